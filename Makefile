@@ -1,0 +1,40 @@
+# The README's two commands: `make demo` and `make test`. Both build .venv when it is missing.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test lint typecheck layers bench clean
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade "pip>=25.1"
+
+$(STAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -e ".[jupyter]" --group dev
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/galil demo
+
+lint: $(STAMP)
+	$(BIN)/ruff check galil tests benchmarks examples
+	$(BIN)/ruff format --check galil tests benchmarks examples
+
+typecheck: $(STAMP)
+	$(BIN)/mypy --strict galil
+
+layers: $(STAMP)
+	$(BIN)/lint-imports
+
+test: lint typecheck layers
+	$(BIN)/pytest -q
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/protocol.py
+	$(BIN)/python benchmarks/predict.py
+	$(BIN)/python benchmarks/sim.py
+	$(BIN)/python benchmarks/roundtrip.py
+
+clean:
+	rm -rf $(VENV) build dist .mypy_cache .pytest_cache .ruff_cache

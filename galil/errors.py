@@ -1,0 +1,140 @@
+"""The one error tree of ``galil``.
+
+Every exception the library raises on purpose derives from :class:`GalilError`; each also
+mixes in the stdlib type a caller would naturally catch::
+
+    GalilError
+    ├── CommandError          the controller answered '?'; carries code, text, command
+    ├── ProtocolError         the peer sent bytes we cannot make sense of
+    ├── GalilTimeoutError     (also TimeoutError) no reply in time
+    ├── GalilConnectionError  (also ConnectionError) the link is closed or dead
+    └── InvalidArgument       (also ValueError) refused before anything was sent
+        └── LimitError        a move or value would cross a limit (range, soft limit, CD range,
+                              contour feasibility); says which value, limit, and when
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+__all__ = [
+    "CommandError",
+    "GalilConnectionError",
+    "GalilError",
+    "GalilTimeoutError",
+    "InvalidArgument",
+    "LimitError",
+    "ProtocolError",
+]
+
+
+class GalilError(Exception):
+    """Root of every error raised by ``galil``.
+
+    Attributes:
+        model: controller model name when known (e.g. ``"DMC-4040"``), else ``None``.
+        recent: the last exchanges on the link (oldest first), attached by the client.
+    """
+
+    model: str | None
+    recent: tuple[str, ...]
+
+    def __init__(
+        self, message: str = "", *, model: str | None = None, recent: Sequence[str] = ()
+    ) -> None:
+        super().__init__(message)
+        self.model = model
+        self.recent = tuple(recent)
+
+    def __str__(self) -> str:
+        text = super().__str__()
+        if self.model:
+            text = f"{text} [{self.model}]"
+        if self.recent:
+            tail = "\n  ".join(self.recent[-8:])
+            text = f"{text}\n recent exchanges (oldest first):\n  {tail}"
+        return text
+
+
+class CommandError(GalilError):
+    """The controller rejected a command with ``?``; ``TC1`` explained why.
+
+    Attributes:
+        code: the TC error code (``None`` when TC1 could not be read).
+        text: the controller's (or our table's) explanation.
+        command: the command line that was rejected.
+    """
+
+    def __init__(
+        self,
+        code: int | None,
+        text: str,
+        command: str,
+        *,
+        model: str | None = None,
+        recent: Sequence[str] = (),
+    ) -> None:
+        where = f" by {model}" if model else ""
+        code_txt = f"TC {code}" if code is not None else "TC unknown"
+        super().__init__(f"{command!r} rejected{where}: {code_txt} {text}".rstrip(), recent=recent)
+        self.model = model
+        self.code = code
+        self.text = text
+        self.command = command
+
+    def __str__(self) -> str:
+        # The model is already part of the sentence; do not repeat it.
+        text = Exception.__str__(self)
+        if self.recent:
+            tail = "\n  ".join(self.recent[-8:])
+            text = f"{text}\n recent exchanges (oldest first):\n  {tail}"
+        return text
+
+
+class ProtocolError(GalilError):
+    """The peer sent something that cannot be parsed, or the link is out of step."""
+
+
+class GalilTimeoutError(GalilError, TimeoutError):
+    """No (complete) reply arrived within the timeout."""
+
+
+class GalilConnectionError(GalilError, ConnectionError):
+    """The link could not be opened, or is closed or dead."""
+
+
+class InvalidArgument(GalilError, ValueError):
+    """An argument we refuse to send; raised before any byte reaches the wire."""
+
+
+class LimitError(InvalidArgument):
+    """A value or a predicted path would cross a limit.
+
+    Attributes:
+        name: what was checked (``"SP"``, ``"soft limit FL"``, ``"CD"``, ...).
+        value: the offending value.
+        limit: the limit it crosses.
+        time: seconds from the start of the move where it is crossed, if known.
+        sample: sample index where it is crossed, if known.
+        axis: axis letter, if known.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        name: str = "",
+        value: float | None = None,
+        limit: float | None = None,
+        time: float | None = None,
+        sample: int | None = None,
+        axis: str | None = None,
+        model: str | None = None,
+    ) -> None:
+        super().__init__(message, model=model)
+        self.name = name
+        self.value = value
+        self.limit = limit
+        self.time = time
+        self.sample = sample
+        self.axis = axis

@@ -1,0 +1,361 @@
+"""Per-model capabilities of Galil DMC controllers.
+
+Values come from ``shared/reference/galil-protocol.md``. Where the sources are unsure the entry
+says which assumption we make (``assumptions``) so a reader can see what is measured and what is
+a guess; change the table, not the code, when a manual or a hardware log pins a value down.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+from galil.errors import InvalidArgument
+
+__all__ = ["MODELS", "ModelSpec", "get_model", "parse_identity"]
+
+_ALL_AXES = "ABCDEFGH"
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """What one controller family can do.
+
+    Attributes:
+        name: canonical name, e.g. ``"DMC-4040"``.
+        family: family name, e.g. ``"DMC-40x0"``.
+        axes: axis letters in order (``"ABCD"``; ``"XYZW"`` on families that name them so).
+        aliases: other letters the firmware accepts for the same axes (X=A, Y=B, Z=C, W=D).
+        tm_default: default TM in microseconds (1000 gives 1024 Hz).
+        tm_adjustable: whether TM may be changed (the DMC-1500 has a fixed 2 ms sample).
+        sample_period_fixed: seconds per sample when TM is not adjustable.
+        ac_min, ac_max, ac_resolution: AC/DC range in counts/s²; values round down to the
+            resolution.
+        sp_max, sp_resolution: SP/JG maximum and step in counts/s.
+        cd_max: largest |CD| increment per segment.
+        dt_range: allowed DT exponents (segment = 2**n samples).
+        contour_buffer: contour segments the controller can queue (``_CM`` when empty).
+        line_length: longest command line the controller accepts, in characters.
+        mg_max: longest MG text.
+        transports: buses the family offers.
+        qz: the ``QZ`` reply (axes, general block, coordinated block, axis block bytes), or
+            ``None`` when the family has no binary data record we know of.
+        ip_range: smoothing (IT) range.
+        assumptions: plain-language list of values that are guesses, and why.
+    """
+
+    name: str
+    family: str
+    axes: str
+    aliases: dict[str, str] = field(default_factory=dict)
+    tm_default: float = 1000.0
+    tm_adjustable: bool = True
+    sample_period_fixed: float | None = None
+    ac_min: int = 1024
+    ac_max: int = 1_073_740_800
+    ac_resolution: int = 1024
+    sp_max: int = 22_000_000
+    sp_resolution: int = 2
+    cd_max: int = 32_000
+    dt_range: tuple[int, int] = (1, 8)
+    contour_buffer: int = 511
+    line_length: int = 80
+    mg_max: int = 72
+    transports: frozenset[str] = frozenset({"serial"})
+    qz: tuple[int, int, int, int] | None = None
+    it_range: tuple[float, float] = (0.004, 1.0)
+    assumptions: tuple[str, ...] = ()
+
+    @property
+    def sample_period(self) -> float:
+        """Seconds per servo sample at the default TM."""
+        if self.sample_period_fixed is not None:
+            return self.sample_period_fixed
+        return self.tm_default / 1_024_000.0
+
+    def sample_period_for(self, tm: float) -> float:
+        """Seconds per sample for a given TM (µs), honouring fixed-rate models."""
+        if self.sample_period_fixed is not None:
+            return self.sample_period_fixed
+        return tm / 1_024_000.0
+
+    @property
+    def record_size(self) -> int | None:
+        """Size in bytes of a QR record with every block present (header included)."""
+        if self.qz is None:
+            return None
+        n, general, coord, per_axis = self.qz
+        return 4 + general + coord + n * per_axis
+
+    def axis_letter(self, name: str) -> str:
+        """Return the canonical letter for ``name`` (``"X"`` -> ``"A"`` where aliased).
+
+        Raises:
+            InvalidArgument: the model has no such axis.
+        """
+        letter = name.upper() if isinstance(name, str) else ""
+        letter = self.aliases.get(letter, letter)
+        if len(letter) != 1 or letter not in self.axes:
+            raise InvalidArgument(
+                f"axis {name!r} does not exist on {self.name} (axes: {', '.join(self.axes)})",
+                model=self.name,
+            )
+        return letter
+
+
+_XYZW = {"X": "A", "Y": "B", "Z": "C", "W": "D"}
+_ETH_USB = frozenset({"serial", "usb", "ethernet"})
+
+MODELS: dict[str, ModelSpec] = {}
+
+
+def _add(spec: ModelSpec, *names: str) -> None:
+    MODELS[spec.name] = spec
+    for n in names:
+        MODELS[n] = spec
+
+
+_add(
+    ModelSpec(
+        name="DMC-1500",
+        family="DMC-1500",
+        axes="ABCD",
+        aliases=_XYZW,
+        tm_adjustable=False,
+        sample_period_fixed=0.002,
+        ac_max=67_107_840,
+        sp_max=8_000_000,
+        cd_max=32_000,
+        contour_buffer=1,
+        line_length=80,
+        mg_max=31,
+        transports=frozenset({"serial"}),
+        qz=None,
+        assumptions=(
+            "4 axes: the DMC-1500 manual excerpt names X Y Z W; the axis count is not sourced",
+            "serial only: the DMC-1500 is a stand-alone RS-232 controller in the sources",
+            "contour buffer of 1: pre-Accelera controllers had a 1-deep contour queue",
+            "SP maximum 8,000,000 c/s: no primary source; picked below the 2xxx recollection",
+            "no binary data record: no layout found for this family",
+        ),
+    ),
+    "DMC1500",
+)
+_add(
+    ModelSpec(
+        name="DMC-1700",
+        family="DMC-1700/1800",
+        axes="ABCDEFGH",
+        aliases=_XYZW,
+        ac_max=67_107_840,
+        sp_max=12_000_000,
+        contour_buffer=1,
+        line_length=80,
+        transports=frozenset({"pci"}),
+        qz=(8, 24, 16, 28),
+        assumptions=(
+            "ISA/PCI bus card: reached through a Galil driver device node",
+            "data record like the 2x00 (QZ 8,24,16,28): the 1700 manual shares that layout",
+            "contour buffer of 1: pre-Accelera firmware",
+            "SP maximum 12,000,000 c/s: recollection, not a primary page",
+        ),
+    ),
+    "DMC-1800",
+    "DMC1700",
+    "DMC1800",
+)
+_add(
+    ModelSpec(
+        name="DMC-18x2",
+        family="DMC-18x2",
+        axes="ABCD",
+        aliases=_XYZW,
+        ac_max=67_107_840,
+        sp_max=12_000_000,
+        cd_max=32_000,
+        contour_buffer=1,
+        transports=frozenset({"pci"}),
+        qz=(4, 24, 16, 26),
+        assumptions=(
+            "CD range ±32,000 from the seed manual excerpt",
+            "contour buffer of 1: the seed shows WC pacing one segment at a time",
+            "26-byte axis blocks (gclib GDataRecord1802)",
+        ),
+    ),
+    "DMC-1842",
+    "DMC1842",
+    "DMC1832",
+    "DMC1822",
+    "DMC1812",
+)
+_add(
+    ModelSpec(
+        name="DMC-1806",
+        family="DMC-18x6",
+        axes="ABCDEFGH",
+        ac_max=1_073_740_800,
+        sp_max=22_000_000,
+        cd_max=32_762,
+        contour_buffer=511,
+        transports=frozenset({"pci"}),
+        qz=(8, 52, 26, 36),
+        assumptions=(
+            "CD range ±32,762 as printed on the 18x6 CD page (sic)",
+            "record laid out like the 40x0 one (gclib GDataRecord1806); sizes assumed equal",
+        ),
+    ),
+    "DMC-18x6",
+    "DMC1806",
+    "DMC1846",
+    "DMC1886",
+)
+_add(
+    ModelSpec(
+        name="DMC-2183",
+        family="DMC-21x3",
+        axes="ABCDEFGH",
+        ac_max=67_107_840,
+        sp_max=12_000_000,
+        cd_max=32_000,
+        contour_buffer=511,
+        transports=_ETH_USB,
+        qz=(8, 24, 16, 28),
+        assumptions=(
+            "contour buffer 511 as on Accelera-class firmware: not confirmed for 21x3",
+            "SP maximum 12,000,000 c/s: recollection, not a primary page",
+        ),
+    ),
+    "DMC-21x3",
+    "DMC2183",
+    "DMC2143",
+    "DMC2163",
+    "DMC2123",
+    "DMC2113",
+    "DMC-2143",
+)
+_add(
+    ModelSpec(
+        name="DMC-4040",
+        family="DMC-40x0",
+        axes="ABCD",
+        ac_max=1_073_740_800,
+        sp_max=22_000_000,
+        cd_max=32_000,
+        contour_buffer=511,
+        transports=_ETH_USB,
+        qz=(4, 52, 26, 36),
+        assumptions=(
+            "CD range ±32,000 from the 40x0 manual summary; the 18x6 page says ±32,762",
+            "SP maximum 22,000,000 c/s: recollection, not a primary page",
+        ),
+    ),
+    "DMC-40x0",
+    "DMC4040",
+)
+for _n in (1, 2, 3, 5, 6, 7, 8):
+    _base = MODELS["DMC-4040"]
+    _add(
+        ModelSpec(
+            **{
+                **_base.__dict__,
+                "name": f"DMC-40{_n}0",
+                "axes": _ALL_AXES[:_n],
+                "qz": (_n, 52, 26, 36),
+            }
+        ),
+        f"DMC40{_n}0",
+    )
+_add(
+    ModelSpec(
+        **{
+            **MODELS["DMC-4040"].__dict__,
+            "name": "DMC-4143",
+            "family": "DMC-41x3",
+            "axes": "ABCD",
+            "qz": (4, 52, 26, 36),
+        }
+    ),
+    "DMC-41x3",
+    "DMC4143",
+    "DMC4183",
+    "DMC4123",
+    "DMC4113",
+)
+_add(
+    ModelSpec(
+        name="DMC-30010",
+        family="DMC-30010",
+        axes="A",
+        ac_max=1_073_740_800,
+        sp_max=22_000_000,
+        cd_max=32_000,
+        contour_buffer=511,
+        transports=_ETH_USB,
+        qz=(1, 18, 16, 36),
+        assumptions=("contour buffer 511 as on Accelera-class firmware: not confirmed",),
+    ),
+    "DMC30010",
+    "DMC-30000",
+)
+
+_IDENT = re.compile(r"^\s*(?P<model>(?:DMC|RIO)-?\d+\w*?)\s+Rev\s+(?P<rev>\S+)", re.IGNORECASE)
+
+
+def get_model(name: str) -> ModelSpec:
+    """Return the spec for a model name such as ``"DMC-4040"``, ``"DMC4040"`` or ``"dmc-1806"``.
+
+    Unknown members of a known family map to the family (``DMC4183`` -> DMC-21x3 class by prefix).
+
+    Raises:
+        InvalidArgument: no family matches.
+    """
+    key = name.strip().upper()
+    if key in MODELS:
+        return MODELS[key]
+    compact = key.replace("-", "")
+    for known, spec in MODELS.items():
+        if known.replace("-", "") == compact:
+            return spec
+    digits = compact[3:] if compact.startswith("DMC") else ""
+    by_prefix = {
+        "15": "DMC-1500",
+        "17": "DMC-1700",
+        "18": "DMC-18x2",
+        "186": "DMC-1806",
+        "21": "DMC-2183",
+        "40": "DMC-4040",
+        "41": "DMC-4143",
+        "300": "DMC-30010",
+        "310": "DMC-30010",
+    }
+    for prefix in sorted(by_prefix, key=len, reverse=True):
+        if digits.startswith(prefix) and digits[len(prefix) :].isdigit():
+            base = MODELS[by_prefix[prefix]]
+            if prefix in ("40", "41", "21", "17", "18") and len(digits) == 4 and digits[2] in "12345678":
+                n = int(digits[2])
+                return ModelSpec(**{**base.__dict__, "name": f"DMC-{digits}", "axes": _ALL_AXES[:n],
+                                    "qz": None if base.qz is None else (n, *base.qz[1:])})
+            return base
+    raise InvalidArgument(f"unknown controller model {name!r}; known: {', '.join(sorted(set(s.name for s in MODELS.values())))}")
+
+
+@dataclass(frozen=True)
+class Identity:
+    """A parsed ``^R^V`` reply."""
+
+    model: ModelSpec
+    raw_model: str
+    firmware: str
+
+
+def parse_identity(reply: str) -> Identity:
+    """Parse a ``^R^V`` reply like ``"DMC4040 Rev 1.2f"`` into an :class:`Identity`.
+
+    Raises:
+        InvalidArgument: the text is not a model string or names an unknown model.
+    """
+    m = _IDENT.match(reply)
+    if m is None:
+        raise InvalidArgument(f"not a Galil identification string: {reply!r}")
+    raw = m.group("model").upper()
+    return Identity(model=get_model(raw), raw_model=raw, firmware=m.group("rev"))
