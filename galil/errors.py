@@ -103,7 +103,7 @@ class GalilConnectionError(GalilError, ConnectionError):
     """The link could not be opened, or is closed or dead."""
 
 
-class InvalidArgument(GalilError, ValueError):
+class InvalidArgument(GalilError, ValueError):  # noqa: N818 (name fixed by the public API)
     """An argument we refuse to send; raised before any byte reaches the wire."""
 
 

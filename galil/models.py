@@ -331,12 +331,23 @@ def get_model(name: str) -> ModelSpec:
     for prefix in sorted(by_prefix, key=len, reverse=True):
         if digits.startswith(prefix) and digits[len(prefix) :].isdigit():
             base = MODELS[by_prefix[prefix]]
-            if prefix in ("40", "41", "21", "17", "18") and len(digits) == 4 and digits[2] in "12345678":
+            if (
+                prefix in ("40", "41", "21", "17", "18")
+                and len(digits) == 4
+                and digits[2] in "12345678"
+            ):
                 n = int(digits[2])
-                return ModelSpec(**{**base.__dict__, "name": f"DMC-{digits}", "axes": _ALL_AXES[:n],
-                                    "qz": None if base.qz is None else (n, *base.qz[1:])})
+                return ModelSpec(
+                    **{
+                        **base.__dict__,
+                        "name": f"DMC-{digits}",
+                        "axes": _ALL_AXES[:n],
+                        "qz": None if base.qz is None else (n, *base.qz[1:]),
+                    }
+                )
             return base
-    raise InvalidArgument(f"unknown controller model {name!r}; known: {', '.join(sorted(set(s.name for s in MODELS.values())))}")
+    known = ", ".join(sorted({s.name for s in MODELS.values()}))
+    raise InvalidArgument(f"unknown controller model {name!r}; known: {known}")
 
 
 @dataclass(frozen=True)

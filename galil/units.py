@@ -1,0 +1,180 @@
+"""Units at the edge: pint Quantities in, counts and seconds inside.
+
+The default registry is created on first use (building one costs ~0.2 s). Quantities from any other
+registry are accepted: they are re-read through their magnitude and unit name, so a user's own
+``pint.UnitRegistry()`` works as well as ``galil.units.ureg``.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass
+from functools import cache
+from typing import Any
+
+import pint
+
+from galil.errors import InvalidArgument
+
+__all__ = ["Scale", "counts_or_plain", "get_registry", "is_quantity", "ureg"]
+
+
+@cache
+def get_registry() -> Any:
+    """Return the library's default registry (shared with ``pint`` application registry)."""
+    reg: Any = pint.get_application_registry()  # type: ignore[no-untyped-call]
+    return reg.get()
+
+
+class _LazyRegistry:
+    """``galil.units.ureg``: the default registry, built on first attribute access."""
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(get_registry(), name)
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        return get_registry()(*args, **kwargs)
+
+    def __repr__(self) -> str:
+        return "<galil default pint registry>"
+
+
+ureg: Any = _LazyRegistry()
+
+
+def is_quantity(value: object) -> bool:
+    """True for a pint Quantity of any registry."""
+    return (
+        hasattr(value, "magnitude") and hasattr(value, "units") and hasattr(value, "dimensionality")
+    )
+
+
+def _ours(q: Any) -> Any:
+    """Re-express a Quantity of any registry in the default registry."""
+    reg = get_registry()
+    if getattr(q, "_REGISTRY", None) is reg:
+        return q
+    return reg.Quantity(q.magnitude, str(q.units))
+
+
+def _finite(value: float, what: str) -> float:
+    if not math.isfinite(value):
+        raise InvalidArgument(f"{what} must be a finite number, got {value!r}")
+    return value
+
+
+def _plain_number(value: object, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise InvalidArgument(f"{what} must be a number or a pint Quantity, got {value!r}")
+    return _finite(float(value), what)
+
+
+@dataclass(frozen=True)
+class Scale:
+    """How one axis maps user units onto encoder counts.
+
+    ``counts = sign * (x - offset) * counts_per`` for positions; speeds and accelerations
+    use ``sign * counts_per`` alone.
+
+    Attributes:
+        counts_per: counts per unit, e.g. ``2000 / ureg.mm`` or ``4096 / ureg.degree``.
+        offset: the user position at count 0 (a Quantity in the axis's length/angle unit).
+        sign: +1, or -1 when the user's positive direction is the motor's negative one.
+    """
+
+    counts_per: Any
+    offset: Any = None
+    sign: int = 1
+
+    def __post_init__(self) -> None:
+        if not is_quantity(self.counts_per):
+            raise InvalidArgument(
+                f"counts_per must be a Quantity such as 2000 / ureg.mm, got {self.counts_per!r}"
+            )
+        cp = _ours(self.counts_per)
+        per = (1 / cp).units
+        if cp.dimensionless and str(per) in ("dimensionless", "count", ""):
+            raise InvalidArgument(
+                "counts_per must be per a length or an angle, e.g. 2000 / ureg.mm"
+            )
+        if not math.isfinite(float(cp.magnitude)) or float(cp.magnitude) <= 0:
+            raise InvalidArgument(
+                f"counts_per must be positive and finite, got {self.counts_per!r}"
+            )
+        object.__setattr__(self, "counts_per", cp)
+        if self.sign not in (1, -1):
+            raise InvalidArgument(f"sign must be +1 or -1, got {self.sign!r}")
+        unit = self.unit
+        if self.offset is None:
+            object.__setattr__(self, "offset", get_registry().Quantity(0.0, unit))
+        else:
+            object.__setattr__(self, "offset", self._convert(self.offset, unit, "offset"))
+
+    @property
+    def unit(self) -> Any:
+        """The user's position unit (``mm`` for ``2000 / mm``)."""
+        return (1 / self.counts_per).units
+
+    @property
+    def _k(self) -> float:
+        return float(self.counts_per.magnitude)
+
+    def _convert(self, value: Any, unit: Any, what: str) -> Any:
+        if not is_quantity(value):
+            raise InvalidArgument(
+                f"{what} needs units compatible with {unit:~} (the axis has a scale), got {value!r}"
+            )
+        q = _ours(value)
+        try:
+            out = q.to(unit)
+        except pint.DimensionalityError as exc:
+            raise InvalidArgument(
+                f"{what}: {value:~} has the wrong dimension; expected {unit:~}-compatible units"
+            ) from exc
+        _finite(float(out.magnitude), what)
+        return out
+
+    def position_to_counts(self, value: Any, what: str = "position") -> float:
+        """A position Quantity to (unrounded) counts."""
+        q = self._convert(value, self.unit, what)
+        return self.sign * float((q - self.offset).magnitude) * self._k
+
+    def distance_to_counts(self, value: Any, what: str = "distance") -> float:
+        """A relative distance Quantity to counts (no offset)."""
+        q = self._convert(value, self.unit, what)
+        return self.sign * float(q.magnitude) * self._k
+
+    def rate_to_counts(self, value: Any, power: int, what: str) -> float:
+        """A speed (power 1) or acceleration (power 2) Quantity to counts/s**power."""
+        unit = self.unit / get_registry().second ** power
+        q = self._convert(value, unit, what)
+        return self.sign * float(q.magnitude) * self._k
+
+    def counts_to_position(self, counts: float) -> Any:
+        """Counts to a position Quantity."""
+        return (counts * self.sign / self._k) * get_registry().Quantity(
+            1.0, self.unit
+        ) + self.offset
+
+    def counts_to_distance(self, counts: float) -> Any:
+        """Counts to a relative distance Quantity."""
+        return get_registry().Quantity(counts * self.sign / self._k, self.unit)
+
+    def counts_to_rate(self, counts: float, power: int) -> Any:
+        """Counts/s**power to a speed or acceleration Quantity."""
+        unit = self.unit / get_registry().second ** power
+        return get_registry().Quantity(counts * self.sign / self._k, unit)
+
+
+def counts_or_plain(value: object, what: str) -> float:
+    """For an axis without a scale: a plain number, or a Quantity in counts."""
+    if is_quantity(value):
+        q = _ours(value)
+        if not q.dimensionless:
+            raise InvalidArgument(
+                f"{what}: {value} has units but the axis has no scale; set "
+                "axis.scale(counts_per=...) or pass counts"
+            )
+        return _finite(float(q.to("count").magnitude), what)
+    return _plain_number(value, what)
