@@ -301,51 +301,60 @@ _add(
 _IDENT = re.compile(r"^\s*(?P<model>(?:DMC|RIO)-?\d+\w*?)\s+Rev\s+(?P<rev>\S+)", re.IGNORECASE)
 
 
+# Four-digit part numbers are <family digits><axis count><family suffix>: DMC-4040 is a
+# 40x0 with 4 axes, DMC-2183 a 21x3 with 8, DMC-1846 an 18x6 with 4 (EPICS reads the axis
+# count from the same digit). Keys: (first two digits, last digit) -> family's table entry.
+_FAMILY_BY_DIGITS = {
+    ("17", "0"): "DMC-1700",
+    ("18", "0"): "DMC-1700",
+    ("18", "2"): "DMC-18x2",
+    ("18", "6"): "DMC-1806",
+    ("21", "3"): "DMC-2183",
+    # Assumption: the DMC-2x00 (2100/2200, e.g. "DMC2280 Rev 1.0o-CM") shares the 21x3
+    # ranges and its 24/16/28 data record (M2x00 p.67-69); no separate table entry yet.
+    ("21", "0"): "DMC-2183",
+    ("22", "0"): "DMC-2183",
+    ("40", "0"): "DMC-4040",
+    ("41", "3"): "DMC-4143",
+}
+_PART = re.compile(r"DMC-?(\d{4,5})")
+
+
 def get_model(name: str) -> ModelSpec:
     """Return the spec for a model name such as ``"DMC-4040"``, ``"DMC4040"`` or ``"dmc-1806"``.
 
-    Unknown members of a known family map to the family (``DMC4183`` -> DMC-21x3 class by prefix).
+    A part number that is not in the table maps to its family with the axis count read from
+    the third digit (``DMC4183`` -> DMC-41x3 with 8 axes, ``DMC1846`` -> DMC-18x6 with 4).
 
     Raises:
         InvalidArgument: no family matches.
     """
-    key = name.strip().upper()
-    if key in MODELS:
-        return MODELS[key]
+    key = name.strip().upper() if isinstance(name, str) else ""
     compact = key.replace("-", "")
-    for known, spec in MODELS.items():
-        if known.replace("-", "") == compact:
+    for spec in MODELS.values():
+        if spec.name.upper().replace("-", "") == compact:
             return spec
-    digits = compact[3:] if compact.startswith("DMC") else ""
-    by_prefix = {
-        "15": "DMC-1500",
-        "17": "DMC-1700",
-        "18": "DMC-18x2",
-        "186": "DMC-1806",
-        "21": "DMC-2183",
-        "40": "DMC-4040",
-        "41": "DMC-4143",
-        "300": "DMC-30010",
-        "310": "DMC-30010",
-    }
-    for prefix in sorted(by_prefix, key=len, reverse=True):
-        if digits.startswith(prefix) and digits[len(prefix) :].isdigit():
-            base = MODELS[by_prefix[prefix]]
-            if (
-                prefix in ("40", "41", "21", "17", "18")
-                and len(digits) == 4
-                and digits[2] in "12345678"
-            ):
-                n = int(digits[2])
-                return ModelSpec(
-                    **{
-                        **base.__dict__,
-                        "name": f"DMC-{digits}",
-                        "axes": _ALL_AXES[:n],
-                        "qz": None if base.qz is None else (n, *base.qz[1:]),
-                    }
-                )
-            return base
+    part = _PART.fullmatch(key)
+    if part is not None:
+        digits = part.group(1)
+        if len(digits) == 4 and (digits[:2], digits[3]) in _FAMILY_BY_DIGITS:
+            base = MODELS[_FAMILY_BY_DIGITS[digits[:2], digits[3]]]
+            n = int(digits[2]) if digits[2] in "12345678" else len(base.axes)
+            return ModelSpec(
+                **{
+                    **base.__dict__,
+                    "name": f"DMC-{digits}",
+                    "axes": _ALL_AXES[:n],
+                    "qz": None if base.qz is None else (n, *base.qz[1:]),
+                }
+            )
+        if len(digits) == 4 and digits.startswith("15"):
+            return MODELS["DMC-1500"]
+        if len(digits) == 5 and digits[:2] in ("30", "31"):
+            return MODELS["DMC-30010"]
+    for known, spec in MODELS.items():
+        if known.upper().replace("-", "") == compact:
+            return spec
     known = ", ".join(sorted({s.name for s in MODELS.values()}))
     raise InvalidArgument(f"unknown controller model {name!r}; known: {known}")
 

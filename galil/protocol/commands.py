@@ -1,0 +1,1000 @@
+"""Typed command builders: every byte we send is built and validated here.
+
+Each builder returns a :class:`Command` (text without terminator, and how its reply ends) or
+raises :class:`~galil.errors.InvalidArgument` / :class:`~galil.errors.LimitError` before any
+bytes exist. Builders take an optional ``model`` (:class:`~galil.models.ModelSpec`) to check axes
+and ranges for that controller; without one they apply a permissive 8-axis check (axes A-H, and
+X Y Z W as aliases of A-D) with only the limits every model shares.
+
+Axis forms::
+
+    pr(1000, None, -200)      -> "PR 1000,,-200"
+    pr(B=500)                 -> "PRB=500"
+    pr(A=1, C=-2)             -> "PR 1,,-2"
+    bg("AC")                  -> "BG AC"
+
+Strings and names never carry ``;``, CR, LF, quotes, backslashes or non-ASCII characters, so a
+caller cannot smuggle a second command into a line.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import re
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from numbers import Real
+from typing import ClassVar
+
+import numpy as np
+
+from galil.errors import InvalidArgument, LimitError
+from galil.models import ModelSpec
+from galil.protocol.numbers import format_number
+
+__all__ = [
+    "COMMAND_NAMES",
+    "Command",
+    "Expect",
+    "ReplyKind",
+    "ab",
+    "ac",
+    "am",
+    "assign",
+    "bg",
+    "bl",
+    "cd",
+    "cd_end",
+    "cm",
+    "cw",
+    "dc",
+    "dl",
+    "dp",
+    "dt",
+    "eo",
+    "fl",
+    "hx",
+    "identify",
+    "ip",
+    "it",
+    "jg",
+    "lz",
+    "mc",
+    "mg",
+    "mg_operand",
+    "mo",
+    "pa",
+    "pack",
+    "parse_line",
+    "pr",
+    "qd",
+    "qr",
+    "qu",
+    "qz",
+    "rp",
+    "sc",
+    "sh",
+    "sp",
+    "st",
+    "tc",
+    "td",
+    "te",
+    "th",
+    "tm",
+    "tp",
+    "ts",
+    "tv",
+    "ul",
+    "wc",
+    "xq",
+]
+
+
+class ReplyKind(enum.Enum):
+    """How the controller ends its answer to one command."""
+
+    ACK = "ack"  # ':' alone
+    DATA = "data"  # data lines (CR LF) then ':'
+    ANY = "any"  # either of the above (a raw line we cannot classify)
+    RECORD = "record"  # binary record then ':'
+    DOUBLE_ACK = "double_ack"  # '::' after a DL download
+    CTRL_Z = "ctrl_z"  # text, ^Z, then ':' (UL, QU)
+
+
+@dataclass(frozen=True, slots=True)
+class Expect:
+    """What ends the reply to a command.
+
+    Attributes:
+        kind: the reply shape.
+        size: for ``RECORD`` the record size in bytes (``None``: read it from the header);
+            for ``DATA`` the most data lines allowed (``None``: any number).
+    """
+
+    kind: ReplyKind
+    size: int | None = None
+
+    ACK: ClassVar[Expect]
+    DATA: ClassVar[Expect]
+    ANY: ClassVar[Expect]
+    DOUBLE_ACK: ClassVar[Expect]
+    CTRL_Z: ClassVar[Expect]
+    LINE: ClassVar[Expect]
+
+    @staticmethod
+    def record(size: int | None = None) -> Expect:
+        """A binary record of ``size`` bytes (``None``: from its header), then ``:``."""
+        if size is not None and size < 4:
+            raise InvalidArgument(f"a data record has at least a 4-byte header, not {size}")
+        return Expect(ReplyKind.RECORD, size)
+
+    @staticmethod
+    def data(lines: int | None = None) -> Expect:
+        """Data lines (at most ``lines``), then ``:``."""
+        return Expect(ReplyKind.DATA, lines)
+
+
+Expect.ACK = Expect(ReplyKind.ACK)
+Expect.DATA = Expect(ReplyKind.DATA)
+Expect.ANY = Expect(ReplyKind.ANY)
+Expect.DOUBLE_ACK = Expect(ReplyKind.DOUBLE_ACK)
+Expect.CTRL_Z = Expect(ReplyKind.CTRL_Z)
+Expect.LINE = Expect(ReplyKind.DATA, 1)
+
+_ACK = Expect.ACK
+_LINE = Expect.LINE
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    """One command (or a compound line of several) ready to send.
+
+    Attributes:
+        text: the command text, without terminator (``"PRA=1000"``).
+        expect: how the reply ends.
+        payload: bytes sent after ``text`` and CR (the program of ``DL``, the values of ``QD``).
+        parts: for a compound line built by :func:`pack`, the commands in it, in order.
+    """
+
+    text: str
+    expect: Expect = _ACK
+    payload: bytes = b""
+    parts: tuple[Command, ...] = ()
+
+    @property
+    def returns_data(self) -> bool:
+        """Whether the reply carries data (text, record or upload) before its ``:``."""
+        return self.expect.kind not in (ReplyKind.ACK, ReplyKind.DOUBLE_ACK)
+
+    @property
+    def wire(self) -> bytes:
+        """The bytes to write: text, CR, then any payload."""
+        return self.text.encode("latin-1") + b"\r" + self.payload
+
+    def __str__(self) -> str:
+        return self.text
+
+
+# Two-letter mnemonics of the firmware (40x0/18x2/2x00 command references). A variable whose
+# name starts with one of these followed only by digits or axis letters (``CD0``, ``SPA``)
+# would be parsed as that command, so such names are refused.
+_MNEMONICS = """
+    AB AC AD AE AF AG AI AL AM AO AP AQ AR AS AT AU AV AW AZ BA BB BC BD BG BI BK BL BM BN BO
+    BP BQ BR BS BV BW BX BZ CA CB CC CD CE CF CI CM CN CO CR CS CW DA DC DE DF DH DL DM DP DR DS
+    DT DV EA EB EC ED EG EI EM EN EO EP EQ ER ES ET EW EY FA FC FE FI FL FV GA GD GM GN GR GS HM
+    HS HV HX IA ID IF IH IK IL IN IP IT JG JP JS KD KI KP KS LA LB LC LD LE LI LL LM LS LU LV LZ
+    MB MC MF MG MO MR MT MW NB NF NO NZ OA OB OC OE OF OP OT OV PA PF PL PR PT PV PW QD QH QP QR
+    QS QU QZ RA RC RD RE RI RL RO RP RS SA SB SC SD SH SI SL SM SP ST SY TA TB TC TD TE TH TI TK
+    TL TM TN TP TR TS TT TV TW TZ UI UL VA VD VE VF VM VP VR VS VV WC WH WT XQ YA YB YC
+    YR ZA ZS"""
+COMMAND_NAMES: frozenset[str] = frozenset(_MNEMONICS.split())
+_KEYWORDS = frozenset({"ELSE", "ENDIF", "TIME", "AND", "OR"})
+
+_VAR = re.compile(r"[A-Za-z][A-Za-z0-9]{0,7}")
+_LABEL = re.compile(r"#[A-Za-z][A-Za-z0-9]{0,6}")
+_OPERAND = re.compile(
+    r"_[A-Z]{2}[A-Z0-9]{0,2}"  # _TPA, _TC, _XQ0, _LFA
+    r"|@[A-Z]{2,4}\[\d{1,4}\]"  # @IN[1], @AN[2]
+    r"|[A-Za-z][A-Za-z0-9]{0,7}(?:\[\d{1,5}\])?"  # variable or array element
+)
+_AXIS_SUFFIX = re.compile(r"[A-HSTXYZWN]{1,8}|\d+")
+_UNSAFE = re.compile(r'[^\x20-\x7e]|[;"\\]')
+
+_INT32_MIN, _INT32_MAX = -2_147_483_648, 2_147_483_647
+
+
+# --------------------------------------------------------------------------------- axes
+
+
+class _Axes:
+    """Axis letters a model accepts, with their positional index."""
+
+    __slots__ = ("index", "model_name", "nax", "ordered")
+
+    def __init__(self, model: ModelSpec | None) -> None:
+        if model is None:
+            letters = "ABCDEFGH"
+            aliases = {"X": "A", "Y": "B", "Z": "C", "W": "D"}
+            self.model_name = None
+        else:
+            letters, aliases, self.model_name = model.axes, model.aliases, model.name
+        self.index = {c: "ABCDEFGH".index(c) for c in letters}
+        for alias, real in aliases.items():
+            if real in self.index:
+                self.index[alias] = self.index[real]
+        self.nax = len(letters)
+        self.ordered = letters
+
+    def position(self, letter: object) -> int:
+        idx = self.index.get(letter) if isinstance(letter, str) else None
+        if idx is None:
+            where = f" on {self.model_name}" if self.model_name else ""
+            raise InvalidArgument(
+                f"unknown axis {letter!r}{where}; valid: {', '.join(sorted(self.index))}",
+                model=self.model_name,
+            )
+        return idx
+
+
+_DEFAULT_AXES = _Axes(None)
+_AXES_CACHE: dict[tuple[str, str, tuple[tuple[str, str], ...]], _Axes] = {}
+
+
+def _axes(model: ModelSpec | None) -> _Axes:
+    if model is None:
+        return _DEFAULT_AXES
+    key = (model.name, model.axes, tuple(sorted(model.aliases.items())))
+    found = _AXES_CACHE.get(key)
+    if found is None:
+        found = _AXES_CACHE[key] = _Axes(model)
+    return found
+
+
+def _axis_list(axes: str | Iterable[str], model: ModelSpec | None, extra: str = "") -> str:
+    """Validate an axis list like ``"AC"`` (letters as given, no repeats)."""
+    if not isinstance(axes, str):
+        axes = "".join(axes)
+    table = _axes(model)
+    seen: set[int | str] = set()
+    for letter in axes:
+        key: int | str = letter if letter in extra else table.position(letter)
+        if key in seen:
+            raise InvalidArgument(f"axis {letter!r} given twice in {axes!r}")
+        seen.add(key)
+    return axes
+
+
+# --------------------------------------------------------------------------------- values
+
+
+def _number(value: object, what: str) -> float:
+    # bool is an int, but True as a count is almost always a bug.
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, Real):
+        raise InvalidArgument(f"{what}: {value!r} is not a number")
+    v = float(value)
+    if not math.isfinite(v):
+        raise InvalidArgument(f"{what}: {value!r} cannot be sent (NaN or infinity)")
+    return v
+
+
+def _count(value: object, what: str, axis: str | None = None) -> str:
+    """A signed 32-bit integer count."""
+    if type(value) is int and _INT32_MIN <= value <= _INT32_MAX:
+        return str(value)
+    v = _number(value, what)
+    if not v.is_integer():
+        raise InvalidArgument(f"{what}: {value!r} is not a whole number of counts")
+    if not _INT32_MIN <= v <= _INT32_MAX:
+        limit = _INT32_MAX if v > 0 else _INT32_MIN
+        raise LimitError(
+            f"{what}: {value!r} is outside the 32-bit range",
+            name=what,
+            value=v,
+            limit=limit,
+            axis=axis,
+        )
+    return str(int(v))
+
+
+def _ranged(
+    value: object,
+    lo: float,
+    hi: float,
+    what: str,
+    axis: str | None = None,
+    model: str | None = None,
+    *,
+    integer: bool = False,
+) -> str:
+    if type(value) is int and lo <= value <= hi:
+        return str(value)
+    v = _number(value, what)
+    if integer and not v.is_integer():
+        raise InvalidArgument(f"{what}: {value!r} must be a whole number", model=model)
+    if not lo <= v <= hi:
+        where = f" on {model}" if model else ""
+        raise LimitError(
+            f"{what}: {value!r} is outside {format_number(lo)} .. {format_number(hi)}{where}",
+            name=what,
+            value=v,
+            limit=hi if v > hi else lo,
+            axis=axis,
+            model=model,
+        )
+    return format_number(v)
+
+
+class _Checker:
+    """Range check for one per-axis command, bound to a model."""
+
+    __slots__ = ("hi", "integer", "lo", "model_name", "name")
+
+    def __init__(
+        self, name: str, lo: float, hi: float, model: ModelSpec | None, *, integer: bool
+    ) -> None:
+        self.name, self.lo, self.hi, self.integer = name, lo, hi, integer
+        self.model_name = model.name if model is not None else None
+
+    def __call__(self, value: object, axis: str) -> str:
+        if type(value) is int and self.lo <= value <= self.hi:
+            return str(value)
+        if self.integer and self.lo == _INT32_MIN and self.hi == _INT32_MAX:
+            return _count(value, self.name, axis)
+        return _ranged(
+            value, self.lo, self.hi, self.name, axis, self.model_name, integer=self.integer
+        )
+
+
+# Integer ranges every model accepts, for the hot path of _axis_command.
+_DEFAULT_INT_RANGES: dict[str, tuple[int, int]] = {
+    "PR": (_INT32_MIN, _INT32_MAX),
+    "PA": (_INT32_MIN, _INT32_MAX),
+    "DP": (_INT32_MIN, _INT32_MAX),
+    "FL": (_INT32_MIN, _INT32_MAX),
+    "BL": (_INT32_MIN, _INT32_MAX),
+    "IP": (_INT32_MIN, _INT32_MAX),
+    "SP": (0, _INT32_MAX),
+    "JG": (-_INT32_MAX, _INT32_MAX),
+    "AC": (1024, _INT32_MAX),
+    "DC": (1024, _INT32_MAX),
+}
+
+
+def _axis_command(
+    mnemonic: str,
+    values: Sequence[object],
+    by_axis: Mapping[str, object],
+    model: ModelSpec | None,
+    suffix: str = "",
+) -> str:
+    if not values and len(by_axis) == 1:
+        ((letter, value),) = by_axis.items()
+        if model is None and type(value) is int and letter in _DEFAULT_AXES.index:
+            # hot path: one axis, an int, the permissive model
+            lo, hi = _DEFAULT_INT_RANGES.get(mnemonic, (1, 0))
+            if lo <= value <= hi:
+                return f"{mnemonic}{letter}={value}{suffix}"
+    table = _axes(model)
+    check = _checker(mnemonic, model)
+    if not values and len(by_axis) == 1:
+        ((letter, value),) = by_axis.items()
+        table.position(letter)
+        return f"{mnemonic}{letter}={check(value, letter)}{suffix}"
+    if len(values) > table.nax:
+        raise InvalidArgument(
+            f"{mnemonic}: {len(values)} values for {table.nax} axes", model=table.model_name
+        )
+    fields: list[str] = [
+        "" if v is None else check(v, table.ordered[i]) for i, v in enumerate(values)
+    ]
+    for letter, value in by_axis.items():
+        idx = table.position(letter)
+        if idx >= len(fields):
+            fields.extend([""] * (idx + 1 - len(fields)))
+        elif fields[idx]:
+            raise InvalidArgument(f"{mnemonic}: axis {letter!r} given twice")
+        if value is not None:
+            fields[idx] = check(value, letter)
+    while fields and not fields[-1]:
+        fields.pop()
+    if not fields:
+        raise InvalidArgument(f"{mnemonic}: no value given")
+    return f"{mnemonic} {','.join(fields)}{suffix}"
+
+
+# Checkers are cached per command and per model values (ModelSpec holds a dict, so it is not
+# hashable; specs built on the fly by get_model() share their values).
+_CHECKERS: dict[tuple[object, ...], _Checker] = {}
+
+
+def _checker(kind: str, model: ModelSpec | None) -> _Checker:
+    key: tuple[object, ...] = (kind,)
+    if model is not None:
+        key = (kind, model.name, model.ac_min, model.ac_max, model.sp_max, model.cd_max)
+        key += model.it_range
+    found = _CHECKERS.get(key)
+    if found is not None:
+        return found
+    if kind in ("PR", "PA", "DP", "FL", "BL", "IP"):
+        found = _Checker(kind, _INT32_MIN, _INT32_MAX, model, integer=True)
+    elif kind in ("AC", "DC"):
+        lo, hi = (1024, _INT32_MAX) if model is None else (model.ac_min, model.ac_max)
+        found = _Checker(kind, lo, hi, model, integer=False)
+    elif kind == "SP":
+        found = _Checker(
+            kind, 0, _INT32_MAX if model is None else model.sp_max, model, integer=False
+        )
+    elif kind == "JG":
+        hi = _INT32_MAX if model is None else model.sp_max
+        found = _Checker(kind, -hi, hi, model, integer=False)
+    elif kind == "IT":
+        it_lo, it_hi = (0.004, 1.0) if model is None else model.it_range
+        found = _Checker(kind, it_lo, it_hi, model, integer=False)
+    elif kind == "CD":
+        hi = _INT32_MAX if model is None else model.cd_max
+        found = _Checker(kind, -hi, hi, model, integer=True)
+    else:  # pragma: no cover - programming error
+        raise KeyError(kind)
+    _CHECKERS[key] = found
+    return found
+
+
+def pr(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """PR: relative move distance per axis in counts (``pr(1000, None, -200)``, ``pr(B=500)``)."""
+    return Command(_axis_command("PR", values, by_axis, model))
+
+
+def pa(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """PA: absolute target position per axis in counts."""
+    return Command(_axis_command("PA", values, by_axis, model))
+
+
+def sp(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """SP: slew speed per axis, counts/s, 0 .. the model's maximum."""
+    return Command(_axis_command("SP", values, by_axis, model))
+
+
+def ac(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """AC: acceleration per axis, counts/s², inside the model's AC range."""
+    return Command(_axis_command("AC", values, by_axis, model))
+
+
+def dc(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """DC: deceleration per axis, counts/s², inside the model's DC range."""
+    return Command(_axis_command("DC", values, by_axis, model))
+
+
+def jg(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """JG: signed jog speed per axis, counts/s."""
+    return Command(_axis_command("JG", values, by_axis, model))
+
+
+def ip(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """IP: increment the target position, counts."""
+    return Command(_axis_command("IP", values, by_axis, model))
+
+
+def it(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """IT: independent time constant (smoothing), 0.004 .. 1."""
+    return Command(_axis_command("IT", values, by_axis, model))
+
+
+def dp(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """DP: define the current position, counts."""
+    return Command(_axis_command("DP", values, by_axis, model))
+
+
+def fl(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """FL: forward software limit, counts (2147483647 disables it)."""
+    return Command(_axis_command("FL", values, by_axis, model))
+
+
+def bl(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """BL: reverse software limit, counts (-2147483648 disables it)."""
+    return Command(_axis_command("BL", values, by_axis, model))
+
+
+# --------------------------------------------------------------------------------- axis lists
+
+
+# Validated axis-list texts for the permissive model (bounded: a cache, not a leak).
+_LIST_CACHE: dict[tuple[str, str, str], str] = {}
+
+
+def _list_command(
+    mnemonic: str, axes: str | Iterable[str], model: ModelSpec | None, extra: str = ""
+) -> str:
+    if model is None and type(axes) is str:
+        key = (mnemonic, axes, extra)
+        text = _LIST_CACHE.get(key)
+        if text is None:
+            text = _list_command(mnemonic, list(axes), None, extra)
+            if len(_LIST_CACHE) < 4096:
+                _LIST_CACHE[key] = text
+        return text
+    letters = _axis_list(axes, model, extra)
+    return f"{mnemonic} {letters}" if letters else mnemonic
+
+
+def bg(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """BG: begin motion on ``axes`` (``""``: all; ``S``/``T`` coordinated planes allowed)."""
+    return Command(_list_command("BG", axes, model, "ST"))
+
+
+def st(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """ST: decelerate to a stop (``""``: every axis, and stop programs)."""
+    return Command(_list_command("ST", axes, model, "ST"))
+
+
+def am(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """AM: trippoint, the ``:`` comes when the profiler of ``axes`` has finished."""
+    return Command(_list_command("AM", axes, model, "ST"))
+
+
+def mc(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """MC: trippoint, the ``:`` comes when ``axes`` are in position."""
+    return Command(_list_command("MC", axes, model))
+
+
+def sh(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """SH: servo here (motor on)."""
+    return Command(_list_command("SH", axes, model))
+
+
+def mo(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """MO: motor off."""
+    return Command(_list_command("MO", axes, model))
+
+
+def cm(axes: str | Iterable[str], *, model: ModelSpec | None = None) -> Command:
+    """CM: select contour mode on ``axes``."""
+    letters = _axis_list(axes, model)
+    if not letters:
+        raise InvalidArgument("CM needs at least one axis")
+    return Command(f"CM {letters}")
+
+
+def ab(motion_only: bool = False) -> Command:
+    """AB: abort motion (and programs, unless ``motion_only``: ``AB 1``)."""
+    return Command("AB 1" if motion_only else "AB")
+
+
+_QUERY_CACHE: dict[tuple[str, str], Command] = {}
+
+
+def _query(mnemonic: str, axes: str | Iterable[str], model: ModelSpec | None) -> Command:
+    if model is None and type(axes) is str:
+        # Commands are immutable, so the permissive model's queries can be shared.
+        found = _QUERY_CACHE.get((mnemonic, axes))
+        if found is None:
+            found = Command(_list_command(mnemonic, axes, None), _LINE)
+            if len(_QUERY_CACHE) < 4096:
+                _QUERY_CACHE[mnemonic, axes] = found
+        return found
+    return Command(_list_command(mnemonic, axes, model), _LINE)
+
+
+def tp(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """TP: tell position (one line: one value per axis, comma separated)."""
+    return _query("TP", axes, model)
+
+
+def tv(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """TV: tell velocity (filtered), counts/s."""
+    return _query("TV", axes, model)
+
+
+def te(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """TE: tell position error."""
+    return _query("TE", axes, model)
+
+
+def rp(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """RP: reference position (profiler output after IT)."""
+    return _query("RP", axes, model)
+
+
+def td(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """TD: tell dual (auxiliary) encoder, or step count on steppers."""
+    return _query("TD", axes, model)
+
+
+def ts(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """TS: tell switches (status byte per axis)."""
+    return _query("TS", axes, model)
+
+
+def sc(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """SC: stop code per axis."""
+    return _query("SC", axes, model)
+
+
+# --------------------------------------------------------------------------------- contour
+
+
+def cd(
+    *values: object, dt: int | None = None, model: ModelSpec | None = None, **by_axis: object
+) -> Command:
+    """CD: one contour segment of increments per axis, optionally with its own DT (``=n``)."""
+    suffix = ""
+    if dt is not None:
+        suffix = "=" + _ranged(dt, 0, 8, "CD =n (DT)", integer=True)
+    text = _axis_command("CD", values, by_axis, model, suffix)
+    if "=" in text and not text.startswith("CD "):
+        # "CDA=5" would not parse as a segment; always use the positional form.
+        table = _axes(model)
+        ((letter, value),) = by_axis.items()
+        fields = [""] * (table.position(letter) + 1)
+        fields[-1] = _checker("CD", model)(value, letter)
+        text = f"CD {','.join(fields)}{suffix}"
+    return Command(text)
+
+
+def cd_end(axes: str = "A", *, model: ModelSpec | None = None) -> Command:
+    """End contour mode: ``CD 0=0`` (the space matters: ``CD0=0`` assigns a variable CD0)."""
+    letters = _axis_list(axes, model)
+    if not letters:
+        raise InvalidArgument("cd_end needs at least one axis")
+    table = _axes(model)
+    n = max(table.position(c) for c in letters) + 1
+    return Command("CD " + ",".join(["0"] * n) + "=0")
+
+
+def dt(n: int, *, model: ModelSpec | None = None) -> Command:
+    """DT: contour segment time, 2**n samples (0 ends, -1 pauses on buffered models)."""
+    lo, hi = (-1, 8) if model is None else model.dt_range
+    if model is not None and model.contour_buffer > 1:
+        lo = -1
+    allowed = _ranged(
+        n, min(lo, 0), hi, "DT", model=None if model is None else model.name, integer=True
+    )
+    return Command(f"DT {allowed}")
+
+
+def wc() -> Command:
+    """WC: trippoint, the ``:`` comes when the current contour segment is complete."""
+    return Command("WC")
+
+
+# --------------------------------------------------------------------------------- queries, setup
+
+
+def tc(mode: int = 1) -> Command:
+    """TC: tell the last error code (``TC1``: code and text)."""
+    if mode not in (0, 1) or isinstance(mode, bool):
+        raise InvalidArgument(f"TC takes 0 or 1, not {mode!r}")
+    return Command(f"TC{mode}", _LINE)
+
+
+def _safe_text(text: str, what: str, limit: int) -> str:
+    if not isinstance(text, str):
+        raise InvalidArgument(f"{what}: {text!r} is not a string")
+    bad = _UNSAFE.search(text)
+    if bad is not None:
+        raise InvalidArgument(
+            f"{what}: character {bad.group()!r} cannot be sent "
+            "(no ';', quotes, backslash, control or non-ASCII characters)"
+        )
+    if len(text) > limit:
+        raise InvalidArgument(f"{what}: {len(text)} characters, the limit is {limit}")
+    return text
+
+
+def mg(text: str, *, model: ModelSpec | None = None) -> Command:
+    """MG "text": print a message (the controller answers with that line).
+
+    Refused: ``?`` (TC 54), braces, a leading ``:`` (it would read as an acknowledgement),
+    and anything :func:`_safe_text` refuses; longer than the model's MG limit.
+    """
+    limit = 72 if model is None else model.mg_max
+    _safe_text(text, "MG text", limit)
+    if "?" in text or "{" in text or "}" in text:
+        raise InvalidArgument(f"MG text {text!r}: '?' and braces are not allowed in a message")
+    if text.startswith(":"):
+        raise InvalidArgument(f"MG text {text!r} would start a line with ':'")
+    return Command(f'MG "{text}"', _LINE)
+
+
+def mg_operand(*names: str) -> Command:
+    """MG of operands or variables: ``mg_operand("_TPA")`` -> ``MG _TPA`` (one line reply)."""
+    if not names:
+        raise InvalidArgument("mg_operand needs at least one operand")
+    for name in names:
+        if not isinstance(name, str) or _OPERAND.fullmatch(name) is None:
+            raise InvalidArgument(f"not an operand or variable name: {name!r}")
+    return Command("MG " + ",".join(names), _LINE)
+
+
+def tm(period_us: float, *, model: ModelSpec | None = None) -> Command:
+    """TM: servo sample period in µs (31.25 .. 20000; refused where it is fixed)."""
+    if model is not None and not model.tm_adjustable:
+        raise InvalidArgument(
+            f"{model.name} has a fixed sample period; TM cannot be set", model=model.name
+        )
+    return Command("TM " + _ranged(period_us, 31.25, 20000, "TM"))
+
+
+def cw(mode: int | None = None, drop: int | None = None) -> Command:
+    """CW: unsolicited characters with high bit set (1) or clear (2); ``drop`` 0 pause, 1 drop."""
+    if mode is None and drop is None:
+        raise InvalidArgument("CW needs a mode or a drop setting")
+    if mode is not None and (isinstance(mode, bool) or mode not in (1, 2)):
+        raise InvalidArgument(f"CW mode is 1 or 2, not {mode!r}")
+    if drop is not None and (isinstance(drop, bool) or drop not in (0, 1)):
+        raise InvalidArgument(f"CW drop setting is 0 or 1, not {drop!r}")
+    first = "" if mode is None else str(mode)
+    return Command(f"CW {first}" + ("" if drop is None else f",{drop}"))
+
+
+def eo(enable: int) -> Command:
+    """EO: echo off (0) or on (1)."""
+    if isinstance(enable, bool) or enable not in (0, 1):
+        raise InvalidArgument(f"EO takes 0 or 1, not {enable!r}")
+    return Command(f"EO {enable}")
+
+
+def lz(enable: int) -> Command:
+    """LZ: leading zeros in replies off (1, zeros removed) or on (0)."""
+    if isinstance(enable, bool) or enable not in (0, 1):
+        raise InvalidArgument(f"LZ takes 0 or 1, not {enable!r}")
+    return Command(f"LZ {enable}")
+
+
+def qz() -> Command:
+    """QZ: data-record sizes (axes, general, coordinated, per-axis bytes)."""
+    return Command("QZ", _LINE)
+
+
+def qr(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """QR: one binary data record then ``:``; the size comes from the model or the header."""
+    letters = _axis_list(axes, model, "ISTN")
+    size = model.record_size if model is not None and not letters else None
+    return Command(f"QR {letters}" if letters else "QR", Expect.record(size))
+
+
+def th() -> Command:
+    """TH: Ethernet handles (several lines)."""
+    return Command("TH", Expect.DATA)
+
+
+def identify() -> Command:
+    """``^R^V`` (bytes 0x12 0x16): model and firmware, e.g. ``DMC4040 Rev 1.2f``."""
+    return Command("\x12\x16", _LINE)
+
+
+# --------------------------------------------------------------------------------- programs, arrays
+
+
+def _variable_name(name: str, what: str = "variable") -> str:
+    if not isinstance(name, str) or _VAR.fullmatch(name) is None:
+        raise InvalidArgument(
+            f"{what} name {name!r}: a letter then up to 7 letters or digits (8 at most)"
+        )
+    upper = name.upper()
+    rest = upper[2:]
+    # "SPA" or "CD0" would parse as a command; "SPEEDZ" repeats letters, so it cannot be an
+    # axis list and the firmware reads it as a name.
+    looks_like_args = (
+        not rest
+        or rest.isdigit()
+        or (_AXIS_SUFFIX.fullmatch(rest) is not None and len(set(rest)) == len(rest))
+    )
+    if upper in _KEYWORDS or (upper[:2] in COMMAND_NAMES and looks_like_args):
+        raise InvalidArgument(
+            f"{what} name {name!r} clashes with the command {upper[:2]} "
+            f"(the controller would read {name}= as that command)"
+        )
+    return name
+
+
+def assign(name: str, value: float) -> Command:
+    """Variable assignment ``name=value`` (Galil name rules; no command clash like ``CD0``)."""
+    return Command(f"{_variable_name(name)}={format_number(_number(value, name))}")
+
+
+def _label(label: str) -> str:
+    if not isinstance(label, str) or _LABEL.fullmatch(label) is None:
+        raise InvalidArgument(f"label {label!r}: '#', a letter, then up to 6 letters or digits")
+    return label
+
+
+def xq(label: str = "", thread: int | None = None) -> Command:
+    """XQ: execute the program from ``label`` (``"#A"``) in ``thread`` (0-7)."""
+    text = "XQ"
+    if label:
+        text += " " + _label(label)
+    if thread is not None:
+        t = _ranged(thread, 0, 7, "XQ thread", integer=True)
+        text += f",{t}" if label else f" ,{t}"
+    return Command(text)
+
+
+def hx(thread: int | None = None) -> Command:
+    """HX: halt program thread ``thread`` (``None``: all)."""
+    if thread is None:
+        return Command("HX")
+    return Command("HX" + _ranged(thread, 0, 7, "HX thread", integer=True))
+
+
+def dl(program: str | Sequence[str], *, model: ModelSpec | None = None) -> Command:
+    """DL: download a program (replaces the controller's program); the reply is ``::``.
+
+    Lines may hold any printable ASCII but no backslash (it ends the download); empty lines are
+    refused because the firmware rejects them (write ``'`` for a blank comment line).
+    """
+    lines = program.splitlines() if isinstance(program, str) else list(program)
+    if not lines:
+        raise InvalidArgument("DL: the program is empty")
+    limit = 80 if model is None else model.line_length
+    for i, line in enumerate(lines, 1):
+        if not isinstance(line, str):
+            raise InvalidArgument(f"DL line {i}: {line!r} is not a string")
+        bad = re.search(r"[^\x20-\x7e]|\\", line)
+        if bad is not None:
+            raise InvalidArgument(f"DL line {i}: character {bad.group()!r} cannot be downloaded")
+        if not line.strip():
+            raise InvalidArgument(f"DL line {i} is empty; the controller rejects empty lines")
+        if len(line) > limit:
+            raise InvalidArgument(f"DL line {i}: {len(line)} characters, the limit is {limit}")
+    payload = ("\r".join(lines) + "\r\\").encode("ascii")
+    return Command("DL", Expect.DOUBLE_ACK, payload)
+
+
+def ul() -> Command:
+    """UL: upload the program; text, ^Z, then ``:``."""
+    return Command("UL", Expect.CTRL_Z)
+
+
+def _array_range(first: int | None, last: int | None) -> str:
+    if first is None and last is None:
+        return ""
+    lo = _ranged(0 if first is None else first, 0, 999_999, "first index", integer=True)
+    if last is None:
+        return f",{lo}"
+    hi = _ranged(last, int(lo), 999_999, "last index", integer=True)
+    return f",{lo},{hi}"
+
+
+def qu(name: str, first: int | None = None, last: int | None = None, delim: int = 1) -> Command:
+    """QU: upload array ``name`` (elements ``first``..``last``); ends with ^Z then ``:``."""
+    _variable_name(name, "array")
+    if isinstance(delim, bool) or delim not in (0, 1):
+        raise InvalidArgument(f"QU delimiter is 0 (CR) or 1 (comma), not {delim!r}")
+    rng = _array_range(first, last)
+    if not rng:
+        rng = ",,"
+    elif rng.count(",") == 1:
+        rng += ","
+    return Command(f"QU {name}[]{rng},{delim}", Expect.CTRL_Z)
+
+
+def qd(name: str, values: Sequence[float], first: int | None = None) -> Command:
+    """QD: download ``values`` into array ``name`` from index ``first``; one ``:`` at the end."""
+    _variable_name(name, "array")
+    if len(values) == 0:
+        raise InvalidArgument("QD: no values")
+    start = 0 if first is None else int(_ranged(first, 0, 999_999, "first index", integer=True))
+    data = ",".join(format_number(_number(v, f"{name}[{start + i}]")) for i, v in enumerate(values))
+    text = f"QD {name}[],{start},{start + len(values) - 1}"
+    return Command(text, _ACK, (data + "\\").encode("ascii"))
+
+
+# --------------------------------------------------------------------------------- lines
+
+
+_SPECIAL = (ReplyKind.RECORD, ReplyKind.DOUBLE_ACK, ReplyKind.CTRL_Z)
+
+
+def pack(commands: Iterable[Command], limit: int | ModelSpec = 80) -> list[Command]:
+    """Join commands into compound lines (``PRA=1;BGA``) no longer than the line limit.
+
+    The limit counts the terminating CR. Commands with a payload or a special reply (QR, DL,
+    UL, QU, QD, ^R^V) go on a line of their own.
+
+    Raises:
+        InvalidArgument: a single command is already longer than the limit.
+    """
+    maximum = limit if isinstance(limit, int) else limit.line_length
+    lines: list[Command] = []
+    group: list[Command] = []
+    length = 0
+
+    def flush() -> None:
+        if len(group) == 1:
+            lines.append(group[0])
+        elif group:
+            lines.append(Command(";".join(c.text for c in group), Expect.ANY, b"", tuple(group)))
+        group.clear()
+
+    for cmd in commands:
+        if cmd.parts:
+            raise InvalidArgument("pack() takes single commands, not compound lines")
+        size = len(cmd.text) + 1
+        if size > maximum:
+            raise InvalidArgument(f"{cmd.text!r} is longer than the {maximum}-character line limit")
+        alone = bool(cmd.payload) or cmd.expect.kind in _SPECIAL or cmd.text.startswith("\x12")
+        if alone:
+            flush()
+            lines.append(cmd)
+            length = 0
+            continue
+        if group and length + size > maximum:
+            flush()
+            length = 0
+        group.append(cmd)
+        length += size
+    flush()
+    return lines
+
+
+_QUERIES = frozenset(
+    {
+        "TP",
+        "TV",
+        "TE",
+        "RP",
+        "TD",
+        "TS",
+        "SC",
+        "TC",
+        "MG",
+        "QZ",
+        "TH",
+        "ID",
+        "LS",
+        "LA",
+        "LV",
+        "TB",
+        "TI",
+        "TT",
+        "WH",
+    }
+)
+
+
+def _split_line(text: str) -> list[str]:
+    parts: list[str] = []
+    start = 0
+    quoted = False
+    for i, ch in enumerate(text):
+        if ch == '"':
+            quoted = not quoted
+        elif ch == ";" and not quoted:
+            parts.append(text[start:i])
+            start = i + 1
+    parts.append(text[start:])
+    return parts
+
+
+def parse_line(text: str) -> Command:
+    """Turn a raw command line (``"PRA=1;MG _TPA"``) into a :class:`Command`.
+
+    Each sub-command's reply shape is inferred: ``QR`` is a record, ``UL``/``QU`` end with
+    ^Z, known queries and ``?`` interrogations return data, anything else may return either.
+
+    Raises:
+        InvalidArgument: CR, LF or non-ASCII in the line, or ``DL``/``QD`` (use their builders).
+    """
+    if not isinstance(text, str) or not text.isascii():
+        raise InvalidArgument(f"command line {text!r} must be ASCII text")
+    if "\r" in text or "\n" in text:
+        raise InvalidArgument(f"command line {text!r} must not contain CR or LF")
+    pieces = _split_line(text)
+    parts = tuple(_raw_command(p) for p in pieces)
+    if len(parts) == 1:
+        return parts[0]
+    return Command(text, Expect.ANY, b"", parts)
+
+
+def _raw_command(text: str) -> Command:
+    head = text.lstrip().upper()[:2]
+    if head in ("DL", "QD"):
+        raise InvalidArgument(f"{head} needs a payload; use commands.{head.lower()}()")
+    if head == "QR":
+        return Command(text, Expect.record(None))
+    if head in ("UL", "QU"):
+        return Command(text, Expect.CTRL_Z)
+    if head in _QUERIES or text.startswith("\x12\x16"):
+        return Command(text, Expect.DATA)
+    return Command(text, Expect.ANY)

@@ -1,0 +1,268 @@
+"""The session: matches every reply to the command it answers (sans-I/O).
+
+Modelled on h11: :meth:`Session.send` turns a command into the bytes to write and queues it;
+:meth:`Session.receive_data` takes whatever bytes arrived and returns what they complete. The
+caller owns the transport, the lock and the clock.
+
+A reply is handed to a command only when its shape fits (``:`` for a plain command, data for a
+query, a record for ``QR``, ...). Anything else means the link is out of step: the session
+raises :class:`~galil.errors.ProtocolError`, forgets its pending commands, and refuses to send
+until :meth:`Session.resync` has been written and its marker has come back.
+
+Resynchronisation: ``resync()`` returns ``\\`` CR (ends a download the controller may still be
+in) then ``MG "<token>"`` CR, with a fresh token; the parser discards every byte until
+``<token>`` CR LF ``:`` and then the session is in step again.
+"""
+
+from __future__ import annotations
+
+import secrets
+from collections import deque
+from dataclasses import dataclass
+
+from galil.errors import ProtocolError
+from galil.protocol.commands import Command, ReplyKind, parse_line
+from galil.protocol.framing import (
+    ACK,
+    Ack,
+    FrameParser,
+    Record,
+    Rejected,
+    Reply,
+    Synced,
+    Unsolicited,
+)
+
+__all__ = ["Completed", "Session"]
+
+
+@dataclass(frozen=True, slots=True)
+class Completed:
+    """The complete reply to one command.
+
+    Attributes:
+        command: the command answered (one part of a compound line).
+        ok: ``False`` when the controller answered ``?`` (the client then asks ``TC1``).
+        text: the data (without its final CR LF), or what was printed before a ``?``.
+        record: the binary record of a ``QR``, else ``None``.
+    """
+
+    command: Command
+    ok: bool
+    text: str = ""
+    record: bytes | None = None
+
+
+class Session:
+    """Pending-command queue and reply matcher for one command link.
+
+    Args:
+        echo: the controller echoes what it receives (``EO1`` on serial); the echo is removed.
+    """
+
+    def __init__(self, echo: bool = False) -> None:
+        self.echo = echo
+        self._parser = FrameParser()
+        self._pending: deque[Command] = deque()
+        self._dl_first: bool | None = None  # first terminator of the DL at the head
+        self.out_of_step = False
+        self._token = ""
+        self._resyncs = 0
+
+    @property
+    def pending(self) -> int:
+        """Commands sent whose replies are not complete yet."""
+        return len(self._pending)
+
+    @property
+    def resyncing(self) -> bool:
+        """Whether a resync marker was sent and has not come back yet."""
+        return self._parser.hunting
+
+    def send(self, cmd: Command | str) -> bytes:
+        """Queue ``cmd`` and return the bytes to write (CR terminated, payload appended).
+
+        Raises:
+            ProtocolError: the session is out of step (call :meth:`resync` first).
+            InvalidArgument: a raw string that cannot be sent (see ``parse_line``).
+        """
+        if self.out_of_step:
+            raise ProtocolError("the link is out of step; write session.resync() first")
+        if type(cmd) is str:
+            cmd = parse_line(cmd)
+        assert isinstance(cmd, Command)
+        wire = cmd.text.encode("latin-1") + b"\r" + cmd.payload
+        parser = self._parser
+        if not cmd.parts and not self.echo:
+            self._pending.append(cmd)
+            parser.expect(cmd.expect)
+            return wire
+        parts = cmd.parts or (cmd,)
+        if self.echo:
+            end = parser.echo_total
+            parser.add_echo(wire)
+            for i, part in enumerate(parts):
+                end += len(part.text) + 1
+                if i == len(parts) - 1:
+                    end += len(cmd.payload)
+                self._pending.append(part)
+                parser.expect(part.expect, end)
+        else:
+            for part in parts:
+                self._pending.append(part)
+                parser.expect(part.expect)
+        return wire
+
+    def receive_data(self, data: bytes) -> list[Completed | Unsolicited]:
+        """Feed bytes from the link; return completed replies and unsolicited lines, in order.
+
+        Raises:
+            ProtocolError: a reply that fits no pending command; the session is now out of step.
+        """
+        parser = self._parser
+        pending = self._pending
+        if (
+            data == b":"
+            and pending
+            and not self.echo
+            and parser._line_start
+            and not parser._buf
+            and parser._mode == 0
+            and not parser._special
+            and not parser.unsolicited_only
+        ):
+            # Hot path: a lone ':' for a plain command (one lookup instead of a parse).
+            cmd = pending[0]
+            kind = cmd.expect.kind
+            if kind is ReplyKind.ACK or kind is ReplyKind.ANY:
+                pending.popleft()
+                parser._pop()
+                return [Completed(cmd, True)]
+        elif (
+            pending
+            and data[-3:] == b"\r\n:"
+            and not self.echo
+            and parser._line_start
+            and not parser._buf
+            and parser._mode == 0
+            and not parser._special
+            and not parser.unsolicited_only
+            and data.count(b"\n") == 1
+            and data[0] not in b":?"
+            and data.isascii()
+        ):
+            # Hot path: one complete data line for a query.
+            cmd = pending[0]
+            kind = cmd.expect.kind
+            if kind is ReplyKind.DATA or kind is ReplyKind.ANY:
+                pending.popleft()
+                parser._pop()
+                return [Completed(cmd, True, data[:-3].decode("ascii"))]
+        try:
+            events = parser.feed(data)
+        except ProtocolError as exc:
+            self._lose_step()
+            raise ProtocolError(f"{exc} (pending: {self._describe()})") from exc
+        if len(events) == 1 and events[0] is ACK and self._pending:
+            cmd = self._pending[0]
+            if cmd.expect.kind is ReplyKind.ACK or cmd.expect.kind is ReplyKind.ANY:
+                self._pending.popleft()
+                return [Completed(cmd, True)]
+        out: list[Completed | Unsolicited] = []
+        for event in events:
+            if type(event) is Unsolicited:
+                out.append(event)
+            elif type(event) is Synced:
+                self.out_of_step = False
+            else:
+                done = self._match(event)  # type: ignore[arg-type]
+                if done is not None:
+                    out.append(done)
+        return out
+
+    def _match(self, event: Ack | Rejected | Reply | Record) -> Completed | None:
+        if not self._pending:
+            self._lose_step()
+            raise ProtocolError(f"reply {event!r} arrived but no command is pending")
+        cmd = self._pending[0]
+        kind = cmd.expect.kind
+        if kind is ReplyKind.DOUBLE_ACK:
+            ok = type(event) is Ack
+            if type(event) not in (Ack, Rejected):
+                self._doubt(cmd, event)
+            if self._dl_first is None:
+                self._dl_first = ok
+                return None
+            ok = self._dl_first and ok
+            self._dl_first = None
+            self._pending.popleft()
+            return Completed(cmd, ok)
+        if type(event) is Rejected:
+            self._pending.popleft()
+            return Completed(cmd, False, event.text)
+        if type(event) is Ack:
+            if kind is ReplyKind.ACK or kind is ReplyKind.ANY:
+                self._pending.popleft()
+                return Completed(cmd, True)
+        elif type(event) is Reply:
+            if kind is ReplyKind.DATA:
+                limit = cmd.expect.size
+                if limit is not None and event.text.count("\n") >= limit:
+                    self._doubt(cmd, event)
+                self._pending.popleft()
+                return Completed(cmd, True, event.text)
+            if kind is ReplyKind.ANY or kind is ReplyKind.CTRL_Z:
+                self._pending.popleft()
+                return Completed(cmd, True, event.text)
+        elif type(event) is Record and kind is ReplyKind.RECORD:
+            self._pending.popleft()
+            return Completed(cmd, True, "", event.data)
+        self._doubt(cmd, event)
+        return None  # pragma: no cover - _doubt raises
+
+    def _doubt(self, cmd: Command, event: object) -> None:
+        self._lose_step()
+        raise ProtocolError(
+            f"reply {event!r} does not fit command {cmd.text!r} "
+            f"(expected {cmd.expect.kind.value}); the link is out of step"
+        )
+
+    def _describe(self) -> str:
+        return ", ".join(repr(c.text) for c in list(self._pending)[:4]) or "none"
+
+    def _lose_step(self) -> None:
+        self.out_of_step = True
+        self._pending.clear()
+        self._dl_first = None
+        self._parser.reset()
+
+    def abandon(self) -> list[Command]:
+        """Give up on every pending command (after a timeout); the session is out of step.
+
+        Returns:
+            The abandoned commands, oldest first.
+        """
+        lost = list(self._pending)
+        self._lose_step()
+        return lost
+
+    def resync(self, token: str | None = None) -> bytes:
+        """Return the bytes that bring the link back in step; write them, then keep feeding.
+
+        Pending commands are abandoned. ``out_of_step`` stays ``True`` until the controller's
+        answer to the marker has been read by :meth:`receive_data`.
+        """
+        self._resyncs += 1
+        if token is None:
+            token = f"SYNC{self._resyncs}X{secrets.token_hex(4).upper()}"
+        elif not token.isalnum() or not token.isascii() or len(token) > 30:
+            raise ProtocolError(f"resync token must be short and alphanumeric: {token!r}")
+        self._token = token
+        self._lose_step()
+        self._parser.hunt(token.encode("ascii") + b"\r\n:")
+        return b'\\\rMG "' + token.encode("ascii") + b'"\r'
+
+    @staticmethod
+    def marker_reply(token: str) -> bytes:
+        """The controller's answer to the resync marker (what a simulator must print)."""
+        return token.encode("ascii") + b"\r\n:"

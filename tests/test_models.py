@@ -1,0 +1,79 @@
+"""Model table lookups and ^R^V identification."""
+
+from __future__ import annotations
+
+import pytest
+
+from galil.errors import InvalidArgument
+from galil.models import MODELS, get_model, parse_identity
+
+
+@pytest.mark.parametrize(
+    ("reply", "name", "family", "axes", "firmware"),
+    [
+        ("DMC1806 Rev 1.0b", "DMC-1806", "DMC-18x6", "ABCDEFGH", "1.0b"),
+        ("DMC4040 Rev 1.2f", "DMC-4040", "DMC-40x0", "ABCD", "1.2f"),
+        ("DMC2183 Rev 1.0o-CM", "DMC-2183", "DMC-21x3", "ABCDEFGH", "1.0o-CM"),
+        (" DMC4080 Rev 1.2f\r\n", "DMC-4080", "DMC-40x0", "ABCDEFGH", "1.2f"),
+        ("DMC4183 Rev 1.0a", "DMC-4183", "DMC-41x3", "ABCDEFGH", "1.0a"),
+        ("DMC4123 Rev 1.0a", "DMC-4123", "DMC-41x3", "AB", "1.0a"),
+        ("DMC2143 Rev 1.0", "DMC-2143", "DMC-21x3", "ABCD", "1.0"),
+        ("DMC1846 Rev 1.0", "DMC-1846", "DMC-18x6", "ABCD", "1.0"),
+        ("DMC1842 Rev 1.0", "DMC-1842", "DMC-18x2", "ABCD", "1.0"),
+        ("DMC1822 Rev 1.0", "DMC-1822", "DMC-18x2", "AB", "1.0"),
+        ("DMC30010 Rev 1.2a", "DMC-30010", "DMC-30010", "A", "1.2a"),
+        ("DMC2280 Rev 1.0o-CM", "DMC-2280", "DMC-21x3", "ABCDEFGH", "1.0o-CM"),
+    ],
+)
+def test_parse_identity(reply: str, name: str, family: str, axes: str, firmware: str) -> None:
+    ident = parse_identity(reply)
+    assert ident.model.name == name
+    assert ident.model.family == family
+    assert ident.model.axes == axes
+    assert ident.firmware == firmware
+    if ident.model.qz is not None:
+        assert ident.model.qz[0] == len(axes)
+
+
+@pytest.mark.parametrize("reply", ["", "hello", "RIO47102 Rev 1.1j", "DMC9999 Rev 1.0", "Rev 1.0"])
+def test_parse_identity_refuses(reply: str) -> None:
+    with pytest.raises(InvalidArgument):
+        parse_identity(reply)
+
+
+def test_lookup_is_case_and_dash_insensitive() -> None:
+    for spec in {s.name: s for s in MODELS.values()}.values():
+        assert get_model(spec.name) is spec
+        assert get_model(spec.name.lower()) is spec
+        assert get_model(spec.name.replace("-", "")).name == spec.name
+
+
+def test_family_names() -> None:
+    assert get_model("DMC-18x2").family == "DMC-18x2"
+    assert get_model("DMC-21x3").name == "DMC-2183"
+    assert get_model("DMC-40x0").name == "DMC-4040"
+
+
+def test_record_sizes_match_qz() -> None:
+    assert get_model("DMC-4040").record_size == 82 + 4 * 36
+    assert get_model("DMC-2183").record_size == 44 + 8 * 28
+    assert get_model("DMC-1500").record_size is None
+
+
+def test_sample_periods() -> None:
+    assert get_model("DMC-1500").sample_period == 0.002
+    assert get_model("DMC-1500").sample_period_for(500) == 0.002
+    assert get_model("DMC-4040").sample_period == pytest.approx(1 / 1024)
+    assert get_model("DMC-4040").sample_period_for(500) == pytest.approx(1 / 2048)
+
+
+def test_axis_letters_and_aliases() -> None:
+    m1500 = get_model("DMC-1500")
+    assert m1500.axis_letter("X") == "A"
+    assert m1500.axis_letter("w") == "D"
+    m4040 = get_model("DMC-4040")
+    assert m4040.axis_letter("c") == "C"
+    with pytest.raises(InvalidArgument):
+        m4040.axis_letter("E")
+    with pytest.raises(InvalidArgument):
+        m4040.axis_letter("X")
