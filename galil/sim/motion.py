@@ -1,0 +1,113 @@
+"""One simulated axis in the servo loop: the shared profiler, a servo lag and a velocity filter.
+
+The reference ``r``/``y`` comes from :class:`galil.predict.engine.AxisProfiler` (the one motion
+engine, shared with the predictor). What the simulator adds is the plant: the encoder ``TP``
+follows the reference through a first-order lag (time constant ``lag`` seconds), so the
+profiler can be done (``AM``) before the motor is in position (``MC``), and ``TV`` reports the
+encoder velocity averaged over 0.25 s as the manuals describe. Everything is evaluated over
+whole chunks of samples with numpy.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+from galil.errors import InvalidArgument
+from galil.predict.engine import AxisProfiler
+from galil.predict.smoothing import smooth
+
+__all__ = ["TV_WINDOW_SECONDS", "AxisMotion"]
+
+#: The manuals' "special averaging filter (over approximately 0.25 sec)" for TV.
+TV_WINDOW_SECONDS = 0.25
+
+
+class AxisMotion:
+    """The servo-loop state of one axis.
+
+    Args:
+        sample_period: seconds per servo sample.
+        position: initial reference and encoder position, counts.
+        lag: servo lag time constant in seconds (0 = the motor follows exactly).
+    """
+
+    def __init__(self, sample_period: float, position: int = 0, lag: float = 0.003) -> None:
+        self.sample_period = sample_period
+        self.profiler = AxisProfiler(sample_period=sample_period, position=int(position))
+        self.actual = float(position)
+        self.motor_on = True
+        self._window = max(1, round(TV_WINDOW_SECONDS / sample_period))
+        self._history = np.full(self._window + 1, float(position))
+        self.lag = 0.0
+        self._alpha = 1.0
+        self.set_lag(lag)
+
+    def set_lag(self, lag: float) -> None:
+        """Set the servo lag time constant in seconds (>= 0).
+
+        Raises:
+            InvalidArgument: negative or not finite.
+        """
+        if not math.isfinite(lag) or lag < 0.0:
+            raise InvalidArgument(f"servo lag must be a finite number of seconds >= 0, not {lag!r}")
+        self.lag = float(lag)
+        # Exact discretisation of a first-order lag: a step is followed by 1 - exp(-Ts/tau).
+        self._alpha = 1.0 if lag == 0.0 else -math.expm1(-self.sample_period / lag)
+
+    @property
+    def encoder(self) -> int:
+        """``TP``: the encoder position in counts."""
+        return round(self.actual)
+
+    @property
+    def reference(self) -> int:
+        """``RP``: the reference position (after IT smoothing), counts."""
+        return int(self.profiler.reference)
+
+    @property
+    def error(self) -> int:
+        """``TE``: reference minus encoder, counts."""
+        return self.reference - self.encoder
+
+    @property
+    def velocity(self) -> float:
+        """``TV``: encoder velocity averaged over the last 0.25 s, counts/s."""
+        span = float(self._history[-1] - self._history[0])
+        return span / (self._window * self.sample_period)
+
+    @property
+    def moving(self) -> bool:
+        """``_BG``: the profile is not complete."""
+        return bool(self.profiler.moving)
+
+    @property
+    def in_position(self) -> bool:
+        """Profile complete and the encoder on the reference (what ``MC`` waits for)."""
+        if not self.motor_on:
+            return True
+        return not self.profiler.moving and self.encoder == self.reference
+
+    def advance(self, n: int) -> npt.NDArray[np.int64]:
+        """Run ``n`` samples; return the reference positions of those samples."""
+        ref = np.asarray(self.profiler.advance(n), dtype=np.int64)
+        if self.motor_on:
+            if self._alpha >= 1.0:
+                actual = ref.astype(np.float64)
+            else:
+                actual = smooth(ref, self._alpha, self.actual)
+            self.actual = float(actual[-1])
+            self._remember(np.rint(actual))
+        else:
+            # No servo: the motor stays where it is.
+            self._remember(np.full(n, float(round(self.actual))))
+        return ref
+
+    def _remember(self, encoder: npt.NDArray[np.float64]) -> None:
+        keep = self._window + 1
+        if encoder.size >= keep:
+            self._history = encoder[-keep:].copy()
+        else:
+            self._history = np.concatenate((self._history[encoder.size :], encoder))

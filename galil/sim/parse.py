@@ -1,0 +1,212 @@
+"""Text handling for the simulated interpreter: splitting, fields and expressions.
+
+The controller reads ASCII commands ended by ``;`` or carriage return (never inside a quoted
+string), two upper-case letters and their arguments. Expressions are evaluated strictly left to
+right with parentheses only, as Galil's interpreter does (``1+2*3`` is 9).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable
+
+__all__ = [
+    "Refused",
+    "evaluate",
+    "next_command",
+    "split_fields",
+    "split_program_line",
+]
+
+
+class Refused(Exception):  # noqa: N818 (a reply, not a failure)
+    """The interpreter answers ``?``; ``code`` is the TC code it records."""
+
+    def __init__(self, code: int, why: str = "") -> None:
+        super().__init__(why or f"TC {code}")
+        self.code = code
+
+
+def next_command(buffer: str) -> tuple[str, int] | None:
+    """Find the first complete command in ``buffer``.
+
+    Returns:
+        ``(command text without its terminator, index just past the terminator)``, or ``None``
+        when no terminator has arrived yet. Line feeds are dropped (terminals send CR LF).
+    """
+    quoted = False
+    for i, ch in enumerate(buffer):
+        if ch == '"':
+            quoted = not quoted
+        elif ch == "\r" or (ch == ";" and not quoted):
+            return buffer[:i].replace("\n", ""), i + 1
+    return None
+
+
+def split_program_line(line: str) -> list[str]:
+    """Split one program line into its ``;``-separated commands (quotes respected)."""
+    out: list[str] = []
+    start = 0
+    quoted = False
+    for i, ch in enumerate(line):
+        if ch == '"':
+            quoted = not quoted
+        elif ch == ";" and not quoted:
+            out.append(line[start:i])
+            start = i + 1
+    out.append(line[start:])
+    return out
+
+
+def split_fields(text: str) -> list[str]:
+    """Split on commas that are outside quotes, brackets and parentheses."""
+    fields: list[str] = []
+    depth = 0
+    quoted = False
+    start = 0
+    for i, ch in enumerate(text):
+        if ch == '"':
+            quoted = not quoted
+        elif quoted:
+            continue
+        elif ch in "([{":
+            depth += 1
+        elif ch in ")]}":
+            depth -= 1
+        elif ch == "," and depth == 0:
+            fields.append(text[start:i])
+            start = i + 1
+    fields.append(text[start:])
+    return fields
+
+
+_TOKEN = re.compile(
+    r"\s*(?:"
+    r"(?P<num>(?:\d+(?:\.\d*)?|\.\d+))"
+    r"|(?P<hex>\$[0-9A-Fa-f]+(?:\.[0-9A-Fa-f]+)?)"
+    r"|(?P<func>@[A-Z]+\[)"
+    r"|(?P<name>_?[A-Za-z][A-Za-z0-9_]*)"
+    r"|(?P<op><=|>=|<>|[-+*/&|<>=()\]])"
+    r")"
+)
+_FUNCS: dict[str, Callable[[float], float]] = {
+    "ABS": abs,
+    "INT": lambda x: float(math.floor(x)),
+    "FRAC": lambda x: x - math.trunc(x),
+    "RND": lambda x: float(math.floor(x + 0.5)),
+    "SQR": lambda x: math.sqrt(x) if x >= 0 else math.nan,
+    "COM": lambda x: float(~int(x) & 0xFFFFFFFF),
+}
+
+
+def _tokens(text: str) -> list[tuple[str, str]]:
+    out: list[tuple[str, str]] = []
+    pos = 0
+    text = text.rstrip()
+    while pos < len(text):
+        m = _TOKEN.match(text, pos)
+        if m is None or m.end() == pos:
+            raise Refused(1, f"cannot read {text[pos:]!r}")
+        kind = m.lastgroup
+        assert kind is not None
+        out.append((kind, m.group(kind)))
+        pos = m.end()
+    return out
+
+
+def evaluate(text: str, lookup: Callable[[str], float]) -> float:
+    """Evaluate a Galil expression, left to right.
+
+    Args:
+        text: the expression (``"_TPA+100"``, ``"(a<5)&(b>2)"``, ``"-$10"``).
+        lookup: returns the value of a variable or operand name, or raises :class:`Refused`.
+
+    Raises:
+        Refused: a syntax error (TC 1), unbalanced parentheses (TC 59), a bad value (TC 6).
+    """
+    tokens = _tokens(text)
+    if not tokens:
+        raise Refused(1, "missing value")
+    value, pos = _sequence(tokens, 0, lookup)
+    if pos != len(tokens):
+        raise Refused(59 if tokens[pos][1] in ")]" else 1, f"unexpected {tokens[pos][1]!r}")
+    if not math.isfinite(value):
+        raise Refused(6, "value out of range")
+    return value
+
+
+def _apply(op: str, a: float, b: float) -> float:
+    if op == "+":
+        return a + b
+    if op == "-":
+        return a - b
+    if op == "*":
+        return a * b
+    if op == "/":
+        if b == 0:
+            raise Refused(6, "division by zero")
+        return a / b
+    if op == "&":
+        return float(int(a) & int(b))
+    if op == "|":
+        return float(int(a) | int(b))
+    comparisons = {
+        "<": a < b,
+        ">": a > b,
+        "=": a == b,
+        "<=": a <= b,
+        ">=": a >= b,
+        "<>": a != b,
+    }
+    return 1.0 if comparisons[op] else 0.0
+
+
+def _sequence(
+    tokens: list[tuple[str, str]], pos: int, lookup: Callable[[str], float]
+) -> tuple[float, int]:
+    value, pos = _operand(tokens, pos, lookup)
+    while pos < len(tokens) and tokens[pos][0] == "op" and tokens[pos][1] not in ")]":
+        op = tokens[pos][1]
+        if op == "(":
+            raise Refused(1, "missing operator")
+        rhs, pos = _operand(tokens, pos + 1, lookup)
+        value = _apply(op, value, rhs)
+    return value, pos
+
+
+def _operand(
+    tokens: list[tuple[str, str]], pos: int, lookup: Callable[[str], float]
+) -> tuple[float, int]:
+    if pos >= len(tokens):
+        raise Refused(1, "missing value")
+    kind, text = tokens[pos]
+    if kind == "num":
+        return float(text), pos + 1
+    if kind == "hex":
+        whole, _, frac = text[1:].partition(".")
+        value = float(int(whole, 16))
+        if frac:
+            value += int(frac, 16) / 16 ** len(frac)
+        return value, pos + 1
+    if kind == "name":
+        return lookup(text), pos + 1
+    if kind == "func":
+        name = text[1:-1]
+        if name not in _FUNCS:
+            raise Refused(57, f"unknown function @{name}")
+        arg, pos = _sequence(tokens, pos + 1, lookup)
+        if pos >= len(tokens) or tokens[pos][1] != "]":
+            raise Refused(55, "missing ]")
+        return _FUNCS[name](arg), pos + 1
+    if text == "-":
+        value, pos = _operand(tokens, pos + 1, lookup)
+        return -value, pos
+    if text == "+":
+        return _operand(tokens, pos + 1, lookup)
+    if text == "(":
+        value, pos = _sequence(tokens, pos + 1, lookup)
+        if pos >= len(tokens) or tokens[pos][1] != ")":
+            raise Refused(59, "mismatched parentheses")
+        return value, pos + 1
+    raise Refused(1, f"unexpected {text!r}")

@@ -1,0 +1,385 @@
+"""Serve a simulated controller over TCP (127.0.0.1) or a pseudo-terminal.
+
+Both servers run on a background thread, are context managers, and advertise their address::
+
+    with SimTcpServer(model="DMC-4040") as srv:
+        sock = socket.create_connection(srv.address)          # the command port (like 23)
+        msgs = socket.create_connection(srv.message_address)  # unsolicited messages
+
+    with SimPtyServer() as srv:
+        port = serial.Serial(srv.path)                        # looks like a serial port
+
+By default they run on a :class:`~galil.sim.clock.RealTimeClock`; pass a controller built on a
+:class:`~galil.sim.clock.ManualClock` and call :meth:`advance` to make tests independent of time.
+``main`` implements ``galil sim``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import selectors
+import socket
+import sys
+import threading
+import time
+import tty
+from collections.abc import Sequence
+from types import TracebackType
+
+from galil.errors import GalilConnectionError, InvalidArgument
+from galil.sim.clock import RealTimeClock
+from galil.sim.controller import SimController
+from galil.sim.faults import FaultHook, apply_faults
+
+__all__ = ["SimPtyServer", "SimTcpServer", "main"]
+
+#: How often the serving thread runs the servo loop and flushes output (seconds).
+_TICK = 0.002
+_MAX_BACKLOG = 1 << 16
+
+
+class _Outbox:
+    """Output waiting to be sent, with fault delays honoured in real time."""
+
+    def __init__(self, faults: FaultHook | None) -> None:
+        self.faults = faults
+        self.items: list[tuple[float, bytes]] = []
+        self._last = 0.0
+
+    def put(self, data: bytes) -> None:
+        now = time.monotonic()
+        for delay, piece in apply_faults(self.faults, data):
+            # keep order: a piece is never sent before the one queued ahead of it
+            self._last = max(self._last, now + delay)
+            self.items.append((self._last, piece))
+
+    def due(self) -> bytes:
+        now = time.monotonic()
+        out = bytearray()
+        while self.items and self.items[0][0] <= now:
+            out += self.items.pop(0)[1]
+        return bytes(out)
+
+
+class _Server:
+    """Thread, lock and lifecycle shared by the TCP and pty servers."""
+
+    def __init__(self, controller: SimController | None, model: str) -> None:
+        self.controller = (
+            controller if controller is not None else SimController(model, RealTimeClock())
+        )
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._error: BaseException | None = None
+
+    def start(self) -> None:
+        """Start serving on a background thread."""
+        if self._thread is not None:
+            return
+        self._open()
+        self._thread = threading.Thread(target=self._serve, name=type(self).__name__, daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop serving and close everything."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+            self._thread = None
+        self._close()
+
+    def advance(self, seconds: float) -> None:
+        """Advance a manual clock (thread-safe; the controller serialises access)."""
+        self.controller.advance(seconds)
+
+    def __enter__(self) -> _Server:
+        self.start()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.stop()
+
+    def _serve(self) -> None:
+        try:
+            while not self._stop.is_set():
+                self._tick()
+        except BaseException as e:  # surfaced by the owner; a server thread must not vanish
+            self._error = e
+
+    def _open(self) -> None:
+        raise NotImplementedError
+
+    def _close(self) -> None:
+        raise NotImplementedError
+
+    def _tick(self) -> None:
+        raise NotImplementedError
+
+
+class SimTcpServer(_Server):
+    """The simulator on 127.0.0.1: a command port and a port for unsolicited messages.
+
+    Each connection to the command port is one handle (``TH`` lists them). Unsolicited output
+    (program ``MG``) goes to every connection on the message port; it is kept (up to 64 KiB)
+    until one connects.
+
+    Args:
+        controller: the controller to serve (default: a new one on a real-time clock).
+        model: model of the default controller.
+        host: address to bind; only loopback addresses are accepted.
+        port: command port (0 picks a free one).
+        message_port: port for unsolicited messages (0 picks a free one).
+        faults: fault hook applied to everything sent.
+    """
+
+    def __init__(
+        self,
+        controller: SimController | None = None,
+        *,
+        model: str = "DMC-4040",
+        host: str = "127.0.0.1",
+        port: int = 0,
+        message_port: int = 0,
+        faults: FaultHook | None = None,
+    ) -> None:
+        if not host.startswith("127.") and host not in ("localhost", "::1"):
+            raise InvalidArgument(f"the simulator serves loopback only, not {host!r}")
+        super().__init__(controller, model)
+        self.host = host
+        self._want = (port, message_port)
+        self.faults = faults
+        self.controller.separate_messages = True
+        self._sel = selectors.DefaultSelector()
+        self._listen: socket.socket | None = None
+        self._listen_msg: socket.socket | None = None
+        self._clients: dict[socket.socket, tuple[int, _Outbox]] = {}
+        self._msg_clients: dict[socket.socket, _Outbox] = {}
+        self._backlog = bytearray()
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """(host, port) of the command port."""
+        if self._listen is None:
+            raise GalilConnectionError("server not started")
+        host, port = self._listen.getsockname()[:2]
+        return str(host), int(port)
+
+    @property
+    def message_address(self) -> tuple[str, int]:
+        """(host, port) of the unsolicited-message port."""
+        if self._listen_msg is None:
+            raise GalilConnectionError("server not started")
+        host, port = self._listen_msg.getsockname()[:2]
+        return str(host), int(port)
+
+    @property
+    def url(self) -> str:
+        """``tcp://host:port`` of the command port."""
+        host, port = self.address
+        return f"tcp://{host}:{port}"
+
+    def _open(self) -> None:
+        for i, want in enumerate(self._want):
+            s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            s.bind((self.host, want))
+            s.listen(8)
+            s.setblocking(False)
+            self._sel.register(s, selectors.EVENT_READ, "listen" if i == 0 else "listen_msg")
+            if i == 0:
+                self._listen = s
+            else:
+                self._listen_msg = s
+
+    def _close(self) -> None:
+        for sock in [*self._clients, *self._msg_clients, self._listen, self._listen_msg]:
+            if sock is not None:
+                with contextlib.suppress(KeyError, ValueError):
+                    self._sel.unregister(sock)
+                sock.close()
+        self._clients.clear()
+        self._msg_clients.clear()
+        self._sel.close()
+
+    def _drop(self, sock: socket.socket) -> None:
+        self._sel.unregister(sock)
+        entry = self._clients.pop(sock, None)
+        if entry is not None:
+            self.controller.close_port(entry[0])
+        self._msg_clients.pop(sock, None)
+        sock.close()
+
+    def _tick(self) -> None:
+        for key, _ in self._sel.select(timeout=_TICK):
+            sock = key.fileobj
+            assert isinstance(sock, socket.socket)
+            if key.data in ("listen", "listen_msg"):
+                conn, peer = sock.accept()
+                conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                conn.setblocking(False)
+                if key.data == "listen":
+                    name = f"TCP PORT {self.address[1]} TO IP ADDRESS 127,0,0,1 PORT {peer[1]}"
+                    self._clients[conn] = (self.controller.open_port(name), _Outbox(self.faults))
+                    self._sel.register(conn, selectors.EVENT_READ, "client")
+                else:
+                    box = _Outbox(self.faults)
+                    box.put(bytes(self._backlog))
+                    self._backlog.clear()
+                    self._msg_clients[conn] = box
+                    self._sel.register(conn, selectors.EVENT_READ, "msg")
+                continue
+            try:
+                data = sock.recv(4096)
+            except OSError:
+                data = b""
+            if not data:
+                self._drop(sock)
+            elif key.data == "client":
+                number, box = self._clients[sock]
+                box.put(self.controller.feed(data, port=number))
+        for sock, (number, box) in list(self._clients.items()):
+            box.put(self.controller.poll(port=number))
+            self._send(sock, box)
+        messages = self.controller.read_messages()
+        if messages:
+            if self._msg_clients:
+                for box in self._msg_clients.values():
+                    box.put(messages)
+            else:
+                self._backlog += messages
+                del self._backlog[:-_MAX_BACKLOG]
+        for sock, box in list(self._msg_clients.items()):
+            self._send(sock, box)
+
+    def _send(self, sock: socket.socket, box: _Outbox) -> None:
+        out = box.due()
+        if not out:
+            return
+        try:
+            sock.setblocking(True)
+            sock.sendall(out)
+            sock.setblocking(False)
+        except OSError:
+            self._drop(sock)
+
+
+class SimPtyServer(_Server):
+    """The simulator behind a pseudo-terminal: open :attr:`path` as a serial port.
+
+    Unsolicited output is mixed into the replies, as on a serial port.
+
+    Args:
+        controller: the controller to serve (default: a new one on a real-time clock).
+        model: model of the default controller.
+        faults: fault hook applied to everything sent.
+    """
+
+    def __init__(
+        self,
+        controller: SimController | None = None,
+        *,
+        model: str = "DMC-4040",
+        faults: FaultHook | None = None,
+    ) -> None:
+        super().__init__(controller, model)
+        self.controller.separate_messages = False
+        self.faults = faults
+        self._master = -1
+        self._slave = -1
+        self.path = ""
+        self._box = _Outbox(faults)
+        self._sel = selectors.DefaultSelector()
+
+    def _open(self) -> None:
+        self._master, self._slave = os.openpty()
+        # Raw: no echo, no CR/LF translation; the slave stays open here so the pty survives
+        # clients opening and closing it.
+        tty.setraw(self._slave)
+        os.set_blocking(self._master, False)
+        self.path = os.ttyname(self._slave)
+        self._sel.register(self._master, selectors.EVENT_READ)
+
+    def _close(self) -> None:
+        self._sel.close()
+        for fd in (self._master, self._slave):
+            if fd >= 0:
+                os.close(fd)
+        self._master = self._slave = -1
+
+    def _tick(self) -> None:
+        if self._sel.select(timeout=_TICK):
+            try:
+                data = os.read(self._master, 4096)
+            except (BlockingIOError, OSError):
+                data = b""
+            if data:
+                self._box.put(self.controller.feed(data))
+        self._box.put(self.controller.poll())
+        out = self._box.due()
+        while out:
+            try:
+                written = os.write(self._master, out)
+            except BlockingIOError:
+                time.sleep(_TICK)
+                continue
+            out = out[written:]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``galil sim``: serve a simulated controller until Ctrl-C.
+
+    ``galil sim --model DMC-4040 --tcp 127.0.0.1:0`` or ``galil sim --pty``.
+    """
+    parser = argparse.ArgumentParser(prog="galil sim", description="Serve a simulated Galil DMC")
+    parser.add_argument("--model", default="DMC-4040", help="controller model (DMC-4040)")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--tcp", metavar="HOST:PORT", help="serve TCP (default 127.0.0.1:0)")
+    where.add_argument("--pty", action="store_true", help="serve a pseudo-terminal")
+    parser.add_argument("--message-port", type=int, default=0, help="TCP port for messages")
+    parser.add_argument("--lag", type=float, default=0.003, help="servo lag time constant, s")
+    args = parser.parse_args(argv)
+    try:
+        controller = SimController(args.model, RealTimeClock(), servo_lag=args.lag)
+    except InvalidArgument as e:
+        parser.error(str(e))
+    server: _Server
+    if args.pty:
+        server = SimPtyServer(controller)
+        server.start()
+        assert isinstance(server, SimPtyServer)
+        print(f"{controller.identity} on serial port {server.path}", flush=True)
+    else:
+        host, _, port = (args.tcp or "127.0.0.1:0").rpartition(":")
+        try:
+            server = SimTcpServer(
+                controller,
+                host=host or "127.0.0.1",
+                port=int(port or 0),
+                message_port=args.message_port,
+            )
+        except (InvalidArgument, ValueError) as e:
+            parser.error(str(e))
+        server.start()
+        assert isinstance(server, SimTcpServer)
+        print(f"{controller.identity} on {server.url}", flush=True)
+        mhost, mport = server.message_address
+        print(f"unsolicited messages on tcp://{mhost}:{mport}", flush=True)
+    try:
+        while True:
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.stop()
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

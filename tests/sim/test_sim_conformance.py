@@ -1,0 +1,243 @@
+"""One conformance suite, run through every front (in-process link, TCP, pty).
+
+Each test sends raw bytes and checks raw bytes; time moves only when a test advances the
+simulator's manual clock.
+"""
+
+from __future__ import annotations
+
+from conftest import Front
+
+PROGRAM = (
+    b'#A\rMG "hello"\rWT 100\rMG "bye"\rEN\r#LOOP\rn=0\r#L2\rn=n+1\rJP #L2,n<5\rMG "n=",n\rEN\r\\'
+)
+
+
+def tc1(front: Front) -> bytes:
+    return front.ask(b"TC1")
+
+
+def test_identity(front: Front) -> None:
+    assert front.ask(b"\x12\x16") == b"DMC4040 Rev 1.2f-sim\r\n:"
+
+
+def test_ack_and_reject(front: Front) -> None:
+    assert front.ask(b"SP 1000") == b":"
+    assert front.ask(b"bg") == b"?"
+    assert tc1(front) == b" 1 Unrecognized command\r\n:"
+    assert front.ask(b"TC") == b" 0\r\n:"  # reading TC cleared it
+    assert front.ask(b"XX") == b"?"
+
+
+def test_compound_lines_answer_each_command(front: Front) -> None:
+    assert front.ask(b"a=1;b=2") == b"::"
+    assert front.ask(b"a=5;MG a") == b": 5.0000\r\n:"
+    assert front.ask(b"a=1;pr 1;b=3") == b":?:"
+    assert front.ask(b"MG a+b*2") == b" 8.0000\r\n:"  # left to right: (1+3)*2
+
+
+def test_query_formats(front: Front) -> None:
+    assert front.ask(b"TPA") == b" 0\r\n:"
+    assert front.ask(b"TP") == b" 0, 0, 0, 0\r\n:"
+    assert front.ask(b"PR 1000,,-200") == b":"
+    assert front.ask(b"PR ?,?,?") == b" 1000, 0,-200\r\n:"
+    assert front.ask(b"PRB=500;PR ?,?") == b": 1000, 500\r\n:"
+    assert front.ask(b"LZ 0;PR ?") == b": 0000001000\r\n:"
+    assert front.ask(b"PF 4.1;PR ?") == b": 1000.0\r\n:"
+    assert front.ask(b"LZ 1;VF 3.2;MG 2.5") == b":: 2.50\r\n:"
+    assert front.ask(b'MG "x=", 7 {F3.1}') == b"x= 007.0\r\n:"
+    assert front.ask(b"AC 150000;AC ?") == b": 149504\r\n:"
+    assert front.ask(b"QZ") == b" 4, 52, 26, 36\r\n:"
+
+
+def test_variables(front: Front) -> None:
+    assert front.ask(b"speed=1234.5") == b":"
+    assert front.ask(b"speed=") == b" 1234.5000\r\n:"
+    assert front.ask(b"MG speed") == b" 1234.5000\r\n:"
+    assert front.ask(b"MG nothere") == b"?"
+    assert tc1(front).startswith(b" 1 ")
+
+
+def test_number_out_of_range(front: Front) -> None:
+    assert front.ask(b"SP -5") == b"?"
+    assert tc1(front) == b" 6 Number out of range\r\n:"
+    assert front.ask(b"IT 2") == b"?"
+    assert front.ask(b"SP ?") == b" 25000\r\n:"  # unchanged
+
+
+def test_refused_command_changes_nothing(front: Front) -> None:
+    assert front.ask(b"PR 100,200") == b":"
+    assert front.ask(b"PR 5,nothere") == b"?"
+    assert front.ask(b"PR ?,?") == b" 100, 200\r\n:"
+    assert front.ask(b"MO B;BG AB") == b":?"
+    assert tc1(front) == b" 20 Begin not valid with motor off\r\n:"
+    assert front.ask(b"MG _BGA") == b" 0.0000\r\n:"
+
+
+def test_motion_codes(front: Front) -> None:
+    assert front.ask(b"PR 100000;SP 10000;BG A") == b":::"
+    assert front.ask(b"BG A") == b"?"
+    assert tc1(front) == b" 21 Begin not valid while running\r\n:"
+    assert front.ask(b"PR 5") == b"?"
+    assert tc1(front) == b" 7 Command not valid while running\r\n:"
+    assert front.ask(b"DC 100000") == b"?"
+    assert front.ask(b"JG 500") == b"?"
+    assert tc1(front) == b" 13 JG only valid when running in jog mode\r\n:"
+    assert front.ask(b"IP -10") == b"?"
+    assert tc1(front).startswith(b" 16 IP incorrect sign")
+    assert front.ask(b"MO A") == b"?"
+    assert front.ask(b"ST A") == b":"
+    front.advance(2.0)
+    assert front.ask(b"MG _BGA;SC A") == b" 0.0000\r\n: 4\r\n:"
+
+
+def test_am_holds_the_colon_until_the_profile_is_done(front: Front) -> None:
+    assert front.ask(b"PR 1000;SP 10000;BG A") == b":::"
+    front.write(b"AM A\r")
+    front.write(b"MG 42\r")  # queued behind the trippoint
+    assert front.quiet() == b""
+    front.advance(0.05)
+    assert front.quiet() == b""
+    front.advance(1.0)
+    assert front.read_terminators(2) == b": 42.0000\r\n:"
+    assert front.ask(b"RPA;MG _BGA") == b" 1000\r\n: 0.0000\r\n:"
+
+
+def test_mc_waits_for_the_motor_after_am(front: Front) -> None:
+    front.controller.set_servo_lag(0.05)
+    assert front.ask(b"PR 2000;SP 20000;AC 1000000;DC 1000000;BG A") == b":::::"
+    front.write(b"AM A;MG TIME;TE A;MC A;MG TIME\r")
+    assert front.quiet() == b""
+    front.advance(1.0)
+    parts = front.read_terminators(5).split(b"\r\n:")
+    assert parts[0].startswith(b":")
+    t_am, te, t_mc = int(float(parts[0][1:])), int(parts[1]), int(float(parts[2][1:]))
+    assert te > 0  # the motor lags the reference when the profile is done
+    assert t_mc > t_am
+    assert front.ask(b"TEA;TPA") == b" 0\r\n: 2000\r\n:"
+
+
+def test_mc_releases_later_than_am() -> None:
+    from galil.sim.clock import ManualClock
+    from galil.sim.controller import SimController
+
+    sim = SimController("DMC-4040", ManualClock(), servo_lag=0.05)
+    assert sim.feed(b"PR 2000;SP 20000;BG A;AM A\r") == b":::"
+    assert sim.advance_until_output(5.0) == b":"
+    t_am = sim.sample
+    assert sim.feed(b"TEA\r") != b" 0\r\n:"
+    assert sim.feed(b"MC A\r") == b""
+    assert sim.advance_until_output(5.0) == b":"
+    assert sim.sample > t_am
+    assert sim.feed(b"TEA\r") == b" 0\r\n:"
+
+
+def test_time_and_mg(front: Front) -> None:
+    front.advance(1.0)
+    assert front.ask(b"MG TIME") == b" 1024.0000\r\n:"
+    assert front.ask(b'MG "pos", _TPA, "!"') == b"pos 0.0000!\r\n:"
+    assert front.ask(b'MG "no newline" {N}') == b"no newline:"
+
+
+def test_jog_speed_and_tv(front: Front) -> None:
+    assert front.ask(b"JG 5000;BG A") == b"::"
+    front.advance(1.0)
+    assert front.ask(b"TVA") == b" 5000\r\n:"
+    assert front.ask(b"JG -3000") == b":"
+    front.advance(1.0)
+    assert front.ask(b"TVA") == b"-3000\r\n:"
+    assert front.ask(b"AB") == b":"
+    assert front.ask(b"SC A;MG _BGA") == b" 7\r\n: 0.0000\r\n:"
+
+
+def test_limit_switch_stops_and_refuses_begin(front: Front) -> None:
+    assert front.ask(b"JG 5000;BG A") == b"::"
+    front.advance(0.5)
+    front.controller.set_limit_switch("A", "forward", True)
+    front.advance(1.0)
+    assert front.ask(b"MG _BGA;SC A;TS A") == b" 0.0000\r\n: 2\r\n: 7\r\n:"
+    assert front.ask(b"BG A") == b"?"
+    assert tc1(front) == b" 22 Begin not possible due to limit switch\r\n:"
+    assert front.ask(b"JG -5000;BG A") == b"::"  # away from the switch is fine
+
+
+def test_soft_limit(front: Front) -> None:
+    assert front.ask(b"FL 500;PR 2000;BG A") == b":::"
+    front.advance(2.0)
+    assert front.ask(b"SC A") == b" 2\r\n:"
+    rp = int(front.ask(b"RPA")[:-3])
+    assert 500 < rp < 2000
+    assert front.ask(b"PR 10;BG A") == b":?"
+    assert front.ask(b"PR -10;BG A") == b"::"
+
+
+def test_contour_buffer_and_wc(front: Front) -> None:
+    assert front.ask(b"CM A;DT 3") == b"::"
+    assert front.ask(b"MG _CM") == b" 511.0000\r\n:"
+    assert front.ask(b"CD 80;CD 80;CD 80") == b":::"
+    assert front.ask(b"MG _CM") == b" 509.0000\r\n:"
+    front.write(b"WC\r")
+    assert front.quiet() == b""
+    front.advance(0.1)  # 3 segments of 8 samples: all run
+    assert front.read_terminators(1) == b":"
+    assert front.ask(b"CD 40000") == b"?"
+    assert tc1(front) == b" 41 Contouring record range error\r\n:"
+    assert front.ask(b"CD 0=0;RPA") == b": 240\r\n:"
+    front.advance(0.01)
+    assert front.ask(b"SC A") == b" 51\r\n:"
+
+
+def expect(front: Front, line: bytes, reply: bytes, message: bytes, wait: float = 0.0) -> None:
+    """Send ``line``: its reply on the command stream, ``message`` as unsolicited output
+    within ``wait`` simulated seconds."""
+    if front.name == "tcp":
+        assert front.ask(line) == reply
+        front.advance(wait)
+        got = b""
+        while len(got) < len(message):
+            chunk = front.messages(5.0)
+            assert chunk, got
+            got += chunk
+        assert got == message
+    else:  # serial-like fronts interleave messages with replies
+        got = front.ask(line)
+        front.advance(wait)
+        while len(got) < len(reply) + len(message):
+            chunk = front.read_some(5.0)
+            assert chunk, got
+            got += chunk
+        assert got == reply + message
+
+
+def test_program_messages_and_cw(front: Front) -> None:
+    front.write(b"DL\r" + PROGRAM)
+    assert front.read_terminators(2) == b"::"
+    expect(front, b"XQ #A", b":", b"hello\r\n")
+    front.advance(0.2)
+    assert front.messages(5.0) == b"bye\r\n"
+    mark = bytes(b | 0x80 for b in b"n= 5.0000\r\n")
+    expect(front, b"CW 1;XQ #LOOP", b"::", mark, wait=0.01)
+    front.controller.emit_message("hook")
+    assert front.messages(5.0) == bytes(b | 0x80 for b in b"hook\r\n")
+    up = front.ask(b"UL")
+    assert up.startswith(b"#A\r\nMG")
+    assert up.endswith(b"\x1a:")
+    assert front.ask(b"MG _XQ0") == b"-1.0000\r\n:"
+
+
+def test_echo(front: Front) -> None:
+    assert front.ask(b"EO 1") == b":"
+    front.write(b"TPA\r")
+    assert front.read_terminators(1) == b"TPA\r 0\r\n:"
+
+
+def test_data_record(front: Front) -> None:
+    front.write(b"QR\r")
+    data = b""
+    while len(data) < 82 + 4 * 36 + 1:
+        chunk = front.read_some(5.0)
+        assert chunk, data
+        data += chunk
+    assert len(data) == 82 + 4 * 36 + 1
+    assert data.endswith(b":")
+    assert int.from_bytes(data[2:4], "little") == 82 + 4 * 36

@@ -1,0 +1,195 @@
+"""The simulator's servo loop runs the predictor's engine: same calls, same samples, same RP."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from galil.predict.engine import AxisProfiler
+from galil.sim.clock import ManualClock
+from galil.sim.controller import SimController
+
+TS = 1 / 1024
+
+
+def new_sim(lag: float = 0.003) -> SimController:
+    return SimController("DMC-4040", ManualClock(), servo_lag=lag)
+
+
+def ok(sim: SimController, line: str) -> None:
+    reply = sim.feed(line.encode() + b"\r")
+    assert b"?" not in reply, (line, reply, sim.feed(b"TC1\r"))
+
+
+def sample_rp(sim: SimController, n: int, axis: str = "A") -> np.ndarray:
+    """RP after each of the next n samples, one sample at a time."""
+    out = []
+    for _ in range(n):
+        sim.advance(sim.sample_period)
+        out.append(sim.motion(axis).reference)
+    return np.array(out, dtype=np.int64)
+
+
+def trapezoid(d: float, sp: float, ac: float, dc: float, t: np.ndarray) -> np.ndarray:
+    """Closed-form x(t) of a trapezoid/triangle move of signed distance d."""
+    s, d = math.copysign(1, d), abs(d)
+    if d >= sp * sp / (2 * ac) + sp * sp / (2 * dc):
+        v = sp
+    else:
+        v = math.sqrt(2 * d * ac * dc / (ac + dc))
+    ta, td = v / ac, v / dc
+    tc = (d - v * v / (2 * ac) - v * v / (2 * dc)) / v if v > 0 else 0.0
+    x = np.where(
+        t < ta,
+        0.5 * ac * t * t,
+        np.where(
+            t < ta + tc,
+            v * ta / 2 + v * (t - ta),
+            d - 0.5 * dc * np.clip(ta + tc + td - t, 0, None) ** 2,
+        ),
+    )
+    return s * np.where(t >= ta + tc + td, d, x)
+
+
+def test_move_sample_by_sample_matches_engine_and_closed_form() -> None:
+    sim = new_sim()
+    ok(sim, "PR 3000;SP 20000;AC 204800;DC 102400;BG A")
+    rp = sample_rp(sim, 400)
+    prof = AxisProfiler(sample_period=TS)
+    prof.begin_move(3000, 20000, 204800, 102400)
+    np.testing.assert_array_equal(rp, prof.advance(400))
+    assert not sim.motion("A").moving
+    x = trapezoid(3000, 20000, 204800, 102400, np.arange(1, 401) * TS)
+    assert np.max(np.abs(rp - x)) <= 20000 * TS + 2
+    # duration within 2 samples of the closed form
+    again = new_sim()
+    ok(again, "PR 3000;SP 20000;AC 204800;DC 102400;BG A")
+    done = 0
+    while again.feed(b"MG _BGA\r") == b" 1.0000\r\n:":
+        again.advance(TS)
+        done += 1
+    closed = (20000 / 204800 + 20000 / 102400) / 2 + 3000 / 20000
+    assert abs(done * TS - closed) <= 2 * TS
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    d=st.integers(-300_000, 300_000),
+    sp=st.integers(1000, 250_000).map(lambda v: 2 * v),
+    ac=st.integers(1, 2000).map(lambda v: 1024 * v),
+    dc=st.integers(1, 2000).map(lambda v: 1024 * v),
+    chunks=st.lists(st.floats(0.001, 0.7), min_size=1, max_size=8),
+)
+def test_chunked_moves_match_the_engine(
+    d: int, sp: int, ac: int, dc: int, chunks: list[float]
+) -> None:
+    sim = new_sim()
+    ok(sim, f"PR {d};SP {sp};AC {ac};DC {dc};BG A")
+    prof = AxisProfiler(sample_period=TS)
+    prof.begin_move(d, sp, ac, dc)
+    for c in chunks:
+        before = sim.sample
+        sim.advance(c)
+        ref = prof.advance(sim.sample - before)
+        if ref.size:
+            assert sim.motion("A").reference == ref[-1]
+        assert sim.motion("A").moving == prof.moving
+    end = prof.end_sample
+    assert end is not None
+    sim.advance((max(0, end - sim.sample) + 2) * TS)  # past the end
+    assert sim.feed(b"MG _BGA;RPA\r") == f" 0.0000\r\n: {d}\r\n:".encode().replace(b" -", b"-")
+
+
+def test_jog_speed_change_in_motion_matches_engine() -> None:
+    sim = new_sim()
+    ok(sim, "JG 5000;AC 51200;DC 51200;BG A")
+    a = sample_rp(sim, 300)
+    ok(sim, "JG -8000")
+    b = sample_rp(sim, 500)
+    prof = AxisProfiler(sample_period=TS)
+    prof.begin_jog(5000, 51200, 51200)
+    first = prof.advance(300)
+    prof.set_speed(-8000)
+    np.testing.assert_array_equal(a, first)
+    np.testing.assert_array_equal(b, prof.advance(500))
+
+
+def test_ip_sp_ac_changes_and_st_match_engine() -> None:
+    sim = new_sim()
+    ok(sim, "PR 50000;SP 10000;AC 102400;DC 102400;BG A")
+    prof = AxisProfiler(sample_period=TS)
+    prof.begin_move(50000, 10000, 102400, 102400)
+    steps = [
+        ("IP 2000", lambda: prof.increment(2000, 10000, 102400, 102400)),
+        ("SP 30000", lambda: prof.set_speed(30000)),
+        ("AC 20480", lambda: prof.set_accel(20480)),
+        ("ST A", prof.stop),
+    ]
+    for line, call in steps:
+        got = sample_rp(sim, 150)
+        np.testing.assert_array_equal(got, prof.advance(150))
+        ok(sim, line)
+        call()
+    np.testing.assert_array_equal(sample_rp(sim, 800), prof.advance(800))
+    assert sim.feed(b"SC A\r") == b" 4\r\n:"
+
+
+def test_it_smoothing_matches_engine() -> None:
+    sim = new_sim()
+    ok(sim, "IT 0.25;PR 4000;SP 40000;BG A")
+    prof = AxisProfiler(sample_period=TS)
+    prof.begin_move(4000, 40000, 256000, 256000, 0.25)
+    np.testing.assert_array_equal(sample_rp(sim, 300), prof.advance(300))
+
+
+def test_contour_matches_engine() -> None:
+    sim = new_sim()
+    ok(sim, "CM A;DT 2;CD 48;CD 240=3;CD 48=4")
+    prof = AxisProfiler(sample_period=TS)
+    prof.begin_contour()
+    for inc, n in ((48, 2), (240, 3), (48, 4)):
+        prof.add_segment(inc, n)
+    got = sample_rp(sim, 30)
+    np.testing.assert_array_equal(got, prof.advance(30))
+    assert got[3] == 12 * 4
+    assert got[11] == 288
+    assert got[27] == 336
+
+
+def test_multi_axis_all_match() -> None:
+    sim = new_sim()
+    ok(sim, "PR 1000,-2000,3000,-4000;SP 9000,8000,7000,6000;BG")
+    sim.advance(0.4)
+    for letter, (d, sp) in zip(
+        "ABCD", ((1000, 9000), (-2000, 8000), (3000, 7000), (-4000, 6000)), strict=False
+    ):
+        prof = AxisProfiler(sample_period=TS)
+        prof.begin_move(d, sp, 256000, 256000)
+        assert sim.motion(letter).reference == prof.advance(sim.sample)[-1]
+
+
+def test_tv_is_averaged_over_a_quarter_second() -> None:
+    sim = new_sim(lag=0.0)
+    ok(sim, "JG 10240;AC 1073740800;DC 1073740800;BG A")
+    sim.advance(0.125)  # half a window at (nearly) full speed
+    tv = int(sim.feed(b"TVA\r")[:-3])
+    assert abs(tv - 5120) <= 60
+    sim.advance(0.5)
+    assert sim.feed(b"TVA\r") == b" 10240\r\n:"
+
+
+def test_servo_lag_is_first_order() -> None:
+    sim = new_sim(lag=0.01)
+    ok(sim, "PR 1000;SP 1000000;AC 1073740800;DC 1073740800;BG A")
+    sim.advance(0.01)
+    m = sim.motion("A")
+    assert not m.moving
+    assert m.reference == 1000
+    # after about one time constant the motor has covered ~63% of the step
+    assert 500 < m.encoder < 800
+    sim.advance(0.2)
+    assert m.encoder == 1000
+    assert m.in_position
