@@ -37,6 +37,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from galil.errors import CommandError, InvalidArgument
 from galil.models import ModelSpec, get_model
@@ -433,6 +434,26 @@ class SimController:
 
     def _snapshot(self) -> tuple[int, dict[str, AxisMotion]]:
         return self._sample, {k: copy.deepcopy(a.m) for k, a in self._axes.items()}
+
+    def start_trace(self, axes: str | None = None) -> None:
+        """Record every sample's reference position on ``axes`` (default: all) from now on."""
+        with self._lock:
+            self._sync()
+            for letter in axes or self.spec.axes:
+                self.motion(letter).start_trace()
+
+    def stop_trace(self, axes: str | None = None) -> dict[str, npt.NDArray[np.int64]]:
+        """Stop recording; return the reference positions per axis since :meth:`start_trace`.
+
+        Each array starts with the position at the start of the trace, then one value per
+        servo sample (``sample_period`` apart).
+        """
+        with self._lock:
+            self._sync()
+            return {
+                self.spec.axis_letter(a): self.motion(a).stop_trace()
+                for a in (axes or self.spec.axes)
+            }
 
     def _restore(self, snap: tuple[int, dict[str, AxisMotion]]) -> None:
         self._sample = snap[0]

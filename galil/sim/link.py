@@ -126,6 +126,18 @@ class SimLink:
                 return out
             time.sleep(_POLL_INTERVAL)
 
+    def sleep(self, seconds: float) -> None:
+        """Let ``seconds`` pass for the controller: simulated time on a manual clock.
+
+        The client pauses through this between polls, so a host script that waits for a move
+        runs at simulation speed in tests instead of sleeping in real time.
+        """
+        self._check()
+        if self._manual:
+            self.controller.advance(max(0.0, seconds))
+        else:
+            time.sleep(max(0.0, seconds))
+
     def close(self) -> None:
         """Close the link (and its message handle); later calls raise."""
         self._closed = True

@@ -44,6 +44,8 @@ class AxisMotion:
         self.lag = 0.0
         self._alpha = 1.0
         self.set_lag(lag)
+        # Reference positions kept while a trace runs (the simulator's answer to RA/RD/RC).
+        self._trace: list[npt.NDArray[np.int64]] | None = None
 
     def set_lag(self, lag: float) -> None:
         """Set the servo lag time constant in seconds (>= 0).
@@ -90,9 +92,23 @@ class AxisMotion:
             return True
         return not self.profiler.moving and self.encoder == self.reference
 
+    def start_trace(self) -> None:
+        """Start keeping every sample's reference position (drops an earlier trace)."""
+        self._trace = [np.array([self.reference], dtype=np.int64)]
+
+    def stop_trace(self) -> npt.NDArray[np.int64]:
+        """Stop tracing; return the reference positions since :meth:`start_trace`.
+
+        The first value is the position when the trace started; one value per sample follows.
+        """
+        chunks, self._trace = self._trace or [np.zeros(0, dtype=np.int64)], None
+        return np.concatenate(chunks)
+
     def advance(self, n: int) -> npt.NDArray[np.int64]:
         """Run ``n`` samples; return the reference positions of those samples."""
         ref = np.asarray(self.profiler.advance(n), dtype=np.int64)
+        if self._trace is not None:
+            self._trace.append(ref)
         if self.motor_on:
             if self._alpha >= 1.0:
                 actual = ref.astype(np.float64)

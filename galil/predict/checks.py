@@ -1,0 +1,518 @@
+"""Checks before anything is sent: quantised values, model ranges, soft limits, contour streams.
+
+Every failure is a :class:`galil.errors.LimitError` that names the value, the limit it crosses,
+and, where it applies, the time and sample at which the predicted path crosses it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import overload
+
+import numpy as np
+import numpy.typing as npt
+
+from galil.errors import InvalidArgument, LimitError
+from galil.models import ModelSpec, get_model
+from galil.predict.profile import Profile
+from galil.predict.smoothing import quantise_it
+
+__all__ = [
+    "ETHERNET_BYTES_PER_S",
+    "Checked",
+    "Quantised",
+    "StreamReport",
+    "check",
+    "check_contour",
+    "check_parameter",
+    "check_soft_limits",
+    "contour_bytes",
+    "quantise",
+    "quantise_accel",
+    "quantise_limits",
+    "quantise_speed",
+    "quantise_value",
+    "resolve_model",
+]
+
+#: Sustained command bytes per second assumed for an Ethernet link. Each contour line waits for
+#: its ':' before the next goes out, so the round trip (about 1 ms on a LAN) limits the rate far
+#: below the wire speed; 64 kB/s is a conservative guess, not a measurement.
+ETHERNET_BYTES_PER_S = 64_000.0
+_POSITION_MAX = 2**31 - 1
+_POSITION_MIN = -(2**31)
+
+
+def resolve_model(model: str | ModelSpec) -> ModelSpec:
+    """Accept a model name or a :class:`ModelSpec`."""
+    return model if isinstance(model, ModelSpec) else get_model(model)
+
+
+def quantise_accel(value: float, model: str | ModelSpec = "DMC-4040", *, name: str = "AC") -> int:
+    """AC or DC as the controller stores it: rounded down to its resolution, at least one step.
+
+    Raises:
+        LimitError: not positive, not finite, or above the model's maximum.
+    """
+    spec = resolve_model(model)
+    if not math.isfinite(value) or value <= 0:
+        raise LimitError(
+            f"{name} must be a positive number, got {value!r}",
+            name=name,
+            value=value,
+            limit=spec.ac_min,
+            model=spec.name,
+        )
+    if value > spec.ac_max:
+        raise LimitError(
+            f"{name} {value:g} counts/s² is above the {spec.name} maximum {spec.ac_max}",
+            name=name,
+            value=value,
+            limit=spec.ac_max,
+            model=spec.name,
+        )
+    res = spec.ac_resolution
+    return max(spec.ac_min, int(value // res) * res)
+
+
+def quantise_speed(
+    value: float, model: str | ModelSpec = "DMC-4040", *, name: str = "SP", signed: bool = False
+) -> int:
+    """SP (or JG with ``signed=True``) as stored: magnitude rounded down to the resolution.
+
+    Raises:
+        LimitError: not finite, negative SP, or above the model's maximum.
+    """
+    spec = resolve_model(model)
+    if not math.isfinite(value) or (value < 0 and not signed):
+        raise LimitError(
+            f"{name} must be a non-negative number, got {value!r}",
+            name=name,
+            value=value,
+            limit=0,
+            model=spec.name,
+        )
+    if abs(value) > spec.sp_max:
+        raise LimitError(
+            f"{name} {value:g} counts/s is above the {spec.name} maximum {spec.sp_max}",
+            name=name,
+            value=value,
+            limit=spec.sp_max,
+            model=spec.name,
+        )
+    res = spec.sp_resolution
+    return int(math.copysign(int(abs(value) // res) * res, value))
+
+
+@dataclass(frozen=True)
+class Quantised:
+    """The values the controller will actually use (``None`` where none was given)."""
+
+    speed: int | None
+    accel: int | None
+    decel: int | None
+    smoothing: float | None
+    sample_period: float
+
+
+_COMMANDS = ("SP", "JG", "AC", "DC", "IT")
+
+
+def quantise_value(command: str, value: float, model: str | ModelSpec = "DMC-4040") -> float:
+    """One value as the controller stores it: ``command`` is SP, JG, AC, DC or IT.
+
+    Raises:
+        LimitError: outside the model's range. InvalidArgument: unknown command.
+    """
+    cmd = command.upper()
+    if cmd in ("SP", "JG"):
+        return float(quantise_speed(value, model, name=cmd, signed=cmd == "JG"))
+    if cmd in ("AC", "DC"):
+        return float(quantise_accel(value, model, name=cmd))
+    if cmd == "IT":
+        q = quantise(model, smoothing=value).smoothing
+        assert q is not None
+        return q
+    raise InvalidArgument(f"cannot quantise {command!r}; known: {', '.join(_COMMANDS)}")
+
+
+def check_parameter(
+    command: str, value: float, model: str | ModelSpec = "DMC-4040", *, axis: str | None = None
+) -> float:
+    """Quantise and range-check one SP/JG/AC/DC/IT value (the LimitError names the axis)."""
+    try:
+        return quantise_value(command, value, model)
+    except LimitError as exc:
+        exc.axis = axis
+        raise
+
+
+def quantise_limits(model: str | ModelSpec = "DMC-4040") -> dict[str, tuple[float, float]]:
+    """The model's range for each quantised command, after quantisation."""
+    spec = resolve_model(model)
+    return {
+        "SP": (0.0, float(spec.sp_max)),
+        "JG": (-float(spec.sp_max), float(spec.sp_max)),
+        "AC": (float(spec.ac_min), float(spec.ac_max)),
+        "DC": (float(spec.ac_min), float(spec.ac_max)),
+        "IT": (1 / 256, 1.0),
+    }
+
+
+@overload
+def quantise(
+    model: str | ModelSpec = ...,
+    *,
+    speed: float | None = ...,
+    accel: float | None = ...,
+    decel: float | None = ...,
+    smoothing: float | None = ...,
+    jog: bool = ...,
+    tm: float | None = ...,
+) -> Quantised: ...
+
+
+@overload
+def quantise(model: str, value: float, model_spec: str | ModelSpec, /) -> float: ...
+
+
+def quantise(
+    model: str | ModelSpec = "DMC-4040",
+    value: float | None = None,
+    model_spec: str | ModelSpec | None = None,
+    *,
+    speed: float | None = None,
+    accel: float | None = None,
+    decel: float | None = None,
+    smoothing: float | None = None,
+    jog: bool = False,
+    tm: float | None = None,
+) -> Quantised | float:
+    """Quantise SP/JG, AC, DC and IT as ``model`` stores them; check them against its ranges.
+
+    Also callable as ``quantise("AC", 150_000, "DMC-4040") -> 149504.0`` (one value; see
+    :func:`quantise_value`).
+
+    Args:
+        model: model name or spec.
+        speed: SP (or JG when ``jog``; then the sign is kept), counts/s.
+        accel: AC, counts/s².
+        decel: DC, counts/s².
+        smoothing: IT.
+        jog: ``speed`` is a signed jog speed.
+        tm: TM in µs (default: the model's default), sets ``sample_period``.
+
+    Raises:
+        LimitError: a value outside the model's range.
+    """
+    if value is not None:
+        if not isinstance(model, str):
+            raise InvalidArgument("quantise(command, value, model): command must be a string")
+        return quantise_value(model, value, "DMC-4040" if model_spec is None else model_spec)
+    spec = resolve_model(model)
+    ts = spec.sample_period if tm is None else spec.sample_period_for(tm)
+    sp = None
+    if speed is not None:
+        sp = quantise_speed(speed, spec, name="JG" if jog else "SP", signed=jog)
+    it = None
+    if smoothing is not None:
+        try:
+            it = quantise_it(smoothing)
+        except InvalidArgument as exc:
+            raise LimitError(
+                str(exc), name="IT", value=smoothing, limit=spec.it_range[0], model=spec.name
+            ) from None
+    return Quantised(
+        speed=sp,
+        accel=None if accel is None else quantise_accel(accel, spec, name="AC"),
+        decel=None if decel is None else quantise_accel(decel, spec, name="DC"),
+        smoothing=it,
+        sample_period=ts,
+    )
+
+
+def check_soft_limits(
+    profile: Profile,
+    *,
+    forward_limit: float | None = None,
+    backward_limit: float | None = None,
+    axis: str | None = None,
+    low: float | None = None,
+    high: float | None = None,
+) -> None:
+    """Check the whole predicted path, not just its end, against FL and BL.
+
+    ``high``/``low`` are aliases of ``forward_limit``/``backward_limit``.
+
+    Raises:
+        LimitError: at the first sample beyond a limit (``name`` is ``"FL"`` or ``"BL"``).
+    """
+    forward_limit = high if forward_limit is None else forward_limit
+    backward_limit = low if backward_limit is None else backward_limit
+    pos = profile.position
+    checks: list[tuple[str, float, npt.NDArray[np.bool_]]] = []
+    if forward_limit is not None:
+        checks.append(("FL", forward_limit, pos > forward_limit))
+    if backward_limit is not None:
+        checks.append(("BL", backward_limit, pos < backward_limit))
+    checks.append(("position range", _POSITION_MAX, pos > _POSITION_MAX))
+    checks.append(("position range", _POSITION_MIN, pos < _POSITION_MIN))
+    first: tuple[int, str, float] | None = None
+    for name, limit, over in checks:
+        hit = np.flatnonzero(over)
+        if hit.size and (first is None or int(hit[0]) < first[0]):
+            first = (int(hit[0]), name, limit)
+    if first is None:
+        return
+    k, name, limit = first
+    t = float(profile.t[k])
+    where = f" on axis {axis}" if axis else ""
+    raise LimitError(
+        f"the path{where} reaches {int(pos[k])} counts at t={t:.6g} s (sample {k}), beyond"
+        f" {name} {limit:g}; the move ends at {profile.end}",
+        name=name,
+        value=int(pos[k]),
+        limit=limit,
+        time=t,
+        sample=k,
+        axis=axis,
+    )
+
+
+@dataclass(frozen=True)
+class StreamReport:
+    """How a contour stream fares on a link.
+
+    Attributes:
+        link_rate: bytes/s assumed for the link (after the utilisation margin).
+        needed_rate: average bytes/s the segments need.
+        bytes_total: bytes to send.
+        min_slack: smallest margin, seconds, between a segment's arrival and its start.
+        buffer_depth: contour segments the controller can hold.
+    """
+
+    link_rate: float
+    needed_rate: float
+    bytes_total: int
+    min_slack: float
+    buffer_depth: int
+
+
+def contour_bytes(increments: npt.ArrayLike, dt: npt.ArrayLike) -> npt.NDArray[np.int64]:
+    """Bytes on the wire per segment for one axis: ``CD c`` (``CD c=n`` when DT changes) + CR."""
+    c = np.asarray(increments, dtype=np.int64)
+    n = np.broadcast_to(np.asarray(dt, dtype=np.int64), c.shape)
+    digits = np.where(c == 0, 1, np.floor(np.log10(np.maximum(np.abs(c), 1))).astype(np.int64) + 1)
+    out = 3 + digits + (c < 0) + 1  # "CD " + digits + sign + CR
+    changes = np.ones(c.shape, dtype=bool)
+    changes[1:] = n[1:] != n[:-1]
+    out = out + np.where(changes, 2, 0)  # "=n"
+    result: npt.NDArray[np.int64] = out.astype(np.int64)
+    return result
+
+
+def check_contour(
+    increments: npt.ArrayLike,
+    dt: int | Sequence[int],
+    *,
+    model: str | ModelSpec = "DMC-4040",
+    baud: float | None = None,
+    link_rate: float | None = None,
+    ethernet: bool = False,
+    buffer_depth: int | None = None,
+    bytes_per_segment: int | Sequence[int] | None = None,
+    utilisation: float = 0.8,
+    preload: bool = False,
+    sample_period: float | None = None,
+    axis: str | None = None,
+) -> StreamReport | None:
+    """Check contour segments against the model's CD/DT ranges and, given a link, the stream.
+
+    The stream model: the host sends segments back to back at ``utilisation`` x the link's byte
+    rate (a serial port at B baud moves B/10 bytes/s), never more than ``buffer_depth`` ahead;
+    contour motion starts when the first segment arrives (or, with ``preload``, the first
+    ``buffer_depth``); every segment must arrive before the previous one ends.
+
+    Returns:
+        A :class:`StreamReport` when a link was given, else ``None``.
+
+    Raises:
+        LimitError: ``"CD"`` or ``"DT"`` out of range (``sample`` is the segment's first sample),
+            ``"link byte rate"`` when the average need exceeds the link, ``"contour stream"``
+            when the buffer would run dry (``time``/``sample`` where it does).
+    """
+    spec = resolve_model(model)
+    ts = spec.sample_period if sample_period is None else sample_period
+    c = np.asarray(increments, dtype=np.int64).ravel()
+    n = np.broadcast_to(np.asarray(dt, dtype=np.int64), c.shape)
+    lengths = np.left_shift(np.int64(1), np.clip(n, 0, 62))
+    starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]) if c.size else np.zeros(0, np.int64)
+    lo, hi = spec.dt_range
+    bad = np.flatnonzero((n < lo) | (n > hi))
+    if bad.size:
+        i = int(bad[0])
+        raise LimitError(
+            f"DT {int(n[i])} of segment {i} is outside {lo}..{hi} on {spec.name}",
+            name="DT",
+            value=int(n[i]),
+            limit=hi if n[i] > hi else lo,
+            time=float(starts[i] * ts),
+            sample=int(starts[i]),
+            axis=axis,
+            model=spec.name,
+        )
+    bad = np.flatnonzero(np.abs(c) > spec.cd_max)
+    if bad.size:
+        i = int(bad[0])
+        raise LimitError(
+            f"CD {int(c[i])} (segment {i}, t={starts[i] * ts:.6g} s) is outside"
+            f" ±{spec.cd_max} on {spec.name}",
+            name="CD",
+            value=int(c[i]),
+            limit=spec.cd_max,
+            time=float(starts[i] * ts),
+            sample=int(starts[i]),
+            axis=axis,
+            model=spec.name,
+        )
+    if baud is None and link_rate is None and not ethernet:
+        return None
+    if not 0 < utilisation <= 1:
+        raise InvalidArgument(f"utilisation must be in (0, 1], got {utilisation!r}")
+    if link_rate is not None:
+        raw_rate = float(link_rate)
+    elif baud is not None:
+        raw_rate = float(baud) / 10.0
+    else:
+        raw_rate = ETHERNET_BYTES_PER_S
+    if not raw_rate > 0:
+        raise InvalidArgument(f"link rate must be positive, got {raw_rate!r}")
+    rate = raw_rate * utilisation
+    depth = spec.contour_buffer if buffer_depth is None else int(buffer_depth)
+    if depth < 1:
+        raise InvalidArgument(f"buffer depth must be >= 1, got {depth}")
+    if bytes_per_segment is None:
+        b = contour_bytes(c, n)
+    else:
+        b = np.broadcast_to(np.asarray(bytes_per_segment, dtype=np.int64), c.shape)
+    total_bytes = int(b.sum())
+    if c.size == 0:
+        return StreamReport(rate, 0.0, 0, math.inf, depth)
+    durations = lengths * ts
+    total_time = float(durations.sum())
+    needed = total_bytes / total_time
+    if needed > rate:
+        raise LimitError(
+            f"contour needs {needed:.6g} bytes/s on average but the link gives {rate:.6g}"
+            f" ({utilisation:.0%} of {raw_rate:.6g} bytes/s)",
+            name="link byte rate",
+            value=needed,
+            limit=rate,
+            axis=axis,
+            model=spec.name,
+        )
+    sent = np.cumsum(b) / rate  # completion times if sent back to back from t = 0
+    first = min(depth, c.size) - 1 if preload else 0
+    s0 = float(sent[first])
+    seg_start = s0 + np.concatenate([[0.0], np.cumsum(durations)[:-1]])
+    # Segment i may be sent once segment i - depth has left the buffer (started).
+    gate = np.zeros(c.size)
+    if c.size > depth:
+        gate[depth:] = seg_start[: c.size - depth]
+    prev = np.concatenate([[0.0], sent[:-1]])
+    arrive = sent + np.maximum.accumulate(gate - prev)
+    slack = seg_start - arrive
+    late = np.flatnonzero(slack < -1e-12)
+    if late.size:
+        i = int(late[0])
+        k = int(starts[i])
+        raise LimitError(
+            f"contour buffer runs dry: segment {i} arrives at {arrive[i]:.6g} s but is needed at"
+            f" {seg_start[i]:.6g} s (link {rate:.6g} bytes/s, {int(b[i])} bytes for"
+            f" {durations[i] * 1e3:.4g} ms)",
+            name="contour stream",
+            value=float(arrive[i]),
+            limit=float(seg_start[i]),
+            time=k * ts,
+            sample=k,
+            axis=axis,
+            model=spec.name,
+        )
+    return StreamReport(rate, needed, total_bytes, float(slack.min()), depth)
+
+
+@dataclass(frozen=True)
+class Checked:
+    """Result of :func:`check`: the values the controller will use, and the stream report."""
+
+    quantised: Quantised
+    stream: StreamReport | None
+
+
+def check(
+    profile: Profile | None = None,
+    *,
+    model: str | ModelSpec = "DMC-4040",
+    speed: float | None = None,
+    accel: float | None = None,
+    decel: float | None = None,
+    smoothing: float | None = None,
+    jog: bool = False,
+    forward_limit: float | None = None,
+    backward_limit: float | None = None,
+    increments: npt.ArrayLike | None = None,
+    dt: int | Sequence[int] | None = None,
+    baud: float | None = None,
+    link_rate: float | None = None,
+    ethernet: bool = False,
+    buffer_depth: int | None = None,
+    axis: str | None = None,
+    tm: float | None = None,
+) -> Checked:
+    """All pre-send checks in one call (the axis layer's entry point).
+
+    Quantises and range-checks SP/JG, AC, DC and IT for ``model``; checks a predicted
+    ``profile`` against the soft limits FL/BL over its whole path; checks contour
+    ``increments``/``dt`` against CD/DT ranges and, given a link, the streaming feasibility.
+
+    Raises:
+        LimitError: the first check that fails, naming the value, the limit and where.
+    """
+    spec = resolve_model(model)
+    q: Quantised = quantise(
+        spec, speed=speed, accel=accel, decel=decel, smoothing=smoothing, jog=jog, tm=tm
+    )
+    if profile is not None:
+        check_soft_limits(
+            profile, forward_limit=forward_limit, backward_limit=backward_limit, axis=axis
+        )
+        if profile.peak_speed > spec.sp_max:
+            k = int(np.argmax(np.abs(profile.velocity)))
+            raise LimitError(
+                f"peak speed {profile.peak_speed:g} counts/s is above the {spec.name} maximum",
+                name="speed",
+                value=profile.peak_speed,
+                limit=spec.sp_max,
+                time=float(profile.t[k]),
+                sample=k,
+                axis=axis,
+                model=spec.name,
+            )
+    stream = None
+    if increments is not None:
+        if dt is None:
+            raise InvalidArgument("contour increments need dt")
+        stream = check_contour(
+            increments,
+            dt,
+            model=spec,
+            baud=baud,
+            link_rate=link_rate,
+            ethernet=ethernet,
+            buffer_depth=buffer_depth,
+            sample_period=q.sample_period,
+            axis=axis,
+        )
+    return Checked(quantised=q, stream=stream)

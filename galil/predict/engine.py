@@ -1,0 +1,828 @@
+"""The one motion engine: a sample-stepping model of one axis of the controller's profiler.
+
+:class:`AxisProfiler` is driven by the predictor (with a schedule of events) and by the
+simulator's servo loop. Both get identical reference positions for identical calls at identical
+samples, however they chunk :meth:`AxisProfiler.advance`.
+
+Inside, time is counted in samples and distance in counts. A kinematic plan (position move,
+jog, stop ramp) is a list of constant-acceleration segments anchored at the sample where the
+command was given; the position at any sample is a closed form, evaluated with numpy for whole
+chunks at once. The position is kept at 1/65536 count, as the controller does, and ``r[k]`` is
+that rounded to the nearest count. See ``shared/reference/profiler-model.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from galil.errors import CommandError, InvalidArgument
+from galil.predict.smoothing import PAGE, smooth_page
+
+__all__ = [
+    "FRACTION",
+    "AxisProfiler",
+    "KinematicPlan",
+    "Segment",
+    "plan_jog",
+    "plan_position",
+    "plan_stop",
+]
+
+#: The controller carries position with 16 fractional bits.
+FRACTION = 65536
+# Slack, in counts, when deciding whether the present stopping distance fits the remaining
+# distance: re-plans start from a position quantised to 1/65536 count.
+_EPS = 1e-4
+
+_TC_TEXT = {
+    6: "Number out of range",
+    7: "Command not valid while running",
+    8: "Command not valid when not running",
+    13: "JG only valid when running in jog mode",
+    16: "IP incorrect sign during position move or IP given during forced deceleration",
+    18: "Command not valid when contouring",
+    21: "Begin not valid while running",
+}
+
+Int64Array = npt.NDArray[np.int64]
+FloatArray = npt.NDArray[np.float64]
+
+
+def _refuse(code: int, command: str) -> CommandError:
+    return CommandError(code, _TC_TEXT[code], command)
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One phase of constant acceleration, in samples and counts (signed)."""
+
+    duration: float
+    velocity: float
+    accel: float
+
+
+@dataclass(frozen=True)
+class KinematicPlan:
+    """A piecewise-quadratic trajectory from a start state, in samples and counts.
+
+    Attributes:
+        x0: start position (counts, may be fractional).
+        segments: consecutive constant-acceleration phases; the last one of a jog is open-ended
+            (``duration == inf``).
+        x_end: exact end position (the target of a position move).
+        duration: closed-form duration in samples (``inf`` for a jog).
+        peak: largest |velocity| reached, counts/sample.
+        shape: ``"trapezoid"``, ``"triangle"``, ``"none"`` (already there), ``"jog"``,
+            ``"stop"``.
+    """
+
+    x0: float
+    segments: tuple[Segment, ...]
+    x_end: float
+    duration: float
+    peak: float
+    shape: str
+
+    def tables(self) -> tuple[list[float], list[float], list[float], list[float]]:
+        """Return segment start times, start positions, start velocities and accelerations."""
+        if not self.segments:
+            return [0.0], [self.x0], [0.0], [0.0]
+        t0: list[float] = []
+        p0: list[float] = []
+        v0: list[float] = []
+        a: list[float] = []
+        t = 0.0
+        x = self.x0
+        for s in self.segments:
+            t0.append(t)
+            p0.append(x)
+            v0.append(s.velocity)
+            a.append(s.accel)
+            if math.isfinite(s.duration):
+                x = x + s.duration * (s.velocity + 0.5 * s.accel * s.duration)
+                t += s.duration
+        return t0, p0, v0, a
+
+
+def _ramp(v_from: float, v_to: float, rate: float) -> Segment:
+    """A segment changing velocity from ``v_from`` to ``v_to`` at ``rate`` (> 0)."""
+    dv = v_to - v_from
+    return Segment(abs(dv) / rate, v_from, math.copysign(rate, dv))
+
+
+def _travel(x0: float, segs: list[Segment]) -> float:
+    """Position after running ``segs`` from ``x0``."""
+    for seg in segs:
+        x0 += seg.duration * (seg.velocity + 0.5 * seg.accel * seg.duration)
+    return x0
+
+
+def plan_position(
+    x0: float, v0: float, target: float, v: float, a: float, d: float
+) -> KinematicPlan:
+    """Plan a position move from the state (``x0``, ``v0``) to ``target``.
+
+    Args:
+        x0: present position, counts.
+        v0: present velocity, counts/sample (signed).
+        target: end position, counts.
+        v: slew speed, counts/sample (> 0).
+        a: acceleration, counts/sample² (> 0).
+        d: deceleration, counts/sample² (> 0).
+
+    Speed grows at ``a`` and shrinks at ``d``. A state moving away from the target first
+    decelerates to rest (the engine refuses that case for IP; it only arises numerically).
+    """
+    segs: list[Segment] = []
+    peak = abs(v0)
+    dist = target - x0
+    s = 1.0 if dist > 0 or (dist == 0 and v0 >= 0) else -1.0
+    dd = s * dist
+    u0 = s * v0
+    shape = "none"
+    if u0 < 0:
+        # Moving away: come to rest at d, then start over towards the target.
+        segs.append(_ramp(s * u0, 0.0, d))
+        dd += u0 * u0 / (2 * d)
+        u0 = 0.0
+    stop_dist = u0 * u0 / (2 * d)
+    if stop_dist > dd + _EPS:
+        # Cannot stop in time: overshoot, then come back.
+        segs.append(_ramp(s * u0, 0.0, d))
+        back = plan_position(_travel(x0, segs), 0.0, target, v, a, d)
+        segs.extend(back.segments)
+        total = sum(x.duration for x in segs)
+        peak = max(peak, back.peak)
+        return KinematicPlan(x0, tuple(segs), float(target), total, peak, "overshoot")
+    if stop_dist >= dd:
+        # Already on the final ramp (within rounding): finish at exactly the rate that lands.
+        if dd > 0 and u0 > 0:
+            segs.append(Segment(2 * dd / u0, s * u0, -s * u0 * u0 / (2 * dd)))
+        shape = "triangle" if u0 > 0 else "none"
+    elif u0 > v:
+        # Slower slew than the present speed: shrink at d, cruise, stop.
+        d1 = (u0 * u0 - v * v) / (2 * d)
+        segs.append(_ramp(s * u0, s * v, d))
+        cruise = dd - d1 - v * v / (2 * d)
+        if cruise > 0:
+            segs.append(Segment(cruise / v, s * v, 0.0))
+        segs.append(_ramp(s * v, 0.0, d))
+        shape = "trapezoid"
+    else:
+        up_sq = (2 * dd * a * d + u0 * u0 * d) / (a + d)
+        if up_sq >= v * v:
+            up, shape = v, "trapezoid"
+        else:
+            up, shape = max(math.sqrt(up_sq), u0), "triangle"
+        peak = max(peak, up)
+        d1 = (up * up - u0 * u0) / (2 * a)
+        d3 = up * up / (2 * d)
+        if up > u0:
+            segs.append(_ramp(s * u0, s * up, a))
+        cruise = dd - d1 - d3
+        if cruise > 0 and up > 0:
+            segs.append(Segment(cruise / up, s * up, 0.0))
+        if up > 0:
+            segs.append(_ramp(s * up, 0.0, d))
+    total = sum(x.duration for x in segs)
+    return KinematicPlan(x0, tuple(segs), float(target), total, peak, shape)
+
+
+def plan_jog(x0: float, v0: float, speed: float, a: float, d: float) -> KinematicPlan:
+    """Plan a jog from (``x0``, ``v0``) towards the signed ``speed`` (all per sample).
+
+    |v| grows at ``a`` and shrinks at ``d``; a sign change passes through zero.
+    """
+    segs: list[Segment] = []
+    v = v0
+    if v != 0 and (speed == 0 or (speed > 0) != (v > 0)):
+        segs.append(_ramp(v, 0.0, d))
+        v = 0.0
+    if speed != v:
+        segs.append(_ramp(v, speed, a if abs(speed) > abs(v) else d))
+    segs.append(Segment(math.inf, speed, 0.0))
+    return KinematicPlan(x0, tuple(segs), math.inf, math.inf, max(abs(v0), abs(speed)), "jog")
+
+
+def plan_stop(x0: float, v0: float, d: float) -> KinematicPlan:
+    """Plan a ramp to rest at ``d`` from (``x0``, ``v0``); it ends where it comes to rest."""
+    if v0 == 0:
+        return KinematicPlan(x0, (), x0, 0.0, 0.0, "stop")
+    seg = _ramp(v0, 0.0, d)
+    x_end = x0 + seg.duration * (seg.velocity + 0.5 * seg.accel * seg.duration)
+    return KinematicPlan(x0, (seg,), x_end, seg.duration, abs(v0), "stop")
+
+
+def _round_fixed(xq: Int64Array) -> Int64Array:
+    """Fixed-point position to the nearest whole count (in place: ``xq`` is consumed)."""
+    xq += FRACTION // 2
+    np.right_shift(xq, 16, out=xq)
+    return xq
+
+
+class _Active:
+    """A kinematic plan placed in time: anchored at sample ``k0``.
+
+    Coefficients are kept as Python floats: numpy applies the same IEEE double operations
+    element by element, so the scalar path (:meth:`state`) and the vector path
+    (:meth:`fixed`) give bit-identical positions.
+    """
+
+    __slots__ = (
+        "a",
+        "end_sample",
+        "end_value",
+        "h_fixed",
+        "k0",
+        "p0",
+        "p_fixed",
+        "plan",
+        "t0",
+        "v0",
+        "v_fixed",
+    )
+
+    def __init__(self, plan: KinematicPlan, k0: int) -> None:
+        self.plan = plan
+        self.k0 = k0
+        self.t0, self.p0, self.v0, self.a = plan.tables()
+        self._scale()
+        self.end_sample: int | None = None
+        self.end_value = 0
+        if math.isfinite(plan.duration):
+            self.end_sample = k0 + max(0, math.ceil(plan.duration - 1e-9))
+            xq = math.floor(plan.x_end * FRACTION + 0.5)
+            self.end_value = (xq + FRACTION // 2) >> 16
+
+    def _scale(self) -> None:
+        self.p_fixed = [p * FRACTION + 0.5 for p in self.p0]
+        self.v_fixed = [v * FRACTION for v in self.v0]
+        self.h_fixed = [a * (FRACTION / 2) for a in self.a]
+
+    def shift(self, n: int) -> None:
+        """Step the whole plan by ``n`` counts (IP while jogging)."""
+        self.p0 = [p + n for p in self.p0]
+        self._scale()
+        self.end_value += n
+
+    def fixed(self, start: int, n: int) -> Int64Array:
+        """Fixed-point (1/65536) positions at the absolute samples ``start .. start+n-1``."""
+        out = np.empty(n, np.int64)
+        first = start - self.k0
+        end = n if self.end_sample is None else min(n, max(0, self.end_sample - start))
+        t0 = self.t0
+        last = len(t0) - 1
+        for i in range(last + 1):
+            # Sample tau belongs to segment i when t0[i] <= tau < t0[i+1] (tau is an integer).
+            lo = 0 if i == 0 else min(end, max(0, math.ceil(t0[i]) - first))
+            hi = end if i == last else min(end, max(0, math.ceil(t0[i + 1]) - first))
+            if hi <= lo:
+                continue
+            # Horner form, already scaled to 1/65536 count (and offset by half for rounding).
+            dt = np.arange(first + lo, first + hi, dtype=np.float64)
+            dt -= t0[i]
+            x = self.h_fixed[i] * dt
+            x += self.v_fixed[i]
+            x *= dt
+            x += self.p_fixed[i]
+            np.floor(x, out=x)
+            out[lo:hi] = x
+        if end < n:
+            out[end:] = self.end_value * FRACTION
+        return out
+
+    def _segment(self, tau: float) -> int:
+        i = len(self.t0) - 1
+        while i > 0 and self.t0[i] > tau:
+            i -= 1
+        return i
+
+    def velocities(self, start: int, n: int) -> FloatArray:
+        """Plan velocity (counts/sample) at the absolute samples ``start .. start+n-1``."""
+        tau = np.arange(start - self.k0, start - self.k0 + n, dtype=np.float64)
+        t0 = np.array(self.t0)
+        idx = np.searchsorted(t0, tau, side="right") - 1
+        v: FloatArray = np.array(self.v0)[idx] + np.array(self.a)[idx] * (tau - t0[idx])
+        if self.end_sample is not None:
+            v[tau >= self.end_sample - self.k0] = 0.0
+        return v
+
+    def state(self, k: int) -> tuple[float, float]:
+        """Position (counts, quantised to 1/65536) and velocity (counts/sample) at sample k."""
+        if self.end_sample is not None and k >= self.end_sample:
+            return float(self.end_value), 0.0
+        tau = float(k - self.k0)
+        i = self._segment(tau)
+        dt = tau - self.t0[i]
+        # the same operations, in the same order, as fixed()
+        x = self.h_fixed[i] * dt
+        x += self.v_fixed[i]
+        x *= dt
+        x += self.p_fixed[i]
+        return math.floor(x) / FRACTION, self.v0[i] + self.a[i] * dt
+
+
+class AxisProfiler:
+    """The profiler of one axis, stepped sample by sample (see the interface in ADR 0001).
+
+    Commands take effect from the next sample; refusals raise :class:`CommandError` with the
+    controller's TC code. Speeds and accelerations (counts/s, counts/s²) must already be
+    quantised as the controller stores them (:func:`galil.predict.quantise`).
+
+    Attributes:
+        sample: samples committed so far.
+        position: ``r[k]``, the profiler reference (before smoothing), counts.
+        reference: ``y[k]`` rounded, the reference after IT smoothing (what ``_RP`` reports).
+        velocity: the profiler's velocity at the last sample, counts/s (signed).
+        moving: ``_BG``; True until the profile and its smoothing tail are complete.
+        mode: ``"idle"``, ``"position"``, ``"jog"`` or ``"contour"``.
+        target: ``_PA`` of the position move (the last target otherwise).
+        stop_code: 0 running, 1 done, 2/3 limits, 4 ST, 7 AB, 50/51 contour running/stopped.
+        smoothing: IT in use.
+    """
+
+    def __init__(self, *, sample_period: float = 1 / 1024, position: int = 0) -> None:
+        if not (sample_period > 0 and math.isfinite(sample_period)):
+            raise InvalidArgument(f"sample period must be positive, got {sample_period!r}")
+        self.sample_period = float(sample_period)
+        self.sample = 0
+        self.position = int(position)
+        self.reference = int(position)
+        self.velocity = 0.0
+        self.moving = False
+        self.mode = "idle"
+        self.target = int(position)
+        self.stop_code = 1
+        self.smoothing = 1.0
+        self._y = float(position)
+        self._active: _Active | None = None
+        self._stopping = False
+        self._end_code = 1
+        self._v = 0.0  # slew / jog speed, counts/sample (jog: signed)
+        self._a = 0.0
+        self._d = 0.0
+        # smoothing cache: r and y for samples _cache_k + 1 ...
+        self._cache_k = 0
+        self._cache_r: Int64Array = np.empty(0, np.int64)
+        self._cache_y: FloatArray = np.empty(0)
+        self._smooth_end: int | None = None
+        # contour queue: increments and lengths (samples), head index, progress in the head
+        self._cq_c: list[int] = []
+        self._cq_n: list[int] = []
+        self._cq_head = 0
+        self._c_elapsed = 0
+        self._c_base = int(position)
+        self._c_rate = 0.0
+        self._c_ending = False
+
+    # ---- helpers -----------------------------------------------------------------------
+    def _per_sample(self, speed: float, accel: float, decel: float) -> tuple[float, float, float]:
+        ts = self.sample_period
+        for name, value in (("speed", speed), ("accel", accel), ("decel", decel)):
+            if not math.isfinite(value):
+                raise InvalidArgument(f"{name} must be finite, got {value!r}")
+        if accel <= 0 or decel <= 0:
+            raise InvalidArgument(f"accel and decel must be > 0, got {accel!r}, {decel!r}")
+        return speed * ts, accel * ts * ts, decel * ts * ts
+
+    def _state(self) -> tuple[float, float]:
+        if self._active is None:
+            return float(self.position), 0.0
+        return self._active.state(self.sample)
+
+    def _set_plan(self, plan: KinematicPlan, *, stopping: bool = False, code: int = 1) -> None:
+        self._active = _Active(plan, self.sample)
+        self._stopping = stopping
+        self._end_code = code
+        self._invalidate()
+        self.moving = True
+        # While a forced stop ramps down, _SC already reports why (4 for ST, 2/3 for limits).
+        self.stop_code = code if stopping else 0
+        self.velocity = self._state()[1] / self.sample_period
+
+    def _invalidate(self) -> None:
+        self._cache_k = self.sample
+        self._cache_r = np.empty(0, np.int64)
+        self._cache_y = np.empty(0)
+        self._smooth_end = None
+
+    def _check_smoothing(self, smoothing: float) -> float:
+        if not (0.004 <= smoothing <= 1.0):
+            raise InvalidArgument(f"smoothing (IT) must be in [0.004, 1], got {smoothing!r}")
+        return float(smoothing)
+
+    # ---- commands ----------------------------------------------------------------------
+    def begin_move(
+        self, target: int, speed: float, accel: float, decel: float, smoothing: float = 1.0
+    ) -> None:
+        """PR/PA then BG: a trapezoid or triangle to ``target`` (counts).
+
+        Raises:
+            CommandError: TC 21 while moving.
+        """
+        if self.moving:
+            raise _refuse(21, "BG")
+        it = self._check_smoothing(smoothing)
+        v, a, d = self._per_sample(abs(speed), accel, decel)
+        if v <= 0:
+            raise InvalidArgument(f"speed must be > 0, got {speed!r}")
+        self.smoothing = it
+        self._v, self._a, self._d = v, a, d
+        self.mode = "position"
+        self.target = int(target)
+        self._set_plan(plan_position(float(self.position), 0.0, float(target), v, a, d))
+
+    def begin_jog(self, speed: float, accel: float, decel: float, smoothing: float = 1.0) -> None:
+        """JG then BG: ramp to the signed ``speed`` and keep going.
+
+        Raises:
+            CommandError: TC 21 while moving.
+        """
+        if self.moving:
+            raise _refuse(21, "BG")
+        it = self._check_smoothing(smoothing)
+        v, a, d = self._per_sample(speed, accel, decel)
+        self.smoothing = it
+        self._v, self._a, self._d = v, a, d
+        self.mode = "jog"
+        self._set_plan(plan_jog(float(self.position), 0.0, v, a, d))
+
+    def resume_jog(
+        self,
+        velocity: float,
+        speed: float,
+        accel: float,
+        decel: float,
+        smoothing: float = 1.0,
+    ) -> None:
+        """Start as if already jogging at ``velocity`` (counts/s), then JG ``speed``.
+
+        For predictions that begin in the middle of a jog (a JG change sent while jogging).
+        """
+        if self.moving:
+            raise _refuse(21, "BG")
+        it = self._check_smoothing(smoothing)
+        v, a, d = self._per_sample(speed, accel, decel)
+        if not math.isfinite(velocity):
+            raise InvalidArgument(f"velocity must be finite, got {velocity!r}")
+        self.smoothing = it
+        self._v, self._a, self._d = v, a, d
+        self.mode = "jog"
+        self._set_plan(plan_jog(float(self.position), velocity * self.sample_period, v, a, d))
+
+    def set_speed(self, speed: float) -> None:
+        """SP (position move) or JG (jog) while moving: re-plan from the present state.
+
+        Ignored while idle, while contouring and during a forced deceleration (ST, limits).
+        """
+        if not math.isfinite(speed):
+            raise InvalidArgument(f"speed must be finite, got {speed!r}")
+        if not self.moving or self._stopping or self.mode not in ("position", "jog"):
+            return
+        x, v0 = self._state()
+        if self.mode == "jog":
+            self._v = speed * self.sample_period
+            self._set_plan(plan_jog(x, v0, self._v, self._a, self._d))
+        else:
+            if speed == 0:
+                raise InvalidArgument("speed of a position move must be > 0")
+            self._v = abs(speed) * self.sample_period
+            self._set_plan(plan_position(x, v0, float(self.target), self._v, self._a, self._d))
+
+    def set_accel(self, accel: float) -> None:
+        """AC while moving: re-plan from the present state (ignored when it has no effect)."""
+        if not (math.isfinite(accel) and accel > 0):
+            raise InvalidArgument(f"accel must be > 0, got {accel!r}")
+        self._a = accel * self.sample_period**2
+        if not self.moving or self._stopping or self.mode not in ("position", "jog"):
+            return
+        x, v0 = self._state()
+        if self.mode == "jog":
+            self._set_plan(plan_jog(x, v0, self._v, self._a, self._d))
+        else:
+            self._set_plan(plan_position(x, v0, float(self.target), self._v, self._a, self._d))
+
+    def increment(
+        self,
+        n: int,
+        speed: float,
+        accel: float,
+        decel: float,
+        smoothing: float | None = None,
+    ) -> None:
+        """IP n: retarget a position move, step a jog, or start a move of ``n`` when idle.
+
+        Raises:
+            CommandError: TC 16 for a wrong-sign IP during a position move or any IP during a
+                forced deceleration; TC 18 while contouring.
+        """
+        n = int(n)
+        if self.mode == "contour":
+            raise _refuse(18, "IP")
+        if not self.moving:
+            it = self.smoothing if smoothing is None else smoothing
+            self.begin_move(self.position + n, speed, accel, decel, it)
+            return
+        if self._stopping:
+            raise _refuse(16, "IP")
+        if n == 0:
+            return
+        if self.mode == "jog":
+            assert self._active is not None
+            self._active.shift(n)
+            self._invalidate()
+            return
+        x, v0 = self._state()
+        direction = self.target - x if v0 == 0 else v0
+        if direction != 0 and (n > 0) != (direction > 0):
+            raise _refuse(16, "IP")
+        v, a, d = self._per_sample(abs(speed), accel, decel)
+        if v > 0:
+            self._v = v
+        self._a, self._d = a, d
+        self.target += n
+        self._set_plan(plan_position(x, v0, float(self.target), self._v, self._a, self._d))
+
+    def stop(self) -> None:
+        """ST: ramp to rest at DC (stop code 4); in contour mode stop at once (code 51)."""
+        self._forced_stop(4)
+
+    def limit_stop(self, code: int) -> None:
+        """A limit switch or soft limit: ramp to rest at DC with stop code ``code`` (2 or 3)."""
+        self._forced_stop(int(code))
+
+    def _forced_stop(self, code: int) -> None:
+        if not self.moving:
+            return
+        if self.mode == "contour":
+            self._finish_contour(51 if code == 4 else code)
+            return
+        if self._stopping:
+            return
+        x, v0 = self._state()
+        self._set_plan(plan_stop(x, v0, self._d), stopping=True, code=code)
+
+    def abort(self) -> None:
+        """AB: stop at once where the reference is now (stop code 7); smoothing is dropped."""
+        self._cq_c, self._cq_n, self._cq_head = [], [], 0
+        self._c_ending = False
+        self._active = None
+        self._stopping = False
+        self._invalidate()
+        self.position = self.reference
+        self._y = float(self.reference)
+        self.velocity = 0.0
+        self.moving = False
+        self.mode = "idle"
+        self.stop_code = 7
+
+    # ---- contour -----------------------------------------------------------------------
+    def begin_contour(self) -> None:
+        """CM: enter contour mode; an empty queue holds position.
+
+        Raises:
+            CommandError: TC 7 while another motion is running.
+        """
+        if self.moving:
+            if self.mode == "contour":
+                return
+            raise _refuse(7, "CM")
+        self.mode = "contour"
+        self.moving = True
+        self.stop_code = 50
+        self._invalidate()
+        self._cq_c, self._cq_n, self._cq_head = [], [], 0
+        self._c_elapsed = 0
+        self._c_base = self.position
+        self._c_rate = 0.0
+        self._c_ending = False
+
+    def add_segment(self, increment: int, n: int) -> None:
+        """CD ``increment`` over ``2**n`` samples (DT n), queued behind earlier segments.
+
+        Raises:
+            CommandError: TC 8 outside contour mode, TC 6 for DT outside 1..8.
+        """
+        if self.mode != "contour" or self._c_ending:
+            raise _refuse(8, "CD")
+        if not 1 <= int(n) <= 8:
+            raise _refuse(6, "DT")
+        self._cq_c.append(int(increment))
+        self._cq_n.append(int(n))
+
+    def end_contour(self) -> None:
+        """CD 0=0: leave contour mode once the queued segments have run."""
+        if self.mode != "contour":
+            return
+        self._c_ending = True
+        if self.queued_segments == 0:
+            self._finish_contour(51)
+
+    @property
+    def queued_segments(self) -> int:
+        """Contour segments not yet finished (including the one running)."""
+        return len(self._cq_c) - self._cq_head
+
+    def _finish_contour(self, code: int) -> None:
+        self._cq_c, self._cq_n, self._cq_head = [], [], 0
+        self._c_ending = False
+        self.mode = "idle"
+        self.moving = False
+        self.stop_code = code
+        self.velocity = 0.0
+        self._y = float(self.position)
+        self.reference = self.position
+
+    def _contour_window(self, n: int) -> tuple[Int64Array, int, int, int, float]:
+        """Positions of the next ``n`` samples and the queue state after them."""
+        h = self._cq_head
+        # Each segment lasts at least 2 samples, so this many always cover the window.
+        m = min(len(self._cq_c) - h, n // 2 + 2)
+        if m == 0:
+            return np.full(n, self._c_base, np.int64), 0, 0, self._c_base, 0.0
+        c = np.array(self._cq_c[h : h + m], dtype=np.int64)
+        e = np.array(self._cq_n[h : h + m], dtype=np.int64)
+        length = np.left_shift(1, e)
+        ends = np.cumsum(length) - self._c_elapsed
+        starts = ends - length
+        bases = self._c_base + np.cumsum(c) - c
+        s = np.arange(1, n + 1, dtype=np.int64)
+        idx = np.searchsorted(ends, s, side="left")
+        inside = idx < m
+        ic = np.minimum(idx, m - 1)
+        j = s - starts[ic]
+        pos = bases[ic] + np.right_shift(c[ic] * j, e[ic])
+        final = int(bases[-1] + c[-1])
+        out = np.where(inside, pos, final)
+        done = int(np.searchsorted(ends, n, side="right"))
+        if done < m:
+            elapsed = int(n - starts[done])
+            base = int(bases[done])
+        else:
+            elapsed, base = 0, final
+        last = int(idx[-1])
+        rate = float(c[last]) / float(length[last]) if last < m else 0.0
+        return out.astype(np.int64), done, elapsed, base, rate
+
+    # ---- stepping ----------------------------------------------------------------------
+    def _raw(self, start: int, n: int) -> Int64Array:
+        """Unsmoothed reference for absolute samples ``start .. start+n-1``."""
+        if self._active is None:
+            return np.full(n, self.position, np.int64)
+        return _round_fixed(self._active.fixed(start, n))
+
+    def _fill(self, n: int) -> None:
+        """Extend the smoothing cache, one page at a time, to cover n samples from now."""
+        assert self._active is not None
+        have = self._cache_r.size - (self.sample - self._cache_k)
+        if have >= n:
+            return
+        pages = -(-(n - have) // PAGE)
+        r_parts = [self._cache_r]
+        y_parts = [self._cache_y]
+        start = self._cache_k + self._cache_r.size + 1
+        y_prev = float(self._cache_y[-1]) if self._cache_y.size else self._y
+        end = self._active.end_sample
+        final = float(self._active.end_value)
+        for p in range(pages):
+            s0 = start + p * PAGE
+            r = self._raw(s0, PAGE)
+            if self._smooth_end is not None and s0 >= self._smooth_end:
+                y = np.full(PAGE, final)
+            else:
+                y = smooth_page(r.astype(np.float64), y_prev, self.smoothing)
+                if end is not None:
+                    k = np.arange(s0, s0 + PAGE)
+                    hit = np.flatnonzero((k >= end) & (np.abs(y - final) < 0.5))
+                    if hit.size:
+                        i = int(hit[0])
+                        self._smooth_end = s0 + i
+                        y[i:] = final
+            y_prev = float(y[-1])
+            r_parts.append(r)
+            y_parts.append(y)
+        self._cache_r = np.concatenate(r_parts)
+        self._cache_y = np.concatenate(y_parts)
+
+    def _window(self, n: int) -> tuple[Int64Array, Int64Array, FloatArray | None]:
+        if self.mode == "contour":
+            r = self._contour_window(n)[0]
+            return r, r, None
+        if self._active is None or self.smoothing >= 1.0:
+            r = self._raw(self.sample + 1, n)
+            return r, r, None  # fresh arrays: no copy needed
+        self._fill(n)
+        off = self.sample - self._cache_k
+        r = self._cache_r[off : off + n]
+        y = self._cache_y[off : off + n]
+        return r, np.floor(y + 0.5).astype(np.int64), y
+
+    def preview(self, n: int) -> Int64Array:
+        """The next ``n`` reference values (after smoothing), without committing them."""
+        out: Int64Array = self._window(self._count(n))[1].copy()
+        return out
+
+    def preview_from(self, start: int, n: int) -> Int64Array:
+        """Unsmoothed positions of the present plan at samples ``start .. start+n-1``.
+
+        For the predictor: one evaluation of a whole move, sample 0 included. Samples before
+        the present one are what the plan gave there (when it was in force).
+        """
+        if self.mode == "contour":
+            raise InvalidArgument("preview_from() is for kinematic plans, not contour mode")
+        return self._raw(int(start), self._count(n))
+
+    def preview_profile(self, n: int) -> Int64Array:
+        """The next ``n`` profiler positions ``r`` (before smoothing: what AD/AR watch)."""
+        out: Int64Array = self._window(self._count(n))[0].copy()
+        return out
+
+    def advance(self, n: int) -> Int64Array:
+        """Commit the next ``n`` samples and return their reference values (int64)."""
+        return self.advance_both(n)[1]
+
+    def advance_both(self, n: int) -> tuple[Int64Array, Int64Array]:
+        """Commit ``n`` samples; return the profiler positions ``r`` and the references.
+
+        Without smoothing (IT = 1, or contour mode) both are the same array.
+        """
+        n = self._count(n)
+        if n == 0:
+            return np.empty(0, np.int64), np.empty(0, np.int64)
+        if self.mode == "contour":
+            r, done, elapsed, base, rate = self._contour_window(n)
+            self._cq_head += done
+            self._c_elapsed, self._c_base, self._c_rate = elapsed, base, rate
+            if self._cq_head > 4096 and self._cq_head * 2 > len(self._cq_c):
+                del self._cq_c[: self._cq_head], self._cq_n[: self._cq_head]
+                self._cq_head = 0
+            self.sample += n
+            self.position = self.reference = int(r[-1])
+            self._y = float(self.position)
+            self.velocity = rate / self.sample_period
+            if self._c_ending and self.queued_segments == 0:
+                self._finish_contour(51)
+            return r, r
+        r, ref, y = self._window(n)
+        if y is not None:  # slices of the smoothing cache: hand out copies
+            r, ref = r.copy(), ref.copy()
+        else:
+            ref = r
+        self.sample += n
+        self.position = int(r[-1])
+        self.reference = int(ref[-1])
+        self._y = float(y[-1]) if y is not None else float(self.position)
+        if self._active is not None:
+            self.velocity = self._active.state(self.sample)[1] / self.sample_period
+            end = self._smooth_end if self.smoothing < 1.0 else self._active.end_sample
+            if end is not None and self.sample >= end:
+                self._finish()
+        return r, ref
+
+    def _finish(self) -> None:
+        assert self._active is not None
+        self.position = self._active.end_value
+        self.reference = self.position
+        self._y = float(self.position)
+        self._active = None
+        self._invalidate()
+        self.moving = False
+        self.mode = "idle"
+        self.velocity = 0.0
+        self.stop_code = self._end_code
+        self._stopping = False
+
+    @staticmethod
+    def _count(n: int) -> int:
+        n = int(n)
+        if n < 0:
+            raise InvalidArgument(f"sample count must be >= 0, got {n}")
+        return n
+
+    # ---- introspection (predictor use) -----------------------------------------------
+    def preview_velocity(self, n: int) -> FloatArray:
+        """Profiler velocity (counts/s, before rounding) over the next ``n`` samples."""
+        n = self._count(n)
+        if self.mode == "contour" or self._active is None:
+            rate = self._c_rate if self.mode == "contour" else 0.0
+            return np.full(n, rate / self.sample_period)
+        out: FloatArray = self._active.velocities(self.sample + 1, n) / self.sample_period
+        return out
+
+    @property
+    def end_sample(self) -> int | None:
+        """Sample at which the present plan ends, when known (``None`` for a jog)."""
+        if self._active is None:
+            return self.sample if not self.moving else None
+        if self.smoothing < 1.0:
+            return self._smooth_end
+        return self._active.end_sample
+
+    @property
+    def plan(self) -> KinematicPlan | None:
+        """The kinematic plan in force (``None`` when idle or contouring)."""
+        return None if self._active is None else self._active.plan

@@ -1,0 +1,112 @@
+"""Jog (JG then BG): ramps between speeds, speed changes at given times, ST."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from galil.errors import InvalidArgument
+from galil.models import ModelSpec
+from galil.predict.engine import AxisProfiler
+from galil.predict.move import Event, SetSpeed, Stop, _resolve, _sample_of, run
+from galil.predict.profile import Profile
+
+__all__ = ["jog"]
+
+
+def jog(
+    speed: float,
+    accel: float,
+    decel: float,
+    *,
+    changes: Sequence[tuple[float, float]] = (),
+    stop_at: float | None = None,
+    duration: float | None = None,
+    events: Sequence[Event] = (),
+    sample_period: float = 1 / 1024,
+    smoothing: float = 1.0,
+    start: int = 0,
+    initial_speed: float = 0.0,
+    model: str | ModelSpec | None = None,
+) -> Profile:
+    """Predict a jog at the signed ``speed`` (counts/s).
+
+    |v| grows at ``accel`` and shrinks at ``decel``; a change of sign passes through zero.
+
+    Args:
+        speed: JG, counts/s (signed).
+        accel: AC, counts/s².
+        decel: DC, counts/s².
+        changes: ``(time, new_speed)`` pairs: JG in motion at ``time`` seconds.
+        stop_at: ST at this time (seconds): the profile ends when the axis has stopped.
+        duration: predict this many seconds. Without ``stop_at`` or ``duration`` the
+            prediction runs until the last ramp has reached its speed.
+        events: further changes in motion (:class:`~galil.predict.move.SetAccel`,
+            :class:`~galil.predict.move.Increment`, ...).
+        sample_period: seconds per sample.
+        smoothing: IT.
+        start: position at sample 0.
+        initial_speed: velocity at sample 0 (counts/s): the axis is already jogging, and
+            ``speed`` is a JG change in motion.
+        model: quantise JG/AC/DC/IT as this model stores them first.
+
+    Raises:
+        InvalidArgument: bad arguments. CommandError: an event the controller would refuse.
+    """
+    for name, value in (("accel", accel), ("decel", decel)):
+        if not (math.isfinite(value) and value > 0):
+            raise InvalidArgument(f"{name} must be a positive number, got {value!r}")
+    if not math.isfinite(speed):
+        raise InvalidArgument(f"speed must be finite, got {speed!r}")
+    speed, accel, decel, smoothing, sample_period = _resolve(
+        speed, accel, decel, smoothing, sample_period, model, jog=True
+    )
+    ts = sample_period
+    all_events: list[Event] = [SetSpeed(t, s) for t, s in changes]
+    all_events.extend(events)
+    if stop_at is not None:
+        all_events.append(Stop(stop_at))
+    eng = AxisProfiler(sample_period=ts, position=int(start))
+    if initial_speed:
+        eng.resume_jog(initial_speed, speed, accel, decel, smoothing)
+    else:
+        eng.begin_jog(speed, accel, decel, smoothing)
+    until: int | None = None
+    if duration is not None:
+        until = _sample_of(duration, ts)
+    elif stop_at is None and not any(isinstance(e, Stop) for e in all_events):
+        # No end given: run past the last event until the last ramp (and smoothing) settles.
+        last = max((_sample_of(e.time, ts) for e in all_events), default=0)
+        r, ref, peak = run(eng, all_events, speed=speed, accel=accel, decel=decel, until=last)
+        plan = eng.plan
+        extra = 0
+        if plan is not None:
+            ramp = sum(s.duration for s in plan.segments if math.isfinite(s.duration))
+            extra = max(0, math.ceil(ramp - 1e-9) - (eng.sample - last))
+        if smoothing < 1.0:
+            extra += math.ceil(8 / smoothing)
+        r2, ref2, peak2 = run(eng, (), speed=speed, accel=accel, decel=decel, until=extra)
+        r = np.concatenate([r, r2])
+        ref = np.concatenate([ref, ref2])
+        peak = max(peak, peak2)
+        peak = max(peak, abs(initial_speed))
+        return _profile(start, r, ref, ts, peak, eng.stop_code, initial_speed)
+    r, ref, peak = run(eng, all_events, speed=speed, accel=accel, decel=decel, until=until)
+    peak = max(peak, abs(initial_speed))
+    return _profile(start, r, ref, ts, peak, eng.stop_code, initial_speed)
+
+
+def _profile(
+    start: int, r: np.ndarray, ref: np.ndarray, ts: float, peak: float, code: int, v0: float
+) -> Profile:
+    return Profile.from_samples(
+        np.concatenate([[int(start)], ref]),
+        profiler=np.concatenate([[int(start)], r]),
+        sample_period=ts,
+        start_velocity=v0,
+        shape="jog",
+        peak_speed=peak,
+        stop_code=code,
+    )

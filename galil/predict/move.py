@@ -1,0 +1,460 @@
+"""Position moves (PR/PA then BG), changes in motion, and speed schedules.
+
+Every function here drives :class:`~galil.predict.engine.AxisProfiler`, the engine the
+simulator runs, so a prediction is the simulator's (and, as far as the model goes, the
+controller's) reference sample for sample.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from galil.errors import InvalidArgument, LimitError
+from galil.models import ModelSpec
+from galil.predict.engine import AxisProfiler, KinematicPlan, plan_position
+from galil.predict.profile import Profile
+
+__all__ = [
+    "Event",
+    "Increment",
+    "MovePlan",
+    "ScheduleError",
+    "SetAccel",
+    "SetSpeed",
+    "SpeedSchedule",
+    "Stop",
+    "move",
+    "plan_move",
+    "run",
+    "speed_schedule",
+]
+
+#: Longest prediction, in samples (about 13.6 hours at 1024 Hz), so a mistake cannot hang.
+MAX_SAMPLES = 50_000_000
+
+Int64Array = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class SetSpeed:
+    """SP (position move) or JG (jog) at ``time`` seconds from the start, counts/s."""
+
+    time: float
+    speed: float
+
+
+@dataclass(frozen=True)
+class SetAccel:
+    """AC at ``time`` seconds, counts/s²."""
+
+    time: float
+    accel: float
+
+
+@dataclass(frozen=True)
+class Increment:
+    """IP ``distance`` counts at ``time`` seconds."""
+
+    time: float
+    distance: int
+
+
+@dataclass(frozen=True)
+class Stop:
+    """ST at ``time`` seconds."""
+
+    time: float
+
+
+Event = SetSpeed | SetAccel | Increment | Stop
+
+
+@dataclass(frozen=True)
+class MovePlan:
+    """A position move planned but not sampled (the cheap part of :func:`move`).
+
+    Attributes:
+        distance: counts (signed).
+        duration: seconds, ``samples * sample_period``.
+        samples: N, the sample at which the profiler issues the target.
+        exact_duration: the continuous (closed-form) duration, seconds.
+        peak_speed: counts/s.
+        shape: ``"trapezoid"``, ``"triangle"`` or ``"none"``.
+        accel_time, cruise_time, decel_time: phase lengths in seconds (closed form).
+    """
+
+    distance: int
+    duration: float
+    samples: int
+    exact_duration: float
+    peak_speed: float
+    shape: str
+    accel_time: float
+    cruise_time: float
+    decel_time: float
+
+
+def _validate(speed: float, accel: float, decel: float, sample_period: float) -> None:
+    for name, value in (("speed", speed), ("accel", accel), ("decel", decel)):
+        if not (math.isfinite(value) and value > 0):
+            raise InvalidArgument(f"{name} must be a positive number, got {value!r}")
+    if not (math.isfinite(sample_period) and sample_period > 0):
+        raise InvalidArgument(f"sample_period must be positive, got {sample_period!r}")
+
+
+def plan_move(
+    distance: int,
+    speed: float,
+    accel: float,
+    decel: float,
+    *,
+    sample_period: float = 1 / 1024,
+) -> MovePlan:
+    """Plan a PR move from rest without sampling it: duration, peak speed and shape.
+
+    Raises:
+        InvalidArgument: a non-positive speed, accel, decel or sample period.
+    """
+    _validate(speed, accel, decel, sample_period)
+    ts = sample_period
+    plan = plan_position(0.0, 0.0, float(distance), speed * ts, accel * ts * ts, decel * ts * ts)
+    return _move_plan(int(distance), plan, ts)
+
+
+def _move_plan(distance: int, plan: KinematicPlan, ts: float) -> MovePlan:
+    phases = [0.0, 0.0, 0.0]
+    for seg in plan.segments:
+        if seg.accel == 0:
+            phases[1] += seg.duration
+        elif (seg.accel > 0) == (distance > 0):
+            phases[0] += seg.duration
+        else:
+            phases[2] += seg.duration
+    samples = max(0, math.ceil(plan.duration - 1e-9))
+    return MovePlan(
+        distance=distance,
+        duration=samples * ts,
+        samples=samples,
+        exact_duration=plan.duration * ts,
+        peak_speed=plan.peak / ts,
+        shape=plan.shape,
+        accel_time=phases[0] * ts,
+        cruise_time=phases[1] * ts,
+        decel_time=phases[2] * ts,
+    )
+
+
+def _resolve(
+    speed: float,
+    accel: float,
+    decel: float,
+    smoothing: float,
+    sample_period: float,
+    model: str | ModelSpec | None,
+    *,
+    jog: bool = False,
+) -> tuple[float, float, float, float, float]:
+    if model is None:
+        return speed, accel, decel, smoothing, sample_period
+    from galil.predict.checks import quantise
+
+    q = quantise(model, speed=speed, accel=accel, decel=decel, smoothing=smoothing, jog=jog)
+    assert q.speed is not None
+    assert q.accel is not None
+    assert q.decel is not None
+    assert q.smoothing is not None
+    return q.speed, q.accel, q.decel, q.smoothing, q.sample_period
+
+
+def _sample_of(time: float, ts: float) -> int:
+    if not (math.isfinite(time) and time >= 0):
+        raise InvalidArgument(f"event time must be >= 0, got {time!r}")
+    return round(time / ts)
+
+
+@dataclass
+class _Run:
+    """What a driven engine produced."""
+
+    r: list[Int64Array]
+    ref: list[Int64Array]
+    peak: float
+
+
+def _advance(eng: AxisProfiler, n: int, run: _Run) -> None:
+    if n <= 0:
+        return
+    if eng.moving:
+        v = eng.preview_velocity(n)
+        if v.size:
+            run.peak = max(run.peak, float(np.max(np.abs(v))))
+    r, ref = eng.advance_both(n)
+    run.r.append(r)
+    run.ref.append(ref)
+
+
+def run(
+    eng: AxisProfiler,
+    events: Sequence[Event],
+    *,
+    speed: float,
+    accel: float,
+    decel: float,
+    until: int | None = None,
+) -> tuple[Int64Array, Int64Array, float]:
+    """Drive ``eng`` through timed events, then until ``until`` or until motion completes.
+
+    Each event is applied at sample ``round(time / sample_period)`` and takes effect from the
+    next sample, as a command does on the controller.
+
+    Returns:
+        ``(r, reference, peak_speed)``: samples 1.. of the profiler position and of the
+        reference, and the largest |profiler velocity| seen (counts/s).
+
+    Raises:
+        CommandError: the controller would refuse an event (e.g. TC 16 for a wrong-sign IP).
+        InvalidArgument: the motion does not complete within ``MAX_SAMPLES``.
+    """
+    ts = eng.sample_period
+    out = _Run([], [], abs(eng.velocity))
+    sp, ac = speed, accel
+    base = eng.sample
+    for ev in sorted(events, key=lambda e: e.time):
+        k = base + _sample_of(ev.time, ts)
+        _advance(eng, k - eng.sample, out)
+        if isinstance(ev, SetSpeed):
+            sp = abs(ev.speed) if eng.mode != "jog" else ev.speed
+            eng.set_speed(ev.speed)
+        elif isinstance(ev, SetAccel):
+            ac = ev.accel
+            eng.set_accel(ev.accel)
+        elif isinstance(ev, Increment):
+            eng.increment(ev.distance, abs(sp), ac, decel)
+        else:
+            eng.stop()
+    if until is not None:
+        _advance(eng, base + until - eng.sample, out)
+    else:
+        step = 1024
+        while eng.moving:
+            if eng.sample - base > MAX_SAMPLES:
+                raise InvalidArgument(f"motion does not complete within {MAX_SAMPLES} samples")
+            end = eng.end_sample
+            n = end - eng.sample if end is not None and end > eng.sample else step
+            _advance(eng, n, out)
+            step = min(step * 2, 1 << 20)
+    empty = np.empty(0, np.int64)
+    r = np.concatenate(out.r) if out.r else empty
+    ref = np.concatenate(out.ref) if out.ref else empty
+    return r, ref, out.peak
+
+
+def move(
+    distance: int,
+    speed: float,
+    accel: float,
+    decel: float,
+    *,
+    sample_period: float = 1 / 1024,
+    smoothing: float = 1.0,
+    start: int = 0,
+    events: Sequence[Event] = (),
+    model: str | ModelSpec | None = None,
+) -> Profile:
+    """Predict a PR move of ``distance`` counts (PA: pass ``target - start``).
+
+    Args:
+        distance: counts, signed.
+        speed: SP, counts/s.
+        accel: AC, counts/s².
+        decel: DC, counts/s².
+        sample_period: seconds per servo sample (``TM/1_024_000``).
+        smoothing: IT (1 = none).
+        start: position at sample 0.
+        events: changes in motion (:class:`SetSpeed`, :class:`SetAccel`, :class:`Increment`,
+            :class:`Stop`) at given times.
+        model: when given, SP/AC/DC/IT are first quantised as that model stores them (and
+            range-checked), and its sample period is used.
+
+    Returns:
+        The :class:`Profile` from sample 0 (``start``) to the sample where the move completes.
+
+    Raises:
+        InvalidArgument: bad arguments. LimitError: out of the model's range (with ``model``).
+        CommandError: an event the controller would refuse.
+    """
+    _validate(speed, accel, decel, sample_period)
+    speed, accel, decel, smoothing, sample_period = _resolve(
+        speed, accel, decel, smoothing, sample_period, model
+    )
+    eng = AxisProfiler(sample_period=sample_period, position=int(start))
+    eng.begin_move(int(start) + int(distance), speed, accel, decel, smoothing)
+    plan = eng.plan
+    assert plan is not None
+    if not events and smoothing >= 1.0:
+        # Fast path: the same plan evaluated at samples 0..N in one go (sample 0 is the start).
+        end = eng.end_sample
+        assert end is not None
+        pos = eng.preview_from(0, end + 1)
+        return Profile.from_samples(
+            pos,
+            sample_period=sample_period,
+            shape=plan.shape,
+            peak_speed=plan.peak / sample_period,
+            stop_code=1,
+        )
+    r, ref, peak = run(eng, events, speed=speed, accel=accel, decel=decel)
+    shape = plan.shape
+    if events:
+        shape = "stopped" if eng.stop_code == 4 else "changed"
+    return Profile.from_samples(
+        np.concatenate([[int(start)], ref]),
+        profiler=np.concatenate([[int(start)], r]),
+        sample_period=sample_period,
+        shape=shape,
+        peak_speed=peak,
+        stop_code=eng.stop_code,
+    )
+
+
+class ScheduleError(LimitError):
+    """A speed-schedule change point that is not valid.
+
+    Attributes:
+        index: which change (0-based) is invalid; ``len(changes)`` for the final deceleration.
+        earliest: the earliest valid trigger distance for that change (for the final
+            deceleration: the shortest move distance that fits).
+    """
+
+    def __init__(self, message: str, *, index: int, earliest: float, value: float) -> None:
+        super().__init__(
+            message, name="speed schedule", value=value, limit=earliest, time=None, sample=None
+        )
+        self.index = index
+        self.earliest = earliest
+
+
+@dataclass(frozen=True)
+class SpeedSchedule:
+    """A move that changes speed at given distances, validated and predicted.
+
+    Attributes:
+        distance: total move, counts (signed).
+        triggers: distances from the start (counts, positive) at which each speed change is
+            commanded: the axis layer arms ``AD`` trippoints with these.
+        speeds: the initial speed followed by each new speed, counts/s.
+        ramp_ends: distance from the start at which each ramp (initial acceleration, then one
+            per change) finishes, closed form.
+        profile: the predicted :class:`Profile`.
+    """
+
+    distance: int
+    triggers: tuple[int, ...]
+    speeds: tuple[float, ...]
+    ramp_ends: tuple[float, ...]
+    profile: Profile
+
+
+def speed_schedule(
+    distance: int,
+    initial_speed: float,
+    changes: Sequence[tuple[float, float]],
+    accel: float,
+    decel: float,
+    *,
+    sample_period: float = 1 / 1024,
+    start: int = 0,
+    smoothing: float = 1.0,
+) -> SpeedSchedule:
+    """Validate and predict a move that changes speed at given distances from its start.
+
+    The Galil counterpart of a "distance to change" schedule: PR ``distance`` at
+    ``initial_speed``; at each ``(at, speed)`` (``at`` counts from the start, increasing) an
+    ``AD`` trippoint then ``SP speed``. A change is valid only if the previous ramp has finished
+    when its trigger is reached; the last ramp must also leave room for the final deceleration.
+    Speed rises at ``accel`` and falls at ``decel``.
+
+    Raises:
+        ScheduleError: a change point that is not valid, with the earliest valid one.
+        InvalidArgument: malformed arguments.
+    """
+    _validate(initial_speed, accel, decel, sample_period)
+    total = abs(int(distance))
+    if total == 0:
+        raise InvalidArgument("a speed schedule needs a non-zero distance")
+    speeds = [float(initial_speed)]
+    ramp_end = initial_speed**2 / (2 * accel)
+    ramp_ends = [ramp_end]
+    triggers: list[int] = []
+    prev_at = 0.0
+    for i, (at, sp) in enumerate(changes):
+        if not (math.isfinite(sp) and sp > 0):
+            raise InvalidArgument(f"change {i}: speed must be positive, got {sp!r}")
+        if not (math.isfinite(at) and prev_at < at < total):
+            raise InvalidArgument(
+                f"change {i}: trigger distance {at!r} must lie in ({prev_at:g}, {total})"
+            )
+        if at < ramp_end:
+            earliest = math.ceil(ramp_end)
+            raise ScheduleError(
+                f"change {i} at {at:g} counts comes before the previous ramp ends at"
+                f" {ramp_end:.6g} counts; the earliest valid trigger is {earliest}",
+                index=i,
+                earliest=earliest,
+                value=at,
+            )
+        rate = accel if sp > speeds[-1] else decel
+        ramp_end = at + abs(sp**2 - speeds[-1] ** 2) / (2 * rate)
+        ramp_ends.append(ramp_end)
+        speeds.append(float(sp))
+        triggers.append(math.ceil(at))
+        prev_at = at
+    need = ramp_end + speeds[-1] ** 2 / (2 * decel)
+    if need > total:
+        earliest = math.ceil(need)
+        raise ScheduleError(
+            f"the final deceleration from {speeds[-1]:g} counts/s needs the move to be at least"
+            f" {need:.6g} counts long, not {total}",
+            index=len(triggers),
+            earliest=earliest,
+            value=total,
+        )
+    sign = 1 if distance > 0 else -1
+    eng = AxisProfiler(sample_period=sample_period, position=int(start))
+    eng.begin_move(int(start) + int(distance), initial_speed, accel, decel, smoothing)
+    out = _Run([], [], 0.0)
+    for trig, sp in zip(triggers, speeds[1:], strict=True):
+        # AD watches the profiler position r (before smoothing); SP acts from the next sample.
+        while True:
+            end = eng.end_sample
+            n = max(1, (end - eng.sample) if end is not None else 1024)
+            r = eng.preview_profile(n)
+            hit = np.flatnonzero(sign * (r - int(start)) >= trig)
+            if hit.size:
+                _advance(eng, int(hit[0]) + 1, out)
+                break
+            _advance(eng, n, out)
+        eng.set_speed(sp)
+    r, ref, peak = run(eng, (), speed=speeds[-1], accel=accel, decel=decel)
+    out.r.append(r)
+    out.ref.append(ref)
+    profile = Profile.from_samples(
+        np.concatenate([[int(start)], *out.ref]),
+        profiler=np.concatenate([[int(start)], *out.r]),
+        sample_period=sample_period,
+        shape="schedule",
+        peak_speed=max(out.peak, peak),
+        stop_code=eng.stop_code,
+    )
+    return SpeedSchedule(
+        distance=int(distance),
+        triggers=tuple(triggers),
+        speeds=tuple(speeds),
+        ramp_ends=tuple(ramp_ends),
+        profile=profile,
+    )

@@ -1,0 +1,281 @@
+"""Results of a prediction: one axis (:class:`Profile`) or several on one time base."""
+
+from __future__ import annotations
+
+import html
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+from galil.errors import InvalidArgument
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+__all__ = ["MultiProfile", "Profile", "together"]
+
+FloatArray = npt.NDArray[np.float64]
+Int64Array = npt.NDArray[np.int64]
+
+
+def _summary_rows(p: Profile) -> list[tuple[str, str]]:
+    return [
+        ("shape", p.shape),
+        ("duration", f"{p.duration:.6g} s ({p.samples} samples)"),
+        ("start → end", f"{p.start} → {p.end} counts"),
+        ("peak speed", f"{p.peak_speed:.6g} counts/s"),
+        ("sample period", f"{p.sample_period * 1e6:.6g} µs"),
+    ]
+
+
+@dataclass(frozen=True, eq=False)
+class Profile:
+    """What the controller's profiler will command, one value per servo sample.
+
+    Attributes:
+        t: sample times in seconds from the start (``k * sample_period``), k = 0..N.
+        position: the reference (after IT smoothing) at each sample, counts (int64).
+        velocity: ``(position[k] - position[k-1]) / sample_period`` in counts/s;
+            ``velocity[0]`` is the velocity at the start.
+        duration: ``N * sample_period``: until the profiler has issued the final position.
+        shape: ``"trapezoid"``, ``"triangle"``, ``"none"``, ``"jog"``, ``"contour"``,
+            ``"changed"`` (re-planned in motion) or ``"stopped"``.
+        peak_speed: largest |profiler velocity| (before rounding to counts), counts/s.
+        sample_period: seconds per sample.
+        profiler: the profiler position ``r`` before smoothing (what AD/AR trippoints watch);
+            equal to ``position`` when IT is 1.
+        stop_code: the stop code once the profile is over (1 done, 4 ST, 51 contour, ...).
+    """
+
+    t: FloatArray
+    position: Int64Array
+    velocity: FloatArray
+    duration: float
+    shape: str
+    peak_speed: float
+    sample_period: float
+    profiler: Int64Array = field(repr=False)
+    stop_code: int = 1
+
+    def __post_init__(self) -> None:
+        for arr in (self.t, self.position, self.velocity, self.profiler):
+            arr.setflags(write=False)
+
+    @classmethod
+    def from_samples(
+        cls,
+        reference: npt.ArrayLike,
+        *,
+        sample_period: float,
+        shape: str,
+        peak_speed: float,
+        profiler: npt.ArrayLike | None = None,
+        start_velocity: float = 0.0,
+        stop_code: int = 1,
+    ) -> Profile:
+        """Build a profile from the reference positions r[0..N] (r[0] is the start)."""
+        pos = np.asarray(reference, dtype=np.int64)
+        if pos.ndim != 1 or pos.size == 0:
+            raise InvalidArgument("a profile needs at least the start position")
+        vel = np.empty(pos.size)
+        vel[0] = start_velocity
+        np.subtract(pos[1:], pos[:-1], out=vel[1:], casting="unsafe")
+        vel[1:] *= 1.0 / sample_period
+        raw = pos if profiler is None else np.asarray(profiler, dtype=np.int64)
+        n = pos.size - 1
+        t = np.arange(pos.size, dtype=np.float64)
+        t *= float(sample_period)
+        return cls(
+            t=t,
+            position=pos,
+            velocity=vel,
+            duration=n * sample_period,
+            shape=shape,
+            peak_speed=float(peak_speed),
+            sample_period=float(sample_period),
+            profiler=raw,
+            stop_code=stop_code,
+        )
+
+    @property
+    def samples(self) -> int:
+        """N: the index of the last sample (the profile has N + 1 values)."""
+        return int(self.position.size - 1)
+
+    @property
+    def start(self) -> int:
+        """Position at sample 0."""
+        return int(self.position[0])
+
+    @property
+    def end(self) -> int:
+        """Position at the last sample."""
+        return int(self.position[-1])
+
+    @property
+    def distance(self) -> int:
+        """End minus start, counts."""
+        return self.end - self.start
+
+    @property
+    def acceleration(self) -> FloatArray:
+        """Per-sample change of velocity in counts/s² (first value 0)."""
+        acc = np.zeros(self.velocity.size)
+        acc[1:] = np.diff(self.velocity) / self.sample_period
+        return acc
+
+    def at(self, t: float | npt.ArrayLike) -> Any:
+        """Reference position at time(s) ``t`` (s), linearly interpolated between samples.
+
+        Before 0 it is the start, after the end the final position.
+        """
+        out = np.interp(np.asarray(t, dtype=np.float64), self.t, self.position)
+        return float(out) if np.ndim(out) == 0 else out
+
+    def plot(self, *, title: str | None = None) -> Figure:
+        """Plot position, velocity and acceleration against time; return the Figure.
+
+        matplotlib is imported here, not at import time.
+        """
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(7, 6), layout="constrained")
+        axes = fig.subplots(3, 1, sharex=True)
+        axes[0].plot(self.t, self.position, drawstyle="steps-post")
+        axes[0].set_ylabel("position (counts)")
+        axes[1].plot(self.t, self.velocity, drawstyle="steps-post")
+        axes[1].set_ylabel("velocity (counts/s)")
+        axes[2].plot(self.t, self.acceleration, drawstyle="steps-post")
+        axes[2].set_ylabel("accel (counts/s²)")
+        axes[2].set_xlabel("time (s)")
+        fig.suptitle(title or f"{self.shape}: {self.distance} counts in {self.duration:.4g} s")
+        return fig
+
+    def _repr_html_(self) -> str:
+        rows = "".join(
+            f"<tr><th style='text-align:left'>{html.escape(k)}</th><td>{html.escape(v)}</td></tr>"
+            for k, v in _summary_rows(self)
+        )
+        return f"<table><caption>Profile</caption>{rows}</table>"
+
+    def _repr_pretty_(self, p: Any, cycle: bool) -> None:
+        if cycle:
+            p.text("Profile(...)")
+            return
+        body = ", ".join(f"{k}={v}" for k, v in _summary_rows(self))
+        p.text(f"Profile({body})")
+
+    def __repr__(self) -> str:
+        return (
+            f"Profile(shape={self.shape!r}, duration={self.duration:.6g}, samples={self.samples},"
+            f" start={self.start}, end={self.end}, peak_speed={self.peak_speed:.6g})"
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class MultiProfile(Mapping[str, Profile]):
+    """Several axes on one time base: every profile padded (holding its end) to the longest.
+
+    Attributes:
+        t: common sample times, seconds.
+        profiles: axis name -> padded :class:`Profile` (each keeps its own duration).
+        duration: the longest duration.
+        sample_period: seconds per sample.
+    """
+
+    t: FloatArray
+    profiles: Mapping[str, Profile]
+    duration: float
+    sample_period: float
+
+    def __getitem__(self, axis: str) -> Profile:
+        return self.profiles[axis]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.profiles)
+
+    def __len__(self) -> int:
+        return len(self.profiles)
+
+    @property
+    def position(self) -> Int64Array:
+        """Positions as a 2-D array, one row per axis (in mapping order)."""
+        return np.vstack([p.position for p in self.profiles.values()])
+
+    def plot(self) -> Figure:
+        """Plot every axis's position and velocity on the common time base."""
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(7, 5), layout="constrained")
+        ax_p, ax_v = fig.subplots(2, 1, sharex=True)
+        for name, p in self.profiles.items():
+            ax_p.plot(self.t, p.position, label=name, drawstyle="steps-post")
+            ax_v.plot(self.t, p.velocity, label=name, drawstyle="steps-post")
+        ax_p.set_ylabel("position (counts)")
+        ax_v.set_ylabel("velocity (counts/s)")
+        ax_v.set_xlabel("time (s)")
+        ax_p.legend()
+        return fig
+
+    def _repr_html_(self) -> str:
+        head = "<tr><th>axis</th><th>shape</th><th>duration (s)</th><th>distance</th>"
+        head += "<th>peak speed</th></tr>"
+        rows = "".join(
+            f"<tr><td>{html.escape(k)}</td><td>{html.escape(p.shape)}</td>"
+            f"<td>{p.duration:.6g}</td><td>{p.distance}</td><td>{p.peak_speed:.6g}</td></tr>"
+            for k, p in self.profiles.items()
+        )
+        caption = f"<caption>{len(self)} axes, {self.duration:.6g} s</caption>"
+        return f"<table>{caption}{head}{rows}</table>"
+
+    def _repr_pretty_(self, p: Any, cycle: bool) -> None:
+        p.text(repr(self) if not cycle else "MultiProfile(...)")
+
+    def __repr__(self) -> str:
+        inner = ", ".join(f"{k}: {v.shape} {v.duration:.4g} s" for k, v in self.profiles.items())
+        return f"MultiProfile({inner})"
+
+
+def _pad(p: Profile, n: int) -> Profile:
+    extra = n - p.position.size
+    if extra <= 0:
+        return p
+    pos = np.concatenate([p.position, np.full(extra, p.position[-1])])
+    raw = np.concatenate([p.profiler, np.full(extra, p.profiler[-1])])
+    vel = np.concatenate([p.velocity, np.zeros(extra)])
+    return Profile(
+        t=np.arange(n, dtype=np.float64) * float(p.sample_period),
+        position=pos,
+        velocity=vel,
+        duration=p.duration,
+        shape=p.shape,
+        peak_speed=p.peak_speed,
+        sample_period=p.sample_period,
+        profiler=raw,
+        stop_code=p.stop_code,
+    )
+
+
+def together(profiles: Mapping[str, Profile]) -> MultiProfile:
+    """Put several axes' profiles on one time base (all started on the same sample).
+
+    Raises:
+        InvalidArgument: no profiles, or different sample periods.
+    """
+    if not profiles:
+        raise InvalidArgument("together() needs at least one profile")
+    periods = {p.sample_period for p in profiles.values()}
+    if len(periods) != 1:
+        raise InvalidArgument(f"profiles have different sample periods: {sorted(periods)}")
+    ts = periods.pop()
+    n = max(p.position.size for p in profiles.values())
+    padded = {k: _pad(p, n) for k, p in profiles.items()}
+    return MultiProfile(
+        t=np.arange(n, dtype=np.float64) * float(ts),
+        profiles=padded,
+        duration=max(p.duration for p in profiles.values()),
+        sample_period=ts,
+    )
