@@ -1,0 +1,991 @@
+"""The Controller: one link to one controller, safe to share between threads.
+
+``connect(address)`` opens a transport (``galil.transport``), identifies the controller
+(``^R^V``), routes its unsolicited output away from replies, and returns a :class:`Controller`.
+Every exchange goes through a sans-I/O :class:`~galil.protocol.session.Session` under one lock
+per link, so each caller gets its own reply however many threads share the link::
+
+    with galil.connect("tcp://192.168.0.2") as c:
+        c.command("SHA")
+        c.query_number("MG _TPA")        # -> 0.0
+        c.messages.get(timeout=5)        # a line a program printed with MG
+
+A ``?`` is explained at once with ``TC1`` and raised as :class:`~galil.errors.CommandError`;
+every error carries the last exchanges (``error.recent``). Bytes on the wire are logged at DEBUG
+on the ``galil.wire`` logger.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import logging
+import queue
+import threading
+import time
+import warnings
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, TypeVar
+
+from galil.errors import (
+    CommandError,
+    GalilConnectionError,
+    GalilError,
+    GalilTimeoutError,
+    InvalidArgument,
+    ProtocolError,
+)
+from galil.models import Identity, ModelSpec, get_model, parse_identity
+from galil.protocol import commands as cmds
+from galil.protocol.codes import parse_tc1
+from galil.protocol.commands import Command
+from galil.protocol.framing import FrameParser, Unsolicited
+from galil.protocol.numbers import parse_number
+from galil.protocol.session import Completed, Session
+from galil.transport import Transport, open_transport
+
+if TYPE_CHECKING:
+    from galil.axis import Axis
+
+__all__ = ["CLIENT_OPTIONS", "Controller", "MessageQueue", "WireLog", "connect"]
+
+_WIRE = logging.getLogger("galil.wire")
+_LOG = logging.getLogger("galil.client")
+_DEBUG = logging.DEBUG
+_monotonic = time.monotonic
+
+CLIENT_OPTIONS = frozenset(
+    {"timeout", "model", "handshake", "unsolicited", "history", "poll_interval", "max_messages"}
+)
+"""Keyword options :func:`connect` keeps for the :class:`Controller`; the rest go to the
+transport opener (``baudrate=``, ``port=``, ``backend=`` ...)."""
+
+_E = TypeVar("_E", bound=GalilError)
+
+
+@functools.lru_cache(maxsize=512)
+def _parse(text: str) -> Command:
+    # Polling loops send the same few lines again and again: parse each text once.
+    return cmds.parse_line(text)
+
+
+def _check_timeout(timeout: float | None, default: float) -> float:
+    if timeout is None:
+        return default
+    if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not timeout > 0:
+        raise InvalidArgument(f"timeout must be a positive number of seconds, not {timeout!r}")
+    return float(timeout)
+
+
+# ----------------------------------------------------------------------------------- messages
+
+
+class MessageQueue:
+    """Unsolicited lines from the controller, oldest first; a bounded, thread-safe queue.
+
+    When nobody reads it, the oldest lines are dropped (``dropped`` counts them) rather than
+    growing without end.
+    """
+
+    def __init__(self, maxlen: int = 1000) -> None:
+        self._items: deque[str] = deque()
+        self._maxlen = maxlen
+        self._cond = threading.Condition(threading.Lock())
+        self.dropped = 0
+
+    def put(self, line: str) -> None:
+        """Append a line (used by the client)."""
+        with self._cond:
+            if len(self._items) >= self._maxlen:
+                self._items.popleft()
+                self.dropped += 1
+            self._items.append(line)
+            self._cond.notify()
+
+    def get(self, timeout: float | None = None) -> str:
+        """Return the oldest line, waiting up to ``timeout`` seconds (``None``: for ever).
+
+        Raises:
+            queue.Empty: nothing arrived in time.
+        """
+        with self._cond:
+            if not self._cond.wait_for(lambda: self._items, timeout):
+                raise queue.Empty(f"no unsolicited message within {timeout} s")
+            return self._items.popleft()
+
+    def get_nowait(self) -> str:
+        """Return the oldest line at once; raise ``queue.Empty`` when there is none."""
+        with self._cond:
+            if not self._items:
+                raise queue.Empty("no unsolicited message waiting")
+            return self._items.popleft()
+
+    def drain(self) -> list[str]:
+        """Remove and return every waiting line."""
+        with self._cond:
+            out = list(self._items)
+            self._items.clear()
+            return out
+
+    def __len__(self) -> int:
+        with self._cond:
+            return len(self._items)
+
+    def __repr__(self) -> str:
+        return f"<MessageQueue {len(self)} waiting, {self.dropped} dropped>"
+
+
+# ----------------------------------------------------------------------------------- wire log
+
+WireHook = Callable[[str, bytes], None]
+"""``hook(direction, data)``; direction is ``"out"`` (written) or ``"in"`` (read)."""
+
+
+@dataclass
+class WireCapture:
+    """Bytes seen on the wire while a :meth:`WireLog.capture` block ran."""
+
+    sent: bytearray = field(default_factory=bytearray)
+    received: bytearray = field(default_factory=bytearray)
+
+    def __call__(self, direction: str, data: bytes) -> None:
+        (self.sent if direction == "out" else self.received).extend(data)
+
+
+class WireLog:
+    """Hooks that see every byte written to and read from the command link."""
+
+    def __init__(self) -> None:
+        self.hooks: list[WireHook] = []
+
+    def add(self, hook: WireHook) -> Callable[[], None]:
+        """Call ``hook(direction, data)`` for each write and read; returns a remover."""
+        self.hooks = [*self.hooks, hook]  # copy-on-write: readers never see a half update
+
+        def remove() -> None:
+            self.hooks = [h for h in self.hooks if h is not hook]
+
+        return remove
+
+    @contextlib.contextmanager
+    def capture(self) -> Iterator[WireCapture]:
+        """Record the bytes of a block: ``with c.wire_log.capture() as w: ...; w.sent``."""
+        cap = WireCapture()
+        remove = self.add(cap)
+        try:
+            yield cap
+        finally:
+            remove()
+
+
+# ----------------------------------------------------------------------------------- the client
+
+
+def _format_exchange(entry: Completed | tuple[Any, ...]) -> str:
+    if type(entry) is Completed:
+        sent, reply, ok = entry.command.text, entry.text, entry.ok
+        if ok:
+            return f"-> {sent!r}  <- {reply!r}"
+        return f"-> {sent!r}  <- ? {reply!r}" if reply else f"-> {sent!r}  <- ?"
+    assert isinstance(entry, tuple)
+    kind = entry[0]
+    if kind == "m":
+        return f"<< {entry[1]!r} (unsolicited)"
+    if kind == "t":
+        return f"-> {entry[1]!r}  (no reply: timeout)"
+    return f"-- {entry[1]}"
+
+
+class Controller:
+    """A connected controller. Build it with :func:`connect`.
+
+    Args:
+        transport: an open transport, or a callable that opens one (used again by
+            :meth:`reconnect`).
+        timeout: default seconds to wait for each reply.
+        model: the model name (or spec) when it is known; checked against ``^R^V``.
+        handshake: identify the controller and route unsolicited output at connect; with
+            ``False`` nothing is sent at connect and ``model`` is required.
+        unsolicited: route unsolicited output (second Ethernet handle, else ``CW1``).
+        history: exchanges kept in the ring buffer attached to errors.
+        poll_interval: seconds between polls for unsolicited lines while the link is idle.
+        max_messages: unsolicited lines kept in :attr:`messages` before the oldest drop.
+
+    Attributes:
+        transport: the open :class:`~galil.transport.Transport`.
+        model: the controller's :class:`~galil.models.ModelSpec`.
+        identity: the parsed ``^R^V`` reply (``None`` without a handshake).
+        timeout: default reply timeout in seconds.
+        bytes_sent / bytes_received: counters of bytes written to / read from the command link.
+        wire_log: hooks on the raw bytes (:class:`WireLog`).
+    """
+
+    def __init__(
+        self,
+        transport: Transport | Callable[[], Transport],
+        *,
+        timeout: float = 1.0,
+        model: str | ModelSpec | None = None,
+        handshake: bool = True,
+        unsolicited: bool = True,
+        history: int = 64,
+        poll_interval: float = 0.02,
+        max_messages: int = 1000,
+    ) -> None:
+        self.timeout = _check_timeout(timeout, 1.0)
+        if not handshake and model is None:
+            raise InvalidArgument("handshake=False needs model= (nothing identifies it then)")
+        if isinstance(history, bool) or not isinstance(history, int) or history < 1:
+            raise InvalidArgument(f"history must be a positive integer, not {history!r}")
+        self._given_model = get_model(model) if isinstance(model, str) else model
+        self._handshake = handshake
+        self._unsolicited = unsolicited
+        self._poll_interval = _check_timeout(poll_interval, 0.02)
+        if callable(transport) and not isinstance(transport, Transport):
+            self._factory: Callable[[], Transport] | None = transport
+            first: Transport | None = None
+        else:
+            self._factory = None
+            first = transport
+        self._lock = threading.Lock()
+        # Completed replies are kept as they are (immutable); text is made only for an error.
+        self._recent: deque[Completed | tuple[Any, ...]] = deque(maxlen=history)
+        self.messages_queue = MessageQueue(max_messages)
+        self._subscribers: list[Callable[[str], None]] = []
+        self._undelivered: list[str] = []
+        self._dispatch_lock = threading.Lock()
+        self.wire_log = WireLog()
+        self.bytes_sent = 0
+        self.bytes_received = 0
+        self.model: ModelSpec = self._given_model  # type: ignore[assignment]  # set by _open
+        self.identity: Identity | None = None
+        self.transport: Transport = None  # type: ignore[assignment]  # set by _open
+        self._session = Session()
+        self._open_flag = False
+        self._cw_restore: int | None = None
+        self._pump: threading.Thread | None = None
+        self._reader: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._axes: dict[str, Axis] | None = None
+        self._open(first)
+
+    # -- life cycle -------------------------------------------------------------------------
+
+    def _open(self, transport: Transport | None) -> None:
+        if transport is None:
+            if self._factory is None:
+                raise GalilConnectionError("no transport and no address to open one")
+            transport = self._factory()
+        self.transport = transport
+        clock, _ = self._sim_clock()
+        self._link_clock: Any = clock if hasattr(clock, "now") else None
+        self._session = Session()
+        self._stop = threading.Event()
+        self._cw_restore = None
+        self._open_flag = True
+        try:
+            with self._lock:
+                self._drain_stale()
+                if self._handshake:
+                    self._identify()
+                    if self._unsolicited:
+                        self._route_unsolicited()
+                else:
+                    self.model = self._given_model  # type: ignore[assignment]
+        except BaseException:
+            self._teardown()
+            raise
+        finally:
+            self._deliver()
+
+    def _drain_stale(self) -> None:
+        # Bytes left over from an earlier program or session would be taken for our replies.
+        for _ in range(64):
+            if not self._read(0.0):
+                return
+
+    def _identify(self) -> None:
+        given = self._given_model
+        try:
+            reply = self._roundtrip([cmds.identify()], self.timeout)[0]
+        except GalilTimeoutError as exc:
+            raise self._error(
+                GalilConnectionError,
+                f"no answer to ^R^V on {self.transport!r} within {self.timeout} s: is a Galil "
+                "controller on the other end (and the baud rate right)?",
+            ) from exc
+        ident: Identity | None = None
+        problem = ""
+        if reply.ok:
+            try:
+                ident = parse_identity(reply.text)
+            except InvalidArgument as exc:
+                problem = str(exc)
+        else:
+            problem = "the controller refused ^R^V"
+        if ident is None:
+            if given is None:
+                raise self._error(
+                    GalilConnectionError,
+                    f"cannot identify the controller ({problem}); pass model='DMC-....'",
+                )
+            warnings.warn(
+                f"{problem}; using model={given.name} as given", RuntimeWarning, stacklevel=4
+            )
+            self.model = given
+            return
+        self.identity = ident
+        self.model = ident.model
+        if given is not None and given.name != ident.model.name:
+            warnings.warn(
+                f"model={given.name} was given but the controller says {ident.raw_model}; "
+                f"using {ident.model.name}",
+                RuntimeWarning,
+                stacklevel=4,
+            )
+
+    def _route_unsolicited(self) -> None:
+        ready = getattr(self.transport, "secondary", None)
+        if ready is not None:
+            # The transport brought its own message handle (a simulator's, a gateway's).
+            self._start_reader(ready, "the transport's message handle")
+            return
+        opener = getattr(self.transport, "open_secondary", None)
+        if opener is not None and "ethernet" in self.model.transports:
+            try:
+                secondary = opener()
+                if getattr(secondary, "messages_only", False):
+                    self._start_reader(secondary, "the message port")
+                else:
+                    self._claim_secondary(secondary)
+                return
+            except GalilError as exc:
+                with contextlib.suppress(AttributeError):
+                    self.transport.secondary = None  # closed: do not offer it to anyone
+                warnings.warn(
+                    f"no second Ethernet handle for unsolicited messages ({exc}); "
+                    "they will be marked with CW1 on the command handle instead",
+                    RuntimeWarning,
+                    stacklevel=6,
+                )
+        self._enable_marking()
+
+    def _claim_secondary(self, secondary: Transport) -> None:
+        # "CF I" sent on a handle makes that handle the destination of unsolicited output.
+        secondary.write(b"CF I\r")
+        deadline = time.monotonic() + self.timeout
+        got = b""
+        while not got.rstrip().endswith((b":", b"?")):
+            left = deadline - time.monotonic()
+            if left <= 0:
+                with contextlib.suppress(GalilError):
+                    secondary.close()
+                raise GalilTimeoutError("no answer to CF I on the second handle")
+            got += secondary.read(left)
+        if got.rstrip().endswith(b"?"):
+            with contextlib.suppress(GalilError):
+                secondary.close()
+            raise CommandError(None, "CF I refused on the second handle", "CF I")
+        self._start_reader(secondary, "the second Ethernet handle (CF I)")
+
+    def _start_reader(self, secondary: Transport, where: str) -> None:
+        self._remember(("n", f"unsolicited output comes on {where}"))
+        self._reader = threading.Thread(
+            target=self._read_secondary,
+            args=(secondary, self._stop),
+            name=f"galil-messages-{self.model.name}",
+            daemon=True,
+        )
+        self._reader.start()
+
+    def _enable_marking(self) -> None:
+        previous = 2  # factory default: unsolicited characters unmarked
+        try:
+            done = self._roundtrip([cmds.mg_operand("_CW")], self.timeout)[0]
+            if done.ok:
+                value = round(parse_number(done.text.split(",")[0]))
+                if value in (1, 2):
+                    previous = value
+        except (GalilTimeoutError, ProtocolError, InvalidArgument):
+            pass  # optional: without a reading we restore the factory default
+        try:
+            done = self._roundtrip([cmds.cw(1)], self.timeout)[0]
+        except GalilTimeoutError:
+            done = Completed(cmds.cw(1), False)
+        if not done.ok:
+            warnings.warn(
+                f"{self.model.name} refused CW 1: unsolicited output is not marked and may be "
+                "mistaken for replies",
+                RuntimeWarning,
+                stacklevel=5,
+            )
+            return
+        self._cw_restore = previous
+
+    def close(self) -> None:
+        """Restore what connect changed (``CW``), stop the readers and close the link.
+
+        Idempotent; never raises for a link that is already dead.
+        """
+        with self._lock:
+            if not self._open_flag:
+                return
+            if self._cw_restore is not None and self._cw_restore != 1:
+                with contextlib.suppress(GalilError):
+                    self._roundtrip([cmds.cw(self._cw_restore)], min(self.timeout, 0.5))
+            self._teardown()
+        self._join_threads()
+
+    def _teardown(self) -> None:
+        self._open_flag = False
+        self._stop.set()
+        with contextlib.suppress(GalilError, OSError):
+            self.transport.close()
+
+    def _join_threads(self) -> None:
+        me = threading.current_thread()
+        for t in (self._pump, self._reader):
+            if t is not None and t is not me:
+                t.join(timeout=2.0)
+        self._pump = self._reader = None
+
+    def reconnect(self) -> None:
+        """Close the link and open it again (same address and options), handshake included.
+
+        Raises:
+            GalilConnectionError: the controller was built on a transport object, not an
+                address, or the new link fails.
+        """
+        if self._factory is None:
+            raise GalilConnectionError(
+                "this Controller was given a transport object; reconnect needs an address "
+                "(use galil.connect(address))"
+            )
+        had_pump = self._pump is not None
+        self.close()
+        self._open(None)
+        if had_pump:
+            self._ensure_pump()
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` was called (or connecting failed)."""
+        return not self._open_flag
+
+    def __enter__(self) -> Controller:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = "closed" if self.closed else "open"
+        name = self.model.name if self.model is not None else "?"
+        return f"<Controller {name} on {self.transport!r} {state}>"
+
+    # -- commands ---------------------------------------------------------------------------
+
+    def command(
+        self, text: str, *, timeout: float | None = None, allow_compound: bool = False
+    ) -> str:
+        """Send one raw command line and return its reply text (``""`` for a plain ``:``).
+
+        A ``;`` outside quotes would start a second command: it is refused unless
+        ``allow_compound=True`` (the replies of the parts are then joined by CR LF).
+
+        Raises:
+            InvalidArgument: the text cannot be sent (CR/LF, non-ASCII, a stray ``;``).
+            CommandError: the controller answered ``?`` (code and text from ``TC1``).
+            GalilTimeoutError: no complete reply within the timeout.
+            GalilConnectionError: the link is closed or dead.
+        """
+        cmd = _parse(text) if type(text) is str else cmds.parse_line(text)
+        if cmd.parts and not allow_compound:
+            raise InvalidArgument(
+                f"{text!r} holds {len(cmd.parts)} commands; send one command, or pass "
+                "allow_compound=True, or use command_line([...])"
+            )
+        # _transact inlined: this is the path every raw command takes.
+        t = self.timeout if timeout is None else _check_timeout(timeout, self.timeout)
+        try:
+            with self._lock:
+                if not self._open_flag:
+                    raise self._error(GalilConnectionError, "the controller link is closed")
+                done = self._roundtrip((cmd,), t)
+                for d in done:
+                    if not d.ok:
+                        raise self._explain(d, t)
+        finally:
+            if self._undelivered:
+                self._deliver()
+        if len(done) == 1:
+            return done[0].text
+        return "\r\n".join(d.text for d in done if d.text)
+
+    def command_line(
+        self, parts: Sequence[str | Command], *, timeout: float | None = None
+    ) -> list[str]:
+        """Send several commands as compound line(s) (``PRA=1;BGA``); one reply per part.
+
+        The parts are joined with ``;`` up to the model's line length (longer runs go on
+        further lines, in order).
+
+        Raises:
+            InvalidArgument: a part is itself compound or cannot be sent.
+            CommandError: a part was rejected (the error names it).
+        """
+        if isinstance(parts, str):
+            raise InvalidArgument("command_line takes a list of commands, not one string")
+        singles: list[Command] = []
+        for p in parts:
+            c = p if isinstance(p, Command) else _parse(p)
+            if c.parts:
+                raise InvalidArgument(f"{c.text!r} is already compound; pass its parts")
+            singles.append(c)
+        if not singles:
+            return []
+        lines = cmds.pack(singles, self.model.line_length if self.model else 80)
+        return [d.text for d in self._transact(tuple(lines), timeout)]
+
+    def send(self, command: Command, *, timeout: float | None = None) -> str:
+        """Send a prepared :class:`~galil.protocol.commands.Command`; return its reply text."""
+        return self.exchange(command, timeout=timeout).text
+
+    def exchange(self, command: Command, *, timeout: float | None = None) -> Completed:
+        """Send a prepared command and return the whole :class:`Completed` (``record`` for QR).
+
+        A compound command (from ``protocol.commands.pack``) returns its last part's reply.
+        """
+        if not isinstance(command, Command):
+            raise InvalidArgument(f"exchange() takes a Command, not {type(command).__name__}")
+        return self._transact((command,), timeout)[-1]
+
+    def send_many(self, commands: Iterable[Command], *, timeout: float | None = None) -> list[str]:
+        """Send prepared commands back to back (pipelined) and return every reply text."""
+        batch = tuple(commands)
+        for c in batch:
+            if not isinstance(c, Command):
+                raise InvalidArgument(f"send_many() takes Commands, not {type(c).__name__}")
+        if not batch:
+            return []
+        return [d.text for d in self._transact(batch, timeout)]
+
+    def query_number(self, text: str, *, timeout: float | None = None) -> float:
+        """Send a query (``"MG _TPA"``, ``"TPA"``) and return its one number.
+
+        Raises:
+            ProtocolError: the reply is not exactly one number.
+        """
+        values = self.query_numbers(text, timeout=timeout)
+        if len(values) != 1:
+            raise self._error(ProtocolError, f"{text!r} answered {len(values)} numbers, not one")
+        return values[0]
+
+    def query_numbers(self, text: str, *, timeout: float | None = None) -> list[float]:
+        """Send a query and return every number in its reply (``"TP"`` -> ``[0.0, 5.0, ...]``)."""
+        reply = self.command(text, timeout=timeout)
+        try:
+            return _numbers(reply)
+        except (InvalidArgument, ValueError, ProtocolError) as exc:
+            raise self._error(ProtocolError, f"{text!r} answered {reply!r}: {exc}") from exc
+
+    def query_operands(self, names: Sequence[str], *, timeout: float | None = None) -> list[float]:
+        """Read operands or variables (``["_TPA", "_SCA", "speed"]``) in as few lines as fit.
+
+        The ``MG`` lines go out pipelined under one lock, so no other thread's command
+        lands between them.
+        """
+        names = list(names)
+        if not names:
+            return []
+        limit = (self.model.line_length if self.model else 80) - 4
+        batches: list[list[str]] = [[]]
+        length = 0
+        for n in names:
+            if batches[-1] and length + len(n) + 1 > limit:
+                batches.append([])
+                length = 0
+            batches[-1].append(n)
+            length += len(n) + 1
+        lines = [cmds.mg_operand(*b) for b in batches]
+        done = self._transact(tuple(lines), timeout)
+        out: list[float] = []
+        for batch, d in zip(batches, done, strict=True):
+            try:
+                values = _numbers(d.text)
+            except (InvalidArgument, ValueError, ProtocolError) as exc:
+                raise self._error(ProtocolError, f"MG {batch} answered {d.text!r}: {exc}") from exc
+            if len(values) != len(batch):
+                raise self._error(
+                    ProtocolError,
+                    f"MG {','.join(batch)} answered {d.text!r}: not {len(batch)} numbers",
+                )
+            out += values
+        return out
+
+    # The axis layer's spellings.
+    _query_numbers = query_operands
+
+    def _query_ints(self, names: Sequence[str]) -> list[int]:
+        return [round(v) for v in self.query_operands(names)]
+
+    # -- the exchange -----------------------------------------------------------------------
+
+    def _transact(self, batch: Sequence[Command], timeout: float | None) -> list[Completed]:
+        t = self.timeout if timeout is None else _check_timeout(timeout, self.timeout)
+        try:
+            with self._lock:
+                if not self._open_flag:
+                    raise self._error(GalilConnectionError, "the controller link is closed")
+                done = self._roundtrip(batch, t)
+                for d in done:
+                    if not d.ok:
+                        raise self._explain(d, t)
+                return done
+        finally:
+            if self._undelivered:
+                self._deliver()
+
+    def _roundtrip(self, batch: Sequence[Command], t: float) -> list[Completed]:
+        """Write ``batch`` and read until every reply is complete (lock held).
+
+        This is the hot path of every command: it calls the transport directly and keeps
+        clock reads, logging checks and allocations to the minimum.
+        """
+        session = self._session
+        if session.out_of_step:
+            self._resync(t)
+        if len(batch) == 1:
+            data = session.send(batch[0])
+        else:
+            data = b"".join([session.send(c) for c in batch])
+        transport = self.transport
+        done: list[Completed] = []
+        recent = self._recent
+        # Bookkeeping happens before the write: any Python work between the write and the
+        # read delays the reply (a local peer may be waiting for the GIL we hold).
+        self.bytes_sent += len(data)
+        watch = self.wire_log.hooks or _WIRE.isEnabledFor(_DEBUG)
+        if watch:
+            self._observe("out", data)
+        clock = self._link_clock
+        sim_start = clock.now() if clock is not None else 0.0
+        start = _monotonic()
+        try:
+            transport.write(data)
+            chunk = transport.read(t)  # the timeout as given, so transports can cache it
+        except GalilConnectionError as exc:
+            raise self._error(GalilConnectionError, str(exc)) from exc
+        while True:
+            if chunk:
+                self.bytes_received += len(chunk)
+                if watch:
+                    self._observe("in", chunk)
+                try:
+                    events = session.receive_data(chunk)
+                except ProtocolError as exc:
+                    self._remember(("n", f"protocol error: {exc}"))
+                    raise self._error(ProtocolError, str(exc)) from exc
+                if len(events) == 1 and not done and type(events[0]) is Completed:
+                    # The common case: the whole reply in one read.
+                    recent.append(events[0])
+                    if not session.pending:
+                        return events  # type: ignore[return-value]
+                    done.append(events[0])
+                    events = []
+                for ev in events:
+                    if type(ev) is Completed:
+                        done.append(ev)
+                        recent.append(ev)
+                    else:
+                        self._message(ev.line)  # type: ignore[union-attr]
+                if not session.pending:
+                    return done
+            wait = start + t - _monotonic()
+            if clock is not None:
+                # A simulator's reads let simulated time pass: the timeout counts in it too.
+                wait = min(wait, sim_start + t - clock.now())
+            if wait > 0:
+                try:
+                    chunk = transport.read(wait)
+                except GalilConnectionError as exc:
+                    raise self._error(GalilConnectionError, str(exc)) from exc
+            else:
+                lost = session.abandon()
+                for c in lost:
+                    recent.append(("t", c.text))
+                raise self._error(
+                    GalilTimeoutError,
+                    f"no reply to {lost[0].text if lost else batch[-1].text!r} within {t:g} s "
+                    "(the link will resynchronise before the next command)",
+                )
+
+    def _resync(self, t: float) -> None:
+        session = self._session
+        self._remember(("n", "link out of step: resynchronising"))
+        self._write(session.resync())
+        limit = max(t, 0.2)
+        clock = self._link_clock
+        sim_deadline = clock.now() + limit if clock is not None else 0.0
+        deadline = time.monotonic() + limit
+        while session.out_of_step:
+            wait = deadline - time.monotonic()
+            if clock is not None:
+                wait = min(wait, sim_deadline - clock.now())
+            chunk = self._read(max(wait, 0.0))
+            if chunk:
+                try:
+                    events = session.receive_data(chunk)
+                except ProtocolError:
+                    continue  # the parser is hunting for the marker; junk is expected
+                for ev in events:
+                    if type(ev) is Unsolicited:
+                        self._message(ev.line)
+            elif wait <= 0:
+                raise self._error(
+                    GalilConnectionError,
+                    f"the link is out of step and did not resynchronise within {max(t, 0.2):g} s;"
+                    " call reconnect()",
+                )
+        self._remember(("n", "link back in step"))
+
+    def _explain(self, rejected: Completed, t: float) -> CommandError:
+        code: int | None = None
+        try:
+            tc = self._roundtrip([cmds.tc(1)], t)[0]
+            if tc.ok:
+                code, text = parse_tc1(tc.text)
+            else:
+                text = "(TC1 was refused too)"
+        except (GalilTimeoutError, ProtocolError) as exc:
+            text = f"(TC1 failed: {exc.args[0] if exc.args else exc})"
+        name = self.model.name if self.model is not None else None
+        return CommandError(code, text, rejected.command.text, model=name, recent=self.recent)
+
+    def _write(self, data: bytes) -> None:
+        try:
+            self.transport.write(data)
+        except GalilConnectionError as exc:
+            raise self._error(GalilConnectionError, str(exc)) from exc
+        self.bytes_sent += len(data)
+        if self.wire_log.hooks or _WIRE.isEnabledFor(_DEBUG):
+            self._observe("out", data)
+
+    def _read(self, timeout: float) -> bytes:
+        try:
+            data = self.transport.read(timeout)
+        except GalilConnectionError as exc:
+            raise self._error(GalilConnectionError, str(exc)) from exc
+        if data:
+            self.bytes_received += len(data)
+            if self.wire_log.hooks or _WIRE.isEnabledFor(_DEBUG):
+                self._observe("in", data)
+        return data
+
+    def _observe(self, direction: str, data: bytes) -> None:
+        if _WIRE.isEnabledFor(_DEBUG):
+            _WIRE.debug("%s %r", "->" if direction == "out" else "<-", data)
+        for hook in self.wire_log.hooks:
+            hook(direction, data)
+
+    def _error(self, kind: type[_E], message: str) -> _E:
+        name = self.model.name if self.model is not None else None
+        return kind(message, model=name, recent=self.recent)
+
+    def _remember(self, entry: tuple[Any, ...]) -> None:
+        self._recent.append(entry)
+
+    @property
+    def recent(self) -> tuple[str, ...]:
+        """The last exchanges on the link, oldest first (what errors carry)."""
+        return tuple(_format_exchange(e) for e in list(self._recent))
+
+    # -- unsolicited output -----------------------------------------------------------------
+
+    @property
+    def messages(self) -> MessageQueue:
+        """Unsolicited lines (program ``MG`` output ...) as a queue: ``messages.get(timeout)``.
+
+        Reading it starts the background poll of an idle link.
+        """
+        self._ensure_pump()
+        return self.messages_queue
+
+    def subscribe(self, callback: Callable[[str], None]) -> Callable[[], None]:
+        """Call ``callback(line)`` for each unsolicited line (outside the link lock).
+
+        Returns:
+            A function that unsubscribes.
+        """
+        if not callable(callback):
+            raise InvalidArgument(f"callback must be callable, not {callback!r}")
+        self._subscribers = [*self._subscribers, callback]
+        self._ensure_pump()
+
+        def unsubscribe() -> None:
+            self._subscribers = [c for c in self._subscribers if c is not callback]
+
+        return unsubscribe
+
+    def _message(self, line: str) -> None:
+        self._recent.append(("m", line))
+        self.messages_queue.put(line)
+        if self._subscribers:
+            self._undelivered.append(line)
+
+    def _deliver(self) -> None:
+        # Callbacks run outside the link lock so that they may send commands themselves.
+        with self._dispatch_lock:
+            lines, self._undelivered = self._undelivered, []
+            for line in lines:
+                for cb in self._subscribers:
+                    try:
+                        cb(line)
+                    except Exception:
+                        _LOG.exception("unsolicited-message callback %r failed", cb)
+
+    def _ensure_pump(self) -> None:
+        if self._pump is not None or self._reader is not None or not self._open_flag:
+            return  # a second handle has its own reader already
+        self._pump = threading.Thread(
+            target=self._poll_idle, args=(self._stop,), name="galil-poll", daemon=True
+        )
+        self._pump.start()
+
+    def _poll_idle(self, stop: threading.Event) -> None:
+        # Reads only with a zero timeout while holding the lock, so a command never waits
+        # behind a blocked poll.
+        while not stop.wait(self._poll_interval):
+            if not self._lock.acquire(timeout=self._poll_interval):
+                continue  # commands are flowing: they collect unsolicited lines themselves
+            try:
+                if stop.is_set() or not self._open_flag:
+                    return
+                chunk = self._read(0.0)
+                if chunk:
+                    for ev in self._session.receive_data(chunk):
+                        if type(ev) is Unsolicited:
+                            self._message(ev.line)
+            except ProtocolError:
+                pass  # the session is out of step; the next command resynchronises
+            except GalilConnectionError:
+                return
+            finally:
+                self._lock.release()
+            if self._undelivered:
+                self._deliver()
+
+    def _read_secondary(self, secondary: Transport, stop: threading.Event) -> None:
+        parser = FrameParser(unsolicited_only=True)
+        while not stop.is_set():
+            try:
+                chunk = secondary.read(0.25)
+            except GalilConnectionError:
+                return
+            if not chunk:
+                # Some handles return at once when idle (a simulator's): do not spin.
+                stop.wait(self._poll_interval)
+                continue
+            try:
+                events = parser.feed(chunk)
+            except ProtocolError:
+                parser.reset()
+                continue
+            lines = [ev.line for ev in events if type(ev) is Unsolicited]
+            if lines:
+                with self._lock:
+                    for line in lines:
+                        self._message(line)
+            if self._undelivered:
+                self._deliver()
+
+    # -- the axis layer's needs -------------------------------------------------------------
+
+    @property
+    def sample_period(self) -> float:
+        """Seconds per servo sample (the model's default TM)."""
+        return self.model.sample_period
+
+    def _sim_clock(self) -> Any:
+        # A simulator link exposes its controller; a manual clock there only moves when told.
+        controller = getattr(self.transport, "controller", None)
+        return getattr(controller, "clock", None), controller
+
+    def _clock(self) -> float:
+        """Seconds on the controller's clock (simulated time on a simulator link)."""
+        clock, _ = self._sim_clock()
+        if clock is not None:
+            return float(clock.now())
+        return time.monotonic()
+
+    def _pause(self, seconds: float) -> None:
+        """Let ``seconds`` pass: sleep, or advance a simulator's manual clock."""
+        clock, controller = self._sim_clock()
+        if clock is not None and hasattr(clock, "advance") and hasattr(controller, "advance"):
+            with self._lock:
+                controller.advance(seconds)
+            return
+        time.sleep(seconds)
+
+    @property
+    def axes(self) -> dict[str, Axis]:
+        """The model's axes by letter (``controller.axes["A"]``; also ``controller.A``)."""
+        if self._axes is None:
+            from galil.axis import Axis
+
+            self._axes = {letter: Axis(self, letter) for letter in self.model.axes}
+        return self._axes
+
+    def __getattr__(self, name: str) -> Any:
+        # Only single axis letters reach here (and X/Y/Z/W aliases where the model has them).
+        if len(name) == 1 and name.isupper():
+            model = self.__dict__.get("model")
+            if model is not None:
+                try:
+                    return self.axes[model.axis_letter(name)]
+                except InvalidArgument:
+                    pass
+        raise AttributeError(f"{type(self).__name__!s} has no attribute {name!r}")
+
+
+def _numbers(reply: str) -> list[float]:
+    # Replies separate values with commas, spaces, or both ("-9, 5, 0" / " 1.0000 2.0000").
+    fields = reply.replace(",", " ").split()
+    if not fields:
+        raise InvalidArgument("no number in the reply")
+    return [parse_number(f) for f in fields]
+
+
+def connect(address: str | Transport, **options: Any) -> Controller:
+    """Connect to a controller with one line.
+
+    Args:
+        address: ``tcp://host[:port]`` or a bare IPv4 address, ``/dev/ttyUSB0``, ``COM3``,
+            ``serial:///dev/ttyS0?baudrate=19200`` or any pyserial URL,
+            ``usb://[vid:pid][?serial=...]``, ``/dev/galilpci0``, ``sim://DMC-4040``; or an
+            open :class:`~galil.transport.Transport`.
+        **options: client options (``timeout``, ``model``, ``handshake``, ``unsolicited``,
+            ``history``, ``poll_interval``, ``max_messages``); the rest go to the transport
+            (``baudrate=``, ``connect_timeout=``, ``backend=`` ...).
+
+    Raises:
+        InvalidArgument: the address or an option is not understood.
+        GalilConnectionError: the link cannot be opened or the controller does not answer.
+    """
+    client_opts = {k: options.pop(k) for k in list(options) if k in CLIENT_OPTIONS}
+    if isinstance(address, str):
+        transport_opts = options
+
+        def factory() -> Transport:
+            return open_transport(address, **transport_opts)
+
+        return Controller(factory, **client_opts)
+    if options:
+        raise InvalidArgument(
+            f"transport options {sorted(options)} need an address, not an open transport"
+        )
+    if not isinstance(address, Transport):
+        raise InvalidArgument(f"connect() takes an address or a Transport, not {address!r}")
+    return Controller(address, **client_opts)

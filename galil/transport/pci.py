@@ -1,0 +1,130 @@
+"""PCI transport: the character device node of Galil's Linux driver (``/dev/galilpci0``).
+
+The driver exposes the controller's command FIFO as a byte stream: ``write`` sends commands,
+``read`` returns replies. The node is opened non-blocking and read through ``poll`` so that a
+read honours its timeout.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import select
+from typing import Any
+from urllib.parse import SplitResult
+
+from galil.errors import GalilConnectionError, InvalidArgument
+from galil.transport import parse_options
+
+__all__ = ["PciTransport", "open_pci"]
+
+_CHUNK = 4096
+_DEAD = select.POLLERR | select.POLLHUP | select.POLLNVAL
+
+
+class PciTransport:
+    """A Galil PCI device node opened read/write.
+
+    Args:
+        path: the node, e.g. ``/dev/galilpci0``.
+        write_timeout: seconds to wait for the driver to take a write.
+    """
+
+    secondary: None = None
+
+    def __init__(self, path: str, *, write_timeout: float = 1.0) -> None:
+        self.path = path
+        self.write_timeout = write_timeout
+        try:
+            flags = os.O_RDWR | os.O_NONBLOCK | os.O_NOCTTY | getattr(os, "O_CLOEXEC", 0)
+            fd = os.open(path, flags)
+        except OSError as exc:
+            raise GalilConnectionError(f"cannot open PCI node {path}: {exc}") from exc
+        self._fd: int | None = fd
+        self._poll_in = select.poll()
+        self._poll_in.register(fd, select.POLLIN | select.POLLPRI)
+        self._poll_out = select.poll()
+        self._poll_out.register(fd, select.POLLOUT)
+
+    @property
+    def kind(self) -> str:
+        """Always ``"pci"``."""
+        return "pci"
+
+    def __repr__(self) -> str:
+        state = "open" if self._fd is not None else "closed"
+        return f"<PciTransport {self.path} {state}>"
+
+    def _live(self) -> int:
+        if self._fd is None:
+            raise GalilConnectionError(f"PCI node {self.path} is closed")
+        return self._fd
+
+    def write(self, data: bytes) -> None:
+        """Send all of ``data``."""
+        fd = self._live()
+        view = memoryview(data)
+        try:
+            while view:
+                try:
+                    n = os.write(fd, view)
+                except BlockingIOError:
+                    n = 0
+                if n:
+                    view = view[n:]
+                    continue
+                events = self._poll_out.poll(self.write_timeout * 1000)
+                if not events:
+                    raise GalilConnectionError(
+                        f"PCI node {self.path} did not accept data within {self.write_timeout} s"
+                    )
+                if events[0][1] & _DEAD:
+                    raise GalilConnectionError(f"PCI node {self.path} is gone")
+        except OSError as exc:
+            raise GalilConnectionError(f"PCI node {self.path} failed while sending: {exc}") from exc
+
+    def read(self, timeout: float) -> bytes:
+        """Return what arrives within ``timeout`` seconds (``b""`` if nothing)."""
+        fd = self._live()
+        try:
+            events = self._poll_in.poll(max(0.0, timeout) * 1000)
+            if not events:
+                return b""
+            mask = events[0][1]
+            try:
+                data = os.read(fd, _CHUNK)
+            except BlockingIOError:
+                data = b""
+            except OSError as exc:
+                # A pty master reports its closed peer as EIO; a driver node as ENODEV.
+                if exc.errno in (errno.EIO, errno.ENODEV, errno.ENXIO):
+                    raise GalilConnectionError(f"PCI node {self.path} is gone: {exc}") from exc
+                raise
+        except OSError as exc:
+            raise GalilConnectionError(f"PCI node {self.path} failed while reading: {exc}") from exc
+        if not data and mask & _DEAD:
+            raise GalilConnectionError(f"PCI node {self.path} is gone (peer hung up)")
+        return data
+
+    def close(self) -> None:
+        """Close the node; idempotent."""
+        fd, self._fd = self._fd, None
+        if fd is not None:
+            os.close(fd)
+
+
+def open_pci(url: SplitResult, **options: Any) -> PciTransport:
+    """Open ``/dev/galilpciN`` or ``pci:///path/to/node``; option ``write_timeout``.
+
+    Raises:
+        InvalidArgument: no path, or an unknown option.
+        GalilConnectionError: the node cannot be opened.
+    """
+    opts = parse_options(url, options)
+    path = url.netloc + url.path
+    if not path:
+        raise InvalidArgument(f"no device node in {url.geturl()!r}; e.g. /dev/galilpci0")
+    write_timeout = float(opts.pop("write_timeout", 1.0))
+    if opts:
+        raise InvalidArgument(f"unknown PCI option(s): {', '.join(sorted(opts))}")
+    return PciTransport(path, write_timeout=write_timeout)

@@ -1,0 +1,177 @@
+"""A scriptable Galil-like peer behind a real Transport, for the client's unit tests.
+
+It answers like firmware does (``:``, data + CR LF + ``:``, ``?`` and a ``TC1`` explanation) and
+lets a test refuse commands, hold replies back, inject unsolicited output or garbage, and kill
+the link. The simulator-backed scenario tests live in tests/transport/test_scenarios.py.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from galil.errors import GalilConnectionError
+
+TC_TEXT = {
+    1: "Unrecognized command",
+    6: "Number out of range",
+    20: "Begin not valid with motor off",
+}
+
+
+@dataclass
+class FakeGalil:
+    """Firmware stand-in: state shared by every link opened to it (survives reconnects)."""
+
+    identity: str = "DMC4040 Rev 1.2f"
+    refuse: dict[str, int] = field(default_factory=dict)  # command text -> TC code
+    hold: set[str] = field(default_factory=set)  # commands whose reply is withheld
+    silent: bool = False  # answer nothing at all
+    cw: int = 2
+    tc: int = 0
+    variables: dict[str, float] = field(default_factory=dict)
+    log: list[str] = field(default_factory=list)
+    links: list[FakeLink] = field(default_factory=list)
+    extra: Callable[[str], str | None] | None = None  # custom answers (None: default)
+    held: list[bytes] = field(default_factory=list)
+
+    def answer(self, cmd: str) -> bytes:
+        self.log.append(cmd)
+        if self.silent:
+            return b""
+        if cmd in self.hold:
+            self.held.append(self._answer(cmd))
+            return b""
+        return self._answer(cmd)
+
+    def _answer(self, cmd: str) -> bytes:
+        if cmd in self.refuse:
+            self.tc = self.refuse[cmd]
+            return b"?"
+        if self.extra is not None:
+            custom = self.extra(cmd)
+            if custom is not None:
+                return custom.encode("latin-1")
+        if cmd == "\x12\x16":
+            return self.identity.encode() + b"\r\n:"
+        if cmd == "TC1":
+            code, self.tc = self.tc, 0
+            return f" {code} {TC_TEXT.get(code, 'whatever')}\r\n:".encode()
+        if cmd.startswith("MG "):
+            return b" " + self._mg(cmd[3:]).encode() + b"\r\n:"
+        if cmd.startswith("CW "):
+            self.cw = int(cmd[3:].split(",")[0])
+            return b":"
+        if "=" in cmd and cmd[:1].isalpha():
+            name, value = cmd.split("=", 1)
+            self.variables[name] = float(value)
+            return b":"
+        if cmd == "\\":
+            self.tc = 1
+            return b"?"
+        if not cmd or not cmd[:2].isupper():
+            self.tc = 1
+            return b"?"
+        return b":"
+
+    def _mg(self, args: str) -> str:
+        out = []
+        for a in args.split(","):
+            a = a.strip()
+            if a.startswith('"') and a.endswith('"'):
+                out.append(a[1:-1])
+            elif a == "_CW":
+                out.append(f"{self.cw}.0000")
+            elif a in self.variables:
+                out.append(f"{self.variables[a]:.4f}")
+            else:
+                out.append(a)
+        return " ".join(out)
+
+    def release_held(self) -> None:
+        for link in self.links:
+            for data in self.held:
+                link.push(data)
+        self.held.clear()
+
+    def emit(self, text: str, *, marked: bool = True) -> None:
+        """Unsolicited output as a program's MG would print it (bit 7 set with CW1)."""
+        data = (text + "\r\n").encode()
+        if marked:
+            data = bytes(b | 0x80 for b in data)
+        for link in self.links:
+            link.push(data)
+
+    def open(self) -> FakeLink:
+        link = FakeLink(self)
+        self.links.append(link)
+        return link
+
+
+class FakeLink:
+    """One open link to a :class:`FakeGalil` (satisfies the Transport protocol)."""
+
+    secondary = None
+
+    def __init__(self, peer: FakeGalil) -> None:
+        self.peer = peer
+        self.inbuf = b""
+        self.out = bytearray()
+        self.cond = threading.Condition()
+        self.closed = False
+        self.dead = False
+
+    @property
+    def kind(self) -> str:
+        return "serial"
+
+    def push(self, data: bytes) -> None:
+        with self.cond:
+            self.out += data
+            self.cond.notify_all()
+
+    def write(self, data: bytes) -> None:
+        if self.closed or self.dead:
+            raise GalilConnectionError("fake link is closed" if self.closed else "fake link died")
+        self.inbuf += data
+        while b"\r" in self.inbuf:
+            line, self.inbuf = self.inbuf.split(b"\r", 1)
+            for cmd in _split(line.decode("latin-1")):
+                reply = self.peer.answer(cmd)
+                if reply:
+                    self.push(reply)
+
+    def read(self, timeout: float) -> bytes:
+        with self.cond:
+            if self.closed or self.dead:
+                raise GalilConnectionError(
+                    "fake link is closed" if self.closed else "fake link died"
+                )
+            if not self.out and timeout > 0:
+                self.cond.wait(timeout)
+            if self.dead:
+                raise GalilConnectionError("fake link died")
+            data = bytes(self.out)
+            self.out.clear()
+            return data
+
+    def close(self) -> None:
+        self.closed = True
+        with self.cond:
+            self.cond.notify_all()
+
+
+def _split(line: str) -> list[str]:
+    """Split a line at ``;`` outside quotes."""
+    parts, current, quoted = [], "", False
+    for ch in line:
+        if ch == '"':
+            quoted = not quoted
+        if ch == ";" and not quoted:
+            parts.append(current)
+            current = ""
+        else:
+            current += ch
+    parts.append(current)
+    return parts
