@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from galil.axis import Axis, MoveHandle, MoveResult
+from galil.client import Controller, connect
+from galil.contour import ContourResult, ContourUnderrunError
 from galil.errors import (
     CommandError,
     GalilConnectionError,
@@ -11,16 +14,28 @@ from galil.errors import (
     LimitError,
     ProtocolError,
 )
+from galil.models import ModelSpec, get_model
+from galil.predict import Profile
 
 __version__ = "0.1.0.dev0"
 
 __all__ = [
+    "Axis",
     "CommandError",
+    "ContourResult",
+    "ContourUnderrunError",
+    "Controller",
     "GalilConnectionError",
     "GalilError",
     "GalilTimeoutError",
     "InvalidArgument",
     "LimitError",
+    "ModelSpec",
+    "MoveHandle",
+    "MoveResult",
+    "Profile",
     "ProtocolError",
     "__version__",
+    "connect",
+    "get_model",
 ]

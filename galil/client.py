@@ -21,6 +21,7 @@ import contextlib
 import functools
 import logging
 import queue
+import re
 import threading
 import time
 import warnings
@@ -938,6 +939,93 @@ class Controller:
             self._axes = {letter: Axis(self, letter) for letter in self.model.axes}
         return self._axes
 
+    # -- motion on several axes -------------------------------------------------------------
+
+    def sleep(self, seconds: float) -> None:
+        """Let ``seconds`` pass for the controller (simulated time on a manual-clock simulator).
+
+        Scripts that wait between commands should use this rather than ``time.sleep`` so the
+        same script runs instantly against the simulator in tests.
+        """
+        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not seconds >= 0:
+            raise InvalidArgument(f"seconds must be a non-negative number, got {seconds!r}")
+        self._pause(float(seconds))
+
+    def move(self, targets: dict[str, Any], *, relative: bool = False, **overrides: Any) -> Any:
+        """Move several axes at once, sent in one line and begun together (``BG AB``).
+
+        Args:
+            targets: position (or distance with ``relative=True``) per axis letter, in each
+                axis's units.
+            relative: move by the given distances instead of to the positions.
+            **overrides: ``speed``, ``accel``, ``decel`` for every axis of this move.
+
+        Returns:
+            A :class:`~galil.axis.MoveHandle` over all the axes.
+        """
+        from galil.axis import execute_move
+
+        return execute_move(self, targets, relative=relative, **overrides)
+
+    def plan(self, targets: dict[str, Any], *, relative: bool = False, **overrides: Any) -> Any:
+        """Predict and check :meth:`move` without sending anything; returns a MultiProfile."""
+        from galil import predict
+        from galil.axis import execute_move
+
+        handle = execute_move(self, targets, relative=relative, dry_run=True, **overrides)
+        return predict.together(handle.profiles)
+
+    def stop(self, axes: str = "") -> None:
+        """Decelerate axes (default: all) to a stop at their DC (``ST``)."""
+        letters = "".join(self.model.axis_letter(a) for a in axes) if axes else ""
+        self.command(f"ST {letters}".rstrip())
+        for letter in letters or self.model.axes:
+            self.axes[letter]._jog_speed = None
+
+    def abort(self) -> None:
+        """Stop all motion at once, without deceleration (``AB 1``: programs keep running)."""
+        self.command("AB 1")
+        for ax in self.axes.values():
+            ax._jog_speed = None
+
+    def servo_here(self, axes: str = "") -> None:
+        """Enable the servo on axes (default: all) at their present position (``SH``)."""
+        letters = "".join(self.model.axis_letter(a) for a in axes) if axes else ""
+        self.command(f"SH {letters}".rstrip())
+
+    def motor_off(self, axes: str = "") -> None:
+        """Turn the motors of axes (default: all) off (``MO``)."""
+        letters = "".join(self.model.axis_letter(a) for a in axes) if axes else ""
+        self.command(f"MO {letters}".rstrip())
+
+    def motion(self, axes: str | None = None) -> Any:
+        """A context in which an exception or Ctrl-C stops the moving axes and waits for them.
+
+        ``with controller.motion(): ...``: on any exception, ``ST`` goes to every axis still
+        moving (of ``axes``, default all) and the block's exception is re-raised once they
+        have stopped.
+        """
+        from galil.axis import motion_guard
+
+        return motion_guard(self, axes)
+
+    def contour(
+        self, axes: str, path: Any, *, dt: int, progress: bool = False, timeout: float | None = None
+    ) -> Any:
+        """Run a contour path on ``axes`` and return when it is done.
+
+        ``path`` holds ideal positions in counts relative to where each axis is now, one per
+        ``2**dt``-sample segment (shape (segments,) or (segments, axes)). The stream is checked
+        first (CD range, DT, link speed against the model's buffer), then CM/DT/CD lines keep
+        the controller's buffer fed, and ``CD 0=0`` ends it.
+
+        Returns:
+            A :class:`~galil.contour.ContourResult` (predictions, low-water mark, lines sent).
+        """
+        from galil.contour import stream
+
+        return stream(self, axes, path, dt=dt, progress=progress, timeout=timeout)
+
     def __getattr__(self, name: str) -> Any:
         # Only single axis letters reach here (and X/Y/Z/W aliases where the model has them).
         if len(name) == 1 and name.isupper():
@@ -950,10 +1038,15 @@ class Controller:
         raise AttributeError(f"{type(self).__name__!s} has no attribute {name!r}")
 
 
+# MG prints several values back to back, a space before a positive one and only the sign
+# before a negative one (" 1.0000-2.0000"); TP separates with commas (+ spaces).
+_NUMBER_TOKEN = re.compile(r"\$-?[0-9A-Fa-f]+(?:\.[0-9A-Fa-f]*)?|[-+]?(?:\d+(?:\.\d*)?|\.\d+)")
+_SEPARATORS = re.compile(r"[\s,]*")
+
+
 def _numbers(reply: str) -> list[float]:
-    # Replies separate values with commas, spaces, or both ("-9, 5, 0" / " 1.0000 2.0000").
-    fields = reply.replace(",", " ").split()
-    if not fields:
+    fields = _NUMBER_TOKEN.findall(reply)
+    if not fields or _SEPARATORS.fullmatch(_NUMBER_TOKEN.sub("", reply)) is None:
         raise InvalidArgument("no number in the reply")
     return [parse_number(f) for f in fields]
 

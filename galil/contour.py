@@ -7,15 +7,22 @@ segment end (no drift) and the total is exact.
 
 from __future__ import annotations
 
+import contextlib
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
-from galil.errors import InvalidArgument
+if TYPE_CHECKING:
+    from galil.client import Controller
+    from galil.predict import Profile
 
-__all__ = ["increments", "sample_path"]
+from galil.errors import GalilError, InvalidArgument
+
+__all__ = ["ContourResult", "ContourUnderrunError", "increments", "sample_path", "stream"]
 
 
 def _round(x: npt.NDArray[np.float64]) -> npt.NDArray[np.int64]:
@@ -85,3 +92,203 @@ def sample_path(
     if x.shape != t.shape:
         raise InvalidArgument(f"func returned shape {x.shape}, expected {t.shape}")
     return x
+
+
+class ContourUnderrunError(GalilError):
+    """The controller's contour buffer ran dry before the path was sent (TC 42's condition).
+
+    Attributes:
+        code: 42, the controller's "contour data being sent too slowly".
+        segment: index of the first segment that arrived late.
+    """
+
+    code = 42
+
+    def __init__(self, message: str, *, segment: int, model: str | None = None) -> None:
+        super().__init__(message, model=model)
+        self.segment = segment
+
+
+@dataclass(frozen=True)
+class ContourResult:
+    """A finished contour stream.
+
+    Attributes:
+        axes: the contour axes.
+        increments: the CD increments sent, shape (segments, axes).
+        dt: the DT exponent used.
+        profiles: predicted profile per axis.
+        low_water: fewest free buffer slots seen while streaming (``_CM``).
+        lines: command lines sent for the segments.
+    """
+
+    axes: str
+    increments: npt.NDArray[np.int64]
+    dt: int
+    profiles: dict[str, Profile]
+    low_water: int
+    lines: int
+
+    @property
+    def duration(self) -> float:
+        """Predicted duration in seconds."""
+        return max(p.duration for p in self.profiles.values())
+
+
+def _link_options(controller: Controller) -> dict[str, Any]:
+    kind = getattr(controller.transport, "kind", "")
+    if kind == "serial":
+        baud = getattr(controller.transport, "baudrate", None)
+        return {"baud": float(baud)} if baud else {"baud": 9600.0}
+    if kind == "ethernet":
+        return {"ethernet": True}
+    return {}  # in-process, USB and PCI links are far faster than any contour needs
+
+
+def _cd_text(letters: str, all_axes: str, row: Sequence[int]) -> str:
+    # CD takes one field per controller axis, in axis order; non-contour fields stay empty.
+    fields = [""] * (max(all_axes.index(a) for a in letters) + 1)
+    for a, v in zip(letters, row, strict=True):
+        fields[all_axes.index(a)] = str(int(v))
+    return "CD " + ",".join(fields)
+
+
+def stream(
+    controller: Controller,
+    axes: str | Sequence[str],
+    path: npt.ArrayLike,
+    *,
+    dt: int,
+    progress: bool = False,
+    timeout: float | None = None,
+) -> ContourResult:
+    """Run a contour: check it, enter CM, keep the buffer fed, end with ``CD 0=0``, wait.
+
+    Args:
+        controller: the connected controller.
+        axes: contour axes, e.g. ``"B"`` or ``"AB"``.
+        path: ideal positions in counts *relative to where each axis is now*, at the end of
+            each ``2**dt``-sample segment; shape (segments,) or (segments, axes).
+        dt: DT exponent (segments last ``2**dt`` samples).
+        progress: show a ``tqdm.auto`` bar over segments.
+        timeout: seconds to wait for the contour to finish after the last segment (default:
+            its predicted duration plus a margin).
+
+    Raises:
+        LimitError: an increment outside the CD range, a DT outside the model's range, or a
+            link too slow for the stream (nothing is sent then).
+        InvalidArgument: a bad path or axis, or an axis already moving (nothing is sent).
+        ContourUnderrunError: the buffer ran dry while streaming (the contour is ended).
+    """
+    from galil import predict
+    from galil.predict.checks import check_contour
+
+    model = controller.model
+    names = list(axes) if isinstance(axes, str) else [str(a) for a in axes]
+    letters = "".join(model.axis_letter(a) for a in names)
+    if not letters or len(set(letters)) != len(letters):
+        raise InvalidArgument(f"contour axes must be distinct and non-empty, got {axes!r}")
+    if isinstance(dt, bool) or not isinstance(dt, int):
+        raise InvalidArgument(f"dt must be an integer exponent, got {dt!r}")
+    ideal = np.asarray(path, dtype=np.float64)
+    if ideal.ndim == 1:
+        ideal = ideal[:, None]
+    if ideal.ndim != 2 or ideal.shape[1] != len(letters) or ideal.shape[0] == 0:
+        raise InvalidArgument(
+            f"path must have shape (segments,) or (segments, {len(letters)}), got "
+            f"{np.asarray(path).shape}"
+        )
+    incs = np.stack([increments(ideal[:, j]) for j in range(len(letters))], axis=1)
+    link = _link_options(controller)
+    for j, a in enumerate(letters):
+        check_contour(
+            incs[:, j],
+            dt,
+            model=model,
+            axis=a,
+            sample_period=controller.sample_period,
+            bytes_per_segment=len(_cd_text(letters, model.axes, incs[0])) + 1,
+            **link,
+        )
+    state = controller.query_operands([f"_{op}{a}" for a in letters for op in ("RP", "BG")])
+    for j, a in enumerate(letters):
+        if state[2 * j + 1]:
+            raise InvalidArgument(f"axis {a} is moving; stop it before a contour", model=model.name)
+    starts = {a: round(state[2 * j]) for j, a in enumerate(letters)}
+    profiles = {
+        a: predict.contour(incs[:, j], dt, start=starts[a], sample_period=controller.sample_period)
+        for j, a in enumerate(letters)
+    }
+    texts = [_cd_text(letters, model.axes, row) for row in incs.tolist()]
+    depth = model.contour_buffer
+    bar = _bar(len(texts), letters) if progress else None
+    controller.command_line([f"CM {letters}", f"DT {dt}"])
+    sent = 0
+    lines = 0
+    low_water = depth
+    seg_time = (1 << dt) * controller.sample_period
+    try:
+        while sent < len(texts):
+            free = round(controller.query_number("MG _CM"))
+            if sent and free >= depth:
+                raise ContourUnderrunError(
+                    f"contour buffer ran dry after {sent} of {len(texts)} segments "
+                    f"(TC 42: contour data sent too slowly)",
+                    segment=sent,
+                    model=model.name,
+                )
+            low_water = min(low_water, free)
+            if depth <= 2:
+                # A one-deep buffer: WC holds its ':' until the segment before is running.
+                controller.command_line([texts[sent], "WC"], timeout=seg_time * 4 + 1.0)
+                sent += 1
+                lines += 1
+            elif free > 1:
+                batch = texts[sent : sent + free - 1]
+                controller.command_line(batch)
+                sent += len(batch)
+                lines += _line_count(batch, model.line_length)
+            else:
+                controller._pause(seg_time)
+            if bar is not None:
+                bar.update(sent - bar.n)
+        # How full the buffer got: the last batch is the fullest moment of a short path.
+        low_water = min(low_water, round(controller.query_number("MG _CM")))
+    except BaseException:
+        # Leave the controller out of contour mode whatever happened; report the first error.
+        with contextlib.suppress(GalilError):
+            controller.command("CD 0=0")
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    controller.command("CD 0=0")
+    wait = timeout if timeout is not None else max(p.duration for p in profiles.values()) + 2.0
+    deadline = controller._clock() + wait
+    while any(controller._query_ints([f"_BG{a}" for a in letters])):
+        if controller._clock() > deadline:
+            from galil.errors import GalilTimeoutError
+
+            raise GalilTimeoutError(
+                f"contour on {letters} not finished after {wait:.3g} s", model=model.name
+            )
+        controller._pause(min(0.05, max(seg_time, 0.005)))
+    return ContourResult(letters, incs, dt, profiles, low_water, lines)
+
+
+def _line_count(parts: Sequence[str], limit: int) -> int:
+    count, length = 1, 0
+    for p in parts:
+        if length and length + 1 + len(p) + 1 > limit:
+            count += 1
+            length = 0
+        length += len(p) + (1 if length else 0)
+    return count
+
+
+def _bar(total: int, letters: str) -> Any:
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:
+        return None
+    return tqdm(total=total, desc=f"contour {letters}", unit="seg")

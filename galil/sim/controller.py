@@ -33,14 +33,16 @@ import math
 import re
 import struct
 import threading
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
-from galil.errors import CommandError, InvalidArgument
+from galil.errors import CommandError, InvalidArgument, LimitError
 from galil.models import ModelSpec, get_model
+from galil.predict.checks import quantise_accel, quantise_speed
 from galil.predict.smoothing import quantise_it
 from galil.protocol.codes import tc_text
 from galil.protocol.numbers import format_reply, parse_format
@@ -89,6 +91,7 @@ _OTHER = frozenset(
         "VF",
         "RS",
         "NO",
+        "AD",
     ]
 )
 COMMANDS = _AXIS_VALUE | _AXIS_LIST | _OTHER
@@ -155,6 +158,7 @@ class _Axis:
     limit_stopping: bool = False
     contour: bool = False
     contour_fed: bool = False
+    move_start: int = 0  # profiler position at the last BG: AD/AR measure from here
 
 
 class SimController:
@@ -191,6 +195,8 @@ class SimController:
         self.separate_messages = False
         self._messages = bytearray()
         self._sample = 0
+        #: ``(sample, command text)`` of the latest host commands, oldest first.
+        self.command_log: deque[tuple[int, str]] = deque(maxlen=10_000)
         self._tm = self.spec.tm_default
         self._ts = self.spec.sample_period
         self._time_base = self.clock.now()
@@ -435,12 +441,17 @@ class SimController:
     def _snapshot(self) -> tuple[int, dict[str, AxisMotion]]:
         return self._sample, {k: copy.deepcopy(a.m) for k, a in self._axes.items()}
 
-    def start_trace(self, axes: str | None = None) -> None:
-        """Record every sample's reference position on ``axes`` (default: all) from now on."""
+    def start_trace(self, axes: str | None = None) -> int:
+        """Record every sample's reference position on ``axes`` (default: all) from now on.
+
+        Returns:
+            The sample number of the trace's first value (compare with :attr:`command_log`).
+        """
         with self._lock:
             self._sync()
             for letter in axes or self.spec.axes:
                 self.motion(letter).start_trace()
+            return self._sample
 
     def stop_trace(self, axes: str | None = None) -> dict[str, npt.NDArray[np.int64]]:
         """Stop recording; return the reference positions per axis since :meth:`start_trace`.
@@ -620,6 +631,9 @@ class SimController:
             self._host_command(p, text)
 
     def _host_command(self, p: _Port, text: str) -> None:
+        # Which sample each host command ran in: lets a test or the demo rebuild the exact
+        # schedule of changes in motion and predict it.
+        self.command_log.append((self._sample, text))
         try:
             result = self._execute(text, None)
         except Refused as e:
@@ -912,17 +926,18 @@ class SimController:
             raise Refused(6, str(e)) from None
 
     # ---- quantisation as the controller stores values ----------------------------------
+    # The predictor's quantisation, so the values stored here are the ones it plans with.
     def _q_accel(self, value: float) -> float:
-        if not 0 < value <= self.spec.ac_max:
-            raise Refused(6, "AC/DC out of range")
-        step = self.spec.ac_resolution
-        return float(max(step, math.floor(value / step) * step))
+        try:
+            return float(quantise_accel(value, self.spec))
+        except LimitError:
+            raise Refused(6, "AC/DC out of range") from None
 
     def _q_speed(self, value: float) -> float:
-        if not abs(value) <= self.spec.sp_max:
-            raise Refused(6, "speed out of range")
-        step = self.spec.sp_resolution
-        return float(math.copysign(math.floor(abs(value) / step + 0.5) * step, value))
+        try:
+            return float(quantise_speed(value, self.spec, signed=True))
+        except LimitError:
+            raise Refused(6, "speed out of range") from None
 
     @staticmethod
     def _q_position(value: float) -> int:
@@ -1086,6 +1101,7 @@ class SimController:
         for ax, goal in plans:
             prof = ax.m.profiler
             ax.limit_stopping = False
+            ax.move_start = prof.position
             if goal is None:
                 self._engine(functools.partial(prof.begin_jog, ax.jg, ax.ac, ax.dc, ax.it))
             else:
@@ -1157,6 +1173,37 @@ class SimController:
             return True
 
         return _Wait(lambda: not any(self._axes[c].m.moving for c in letters), exact=exact)
+
+    def _cmd_ad(self, args: str, th: _Thread | None) -> _Wait:
+        """AD: hold until each named axis's profile has gone the distance from the move's start.
+
+        Like the controller, AD watches the profiler (before IT smoothing); distances are
+        magnitudes, and a move that ends first releases the wait.
+        """
+        fields = split_fields(args.partition("=")[2] if "=" in args else args)
+        if "=" in args:
+            letters = [self.spec.axis_letter(c) for c in args.partition("=")[0].strip()]
+            values = [self._eval(fields[0])] * len(letters)
+        else:
+            letters = [a for a, f in zip(self._axes, fields, strict=False) if f.strip()]
+            values = [self._eval(f) for f in fields if f.strip()]
+        if not letters:
+            raise Refused(4, "AD needs a distance")
+        goal: dict[str, float] = {}
+        for c, v in zip(letters, values, strict=True):
+            if not 0 <= v <= _INT_MAX:
+                raise Refused(6, "AD distance out of range")
+            goal[c] = v
+
+        def reached() -> bool:
+            for c, d in goal.items():
+                ax = self._axes[c]
+                prof = ax.m.profiler
+                if prof.moving and abs(prof.position - ax.move_start) < d:
+                    return False
+            return True
+
+        return _Wait(reached)
 
     def _cmd_mc(self, args: str, th: _Thread | None) -> _Wait:
         letters = [ax.letter for ax in self._axis_list(args)]

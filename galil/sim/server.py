@@ -27,6 +27,7 @@ import time
 import tty
 from collections.abc import Sequence
 from types import TracebackType
+from typing import TypeVar
 
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.sim.clock import RealTimeClock
@@ -63,6 +64,9 @@ class _Outbox:
         return bytes(out)
 
 
+_S = TypeVar("_S", bound="_Server")
+
+
 class _Server:
     """Thread, lock and lifecycle shared by the TCP and pty servers."""
 
@@ -94,7 +98,7 @@ class _Server:
         """Advance a manual clock (thread-safe; the controller serialises access)."""
         self.controller.advance(seconds)
 
-    def __enter__(self) -> _Server:
+    def __enter__(self: _S) -> _S:
         self.start()
         return self
 

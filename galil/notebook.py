@@ -1,0 +1,97 @@
+"""Jupyter helpers: plots of predicted against recorded motion, and a jog widget.
+
+Heavy imports (matplotlib, ipywidgets) happen inside the functions, so importing this module is
+cheap. Nothing in the library imports it; notebooks do.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from galil.axis import Axis
+    from galil.predict import Profile
+
+__all__ = ["compare_plot", "jog_widget"]
+
+
+def compare_plot(
+    predicted: Mapping[str, Profile],
+    recorded: Mapping[str, tuple[npt.ArrayLike, npt.ArrayLike]],
+    *,
+    title: str = "predicted vs recorded",
+) -> Any:
+    """Plot predicted positions against recorded ones, and their difference in counts.
+
+    Args:
+        predicted: profile per axis letter.
+        recorded: ``(t, position)`` per axis letter, ``t`` in seconds from the same start.
+        title: figure title.
+
+    Returns:
+        The matplotlib Figure.
+    """
+    import matplotlib
+
+    if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
+        # A headless machine has no display; never let a demo die on a backend.
+        import os
+
+        if not os.environ.get("DISPLAY"):
+            matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax_pos, ax_diff) = plt.subplots(
+        2, 1, figsize=(9, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]}
+    )
+    for letter, prof in predicted.items():
+        ax_pos.plot(prof.t, prof.position, label=f"{letter} predicted", linewidth=2, alpha=0.6)
+        if letter in recorded:
+            t, pos = (np.asarray(v, dtype=float) for v in recorded[letter])
+            ax_pos.plot(t, pos, "--", label=f"{letter} recorded", linewidth=1)
+            n = min(len(pos), len(prof.position))
+            ax_diff.plot(t[:n], pos[:n] - prof.position[:n], label=letter)
+    ax_pos.set_ylabel("position (counts)")
+    ax_pos.legend(loc="best", fontsize="small")
+    ax_pos.set_title(title)
+    ax_diff.set_ylabel("recorded - predicted")
+    ax_diff.set_xlabel("time (s)")
+    ax_diff.grid(True, alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def jog_widget(axis: Axis, *, max_speed: float | None = None) -> Any:
+    """A slider that jogs ``axis`` at the chosen speed (0 stops it); needs ipywidgets.
+
+    Args:
+        axis: the axis to jog.
+        max_speed: slider range in the axis's units per second (counts/s without a scale).
+    """
+    import ipywidgets as widgets
+
+    from galil.units import get_registry
+
+    limit = max_speed if max_speed is not None else 10_000.0
+    slider = widgets.FloatSlider(value=0.0, min=-limit, max=limit, description=f"jog {axis.letter}")
+    status = widgets.Label(value="stopped")
+
+    def on_change(change: Mapping[str, Any]) -> None:
+        value = float(change["new"])
+        if value == 0:
+            axis.stop()
+            status.value = "stopped"
+            return
+        speed: Any = value
+        if axis.scale is not None:
+            reg = get_registry()
+            speed = reg.Quantity(value, axis.scale.unit / reg.second)
+        axis.jog(speed)
+        status.value = f"jogging at {value:g}"
+
+    slider.observe(on_change, names="value")
+    return widgets.VBox([slider, status])
