@@ -9,7 +9,6 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import overload
 
 import numpy as np
 import numpy.typing as npt
@@ -161,27 +160,8 @@ def quantise_limits(model: str | ModelSpec = "DMC-4040") -> dict[str, tuple[floa
     }
 
 
-@overload
-def quantise(
-    model: str | ModelSpec = ...,
-    *,
-    speed: float | None = ...,
-    accel: float | None = ...,
-    decel: float | None = ...,
-    smoothing: float | None = ...,
-    jog: bool = ...,
-    tm: float | None = ...,
-) -> Quantised: ...
-
-
-@overload
-def quantise(model: str, value: float, model_spec: str | ModelSpec, /) -> float: ...
-
-
 def quantise(
     model: str | ModelSpec = "DMC-4040",
-    value: float | None = None,
-    model_spec: str | ModelSpec | None = None,
     *,
     speed: float | None = None,
     accel: float | None = None,
@@ -189,11 +169,10 @@ def quantise(
     smoothing: float | None = None,
     jog: bool = False,
     tm: float | None = None,
-) -> Quantised | float:
+) -> Quantised:
     """Quantise SP/JG, AC, DC and IT as ``model`` stores them; check them against its ranges.
 
-    Also callable as ``quantise("AC", 150_000, "DMC-4040") -> 149504.0`` (one value; see
-    :func:`quantise_value`).
+    One value at a time: :func:`quantise_value` (or :func:`check_parameter`).
 
     Args:
         model: model name or spec.
@@ -207,10 +186,6 @@ def quantise(
     Raises:
         LimitError: a value outside the model's range.
     """
-    if value is not None:
-        if not isinstance(model, str):
-            raise InvalidArgument("quantise(command, value, model): command must be a string")
-        return quantise_value(model, value, "DMC-4040" if model_spec is None else model_spec)
     spec = resolve_model(model)
     ts = spec.sample_period if tm is None else spec.sample_period_for(tm)
     sp = None

@@ -313,7 +313,7 @@ def test_jog_from_an_existing_speed() -> None:
 
 
 def test_single_value_quantise_forms() -> None:
-    assert predict.quantise("AC", 150_000, "DMC-4040") == 149_504
+    assert predict.quantise_value("AC", 150_000, "DMC-4040") == 149_504
     assert predict.quantise_value("JG", -3001) == -3000
     assert predict.quantise_limits("DMC-2183")["AC"] == (1024, 67_107_840)
     with pytest.raises(InvalidArgument) as info:
