@@ -21,6 +21,17 @@ FloatArray = npt.NDArray[np.float64]
 Int64Array = npt.NDArray[np.int64]
 
 
+def _moving_average(x: FloatArray, window: int) -> FloatArray:
+    """Centred moving average with the ends averaged over what exists."""
+    if window <= 1 or x.size == 0:
+        return np.asarray(x, dtype=np.float64)
+    kernel = np.ones(window)
+    total = np.convolve(x, kernel, mode="same")
+    count = np.convolve(np.ones(x.size), kernel, mode="same")
+    out: FloatArray = total / count
+    return out
+
+
 def _summary_rows(p: Profile) -> list[tuple[str, str]]:
     return [
         ("shape", p.shape),
@@ -135,22 +146,35 @@ class Profile:
         out = np.interp(np.asarray(t, dtype=np.float64), self.t, self.position)
         return float(out) if np.ndim(out) == 0 else out
 
-    def plot(self, *, title: str | None = None) -> Figure:
+    def plot(self, *, title: str | None = None, average: float = 0.004) -> Figure:
         """Plot position, velocity and acceleration against time; return the Figure.
 
+        Positions are whole counts, so per-sample velocity jitters by a count per sample and its
+        difference is noise; velocity and acceleration are therefore drawn as centred moving
+        averages over ``average`` seconds (the raw velocity is shown faintly behind).
         matplotlib is imported here, not at import time.
         """
         from matplotlib.figure import Figure
 
+        window = max(1, round(average / self.sample_period))
+        vel = _moving_average(self.velocity, window)
+        acc = np.zeros(vel.size)
+        acc[1:] = np.diff(vel) / self.sample_period
+        acc = _moving_average(acc, 4 * window)  # a difference of a difference: average longer
         fig = Figure(figsize=(7, 6), layout="constrained")
         axes = fig.subplots(3, 1, sharex=True)
         axes[0].plot(self.t, self.position, drawstyle="steps-post")
         axes[0].set_ylabel("position (counts)")
-        axes[1].plot(self.t, self.velocity, drawstyle="steps-post")
+        axes[1].plot(self.t, self.velocity, drawstyle="steps-post", color="0.8", linewidth=0.8)
+        axes[1].plot(self.t, vel)
         axes[1].set_ylabel("velocity (counts/s)")
-        axes[2].plot(self.t, self.acceleration, drawstyle="steps-post")
+        axes[2].plot(self.t, acc)
         axes[2].set_ylabel("accel (counts/s²)")
         axes[2].set_xlabel("time (s)")
+        for ax in axes:
+            ax.grid(True, alpha=0.3)
+        if window > 1:
+            axes[1].set_title(f"{window}-sample moving average", fontsize="small", loc="right")
         fig.suptitle(title or f"{self.shape}: {self.distance} counts in {self.duration:.4g} s")
         return fig
 
