@@ -1,0 +1,104 @@
+"""The ``galil`` console command, run as a user would."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from galil import cli
+
+GALIL = [sys.executable, "-m", "galil.cli"]
+
+
+def test_plan_prints_the_profile_and_saves_a_plot(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    png = tmp_path / "plan.png"
+    assert (
+        cli.main(["plan", "10000", "--speed", "25000", "--accel", "256000", "--png", str(png)]) == 0
+    )
+    out = capsys.readouterr().out
+    assert "trapezoid" in out
+    assert "end=10000" in out
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_plan_refuses_an_out_of_range_speed(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["plan", "10000", "--speed", "1e12"]) == 2
+    assert "SP" in capsys.readouterr().err
+
+
+def test_info_describes_a_simulated_controller(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["info", "sim://DMC-4040"]) == 0
+    out = capsys.readouterr().out
+    assert "DMC4040" in out
+    assert "axes: A, B, C, D" in out
+
+
+def test_terminal_sends_lines_and_explains_rejections() -> None:
+    run = subprocess.run(
+        [*GALIL, "terminal", "sim://DMC-4040"],
+        input="MG 1+2\nbg\n",
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert run.returncode == 0, run.stderr
+    assert "3.0000" in run.stdout
+    assert "? 1 Unrecognized command" in run.stdout
+
+
+def test_sim_serves_tcp_until_interrupted() -> None:
+    proc = subprocess.Popen(
+        [*GALIL, "sim", "--model", "DMC-4040", "--tcp", "127.0.0.1:0"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        match = re.search(r"tcp://127\.0\.0\.1:(\d+)", line)
+        assert match, line
+        with socket.create_connection(("127.0.0.1", int(match.group(1))), timeout=10) as s:
+            s.sendall(b"MG 6*7\r")
+            reply = b""
+            while not reply.endswith(b":"):
+                chunk = s.recv(64)
+                assert chunk
+                reply += chunk
+        assert reply.strip() == b"42.0000\r\n:".strip()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=20)
+    assert proc.returncode in (0, 130, -signal.SIGINT)
+
+
+@pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pty")
+def test_sim_serves_a_pty_until_interrupted() -> None:
+    import serial
+
+    proc = subprocess.Popen(
+        [*GALIL, "sim", "--pty"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        match = re.search(r"(/dev/\S+)", line)
+        assert match, line
+        port = serial.Serial(match.group(1), timeout=10)
+        try:
+            port.write(b"MG 6*7\r")
+            assert port.read_until(b":").strip() == b"42.0000\r\n:".strip()
+        finally:
+            port.close()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=20)
