@@ -16,6 +16,7 @@ from galil.errors import (
 )
 from galil.models import ModelSpec, get_model
 from galil.predict import Profile
+from galil.protocol.codes import stop_text, tc_text
 
 __version__ = "0.1.0.dev0"
 
@@ -38,4 +39,6 @@ __all__ = [
     "__version__",
     "connect",
     "get_model",
+    "stop_text",
+    "tc_text",
 ]

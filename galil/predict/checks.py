@@ -219,7 +219,9 @@ def check_soft_limits(
 ) -> None:
     """Check the whole predicted path, not just its end, against FL and BL.
 
-    ``high``/``low`` are aliases of ``forward_limit``/``backward_limit``.
+    ``high``/``low`` are aliases of ``forward_limit``/``backward_limit``. Like the controller,
+    only motion *outwards* beyond a limit is refused: an axis that starts past FL may move
+    back towards (and inside) it.
 
     Raises:
         LimitError: at the first sample beyond a limit (``name`` is ``"FL"`` or ``"BL"``).
@@ -227,11 +229,12 @@ def check_soft_limits(
     forward_limit = high if forward_limit is None else forward_limit
     backward_limit = low if backward_limit is None else backward_limit
     pos = profile.position
+    prev = np.concatenate((pos[:1], pos[:-1]))
     checks: list[tuple[str, float, npt.NDArray[np.bool_]]] = []
     if forward_limit is not None:
-        checks.append(("FL", forward_limit, pos > forward_limit))
+        checks.append(("FL", forward_limit, (pos > forward_limit) & (pos > prev)))
     if backward_limit is not None:
-        checks.append(("BL", backward_limit, pos < backward_limit))
+        checks.append(("BL", backward_limit, (pos < backward_limit) & (pos < prev)))
     checks.append(("position range", _POSITION_MAX, pos > _POSITION_MAX))
     checks.append(("position range", _POSITION_MIN, pos < _POSITION_MIN))
     first: tuple[int, str, float] | None = None

@@ -213,3 +213,16 @@ def test_speed_schedule_reports_the_earliest_valid_trigger() -> None:
     with pytest.raises(predict.ScheduleError) as info:
         predict.speed_schedule(15 * u, 50 * u, [(1000, 10 * u)], ac, dc)
     assert info.value.earliest == 1250
+
+
+def test_soft_limits_refuse_only_outward_motion() -> None:
+    # An axis already past FL may come back inside; it may not go further out.
+    back = predict.move(-4500, 10_000, 102_400, 102_400, start=5000)
+    predict.check_soft_limits(back, high=1000)
+    further = predict.move(500, 10_000, 102_400, 102_400, start=5000)
+    with pytest.raises(LimitError) as info:
+        predict.check_soft_limits(further, high=1000)
+    assert info.value.name == "FL"
+    assert info.value.sample is not None and info.value.sample > 0
+    below = predict.move(4500, 10_000, 102_400, 102_400, start=-5000)
+    predict.check_soft_limits(below, low=-1000)

@@ -1,0 +1,120 @@
+"""Every example runs: the scripts as subprocesses, the notebook through a Jupyter kernel.
+
+The scripts run against the in-process simulator by default (simulated time, so they are fast),
+and one of them against the simulator served over TCP, given an address as hardware would be.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+SCRIPTS = sorted(EXAMPLES.glob("[0-9][0-9]_*.py"))
+
+# A line (or part of one) each script must print: the point of the example happened.
+EXPECTED = {
+    "01_connect.py": ["connected to DMC4040", "refused as expected: TC 10"],
+    "02_jog.py": [
+        "velocity -5.00 mm / s",
+        "stop code 4",
+        "jog into the forward soft limit: stop code 2",
+    ],
+    "03_move_with_units.py": [
+        "plan A -> 12.5 mm: trapezoid",
+        "end vs prediction: {'A': 0} counts",
+        "refused: FL would be crossed",
+        "wrong dimension",
+        "back at A 0.00",
+    ],
+    "04_contour.py": [
+        "1 - cos: 31 segments, 6000 counts",
+        "B 10000 counts",
+        "refused: CD 40000",
+        "too slow",
+    ],
+    "05_speed_schedule.py": [
+        "earliest valid is",
+        "trippoints at [10.0, 20.0] mm",
+        "end vs prediction {'A': 0} counts",
+    ],
+}
+
+
+def _run(args: list[str], cwd: Path, timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
+    env = dict(os.environ, MPLBACKEND="Agg", PYTHONWARNINGS="error::RuntimeWarning")
+    return subprocess.run(
+        [sys.executable, *args],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
+
+
+def test_every_script_is_covered() -> None:
+    assert [p.name for p in SCRIPTS] == sorted(EXPECTED)
+
+
+@pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: p.name)
+def test_script_runs_on_the_simulator(script: Path, tmp_path: Path) -> None:
+    proc = _run([str(script)], tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "Traceback" not in proc.stderr, proc.stderr
+    for text in EXPECTED[script.name]:
+        assert text in proc.stdout, f"{text!r} not in:\n{proc.stdout}"
+
+
+def test_script_takes_an_address(tmp_path: Path) -> None:
+    # The simulator behind a real TCP socket stands in for a controller on the network.
+    from galil.sim.server import SimTcpServer
+
+    with SimTcpServer(model="DMC-4040") as server:
+        host, port = server.message_address
+        address = f"{server.url}?message_port={port}"
+        assert host
+        proc = _run([str(EXAMPLES / "03_move_with_units.py"), address], tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    for text in EXPECTED["03_move_with_units.py"]:
+        assert text in proc.stdout, f"{text!r} not in:\n{proc.stdout}"
+
+
+def test_script_reports_a_bad_address(tmp_path: Path) -> None:
+    proc = _run([str(EXAMPLES / "01_connect.py"), "tcp://127.0.0.1:1"], tmp_path)
+    assert proc.returncode == 1
+    assert "could not connect to tcp://127.0.0.1:1" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_notebook_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    pytest.importorskip("ipykernel")
+    monkeypatch.setenv("MPLBACKEND", "Agg")  # the kernel inherits it: no display needed
+    copy = tmp_path / "lab.ipynb"
+    shutil.copy(EXAMPLES / "lab.ipynb", copy)
+    nb = nbformat.read(copy, as_version=4)
+    # Committed without outputs, so a diff shows only what a person changed.
+    for cell in nb.cells:
+        if cell.cell_type == "code":
+            assert not cell.outputs
+            assert cell.execution_count is None
+    client = nbclient.NotebookClient(
+        nb, timeout=60, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}
+    )
+    client.execute()  # raises CellExecutionError on the first failing cell
+    outputs = [o for cell in nb.cells if cell.cell_type == "code" for o in cell.outputs]
+    assert not [o for o in outputs if o.output_type == "error"]
+    text = "".join(o.get("text", "") for o in outputs if o.output_type == "stream")
+    assert "A move: largest |recorded - predicted| = 0 counts" in text
+    assert "B contour: largest |recorded - predicted| = 0 counts" in text
+    assert "refused:" in text
+    images = [o for o in outputs if "image/png" in o.get("data", {})]
+    assert len(images) >= 2  # the planned profile and the comparison
