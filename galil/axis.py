@@ -3,6 +3,10 @@
 An :class:`Axis` belongs to a :class:`~galil.client.Controller`; ``controller.axes["A"]`` and
 ``controller.A`` give the same object. Moves return a :class:`MoveHandle` that knows its
 predicted :class:`~galil.predict.Profile`, can wait (with a progress bar), call back, and stop.
+
+Every command that starts or changes a move goes out on one line with ``MG TIME``, so the
+handle knows the controller sample at which it took effect and can re-predict the motion
+exactly (a speed change, an ``IP``, an ``ST``), instead of guessing from the host's clock.
 """
 
 from __future__ import annotations
@@ -10,25 +14,37 @@ from __future__ import annotations
 import contextlib
 import math
 import threading
+import time
 import warnings
-from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from galil import predict
-from galil.errors import GalilError, InvalidArgument, LimitError
+from galil.errors import CommandError, GalilError, GalilTimeoutError, InvalidArgument, LimitError
 from galil.protocol import codes
 from galil.units import Scale, counts_or_plain, is_quantity
 
 if TYPE_CHECKING:
     from galil.client import Controller
 
-__all__ = ["Axis", "MoveHandle", "MoveResult", "execute_move", "motion_guard"]
+__all__ = [
+    "Axis",
+    "MoveHandle",
+    "MoveParams",
+    "MoveResult",
+    "abort_all",
+    "execute_move",
+    "motion_guard",
+    "stop_axes",
+]
 
 _INT32 = (-2_147_483_648, 2_147_483_647)
 # Polling faster than this only loads the link; the controller decodes a command in ~0.5 ms.
 _MIN_POLL = 0.005
 _MAX_POLL = 0.1
+# The program variable a speed schedule stores its BG sample in (8 characters at most).
+_SCHEDULE_BEGIN = "gsbegin"
 
 
 @dataclass(frozen=True)
@@ -47,8 +63,10 @@ class MoveResult:
 
     Attributes:
         final: final reference position (``_RP``) per axis, counts.
-        predicted: the predicted final position per axis, counts.
-        deviation: ``final - predicted`` per axis, counts.
+        predicted: the predicted final position per axis, counts. Axes whose motion changed
+            in a way the predictor cannot follow (a jog stopped by someone else, a limit, a
+            change sent behind the library's back) are left out.
+        deviation: ``final - predicted`` for the axes in ``predicted``, counts.
         stop_codes: ``_SC`` per axis.
     """
 
@@ -59,58 +77,201 @@ class MoveResult:
 
     @property
     def worst(self) -> int:
-        """Largest absolute deviation over the axes, counts."""
+        """Largest absolute deviation over the predicted axes, counts."""
         return max((abs(v) for v in self.deviation.values()), default=0)
+
+    def stop_text(self, axis: str) -> str:
+        """The text of an axis's stop code."""
+        return codes.stop_text(self.stop_codes[axis])
+
+
+@dataclass
+class _Track:
+    """What is known of one axis's motion since its BG: enough to predict it again."""
+
+    kind: str  # "position" | "jog" | "schedule"
+    start: int
+    params: MoveParams
+    begin: int | None  # controller sample (TIME) of the BG line; None while unknown
+    amount: float = 0.0  # position: distance in counts; jog: the first JG (signed)
+    events: list[predict.Event] = field(default_factory=list)
+    aborted: int | None = None  # sample of an AB
+    stopped: bool = False  # an ST went out (host side): the jog has an end
+    exact: bool = True  # False once something happened that the predictor cannot follow
+    fixed: predict.Profile | None = None  # a prediction made elsewhere (speed schedule)
+
+
+def _open_jog(t: _Track) -> bool:
+    # A jog has a known end only once the library stopped (or aborted) it.
+    return t.kind == "jog" and not t.stopped and t.aborted is None
+
+
+def _sample_of(reply: str) -> int | None:
+    try:
+        return round(float(reply.strip()))
+    except ValueError:
+        return None
+
+
+def _predict(controller: Controller, t: _Track) -> predict.Profile:
+    """Predict one axis's motion from its start and every change recorded since."""
+    ts = controller.sample_period
+    p = t.params
+    if t.fixed is not None:
+        profile = t.fixed
+    elif t.kind == "jog":
+        profile = predict.jog(
+            t.amount,
+            p.accel,
+            p.decel,
+            events=t.events,
+            sample_period=ts,
+            smoothing=p.smoothing,
+            start=t.start,
+        )
+    else:
+        profile = predict.move(
+            round(t.amount),
+            max(p.speed, controller.model.sp_resolution),
+            p.accel,
+            p.decel,
+            sample_period=ts,
+            smoothing=p.smoothing,
+            start=t.start,
+            events=t.events,
+        )
+    if t.aborted is not None and t.begin is not None:
+        # AB stops the profiler where it is: the reference stays at that sample's value.
+        k = max(0, min(t.aborted - t.begin, profile.samples))
+        profile = predict.Profile.from_samples(
+            profile.position[: k + 1],
+            profiler=profile.profiler[: k + 1],
+            sample_period=ts,
+            shape="stopped",
+            peak_speed=profile.peak_speed,
+            stop_code=7,
+        )
+    return profile
 
 
 class MoveHandle:
     """A move in progress on one or more axes.
 
     Attributes:
-        profile: the prediction for the first axis (``profiles`` has them all).
-        profiles: predicted profile per axis letter.
-        kind: ``"position"``, ``"jog"``, ``"increment"`` or ``"contour"``.
+        kind: ``"position"``, ``"jog"`` or ``"schedule"``.
+        started_at: the controller clock (seconds) when the handle was made.
     """
 
-    def __init__(
-        self,
-        controller: Controller,
-        profiles: Mapping[str, predict.Profile],
-        kind: str,
-        *,
-        expect_final: bool = True,
-        params: Mapping[str, MoveParams] | None = None,
-    ) -> None:
+    def __init__(self, controller: Controller, tracks: Mapping[str, _Track], kind: str) -> None:
         self._controller = controller
-        self.profiles = dict(profiles)
+        self._tracks = dict(tracks)
         self.kind = kind
-        self.params = dict(params or {})
-        self._expect_final = expect_final
         self.started_at = controller._clock()
         self._done = False
         self._result: MoveResult | None = None
         self._callbacks: list[Callable[[MoveHandle], None]] = []
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()
+        self._cache: dict[str, predict.Profile] = {}
         self._watcher: threading.Thread | None = None
         self._error: BaseException | None = None
 
+    # -- predictions -------------------------------------------------------------------------
     @property
     def axes(self) -> str:
         """The axis letters this move drives."""
-        return "".join(self.profiles)
+        return "".join(self._tracks)
+
+    @property
+    def params(self) -> dict[str, MoveParams]:
+        """The quantised SP/AC/DC/IT each axis started with."""
+        return {a: t.params for a, t in self._tracks.items()}
+
+    @property
+    def begin(self) -> dict[str, int | None]:
+        """Controller sample (``TIME``) at which each axis's motion began, if known.
+
+        ``profile.position[k]`` is the predicted reference at sample ``begin + k``; use it to
+        line recorded data up with the prediction.
+        """
+        out: dict[str, int | None] = {}
+        for a, t in self._tracks.items():
+            if t.begin is None and t.kind == "schedule":
+                self._schedule_begin(t)
+            out[a] = t.begin
+        return out
+
+    def _schedule_begin(self, track: _Track) -> None:
+        # The downloaded program stores TIME right after its BG; -1 until it has run.
+        with contextlib.suppress(GalilError):
+            value = round(self._controller.query_operands([_SCHEDULE_BEGIN])[0])
+            if value >= 0:
+                track.begin = value
+
+    @property
+    def profiles(self) -> dict[str, predict.Profile]:
+        """Predicted profile per axis letter, including every change sent since the start."""
+        with self._lock:
+            for a, t in self._tracks.items():
+                if a not in self._cache:
+                    self._cache[a] = self._predict(a, t)
+            return dict(self._cache)
 
     @property
     def profile(self) -> predict.Profile:
         """The predicted profile of the (first) axis."""
         return next(iter(self.profiles.values()))
 
+    def _predict(self, letter: str, t: _Track) -> predict.Profile:
+        return _predict(self._controller, t)
+
+    def _add_event(
+        self, letter: str, sample: int | None, make: Callable[[float], predict.Event] | None
+    ) -> None:
+        """Record a change sent at controller ``sample`` (``make`` builds it from its time).
+
+        ``make=None`` is an abort. A change after the predicted end of a position move is
+        ignored: the move was over when it arrived.
+        """
+        with self._lock:
+            t = self._tracks.get(letter)
+            if t is None or self._done:
+                return
+            if sample is None or t.begin is None or t.kind == "schedule" or t.aborted is not None:
+                t.exact = False
+                return
+            k = sample - t.begin
+            current = self.profiles[letter]
+            if t.kind == "position" and k > current.samples:
+                return
+            if make is None:
+                t.aborted = sample
+            else:
+                event = make(k * self._controller.sample_period)
+                t.events.append(event)
+                if isinstance(event, predict.Stop):
+                    t.stopped = True
+            self._cache.pop(letter, None)
+            try:
+                self._cache[letter] = self._predict(letter, t)
+            except (CommandError, InvalidArgument):
+                # The predictor refuses what the controller accepted: keep the old prediction.
+                if make is not None:
+                    t.events.pop()
+                t.exact = False
+                self._cache[letter] = current
+
     @property
     def duration(self) -> float:
-        """Predicted duration in seconds (``inf`` for a jog, which runs until stopped)."""
-        if self.kind == "jog" or not self.profiles:
+        """Predicted duration in seconds (``inf`` for a jog that has not been stopped)."""
+        if any(
+            t.kind == "jog" and not t.stopped and t.aborted is None for t in self._tracks.values()
+        ):
             return math.inf
+        if not self._tracks:
+            return 0.0
         return max(p.duration for p in self.profiles.values())
 
+    # -- completion --------------------------------------------------------------------------
     @property
     def result(self) -> MoveResult | None:
         """The comparison with the prediction, once the move is done."""
@@ -118,34 +279,38 @@ class MoveHandle:
 
     @property
     def done(self) -> bool:
-        """True once every axis's profile is complete (``_BG`` is 0)."""
+        """True once every axis's profile is complete (``_BG`` is 0); one query per call."""
         if self._done:
             return True
-        moving = self._controller._query_ints([f"_BG{a}" for a in self.axes])
-        if not any(moving):
-            self._finish()
+        letters = self.axes
+        names = [f"_{op}{a}" for op in ("BG", "RP", "SC") for a in letters]
+        values = self._controller._query_ints(names)
+        n = len(letters)
+        if not any(values[:n]):
+            self._finish(values[n : 2 * n], values[2 * n :])
         return self._done
 
-    def _finish(self) -> None:
+    def _finish(self, rp: Sequence[int], sc: Sequence[int]) -> None:
         with self._lock:
             if self._done:
                 return
-            names = [f"_RP{a}" for a in self.axes] + [f"_SC{a}" for a in self.axes]
-            values = self._controller._query_ints(names)
-            n = len(self.axes)
-            final = dict(zip(self.axes, values[:n], strict=True))
-            stop = dict(zip(self.axes, values[n:], strict=True))
-            predicted = {a: int(p.position[-1]) for a, p in self.profiles.items()}
-            deviation = {a: final[a] - predicted[a] for a in self.axes}
+            letters = self.axes
+            final = dict(zip(letters, rp, strict=True))
+            stop = dict(zip(letters, sc, strict=True))
+            profiles = self.profiles
+            predicted: dict[str, int] = {}
+            for a, t in self._tracks.items():
+                if t.exact and not _open_jog(t) and stop[a] not in (2, 3):
+                    predicted[a] = profiles[a].end
+            deviation = {a: final[a] - v for a, v in predicted.items()}
             self._result = MoveResult(final, predicted, deviation, stop)
             self._done = True
             callbacks, self._callbacks = self._callbacks, []
-        if self._expect_final and self._result.worst > 1 and all(c == 1 for c in stop.values()):
+        if self._result.worst > 1:
             warnings.warn(
-                f"move on {self.axes} ended {self._result.deviation} counts away from the "
-                "prediction",
+                f"move on {letters} ended {self._result.deviation} counts away from the prediction",
                 RuntimeWarning,
-                stacklevel=3,
+                stacklevel=4,
             )
         for cb in callbacks:
             cb(self)
@@ -153,51 +318,74 @@ class MoveHandle:
     def wait(self, timeout: float | None = None, progress: bool = False) -> MoveResult:
         """Block until the move is done, polling without holding the link between polls.
 
+        Polls come at about a quarter of the predicted time left (between 5 and 100 ms); on a
+        manual-clock simulator each pause advances simulated time instead of sleeping.
+
         Args:
             timeout: seconds to wait at most (``None``: the predicted duration plus a margin,
-                or forever for a jog).
+                or forever for a jog that has not been stopped).
             progress: show a ``tqdm.auto`` bar driven by the predicted duration.
 
         Raises:
             GalilTimeoutError: the move did not finish in time (it is NOT stopped).
             LimitError: an axis stopped on a limit switch or soft limit.
         """
-        from galil.errors import GalilTimeoutError
-
-        if timeout is None and self.kind != "jog" and math.isfinite(self.duration):
-            timeout = self.duration * 1.5 + 2.0
-        deadline = None if timeout is None else self._controller._clock() + timeout
+        if timeout is not None and not (isinstance(timeout, (int, float)) and timeout >= 0):
+            raise InvalidArgument(f"timeout must be a non-negative number, got {timeout!r}")
+        duration = self.duration
+        if timeout is None and math.isfinite(duration):
+            timeout = duration * 1.5 + 2.0
+        c = self._controller
+        start = c._clock()
+        deadline = None if timeout is None else start + timeout
         bar = _progress_bar(self) if progress else None
-        start = self._controller._clock()
         try:
             while not self.done:
-                now = self._controller._clock()
+                now = c._clock()
                 if deadline is not None and now >= deadline:
                     raise GalilTimeoutError(
                         f"move on {self.axes} not done after {timeout:.3g} s "
                         f"(predicted {self.duration:.3g} s)",
-                        model=self._controller.model.name,
+                        model=c.model.name,
                     )
+                elapsed = now - self.started_at
                 if bar is not None:
-                    bar.n = min(now - start, bar.total)
+                    bar.n = elapsed if bar.total is None else min(elapsed, bar.total)
                     bar.refresh()
-                remaining = self.duration - (now - start)
-                pause = remaining / 4 if math.isfinite(remaining) and remaining > 0 else _MAX_POLL
-                self._controller._pause(min(max(pause, _MIN_POLL), _MAX_POLL))
+                remaining = self.duration - elapsed
+                pause = remaining / 4 if math.isfinite(remaining) else _MAX_POLL
+                if deadline is not None:
+                    pause = min(pause, deadline - now)
+                c._pause(min(max(pause, _MIN_POLL), _MAX_POLL))
         finally:
             if bar is not None:
-                bar.n = bar.total if self._done else bar.n
+                if self._done and bar.total is not None:
+                    bar.n = bar.total
                 bar.refresh()
                 bar.close()
+        if self._error is not None:
+            raise self._error
         assert self._result is not None
         limited = {a: c for a, c in self._result.stop_codes.items() if c in (2, 3)}
         if limited:
             text = ", ".join(f"{a}: {codes.stop_text(c)}" for a, c in limited.items())
-            raise LimitError(f"move stopped early ({text})", name="limit switch")
+            first = next(iter(limited))
+            raise LimitError(
+                f"move stopped early ({text})",
+                name="limit switch" if limited[first] else "limit",
+                value=self._result.final[first],
+                axis=first,
+                model=c.model.name,
+            )
         return self._result
 
     def add_callback(self, callback: Callable[[MoveHandle], None]) -> None:
-        """Call ``callback(handle)`` once the move is done (at once if it already is)."""
+        """Call ``callback(handle)`` once the move is done (at once if it already is).
+
+        A background thread polls ``_BG`` every 50 ms of real time; it never advances a
+        simulator's manual clock (whoever waits does), so a callback may also run on the
+        thread that calls :meth:`wait` or reads :attr:`done`.
+        """
         with self._lock:
             if not self._done:
                 self._callbacks.append(callback)
@@ -212,13 +400,13 @@ class MoveHandle:
     def _watch(self) -> None:
         try:
             while not self.done:
-                self._controller._pause(_MAX_POLL / 2)
+                time.sleep(_MAX_POLL / 2)
         except GalilError as exc:  # the link died: record it, callers see it on wait()
             self._error = exc
 
     def stop(self) -> None:
         """Decelerate the move's axes to a stop (``ST``) at their DC."""
-        self._controller.command(f"ST {self.axes}")
+        stop_axes(self._controller, self.axes)
 
     def __repr__(self) -> str:
         state = "done" if self._done else "moving"
@@ -231,12 +419,32 @@ def _progress_bar(handle: MoveHandle) -> Any:
     except ImportError:  # progress is a nicety; the wait itself does not need it
         return None
     total = handle.duration if math.isfinite(handle.duration) else None
-    return tqdm(
-        total=total,
-        desc=f"{handle.kind} {handle.axes}",
-        unit="s",
-        bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} s",
-    )
+    fmt = "{l_bar}{bar}| {n:.2f}/{total:.2f} s" if total is not None else "{desc}: {n:.2f} s"
+    return tqdm(total=total, desc=f"{handle.kind} {handle.axes}", unit="s", bar_format=fmt)
+
+
+def _notify(
+    controller: Controller,
+    letters: str,
+    sample: int | None,
+    make: Callable[[float], predict.Event] | None,
+) -> None:
+    for a in letters:
+        handle = controller.axes[a]._active
+        if handle is not None:
+            handle._add_event(a, sample, make)
+
+
+def stop_axes(controller: Controller, letters: str = "") -> None:
+    """``ST`` on ``letters`` (default: all axes); the moves' predictions follow the stop."""
+    replies = controller.command_line([f"ST {letters}".rstrip(), "MG TIME"])
+    _notify(controller, letters or controller.model.axes, _sample_of(replies[-1]), predict.Stop)
+
+
+def abort_all(controller: Controller) -> None:
+    """``AB 1``: stop every axis at once, without deceleration; programs keep running."""
+    replies = controller.command_line(["AB 1", "MG TIME"])
+    _notify(controller, controller.model.axes, _sample_of(replies[-1]), None)
 
 
 class Axis:
@@ -250,12 +458,20 @@ class Axis:
         self._controller = controller
         self.letter = letter
         self._scale: Scale | None = None
-        self._jog_speed: float | None = None
         self._active: MoveHandle | None = None  # the last move started through this axis
 
     # -- units ------------------------------------------------------------------------------
     def set_scale(self, counts_per: Any, offset: Any = None, sign: int = 1) -> Axis:
-        """Give the axis a scale, e.g. ``counts_per=2000 / ureg.mm``; ``None`` removes it."""
+        """Give the axis a scale, e.g. ``counts_per=2000 / ureg.mm``; ``None`` removes it.
+
+        Args:
+            counts_per: counts per user unit (a length, or an angle for a rotary axis).
+            offset: the user position at count 0.
+            sign: -1 when the user's positive direction is the motor's negative one.
+
+        Returns:
+            The axis, so ``x = dmc.A.set_scale(...)`` reads well.
+        """
         self._scale = None if counts_per is None else Scale(counts_per, offset, sign)
         return self
 
@@ -275,9 +491,12 @@ class Axis:
         return counts_or_plain(value, what)
 
     def _rate_counts(self, value: Any, power: int, what: str) -> float:
+        # A rate's sign never flips with the axis: speeds and accelerations are magnitudes.
+        return abs(self._signed_rate(value, power, what))
+
+    def _signed_rate(self, value: Any, power: int, what: str) -> float:
         if self._scale is not None:
-            # A rate's sign never flips with the axis: speeds and accelerations are magnitudes.
-            return abs(self._scale.rate_to_counts(value, power, what))
+            return self._scale.rate_to_counts(value, power, what)
         if is_quantity(value):
             raise InvalidArgument(
                 f"{what}: {value} has units but axis {self.letter} has no scale; "
@@ -291,11 +510,11 @@ class Axis:
     def _out_rate(self, counts: float, power: int) -> Any:
         if self._scale is None:
             return counts
-        return abs(self._scale.counts_to_rate(counts, power)) if power else counts
+        return abs(self._scale.counts_to_rate(counts, power))
 
     # -- operands ---------------------------------------------------------------------------
     def _operand(self, name: str) -> float:
-        return self._controller._query_numbers([f"_{name}{self.letter}"])[0]
+        return self._controller.query_operands([f"_{name}{self.letter}"])[0]
 
     @property
     def position(self) -> Any:
@@ -309,7 +528,7 @@ class Axis:
 
     @property
     def velocity(self) -> Any:
-        """Filtered actual velocity ``_TV`` (averaged over ~0.25 s by the controller)."""
+        """Filtered actual velocity ``_TV`` (signed; averaged over ~0.25 s by the controller)."""
         v = self._operand("TV")
         return v if self._scale is None else self._scale.counts_to_rate(v, 1)
 
@@ -331,18 +550,35 @@ class Axis:
 
     @property
     def stop_code(self) -> tuple[int, str]:
-        """``_SC`` with its text, e.g. ``(1, "Stopped at commanded independent position")``."""
-        code = int(self._operand("SC"))
+        """``_SC`` with its text, e.g. ``(4, "Decelerating or stopped by Stop Command (ST)")``."""
+        code = round(self._operand("SC"))
         return code, codes.stop_text(code)
 
     # -- parameters -------------------------------------------------------------------------
     def _set_param(self, cmd: str, counts: float) -> None:
         value = predict.check_parameter(cmd, counts, self._controller.model, axis=self.letter)
-        self._controller.command(f"{cmd}{self.letter}={_fmt(value)}")
+        text = f"{cmd}{self.letter}={_fmt(value)}"
+        handle = self._active
+        if handle is None or handle._done or cmd not in ("SP", "AC"):
+            self._controller.command(text)
+            return
+        # A change in motion: stamp it so the move's prediction can follow it.
+        replies = self._controller.command_line([text, "MG TIME"])
+        if cmd == "SP":
+            jog = handle._tracks.get(self.letter)
+            if jog is not None and jog.kind == "jog":
+                return  # SP does not touch a jog
+            handle._add_event(
+                self.letter, _sample_of(replies[-1]), lambda t: predict.SetSpeed(t, value)
+            )
+        else:
+            handle._add_event(
+                self.letter, _sample_of(replies[-1]), lambda t: predict.SetAccel(t, value)
+            )
 
     @property
     def speed(self) -> Any:
-        """Slew speed ``SP`` (the controller's quantised value)."""
+        """Slew speed ``SP`` (the controller's quantised value); settable in motion."""
         return self._out_rate(self._operand("SP"), 1)
 
     @speed.setter
@@ -351,7 +587,7 @@ class Axis:
 
     @property
     def accel(self) -> Any:
-        """Acceleration ``AC``."""
+        """Acceleration ``AC``; settable in motion."""
         return self._out_rate(self._operand("AC"), 2)
 
     @accel.setter
@@ -360,7 +596,7 @@ class Axis:
 
     @property
     def decel(self) -> Any:
-        """Deceleration ``DC``."""
+        """Deceleration ``DC`` (the controller refuses a change in motion)."""
         return self._out_rate(self._operand("DC"), 2)
 
     @decel.setter
@@ -380,28 +616,59 @@ class Axis:
 
     @property
     def jog_speed(self) -> Any:
-        """The last jog speed set through this axis (``JG``), or ``None``."""
-        if self._jog_speed is None:
-            return None
-        v = self._jog_speed
+        """Jog speed ``JG`` (signed); setting it while jogging changes the speed in motion."""
+        v = self._operand("JG")
         return v if self._scale is None else self._scale.counts_to_rate(v, 1)
+
+    @jog_speed.setter
+    def jog_speed(self, value: Any) -> None:
+        if self._jogging():
+            self.jog(value)
+            return
+        v = predict.check_parameter(
+            "JG", self._signed_rate(value, 1, "jog speed"), self._controller.model, axis=self.letter
+        )
+        self._controller.command(f"JG{self.letter}={_fmt(v)}")
+
+    def _jogging(self) -> bool:
+        h = self._active
+        if h is None or h._done:
+            return False
+        t = h._tracks.get(self.letter)
+        return t is not None and t.kind == "jog"
 
     @property
     def soft_limits(self) -> tuple[Any, Any]:
-        """``(BL, FL)`` reverse and forward soft limits."""
-        bl, fl = self._controller._query_numbers([f"_BL{self.letter}", f"_FL{self.letter}"])
-        return self._out_pos(bl), self._out_pos(fl)
+        """``(low, high)`` soft limits (``BL``, ``FL``); ``None`` on either side removes it."""
+        bl, fl = self._controller.query_operands([f"_BL{self.letter}", f"_FL{self.letter}"])
+        low, high = self._out_pos(bl), self._out_pos(fl)
+        if self._scale is not None and self._scale.sign < 0:
+            low, high = high, low
+        return low, high
 
     @soft_limits.setter
     def soft_limits(self, limits: tuple[Any, Any]) -> None:
-        low, high = limits
+        try:
+            low, high = limits
+        except (TypeError, ValueError) as exc:
+            raise InvalidArgument(f"soft_limits takes (low, high), got {limits!r}") from exc
         bl = _INT32[0] if low is None else round(self._pos_counts(low, "reverse soft limit"))
         fl = _INT32[1] if high is None else round(self._pos_counts(high, "forward soft limit"))
-        if bl > fl:
+        if self._scale is not None and self._scale.sign < 0:
             bl, fl = fl, bl  # a negative scale sign swaps the ends
+            bl = _INT32[0] if high is None else bl
+            fl = _INT32[1] if low is None else fl
+        if bl > fl:
+            raise InvalidArgument(f"soft limits {limits!r}: low is above high")
         for name, v in (("BL", bl), ("FL", fl)):
             if not _INT32[0] <= v <= _INT32[1]:
-                raise LimitError(f"{name} {v} outside the 32-bit position range", name=name)
+                raise LimitError(
+                    f"{name} {v} outside the 32-bit position range",
+                    name=name,
+                    value=v,
+                    limit=_INT32[1] if v > 0 else _INT32[0],
+                    axis=self.letter,
+                )
         self._controller.command_line([f"BL{self.letter}={bl}", f"FL{self.letter}={fl}"])
 
     # -- moves ------------------------------------------------------------------------------
@@ -436,98 +703,89 @@ class Axis:
         return plan.profile
 
     def jog(self, speed: Any) -> MoveHandle:
-        """Jog at ``speed`` (signed); changes speed in motion when already jogging."""
+        """Jog at ``speed`` (signed).
+
+        Already jogging: the speed changes in motion and the jog's own handle is returned, its
+        prediction now including the change (at the controller sample it took effect).
+
+        Raises:
+            InvalidArgument: wrong units, a position move in progress, a stopping jog, or the
+                motor off.
+            LimitError: a speed beyond the model's range.
+        """
         c = self._controller
-        v = predict.check_parameter(
-            "JG", self._signed_rate(speed, "jog speed"), c.model, axis=self.letter
+        a = self.letter
+        v = predict.check_parameter("JG", self._signed_rate(speed, 1, "jog speed"), c.model, axis=a)
+        rp, bg, ac, dc, it, mo = c.query_operands(
+            [f"_{op}{a}" for op in ("RP", "BG", "AC", "DC", "IT", "MO")]
         )
-        state = c._query_numbers(
-            [
-                f"_RP{self.letter}",
-                f"_BG{self.letter}",
-                f"_AC{self.letter}",
-                f"_DC{self.letter}",
-                f"_IT{self.letter}",
-            ]
-        )
-        rp, bg, ac, dc, it = state
-        previous = self._jog_speed if bg else None
-        jogging = previous is not None
-        if bg and not jogging:
+        handle = self._active
+        if bg and self._jogging():
+            assert handle is not None
+            track = handle._tracks[a]
+            if track.stopped or track.aborted is not None:
+                raise InvalidArgument(
+                    f"axis {a} is stopping; wait for it before jogging again", model=c.model.name
+                )
+            replies = c.command_line([f"JG{a}={_fmt(v)}", "MG TIME"])
+            handle._add_event(a, _sample_of(replies[-1]), lambda t: predict.SetSpeed(t, v))
+            return handle
+        if bg:
             raise InvalidArgument(
-                f"axis {self.letter} is in a position move; stop it before jogging",
-                model=c.model.name,
+                f"axis {a} is in another move; stop it before jogging", model=c.model.name
             )
-        profile = predict.jog(
-            v,
-            ac,
-            dc,
-            start=int(rp),
-            # The prediction assumes the last jog ramp has reached its speed.
-            initial_speed=previous if previous is not None else 0.0,
-            sample_period=c.sample_period,
-            smoothing=it,
-        )
-        if jogging:
-            c.command(f"JG{self.letter}={_fmt(v)}")
-        else:
-            c.command_line([f"JG{self.letter}={_fmt(v)}", f"BG{self.letter}"])
-        self._jog_speed = v
-        handle = MoveHandle(c, {self.letter: profile}, "jog", expect_final=False)
+        if mo:
+            raise InvalidArgument(
+                f"axis {a} has its motor off; call controller.servo_here()", model=c.model.name
+            )
+        params = MoveParams(abs(v), ac, dc, it)
+        replies = c.command_line([f"JG{a}={_fmt(v)}", f"BG{a}", "MG TIME"])
+        track = _Track("jog", round(rp), params, _sample_of(replies[-1]), amount=v)
+        handle = MoveHandle(c, {a: track}, "jog")
         self._active = handle
         return handle
-
-    def _signed_rate(self, value: Any, what: str) -> float:
-        if self._scale is not None:
-            return self._scale.rate_to_counts(value, 1, what)
-        return self._rate_counts(value, 1, what)
 
     def increment(self, n: Any) -> MoveHandle:
         """Increment the position by ``n`` (``IP``).
 
         Idle: the same as ``move_by(n)``. During a position move: the target moves by ``n``
-        (same direction only; the controller refuses a reversal with TC 16). While jogging: an
-        instant step of the reference position.
+        (same direction only; the controller refuses a reversal with TC 16, so it is refused
+        here first). While jogging: an instant step of the reference position. In motion the
+        handle of the move in progress is returned, its prediction updated.
+
+        Raises:
+            InvalidArgument: wrong units, a reversal, an axis stopping or in contour mode.
         """
         counts = round(self._dist_counts(n, "increment"))
         c = self._controller
-        rp, bg, pa = c.query_operands(
-            [f"_RP{self.letter}", f"_BG{self.letter}", f"_PA{self.letter}"]
-        )
-        active = self._active
+        a = self.letter
+        rp, bg, pa = c.query_operands([f"_RP{a}", f"_BG{a}", f"_PA{a}"])
         if not bg:
-            return execute_move(c, {self.letter: n}, relative=True, command="IP")
-        if self._jog_speed is not None:
-            c.command(f"IP{self.letter}={counts}")
-            assert active is not None
-            return active
-        remaining = int(pa) - int(rp)
-        if counts and remaining and (counts > 0) != (remaining > 0):
+            return execute_move(c, {a: n}, relative=True, command="IP")
+        handle = self._active
+        track = None if handle is None or handle._done else handle._tracks.get(a)
+        if track is not None and (track.stopped or track.aborted is not None):
             raise InvalidArgument(
-                f"IP {counts} would reverse the move in progress on {self.letter} "
-                f"({remaining:+d} counts to go); the controller refuses it (TC 16)",
-                model=c.model.name,
+                f"axis {a} is stopping; the controller refuses IP now (TC 16)", model=c.model.name
             )
-        profile = None
-        if active is not None and active.kind == "position" and self.letter in active.profiles:
-            old = active.profiles[self.letter]
-            elapsed = max(0.0, c._clock() - active.started_at)
-            params = active.params[self.letter]
-            profile = predict.move(
-                old.distance,
-                params.speed,
-                params.accel,
-                params.decel,
-                sample_period=c.sample_period,
-                smoothing=params.smoothing,
-                start=old.start,
-                events=[predict.Increment(elapsed, counts)],
+        if track is None or track.kind != "jog":
+            remaining = round(pa) - round(rp)
+            if counts and remaining and (counts > 0) != (remaining > 0):
+                raise InvalidArgument(
+                    f"IP {counts} would reverse the move in progress on {a} "
+                    f"({remaining:+d} counts to go); the controller refuses it (TC 16)",
+                    model=c.model.name,
+                )
+        replies = c.command_line([f"IP{a}={counts}", "MG TIME"])
+        if handle is None or track is None:
+            # Someone else's move: nothing to follow; a handle that only waits for it.
+            params = MoveParams(0.0, 1.0, 1.0, 1.0)
+            lone = _Track("position", round(rp), params, None, exact=False)
+            lone.fixed = predict.Profile.from_samples(
+                [round(rp)], sample_period=c.sample_period, shape="none", peak_speed=0.0
             )
-        c.command(f"IP{self.letter}={counts}")
-        if profile is None:
-            return MoveHandle(c, {}, "increment", expect_final=False)
-        handle = MoveHandle(c, {self.letter: profile}, "increment")
-        self._active = handle
+            return MoveHandle(c, {a: lone}, "position")
+        handle._add_event(a, _sample_of(replies[-1]), lambda t: predict.Increment(t, counts))
         return handle
 
     def speed_schedule(
@@ -546,12 +804,23 @@ class Axis:
             changes: ``[(at, new_speed), ...]``, ``at`` measured from the start of the move.
             speed: initial speed (default: the axis's SP).
             label: program label to download (the program replaces what is in memory).
+
+        Raises:
+            ScheduleError: a change point the profiler cannot honour (nothing is sent).
+            InvalidArgument: wrong units, bad values, the axis busy or its motor off.
+            LimitError: a speed out of range or a path crossing a soft limit.
         """
         c = self._controller
         a = self.letter
         d = round(self._dist_counts(distance, "distance"))
         pairs = []
-        for item in changes:
+        try:
+            items = list(changes)
+        except TypeError as exc:
+            raise InvalidArgument(
+                f"changes must be a list of (at, speed), got {changes!r}"
+            ) from exc
+        for item in items:
             try:
                 at, sp = item
             except (TypeError, ValueError) as exc:
@@ -564,38 +833,41 @@ class Axis:
                     ),
                 )
             )
-        rp, bg, sp0, ac, dc, it, bl, fl, mo = c.query_operands(
-            [f"_{op}{a}" for op in ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")]
-        )
-        if bg or mo:
-            raise InvalidArgument(f"axis {a} is moving or its motor is off", model=c.model.name)
-        first = (
-            sp0
+        chosen = (
+            None
             if speed is None
             else predict.check_parameter(
                 "SP", self._rate_counts(speed, 1, "speed"), c.model, axis=a
             )
         )
+        rp, bg, sp0, ac, dc, it, bl, fl, mo = c.query_operands(
+            [f"_{op}{a}" for op in ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")]
+        )
+        if bg or mo:
+            raise InvalidArgument(f"axis {a} is moving or its motor is off", model=c.model.name)
+        first = sp0 if chosen is None else chosen
         schedule = predict.speed_schedule(
-            d, first, pairs, ac, dc, sample_period=c.sample_period, start=int(rp), smoothing=it
+            d, first, pairs, ac, dc, sample_period=c.sample_period, start=round(rp), smoothing=it
         )
         predict.check_soft_limits(schedule.profile, low=bl, high=fl, axis=a)
         program = [f"#{label}", f"SP{a}={_fmt(first)}", f"PR{a}={d}", f"BG{a}"]
+        program.append(f"{_SCHEDULE_BEGIN}=TIME")
         for trig, new in zip(schedule.triggers, schedule.speeds[1:], strict=True):
             program += [f"AD{a}={trig}", f"SP{a}={_fmt(new)}"]
         program.append("EN")
         from galil.protocol import commands as cmds
 
         c.send(cmds.dl(program, model=c.model))
-        c.send(cmds.xq(f"#{label}"))
-        handle = MoveHandle(c, {a: schedule.profile}, "schedule")
+        c.command_line([f"{_SCHEDULE_BEGIN}=-1", cmds.xq(f"#{label}")])
+        params = MoveParams(first, ac, dc, it)
+        track = _Track("schedule", round(rp), params, None, amount=d, fixed=schedule.profile)
+        handle = MoveHandle(c, {a: track}, "schedule")
         self._active = handle
         return handle
 
     def stop(self) -> None:
-        """Decelerate to a stop (``ST``) and forget the jog speed."""
-        self._controller.command(f"ST {self.letter}")
-        self._jog_speed = None
+        """Decelerate to a stop (``ST``) at DC."""
+        stop_axes(self._controller, self.letter)
 
     def __repr__(self) -> str:
         unit = f" in {self._scale.unit:~}" if self._scale is not None else " in counts"
@@ -606,6 +878,14 @@ def _fmt(value: float) -> str:
     if float(value).is_integer():
         return str(int(value))
     return f"{value:.4f}".rstrip("0").rstrip(".")
+
+
+def _fields(letters: str, axes: str, values: Mapping[str, str]) -> str:
+    # One field per controller axis up to the last one used: "1000,,-200".
+    out = [""] * (max(axes.index(a) for a in letters) + 1)
+    for a in letters:
+        out[axes.index(a)] = values[a]
+    return ",".join(out)
 
 
 def execute_move(
@@ -622,12 +902,18 @@ def execute_move(
     """Predict, check and send a position move on one or more axes, begun together.
 
     Everything is validated and predicted first; the move goes out as one command line
-    (parameters, targets, then ``BG``) so the axes start in the same sample. With
-    ``dry_run`` nothing is sent and the handle only carries the predictions. ``command="IP"``
-    sends an idle increment (``IP`` = ``PR`` + ``BG`` on the controller).
+    (parameters, targets, ``BG``, ``MG TIME``) so the axes start in the same sample and the
+    handle knows which. With ``dry_run`` nothing is sent and the handle only carries the
+    predictions. ``command="IP"`` sends an idle increment (``IP`` = ``PR`` + ``BG``).
+
+    Raises:
+        InvalidArgument: no or unknown axes, wrong units, an axis moving or its motor off.
+        LimitError: a value out of range, or a path crossing a soft limit.
     """
-    if not targets:
-        raise InvalidArgument("no axes to move")
+    if not isinstance(targets, Mapping) or not targets:
+        raise InvalidArgument(
+            f"targets must be a non-empty mapping of axis to value, got {targets!r}"
+        )
     model = controller.model
     letters = ""
     values: dict[str, Any] = {}
@@ -637,13 +923,31 @@ def execute_move(
             raise InvalidArgument(f"axis {letter} given twice")
         letters += letter
         values[letter] = value
-    ops = ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")
-    state = controller.query_operands([f"_{op}{a}" for a in letters for op in ops])
-    parts: list[str] = []
-    profiles: dict[str, predict.Profile] = {}
-    params: dict[str, MoveParams] = {}
-    for i, a in enumerate(letters):
+    letters = "".join(sorted(letters, key=model.axes.index))
+    # Units and ranges first: a wrong value is refused before anything goes on the wire.
+    params_parts: dict[str, dict[str, str]] = {"SP": {}, "AC": {}, "DC": {}}
+    given: dict[str, dict[str, float]] = {}
+    amounts: dict[str, float] = {}
+    for a in letters:
         axis = controller.axes[a]
+        given[a] = {}
+        for cmd, val, power in (("SP", speed, 1), ("AC", accel, 2), ("DC", decel, 2)):
+            if val is not None:
+                counts = axis._rate_counts(val, power, cmd.lower())
+                given[a][cmd] = predict.check_parameter(cmd, counts, model, axis=a)
+                params_parts[cmd][a] = _fmt(given[a][cmd])
+        if relative:
+            amounts[a] = round(axis._dist_counts(values[a], "distance"))
+        else:
+            amounts[a] = round(axis._pos_counts(values[a], "target"))
+        _check_int32("PR" if relative else "PA", amounts[a], a, model.name)
+    ops = ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")
+    # One round trip for every axis's state (query_operands packs the MG lines together).
+    state = controller.query_operands([f"_{op}{a}" for a in letters for op in ops])
+    targets_out: dict[str, str] = {}
+    tracks: dict[str, _Track] = {}
+    profiles: dict[str, predict.Profile] = {}
+    for i, a in enumerate(letters):
         rp, bg, sp, ac, dc, it, bl, fl, mo = state[i * len(ops) : (i + 1) * len(ops)]
         if bg and not dry_run:
             raise InvalidArgument(
@@ -653,26 +957,15 @@ def execute_move(
             raise InvalidArgument(
                 f"axis {a} has its motor off; call controller.servo_here()", model=model.name
             )
-        chosen = {"SP": sp, "AC": ac, "DC": dc}
-        for cmd, val, power in (("SP", speed, 1), ("AC", accel, 2), ("DC", decel, 2)):
-            if val is not None:
-                counts = axis._rate_counts(val, power, cmd.lower())
-                chosen[cmd] = predict.check_parameter(cmd, counts, model, axis=a)
-                parts.append(f"{cmd}{a}={_fmt(chosen[cmd])}")
+        chosen = {"SP": sp, "AC": ac, "DC": dc, **given[a]}
+        start = round(rp)
         if relative:
-            distance = round(axis._dist_counts(values[a], "distance"))
-            target = int(rp) + distance
+            distance = round(amounts[a])
+            target = start + distance
         else:
-            target = round(axis._pos_counts(values[a], "target"))
-            distance = target - int(rp)
-        if not _INT32[0] <= target <= _INT32[1]:
-            raise LimitError(
-                f"target {target} outside the 32-bit position range",
-                name="PA",
-                value=target,
-                limit=_INT32[1] if target > 0 else _INT32[0],
-                axis=a,
-            )
+            target = round(amounts[a])
+            distance = target - start
+        _check_int32("PA", target, a, model.name)
         if chosen["SP"] <= 0 and distance:
             raise LimitError(
                 f"axis {a} has SP 0: set a speed first",
@@ -680,47 +973,83 @@ def execute_move(
                 value=0,
                 limit=model.sp_resolution,
                 axis=a,
+                model=model.name,
             )
-        profile = predict.move(
-            distance,
-            max(chosen["SP"], model.sp_resolution),
-            chosen["AC"],
-            chosen["DC"],
-            sample_period=controller.sample_period,
-            smoothing=it,
-            start=int(rp),
-        )
+        params = MoveParams(chosen["SP"], chosen["AC"], chosen["DC"], it)
+        track = _Track("position", start, params, None, amount=distance)
+        profile = _predict(controller, track)
         predict.check_soft_limits(profile, low=bl, high=fl, axis=a)
+        tracks[a] = track
         profiles[a] = profile
-        params[a] = MoveParams(chosen["SP"], chosen["AC"], chosen["DC"], it)
-        parts.append(f"IP{a}={distance}" if command == "IP" else f"PA{a}={target}")
+        targets_out[a] = str(distance if command == "IP" else target)
+    parts: list[str] = []
+    for cmd, per_axis in params_parts.items():
+        if per_axis:
+            parts.append(_axis_command(cmd, "".join(per_axis), model.axes, per_axis))
+    verb = "IP" if command == "IP" else "PA"
+    parts.append(_axis_command(verb, letters, model.axes, targets_out))
     if command != "IP":
-        parts.append(f"BG {letters}")
-    handle = MoveHandle(controller, profiles, "position", params=params)
+        parts.append(f"BG {letters}" if len(letters) > 1 else f"BG{letters}")
+    parts.append("MG TIME")
+    handle = MoveHandle(controller, tracks, "position")
+    handle._cache.update(profiles)
     if not dry_run:
-        controller.command_line(parts)
+        replies = controller.command_line(parts)
+        begin = _sample_of(replies[-1])
         for a in letters:
-            ax = controller.axes[a]
-            ax._active = handle
-            ax._jog_speed = None
+            tracks[a].begin = begin
+            controller.axes[a]._active = handle
     return handle
+
+
+def _check_int32(name: str, value: float, axis: str, model: str) -> None:
+    if not _INT32[0] <= value <= _INT32[1]:
+        raise LimitError(
+            f"{name} {value:.0f} on {axis} is outside the 32-bit position range",
+            name=name,
+            value=value,
+            limit=_INT32[1] if value > 0 else _INT32[0],
+            axis=axis,
+            model=model,
+        )
+
+
+def _axis_command(cmd: str, letters: str, axes: str, values: Mapping[str, str]) -> str:
+    if len(letters) == 1:
+        return f"{cmd}{letters}={values[letters]}"
+    return f"{cmd} {_fields(letters, axes, values)}"
 
 
 @contextlib.contextmanager
 def motion_guard(controller: Controller, axes: str | None = None) -> Iterator[None]:
-    """Stop the moving axes (``ST``) and wait for them if the block raises (Ctrl-C included)."""
+    """Stop the moving axes (``ST``) and wait for them if the block raises (Ctrl-C included).
+
+    The block's exception is re-raised once the axes have stopped (or after 30 s of trying);
+    a failure while stopping never hides it.
+    """
+    letters = controller.model.axes if axes is None else _letters(controller, axes)
     try:
         yield
     except BaseException:
-        letters = axes or controller.model.axes
         with contextlib.suppress(GalilError):
             moving = controller._query_ints([f"_BG{a}" for a in letters])
             busy = "".join(a for a, m in zip(letters, moving, strict=True) if m)
             if busy:
-                controller.command(f"ST {busy}")
+                stop_axes(controller, busy)
                 deadline = controller._clock() + 30.0
                 while any(controller._query_ints([f"_BG{a}" for a in busy])):
                     if controller._clock() > deadline:
                         break
                     controller._pause(_MIN_POLL * 4)
         raise
+
+
+def _letters(controller: Controller, axes: str) -> str:
+    if not isinstance(axes, str):
+        raise InvalidArgument(f"axes must be a string of axis letters, got {axes!r}")
+    out = ""
+    for name in axes.replace(" ", "").replace(",", ""):
+        letter = controller.model.axis_letter(name)
+        if letter not in out:
+            out += letter
+    return out

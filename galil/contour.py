@@ -136,10 +136,15 @@ class ContourResult:
 
 
 def _link_options(controller: Controller) -> dict[str, Any]:
-    kind = getattr(controller.transport, "kind", "")
+    transport = controller.transport
+    kind = getattr(transport, "kind", "")
     if kind == "serial":
-        baud = getattr(controller.transport, "baudrate", None)
-        return {"baud": float(baud)} if baud else {"baud": 9600.0}
+        # The serial transport keeps its pyserial object on ``port``; a plug-in may carry
+        # ``baudrate`` itself. An unknown rate is taken as the slowest common one.
+        baud = getattr(transport, "baudrate", None)
+        if baud is None:
+            baud = getattr(getattr(transport, "port", None), "baudrate", None)
+        return {"baud": float(baud) if baud else 9600.0}
     if kind == "ethernet":
         return {"ethernet": True}
     return {}  # in-process, USB and PCI links are far faster than any contour needs
@@ -221,39 +226,50 @@ def stream(
     }
     texts = [_cd_text(letters, model.axes, row) for row in incs.tolist()]
     depth = model.contour_buffer
+    seg_time = (1 << dt) * controller.sample_period
+    # Refill when a quarter of the buffer is free: few long lines, and most of the buffer
+    # still queued (a quarter of 511 segments is 0.25 s even at DT 1).
+    refill = max(1, depth // 4)
     bar = _bar(len(texts), letters) if progress else None
+    if round(controller.query_operands(["_TC"])[0]) == 42:
+        controller.command("TC 0")  # a previous stream's code; ours must be seen afresh
     controller.command_line([f"CM {letters}", f"DT {dt}"])
     sent = 0
     lines = 0
     low_water = depth
-    seg_time = (1 << dt) * controller.sample_period
     try:
         while sent < len(texts):
-            free = round(controller.query_number("MG _CM"))
-            if sent and free >= depth:
+            free_f, tc = controller.query_operands(["_CM", "_TC"])
+            free = round(free_f)
+            if sent and round(tc) == 42:
                 raise ContourUnderrunError(
                     f"contour buffer ran dry after {sent} of {len(texts)} segments "
-                    f"(TC 42: contour data sent too slowly)",
+                    "(TC 42: contour data sent too slowly)",
                     segment=sent,
                     model=model.name,
                 )
             low_water = min(low_water, free)
+            room = free - 1  # one spare: models differ in whether _CM counts the running one
             if depth <= 2:
                 # A one-deep buffer: WC holds its ':' until the segment before is running.
                 controller.command_line([texts[sent], "WC"], timeout=seg_time * 4 + 1.0)
                 sent += 1
                 lines += 1
-            elif free > 1:
-                batch = texts[sent : sent + free - 1]
+            elif room >= min(refill, len(texts) - sent):
+                batch = texts[sent : sent + room]
                 controller.command_line(batch)
                 sent += len(batch)
                 lines += _line_count(batch, model.line_length)
             else:
-                controller._pause(seg_time)
+                # Wait for the room one refill needs, but poll at least every 50 ms and well
+                # within what is queued: a late look costs more than an early one.
+                queued = (depth - free) * seg_time
+                need = (refill - max(room, 0)) * seg_time
+                controller._pause(max(seg_time, min(need, queued / 4, 0.05)))
             if bar is not None:
                 bar.update(sent - bar.n)
         # How full the buffer got: the last batch is the fullest moment of a short path.
-        low_water = min(low_water, round(controller.query_number("MG _CM")))
+        low_water = min(low_water, round(controller.query_operands(["_CM"])[0]))
     except BaseException:
         # Leave the controller out of contour mode whatever happened; report the first error.
         with contextlib.suppress(GalilError):
@@ -266,13 +282,14 @@ def stream(
     wait = timeout if timeout is not None else max(p.duration for p in profiles.values()) + 2.0
     deadline = controller._clock() + wait
     while any(controller._query_ints([f"_BG{a}" for a in letters])):
-        if controller._clock() > deadline:
+        now = controller._clock()
+        if now > deadline:
             from galil.errors import GalilTimeoutError
 
             raise GalilTimeoutError(
                 f"contour on {letters} not finished after {wait:.3g} s", model=model.name
             )
-        controller._pause(min(0.05, max(seg_time, 0.005)))
+        controller._pause(min(0.05, max(seg_time, 0.005), max(deadline - now, 0.001)))
     return ContourResult(letters, incs, dt, profiles, low_water, lines)
 
 

@@ -15,6 +15,7 @@ In a ``conftest.py``, ``from galil.testing import galil_sim`` gives a ``galil_si
 from __future__ import annotations
 
 import contextlib
+import re
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -101,16 +102,37 @@ def transcript(controller: Controller) -> Iterator[Transcript]:
         remove()
 
 
+_READ_ONLY = re.compile(r"MG [_A-Za-z][_A-Za-z0-9]*(?:\s*,\s*[_A-Za-z][_A-Za-z0-9]*)*")
+
+
 @contextlib.contextmanager
-def nothing_sent(controller: Controller) -> Iterator[None]:
+def nothing_sent(controller: Controller, *, allow_queries: bool = False) -> Iterator[Transcript]:
     """Assert the block puts no byte on the wire (e.g. around a call that must be refused).
 
+    Args:
+        controller: the connection to watch.
+        allow_queries: accept lines that only read operands or variables (``MG _RPA,_BLA``):
+            for refusals that need the controller's state (a soft limit, a busy axis), where
+            what matters is that nothing that changes the controller went out.
+
+    Yields:
+        The :class:`Transcript` of what was sent (empty unless ``allow_queries``).
+
     Raises:
-        AssertionError: something was written; the message shows what.
+        AssertionError: something (else) was written; the message shows what.
     """
     before = controller.bytes_sent
     with transcript(controller) as record:
-        yield
+        yield record
+    if allow_queries:
+        others = [
+            line
+            for line in record.lines
+            if not all(_READ_ONLY.fullmatch(part.strip()) for part in line.split(";"))
+        ]
+        if others:
+            raise AssertionError(f"commands other than queries went onto the wire: {others!r}")
+        return
     if controller.bytes_sent != before or record.raw:
         raise AssertionError(f"bytes went onto the wire: {bytes(record.raw)!r}")
 

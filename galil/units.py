@@ -58,6 +58,18 @@ def _ours(q: Any) -> Any:
     return reg.Quantity(q.magnitude, str(q.units))
 
 
+def _angle_power(units: Any) -> int:
+    """The power of angle in ``units`` (pint treats angles as dimensionless: count radians)."""
+    root = get_registry().Quantity(1.0, units).to_root_units()
+    return int(dict(root.unit_items()).get("radian", 0))
+
+
+def _without_counts(q: Any) -> Any:
+    """``2000 count / mm`` -> ``2000 / mm``: counts are what the scale converts to."""
+    power = dict(q.unit_items()).get("count", 0)
+    return q / get_registry().count ** power if power else q
+
+
 def _finite(value: float, what: str) -> float:
     if not math.isfinite(value):
         raise InvalidArgument(f"{what} must be a finite number, got {value!r}")
@@ -92,11 +104,13 @@ class Scale:
             raise InvalidArgument(
                 f"counts_per must be a Quantity such as 2000 / ureg.mm, got {self.counts_per!r}"
             )
-        cp = _ours(self.counts_per)
-        per = (1 / cp).units
-        if cp.dimensionless and str(per) in ("dimensionless", "count", ""):
+        cp = _without_counts(_ours(self.counts_per))
+        linear = cp.dimensionality == get_registry().Quantity(1.0, "1/m").dimensionality
+        rotary = cp.dimensionless and _angle_power(cp.units) == -1
+        if not (linear or rotary):
             raise InvalidArgument(
-                "counts_per must be per a length or an angle, e.g. 2000 / ureg.mm"
+                "counts_per must be counts per a length or an angle, e.g. 2000 / ureg.mm or "
+                f"4096 / ureg.degree, got {self.counts_per!r}"
             )
         if not math.isfinite(float(cp.magnitude)) or float(cp.magnitude) <= 0:
             raise InvalidArgument(
@@ -132,6 +146,11 @@ class Scale:
             raise InvalidArgument(
                 f"{what}: {value:~} has the wrong dimension; expected {unit:~}-compatible units"
             ) from exc
+        if _angle_power(q.units) != _angle_power(unit):
+            # pint converts 5 (dimensionless) or 5 Hz to degrees silently: refuse it here.
+            raise InvalidArgument(
+                f"{what}: {value:~} is not an angle; expected {unit:~}-compatible units"
+            )
         _finite(float(out.magnitude), what)
         return out
 
@@ -171,10 +190,10 @@ def counts_or_plain(value: object, what: str) -> float:
     """For an axis without a scale: a plain number, or a Quantity in counts."""
     if is_quantity(value):
         q = _ours(value)
-        if not q.dimensionless:
+        if not q.dimensionless or dict(q.unit_items()).keys() - {"count"}:
             raise InvalidArgument(
-                f"{what}: {value} has units but the axis has no scale; set "
-                "axis.scale(counts_per=...) or pass counts"
+                f"{what}: {value} has units but the axis has no scale; call "
+                "axis.set_scale(counts_per=...) or pass counts"
             )
         return _finite(float(q.to("count").magnitude), what)
     return _plain_number(value, what)

@@ -1,0 +1,137 @@
+"""Item 4 of issue 6: contour streaming, buffer pacing, underrun and infeasible links."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from axis_helpers import assert_follows
+
+import galil
+from galil.contour import sample_path
+from galil.errors import InvalidArgument, LimitError
+from galil.sim.controller import SimController
+from galil.sim.faults import FaultPlan
+from galil.testing import nothing_sent, sim_of, simulated
+
+
+def _ramp(n: int, step: float = 37.3) -> np.ndarray:
+    """A path of ``n`` segments with non-integer steps (the planner must carry the fractions)."""
+    return np.cumsum(np.full(n, step)) + 40 * np.sin(np.arange(n) / 50)
+
+
+def test_long_contour_keeps_the_buffer_fed(
+    dmc: galil.Controller, capsys: pytest.CaptureFixture[str]
+) -> None:
+    sim = sim_of(dmc)
+    dmc.A.move_to(1000).wait()
+    path = _ramp(2000)  # four times the 511-deep buffer
+    t0 = sim.start_trace("A")
+    result = dmc.contour("A", path, dt=1, progress=True)
+    trace = sim.stop_trace("A")["A"]
+    log = [text for k, text in sim.command_log if k >= t0]
+    cds = [text for text in log if text.startswith("CD ") and text != "CD 0=0"]
+    assert log[0] == "TC 0" or log[0].startswith("MG") or log[0] == "CM A"
+    assert "CM A" in log
+    assert "DT 1" in log
+    assert len(cds) == 2000
+    assert log[-1].startswith("MG")
+    assert "CD 0=0" in log
+    assert log.index("CD 0=0") > max(i for i, t in enumerate(log) if t in cds)
+    sent = np.array([int(t[3:]) for t in cds])
+    np.testing.assert_array_equal(sent, result.increments[:, 0])
+    assert 1000 + sent.sum() == round(path[-1]) + 1000 == dmc.A.reference_position
+    assert 0 < result.low_water < 511  # filled, never overfilled (a CD never waited for room)
+    assert result.lines < 2000 / 4  # several segments per line
+    first_cd = min(k for k, text in sim.command_log if k >= t0 and text.startswith("CD "))
+    assert_follows(trace, t0, result.profiles["A"], first_cd)
+    assert dmc.A.stop_code[0] == 51
+    assert "contour A" in capsys.readouterr().err
+    assert result.duration == pytest.approx(2000 * 2 * dmc.sample_period)
+
+
+def test_two_axis_contour_from_sample_path(dmc: galil.Controller) -> None:
+    a, b = 6000.0, 0.120  # the manual's 1 - cos move
+    t = sample_path(
+        lambda t: a * t / b - a / (2 * math.pi) * np.sin(2 * math.pi * np.minimum(t, b) / b),
+        b,
+        2,
+        dmc.sample_period,
+    )
+    path = np.stack([t, -0.5 * t], axis=1)
+    result = dmc.contour("BD", path, dt=2)
+    assert result.axes == "BD"
+    assert dmc.query_operands(["_RPB", "_RPD"]) == [6000, -3000]
+
+
+def _slow_link(delay: float) -> tuple[SimController, FaultPlan]:
+    """A link where every reply costs ``delay`` seconds of the controller's (manual) time.
+
+    A FaultPlan delay on a manual clock only holds bytes back; this plan also lets the
+    controller's clock run while the host waits, as a slow link would.
+    """
+    sim = SimController("DMC-4040")
+    plan = FaultPlan(delay=delay)
+
+    def hook(data: bytes) -> list[tuple[float, bytes]]:
+        sim.advance(delay)
+        return plan(data)
+
+    return sim, hook  # type: ignore[return-value]
+
+
+def test_underrun_raises(dmc: galil.Controller) -> None:
+    sim, hook = _slow_link(0.5)  # half a second per reply: longer than the refill margin
+    with galil.connect("sim://DMC-4040", controller=sim, faults=hook) as slow:
+        with pytest.raises(galil.ContourUnderrunError) as info:
+            slow.contour("A", _ramp(2000), dt=1)
+        assert info.value.code == 42
+        assert 0 < info.value.segment < 2000
+        assert "too slowly" in str(info.value)
+        # The stream ended contour mode; the axis can move again once the buffer drained.
+        slow.sleep(2.0)
+        assert slow.A.moving is False
+        slow.A.move_by(100).wait()
+
+
+def test_fast_enough_link_does_not_underrun() -> None:
+    sim, hook = _slow_link(0.002)
+    with galil.connect("sim://DMC-4040", controller=sim, faults=hook) as dmc:
+        result = dmc.contour("A", _ramp(1500), dt=1)
+        assert result.increments.shape == (1500, 1)
+
+
+def test_one_deep_buffer_paces_with_wc() -> None:
+    with simulated("DMC-1500") as dmc:
+        sim = sim_of(dmc)
+        path = _ramp(40, step=120.0)
+        t0 = sim.start_trace("A")
+        result = dmc.contour("X", path, dt=3)
+        trace = sim.stop_trace("A")["A"]
+        lines = [text for k, text in sim.command_log if k >= t0]
+        assert lines.count("WC") == 40
+        assert result.lines == 40
+        first_cd = min(k for k, text in sim.command_log if k >= t0 and text.startswith("CD "))
+        assert_follows(trace, t0, result.profiles["A"], first_cd)
+        assert dmc.X.reference_position == round(path[-1])
+
+
+def test_contour_bad_input_sends_nothing(dmc: galil.Controller) -> None:
+    with nothing_sent(dmc), pytest.raises(LimitError, match="CD 40000") as info:
+        dmc.contour("A", [100, 200, 40_200], dt=1)
+    assert info.value.name == "CD"
+    assert info.value.axis == "A"
+    with nothing_sent(dmc), pytest.raises(LimitError, match="DT 9"):
+        dmc.contour("A", [1, 2], dt=9)
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="shape"):
+        dmc.contour("AB", [1, 2, 3], dt=1)
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="distinct"):
+        dmc.contour("AA", [[1, 1]], dt=1)
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="NaN"):
+        dmc.contour("A", [1, math.nan], dt=1)
+    with nothing_sent(dmc), pytest.raises(InvalidArgument):
+        dmc.contour("Q", [1], dt=1)
+    dmc.A.jog(1000)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="moving"):
+        dmc.contour("A", [1, 2], dt=1)

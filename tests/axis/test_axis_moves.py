@@ -1,0 +1,239 @@
+"""Item 3 of issue 6: moves, jogs, increments, stops and their handles, on the in-process sim.
+
+Every scenario compares the simulator's servo loop with the handle's prediction sample by
+sample: the handle stamps each command with the controller's TIME, so the two must agree.
+"""
+
+from __future__ import annotations
+
+import re
+import threading
+
+import pytest
+from axis_helpers import assert_follows
+
+import galil
+from galil.errors import GalilTimeoutError, InvalidArgument, LimitError
+from galil.testing import nothing_sent, sim_of, transcript
+from galil.units import ureg
+
+
+def _log(dmc: galil.Controller, pattern: str, since: int = 0) -> list[tuple[int, str]]:
+    rx = re.compile(pattern)
+    return [(k, t) for k, t in sim_of(dmc).command_log if k >= since and rx.fullmatch(t)]
+
+
+def test_move_to_follows_prediction(dmc: galil.Controller) -> None:
+    mm, s = ureg.mm, ureg.s
+    x = dmc.A.set_scale(counts_per=2000 / mm)
+    x.speed, x.accel, x.decel = 20 * mm / s, 200 * mm / s**2, 300 * mm / s**2
+    plan = x.plan_to(12.5 * mm)
+    sim = sim_of(dmc)
+    t0 = sim.start_trace("A")
+    with transcript(dmc) as sent:
+        h = x.move_to(12.5 * mm)
+    assert sent.lines[-1] == "PAA=25000;BGA;MG TIME"  # one line: target, begin, stamp
+    assert h.kind == "position"
+    assert h.axes == "A"
+    assert not h.done
+    assert h.profile.position.tolist() == plan.position.tolist()
+    assert h.duration == pytest.approx(plan.duration)
+    r = h.wait()
+    trace = sim.stop_trace("A")["A"]
+    assert h.done
+    assert h.result is r
+    assert r.final == {"A": 25000}
+    assert r.predicted == {"A": 25000}
+    assert r.worst == 0
+    assert r.stop_codes == {"A": 1}
+    ((bg, _),) = _log(dmc, r"BGA", t0)
+    assert h.begin == {"A": bg}
+    assert_follows(trace, t0, h.profile, bg)
+    assert x.reference_position == 12.5 * mm
+
+
+def test_several_axes_in_one_line_begin_in_the_same_sample(dmc: galil.Controller) -> None:
+    sim = sim_of(dmc)
+    dmc.B.speed = 50_000
+    t0 = sim.start_trace()
+    with transcript(dmc) as sent:
+        h = dmc.move({"A": 3000, "D": -8000, "B": 20_000}, accel=512_000)
+    moving = [line for line in sent.lines if not line.startswith("MG _")]
+    assert moving == ["AC 512000,512000,,512000;PA 3000,20000,,-8000;BG ABD;MG TIME"]
+    r = h.wait()
+    traces = sim.stop_trace()
+    assert h.axes == "ABD"
+    assert r.final == {"A": 3000, "B": 20_000, "D": -8000}
+    assert r.worst == 0
+    ((bg, _),) = _log(dmc, r"BG ABD", t0)
+    assert set(h.begin.values()) == {bg}
+    for a in "ABD":
+        assert_follows(traces[a], t0, h.profiles[a], bg)
+    plan = dmc.plan({"A": 0, "B": 0}, relative=True)
+    assert set(plan) == {"A", "B"}
+
+
+def test_move_by_with_overrides_and_a_speed_change_in_motion(dmc: galil.Controller) -> None:
+    sim = sim_of(dmc)
+    t0 = sim.start_trace("C")
+    h = dmc.C.move_by(-40_000, speed=30_000, decel=100_000)
+    dmc.sleep(0.3)
+    dmc.C.speed = 60_000  # SP in motion: the prediction follows it
+    dmc.C.accel = 512_000
+    r = h.wait()
+    trace = sim.stop_trace("C")["C"]
+    assert dmc.C.speed == 60_000
+    assert r.final == {"C": -40_000}
+    assert r.deviation == {"C": 0}
+    assert h.profile.shape == "changed"
+    assert_follows(trace, t0, h.profile, h.begin["C"])
+
+
+def test_jog_with_speed_changes_and_stop(dmc: galil.Controller) -> None:
+    mm, s = ureg.mm, ureg.s
+    x = dmc.A.set_scale(counts_per=2000 / mm)
+    sim = sim_of(dmc)
+    t0 = sim.start_trace("A")
+    j = x.jog(10 * mm / s)
+    assert j.kind == "jog"
+    assert j.duration == float("inf")
+    dmc.sleep(0.02)  # still ramping: the change must not assume the ramp was complete
+    assert x.jog(-5 * mm / s) is j
+    dmc.sleep(0.5)
+    assert x.velocity.to(mm / s).magnitude == pytest.approx(-5, rel=0.01)
+    x.jog_speed = 7 * mm / s  # the setter changes speed in motion too
+    dmc.sleep(0.4)
+    j.stop()
+    assert j.duration < float("inf")
+    r = j.wait()
+    trace = sim.stop_trace("A")["A"]
+    assert r.stop_codes == {"A": 4}
+    assert r.predicted == r.final
+    assert r.worst == 0
+    assert_follows(trace, t0, j.profile, j.begin["A"])
+    with pytest.raises(GalilTimeoutError):
+        dmc.B.jog(1000).wait(timeout=0.2)
+    dmc.stop("B")
+
+
+def test_jog_refused_during_a_position_move(dmc: galil.Controller) -> None:
+    dmc.A.move_by(50_000)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="stop it"):
+        dmc.A.jog(1000)
+    dmc.A.stop()
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="moving"):
+        dmc.A.move_to(0)
+
+
+def test_increment_idle_is_a_relative_move(dmc: galil.Controller) -> None:
+    sim = sim_of(dmc)
+    t0 = sim.start_trace("B")
+    with transcript(dmc) as sent:
+        h = dmc.B.increment(7000)
+    assert sent.lines[-1] == "IPB=7000;MG TIME"
+    r = h.wait()
+    assert r.final == {"B": 7000}
+    assert r.worst == 0
+    assert_follows(sim.stop_trace("B")["B"], t0, h.profile, h.begin["B"])
+
+
+def test_increment_during_a_move_extends_it(dmc: galil.Controller) -> None:
+    sim = sim_of(dmc)
+    t0 = sim.start_trace("A")
+    h = dmc.A.move_by(20_000)
+    dmc.sleep(0.25)
+    assert dmc.A.increment(5000) is h
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="TC 16"):
+        dmc.A.increment(-3000)  # a reversal: the controller would refuse it
+    r = h.wait()
+    assert r.final == {"A": 25_000}
+    assert r.predicted == {"A": 25_000}
+    assert_follows(sim.stop_trace("A")["A"], t0, h.profile, h.begin["A"])
+
+
+def test_increment_while_jogging_and_while_stopping(dmc: galil.Controller) -> None:
+    sim = sim_of(dmc)
+    t0 = sim.start_trace("D")
+    j = dmc.D.jog(-20_000)
+    dmc.sleep(0.3)
+    assert dmc.D.increment(-1500) is j
+    dmc.sleep(0.1)
+    dmc.D.stop()
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="stopping"):
+        dmc.D.increment(-100)
+    r = j.wait()
+    assert r.worst == 0
+    assert r.predicted == r.final
+    assert_follows(sim.stop_trace("D")["D"], t0, j.profile, j.begin["D"])
+
+
+def test_controller_stop_and_abort(dmc: galil.Controller) -> None:
+    sim = sim_of(dmc)
+    t0 = sim.start_trace()
+    h = dmc.move({"A": 100_000, "B": -100_000})
+    j = dmc.C.jog(30_000)
+    dmc.sleep(0.3)
+    dmc.stop()
+    r, rj = h.wait(), j.wait()
+    assert r.stop_codes == {"A": 4, "B": 4}
+    assert rj.stop_codes == {"C": 4}
+    assert r.worst == 0
+    assert rj.worst == 0
+    assert set(r.predicted) == {"A", "B"}
+    traces = sim.stop_trace()
+    for a in "AB":
+        assert_follows(traces[a], t0, h.profiles[a], h.begin[a])
+    t1 = sim.start_trace("A")
+    h = dmc.A.move_by(50_000)
+    dmc.sleep(0.2)
+    dmc.abort()
+    r = h.wait()
+    assert r.stop_codes == {"A": 7}
+    assert r.worst == 0
+    assert h.profile.stop_code == 7
+    assert_follows(sim.stop_trace("A")["A"], t1, h.profile, h.begin["A"])
+
+
+def test_handle_progress_and_callbacks(
+    dmc: galil.Controller, capsys: pytest.CaptureFixture[str]
+) -> None:
+    seen: list[galil.MoveHandle] = []
+    called = threading.Event()
+    h = dmc.A.move_by(30_000)
+    h.add_callback(seen.append)
+    h.add_callback(lambda _h: called.set())
+    r = h.wait(progress=True)
+    assert called.wait(5)
+    assert seen == [h]
+    assert r is h.result
+    later: list[galil.MoveHandle] = []
+    h.add_callback(later.append)  # already done: called at once
+    assert later == [h]
+    err = capsys.readouterr().err
+    assert "position A" in err
+    assert "100%" in err
+    j = dmc.B.jog(5000)
+    dmc.sleep(0.1)
+    j.stop()
+    j.wait(progress=True)  # a jog has no total: the bar counts seconds
+    assert "jog B" in capsys.readouterr().err
+    assert "done" in repr(h)
+
+
+def test_limit_switch_stops_a_move_with_limit_error(dmc: galil.Controller) -> None:
+    h = dmc.A.move_by(100_000)
+    dmc.sleep(0.1)
+    sim_of(dmc).set_limit_switch("A", "forward", True)
+    with pytest.raises(LimitError, match="FWD limit"):
+        h.wait()
+    assert h.result is not None
+    assert h.result.stop_codes == {"A": 2}
+    assert "A" not in h.result.predicted  # a limit is not something the prediction knew
+
+
+def test_motor_off_refused(dmc: galil.Controller) -> None:
+    dmc.motor_off("B")
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="motor off"):
+        dmc.B.move_by(100)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="motor off"):
+        dmc.B.jog(100)

@@ -1,0 +1,207 @@
+"""Item 1 and 2 of issue 6: the axes mapping, typed operands, units and scales."""
+
+from __future__ import annotations
+
+import math
+
+import pint
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import galil
+from galil.errors import InvalidArgument
+from galil.predict import quantise_value
+from galil.testing import nothing_sent, sim_of, simulated
+from galil.units import Scale, ureg
+
+OTHER = pint.UnitRegistry()  # a user's own registry, not galil's
+
+
+def test_axes_mapping_and_attributes(dmc: galil.Controller) -> None:
+    assert list(dmc.axes) == ["A", "B", "C", "D"]
+    assert dmc.A is dmc.axes["A"] is dmc.axes["A"]
+    assert dmc.D.letter == "D"
+    with pytest.raises(AttributeError):
+        _ = dmc.E  # a DMC-4040 has four axes
+    with pytest.raises(AttributeError):
+        _ = dmc.X  # and no X Y Z W names
+    assert "A" in repr(dmc.A)
+    assert "counts" in repr(dmc.A)
+
+
+@pytest.mark.parametrize("model", ["DMC-1500", "DMC-1700", "DMC-18x2"])
+def test_xyzw_aliases(model: str) -> None:
+    with simulated(model) as dmc:
+        assert (dmc.X, dmc.Y, dmc.Z, dmc.W) == (dmc.A, dmc.B, dmc.C, dmc.D)
+        h = dmc.move({"X": 1000, "Y": -500})
+        assert h.axes == "AB"
+        r = h.wait()
+        assert r.final == {"A": 1000, "B": -500}
+        assert dmc.Y.reference_position == -500
+
+
+def test_typed_properties_in_counts(dmc: galil.Controller) -> None:
+    a = dmc.A
+    a.speed = 12_345
+    a.accel = 100_000
+    a.decel = 200_000
+    a.smoothing = 0.5
+    a.jog_speed = -7000
+    # The controller's stored (quantised) values, as the predictor quantises them.
+    assert a.speed == quantise_value("SP", 12_345, dmc.model) != 12_345
+    assert a.accel == quantise_value("AC", 100_000, dmc.model) != 100_000
+    assert a.decel == quantise_value("DC", 200_000, dmc.model)
+    assert a.smoothing == 0.5
+    assert a.jog_speed == -7000
+    a.soft_limits = (-1000, 50_000)
+    assert a.soft_limits == (-1000, 50_000)
+    a.soft_limits = (None, None)
+    assert a.soft_limits == (-2_147_483_648, 2_147_483_647)
+    assert a.position == 0
+    assert a.reference_position == 0
+    assert a.velocity == 0
+    assert a.error == 0
+    assert a.moving is False
+    assert a.motor_on is True
+    assert a.stop_code[0] in (0, 1)
+    assert isinstance(a.stop_code[1], str)
+    h = a.move_by(30_000)
+    dmc.sleep(0.2)
+    assert a.moving is True
+    assert a.stop_code == (0, "Motors are running, independent mode")
+    assert a.velocity > 0
+    assert a.reference_position > 0
+    h.stop()
+    h.wait()
+    assert a.stop_code == (4, "Decelerating or stopped by Stop Command (ST)")
+    dmc.motor_off("A")
+    assert a.motor_on is False
+    dmc.servo_here("A")
+    assert a.motor_on is True
+
+
+def test_properties_are_quantities_with_a_scale(dmc: galil.Controller) -> None:
+    mm, s = ureg.mm, ureg.s
+    x = dmc.A.set_scale(counts_per=2000 / mm)
+    assert x.scale is not None
+    assert "mm" in repr(x)
+    x.speed = 20 * mm / s
+    x.accel = 200 * mm / s**2
+    x.decel = OTHER.Quantity(0.2, "m/s**2")  # another registry, another unit
+    x.jog_speed = -5 * mm / s
+    assert x.speed == 20 * mm / s
+    assert x.accel == quantise_value("AC", 400_000, dmc.model) / 2000 * mm / s**2
+    assert x.accel.units == mm / s**2
+    assert dmc.query_number("MG _SPA") == 40_000
+    assert dmc.query_number("MG _JGA") == -10_000
+    assert x.jog_speed == -5 * mm / s
+    x.soft_limits = (-5 * mm, OTHER.Quantity(1, "cm"))
+    assert x.soft_limits == (-5 * mm, 10 * mm)
+    assert dmc.query_operands(["_BLA", "_FLA"]) == [-10_000, 20_000]
+    x.move_to(2.5 * mm).wait()
+    assert x.reference_position == 2.5 * mm
+    assert x.position.units == mm
+    assert x.error.units == mm
+    assert x.velocity.units == mm / s
+    x.set_scale(None)
+    assert x.reference_position == 5000
+
+
+def test_rotary_axis_offset_and_sign(dmc: galil.Controller) -> None:
+    deg = ureg.degree
+    r = dmc.B.set_scale(counts_per=4096 / (90 * deg), offset=10 * deg, sign=-1)
+    r.speed = 180 * deg / ureg.s
+    assert dmc.query_number("MG _SPB") == 8192
+    r.move_to(OTHER.Quantity(100, "degree")).wait()  # 90° past the offset, motor negative
+    assert dmc.query_number("MG _RPB") == -4096
+    assert r.reference_position == 100 * deg
+    r.move_by(OTHER.Quantity(-0.25, "turn")).wait()
+    assert dmc.query_number("MG _RPB") == 0
+    assert r.reference_position == 10 * deg
+    r.soft_limits = (0 * deg, 190 * deg)  # the sign swaps BL and FL on the controller
+    assert dmc.query_operands(["_BLB", "_FLB"]) == [-8192, 455]
+    low, high = r.soft_limits  # whole counts: within one count of what was asked
+    assert abs(low - 0 * deg) <= 90 / 4096 * deg
+    assert abs(high - 190 * deg) <= 90 / 4096 * deg
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="not an angle"):
+        r.move_to(5 * ureg.dimensionless)
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="not an angle"):
+        r.speed = 3 * ureg.Hz
+
+
+@pytest.mark.parametrize(
+    ("action", "match"),
+    [
+        (lambda x: x.move_to(5 * ureg.s), "wrong dimension"),
+        (lambda x: x.move_by(OTHER.Quantity(5, "degree")), "wrong dimension"),
+        (lambda x: x.move_to(5), "needs units"),
+        (lambda x: setattr(x, "speed", 5 * ureg.mm), "wrong dimension"),
+        (lambda x: setattr(x, "accel", 5 * ureg.mm / ureg.s), "wrong dimension"),
+        (lambda x: x.jog(OTHER.Quantity(3, "mm/s**2")), "wrong dimension"),
+        (lambda x: x.increment(2 * ureg.kg), "wrong dimension"),
+        (lambda x: setattr(x, "soft_limits", (0 * ureg.s, 1 * ureg.mm)), "wrong dimension"),
+        (lambda x: x.move_to(math.nan * ureg.mm), "finite"),
+    ],
+)
+def test_wrong_units_refused_before_sending(dmc: galil.Controller, action, match: str) -> None:
+    x = dmc.A.set_scale(counts_per=2000 / ureg.mm)
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match=match):
+        action(x)
+
+
+def test_units_on_an_axis_without_scale(dmc: galil.Controller) -> None:
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="no scale"):
+        dmc.B.move_to(3 * ureg.mm)
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="no scale"):
+        dmc.B.speed = 3 * ureg.mm / ureg.s
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="number"):
+        dmc.B.move_to("12")
+    dmc.B.move_to(OTHER.Quantity(1500, "count")).wait()  # counts are fine
+    assert dmc.B.reference_position == 1500
+
+
+@pytest.mark.parametrize(
+    "bad", [2000, 2000 / ureg.s, 2000 / ureg.count, -5 / ureg.mm, math.inf / ureg.mm]
+)
+def test_bad_scales(bad: object) -> None:
+    with pytest.raises(InvalidArgument):
+        Scale(bad)
+    with pytest.raises(InvalidArgument):
+        Scale(2000 / ureg.mm, sign=0)
+    with pytest.raises(InvalidArgument):
+        Scale(2000 / ureg.mm, offset=1 * ureg.s)
+
+
+def test_counts_in_the_scale_unit_are_dropped() -> None:
+    s = Scale(2000 * ureg.count / ureg.mm)
+    assert s.unit == ureg.mm
+    assert s.position_to_counts(OTHER.Quantity(1.5, "mm")) == 3000
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    per=st.floats(1e-3, 1e6),
+    offset=st.floats(-1e4, 1e4),
+    sign=st.sampled_from([1, -1]),
+    x=st.floats(-1e4, 1e4),
+    unit=st.sampled_from(["mm", "inch", "um", "degree", "turn"]),
+)
+def test_scale_round_trips(per: float, offset: float, sign: int, x: float, unit: str) -> None:
+    u = ureg.Unit(unit)
+    s = Scale(per / u, offset=offset * u, sign=sign)
+    counts = s.position_to_counts(OTHER.Quantity(x, unit))
+    assert counts == pytest.approx(sign * (x - offset) * per, rel=1e-9, abs=1e-6)
+    back = s.counts_to_position(counts)
+    assert back.to(u).magnitude == pytest.approx(x, rel=1e-9, abs=1e-6 * (1 + abs(offset)))
+    rate = s.rate_to_counts(OTHER.Quantity(x, f"{unit}/s"), 1, "speed")
+    assert s.counts_to_rate(rate, 1).to(u / ureg.s).magnitude == pytest.approx(
+        x, rel=1e-9, abs=1e-9
+    )
+    d = s.distance_to_counts(x * u)
+    assert s.counts_to_distance(d).magnitude == pytest.approx(x, rel=1e-9, abs=1e-9)
+
+
+def test_sim_of_needs_a_simulator() -> None:
+    with simulated() as dmc:
+        assert sim_of(dmc).spec.name == "DMC-4040"

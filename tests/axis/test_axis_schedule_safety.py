@@ -1,0 +1,140 @@
+"""Items 5, 6 and 9 of issue 6: speed schedules, the motion guard, and refused input."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from axis_helpers import assert_follows
+
+import galil
+from galil.errors import InvalidArgument, LimitError
+from galil.predict import ScheduleError
+from galil.testing import nothing_sent, sim_of, transcript
+from galil.units import ureg
+
+
+def test_speed_schedule_runs_as_predicted(dmc: galil.Controller) -> None:
+    sim = sim_of(dmc)
+    t0 = sim.start_trace("B")
+    with transcript(dmc) as sent:
+        h = dmc.B.speed_schedule(15_000, [(5000, 10_000), (10_000, 5000)], speed=50_000)
+    assert {"#GSCHED", "SPB=50000", "PRB=15000", "BGB", "ADB=5000", "ADB=10000"} <= set(sent.lines)
+    assert any("XQ #GSCHED" in line for line in sent.lines)
+    assert h.kind == "schedule"
+    r = h.wait()
+    trace = sim.stop_trace("B")["B"]
+    assert r.final == {"B": 15_000}
+    assert r.worst == 0
+    begin = h.begin["B"]
+    assert begin is not None
+    assert begin >= t0
+    assert_follows(trace, t0, h.profile, begin)
+
+
+def test_speed_schedule_in_units(dmc: galil.Controller) -> None:
+    mm, s = ureg.mm, ureg.s
+    x = dmc.C.set_scale(counts_per=2000 / mm)
+    h = x.speed_schedule(-10 * mm, [(3 * mm, 10 * mm / s)], speed=25 * mm / s)
+    assert h.wait().final == {"C": -20_000}
+    assert x.reference_position == -10 * mm
+
+
+def test_invalid_change_point_names_the_earliest(dmc: galil.Controller) -> None:
+    dmc.B.accel = 100_000
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(ScheduleError) as info:
+        dmc.B.speed_schedule(15_000, [(1000, 10_000)], speed=50_000)
+    err = info.value
+    ac = dmc.B.accel  # quantised as the controller stores it
+    assert err.index == 0
+    assert err.earliest == math.ceil(50_000**2 / (2 * ac))
+    assert err.earliest > 1000
+    assert "earliest valid trigger" in str(err)
+    assert isinstance(err, LimitError)
+    with nothing_sent(dmc), pytest.raises(InvalidArgument):
+        dmc.B.speed_schedule(15_000, [(1000,)])
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="wrong dimension"):
+        dmc.B.set_scale(counts_per=1000 / ureg.mm).speed_schedule(
+            5 * ureg.mm, [(1 * ureg.s, 2 * ureg.mm / ureg.s)]
+        )
+
+
+def _fail_during_moves(dmc: galil.Controller, exc: BaseException, guarded: str | None) -> None:
+    with dmc.motion(guarded):
+        dmc.A.move_by(100_000)
+        dmc.C.jog(-20_000)
+        dmc.sleep(0.3)
+        raise exc
+
+
+@pytest.mark.parametrize("exc", [RuntimeError("scan failed"), KeyboardInterrupt()])
+def test_motion_guard_stops_moving_axes(dmc: galil.Controller, exc: BaseException) -> None:
+    sim = sim_of(dmc)
+    dmc.D.move_by(500)  # finishes before the failure: not stopped again
+    with pytest.raises(type(exc)) as info:
+        _fail_during_moves(dmc, exc, None)
+    assert info.value is exc  # re-raised as it was
+    stops = [text for _, text in sim.command_log if text.startswith("ST")]
+    assert stops == ["ST AC"]
+    # The guard waited: both axes are at rest, stopped by ST, when the exception arrives.
+    assert dmc.query_operands(["_BGA", "_BGC", "_SCA", "_SCC"]) == [0, 0, 4, 4]
+
+
+def test_motion_guard_leaves_a_clean_block_alone(dmc: galil.Controller) -> None:
+    with dmc.motion("AB"):
+        dmc.A.move_by(100).wait()
+    with pytest.raises(ValueError, match="only B"):
+        _fail_during_moves(dmc, ValueError("only B is guarded"), "B")
+    assert dmc.A.moving
+    assert dmc.C.moving
+    assert not [t for _, t in sim_of(dmc).command_log if t.startswith("ST")]
+    dmc.stop()
+
+
+def test_out_of_range_values_sent_nothing(dmc: galil.Controller) -> None:
+    x = dmc.A.set_scale(counts_per=2000 / ureg.mm)
+    mm, s = ureg.mm, ureg.s
+    cases = [
+        lambda: setattr(x, "speed", 1e9 * mm / s),
+        lambda: setattr(x, "accel", 1e12 * mm / s**2),
+        lambda: x.move_by(1 * mm, speed=1e9 * mm / s),
+        lambda: x.jog(-1e9 * mm / s),
+        lambda: dmc.move({"A": 1 * mm, "B": 1e12}),
+        lambda: setattr(x, "soft_limits", (-2e9 * mm, 0 * mm)),
+    ]
+    for case in cases:
+        with nothing_sent(dmc), pytest.raises(LimitError) as info:
+            case()
+        assert info.value.name
+    with nothing_sent(dmc), pytest.raises(InvalidArgument):
+        dmc.A.smoothing = 2.0
+    with nothing_sent(dmc), pytest.raises(InvalidArgument):
+        dmc.move({})
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="twice"):
+        dmc.move({"A": 1, "a": 2})
+    with nothing_sent(dmc), pytest.raises(InvalidArgument):
+        dmc.move({"Q": 1})
+
+
+def test_move_past_a_soft_limit_is_refused(dmc: galil.Controller) -> None:
+    x = dmc.A.set_scale(counts_per=2000 / ureg.mm)
+    x.soft_limits = (-5 * ureg.mm, 5 * ureg.mm)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as info:
+        x.move_to(6 * ureg.mm)
+    assert "FL 10000" in str(info.value)
+    assert info.value.axis == "A"
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError, match="BL"):
+        dmc.move({"B": 0, "A": -5.5 * ureg.mm})
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError):
+        x.speed_schedule(12 * ureg.mm, [])
+    assert x.move_to(5 * ureg.mm).wait().final == {"A": 10_000}
+
+
+def test_nothing_sent_catches_a_command(dmc: galil.Controller) -> None:
+    with pytest.raises(AssertionError, match="onto the wire"), nothing_sent(dmc):
+        dmc.A.speed = 1000
+    with (
+        pytest.raises(AssertionError, match="other than queries"),
+        nothing_sent(dmc, allow_queries=True),
+    ):
+        dmc.A.move_by(10)
