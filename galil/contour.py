@@ -215,15 +215,20 @@ def stream(
             bytes_per_segment=len(_cd_text(letters, model.axes, incs[0])) + 1,
             **link,
         )
-    state = controller.query_operands([f"_{op}{a}" for a in letters for op in ("RP", "BG")])
-    for j, a in enumerate(letters):
-        if state[2 * j + 1]:
+    ops = ("RP", "BG", "BL", "FL")
+    state = controller.query_operands([f"_{op}{a}" for a in letters for op in ops])
+    axis_state = {a: state[j * len(ops) : (j + 1) * len(ops)] for j, a in enumerate(letters)}
+    for a, (_, bg, _, _) in axis_state.items():
+        if bg:
             raise InvalidArgument(f"axis {a} is moving; stop it before a contour", model=model.name)
-    starts = {a: round(state[2 * j]) for j, a in enumerate(letters)}
+    starts = {a: round(axis_state[a][0]) for a in letters}
     profiles = {
         a: predict.contour(incs[:, j], dt, start=starts[a], sample_period=controller.sample_period)
         for j, a in enumerate(letters)
     }
+    for a, prof in profiles.items():
+        # The whole path against FL/BL, as for any move, before CM goes out.
+        predict.check_soft_limits(prof, low=axis_state[a][2], high=axis_state[a][3], axis=a)
     texts = [_cd_text(letters, model.axes, row) for row in incs.tolist()]
     depth = model.contour_buffer
     seg_time = (1 << dt) * controller.sample_period

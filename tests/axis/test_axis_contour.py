@@ -135,3 +135,17 @@ def test_contour_bad_input_sends_nothing(dmc: galil.Controller) -> None:
     dmc.A.jog(1000)
     with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="moving"):
         dmc.contour("A", [1, 2], dt=1)
+
+
+def test_contour_past_a_soft_limit_is_refused_before_cm() -> None:
+    from galil.errors import LimitError
+    from galil.testing import nothing_sent, simulated
+
+    with simulated() as dmc:
+        dmc.command("FLB=1000")
+        path = [500.0 * (i + 1) for i in range(10)]  # out to 5000 counts
+        with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as info:
+            dmc.contour("B", path, dt=2)
+        assert info.value.name == "FL"
+        assert info.value.axis == "B"
+        assert dmc.B.reference_position == 0
