@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from galil.axis import Axis, MoveHandle, MoveResult
-from galil.client import Controller, connect
+from galil.client import Controller, MessageQueue, RecordStream, connect
 from galil.contour import ContourResult, ContourUnderrunError
 from galil.errors import (
     CommandError,
@@ -31,11 +31,13 @@ __all__ = [
     "GalilTimeoutError",
     "InvalidArgument",
     "LimitError",
+    "MessageQueue",
     "ModelSpec",
     "MoveHandle",
     "MoveResult",
     "Profile",
     "ProtocolError",
+    "RecordStream",
     "__version__",
     "connect",
     "get_model",

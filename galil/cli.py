@@ -23,6 +23,9 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         argv += ["--tcp", args.tcp]
     if args.pty:
         argv += ["--pty"]
+    if args.message_port is not None:
+        argv += ["--message-port", str(args.message_port)]
+    argv += ["--lag", str(args.lag)]
     return sim_main(argv)
 
 
@@ -103,6 +106,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--model", default="DMC-4040")
     p.add_argument("--tcp", metavar="HOST:PORT", help="e.g. 127.0.0.1:0 (0 picks a free port)")
     p.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal")
+    p.add_argument(
+        "--message-port",
+        type=int,
+        default=None,
+        help="TCP port for unsolicited messages (0 picks one, -1 none: use CF on a handle)",
+    )
+    p.add_argument("--lag", type=float, default=0.003, help="servo lag time constant, s")
     p.set_defaults(func=_cmd_sim)
 
     p = sub.add_parser("plan", help="predict a position move and print (or plot) it")

@@ -30,6 +30,8 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
+import numpy as np
+
 from galil.errors import (
     CommandError,
     GalilConnectionError,
@@ -41,16 +43,17 @@ from galil.errors import (
 from galil.models import Identity, ModelSpec, get_model, parse_identity
 from galil.protocol import commands as cmds
 from galil.protocol.codes import parse_tc1
-from galil.protocol.commands import Command
+from galil.protocol.commands import Command, Expect
 from galil.protocol.framing import FrameParser, Unsolicited
 from galil.protocol.numbers import parse_number
+from galil.protocol.records import RecordSplitter, decode_record, parse_qz, record_to_dict
 from galil.protocol.session import Completed, Session
 from galil.transport import Transport, open_transport
 
 if TYPE_CHECKING:
     from galil.axis import Axis
 
-__all__ = ["CLIENT_OPTIONS", "Controller", "MessageQueue", "WireLog", "connect"]
+__all__ = ["CLIENT_OPTIONS", "Controller", "MessageQueue", "RecordStream", "WireLog", "connect"]
 
 _WIRE = logging.getLogger("galil.wire")
 _LOG = logging.getLogger("galil.client")
@@ -58,12 +61,26 @@ _DEBUG = logging.DEBUG
 _monotonic = time.monotonic
 
 CLIENT_OPTIONS = frozenset(
-    {"timeout", "model", "handshake", "unsolicited", "history", "poll_interval", "max_messages"}
+    {
+        "timeout",
+        "model",
+        "handshake",
+        "unsolicited",
+        "history",
+        "poll_interval",
+        "max_messages",
+        "echo",
+    }
 )
 """Keyword options :func:`connect` keeps for the :class:`Controller`; the rest go to the
 transport opener (``baudrate=``, ``port=``, ``backend=`` ...)."""
 
 _E = TypeVar("_E", bound=GalilError)
+
+# ^R^V with any reply shape, and what its echo looks like in front of the identity (the
+# controller may or may not echo the control characters; an echoed CR may gain an LF).
+_IDENTIFY_ANY = Command("\x12\x16", Expect.ANY)
+_ECHO_OF_IDENTIFY = re.compile(r"[\x12\x16]*\r\n?")
 
 
 @functools.lru_cache(maxsize=512)
@@ -181,6 +198,218 @@ class WireLog:
             remove()
 
 
+# ----------------------------------------------------------------------------------- records
+
+RecordCallback = Callable[["np.void"], None]
+
+
+class RecordStream:
+    """Data records at a fixed period, decoded, oldest first. Build it with
+    :meth:`Controller.records`.
+
+    Over Ethernet the controller pushes them (``DR period,handle``) to a handle of their own,
+    read by a background thread into a bounded queue (``dropped`` counts records lost when
+    nobody reads). Elsewhere (serial, USB, the in-process simulator) each :meth:`get` waits
+    until the next record is due and asks for it with ``QR``, so records are as far apart as
+    asked, in the controller's time (simulated time on a manual-clock simulator).
+
+    Attributes:
+        period: servo samples between records.
+        method: ``"DR"`` (pushed) or ``"QR"`` (polled).
+        dropped: records dropped from a full queue (``DR`` only).
+    """
+
+    def __init__(
+        self,
+        controller: Controller,
+        period: int,
+        method: str,
+        *,
+        handle: Transport | None = None,
+        maxlen: int = 10_000,
+    ) -> None:
+        self.period = period
+        self.method = method
+        self.dropped = 0
+        self._controller = controller
+        self._handle = handle
+        self._items: deque[np.void] = deque()
+        self._maxlen = maxlen
+        self._cond = threading.Condition(threading.Lock())
+        self._closed = False
+        self._error: GalilError | None = None
+        self._subscribers: list[RecordCallback] = []
+        self._next_due: float | None = None
+        self._thread: threading.Thread | None = None
+
+    def _start_reader(self, qz: tuple[int, int, int, int]) -> None:
+        self._thread = threading.Thread(
+            target=self._read, args=(qz,), name="galil-records", daemon=True
+        )
+        self._thread.start()
+
+    def _read(self, qz: tuple[int, int, int, int]) -> None:
+        handle = self._handle
+        assert handle is not None
+        splitter = RecordSplitter(qz)
+        while not self._closed:
+            try:
+                chunk = handle.read(0.25)
+                records = [decode_record(r, qz) for r in splitter.feed(chunk)] if chunk else []
+            except ProtocolError as exc:
+                # A stream out of step cannot be re-cut reliably: stop and say why.
+                self._fail(exc)
+                return
+            except GalilConnectionError as exc:
+                if not self._closed:
+                    self._fail(exc)
+                return
+            if records:
+                self._push(records)
+
+    def _fail(self, exc: GalilError) -> None:
+        with self._cond:
+            self._error = exc
+            self._cond.notify_all()
+
+    def _push(self, records: list[np.void]) -> None:
+        with self._cond:
+            for rec in records:
+                if len(self._items) >= self._maxlen:
+                    self._items.popleft()
+                    self.dropped += 1
+                self._items.append(rec)
+            self._cond.notify_all()
+        for rec in records:
+            self._notify(rec)
+
+    def _notify(self, rec: np.void) -> None:
+        for cb in self._subscribers:
+            try:
+                cb(rec)
+            except Exception:
+                _LOG.exception("data-record callback %r failed", cb)
+
+    def subscribe(self, callback: RecordCallback) -> Callable[[], None]:
+        """Call ``callback(record)`` for each record as it arrives; returns an unsubscriber.
+
+        With ``DR`` the callback runs on the reader thread; with ``QR`` inside :meth:`get`.
+        """
+        if not callable(callback):
+            raise InvalidArgument(f"callback must be callable, not {callback!r}")
+        self._subscribers = [*self._subscribers, callback]
+
+        def unsubscribe() -> None:
+            self._subscribers = [c for c in self._subscribers if c is not callback]
+
+        return unsubscribe
+
+    def get(self, timeout: float | None = None) -> np.void:
+        """Return the next record, waiting up to ``timeout`` seconds (``None``: for ever).
+
+        Raises:
+            queue.Empty: no record within ``timeout``.
+            GalilConnectionError: the stream is closed (or its handle died).
+            ProtocolError: the record stream could not be decoded.
+        """
+        if self.method == "QR":
+            return self._poll(timeout)
+        with self._cond:
+            ready = self._cond.wait_for(
+                lambda: self._items or self._closed or self._error is not None, timeout
+            )
+            if self._items:
+                return self._items.popleft()
+            if self._error is not None:
+                raise self._error
+            if self._closed:
+                raise GalilConnectionError("the data-record stream is closed")
+            assert not ready
+            raise queue.Empty(f"no data record within {timeout} s")
+
+    def _poll(self, timeout: float | None) -> np.void:
+        if self._closed:
+            raise GalilConnectionError("the data-record stream is closed")
+        c = self._controller
+        now = c._clock()
+        if self._next_due is None:
+            self._next_due = now
+        wait = self._next_due - now
+        if wait > 0:
+            if timeout is not None and wait > timeout:
+                c._pause(timeout)
+                raise queue.Empty(f"no data record within {timeout} s")
+            c._pause(wait)
+        rec: np.void = c.record()
+        # The next one is due a period after this one was due, so records do not drift.
+        self._next_due = max(self._next_due, now) + self.period * c.sample_period
+        self._notify(rec)
+        return rec
+
+    def take(self, n: int, timeout: float | None = None) -> np.ndarray[Any, np.dtype[Any]]:
+        """Return the next ``n`` records as one structured array (``a["A"]["position"]``).
+
+        ``timeout`` bounds the wait for each record.
+        """
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            raise InvalidArgument(f"n must be a positive integer, not {n!r}")
+        first = self.get(timeout)
+        out = np.empty(n, dtype=first.dtype)
+        out[0] = first
+        for i in range(1, n):
+            out[i] = self.get(timeout)
+        return out
+
+    def __iter__(self) -> Iterator[np.void]:
+        """Records until the stream is closed."""
+        while True:
+            try:
+                yield self.get()
+            except GalilConnectionError:
+                return
+
+    def __len__(self) -> int:
+        with self._cond:
+            return len(self._items)
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` was called."""
+        return self._closed
+
+    def close(self) -> None:
+        """Stop the stream (``DR 0``) and close its handle; idempotent."""
+        with self._cond:
+            if self._closed:
+                return
+            self._closed = True
+            self._cond.notify_all()
+        c = self._controller
+        c._record_streams = [s for s in c._record_streams if s is not self]
+        if self.method == "DR":
+            if not c.closed:
+                with contextlib.suppress(GalilError):
+                    c.command("DR 0")
+            if self._handle is not None:
+                with contextlib.suppress(GalilError, OSError):
+                    self._handle.close()
+            if self._thread is not None and self._thread is not threading.current_thread():
+                self._thread.join(timeout=2.0)
+
+    def __enter__(self) -> RecordStream:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = "closed" if self._closed else "open"
+        waiting = len(self)
+        return (
+            f"<RecordStream {self.method} every {self.period} samples, {waiting} waiting, {state}>"
+        )
+
+
 # ----------------------------------------------------------------------------------- the client
 
 
@@ -213,6 +442,10 @@ class Controller:
         history: exchanges kept in the ring buffer attached to errors.
         poll_interval: seconds between polls for unsolicited lines while the link is idle.
         max_messages: unsolicited lines kept in :attr:`messages` before the oldest drop.
+        echo: what to do when the handshake finds the controller echoing (``EO 1``, a serial
+            setting): ``False`` (default) switches the echo off with ``EO 0``, as Galil's own
+            library does, and :meth:`close` switches it back on; ``True`` leaves it on and
+            strips the echo from every reply.
 
     Attributes:
         transport: the open :class:`~galil.transport.Transport`.
@@ -234,8 +467,12 @@ class Controller:
         history: int = 64,
         poll_interval: float = 0.02,
         max_messages: int = 1000,
+        echo: bool = False,
     ) -> None:
         self.timeout = _check_timeout(timeout, 1.0)
+        if not isinstance(echo, bool):
+            raise InvalidArgument(f"echo must be True or False, not {echo!r}")
+        self._keep_echo = echo
         if not handshake and model is None:
             raise InvalidArgument("handshake=False needs model= (nothing identifies it then)")
         if isinstance(history, bool) or not isinstance(history, int) or history < 1:
@@ -266,6 +503,11 @@ class Controller:
         self._session = Session()
         self._open_flag = False
         self._cw_restore: int | None = None
+        self._eo_restore = False
+        #: Whether the controller echoes (found at the handshake).
+        self.echo = False
+        self._qz: tuple[int, int, int, int] | None = None
+        self._record_streams: list[RecordStream] = []
         self._pump: threading.Thread | None = None
         self._reader: threading.Thread | None = None
         self._stop = threading.Event()
@@ -285,6 +527,9 @@ class Controller:
         self._session = Session()
         self._stop = threading.Event()
         self._cw_restore = None
+        self._eo_restore = False
+        self.echo = False
+        self._qz = None
         self._open_flag = True
         try:
             with self._lock:
@@ -310,7 +555,9 @@ class Controller:
     def _identify(self) -> None:
         given = self._given_model
         try:
-            reply = self._roundtrip([cmds.identify()], self.timeout)[0]
+            # Any reply shape: with echo on, the echo of ^R^V comes first (maybe a line of
+            # its own), and that is how the echo is found.
+            reply = self._roundtrip([_IDENTIFY_ANY], self.timeout)[0]
         except GalilTimeoutError as exc:
             raise self._error(
                 GalilConnectionError,
@@ -320,6 +567,10 @@ class Controller:
         ident: Identity | None = None
         problem = ""
         if reply.ok:
+            echo = _ECHO_OF_IDENTIFY.match(reply.text)
+            if echo is not None and echo.end():
+                reply = Completed(reply.command, True, reply.text[echo.end() :])
+                self._handle_echo()
             try:
                 ident = parse_identity(reply.text)
             except InvalidArgument as exc:
@@ -346,6 +597,30 @@ class Controller:
                 RuntimeWarning,
                 stacklevel=4,
             )
+
+    def _handle_echo(self) -> None:
+        # The controller echoes what it receives: strip the echo from now on, and unless the
+        # caller wants to keep it, switch it off (restored by close()).
+        self.echo = True
+        self._session = Session(echo=True)
+        self._remember(("n", "the controller echoes (EO 1)"))
+        if self._keep_echo:
+            return
+        try:
+            done = self._roundtrip([cmds.eo(0)], self.timeout)[0]
+        except (GalilTimeoutError, ProtocolError):
+            done = Completed(cmds.eo(0), False)  # the session resynchronises before the next
+        if done.ok:
+            self._session = Session()
+            self._eo_restore = True
+            self.echo = False
+            return
+        warnings.warn(
+            f"{self.model.name if self.model else 'the controller'} echoes and refused EO 0; "
+            "the echo is stripped from every reply",
+            RuntimeWarning,
+            stacklevel=6,
+        )
 
     def _route_unsolicited(self) -> None:
         ready = getattr(self.transport, "secondary", None)
@@ -430,12 +705,18 @@ class Controller:
 
         Idempotent; never raises for a link that is already dead.
         """
+        for stream in list(self._record_streams):
+            stream.close()
         with self._lock:
             if not self._open_flag:
                 return
             if self._cw_restore is not None and self._cw_restore != 1:
                 with contextlib.suppress(GalilError):
                     self._roundtrip([cmds.cw(self._cw_restore)], min(self.timeout, 0.5))
+            if self._eo_restore:
+                # Last: once the echo is back on, replies carry it and we expect none.
+                with contextlib.suppress(GalilError):
+                    self._roundtrip([cmds.eo(1)], min(self.timeout, 0.5))
             self._teardown()
         self._join_threads()
 
@@ -902,6 +1183,122 @@ class Controller:
             if self._undelivered:
                 self._deliver()
 
+    # -- data records -----------------------------------------------------------------------
+
+    def _record_layout(self) -> tuple[int, int, int, int]:
+        # QZ says how the controller lays its record out (axes may have been reconfigured);
+        # the model table is the fallback for firmware that refuses QZ.
+        if self._qz is None:
+            try:
+                self._qz = parse_qz(self.command("QZ"))
+            except CommandError as exc:
+                if self.model.qz is None:
+                    raise InvalidArgument(
+                        f"{self.model.name} has no binary data record (QZ refused)"
+                    ) from exc
+                self._qz = self.model.qz
+        return self._qz
+
+    def record(self, axes: str = "", *, as_dict: bool = False, timeout: float | None = None) -> Any:
+        """Read one data record (``QR``) and decode it.
+
+        Args:
+            axes: the blocks to ask for (``"AB"``, ``"S"`` ...); default the whole record.
+            as_dict: plain Python values (nested dicts per axis) instead of a numpy record.
+            timeout: seconds to wait for it.
+
+        Returns:
+            A structured numpy record (``rec["A"]["position"]``, ``rec["sample"]``,
+            ``rec["error_code"]``; field names in :mod:`galil.protocol.records`), or a dict.
+
+        Raises:
+            InvalidArgument: bad axes, or the model has no data record.
+            ProtocolError: the record does not match the layout ``QZ`` gave.
+        """
+        command = cmds.qr(axes, model=self.model)
+        layout = self._record_layout()
+        done = self.exchange(command, timeout=timeout)
+        if done.record is None:
+            raise self._error(ProtocolError, f"{command.text!r} answered no binary record")
+        try:
+            rec = decode_record(done.record, layout)
+        except ProtocolError as exc:
+            raise self._error(ProtocolError, f"{command.text!r}: {exc}") from exc
+        return record_to_dict(rec) if as_dict else rec
+
+    def records(self, period: int, *, method: str = "auto", maxlen: int = 10_000) -> RecordStream:
+        """Stream data records every ``period`` servo samples.
+
+        ``"DR"`` (the default over Ethernet) has the controller push them (``DR period,h``) to
+        a handle opened for them alone, so they never mix with replies or messages; ``"QR"``
+        (elsewhere) polls, one ``QR`` per record when it is due. Close the stream (or use it
+        as a context manager) to stop it; :meth:`close` stops every stream.
+
+        Args:
+            period: servo samples between records (the controller's minimum applies to DR:
+                2 on most models, 8 on the 21x3/41x3).
+            method: ``"auto"``, ``"DR"`` or ``"QR"``.
+            maxlen: records kept unread before the oldest are dropped (DR).
+
+        Raises:
+            InvalidArgument: bad period or method, DR asked for where there is no handle
+                for it, or the model has no data record.
+            CommandError: the controller refused ``DR`` (a period below its minimum ...).
+        """
+        if isinstance(period, bool) or not isinstance(period, int) or not 1 <= period <= 65535:
+            raise InvalidArgument(f"period is a number of samples 1..65535, not {period!r}")
+        if method not in ("auto", "DR", "QR"):
+            raise InvalidArgument(f"method is 'auto', 'DR' or 'QR', not {method!r}")
+        if isinstance(maxlen, bool) or not isinstance(maxlen, int) or maxlen < 1:
+            raise InvalidArgument(f"maxlen must be a positive integer, not {maxlen!r}")
+        opener = getattr(self.transport, "open_handle", None)
+        can_push = opener is not None and self.transport.kind == "ethernet"
+        if method == "DR" and not can_push:
+            raise InvalidArgument(
+                f"DR needs a second Ethernet handle; {self.transport!r} has none (use 'QR')"
+            )
+        layout = self._record_layout()
+        if method == "QR" or not can_push:
+            stream = RecordStream(self, period, "QR", maxlen=maxlen)
+        else:
+            assert opener is not None
+            try:
+                handle: Transport = opener()
+            except GalilConnectionError as exc:
+                raise self._error(GalilConnectionError, f"no handle for DR: {exc}") from exc
+            try:
+                index = self._which_handle(handle)
+                stream = RecordStream(self, period, "DR", handle=handle, maxlen=maxlen)
+                self.command(f"DR {period},{index}")
+            except BaseException:
+                with contextlib.suppress(GalilError, OSError):
+                    handle.close()
+                raise
+            stream._start_reader(layout)
+        self._record_streams.append(stream)
+        return stream
+
+    def _which_handle(self, handle: Transport) -> int:
+        # _WH on a handle names it (0..7 for A..H), which is what DR's second field wants.
+        handle.write(b"MG _WH\r")
+        got = b""
+        deadline = time.monotonic() + self.timeout
+        while not got.rstrip().endswith((b":", b"?")):
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise self._error(GalilTimeoutError, "no answer to MG _WH on the record handle")
+            got += handle.read(left)
+        text = got.rstrip()[:-1].decode("latin-1").strip()
+        if got.rstrip().endswith(b"?") or not text:
+            raise CommandError(None, "MG _WH refused on the record handle", "MG _WH")
+        try:
+            index = round(parse_number(text))
+        except (InvalidArgument, ValueError) as exc:
+            raise self._error(ProtocolError, f"MG _WH answered {text!r}") from exc
+        if not 0 <= index <= 7:
+            raise self._error(ProtocolError, f"MG _WH answered {text!r}: not a handle 0..7")
+        return index
+
     # -- the axis layer's needs -------------------------------------------------------------
 
     @property
@@ -976,27 +1373,32 @@ class Controller:
         return predict.together(handle.profiles)
 
     def stop(self, axes: str = "") -> None:
-        """Decelerate axes (default: all) to a stop at their DC (``ST``)."""
-        letters = "".join(self.model.axis_letter(a) for a in axes) if axes else ""
-        self.command(f"ST {letters}".rstrip())
-        for letter in letters or self.model.axes:
-            self.axes[letter]._jog_speed = None
+        """Decelerate axes (default: all) to a stop at their DC (``ST``).
+
+        The predictions of the moves in progress follow the stop (it is stamped with the
+        controller's ``TIME``), so their handles still compare the end with a prediction.
+        """
+        from galil.axis import _letters, stop_axes
+
+        stop_axes(self, _letters(self, axes))
 
     def abort(self) -> None:
         """Stop all motion at once, without deceleration (``AB 1``: programs keep running)."""
-        self.command("AB 1")
-        for ax in self.axes.values():
-            ax._jog_speed = None
+        from galil.axis import abort_all
+
+        abort_all(self)
 
     def servo_here(self, axes: str = "") -> None:
         """Enable the servo on axes (default: all) at their present position (``SH``)."""
-        letters = "".join(self.model.axis_letter(a) for a in axes) if axes else ""
-        self.command(f"SH {letters}".rstrip())
+        from galil.axis import _letters
+
+        self.command(f"SH {_letters(self, axes)}".rstrip())
 
     def motor_off(self, axes: str = "") -> None:
         """Turn the motors of axes (default: all) off (``MO``)."""
-        letters = "".join(self.model.axis_letter(a) for a in axes) if axes else ""
-        self.command(f"MO {letters}".rstrip())
+        from galil.axis import _letters
+
+        self.command(f"MO {_letters(self, axes)}".rstrip())
 
     def motion(self, axes: str | None = None) -> Any:
         """A context in which an exception or Ctrl-C stops the moving axes and waits for them.

@@ -58,11 +58,7 @@ def run_demo(
     say: Callable[[str], None] = (lambda _s: None) if quiet else print
     began = time.monotonic()
     mm, s = ureg.mm, ureg.s
-    with (
-        SimTcpServer(model=model) as server,
-        # The simulator serves unsolicited messages on a port of their own.
-        galil.connect(server.url, message_port=server.message_address[1]) as dmc,
-    ):
+    with SimTcpServer(model=model) as server, galil.connect(server.url) as dmc:
         sim = server.controller
         ident = dmc.identity
         assert ident is not None

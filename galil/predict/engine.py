@@ -217,6 +217,11 @@ def plan_stop(x0: float, v0: float, d: float) -> KinematicPlan:
     return KinematicPlan(x0, (seg,), x_end, seg.duration, abs(v0), "stop")
 
 
+# Chunks up to this many samples are evaluated with Python floats (same IEEE operations as
+# numpy, element by element): below it numpy's fixed cost per call is the larger one.
+_SCALAR_MAX = 48
+
+
 def _round_fixed(xq: Int64Array) -> Int64Array:
     """Fixed-point position to the nearest whole count (in place: ``xq`` is consumed)."""
     xq += FRACTION // 2
@@ -295,6 +300,42 @@ class _Active:
             out[end:] = self.end_value * FRACTION
         return out
 
+    def rounded(self, start: int, n: int) -> list[int]:
+        """Whole-count positions at ``start .. start+n-1``: :meth:`fixed` then rounding.
+
+        The scalar path for short chunks (a host polling every few milliseconds): numpy's
+        fixed cost per call dwarfs a few samples of arithmetic. The operations are those of
+        :meth:`fixed` and :func:`_round_fixed`, in the same order, on the same IEEE doubles
+        (an int minus a float is the int converted exactly, then subtracted), so the values
+        are identical.
+        """
+        k = start - self.k0
+        stop = k + n
+        run = stop if self.end_sample is None else max(k, min(stop, self.end_sample - self.k0))
+        out: list[int] = []
+        floor = math.floor
+        half = FRACTION // 2
+        t0 = self.t0
+        last = len(t0) - 1
+        i = self._segment(float(k)) if k < run else last
+        while k < run:
+            # Sample tau belongs to segment i while tau < t0[i+1] (tau is an integer).
+            hi = run if i == last else min(run, max(k, math.ceil(t0[i + 1])))
+            h, v, t, p = self.h_fixed[i], self.v_fixed[i], t0[i], self.p_fixed[i]
+            if h == 0.0:
+                # Cruise: h * dt is a zero and adding it to v gives v back, bit for bit.
+                out += [(floor(v * (tau - t) + p) + half) >> 16 for tau in range(k, hi)]
+            else:
+                out += [
+                    (floor((h * (dt := tau - t) + v) * dt + p) + half) >> 16
+                    for tau in range(k, hi)
+                ]
+            k = hi
+            i += 1
+        if k < stop:
+            out += [self.end_value] * (stop - k)
+        return out
+
     def _segment(self, tau: float) -> int:
         i = len(self.t0) - 1
         while i > 0 and self.t0[i] > tau:
@@ -310,6 +351,14 @@ class _Active:
         if self.end_sample is not None:
             v[tau >= self.end_sample - self.k0] = 0.0
         return v
+
+    def velocity_at(self, k: int) -> float:
+        """Velocity (counts/sample) at sample k: the second half of :meth:`state`."""
+        if self.end_sample is not None and k >= self.end_sample:
+            return 0.0
+        tau = float(k - self.k0)
+        i = self._segment(tau)
+        return self.v0[i] + self.a[i] * (tau - self.t0[i])
 
     def state(self, k: int) -> tuple[float, float]:
         """Position (counts, quantised to 1/65536) and velocity (counts/sample) at sample k."""
@@ -673,6 +722,8 @@ class AxisProfiler:
         """Unsmoothed reference for absolute samples ``start .. start+n-1``."""
         if self._active is None:
             return np.full(n, self.position, np.int64)
+        if n <= _SCALAR_MAX:
+            return np.array(self._active.rounded(start, n), np.int64)
         return _round_fixed(self._active.fixed(start, n))
 
     def _fill(self, n: int) -> None:
@@ -782,6 +833,35 @@ class AxisProfiler:
             if end is not None and self.sample >= end:
                 self._finish()
         return r, ref
+
+    def advance_values(self, n: int) -> list[int]:
+        """:meth:`advance` as a list of ints; cheap for short chunks (a servo loop's steps)."""
+        act = self._active
+        if (
+            act is None
+            or self.smoothing < 1.0
+            or self.mode == "contour"
+            or type(n) is not int
+            or not 0 < n <= _SCALAR_MAX
+        ):
+            if act is None and self.mode != "contour" and type(n) is int and n > 0:
+                # Idle: the reference holds still (what advance_both does, without arrays).
+                self.sample += n
+                self.reference = self.position
+                self._y = float(self.position)
+                return [self.position] * n
+            values: list[int] = self.advance(n).tolist()
+            return values
+        # The commit of advance_both() for a plan without smoothing, on Python ints.
+        out = act.rounded(self.sample + 1, n)
+        self.sample += n
+        self.position = self.reference = out[-1]
+        self._y = float(out[-1])
+        self.velocity = act.velocity_at(self.sample) / self.sample_period
+        end = act.end_sample
+        if end is not None and self.sample >= end:
+            self._finish()
+        return out
 
     def _finish(self) -> None:
         assert self._active is not None

@@ -22,10 +22,10 @@ from __future__ import annotations
 import enum
 import math
 import re
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from numbers import Real
-from typing import ClassVar
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 
@@ -146,9 +146,12 @@ _ACK = Expect.ACK
 _LINE = Expect.LINE
 
 
-@dataclass(frozen=True, slots=True)
-class Command:
+class Command(NamedTuple):
     """One command (or a compound line of several) ready to send.
+
+    Immutable, hashable and compared by value. A named tuple rather than a frozen dataclass:
+    a command is built for almost every exchange and a tuple is built several times faster
+    (see docs/decisions/0001).
 
     Attributes:
         text: the command text, without terminator (``"PRA=1000"``).
@@ -174,6 +177,14 @@ class Command:
 
     def __str__(self) -> str:
         return self.text
+
+
+_new = tuple.__new__
+
+
+def _plain(text: str) -> Command:
+    """``Command(text)`` without the named tuple's keyword handling (the builders' hot path)."""
+    return _new(Command, (text, _ACK, b"", ()))
 
 
 # Two-letter mnemonics of the firmware (40x0/18x2/2x00 command references). A variable whose
@@ -361,18 +372,24 @@ _DEFAULT_INT_RANGES: dict[str, tuple[int, int]] = {
 }
 
 
+_DEFAULT_LETTERS = frozenset(_DEFAULT_AXES.index)
+_NO_RANGE = (1, 0)
+
+
 def _axis_command(
     mnemonic: str,
     values: Sequence[object],
-    by_axis: Mapping[str, object],
+    by_axis: dict[str, object],
     model: ModelSpec | None,
     suffix: str = "",
 ) -> str:
-    if not values and len(by_axis) == 1:
-        ((letter, value),) = by_axis.items()
-        if model is None and type(value) is int and letter in _DEFAULT_AXES.index:
-            # hot path: one axis, an int, the permissive model
-            lo, hi = _DEFAULT_INT_RANGES.get(mnemonic, (1, 0))
+    if not values and model is None and len(by_axis) == 1:
+        # hot path: one axis, an int, the permissive model (popitem is the cheapest way to
+        # the one item; the item goes back, callers may read the dict again)
+        letter, value = by_axis.popitem()
+        by_axis[letter] = value
+        if type(value) is int and letter in _DEFAULT_LETTERS:
+            lo, hi = _DEFAULT_INT_RANGES.get(mnemonic, _NO_RANGE)
             if lo <= value <= hi:
                 return f"{mnemonic}{letter}={value}{suffix}"
     table = _axes(model)
@@ -442,57 +459,57 @@ def _checker(kind: str, model: ModelSpec | None) -> _Checker:
 
 def pr(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
     """PR: relative move distance per axis in counts (``pr(1000, None, -200)``, ``pr(B=500)``)."""
-    return Command(_axis_command("PR", values, by_axis, model))
+    return _plain(_axis_command("PR", values, by_axis, model))
 
 
 def pa(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
     """PA: absolute target position per axis in counts."""
-    return Command(_axis_command("PA", values, by_axis, model))
+    return _plain(_axis_command("PA", values, by_axis, model))
 
 
 def sp(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
     """SP: slew speed per axis, counts/s, 0 .. the model's maximum."""
-    return Command(_axis_command("SP", values, by_axis, model))
+    return _plain(_axis_command("SP", values, by_axis, model))
 
 
 def ac(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
     """AC: acceleration per axis, counts/s², inside the model's AC range."""
-    return Command(_axis_command("AC", values, by_axis, model))
+    return _plain(_axis_command("AC", values, by_axis, model))
 
 
 def dc(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
     """DC: deceleration per axis, counts/s², inside the model's DC range."""
-    return Command(_axis_command("DC", values, by_axis, model))
+    return _plain(_axis_command("DC", values, by_axis, model))
 
 
 def jg(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
     """JG: signed jog speed per axis, counts/s."""
-    return Command(_axis_command("JG", values, by_axis, model))
+    return _plain(_axis_command("JG", values, by_axis, model))
 
 
 def ip(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
     """IP: increment the target position, counts."""
-    return Command(_axis_command("IP", values, by_axis, model))
+    return _plain(_axis_command("IP", values, by_axis, model))
 
 
 def it(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
     """IT: independent time constant (smoothing), 0.004 .. 1."""
-    return Command(_axis_command("IT", values, by_axis, model))
+    return _plain(_axis_command("IT", values, by_axis, model))
 
 
 def dp(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
     """DP: define the current position, counts."""
-    return Command(_axis_command("DP", values, by_axis, model))
+    return _plain(_axis_command("DP", values, by_axis, model))
 
 
 def fl(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
     """FL: forward software limit, counts (2147483647 disables it)."""
-    return Command(_axis_command("FL", values, by_axis, model))
+    return _plain(_axis_command("FL", values, by_axis, model))
 
 
 def bl(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
     """BL: reverse software limit, counts (-2147483648 disables it)."""
-    return Command(_axis_command("BL", values, by_axis, model))
+    return _plain(_axis_command("BL", values, by_axis, model))
 
 
 # --------------------------------------------------------------------------------- axis lists
@@ -519,32 +536,32 @@ def _list_command(
 
 def bg(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
     """BG: begin motion on ``axes`` (``""``: all; ``S``/``T`` coordinated planes allowed)."""
-    return Command(_list_command("BG", axes, model, "ST"))
+    return _plain(_list_command("BG", axes, model, "ST"))
 
 
 def st(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
     """ST: decelerate to a stop (``""``: every axis, and stop programs)."""
-    return Command(_list_command("ST", axes, model, "ST"))
+    return _plain(_list_command("ST", axes, model, "ST"))
 
 
 def am(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
     """AM: trippoint, the ``:`` comes when the profiler of ``axes`` has finished."""
-    return Command(_list_command("AM", axes, model, "ST"))
+    return _plain(_list_command("AM", axes, model, "ST"))
 
 
 def mc(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
     """MC: trippoint, the ``:`` comes when ``axes`` are in position."""
-    return Command(_list_command("MC", axes, model))
+    return _plain(_list_command("MC", axes, model))
 
 
 def sh(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
     """SH: servo here (motor on)."""
-    return Command(_list_command("SH", axes, model))
+    return _plain(_list_command("SH", axes, model))
 
 
 def mo(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
     """MO: motor off."""
-    return Command(_list_command("MO", axes, model))
+    return _plain(_list_command("MO", axes, model))
 
 
 def cm(axes: str | Iterable[str], *, model: ModelSpec | None = None) -> Command:

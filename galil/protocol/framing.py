@@ -164,6 +164,19 @@ class FrameParser:
         self._marker = marker
 
     @property
+    def idle(self) -> bool:
+        """Nothing expected and nothing half-parsed: the next byte starts a fresh reply."""
+        return (
+            not self._expects
+            and self._mode == _NORMAL
+            and self._line_start
+            and not self._buf
+            and self._echo_pos == len(self._echo)
+            and not self._echo_lf
+            and not self.unsolicited_only
+        )
+
+    @property
     def hunting(self) -> bool:
         """Whether the parser is still looking for the resync marker."""
         return self._mode == _HUNT

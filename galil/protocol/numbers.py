@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+from functools import lru_cache
 from numbers import Real
 
 import numpy as np
@@ -34,6 +35,8 @@ MIN_ARG = -2_147_483_648.0
 
 _FIX_MIN = -(1 << 47)  # raw 32.16 limits (48-bit two's complement)
 _FIX_MAX = (1 << 47) - 1
+_POW10 = [10**i for i in range(11)]
+_INT_LO, _INT_HI = -(1 << 31), (1 << 31) - 1  # whole numbers inside the 32.16 range
 
 # Reply forms: optional blanks, sign, digits with an optional fraction; or hex with '$'.
 _DECIMAL = re.compile(r"[ \t\r\n]*[-+]?(?:\d+(?:\.\d*)?|\.\d+)[ \t\r\n]*")
@@ -132,6 +135,7 @@ def from_fixed(raw: int) -> float:
     return raw / 65536
 
 
+@lru_cache(maxsize=64)  # a simulator formats every reply with the same few formats
 def parse_format(fmt: str) -> tuple[bool, int, int]:
     """Split a PF/VF format (``"10.4"``, ``"-8.2"`` or ``"$8.2"`` for hex) into (hex, m, n).
 
@@ -167,6 +171,12 @@ def format_reply(
         InvalidArgument: a bad format or a non-finite value.
     """
     is_hex, digits, decimals = parse_format(fmt)
+    if type(value) is int and not decimals and not is_hex and lz and _INT_LO <= value <= _INT_HI:
+        # Whole counts (TP, RP, TE ...), the commonest reply: no fixed-point detour.
+        if 0 < value < _POW10[digits]:
+            return f" {value}" if sign_space else str(value)
+        if -_POW10[digits] < value < 0:
+            return str(value)
     raw = to_fixed(float(value))
     if is_hex:
         return _format_hex(raw, digits, decimals)

@@ -17,7 +17,15 @@ import numpy as np
 from galil.errors import InvalidArgument, ProtocolError
 from galil.models import ModelSpec
 
-__all__ = ["AXIS_LETTERS", "decode_record", "parse_qz", "record_dtype", "record_to_dict"]
+__all__ = [
+    "AXIS_LETTERS",
+    "RecordSplitter",
+    "decode_record",
+    "parse_qz",
+    "record_dtype",
+    "record_size",
+    "record_to_dict",
+]
 
 AXIS_LETTERS = "ABCDEFGH"
 
@@ -186,3 +194,61 @@ def record_to_dict(record: np.void) -> dict[str, Any]:
         else:
             out[name] = value.item()
     return out
+
+
+def record_size(qz: tuple[int, int, int, int], axes_present: int) -> int:
+    """Bytes of a record whose header says ``axes_present`` (byte 1: bit n = axis n)."""
+    _, general, coord, per_axis = qz
+    return 4 + general + coord + bin(axes_present & 0xFF).count("1") * per_axis
+
+
+class RecordSplitter:
+    """Cut a stream of ``DR`` records (no ``:`` between them) into whole records; sans-I/O.
+
+    Each record announces its size in its header; with the ``QZ`` sizes given, that size is
+    checked against the axis blocks the header says are present, so a stream that lost a
+    byte is noticed at the next header rather than decoded as garbage.
+
+    Args:
+        qz: the controller's ``QZ`` sizes, or ``None`` to trust the headers' sizes.
+        max_size: largest record accepted (bytes).
+    """
+
+    def __init__(self, qz: tuple[int, int, int, int] | None = None, max_size: int = 4096) -> None:
+        self.qz = qz
+        self.max_size = max_size
+        self._buf = bytearray()
+
+    def reset(self) -> None:
+        """Forget a partial record (after an error, or to resynchronise)."""
+        self._buf.clear()
+
+    def feed(self, data: bytes) -> list[bytes]:
+        """Add bytes; return every record now complete, oldest first.
+
+        Raises:
+            ProtocolError: a header is not a record header, or its size is impossible. The
+                partial record is dropped; call :meth:`reset` before feeding on.
+        """
+        buf = self._buf
+        buf += data
+        out: list[bytes] = []
+        while len(buf) >= 4:
+            if not buf[0] & 0x80:
+                self.reset()
+                raise ProtocolError(f"not a data record header: {bytes(buf[:4])!r}")
+            size = buf[2] | buf[3] << 8
+            if size < 4 or size > self.max_size:
+                self.reset()
+                raise ProtocolError(f"data record header announces {size} bytes")
+            if self.qz is not None and size != record_size(self.qz, buf[1]):
+                want = record_size(self.qz, buf[1])
+                self.reset()
+                raise ProtocolError(
+                    f"data record header announces {size} bytes; its axes need {want}"
+                )
+            if len(buf) < size:
+                break
+            out.append(bytes(buf[:size]))
+            del buf[:size]
+        return out

@@ -18,12 +18,11 @@ from __future__ import annotations
 
 import secrets
 from collections import deque
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from galil.errors import ProtocolError
 from galil.protocol.commands import Command, ReplyKind, parse_line
 from galil.protocol.framing import (
-    ACK,
     Ack,
     FrameParser,
     Record,
@@ -36,9 +35,11 @@ from galil.protocol.framing import (
 __all__ = ["Completed", "Session"]
 
 
-@dataclass(frozen=True, slots=True)
-class Completed:
+class Completed(NamedTuple):
     """The complete reply to one command.
+
+    Immutable and compared by value; a named tuple, built in one step, because one is made
+    for every reply (see docs/decisions/0001).
 
     Attributes:
         command: the command answered (one part of a compound line).
@@ -51,6 +52,10 @@ class Completed:
     ok: bool
     text: str = ""
     record: bytes | None = None
+
+
+_new = tuple.__new__
+_ACK_KIND, _ANY_KIND, _DATA_KIND = ReplyKind.ACK, ReplyKind.ANY, ReplyKind.DATA
 
 
 class Session:
@@ -68,6 +73,11 @@ class Session:
         self.out_of_step = False
         self._token = ""
         self._resyncs = 0
+        # Fast path for the usual one-command exchange: while the parser is idle, a lone
+        # plain command is not registered with it (``_lazy``); a reply of the obvious shape
+        # completes it without parsing, anything else registers it first and parses.
+        self._idle = True  # the parser is idle (nothing expected, nothing half-parsed)
+        self._lazy = False  # the one pending command is not registered with the parser
 
     @property
     def pending(self) -> int:
@@ -90,21 +100,38 @@ class Session:
             raise ProtocolError("the link is out of step; write session.resync() first")
         if type(cmd) is str:
             cmd = parse_line(cmd)
-        assert isinstance(cmd, Command)
-        wire = cmd.text.encode("latin-1") + b"\r" + cmd.payload
-        parser = self._parser
-        if not cmd.parts and not self.echo:
-            self._pending.append(cmd)
-            parser.expect(cmd.expect)
+        elif type(cmd) is not Command and not isinstance(cmd, Command):
+            raise TypeError(f"send() takes a Command or a str, not {type(cmd).__name__}")
+        text, expect, payload, parts = cmd
+        wire = text.encode("latin-1") + b"\r"
+        if payload:
+            wire += payload
+        if not parts and not self.echo:
+            pending = self._pending
+            if self._idle and not pending:
+                kind = expect.kind
+                if kind is _ACK_KIND or kind is _ANY_KIND or kind is _DATA_KIND:
+                    pending.append(cmd)
+                    self._lazy = True
+                    return wire
+            if self._lazy:
+                self._register()
+            self._idle = False
+            pending.append(cmd)
+            self._parser.expect(expect)
             return wire
-        parts = cmd.parts or (cmd,)
+        if self._lazy:
+            self._register()
+        self._idle = False
+        parser = self._parser
+        parts = parts or (cmd,)
         if self.echo:
             end = parser.echo_total
             parser.add_echo(wire)
             for i, part in enumerate(parts):
                 end += len(part.text) + 1
                 if i == len(parts) - 1:
-                    end += len(cmd.payload)
+                    end += len(payload)
                 self._pending.append(part)
                 parser.expect(part.expect, end)
         else:
@@ -113,14 +140,41 @@ class Session:
                 parser.expect(part.expect)
         return wire
 
+    def _register(self) -> None:
+        # The lazy command meets a reply the fast path does not take: give it to the parser.
+        self._lazy = False
+        self._idle = False
+        self._parser.expect(self._pending[0].expect)
+
     def receive_data(self, data: bytes) -> list[Completed | Unsolicited]:
         """Feed bytes from the link; return completed replies and unsolicited lines, in order.
 
         Raises:
             ProtocolError: a reply that fits no pending command; the session is now out of step.
         """
-        parser = self._parser
         pending = self._pending
+        if self._lazy:
+            cmd = pending[0]
+            kind = cmd.expect.kind
+            if data == b":":
+                if kind is _ACK_KIND or kind is _ANY_KIND:
+                    pending.popleft()
+                    self._lazy = False
+                    return [_new(Completed, (cmd, True, "", None))]
+            elif (
+                data[-3:] == b"\r\n:"
+                and kind is not _ACK_KIND
+                and data.count(b"\n") == 1
+                and data[0] not in b":?"
+                and data.isascii()
+                and (cmd.expect.size is None or cmd.expect.size >= 1)
+            ):
+                # One complete data line for a query, nothing else in the chunk.
+                pending.popleft()
+                self._lazy = False
+                return [_new(Completed, (cmd, True, data[:-3].decode("ascii"), None))]
+            self._register()
+        parser = self._parser
         if (
             data == b":"
             and pending
@@ -131,43 +185,21 @@ class Session:
             and not parser._special
             and not parser.unsolicited_only
         ):
-            # Hot path: a lone ':' for a plain command (one lookup instead of a parse).
+            # Hot path of a pipelined batch: a lone ':' for a plain command.
             cmd = pending[0]
             kind = cmd.expect.kind
-            if kind is ReplyKind.ACK or kind is ReplyKind.ANY:
+            if kind is _ACK_KIND or kind is _ANY_KIND:
                 pending.popleft()
                 parser._pop()
-                return [Completed(cmd, True)]
-        elif (
-            pending
-            and data[-3:] == b"\r\n:"
-            and not self.echo
-            and parser._line_start
-            and not parser._buf
-            and parser._mode == 0
-            and not parser._special
-            and not parser.unsolicited_only
-            and data.count(b"\n") == 1
-            and data[0] not in b":?"
-            and data.isascii()
-        ):
-            # Hot path: one complete data line for a query.
-            cmd = pending[0]
-            kind = cmd.expect.kind
-            if kind is ReplyKind.DATA or kind is ReplyKind.ANY:
-                pending.popleft()
-                parser._pop()
-                return [Completed(cmd, True, data[:-3].decode("ascii"))]
+                if not pending:
+                    self._idle = parser.idle
+                return [_new(Completed, (cmd, True, "", None))]
+        self._idle = False
         try:
             events = parser.feed(data)
         except ProtocolError as exc:
             self._lose_step()
             raise ProtocolError(f"{exc} (pending: {self._describe()})") from exc
-        if len(events) == 1 and events[0] is ACK and self._pending:
-            cmd = self._pending[0]
-            if cmd.expect.kind is ReplyKind.ACK or cmd.expect.kind is ReplyKind.ANY:
-                self._pending.popleft()
-                return [Completed(cmd, True)]
         out: list[Completed | Unsolicited] = []
         for event in events:
             if type(event) is Unsolicited:
@@ -178,6 +210,8 @@ class Session:
                 done = self._match(event)  # type: ignore[arg-type]
                 if done is not None:
                     out.append(done)
+        if not pending:
+            self._idle = parser.idle
         return out
 
     def _match(self, event: Ack | Rejected | Reply | Record) -> Completed | None:
@@ -232,6 +266,8 @@ class Session:
 
     def _lose_step(self) -> None:
         self.out_of_step = True
+        self._lazy = False
+        self._idle = False
         self._pending.clear()
         self._dl_first = None
         self._parser.reset()

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from galil.errors import CommandError, InvalidArgument, LimitError
+from galil.errors import CommandError, GalilConnectionError, InvalidArgument, LimitError
 from galil.models import ModelSpec, get_model
 from galil.predict.checks import quantise_accel, quantise_speed
 from galil.predict.smoothing import quantise_it
@@ -60,6 +60,10 @@ _MAX_CHUNK = 2048
 _LINES_PER_SAMPLE = 16
 #: Program threads on current controllers.
 _THREADS = 8
+#: Ethernet handle letters, in the order the controller hands them out.
+_HANDLES = "ABCDEFGH"
+#: Longest DR period accepted, in samples (an assumption: the manuals found give no maximum).
+_DR_MAX = 30000
 
 _AXIS_VALUE = frozenset(["PR", "PA", "SP", "AC", "DC", "JG", "IP", "IT", "DP", "FL", "BL"])
 _AXIS_LIST = frozenset(
@@ -92,6 +96,10 @@ _OTHER = frozenset(
         "RS",
         "NO",
         "AD",
+        "CF",
+        "WH",
+        "DR",
+        "TB",
     ]
 )
 COMMANDS = _AXIS_VALUE | _AXIS_LIST | _OTHER
@@ -119,6 +127,8 @@ class _Port:
     """One command handle: its unparsed input, its output and what it is waiting for."""
 
     name: str
+    number: int = 0
+    letter: str = ""  # Ethernet handle letter (A-H); "" for the main (serial) port
     inbuf: str = ""
     out: bytearray = field(default_factory=bytearray)
     wait: _Wait | None = None
@@ -190,6 +200,13 @@ class SimController:
         self._servo_lag = servo_lag
         self._ports: dict[int, _Port] = {0: _Port("main")}
         self._next_port = 1
+        #: Port that receives unsolicited output (``CF``); None: the default destination.
+        self._cf: int | None = None
+        #: ``DR`` stream: (samples between records, port number), and the next record's sample.
+        self._dr: tuple[int, int] | None = None
+        self._dr_next = 0
+        #: Port whose host command is executing (None inside program threads).
+        self._current: _Port | None = None
         #: When True, unsolicited output goes to :meth:`read_messages` (a TCP message handle);
         #: otherwise it is interleaved with the replies of the main port (serial behaviour).
         self.separate_messages = False
@@ -328,11 +345,21 @@ class SimController:
             return self._take(p)
 
     def open_port(self, name: str) -> int:
-        """Open another command handle (an Ethernet handle); return its number."""
+        """Open another command handle (an Ethernet handle); return its number.
+
+        The handle takes the first free letter A-H (what ``TH``, ``WH`` and ``CF`` name).
+
+        Raises:
+            GalilConnectionError: all eight handles are in use.
+        """
         with self._lock:
+            used = {p.letter for p in self._ports.values()}
+            free = [c for c in _HANDLES if c not in used]
+            if not free:
+                raise GalilConnectionError("all eight Ethernet handles are in use")
             number = self._next_port
             self._next_port += 1
-            self._ports[number] = _Port(name)
+            self._ports[number] = _Port(name, number=number, letter=free[0])
             return number
 
     def close_port(self, port: int) -> None:
@@ -340,6 +367,11 @@ class SimController:
         with self._lock:
             if port != 0:
                 self._ports.pop(port, None)
+                # Output aimed at a closed handle would pile up unread: fall back.
+                if self._cf == port:
+                    self._cf = None
+                if self._dr is not None and self._dr[1] == port:
+                    self._dr = None
 
     def set_limit_switch(self, axis: str, which: str, active: bool) -> None:
         """Test hook: set a limit switch; an active one stops motion towards it (SC 2/3).
@@ -408,25 +440,34 @@ class SimController:
 
     def _horizon(self) -> int:
         h = _MAX_CHUNK
-        waits = [p.wait for p in self._ports.values()]
+        now = self._sample
         for th in self._threads.values():
             if th.wait is None:
                 return 1
-            waits.append(th.wait)
-        for w in waits:
+            if th.wait.wake is not None:
+                h = min(h, th.wait.wake - now)
+        for p in self._ports.values():
+            w = p.wait
             if w is not None and w.wake is not None:
-                h = min(h, w.wake - self._sample)
+                h = min(h, w.wake - now)
+        if self._dr is not None:
+            h = min(h, self._dr_next - now)  # a DR record is due at that sample
         # Ending chunks where a profile ends saves a bisection for AM.
         for ax in self._axes.values():
-            end = ax.m.profiler.end_sample if ax.m.moving else None
-            if end is not None and end > self._sample:
-                h = min(h, end - self._sample)
+            prof = ax.m.profiler
+            if prof.moving:
+                end = prof.end_sample
+                if end is not None and end > now:
+                    h = min(h, end - now)
         return max(1, h)
 
     def _watches(self) -> list[Callable[[], bool]]:
         out: list[Callable[[], bool]] = []
-        for w in [p.wait for p in self._ports.values()] + [t.wait for t in self._threads.values()]:
-            if w is not None and w.predicate is not None:
+        waits = [p.wait for p in self._ports.values() if p.wait is not None]
+        if self._threads:
+            waits += [t.wait for t in self._threads.values() if t.wait is not None]
+        for w in waits:
+            if w.predicate is not None:
                 if w.exact is not None and w.exact():
                     continue
                 out.append(w.predicate)
@@ -471,10 +512,15 @@ class SimController:
         for k, m in snap[1].items():
             self._axes[k].m = copy.deepcopy(m)
 
-    def _advance_axes(self, n: int) -> dict[str, object]:
+    def _advance_axes(self, n: int, keep: list[_Axis] | None = None) -> dict[str, object]:
+        """Run every axis ``n`` samples; return the references of the ``keep`` axes."""
         refs: dict[str, object] = {}
+        wanted = {ax.letter for ax in keep} if keep else ()
         for letter, ax in self._axes.items():
-            refs[letter] = ax.m.advance(n)
+            if letter in wanted:
+                refs[letter] = ax.m.advance(n)
+            else:
+                ax.m.step(n)
         self._sample += n
         return refs
 
@@ -482,10 +528,10 @@ class SimController:
         return [
             ax
             for ax in self._axes.values()
-            if ax.m.moving
+            if (ax.fl < _INT_MAX or ax.bl > _INT_MIN)
+            and ax.m.moving
             and not ax.limit_stopping
             and not ax.contour
-            and (ax.fl < _INT_MAX or ax.bl > _INT_MIN)
         ]
 
     def _step(self, n: int) -> int:
@@ -493,7 +539,7 @@ class SimController:
         watches = self._watches()
         limited = self._limited()
         snap = self._snapshot() if (watches or limited) else None
-        refs = self._advance_axes(n)
+        refs = self._advance_axes(n, limited)
         k = n
         for ax in limited:
             k = min(k, self._crossing(ax, refs[ax.letter]))
@@ -527,18 +573,20 @@ class SimController:
         return int(hits[0]) + 1 if hits.size else r.size + 1
 
     def _check_soft_limits(self, ax: _Axis) -> None:
-        m = ax.m
-        if not m.moving or ax.limit_stopping or ax.contour:
+        prof = ax.m.profiler
+        if not prof.moving or ax.limit_stopping or ax.contour:
             return
-        v = m.profiler.velocity
-        if v > 0 and m.reference > ax.fl:
+        v = prof.velocity
+        if v > 0 and prof.reference > ax.fl:
             ax.limit_stopping = True
-            m.profiler.limit_stop(2)
-        elif v < 0 and m.reference < ax.bl:
+            prof.limit_stop(2)
+        elif v < 0 and prof.reference < ax.bl:
             ax.limit_stopping = True
-            m.profiler.limit_stop(3)
+            prof.limit_stop(3)
 
     def _check_switches(self, ax: _Axis) -> None:
+        if not (ax.switch_fwd or ax.switch_rev):
+            return  # the common case, checked first: the servo loop asks every step
         m = ax.m
         if not m.moving or ax.limit_stopping or ax.contour:
             return
@@ -552,11 +600,14 @@ class SimController:
 
     def _service(self) -> None:
         """Release what is due at this sample and run program threads until they block."""
+        if self._dr is not None and self._sample >= self._dr_next:
+            self._stream_record()
         progress = True
         while progress:
             progress = False
             for ax in self._axes.values():
-                self._check_switches(ax)
+                if ax.switch_fwd or ax.switch_rev:
+                    self._check_switches(ax)
                 if ax.contour:
                     prof = ax.m.profiler
                     if prof.mode != "contour":
@@ -570,9 +621,10 @@ class SimController:
                     self._release(port, w)
                     self._pump(port)
                     progress = True
-            for th in list(self._threads.values()):
-                if self._run_thread(th):
-                    progress = True
+            if self._threads:
+                for th in list(self._threads.values()):
+                    if self._run_thread(th):
+                        progress = True
 
     def _ready(self, w: _Wait) -> bool:
         if w.wake is not None and self._sample < w.wake:
@@ -607,7 +659,9 @@ class SimController:
         data = text.encode("latin-1", "replace")
         if self._cw == 1:
             data = bytes(b | 0x80 for b in data)
-        if self.separate_messages:
+        if self._cf is not None and self._cf in self._ports:
+            self._ports[self._cf].out += data
+        elif self.separate_messages:
             self._messages += data
         else:
             self._ports[0].out += data
@@ -634,12 +688,15 @@ class SimController:
         # Which sample each host command ran in: lets a test or the demo rebuild the exact
         # schedule of changes in motion and predict it.
         self.command_log.append((self._sample, text))
+        self._current = p  # CF I, WH and DR act on the handle that sent the command
         try:
             result = self._execute(text, None)
         except Refused as e:
             self._tc = e.code
             p.out += b"?"
             return
+        finally:
+            self._current = None
         if isinstance(result, _Wait):
             if self._ready(result):
                 self._release(p, result)
@@ -834,6 +891,13 @@ class SimController:
             return float(self._cw)
         if code == "EO" and not rest:
             return 1.0 if self._echo else 0.0
+        if code == "TB" and not rest:
+            return float(self._tb())
+        if code == "DR" and not rest:
+            return float(self._dr[0]) if self._dr is not None else 0.0
+        if code == "WH" and not rest:
+            p = self._current
+            return float(_HANDLES.index(p.letter)) if p is not None and p.letter else -1.0
         if code == "BN" and not rest:
             return 4040.0
         if code == "NO" and not rest:
@@ -1472,20 +1536,110 @@ class SimController:
     def _cmd_qr(self, args: str, th: _Thread | None) -> str:
         if self.spec.qz is None or self.spec.qz[1] not in (52, 24):
             raise Refused(1, "no data record on this model")
-        return self.record().decode("latin-1")
+        # QR AB asks for those axis blocks only (the header says which); the general and
+        # coordinated blocks always come (I, S, T, N letters are accepted and change nothing).
+        letters = args.replace(" ", "").replace(",", "").upper()
+        axes = ""
+        for c in letters:
+            if c in "ISTN":
+                continue
+            letter = self._axis(c).letter
+            if letter not in axes:
+                axes += letter
+        return self.record(axes).decode("latin-1")
 
     def _cmd_th(self, args: str, th: _Thread | None) -> str:
         return self._th()
 
     def _th(self) -> str:
         lines = ["CONTROLLER IP ADDRESS 127,0,0,1 ETHERNET ADDRESS 00-50-4C-00-00-01"]
-        names = [p.name for n, p in sorted(self._ports.items()) if n != 0]
-        for i, letter in enumerate("ABCDEFGH"):
-            if i < len(names):
-                lines.append(f"IH{letter} {names[i]}")
-            else:
-                lines.append(f"IH{letter} AVAILABLE")
+        names = {p.letter: p.name for p in self._ports.values() if p.letter}
+        for letter in _HANDLES:
+            lines.append(f"IH{letter} {names.get(letter, 'AVAILABLE')}")
         return "\r\n".join(lines) + "\r\n"
+
+    # ---- handles: CF, WH, DR -----------------------------------------------------------
+    def _handle(self, letter: str) -> _Port:
+        for p in self._ports.values():
+            if p.letter == letter:
+                return p
+        raise Refused(126, f"Ethernet handle {letter} is not open")
+
+    def _cmd_cf(self, args: str, th: _Thread | None) -> str:
+        a = args.strip().upper()
+        if a == "I":
+            # The handle that sends CF I receives the messages (how a host claims them).
+            if self._current is None:
+                raise Refused(6, "CF I names the sending handle; a program has none")
+            self._cf = self._current.number
+        elif a == "S":
+            # The main port: on the simulator's TCP server, its message port.
+            self._cf = None
+        elif len(a) == 1 and a in _HANDLES:
+            self._cf = self._handle(a).number
+        else:
+            raise Refused(6, "CF takes I, S or a handle letter A-H")
+        return ""
+
+    def _cmd_wh(self, args: str, th: _Thread | None) -> str:
+        if args.strip():
+            raise Refused(6, "WH takes no argument")
+        p = self._current
+        return ("RS232" if p is None or not p.letter else f"IH{p.letter}") + "\r\n"
+
+    def _dr_min(self) -> int:
+        # Smallest DR period in samples: 8 on the Econo 21x3/41x3, 4 on the 30010, else 2.
+        return {"DMC-21x3": 8, "DMC-41x3": 8, "DMC-30010": 4}.get(self.spec.family, 2)
+
+    def _cmd_dr(self, args: str, th: _Thread | None) -> str:
+        fields = split_fields(args)
+        if len(fields) > 2 or not fields[0].strip():
+            raise Refused(6, "DR takes samples and an optional handle")
+        period = self._eval(fields[0])
+        if period == 0:
+            self._dr = None
+            return ""
+        if self.spec.qz is None or self.spec.qz[1] not in (52, 24):
+            raise Refused(1, "no data record on this model")
+        if period != int(period) or not self._dr_min() <= period <= _DR_MAX:
+            raise Refused(6, f"DR period must be 0 or {self._dr_min()}..{_DR_MAX} samples")
+        if len(fields) == 2 and fields[1].strip():
+            index = self._eval(fields[1])
+            if index != int(index) or not 0 <= index < len(_HANDLES):
+                raise Refused(6, "DR handle is 0..7 (A..H)")
+            port = self._handle(_HANDLES[int(index)])
+        elif self._current is not None and self._current.letter:
+            port = self._current
+        else:
+            raise Refused(6, "DR streams to an Ethernet handle; name one (DR n,h)")
+        self._dr = (int(period), port.number)
+        self._dr_next = self._sample + int(period)
+        return ""
+
+    def _stream_record(self) -> None:
+        assert self._dr is not None
+        period, number = self._dr
+        port = self._ports.get(number)
+        if port is None:
+            self._dr = None
+            return
+        # Streamed records carry no ':' (only a solicited QR has one).
+        port.out += self.record()
+        while self._dr_next <= self._sample:
+            self._dr_next += period
+
+    def _cmd_tb(self, args: str, th: _Thread | None) -> str:
+        if args.strip():
+            raise Refused(6, "TB takes no argument")
+        return self._num(self._tb(), "3.0") + "\r\n"
+
+    def _tb(self) -> int:
+        value = 0x80 if self._threads else 0
+        if any(ax.contour for ax in self._axes.values()):
+            value |= 0x20
+        if self._dr is not None:
+            value |= 0x40  # "data record active" on the families that report it
+        return value | (1 if self._echo else 0)
 
     # ---- programs ----------------------------------------------------------------------
     def _cmd_dl(self, args: str, th: _Thread | None) -> _Download:
@@ -1538,9 +1692,9 @@ class SimController:
         raise Refused(2, "EN only in a program")
 
     # ---- data record -------------------------------------------------------------------
-    def record(self) -> bytes:
+    def record(self, axes: str = "") -> bytes:
         """The QR data record of this model's layout (4000 or 21x3 style), then ``:`` is added
-        by the caller.
+        by the caller. ``axes`` (letters) limits the axis blocks; default all.
 
         Raises:
             InvalidArgument: the model has no data record layout here.
@@ -1549,9 +1703,15 @@ class SimController:
         if qz is None or qz[1] not in (52, 24):
             raise InvalidArgument(f"{self.spec.name}: no data record layout in the simulator")
         n, general, coord, per_axis = qz
-        size = 4 + general + coord + n * per_axis
+        present = [
+            (i, ax)
+            for i, ax in enumerate(list(self._axes.values())[:n])
+            if not axes or ax.letter in axes
+        ]
+        size = 4 + general + coord + len(present) * per_axis
         buf = bytearray(size)
-        struct.pack_into("<BBH", buf, 0, 0x87, (1 << n) - 1, size)
+        mask = sum(1 << i for i, _ in present)
+        struct.pack_into("<BBH", buf, 0, 0x87, mask, size)
         struct.pack_into("<H", buf, 4, self._sample & 0xFFFF)
         buf[6:16] = b"\xff" * 10  # inputs read high when nothing is connected
         threads = sum(1 << t for t in self._threads)
@@ -1564,7 +1724,7 @@ class SimController:
             buf[26] = self._tc & 0xFF
             buf[27] = (0x80 if threads else 0) | (1 if self._echo else 0)
             base = 44
-        for i, ax in enumerate(list(self._axes.values())[:n]):
+        for i, (_, ax) in enumerate(present):
             at = base + i * per_axis
             m = ax.m
             struct.pack_into(

@@ -11,6 +11,7 @@ whole chunks of samples with numpy.
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 import numpy.typing as npt
@@ -20,6 +21,9 @@ from galil.predict.engine import AxisProfiler
 from galil.predict.smoothing import smooth
 
 __all__ = ["TV_WINDOW_SECONDS", "AxisMotion"]
+
+# Chunks up to this many samples run the servo lag as a scalar recursion.
+_SCALAR_MAX = 48
 
 #: The manuals' "special averaging filter (over approximately 0.25 sec)" for TV.
 TV_WINDOW_SECONDS = 0.25
@@ -40,7 +44,10 @@ class AxisMotion:
         self.actual = float(position)
         self.motor_on = True
         self._window = max(1, round(TV_WINDOW_SECONDS / sample_period))
-        self._history = np.full(self._window + 1, float(position))
+        # Encoder positions of the last window + 1 samples (a deque: short chunks append cheaply).
+        self._history: deque[float] = deque(
+            [float(position)] * (self._window + 1), maxlen=self._window + 1
+        )
         self.lag = 0.0
         self._alpha = 1.0
         self.set_lag(lag)
@@ -77,7 +84,7 @@ class AxisMotion:
     @property
     def velocity(self) -> float:
         """``TV``: encoder velocity averaged over the last 0.25 s, counts/s."""
-        span = float(self._history[-1] - self._history[0])
+        span = self._history[-1] - self._history[0]
         return span / (self._window * self.sample_period)
 
     @property
@@ -109,21 +116,37 @@ class AxisMotion:
         ref = np.asarray(self.profiler.advance(n), dtype=np.int64)
         if self._trace is not None:
             self._trace.append(ref)
-        if self.motor_on:
+        history = self._history
+        if not self.motor_on:
+            # No servo: the motor stays where it is.
+            history.extend([float(round(self.actual))] * min(n, self._window + 1))
+        elif n <= _SCALAR_MAX:
+            self._follow(ref.tolist())
+        else:
             if self._alpha >= 1.0:
                 actual = ref.astype(np.float64)
             else:
                 actual = smooth(ref, self._alpha, self.actual)
             self.actual = float(actual[-1])
-            self._remember(np.rint(actual))
-        else:
-            # No servo: the motor stays where it is.
-            self._remember(np.full(n, float(round(self.actual))))
+            history.extend(np.rint(actual[-(self._window + 1) :]).tolist())
         return ref
 
-    def _remember(self, encoder: npt.NDArray[np.float64]) -> None:
-        keep = self._window + 1
-        if encoder.size >= keep:
-            self._history = encoder[-keep:].copy()
+    def step(self, n: int) -> None:
+        """Run ``n`` samples, like :meth:`advance`, without handing the references back."""
+        if n > _SCALAR_MAX or self._trace is not None or not self.motor_on:
+            self.advance(n)
+            return
+        self._follow(self.profiler.advance_values(n))
+
+    def _follow(self, refs: list[int]) -> None:
+        # A few samples (a host polling): the lag's recursion beats numpy's fixed cost.
+        alpha = self._alpha
+        y = self.actual
+        history = self._history
+        if alpha >= 1.0:
+            history.extend(refs)
+            y = float(refs[-1]) if refs else y
         else:
-            self._history = np.concatenate((self._history[encoder.size :], encoder))
+            # round() is half to even, as numpy.rint
+            history.extend([round(y := y + alpha * (r - y)) for r in refs])
+        self.actual = y

@@ -4,7 +4,9 @@ Both servers run on a background thread, are context managers, and advertise the
 
     with SimTcpServer(model="DMC-4040") as srv:
         sock = socket.create_connection(srv.address)          # the command port (like 23)
-        msgs = socket.create_connection(srv.message_address)  # unsolicited messages
+        msgs = socket.create_connection(srv.address)          # a second handle ...
+        msgs.sendall(b"CF I\r")                               # ... claims unsolicited output
+        # or, without CF: socket.create_connection(srv.message_address)
 
     with SimPtyServer() as srv:
         port = serial.Serial(srv.path)                        # looks like a serial port
@@ -130,16 +132,21 @@ class _Server:
 class SimTcpServer(_Server):
     """The simulator on 127.0.0.1: a command port and a port for unsolicited messages.
 
-    Each connection to the command port is one handle (``TH`` lists them). Unsolicited output
-    (program ``MG``) goes to every connection on the message port; it is kept (up to 64 KiB)
-    until one connects.
+    Each connection to the command port is one handle, A to H as on the controller (``TH``
+    lists them, ``WH`` names the asking one). As on the controller, ``CF I`` sent on a handle
+    makes it the destination of unsolicited output (program ``MG``) and ``DR n,h`` streams data
+    records to handle ``h``. Until a handle claims it with ``CF``, unsolicited output goes to
+    every connection on the message port (a simulator convenience, like a protocol gateway's);
+    it is kept (up to 64 KiB) until one connects.
 
     Args:
         controller: the controller to serve (default: a new one on a real-time clock).
         model: model of the default controller.
         host: address to bind; only loopback addresses are accepted.
         port: command port (0 picks a free one).
-        message_port: port for unsolicited messages (0 picks a free one).
+        message_port: port for unsolicited messages (0 picks a free one; None: no such port,
+            unsolicited output goes to the serial port, i.e. nowhere, until a handle sends
+            ``CF I``, as on a controller).
         faults: fault hook applied to everything sent.
     """
 
@@ -150,16 +157,18 @@ class SimTcpServer(_Server):
         model: str = "DMC-4040",
         host: str = "127.0.0.1",
         port: int = 0,
-        message_port: int = 0,
+        message_port: int | None = 0,
         faults: FaultHook | None = None,
     ) -> None:
         if not host.startswith("127.") and host not in ("localhost", "::1"):
             raise InvalidArgument(f"the simulator serves loopback only, not {host!r}")
         super().__init__(controller, model)
         self.host = host
-        self._want = (port, message_port)
+        self._want = (port,) if message_port is None else (port, message_port)
         self.faults = faults
-        self.controller.separate_messages = True
+        # Without a message port, unsolicited output stays on the (unserved) main port until
+        # a handle claims it; that buffer is cleared each tick so it cannot grow.
+        self.controller.separate_messages = message_port is not None
         self._sel = selectors.DefaultSelector()
         self._listen: socket.socket | None = None
         self._listen_msg: socket.socket | None = None
@@ -179,7 +188,7 @@ class SimTcpServer(_Server):
     def message_address(self) -> tuple[str, int]:
         """(host, port) of the unsolicited-message port."""
         if self._listen_msg is None:
-            raise GalilConnectionError("server not started")
+            raise GalilConnectionError("server not started, or started without a message port")
         host, port = self._listen_msg.getsockname()[:2]
         return str(host), int(port)
 
@@ -230,7 +239,12 @@ class SimTcpServer(_Server):
                 conn.setblocking(False)
                 if key.data == "listen":
                     name = f"TCP PORT {self.address[1]} TO IP ADDRESS 127,0,0,1 PORT {peer[1]}"
-                    self._clients[conn] = (self.controller.open_port(name), _Outbox(self.faults))
+                    try:
+                        number = self.controller.open_port(name)
+                    except GalilConnectionError:
+                        conn.close()  # all eight handles taken: the controller refuses too
+                        continue
+                    self._clients[conn] = (number, _Outbox(self.faults))
                     self._sel.register(conn, selectors.EVENT_READ, "client")
                 else:
                     box = _Outbox(self.faults)
@@ -251,6 +265,8 @@ class SimTcpServer(_Server):
         for sock, (number, box) in list(self._clients.items()):
             box.put(self.controller.poll(port=number))
             self._send(sock, box)
+        if not self.controller.separate_messages:
+            self.controller.poll(port=0)  # nobody listens on the serial port here
         messages = self.controller.read_messages()
         if messages:
             if self._msg_clients:
@@ -346,7 +362,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     where = parser.add_mutually_exclusive_group()
     where.add_argument("--tcp", metavar="HOST:PORT", help="serve TCP (default 127.0.0.1:0)")
     where.add_argument("--pty", action="store_true", help="serve a pseudo-terminal")
-    parser.add_argument("--message-port", type=int, default=0, help="TCP port for messages")
+    parser.add_argument(
+        "--message-port",
+        type=int,
+        default=0,
+        help="TCP port for unsolicited messages (0: any free one; -1: none, use CF I)",
+    )
     parser.add_argument("--lag", type=float, default=0.003, help="servo lag time constant, s")
     args = parser.parse_args(argv)
     try:
@@ -366,15 +387,18 @@ def main(argv: Sequence[str] | None = None) -> int:
                 controller,
                 host=host or "127.0.0.1",
                 port=int(port or 0),
-                message_port=args.message_port,
+                message_port=None if args.message_port < 0 else args.message_port,
             )
         except (InvalidArgument, ValueError) as e:
             parser.error(str(e))
         server.start()
         assert isinstance(server, SimTcpServer)
         print(f"{controller.identity} on {server.url}", flush=True)
-        mhost, mport = server.message_address
-        print(f"unsolicited messages on tcp://{mhost}:{mport}", flush=True)
+        if args.message_port >= 0:
+            mhost, mport = server.message_address
+            print(
+                f"unsolicited messages on tcp://{mhost}:{mport} (or CF I on a handle)", flush=True
+            )
     try:
         while True:
             time.sleep(0.5)

@@ -1,8 +1,10 @@
 """Ethernet transport: a TCP socket to the controller's command port (23 by default).
 
-Galil Ethernet controllers serve several handles; the client asks for a second one with
-:meth:`TcpTransport.open_secondary` and points unsolicited messages at it (``CF I`` sent on that
-handle), so that they never share a stream with replies.
+Galil Ethernet controllers serve several handles (connections to the same port, A to H); the
+client asks for a second one with :meth:`TcpTransport.open_secondary` and points unsolicited
+messages at it (``CF I`` sent on that handle), so that they never share a stream with replies.
+:meth:`TcpTransport.open_handle` opens further handles (a ``DR`` data-record stream gets its
+own).
 """
 
 from __future__ import annotations
@@ -146,6 +148,16 @@ class TcpTransport:
                     self.host, self.port, connect_timeout=self.connect_timeout
                 )
         return self.secondary
+
+    def open_handle(self) -> TcpTransport:
+        """Open another handle to the same controller port; the caller owns and closes it.
+
+        Raises:
+            GalilConnectionError: this link is closed, or the controller refused the handle
+                (it has eight at most).
+        """
+        self._live()
+        return TcpTransport(self.host, self.port, connect_timeout=self.connect_timeout)
 
     def close(self) -> None:
         """Close this handle and the secondary one; idempotent."""

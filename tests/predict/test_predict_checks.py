@@ -223,6 +223,7 @@ def test_soft_limits_refuse_only_outward_motion() -> None:
     with pytest.raises(LimitError) as info:
         predict.check_soft_limits(further, high=1000)
     assert info.value.name == "FL"
-    assert info.value.sample is not None and info.value.sample > 0
+    assert info.value.sample is not None
+    assert info.value.sample > 0
     below = predict.move(4500, 10_000, 102_400, 102_400, start=-5000)
     predict.check_soft_limits(below, low=-1000)
