@@ -58,32 +58,55 @@ def compare_plot(
 
 
 def jog_widget(axis: Axis, *, max_speed: float | None = None) -> Any:
-    """A slider that jogs ``axis`` at the chosen speed (0 stops it); needs ipywidgets.
+    """A slider that jogs ``axis`` at the chosen speed, and a Stop button; needs ipywidgets.
+
+    Moving the slider jogs (or changes the jog speed in motion); 0 or Stop decelerates to a
+    stop. A refused speed shows its error under the slider instead of raising in a callback.
 
     Args:
         axis: the axis to jog.
         max_speed: slider range in the axis's units per second (counts/s without a scale).
+
+    Returns:
+        The widget box (``.children``: slider, stop button, status label).
     """
     import ipywidgets as widgets
 
+    from galil.errors import GalilError
     from galil.units import get_registry
 
     limit = max_speed if max_speed is not None else 10_000.0
-    slider = widgets.FloatSlider(value=0.0, min=-limit, max=limit, description=f"jog {axis.letter}")
+    unit = "counts/s" if axis.scale is None else f"{axis.scale.unit:~}/s"
+    slider = widgets.FloatSlider(
+        value=0.0, min=-limit, max=limit, description=f"jog {axis.letter}", continuous_update=False
+    )
+    stop = widgets.Button(description="Stop", button_style="danger")
     status = widgets.Label(value="stopped")
 
+    def jog(value: float) -> None:
+        try:
+            if value == 0:
+                axis.stop()
+                status.value = "stopped"
+                return
+            speed: Any = value
+            if axis.scale is not None:
+                reg = get_registry()
+                speed = reg.Quantity(value, axis.scale.unit / reg.second)
+            axis.jog(speed)
+            status.value = f"jogging at {value:g} {unit}"
+        except GalilError as exc:
+            status.value = f"refused: {exc}".splitlines()[0]
+
     def on_change(change: Mapping[str, Any]) -> None:
-        value = float(change["new"])
-        if value == 0:
-            axis.stop()
-            status.value = "stopped"
-            return
-        speed: Any = value
-        if axis.scale is not None:
-            reg = get_registry()
-            speed = reg.Quantity(value, axis.scale.unit / reg.second)
-        axis.jog(speed)
-        status.value = f"jogging at {value:g}"
+        jog(float(change["new"]))
+
+    def on_stop(_button: Any) -> None:
+        if slider.value != 0:
+            slider.value = 0.0  # observing the change sends the stop
+        else:
+            jog(0.0)
 
     slider.observe(on_change, names="value")
-    return widgets.VBox([slider, status])
+    stop.on_click(on_stop)
+    return widgets.VBox([widgets.HBox([slider, stop]), status])
