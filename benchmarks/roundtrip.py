@@ -98,7 +98,9 @@ def main() -> None:
     print(f"raw socket            {r * 1e6:8.1f} us  (best {min(raw) * 1e6:.1f})")
     print(f"galil Controller      {m * 1e6:8.1f} us  (best {min(lib) * 1e6:.1f})")
     print(f"library overhead      {(m - r) * 1e6:8.1f} us per round trip (medians)")
-    print(f"ratio library / raw   {statistics.median(ratios):8.2f}  (median of pairs; target <= 1.30)")
+    print(
+        f"ratio library / raw   {statistics.median(ratios):8.2f}  (median of pairs; target <= 1.30)"
+    )
 
 
 if __name__ == "__main__":

@@ -18,7 +18,6 @@ on the ``galil.wire`` logger.
 from __future__ import annotations
 
 import contextlib
-import functools
 import logging
 import queue
 import re
@@ -56,6 +55,9 @@ if TYPE_CHECKING:
 __all__ = ["CLIENT_OPTIONS", "Controller", "MessageQueue", "RecordStream", "WireLog", "connect"]
 
 _WIRE = logging.getLogger("galil.wire")
+# The logger's own cache of isEnabledFor() answers (cleared in place when levels change): one
+# dict lookup on the hot path instead of a method call; None when not known yet.
+_WIRE_CACHE: dict[int, bool] = getattr(_WIRE, "_cache", {})
 _LOG = logging.getLogger("galil.client")
 _DEBUG = logging.DEBUG
 _monotonic = time.monotonic
@@ -83,10 +85,19 @@ _IDENTIFY_ANY = Command("\x12\x16", Expect.ANY)
 _ECHO_OF_IDENTIFY = re.compile(r"[\x12\x16]*\r\n?")
 
 
-@functools.lru_cache(maxsize=512)
+# Polling loops send the same few lines again and again: each text is parsed once (a plain
+# dict, looked up inline by Controller.command; cleared when it grows, so it stays bounded).
+_PARSED: dict[str, Command] = {}
+
+
 def _parse(text: str) -> Command:
-    # Polling loops send the same few lines again and again: parse each text once.
-    return cmds.parse_line(text)
+    cmd = _PARSED.get(text)
+    if cmd is None:
+        cmd = cmds.parse_line(text)
+        if len(_PARSED) >= 512:
+            _PARSED.clear()
+        _PARSED[text] = cmd
+    return cmd
 
 
 def _check_timeout(timeout: float | None, default: float) -> float:
@@ -783,7 +794,9 @@ class Controller:
             GalilTimeoutError: no complete reply within the timeout.
             GalilConnectionError: the link is closed or dead.
         """
-        cmd = _parse(text) if type(text) is str else cmds.parse_line(text)
+        cmd = _PARSED.get(text) if type(text) is str else None
+        if cmd is None:
+            cmd = _parse(text) if type(text) is str else cmds.parse_line(text)
         if cmd.parts and not allow_compound:
             raise InvalidArgument(
                 f"{text!r} holds {len(cmd.parts)} commands; send one command, or pass "
@@ -795,15 +808,51 @@ class Controller:
             with self._lock:
                 if not self._open_flag:
                     raise self._error(GalilConnectionError, "the controller link is closed")
-                done = self._roundtrip((cmd,), t)
+                session = self._session
+                if (
+                    cmd.parts
+                    or session.out_of_step
+                    or self._link_clock is not None
+                    or self.wire_log.hooks
+                    or _WIRE_CACHE.get(_DEBUG, True)  # unknown: take the general path
+                ):
+                    done = self._roundtrip((cmd,), t)
+                else:
+                    # _roundtrip's common case inlined (one command, no hooks, a real link,
+                    # the whole reply in the first read): on a fast link every line of Python
+                    # here is latency.
+                    data = session.send(cmd)
+                    self.bytes_sent += len(data)
+                    start = _monotonic()
+                    transport = self.transport
+                    try:
+                        transport.write(data)
+                        chunk = transport.read(t)
+                    except GalilConnectionError as exc:
+                        raise self._error(GalilConnectionError, str(exc)) from exc
+                    events: list[Completed | Unsolicited] = []
+                    if chunk:
+                        self.bytes_received += len(chunk)
+                        try:
+                            events = session.receive_data(chunk)
+                        except ProtocolError as exc:
+                            raise self._protocol_error(exc) from exc
+                        if len(events) == 1 and not session.pending:
+                            d = events[0]
+                            if type(d) is Completed and d.ok:
+                                self._recent.append(d)
+                                return d.text
+                    done = self._collect((cmd,), t, start, 0.0, events, False)
+                if len(done) == 1:
+                    d = done[0]
+                    if d.ok:
+                        return d.text
                 for d in done:
                     if not d.ok:
                         raise self._explain(d, t)
         finally:
             if self._undelivered:
                 self._deliver()
-        if len(done) == 1:
-            return done[0].text
         return "\r\n".join(d.text for d in done if d.text)
 
     def command_line(
@@ -944,8 +993,6 @@ class Controller:
         else:
             data = b"".join([session.send(c) for c in batch])
         transport = self.transport
-        done: list[Completed] = []
-        recent = self._recent
         # Bookkeeping happens before the write: any Python work between the write and the
         # read delays the reply (a local peer may be waiting for the GIL we hold).
         self.bytes_sent += len(data)
@@ -960,41 +1007,53 @@ class Controller:
             chunk = transport.read(t)  # the timeout as given, so transports can cache it
         except GalilConnectionError as exc:
             raise self._error(GalilConnectionError, str(exc)) from exc
+        events: list[Completed | Unsolicited] = []
+        if chunk:
+            self.bytes_received += len(chunk)
+            if watch:
+                self._observe("in", chunk)
+            try:
+                events = session.receive_data(chunk)
+            except ProtocolError as exc:
+                raise self._protocol_error(exc) from exc
+            if len(events) == 1 and not session.pending and type(events[0]) is Completed:
+                # The common case: the whole reply in one read.
+                self._recent.append(events[0])
+                return events  # type: ignore[return-value]
+        return self._collect(batch, t, start, sim_start, events, watch)
+
+    def _collect(
+        self,
+        batch: Sequence[Command],
+        t: float,
+        start: float,
+        sim_start: float,
+        events: list[Completed | Unsolicited],
+        watch: object,
+    ) -> list[Completed]:
+        """Take ``events`` (from the first read), then read until ``batch`` is answered.
+
+        ``start`` and ``sim_start`` are the wall and simulated times the batch was written.
+        """
+        session = self._session
+        transport = self.transport
+        recent = self._recent
+        clock = self._link_clock
+        done: list[Completed] = []
         while True:
-            if chunk:
-                self.bytes_received += len(chunk)
-                if watch:
-                    self._observe("in", chunk)
-                try:
-                    events = session.receive_data(chunk)
-                except ProtocolError as exc:
-                    self._remember(("n", f"protocol error: {exc}"))
-                    raise self._error(ProtocolError, str(exc)) from exc
-                if len(events) == 1 and not done and type(events[0]) is Completed:
-                    # The common case: the whole reply in one read.
-                    recent.append(events[0])
-                    if not session.pending:
-                        return events  # type: ignore[return-value]
-                    done.append(events[0])
-                    events = []
-                for ev in events:
-                    if type(ev) is Completed:
-                        done.append(ev)
-                        recent.append(ev)
-                    else:
-                        self._message(ev.line)  # type: ignore[union-attr]
-                if not session.pending:
-                    return done
+            for ev in events:
+                if type(ev) is Completed:
+                    done.append(ev)
+                    recent.append(ev)
+                else:
+                    self._message(ev.line)  # type: ignore[union-attr]
+            if not session.pending:
+                return done
             wait = start + t - _monotonic()
             if clock is not None:
                 # A simulator's reads let simulated time pass: the timeout counts in it too.
                 wait = min(wait, sim_start + t - clock.now())
-            if wait > 0:
-                try:
-                    chunk = transport.read(wait)
-                except GalilConnectionError as exc:
-                    raise self._error(GalilConnectionError, str(exc)) from exc
-            else:
+            if wait <= 0:
                 lost = session.abandon()
                 for c in lost:
                     recent.append(("t", c.text))
@@ -1003,6 +1062,23 @@ class Controller:
                     f"no reply to {lost[0].text if lost else batch[-1].text!r} within {t:g} s "
                     "(the link will resynchronise before the next command)",
                 )
+            try:
+                chunk = transport.read(wait)
+            except GalilConnectionError as exc:
+                raise self._error(GalilConnectionError, str(exc)) from exc
+            events = []
+            if chunk:
+                self.bytes_received += len(chunk)
+                if watch:
+                    self._observe("in", chunk)
+                try:
+                    events = session.receive_data(chunk)
+                except ProtocolError as exc:
+                    raise self._protocol_error(exc) from exc
+
+    def _protocol_error(self, exc: ProtocolError) -> ProtocolError:
+        self._remember(("n", f"protocol error: {exc}"))
+        return self._error(ProtocolError, str(exc))
 
     def _resync(self, t: float) -> None:
         session = self._session

@@ -13,6 +13,7 @@ that rounded to the nearest count. See ``shared/reference/profiler-model.md``.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 
@@ -309,6 +310,10 @@ class _Active:
         (an int minus a float is the int converted exactly, then subtracted), so the values
         are identical.
         """
+        return self.step_values(start, n)[0]
+
+    def step_values(self, start: int, n: int) -> tuple[list[int], float]:
+        """:meth:`rounded`, and the velocity at the last of those samples (as :meth:`state`)."""
         k = start - self.k0
         stop = k + n
         run = stop if self.end_sample is None else max(k, min(stop, self.end_sample - self.k0))
@@ -318,23 +323,27 @@ class _Active:
         t0 = self.t0
         last = len(t0) - 1
         i = self._segment(float(k)) if k < run else last
+        velocity = 0.0
         while k < run:
             # Sample tau belongs to segment i while tau < t0[i+1] (tau is an integer).
             hi = run if i == last else min(run, max(k, math.ceil(t0[i + 1])))
-            h, v, t, p = self.h_fixed[i], self.v_fixed[i], t0[i], self.p_fixed[i]
-            if h == 0.0:
-                # Cruise: h * dt is a zero and adding it to v gives v back, bit for bit.
-                out += [(floor(v * (tau - t) + p) + half) >> 16 for tau in range(k, hi)]
-            else:
-                out += [
-                    (floor((h * (dt := tau - t) + v) * dt + p) + half) >> 16
-                    for tau in range(k, hi)
-                ]
-            k = hi
+            if hi > k:
+                h, v, t, p = self.h_fixed[i], self.v_fixed[i], t0[i], self.p_fixed[i]
+                if h == 0.0:
+                    # Cruise: h * dt is a zero and adding it to v gives v back, bit for bit.
+                    out += [(floor(v * (tau - t) + p) + half) >> 16 for tau in range(k, hi)]
+                else:
+                    out += [
+                        (floor((h * (dt := tau - t) + v) * dt + p) + half) >> 16
+                        for tau in range(k, hi)
+                    ]
+                if hi == stop:
+                    velocity = self.v0[i] + self.a[i] * (float(stop - 1) - t)
+                k = hi
             i += 1
         if k < stop:
             out += [self.end_value] * (stop - k)
-        return out
+        return out, velocity
 
     def _segment(self, tau: float) -> int:
         i = len(self.t0) - 1
@@ -351,14 +360,6 @@ class _Active:
         if self.end_sample is not None:
             v[tau >= self.end_sample - self.k0] = 0.0
         return v
-
-    def velocity_at(self, k: int) -> float:
-        """Velocity (counts/sample) at sample k: the second half of :meth:`state`."""
-        if self.end_sample is not None and k >= self.end_sample:
-            return 0.0
-        tau = float(k - self.k0)
-        i = self._segment(tau)
-        return self.v0[i] + self.a[i] * (tau - self.t0[i])
 
     def state(self, k: int) -> tuple[float, float]:
         """Position (counts, quantised to 1/65536) and velocity (counts/sample) at sample k."""
@@ -427,6 +428,17 @@ class AxisProfiler:
         self._c_base = int(position)
         self._c_rate = 0.0
         self._c_ending = False
+
+    def __deepcopy__(self, memo: dict[int, object]) -> AxisProfiler:
+        # A simulator snapshots its axes often. Plans, their tables and the smoothing cache
+        # are replaced, never changed in place, so the copy shares them; the active plan's
+        # holder (an IP shifts it) and the contour queue (appended to) are copied.
+        new = copy.copy(self)
+        if self._active is not None:
+            new._active = copy.copy(self._active)
+        new._cq_c = list(self._cq_c)
+        new._cq_n = list(self._cq_n)
+        return new
 
     # ---- helpers -----------------------------------------------------------------------
     def _per_sample(self, speed: float, accel: float, decel: float) -> tuple[float, float, float]:
@@ -853,11 +865,11 @@ class AxisProfiler:
             values: list[int] = self.advance(n).tolist()
             return values
         # The commit of advance_both() for a plan without smoothing, on Python ints.
-        out = act.rounded(self.sample + 1, n)
+        out, velocity = act.step_values(self.sample + 1, n)
         self.sample += n
         self.position = self.reference = out[-1]
         self._y = float(out[-1])
-        self.velocity = act.velocity_at(self.sample) / self.sample_period
+        self.velocity = velocity / self.sample_period
         end = act.end_sample
         if end is not None and self.sample >= end:
             self._finish()

@@ -912,6 +912,8 @@ def pack(commands: Iterable[Command], limit: int | ModelSpec = 80) -> list[Comma
     Raises:
         InvalidArgument: a single command is already longer than the limit.
     """
+    if isinstance(commands, Command):  # a named tuple is iterable: catch the slip here
+        raise InvalidArgument("pack() takes a sequence of commands, not one Command")
     maximum = limit if isinstance(limit, int) else limit.line_length
     lines: list[Command] = []
     group: list[Command] = []

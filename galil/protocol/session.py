@@ -96,6 +96,18 @@ class Session:
             ProtocolError: the session is out of step (call :meth:`resync` first).
             InvalidArgument: a raw string that cannot be sent (see ``parse_line``).
         """
+        if self._idle and not self._pending and type(cmd) is Command and not self.echo:
+            # The usual exchange: one plain command on a quiet link (_idle implies in step).
+            text, expect, payload, parts = cmd
+            kind = expect.kind
+            if (
+                not parts
+                and not payload
+                and (kind is _ACK_KIND or kind is _ANY_KIND or kind is _DATA_KIND)
+            ):
+                self._pending.append(cmd)
+                self._lazy = True
+                return text.encode("latin-1") + b"\r"
         if self.out_of_step:
             raise ProtocolError("the link is out of step; write session.resync() first")
         if type(cmd) is str:
@@ -230,27 +242,27 @@ class Session:
             ok = self._dl_first and ok
             self._dl_first = None
             self._pending.popleft()
-            return Completed(cmd, ok)
+            return _new(Completed, (cmd, ok, "", None))
         if type(event) is Rejected:
             self._pending.popleft()
-            return Completed(cmd, False, event.text)
+            return _new(Completed, (cmd, False, event.text, None))
         if type(event) is Ack:
             if kind is ReplyKind.ACK or kind is ReplyKind.ANY:
                 self._pending.popleft()
-                return Completed(cmd, True)
+                return _new(Completed, (cmd, True, "", None))
         elif type(event) is Reply:
             if kind is ReplyKind.DATA:
                 limit = cmd.expect.size
                 if limit is not None and event.text.count("\n") >= limit:
                     self._doubt(cmd, event)
                 self._pending.popleft()
-                return Completed(cmd, True, event.text)
+                return _new(Completed, (cmd, True, event.text, None))
             if kind is ReplyKind.ANY or kind is ReplyKind.CTRL_Z:
                 self._pending.popleft()
-                return Completed(cmd, True, event.text)
+                return _new(Completed, (cmd, True, event.text, None))
         elif type(event) is Record and kind is ReplyKind.RECORD:
             self._pending.popleft()
-            return Completed(cmd, True, "", event.data)
+            return _new(Completed, (cmd, True, "", event.data))
         self._doubt(cmd, event)
         return None  # pragma: no cover - _doubt raises
 

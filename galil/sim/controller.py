@@ -512,17 +512,11 @@ class SimController:
         for k, m in snap[1].items():
             self._axes[k].m = copy.deepcopy(m)
 
-    def _advance_axes(self, n: int, keep: list[_Axis] | None = None) -> dict[str, object]:
-        """Run every axis ``n`` samples; return the references of the ``keep`` axes."""
-        refs: dict[str, object] = {}
-        wanted = {ax.letter for ax in keep} if keep else ()
-        for letter, ax in self._axes.items():
-            if letter in wanted:
-                refs[letter] = ax.m.advance(n)
-            else:
-                ax.m.step(n)
+    def _advance_axes(self, n: int) -> None:
+        """Run every axis ``n`` samples."""
+        for ax in self._axes.values():
+            ax.m.step(n)
         self._sample += n
-        return refs
 
     def _limited(self) -> list[_Axis]:
         return [
@@ -537,26 +531,33 @@ class SimController:
     def _step(self, n: int) -> int:
         """Advance up to ``n`` samples, stopping at the first event; return samples run."""
         watches = self._watches()
-        limited = self._limited()
-        snap = self._snapshot() if (watches or limited) else None
-        refs = self._advance_axes(n, limited)
         k = n
-        for ax in limited:
-            k = min(k, self._crossing(ax, refs[ax.letter]))
-        if snap is not None and k < n:
-            self._restore(snap)
-            self._advance_axes(k)
-        if snap is not None and watches and any(w() for w in watches):
+        # A soft limit crossed ends the step there: found on a preview of the references
+        # (what advance() would return), so no snapshot of the axes is needed for it.
+        for ax in self._limited():
+            k = min(k, self._crossing(ax, ax.m.profiler.preview(n)))
+        if not watches:
+            for ax in self._axes.values():
+                ax.m.step(k)
+                self._check_soft_limits(ax)
+            self._sample += k
+            return k
+        snap = self._snapshot()
+        self._advance_axes(k)
+        if any(w() for w in watches):
             lo, hi = 0, k  # nothing fires after 0 samples; something fires after hi
+            at = k  # where the axes are now
             while hi - lo > 1:
                 mid = (lo + hi) // 2
                 self._restore(snap)
                 self._advance_axes(mid)
+                at = mid
                 if any(w() for w in watches):
                     hi = mid
                 else:
                     lo = mid
-            if hi != k:
+            if at != hi:
+                # The last probe may have been a "not yet" one: go back to where it fires.
                 self._restore(snap)
                 self._advance_axes(hi)
             k = hi
@@ -1271,7 +1272,17 @@ class SimController:
 
     def _cmd_mc(self, args: str, th: _Thread | None) -> _Wait:
         letters = [ax.letter for ax in self._axis_list(args)]
-        return _Wait(lambda: all(self._axes[c].m.in_position for c in letters))
+
+        def exact() -> bool:
+            # An axis still running a profile with a known end is not in position before
+            # that end, which is a step boundary (see _horizon): no need to bisect the step.
+            for c in letters:
+                m = self._axes[c].m
+                if m.motor_on and m.profiler.moving and m.profiler.end_sample is not None:
+                    return True
+            return False
+
+        return _Wait(lambda: all(self._axes[c].m.in_position for c in letters), exact=exact)
 
     def _cmd_wt(self, args: str, th: _Thread | None) -> _Wait:
         fields = split_fields(args)

@@ -10,7 +10,10 @@ whole chunks of samples with numpy.
 
 from __future__ import annotations
 
+import copy
+import functools
 import math
+import operator
 from collections import deque
 
 import numpy as np
@@ -48,11 +51,27 @@ class AxisMotion:
         self._history: deque[float] = deque(
             [float(position)] * (self._window + 1), maxlen=self._window + 1
         )
+        # Short chunks not yet expanded into _history: (lag state before, alpha, references).
+        # Only TV reads the history, so a polling host's chunks are expanded when it asks
+        # (and the ones the window has left behind never are).
+        self._unexpanded: deque[tuple[float, float, list[int]]] = deque()
+        self._unexpanded_n = 0
         self.lag = 0.0
         self._alpha = 1.0
         self.set_lag(lag)
         # Reference positions kept while a trace runs (the simulator's answer to RA/RD/RC).
         self._trace: list[npt.NDArray[np.int64]] | None = None
+
+    def __deepcopy__(self, memo: dict[int, object]) -> AxisMotion:
+        # The servo loop snapshots every axis before a step a watch may cut short; a generic
+        # deep copy would copy every number in the histories one by one. What is shared here
+        # is never changed in place (numbers, the chunks' reference lists, trace arrays).
+        new = copy.copy(self)
+        new.profiler = copy.deepcopy(self.profiler, memo)
+        new._history = deque(self._history, maxlen=self._history.maxlen)
+        new._unexpanded = deque(self._unexpanded)
+        new._trace = None if self._trace is None else list(self._trace)
+        return new
 
     def set_lag(self, lag: float) -> None:
         """Set the servo lag time constant in seconds (>= 0).
@@ -84,6 +103,8 @@ class AxisMotion:
     @property
     def velocity(self) -> float:
         """``TV``: encoder velocity averaged over the last 0.25 s, counts/s."""
+        if self._unexpanded:
+            self._expand()
         span = self._history[-1] - self._history[0]
         return span / (self._window * self.sample_period)
 
@@ -116,6 +137,8 @@ class AxisMotion:
         ref = np.asarray(self.profiler.advance(n), dtype=np.int64)
         if self._trace is not None:
             self._trace.append(ref)
+        if self._unexpanded:
+            self._expand()
         history = self._history
         if not self.motor_on:
             # No servo: the motor stays where it is.
@@ -139,14 +162,41 @@ class AxisMotion:
         self._follow(self.profiler.advance_values(n))
 
     def _follow(self, refs: list[int]) -> None:
-        # A few samples (a host polling): the lag's recursion beats numpy's fixed cost.
+        # A few samples (a host polling): the lag's closed form, a dot product in C, gives the
+        # motor's position after the chunk; the per-sample encoder values wait for TV.
         alpha = self._alpha
-        y = self.actual
-        history = self._history
+        y0 = self.actual
         if alpha >= 1.0:
-            history.extend(refs)
-            y = float(refs[-1]) if refs else y
+            self.actual = float(refs[-1]) if refs else y0
         else:
-            # round() is half to even, as numpy.rint
-            history.extend([round(y := y + alpha * (r - y)) for r in refs])
-        self.actual = y
+            carry, weights = _lag_weights(alpha, len(refs))
+            self.actual = carry * y0 + sum(map(operator.mul, weights, refs))
+        self._unexpanded.append((y0, alpha, refs))
+        self._unexpanded_n += len(refs)
+        if self._unexpanded_n > 4 * self._window:
+            # Forget the chunks the TV window has left behind (now and then, not every call).
+            keep = self._window + 1
+            while self._unexpanded_n - len(self._unexpanded[0][2]) >= keep:
+                self._unexpanded_n -= len(self._unexpanded.popleft()[2])
+
+    def _expand(self) -> None:
+        """Put the encoder values of the short chunks into the TV history, oldest first."""
+        history = self._history
+        for y, alpha, refs in self._unexpanded:
+            if alpha >= 1.0:
+                history.extend(refs)
+            else:
+                # round() is half to even, as numpy.rint
+                history.extend([round(y := y + alpha * (r - y)) for r in refs])
+        self._unexpanded.clear()
+        self._unexpanded_n = 0
+
+
+@functools.lru_cache(maxsize=256)
+def _lag_weights(alpha: float, n: int) -> tuple[float, list[float]]:
+    """``(c**n, [alpha * c**(n-k) for k in 1..n])`` with ``c = 1 - alpha``.
+
+    After ``n`` samples of ``y += alpha * (r - y)`` from ``y0``, ``y = c**n * y0 + sum(w * r)``.
+    """
+    c = 1.0 - alpha
+    return c**n, [alpha * c ** (n - k) for k in range(1, n + 1)]

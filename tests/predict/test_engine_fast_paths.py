@@ -1,0 +1,127 @@
+"""The engine's scalar path for short chunks gives exactly what its numpy path gives."""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from galil.predict.engine import (
+    AxisProfiler,
+    KinematicPlan,
+    _Active,
+    _round_fixed,
+    plan_jog,
+    plan_position,
+    plan_stop,
+)
+
+SETTINGS = settings(max_examples=150, deadline=None)
+
+rates = st.floats(0.001, 5.0)
+starts = st.floats(-1e6, 1e6)
+
+
+@st.composite
+def plans(draw: st.DrawFn) -> KinematicPlan:
+    x0 = draw(starts)
+    v0 = draw(st.floats(-60.0, 60.0))
+    kind = draw(st.sampled_from(["position", "jog", "stop"]))
+    if kind == "position":
+        target = x0 + draw(st.floats(-1e6, 1e6))
+        return plan_position(x0, v0, target, draw(st.floats(0.1, 300.0)), draw(rates), draw(rates))
+    if kind == "jog":
+        speed = draw(st.one_of(st.just(0.0), st.floats(-300.0, 300.0)))
+        return plan_jog(x0, v0, speed, draw(rates), draw(rates))
+    return plan_stop(x0, v0, draw(rates))
+
+
+@SETTINGS
+@given(plan=plans(), k0=st.integers(-100, 100), where=st.floats(-0.05, 1.2), n=st.integers(0, 400))
+def test_scalar_positions_are_the_vector_ones(
+    plan: KinematicPlan, k0: int, where: float, n: int
+) -> None:
+    active = _Active(plan, k0)
+    span = plan.duration if math.isfinite(plan.duration) else 50_000.0
+    start = k0 + math.floor(where * min(span, 1e5))
+    vector = _round_fixed(active.fixed(start, n))
+    scalar, velocity = active.step_values(start, n)
+    assert scalar == vector.tolist()
+    assert active.rounded(start, n) == scalar
+    if n:
+        assert velocity == active.state(start + n - 1)[1]
+
+
+@SETTINGS
+@given(
+    d=st.integers(-400_000, 400_000),
+    speed=st.integers(1_000, 500_000),
+    accel=st.integers(1, 2000).map(lambda v: 1024 * v),
+    chunks=st.lists(st.integers(1, 80), min_size=1, max_size=6),
+    jog=st.booleans(),
+)
+def test_short_chunks_commit_what_one_long_chunk_commits(
+    d: int, speed: int, accel: int, chunks: list[int], jog: bool
+) -> None:
+    whole, parts = AxisProfiler(), AxisProfiler()
+    for eng in (whole, parts):
+        if jog:
+            eng.begin_jog(math.copysign(speed, d or 1), accel, accel)
+        else:
+            eng.begin_move(d, speed, accel, accel)
+    total = 3000
+    expected = whole.advance(total)
+    got: list[int] = []
+    i = 0
+    while len(got) < total:
+        n = min(chunks[i % len(chunks)], total - len(got))
+        got += parts.advance_values(n)
+        assert parts.position == expected[len(got) - 1]
+        assert parts.reference == parts.position
+        i += 1
+    np.testing.assert_array_equal(np.array(got), expected)
+    assert (parts.moving, parts.stop_code, parts.mode) == (
+        whole.moving,
+        whole.stop_code,
+        whole.mode,
+    )
+    assert parts.velocity == whole.velocity
+    assert parts.sample == whole.sample
+
+
+def test_advance_values_falls_back_for_smoothing_and_idle() -> None:
+    smooth, ref = AxisProfiler(), AxisProfiler()
+    for eng in (smooth, ref):
+        eng.begin_move(5000, 40_000, 256_000, 256_000, 0.25)
+    expected = ref.advance(700).tolist()
+    got: list[int] = []
+    while len(got) < 700:
+        got += smooth.advance_values(7)
+    assert got == expected
+    idle = AxisProfiler(position=42)
+    assert idle.advance_values(5) == [42] * 5
+    assert idle.sample == 5
+    assert idle.advance_values(0) == []
+
+
+def test_a_deep_copy_is_independent_of_the_original() -> None:
+    jog, ref = AxisProfiler(), AxisProfiler()
+    for eng in (jog, ref):
+        eng.begin_jog(20_000, 256_000, 256_000, 0.5)
+        eng.advance(300)
+    snap = copy.deepcopy(jog)
+    jog.increment(5000, 20_000, 256_000, 256_000)  # shifts the jog's plan in place
+    jog.advance(200)
+    np.testing.assert_array_equal(snap.advance(400), ref.advance(400))
+    contour, twin = AxisProfiler(), AxisProfiler()
+    for eng in (contour, twin):
+        eng.begin_contour()
+        eng.add_segment(100, 3)
+    snap = copy.deepcopy(contour)
+    contour.add_segment(-500, 2)
+    twin_values = twin.advance(20)
+    np.testing.assert_array_equal(snap.advance(20), twin_values)
+    assert snap.queued_segments == twin.queued_segments
