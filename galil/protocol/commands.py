@@ -972,7 +972,8 @@ _QUERIES = frozenset(
 )
 
 
-def _split_line(text: str) -> list[str]:
+def split_commands(text: str) -> list[str]:
+    """Split a command line at the ``;`` outside double quotes (``MG "a;b";TP`` is two)."""
     parts: list[str] = []
     start = 0
     quoted = False
@@ -999,7 +1000,7 @@ def parse_line(text: str) -> Command:
         raise InvalidArgument(f"command line {text!r} must be ASCII text")
     if "\r" in text or "\n" in text:
         raise InvalidArgument(f"command line {text!r} must not contain CR or LF")
-    pieces = _split_line(text)
+    pieces = split_commands(text)
     parts = tuple(_raw_command(p) for p in pieces)
     if len(parts) == 1:
         return parts[0]

@@ -11,6 +11,8 @@ import math
 import re
 from collections.abc import Callable
 
+from galil.protocol.commands import split_commands
+
 __all__ = [
     "Refused",
     "evaluate",
@@ -46,17 +48,7 @@ def next_command(buffer: str) -> tuple[str, int] | None:
 
 def split_program_line(line: str) -> list[str]:
     """Split one program line into its ``;``-separated commands (quotes respected)."""
-    out: list[str] = []
-    start = 0
-    quoted = False
-    for i, ch in enumerate(line):
-        if ch == '"':
-            quoted = not quoted
-        elif ch == ";" and not quoted:
-            out.append(line[start:i])
-            start = i + 1
-    out.append(line[start:])
-    return out
+    return split_commands(line)
 
 
 def split_fields(text: str) -> list[str]:
