@@ -89,6 +89,46 @@ class Session:
         """Whether a resync marker was sent and has not come back yet."""
         return self._parser.hunting
 
+    def quick_wire(self, cmd: Command) -> bytes | None:
+        """The bytes for ``cmd`` when it may be exchanged without queuing, else ``None``.
+
+        For the usual exchange (one plain command on a quiet link in step): write the bytes,
+        then give what came back to :meth:`quick_reply`. If that returns ``None``, call
+        :meth:`send` (its bytes are already on the wire: do not write them again) and
+        :meth:`receive_data` with the same data, as for any command.
+        """
+        if self._idle and not self._pending and not self.echo and type(cmd) is Command:
+            text, expect, payload, parts = cmd
+            kind = expect.kind
+            if (
+                not parts
+                and not payload
+                and (kind is _ACK_KIND or kind is _ANY_KIND or kind is _DATA_KIND)
+            ):
+                return text.encode("latin-1") + b"\r"
+        return None
+
+    @staticmethod
+    def quick_reply(cmd: Command, data: bytes) -> str | None:
+        """The reply text when ``data`` is exactly ``cmd``'s whole reply, else ``None``.
+
+        Only the two shapes :meth:`receive_data` also completes without parsing: a lone ``:``
+        for a command that may answer so, or one ASCII data line then ``:`` for a query.
+        """
+        kind = cmd.expect.kind
+        if data == b":":
+            return "" if kind is _ACK_KIND or kind is _ANY_KIND else None
+        if (
+            data[-3:] == b"\r\n:"
+            and kind is not _ACK_KIND
+            and data.count(b"\n") == 1
+            and data[0] not in b":?"
+            and data.isascii()
+            and (cmd.expect.size is None or cmd.expect.size >= 1)
+        ):
+            return data[:-3].decode("ascii")
+        return None
+
     def send(self, cmd: Command | str) -> bytes:
         """Queue ``cmd`` and return the bytes to write (CR terminated, payload appended).
 
@@ -167,24 +207,11 @@ class Session:
         pending = self._pending
         if self._lazy:
             cmd = pending[0]
-            kind = cmd.expect.kind
-            if data == b":":
-                if kind is _ACK_KIND or kind is _ANY_KIND:
-                    pending.popleft()
-                    self._lazy = False
-                    return [_new(Completed, (cmd, True, "", None))]
-            elif (
-                data[-3:] == b"\r\n:"
-                and kind is not _ACK_KIND
-                and data.count(b"\n") == 1
-                and data[0] not in b":?"
-                and data.isascii()
-                and (cmd.expect.size is None or cmd.expect.size >= 1)
-            ):
-                # One complete data line for a query, nothing else in the chunk.
+            text = self.quick_reply(cmd, data)
+            if text is not None:
                 pending.popleft()
                 self._lazy = False
-                return [_new(Completed, (cmd, True, data[:-3].decode("ascii"), None))]
+                return [_new(Completed, (cmd, True, text, None))]
             self._register()
         parser = self._parser
         if (
