@@ -17,6 +17,12 @@ from galil import cli
 GALIL = [sys.executable, "-m", "galil.cli"]
 
 
+def _default_sigint() -> None:
+    # A shell that starts a job in the background ignores SIGINT for it, and a Python started
+    # with SIGINT ignored never raises KeyboardInterrupt: give the child Ctrl-C back.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_plan_prints_the_profile_and_saves_a_plot(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -61,6 +67,7 @@ def test_sim_serves_tcp_until_interrupted() -> None:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=_default_sigint,
     )
     try:
         assert proc.stdout is not None
@@ -86,7 +93,11 @@ def test_sim_serves_a_pty_until_interrupted() -> None:
     import serial
 
     proc = subprocess.Popen(
-        [*GALIL, "sim", "--pty"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        [*GALIL, "sim", "--pty"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=_default_sigint,
     )
     try:
         assert proc.stdout is not None
