@@ -172,8 +172,9 @@ def stream(
     Args:
         controller: the connected controller.
         axes: contour axes, e.g. ``"B"`` or ``"AB"``.
-        path: ideal positions in counts *relative to where each axis is now*, at the end of
-            each ``2**dt``-sample segment; shape (segments,) or (segments, axes).
+        path: ideal positions *relative to where each axis is now*, at the end of each
+            ``2**dt``-sample segment; shape (segments,) or (segments, axes). Plain numbers are
+            counts; a pint Quantity array is converted through each axis's scale.
         dt: DT exponent (segments last ``2**dt`` samples).
         progress: show a ``tqdm.auto`` bar over segments.
         timeout: seconds to wait for the contour to finish after the last segment (default:
@@ -195,7 +196,7 @@ def stream(
         raise InvalidArgument(f"contour axes must be distinct and non-empty, got {axes!r}")
     if isinstance(dt, bool) or not isinstance(dt, int):
         raise InvalidArgument(f"dt must be an integer exponent, got {dt!r}")
-    ideal = np.asarray(path, dtype=np.float64)
+    ideal = _path_counts(controller, letters, path)
     if ideal.ndim == 1:
         ideal = ideal[:, None]
     if ideal.ndim != 2 or ideal.shape[1] != len(letters) or ideal.shape[0] == 0:
@@ -296,6 +297,31 @@ def stream(
             )
         controller._pause(min(0.05, max(seg_time, 0.005), max(deadline - now, 0.001)))
     return ContourResult(letters, incs, dt, profiles, low_water, lines)
+
+
+def _path_counts(controller: Controller, letters: str, path: Any) -> npt.NDArray[np.float64]:
+    """The path in counts: plain numbers as they are, a Quantity through each axis's scale."""
+    from galil.units import counts_or_plain, is_quantity
+
+    if not is_quantity(path):
+        return np.asarray(path, dtype=np.float64)
+    magnitude = np.asarray(path.magnitude, dtype=np.float64)
+    columns = magnitude[:, None] if magnitude.ndim == 1 else magnitude
+    if columns.ndim != 2 or columns.shape[1] != len(letters):
+        return magnitude  # the shape check after this call reports it
+    out = np.empty_like(columns)
+    for j, a in enumerate(letters):
+        scale = controller.axes[a].scale
+        unit_of = path.units
+        if scale is None:
+            out[:, j] = [
+                counts_or_plain(v * unit_of, f"contour path on {a}") for v in columns[:, j]
+            ]
+        else:
+            # One conversion factor per axis: the path is relative, so no offset applies.
+            factor = scale.distance_to_counts(1.0 * unit_of, f"contour path on {a}")
+            out[:, j] = columns[:, j] * factor
+    return out.ravel() if magnitude.ndim == 1 else out
 
 
 def _line_count(parts: Sequence[str], limit: int) -> int:

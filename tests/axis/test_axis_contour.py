@@ -149,3 +149,20 @@ def test_contour_past_a_soft_limit_is_refused_before_cm() -> None:
         assert info.value.name == "FL"
         assert info.value.axis == "B"
         assert dmc.B.reference_position == 0
+
+
+def test_contour_path_in_millimetres_follows_the_scale() -> None:
+    from galil.errors import InvalidArgument
+    from galil.testing import nothing_sent, simulated
+    from galil.units import ureg
+
+    with simulated() as dmc:
+        dmc.B.set_scale(counts_per=2000 / ureg.mm)
+        path = np.linspace(0.25, 3.0, 12) * ureg.mm
+        result = dmc.contour("B", path, dt=2)
+        assert int(result.increments.sum()) == 6000
+        assert dmc.B.reference_position.to("mm").magnitude == pytest.approx(3.0)
+        with nothing_sent(dmc), pytest.raises(InvalidArgument):
+            dmc.contour("B", np.linspace(1, 2, 4) * ureg.s, dt=2)
+        with nothing_sent(dmc), pytest.raises(InvalidArgument):
+            dmc.contour("C", np.linspace(1, 2, 4) * ureg.mm, dt=2)  # C has no scale
