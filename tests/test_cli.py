@@ -113,3 +113,19 @@ def test_sim_serves_a_pty_until_interrupted() -> None:
     finally:
         proc.send_signal(signal.SIGINT)
         proc.wait(timeout=20)
+
+
+def test_sim_stops_cleanly_on_sigterm() -> None:
+    proc = subprocess.Popen(
+        [*GALIL, "sim", "--tcp", "127.0.0.1:0"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stdout is not None
+        assert "tcp://127.0.0.1:" in proc.stdout.readline()
+    finally:
+        proc.terminate()
+        _, err = proc.communicate(timeout=20)
+    assert proc.returncode == 0, err

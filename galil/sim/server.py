@@ -22,6 +22,7 @@ import argparse
 import contextlib
 import os
 import selectors
+import signal
 import socket
 import sys
 import threading
@@ -399,6 +400,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(
                 f"unsolicited messages on tcp://{mhost}:{mport} (or CF I on a handle)", flush=True
             )
+    if threading.current_thread() is threading.main_thread():
+        # `kill` (a service manager, a CI job ending) stops the server as cleanly as Ctrl-C.
+        signal.signal(signal.SIGTERM, _interrupt)
     try:
         while True:
             time.sleep(0.5)
@@ -407,6 +411,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         server.stop()
     return 0
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
 
 
 if __name__ == "__main__":  # pragma: no cover
