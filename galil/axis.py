@@ -34,6 +34,7 @@ __all__ = [
     "MoveParams",
     "MoveResult",
     "abort_all",
+    "check_overrides",
     "execute_move",
     "motion_guard",
     "stop_axes",
@@ -492,7 +493,16 @@ class Axis:
 
     def _rate_counts(self, value: Any, power: int, what: str) -> float:
         # A rate's sign never flips with the axis: speeds and accelerations are magnitudes.
-        return abs(self._signed_rate(value, power, what))
+        counts = self._signed_rate(value, power, what)
+        sign = 1 if self._scale is None else self._scale.sign
+        if counts * sign < 0:
+            # abs() would run a "-5 mm/s" silently at +5 mm/s: the direction of a position
+            # move comes from its target, so a negative value is a mistake worth naming.
+            hint = " (the direction comes from the target; jog takes a signed speed)"
+            raise InvalidArgument(
+                f"{what} must not be negative, got {value!r}{hint if power == 1 else ''}"
+            )
+        return abs(counts)
 
     def _signed_rate(self, value: Any, power: int, what: str) -> float:
         if self._scale is not None:
@@ -528,7 +538,10 @@ class Axis:
 
     @property
     def velocity(self) -> Any:
-        """Filtered actual velocity ``_TV`` (signed; averaged over ~0.25 s by the controller)."""
+        """Filtered actual velocity ``_TV`` (signed; averaged over ~0.25 s by the controller).
+
+        The average lags: just after a stop it still reads part of the speed before it.
+        """
         v = self._operand("TV")
         return v if self._scale is None else self._scale.counts_to_rate(v, 1)
 
@@ -555,8 +568,21 @@ class Axis:
         return code, codes.stop_text(code)
 
     # -- parameters -------------------------------------------------------------------------
+    def _check_parameter(self, cmd: str, counts: float) -> float:
+        """Quantise and range-check SP/JG/AC/DC; a refusal also states the range in user units."""
+        try:
+            return predict.check_parameter(cmd, counts, self._controller.model, axis=self.letter)
+        except LimitError as exc:
+            scale = self._scale
+            if scale is not None and exc.value is not None and exc.limit is not None:
+                power = 2 if cmd in ("AC", "DC") else 1
+                value = abs(scale.counts_to_rate(exc.value, power))
+                limit = abs(scale.counts_to_rate(exc.limit, power))
+                exc.args = (f"{exc.args[0]} (in user units: {value:~.6g}, limit {limit:~.6g})",)
+            raise
+
     def _set_param(self, cmd: str, counts: float) -> None:
-        value = predict.check_parameter(cmd, counts, self._controller.model, axis=self.letter)
+        value = self._check_parameter(cmd, counts)
         text = f"{cmd}{self.letter}={_fmt(value)}"
         handle = self._active
         if handle is None or handle._done or cmd not in ("SP", "AC"):
@@ -625,9 +651,7 @@ class Axis:
         if self._jogging():
             self.jog(value)
             return
-        v = predict.check_parameter(
-            "JG", self._signed_rate(value, 1, "jog speed"), self._controller.model, axis=self.letter
-        )
+        v = self._check_parameter("JG", self._signed_rate(value, 1, "jog speed"))
         self._controller.command(f"JG{self.letter}={_fmt(v)}")
 
     def _jogging(self) -> bool:
@@ -659,7 +683,9 @@ class Axis:
             bl = _INT32[0] if high is None else bl
             fl = _INT32[1] if low is None else fl
         if bl > fl:
-            raise InvalidArgument(f"soft limits {limits!r}: low is above high")
+            raise InvalidArgument(
+                f"soft limits ({_show(low)}, {_show(high)}): low is above high (takes (low, high))"
+            )
         for name, v in (("BL", bl), ("FL", fl)):
             if not _INT32[0] <= v <= _INT32[1]:
                 raise LimitError(
@@ -682,14 +708,17 @@ class Axis:
             InvalidArgument: wrong units, bad values, axis busy or motor off.
             LimitError: a value out of the model's range, or a path crossing a soft limit.
         """
+        check_overrides("move_to", overrides)
         return execute_move(self._controller, {self.letter: position}, relative=False, **overrides)
 
     def move_by(self, distance: Any, **overrides: Any) -> MoveHandle:
         """Move by a relative distance (``PR`` then ``BG``)."""
+        check_overrides("move_by", overrides)
         return execute_move(self._controller, {self.letter: distance}, relative=True, **overrides)
 
     def plan_to(self, position: Any, **overrides: Any) -> predict.Profile:
         """Predict and check ``move_to(position)`` without sending anything."""
+        check_overrides("plan_to", overrides)
         plan = execute_move(
             self._controller, {self.letter: position}, relative=False, dry_run=True, **overrides
         )
@@ -697,6 +726,7 @@ class Axis:
 
     def plan_by(self, distance: Any, **overrides: Any) -> predict.Profile:
         """Predict and check ``move_by(distance)`` without sending anything."""
+        check_overrides("plan_by", overrides)
         plan = execute_move(
             self._controller, {self.letter: distance}, relative=True, dry_run=True, **overrides
         )
@@ -715,7 +745,7 @@ class Axis:
         """
         c = self._controller
         a = self.letter
-        v = predict.check_parameter("JG", self._signed_rate(speed, 1, "jog speed"), c.model, axis=a)
+        v = self._check_parameter("JG", self._signed_rate(speed, 1, "jog speed"))
         rp, bg, ac, dc, it, mo = c.query_operands(
             [f"_{op}{a}" for op in ("RP", "BG", "AC", "DC", "IT", "MO")]
         )
@@ -828,17 +858,13 @@ class Axis:
             pairs.append(
                 (
                     abs(self._dist_counts(at, "trigger distance")),
-                    predict.check_parameter(
-                        "SP", self._rate_counts(sp, 1, "speed"), c.model, axis=a
-                    ),
+                    self._check_parameter("SP", self._rate_counts(sp, 1, "speed")),
                 )
             )
         chosen = (
             None
             if speed is None
-            else predict.check_parameter(
-                "SP", self._rate_counts(speed, 1, "speed"), c.model, axis=a
-            )
+            else self._check_parameter("SP", self._rate_counts(speed, 1, "speed"))
         )
         rp, bg, sp0, ac, dc, it, bl, fl, mo = c.query_operands(
             [f"_{op}{a}" for op in ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")]
@@ -933,8 +959,8 @@ def execute_move(
         given[a] = {}
         for cmd, val, power in (("SP", speed, 1), ("AC", accel, 2), ("DC", decel, 2)):
             if val is not None:
-                counts = axis._rate_counts(val, power, cmd.lower())
-                given[a][cmd] = predict.check_parameter(cmd, counts, model, axis=a)
+                counts = axis._rate_counts(val, power, _OVERRIDE_NAMES[cmd])
+                given[a][cmd] = axis._check_parameter(cmd, counts)
                 params_parts[cmd][a] = _fmt(given[a][cmd])
         if relative:
             amounts[a] = round(axis._dist_counts(values[a], "distance"))
@@ -978,7 +1004,11 @@ def execute_move(
         params = MoveParams(chosen["SP"], chosen["AC"], chosen["DC"], it)
         track = _Track("position", start, params, None, amount=distance)
         profile = _predict(controller, track)
-        predict.check_soft_limits(profile, low=bl, high=fl, axis=a)
+        try:
+            predict.check_soft_limits(profile, low=bl, high=fl, axis=a)
+        except LimitError as exc:
+            _in_user_units(exc, axis._scale, profile.end)
+            raise
         tracks[a] = track
         profiles[a] = profile
         targets_out[a] = str(distance if command == "IP" else target)
@@ -1000,6 +1030,43 @@ def execute_move(
             tracks[a].begin = begin
             controller.axes[a]._active = handle
     return handle
+
+
+def _show(value: Any) -> str:
+    return f"{value:~}" if is_quantity(value) else repr(value)
+
+
+_OVERRIDE_NAMES = {"SP": "speed", "AC": "accel", "DC": "decel"}
+
+
+def check_overrides(where: str, overrides: Mapping[str, Any]) -> None:
+    """Refuse keyword overrides a move does not take, naming the public call and the valid ones.
+
+    Without this, a typo (``sped=``) surfaces as a TypeError about an internal function, and
+    internal keywords (``dry_run=``, ``command=``) would be accepted from users.
+
+    Raises:
+        TypeError: an unknown keyword, as Python itself would raise it.
+    """
+    unknown = sorted(set(overrides) - set(_OVERRIDE_NAMES.values()))
+    if unknown:
+        raise TypeError(
+            f"{where}() got an unexpected keyword argument {unknown[0]!r}; "
+            "a move takes speed=, accel= and decel="
+        )
+
+
+def _in_user_units(exc: LimitError, scale: Scale | None, end: int) -> None:
+    # The predictor speaks counts; a user who set limits in mm should read mm too.
+    if scale is None or exc.value is None or exc.limit is None:
+        return
+    if exc.name not in ("FL", "BL"):
+        return
+    unit_text = ", ".join(
+        f"{label} {scale.counts_to_position(v):~.6g}"
+        for label, v in (("reaches", exc.value), ("limit", exc.limit), ("end", end))
+    )
+    exc.args = (f"{exc.args[0]} (in user units: {unit_text})", *exc.args[1:])
 
 
 def _check_int32(name: str, value: float, axis: str, model: str) -> None:

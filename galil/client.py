@@ -1135,7 +1135,11 @@ class Controller:
         except (GalilTimeoutError, ProtocolError) as exc:
             text = f"(TC1 failed: {exc.args[0] if exc.args else exc})"
         name = self.model.name if self.model is not None else None
-        return CommandError(code, text, rejected.command.text, model=name, recent=self.recent)
+        error = CommandError(code, text, rejected.command.text, model=name, recent=self.recent)
+        hint = _case_hint(rejected.command.text) if code == 1 else None
+        if hint is not None:
+            error.args = (f"{error.args[0]} ({hint})",)
+        return error
 
     def _write(self, data: bytes) -> None:
         try:
@@ -1451,15 +1455,17 @@ class Controller:
         Returns:
             A :class:`~galil.axis.MoveHandle` over all the axes.
         """
-        from galil.axis import execute_move
+        from galil.axis import check_overrides, execute_move
 
+        check_overrides("move", overrides)
         return execute_move(self, targets, relative=relative, **overrides)
 
     def plan(self, targets: dict[str, Any], *, relative: bool = False, **overrides: Any) -> Any:
         """Predict and check :meth:`move` without sending anything; returns a MultiProfile."""
         from galil import predict
-        from galil.axis import execute_move
+        from galil.axis import check_overrides, execute_move
 
+        check_overrides("plan", overrides)
         handle = execute_move(self, targets, relative=relative, dry_run=True, **overrides)
         return predict.together(handle.profiles)
 
@@ -1528,6 +1534,13 @@ class Controller:
                     return self.axes[model.axis_letter(name)]
                 except InvalidArgument:
                     pass
+        model = self.__dict__.get("model")
+        if len(name) == 1 and name.isalpha() and model is not None:
+            # Most likely an axis letter: a typo, a lower-case letter, or one the model lacks.
+            raise AttributeError(
+                f"{type(self).__name__!s} has no attribute {name!r}: {model.name} has axes "
+                f"{', '.join(model.axes)} (controller.A, or controller.axes['A'])"
+            )
         raise AttributeError(f"{type(self).__name__!s} has no attribute {name!r}")
 
 
@@ -1535,6 +1548,22 @@ class Controller:
 # before a negative one (" 1.0000-2.0000"); TP separates with commas (+ spaces).
 _NUMBER_TOKEN = re.compile(r"\$-?[0-9A-Fa-f]+(?:\.[0-9A-Fa-f]*)?|[-+]?(?:\d+(?:\.\d*)?|\.\d+)")
 _SEPARATORS = re.compile(r"[\s,]*")
+
+
+_QUOTED = re.compile(r'"[^"]*"?')
+
+
+def _case_hint(text: str) -> str | None:
+    """For a command refused as unrecognised: point at lower case, the usual cause."""
+    # Strings in quotes keep their case; only the command and operand names must be upper.
+    bare = _QUOTED.sub("", text)
+    if bare == bare.upper():
+        return None
+    quoted = _QUOTED.findall(text)
+    pieces = _QUOTED.split(text)
+    rest = zip(quoted, pieces[1:], strict=True)
+    upper = pieces[0].upper() + "".join(q + p.upper() for q, p in rest)
+    return f"Galil commands and operands are upper case: did you mean {upper!r}?"
 
 
 def _numbers(reply: str) -> list[float]:

@@ -29,7 +29,8 @@ def compare_plot(
 
     Args:
         predicted: profile per axis letter.
-        recorded: ``(t, position)`` per axis letter, ``t`` in seconds from the same start.
+        recorded: ``(t, position)`` per axis letter, ``t`` in seconds from the same start;
+            any sampling: the difference is taken against the prediction at those times.
         title: figure title.
 
     Returns:
@@ -42,18 +43,30 @@ def compare_plot(
     fig = Figure(figsize=(9, 6), layout="constrained")
     ax_pos, ax_diff = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
     for letter, prof in predicted.items():
-        ax_pos.plot(prof.t, prof.position, label=f"{letter} predicted", linewidth=2, alpha=0.6)
+        (line,) = ax_pos.plot(
+            prof.t, prof.position, label=f"{letter} predicted", linewidth=2, alpha=0.6
+        )
         if letter in recorded:
             t, pos = (np.asarray(v, dtype=float) for v in recorded[letter])
-            ax_pos.plot(t, pos, "--", label=f"{letter} recorded", linewidth=1)
-            n = min(len(pos), len(prof.position))
-            ax_diff.plot(t[:n], pos[:n] - prof.position[:n], label=letter)
+            # Same colour, dashed: each recording reads as the twin of its prediction.
+            ax_pos.plot(t, pos, "--", color=line.get_color(), label=f"{letter} recorded")
+            # Compare at the recorded times, not index by index: a recording taken at another
+            # rate (records every few samples, a polling loop) must not be misaligned. The
+            # prediction holds its end after it finishes, as the axis does.
+            if prof.t.size:
+                expected = np.interp(t, prof.t, prof.position)
+            else:
+                expected = np.full(t.size, float(prof.end))
+            ax_diff.plot(t, pos - expected, color=line.get_color(), label=letter)
     ax_pos.set_ylabel("position (counts)")
     ax_pos.legend(loc="best", fontsize="small")
     ax_pos.set_title(title)
-    ax_diff.set_ylabel("recorded - predicted")
+    ax_pos.grid(True, alpha=0.3)
+    ax_diff.set_ylabel("recorded - predicted\n(counts)")
     ax_diff.set_xlabel("time (s)")
     ax_diff.grid(True, alpha=0.3)
+    if len(ax_diff.lines) > 1:
+        ax_diff.legend(loc="best", fontsize="small")
     return fig
 
 

@@ -229,18 +229,28 @@ class MultiProfile(Mapping[str, Profile]):
         """Positions as a 2-D array, one row per axis (in mapping order)."""
         return np.vstack([p.position for p in self.profiles.values()])
 
-    def plot(self) -> Figure:
-        """Plot every axis's position and velocity on the common time base."""
+    def plot(self, *, average: float = 0.004) -> Figure:
+        """Plot every axis's position and velocity on the common time base.
+
+        As in :meth:`Profile.plot`, velocity is drawn as a centred moving average over
+        ``average`` seconds: whole-count positions make the per-sample velocity jitter.
+        """
         from matplotlib.figure import Figure
 
         fig = Figure(figsize=(7, 5), layout="constrained")
         ax_p, ax_v = fig.subplots(2, 1, sharex=True)
+        ts = float(self.t[1] - self.t[0]) if self.t.size > 1 else 1.0
+        window = max(1, round(average / ts))
         for name, p in self.profiles.items():
             ax_p.plot(self.t, p.position, label=name, drawstyle="steps-post")
-            ax_v.plot(self.t, p.velocity, label=name, drawstyle="steps-post")
+            ax_v.plot(self.t, _moving_average(p.velocity, window), label=name)
         ax_p.set_ylabel("position (counts)")
         ax_v.set_ylabel("velocity (counts/s)")
         ax_v.set_xlabel("time (s)")
+        for ax in (ax_p, ax_v):
+            ax.grid(True, alpha=0.3)
+        if window > 1:
+            ax_v.set_title(f"{window}-sample moving average", fontsize="small", loc="right")
         ax_p.legend()
         return fig
 

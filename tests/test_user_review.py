@@ -1,0 +1,226 @@
+"""What three new users tripped over, each pinned by a test (see the user review's report).
+
+An application developer scripting a DMC-4040, a scientist driving a stage in millimetres, and
+an engineer planning moves in physical units: their mistakes must be named clearly, refused
+before anything is sent, and their plots must compare like with like.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from matplotlib.colors import to_rgba
+
+import galil
+from galil import predict
+from galil.notebook import compare_plot
+from galil.testing import nothing_sent, simulated, transcript
+from galil.units import ureg
+
+mm, s = ureg.mm, ureg.s
+
+
+@pytest.fixture
+def dmc() -> galil.Controller:
+    with simulated() as controller:
+        yield controller
+
+
+@pytest.fixture
+def x(dmc: galil.Controller) -> galil.Axis:
+    axis = dmc.A.set_scale(counts_per=2000 / mm)
+    axis.speed = 20 * mm / s
+    axis.accel = axis.decel = 200 * mm / s**2
+    return axis
+
+
+# -- a negative speed was run silently at its magnitude -------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("name", "value"),
+    [("speed", -5 * mm / s), ("accel", -200 * mm / s**2), ("decel", -200 * mm / s**2)],
+)
+def test_a_negative_rate_is_refused_not_flipped(
+    dmc: galil.Controller, x: galil.Axis, name: str, value: object
+) -> None:
+    before = getattr(x, name)
+    with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match="must not be negative"):
+        setattr(x, name, value)
+    assert getattr(x, name) == before
+
+
+def test_a_negative_speed_without_a_scale_is_refused_too(dmc: galil.Controller) -> None:
+    with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match="direction comes from"):
+        dmc.B.speed = -5000
+
+
+def test_a_negative_speed_override_is_refused_before_the_move(
+    dmc: galil.Controller, x: galil.Axis
+) -> None:
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(galil.InvalidArgument):
+        x.move_to(5 * mm, speed=-10 * mm / s)
+    assert not x.moving
+
+
+def test_a_reversed_axis_still_takes_positive_rates_and_signed_jogs(
+    dmc: galil.Controller,
+) -> None:
+    y = dmc.B.set_scale(counts_per=2000 / mm, sign=-1)
+    y.speed = 10 * mm / s
+    y.accel = 100 * mm / s**2
+    assert y.speed.to("mm/s").magnitude == pytest.approx(10, rel=1e-3)
+    with transcript(dmc) as sent:
+        y.jog(-5 * mm / s)
+    assert any("JGB=10000" in line for line in sent.lines)  # user -5 mm/s = motor +10000
+    y.stop()
+
+
+# -- overrides: the user's words in the errors, and no internal keywords --------------------
+
+
+def test_an_override_with_the_wrong_unit_is_named_as_the_user_spelled_it(
+    x: galil.Axis,
+) -> None:
+    with pytest.raises(galil.InvalidArgument, match=r"^speed: 5 mm has the wrong dimension"):
+        x.plan_to(10 * mm, speed=5 * mm)
+
+
+@pytest.mark.parametrize("where", ["move_to", "move_by", "plan_to", "plan_by"])
+def test_a_misspelled_override_names_the_public_call(
+    dmc: galil.Controller, x: galil.Axis, where: str
+) -> None:
+    with nothing_sent(dmc), pytest.raises(TypeError, match=rf"^{where}\(\) .* 'sped'.*speed="):
+        getattr(x, where)(1 * mm, sped=5 * mm / s)
+
+
+@pytest.mark.parametrize("internal", [{"dry_run": True}, {"command": "IP"}])
+def test_internal_keywords_are_not_overrides(
+    dmc: galil.Controller, x: galil.Axis, internal: dict[str, object]
+) -> None:
+    with nothing_sent(dmc), pytest.raises(TypeError, match="move_to"):
+        x.move_to(1 * mm, **internal)
+    with nothing_sent(dmc), pytest.raises(TypeError, match=r"^move\(\)"):
+        dmc.move({"A": 1 * mm}, **internal)
+    with nothing_sent(dmc), pytest.raises(TypeError, match=r"^plan\(\)"):
+        dmc.plan({"A": 1 * mm}, speed=1 * mm / s, acel=1)
+
+
+# -- limits in the units the user set them in ----------------------------------------------
+
+
+def test_a_soft_limit_refusal_also_speaks_millimetres(x: galil.Axis) -> None:
+    x.soft_limits = (-5 * mm, 20 * mm)
+    with pytest.raises(galil.LimitError) as info:
+        x.plan_to(25 * mm)
+    message = str(info.value)
+    assert "beyond FL 40000" in message  # the counts stay, for the controller's view
+    assert "limit 20 mm" in message
+    assert "end 25 mm" in message
+    reached = info.value.value
+    assert reached is not None
+    assert f"reaches {reached / 2000:.6g} mm" in message
+
+
+def test_a_soft_limit_refusal_on_a_reversed_axis_maps_counts_back(
+    dmc: galil.Controller,
+) -> None:
+    y = dmc.B.set_scale(counts_per=1000 / mm, sign=-1)
+    y.speed = 10 * mm / s
+    y.accel = y.decel = 100 * mm / s**2
+    y.soft_limits = (-3 * mm, 4 * mm)
+    with pytest.raises(galil.LimitError, match=r"limit -3 mm, end -6 mm"):
+        y.plan_to(-6 * mm)
+
+
+def test_an_axis_without_a_scale_keeps_the_counts_message(dmc: galil.Controller) -> None:
+    dmc.C.speed = 10_000
+    dmc.C.soft_limits = (None, 1000)
+    with pytest.raises(galil.LimitError) as info:
+        dmc.C.plan_to(2000)
+    assert "user units" not in str(info.value)
+
+
+def test_a_speed_out_of_range_states_the_range_in_user_units(
+    dmc: galil.Controller, x: galil.Axis
+) -> None:
+    with nothing_sent(dmc), pytest.raises(galil.LimitError) as info:
+        x.speed = 50 * ureg.m / s
+    top = dmc.model.sp_max / 2000
+    assert f"limit {top:g} mm / s" in str(info.value)
+    assert "50000 mm / s" in str(info.value)
+
+
+def test_soft_limits_the_wrong_way_round_read_plainly(x: galil.Axis) -> None:
+    with pytest.raises(galil.InvalidArgument) as info:
+        x.soft_limits = (30 * mm, 0 * mm)
+    assert "Quantity(" not in str(info.value)
+    assert "30 mm" in str(info.value)
+
+
+# -- raw commands and axis letters ----------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("text", "suggestion"),
+    [("tp", "'TP'"), ("MG _tpa", "'MG _TPA'"), ('MG "keep", _tpa', "'MG \"keep\", _TPA'")],
+)
+def test_a_lower_case_command_is_explained(
+    dmc: galil.Controller, text: str, suggestion: str
+) -> None:
+    with pytest.raises(galil.CommandError) as info:
+        dmc.command(text)
+    assert info.value.code == 1
+    assert f"upper case: did you mean {suggestion}?" in str(info.value)
+
+
+def test_an_upper_case_refusal_gets_no_case_hint(dmc: galil.Controller) -> None:
+    with pytest.raises(galil.CommandError) as info:
+        dmc.command("XQ #NOSUCH")
+    assert "upper case" not in str(info.value)
+
+
+@pytest.mark.parametrize("name", ["E", "a"])
+def test_a_wrong_axis_attribute_lists_the_axes(dmc: galil.Controller, name: str) -> None:
+    with pytest.raises(AttributeError, match="DMC-4040 has axes A, B, C, D"):
+        getattr(dmc, name)
+    assert not hasattr(dmc, name)
+
+
+# -- plots ----------------------------------------------------------------------------------
+
+
+def test_compare_plot_aligns_a_recording_taken_at_another_rate() -> None:
+    prof = predict.move(20_000, 40_000, 256_000, 256_000)
+    # Records every 4th sample, plus a few samples after the end (the axis holds still).
+    t = np.concatenate((prof.t[::4], prof.t[-1] + np.arange(1, 4) * prof.sample_period))
+    pos = np.concatenate((prof.position[::4], np.full(3, prof.end)))
+    fig = compare_plot({"A": prof}, {"A": (t, pos)})
+    diff = fig.axes[1].lines[0].get_ydata()
+    assert np.abs(diff).max() == 0
+
+
+def test_compare_plot_pairs_colours_and_labels_the_difference() -> None:
+    a = predict.move(5_000, 40_000, 256_000, 256_000)
+    b = predict.move(-3_000, 20_000, 256_000, 256_000)
+    fig = compare_plot({"A": a, "B": b}, {"A": (a.t, a.position), "B": (b.t, b.position)})
+    top, diff = fig.axes
+    colours = [to_rgba(line.get_color()) for line in top.lines]
+    assert colours[0] == colours[1]
+    assert colours[2] == colours[3]
+    assert colours[0] != colours[2]
+    assert [to_rgba(line.get_color()) for line in diff.lines] == [colours[0], colours[2]]
+    assert diff.get_legend() is not None
+    assert "counts" in diff.get_ylabel()
+
+
+def test_multiprofile_plot_draws_a_smoothed_velocity(dmc: galil.Controller) -> None:
+    dmc.A.speed = 40_000
+    dmc.B.speed = 10_000
+    both = dmc.plan({"A": 40_000, "B": 5_000})
+    fig = both.plot()
+    velocity = fig.axes[1].lines[0].get_ydata()
+    raw = both["A"].velocity
+    cruise = slice(raw.size // 3, raw.size // 2)  # A runs at SP here
+    assert np.ptp(velocity[cruise]) < np.ptp(raw[cruise])
+    assert np.mean(velocity[cruise]) == pytest.approx(40_000, rel=1e-3)
