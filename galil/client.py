@@ -518,6 +518,7 @@ class Controller:
         self.transport: Transport = None  # type: ignore[assignment]  # set by _open
         self._session = Session()
         self._open_flag = False
+        self._dead = ""  # why the command link broke, until reconnect()
         self._cw_restore: int | None = None
         self._eo_restore = False
         #: Whether the controller echoes (found at the handshake).
@@ -547,6 +548,7 @@ class Controller:
         self.echo = False
         self._qz = None
         self._open_flag = True
+        self._dead = ""
         try:
             with self._lock:
                 self._drain_stale()
@@ -779,7 +781,7 @@ class Controller:
         self.close()
 
     def __repr__(self) -> str:
-        state = "closed" if self.closed else "open"
+        state = "closed" if self.closed else ("dead: call reconnect()" if self._dead else "open")
         name = self.model.name if self.model is not None else "?"
         return f"<Controller {name} on {self.transport!r} {state}>"
 
@@ -813,8 +815,8 @@ class Controller:
         # acquire/release rather than `with`: half the cost on the hot path (~0.3 us).
         lock.acquire()
         try:
-            if not self._open_flag:
-                raise self._error(GalilConnectionError, "the controller link is closed")
+            if not self._open_flag or self._dead:
+                raise self._closed_error()
             session = self._session
             if (
                 cmd.parts
@@ -841,7 +843,7 @@ class Controller:
                 except GalilConnectionError as exc:
                     if not queued:
                         session.send(cmd)  # the bytes went out: the reply may still come
-                    raise self._error(GalilConnectionError, str(exc)) from exc
+                    raise self._link_failed(exc) from exc
                 if not queued:
                     reply = session.quick_reply(cmd, chunk) if chunk else None
                     if reply is not None:
@@ -983,8 +985,8 @@ class Controller:
         t = self.timeout if timeout is None else _check_timeout(timeout, self.timeout)
         try:
             with self._lock:
-                if not self._open_flag:
-                    raise self._error(GalilConnectionError, "the controller link is closed")
+                if not self._open_flag or self._dead:
+                    raise self._closed_error()
                 done = self._roundtrip(batch, t)
                 for d in done:
                     if not d.ok:
@@ -1021,7 +1023,7 @@ class Controller:
             transport.write(data)
             chunk = transport.read(t)  # the timeout as given, so transports can cache it
         except GalilConnectionError as exc:
-            raise self._error(GalilConnectionError, str(exc)) from exc
+            raise self._link_failed(exc) from exc
         events: list[Completed | Unsolicited] = []
         if chunk:
             self.bytes_received += len(chunk)
@@ -1080,7 +1082,7 @@ class Controller:
             try:
                 chunk = transport.read(wait)
             except GalilConnectionError as exc:
-                raise self._error(GalilConnectionError, str(exc)) from exc
+                raise self._link_failed(exc) from exc
             events = []
             if chunk:
                 self.bytes_received += len(chunk)
@@ -1145,7 +1147,7 @@ class Controller:
         try:
             self.transport.write(data)
         except GalilConnectionError as exc:
-            raise self._error(GalilConnectionError, str(exc)) from exc
+            raise self._link_failed(exc) from exc
         self.bytes_sent += len(data)
         if self.wire_log.hooks or _WIRE.isEnabledFor(_DEBUG):
             self._observe("out", data)
@@ -1154,7 +1156,7 @@ class Controller:
         try:
             data = self.transport.read(timeout)
         except GalilConnectionError as exc:
-            raise self._error(GalilConnectionError, str(exc)) from exc
+            raise self._link_failed(exc) from exc
         if data:
             self.bytes_received += len(data)
             if self.wire_log.hooks or _WIRE.isEnabledFor(_DEBUG):
@@ -1166,6 +1168,20 @@ class Controller:
             _WIRE.debug("%s %r", "->" if direction == "out" else "<-", data)
         for hook in self.wire_log.hooks:
             hook(direction, data)
+
+    def _link_failed(self, exc: GalilConnectionError) -> GalilConnectionError:
+        # The command link broke under a read or write: remember it, so the next call (and
+        # repr) says the link is dead and what to do, rather than failing on a broken pipe.
+        self._dead = str(exc)
+        return self._error(GalilConnectionError, f"{exc}; call reconnect() to open it again")
+
+    def _closed_error(self) -> GalilConnectionError:
+        if self._dead:
+            return self._error(
+                GalilConnectionError,
+                f"the controller link died ({self._dead}); call reconnect() to open it again",
+            )
+        return self._error(GalilConnectionError, "the controller link is closed")
 
     def _error(self, kind: type[_E], message: str) -> _E:
         name = self.model.name if self.model is not None else None
