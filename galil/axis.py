@@ -223,7 +223,7 @@ class MoveHandle:
         return next(iter(self.profiles.values()))
 
     def _predict(self, letter: str, t: _Track) -> predict.Profile:
-        return _predict(self._controller, t)
+        return self._controller.axes[letter]._display(_predict(self._controller, t))
 
     def _add_event(
         self, letter: str, sample: int | None, make: Callable[[float], predict.Event] | None
@@ -475,6 +475,17 @@ class Axis:
         """
         self._scale = None if counts_per is None else Scale(counts_per, offset, sign)
         return self
+
+    def _display(self, profile: predict.Profile) -> predict.Profile:
+        """``profile`` shown in this axis's unit (its arrays stay in counts)."""
+        scale = self._scale
+        if scale is None:
+            return profile
+        return profile.with_units(
+            scale.sign * float(scale.counts_per.magnitude),
+            f"{scale.unit:~}",
+            offset=float(scale.offset.magnitude),
+        )
 
     @property
     def scale(self) -> Scale | None:
@@ -1010,7 +1021,7 @@ def execute_move(
             _in_user_units(exc, axis._scale, profile.end)
             raise
         tracks[a] = track
-        profiles[a] = profile
+        profiles[a] = axis._display(profile)
         targets_out[a] = str(distance if command == "IP" else target)
     parts: list[str] = []
     for cmd, per_axis in params_parts.items():

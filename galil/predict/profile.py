@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import html
+import math
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -33,11 +34,17 @@ def _moving_average(x: FloatArray, window: int) -> FloatArray:
 
 
 def _summary_rows(p: Profile) -> list[tuple[str, str]]:
+    ends = f"{p.start} → {p.end} counts"
+    peak = f"{p.peak_speed:.6g} counts/s"
+    if p.display is not None:
+        k, offset, unit = p.display
+        ends = f"{offset + p.start / k:.6g} → {offset + p.end / k:.6g} {unit} ({ends})"
+        peak = f"{p.peak_speed / abs(k):.6g} {unit}/s ({peak})"
     return [
         ("shape", p.shape),
         ("duration", f"{p.duration:.6g} s ({p.samples} samples)"),
-        ("start → end", f"{p.start} → {p.end} counts"),
-        ("peak speed", f"{p.peak_speed:.6g} counts/s"),
+        ("start → end", ends),
+        ("peak speed", peak),
         ("sample period", f"{p.sample_period * 1e6:.6g} µs"),
     ]
 
@@ -59,6 +66,10 @@ class Profile:
         profiler: the profiler position ``r`` before smoothing (what AD/AR trippoints watch);
             equal to ``position`` when IT is 1.
         stop_code: the stop code once the profile is over (1 done, 4 ST, 51 contour, ...).
+        display: ``(counts_per_unit, offset, unit)`` for showing this profile in a user unit
+            (plots and summaries only; every array stays in counts). ``counts_per_unit`` is
+            negative when the axis's positive direction is the motor's negative one. Set by
+            the axis layer on scaled axes; see :meth:`with_units`.
     """
 
     t: FloatArray
@@ -70,6 +81,7 @@ class Profile:
     sample_period: float
     profiler: Int64Array = field(repr=False)
     stop_code: int = 1
+    display: tuple[float, float, str] | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         for arr in (self.t, self.position, self.velocity, self.profiler):
@@ -138,6 +150,20 @@ class Profile:
         acc[1:] = np.diff(self.velocity) / self.sample_period
         return acc
 
+    def with_units(self, counts_per_unit: float, unit: str, offset: float = 0.0) -> Profile:
+        """The same profile, shown in ``unit`` (``counts = (x - offset) * counts_per_unit``)."""
+        if not (math.isfinite(counts_per_unit) and counts_per_unit != 0):
+            raise InvalidArgument(
+                f"counts_per_unit must be finite and non-zero, not {counts_per_unit!r}"
+            )
+        if not math.isfinite(offset):
+            raise InvalidArgument(f"offset must be finite, not {offset!r}")
+        return replace(self, display=(float(counts_per_unit), float(offset), str(unit)))
+
+    def _shown(self) -> tuple[float, float, str]:
+        """(counts per shown unit, offset, unit name): counts themselves without a display."""
+        return self.display if self.display is not None else (1.0, 0.0, "counts")
+
     def at(self, t: float | npt.ArrayLike) -> Any:
         """Reference position at time(s) ``t`` (s), linearly interpolated between samples.
 
@@ -161,21 +187,25 @@ class Profile:
         acc = np.zeros(vel.size)
         acc[1:] = np.diff(vel) / self.sample_period
         acc = _moving_average(acc, 4 * window)  # a difference of a difference: average longer
+        k, offset, unit = self._shown()
         fig = Figure(figsize=(7, 6), layout="constrained")
         axes = fig.subplots(3, 1, sharex=True)
-        axes[0].plot(self.t, self.position, drawstyle="steps-post")
-        axes[0].set_ylabel("position (counts)")
-        axes[1].plot(self.t, self.velocity, drawstyle="steps-post", color="0.8", linewidth=0.8)
-        axes[1].plot(self.t, vel)
-        axes[1].set_ylabel("velocity (counts/s)")
-        axes[2].plot(self.t, acc)
-        axes[2].set_ylabel("accel (counts/s²)")
+        axes[0].plot(self.t, offset + self.position / k, drawstyle="steps-post")
+        axes[0].set_ylabel(f"position ({unit})")
+        axes[1].plot(self.t, self.velocity / k, drawstyle="steps-post", color="0.8", linewidth=0.8)
+        axes[1].plot(self.t, vel / k)
+        axes[1].set_ylabel(f"velocity ({unit}/s)")
+        axes[2].plot(self.t, acc / k)
+        axes[2].set_ylabel(f"accel ({unit}/s²)")
         axes[2].set_xlabel("time (s)")
         for ax in axes:
             ax.grid(True, alpha=0.3)
         if window > 1:
             axes[1].set_title(f"{window}-sample moving average", fontsize="small", loc="right")
-        fig.suptitle(title or f"{self.shape}: {self.distance} counts in {self.duration:.4g} s")
+        moved = (
+            f"{self.distance} counts" if self.display is None else f"{self.distance / k:.6g} {unit}"
+        )
+        fig.suptitle(title or f"{self.shape}: {moved} in {self.duration:.4g} s")
         return fig
 
     def _repr_html_(self) -> str:

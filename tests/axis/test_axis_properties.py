@@ -205,3 +205,19 @@ def test_scale_round_trips(per: float, offset: float, sign: int, x: float, unit:
 def test_sim_of_needs_a_simulator() -> None:
     with simulated() as dmc:
         assert sim_of(dmc).spec.name == "DMC-4040"
+
+
+def test_plans_on_scaled_axes_are_shown_in_the_axis_unit() -> None:
+    from galil.testing import simulated
+    from galil.units import ureg
+
+    with simulated() as dmc:
+        x = dmc.A.set_scale(counts_per=2000 / ureg.mm)
+        plan = x.plan_to(12.5 * ureg.mm)
+        assert plan.end == 25_000
+        assert plan.display == (2000.0, 0.0, "mm")
+        assert "12.5 mm" in plan._repr_html_()
+        move = x.move_to(12.5 * ureg.mm)
+        assert move.profile.display == (2000.0, 0.0, "mm")
+        move.wait()
+        assert dmc.B.plan_to(100).display is None  # no scale: counts

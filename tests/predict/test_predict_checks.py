@@ -227,3 +227,17 @@ def test_soft_limits_refuse_only_outward_motion() -> None:
     assert info.value.sample > 0
     below = predict.move(4500, 10_000, 102_400, 102_400, start=-5000)
     predict.check_soft_limits(below, low=-1000)
+
+
+def test_profile_with_units_changes_only_what_is_shown() -> None:
+    p = predict.move(25_000, 25_000, 256_000, 256_000)
+    shown = p.with_units(-2000.0, "mm", offset=5.0)
+    assert shown.position is p.position  # arrays stay in counts
+    rows = dict(predict.profile._summary_rows(shown))
+    assert rows["start → end"].startswith("5 → -7.5 mm")
+    assert rows["peak speed"].startswith("12.5 mm/s")
+    fig = shown.plot()
+    assert fig.axes[0].get_ylabel() == "position (mm)"
+    assert fig.axes[0].lines[0].get_ydata()[-1] == pytest.approx(-7.5)
+    with pytest.raises(InvalidArgument):
+        p.with_units(0.0, "mm")
