@@ -52,6 +52,14 @@ def main() -> int:
                 f"speed {axis.speed:.0f} c/s, stop code {code} ({text})"
             )
 
+        # A data record (QR) has the state of every axis taken in the same servo sample.
+        try:
+            rec = dmc.record()
+            positions = {a: int(rec[a]["position"]) for a in dmc.model.axes}
+            print(f"data record at sample {rec['sample']}: positions {positions}")
+        except (galil.InvalidArgument, galil.CommandError) as exc:  # not on every model
+            print(f"no data record: {str(exc).splitlines()[0]}")
+
         # Raw commands are there when you need one; a query returns the reply text.
         print("raw MG _TPA ->", dmc.command("MG _TPA").strip())
         # Several operands in as few round trips as fit on a line.

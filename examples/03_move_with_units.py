@@ -47,12 +47,17 @@ def main() -> int:
         low, high = x.soft_limits
         print(f"A: speed {x.speed:~.3f}, accel {x.accel:~.1f}, soft limits {low:~} to {high:~}")
 
-        # 1. Plan: the predictor says what the profiler will do, and nothing is sent.
+        # 1. Plan: the predictor says what the profiler will do, and nothing is sent. Its
+        # arrays are counts, but on a scaled axis it is shown in the axis's unit (the
+        # notebook table, the plot); `display` holds that unit (None on an unscaled axis).
         plan = x.plan_to(12.5 * mm)
+        counts_per, _offset, unit = plan.display
         print(
             f"plan A -> 12.5 mm: {plan.shape}, {plan.duration:.3f} s, "
-            f"peak {plan.peak_speed / COUNTS_PER_MM:.2f} mm/s, {plan.samples} samples"
+            f"peak {plan.peak_speed / abs(counts_per):.2f} {unit}/s, {plan.samples} samples"
         )
+        plan.plot().savefig("plan_A.png")  # position, velocity and acceleration in mm
+        print("plot in mm saved to plan_A.png")
 
         # 2. Move: the same checks again, then PA and BG in one line. wait() polls at a rate
         # set by the predicted duration and compares the end with the prediction.

@@ -31,6 +31,7 @@ def main() -> int:
     """Stream the manual's 1 - cos profile, then a quarter circle on two axes."""
     with galil.connect(ADDRESS) as dmc:
         x = dmc.A.set_scale(counts_per=COUNTS_PER_MM / mm)
+        y = dmc.B.set_scale(counts_per=COUNTS_PER_MM / mm)
         if not (x.motor_on and dmc.B.motor_on):
             dmc.servo_here("AB")
         ts = dmc.sample_period
@@ -61,9 +62,9 @@ def main() -> int:
             f"buffer never below {result.low_water} free slots"
         )
 
-        # 2. Two axes: a quarter circle of 5 mm radius in half a second. Paths are in counts
-        # (contour() does not apply the axes' scales), so convert millimetres first.
-        radius = 5 * COUNTS_PER_MM
+        # 2. Two axes: a quarter circle of 5 mm radius in half a second. A path in pint units
+        # goes through each axis's scale; plain numbers (as above) are counts.
+        radius = 5.0  # mm
 
         def quarter_circle(t: np.ndarray) -> np.ndarray:
             angle = (math.pi / 2) * (1 - np.cos(math.pi * t / 0.5)) / 2  # ease in and out
@@ -71,18 +72,18 @@ def main() -> int:
 
         times = np.arange(1, 129) * (1 << dt) * ts
         times = np.minimum(times, 0.5)
-        path2 = quarter_circle(times)  # shape (segments, 2): one column per axis
+        path2 = quarter_circle(times) * mm  # shape (segments, 2): one column per axis
         with dmc.motion():
             arc = dmc.contour("AB", path2, dt=dt, progress=True)
         print(
             f"quarter circle: {len(arc.increments)} segments in {arc.duration:.3f} s; "
-            f"A {x.reference_position:~.3f}, B {dmc.B.reference_position:.0f} counts"
+            f"A {x.reference_position:~.3f}, B {y.reference_position:~.3f}"
         )
 
         # 3. A path the controller cannot follow is refused before anything is sent.
         # Here: 20 mm in one 4-sample segment is beyond the CD range (±32,000 counts).
         try:
-            dmc.contour("A", [0.0, 20 * COUNTS_PER_MM], dt=dt)
+            dmc.contour("A", [0.0, 20.0] * mm, dt=dt)
         except galil.LimitError as exc:
             print(
                 f"refused: {exc.name} {exc.value} beyond ±{exc.limit:.0f}, segment at sample "

@@ -28,6 +28,7 @@ GUIDE = [
     "safety.md",
     "predictor.md",
     "transports.md",
+    "testing.md",
 ]
 
 _FENCE = re.compile(r"^```([^\n`]*)\n(.*?)^```\s*$", re.MULTILINE | re.DOTALL)
@@ -83,8 +84,12 @@ def test_page_code_runs(
             except Exception as exc:
                 pytest.fail(f"{page.name}, block at line {line}: {type(exc).__name__}: {exc}")
     finally:
-        # Pages connect to simulators; close whatever they left open.
+        # Pages connect to simulators (some behind a socket); close whatever they left open.
+        from galil.sim.server import SimTcpServer
+
         for value in namespace.values():
             if isinstance(value, galil.Controller) and not value.closed:
                 value.close()
+            elif isinstance(value, SimTcpServer):
+                value.stop()  # idempotent
         capsys.readouterr()

@@ -19,7 +19,11 @@ SCRIPTS = sorted(EXAMPLES.glob("[0-9][0-9]_*.py"))
 
 # A line (or part of one) each script must print: the point of the example happened.
 EXPECTED = {
-    "01_connect.py": ["connected to DMC4040", "refused as expected: TC 10"],
+    "01_connect.py": [
+        "connected to DMC4040",
+        "data record at sample",
+        "refused as expected: TC 10",
+    ],
     "02_jog.py": [
         "velocity -5.00 mm / s",
         "stop code 4",
@@ -27,6 +31,8 @@ EXPECTED = {
     ],
     "03_move_with_units.py": [
         "plan A -> 12.5 mm: trapezoid",
+        "peak 20.00 mm/s",
+        "plot in mm saved",
         "end vs prediction: {'A': 0} counts",
         "refused: FL would be crossed",
         "wrong dimension",
@@ -34,7 +40,7 @@ EXPECTED = {
     ],
     "04_contour.py": [
         "1 - cos: 31 segments, 6000 counts",
-        "B 10000 counts",
+        "B 5.000 mm",
         "refused: CD 40000",
         "too slow",
     ],
@@ -76,14 +82,13 @@ def test_script_takes_an_address(tmp_path: Path) -> None:
     # The simulator behind a real TCP socket stands in for a controller on the network.
     from galil.sim.server import SimTcpServer
 
-    with SimTcpServer(model="DMC-4040") as server:
-        host, port = server.message_address
-        address = f"{server.url}?message_port={port}"
-        assert host
-        proc = _run([str(EXAMPLES / "03_move_with_units.py"), address], tmp_path)
+    # No message port, as on a controller: the client claims messages with CF on a handle.
+    with SimTcpServer(model="DMC-4040", message_port=None) as server:
+        proc = _run([str(EXAMPLES / "03_move_with_units.py"), server.url], tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     for text in EXPECTED["03_move_with_units.py"]:
         assert text in proc.stdout, f"{text!r} not in:\n{proc.stdout}"
+    assert (tmp_path / "plan_A.png").stat().st_size > 0
 
 
 def test_script_reports_a_bad_address(tmp_path: Path) -> None:
