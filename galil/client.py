@@ -1173,6 +1173,8 @@ class Controller:
         # The command link broke under a read or write: remember it, so the next call (and
         # repr) says the link is dead and what to do, rather than failing on a broken pipe.
         self._dead = str(exc)
+        with contextlib.suppress(GalilError, OSError):
+            self.transport.close()  # a broken socket or port is no use; reconnect() opens anew
         return self._error(GalilConnectionError, f"{exc}; call reconnect() to open it again")
 
     def _closed_error(self) -> GalilConnectionError:

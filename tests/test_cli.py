@@ -8,6 +8,7 @@ import signal
 import socket
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -15,6 +16,8 @@ import pytest
 from galil import cli
 
 GALIL = [sys.executable, "-m", "galil.cli"]
+
+Spawn = Callable[..., subprocess.Popen[str]]  # the `spawn` fixture of tests/conftest.py
 
 
 def _default_sigint() -> None:
@@ -32,7 +35,7 @@ def test_plan_prints_the_profile_and_saves_a_plot(
     )
     out = capsys.readouterr().out
     assert "trapezoid" in out
-    assert "end=10000" in out
+    assert "0 → 10000 counts" in out
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -61,8 +64,8 @@ def test_terminal_sends_lines_and_explains_rejections() -> None:
     assert "? 1 Unrecognized command" in run.stdout
 
 
-def test_sim_serves_tcp_until_interrupted() -> None:
-    proc = subprocess.Popen(
+def test_sim_serves_tcp_until_interrupted(spawn: Spawn) -> None:
+    proc = spawn(
         [*GALIL, "sim", "--model", "DMC-4040", "--tcp", "127.0.0.1:0"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -89,10 +92,10 @@ def test_sim_serves_tcp_until_interrupted() -> None:
 
 
 @pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pty")
-def test_sim_serves_a_pty_until_interrupted() -> None:
+def test_sim_serves_a_pty_until_interrupted(spawn: Spawn) -> None:
     import serial
 
-    proc = subprocess.Popen(
+    proc = spawn(
         [*GALIL, "sim", "--pty"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -115,8 +118,8 @@ def test_sim_serves_a_pty_until_interrupted() -> None:
         proc.wait(timeout=20)
 
 
-def test_sim_stops_cleanly_on_sigterm() -> None:
-    proc = subprocess.Popen(
+def test_sim_stops_cleanly_on_sigterm(spawn: Spawn) -> None:
+    proc = spawn(
         [*GALIL, "sim", "--tcp", "127.0.0.1:0"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,

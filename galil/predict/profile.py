@@ -222,6 +222,11 @@ class Profile:
         body = ", ".join(f"{k}={v}" for k, v in _summary_rows(self))
         p.text(f"Profile({body})")
 
+    def __str__(self) -> str:
+        # print(profile): the summary, in the display unit when there is one.
+        body = ", ".join(f"{k} {v}" for k, v in _summary_rows(self))
+        return f"Profile: {body}"
+
     def __repr__(self) -> str:
         return (
             f"Profile(shape={self.shape!r}, duration={self.duration:.6g}, samples={self.samples},"
