@@ -1545,7 +1545,7 @@ class SimController:
         return ",".join(self._num(v, "10.0") for v in self.spec.qz) + "\r\n"
 
     def _cmd_qr(self, args: str, th: _Thread | None) -> str:
-        if self.spec.qz is None or self.spec.qz[1] not in (52, 24):
+        if self.spec.qz is None or self.spec.qz[1] not in (52, 24, 18):
             raise Refused(1, "no data record on this model")
         # QR AB asks for those axis blocks only (the header says which); the general and
         # coordinated blocks always come (I, S, T, N letters are accepted and change nothing).
@@ -1610,7 +1610,7 @@ class SimController:
         if period == 0:
             self._dr = None
             return ""
-        if self.spec.qz is None or self.spec.qz[1] not in (52, 24):
+        if self.spec.qz is None or self.spec.qz[1] not in (52, 24, 18):
             raise Refused(1, "no data record on this model")
         if period != int(period) or not self._dr_min() <= period <= _DR_MAX:
             raise Refused(6, f"DR period must be 0 or {self._dr_min()}..{_DR_MAX} samples")
@@ -1711,7 +1711,7 @@ class SimController:
             InvalidArgument: the model has no data record layout here.
         """
         qz = self.spec.qz
-        if qz is None or qz[1] not in (52, 24):
+        if qz is None or qz[1] not in (52, 24, 18):
             raise InvalidArgument(f"{self.spec.name}: no data record layout in the simulator")
         n, general, coord, per_axis = qz
         present = [
@@ -1731,10 +1731,14 @@ class SimController:
             buf[51] = threads & 0xFF
             struct.pack_into("<H", buf, 60, self._contour_free())
             base = 82
-        else:
+        elif general == 24:
             buf[26] = self._tc & 0xFF
             buf[27] = (0x80 if threads else 0) | (1 if self._echo else 0)
             base = 44
+        else:
+            # DMC-30010: an 18-byte general block whose layout is not sourced (kept raw by
+            # galil.protocol.records); only the sample number is filled in. Axis blocks as 4000.
+            base = 4 + general + coord
         for i, (_, ax) in enumerate(present):
             at = base + i * per_axis
             m = ax.m
