@@ -378,9 +378,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     server: _Server
     if args.pty:
         server = SimPtyServer(controller)
-        server.start()
-        assert isinstance(server, SimPtyServer)
-        print(f"{controller.identity} on serial port {server.path}", flush=True)
     else:
         host, _, port = (args.tcp or "127.0.0.1:0").rpartition(":")
         try:
@@ -392,18 +389,23 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
         except (InvalidArgument, ValueError) as e:
             parser.error(str(e))
-        server.start()
-        assert isinstance(server, SimTcpServer)
-        print(f"{controller.identity} on {server.url}", flush=True)
-        if args.message_port >= 0:
-            mhost, mport = server.message_address
-            print(
-                f"unsolicited messages on tcp://{mhost}:{mport} (or CF I on a handle)", flush=True
-            )
     if threading.current_thread() is threading.main_thread():
         # `kill` (a service manager, a CI job ending) stops the server as cleanly as Ctrl-C.
+        # Installed before the address is printed: whoever waits for that line may signal at once.
         signal.signal(signal.SIGTERM, _interrupt)
     try:
+        server.start()
+        if isinstance(server, SimPtyServer):
+            print(f"{controller.identity} on serial port {server.path}", flush=True)
+        else:
+            assert isinstance(server, SimTcpServer)
+            print(f"{controller.identity} on {server.url}", flush=True)
+            if args.message_port >= 0:
+                mhost, mport = server.message_address
+                print(
+                    f"unsolicited messages on tcp://{mhost}:{mport} (or CF I on a handle)",
+                    flush=True,
+                )
         while True:
             time.sleep(0.5)
     except KeyboardInterrupt:

@@ -6,7 +6,7 @@ simulator's manual clock.
 
 from __future__ import annotations
 
-from conftest import Front
+from sim_fronts import Front
 
 PROGRAM = (
     b'#A\rMG "hello"\rWT 100\rMG "bye"\rEN\r#LOOP\rn=0\r#L2\rn=n+1\rJP #L2,n<5\rMG "n=",n\rEN\r\\'

@@ -8,6 +8,7 @@ import socket
 import subprocess
 import sys
 import urllib.parse
+from collections.abc import Callable
 
 import pytest
 from hypothesis import given, settings
@@ -156,8 +157,10 @@ def test_real_time_server_moves_by_itself() -> None:
         s.close()
 
 
-def test_cli_prints_address_and_stops_on_ctrl_c() -> None:
-    proc = subprocess.Popen(
+def test_cli_prints_address_and_stops_on_ctrl_c(
+    spawn: Callable[..., subprocess.Popen[str]],
+) -> None:
+    proc = spawn(
         [sys.executable, "-c", "from galil.sim.server import main; main()", "--tcp", "127.0.0.1:0"],
         stdout=subprocess.PIPE,
         text=True,
@@ -178,3 +181,31 @@ def test_cli_prints_address_and_stops_on_ctrl_c() -> None:
     finally:
         os.kill(proc.pid, signal.SIGINT)
         assert proc.wait(timeout=10) == 0
+
+
+@pytest.mark.parametrize("where", ["--tcp", "--pty"])
+def test_cli_stops_cleanly_when_signalled_as_it_announces_itself(
+    where: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Whoever starts `galil sim` waits for the address line and may stop it at once: SIGTERM
+    # and Ctrl-C must already stop it cleanly (exit 0, server closed) when that line appears.
+    import galil.sim.server as server_module
+
+    announced: list[str] = []
+
+    def signal_on_announce(*args: object, **kwargs: object) -> None:
+        announced.append(" ".join(map(str, args)))
+        handler = signal.getsignal(signal.SIGTERM)
+        assert callable(handler), f"SIGTERM would kill the server outright ({handler!r})"
+        if len(announced) == 1:
+            signal.raise_signal(signal.SIGTERM)  # runs the handler here, in the main thread
+
+    previous = signal.getsignal(signal.SIGTERM)
+    monkeypatch.setattr(server_module, "print", signal_on_announce, raising=False)
+    try:
+        extra = ["127.0.0.1:0"] if where == "--tcp" else []
+        assert server_module.main([where, *extra]) == 0
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert len(announced) == 1
+    assert "DMC4040" in announced[0]
