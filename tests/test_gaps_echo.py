@@ -8,12 +8,12 @@ in-process link, with the simulator's echo preset.
 
 from __future__ import annotations
 
-import threading
 import warnings
 from collections.abc import Iterator
 
 import numpy as np
 import pytest
+from concurrency import hammer
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -84,25 +84,8 @@ def test_echo_kept_on_request_is_stripped_from_every_reply(
 
 def test_threads_share_an_echoing_link(pty_echo: tuple[SimPtyServer, SimController]) -> None:
     srv, _ = pty_echo
-    errors: list[str] = []
     with galil.client.connect(srv.path, timeout=2.0, echo=True) as c:
-
-        def worker(k: int) -> None:
-            for i in range(30):
-                n = k * 1000 + i
-                try:
-                    value = c.query_number(f"MG {n}")
-                except Exception as exc:  # collected below
-                    errors.append(f"{n}: {exc!r}")
-                    return
-                if value != n:
-                    errors.append(f"{n}: got {value}")
-
-        threads = [threading.Thread(target=worker, args=(k,)) for k in range(4)]
-        for t in threads:
-            t.start()
-        for t in threads:
-            t.join()
+        errors = hammer(c, threads=4, per_thread=30)
     assert errors == []
 
 

@@ -14,6 +14,7 @@ import warnings
 from collections.abc import Iterator
 
 import pytest
+from concurrency import hammer
 
 import galil.client
 from galil.errors import GalilConnectionError, GalilTimeoutError
@@ -215,27 +216,12 @@ def test_threads_timeouts_and_messages_over_the_cf_handle() -> None:
         SimTcpServer(sim, message_port=None) as srv,
         galil.client.connect(srv.url, timeout=2.0) as c,
     ):
-        errors: list[str] = []
 
-        def worker(k: int) -> None:
-            for i in range(40):
-                n = k * 1000 + i
-                if k == 0 and i % 10 == 0:
-                    sim.emit_message(f"tick {i}")
-                try:
-                    value = c.query_number(f"MG {n}")
-                except Exception as exc:  # collected below
-                    errors.append(f"{n}: {exc!r}")
-                    return
-                if value != n:
-                    errors.append(f"{n}: got {value}")
+        def tick(k: int, i: int) -> None:
+            if k == 0 and i % 10 == 0:
+                sim.emit_message(f"tick {i}")
 
-        threads = [threading.Thread(target=worker, args=(k,)) for k in range(8)]
-        for t in threads:
-            t.start()
-        for t in threads:
-            t.join()
-        assert errors == []
+        assert hammer(c, threads=8, per_thread=40, before=tick) == []
         assert [c.messages.get(timeout=WAIT) for _ in range(4)] == [
             f"tick {i}" for i in (0, 10, 20, 30)
         ]

@@ -13,6 +13,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import pytest
+from concurrency import hammer
 from fake_usb import FakeBackend, FakeUsbDevice
 
 import galil.client
@@ -155,26 +156,7 @@ def test_timeout_then_resync(bus: Bus) -> None:
 
 
 def test_eight_threads_get_their_own_replies(bus: Bus) -> None:
-    c = bus.controller
-    errors: list[str] = []
-
-    def worker(k: int) -> None:
-        for i in range(bus.threads_commands):
-            n = k * 10000 + i
-            try:
-                value = c.query_number(f"MG {n}")
-            except Exception as exc:  # collected and reported below
-                errors.append(f"{n}: {exc!r}")
-                return
-            if value != n:
-                errors.append(f"{n}: got {value}")
-
-    threads = [threading.Thread(target=worker, args=(k,)) for k in range(8)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
-    assert errors == []
+    assert hammer(bus.controller, threads=8, per_thread=bus.threads_commands) == []
 
 
 def test_close_restores_marking(bus: Bus) -> None:
