@@ -851,13 +851,7 @@ class Controller:
                         self._recent.append(_new_completed((cmd, True, reply, None)))
                         return reply
                     session.send(cmd)  # anything else: the session matches it as usual
-                events: list[Completed | Unsolicited] = []
-                if chunk:
-                    self.bytes_received += len(chunk)
-                    try:
-                        events = session.receive_data(chunk)
-                    except ProtocolError as exc:
-                        raise self._protocol_error(exc) from exc
+                events = self._take(chunk, False)  # no hooks or logging on this path
                 done = self._collect((cmd,), t, start, 0.0, events, False)
             if len(done) == 1:
                 d = done[0]
@@ -1024,19 +1018,11 @@ class Controller:
             chunk = transport.read(t)  # the timeout as given, so transports can cache it
         except GalilConnectionError as exc:
             raise self._link_failed(exc) from exc
-        events: list[Completed | Unsolicited] = []
-        if chunk:
-            self.bytes_received += len(chunk)
-            if watch:
-                self._observe("in", chunk)
-            try:
-                events = session.receive_data(chunk)
-            except ProtocolError as exc:
-                raise self._protocol_error(exc) from exc
-            if len(events) == 1 and not session.pending and type(events[0]) is Completed:
-                # The common case: the whole reply in one read.
-                self._recent.append(events[0])
-                return events  # type: ignore[return-value]
+        events = self._take(chunk, watch)
+        if len(events) == 1 and not session.pending and type(events[0]) is Completed:
+            # The common case: the whole reply in one read.
+            self._recent.append(events[0])
+            return events  # type: ignore[return-value]
         return self._collect(batch, t, start, sim_start, events, watch)
 
     def _collect(
@@ -1083,15 +1069,19 @@ class Controller:
                 chunk = transport.read(wait)
             except GalilConnectionError as exc:
                 raise self._link_failed(exc) from exc
-            events = []
-            if chunk:
-                self.bytes_received += len(chunk)
-                if watch:
-                    self._observe("in", chunk)
-                try:
-                    events = session.receive_data(chunk)
-                except ProtocolError as exc:
-                    raise self._protocol_error(exc) from exc
+            events = self._take(chunk, watch)
+
+    def _take(self, chunk: bytes, watch: Any) -> list[Completed | Unsolicited]:
+        """Count, log and parse one chunk read from the command link (nothing for b"")."""
+        if not chunk:
+            return []
+        self.bytes_received += len(chunk)
+        if watch:
+            self._observe("in", chunk)
+        try:
+            return self._session.receive_data(chunk)
+        except ProtocolError as exc:
+            raise self._protocol_error(exc) from exc
 
     def _protocol_error(self, exc: ProtocolError) -> ProtocolError:
         self._remember(("n", f"protocol error: {exc}"))

@@ -136,18 +136,13 @@ class Session:
             ProtocolError: the session is out of step (call :meth:`resync` first).
             InvalidArgument: a raw string that cannot be sent (see ``parse_line``).
         """
-        if self._idle and not self._pending and type(cmd) is Command and not self.echo:
-            # The usual exchange: one plain command on a quiet link (_idle implies in step).
-            text, expect, payload, parts = cmd
-            kind = expect.kind
-            if (
-                not parts
-                and not payload
-                and (kind is _ACK_KIND or kind is _ANY_KIND or kind is _DATA_KIND)
-            ):
+        # The usual exchange: one plain command on a quiet link (_idle implies in step).
+        if type(cmd) is Command:
+            quick = self.quick_wire(cmd)
+            if quick is not None:
                 self._pending.append(cmd)
                 self._lazy = True
-                return text.encode("latin-1") + b"\r"
+                return quick
         if self.out_of_step:
             raise ProtocolError("the link is out of step; write session.resync() first")
         if type(cmd) is str:
