@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from galil.axis import Axis, MoveHandle, MoveResult
 from galil.client import Controller, MessageQueue, RecordStream, connect
+from galil.codes import stop_text, tc_text
 from galil.contour import ContourResult, ContourUnderrunError
 from galil.errors import (
     CommandError,
@@ -16,7 +17,6 @@ from galil.errors import (
 )
 from galil.models import ModelSpec, get_model
 from galil.predict import Profile
-from galil.protocol.codes import stop_text, tc_text
 
 __version__ = "0.1.0.dev0"
 

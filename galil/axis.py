@@ -20,9 +20,8 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from galil import predict
+from galil import codes, predict
 from galil.errors import CommandError, GalilError, GalilTimeoutError, InvalidArgument, LimitError
-from galil.protocol import codes
 from galil.units import Scale, counts_or_plain, is_quantity
 
 if TYPE_CHECKING:

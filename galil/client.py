@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
+from galil.codes import parse_tc1
 from galil.errors import (
     CommandError,
     GalilConnectionError,
@@ -41,7 +42,6 @@ from galil.errors import (
 )
 from galil.models import Identity, ModelSpec, get_model, parse_identity
 from galil.protocol import commands as cmds
-from galil.protocol.codes import parse_tc1
 from galil.protocol.commands import Command, Expect
 from galil.protocol.framing import FrameParser, Unsolicited
 from galil.protocol.numbers import parse_number

@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from galil.client import Controller
     from galil.predict import Profile
 
-from galil.errors import GalilError, InvalidArgument
+from galil.errors import ContourUnderrunError, GalilError, InvalidArgument
 
 __all__ = ["ContourResult", "ContourUnderrunError", "increments", "sample_path", "stream"]
 
@@ -92,21 +92,6 @@ def sample_path(
     if x.shape != t.shape:
         raise InvalidArgument(f"func returned shape {x.shape}, expected {t.shape}")
     return x
-
-
-class ContourUnderrunError(GalilError):
-    """The controller's contour buffer ran dry before the path was sent (TC 42's condition).
-
-    Attributes:
-        code: 42, the controller's "contour data being sent too slowly".
-        segment: index of the first segment that arrived late.
-    """
-
-    code = 42
-
-    def __init__(self, message: str, *, segment: int, model: str | None = None) -> None:
-        super().__init__(message, model=model)
-        self.segment = segment
 
 
 @dataclass(frozen=True)

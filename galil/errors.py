@@ -8,9 +8,16 @@ mixes in the stdlib type a caller would naturally catch::
     ├── ProtocolError         the peer sent bytes we cannot make sense of
     ├── GalilTimeoutError     (also TimeoutError) no reply in time
     ├── GalilConnectionError  (also ConnectionError) the link is closed or dead
-    └── InvalidArgument       (also ValueError) refused before anything was sent
-        └── LimitError        a move or value would cross a limit (range, soft limit, CD range,
-                              contour feasibility); says which value, limit, and when
+    ├── InvalidArgument       (also ValueError) refused before anything was sent
+    │   └── LimitError        a move or value would cross a limit (range, soft limit, CD range,
+    │       │                 contour feasibility); says which value, limit, and when
+    │       └── ScheduleError a speed-schedule change point the profiler cannot honour
+    └── MotionError           (also RuntimeError) motion that was sent and ended badly: a limit
+        │                     switch, an abort, an axis left moving when stopping failed
+        └── ContourUnderrunError  the contour buffer ran dry while streaming (TC 42)
+
+``LimitError`` always means "refused before sending"; ``MotionError`` means "it moved, and it
+did not end as planned".
 """
 
 from __future__ import annotations
@@ -19,12 +26,15 @@ from collections.abc import Sequence
 
 __all__ = [
     "CommandError",
+    "ContourUnderrunError",
     "GalilConnectionError",
     "GalilError",
     "GalilTimeoutError",
     "InvalidArgument",
     "LimitError",
+    "MotionError",
     "ProtocolError",
+    "ScheduleError",
 ]
 
 
@@ -138,3 +148,63 @@ class LimitError(InvalidArgument):
         self.time = time
         self.sample = sample
         self.axis = axis
+
+
+class ScheduleError(LimitError):
+    """A speed-schedule change point that is not valid.
+
+    Attributes:
+        index: which change (0-based) is invalid; ``len(changes)`` for the final deceleration.
+        earliest: the earliest valid trigger distance for that change (for the final
+            deceleration: the shortest move distance that fits).
+    """
+
+    def __init__(self, message: str, *, index: int, earliest: float, value: float) -> None:
+        super().__init__(
+            message, name="speed schedule", value=value, limit=earliest, time=None, sample=None
+        )
+        self.index = index
+        self.earliest = earliest
+
+
+class MotionError(GalilError, RuntimeError):
+    """Motion that was sent and ended badly (a limit switch, an abort, a failed stop).
+
+    Attributes:
+        axis: the first axis concerned, if known.
+        stop_codes: ``_SC`` per axis when the motion ended, if known.
+        moving: axes that may still be moving (a stop that could not be confirmed).
+        position: the final reference position of ``axis``, if known (counts).
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        axis: str | None = None,
+        stop_codes: dict[str, int] | None = None,
+        moving: str = "",
+        position: float | None = None,
+        model: str | None = None,
+        recent: Sequence[str] = (),
+    ) -> None:
+        super().__init__(message, model=model, recent=recent)
+        self.axis = axis
+        self.stop_codes = dict(stop_codes or {})
+        self.moving = moving
+        self.position = position
+
+
+class ContourUnderrunError(MotionError):
+    """The controller's contour buffer ran dry before the path was sent (TC 42's condition).
+
+    Attributes:
+        code: 42, the controller's "contour data being sent too slowly".
+        segment: index of the first segment that arrived late.
+    """
+
+    code = 42
+
+    def __init__(self, message: str, *, segment: int, model: str | None = None) -> None:
+        super().__init__(message, model=model)
+        self.segment = segment

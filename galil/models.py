@@ -12,9 +12,28 @@ from dataclasses import dataclass, field
 
 from galil.errors import InvalidArgument
 
-__all__ = ["MODELS", "ModelSpec", "get_model", "parse_identity"]
+__all__ = [
+    "ETHERNET_BYTES_PER_S",
+    "INT32_MAX",
+    "INT32_MIN",
+    "IT_RANGE",
+    "MODELS",
+    "ModelSpec",
+    "get_model",
+    "parse_identity",
+]
 
 _ALL_AXES = "ABCDEFGH"
+
+#: The controller's 32-bit integer registers (positions, PR/PA/IP, FL/BL, CD sums).
+INT32_MIN = -2_147_483_648
+INT32_MAX = 2_147_483_647
+#: Sustained command bytes per second assumed for an Ethernet link. Each command line waits for
+#: its ':' before the next goes out, so the round trip (about 1 ms on a LAN) limits the rate far
+#: below the wire speed; 64 kB/s is a conservative guess, not a measurement.
+ETHERNET_BYTES_PER_S = 64_000.0
+#: IT (independent smoothing) range on every model found; resolution 1/256.
+IT_RANGE = (0.004, 1.0)
 
 
 @dataclass(frozen=True)
@@ -40,7 +59,14 @@ class ModelSpec:
         transports: buses the family offers.
         qz: the ``QZ`` reply (axes, general block, coordinated block, axis block bytes), or
             ``None`` when the family has no binary data record we know of.
-        ip_range: smoothing (IT) range.
+        it_range: smoothing (IT) range.
+        tm_min_by_axes: smallest TM (µs) of the normal firmware for 1-2, 3-4, 5-6 and 7-8
+            axes (M40-CR p246); see :attr:`tm_range`.
+        tm_max: largest TM (µs).
+        dr_range: data-record period (``DR``) in samples, smallest and largest.
+        label_length: characters of a program label after ``#``.
+        variable_length: characters of a variable or array name.
+        threads: program threads (``XQ``).
         assumptions: plain-language list of values that are guesses, and why.
     """
 
@@ -63,8 +89,21 @@ class ModelSpec:
     mg_max: int = 72
     transports: frozenset[str] = frozenset({"serial"})
     qz: tuple[int, int, int, int] | None = None
-    it_range: tuple[float, float] = (0.004, 1.0)
+    it_range: tuple[float, float] = IT_RANGE
+    # Sourced for the 40x0 (M40-CR p246); other adjustable families are assumed to share it.
+    tm_min_by_axes: tuple[float, float, float, float] = (62.5, 125.0, 156.25, 187.5)
+    tm_max: float = 20000.0
+    dr_range: tuple[int, int] = (2, 30000)
+    label_length: int = 7  # "#" and up to seven characters (40x0 user manual)
+    variable_length: int = 8  # up to eight characters, the first a letter
+    threads: int = 8  # EPICS: 8 by default, DMC-1xxx 2, DMC-3xxxx 6, RIO 4
     assumptions: tuple[str, ...] = ()
+
+    @property
+    def tm_range(self) -> tuple[float, float]:
+        """Smallest and largest TM (µs) for this model's axis count (normal firmware)."""
+        index = min(max(len(self.axes) - 1, 0) // 2, 3)
+        return self.tm_min_by_axes[index], self.tm_max
 
     @property
     def sample_period(self) -> float:
@@ -131,6 +170,7 @@ _add(
         mg_max=31,
         transports=frozenset({"serial"}),
         qz=None,
+        threads=2,
         assumptions=(
             "4 axes: the DMC-1500 manual excerpt names X Y Z W; the axis count is not sourced",
             "serial only: the DMC-1500 is a stand-alone RS-232 controller in the sources",
@@ -153,6 +193,7 @@ _add(
         line_length=80,
         transports=frozenset({"pci"}),
         qz=(8, 24, 16, 28),
+        threads=2,
         assumptions=(
             "ISA/PCI bus card: reached through a Galil driver device node",
             "data record like the 2x00 (QZ 8,24,16,28): the 1700 manual shares that layout",
@@ -176,6 +217,7 @@ _add(
         contour_buffer=1,
         transports=frozenset({"pci"}),
         qz=(4, 24, 16, 26),
+        threads=2,
         assumptions=(
             "CD range ±32,000 from the seed manual excerpt",
             "contour buffer of 1: the seed shows WC pacing one segment at a time",
@@ -220,8 +262,10 @@ _add(
         contour_buffer=511,
         transports=_ETH_USB,
         qz=(8, 24, 16, 28),
+        dr_range=(8, 30000),
         assumptions=(
             "contour buffer 511 as on Accelera-class firmware: not confirmed for 21x3",
+            "DR minimum 8 samples on the Econo 21x3 (EPICS: 8 ms minimum update period)",
             "SP maximum 12,000,000 c/s: recollection, not a primary page",
         ),
     ),
@@ -246,6 +290,7 @@ _add(
         qz=(4, 52, 26, 36),
         assumptions=(
             "CD range ±32,000 from the 40x0 manual summary; the 18x6 page says ±32,762",
+            "DR at most 30,000 samples between records: not sourced",
             "SP maximum 22,000,000 c/s: recollection, not a primary page",
         ),
     ),
@@ -273,6 +318,7 @@ _add(
             "family": "DMC-41x3",
             "axes": "ABCD",
             "qz": (4, 52, 26, 36),
+            "dr_range": (8, 30000),
         }
     ),
     "DMC-41x3",
@@ -292,7 +338,12 @@ _add(
         contour_buffer=511,
         transports=_ETH_USB,
         qz=(1, 18, 16, 36),
-        assumptions=("contour buffer 511 as on Accelera-class firmware: not confirmed",),
+        dr_range=(4, 30000),
+        threads=6,
+        assumptions=(
+            "contour buffer 511 as on Accelera-class firmware: not confirmed",
+            "DR minimum 4 samples: not confirmed",
+        ),
     ),
     "DMC30010",
     "DMC-30000",

@@ -14,7 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from galil.errors import InvalidArgument, LimitError
-from galil.models import ModelSpec, get_model
+from galil.models import ETHERNET_BYTES_PER_S, ModelSpec, get_model
 from galil.predict.profile import Profile
 from galil.predict.smoothing import quantise_it
 
@@ -36,10 +36,6 @@ __all__ = [
     "resolve_model",
 ]
 
-#: Sustained command bytes per second assumed for an Ethernet link. Each contour line waits for
-#: its ':' before the next goes out, so the round trip (about 1 ms on a LAN) limits the rate far
-#: below the wire speed; 64 kB/s is a conservative guess, not a measurement.
-ETHERNET_BYTES_PER_S = 64_000.0
 _POSITION_MAX = 2**31 - 1
 _POSITION_MIN = -(2**31)
 

@@ -20,8 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from galil.codes import tc_text
 from galil.errors import CommandError, InvalidArgument
-from galil.predict.smoothing import PAGE, smooth_page
+from galil.predict.smoothing import IT_MAX, IT_MIN, PAGE, smooth_page
 
 __all__ = [
     "FRACTION",
@@ -39,22 +40,13 @@ FRACTION = 65536
 # distance: re-plans start from a position quantised to 1/65536 count.
 _EPS = 1e-4
 
-_TC_TEXT = {
-    6: "Number out of range",
-    7: "Command not valid while running",
-    8: "Command not valid when not running",
-    13: "JG only valid when running in jog mode",
-    16: "IP incorrect sign during position move or IP given during forced deceleration",
-    18: "Command not valid when contouring",
-    21: "Begin not valid while running",
-}
 
 Int64Array = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
 
 
 def _refuse(code: int, command: str) -> CommandError:
-    return CommandError(code, _TC_TEXT[code], command)
+    return CommandError(code, tc_text(code), command)
 
 
 @dataclass(frozen=True)
@@ -472,8 +464,10 @@ class AxisProfiler:
         self._smooth_end = None
 
     def _check_smoothing(self, smoothing: float) -> float:
-        if not (0.004 <= smoothing <= 1.0):
-            raise InvalidArgument(f"smoothing (IT) must be in [0.004, 1], got {smoothing!r}")
+        if not (IT_MIN <= smoothing <= IT_MAX):
+            raise InvalidArgument(
+                f"smoothing (IT) must be in [{IT_MIN}, {IT_MAX}], got {smoothing!r}"
+            )
         return float(smoothing)
 
     # ---- commands ----------------------------------------------------------------------

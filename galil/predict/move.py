@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from galil.errors import InvalidArgument, LimitError
+from galil.errors import InvalidArgument, ScheduleError
 from galil.models import ModelSpec
 from galil.predict.engine import AxisProfiler, KinematicPlan, plan_position
 from galil.predict.profile import Profile
@@ -320,23 +320,6 @@ def move(
         peak_speed=peak,
         stop_code=eng.stop_code,
     )
-
-
-class ScheduleError(LimitError):
-    """A speed-schedule change point that is not valid.
-
-    Attributes:
-        index: which change (0-based) is invalid; ``len(changes)`` for the final deceleration.
-        earliest: the earliest valid trigger distance for that change (for the final
-            deceleration: the shortest move distance that fits).
-    """
-
-    def __init__(self, message: str, *, index: int, earliest: float, value: float) -> None:
-        super().__init__(
-            message, name="speed schedule", value=value, limit=earliest, time=None, sample=None
-        )
-        self.index = index
-        self.earliest = earliest
 
 
 @dataclass(frozen=True)

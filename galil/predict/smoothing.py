@@ -15,11 +15,11 @@ import numpy as np
 import numpy.typing as npt
 
 from galil.errors import InvalidArgument
+from galil.models import IT_RANGE
 
 __all__ = ["IT_MAX", "IT_MIN", "PAGE", "quantise_it", "smooth", "smooth_page"]
 
-IT_MIN = 0.004
-IT_MAX = 1.0
+IT_MIN, IT_MAX = IT_RANGE
 #: Samples per smoothing page. 256 keeps the matrix small (512 KiB) and c**256 well above
 #: underflow even at IT = 1/256.
 PAGE = 256

@@ -5,8 +5,8 @@ Nothing here touches a socket, a port or a clock; see ``docs/decisions/0001``.
 
 from __future__ import annotations
 
+from galil.codes import STOP_CODES, TC_CODES, parse_tc1, stop_text, tc_text
 from galil.protocol import commands
-from galil.protocol.codes import STOP_CODES, TC_CODES, parse_tc1, stop_text, tc_text
 from galil.protocol.commands import Command, Expect, ReplyKind, pack, parse_line
 from galil.protocol.framing import (
     Ack,

@@ -30,7 +30,7 @@ from typing import ClassVar, NamedTuple
 import numpy as np
 
 from galil.errors import InvalidArgument, LimitError
-from galil.models import ModelSpec
+from galil.models import INT32_MAX, INT32_MIN, ModelSpec
 from galil.protocol.numbers import format_number
 
 __all__ = [
@@ -202,8 +202,9 @@ _MNEMONICS = """
 COMMAND_NAMES: frozenset[str] = frozenset(_MNEMONICS.split())
 _KEYWORDS = frozenset({"ELSE", "ENDIF", "TIME", "AND", "OR"})
 
-_VAR = re.compile(r"[A-Za-z][A-Za-z0-9]{0,7}")
-_LABEL = re.compile(r"#[A-Za-z][A-Za-z0-9]{0,6}")
+_DEFAULT_NAMES = ModelSpec("", "", "A")  # label/variable lengths when no model is given
+_VAR = re.compile(rf"[A-Za-z][A-Za-z0-9]{{0,{_DEFAULT_NAMES.variable_length - 1}}}")
+_LABEL = re.compile(rf"#[A-Za-z][A-Za-z0-9]{{0,{_DEFAULT_NAMES.label_length - 1}}}")
 _OPERAND = re.compile(
     r"_[A-Z]{2}[A-Z0-9]{0,2}"  # _TPA, _TC, _XQ0, _LFA
     r"|@[A-Z]{2,4}\[\d{1,4}\]"  # @IN[1], @AN[2]
@@ -211,8 +212,6 @@ _OPERAND = re.compile(
 )
 _AXIS_SUFFIX = re.compile(r"[A-HSTXYZWN]{1,8}|\d+")
 _UNSAFE = re.compile(r'[^\x20-\x7e]|[;"\\]')
-
-_INT32_MIN, _INT32_MAX = -2_147_483_648, 2_147_483_647
 
 
 # --------------------------------------------------------------------------------- axes
@@ -291,13 +290,13 @@ def _number(value: object, what: str) -> float:
 
 def _count(value: object, what: str, axis: str | None = None) -> str:
     """A signed 32-bit integer count."""
-    if type(value) is int and _INT32_MIN <= value <= _INT32_MAX:
+    if type(value) is int and INT32_MIN <= value <= INT32_MAX:
         return str(value)
     v = _number(value, what)
     if not v.is_integer():
         raise InvalidArgument(f"{what}: {value!r} is not a whole number of counts")
-    if not _INT32_MIN <= v <= _INT32_MAX:
-        limit = _INT32_MAX if v > 0 else _INT32_MIN
+    if not INT32_MIN <= v <= INT32_MAX:
+        limit = INT32_MAX if v > 0 else INT32_MIN
         raise LimitError(
             f"{what}: {value!r} is outside the 32-bit range",
             name=what,
@@ -350,7 +349,7 @@ class _Checker:
     def __call__(self, value: object, axis: str) -> str:
         if type(value) is int and self.lo <= value <= self.hi:
             return str(value)
-        if self.integer and self.lo == _INT32_MIN and self.hi == _INT32_MAX:
+        if self.integer and self.lo == INT32_MIN and self.hi == INT32_MAX:
             return _count(value, self.name, axis)
         return _ranged(
             value, self.lo, self.hi, self.name, axis, self.model_name, integer=self.integer
@@ -359,16 +358,16 @@ class _Checker:
 
 # Integer ranges every model accepts, for the hot path of _axis_command.
 _DEFAULT_INT_RANGES: dict[str, tuple[int, int]] = {
-    "PR": (_INT32_MIN, _INT32_MAX),
-    "PA": (_INT32_MIN, _INT32_MAX),
-    "DP": (_INT32_MIN, _INT32_MAX),
-    "FL": (_INT32_MIN, _INT32_MAX),
-    "BL": (_INT32_MIN, _INT32_MAX),
-    "IP": (_INT32_MIN, _INT32_MAX),
-    "SP": (0, _INT32_MAX),
-    "JG": (-_INT32_MAX, _INT32_MAX),
-    "AC": (1024, _INT32_MAX),
-    "DC": (1024, _INT32_MAX),
+    "PR": (INT32_MIN, INT32_MAX),
+    "PA": (INT32_MIN, INT32_MAX),
+    "DP": (INT32_MIN, INT32_MAX),
+    "FL": (INT32_MIN, INT32_MAX),
+    "BL": (INT32_MIN, INT32_MAX),
+    "IP": (INT32_MIN, INT32_MAX),
+    "SP": (0, INT32_MAX),
+    "JG": (-INT32_MAX, INT32_MAX),
+    "AC": (1024, INT32_MAX),
+    "DC": (1024, INT32_MAX),
 }
 
 
@@ -434,22 +433,22 @@ def _checker(kind: str, model: ModelSpec | None) -> _Checker:
     if found is not None:
         return found
     if kind in ("PR", "PA", "DP", "FL", "BL", "IP"):
-        found = _Checker(kind, _INT32_MIN, _INT32_MAX, model, integer=True)
+        found = _Checker(kind, INT32_MIN, INT32_MAX, model, integer=True)
     elif kind in ("AC", "DC"):
-        lo, hi = (1024, _INT32_MAX) if model is None else (model.ac_min, model.ac_max)
+        lo, hi = (1024, INT32_MAX) if model is None else (model.ac_min, model.ac_max)
         found = _Checker(kind, lo, hi, model, integer=False)
     elif kind == "SP":
         found = _Checker(
-            kind, 0, _INT32_MAX if model is None else model.sp_max, model, integer=False
+            kind, 0, INT32_MAX if model is None else model.sp_max, model, integer=False
         )
     elif kind == "JG":
-        hi = _INT32_MAX if model is None else model.sp_max
+        hi = INT32_MAX if model is None else model.sp_max
         found = _Checker(kind, -hi, hi, model, integer=False)
     elif kind == "IT":
         it_lo, it_hi = (0.004, 1.0) if model is None else model.it_range
         found = _Checker(kind, it_lo, it_hi, model, integer=False)
     elif kind == "CD":
-        hi = _INT32_MAX if model is None else model.cd_max
+        hi = INT32_MAX if model is None else model.cd_max
         found = _Checker(kind, -hi, hi, model, integer=True)
     else:  # pragma: no cover - programming error
         raise KeyError(kind)
@@ -724,12 +723,16 @@ def mg_operand(*names: str) -> Command:
 
 
 def tm(period_us: float, *, model: ModelSpec | None = None) -> Command:
-    """TM: servo sample period in µs (31.25 .. 20000; refused where it is fixed)."""
+    """TM: servo sample period in µs (the model's range; refused where it is fixed).
+
+    Without a model the widest range any firmware takes (31.25 .. 20000, "fast firmware").
+    """
     if model is not None and not model.tm_adjustable:
         raise InvalidArgument(
             f"{model.name} has a fixed sample period; TM cannot be set", model=model.name
         )
-    return Command("TM " + _ranged(period_us, 31.25, 20000, "TM"))
+    low, high = (31.25, 20000.0) if model is None else model.tm_range
+    return Command("TM " + _ranged(period_us, low, high, "TM"))
 
 
 def cw(mode: int | None = None, drop: int | None = None) -> Command:
@@ -786,7 +789,8 @@ def identify() -> Command:
 def _variable_name(name: str, what: str = "variable") -> str:
     if not isinstance(name, str) or _VAR.fullmatch(name) is None:
         raise InvalidArgument(
-            f"{what} name {name!r}: a letter then up to 7 letters or digits (8 at most)"
+            f"{what} name {name!r}: a letter then up to "
+            f"{_DEFAULT_NAMES.variable_length - 1} letters or digits"
         )
     upper = name.upper()
     rest = upper[2:]
@@ -812,7 +816,10 @@ def assign(name: str, value: float) -> Command:
 
 def _label(label: str) -> str:
     if not isinstance(label, str) or _LABEL.fullmatch(label) is None:
-        raise InvalidArgument(f"label {label!r}: '#', a letter, then up to 6 letters or digits")
+        raise InvalidArgument(
+            f"label {label!r}: '#', a letter, then up to "
+            f"{_DEFAULT_NAMES.label_length - 1} letters or digits"
+        )
     return label
 
 

@@ -15,6 +15,7 @@ from numbers import Real
 import numpy as np
 
 from galil.errors import InvalidArgument, ProtocolError
+from galil.models import INT32_MAX, INT32_MIN
 
 __all__ = [
     "MAX_ARG",
@@ -29,9 +30,9 @@ __all__ = [
 ]
 
 #: Largest magnitude an argument may have (the integer range plus four decimals).
-MAX_ARG = 2_147_483_647.9999
+MAX_ARG = INT32_MAX + 0.9999
 #: Smallest argument: the register's minimum, needed to disable BL (``BLA=-2147483648``).
-MIN_ARG = -2_147_483_648.0
+MIN_ARG = float(INT32_MIN)
 
 _FIX_MIN = -(1 << 47)  # raw 32.16 limits (48-bit two's complement)
 _FIX_MAX = (1 << 47) - 1
@@ -88,7 +89,7 @@ def format_number(value: float) -> str:
         InvalidArgument: NaN, infinity, a non-number, or outside +/-2,147,483,647.9999.
     """
     if type(value) is int:  # the hot path: counts
-        if -2_147_483_648 <= value <= 2_147_483_647:
+        if INT32_MIN <= value <= INT32_MAX:
             return str(value)
     elif type(value) is not float and not _is_real(value):
         raise InvalidArgument(f"not a number: {value!r}")

@@ -40,11 +40,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from galil.codes import tc_text
 from galil.errors import CommandError, GalilConnectionError, InvalidArgument, LimitError
-from galil.models import ModelSpec, get_model
+from galil.models import INT32_MAX, INT32_MIN, ModelSpec, get_model
 from galil.predict.checks import quantise_accel, quantise_speed
 from galil.predict.smoothing import quantise_it
-from galil.protocol.codes import tc_text
 from galil.protocol.numbers import format_reply, parse_format
 from galil.sim.clock import Clock, ManualClock
 from galil.sim.motion import AxisMotion
@@ -52,18 +52,12 @@ from galil.sim.parse import Refused, evaluate, next_command, split_fields, split
 
 __all__ = ["SimController"]
 
-_INT_MAX = 2_147_483_647
-_INT_MIN = -2_147_483_648
 #: Longest run of servo samples evaluated in one vectorised step.
 _MAX_CHUNK = 2048
 #: Program commands one thread may execute per servo sample (the firmware runs a few per ms).
 _LINES_PER_SAMPLE = 16
-#: Program threads on current controllers.
-_THREADS = 8
 #: Ethernet handle letters, in the order the controller hands them out.
 _HANDLES = "ABCDEFGH"
-#: Longest DR period accepted, in samples (an assumption: the manuals found give no maximum).
-_DR_MAX = 30000
 
 _AXIS_VALUE = frozenset(["PR", "PA", "SP", "AC", "DC", "JG", "IP", "IT", "DP", "FL", "BL"])
 _AXIS_LIST = frozenset(
@@ -106,7 +100,7 @@ COMMANDS = _AXIS_VALUE | _AXIS_LIST | _OTHER
 
 _VARIABLE = re.compile(r"[A-Za-z][A-Za-z0-9]{0,7}")
 _RESERVED = frozenset({"TIME"})
-_LABEL = re.compile(r"#([A-Za-z][A-Za-z0-9]{0,7})")
+_LABEL = re.compile(r"#([A-Za-z][A-Za-z0-9]*)")  # length checked against the model
 _BRACES = re.compile(r"\{([^}]*)\}")
 
 
@@ -161,8 +155,8 @@ class _Axis:
     pa: int = 0
     absolute: bool = False
     next_mode: str = "position"
-    fl: int = _INT_MAX
-    bl: int = _INT_MIN
+    fl: int = INT32_MAX
+    bl: int = INT32_MIN
     switch_fwd: bool = False
     switch_rev: bool = False
     limit_stopping: bool = False
@@ -522,7 +516,7 @@ class SimController:
         return [
             ax
             for ax in self._axes.values()
-            if (ax.fl < _INT_MAX or ax.bl > _INT_MIN)
+            if (ax.fl < INT32_MAX or ax.bl > INT32_MIN)
             and ax.m.moving
             and not ax.limit_stopping
             and not ax.contour
@@ -858,7 +852,7 @@ class SimController:
                 raise Refused(1, f"undefined variable {name!r}")
             return self._vnum(self._variables[name]) + "\r\n"
         value = self._eval(rhs)
-        if not _INT_MIN <= value < _INT_MAX + 1:
+        if not INT32_MIN <= value < INT32_MAX + 1:
             raise Refused(6, "out of range")
         self._variables[name] = round(value * 65536) / 65536
         return ""
@@ -905,7 +899,7 @@ class SimController:
             return float(sum(1 << n for n in self._threads))
         if code == "XQ":
             n = int(rest) if rest.isdigit() else 0 if not rest else -1
-            if not 0 <= n < _THREADS:
+            if not 0 <= n < self.spec.threads:
                 raise Refused(1, "bad thread")
             th = self._threads.get(n)
             return float(th.line) if th is not None else -1.0
@@ -1006,7 +1000,7 @@ class SimController:
 
     @staticmethod
     def _q_position(value: float) -> int:
-        if not _INT_MIN <= value <= _INT_MAX:
+        if not INT32_MIN <= value <= INT32_MAX:
             raise Refused(6, "position out of range")
         return round(value)
 
@@ -1256,7 +1250,7 @@ class SimController:
             raise Refused(4, "AD needs a distance")
         goal: dict[str, float] = {}
         for c, v in zip(letters, values, strict=True):
-            if not 0 <= v <= _INT_MAX:
+            if not 0 <= v <= INT32_MAX:
                 raise Refused(6, "AD distance out of range")
             goal[c] = v
 
@@ -1287,7 +1281,7 @@ class SimController:
     def _cmd_wt(self, args: str, th: _Thread | None) -> _Wait:
         fields = split_fields(args)
         ms = self._eval(fields[0]) if fields[0].strip() else -1
-        if not 0 <= ms <= _INT_MAX:
+        if not 0 <= ms <= INT32_MAX:
             raise Refused(6, "WT out of range")
         samples = len(fields) > 1 and fields[1].strip() == "1"
         n = round(ms) if samples else math.ceil(ms / 1000 / self._ts - 1e-9)
@@ -1521,7 +1515,8 @@ class SimController:
             if value != self._tm:
                 raise Refused(6, "this model's sample period is fixed")
             return ""
-        if not 62.5 <= value <= 20000:
+        low, high = self.spec.tm_range
+        if not low <= value <= high:
             raise Refused(6, "TM out of range")
         if any(ax.m.moving for ax in self._axes.values()):
             raise Refused(7, "TM while moving")
@@ -1598,10 +1593,6 @@ class SimController:
         p = self._current
         return ("RS232" if p is None or not p.letter else f"IH{p.letter}") + "\r\n"
 
-    def _dr_min(self) -> int:
-        # Smallest DR period in samples: 8 on the Econo 21x3/41x3, 4 on the 30010, else 2.
-        return {"DMC-21x3": 8, "DMC-41x3": 8, "DMC-30010": 4}.get(self.spec.family, 2)
-
     def _cmd_dr(self, args: str, th: _Thread | None) -> str:
         fields = split_fields(args)
         if len(fields) > 2 or not fields[0].strip():
@@ -1612,8 +1603,9 @@ class SimController:
             return ""
         if self.spec.qz is None or self.spec.qz[1] not in (52, 24, 18):
             raise Refused(1, "no data record on this model")
-        if period != int(period) or not self._dr_min() <= period <= _DR_MAX:
-            raise Refused(6, f"DR period must be 0 or {self._dr_min()}..{_DR_MAX} samples")
+        low, high = self.spec.dr_range
+        if period != int(period) or not low <= period <= high:
+            raise Refused(6, f"DR period must be 0 or {low}..{high} samples")
         if len(fields) == 2 and fields[1].strip():
             index = self._eval(fields[1])
             if index != int(index) or not 0 <= index < len(_HANDLES):
@@ -1669,7 +1661,7 @@ class SimController:
         fields = split_fields(args)
         label = fields[0].strip()
         number = int(self._eval(fields[1])) if len(fields) > 1 and fields[1].strip() else 0
-        if not 0 <= number < _THREADS:
+        if not 0 <= number < self.spec.threads:
             raise Refused(6, "no such thread")
         if label:
             m = _LABEL.fullmatch(label)
@@ -1691,7 +1683,7 @@ class SimController:
             self._threads.clear()
             return ""
         n = int(self._eval(a))
-        if not 0 <= n < _THREADS:
+        if not 0 <= n < self.spec.threads:
             raise Refused(6, "no such thread")
         self._threads.pop(n, None)
         return ""
@@ -1776,7 +1768,7 @@ def _find_eq(s: str) -> int:
 
 
 def _clamp32(v: int) -> int:
-    return max(_INT_MIN, min(_INT_MAX, int(v)))
+    return max(INT32_MIN, min(INT32_MAX, int(v)))
 
 
 def _stop_code(ax: _Axis) -> int:

@@ -126,6 +126,14 @@ class SimLink:
                 return out
             time.sleep(_POLL_INTERVAL)
 
+    def controller_time(self) -> float:
+        """Seconds on the simulator's clock (the ``ControllerClock`` capability)."""
+        return float(self.controller.clock.now())
+
+    def let_time_pass(self, seconds: float) -> None:
+        """Let ``seconds`` pass for the simulator (``ControllerClock``): see :meth:`sleep`."""
+        self.sleep(seconds)
+
     def sleep(self, seconds: float) -> None:
         """Let ``seconds`` pass for the controller: simulated time on a manual clock.
 

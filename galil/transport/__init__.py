@@ -32,6 +32,10 @@ from galil.errors import GalilConnectionError, InvalidArgument
 
 __all__ = [
     "ENTRY_POINT_GROUP",
+    "ByteRate",
+    "ControllerClock",
+    "HandleSource",
+    "MessagesOnly",
     "Opener",
     "Transport",
     "open_transport",
@@ -77,6 +81,13 @@ class Transport(Protocol):
         """The bus: ``"serial"``, ``"usb"``, ``"ethernet"``, ``"pci"`` or ``"sim"``."""
         ...
 
+
+from galil.transport.capabilities import (  # noqa: E402 (they refer to Transport)
+    ByteRate,
+    ControllerClock,
+    HandleSource,
+    MessagesOnly,
+)
 
 Opener = Callable[..., Transport]
 """``opener(url: SplitResult, **options) -> Transport``."""

@@ -81,6 +81,15 @@ class SerialTransport:
         return "serial"
 
     @property
+    def byte_rate(self) -> float:
+        """Bytes per second the line carries: baud / 10 (start, 8 data, stop bits).
+
+        A port that does not say its baud rate is taken at 9600, the slowest common one.
+        """
+        baud = getattr(self._port, "baudrate", None)
+        return float(baud) / 10.0 if isinstance(baud, (int, float)) and baud > 0 else 960.0
+
+    @property
     def port(self) -> SerialPort:
         """The underlying pyserial object (for line settings such as ``baudrate``)."""
         return self._live()

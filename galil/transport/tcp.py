@@ -15,6 +15,7 @@ from typing import Any
 from urllib.parse import SplitResult
 
 from galil.errors import GalilConnectionError, InvalidArgument
+from galil.models import ETHERNET_BYTES_PER_S
 from galil.transport import parse_options, timeout_grid
 
 __all__ = ["DEFAULT_PORT", "TcpTransport", "open_tcp"]
@@ -81,6 +82,11 @@ class TcpTransport:
     def kind(self) -> str:
         """Always ``"ethernet"``."""
         return "ethernet"
+
+    @property
+    def byte_rate(self) -> float:
+        """Sustained command bytes per second (round trips, not the wire, set the pace)."""
+        return ETHERNET_BYTES_PER_S
 
     def __repr__(self) -> str:
         state = "open" if self._sock is not None else "closed"

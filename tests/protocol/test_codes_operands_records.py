@@ -7,7 +7,7 @@ import pytest
 
 from galil.errors import InvalidArgument, ProtocolError
 from galil.models import get_model
-from galil.protocol.codes import STOP_CODES, TC_CODES, parse_tc1, stop_text, tc_text
+from galil.codes import STOP_CODES, TC_CODES, parse_tc1, stop_text, tc_text
 from galil.protocol.operands import decode_operand, parse_axes_reply
 from galil.protocol.records import decode_record, parse_qz, record_dtype, record_to_dict
 

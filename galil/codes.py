@@ -1,4 +1,6 @@
-"""TC error codes and SC stop codes, with their texts.
+"""TC error codes and SC stop codes, with their texts: the one table (a leaf module).
+
+``protocol/``, ``predict/`` and ``sim/`` all import it; nothing else holds a copy.
 
 The tables follow the secondary copies collected in ``galil-protocol.md`` section 1.2 (BLISS,
 gclib-based tools, a Tango device); they agree with each other. The controller's own ``TC1``
