@@ -22,7 +22,7 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check galil tests benchmarks examples
 
 typecheck: $(STAMP)
-	$(BIN)/mypy --strict galil
+	$(BIN)/mypy --strict galil tests/typing
 
 layers: $(STAMP)
 	$(BIN)/lint-imports

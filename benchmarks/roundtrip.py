@@ -17,7 +17,7 @@ import sys
 import threading
 import time
 
-import galil.client
+import galil.controller
 
 
 def serve(server: socket.socket) -> None:
@@ -59,8 +59,8 @@ def raw_round_trips(port: int, n: int) -> float:
 
 
 def library_round_trips(port: int, n: int) -> float:
-    """Seconds per round trip through galil.client.Controller.command."""
-    c = galil.client.connect(f"tcp://127.0.0.1:{port}", handshake=False, model="DMC-4040")
+    """Seconds per round trip through galil.controller.Controller.command."""
+    c = galil.controller.connect(f"tcp://127.0.0.1:{port}", handshake=False, model="DMC-4040")
     try:
         command = c.command
         start = time.perf_counter()

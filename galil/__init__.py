@@ -2,21 +2,27 @@
 
 from __future__ import annotations
 
-from galil.axis import Axis, MoveHandle, MoveResult
-from galil.client import Controller, MessageQueue, RecordStream, connect
+from galil.axis import Axis
 from galil.codes import stop_text, tc_text
-from galil.contour import ContourResult, ContourUnderrunError
+from galil.contour import ContourResult
+from galil.controller import Controller, connect
 from galil.errors import (
     CommandError,
+    ContourUnderrunError,
     GalilConnectionError,
     GalilError,
     GalilTimeoutError,
     InvalidArgument,
     LimitError,
+    MotionError,
     ProtocolError,
+    ScheduleError,
 )
+from galil.messages import MessageQueue
 from galil.models import ModelSpec, get_model
-from galil.predict import Profile
+from galil.motion import MoveHandle, MoveResult
+from galil.predict import MultiProfile, Profile
+from galil.records import RecordStream
 
 __version__ = "0.1.0.dev0"
 
@@ -33,11 +39,14 @@ __all__ = [
     "LimitError",
     "MessageQueue",
     "ModelSpec",
+    "MotionError",
     "MoveHandle",
     "MoveResult",
+    "MultiProfile",
     "Profile",
     "ProtocolError",
     "RecordStream",
+    "ScheduleError",
     "__version__",
     "connect",
     "get_model",

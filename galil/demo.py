@@ -12,9 +12,18 @@ import math
 import re
 import time
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+
+from galil.contour import sample_path
+from galil.controller import Controller, connect
+from galil.notebook import compare_plot
+from galil.predict import Profile
+from galil.sim.controller import SimController
+from galil.sim.server import SimTcpServer
+from galil.units import ureg
 
 __all__ = ["compare", "run_demo"]
 
@@ -49,116 +58,118 @@ def run_demo(
     png: str | None = "galil-demo.png", model: str = "DMC-4040", quiet: bool = False
 ) -> int:
     """Run the demo; return 0 when the simulator matched the predictions exactly."""
-    import galil
-    from galil import predict
-    from galil.contour import increments, sample_path
-    from galil.sim.server import SimTcpServer
-    from galil.units import ureg
 
     say: Callable[[str], None] = (lambda _s: None) if quiet else print
     began = time.monotonic()
-    mm, s = ureg.mm, ureg.s
-    with SimTcpServer(model=model) as server, galil.connect(server.url) as dmc:
-        sim = server.controller
+    with SimTcpServer(model=model) as server, connect(server.url) as dmc:
         ident = dmc.identity
         assert ident is not None
-        ts = dmc.sample_period
         say(f"simulated {ident.raw_model} (firmware {ident.firmware}) at {server.url}")
-
-        # 1. A position move in millimetres, planned before anything is sent.
-        x = dmc.A.set_scale(counts_per=2000 / mm)
-        x.speed = 20 * mm / s
-        x.accel = 200 * mm / s**2
-        x.decel = 200 * mm / s**2
-        plan = x.plan_to(12.5 * mm)
-        say(
-            f"plan: A to 12.5 mm ({plan.distance} counts): {plan.shape}, "
-            f"{plan.duration:.3f} s, peak {plan.peak_speed / 2000:.2f} mm/s"
-        )
-        t0 = sim.start_trace("A")
-        move = x.move_to(12.5 * mm)
-        result = move.wait(progress=not quiet)
-        trace_move = sim.stop_trace("A")["A"]
-        bg = _samples_of(sim.command_log, r"BG ?A", t0)[0][0]
-        say(f"moved: A reference {result.final['A']} counts, encoder {x.position:~.4f}")
-
-        # 2. A jog with a speed change in motion, then a stop.
-        ac, dc = (float(v) for v in dmc.query_operands(["_ACA", "_DCA"]))
-        start = int(dmc.query_number("MG _RPA"))
-        t1 = sim.start_trace("A")
-        x.jog(10 * mm / s)
-        dmc.sleep(0.4)
-        x.jog(-5 * mm / s)
-        dmc.sleep(0.5)
-        x.stop()
-        while x.moving:
-            dmc.sleep(0.02)
-        trace_jog = sim.stop_trace("A")["A"]
-        jg = _samples_of(sim.command_log, r"JGA=-?\d+", t1)
-        jog_bg = _samples_of(sim.command_log, r"BGA", t1)[0][0]
-        st = _samples_of(sim.command_log, r"ST A", t1)[0][0]
-        speeds = [float(text.partition("=")[2]) for _, text in jg]
-        jog_prediction = predict.jog(
-            speeds[0],
-            ac,
-            dc,
-            changes=[((jg[1][0] - jog_bg) * ts, speeds[1])],
-            stop_at=(st - jog_bg) * ts,
-            start=start,
-            sample_period=ts,
-        )
-        say(f"jogged: +10 mm/s, then -5 mm/s in motion, stopped at {x.position:~.4f}")
-
-        # 3. The manual's contour: 6000 counts in 120 ms along a 1 - cos velocity.
-        a, b, dt = 6000.0, 0.120, 2
-        path = sample_path(
-            lambda t: a * t / b - a / (2 * math.pi) * np.sin(2 * math.pi * np.minimum(t, b) / b),
-            duration=b,
-            dt=dt,
-            sample_period=ts,
-        )
-        incs = increments(path)
-        start_b = int(dmc.query_number("MG _RPB"))
-        t2 = sim.start_trace("B")
-        contour = dmc.contour("B", path, dt=dt)
-        trace_contour = sim.stop_trace("B")["B"]
-        first_cd = _samples_of(sim.command_log, r"CD ,?-?\d+", t2)[0][0]
-        contour_prediction = predict.contour(incs, dt, start=start_b, sample_period=ts)
-        say(
-            f"contour: {incs.size} segments of {(1 << dt) * ts * 1e3:.3f} ms on B, "
-            f"{int(incs.sum())} counts in {contour.duration * 1e3:.1f} ms, "
-            f"{contour.lines} lines, buffer never below {contour.low_water} free"
-        )
-
-        # 4. Recorded against predicted, sample by sample.
+        runs = [
+            _demo_move(dmc, server.controller, say, quiet),
+            _demo_jog(dmc, server.controller, say),
+            _demo_contour(dmc, server.controller, say),
+        ]
+        # Recorded against predicted, sample by sample.
         diffs = {
-            "move": compare(trace_move, t0, move.profile.position, bg),
-            "jog": compare(trace_jog, t1, jog_prediction.position, jog_bg),
-            "contour": compare(trace_contour, t2, contour_prediction.position, first_cd),
+            r.name: compare(r.trace, r.trace_start, r.predicted.position, r.begin) for r in runs
         }
-        worst = max(diffs.values())
         say(
             "largest difference, recorded - predicted: "
             + ", ".join(f"{k} {v} counts" for k, v in diffs.items())
         )
         if png:
-            from galil.notebook import compare_plot
-
-            fig = compare_plot(
-                {"A move": move.profile, "A jog": jog_prediction, "B contour": contour_prediction},
-                {
-                    "A move": _window(trace_move, t0, bg, move.profile.position.size, ts),
-                    "A jog": _window(trace_jog, t1, jog_bg, jog_prediction.position.size, ts),
-                    "B contour": _window(
-                        trace_contour, t2, first_cd, contour_prediction.position.size, ts
-                    ),
-                },
-                title=f"galil demo, simulated {dmc.model.name}: predicted vs recorded",
-            )
-            fig.savefig(png, dpi=90)
+            _plot(runs, dmc.sample_period, png, f"galil demo, simulated {dmc.model.name}")
             say(f"plot saved to {png}")
         say(f"demo finished in {time.monotonic() - began:.1f} s")
-    return 0 if worst == 0 else 1
+    return 0 if max(diffs.values()) == 0 else 1
+
+
+@dataclass(frozen=True)
+class _Run:
+    name: str
+    predicted: Profile
+    trace: IntArray
+    trace_start: int
+    begin: int
+
+
+def _demo_move(
+    dmc: Controller, sim: SimController, say: Callable[[str], None], quiet: bool
+) -> _Run:
+    """A position move in millimetres, planned before anything is sent."""
+    mm, s = ureg.mm, ureg.s
+    x = dmc.A.set_scale(counts_per=2000 / mm)
+    x.speed = 20 * mm / s
+    x.accel = 200 * mm / s**2
+    x.decel = 200 * mm / s**2
+    plan = x.plan_to(12.5 * mm)
+    say(
+        f"plan: A to 12.5 mm ({plan.distance} counts): {plan.shape}, "
+        f"{plan.duration:.3f} s, peak {plan.peak_speed / 2000:.2f} mm/s"
+    )
+    t0 = sim.start_trace("A")
+    move = x.move_to(12.5 * mm)
+    result = move.wait(progress=not quiet)
+    trace = sim.stop_trace("A")["A"]
+    say(f"moved: A reference {result.final['A']} counts, encoder {x.position:~.4f}")
+    begin = move.begin["A"]
+    assert begin is not None
+    return _Run("move", move.profile, trace, t0, begin)
+
+
+def _demo_jog(dmc: Controller, sim: SimController, say: Callable[[str], None]) -> _Run:
+    """A jog with a speed change in motion, then a stop: the handle follows both."""
+    mm, s = ureg.mm, ureg.s
+    x = dmc.A
+    t1 = sim.start_trace("A")
+    jog = x.jog(10 * mm / s)
+    dmc.sleep(0.4)
+    x.jog(-5 * mm / s)
+    dmc.sleep(0.5)
+    x.stop()
+    jog.wait()
+    trace = sim.stop_trace("A")["A"]
+    say(f"jogged: +10 mm/s, then -5 mm/s in motion, stopped at {x.position:~.4f}")
+    begin = jog.begin["A"]
+    assert begin is not None
+    return _Run("jog", jog.profile, trace, t1, begin)
+
+
+def _demo_contour(dmc: Controller, sim: SimController, say: Callable[[str], None]) -> _Run:
+    """The manual's contour: 6000 counts in 120 ms along a 1 - cos velocity."""
+    ts = dmc.sample_period
+    a, b, dt = 6000.0, 0.120, 2
+    path = sample_path(
+        lambda t: a * t / b - a / (2 * math.pi) * np.sin(2 * math.pi * np.minimum(t, b) / b),
+        duration=b,
+        dt=dt,
+        sample_period=ts,
+    )
+    t2 = sim.start_trace("B")
+    contour = dmc.contour("B", path, dt=dt)
+    trace = sim.stop_trace("B")["B"]
+    first_cd = _samples_of(sim.command_log, r"CD ,?-?\d+", t2)[0][0]
+    incs = contour.increments
+    say(
+        f"contour: {incs.size} segments of {(1 << dt) * ts * 1e3:.3f} ms on B, "
+        f"{int(incs.sum())} counts in {contour.duration * 1e3:.1f} ms, "
+        f"{contour.lines} lines, buffer never below {contour.low_water} free"
+    )
+    return _Run("contour", contour.profiles["B"], trace, t2, first_cd)
+
+
+def _plot(runs: list[_Run], ts: float, png: str, title: str) -> None:
+    labels = {"move": "A move", "jog": "A jog", "contour": "B contour"}
+    fig = compare_plot(
+        {labels[r.name]: r.predicted for r in runs},
+        {
+            labels[r.name]: _window(r.trace, r.trace_start, r.begin, r.predicted.position.size, ts)
+            for r in runs
+        },
+        title=f"{title}: predicted vs recorded",
+    )
+    fig.savefig(png, dpi=90)
 
 
 def _window(

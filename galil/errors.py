@@ -127,6 +127,7 @@ class LimitError(InvalidArgument):
         time: seconds from the start of the move where it is crossed, if known.
         sample: sample index where it is crossed, if known.
         axis: axis letter, if known.
+        end: where the refused motion would have ended (counts), if known.
     """
 
     def __init__(
@@ -140,6 +141,7 @@ class LimitError(InvalidArgument):
         sample: int | None = None,
         axis: str | None = None,
         model: str | None = None,
+        end: float | None = None,
     ) -> None:
         super().__init__(message, model=model)
         self.name = name
@@ -148,6 +150,7 @@ class LimitError(InvalidArgument):
         self.time = time
         self.sample = sample
         self.axis = axis
+        self.end = end
 
 
 class ScheduleError(LimitError):

@@ -7,14 +7,15 @@ cheap. Nothing in the library imports it; notebooks do.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-if TYPE_CHECKING:
-    from galil.axis import Axis
-    from galil.predict import Profile
+from galil.axis import Axis
+from galil.errors import GalilError
+from galil.predict import Profile
+from galil.units import get_registry
 
 __all__ = ["compare_plot", "jog_widget"]
 
@@ -84,9 +85,6 @@ def jog_widget(axis: Axis, *, max_speed: float | None = None) -> Any:
         The widget box (``.children``: slider, stop button, status label).
     """
     import ipywidgets as widgets
-
-    from galil.errors import GalilError
-    from galil.units import get_registry
 
     limit = max_speed if max_speed is not None else 10_000.0
     unit = "counts/s" if axis.scale is None else f"{axis.scale.unit:~}/s"

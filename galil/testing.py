@@ -18,20 +18,18 @@ import contextlib
 import re
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from galil.controller import Controller, connect
 from galil.errors import InvalidArgument
-
-if TYPE_CHECKING:
-    from galil.client import Controller
-    from galil.sim.controller import SimController
+from galil.sim.controller import SimController
 
 __all__ = ["Transcript", "nothing_sent", "sim_of", "simulated", "transcript"]
 
 
 @contextlib.contextmanager
 def simulated(model: str = "DMC-4040", **options: Any) -> Iterator[Controller]:
-    """A :class:`~galil.client.Controller` connected to a fresh in-process simulator.
+    """A :class:`~galil.controller.Controller` connected to a fresh in-process simulator.
 
     The simulator runs on a manual clock: time passes only while the client waits for a reply
     or pauses (``controller.sleep``, ``MoveHandle.wait``), so tests run at simulation speed and
@@ -41,8 +39,6 @@ def simulated(model: str = "DMC-4040", **options: Any) -> Iterator[Controller]:
         model: the simulated model.
         **options: passed to :func:`galil.connect` (e.g. ``timeout``).
     """
-    from galil.client import connect
-
     dmc = connect(f"sim://{model}", **options)
     try:
         yield dmc

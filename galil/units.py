@@ -9,15 +9,18 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
 import pint
 
 from galil.errors import InvalidArgument
 
-__all__ = ["Scale", "counts_or_plain", "get_registry", "is_quantity", "ureg"]
+__all__ = ["Scale", "counts_or_plain", "get_registry", "is_quantity", "path_to_counts", "ureg"]
 
 
 @cache
@@ -80,6 +83,16 @@ def _plain_number(value: object, what: str) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise InvalidArgument(f"{what} must be a number or a pint Quantity, got {value!r}")
     return _finite(float(value), what)
+
+
+def _magnitude(q: Any, what: str) -> float:
+    """The magnitude of a scalar, real Quantity (arrays and complex values are refused)."""
+    m = q.magnitude
+    if getattr(m, "ndim", 0) == 0 and hasattr(m, "item"):
+        m = m.item()
+    if isinstance(m, bool) or not isinstance(m, numbers.Real):
+        raise InvalidArgument(f"{what} must be one real value, got {q!r}")
+    return _finite(float(m), what)
 
 
 @dataclass(frozen=True)
@@ -151,7 +164,7 @@ class Scale:
             raise InvalidArgument(
                 f"{what}: {value:~} is not an angle; expected {unit:~}-compatible units"
             )
-        _finite(float(out.magnitude), what)
+        _magnitude(out, what)
         return out
 
     def position_to_counts(self, value: Any, what: str = "position") -> float:
@@ -195,5 +208,48 @@ def counts_or_plain(value: object, what: str) -> float:
                 f"{what}: {value} has units but the axis has no scale; call "
                 "axis.set_scale(counts_per=...) or pass counts"
             )
-        return _finite(float(q.to("count").magnitude), what)
+        return _magnitude(q.to("count"), what)
     return _plain_number(value, what)
+
+
+def path_to_counts(
+    path: object, scales: Sequence[Scale | None], letters: str
+) -> npt.NDArray[np.float64]:
+    """A relative contour path in counts: plain numbers as they are, a Quantity array through
+    each axis's scale (shape (segments,) or (segments, axes); no offset, the path is relative).
+
+    Raises:
+        InvalidArgument: not numbers, complex or non-finite values, or units an axis cannot
+            take.
+    """
+    if not is_quantity(path):
+        return _real_array(path, "contour path")
+    q: Any = path
+    magnitude = _real_array(q.magnitude, "contour path")
+    columns = magnitude[:, None] if magnitude.ndim == 1 else magnitude
+    if columns.ndim != 2 or columns.shape[1] != len(letters):
+        return magnitude  # the caller's shape check reports it
+    out = np.empty_like(columns)
+    unit_of = q.units
+    for j, (a, scale) in enumerate(zip(letters, scales, strict=True)):
+        what = f"contour path on {a}"
+        if scale is None:
+            out[:, j] = columns[:, j] * counts_or_plain(1.0 * unit_of, what)
+        else:
+            out[:, j] = columns[:, j] * scale.distance_to_counts(1.0 * unit_of, what)
+    return out.ravel() if magnitude.ndim == 1 else out
+
+
+def _real_array(values: object, what: str) -> npt.NDArray[np.float64]:
+    try:
+        array = np.asarray(values)
+    except (TypeError, ValueError) as exc:
+        raise InvalidArgument(f"{what} must be an array of numbers: {exc}") from exc
+    if array.dtype.kind not in "iuf":
+        raise InvalidArgument(
+            f"{what} must hold real numbers, got {array.dtype} values ({values!r:.60})"
+        )
+    out = array.astype(np.float64)
+    if not np.all(np.isfinite(out)):
+        raise InvalidArgument(f"{what} holds NaN or infinity")
+    return out

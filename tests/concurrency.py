@@ -1,11 +1,24 @@
-"""Many threads on one Controller: each must get its own replies."""
+"""Shared helpers: many threads on one Controller (each must get its own replies), and
+waiting for a simulator's Ethernet handles to close."""
 
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 
-from galil.client import Controller
+from galil.controller import Controller
+from galil.sim.controller import SimController
+
+HANDLE_WAIT = 10.0
+
+
+def handles_closed(sim: SimController, left: int = 0) -> None:
+    """Wait until the server has seen connections close and ``left`` handles remain."""
+    deadline = time.monotonic() + HANDLE_WAIT
+    while sim.describe_handles().count("TCP PORT") != left:
+        assert time.monotonic() < deadline, sim.describe_handles()
+        threading.Event().wait(0.002)  # the server's next tick
 
 
 def hammer(

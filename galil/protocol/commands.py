@@ -30,7 +30,7 @@ from typing import ClassVar, NamedTuple
 import numpy as np
 
 from galil.errors import InvalidArgument, LimitError
-from galil.models import INT32_MAX, INT32_MIN, ModelSpec
+from galil.models import INT32_MAX, INT32_MIN, IT_RANGE, ModelSpec
 from galil.protocol.numbers import format_number
 
 __all__ = [
@@ -185,6 +185,9 @@ _new = tuple.__new__
 def _plain(text: str) -> Command:
     """``Command(text)`` without the named tuple's keyword handling (the builders' hot path)."""
     return _new(Command, (text, _ACK, b"", ()))
+
+
+_TIME = Command("MG TIME", _LINE)
 
 
 # Two-letter mnemonics of the firmware (40x0/18x2/2x00 command references). A variable whose
@@ -444,8 +447,10 @@ def _checker(kind: str, model: ModelSpec | None) -> _Checker:
     elif kind == "JG":
         hi = INT32_MAX if model is None else model.sp_max
         found = _Checker(kind, -hi, hi, model, integer=False)
+    elif kind == "AD":
+        found = _Checker(kind, 0, INT32_MAX, model, integer=True)
     elif kind == "IT":
-        it_lo, it_hi = (0.004, 1.0) if model is None else model.it_range
+        it_lo, it_hi = IT_RANGE if model is None else model.it_range
         found = _Checker(kind, it_lo, it_hi, model, integer=False)
     elif kind == "CD":
         hi = INT32_MAX if model is None else model.cd_max
@@ -459,6 +464,11 @@ def _checker(kind: str, model: ModelSpec | None) -> _Checker:
 def pr(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
     """PR: relative move distance per axis in counts (``pr(1000, None, -200)``, ``pr(B=500)``)."""
     return _plain(_axis_command("PR", values, by_axis, model))
+
+
+def ad(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """AD: trippoint, held until the axis has moved this distance (counts) from its start."""
+    return _plain(_axis_command("AD", values, by_axis, model))
 
 
 def pa(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
@@ -722,6 +732,23 @@ def mg_operand(*names: str) -> Command:
     return Command("MG " + ",".join(names), _LINE)
 
 
+def mg_operand_lines(names: Sequence[str], line_length: int = 80) -> list[Command]:
+    """As few ``MG`` lines as hold ``names`` within ``line_length`` (one reply line each).
+
+    Each line's reply has one number per name, in order; several lines go out pipelined.
+    """
+    limit = line_length - 4  # "MG " and the CR
+    batches: list[list[str]] = [[]]
+    length = 0
+    for n in names:
+        if batches[-1] and length + len(n) + 1 > limit:
+            batches.append([])
+            length = 0
+        batches[-1].append(n)
+        length += len(n) + 1
+    return [mg_operand(*b) for b in batches if b]
+
+
 def tm(period_us: float, *, model: ModelSpec | None = None) -> Command:
     """TM: servo sample period in µs (the model's range; refused where it is fixed).
 
@@ -771,6 +798,26 @@ def qr(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Com
     letters = _axis_list(axes, model, "ISTN")
     size = model.record_size if model is not None and not letters else None
     return Command(f"QR {letters}" if letters else "QR", Expect.record(size))
+
+
+def dr(period: int, handle: int | None = None, *, model: ModelSpec | None = None) -> Command:
+    """DR: push a data record every ``period`` samples to Ethernet handle ``handle`` (0-7).
+
+    ``dr(0)`` stops the stream. The period must be 0 or within the model's ``dr_range``.
+    """
+    low, high = (1, 65535) if model is None else model.dr_range
+    if isinstance(period, bool) or not isinstance(period, int):
+        raise InvalidArgument(f"DR period is a whole number of samples, not {period!r}")
+    if period != 0:
+        _ranged(period, low, high, "DR period", integer=True)
+    if handle is None:
+        return Command(f"DR {period}")
+    return Command(f"DR {period},{_ranged(handle, 0, 7, 'DR handle', integer=True)}")
+
+
+def time_stamp() -> Command:
+    """``MG TIME``: the controller's sample counter, sent on the line of a motion command."""
+    return _TIME
 
 
 def th() -> Command:

@@ -385,21 +385,27 @@ class FrameParser:
 
     def _hunt_bytes(self, data: bytes, i: int, events: list[Event]) -> int:
         # High-bit bytes are unsolicited or record data: neither can be part of the marker.
-        low = bytes(b for b in data[i:] if b < 0x80)
-        self._buf += low
-        at = self._buf.find(self._marker)
-        if at < 0:
-            keep = len(self._marker) - 1
-            if len(self._buf) > keep:
-                del self._buf[: len(self._buf) - keep]
-            return len(data)
-        rest = bytes(self._buf[at + len(self._marker) :])
+        # The marker is searched in the low bytes, but what follows it is taken from ``data``
+        # itself, so unsolicited (high-bit) output after the marker survives.
         marker = self._marker
-        self.reset()
-        events.append(Synced(marker))
-        # What followed the marker is ordinary traffic again (nothing is pending, though).
-        self._feed_bytes(rest, events)
-        return len(data)
+        buf = self._buf
+        n = len(data)
+        while i < n:
+            b = data[i]
+            i += 1
+            if b >= 0x80:
+                continue
+            buf.append(b)
+            if b == marker[-1] and buf.endswith(marker):
+                self.reset()
+                events.append(Synced(marker))
+                # What followed the marker is ordinary traffic again (nothing is pending).
+                self._feed_bytes(data[i:], events)
+                return n
+        keep = len(marker) - 1
+        if len(buf) > keep:
+            del buf[: len(buf) - keep]
+        return n
 
     # ------------------------------------------------------------------ completion
 

@@ -2,7 +2,7 @@
 
 Every transport satisfies the small :class:`Transport` protocol: bytes out, bytes in with a
 timeout, close. Nothing here knows about commands or replies; framing lives in
-``galil.protocol`` and the pairing of the two in ``galil.client``.
+``galil.protocol`` and the pairing of the two in ``galil.link``.
 
 Addresses are URLs whose scheme picks an opener from a registry::
 

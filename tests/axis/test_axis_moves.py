@@ -13,7 +13,7 @@ import pytest
 from axis_helpers import assert_follows
 
 import galil
-from galil.errors import GalilTimeoutError, InvalidArgument, LimitError
+from galil.errors import GalilTimeoutError, InvalidArgument
 from galil.testing import nothing_sent, sim_of, transcript
 from galil.units import ureg
 
@@ -32,7 +32,7 @@ def test_move_to_follows_prediction(dmc: galil.Controller) -> None:
     t0 = sim.start_trace("A")
     with transcript(dmc) as sent:
         h = x.move_to(12.5 * mm)
-    assert sent.lines[-1] == "PAA=25000;BGA;MG TIME"  # one line: target, begin, stamp
+    assert sent.lines[-1] == "PAA=25000;BG A;MG TIME"  # one line: target, begin, stamp
     assert h.kind == "position"
     assert h.axes == "A"
     assert not h.done
@@ -46,7 +46,7 @@ def test_move_to_follows_prediction(dmc: galil.Controller) -> None:
     assert r.predicted == {"A": 25000}
     assert r.worst == 0
     assert r.stop_codes == {"A": 1}
-    ((bg, _),) = _log(dmc, r"BGA", t0)
+    ((bg, _),) = _log(dmc, r"BG A", t0)
     assert h.begin == {"A": bg}
     assert_follows(trace, t0, h.profile, bg)
     assert x.reference_position == 12.5 * mm
@@ -220,12 +220,15 @@ def test_handle_progress_and_callbacks(
     assert "done" in repr(h)
 
 
-def test_limit_switch_stops_a_move_with_limit_error(dmc: galil.Controller) -> None:
+def test_limit_switch_stops_a_move_with_motion_error(dmc: galil.Controller) -> None:
     h = dmc.A.move_by(100_000)
     dmc.sleep(0.1)
     sim_of(dmc).set_limit_switch("A", "forward", True)
-    with pytest.raises(LimitError, match="FWD limit"):
+    with pytest.raises(galil.MotionError, match="FWD limit") as info:
         h.wait()
+    assert info.value.axis == "A"
+    assert info.value.stop_codes == {"A": 2}
+    assert not isinstance(info.value, galil.LimitError)  # it moved: not a refusal
     assert h.result is not None
     assert h.result.stop_codes == {"A": 2}
     assert "A" not in h.result.predicted  # a limit is not something the prediction knew

@@ -19,7 +19,7 @@ def test_speed_schedule_runs_as_predicted(dmc: galil.Controller) -> None:
     t0 = sim.start_trace("B")
     with transcript(dmc) as sent:
         h = dmc.B.speed_schedule(15_000, [(5000, 10_000), (10_000, 5000)], speed=50_000)
-    assert {"#GSCHED", "SPB=50000", "PRB=15000", "BGB", "ADB=5000", "ADB=10000"} <= set(sent.lines)
+    assert {"#GSCHED", "SPB=50000", "PRB=15000", "BG B", "ADB=5000", "ADB=10000"} <= set(sent.lines)
     assert any("XQ #GSCHED" in line for line in sent.lines)
     assert h.kind == "schedule"
     r = h.wait()

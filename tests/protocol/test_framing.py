@@ -219,6 +219,17 @@ def test_resync_after_timeout() -> None:
     assert Session.marker_reply("TOKEN1") == b"TOKEN1\r\n:"
 
 
+def test_unsolicited_output_right_after_the_resync_marker_is_kept() -> None:
+    # The marker and a CW1 message in one chunk, or split anywhere: the message survives.
+    tail = b"junk?" + b"TOKEN1\r\n:" + high("after\r\n")
+    for cut in range(len(tail) + 1):
+        s = Session()
+        s.resync("TOKEN1")
+        events = feed_split(s, tail, [cut])
+        assert [e.line for e in events if isinstance(e, Unsolicited)] == ["after"], cut
+        assert not s.out_of_step
+
+
 def test_resync_tokens_differ() -> None:
     session = Session()
     assert session.resync() != session.resync()

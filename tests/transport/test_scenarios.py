@@ -16,8 +16,8 @@ import pytest
 from concurrency import hammer
 from fake_usb import FakeBackend, FakeUsbDevice
 
-import galil.client
-from galil.client import Controller
+import galil.controller
+from galil.controller import Controller
 from galil.errors import CommandError, GalilConnectionError, GalilTimeoutError
 from galil.sim.clock import RealTimeClock
 from galil.sim.controller import SimController
@@ -36,13 +36,13 @@ class Bus:
 
 
 def _sim_inline() -> Iterator[Bus]:
-    c = galil.client.connect("sim://DMC-4040")
+    c = galil.controller.connect("sim://DMC-4040")
     yield Bus("sim", c, c.transport.controller, 400, True)  # type: ignore[attr-defined]
     c.close()
 
 
 def _sim_separate() -> Iterator[Bus]:
-    c = galil.client.connect("sim://DMC-4040?messages=separate")
+    c = galil.controller.connect("sim://DMC-4040?messages=separate")
     yield Bus("sim-separate", c, c.transport.controller, 100, False)  # type: ignore[attr-defined]
     c.close()
 
@@ -50,7 +50,7 @@ def _sim_separate() -> Iterator[Bus]:
 def _tcp() -> Iterator[Bus]:
     with SimTcpServer(model="DMC-4040") as srv:
         host, port = srv.address
-        c = galil.client.connect(
+        c = galil.controller.connect(
             f"tcp://{host}:{port}", message_port=srv.message_address[1], timeout=2.0
         )
         yield Bus("tcp", c, srv.controller, 40, False)
@@ -59,14 +59,14 @@ def _tcp() -> Iterator[Bus]:
 
 def _pty_serial() -> Iterator[Bus]:
     with SimPtyServer(model="DMC-4040") as srv:
-        c = galil.client.connect(srv.path, timeout=2.0)
+        c = galil.controller.connect(srv.path, timeout=2.0)
         yield Bus("pty", c, srv.controller, 40, True)
         c.close()
 
 
 def _pci() -> Iterator[Bus]:
     with SimPtyServer(model="DMC-4040") as srv:
-        c = galil.client.connect(f"pci://{srv.path}", timeout=2.0)
+        c = galil.controller.connect(f"pci://{srv.path}", timeout=2.0)
         yield Bus("pci", c, srv.controller, 40, True)
         c.close()
 
@@ -84,7 +84,7 @@ def _usb() -> Iterator[Bus]:
             return sim.poll()
 
     dev = FakeUsbDevice(respond, poll=poll)
-    c = galil.client.connect("usb://1079:4040", backend=FakeBackend(dev), timeout=2.0)
+    c = galil.controller.connect("usb://1079:4040", backend=FakeBackend(dev), timeout=2.0)
     yield Bus("usb", c, sim, 40, True)
     c.close()
 
@@ -172,7 +172,7 @@ def test_close_restores_marking(bus: Bus) -> None:
 def test_many_commands_on_the_in_process_link() -> None:
     """Thousands of commands from 8 threads at once, each getting its own reply."""
     c: Controller
-    with galil.client.connect("sim://DMC-4040") as c:
+    with galil.controller.connect("sim://DMC-4040") as c:
         errors: list[str] = []
 
         def worker(k: int) -> None:

@@ -8,15 +8,13 @@ second handle and claims the messages with it.
 from __future__ import annotations
 
 import socket
-import threading
-import time
 import warnings
 from collections.abc import Iterator
 
 import pytest
-from concurrency import hammer
+from concurrency import hammer, handles_closed
 
-import galil.client
+import galil.controller
 from galil.errors import GalilConnectionError, GalilTimeoutError
 from galil.sim.clock import ManualClock, RealTimeClock
 from galil.sim.controller import SimController
@@ -57,14 +55,6 @@ def server() -> Iterator[SimTcpServer]:
         yield srv
 
 
-def handles_closed(sim: SimController, left: int = 0) -> None:
-    """Wait until the server has seen connections close and ``left`` handles remain."""
-    deadline = time.monotonic() + WAIT
-    while sim.describe_handles().count("TCP PORT") != left:
-        assert time.monotonic() < deadline, sim.describe_handles()
-        threading.Event().wait(0.002)  # the server's next tick
-
-
 def _handle(srv: SimTcpServer) -> socket.socket:
     return socket.create_connection(srv.address, timeout=WAIT)
 
@@ -74,7 +64,7 @@ def test_client_default_claims_messages_with_cf_on_a_second_handle() -> None:
     with SimTcpServer(sim, message_port=None) as srv:
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # no fall-back to CW1 marking
-            c = galil.client.connect(srv.url, timeout=2.0)
+            c = galil.controller.connect(srv.url, timeout=2.0)
         with c:
             second = c.transport.secondary
             assert isinstance(second, TcpTransport)
@@ -92,7 +82,7 @@ def test_client_default_claims_messages_with_cf_on_a_second_handle() -> None:
 
 def test_cf_wins_over_the_message_port(server: SimTcpServer) -> None:
     port = socket.create_connection(server.message_address, timeout=WAIT)
-    with galil.client.connect(server.url, timeout=2.0) as c:
+    with galil.controller.connect(server.url, timeout=2.0) as c:
         server.controller.emit_message("to the CF handle")
         assert c.messages.get(timeout=WAIT) == "to the CF handle"
         assert _quiet(port) == b""
@@ -169,7 +159,7 @@ def test_handle_letters_are_reused_and_eight_is_the_limit(server: SimTcpServer) 
 def test_serial_like_ports_are_rs232() -> None:
     sim = SimController("DMC-4040", ManualClock())
     link = SimLink(sim)
-    with galil.client.connect(link) as c:
+    with galil.controller.connect(link) as c:
         assert c.command("WH") == "RS232"
         assert c.query_number("MG _WH") == -1
         # CF I on the main port keeps output there (inline, marked with CW1).
@@ -214,7 +204,7 @@ def test_threads_timeouts_and_messages_over_the_cf_handle() -> None:
     sim = SimController("DMC-4040", RealTimeClock())
     with (
         SimTcpServer(sim, message_port=None) as srv,
-        galil.client.connect(srv.url, timeout=2.0) as c,
+        galil.controller.connect(srv.url, timeout=2.0) as c,
     ):
 
         def tick(k: int, i: int) -> None:

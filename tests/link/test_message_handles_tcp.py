@@ -10,7 +10,7 @@ from collections.abc import Iterator
 import pytest
 from client_fakes import FakeGalil, _split
 
-import galil.client
+import galil.controller
 
 
 class HandleServer:
@@ -83,7 +83,7 @@ def handle_server() -> Iterator[HandleServer]:
 
 
 def test_second_handle_carries_messages(handle_server: HandleServer) -> None:
-    with galil.client.connect(f"tcp://127.0.0.1:{handle_server.port}", timeout=1.0) as c:
+    with galil.controller.connect(f"tcp://127.0.0.1:{handle_server.port}", timeout=1.0) as c:
         assert handle_server.claimed.wait(2)
         assert c.transport.secondary is not None
         assert "CW 1" not in handle_server.galil.log  # no marking needed on Ethernet
@@ -98,7 +98,7 @@ def test_refused_cf_falls_back_to_marking() -> None:
     srv = HandleServer(refuse_cf=True)
     try:
         with pytest.warns(RuntimeWarning, match="no second Ethernet handle"):
-            c = galil.client.connect(f"tcp://127.0.0.1:{srv.port}", timeout=1.0)
+            c = galil.controller.connect(f"tcp://127.0.0.1:{srv.port}", timeout=1.0)
         assert srv.galil.log[-1] == "CW 1"
         assert c.transport.secondary is None
         assert c.command("MG 2") == " 2"
@@ -109,7 +109,7 @@ def test_refused_cf_falls_back_to_marking() -> None:
 
 
 def test_unsolicited_off_leaves_the_controller_alone(handle_server: HandleServer) -> None:
-    with galil.client.connect(
+    with galil.controller.connect(
         f"tcp://127.0.0.1:{handle_server.port}", timeout=1.0, unsolicited=False
     ) as c:
         assert c.command("MG 1") == " 1"

@@ -14,12 +14,12 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
+from concurrency import handles_closed
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from test_gaps_handles import handles_closed
 
-import galil.client
-from galil.client import Controller, RecordStream
+import galil.controller
+from galil.controller import Controller, RecordStream
 from galil.errors import CommandError, InvalidArgument, ProtocolError
 from galil.models import get_model
 from galil.protocol.records import RecordSplitter, decode_record, record_size
@@ -35,7 +35,7 @@ WAIT = 5.0
 def tcp() -> Iterator[tuple[SimTcpServer, Controller]]:
     sim = SimController("DMC-4040", ManualClock())
     with SimTcpServer(sim) as srv:
-        c = galil.client.connect(srv.url, timeout=2.0)
+        c = galil.controller.connect(srv.url, timeout=2.0)
         yield srv, c
         c.close()
 
@@ -134,7 +134,7 @@ def test_dr_period_below_the_minimum_is_refused(tcp: tuple[SimTcpServer, Control
 
 def test_econo_model_records_over_tcp() -> None:
     sim = SimController("DMC-2143", ManualClock())
-    with SimTcpServer(sim) as srv, galil.client.connect(srv.url, timeout=2.0) as c:
+    with SimTcpServer(sim) as srv, galil.controller.connect(srv.url, timeout=2.0) as c:
         with pytest.raises(CommandError):
             c.records(4)  # 8 samples at least on the 21x3
         with c.records(8) as stream:

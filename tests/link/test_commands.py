@@ -1,11 +1,11 @@
-"""Controller behaviour against a scriptable firmware stand-in (tests/client_fakes.py)."""
+"""Commands and replies: raw and prepared commands, queries, compound lines, refusals explained
+with TC1, timeouts and resync, the ring buffer, the wire log, threads.
+"""
 
 from __future__ import annotations
 
 import logging
-import queue
 import threading
-import warnings
 from collections.abc import Iterator
 from typing import Any
 from urllib.parse import SplitResult
@@ -16,7 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import galil.transport as transport_registry
-from galil.client import Controller, connect
+from galil.controller import Controller, connect
 from galil.errors import (
     CommandError,
     GalilConnectionError,
@@ -46,121 +46,6 @@ def c(peer: FakeGalil) -> Iterator[Controller]:
     ctl = connect("fakegalil://x", timeout=0.2)
     yield ctl
     ctl.close()
-
-
-# -- connect and handshake ------------------------------------------------------------------
-
-
-def test_connect_identifies_and_marks_unsolicited(c: Controller, peer: FakeGalil) -> None:
-    assert c.model.name == "DMC-4040"
-    assert c.identity is not None
-    assert c.identity.firmware == "1.2f"
-    assert peer.log[:3] == ["\x12\x16", "MG _CW", "CW 1"]
-    assert peer.cw == 1
-    assert c.bytes_sent == len(b"\x12\x16\rMG _CW\rCW 1\r")
-    assert c.transport.kind == "serial"
-    assert "DMC-4040" in repr(c)
-
-
-def test_close_restores_cw_and_is_idempotent(peer: FakeGalil) -> None:
-    peer.cw = 2
-    c = connect("fakegalil://x", timeout=0.2)
-    assert peer.cw == 1
-    c.close()
-    assert peer.cw == 2
-    assert peer.log[-1] == "CW 2"
-    c.close()
-    assert c.closed
-    with pytest.raises(GalilConnectionError, match="closed"):
-        c.command("TPA")
-
-
-def test_context_manager_closes(peer: FakeGalil) -> None:
-    with connect("fakegalil://x", timeout=0.2) as c:
-        assert c.command("MG 5") == " 5"
-    assert c.closed
-    assert peer.links[0].closed
-
-
-def test_identify_refused_with_model_warns_and_connects(peer: FakeGalil) -> None:
-    peer.refuse["\x12\x16"] = 1
-    with pytest.warns(RuntimeWarning, match="refused"):
-        c = connect("fakegalil://x", timeout=0.2, model="DMC-4080")
-    assert c.model.name == "DMC-4080"
-    assert c.identity is None
-    c.close()
-
-
-def test_identify_refused_without_model_fails(peer: FakeGalil) -> None:
-    peer.refuse["\x12\x16"] = 1
-    with pytest.raises(GalilConnectionError, match=r"cannot identify.*model="):
-        connect("fakegalil://x", timeout=0.2)
-    assert peer.links[0].closed
-
-
-def test_unknown_identity_string(peer: FakeGalil) -> None:
-    peer.identity = "ACME 3000"
-    with pytest.raises(GalilConnectionError, match="not a Galil identification"):
-        connect("fakegalil://x", timeout=0.2)
-
-
-def test_silent_peer_is_a_connection_error(peer: FakeGalil) -> None:
-    peer.silent = True
-    with pytest.raises(GalilConnectionError, match="no answer to \\^R\\^V"):
-        connect("fakegalil://x", timeout=0.05)
-
-
-def test_model_mismatch_warns_and_trusts_the_controller(peer: FakeGalil) -> None:
-    with pytest.warns(RuntimeWarning, match="DMC-1806 was given but the controller says DMC4040"):
-        c = connect("fakegalil://x", timeout=0.2, model="DMC-1806")
-    assert c.model.name == "DMC-4040"
-    c.close()
-
-
-def test_cw_refused_warns_but_connects(peer: FakeGalil) -> None:
-    peer.refuse["CW 1"] = 6
-    with pytest.warns(RuntimeWarning, match="refused CW 1"):
-        c = connect("fakegalil://x", timeout=0.2)
-    assert c.command("MG 1") == " 1"
-    c.close()
-    assert "CW 2" not in peer.log  # nothing to restore
-
-
-def test_no_handshake_sends_nothing(peer: FakeGalil) -> None:
-    c = connect("fakegalil://x", handshake=False, model="DMC-4040")
-    assert c.bytes_sent == 0
-    assert peer.log == []
-    assert c.identity is None
-    c.close()
-    assert peer.log == []
-    with pytest.raises(InvalidArgument, match="model="):
-        connect("fakegalil://x", handshake=False)
-
-
-def test_transport_options_are_passed_on_and_checked(peer: FakeGalil) -> None:
-    with pytest.raises(InvalidArgument, match="unknown option"):
-        connect("fakegalil://x", baudrate=9600)
-
-
-def test_connect_accepts_an_open_transport(peer: FakeGalil) -> None:
-    c = connect(peer.open(), timeout=0.2)
-    assert c.command("MG 2") == " 2"
-    with pytest.raises(GalilConnectionError, match="reconnect needs an address"):
-        c.reconnect()
-    c.close()
-    with pytest.raises(InvalidArgument, match="need an address"):
-        connect(peer.open(), baudrate=1)
-
-
-@pytest.mark.parametrize("bad", [0, -1, "1", True, float("nan")])
-def test_bad_timeouts_are_refused(c: Controller, bad: Any) -> None:
-    sent = c.bytes_sent
-    with pytest.raises(InvalidArgument, match="timeout"):
-        c.command("TPA", timeout=bad)
-    assert c.bytes_sent == sent
-
-
-# -- commands and queries -------------------------------------------------------------------
 
 
 def test_command_and_typed_queries(c: Controller, peer: FakeGalil) -> None:
@@ -278,9 +163,6 @@ def test_any_text_is_sent_verbatim_or_refused_unsent(text: str) -> None:
         assert wire.sent.startswith(text.encode("ascii") + b"\r")
 
 
-# -- errors ---------------------------------------------------------------------------------
-
-
 def test_question_mark_is_explained_with_tc1(c: Controller, peer: FakeGalil) -> None:
     peer.refuse["BG A"] = 20
     with pytest.raises(CommandError) as info:
@@ -343,17 +225,6 @@ def test_garbage_is_a_protocol_error_then_recovers(c: Controller, peer: FakeGali
     assert c.command("MG 4") == " 4"
 
 
-def test_dead_link_and_reconnect(c: Controller, peer: FakeGalil) -> None:
-    peer.links[0].dead = True
-    with pytest.raises(GalilConnectionError, match="died") as info:
-        c.command("MG 1")
-    assert isinstance(info.value, ConnectionError)
-    c.reconnect()
-    assert len(peer.links) == 2
-    assert c.command("MG 2") == " 2"
-    assert peer.links[0].closed
-
-
 def test_errors_carry_the_ring_buffer(peer: FakeGalil) -> None:
     c = connect("fakegalil://x", timeout=0.2, history=4)
     for i in range(10):
@@ -369,67 +240,6 @@ def test_errors_carry_the_ring_buffer(peer: FakeGalil) -> None:
     c.close()
     with pytest.raises(InvalidArgument):
         connect("fakegalil://x", history=0)
-
-
-# -- unsolicited messages -------------------------------------------------------------------
-
-
-def test_unsolicited_inside_a_reply_is_split_out(c: Controller, peer: FakeGalil) -> None:
-    peer.extra = lambda cmd: (
-        " 4" + "".join(chr(b | 0x80) for b in b"hello\r\n") + "2\r\n:" if cmd == "MG 42" else None
-    )
-    assert c.command("MG 42") == " 42"
-    assert c.messages.get(timeout=1) == "hello"
-    assert any("hello" in r and "unsolicited" in r for r in c.recent)
-
-
-def test_messages_arrive_while_idle(c: Controller, peer: FakeGalil) -> None:
-    q = c.messages
-    peer.emit("done moving")
-    assert q.get(timeout=2) == "done moving"
-    with pytest.raises(queue.Empty):
-        q.get(timeout=0.01)
-    with pytest.raises(queue.Empty):
-        q.get_nowait()
-
-
-def test_subscribers_get_lines_and_may_send_commands(c: Controller, peer: FakeGalil) -> None:
-    got: list[tuple[str, str]] = []
-    event = threading.Event()
-
-    def callback(line: str) -> None:
-        got.append((line, c.command("MG 9")))  # no deadlock: called outside the link lock
-        event.set()
-
-    def broken(line: str) -> None:
-        raise RuntimeError("callback bug")
-
-    unsubscribe = c.subscribe(callback)
-    c.subscribe(broken)
-    peer.emit("hi")
-    assert event.wait(2)
-    assert got == [("hi", " 9")]
-    unsubscribe()
-    peer.emit("again")
-    assert c.messages.get(timeout=2) == "hi"
-    assert c.messages.get(timeout=2) == "again"
-    assert got == [("hi", " 9")]
-    with pytest.raises(InvalidArgument):
-        c.subscribe("nope")  # type: ignore[arg-type]
-
-
-def test_message_queue_is_bounded(peer: FakeGalil) -> None:
-    c = connect("fakegalil://x", timeout=0.2, max_messages=3)
-    for i in range(5):
-        peer.emit(f"m{i}", marked=True)
-    c.command("MG 0")
-    assert c.messages_queue.drain() == ["m2", "m3", "m4"]
-    assert c.messages_queue.dropped == 2
-    assert "dropped" in repr(c.messages_queue)
-    c.close()
-
-
-# -- observability --------------------------------------------------------------------------
 
 
 def test_wire_bytes_logged_at_debug(c: Controller, caplog: pytest.LogCaptureFixture) -> None:
@@ -451,9 +261,6 @@ def test_wire_hooks_see_both_directions(c: Controller) -> None:
     assert c.bytes_received == received + len(b" 3\r\n:")
 
 
-# -- threads --------------------------------------------------------------------------------
-
-
 def test_threads_each_get_their_own_reply(c: Controller) -> None:
     errors: list[str] = []
 
@@ -470,16 +277,3 @@ def test_threads_each_get_their_own_reply(c: Controller) -> None:
     for t in threads:
         t.join()
     assert errors == []
-
-
-def test_axes_and_letters(c: Controller) -> None:
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        axes = c.axes
-    assert list(axes) == ["A", "B", "C", "D"]
-    assert c.A is axes["A"]
-    with pytest.raises(AttributeError):
-        _ = c.E
-    with pytest.raises(AttributeError):
-        _ = c.nothing
-    assert c.sample_period == pytest.approx(1 / 1024)

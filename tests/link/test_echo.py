@@ -17,8 +17,8 @@ from concurrency import hammer
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import galil.client
-from galil.client import Controller
+import galil.controller
+from galil.controller import Controller
 from galil.errors import GalilTimeoutError, InvalidArgument
 from galil.sim.clock import ManualClock, RealTimeClock
 from galil.sim.controller import SimController
@@ -52,7 +52,7 @@ def test_echo_is_switched_off_at_connect_and_restored_at_close(
     pty_echo: tuple[SimPtyServer, SimController],
 ) -> None:
     srv, sim = pty_echo
-    c = galil.client.connect(srv.path, timeout=2.0)
+    c = galil.controller.connect(srv.path, timeout=2.0)
     assert c.identity is not None
     assert c.identity.raw_model == "DMC4040"
     assert c.echo is False
@@ -68,7 +68,7 @@ def test_echo_kept_on_request_is_stripped_from_every_reply(
     pty_echo: tuple[SimPtyServer, SimController],
 ) -> None:
     srv, sim = pty_echo
-    with galil.client.connect(srv.path, timeout=2.0, echo=True) as c:
+    with galil.controller.connect(srv.path, timeout=2.0, echo=True) as c:
         assert c.echo is True
         assert c.query_number("MG _EO") == 1
         assert c.command("speed=1234") == ""
@@ -84,7 +84,7 @@ def test_echo_kept_on_request_is_stripped_from_every_reply(
 
 def test_threads_share_an_echoing_link(pty_echo: tuple[SimPtyServer, SimController]) -> None:
     srv, _ = pty_echo
-    with galil.client.connect(srv.path, timeout=2.0, echo=True) as c:
+    with galil.controller.connect(srv.path, timeout=2.0, echo=True) as c:
         errors = hammer(c, threads=4, per_thread=30)
     assert errors == []
 
@@ -137,7 +137,7 @@ def test_echo_survives_replies_split_anywhere(seed: int, keep: bool) -> None:
 
 def test_echo_option_is_checked() -> None:
     with pytest.raises(InvalidArgument, match="echo"):
-        galil.client.connect("sim://DMC-4040", echo="yes")
+        galil.controller.connect("sim://DMC-4040", echo="yes")
 
 
 @pytest.mark.parametrize("keep", [True, False])
@@ -145,7 +145,7 @@ def test_timeout_then_resync_with_an_echoing_controller(
     pty_echo: tuple[SimPtyServer, SimController], keep: bool
 ) -> None:
     srv, _ = pty_echo
-    with galil.client.connect(srv.path, timeout=2.0, echo=keep) as c:
+    with galil.controller.connect(srv.path, timeout=2.0, echo=keep) as c:
         with pytest.raises(GalilTimeoutError):
             c.command("WT 300", timeout=0.05)
         # The late ':' of WT (and its echo) must not be taken for the next reply.

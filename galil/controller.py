@@ -1,0 +1,553 @@
+"""The Controller: the facade users hold, composing the rooms below it.
+
+``connect(address)`` opens a transport (``galil.transport``), identifies the controller
+(``^R^V``), routes its unsolicited output away from replies, and returns a :class:`Controller`::
+
+    with galil.connect("tcp://192.168.0.2") as c:
+        c.command("SHA")
+        c.query_number("MG _TPA")        # -> 0.0
+        c.messages.get(timeout=5)        # a line a program printed with MG
+
+The facade owns no logic of its own: the link (:mod:`galil.link`) exchanges commands, the
+message room (:mod:`galil.messages`) routes unsolicited output, the record room
+(:mod:`galil.records`) reads data records, and the axis, motion and contour rooms move things.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import threading
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
+from galil import predict
+from galil.axis import Axis, check_overrides, resolve_moves, user_units
+from galil.contour import ContourResult, ContourStream
+from galil.errors import GalilConnectionError, InvalidArgument
+from galil.handshake import identify
+from galil.link import Link, WireLog, check_timeout
+from galil.messages import MessageCallback, MessageQueue, Messages
+from galil.models import Identity, ModelSpec, get_model
+from galil.motion import MotionTracker, MoveHandle, abort_all, motion_guard, stop_axes
+from galil.moves import execute_move
+from galil.protocol import commands as cmds
+from galil.protocol.commands import Command
+from galil.protocol.session import Completed
+from galil.records import Records, RecordStream
+from galil.transport import Transport, open_transport
+from galil.units import path_to_counts
+
+__all__ = ["CLIENT_OPTIONS", "Controller", "connect"]
+
+CLIENT_OPTIONS = frozenset(
+    {
+        "timeout",
+        "model",
+        "handshake",
+        "unsolicited",
+        "history",
+        "poll_interval",
+        "max_messages",
+        "echo",
+    }
+)
+"""Keyword options :func:`connect` keeps for the :class:`Controller`; the rest go to the
+transport opener (``baudrate=``, ``port=``, ``backend=`` ...)."""
+
+
+class Controller:
+    """A connected controller. Build it with :func:`connect`.
+
+    Args:
+        transport: an open transport, or a callable that opens one (used again by
+            :meth:`reconnect`).
+        timeout: default seconds to wait for each reply.
+        model: the model name (or spec) when it is known; checked against ``^R^V``.
+        handshake: identify the controller and route unsolicited output at connect; with
+            ``False`` nothing is sent at connect and ``model`` is required.
+        unsolicited: route unsolicited output (second Ethernet handle, else ``CW1``).
+        history: exchanges kept in the ring buffer attached to errors.
+        poll_interval: seconds between polls for unsolicited lines while the link is idle.
+        max_messages: unsolicited lines kept in :attr:`messages` before the oldest drop.
+        echo: what to do when the handshake finds the controller echoing (``EO 1``, a serial
+            setting): ``False`` (default) switches the echo off with ``EO 0``, as Galil's own
+            library does, and :meth:`close` switches it back on; ``True`` leaves it on and
+            strips the echo from every reply.
+
+    Attributes:
+        link: the command link (:class:`~galil.link.Link`).
+        identity: the parsed ``^R^V`` reply (``None`` without a handshake).
+        echo: whether the controller echoes (found at the handshake and kept).
+    """
+
+    def __init__(
+        self,
+        transport: Transport | Callable[[], Transport],
+        *,
+        timeout: float = 1.0,
+        model: str | ModelSpec | None = None,
+        handshake: bool = True,
+        unsolicited: bool = True,
+        history: int = 64,
+        poll_interval: float = 0.02,
+        max_messages: int = 1000,
+        echo: bool = False,
+    ) -> None:
+        if not isinstance(echo, bool):
+            raise InvalidArgument(f"echo must be True or False, not {echo!r}")
+        if not handshake and model is None:
+            raise InvalidArgument("handshake=False needs model= (nothing identifies it then)")
+        self.link = Link(timeout=timeout, history=history)
+        self._keep_echo = echo
+        self._given_model = get_model(model) if isinstance(model, str) else model
+        self._handshake = handshake
+        self._unsolicited = unsolicited
+        self.messages_room = Messages(
+            self.link,
+            max_messages=max_messages,
+            poll_interval=check_timeout(poll_interval, 0.02, "poll_interval"),
+        )
+        self.records_room = Records(self.link)
+        self.tracker = MotionTracker()
+        self.identity: Identity | None = None
+        self.echo = False
+        self._axes: dict[str, Axis] | None = None
+        self._life = threading.RLock()  # open, close and reconnect, one at a time
+        self._generation = 0
+        if callable(transport) and not isinstance(transport, Transport):
+            self._factory: Callable[[], Transport] | None = transport
+            first: Transport | None = None
+        else:
+            self._factory = None
+            first = transport
+        self._open(first)
+
+    # -- life cycle -------------------------------------------------------------------------
+
+    def _open(self, transport: Transport | None) -> None:
+        if transport is None:
+            if self._factory is None:
+                raise GalilConnectionError("no transport and no address to open one")
+            transport = self._factory()
+        link = self.link
+        link.attach(transport)
+        self.records_room.reset()
+        try:
+            if self._handshake:
+                self.identity, self.echo = identify(
+                    link, self._given_model, keep_echo=self._keep_echo
+                )
+                if self._unsolicited:
+                    self.messages_room.restart()
+            else:
+                assert self._given_model is not None
+                link.model = self._given_model
+        except BaseException:
+            link.detach()
+            self.messages_room.stop()
+            raise
+        self._generation += 1
+
+    def close(self) -> None:
+        """Restore what connect changed (``CW``, ``EO``), stop the readers, close the link.
+
+        Idempotent and thread-safe; never raises for a link that is already dead. No
+        background thread and no controller handle outlives it.
+        """
+        with self._life:
+            self.records_room.close_all()
+            self.link.detach()
+            self.messages_room.stop()
+
+    def reconnect(self) -> None:
+        """Close the link and open it again (same address and options), handshake included.
+
+        Thread-safe: several threads asking at once get one reconnect.
+
+        Raises:
+            GalilConnectionError: the controller was built on a transport object, not an
+                address, or the new link fails.
+        """
+        if self._factory is None:
+            raise GalilConnectionError(
+                "this Controller was given a transport object; reconnect needs an address "
+                "(use galil.connect(address))"
+            )
+        seen = self._generation
+        with self._life:
+            if self._generation != seen and self.link.is_open and not self.link.dead:
+                return  # another thread reconnected while this one waited
+            self.close()
+            self._open(None)
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` was called (or connecting failed)."""
+        return not self.link.is_open
+
+    def __enter__(self) -> Controller:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        link = self.link
+        state = "closed" if self.closed else ("dead: call reconnect()" if link.dead else "open")
+        return f"<Controller {link.model_name or '?'} on {link.transport!r} {state}>"
+
+    # -- the link, as users see it ------------------------------------------------------------
+
+    @property
+    def model(self) -> ModelSpec:
+        """The controller's :class:`~galil.models.ModelSpec`."""
+        return self.link.model
+
+    @property
+    def transport(self) -> Transport:
+        """The open :class:`~galil.transport.Transport`."""
+        t = self.link.transport
+        if t is None:  # pragma: no cover - a Controller always has one
+            raise GalilConnectionError("no transport")
+        return t
+
+    @property
+    def timeout(self) -> float:
+        """Default seconds to wait for each reply."""
+        return self.link.timeout
+
+    @timeout.setter
+    def timeout(self, seconds: float) -> None:
+        self.link.timeout = check_timeout(seconds, self.link.timeout)
+
+    @property
+    def wire_log(self) -> WireLog:
+        """Hooks on the raw bytes of the command link."""
+        return self.link.wire_log
+
+    @property
+    def bytes_sent(self) -> int:
+        """Bytes written to the command link."""
+        return self.link.bytes_sent
+
+    @property
+    def bytes_received(self) -> int:
+        """Bytes read from the command link."""
+        return self.link.bytes_received
+
+    @property
+    def recent(self) -> tuple[str, ...]:
+        """The last exchanges on the link, oldest first (what errors carry)."""
+        return self.link.recent
+
+    @property
+    def sample_period(self) -> float:
+        """Seconds per servo sample."""
+        return self.link.sample_period
+
+    def command(
+        self, text: str, *, timeout: float | None = None, allow_compound: bool = False
+    ) -> str:
+        """Send one raw command line and return its reply text (see :meth:`Link.command`).
+
+        Raises:
+            InvalidArgument: the text cannot be sent (CR/LF, non-ASCII, a stray ``;``).
+            CommandError: the controller answered ``?`` (code and text from ``TC1``).
+            ProtocolError: the link went out of step during the exchange (it may have run).
+            GalilTimeoutError: no complete reply within the timeout.
+            GalilConnectionError: the link is closed or dead.
+        """
+        return self.link.command(text, timeout=timeout, allow_compound=allow_compound)
+
+    def command_line(
+        self, parts: Sequence[str | Command], *, timeout: float | None = None
+    ) -> list[str]:
+        """Send several commands as compound line(s) (``PRA=1;BGA``); one reply per part."""
+        return self.link.command_line(parts, timeout=timeout)
+
+    def send(self, command: Command, *, timeout: float | None = None) -> str:
+        """Send a prepared :class:`~galil.protocol.commands.Command`; return its reply text."""
+        return self.link.send(command, timeout=timeout)
+
+    def exchange(self, command: Command, *, timeout: float | None = None) -> Completed:
+        """Send a prepared command and return the whole reply (``record`` for QR)."""
+        return self.link.exchange(command, timeout=timeout)
+
+    def send_many(self, commands: Iterable[Command], *, timeout: float | None = None) -> list[str]:
+        """Send prepared commands back to back (pipelined) and return every reply text."""
+        return self.link.send_many(commands, timeout=timeout)
+
+    def query_number(self, text: str, *, timeout: float | None = None) -> float:
+        """Send a query (``"MG _TPA"``, ``"TPA"``) and return its one number."""
+        return self.link.query_number(text, timeout=timeout)
+
+    def query_numbers(self, text: str, *, timeout: float | None = None) -> list[float]:
+        """Send a query and return every number in its reply (``"TP"`` -> ``[0.0, 5.0, ...]``)."""
+        return self.link.query_numbers(text, timeout=timeout)
+
+    def query_operands(self, names: Sequence[str], *, timeout: float | None = None) -> list[float]:
+        """Read operands or variables (``["_TPA", "_SCA", "speed"]``) in as few lines as fit."""
+        return self.link.query_operands(names, timeout=timeout)
+
+    def sleep(self, seconds: float) -> None:
+        """Let ``seconds`` pass for the controller (simulated time on a manual-clock simulator).
+
+        Scripts that wait between commands should use this rather than ``time.sleep`` so the
+        same script runs instantly against the simulator in tests.
+        """
+        if (
+            isinstance(seconds, bool)
+            or not isinstance(seconds, (int, float))
+            or not math.isfinite(seconds)
+            or seconds < 0
+        ):
+            raise InvalidArgument(f"seconds must be a non-negative finite number, got {seconds!r}")
+        self.link.pause(float(seconds))
+
+    # -- unsolicited output and records -----------------------------------------------------
+
+    @property
+    def messages(self) -> MessageQueue:
+        """Unsolicited lines (program ``MG`` output ...) as a queue: ``messages.get(timeout)``.
+
+        Reading it starts the background poll of an idle link.
+        """
+        self.messages_room.ensure_polling()
+        return self.messages_room.queue
+
+    def subscribe(self, callback: MessageCallback) -> Callable[[], None]:
+        """Call ``callback(line)`` for each unsolicited line, in order, outside the link lock
+        (a callback may send commands itself). Returns a function that unsubscribes."""
+        return self.messages_room.subscribe(callback)
+
+    def record(self, axes: str = "", *, as_dict: bool = False, timeout: float | None = None) -> Any:
+        """Read one data record (``QR``) and decode it.
+
+        Returns:
+            A structured numpy record (``rec["A"]["position"]``, ``rec["sample"]``,
+            ``rec["error_code"]``; field names in :mod:`galil.protocol.records`), or a dict.
+        """
+        if as_dict:
+            return self.records_room.record_dict(axes, timeout=timeout)
+        return self.records_room.record(axes, timeout=timeout)
+
+    def records(self, period: int, *, method: str = "auto", maxlen: int = 10_000) -> RecordStream:
+        """Stream data records every ``period`` servo samples.
+
+        ``"DR"`` (the default over Ethernet) has the controller push them (``DR period,h``) to
+        a handle opened for them alone; ``"QR"`` (elsewhere) polls, one ``QR`` per record when
+        it is due. Close the stream (or use it as a context manager) to stop it.
+
+        Raises:
+            InvalidArgument: bad period or method, DR where there is no handle for it, or the
+                model has no data record.
+            CommandError: the controller refused ``DR`` (a period below its minimum ...).
+        """
+        return self.records_room.stream(period, method=method, maxlen=maxlen)
+
+    # -- axes -------------------------------------------------------------------------------
+
+    @property
+    def axes(self) -> dict[str, Axis]:
+        """The model's axes by letter (``controller.axes["A"]``; also ``controller.A``)."""
+        if self._axes is None:
+            self._axes = {a: Axis(self.link, a, self.tracker) for a in self.model.axes}
+        return self._axes
+
+    def axis(self, name: str) -> Axis:
+        """The axis called ``name`` (``"A"``, or ``"X"`` where the model aliases it).
+
+        Raises:
+            InvalidArgument: the model has no such axis.
+        """
+        return self.axes[self.model.axis_letter(name)]
+
+    def _letters(self, axes: str) -> str:
+        if not isinstance(axes, str):
+            raise InvalidArgument(f"axes must be a string of axis letters, got {axes!r}")
+        out = ""
+        for name in axes.replace(" ", "").replace(",", ""):
+            letter = self.model.axis_letter(name)
+            if letter not in out:
+                out += letter
+        return out
+
+    # -- motion on several axes -------------------------------------------------------------
+
+    def _execute(
+        self, targets: Mapping[str, Any], relative: bool, dry_run: bool, overrides: dict[str, Any]
+    ) -> MoveHandle:
+        if not isinstance(targets, Mapping) or not targets:
+            raise InvalidArgument(
+                f"targets must be a non-empty mapping of axis to value, got {targets!r}"
+            )
+        axes = {name: self.axis(name) for name in targets}
+        moves = resolve_moves(axes, targets, relative, overrides)
+        by_letter = {a.letter: a for a in axes.values()}
+        with user_units(by_letter):
+            return execute_move(
+                self.link,
+                self.tracker,
+                moves,
+                relative=relative,
+                dry_run=dry_run,
+                display={a: ax.display for a, ax in by_letter.items()},
+            )
+
+    def move(
+        self, targets: Mapping[str, Any], *, relative: bool = False, **overrides: Any
+    ) -> MoveHandle:
+        """Move several axes at once, sent in one line and begun together (``BG AB``).
+
+        Args:
+            targets: position (or distance with ``relative=True``) per axis, in each axis's
+                units.
+            relative: move by the given distances instead of to the positions.
+            **overrides: ``speed``, ``accel``, ``decel`` for every axis of this move.
+        """
+        check_overrides("move", overrides)
+        return self._execute(targets, relative, False, overrides)
+
+    def plan(
+        self, targets: Mapping[str, Any], *, relative: bool = False, **overrides: Any
+    ) -> predict.MultiProfile:
+        """Predict and check :meth:`move` without sending anything."""
+        check_overrides("plan", overrides)
+        return predict.together(self._execute(targets, relative, True, overrides).profiles)
+
+    def stop(self, axes: str = "") -> None:
+        """Decelerate axes (default: all) to a stop at their DC (``ST``).
+
+        The predictions of the moves in progress follow the stop (it is stamped with the
+        controller's ``TIME``), so their handles still compare the end with a prediction.
+        """
+        stop_axes(self.link, self.tracker, self._letters(axes))
+
+    def abort(self) -> None:
+        """Stop all motion at once, without deceleration (``AB 1``: programs keep running)."""
+        abort_all(self.link, self.tracker)
+
+    def servo_here(self, axes: str = "") -> None:
+        """Enable the servo on axes (default: all) at their present position (``SH``)."""
+        self.link.command_line([cmds.sh(self._letters(axes), model=self.model)])
+
+    def motor_off(self, axes: str = "") -> None:
+        """Turn the motors of axes (default: all) off (``MO``)."""
+        self.link.command_line([cmds.mo(self._letters(axes), model=self.model)])
+
+    def motion(self, axes: str | None = None) -> contextlib.AbstractContextManager[None]:
+        """A context in which an exception or Ctrl-C stops the guarded axes and waits for them.
+
+        ``with controller.motion(): ...``: on any exception, ``ST`` goes to every axis still
+        moving (of ``axes``, default all; all of them when that cannot be read), a dead link
+        is reopened once to send it, and the block's exception is re-raised once they have
+        stopped. If they could not be stopped, :class:`~galil.errors.MotionError` says which
+        axes may still be moving.
+        """
+        letters = self.model.axes if axes is None else self._letters(axes)
+        reopen = self.reconnect if self._factory is not None else None
+        return motion_guard(self.link, self.tracker, letters, reconnect=reopen)
+
+    def contour(
+        self,
+        axes: str,
+        path: object,
+        *,
+        dt: int,
+        progress: bool = False,
+        timeout: float | None = None,
+    ) -> ContourResult:
+        """Run a contour path on ``axes`` and return when it is done.
+
+        ``path`` holds ideal positions relative to where each axis is now, one per
+        ``2**dt``-sample segment (shape (segments,) or (segments, axes)): plain numbers are
+        counts, a pint Quantity array goes through each axis's scale. The stream is checked
+        first (CD range, DT, soft limits, link speed against the model's buffer), then
+        CM/DT/CD lines keep the controller's buffer fed, and ``CD 0=0`` ends it.
+        """
+        names = list(axes) if isinstance(axes, str) else [str(a) for a in axes]
+        chosen = [self.axis(a) for a in names]
+        letters = "".join(a.letter for a in chosen)
+        counts = path_to_counts(path, [a.scale for a in chosen], letters)
+        stream = ContourStream(
+            self.link,
+            letters,
+            counts,
+            dt=dt,
+            display={a.letter: a.display for a in chosen},
+            byte_rate=self.link.byte_rate,
+        )
+        with user_units({a.letter: a for a in chosen}):
+            return stream.run(progress=progress, timeout=timeout)
+
+    if not TYPE_CHECKING:  # mypy knows the letters below, and nothing else
+
+        def __getattr__(self, name: str) -> Axis:
+            return self._axis_attribute(name)
+
+    def _axis_attribute(self, name: str) -> Axis:
+        # Only single axis letters reach here (and X/Y/Z/W aliases where the model has them).
+        link = self.__dict__.get("link")
+        model = None if link is None else link._model
+        if len(name) == 1 and name.isupper() and model is not None:
+            try:
+                return self.axes[model.axis_letter(name)]
+            except InvalidArgument:
+                pass
+        if len(name) == 1 and name.isalpha() and model is not None:
+            # Most likely an axis letter: a typo, a lower-case letter, or one the model lacks.
+            raise AttributeError(
+                f"{type(self).__name__!s} has no attribute {name!r}: {model.name} has axes "
+                f"{', '.join(model.axes)} (controller.A, or controller.axes['A'])"
+            )
+        raise AttributeError(f"{type(self).__name__!s} has no attribute {name!r}")
+
+    # Typed axis attributes: mypy sees ``connect(...).A`` as an Axis.
+    A: Axis
+    B: Axis
+    C: Axis
+    D: Axis
+    E: Axis
+    F: Axis
+    G: Axis
+    H: Axis
+    X: Axis
+    Y: Axis
+    Z: Axis
+    W: Axis
+
+
+def connect(address: str | Transport, **options: Any) -> Controller:
+    """Connect to a controller with one line.
+
+    Args:
+        address: ``tcp://host[:port]`` or a bare IPv4 address, ``/dev/ttyUSB0``, ``COM3``,
+            ``serial:///dev/ttyS0?baudrate=19200`` or any pyserial URL,
+            ``usb://[vid:pid][?serial=...]``, ``/dev/galilpci0``, ``sim://DMC-4040``; or an
+            open :class:`~galil.transport.Transport`.
+        **options: client options (``timeout``, ``model``, ``handshake``, ``unsolicited``,
+            ``history``, ``poll_interval``, ``max_messages``, ``echo``); the rest go to the
+            transport (``baudrate=``, ``connect_timeout=``, ``backend=`` ...).
+
+    Raises:
+        InvalidArgument: the address or an option is not understood.
+        GalilConnectionError: the link cannot be opened or the controller does not answer.
+    """
+    client_opts = {k: options.pop(k) for k in list(options) if k in CLIENT_OPTIONS}
+    if "timeout" in client_opts:
+        client_opts["timeout"] = check_timeout(client_opts["timeout"], 1.0)
+    if isinstance(address, str):
+        transport_opts = options
+
+        def factory() -> Transport:
+            return open_transport(address, **transport_opts)
+
+        return Controller(factory, **client_opts)
+    if options:
+        raise InvalidArgument(
+            f"transport options {sorted(options)} need an address, not an open transport"
+        )
+    if not isinstance(address, Transport):
+        raise InvalidArgument(f"connect() takes an address or a Transport, not {address!r}")
+    return Controller(address, **client_opts)

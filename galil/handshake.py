@@ -1,0 +1,112 @@
+"""What happens on a fresh link before the first user command: identify, handle the echo.
+
+``^R^V`` names the controller (``DMC4040 Rev 1.2f``) and picks its :class:`ModelSpec`. A
+controller that echoes what it receives (``EO 1``, a serial setting) is found by the echo of
+that very query; the echo is then switched off with ``EO 0`` (restored at close), as Galil's
+own library does, or kept and stripped from every reply when the caller asks for it.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+
+from galil.errors import GalilConnectionError, GalilTimeoutError, InvalidArgument, ProtocolError
+from galil.link import Link
+from galil.models import Identity, ModelSpec, parse_identity
+from galil.protocol import commands as cmds
+from galil.protocol.commands import Command, Expect
+from galil.protocol.session import Completed
+
+__all__ = ["identify"]
+
+# ^R^V with any reply shape, and what its echo looks like in front of the identity (the
+# controller may or may not echo the control characters; an echoed CR may gain an LF).
+_IDENTIFY_ANY = Command("\x12\x16", Expect.ANY)
+_ECHO_OF_IDENTIFY = re.compile(r"[\x12\x16]*\r\n?")
+
+
+def identify(
+    link: Link, given: ModelSpec | None, *, keep_echo: bool
+) -> tuple[Identity | None, bool]:
+    """Ask ``^R^V``, set ``link.model``, and deal with an echo (lock taken here).
+
+    Returns:
+        The parsed identity (``None`` when only ``given`` names the model) and whether the
+        controller still echoes (only with ``keep_echo``, or if it refused ``EO 0``).
+
+    Raises:
+        GalilConnectionError: no answer, or an answer that names no model and none was given.
+    """
+    with link.locked():
+        try:
+            # Any reply shape: with echo on, the echo of ^R^V comes first (maybe a line of
+            # its own), and that is how the echo is found.
+            reply = link.roundtrip_locked([_IDENTIFY_ANY], link.timeout)[0]
+        except GalilTimeoutError as exc:
+            raise link.error(
+                GalilConnectionError,
+                f"no answer to ^R^V on {link.transport!r} within {link.timeout} s: is a Galil "
+                "controller on the other end (and the baud rate right)?",
+            ) from exc
+        echo = False
+        ident: Identity | None = None
+        problem = ""
+        if reply.ok:
+            found = _ECHO_OF_IDENTIFY.match(reply.text)
+            if found is not None and found.end():
+                reply = Completed(reply.command, True, reply.text[found.end() :])
+                echo = _handle_echo(link, given, keep_echo)
+            try:
+                ident = parse_identity(reply.text)
+            except InvalidArgument as exc:
+                problem = str(exc)
+        else:
+            problem = "the controller refused ^R^V"
+    _settle_model(link, ident, given, problem)
+    return ident, echo
+
+
+def _settle_model(
+    link: Link, ident: Identity | None, given: ModelSpec | None, problem: str
+) -> None:
+    if ident is None:
+        if given is None:
+            raise link.error(
+                GalilConnectionError,
+                f"cannot identify the controller ({problem}); pass model='DMC-....'",
+            )
+        warnings.warn(f"{problem}; using model={given.name} as given", RuntimeWarning, stacklevel=5)
+        link.model = given
+        return
+    link.model = ident.model
+    if given is not None and given.name != ident.model.name:
+        warnings.warn(
+            f"model={given.name} was given but the controller says {ident.raw_model}; "
+            f"using {ident.model.name}",
+            RuntimeWarning,
+            stacklevel=5,
+        )
+
+
+def _handle_echo(link: Link, given: ModelSpec | None, keep_echo: bool) -> bool:
+    """The controller echoes: strip it from now on; unless kept, switch it off (lock held)."""
+    link.set_echo(True)
+    link.note("the controller echoes (EO 1)")
+    if keep_echo:
+        return True
+    try:
+        done = link.roundtrip_locked([cmds.eo(0)], link.timeout)[0]
+    except (GalilTimeoutError, ProtocolError):
+        done = Completed(cmds.eo(0), False)  # the session resynchronises before the next
+    if done.ok:
+        link.set_echo(False)
+        link.restore_on_close(cmds.eo(1))
+        return False
+    name = given.name if given is not None else "the controller"
+    warnings.warn(
+        f"{name} echoes and refused EO 0; the echo is stripped from every reply",
+        RuntimeWarning,
+        stacklevel=6,
+    )
+    return True

@@ -1,0 +1,315 @@
+"""Unsolicited output: where it comes from, the queue it lands in, and the callbacks it reaches.
+
+A controller prints on its own (``MG`` in a program, a thread's errors). :class:`Messages`
+routes that output away from command replies when the link connects: a second Ethernet handle
+(``CF I`` sent on it, or a message-only port), else ``CW 1`` marks every unsolicited byte with
+bit 7 on the command link. Lines land in a bounded :class:`MessageQueue` and go to subscribers
+in order, outside the link lock, so a callback may send commands itself, on any transport.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import queue
+import threading
+import warnings
+from collections import deque
+from collections.abc import Callable
+
+from galil.errors import GalilConnectionError, GalilError, InvalidArgument, ProtocolError
+from galil.link import Link, read_reply
+from galil.protocol import commands as cmds
+from galil.protocol.framing import FrameParser, Unsolicited
+from galil.protocol.numbers import parse_number
+from galil.transport import HandleSource, MessagesOnly, Transport
+
+__all__ = ["MessageCallback", "MessageQueue", "Messages"]
+
+_LOG = logging.getLogger("galil.messages")
+
+MessageCallback = Callable[[str], None]
+
+
+class MessageQueue:
+    """Unsolicited lines from the controller, oldest first; a bounded, thread-safe queue.
+
+    When nobody reads it, the oldest lines are dropped (``dropped`` counts them) rather than
+    growing without end.
+    """
+
+    def __init__(self, maxlen: int = 1000) -> None:
+        self._items: deque[str] = deque()
+        self._maxlen = maxlen
+        self._cond = threading.Condition(threading.Lock())
+        self.dropped = 0
+
+    def put(self, line: str) -> None:
+        """Append a line (used by the client)."""
+        with self._cond:
+            if len(self._items) >= self._maxlen:
+                self._items.popleft()
+                self.dropped += 1
+            self._items.append(line)
+            self._cond.notify()
+
+    def get(self, timeout: float | None = None) -> str:
+        """Return the oldest line, waiting up to ``timeout`` seconds (``None``: for ever).
+
+        Raises:
+            queue.Empty: nothing arrived in time.
+        """
+        with self._cond:
+            if not self._cond.wait_for(lambda: self._items, timeout):
+                raise queue.Empty(f"no unsolicited message within {timeout} s")
+            return self._items.popleft()
+
+    def get_nowait(self) -> str:
+        """Return the oldest line at once; raise ``queue.Empty`` when there is none."""
+        with self._cond:
+            if not self._items:
+                raise queue.Empty("no unsolicited message waiting")
+            return self._items.popleft()
+
+    def drain(self) -> list[str]:
+        """Remove and return every waiting line."""
+        with self._cond:
+            out = list(self._items)
+            self._items.clear()
+            return out
+
+    def __len__(self) -> int:
+        with self._cond:
+            return len(self._items)
+
+    def __repr__(self) -> str:
+        return f"<MessageQueue {len(self)} waiting, {self.dropped} dropped>"
+
+
+class _Dispatcher:
+    """Delivers lines to callbacks in order, one at a time, never recursively.
+
+    Whichever thread brings lines while nobody is delivering delivers them (and any that
+    arrive meanwhile); a callback that sends a command, which brings more lines on the same
+    thread, only queues them for the loop already running. No lock is held while a callback
+    runs, so nothing can deadlock on it.
+    """
+
+    def __init__(self) -> None:
+        self.callbacks: list[MessageCallback] = []
+        self._pending: deque[str] = deque()
+        self._state = threading.Lock()
+        self._delivering = False
+
+    def __call__(self, lines: list[str]) -> None:
+        with self._state:
+            self._pending.extend(lines)
+            if self._delivering or not self.callbacks:
+                if not self.callbacks:
+                    self._pending.clear()
+                return
+            self._delivering = True
+        try:
+            while True:
+                with self._state:
+                    if not self._pending:
+                        self._delivering = False
+                        return
+                    line = self._pending.popleft()
+                for cb in self.callbacks:
+                    try:
+                        cb(line)
+                    except Exception:
+                        _LOG.exception("unsolicited-message callback %r failed", cb)
+        except BaseException:
+            with self._state:
+                self._delivering = False
+            raise
+
+
+class Messages:
+    """The unsolicited side of one controller: routing, the queue, callbacks, reader threads.
+
+    Args:
+        link: the command link.
+        max_messages: lines kept in :attr:`queue` before the oldest drop.
+        poll_interval: seconds between polls for lines while the link is idle.
+    """
+
+    def __init__(self, link: Link, *, max_messages: int = 1000, poll_interval: float = 0.02):
+        if isinstance(max_messages, bool) or not isinstance(max_messages, int) or max_messages < 1:
+            raise InvalidArgument(f"max_messages must be a positive integer, not {max_messages!r}")
+        self.link = link
+        self.queue = MessageQueue(max_messages)
+        self._dispatch = _Dispatcher()
+        self._poll_interval = poll_interval
+        self._stop = threading.Event()
+        self._pump: threading.Thread | None = None
+        self._reader: threading.Thread | None = None
+        self._secondary: Transport | None = None
+        self._wanted_pump = False
+        link.on_messages = self._accept
+
+    def _accept(self, lines: list[str]) -> None:
+        for line in lines:
+            self.queue.put(line)
+        self._dispatch(lines)
+
+    # -- subscribers ------------------------------------------------------------------------
+
+    def subscribe(self, callback: MessageCallback) -> Callable[[], None]:
+        """Call ``callback(line)`` for each unsolicited line; returns an unsubscriber."""
+        if not callable(callback):
+            raise InvalidArgument(f"callback must be callable, not {callback!r}")
+        d = self._dispatch
+        d.callbacks = [*d.callbacks, callback]
+        self.ensure_polling()
+
+        def unsubscribe() -> None:
+            d.callbacks = [c for c in d.callbacks if c is not callback]
+
+        return unsubscribe
+
+    # -- routing at connect -----------------------------------------------------------------
+
+    def route(self) -> None:
+        """Send unsolicited output away from replies (second handle, else CW1 marking)."""
+        link = self.link
+        transport = link.transport
+        assert transport is not None
+        self._stop = threading.Event()
+        ready = transport.secondary
+        if ready is not None:
+            # The transport brought its own message handle (a simulator's, a gateway's).
+            self._start_reader(ready, "the transport's message handle")
+            return
+        if isinstance(transport, HandleSource) and "ethernet" in link.model.transports:
+            try:
+                secondary = transport.open_secondary()
+                if isinstance(secondary, MessagesOnly) and secondary.messages_only:
+                    self._start_reader(secondary, "the message port")
+                else:
+                    self._claim(secondary)
+                return
+            except GalilError as exc:
+                with contextlib.suppress(AttributeError):
+                    transport.secondary = None  # closed: do not offer it to anyone
+                warnings.warn(
+                    f"no second Ethernet handle for unsolicited messages ({exc}); "
+                    "they will be marked with CW1 on the command handle instead",
+                    RuntimeWarning,
+                    stacklevel=5,
+                )
+        self._mark()
+
+    def _claim(self, secondary: Transport) -> None:
+        # "CF I" sent on a handle makes that handle the destination of unsolicited output.
+        try:
+            read_reply(secondary, b"CF I\r", self.link.timeout)
+        except GalilError:
+            with contextlib.suppress(GalilError, OSError):
+                secondary.close()
+            raise
+        self._start_reader(secondary, "the second Ethernet handle (CF I)")
+
+    def _mark(self) -> None:
+        """``CW 1`` on the command link (the previous setting restored at close)."""
+        link = self.link
+        previous = 2  # factory default: unsolicited characters unmarked
+        with link.locked():
+            try:
+                done = link.roundtrip_locked([cmds.mg_operand("_CW")], link.timeout)[0]
+                if done.ok:
+                    value = round(parse_number(done.text.split(",")[0]))
+                    if value in (1, 2):
+                        previous = value
+            except (GalilError, ValueError):
+                pass  # optional: without a reading we restore the factory default
+            try:
+                ok = link.roundtrip_locked([cmds.cw(1)], link.timeout)[0].ok
+            except (ProtocolError, GalilError):
+                ok = False
+        if not ok:
+            warnings.warn(
+                f"{link.model.name} refused CW 1: unsolicited output is not marked and may be "
+                "mistaken for replies",
+                RuntimeWarning,
+                stacklevel=5,
+            )
+            return
+        if previous != 1:
+            link.restore_on_close(cmds.cw(previous))
+
+    def _start_reader(self, secondary: Transport, where: str) -> None:
+        self.link.note(f"unsolicited output comes on {where}")
+        self._secondary = secondary
+        self._reader = threading.Thread(
+            target=self._read_secondary,
+            args=(secondary, self._stop),
+            name=f"galil-messages-{self.link.model_name}",
+            daemon=True,
+        )
+        self._reader.start()
+
+    # -- threads ----------------------------------------------------------------------------
+
+    def ensure_polling(self) -> None:
+        """Poll an idle command link for unsolicited lines (unless a handle carries them)."""
+        self._wanted_pump = True
+        if self._pump is not None or self._reader is not None or not self.link.is_open:
+            return
+        self._pump = threading.Thread(
+            target=self._poll_idle, args=(self._stop,), name="galil-poll", daemon=True
+        )
+        self._pump.start()
+
+    def _poll_idle(self, stop: threading.Event) -> None:
+        # Reads only with a zero timeout while holding the lock, so a command never waits
+        # behind a blocked poll.
+        while not stop.wait(self._poll_interval):
+            if not self.link.poll_unsolicited(self._poll_interval):
+                return
+
+    def _read_secondary(self, secondary: Transport, stop: threading.Event) -> None:
+        parser = FrameParser(unsolicited_only=True)
+        while not stop.is_set():
+            try:
+                chunk = secondary.read(0.25)
+            except GalilConnectionError:
+                return
+            if not chunk:
+                # Some handles return at once when idle (a simulator's): do not spin.
+                stop.wait(self._poll_interval)
+                continue
+            try:
+                events = parser.feed(chunk)
+            except ProtocolError:
+                parser.reset()
+                continue
+            lines = [ev.line for ev in events if type(ev) is Unsolicited]
+            if lines:
+                self.link.post_messages(lines)
+
+    def stop(self) -> None:
+        """Stop the reader threads and close the message handle (after the link closed)."""
+        self._stop.set()
+        if self._secondary is not None:
+            with contextlib.suppress(GalilError, OSError):
+                self._secondary.close()
+        me = threading.current_thread()
+        for t in (self._pump, self._reader):
+            if t is not None and t is not me:
+                t.join(timeout=2.0)
+        self._pump = self._reader = None
+        self._secondary = None
+
+    def restart(self) -> None:
+        """After a reconnect: route again, and poll again if someone was listening."""
+        self.route()
+        if self._wanted_pump:
+            self.ensure_polling()
+
+    @property
+    def threads(self) -> list[threading.Thread]:
+        """The background threads now running (for tests and diagnostics)."""
+        return [t for t in (self._pump, self._reader) if t is not None and t.is_alive()]

@@ -1,0 +1,605 @@
+"""Motion in progress: handles that know their prediction, the tracker, stop, abort, the guard.
+
+Every command that starts or changes a move goes out on one line with ``MG TIME``, so a
+:class:`MoveHandle` knows the controller sample at which it took effect and re-predicts the
+motion exactly (a speed change, an ``IP``, an ``ST``) instead of guessing from the host's clock
+(``docs/decisions/0002``). Everything here is in counts and seconds; axes give each handle a
+``display`` that shows profiles in their user units.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import threading
+import time
+import warnings
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from galil import codes, predict
+from galil.errors import (
+    CommandError,
+    GalilConnectionError,
+    GalilError,
+    GalilTimeoutError,
+    InvalidArgument,
+    MotionError,
+)
+from galil.link import CommandLink
+from galil.protocol import commands as cmds
+
+__all__ = [
+    "Display",
+    "MotionTracker",
+    "MoveHandle",
+    "MoveParams",
+    "MoveResult",
+    "Track",
+    "abort_all",
+    "motion_guard",
+    "sample_of",
+    "stop_axes",
+]
+
+# Polling faster than this only loads the link; the controller decodes a command in ~0.5 ms.
+MIN_POLL = 0.005
+MAX_POLL = 0.1
+# The program variable a speed schedule stores its BG sample in (8 characters at most).
+SCHEDULE_BEGIN = "gsbegin"
+# How long the guard waits for stopped axes to come to rest before giving up.
+_GUARD_WAIT = 30.0
+
+Display = Callable[[predict.Profile], predict.Profile]
+"""Shows a profile in an axis's user unit (arrays stay in counts)."""
+
+
+@dataclass(frozen=True)
+class MoveParams:
+    """The quantised values a move was planned (and sent) with, counts and seconds."""
+
+    speed: float
+    accel: float
+    decel: float
+    smoothing: float
+
+
+@dataclass(frozen=True)
+class MoveResult:
+    """How a finished move compares with its prediction.
+
+    Attributes:
+        final: final reference position (``_RP``) per axis, counts.
+        predicted: the predicted final position per axis, counts. Axes whose motion changed
+            in a way the predictor cannot follow (a jog stopped by someone else, a limit, a
+            change sent behind the library's back) are left out.
+        deviation: ``final - predicted`` for the axes in ``predicted``, counts.
+        stop_codes: ``_SC`` per axis.
+    """
+
+    final: dict[str, int]
+    predicted: dict[str, int]
+    deviation: dict[str, int]
+    stop_codes: dict[str, int]
+
+    @property
+    def worst(self) -> int:
+        """Largest absolute deviation over the predicted axes, counts."""
+        return max((abs(v) for v in self.deviation.values()), default=0)
+
+    def stop_text(self, axis: str) -> str:
+        """The text of an axis's stop code."""
+        return codes.stop_text(self.stop_codes[axis])
+
+
+@dataclass
+class Track:
+    """What is known of one axis's motion since its BG: enough to predict it again."""
+
+    kind: str  # "position" | "jog" | "schedule"
+    start: int
+    params: MoveParams
+    begin: int | None  # controller sample (TIME) of the BG line; None while unknown
+    amount: float = 0.0  # position: distance in counts; jog: the first JG (signed)
+    events: list[predict.Event] = field(default_factory=list)
+    aborted: int | None = None  # sample of an AB
+    stopped: bool = False  # an ST went out (host side): the jog has an end
+    exact: bool = True  # False once something happened that the predictor cannot follow
+    fixed: predict.Profile | None = None  # a prediction made elsewhere (speed schedule)
+
+    @property
+    def open_jog(self) -> bool:
+        """A jog has a known end only once the library stopped (or aborted) it."""
+        return self.kind == "jog" and not self.stopped and self.aborted is None
+
+
+def sample_of(reply: str) -> int | None:
+    """The controller sample in a ``MG TIME`` reply (``None`` if it is not a number)."""
+    try:
+        return round(float(reply.strip()))
+    except (ValueError, OverflowError):
+        return None
+
+
+def predict_track(link: CommandLink, t: Track) -> predict.Profile:
+    """Predict one axis's motion from its start and every change recorded since."""
+    ts = link.sample_period
+    p = t.params
+    if t.fixed is not None:
+        profile = t.fixed
+    elif t.kind == "jog":
+        profile = predict.jog(
+            t.amount,
+            p.accel,
+            p.decel,
+            events=t.events,
+            sample_period=ts,
+            smoothing=p.smoothing,
+            start=t.start,
+        )
+    else:
+        profile = predict.move(
+            round(t.amount),
+            max(p.speed, link.model.sp_resolution),
+            p.accel,
+            p.decel,
+            sample_period=ts,
+            smoothing=p.smoothing,
+            start=t.start,
+            events=t.events,
+        )
+    if t.aborted is not None and t.begin is not None:
+        # AB stops the profiler where it is: the reference stays at that sample's value.
+        k = max(0, min(t.aborted - t.begin, profile.samples))
+        profile = predict.Profile.from_samples(
+            profile.position[: k + 1],
+            profiler=profile.profiler[: k + 1],
+            sample_period=ts,
+            shape="stopped",
+            peak_speed=profile.peak_speed,
+            stop_code=7,
+        )
+    return profile
+
+
+class MotionTracker:
+    """Which handle drives each axis, so stops and changes reach its prediction."""
+
+    def __init__(self) -> None:
+        self._active: dict[str, MoveHandle] = {}
+
+    def started(self, handle: MoveHandle) -> None:
+        """``handle`` now drives its axes."""
+        for a in handle.axes:
+            self._active[a] = handle
+
+    def active(self, letter: str) -> MoveHandle | None:
+        """The handle of the move in progress on ``letter`` (``None`` if none or done)."""
+        h = self._active.get(letter)
+        return None if h is None or h.finished else h
+
+    def track(self, letter: str) -> Track | None:
+        """The motion record of the move in progress on ``letter``."""
+        h = self.active(letter)
+        return None if h is None else h.track(letter)
+
+    def notify(
+        self, letters: str, sample: int | None, make: Callable[[float], predict.Event] | None
+    ) -> None:
+        """A change sent to ``letters`` at controller ``sample`` (``make=None``: an abort)."""
+        for a in letters:
+            handle = self._active.get(a)
+            if handle is not None:
+                handle.add_event(a, sample, make)
+
+
+class MoveHandle:
+    """A move in progress on one or more axes.
+
+    Attributes:
+        kind: ``"position"``, ``"jog"`` or ``"schedule"``.
+        started_at: the controller clock (seconds) when the handle was made.
+    """
+
+    def __init__(
+        self,
+        link: CommandLink,
+        tracks: Mapping[str, Track],
+        kind: str,
+        *,
+        display: Mapping[str, Display] | None = None,
+        tracker: MotionTracker | None = None,
+    ) -> None:
+        self._link = link
+        self._tracks = dict(tracks)
+        self._display = dict(display or {})
+        self._tracker = tracker
+        self.kind = kind
+        self.started_at = link.clock()
+        self._done = False
+        self._result: MoveResult | None = None
+        self._callbacks: list[Callable[[MoveHandle], None]] = []
+        self._lock = threading.RLock()
+        self._cache: dict[str, predict.Profile] = {}
+        self._watcher: threading.Thread | None = None
+        self._error: BaseException | None = None
+
+    # -- predictions -------------------------------------------------------------------------
+    @property
+    def axes(self) -> str:
+        """The axis letters this move drives."""
+        return "".join(self._tracks)
+
+    @property
+    def finished(self) -> bool:
+        """Whether the move was seen done (no query; see :attr:`done`)."""
+        return self._done
+
+    def track(self, letter: str) -> Track | None:
+        """The motion record of one axis (``None`` if the move does not drive it)."""
+        return self._tracks.get(letter)
+
+    @property
+    def params(self) -> dict[str, MoveParams]:
+        """The quantised SP/AC/DC/IT each axis started with."""
+        return {a: t.params for a, t in self._tracks.items()}
+
+    @property
+    def begin(self) -> dict[str, int | None]:
+        """Controller sample (``TIME``) at which each axis's motion began, if known.
+
+        ``profile.position[k]`` is the predicted reference at sample ``begin + k``; use it to
+        line recorded data up with the prediction.
+        """
+        out: dict[str, int | None] = {}
+        for a, t in self._tracks.items():
+            if t.begin is None and t.kind == "schedule":
+                self._schedule_begin(t)
+            out[a] = t.begin
+        return out
+
+    def _schedule_begin(self, track: Track) -> None:
+        # The downloaded program stores TIME right after its BG; -1 until it has run.
+        with contextlib.suppress(GalilError):
+            value = round(self._link.query_operands([SCHEDULE_BEGIN])[0])
+            if value >= 0:
+                track.begin = value
+
+    @property
+    def profiles(self) -> dict[str, predict.Profile]:
+        """Predicted profile per axis letter, including every change sent since the start."""
+        with self._lock:
+            for a, t in self._tracks.items():
+                if a not in self._cache:
+                    self._cache[a] = self._predict(a, t)
+            return dict(self._cache)
+
+    @property
+    def profile(self) -> predict.Profile:
+        """The predicted profile of the (first) axis."""
+        return next(iter(self.profiles.values()))
+
+    def _predict(self, letter: str, t: Track) -> predict.Profile:
+        profile = predict_track(self._link, t)
+        show = self._display.get(letter)
+        return profile if show is None else show(profile)
+
+    def preset(self, profiles: Mapping[str, predict.Profile]) -> None:
+        """Profiles already predicted (and displayed) by whoever made the handle."""
+        with self._lock:
+            self._cache.update(profiles)
+
+    def add_event(
+        self, letter: str, sample: int | None, make: Callable[[float], predict.Event] | None
+    ) -> None:
+        """Record a change sent at controller ``sample`` (``make`` builds it from its time).
+
+        ``make=None`` is an abort. A change after the predicted end of a position move is
+        ignored: the move was over when it arrived.
+        """
+        with self._lock:
+            t = self._tracks.get(letter)
+            if t is None or self._done:
+                return
+            if sample is None or t.begin is None or t.kind == "schedule" or t.aborted is not None:
+                t.exact = False
+                return
+            k = sample - t.begin
+            current = self.profiles[letter]
+            if t.kind == "position" and k > current.samples:
+                return
+            if make is None:
+                t.aborted = sample
+            else:
+                event = make(k * self._link.sample_period)
+                t.events.append(event)
+                if isinstance(event, predict.Stop):
+                    t.stopped = True
+            self._cache.pop(letter, None)
+            try:
+                self._cache[letter] = self._predict(letter, t)
+            except (CommandError, InvalidArgument):
+                # The predictor refuses what the controller accepted: keep the old prediction.
+                if make is not None:
+                    t.events.pop()
+                t.exact = False
+                self._cache[letter] = current
+
+    @property
+    def duration(self) -> float:
+        """Predicted duration in seconds (``inf`` for a jog that has not been stopped)."""
+        if any(t.open_jog for t in self._tracks.values()):
+            return math.inf
+        if not self._tracks:
+            return 0.0
+        return max(p.duration for p in self.profiles.values())
+
+    # -- completion --------------------------------------------------------------------------
+    @property
+    def result(self) -> MoveResult | None:
+        """The comparison with the prediction, once the move is done."""
+        return self._result
+
+    @property
+    def done(self) -> bool:
+        """True once every axis's profile is complete (``_BG`` is 0); one query per call."""
+        if self._done:
+            return True
+        letters = self.axes
+        names = [f"_{op}{a}" for op in ("BG", "RP", "SC") for a in letters]
+        values = [round(v) for v in self._link.query_operands(names)]
+        n = len(letters)
+        if not any(values[:n]):
+            self._finish(values[n : 2 * n], values[2 * n :])
+        return self._done
+
+    def _finish(self, rp: Sequence[int], sc: Sequence[int]) -> None:
+        with self._lock:
+            if self._done:
+                return
+            letters = self.axes
+            final = dict(zip(letters, rp, strict=True))
+            stop = dict(zip(letters, sc, strict=True))
+            profiles = self.profiles
+            predicted: dict[str, int] = {}
+            for a, t in self._tracks.items():
+                if t.exact and not t.open_jog and stop[a] not in (2, 3):
+                    predicted[a] = profiles[a].end
+            deviation = {a: final[a] - v for a, v in predicted.items()}
+            self._result = MoveResult(final, predicted, deviation, stop)
+            self._done = True
+            callbacks, self._callbacks = self._callbacks, []
+        if self._result.worst > 1:
+            warnings.warn(
+                f"move on {letters} ended {self._result.deviation} counts away from the prediction",
+                RuntimeWarning,
+                stacklevel=4,
+            )
+        for cb in callbacks:
+            cb(self)
+
+    def wait(self, timeout: float | None = None, progress: bool = False) -> MoveResult:
+        """Block until the move is done, polling without holding the link between polls.
+
+        Polls come at about a quarter of the predicted time left (between 5 and 100 ms); on a
+        manual-clock simulator each pause advances simulated time instead of sleeping.
+
+        Args:
+            timeout: seconds to wait at most (``None``: the predicted duration plus a margin,
+                or forever for a jog that has not been stopped).
+            progress: show a ``tqdm.auto`` bar driven by the predicted duration.
+
+        Raises:
+            GalilTimeoutError: the move did not finish in time (it is NOT stopped).
+            MotionError: an axis stopped on a limit switch or soft limit.
+        """
+        if timeout is not None and (
+            isinstance(timeout, bool)
+            or not isinstance(timeout, (int, float))
+            or not math.isfinite(timeout)
+            or timeout < 0
+        ):
+            raise InvalidArgument(f"timeout must be a non-negative number, got {timeout!r}")
+        duration = self.duration
+        if timeout is None and math.isfinite(duration):
+            timeout = duration * 1.5 + 2.0
+        bar = progress_bar(self.kind, self.axes, duration) if progress else None
+        try:
+            self._poll_until_done(timeout, bar)
+        finally:
+            if bar is not None:
+                if self._done and bar.total is not None:
+                    bar.n = bar.total
+                bar.refresh()
+                bar.close()
+        if self._error is not None:
+            raise self._error
+        assert self._result is not None
+        self._raise_if_limited(self._result)
+        return self._result
+
+    def _poll_until_done(self, timeout: float | None, bar: Any) -> None:
+        link = self._link
+        deadline = None if timeout is None else link.clock() + timeout
+        while not self.done:
+            now = link.clock()
+            if deadline is not None and now >= deadline:
+                raise link.error(
+                    GalilTimeoutError,
+                    f"move on {self.axes} not done after {timeout:.3g} s "
+                    f"(predicted {self.duration:.3g} s)",
+                )
+            elapsed = now - self.started_at
+            if bar is not None:
+                bar.n = elapsed if bar.total is None else min(elapsed, bar.total)
+                bar.refresh()
+            remaining = self.duration - elapsed
+            pause = remaining / 4 if math.isfinite(remaining) else MAX_POLL
+            if deadline is not None:
+                pause = min(pause, deadline - now)
+            link.pause(min(max(pause, MIN_POLL), MAX_POLL))
+
+    def _raise_if_limited(self, result: MoveResult) -> None:
+        limited = {a: c for a, c in result.stop_codes.items() if c in (2, 3)}
+        if not limited:
+            return
+        text = ", ".join(f"{a}: {codes.stop_text(c)}" for a, c in limited.items())
+        first = next(iter(limited))
+        raise MotionError(
+            f"move stopped early ({text})",
+            axis=first,
+            stop_codes=result.stop_codes,
+            position=result.final[first],
+            model=self._link.model.name,
+            recent=self._link.recent,
+        )
+
+    def add_callback(self, callback: Callable[[MoveHandle], None]) -> None:
+        """Call ``callback(handle)`` once the move is done (at once if it already is).
+
+        A background thread polls ``_BG`` every 50 ms of real time; it never advances a
+        simulator's manual clock (whoever waits does), so a callback may also run on the
+        thread that calls :meth:`wait` or reads :attr:`done`.
+        """
+        with self._lock:
+            if not self._done:
+                self._callbacks.append(callback)
+                if self._watcher is None:
+                    self._watcher = threading.Thread(
+                        target=self._watch, name=f"galil-move-{self.axes}", daemon=True
+                    )
+                    self._watcher.start()
+                return
+        callback(self)
+
+    def _watch(self) -> None:
+        try:
+            while not self.done:
+                time.sleep(MAX_POLL / 2)
+        except GalilError as exc:  # the link died: record it, callers see it on wait()
+            self._error = exc
+
+    def stop(self) -> None:
+        """Decelerate the move's axes to a stop (``ST``) at their DC."""
+        stop_axes(self._link, self._tracker, self.axes)
+
+    def __repr__(self) -> str:
+        state = "done" if self._done else "moving"
+        return f"<MoveHandle {self.kind} {self.axes} {state}, predicted {self.duration:.4g} s>"
+
+
+def progress_bar(kind: str, axes: str, duration: float) -> Any:
+    """A ``tqdm.auto`` bar over a predicted duration (``None`` without tqdm)."""
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:  # progress is a nicety; the wait itself does not need it
+        return None
+    total = duration if math.isfinite(duration) else None
+    fmt = "{l_bar}{bar}| {n:.2f}/{total:.2f} s" if total is not None else "{desc}: {n:.2f} s"
+    return tqdm(total=total, desc=f"{kind} {axes}", unit="s", bar_format=fmt)
+
+
+# ----------------------------------------------------------------------------------- stopping
+
+
+def stop_axes(link: CommandLink, tracker: MotionTracker | None, letters: str = "") -> None:
+    """``ST`` on ``letters`` (default: all axes); the moves' predictions follow the stop."""
+    replies = link.command_line([cmds.st(letters, model=link.model), cmds.time_stamp()])
+    if tracker is not None:
+        tracker.notify(letters or link.model.axes, sample_of(replies[-1]), predict.Stop)
+
+
+def abort_all(link: CommandLink, tracker: MotionTracker | None) -> None:
+    """``AB 1``: stop every axis at once, without deceleration; programs keep running."""
+    replies = link.command_line([cmds.ab(motion_only=True), cmds.time_stamp()])
+    if tracker is not None:
+        tracker.notify(link.model.axes, sample_of(replies[-1]), None)
+
+
+@contextlib.contextmanager
+def motion_guard(
+    link: CommandLink,
+    tracker: MotionTracker | None,
+    letters: str,
+    *,
+    reconnect: Callable[[], None] | None = None,
+) -> Iterator[None]:
+    """Stop the guarded axes (``ST``) and wait for them if the block raises (Ctrl-C included).
+
+    The stop is tried even when the state query fails; a dead link is reopened once (with
+    ``reconnect``) to send it. The block's exception is re-raised once the axes have stopped;
+    if they could not be stopped (or not confirmed stopped), a :class:`MotionError` naming the
+    axes that may still be moving is raised from it.
+    """
+    try:
+        yield
+    except BaseException as exc:
+        moving = _stop_for_guard(link, tracker, letters, reconnect)
+        if moving:
+            raise MotionError(
+                f"{type(exc).__name__} inside motion(); axes {moving} could not be stopped "
+                "and may still be moving",
+                moving=moving,
+                axis=moving[0],
+                model=link.model.name,
+                recent=link.recent,
+            ) from exc
+        raise
+
+
+def _stop_for_guard(
+    link: CommandLink,
+    tracker: MotionTracker | None,
+    letters: str,
+    reconnect: Callable[[], None] | None,
+) -> str:
+    """Send ``ST`` to what moves (all of ``letters`` if unknown); return what may still move."""
+    try:
+        moving = [round(v) for v in link.query_operands([f"_BG{a}" for a in letters])]
+        busy = "".join(a for a, m in zip(letters, moving, strict=True) if m)
+    except GalilError:
+        busy = letters  # unknown: stop them all
+    if not busy:
+        return ""
+    if not _send_stop(link, tracker, busy, reconnect):
+        return busy
+    return _wait_stopped(link, busy)
+
+
+def _send_stop(
+    link: CommandLink,
+    tracker: MotionTracker | None,
+    busy: str,
+    reconnect: Callable[[], None] | None,
+) -> bool:
+    for attempt in range(2):
+        try:
+            stop_axes(link, tracker, busy)
+            return True
+        except GalilConnectionError:
+            if reconnect is None or attempt:
+                return False
+            try:
+                reconnect()
+            except GalilError:
+                return False
+        except GalilError:
+            if attempt:
+                return False
+    return False
+
+
+def _wait_stopped(link: CommandLink, busy: str) -> str:
+    deadline = link.clock() + _GUARD_WAIT
+    try:
+        while True:
+            values = link.query_operands([f"_BG{a}" for a in busy])
+            still = "".join(a for a, v in zip(busy, values, strict=True) if round(v))
+            if not still:
+                return ""
+            if link.clock() > deadline:
+                return still
+            link.pause(MIN_POLL * 4)
+    except GalilError:
+        return ""  # ST went out; the link failed while watching the stop

@@ -1,0 +1,390 @@
+"""Starting motion, in counts: resolve -> predict -> check -> send.
+
+Every operation reads the state it needs in one round trip (resolve), predicts the motion
+sample by sample (predict), checks the whole path against the model's ranges and the soft
+limits (check), and only then sends one command line with ``MG TIME`` (send). A failed check
+raises before a byte goes out. Units are converted by the axis layer before anything here runs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+from galil import predict
+from galil.errors import InvalidArgument, LimitError
+from galil.link import CommandLink
+from galil.models import INT32_MAX, INT32_MIN
+from galil.motion import (
+    SCHEDULE_BEGIN,
+    Display,
+    MotionTracker,
+    MoveHandle,
+    MoveParams,
+    Track,
+    predict_track,
+    sample_of,
+)
+from galil.protocol import commands as cmds
+from galil.protocol.commands import Command
+
+__all__ = [
+    "AxisMove",
+    "execute_move",
+    "increment",
+    "jog",
+    "speed_schedule",
+]
+
+_STATE = ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")
+_BUILDERS = {"SP": cmds.sp, "AC": cmds.ac, "DC": cmds.dc, "PA": cmds.pa, "IP": cmds.ip}
+
+
+@dataclass(frozen=True)
+class AxisMove:
+    """One axis of a position move in counts, its values converted and range-checked.
+
+    Attributes:
+        letter: the axis.
+        value: the absolute target, or the distance of a relative move.
+        speed, accel, decel: quantised overrides for this move (``None``: the axis's own).
+    """
+
+    letter: str
+    value: int
+    speed: float | None = None
+    accel: float | None = None
+    decel: float | None = None
+
+
+@dataclass(frozen=True)
+class _State:
+    rp: int
+    bg: bool
+    sp: float
+    ac: float
+    dc: float
+    it: float
+    bl: float
+    fl: float
+    mo: bool
+
+
+def _read_state(link: CommandLink, letters: str, ops: Sequence[str] = _STATE) -> dict[str, _State]:
+    # One round trip for every axis's state (query_operands packs the MG lines together).
+    values = link.query_operands([f"_{op}{a}" for a in letters for op in ops])
+    n = len(ops)
+    out: dict[str, _State] = {}
+    for i, a in enumerate(letters):
+        rp, bg, sp, ac, dc, it, bl, fl, mo = values[i * n : (i + 1) * n]
+        out[a] = _State(round(rp), bool(bg), sp, ac, dc, it, bl, fl, bool(mo))
+    return out
+
+
+def check_int32(name: str, value: float, axis: str, model: str) -> None:
+    """Refuse a position outside the controller's 32-bit registers.
+
+    Raises:
+        LimitError: outside ``INT32_MIN .. INT32_MAX``.
+    """
+    if not INT32_MIN <= value <= INT32_MAX:
+        raise LimitError(
+            f"{name} {value:.0f} on {axis} is outside the 32-bit position range",
+            name=name,
+            value=value,
+            limit=INT32_MAX if value > 0 else INT32_MIN,
+            axis=axis,
+            model=model,
+        )
+
+
+def _ready(link: CommandLink, a: str, state: _State) -> None:
+    if state.bg:
+        raise InvalidArgument(
+            f"axis {a} is already moving; stop it or wait first", model=link.model.name
+        )
+    if state.mo:
+        raise InvalidArgument(
+            f"axis {a} has its motor off; call controller.servo_here()", model=link.model.name
+        )
+
+
+def _plan_axis(
+    link: CommandLink, move: AxisMove, state: _State, relative: bool
+) -> tuple[Track, predict.Profile, int]:
+    """Predict and check one axis: its track, its profile (counts) and the value to send."""
+    model = link.model
+    a = move.letter
+    distance = move.value if relative else move.value - state.rp
+    target = state.rp + distance
+    check_int32("PA", target, a, model.name)
+    speed = state.sp if move.speed is None else move.speed
+    if speed <= 0 and distance:
+        raise LimitError(
+            f"axis {a} has SP 0: set a speed first",
+            name="SP",
+            value=0,
+            limit=model.sp_resolution,
+            axis=a,
+            model=model.name,
+        )
+    params = MoveParams(
+        speed,
+        state.ac if move.accel is None else move.accel,
+        state.dc if move.decel is None else move.decel,
+        state.it,
+    )
+    track = Track("position", state.rp, params, None, amount=distance)
+    profile = predict_track(link, track)
+    try:
+        predict.check_soft_limits(profile, low=state.bl, high=state.fl, axis=a)
+    except LimitError as exc:
+        exc.end = profile.end
+        raise
+    return track, profile, target
+
+
+def _axis_values(builder: str, values: Mapping[str, float], link: CommandLink) -> Command:
+    return _BUILDERS[builder](model=link.model, **dict(values))
+
+
+def execute_move(
+    link: CommandLink,
+    tracker: MotionTracker,
+    moves: Sequence[AxisMove],
+    *,
+    relative: bool = False,
+    dry_run: bool = False,
+    command: str = "PA",
+    display: Mapping[str, Display] | None = None,
+) -> MoveHandle:
+    """Predict, check and send a position move on one or more axes, begun together.
+
+    The move goes out as one command line (parameters, targets, ``BG``, ``MG TIME``) so the
+    axes start in the same sample and the handle knows which. With ``dry_run`` nothing is sent
+    and the handle only carries the predictions. ``command="IP"`` sends an idle increment
+    (``IP`` = ``PR`` + ``BG``).
+
+    Raises:
+        InvalidArgument: no or repeated axes, an axis moving or its motor off.
+        LimitError: a path crossing a soft limit or the 32-bit range.
+    """
+    letters = "".join(m.letter for m in moves)
+    if not letters or len(set(letters)) != len(letters):
+        raise InvalidArgument(f"a move needs distinct axes, got {letters!r}")
+    order = link.model.axes
+    moves = sorted(moves, key=lambda m: order.index(m.letter))
+    letters = "".join(m.letter for m in moves)
+    state = _read_state(link, letters)
+    tracks: dict[str, Track] = {}
+    profiles: dict[str, predict.Profile] = {}
+    sent: dict[str, float] = {}
+    for m in moves:
+        if not dry_run:
+            _ready(link, m.letter, state[m.letter])
+        track, profile, target = _plan_axis(link, m, state[m.letter], relative)
+        tracks[m.letter] = track
+        show = (display or {}).get(m.letter)
+        profiles[m.letter] = profile if show is None else show(profile)
+        sent[m.letter] = track.amount if command == "IP" else target
+    handle = MoveHandle(link, tracks, "position", display=display, tracker=tracker)
+    handle.preset(profiles)
+    if dry_run:
+        return handle
+    parts: list[Command] = []
+    for name in ("SP", "AC", "DC"):
+        values = {m.letter: getattr(m, _FIELD[name]) for m in moves}
+        given = {a: v for a, v in values.items() if v is not None}
+        if given:
+            parts.append(_axis_values(name, given, link))
+    parts.append(_axis_values("IP" if command == "IP" else "PA", sent, link))
+    if command != "IP":
+        parts.append(cmds.bg(letters, model=link.model))
+    parts.append(cmds.time_stamp())
+    replies = link.command_line(parts)
+    begin = sample_of(replies[-1])
+    for t in tracks.values():
+        t.begin = begin
+    tracker.started(handle)
+    return handle
+
+
+_FIELD = {"SP": "speed", "AC": "accel", "DC": "decel"}
+
+
+def jog(
+    link: CommandLink,
+    tracker: MotionTracker,
+    letter: str,
+    velocity: float,
+    *,
+    display: Display | None = None,
+) -> MoveHandle:
+    """Jog ``letter`` at ``velocity`` counts/s (quantised and range-checked by the caller).
+
+    Already jogging (through the library): the speed changes in motion and the jog's own
+    handle is returned, its prediction now including the change.
+
+    Raises:
+        InvalidArgument: a position move in progress, a stopping jog, or the motor off.
+    """
+    a = letter
+    rp, bg, ac, dc, it, mo = link.query_operands(
+        [f"_{op}{a}" for op in ("RP", "BG", "AC", "DC", "IT", "MO")]
+    )
+    handle = tracker.active(a)
+    track = tracker.track(a)
+    if bg and track is not None and track.kind == "jog" and handle is not None:
+        if track.stopped or track.aborted is not None:
+            raise InvalidArgument(
+                f"axis {a} is stopping; wait for it before jogging again", model=link.model.name
+            )
+        replies = link.command_line([cmds.jg(model=link.model, **{a: velocity}), cmds.time_stamp()])
+        handle.add_event(a, sample_of(replies[-1]), lambda t: predict.SetSpeed(t, velocity))
+        return handle
+    if bg:
+        raise InvalidArgument(
+            f"axis {a} is in another move; stop it before jogging", model=link.model.name
+        )
+    if mo:
+        raise InvalidArgument(
+            f"axis {a} has its motor off; call controller.servo_here()", model=link.model.name
+        )
+    params = MoveParams(abs(velocity), ac, dc, it)
+    replies = link.command_line(
+        [
+            cmds.jg(model=link.model, **{a: velocity}),
+            cmds.bg(a, model=link.model),
+            cmds.time_stamp(),
+        ]
+    )
+    track = Track("jog", round(rp), params, sample_of(replies[-1]), amount=velocity)
+    new = MoveHandle(
+        link, {a: track}, "jog", display={a: display} if display else None, tracker=tracker
+    )
+    tracker.started(new)
+    return new
+
+
+def increment(
+    link: CommandLink,
+    tracker: MotionTracker,
+    letter: str,
+    counts: int,
+    *,
+    display: Display | None = None,
+) -> MoveHandle:
+    """``IP counts`` on ``letter``: an idle move, a longer move in progress, or a jog's step.
+
+    Raises:
+        InvalidArgument: a reversal of a move in progress, or an axis stopping.
+    """
+    a = letter
+    model = link.model
+    rp, bg, pa = link.query_operands([f"_RP{a}", f"_BG{a}", f"_PA{a}"])
+    shows = {a: display} if display else None
+    if not bg:
+        return execute_move(
+            link, tracker, [AxisMove(a, counts)], relative=True, command="IP", display=shows
+        )
+    handle = tracker.active(a)
+    track = tracker.track(a)
+    if track is not None and (track.stopped or track.aborted is not None):
+        raise InvalidArgument(
+            f"axis {a} is stopping; the controller refuses IP now (TC 16)", model=model.name
+        )
+    if track is None or track.kind != "jog":
+        remaining = round(pa) - round(rp)
+        if counts and remaining and (counts > 0) != (remaining > 0):
+            raise InvalidArgument(
+                f"IP {counts} would reverse the move in progress on {a} "
+                f"({remaining:+d} counts to go); the controller refuses it (TC 16)",
+                model=model.name,
+            )
+    replies = link.command_line([cmds.ip(model=model, **{a: counts}), cmds.time_stamp()])
+    if handle is None or track is None:
+        # Someone else's move: nothing to follow; a handle that only waits for it.
+        lone = Track("position", round(rp), MoveParams(0.0, 1.0, 1.0, 1.0), None, exact=False)
+        lone.fixed = predict.Profile.from_samples(
+            [round(rp)], sample_period=link.sample_period, shape="none", peak_speed=0.0
+        )
+        return MoveHandle(link, {a: lone}, "position", display=shows, tracker=tracker)
+    handle.add_event(a, sample_of(replies[-1]), lambda t: predict.Increment(t, counts))
+    return handle
+
+
+def speed_schedule(
+    link: CommandLink,
+    tracker: MotionTracker,
+    letter: str,
+    distance: int,
+    changes: Sequence[tuple[float, float]],
+    *,
+    speed: float | None,
+    label: str,
+    display: Display | None = None,
+) -> MoveHandle:
+    """Move ``letter`` by ``distance``, changing speed at distances from the start (counts).
+
+    Every change point, the label and the program are validated before the first byte; the
+    program runs the schedule with ``AD`` trippoints.
+
+    Raises:
+        ScheduleError: a change point the profiler cannot honour.
+        InvalidArgument: a bad label, the axis busy or its motor off.
+        LimitError: a path crossing a soft limit.
+    """
+    a = letter
+    model = link.model
+    start = cmds.xq(f"#{label}")  # the label is checked before anything is read or sent
+    rp, bg, sp0, ac, dc, it, bl, fl, mo = link.query_operands(
+        [f"_{op}{a}" for op in ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")]
+    )
+    if bg or mo:
+        raise InvalidArgument(f"axis {a} is moving or its motor is off", model=model.name)
+    first = sp0 if speed is None else speed
+    schedule = predict.speed_schedule(
+        distance,
+        first,
+        list(changes),
+        ac,
+        dc,
+        sample_period=link.sample_period,
+        start=round(rp),
+        smoothing=it,
+    )
+    predict.check_soft_limits(schedule.profile, low=bl, high=fl, axis=a)
+    program = _schedule_program(link, a, label, first, distance, schedule)
+    download = cmds.dl(program, model=model)  # validated whole before it goes out
+    link.exchange(download)
+    link.command_line([cmds.assign(SCHEDULE_BEGIN, -1), start])
+    params = MoveParams(first, ac, dc, it)
+    track = Track("schedule", round(rp), params, None, amount=distance, fixed=schedule.profile)
+    handle = MoveHandle(
+        link, {a: track}, "schedule", display={a: display} if display else None, tracker=tracker
+    )
+    tracker.started(handle)
+    return handle
+
+
+def _schedule_program(
+    link: CommandLink,
+    a: str,
+    label: str,
+    first: float,
+    distance: int,
+    schedule: predict.SpeedSchedule,
+) -> list[str]:
+    """The program of a speed schedule: SP, PR, BG, stamp the start, then AD/SP pairs."""
+    model = link.model
+    program = [
+        f"#{label}",
+        cmds.sp(model=model, **{a: first}).text,
+        cmds.pr(model=model, **{a: distance}).text,
+        cmds.bg(a, model=model).text,
+        f"{SCHEDULE_BEGIN}=TIME",
+    ]
+    for trig, new in zip(schedule.triggers, schedule.speeds[1:], strict=True):
+        program += [cmds.ad(model=model, **{a: trig}).text, cmds.sp(model=model, **{a: new}).text]
+    program.append("EN")
+    return program

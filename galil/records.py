@@ -1,0 +1,366 @@
+"""Data records, host side: one record (``QR``) or a stream of them (``DR`` or polled ``QR``).
+
+The binary layout comes from ``QZ`` (the model table is the fallback) and is decoded by
+:mod:`galil.protocol.records` into numpy structured records.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import queue
+import threading
+from collections import deque
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import numpy as np
+
+from galil.errors import (
+    CommandError,
+    GalilConnectionError,
+    GalilError,
+    InvalidArgument,
+    ProtocolError,
+)
+from galil.link import Link, read_reply
+from galil.protocol import commands as cmds
+from galil.protocol.numbers import parse_number
+from galil.protocol.records import RecordSplitter, decode_record, parse_qz, record_to_dict
+from galil.transport import HandleSource, Transport
+
+__all__ = ["RecordCallback", "RecordStream", "Records"]
+
+_LOG = logging.getLogger("galil.records")
+
+RecordCallback = Callable[[np.void], None]
+Layout = tuple[int, int, int, int]
+
+
+class RecordStream:
+    """Data records at a fixed period, decoded, oldest first. Build it with
+    :meth:`galil.Controller.records`.
+
+    Over Ethernet the controller pushes them (``DR period,handle``) to a handle of their own,
+    read by a background thread into a bounded queue (``dropped`` counts records lost when
+    nobody reads). Elsewhere (serial, USB, the in-process simulator) each :meth:`get` waits
+    until the next record is due and asks for it with ``QR``, so records are as far apart as
+    asked, in the controller's time (simulated time on a manual-clock simulator).
+
+    Attributes:
+        period: servo samples between records.
+        method: ``"DR"`` (pushed) or ``"QR"`` (polled).
+        dropped: records dropped from a full queue (``DR`` only).
+    """
+
+    def __init__(
+        self,
+        source: Records,
+        period: int,
+        method: str,
+        *,
+        handle: Transport | None = None,
+        maxlen: int = 10_000,
+    ) -> None:
+        self.period = period
+        self.method = method
+        self.dropped = 0
+        self._source = source
+        self._handle = handle
+        self._items: deque[np.void] = deque()
+        self._maxlen = maxlen
+        self._cond = threading.Condition(threading.Lock())
+        self._closed = False
+        self._error: GalilError | None = None
+        self._subscribers: list[RecordCallback] = []
+        self._next_due: float | None = None
+        self._thread: threading.Thread | None = None
+
+    def _start_reader(self, layout: Layout) -> None:
+        self._thread = threading.Thread(
+            target=self._read, args=(layout,), name="galil-records", daemon=True
+        )
+        self._thread.start()
+
+    def _read(self, layout: Layout) -> None:
+        handle = self._handle
+        assert handle is not None
+        splitter = RecordSplitter(layout)
+        while not self._closed:
+            try:
+                chunk = handle.read(0.25)
+                records = [decode_record(r, layout) for r in splitter.feed(chunk)] if chunk else []
+            except ProtocolError as exc:
+                # A stream out of step cannot be re-cut reliably: stop and say why.
+                self._fail(exc)
+                return
+            except GalilConnectionError as exc:
+                if not self._closed:
+                    self._fail(exc)
+                return
+            if records:
+                self._push(records)
+
+    def _fail(self, exc: GalilError) -> None:
+        with self._cond:
+            self._error = exc
+            self._cond.notify_all()
+
+    def _push(self, records: list[np.void]) -> None:
+        with self._cond:
+            for rec in records:
+                if len(self._items) >= self._maxlen:
+                    self._items.popleft()
+                    self.dropped += 1
+                self._items.append(rec)
+            self._cond.notify_all()
+        for rec in records:
+            self._notify(rec)
+
+    def _notify(self, rec: np.void) -> None:
+        for cb in self._subscribers:
+            try:
+                cb(rec)
+            except Exception:
+                _LOG.exception("data-record callback %r failed", cb)
+
+    def subscribe(self, callback: RecordCallback) -> Callable[[], None]:
+        """Call ``callback(record)`` for each record as it arrives; returns an unsubscriber.
+
+        With ``DR`` the callback runs on the reader thread; with ``QR`` inside :meth:`get`.
+        """
+        if not callable(callback):
+            raise InvalidArgument(f"callback must be callable, not {callback!r}")
+        self._subscribers = [*self._subscribers, callback]
+
+        def unsubscribe() -> None:
+            self._subscribers = [c for c in self._subscribers if c is not callback]
+
+        return unsubscribe
+
+    def get(self, timeout: float | None = None) -> np.void:
+        """Return the next record, waiting up to ``timeout`` seconds (``None``: for ever).
+
+        Raises:
+            queue.Empty: no record within ``timeout``.
+            GalilConnectionError: the stream is closed (or its handle died).
+            ProtocolError: the record stream could not be decoded.
+        """
+        if self.method == "QR":
+            return self._poll(timeout)
+        with self._cond:
+            ready = self._cond.wait_for(
+                lambda: self._items or self._closed or self._error is not None, timeout
+            )
+            if self._items:
+                return self._items.popleft()
+            if self._error is not None:
+                raise self._error
+            if self._closed:
+                raise GalilConnectionError("the data-record stream is closed")
+            assert not ready
+            raise queue.Empty(f"no data record within {timeout} s")
+
+    def _poll(self, timeout: float | None) -> np.void:
+        if self._closed:
+            raise GalilConnectionError("the data-record stream is closed")
+        link = self._source.link
+        now = link.clock()
+        if self._next_due is None:
+            self._next_due = now
+        wait = self._next_due - now
+        if wait > 0:
+            if timeout is not None and wait > timeout:
+                link.pause(timeout)
+                raise queue.Empty(f"no data record within {timeout} s")
+            link.pause(wait)
+        rec = self._source.record()
+        # The next one is due a period after this one was due, so records do not drift.
+        self._next_due = max(self._next_due, now) + self.period * link.sample_period
+        self._notify(rec)
+        return rec
+
+    def take(self, n: int, timeout: float | None = None) -> np.ndarray[Any, np.dtype[Any]]:
+        """Return the next ``n`` records as one structured array (``a["A"]["position"]``).
+
+        ``timeout`` bounds the wait for each record.
+        """
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            raise InvalidArgument(f"n must be a positive integer, not {n!r}")
+        first = self.get(timeout)
+        out = np.empty(n, dtype=first.dtype)
+        out[0] = first
+        for i in range(1, n):
+            out[i] = self.get(timeout)
+        return out
+
+    def __iter__(self) -> Iterator[np.void]:
+        """Records until the stream is closed."""
+        while True:
+            try:
+                yield self.get()
+            except GalilConnectionError:
+                return
+
+    def __len__(self) -> int:
+        with self._cond:
+            return len(self._items)
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` was called."""
+        return self._closed
+
+    def close(self) -> None:
+        """Stop the stream (``DR 0``) and close its handle; idempotent."""
+        with self._cond:
+            if self._closed:
+                return
+            self._closed = True
+            self._cond.notify_all()
+        self._source.forget(self)
+        if self.method == "DR":
+            link = self._source.link
+            if link.is_open:
+                with contextlib.suppress(GalilError):
+                    link.command("DR 0")
+            if self._handle is not None:
+                with contextlib.suppress(GalilError, OSError):
+                    self._handle.close()
+            if self._thread is not None and self._thread is not threading.current_thread():
+                self._thread.join(timeout=2.0)
+
+    def __enter__(self) -> RecordStream:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = "closed" if self._closed else "open"
+        waiting = len(self)
+        return (
+            f"<RecordStream {self.method} every {self.period} samples, {waiting} waiting, {state}>"
+        )
+
+
+class Records:
+    """The data-record room of one controller: the layout, single records, streams."""
+
+    def __init__(self, link: Link) -> None:
+        self.link = link
+        self._layout: Layout | None = None
+        self._streams: list[RecordStream] = []
+        self._lock = threading.Lock()
+
+    def reset(self) -> None:
+        """Forget the layout (after a reconnect: axes may have been reconfigured)."""
+        self._layout = None
+
+    def layout(self) -> Layout:
+        """The ``QZ`` layout (asked once; the model table is the fallback).
+
+        Raises:
+            InvalidArgument: the model has no binary data record.
+        """
+        if self._layout is None:
+            model = self.link.model
+            try:
+                self._layout = parse_qz(self.link.send(cmds.qz()))
+            except CommandError as exc:
+                if model.qz is None:
+                    raise InvalidArgument(
+                        f"{model.name} has no binary data record (QZ refused)"
+                    ) from exc
+                self._layout = model.qz
+        return self._layout
+
+    def record(self, axes: str = "", *, timeout: float | None = None) -> np.void:
+        """Read one data record (``QR``) and decode it.
+
+        Raises:
+            InvalidArgument: bad axes, or the model has no data record.
+            ProtocolError: the record does not match the layout ``QZ`` gave.
+        """
+        link = self.link
+        command = cmds.qr(axes, model=link.model)
+        layout = self.layout()
+        done = link.exchange(command, timeout=timeout)
+        if done.record is None:
+            raise link.error(ProtocolError, f"{command.text!r} answered no binary record")
+        try:
+            return decode_record(done.record, layout)
+        except ProtocolError as exc:
+            raise link.error(ProtocolError, f"{command.text!r}: {exc}") from exc
+
+    def record_dict(self, axes: str = "", *, timeout: float | None = None) -> dict[str, Any]:
+        """:meth:`record` as plain Python values (nested dicts per axis)."""
+        return record_to_dict(self.record(axes, timeout=timeout))
+
+    def stream(self, period: int, *, method: str = "auto", maxlen: int = 10_000) -> RecordStream:
+        """A stream of records every ``period`` samples (see ``Controller.records``)."""
+        if isinstance(period, bool) or not isinstance(period, int) or not 1 <= period <= 65535:
+            raise InvalidArgument(f"period is a number of samples 1..65535, not {period!r}")
+        if method not in ("auto", "DR", "QR"):
+            raise InvalidArgument(f"method is 'auto', 'DR' or 'QR', not {method!r}")
+        if isinstance(maxlen, bool) or not isinstance(maxlen, int) or maxlen < 1:
+            raise InvalidArgument(f"maxlen must be a positive integer, not {maxlen!r}")
+        transport: object = self.link.transport
+        pusher = transport if isinstance(transport, HandleSource) else None
+        if method == "DR" and pusher is None:
+            raise InvalidArgument(
+                f"DR needs a second Ethernet handle; {transport!r} has none (use 'QR')"
+            )
+        layout = self.layout()
+        if method == "QR" or pusher is None:
+            stream = RecordStream(self, period, "QR", maxlen=maxlen)
+        else:
+            stream = self._pushed(pusher, period, maxlen, layout)
+        with self._lock:
+            self._streams.append(stream)
+        return stream
+
+    def _pushed(
+        self, transport: HandleSource, period: int, maxlen: int, layout: Layout
+    ) -> RecordStream:
+        link = self.link
+        try:
+            handle = transport.open_handle()
+        except GalilConnectionError as exc:
+            raise link.error(GalilConnectionError, f"no handle for DR: {exc}") from exc
+        try:
+            index = self._which_handle(handle)
+            stream = RecordStream(self, period, "DR", handle=handle, maxlen=maxlen)
+            link.command(f"DR {period},{index}")
+        except BaseException:
+            with contextlib.suppress(GalilError, OSError):
+                handle.close()
+            raise
+        stream._start_reader(layout)
+        return stream
+
+    def _which_handle(self, handle: Transport) -> int:
+        # _WH on a handle names it (0..7 for A..H), which is what DR's second field wants.
+        link = self.link
+        text = read_reply(handle, b"MG _WH\r", link.timeout)
+        if not text:
+            raise CommandError(None, "MG _WH answered nothing on the record handle", "MG _WH")
+        try:
+            index = round(parse_number(text))
+        except (InvalidArgument, ValueError) as exc:
+            raise link.error(ProtocolError, f"MG _WH answered {text!r}") from exc
+        if not 0 <= index <= 7:
+            raise link.error(ProtocolError, f"MG _WH answered {text!r}: not a handle 0..7")
+        return index
+
+    def forget(self, stream: RecordStream) -> None:
+        """A stream closed itself."""
+        with self._lock:
+            self._streams = [s for s in self._streams if s is not stream]
+
+    def close_all(self) -> None:
+        """Close every open stream."""
+        with self._lock:
+            streams = list(self._streams)
+        for s in streams:
+            s.close()

@@ -1,0 +1,184 @@
+"""Connecting: identification, the handshake, options, closing and reconnecting (against a
+scriptable firmware stand-in, tests/client_fakes.py).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterator
+from typing import Any
+from urllib.parse import SplitResult
+
+import pytest
+from client_fakes import FakeGalil, FakeLink
+
+import galil.transport as transport_registry
+from galil.controller import Controller, connect
+from galil.errors import (
+    GalilConnectionError,
+    InvalidArgument,
+)
+
+
+@pytest.fixture
+def peer() -> Iterator[FakeGalil]:
+    fake = FakeGalil()
+
+    def opener(url: SplitResult, **options: Any) -> FakeLink:
+        if options:
+            raise InvalidArgument(f"unknown option(s) {sorted(options)}")
+        return fake.open()
+
+    transport_registry.register_scheme("fakegalil", opener, replace=True)
+    yield fake
+    transport_registry._registry.pop("fakegalil", None)
+
+
+@pytest.fixture
+def c(peer: FakeGalil) -> Iterator[Controller]:
+    ctl = connect("fakegalil://x", timeout=0.2)
+    yield ctl
+    ctl.close()
+
+
+def test_connect_identifies_and_marks_unsolicited(c: Controller, peer: FakeGalil) -> None:
+    assert c.model.name == "DMC-4040"
+    assert c.identity is not None
+    assert c.identity.firmware == "1.2f"
+    assert peer.log[:3] == ["\x12\x16", "MG _CW", "CW 1"]
+    assert peer.cw == 1
+    assert c.bytes_sent == len(b"\x12\x16\rMG _CW\rCW 1\r")
+    assert c.transport.kind == "serial"
+    assert "DMC-4040" in repr(c)
+
+
+def test_close_restores_cw_and_is_idempotent(peer: FakeGalil) -> None:
+    peer.cw = 2
+    c = connect("fakegalil://x", timeout=0.2)
+    assert peer.cw == 1
+    c.close()
+    assert peer.cw == 2
+    assert peer.log[-1] == "CW 2"
+    c.close()
+    assert c.closed
+    with pytest.raises(GalilConnectionError, match="closed"):
+        c.command("TPA")
+
+
+def test_context_manager_closes(peer: FakeGalil) -> None:
+    with connect("fakegalil://x", timeout=0.2) as c:
+        assert c.command("MG 5") == " 5"
+    assert c.closed
+    assert peer.links[0].closed
+
+
+def test_identify_refused_with_model_warns_and_connects(peer: FakeGalil) -> None:
+    peer.refuse["\x12\x16"] = 1
+    with pytest.warns(RuntimeWarning, match="refused"):
+        c = connect("fakegalil://x", timeout=0.2, model="DMC-4080")
+    assert c.model.name == "DMC-4080"
+    assert c.identity is None
+    c.close()
+
+
+def test_identify_refused_without_model_fails(peer: FakeGalil) -> None:
+    peer.refuse["\x12\x16"] = 1
+    with pytest.raises(GalilConnectionError, match=r"cannot identify.*model="):
+        connect("fakegalil://x", timeout=0.2)
+    assert peer.links[0].closed
+
+
+def test_unknown_identity_string(peer: FakeGalil) -> None:
+    peer.identity = "ACME 3000"
+    with pytest.raises(GalilConnectionError, match="not a Galil identification"):
+        connect("fakegalil://x", timeout=0.2)
+
+
+def test_silent_peer_is_a_connection_error(peer: FakeGalil) -> None:
+    peer.silent = True
+    with pytest.raises(GalilConnectionError, match="no answer to \\^R\\^V"):
+        connect("fakegalil://x", timeout=0.05)
+
+
+def test_model_mismatch_warns_and_trusts_the_controller(peer: FakeGalil) -> None:
+    with pytest.warns(RuntimeWarning, match="DMC-1806 was given but the controller says DMC4040"):
+        c = connect("fakegalil://x", timeout=0.2, model="DMC-1806")
+    assert c.model.name == "DMC-4040"
+    c.close()
+
+
+def test_cw_refused_warns_but_connects(peer: FakeGalil) -> None:
+    peer.refuse["CW 1"] = 6
+    with pytest.warns(RuntimeWarning, match="refused CW 1"):
+        c = connect("fakegalil://x", timeout=0.2)
+    assert c.command("MG 1") == " 1"
+    c.close()
+    assert "CW 2" not in peer.log  # nothing to restore
+
+
+def test_no_handshake_sends_nothing(peer: FakeGalil) -> None:
+    c = connect("fakegalil://x", handshake=False, model="DMC-4040")
+    assert c.bytes_sent == 0
+    assert peer.log == []
+    assert c.identity is None
+    c.close()
+    assert peer.log == []
+    with pytest.raises(InvalidArgument, match="model="):
+        connect("fakegalil://x", handshake=False)
+
+
+def test_transport_options_are_passed_on_and_checked(peer: FakeGalil) -> None:
+    with pytest.raises(InvalidArgument, match="unknown option"):
+        connect("fakegalil://x", baudrate=9600)
+
+
+def test_connect_accepts_an_open_transport(peer: FakeGalil) -> None:
+    c = connect(peer.open(), timeout=0.2)
+    assert c.command("MG 2") == " 2"
+    with pytest.raises(GalilConnectionError, match="reconnect needs an address"):
+        c.reconnect()
+    c.close()
+    with pytest.raises(InvalidArgument, match="need an address"):
+        connect(peer.open(), baudrate=1)
+
+
+@pytest.mark.parametrize("bad", [0, -1, "1", True, float("nan")])
+def test_bad_timeouts_are_refused(c: Controller, bad: Any) -> None:
+    sent = c.bytes_sent
+    with pytest.raises(InvalidArgument, match="timeout"):
+        c.command("TPA", timeout=bad)
+    assert c.bytes_sent == sent
+
+
+def _unquoted_semicolon(text: str) -> bool:
+    quoted = False
+    for ch in text:
+        if ch == '"':
+            quoted = not quoted
+        elif ch == ";" and not quoted:
+            return True
+    return False
+
+
+def test_dead_link_and_reconnect(c: Controller, peer: FakeGalil) -> None:
+    peer.links[0].dead = True
+    with pytest.raises(GalilConnectionError, match="died") as info:
+        c.command("MG 1")
+    assert isinstance(info.value, ConnectionError)
+    c.reconnect()
+    assert len(peer.links) == 2
+    assert c.command("MG 2") == " 2"
+    assert peer.links[0].closed
+
+
+def test_axes_and_letters(c: Controller) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        axes = c.axes
+    assert list(axes) == ["A", "B", "C", "D"]
+    assert c.A is axes["A"]
+    with pytest.raises(AttributeError):
+        _ = c.E
+    with pytest.raises(AttributeError):
+        _ = c.nothing
+    assert c.sample_period == pytest.approx(1 / 1024)

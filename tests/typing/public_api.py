@@ -1,0 +1,29 @@
+"""Checked by ``mypy --strict`` in ``make typecheck`` (not run by pytest): the public API's types.
+
+``assert_type`` fails the type check when mypy infers anything else, e.g. ``Any``.
+"""
+
+from __future__ import annotations
+
+from typing_extensions import assert_type
+
+import galil
+from galil.contour import ContourResult
+from galil.predict import MultiProfile, Profile
+
+
+def check(dmc: galil.Controller) -> None:
+    assert_type(galil.connect("sim://DMC-4040"), galil.Controller)
+    assert_type(dmc.A, galil.Axis)
+    assert_type(dmc.X, galil.Axis)
+    assert_type(dmc.axes["B"], galil.Axis)
+    assert_type(dmc.A.move_to(10), galil.MoveHandle)
+    assert_type(dmc.A.move_by(10), galil.MoveHandle)
+    assert_type(dmc.A.jog(1000), galil.MoveHandle)
+    assert_type(dmc.A.plan_to(10), Profile)
+    assert_type(dmc.move({"A": 1, "B": 2}), galil.MoveHandle)
+    assert_type(dmc.plan({"A": 1}), MultiProfile)
+    assert_type(dmc.contour("A", [1.0, 2.0], dt=2), ContourResult)
+    assert_type(dmc.records(8), galil.RecordStream)
+    assert_type(dmc.A.move_to(10).wait(), galil.MoveResult)
+    assert_type(dmc.messages, galil.MessageQueue)
