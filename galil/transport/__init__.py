@@ -2,7 +2,9 @@
 
 Every transport satisfies the small :class:`Transport` protocol: bytes out, bytes in with a
 timeout, close. Nothing here knows about commands or replies; framing lives in
-``galil.protocol`` and the pairing of the two in ``galil.link``.
+``galil.protocol`` and the pairing of the two in ``galil.link``. Optional capabilities
+(:mod:`galil.transport.capabilities`) are Protocols too. The built-in transports share
+:class:`galil.transport.base.TransportBase`; a plug-in need not inherit it.
 
 Addresses are URLs whose scheme picks an opener from a registry::
 
@@ -19,7 +21,6 @@ Other packages add schemes with :func:`register_scheme` or through the entry-poi
 
 from __future__ import annotations
 
-import math
 import re
 import threading
 from collections.abc import Callable, Mapping
@@ -29,6 +30,7 @@ from typing import Any, Protocol, runtime_checkable
 from urllib.parse import SplitResult, parse_qsl, urlsplit
 
 from galil.errors import GalilConnectionError, InvalidArgument
+from galil.transport.base import timeout_grid
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -257,19 +259,6 @@ def _convert(raw: str) -> Any:
         except ValueError:
             pass
     return raw
-
-
-def timeout_grid(timeout: float) -> float:
-    """Round a read timeout up to the next 10 ms (0 stays 0, negatives become 0).
-
-    Setting a timeout costs system calls on sockets and serial ports; a caller counting down
-    to a deadline would pass a new value every read. On the grid the common case (the same
-    default timeout, command after command) reuses the value already set. A read still returns
-    as soon as data arrives, so rounding up only delays an empty read by under 10 ms.
-    """
-    if timeout <= 0:
-        return 0.0
-    return math.ceil(timeout * 100.0 - 1e-9) / 100.0
 
 
 def open_transport(address: str, **options: Any) -> Transport:

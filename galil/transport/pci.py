@@ -15,6 +15,7 @@ from urllib.parse import SplitResult
 
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.transport import parse_options
+from galil.transport.base import TransportBase
 
 __all__ = ["PciTransport", "open_pci"]
 
@@ -22,15 +23,17 @@ _CHUNK = 4096
 _DEAD = select.POLLERR | select.POLLHUP | select.POLLNVAL
 
 
-class PciTransport:
+class PciTransport(TransportBase[int]):
     """A Galil PCI device node opened read/write.
+
+    Capabilities: none (the driver's FIFO rate is not documented).
 
     Args:
         path: the node, e.g. ``/dev/galilpci0``.
         write_timeout: seconds to wait for the driver to take a write.
     """
 
-    secondary: None = None
+    kind = "pci"
 
     def __init__(self, path: str, *, write_timeout: float = 1.0) -> None:
         self.path = path
@@ -40,77 +43,47 @@ class PciTransport:
             fd = os.open(path, flags)
         except OSError as exc:
             raise GalilConnectionError(f"cannot open PCI node {path}: {exc}") from exc
-        self._fd: int | None = fd
+        super().__init__(fd, name=path, label=f"PCI node {path}")
         self._poll_in = select.poll()
         self._poll_in.register(fd, select.POLLIN | select.POLLPRI)
         self._poll_out = select.poll()
         self._poll_out.register(fd, select.POLLOUT)
 
-    @property
-    def kind(self) -> str:
-        """Always ``"pci"``."""
-        return "pci"
-
-    def __repr__(self) -> str:
-        state = "open" if self._fd is not None else "closed"
-        return f"<PciTransport {self.path} {state}>"
-
-    def _live(self) -> int:
-        if self._fd is None:
-            raise GalilConnectionError(f"PCI node {self.path} is closed")
-        return self._fd
-
-    def write(self, data: bytes) -> None:
-        """Send all of ``data``."""
-        fd = self._live()
-        view = memoryview(data)
+    def _send_some(self, handle: int, data: memoryview) -> int:
         try:
-            while view:
-                try:
-                    n = os.write(fd, view)
-                except BlockingIOError:
-                    n = 0
-                if n:
-                    view = view[n:]
-                    continue
-                events = self._poll_out.poll(self.write_timeout * 1000)
-                if not events:
-                    raise GalilConnectionError(
-                        f"PCI node {self.path} did not accept data within {self.write_timeout} s"
-                    )
-                if events[0][1] & _DEAD:
-                    raise GalilConnectionError(f"PCI node {self.path} is gone")
-        except OSError as exc:
-            raise GalilConnectionError(f"PCI node {self.path} failed while sending: {exc}") from exc
+            return os.write(handle, data)
+        except BlockingIOError:
+            return 0
 
-    def read(self, timeout: float) -> bytes:
-        """Return what arrives within ``timeout`` seconds (``b""`` if nothing)."""
-        fd = self._live()
+    def _wait_writable(self, handle: int) -> None:
+        events = self._poll_out.poll(self.write_timeout * 1000)
+        if not events:
+            raise GalilConnectionError(
+                f"{self.label} did not accept data within {self.write_timeout} s"
+            )
+        if events[0][1] & _DEAD:
+            raise GalilConnectionError(f"{self.label} is gone")
+
+    def _recv(self, handle: int, timeout: float) -> bytes:
+        events = self._poll_in.poll(max(0.0, timeout) * 1000)
+        if not events:
+            return b""
+        mask = events[0][1]
         try:
-            events = self._poll_in.poll(max(0.0, timeout) * 1000)
-            if not events:
-                return b""
-            mask = events[0][1]
-            try:
-                data = os.read(fd, _CHUNK)
-            except BlockingIOError:
-                data = b""
-            except OSError as exc:
-                # A pty master reports its closed peer as EIO; a driver node as ENODEV.
-                if exc.errno in (errno.EIO, errno.ENODEV, errno.ENXIO):
-                    raise GalilConnectionError(f"PCI node {self.path} is gone: {exc}") from exc
-                raise
+            data = os.read(handle, _CHUNK)
+        except BlockingIOError:
+            data = b""
         except OSError as exc:
-            raise GalilConnectionError(f"PCI node {self.path} failed while reading: {exc}") from exc
+            # A pty master reports its closed peer as EIO; a driver node as ENODEV.
+            if exc.errno in (errno.EIO, errno.ENODEV, errno.ENXIO):
+                raise GalilConnectionError(f"{self.label} is gone: {exc}") from exc
+            raise
         if not data and mask & _DEAD:
-            raise GalilConnectionError(f"PCI node {self.path} is gone (peer hung up)")
+            raise GalilConnectionError(f"{self.label} is gone (peer hung up)")
         return data
 
-    def close(self) -> None:
-        """Close the node; idempotent."""
-        fd, self._fd = self._fd, None
-        if fd is not None:
-            os.close(fd)
+    def _release(self, handle: int) -> None:
+        os.close(handle)
 
 
 def open_pci(url: SplitResult, **options: Any) -> PciTransport:

@@ -7,14 +7,14 @@ follow Galil's own host library: 8 data bits, no parity, 1 stop bit, RTS/CTS han
 
 from __future__ import annotations
 
-import contextlib
 from typing import Any, Protocol
 from urllib.parse import SplitResult
 
 import serial
 
 from galil.errors import GalilConnectionError, InvalidArgument
-from galil.transport import PYSERIAL_SCHEMES, parse_options, timeout_grid
+from galil.transport import PYSERIAL_SCHEMES, parse_options
+from galil.transport.base import TransportBase
 
 __all__ = ["DEFAULT_BAUDRATE", "SerialPort", "SerialTransport", "open_serial"]
 
@@ -60,25 +60,21 @@ class SerialPort(Protocol):
         ...
 
 
-class SerialTransport:
+class SerialTransport(TransportBase[SerialPort]):
     """A pyserial port (or anything with pyserial's ``read``/``write``/``in_waiting``).
+
+    Capability: :class:`~galil.transport.ByteRate` (from the port's baud rate).
 
     Args:
         port: an open ``SerialPort`` instance to adopt.
         name: how to name the port in messages.
     """
 
-    secondary: None = None
+    kind = "serial"
 
     def __init__(self, port: SerialPort, name: str = "") -> None:
-        self._port: SerialPort | None = port
-        self.name = name or str(getattr(port, "name", None) or getattr(port, "port", "serial"))
-        self._timeout: float | None = port.timeout
-
-    @property
-    def kind(self) -> str:
-        """Always ``"serial"``."""
-        return "serial"
+        name = name or str(getattr(port, "name", None) or getattr(port, "port", "serial"))
+        super().__init__(port, name=name, label=f"serial port {name}", timeout=port.timeout)
 
     @property
     def byte_rate(self) -> float:
@@ -86,7 +82,7 @@ class SerialTransport:
 
         A port that does not say its baud rate is taken at 9600, the slowest common one.
         """
-        baud = getattr(self._port, "baudrate", None)
+        baud = getattr(self._handle, "baudrate", None)
         return float(baud) / 10.0 if isinstance(baud, (int, float)) and baud > 0 else 960.0
 
     @property
@@ -94,55 +90,28 @@ class SerialTransport:
         """The underlying pyserial object (for line settings such as ``baudrate``)."""
         return self._live()
 
-    def __repr__(self) -> str:
-        state = "open" if self._port is not None else "closed"
-        return f"<SerialTransport {self.name} {state}>"
+    def _send(self, handle: SerialPort, data: bytes) -> None:
+        handle.write(data)  # pyserial writes everything (or raises on its write_timeout)
 
-    def _live(self) -> SerialPort:
-        if self._port is None:
-            raise GalilConnectionError(f"serial port {self.name} is closed")
-        return self._port
+    def _set_timeout(self, handle: SerialPort, seconds: float) -> None:
+        handle.timeout = seconds  # may reconfigure the port: the base only sets a new value
 
-    def write(self, data: bytes) -> None:
-        """Send all of ``data``."""
-        port = self._live()
+    def _recv(self, handle: SerialPort, timeout: float) -> bytes:
         try:
-            port.write(data)
-        except (serial.SerialException, OSError) as exc:
-            raise GalilConnectionError(
-                f"serial port {self.name} failed while sending: {exc}"
-            ) from exc
-
-    def read(self, timeout: float) -> bytes:
-        """Return what arrives within ``timeout`` seconds (``b""`` if nothing)."""
-        port = self._live()
-        try:
-            t = timeout_grid(timeout)
-            if t != self._timeout:
-                # Changing pyserial's timeout may reconfigure the port: only do it on change.
-                port.timeout = t
-                self._timeout = t
-            waiting = port.in_waiting
+            waiting = handle.in_waiting
             # read(n) blocks until n bytes or the timeout: ask for what is there, or one byte.
-            data = bytes(port.read(waiting or 1))
+            data = bytes(handle.read(waiting or 1))
             if data and not waiting:
-                more = port.in_waiting
+                more = handle.in_waiting
                 if more:
-                    data += bytes(port.read(more))
-        except (serial.SerialException, OSError, TypeError) as exc:
+                    data += bytes(handle.read(more))
+        except TypeError as exc:
             # pyserial raises TypeError from some handlers when the port vanished under it.
-            raise GalilConnectionError(
-                f"serial port {self.name} failed while reading: {exc}"
-            ) from exc
+            raise self._failure("reading", exc) from exc
         return data
 
-    def close(self) -> None:
-        """Close the port; idempotent."""
-        port, self._port = self._port, None
-        if port is not None:
-            # The device may be gone already; closing is best effort.
-            with contextlib.suppress(serial.SerialException, OSError):
-                port.close()
+    def _release(self, handle: SerialPort) -> None:
+        handle.close()  # best effort: the base ignores the errors of a vanished device
 
 
 def open_serial(url: SplitResult, **options: Any) -> SerialTransport:

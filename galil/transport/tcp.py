@@ -16,7 +16,8 @@ from urllib.parse import SplitResult
 
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.models import ETHERNET_BYTES_PER_S
-from galil.transport import parse_options, timeout_grid
+from galil.transport import parse_options
+from galil.transport.base import TransportBase
 
 __all__ = ["DEFAULT_PORT", "TcpTransport", "open_tcp"]
 
@@ -24,8 +25,12 @@ DEFAULT_PORT = 23
 _CHUNK = 65536
 
 
-class TcpTransport:
+class TcpTransport(TransportBase[socket.socket]):
     """A connected TCP handle.
+
+    Capabilities: :class:`~galil.transport.HandleSource` (:meth:`open_secondary`,
+    :meth:`open_handle`), :class:`~galil.transport.MessagesOnly` and
+    :class:`~galil.transport.ByteRate`.
 
     Args:
         host: controller host name or address.
@@ -34,10 +39,14 @@ class TcpTransport:
         sock: an already connected socket to adopt instead of connecting (tests, tunnels).
         message_port: a port that carries only unsolicited output (the simulator's server,
             protocol gateways); :meth:`open_secondary` connects there instead of to ``port``.
+        messages_only: this handle carries only unsolicited output (set on the handle
+            :meth:`open_secondary` opens to ``message_port``).
 
     Attributes:
         messages_only: this handle carries only unsolicited output (no ``CF`` needed).
     """
+
+    kind = "ethernet"
 
     def __init__(
         self,
@@ -49,20 +58,19 @@ class TcpTransport:
         message_port: int | None = None,
         messages_only: bool = False,
     ) -> None:
-        if not isinstance(port, int) or not 0 < port < 65536:
+        if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
             raise InvalidArgument(f"TCP port must be 1..65535, got {port!r}")
-        self.host = host
-        self.port = port
-        self.connect_timeout = connect_timeout
         if message_port is not None and (
             isinstance(message_port, bool)
             or not isinstance(message_port, int)
             or not 0 < message_port < 65536
         ):
             raise InvalidArgument(f"message port must be 1..65535, got {message_port!r}")
+        self.host = host
+        self.port = port
+        self.connect_timeout = connect_timeout
         self.message_port = message_port
         self.messages_only = messages_only
-        self.secondary: TcpTransport | None = None
         if sock is None:
             try:
                 sock = socket.create_connection((host, port), timeout=connect_timeout)
@@ -74,86 +82,56 @@ class TcpTransport:
         # (A socketpair adopted in tests is no TCP socket: nothing to tune then.)
         with contextlib.suppress(OSError):
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self._sock: socket.socket | None = sock
-        self._timeout: float | None = -1.0  # forces the first settimeout
-        self._timeout_in = -1.0
-
-    @property
-    def kind(self) -> str:
-        """Always ``"ethernet"``."""
-        return "ethernet"
+        # timeout=None: the socket still has the connect timeout; the first read sets its own.
+        super().__init__(sock, name=f"{host}:{port}", label=f"TCP link to {host}:{port}")
 
     @property
     def byte_rate(self) -> float:
         """Sustained command bytes per second (round trips, not the wire, set the pace)."""
         return ETHERNET_BYTES_PER_S
 
-    def __repr__(self) -> str:
-        state = "open" if self._sock is not None else "closed"
-        return f"<TcpTransport {self.host}:{self.port} {state}>"
+    def _send(self, handle: socket.socket, data: bytes) -> None:
+        handle.sendall(data)
 
-    def _live(self) -> socket.socket:
-        sock = self._sock
-        if sock is None:
-            raise GalilConnectionError(f"TCP link to {self.host}:{self.port} is closed")
-        return sock
+    def _set_timeout(self, handle: socket.socket, seconds: float) -> None:
+        handle.settimeout(seconds)  # 0 makes the socket non-blocking: a poll
 
-    def write(self, data: bytes) -> None:
-        """Send all of ``data``."""
-        sock = self._sock
-        if sock is None:
-            raise GalilConnectionError(f"TCP link to {self.host}:{self.port} is closed")
+    def _recv(self, handle: socket.socket, timeout: float) -> bytes:
         try:
-            sock.sendall(data)
-        except OSError as exc:
-            raise GalilConnectionError(
-                f"TCP link to {self.host}:{self.port} failed while sending: {exc}"
-            ) from exc
-
-    def read(self, timeout: float) -> bytes:
-        """Return what arrives within ``timeout`` seconds (``b""`` if nothing)."""
-        sock = self._sock
-        if sock is None:
-            raise GalilConnectionError(f"TCP link to {self.host}:{self.port} is closed")
-        try:
-            if timeout != self._timeout_in:
-                # settimeout costs syscalls; a caller repeating its timeout reuses the one set.
-                t = timeout_grid(timeout)
-                if t != self._timeout:
-                    sock.settimeout(t)
-                    self._timeout = t
-                self._timeout_in = timeout
-            data = sock.recv(_CHUNK)
+            data = handle.recv(_CHUNK)
         except (TimeoutError, BlockingIOError):
             return b""
-        except OSError as exc:
-            raise GalilConnectionError(
-                f"TCP link to {self.host}:{self.port} failed while reading: {exc}"
-            ) from exc
         if not data:
             raise GalilConnectionError(f"controller at {self.host}:{self.port} closed the link")
         return data
+
+    def _release(self, handle: socket.socket) -> None:
+        with contextlib.suppress(OSError):  # already reset by the peer
+            handle.shutdown(socket.SHUT_RDWR)
+        handle.close()
 
     def open_secondary(self) -> TcpTransport:
         """Open (once) a second handle to the same controller and return it.
 
         Raises:
-            GalilConnectionError: the controller refused another handle.
+            GalilConnectionError: this link is closed, or the controller refused another
+                handle.
         """
-        if self.secondary is None:
-            self._live()
-            if self.message_port is not None:
-                self.secondary = TcpTransport(
-                    self.host,
-                    self.message_port,
-                    connect_timeout=self.connect_timeout,
-                    messages_only=True,
-                )
-            else:
-                self.secondary = TcpTransport(
-                    self.host, self.port, connect_timeout=self.connect_timeout
-                )
-        return self.secondary
+        second = self.secondary
+        if isinstance(second, TcpTransport):
+            return second
+        self._live()
+        if self.message_port is not None:
+            second = TcpTransport(
+                self.host,
+                self.message_port,
+                connect_timeout=self.connect_timeout,
+                messages_only=True,
+            )
+        else:
+            second = TcpTransport(self.host, self.port, connect_timeout=self.connect_timeout)
+        self.secondary = second
+        return second
 
     def open_handle(self) -> TcpTransport:
         """Open another handle to the same controller port; the caller owns and closes it.
@@ -164,16 +142,6 @@ class TcpTransport:
         """
         self._live()
         return TcpTransport(self.host, self.port, connect_timeout=self.connect_timeout)
-
-    def close(self) -> None:
-        """Close this handle and the secondary one; idempotent."""
-        if self.secondary is not None:
-            self.secondary.close()
-        sock, self._sock = self._sock, None
-        if sock is not None:
-            with contextlib.suppress(OSError):  # already reset by the peer
-                sock.shutdown(socket.SHUT_RDWR)
-            sock.close()
 
 
 def open_tcp(url: SplitResult, **options: Any) -> TcpTransport:

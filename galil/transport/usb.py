@@ -9,7 +9,6 @@ FTDI serial bridge appear as ``/dev/ttyUSB*`` / ``COMn``: open those as serial p
 
 from __future__ import annotations
 
-import contextlib
 from typing import Any
 from urllib.parse import SplitResult
 
@@ -18,6 +17,7 @@ import usb.util
 
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.transport import parse_options
+from galil.transport.base import TransportBase
 
 __all__ = ["UsbTransport", "open_usb"]
 
@@ -25,8 +25,11 @@ _WRITE_TIMEOUT_MS = 1000
 _READ_PACKETS = 64  # packets asked for per read; a read returns early on a short packet
 
 
-class UsbTransport:
+class UsbTransport(TransportBase[Any]):
     """Bulk IN/OUT endpoints of one interface of a pyusb device.
+
+    Capabilities: none. The byte rate a Galil USB port sustains is not documented, so this
+    transport does not claim one (:class:`~galil.transport.ByteRate`).
 
     Args:
         device: a ``usb.core.Device``.
@@ -34,15 +37,15 @@ class UsbTransport:
         write_timeout: seconds allowed for one bulk write.
     """
 
-    secondary: None = None
+    kind = "usb"
 
     def __init__(self, device: Any, *, interface: int = 0, write_timeout: float = 1.0) -> None:
-        self._dev: Any = device
+        name = f"{device.idVendor:04x}:{device.idProduct:04x}"
+        super().__init__(device, name=name, label=f"USB device {name}")
         self.interface = interface
         self.write_timeout_ms = max(1, round(write_timeout * 1000))
-        self.name = f"usb {device.idVendor:04x}:{device.idProduct:04x}"
         try:
-            self._detach_kernel_driver()
+            self._detach_kernel_driver(device)
             try:
                 cfg = device.get_active_configuration()
             except usb.core.USBError:
@@ -55,72 +58,46 @@ class UsbTransport:
             self._ep_out = _bulk_endpoint(intf, usb.util.ENDPOINT_OUT)
             self._ep_in = _bulk_endpoint(intf, usb.util.ENDPOINT_IN)
         except (usb.core.USBError, KeyError, IndexError, ValueError) as exc:
-            usb.util.dispose_resources(device)
-            raise GalilConnectionError(f"cannot open {self.name}: {exc}") from exc
+            self._abandon(device)
+            raise GalilConnectionError(f"cannot open {self.label}: {exc}") from exc
         if self._ep_out is None or self._ep_in is None:
-            usb.util.dispose_resources(device)
+            self._abandon(device)
             raise GalilConnectionError(
-                f"{self.name} interface {interface} has no bulk IN/OUT endpoint pair"
+                f"{self.label} interface {interface} has no bulk IN/OUT endpoint pair"
             )
         self._read_size = int(self._ep_in.wMaxPacketSize) * _READ_PACKETS
 
-    def _detach_kernel_driver(self) -> None:
+    def _abandon(self, device: Any) -> None:
+        self._handle = None  # never opened: repr says closed, close() has nothing to do
+        usb.util.dispose_resources(device)
+
+    def _detach_kernel_driver(self, device: Any) -> None:
         try:
-            if self._dev.is_kernel_driver_active(self.interface):
-                self._dev.detach_kernel_driver(self.interface)
+            if device.is_kernel_driver_active(self.interface):
+                device.detach_kernel_driver(self.interface)
         except (NotImplementedError, usb.core.USBError):
             pass  # backends without kernel drivers (or not permitted): try to claim anyway
 
-    @property
-    def kind(self) -> str:
-        """Always ``"usb"``."""
-        return "usb"
-
-    def __repr__(self) -> str:
-        state = "open" if self._dev is not None else "closed"
-        return f"<UsbTransport {self.name} {state}>"
-
-    def _live(self) -> Any:
-        if self._dev is None:
-            raise GalilConnectionError(f"{self.name} is closed")
-        return self._dev
-
-    def write(self, data: bytes) -> None:
-        """Send all of ``data`` on the bulk OUT endpoint."""
-        self._live()
-        view = memoryview(data)
+    def _send_some(self, handle: Any, data: memoryview) -> int:
         try:
-            while view:
-                n = self._ep_out.write(view, timeout=self.write_timeout_ms)
-                if n <= 0:
-                    raise GalilConnectionError(f"{self.name} accepted no bytes")
-                view = view[n:]
+            return int(self._ep_out.write(data, timeout=self.write_timeout_ms))
         except usb.core.USBTimeoutError as exc:
-            raise GalilConnectionError(f"{self.name} did not accept data: {exc}") from exc
-        except usb.core.USBError as exc:
-            raise GalilConnectionError(f"{self.name} failed while sending: {exc}") from exc
+            raise GalilConnectionError(f"{self.label} did not accept data: {exc}") from exc
 
-    def read(self, timeout: float) -> bytes:
-        """Return what arrives within ``timeout`` seconds (``b""`` if nothing)."""
-        self._live()
+    def _recv(self, handle: Any, timeout: float) -> bytes:
         # pyusb treats 0 ms as "wait forever": a poll is 1 ms.
         ms = max(1, round(timeout * 1000))
         try:
             data = self._ep_in.read(self._read_size, timeout=ms)
         except usb.core.USBTimeoutError:
             return b""
-        except usb.core.USBError as exc:
-            raise GalilConnectionError(f"{self.name} failed while reading: {exc}") from exc
         return bytes(data)
 
-    def close(self) -> None:
-        """Release the interface and the device; idempotent."""
-        dev, self._dev = self._dev, None
-        if dev is None:
-            return
-        with contextlib.suppress(usb.core.USBError):  # unplugged: nothing left to release
-            usb.util.release_interface(dev, self.interface)
-        usb.util.dispose_resources(dev)
+    def _release(self, handle: Any) -> None:
+        try:
+            usb.util.release_interface(handle, self.interface)
+        finally:  # unplugged: nothing left to release, but pyusb's resources still go
+            usb.util.dispose_resources(handle)
 
 
 def _bulk_endpoint(intf: Any, direction: int) -> Any:

@@ -27,6 +27,9 @@ class FakeUsbDevice:
     Args:
         respond: called with the bytes of each bulk OUT transfer; returns bytes to queue on IN.
         poll: called while a bulk IN read waits; returns bytes that appeared meanwhile.
+        max_transfer: the most bytes one bulk OUT transfer takes (None: all), so that a host
+            has to send a long write in pieces.
+        kernel_driver: a kernel driver holds interface 0 until the host detaches it.
     """
 
     def __init__(
@@ -38,6 +41,8 @@ class FakeUsbDevice:
         manufacturer: str = "Galil Motion Control",
         serial: str = "SN0001",
         poll: Callable[[], bytes] | None = None,
+        max_transfer: int | None = None,
+        kernel_driver: bool = False,
     ) -> None:
         self.respond = respond
         self.poll = poll
@@ -51,6 +56,9 @@ class FakeUsbDevice:
         self.opened = 0
         self.closed = 0
         self.unplugged = False
+        self.max_transfer = max_transfer
+        self.transfers: list[int] = []  # sizes of the bulk OUT transfers taken
+        self.kernel_driver = kernel_driver
 
     def push(self, data: bytes) -> None:
         with self.cond:
@@ -171,10 +179,13 @@ class FakeBackend(usb.backend.IBackend):  # type: ignore[misc]
         self._check_alive(dev_handle)
         assert ep == EP_OUT, ep
         assert intf in dev_handle.claimed, "bulk write on an unclaimed interface"
-        reply = dev_handle.respond(bytes(data))
+        assert not dev_handle.kernel_driver, "bulk write while the kernel driver holds it"
+        piece = bytes(data[: dev_handle.max_transfer])
+        dev_handle.transfers.append(len(piece))
+        reply = dev_handle.respond(piece)
         if reply:
             dev_handle.push(reply)
-        return len(data)
+        return len(piece)
 
     def bulk_read(
         self, dev_handle: FakeUsbDevice, ep: int, intf: int, buff: Any, timeout: int
@@ -225,4 +236,8 @@ class FakeBackend(usb.backend.IBackend):  # type: ignore[misc]
         return n
 
     def is_kernel_driver_active(self, dev_handle: FakeUsbDevice, intf: int) -> bool:
-        return False
+        return dev_handle.kernel_driver and intf == 0
+
+    def detach_kernel_driver(self, dev_handle: FakeUsbDevice, intf: int) -> None:
+        self.calls.append(f"detach {intf}")
+        dev_handle.kernel_driver = False

@@ -1,33 +1,19 @@
-"""SerialTransport over a pty pair, loop://, socket:// and spy://."""
+"""What only the serial transport does: pyserial URLs and options, the line's byte rate.
+
+The behaviour every transport shares (round trips, timeouts, close, a vanished peer) is in
+test_contract.py, over a pty and loop://.
+"""
 
 from __future__ import annotations
 
-import os
-import time
 from pathlib import Path
 
 import pytest
 from transport_peers import PtyPair, PtyResponder, TcpPeer, read_until
 
 from galil.errors import GalilConnectionError, InvalidArgument
-from galil.transport import Transport, open_transport
+from galil.transport import open_transport
 from galil.transport.serial import SerialTransport
-
-
-def test_pty_round_trip(pty_responder: PtyResponder) -> None:
-    t = open_transport(pty_responder.pair.path)
-    try:
-        assert isinstance(t, SerialTransport)
-        assert isinstance(t, Transport)
-        assert t.kind == "serial"
-        assert t.secondary is None
-        t.write(b"MG 3\r")
-        assert read_until(t.read, b":") == b" 3\r\n:"
-        t.write(b"tp\r")
-        assert read_until(t.read, b"?") == b"?"
-        assert pty_responder.answerer.received == b"MG 3\rtp\r"
-    finally:
-        t.close()
 
 
 def test_serial_url_with_query(pty_pair: PtyPair) -> None:
@@ -52,7 +38,19 @@ def test_keyword_options_reach_pyserial(pty_pair: PtyPair) -> None:
         t.close()
 
 
-def test_partial_and_split_reads(pty_pair: PtyPair) -> None:
+@pytest.mark.parametrize(("baudrate", "byte_rate"), [(9600, 960.0), (115200, 11520.0)])
+def test_byte_rate_follows_the_baud_rate(
+    pty_pair: PtyPair, baudrate: int, byte_rate: float
+) -> None:
+    t = open_transport(pty_pair.path, baudrate=baudrate)
+    try:
+        assert isinstance(t, SerialTransport)
+        assert t.byte_rate == byte_rate  # 10 bits a byte: start, 8 data, stop
+    finally:
+        t.close()
+
+
+def test_reply_split_in_time_is_read_in_parts(pty_pair: PtyPair) -> None:
     t = open_transport(pty_pair.path)
     try:
         pty_pair.send(b" 12")
@@ -63,36 +61,12 @@ def test_partial_and_split_reads(pty_pair: PtyPair) -> None:
         t.close()
 
 
-def test_read_timeout_and_poll(pty_pair: PtyPair) -> None:
+def test_closed_port_is_not_offered(pty_pair: PtyPair) -> None:
     t = open_transport(pty_pair.path)
-    try:
-        start = time.monotonic()
-        assert t.read(0.05) == b""
-        assert time.monotonic() - start >= 0.04
-        assert t.read(0) == b""
-        pty_pair.send(b":")
-        assert read_until(t.read, b":") == b":"
-    finally:
-        t.close()
-
-
-def test_master_hangup_is_a_connection_error(pty_pair: PtyPair) -> None:
-    t = open_transport(pty_pair.path)
-    try:
-        os.close(pty_pair.master)
-        with pytest.raises(GalilConnectionError, match="failed while reading"):
-            read_until(t.read, b":", timeout=1.0)
-    finally:
-        t.close()
-
-
-def test_loop_url_echoes() -> None:
-    t = open_transport("loop://")
-    try:
-        t.write(b"MG 1\r")
-        assert read_until(t.read, b"\r") == b"MG 1\r"
-    finally:
-        t.close()
+    assert isinstance(t, SerialTransport)
+    t.close()
+    with pytest.raises(GalilConnectionError, match=r"serial port .* is closed"):
+        _ = t.port
 
 
 def test_socket_url_to_tcp_peer(tcp_peer: TcpPeer) -> None:
@@ -116,16 +90,6 @@ def test_spy_url_logs_traffic(pty_responder: PtyResponder, tmp_path: Path) -> No
     text = log.read_text()
     assert "TX" in text
     assert "RX" in text
-
-
-def test_closed_port_refuses(pty_pair: PtyPair) -> None:
-    t = open_transport(pty_pair.path)
-    t.close()
-    t.close()
-    with pytest.raises(GalilConnectionError, match="closed"):
-        t.write(b"x")
-    with pytest.raises(GalilConnectionError, match="closed"):
-        t.read(0)
 
 
 def test_missing_device() -> None:

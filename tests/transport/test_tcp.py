@@ -1,37 +1,31 @@
-"""TcpTransport against a real loopback server."""
+"""What only the TCP transport does: addresses, options, extra handles, adopted sockets.
+
+The behaviour every transport shares (round trips, timeouts, close, a vanished peer) is in
+test_contract.py.
+"""
 
 from __future__ import annotations
 
 import socket
-import time
 
 import pytest
 from transport_peers import TcpPeer, read_until
 
 from galil.errors import GalilConnectionError, InvalidArgument
-from galil.transport import Transport, open_transport
+from galil.transport import MessagesOnly, open_transport
 from galil.transport.tcp import DEFAULT_PORT, TcpTransport
 
 
-def test_round_trip_and_kind(tcp_peer: TcpPeer) -> None:
-    t = open_transport(f"tcp://127.0.0.1:{tcp_peer.port}")
-    try:
-        assert isinstance(t, TcpTransport)
-        assert isinstance(t, Transport)
-        assert t.kind == "ethernet"
-        assert t.secondary is None
-        t.write(b"MG 42\r")
-        assert read_until(t.read, b":") == b" 42\r\n:"
-        t.write(b"SHA\rbg\r")
-        assert read_until(t.read, b"?") == b":?"
-    finally:
-        t.close()
+def open_tcp(peer: TcpPeer, **options: object) -> TcpTransport:
+    t = open_transport(f"tcp://127.0.0.1:{peer.port}", **options)
+    assert isinstance(t, TcpTransport)
+    return t
 
 
 def test_bare_ipv4_means_tcp(tcp_peer: TcpPeer) -> None:
     t = open_transport(f"127.0.0.1:{tcp_peer.port}")
     try:
-        assert t.kind == "ethernet"
+        assert isinstance(t, TcpTransport)
         t.write(b"MG 7\r")
         assert read_until(t.read, b":") == b" 7\r\n:"
     finally:
@@ -40,39 +34,74 @@ def test_bare_ipv4_means_tcp(tcp_peer: TcpPeer) -> None:
 
 def test_port_option_overrides_url(tcp_peer: TcpPeer) -> None:
     t = open_transport("tcp://127.0.0.1:1", port=tcp_peer.port)
-    t.close()
-
-
-def test_read_times_out_empty(tcp_peer: TcpPeer) -> None:
-    t = open_transport(f"tcp://127.0.0.1:{tcp_peer.port}")
     try:
-        start = time.monotonic()
-        assert t.read(0.05) == b""
-        assert time.monotonic() - start >= 0.04
-        assert t.read(0) == b""  # a poll returns at once
+        assert isinstance(t, TcpTransport)
+        assert t.port == tcp_peer.port
+        assert tcp_peer.accepted.acquire(timeout=2)
     finally:
         t.close()
 
 
-def test_secondary_handle_is_a_second_connection(tcp_peer: TcpPeer) -> None:
-    t = open_transport(f"tcp://127.0.0.1:{tcp_peer.port}")
-    assert isinstance(t, TcpTransport)
+def test_secondary_handle_is_a_second_connection_closed_with_the_first(tcp_peer: TcpPeer) -> None:
+    t = open_tcp(tcp_peer)
     try:
         second = t.open_secondary()
         assert t.secondary is second
         assert t.open_secondary() is second  # once only
+        assert not second.messages_only  # a command handle: the client sends CF I on it
         assert tcp_peer.accepted.acquire(timeout=2)
         assert tcp_peer.accepted.acquire(timeout=2)
         second.write(b"MG 1\r")
         assert read_until(second.read, b":") == b" 1\r\n:"
     finally:
         t.close()
-    with pytest.raises(GalilConnectionError):
+    assert "closed" in repr(second)
+    with pytest.raises(GalilConnectionError, match="closed"):
         second.read(0)
 
 
-def test_peer_closing_is_a_connection_error(tcp_peer: TcpPeer) -> None:
-    t = open_transport(f"tcp://127.0.0.1:{tcp_peer.port}")
+def test_message_port_gives_a_messages_only_secondary(tcp_peer: TcpPeer) -> None:
+    with socket.create_server(("127.0.0.1", 0)) as messages:
+        t = open_tcp(tcp_peer, message_port=messages.getsockname()[1])
+        try:
+            second = t.open_secondary()
+            conn, _ = messages.accept()
+            conn.close()
+            assert isinstance(second, MessagesOnly)
+            assert second.messages_only
+            assert second.port == messages.getsockname()[1]
+            assert not t.messages_only
+        finally:
+            t.close()
+
+
+def test_open_handle_gives_a_new_handle_each_time(tcp_peer: TcpPeer) -> None:
+    t = open_tcp(tcp_peer)
+    handles = [t.open_handle(), t.open_handle()]
+    try:
+        assert handles[0] is not handles[1]
+        assert t.secondary is None  # owned by the caller, not by t
+        for h in handles:
+            h.write(b"MG 3\r")
+            assert read_until(h.read, b":") == b" 3\r\n:"
+    finally:
+        t.close()
+    assert "open" in repr(handles[0])  # closing t leaves the caller's handles alone
+    for h in handles:
+        h.close()
+
+
+def test_closed_link_opens_no_more_handles(tcp_peer: TcpPeer) -> None:
+    t = open_tcp(tcp_peer)
+    t.close()
+    with pytest.raises(GalilConnectionError, match="closed"):
+        t.open_secondary()
+    with pytest.raises(GalilConnectionError, match="closed"):
+        t.open_handle()
+
+
+def test_peer_closing_says_so(tcp_peer: TcpPeer) -> None:
+    t = open_tcp(tcp_peer)
     try:
         assert tcp_peer.accepted.acquire(timeout=2)
         tcp_peer.drop_all()
@@ -80,17 +109,6 @@ def test_peer_closing_is_a_connection_error(tcp_peer: TcpPeer) -> None:
             read_until(t.read, b":")
     finally:
         t.close()
-
-
-def test_closed_transport_refuses(tcp_peer: TcpPeer) -> None:
-    t = open_transport(f"tcp://127.0.0.1:{tcp_peer.port}")
-    t.close()
-    t.close()  # idempotent
-    with pytest.raises(GalilConnectionError, match="closed"):
-        t.write(b"TP\r")
-    with pytest.raises(GalilConnectionError, match="closed"):
-        t.read(0.01)
-    assert "closed" in repr(t)
 
 
 def test_connection_refused() -> None:
@@ -108,6 +126,8 @@ def test_connection_refused() -> None:
         ("tcp://127.0.0.1:99999", {}, "port"),
         ("tcp://127.0.0.1", {"baudrate": 9600}, "unknown TCP option"),
         ("tcp://127.0.0.1", {"port": 0}, "1..65535"),
+        ("tcp://127.0.0.1", {"port": True}, "1..65535"),
+        ("tcp://127.0.0.1", {"message_port": 70000}, "message port"),
     ],
 )
 def test_bad_tcp_addresses(address: str, options: dict[str, object], message: str) -> None:

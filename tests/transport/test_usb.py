@@ -1,15 +1,18 @@
-"""UsbTransport through pyusb's real code path on a fake backend."""
+"""What only the USB transport does: finding the device, claiming it, bulk transfers.
+
+pyusb's real code runs on a fake backend (fake_usb.py). The behaviour every transport shares
+(round trips, timeouts, close, an unplugged device) is in test_contract.py.
+"""
 
 from __future__ import annotations
 
-import time
-
 import pytest
+import usb.core
 from fake_usb import FakeBackend, FakeUsbDevice
-from transport_peers import LineAnswerer, read_until
+from transport_peers import LineAnswerer, read_exactly, read_until
 
 from galil.errors import GalilConnectionError, InvalidArgument
-from galil.transport import Transport, open_transport
+from galil.transport import open_transport
 from galil.transport.usb import UsbTransport
 
 
@@ -18,15 +21,13 @@ def make_device(**kwargs: object) -> tuple[FakeUsbDevice, LineAnswerer]:
     return FakeUsbDevice(answerer.feed, **kwargs), answerer  # type: ignore[arg-type]
 
 
-def test_round_trip_by_ids() -> None:
+def test_configures_claims_and_releases_the_interface() -> None:
     dev, answerer = make_device()
     backend = FakeBackend(dev)
     t = open_transport("usb://1079:4040", backend=backend)
     try:
         assert isinstance(t, UsbTransport)
-        assert isinstance(t, Transport)
-        assert t.kind == "usb"
-        assert t.secondary is None
+        assert repr(t) == "<UsbTransport 1079:4040 open>"
         assert dev.configuration == 1
         assert dev.claimed == {0}
         t.write(b"MG 77\r")
@@ -37,6 +38,18 @@ def test_round_trip_by_ids() -> None:
     assert dev.claimed == set()
     assert "release 0" in backend.calls
     assert dev.closed >= 1
+
+
+def test_kernel_driver_is_detached_before_claiming() -> None:
+    dev, _ = make_device(kernel_driver=True)
+    backend = FakeBackend(dev)
+    t = open_transport("usb://1079:4040", backend=backend)
+    try:
+        assert backend.calls.index("detach 0") < backend.calls.index("claim 0")
+        t.write(b"MG 1\r")  # the fake refuses transfers while the kernel holds the interface
+        assert read_until(t.read, b":") == b" 1\r\n:"
+    finally:
+        t.close()
 
 
 def test_found_by_manufacturer_without_ids() -> None:
@@ -74,8 +87,6 @@ def test_no_matching_device() -> None:
 
 
 def test_injected_device_skips_search() -> None:
-    import usb.core
-
     dev, _ = make_device()
     found = usb.core.find(idVendor=0x1079, backend=FakeBackend(dev))
     t = open_transport("usb://", device=found)
@@ -86,14 +97,24 @@ def test_injected_device_skips_search() -> None:
         t.close()
 
 
-def test_read_timeout_is_empty_and_never_infinite() -> None:
-    dev, _ = make_device()
+def test_long_write_goes_out_in_the_pieces_the_device_takes() -> None:
+    dev, answerer = make_device(max_transfer=64)
     t = open_transport("usb://1079:4040", backend=FakeBackend(dev))
     try:
-        start = time.monotonic()
-        assert t.read(0.03) == b""
-        assert time.monotonic() - start >= 0.02
-        assert t.read(0) == b""  # becomes a 1 ms read, not pyusb's "forever"
+        payload = b"".join(b"MG %d\r" % i for i in range(40))
+        t.write(payload)
+        assert answerer.received == payload
+        assert dev.transfers[:-1] == [64] * (len(payload) // 64)
+    finally:
+        t.close()
+
+
+def test_device_taking_no_bytes_is_a_connection_error() -> None:
+    dev, _ = make_device(max_transfer=0)
+    t = open_transport("usb://1079:4040", backend=FakeBackend(dev))
+    try:
+        with pytest.raises(GalilConnectionError, match="USB device 1079:4040 accepted no bytes"):
+            t.write(b"MG 1\r")
     finally:
         t.close()
 
@@ -104,24 +125,23 @@ def test_long_reply_arrives_over_several_packets() -> None:
     t = open_transport("usb://1079:4040", backend=FakeBackend(dev))
     try:
         t.write(b"LS\r")
-        assert read_until(t.read, b":") == long + b"\r\n:"
+        assert read_exactly(t.read, len(long) + 3) == long + b"\r\n:"
     finally:
         t.close()
 
 
-def test_unplugged_device_is_a_connection_error() -> None:
+def test_unplugged_device_names_what_failed() -> None:
     dev, _ = make_device()
     t = open_transport("usb://1079:4040", backend=FakeBackend(dev))
     try:
         dev.unplugged = True
-        with pytest.raises(GalilConnectionError, match="failed while sending"):
+        with pytest.raises(GalilConnectionError, match="failed while sending") as sending:
             t.write(b"TP\r")
+        assert isinstance(sending.value.__cause__, usb.core.USBError)
         with pytest.raises(GalilConnectionError, match="failed while reading"):
             t.read(0.01)
     finally:
-        t.close()
-    with pytest.raises(GalilConnectionError, match="closed"):
-        t.read(0)
+        t.close()  # releasing an unplugged device does not raise
 
 
 @pytest.mark.parametrize(

@@ -1,6 +1,8 @@
 """Real loopback peers for the transport tests: a TCP server and pty pairs.
 
 Imported by name (pytest puts this directory on sys.path); fixtures are re-exported by conftest.
+Each peer also exists as a context manager, so that the contract rigs can build one without a
+fixture.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ import os
 import select
 import socket
 import threading
+import time
 import tty
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -105,15 +108,24 @@ class TcpPeer:
             t.join(timeout=2)
 
 
-@pytest.fixture
-def tcp_peer() -> Iterator[TcpPeer]:
+@contextlib.contextmanager
+def serving_tcp() -> Iterator[TcpPeer]:
+    """A :class:`TcpPeer` accepting on a free loopback port until the block ends."""
     server = socket.create_server(("127.0.0.1", 0))
     peer = TcpPeer(server, server.getsockname()[1])
     acceptor = threading.Thread(target=peer.serve, daemon=True)
     acceptor.start()
-    yield peer
-    peer.close()
-    acceptor.join(timeout=2)
+    try:
+        yield peer
+    finally:
+        peer.close()
+        acceptor.join(timeout=2)
+
+
+@pytest.fixture
+def tcp_peer() -> Iterator[TcpPeer]:
+    with serving_tcp() as peer:
+        yield peer
 
 
 @dataclass
@@ -123,6 +135,7 @@ class PtyPair:
     master: int
     slave: int
     path: str
+    master_open: bool = True
 
     def send(self, data: bytes) -> None:
         os.write(self.master, data)
@@ -136,17 +149,34 @@ class PtyPair:
             out += os.read(self.master, n - len(out))
         return out
 
+    def hang_up(self) -> None:
+        """Close the master: the far end of the line goes away."""
+        if self.master_open:
+            self.master_open = False
+            os.close(self.master)
 
-@pytest.fixture
-def pty_pair() -> Iterator[PtyPair]:
+    def close(self) -> None:
+        self.hang_up()
+        os.close(self.slave)
+
+
+@contextlib.contextmanager
+def open_pty() -> Iterator[PtyPair]:
+    """A raw pty pair, closed when the block ends."""
     master, slave = os.openpty()
     # Raw mode: no echo, no CR->NL translation; bytes pass as they are, like a serial line.
     tty.setraw(slave)
     pair = PtyPair(master, slave, os.ttyname(slave))
-    yield pair
-    for fd in (master, slave):
-        with contextlib.suppress(OSError):
-            os.close(fd)
+    try:
+        yield pair
+    finally:
+        pair.close()
+
+
+@pytest.fixture
+def pty_pair() -> Iterator[PtyPair]:
+    with open_pty() as pair:
+        yield pair
 
 
 @dataclass
@@ -155,48 +185,70 @@ class PtyResponder:
 
     pair: PtyPair
     answerer: LineAnswerer
-    stop: threading.Event
+    wake: int  # write end of a pipe the thread also waits on
     thread: threading.Thread
 
+    def stop(self) -> None:
+        """Stop answering (at once: the thread waits on the wake pipe too)."""
+        if self.thread.is_alive():
+            os.write(self.wake, b"x")
+        self.thread.join(timeout=2)
 
-def run_pty_responder(pair: PtyPair) -> PtyResponder:
+
+def _answer_loop(pair: PtyPair, answerer: LineAnswerer, woken: int) -> None:
+    while True:
+        ready, _, _ = select.select([pair.master, woken], [], [])
+        if woken in ready:
+            return
+        try:
+            data = os.read(pair.master, 4096)
+        except OSError:
+            return
+        reply = answerer.feed(data)
+        if reply:
+            os.write(pair.master, reply)
+
+
+@contextlib.contextmanager
+def answering(pair: PtyPair) -> Iterator[PtyResponder]:
+    """Answer commands on ``pair`` (like :func:`answer`) until the block ends."""
+    woken, wake = os.pipe()
     answerer = LineAnswerer()
-    stop = threading.Event()
-
-    def loop() -> None:
-        while not stop.is_set():
-            ready, _, _ = select.select([pair.master], [], [], 0.05)
-            if not ready:
-                continue
-            try:
-                data = os.read(pair.master, 4096)
-            except OSError:
-                return
-            reply = answerer.feed(data)
-            if reply:
-                os.write(pair.master, reply)
-
-    thread = threading.Thread(target=loop, daemon=True)
+    thread = threading.Thread(target=_answer_loop, args=(pair, answerer, woken), daemon=True)
     thread.start()
-    return PtyResponder(pair, answerer, stop, thread)
+    responder = PtyResponder(pair, answerer, wake, thread)
+    try:
+        yield responder
+    finally:
+        responder.stop()
+        os.close(woken)
+        os.close(wake)
 
 
 @pytest.fixture
 def pty_responder(pty_pair: PtyPair) -> Iterator[PtyResponder]:
-    responder = run_pty_responder(pty_pair)
-    yield responder
-    responder.stop.set()
-    responder.thread.join(timeout=2)
+    with answering(pty_pair) as responder:
+        yield responder
 
 
 def read_until(read: Callable[[float], bytes], end: bytes, timeout: float = 2.0) -> bytes:
     """Read from a transport until the data ends with ``end``."""
-    import time
-
     deadline = time.monotonic() + timeout
     out = b""
     while not out.endswith(end):
         left = deadline - time.monotonic()
         assert left > 0, f"got {out!r}, waiting for {end!r}"
         out += read(left)
+    return out
+
+
+def read_exactly(read: Callable[[float], bytes], n: int, timeout: float = 5.0) -> bytes:
+    """Read from a transport until ``n`` bytes came (fails the test on more, or on timeout)."""
+    deadline = time.monotonic() + timeout
+    out = b""
+    while len(out) < n:
+        left = deadline - time.monotonic()
+        assert left > 0, f"got {len(out)} of {n} bytes"
+        out += read(left)
+    assert len(out) == n, f"got {len(out)} bytes, wanted {n}"
     return out
