@@ -17,8 +17,15 @@ import numpy as np
 import numpy.typing as npt
 
 from galil import predict
-from galil.errors import ContourUnderrunError, GalilError, GalilTimeoutError, InvalidArgument
+from galil.errors import (
+    ContourUnderrunError,
+    GalilError,
+    GalilTimeoutError,
+    InvalidArgument,
+    LimitError,
+)
 from galil.link import CommandLink
+from galil.models import INT32_MAX
 from galil.motion import Display
 from galil.predict import Profile
 from galil.predict.checks import check_contour
@@ -52,6 +59,15 @@ def increments(path: npt.ArrayLike, *, start: int = 0) -> npt.NDArray[np.int64]:
         raise InvalidArgument(f"path must be 1-D, got shape {x.shape}")
     if not np.all(np.isfinite(x)):
         raise InvalidArgument("path holds NaN or infinity")
+    if x.size and float(np.max(np.abs(x))) > INT32_MAX:
+        i = int(np.argmax(np.abs(x)))
+        raise LimitError(
+            f"path point {i} ({x[i]:.6g} counts) is outside the 32-bit position range",
+            name="position",
+            value=float(x[i]),
+            limit=INT32_MAX,
+            sample=i,
+        )
     if int(start) != start:
         raise InvalidArgument(f"start must be a whole count, got {start!r}")
     ends = _round(x)

@@ -1,0 +1,210 @@
+"""The link never loses step: whatever is raised in the middle of an exchange (Ctrl-C, an
+OverflowError, a failing wire hook), the next exchange resynchronises first, so no command
+ever takes another's reply.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import galil
+from galil.errors import GalilError, ProtocolError
+from galil.sim.clock import ManualClock
+from galil.sim.controller import SimController
+from galil.sim.link import SimLink
+
+
+class Interrupt(BaseException):
+    """Stands for Ctrl-C (a BaseException, like KeyboardInterrupt)."""
+
+
+@dataclass
+class Tripwire:
+    """A transport around the simulator's link that raises at the n-th read or write."""
+
+    inner: SimLink
+    at: int = -1  # which call raises (-1: none)
+    after: bool = False  # raise after the call did its work (bytes written / read and lost)
+    error: type[BaseException] = Interrupt
+    calls: int = 0
+    secondary: None = None
+    kind: str = "sim"
+    log: list[str] = field(default_factory=list)
+
+    def _trip(self) -> bool:
+        hit = self.calls == self.at
+        self.calls += 1
+        return hit
+
+    def write(self, data: bytes) -> None:
+        hit = self._trip()
+        if hit and not self.after:
+            raise self.error("interrupted before the write")
+        self.inner.write(data)
+        self.log.append(data.decode("latin-1"))
+        if hit:
+            raise self.error("interrupted after the write")
+
+    def read(self, timeout: float) -> bytes:
+        hit = self._trip()
+        if hit and not self.after:
+            raise self.error("interrupted before the read")
+        data = self.inner.read(timeout)
+        if hit:
+            raise self.error("interrupted after the read (its bytes are lost)")
+        return data
+
+    def controller_time(self) -> float:
+        return self.inner.controller_time()
+
+    def let_time_pass(self, seconds: float) -> None:
+        self.inner.let_time_pass(seconds)
+
+    def close(self) -> None:
+        self.inner.close()
+
+
+@pytest.fixture
+def wired() -> Iterator[tuple[galil.Controller, Tripwire]]:
+    wire = Tripwire(SimLink(SimController("DMC-4040", ManualClock())))
+    with galil.connect(wire, timeout=0.5) as dmc:  # type: ignore[arg-type]
+        yield dmc, wire
+
+
+def _pairs_all_right(dmc: galil.Controller, n: int = 100) -> None:
+    for i in range(n):
+        dmc.command(f"gv={i}")
+        assert dmc.query_number("MG gv") == i
+
+
+EXCHANGES = [
+    lambda dmc: dmc.command("MG 11"),
+    lambda dmc: dmc.query_operands(["_TPA", "_TPB", "_RPA"]),
+    lambda dmc: dmc.command_line(["gv=5", "MG gv", "MG TIME"]),
+    lambda dmc: dmc.command("XX"),  # refused: the TC1 question is part of the exchange
+]
+
+
+@settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    which=st.integers(0, len(EXCHANGES) - 1),
+    at=st.integers(0, 5),
+    after=st.booleans(),
+    error=st.sampled_from([Interrupt, KeyboardInterrupt, OverflowError, RuntimeError]),
+)
+def test_an_interruption_anywhere_leaves_every_later_reply_right(
+    wired: tuple[galil.Controller, Tripwire],
+    which: int,
+    at: int,
+    after: bool,
+    error: type[BaseException],
+) -> None:
+    dmc, wire = wired
+    wire.calls, wire.at, wire.after, wire.error = 0, at, after, error
+    with contextlib.suppress(error, GalilError):
+        EXCHANGES[which](dmc)
+    wire.at = -1
+    _pairs_all_right(dmc, 20)
+
+
+def test_ctrl_c_between_write_and_read_cannot_shift_replies(
+    wired: tuple[galil.Controller, Tripwire],
+) -> None:
+    dmc, wire = wired
+    dmc.command("v1=1;v2=2", allow_compound=True)
+    wire.calls, wire.at, wire.after = 0, 1, False  # the read of "MG v1"
+    with pytest.raises(Interrupt):
+        dmc.query_number("MG v1")
+    wire.at = -1
+    assert dmc.query_number("MG v2") == 2  # not v1's late reply
+    assert any("out of step" in r for r in dmc.recent)
+    _pairs_all_right(dmc)
+
+
+def test_a_failing_wire_hook_cannot_shift_replies(
+    wired: tuple[galil.Controller, Tripwire],
+) -> None:
+    dmc, _ = wired
+    calls = []
+
+    def hook(direction: str, data: bytes) -> None:
+        calls.append(direction)
+        if direction == "in" and len(calls) == 2:
+            raise OverflowError("a user's hook failed")
+
+    remove = dmc.wire_log.add(hook)
+    with pytest.raises(OverflowError):
+        dmc.query_number("MG 1")
+    remove()
+    _pairs_all_right(dmc)
+
+
+def test_an_infinite_timeout_is_refused_before_the_wire(
+    wired: tuple[galil.Controller, Tripwire],
+) -> None:
+    dmc, wire = wired
+    before = len(wire.log)
+    for bad in (float("inf"), float("nan"), -1, 0, True, "1"):
+        with pytest.raises(galil.InvalidArgument):
+            dmc.command("MG 1", timeout=bad)  # type: ignore[arg-type]
+    with pytest.raises(galil.InvalidArgument):
+        dmc.sleep(float("inf"))
+    assert len(wire.log) == before
+    with pytest.raises(galil.InvalidArgument):
+        galil.connect("sim://DMC-4040", timeout=float("inf"))
+
+
+@dataclass
+class StrayQuestion:
+    """A fault hook: a stray '?' before the reply of every command line that holds ``mark``."""
+
+    mark: bytes
+    armed: bool = False
+
+    def __call__(self, data: bytes) -> list[tuple[float, bytes]]:
+        if self.armed:
+            self.armed = False
+            return [(0.0, b"?"), (0.0, data)]
+        return [(0.0, data)]
+
+
+def test_a_stray_question_mark_is_never_reported_as_a_rejection() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    stray = StrayQuestion(b"BG")
+    link = SimLink(sim, faults=stray)
+    with galil.connect(link, timeout=0.5) as dmc:
+        dmc.command("SPA=10000;PRA=5000", allow_compound=True)
+        stray.armed = True
+        with pytest.raises(ProtocolError, match="may have executed") as info:
+            dmc.command("BGA")
+        assert not isinstance(info.value, galil.CommandError)
+        assert dmc.query_number("MG _BGA") == 1  # it did run
+        _pairs_all_right(dmc, 10)
+
+
+def test_a_400_digit_reply_is_a_protocol_error_not_an_overflow() -> None:
+    huge = {"armed": False}
+
+    def replace(data: bytes) -> list[tuple[float, bytes]]:
+        if huge["armed"]:
+            huge["armed"] = False
+            return [(0.0, b" " + b"9" * 400 + b"\r\n:")]
+        return [(0.0, data)]
+
+    sim = SimController("DMC-4040", ManualClock())
+    with galil.connect(SimLink(sim, faults=replace), timeout=0.5) as dmc:
+        huge["armed"] = True
+        with pytest.raises(ProtocolError, match="range"):
+            dmc.query_number("MG 1")
+        huge["armed"] = True
+        with pytest.raises(ProtocolError):
+            dmc.query_operands(["_TPA"])
+        _pairs_all_right(dmc, 5)
