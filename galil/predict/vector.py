@@ -29,6 +29,7 @@ from galil.models import ModelSpec
 from galil.predict.engine import AxisProfiler
 from galil.predict.path import (
     ANGLE_RESOLUTION,
+    Arc,
     LinearInterp,
     PathLayout,
     PathSegment,
@@ -58,7 +59,9 @@ def _refuse(code: int, command: str) -> CommandError:
 
 
 def _command_of(segment: PathSegment) -> str:
-    return "LI" if isinstance(segment, LinearInterp) else type(segment).__name__.upper()[:2]
+    if isinstance(segment, LinearInterp):
+        return "LI"
+    return "CR" if isinstance(segment, Arc) else "VP"
 
 
 class VectorProfiler:
@@ -223,8 +226,7 @@ class VectorProfiler:
     def end(self) -> None:
         """``VE``/``LE``: the sequence ends with the segments given so far."""
         self._ended = True
-        if self.moving and not self._path.moving and self._path.reference == self.length:
-            self._finish(COMPLETED)
+        self._settle()
 
     def begin(
         self,

@@ -281,36 +281,94 @@ def _names(axes: Sequence[str] | str | None, n: int) -> list[str]:
     return names
 
 
+def _rate_error(
+    profile: VectorProfile, seg: int, k: int, axis: str, what: str, value: float, limit: float
+) -> LimitError:
+    unit = "counts/s" if what == "speed" else "counts/s²"
+    return LimitError(
+        f"segment {seg}: axis {axis} {what} {value:.6g} {unit} at t={profile.t[k]:.6g} s"
+        f" (sample {k}) is beyond its limit {limit:g}",
+        name=f"axis {what}",
+        value=value,
+        limit=limit,
+        time=float(profile.t[k]),
+        sample=k,
+        axis=axis,
+    )
+
+
 def _rate_checks(
     profile: VectorProfile,
     names: list[str],
     speed_limits: list[float | None],
     accel_limits: list[float | None],
-    model: str,
 ) -> None:
     vel, acc = axis_rates(profile)
-    for what, values, limits, unit in (
-        ("speed", vel, speed_limits, "counts/s"),
-        ("acceleration", acc, accel_limits, "counts/s²"),
-    ):
+    for what, values, limits in (("speed", vel, speed_limits), ("acceleration", acc, accel_limits)):
         for i, limit in enumerate(limits):
             if limit is None:
                 continue
             over = np.flatnonzero(np.abs(values[i]) > limit * (1 + 1e-9))
             if over.size:
                 k = int(over[0])
-                seg = int(profile.segment[k])
-                raise LimitError(
-                    f"segment {seg}: axis {names[i]} {what} {abs(values[i][k]):.6g} {unit} at"
-                    f" t={profile.t[k]:.6g} s (sample {k}) is beyond its limit {limit:g}",
-                    name=f"axis {what}",
-                    value=float(abs(values[i][k])),
-                    limit=limit,
-                    time=float(profile.t[k]),
-                    sample=k,
-                    axis=names[i],
-                    model=model,
-                )
+                value = float(abs(values[i][k]))
+                raise _rate_error(profile, int(profile.segment[k]), k, names[i], what, value, limit)
+    _short_segment_checks(profile, names, speed_limits, accel_limits)
+
+
+def _arc_extremes(theta0: float, sweep: float) -> tuple[FloatArray, FloatArray]:
+    """Largest |component| per axis of an arc's unit tangent and unit normal."""
+    lo, hi = sorted((theta0, theta0 + sweep))
+    quarters = np.arange(math.ceil(lo / 90.0), math.floor(hi / 90.0) + 1) * 90.0
+    phi = np.radians(np.concatenate([np.linspace(lo, hi, 65), quarters]))
+    c, s = np.abs(np.cos(phi)).max(), np.abs(np.sin(phi)).max()
+    return np.array([s, c]), np.array([c, s])
+
+
+def _short_segment_checks(
+    profile: VectorProfile,
+    names: list[str],
+    speed_limits: list[float | None],
+    accel_limits: list[float | None],
+) -> None:
+    """Segments the path crosses in a sample or two: bound them over the samples around them.
+
+    The per-sample check sees only the samples; a short arc crossed between two samples would
+    escape it. Here each such segment's largest tangent and normal components are combined
+    with the speed and acceleration of the samples on either side (a conservative bound).
+    """
+    lay = profile.layout
+    v = profile.speed
+    a = np.zeros_like(v)
+    a[:-1] = np.abs(np.diff(v)) / profile.sample_period
+    for i in range(len(lay)):
+        k0 = max(0, int(np.searchsorted(profile.path, lay.bounds[i], side="right")) - 1)
+        k1 = min(profile.samples, int(np.searchsorted(profile.path, lay.bounds[i + 1])))
+        if k1 - k0 > 3:
+            continue  # samples inside the segment: the per-sample check covered it
+        ks = np.arange(k0, k1 + 1)
+        if lay.arc[i]:
+            t_max, n_max = _arc_extremes(float(lay.theta0[i]), float(lay.sweep[i]))
+            curvature = 1.0 / float(lay.radius[i])
+        else:
+            d = lay.end[i] - lay.start[i]
+            norm = float(np.linalg.norm(d))
+            t_max = np.abs(d) / norm if norm > 0 else np.zeros_like(d)
+            n_max, curvature = np.zeros_like(d), 0.0
+        for j, name in enumerate(names):
+            speeds = v[ks] * t_max[j]
+            accels = a[ks] * t_max[j] + v[ks] ** 2 * curvature * n_max[j]
+            for what, values, limit in (
+                ("speed", speeds, speed_limits[j]),
+                ("acceleration", accels, accel_limits[j]),
+            ):
+                if limit is None:
+                    continue
+                over = np.flatnonzero(values > limit * (1 + 1e-9))
+                if over.size:
+                    k = int(ks[over[0]])
+                    value = float(values[over[0]])
+                    raise _rate_error(profile, i, k, name, what, value, limit)
 
 
 def _limit_checks(
@@ -411,7 +469,6 @@ def check_vector(
         names,
         _per_axis(speed_limits, n, float(spec.sp_max)),
         _per_axis(accel_limits, n, float(spec.ac_max)),
-        spec.name,
     )
     _limit_checks(
         profile, names, _per_axis(forward_limits, n, None), _per_axis(backward_limits, n, None)
