@@ -327,7 +327,7 @@ def test_a_streamed_sequence_is_chunking_independent_and_ends_on_its_end_point(
         eng = VectorProfiler()
         eng.extend(segs[:split])
         eng.begin(80_000, 1_024_000, 1_024_000)
-        out = [eng.advance(at)]
+        out = [np.zeros((2, 1), dtype=np.int64), eng.advance(at)]
         eng.extend(segs[split:])
         eng.end()
         i = 0
