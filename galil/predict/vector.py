@@ -580,6 +580,12 @@ def vector(
     eng.extend(segs)
     eng.end()
     eng.begin(speed, accel, decel, smoothing)
+    return _predict(eng, (speed, accel, decel, smoothing))
+
+
+def _predict(eng: VectorProfiler, settings: tuple[float, float, float, float]) -> VectorProfile:
+    """Step a begun, ended sequence to its end and collect its profile."""
+    ts = eng.sample_period
     plan = eng._path.plan
     assert plan is not None
     first = np.array(eng.position, dtype=np.int64)[:, None]
@@ -599,7 +605,7 @@ def vector(
         layout=layout,
         shape=plan.shape,
         peak_speed=plan.peak / ts,
-        speed_settings=(speed, accel, decel, smoothing),
+        speed_settings=settings,
         stop_code=eng.stop_code if eng.stop_code is not None else COMPLETED,
     )
 

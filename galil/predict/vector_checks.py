@@ -141,6 +141,28 @@ class _Static:
         )
 
 
+def _static_for(segs: Sequence[PathSegment], q: QuantisedVector) -> _Static:
+    """Segment lengths and starts along the path, and the plan's units, for the checks."""
+    for seg in segs:
+        path_kind(seg)  # refuses anything that is not a segment
+    lengths = [float(seg.length) for seg in segs]
+    starts = np.concatenate([[0.0], np.cumsum(lengths)[:-1]]).tolist()
+    ts = q.sample_period
+    assert q.speed is not None
+    assert q.accel is not None
+    assert q.decel is not None
+    return _Static(
+        lengths=lengths,
+        starts=[float(x) for x in starts],
+        total=float(round(math.fsum(lengths))),
+        v=q.speed * ts,
+        a=q.accel * ts * ts,
+        d=q.decel * ts * ts,
+        ts=ts,
+        model=q.model.name,
+    )
+
+
 def _static_checks(
     segs: Sequence[PathSegment], st: _Static, spec: ModelSpec, streaming: bool
 ) -> None:
@@ -442,37 +464,18 @@ def check_vector(
     segs = tuple(segments)
     if not segs:
         raise InvalidArgument("a vector sequence needs at least one segment")
-    for seg in segs:
-        path_kind(seg)  # a TypeError-free refusal of anything that is not a segment
-    lengths = [seg.length for seg in segs]
-    starts = np.concatenate([[0.0], np.cumsum(lengths)[:-1]]).tolist()
-    ts = q.sample_period
-    st = _Static(
-        lengths=[float(x) for x in lengths],
-        starts=[float(x) for x in starts],
-        total=float(round(math.fsum(lengths))),
-        v=q.speed * ts,
-        a=q.accel * ts * ts,
-        d=q.decel * ts * ts,
-        ts=ts,
-        model=spec.name,
-    )
+    st = _static_for(segs, q)
+    n = len(segs[0].increments) if isinstance(segs[0], LinearInterp) else 2
+    names = _names(axes, n)
+    fast = (_per_axis(speed_limits, n, spec.sp_max), _per_axis(accel_limits, n, spec.ac_max))
+    fl, bl = _per_axis(forward_limits, n, None), _per_axis(backward_limits, n, None)
     _static_checks(segs, st, spec, streaming)
     profile = vector(
         segs, q.speed, q.accel, q.decel, start=start, smoothing=smoothing, model=spec, tm=tm
     )
     _coordinate_checks(profile)
-    n = profile.axes
-    names = _names(axes, n)
-    _rate_checks(
-        profile,
-        names,
-        _per_axis(speed_limits, n, float(spec.sp_max)),
-        _per_axis(accel_limits, n, float(spec.ac_max)),
-    )
-    _limit_checks(
-        profile, names, _per_axis(forward_limits, n, None), _per_axis(backward_limits, n, None)
-    )
+    _rate_checks(profile, names, *fast)
+    _limit_checks(profile, names, fl, bl)
     return profile
 
 
