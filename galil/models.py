@@ -67,6 +67,26 @@ class ModelSpec:
         label_length: characters of a program label after ``#``.
         variable_length: characters of a variable or array name.
         threads: program threads (``XQ``).
+        vector_buffer: LM/VM segments the coordinated-motion buffer holds (``_LMS`` when
+            empty): 511 (EPICS ``GalilController.h``; Galil 2004 catalogue "up to 511 LI
+            segments"); assumed the same on every family.
+        vs_max: largest VS in counts/s; ``None`` means ``sp_max`` (assumption). VS has SP's
+            resolution (QCoDeS 41x3: 2 ... 15,000,000 in steps of 2).
+        va_max: largest VA/VD in counts/s²; ``None`` means ``ac_max``. VA/VD round down to
+            ``ac_resolution`` like AC/DC (QCoDeS 41x3: 1024 ... 1,073,740,800 step 1024).
+        li_max: largest |LI| increment per axis and segment (EPICS: 8,388,607 = 2**23 - 1).
+        cr_radius: CR radius range in counts (DMC-1400 command reference: 10 ... 6,000,000).
+        cr_angle_max: largest |θ| and |Δθ| of CR in degrees (DMC-1400 reference: 32,000).
+        cr_angle_resolution: CR angle step in degrees (user manuals: 1/256 degree).
+        cr_arc_max: largest |r·Δθ| of one CR, Δθ in degrees (DMC-1400 reference: 4.5e8).
+        vector_distance_max: longest total sequence in counts (TC 31: "> 2 billion").
+        vector_segment_min: shortest segment in counts before TC 30 "sequence segment too
+            short"; 1 count is an assumption (no source gives the threshold).
+        vt: whether the family has VT (vector smoothing). Sourced for the DMC-2x00 series
+            (BLISS) and listed beside IT on the DMC-1000 and Optima references; the 40x0 user
+            manual says IT smooths VM/LM moves instead, assumed for the Accelera families.
+        gr_max: largest |GR| gear ratio (40x0 and 18x6 references: ±127).
+        gr_resolution: GR step (40x0 reference: 1/65536).
         assumptions: plain-language list of values that are guesses, and why.
     """
 
@@ -97,6 +117,20 @@ class ModelSpec:
     label_length: int = 7  # "#" and up to seven characters (40x0 user manual)
     variable_length: int = 8  # up to eight characters, the first a letter
     threads: int = 8  # EPICS: 8 by default, DMC-1xxx 2, DMC-3xxxx 6, RIO 4
+    # Coordinated motion (LM/LI, VM/VP/CR) and gearing (GA/GR); sources in the docstring.
+    vector_buffer: int = 511
+    vs_max: int | None = None
+    va_max: int | None = None
+    li_max: int = 8_388_607
+    cr_radius: tuple[float, float] = (10.0, 6_000_000.0)
+    cr_angle_max: float = 32_000.0
+    cr_angle_resolution: float = 1 / 256
+    cr_arc_max: float = 4.5e8
+    vector_distance_max: int = 2_000_000_000
+    vector_segment_min: float = 1.0
+    vt: bool = False
+    gr_max: float = 127.0
+    gr_resolution: float = 1 / 65536
     assumptions: tuple[str, ...] = ()
 
     @property
@@ -171,6 +205,7 @@ _add(
         transports=frozenset({"serial"}),
         qz=None,
         threads=2,
+        vt=True,
         assumptions=(
             "4 axes: the DMC-1500 manual excerpt names X Y Z W; the axis count is not sourced",
             "serial only: the DMC-1500 is a stand-alone RS-232 controller in the sources",
@@ -194,6 +229,7 @@ _add(
         transports=frozenset({"pci"}),
         qz=(8, 24, 16, 28),
         threads=2,
+        vt=True,
         assumptions=(
             "ISA/PCI bus card: reached through a Galil driver device node",
             "data record like the 2x00 (QZ 8,24,16,28): the 1700 manual shares that layout",
@@ -218,6 +254,7 @@ _add(
         transports=frozenset({"pci"}),
         qz=(4, 24, 16, 26),
         threads=2,
+        vt=True,
         assumptions=(
             "CD range ±32,000 from the seed manual excerpt",
             "contour buffer of 1: the seed shows WC pacing one segment at a time",
@@ -263,6 +300,7 @@ _add(
         transports=_ETH_USB,
         qz=(8, 24, 16, 28),
         dr_range=(8, 30000),
+        vt=True,
         assumptions=(
             "contour buffer 511 as on Accelera-class firmware: not confirmed for 21x3",
             "DR minimum 8 samples on the Econo 21x3 (EPICS: 8 ms minimum update period)",
@@ -319,6 +357,7 @@ _add(
             "axes": "ABCD",
             "qz": (4, 52, 26, 36),
             "dr_range": (8, 30000),
+            "vs_max": 15_000_000,  # QCoDeS dmc_41x3.py: VS 2 ... 15,000,000 step 2
         }
     ),
     "DMC-41x3",

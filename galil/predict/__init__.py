@@ -28,6 +28,7 @@ from galil.predict.checks import (
 )
 from galil.predict.contour import contour
 from galil.predict.engine import AxisProfiler, KinematicPlan
+from galil.predict.gearing import GearFollower, gear, gear_profile, quantise_ratio
 from galil.predict.jog import jog
 from galil.predict.move import (
     Event,
@@ -42,30 +43,52 @@ from galil.predict.move import (
     plan_move,
     speed_schedule,
 )
+from galil.predict.path import Arc, Line, LinearInterp, PathSegment, VectorPath
 from galil.predict.profile import MultiProfile, Profile, together
 from galil.predict.smoothing import quantise_it
+from galil.predict.vector import VectorProfile, VectorProfiler, vector
+from galil.predict.vector_checks import (
+    QuantisedVector,
+    axis_rates,
+    check_vector,
+    quantise_vector,
+    segment_deadlines,
+)
 
 __all__ = [
+    "Arc",
     "AxisProfiler",
     "Checked",
     "Event",
+    "GearFollower",
     "Increment",
     "KinematicPlan",
+    "Line",
+    "LinearInterp",
     "MovePlan",
     "MultiProfile",
+    "PathSegment",
     "Profile",
     "Quantised",
+    "QuantisedVector",
     "ScheduleError",
     "SetAccel",
     "SetSpeed",
     "SpeedSchedule",
     "Stop",
     "StreamReport",
+    "VectorPath",
+    "VectorProfile",
+    "VectorProfiler",
+    "axis_rates",
     "check",
     "check_contour",
     "check_parameter",
     "check_soft_limits",
+    "check_vector",
     "contour",
+    "gear",
+    "gear_profile",
     "jog",
     "move",
     "plan_move",
@@ -73,8 +96,12 @@ __all__ = [
     "quantise_accel",
     "quantise_it",
     "quantise_limits",
+    "quantise_ratio",
     "quantise_speed",
     "quantise_value",
+    "quantise_vector",
+    "segment_deadlines",
     "speed_schedule",
     "together",
+    "vector",
 ]
