@@ -65,7 +65,11 @@ class FakeGalil:
             return b":"
         if "=" in cmd and cmd[:1].isalpha():
             name, value = cmd.split("=", 1)
-            self.variables[name] = float(value)
+            try:
+                self.variables[name] = float(value)
+            except ValueError:
+                self.tc = 4  # operand error, as a controller would say
+                return b"?"
             return b":"
         if cmd == "\\":
             self.tc = 1
