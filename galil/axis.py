@@ -19,6 +19,7 @@ from galil.models import INT32_MAX, INT32_MIN
 from galil.motion import Display, MotionTracker, MoveHandle, stop_axes
 from galil.moves import AxisMove, execute_move, increment, jog, speed_schedule
 from galil.protocol import commands as cmds
+from galil.routines import Routines
 from galil.units import Scale, counts_or_plain, is_quantity
 
 __all__ = ["OVERRIDES", "Axis", "check_overrides", "resolve_moves", "user_units"]
@@ -54,9 +55,12 @@ class Axis:
     the axis has a scale, counts otherwise; setters validate and quantise before sending.
     """
 
-    def __init__(self, link: CommandLink, letter: str, tracker: MotionTracker) -> None:
+    def __init__(
+        self, link: CommandLink, letter: str, tracker: MotionTracker, routines: Routines
+    ) -> None:
         self._link = link
         self._tracker = tracker
+        self._routines = routines
         self.letter = letter
         self._scale: Scale | None = None
 
@@ -400,7 +404,8 @@ class Axis:
             distance: total relative move.
             changes: ``[(at, new_speed), ...]``, ``at`` measured from the start of the move.
             speed: initial speed (default: the axis's SP).
-            label: program label to download (without ``#``, up to 7 characters).
+            label: the routine's label (without ``#``, up to 7 characters); the routine is
+                installed beside the program in memory, which stays as it was.
 
         Raises:
             ScheduleError: a change point the profiler cannot honour (nothing is sent).
@@ -419,6 +424,7 @@ class Axis:
             return speed_schedule(
                 self._link,
                 self._tracker,
+                self._routines,
                 self.letter,
                 d,
                 pairs,

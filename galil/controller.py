@@ -35,8 +35,10 @@ from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
 from galil.protocol.session import Completed
 from galil.records import Records, RecordStream
+from galil.routines import Routines
 from galil.transport import Transport, open_transport
 from galil.units import path_to_counts
+from galil.watchdog import Watchdog, check_watchdog_args
 
 __all__ = ["CLIENT_OPTIONS", "Controller", "connect"]
 
@@ -110,6 +112,8 @@ class Controller:
         )
         self.records_room = Records(self.link)
         self.tracker = MotionTracker()
+        self.routines = Routines(self.link)
+        self._watchdogs: list[Watchdog] = []
         self.identity: Identity | None = None
         self.echo = False
         self._axes: dict[str, Axis] | None = None
@@ -156,9 +160,16 @@ class Controller:
         background thread and no controller handle outlives it.
         """
         with self._life:
-            self.records_room.close_all()
-            self.link.detach()
-            self.messages_room.stop()
+            self._close_parts(keep_watchdogs=False)
+
+    def _close_parts(self, *, keep_watchdogs: bool) -> None:
+        if not keep_watchdogs:
+            for dog in self._watchdogs:
+                dog.stop()  # leaving on purpose is not dying: the routine is halted
+            self._watchdogs.clear()
+        self.records_room.close_all()
+        self.link.detach()
+        self.messages_room.stop()
 
     def reconnect(self) -> None:
         """Close the link and open it again (same address and options), handshake included.
@@ -178,8 +189,9 @@ class Controller:
         with self._life:
             if self._generation != seen and self.link.is_open and not self.link.dead:
                 return  # another thread reconnected while this one waited
-            self.close()
-            self._open(None)
+            with self.link.reopening():  # commands meanwhile wait for the new link
+                self._close_parts(keep_watchdogs=True)
+                self._open(None)
 
     @property
     def closed(self) -> bool:
@@ -352,7 +364,9 @@ class Controller:
     def axes(self) -> dict[str, Axis]:
         """The model's axes by letter (``controller.axes["A"]``; also ``controller.A``)."""
         if self._axes is None:
-            self._axes = {a: Axis(self.link, a, self.tracker) for a in self.model.axes}
+            self._axes = {
+                a: Axis(self.link, a, self.tracker, self.routines) for a in self.model.axes
+            }
         return self._axes
 
     def axis(self, name: str) -> Axis:
@@ -448,6 +462,31 @@ class Controller:
         letters = self.model.axes if axes is None else self._letters(axes)
         reopen = self.reconnect if self._factory is not None else None
         return motion_guard(self.link, self.tracker, letters, reconnect=reopen)
+
+    def watchdog(
+        self, timeout: float, *, thread: int | None = None, interval: float | None = None
+    ) -> Watchdog:
+        """Start a dead-man switch: the controller stops every axis (``ST``) when the host has
+        been silent for ``timeout`` seconds (see :mod:`galil.watchdog`).
+
+        Args:
+            timeout: seconds of controller time without a heartbeat before motion stops.
+            thread: the program thread for the routine (default: the last one); a thread that
+                runs a program is refused.
+            interval: seconds between heartbeats (default: a quarter of ``timeout``).
+
+        Returns:
+            The running :class:`~galil.watchdog.Watchdog` (``stop()``, ``fired``, a context
+            manager). :meth:`close` stops it: leaving on purpose is not dying.
+
+        Raises:
+            InvalidArgument: a bad timeout, interval or thread, a busy thread, a user program
+                running while the routine must be installed.
+        """
+        t, n, every = check_watchdog_args(self.link, timeout, thread, interval)
+        dog = Watchdog(self.link, self.routines, t, thread=n, interval=every).start()
+        self._watchdogs.append(dog)
+        return dog
 
     def contour(
         self,

@@ -287,6 +287,9 @@ class LinkCore:
         self._inbox: list[str] = []
         self.on_messages: Callable[[list[str]], None] | None = None
         self._restore: list[Command] = []
+        self._keepalive: tuple[Command, float] | None = None
+        self._reopened = threading.Event()  # cleared while a reconnect is under way
+        self._reopened.set()
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -323,6 +326,16 @@ class LinkCore:
         if self.transport is not None:
             with contextlib.suppress(GalilError, OSError):
                 self.transport.close()
+
+    def reopening(self) -> contextlib.AbstractContextManager[None]:
+        """A block in which the link is closed and opened again: commands wait for it."""
+        return _ReopenBlock(self._reopened)
+
+    def _await_reopen(self, t: float) -> None:
+        if not self._reopened.wait(t):
+            raise self.error(
+                GalilConnectionError, f"the link was being reopened and was not back within {t:g} s"
+            )
 
     def restore_on_close(self, command: Command) -> None:
         """Send ``command`` when the link closes (undo what connecting changed); last in, first."""
@@ -382,8 +395,18 @@ class LinkCore:
     # -- the exchange -----------------------------------------------------------------------
 
     def transact(self, batch: Sequence[Command], timeout: float | None) -> list[Completed]:
-        """Send ``batch`` (pipelined) under the lock; raise for the first rejected command."""
+        """Send ``batch`` (pipelined) under the lock; raise for the first rejected command.
+
+        While a reconnect is under way it waits for it (up to the timeout) instead of failing.
+        """
         t = self.timeout if timeout is None else check_timeout(timeout, self.timeout)
+        try:
+            return self._transact(batch, t)
+        except _ReopeningError:
+            self._await_reopen(t)
+            return self._transact(batch, t)
+
+    def _transact(self, batch: Sequence[Command], t: float) -> list[Completed]:
         try:
             with self._lock:
                 if not self._open or self._dead:
@@ -620,6 +643,8 @@ class LinkCore:
         return self.error(GalilConnectionError, f"{exc}; call reconnect() to open it again")
 
     def _closed_error(self) -> GalilConnectionError:
+        if not self._reopened.is_set():
+            return _ReopeningError("the link is being reopened")
         if self._dead:
             return self.error(
                 GalilConnectionError,
@@ -695,15 +720,36 @@ class LinkCore:
         return source.controller_time() if source is not None else _monotonic()
 
     def pause(self, seconds: float) -> None:
-        """Let ``seconds`` pass: sleep, or let a simulator's clock run (under the lock)."""
+        """Let ``seconds`` pass: sleep, or let a simulator's clock run (under the lock).
+
+        With a keepalive set, a simulator's time passes in slices with the keepalive command
+        between them, as a host's heartbeat thread would send it in real time.
+        """
         source = self._clock_source
         if source is None:
             time.sleep(seconds)
             return
         with self._lock:
-            source.let_time_pass(seconds)
+            beat = self._keepalive
+            if beat is None:
+                source.let_time_pass(seconds)
+            else:
+                left = seconds
+                while left > 0:
+                    step = min(left, beat[1])
+                    source.let_time_pass(step)
+                    left -= step
+                    self._roundtrip((beat[0],), self.timeout)
         if self._inbox:
             self._flush()
+
+    def set_keepalive(self, command: Command | None, every: float = 0.0) -> None:
+        """A command a heartbeat sends every ``every`` seconds (``None``: no keepalive).
+
+        The link only uses it to slice a simulator's pauses; real-time heartbeats are the
+        caller's thread (see :mod:`galil.watchdog`).
+        """
+        self._keepalive = None if command is None else (command, every)
 
     @property
     def simulated_time(self) -> bool:
@@ -758,33 +804,38 @@ class Link(LinkCore):
         t = self.timeout if timeout is None else check_timeout(timeout, self.timeout)
         lock = self._lock
         # acquire/release rather than `with`: half the cost on the hot path (~0.3 us).
-        lock.acquire()
         try:
-            if not self._open or self._dead:
-                raise self._closed_error()
-            if (
-                cmd.parts
-                or self._session.out_of_step
-                or self._clock_source is not None
-                or self.wire_log.hooks
-                or _WIRE_CACHE.get(_DEBUG, True)  # unknown: take the general path
-            ):
-                done = self._roundtrip((cmd,), t)
-            else:
-                reply = self._quick(cmd, t)
-                if type(reply) is str:
-                    return reply
-                done = reply  # type: ignore[assignment]
-            if len(done) == 1 and done[0].ok:
-                return done[0].text
-            for d in done:
-                if not d.ok:
-                    raise self._explain(d, t)
-        finally:
-            lock.release()
-            if self._inbox:
-                self._flush()
-        return "\r\n".join(d.text for d in done if d.text)
+            lock.acquire()
+            try:
+                if not self._open or self._dead:
+                    raise self._closed_error()
+                if (
+                    cmd.parts
+                    or self._session.out_of_step
+                    or self._clock_source is not None
+                    or self.wire_log.hooks
+                    or _WIRE_CACHE.get(_DEBUG, True)  # unknown: take the general path
+                ):
+                    done = self._roundtrip((cmd,), t)
+                else:
+                    reply = self._quick(cmd, t)
+                    if type(reply) is str:
+                        return reply
+                    done = reply  # type: ignore[assignment]
+                if len(done) == 1 and done[0].ok:
+                    return done[0].text
+                for d in done:
+                    if not d.ok:
+                        raise self._explain(d, t)
+            finally:
+                lock.release()
+                if self._inbox:
+                    self._flush()
+            return "\r\n".join(d.text for d in done if d.text)
+        except _ReopeningError:
+            # A reconnect is under way: wait for it, then send as if nothing happened.
+            self._await_reopen(t)
+            return self.command(text, timeout=timeout, allow_compound=allow_compound)
 
     def _quick(self, cmd: Command, t: float) -> str | list[Completed]:
         """One command, no hooks, a real link (lock held): the usual exchange, inlined.
@@ -917,6 +968,21 @@ class Link(LinkCore):
     def query_ints(self, names: Sequence[str], *, timeout: float | None = None) -> list[int]:
         """:meth:`query_operands`, each value rounded to an integer."""
         return [round(v) for v in self.query_operands(names, timeout=timeout)]
+
+
+class _ReopeningError(GalilConnectionError):
+    """Raised inside the link while a reconnect is under way; the caller waits and retries."""
+
+
+class _ReopenBlock:
+    def __init__(self, event: threading.Event) -> None:
+        self._event = event
+
+    def __enter__(self) -> None:
+        self._event.clear()
+
+    def __exit__(self, *exc: object) -> None:
+        self._event.set()
 
 
 def read_reply(handle: Transport, command: bytes, timeout: float) -> str:

@@ -67,6 +67,7 @@ class ModelSpec:
         label_length: characters of a program label after ``#``.
         variable_length: characters of a variable or array name.
         threads: program threads (``XQ``).
+        program_lines: lines of program memory (``DL``).
         vector_buffer: LM/VM segments the coordinated-motion buffer holds (``_LMS`` when
             empty): 511 (EPICS ``GalilController.h``; Galil 2004 catalogue "up to 511 LI
             segments"); assumed the same on every family.
@@ -117,6 +118,8 @@ class ModelSpec:
     label_length: int = 7  # "#" and up to seven characters (40x0 user manual)
     variable_length: int = 8  # up to eight characters, the first a letter
     threads: int = 8  # EPICS: 8 by default, DMC-1xxx 2, DMC-3xxxx 6, RIO 4
+    # Assumption: 2000 program lines on every family (no per-family figure found yet).
+    program_lines: int = 2000
     # Coordinated motion (LM/LI, VM/VP/CR) and gearing (GA/GR); sources in the docstring.
     vector_buffer: int = 511
     vs_max: int | None = None

@@ -27,6 +27,7 @@ from galil.motion import (
 )
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
+from galil.routines import Routine, Routines
 
 __all__ = [
     "AxisMove",
@@ -316,6 +317,7 @@ def increment(
 def speed_schedule(
     link: CommandLink,
     tracker: MotionTracker,
+    routines: Routines,
     letter: str,
     distance: int,
     changes: Sequence[tuple[float, float]],
@@ -327,16 +329,18 @@ def speed_schedule(
     """Move ``letter`` by ``distance``, changing speed at distances from the start (counts).
 
     Every change point, the label and the program are validated before the first byte; the
-    program runs the schedule with ``AD`` trippoints.
+    program runs the schedule with ``AD`` trippoints on thread 0, installed beside the user's
+    program (:mod:`galil.routines`), never over it.
 
     Raises:
         ScheduleError: a change point the profiler cannot honour.
-        InvalidArgument: a bad label, the axis busy or its motor off.
+        InvalidArgument: a bad label, the axis busy or its motor off, a label the user's
+            program uses, or a user program running (the download would disturb it).
         LimitError: a path crossing a soft limit.
     """
     a = letter
     model = link.model
-    start = cmds.xq(f"#{label}")  # the label is checked before anything is read or sent
+    cmds.xq(f"#{label}")  # the label is checked before anything is read or sent
     rp, bg, sp0, ac, dc, it, bl, fl, mo = link.query_operands(
         [f"_{op}{a}" for op in ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")]
     )
@@ -355,9 +359,9 @@ def speed_schedule(
     )
     predict.check_soft_limits(schedule.profile, low=bl, high=fl, axis=a)
     program = _schedule_program(link, a, label, first, distance, schedule)
-    download = cmds.dl(program, model=model)  # validated whole before it goes out
-    link.exchange(download)
-    link.command_line([cmds.assign(SCHEDULE_BEGIN, -1), start])
+    routines.install(Routine(f"#{label}", tuple(program)))  # beside the user's program
+    link.command_line([cmds.assign(SCHEDULE_BEGIN, -1)])
+    routines.start(f"#{label}", 0)
     params = MoveParams(first, ac, dc, it)
     track = Track("schedule", round(rp), params, None, amount=distance, fixed=schedule.profile)
     handle = MoveHandle(

@@ -861,6 +861,11 @@ def assign(name: str, value: float) -> Command:
     return Command(f"{_variable_name(name)}={format_number(_number(value, name))}")
 
 
+def stamp(name: str) -> Command:
+    """``name=TIME``: store the controller's sample counter in a variable (a heartbeat)."""
+    return Command(f"{_variable_name(name)}=TIME")
+
+
 def _label(label: str) -> str:
     if not isinstance(label, str) or _LABEL.fullmatch(label) is None:
         raise InvalidArgument(

@@ -1,0 +1,178 @@
+"""A dead-man switch on the controller: motion stops when the host falls silent.
+
+``controller.watchdog(timeout)`` installs a small routine (``#GWDOG``, beside the user's
+program: see :mod:`galil.routines`) and runs it on a program thread. The host stamps a
+heartbeat variable with the controller's ``TIME`` every ``interval`` seconds; when the
+routine sees no heartbeat for ``timeout`` seconds of controller time (the host process died,
+the cable was pulled, the host froze), it stops every axis with ``ST`` (a deceleration at
+each axis's DC), sets ``gwfire=1`` and prints a message. A clean :meth:`Controller.close`
+halts the routine first: leaving on purpose is not dying.
+
+The routine takes one program thread (by default the last one, ``threads - 1``); it refuses
+a thread that runs a program, so it never takes one the user's programs need without saying so.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import threading
+from types import TracebackType
+
+from galil.errors import GalilConnectionError, GalilError, InvalidArgument
+from galil.link import CommandLink, Link
+from galil.models import INT32_MAX
+from galil.protocol import commands as cmds
+from galil.routines import Routine, Routines
+
+__all__ = ["LABEL", "Watchdog", "watchdog_routine"]
+
+_LOG = logging.getLogger("galil.watchdog")
+
+LABEL = "#GWDOG"
+_LOOP = "#GWDOGL"
+BEAT = "gwbeat"
+LIMIT = "gwlimit"
+FIRED = "gwfire"
+
+
+def watchdog_routine(axes: str) -> Routine:
+    """The routine: wait while the heartbeat is fresh, then stop ``axes`` and say so."""
+    lines = (
+        LABEL,
+        f"{FIRED}=0",
+        _LOOP,
+        "WT 2",
+        f"JP {_LOOP},(TIME-{BEAT})<{LIMIT}",
+        cmds.st(axes).text,
+        f"{FIRED}=1",
+        'MG "galil watchdog: no heartbeat, motion stopped"',
+        "EN",
+    )
+    return Routine(LABEL, lines)
+
+
+class Watchdog:
+    """The controller-side dead-man switch and the host's heartbeat. Build it with
+    :meth:`galil.Controller.watchdog`.
+
+    Attributes:
+        timeout: seconds of silence after which the controller stops the axes.
+        interval: seconds between heartbeats.
+        thread: the program thread the routine runs on.
+    """
+
+    def __init__(
+        self, link: Link, routines: Routines, timeout: float, *, thread: int, interval: float
+    ) -> None:
+        self._link = link
+        self._routines = routines
+        self.timeout = timeout
+        self.thread = thread
+        self.interval = interval
+        self._stop = threading.Event()
+        self._beater: threading.Thread | None = None
+        self._beat = cmds.stamp(BEAT)
+
+    def start(self) -> Watchdog:
+        """Install the routine, stamp the first heartbeat, run it, and keep beating.
+
+        Raises:
+            InvalidArgument: the thread is busy, or the routine cannot be installed.
+        """
+        link = self._link
+        samples = round(self.timeout / link.sample_period)
+        if not 2 <= samples <= INT32_MAX:
+            raise InvalidArgument(
+                f"watchdog timeout {self.timeout!r} s is {samples} samples; it needs 2 or more"
+            )
+        self._routines.install(watchdog_routine(link.model.axes))
+        link.command_line([cmds.assign(LIMIT, samples), self._beat])
+        self._routines.start(LABEL, self.thread)
+        link.set_keepalive(self._beat, self.interval)
+        self._stop.clear()
+        self._beater = threading.Thread(target=self._run, name="galil-watchdog", daemon=True)
+        self._beater.start()
+        return self
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.interval):
+            try:
+                self._link.command_line([self._beat])
+            except GalilConnectionError:
+                if not self._link.is_open:
+                    return  # closed for good
+            except GalilError as exc:  # a timeout or a refusal: the next beat tries again
+                _LOG.debug("watchdog heartbeat failed: %s", exc)
+
+    def stop(self) -> None:
+        """Stop beating and halt the routine (the axes are left as they are); idempotent."""
+        self._stop.set()
+        self._link.set_keepalive(None)
+        if self._beater is not None and self._beater is not threading.current_thread():
+            self._beater.join(timeout=2.0)
+        self._beater = None
+        if self._link.is_open and not self._link.dead:
+            with contextlib.suppress(GalilError):
+                self._routines.halt(self.thread)
+
+    @property
+    def running(self) -> bool:
+        """Whether the routine runs on the controller (``_XQn`` is not -1); one query."""
+        return round(self._link.query_operands([f"_XQ{self.thread}"])[0]) >= 0
+
+    @property
+    def fired(self) -> bool:
+        """Whether the routine stopped the axes for want of a heartbeat; one query."""
+        return bool(round(self._link.query_operands([FIRED])[0]))
+
+    def __enter__(self) -> Watchdog:
+        return self
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.stop()
+
+    def __repr__(self) -> str:
+        state = "beating" if self._beater is not None else "stopped"
+        return f"<Watchdog {self.timeout:g} s on thread {self.thread}, {state}>"
+
+
+def check_watchdog_args(
+    link: CommandLink, timeout: object, thread: object, interval: object
+) -> tuple[float, int, float]:
+    """Validate ``watchdog()`` arguments before anything is sent.
+
+    Raises:
+        InvalidArgument: a timeout that is not a positive finite number, a thread that does
+            not exist, an interval not shorter than the timeout.
+    """
+    if (
+        isinstance(timeout, bool)
+        or not isinstance(timeout, (int, float))
+        or not math.isfinite(timeout)
+        or timeout <= 0
+    ):
+        raise InvalidArgument(f"watchdog timeout must be positive seconds, not {timeout!r}")
+    model = link.model
+    chosen = model.threads - 1 if thread is None else thread
+    if isinstance(chosen, bool) or not isinstance(chosen, int) or not 0 <= chosen < model.threads:
+        raise InvalidArgument(
+            f"thread must be 0..{model.threads - 1} on {model.name}, not {thread!r}",
+            model=model.name,
+        )
+    every = float(timeout) / 4 if interval is None else interval
+    if (
+        isinstance(every, bool)
+        or not isinstance(every, (int, float))
+        or not 0 < every < float(timeout)
+    ):
+        raise InvalidArgument(
+            f"heartbeat interval must be positive and shorter than the timeout, not {interval!r}"
+        )
+    return float(timeout), chosen, float(every)
