@@ -252,8 +252,9 @@ def run(
                 raise InvalidArgument(f"motion does not complete within {MAX_SAMPLES} samples")
             end = eng.end_sample
             # An unknown end is at least END_LOOKAHEAD samples away (a smoothed move ending
-            # later, or a jog): stepping that far cannot pass it.
-            n = end - eng.sample if end is not None and end > eng.sample else step
+            # later, or a jog): stepping that far cannot pass it. A plan that has already
+            # ended is complete on the next sample.
+            n = step if end is None else max(1, end - eng.sample)
             _advance(eng, n, out)
             step = min(step * 2, END_LOOKAHEAD)
     empty = np.empty(0, np.int64)
