@@ -562,6 +562,48 @@ def check_contour(
     n = np.broadcast_to(np.asarray(dt, dtype=np.int64), c.shape)
     lengths = np.left_shift(np.int64(1), np.clip(n, 0, 62))
     starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]) if c.size else np.zeros(0, np.int64)
+    _check_segment_ranges(c, n, starts, spec, ts, axis)
+    check_motion(
+        c,
+        samples=lengths,
+        model=spec,
+        sample_period=ts,
+        speed_limit=speed_limit,
+        accel_limit=accel_limit,
+        axes=None if axis is None else [axis],
+    )
+    if baud is None and link_rate is None and not ethernet:
+        return None
+    if not 0 < utilisation <= 1:
+        raise InvalidArgument(f"utilisation must be in (0, 1], got {utilisation!r}")
+    if link_rate is not None:
+        raw_rate = float(link_rate)
+    elif baud is not None:
+        raw_rate = float(baud) / 10.0
+    else:
+        raw_rate = ETHERNET_BYTES_PER_S
+    if not raw_rate > 0:
+        raise InvalidArgument(f"link rate must be positive, got {raw_rate!r}")
+    depth = spec.contour_buffer if buffer_depth is None else int(buffer_depth)
+    if depth < 1:
+        raise InvalidArgument(f"buffer depth must be >= 1, got {depth}")
+    if bytes_per_segment is None:
+        b = contour_bytes(c, n)
+    else:
+        b = np.broadcast_to(np.asarray(bytes_per_segment, dtype=np.int64), c.shape)
+    link = (raw_rate, utilisation, depth, preload)
+    return _check_stream(b, lengths * ts, starts, link, ts, axis, spec)
+
+
+def _check_segment_ranges(
+    c: npt.NDArray[np.int64],
+    n: npt.NDArray[np.int64],
+    starts: npt.NDArray[np.int64],
+    spec: ModelSpec,
+    ts: float,
+    axis: str | None,
+) -> None:
+    """DT and CD of every segment within the model's ranges."""
     lo, hi = spec.dt_range
     bad = np.flatnonzero((n < lo) | (n > hi))
     if bad.size:
@@ -590,39 +632,23 @@ def check_contour(
             axis=axis,
             model=spec.name,
         )
-    check_motion(
-        c,
-        samples=lengths,
-        model=spec,
-        sample_period=ts,
-        speed_limit=speed_limit,
-        accel_limit=accel_limit,
-        axes=None if axis is None else [axis],
-    )
-    if baud is None and link_rate is None and not ethernet:
-        return None
-    if not 0 < utilisation <= 1:
-        raise InvalidArgument(f"utilisation must be in (0, 1], got {utilisation!r}")
-    if link_rate is not None:
-        raw_rate = float(link_rate)
-    elif baud is not None:
-        raw_rate = float(baud) / 10.0
-    else:
-        raw_rate = ETHERNET_BYTES_PER_S
-    if not raw_rate > 0:
-        raise InvalidArgument(f"link rate must be positive, got {raw_rate!r}")
+
+
+def _check_stream(
+    b: npt.NDArray[np.int64],
+    durations: FloatArray,
+    starts: npt.NDArray[np.int64],
+    link: tuple[float, float, int, bool],
+    ts: float,
+    axis: str | None,
+    spec: ModelSpec,
+) -> StreamReport:
+    """Segments of ``b`` bytes sent back to back: does each arrive before it is needed?"""
+    raw_rate, utilisation, depth, preload = link
     rate = raw_rate * utilisation
-    depth = spec.contour_buffer if buffer_depth is None else int(buffer_depth)
-    if depth < 1:
-        raise InvalidArgument(f"buffer depth must be >= 1, got {depth}")
-    if bytes_per_segment is None:
-        b = contour_bytes(c, n)
-    else:
-        b = np.broadcast_to(np.asarray(bytes_per_segment, dtype=np.int64), c.shape)
     total_bytes = int(b.sum())
-    if c.size == 0:
+    if b.size == 0:
         return StreamReport(rate, 0.0, 0, math.inf, depth)
-    durations = lengths * ts
     total_time = float(durations.sum())
     needed = total_bytes / total_time
     if needed > rate:
@@ -636,13 +662,13 @@ def check_contour(
             model=spec.name,
         )
     sent = np.cumsum(b) / rate  # completion times if sent back to back from t = 0
-    first = min(depth, c.size) - 1 if preload else 0
+    first = min(depth, b.size) - 1 if preload else 0
     s0 = float(sent[first])
     seg_start = s0 + np.concatenate([[0.0], np.cumsum(durations)[:-1]])
     # Segment i may be sent once segment i - depth has left the buffer (started).
-    gate = np.zeros(c.size)
-    if c.size > depth:
-        gate[depth:] = seg_start[: c.size - depth]
+    gate = np.zeros(b.size)
+    if b.size > depth:
+        gate[depth:] = seg_start[: b.size - depth]
     prev = np.concatenate([[0.0], sent[:-1]])
     arrive = sent + np.maximum.accumulate(gate - prev)
     slack = seg_start - arrive
