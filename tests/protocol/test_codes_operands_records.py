@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from galil.codes import STOP_CODES, TC_CODES, parse_tc1, stop_text, tc_text
 from galil.errors import InvalidArgument, ProtocolError
 from galil.models import get_model
-from galil.codes import STOP_CODES, TC_CODES, parse_tc1, stop_text, tc_text
 from galil.protocol.operands import decode_operand, parse_axes_reply
 from galil.protocol.records import decode_record, parse_qz, record_dtype, record_to_dict
 
