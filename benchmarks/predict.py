@@ -12,6 +12,7 @@ Run: ``.venv/bin/python benchmarks/predict.py``
 
 from __future__ import annotations
 
+import importlib
 import time
 import tracemalloc
 from collections.abc import Callable
@@ -74,6 +75,8 @@ def contour_bench() -> bool:
     assert np.array_equal(predict.contour(c, 1).position, bare_contour(c, 1))
     t_bare = best(lambda: bare_contour(c, 1), repeat=7)
     t_pred = best(lambda: predict.contour(c, 1), repeat=7)
+    kernel = importlib.import_module("galil.predict.contour").interpolate
+    t_kern = best(lambda: kernel(c, 1, 0, np.empty(samples, np.int64)), repeat=7)
     tracemalloc.start()
     p = predict.contour(c, 1)
     peak = tracemalloc.get_traced_memory()[1]
@@ -85,6 +88,10 @@ def contour_bench() -> bool:
     print(f"  predict   {rate / 1e6:8.2f} M samples/s   ({t_pred * 1e3:.3f} ms)  target >= 50")
     print(f"  bare      {samples / t_bare / 1e6:8.2f} M samples/s   ({t_bare * 1e3:.3f} ms)")
     print(f"  ratio predict/bare time: {ratio:5.2f}x   target <= 2")
+    print(
+        f"  of which positions {t_kern * 1e3:.3f} ms; the rest is the Profile's time and"
+        " velocity arrays"
+    )
     print(f"  peak memory / output arrays: {peak / outputs:5.2f}x   target <= 1.05")
     sizes = (1_000, 100_000, 1_000_000)
     times = [best(lambda m=m: predict.contour(c[:m], 1), repeat=7) for m in sizes]
