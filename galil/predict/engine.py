@@ -709,8 +709,10 @@ class AxisProfiler:
         if self._active is None or self.smoothing >= 1.0:
             r = self._raw(self.sample + 1, n)
             return r, r, None  # fresh arrays: no copy needed
-        self._fill(n)
         sc = self._sc
+        if sc.k + sc.r.size < self.sample + n:
+            self._fill(n)
+            sc = self._sc
         off = self.sample - sc.k
         r = sc.r[off : off + n]
         y = sc.y[off : off + n]
@@ -845,6 +847,8 @@ class AxisProfiler:
             return self.sample if not self.moving else None
         if self.smoothing >= 1.0 or act.end_sample is None:
             return act.end_sample
+        if self._sc.end is not None:
+            return self._sc.end
         return self._sc.find_end(
             self._raw, self.sample, self._y, self.smoothing, act.end_sample, float(act.end_value)
         )

@@ -39,6 +39,8 @@ END_LOOKAHEAD = 1 << 16
 # Past the profile's own end, y falls towards the target by (1 - IT) per sample: from any
 # int32 distance it is within half a count after 23 / IT samples (IT >= 1/256).
 _TAIL_MAX = 23 * 256 + 2 * PAGE
+# Samples already stepped past that the cache drops (at its next fill).
+_TRIM = 16 * PAGE
 
 
 def quantise_it(value: float) -> float:
@@ -151,7 +153,7 @@ class SmoothCache:
             final: the target.
         """
         used = min(now - self.k, self.r.size)
-        if used > 0:
+        if used >= _TRIM:
             self.r, self.y, self.k = self.r[used:], self.y[used:], self.k + used
         have = self.r.size - (now - self.k)
         if have >= n:
