@@ -1,4 +1,5 @@
-"""Checks before anything is sent: quantised values, model ranges, soft limits, contour streams.
+"""Checks before anything is sent: quantised values, model ranges, soft limits, the motion a
+path implies (speed and acceleration), contour streams.
 
 Every failure is a :class:`galil.errors.LimitError` that names the value, the limit it crosses,
 and, where it applies, the time and sample at which the predicted path crosses it.
@@ -21,11 +22,14 @@ from galil.predict.smoothing import quantise_it
 __all__ = [
     "ETHERNET_BYTES_PER_S",
     "Checked",
+    "MotionReport",
     "Quantised",
     "StreamReport",
     "check",
     "check_contour",
+    "check_motion",
     "check_parameter",
+    "check_profile_motion",
     "check_soft_limits",
     "contour_bytes",
     "quantise",
@@ -35,6 +39,8 @@ __all__ = [
     "quantise_value",
     "resolve_model",
 ]
+
+FloatArray = npt.NDArray[np.float64]
 
 _POSITION_MAX = 2**31 - 1
 _POSITION_MIN = -(2**31)
@@ -256,6 +262,230 @@ def check_soft_limits(
 
 
 @dataclass(frozen=True)
+class MotionReport:
+    """The motion a path implies, per axis (what :func:`check_motion` compared).
+
+    Attributes:
+        peak_speed: largest |velocity| of any segment, counts/s.
+        peak_accel: largest |change of velocity| between neighbouring segments (and from the
+            start velocity, and to rest at the end when the path stops), counts/s².
+    """
+
+    peak_speed: tuple[float, ...]
+    peak_accel: tuple[float, ...]
+
+
+Limit = float | Sequence[float | None] | None
+
+
+def _per_axis(limit: Limit, default: float, k: int, name: str) -> FloatArray:
+    """A limit for each of ``k`` axes: one value for all, or one per axis (``None``: default)."""
+    if limit is None or isinstance(limit, (int, float)):
+        values: list[float | None] = [limit] * k
+    else:
+        values = list(limit)
+        if len(values) != k:
+            raise InvalidArgument(f"{name} needs one value per axis ({k}), got {len(values)}")
+    out = np.array([default if v is None else float(v) for v in values])
+    if not np.all(out > 0):
+        raise InvalidArgument(f"{name} must be positive, got {values!r}")
+    return out
+
+
+def _motion_arrays(
+    increments: npt.ArrayLike | None, positions: npt.ArrayLike | None, samples: npt.ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """Increments as (segments, axes) floats and the samples of each segment."""
+    if (increments is None) == (positions is None):
+        raise InvalidArgument("give either increments or positions")
+    if positions is not None:
+        pos = np.asarray(positions, dtype=np.float64)
+        inc = np.diff(pos, axis=0)
+    else:
+        inc = np.asarray(increments, dtype=np.float64)
+    if inc.ndim == 1:
+        inc = inc[:, None]
+    if inc.ndim != 2:
+        raise InvalidArgument(f"a path must be 1-D or (segments, axes), got shape {inc.shape}")
+    if not np.all(np.isfinite(inc)):
+        raise InvalidArgument("a path must be finite")
+    n = np.broadcast_to(np.asarray(samples, dtype=np.float64), inc.shape[:1])
+    if not np.all(n > 0):
+        raise InvalidArgument("every segment must last at least one sample")
+    return inc, n
+
+
+def check_motion(
+    increments: npt.ArrayLike | None = None,
+    *,
+    positions: npt.ArrayLike | None = None,
+    samples: int | npt.ArrayLike = 1,
+    model: str | ModelSpec = "DMC-4040",
+    sample_period: float | None = None,
+    speed_limit: Limit = None,
+    accel_limit: Limit = None,
+    axes: str | Sequence[str] | None = None,
+    start_velocity: float | Sequence[float] = 0.0,
+    stops: bool = True,
+    rounding: float = 0.0,
+) -> MotionReport:
+    """Check the speed and acceleration a path implies, per axis, before it is sent.
+
+    The path is a sequence of segments, each moving every axis linearly by its increment over
+    its samples (contour segments: ``2**DT`` samples; a sampled profile: one sample each).
+    Segment i's velocity is ``increment / (samples * Ts)``; the acceleration is the change of
+    velocity between neighbouring segments over the time between their midpoints, from
+    ``start_velocity`` at the start of the path (rest by default) and, when ``stops``, to rest
+    at its end (one constant acceleration over a first segment from rest gives exactly that
+    acceleration).
+
+    Args:
+        increments: per-segment increments, shape (segments,) or (segments, axes), counts.
+        positions: or the positions at segment boundaries, the start first (one row more).
+        samples: samples in each segment (one value, or one per segment).
+        model: the model whose ``sp_max`` and ``ac_max`` are the default limits.
+        sample_period: seconds per sample (default: the model's).
+        speed_limit: counts/s: one for all axes, one per axis (``None`` entries: the model's).
+        accel_limit: counts/s², likewise.
+        axes: axis names for the errors (a string gives one letter per axis).
+        start_velocity: counts/s per axis at the start of the path.
+        stops: the path ends at rest (a contour, a move); False for a jog still running.
+        rounding: counts each position may be off by (0.5 for rounded per-sample positions):
+            widens each limit by what that much rounding can add, so rounding alone never
+            fails a check.
+
+    Returns:
+        The peak speed and acceleration of each axis.
+
+    Raises:
+        LimitError: ``name`` ``"speed"`` or ``"acceleration"`` at the first segment (in time)
+            where an axis crosses its limit, with ``value``, ``limit``, ``sample`` (where the
+            segment starts; for an acceleration, where the velocity changes), ``time``,
+            ``axis`` and the segment in the message.
+        InvalidArgument: a malformed path or limit.
+    """
+    spec = resolve_model(model)
+    ts = spec.sample_period if sample_period is None else float(sample_period)
+    inc, n = _motion_arrays(increments, positions, samples)
+    m, k = inc.shape
+    if m == 0:
+        return MotionReport((0.0,) * k, (0.0,) * k)
+    names = [None] * k if axes is None else list(axes)
+    if len(names) != k:
+        raise InvalidArgument(f"axes names {len(names)} axes, the path has {k}")
+    v_max = _per_axis(speed_limit, float(spec.sp_max), k, "speed_limit")
+    a_max = _per_axis(accel_limit, float(spec.ac_max), k, "accel_limit")
+    v0 = np.broadcast_to(np.asarray(start_velocity, dtype=np.float64), (k,))
+    starts = np.concatenate(([0.0], np.cumsum(n)))  # sample where each segment starts; total
+    vel = inc / (n * ts)[:, None]
+    slack = 2 * rounding / (n * ts)  # velocity error from rounding, per segment
+    knots_t = np.concatenate(([0.0], starts[:-1] + n / 2, starts[-1:] if stops else []))
+    knots_v = np.vstack([v0, vel, np.zeros((1, k))] if stops else [v0, vel])
+    knots_s = np.concatenate(([0.0], slack, [0.0] if stops else []))
+    dt = np.diff(knots_t) * ts
+    acc = np.diff(knots_v, axis=0) / dt[:, None]
+    acc_slack = (knots_s[:-1] + knots_s[1:]) / dt
+    tol = 1 + 1e-9
+    fast = np.abs(vel) > (v_max[None, :] + slack[:, None]) * tol
+    hard = np.abs(acc) > (a_max[None, :] + acc_slack[:, None]) * tol
+    # acceleration row j changes the velocity at the start of segment j (row m: the end)
+    first = _first_violation(fast, hard)
+    if first is not None:
+        kind, row, axis = first
+        given = speed_limit if kind == "speed" else accel_limit
+        _refuse_motion(kind, row, axis, (vel, acc, v_max, a_max, starts), ts, names, spec, given)
+    return MotionReport(
+        peak_speed=tuple(float(x) for x in np.abs(vel).max(axis=0, initial=0.0)),
+        peak_accel=tuple(float(x) for x in np.abs(acc).max(axis=0, initial=0.0)),
+    )
+
+
+def _first_violation(
+    fast: npt.NDArray[np.bool_], hard: npt.NDArray[np.bool_]
+) -> tuple[str, int, int] | None:
+    """The earliest (row, axis) over limit: speed rows are segments, acceleration rows the
+    changes at segment starts; at the same start the acceleration comes first."""
+    best: tuple[int, int, str, int] | None = None
+    for kind, mask, order in (("speed", fast, 1), ("acceleration", hard, 0)):
+        rows, cols = np.nonzero(mask)
+        if rows.size:
+            key = (int(rows[0]), order, kind, int(cols[0]))
+            if best is None or key[:2] < best[:2]:
+                best = key
+    return None if best is None else (best[2], best[0], best[3])
+
+
+def _refuse_motion(
+    kind: str,
+    row: int,
+    axis: int,
+    arrays: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray],
+    ts: float,
+    names: Sequence[str | None],
+    spec: ModelSpec,
+    given: Limit,
+) -> None:
+    """Raise the LimitError for ``kind`` at ``row`` (a segment, or a change of speed)."""
+    vel, acc, v_max, a_max, starts = arrays
+    m = vel.shape[0]
+    sample = int(starts[row])
+    t = sample * ts
+    name = names[axis]
+    on = f" on axis {name}" if name else ""
+    if kind == "speed":
+        value, limit, unit = float(vel[row, axis]), float(v_max[axis]), "counts/s"
+        where = f"segment {row} (samples {sample}..{int(starts[row + 1])})"
+    else:
+        value, limit, unit = float(acc[row, axis]), float(a_max[axis]), "counts/s²"
+        if row == 0:
+            where = f"the start into segment 0 (sample {sample})"
+        elif row == m:
+            where = f"the stop after segment {m - 1} (sample {sample})"
+        else:
+            where = f"segment {row - 1} -> {row} (sample {sample})"
+    own = given is not None and (isinstance(given, (int, float)) or list(given)[axis] is not None)
+    source = "the limit given" if own else f"the {spec.name} maximum"
+    raise LimitError(
+        f"the path{on} needs {kind} {abs(value):.6g} {unit} at {where}, t={t:.6g} s;"
+        f" {source} is {limit:.6g} {unit}",
+        name=kind,
+        value=abs(value),
+        limit=limit,
+        time=t,
+        sample=sample,
+        axis=name,
+        model=spec.name,
+    )
+
+
+def check_profile_motion(
+    profile: Profile,
+    *,
+    model: str | ModelSpec = "DMC-4040",
+    speed_limit: float | None = None,
+    accel_limit: float | None = None,
+    axis: str | None = None,
+) -> MotionReport:
+    """:func:`check_motion` over a predicted profile (a jog, a move), sample by sample.
+
+    The positions are whole counts, so each limit is widened by what half a count of
+    rounding per sample can add. A profile still moving at its end (a jog without a stop,
+    stop code 0) is not required to stop.
+    """
+    return check_motion(
+        positions=profile.position,
+        model=model,
+        sample_period=profile.sample_period,
+        speed_limit=speed_limit,
+        accel_limit=accel_limit,
+        axes=None if axis is None else [axis],
+        start_velocity=float(profile.velocity[0]),
+        stops=profile.stop_code != 0,
+        rounding=0.5,
+    )
+
+
+@dataclass(frozen=True)
 class StreamReport:
     """How a contour stream fares on a link.
 
@@ -301,8 +531,16 @@ def check_contour(
     preload: bool = False,
     sample_period: float | None = None,
     axis: str | None = None,
+    speed_limit: float | None = None,
+    accel_limit: float | None = None,
 ) -> StreamReport | None:
-    """Check contour segments against the model's CD/DT ranges and, given a link, the stream.
+    """Check contour segments against the model's CD/DT ranges, the motion they imply and,
+    given a link, the stream.
+
+    The motion: each segment's speed against ``speed_limit`` (default the model's SP
+    maximum) and the change of speed between segments, from rest at the start and to rest at
+    the end, against ``accel_limit`` (default the model's AC maximum); see
+    :func:`check_motion`.
 
     The stream model: the host sends segments back to back at ``utilisation`` x the link's byte
     rate (a serial port at B baud moves B/10 bytes/s), never more than ``buffer_depth`` ahead;
@@ -314,6 +552,7 @@ def check_contour(
 
     Raises:
         LimitError: ``"CD"`` or ``"DT"`` out of range (``sample`` is the segment's first sample),
+            ``"speed"`` or ``"acceleration"`` over its limit (see :func:`check_motion`),
             ``"link byte rate"`` when the average need exceeds the link, ``"contour stream"``
             when the buffer would run dry (``time``/``sample`` where it does).
     """
@@ -323,6 +562,48 @@ def check_contour(
     n = np.broadcast_to(np.asarray(dt, dtype=np.int64), c.shape)
     lengths = np.left_shift(np.int64(1), np.clip(n, 0, 62))
     starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]) if c.size else np.zeros(0, np.int64)
+    _check_segment_ranges(c, n, starts, spec, ts, axis)
+    check_motion(
+        c,
+        samples=lengths,
+        model=spec,
+        sample_period=ts,
+        speed_limit=speed_limit,
+        accel_limit=accel_limit,
+        axes=None if axis is None else [axis],
+    )
+    if baud is None and link_rate is None and not ethernet:
+        return None
+    if not 0 < utilisation <= 1:
+        raise InvalidArgument(f"utilisation must be in (0, 1], got {utilisation!r}")
+    if link_rate is not None:
+        raw_rate = float(link_rate)
+    elif baud is not None:
+        raw_rate = float(baud) / 10.0
+    else:
+        raw_rate = ETHERNET_BYTES_PER_S
+    if not raw_rate > 0:
+        raise InvalidArgument(f"link rate must be positive, got {raw_rate!r}")
+    depth = spec.contour_buffer if buffer_depth is None else int(buffer_depth)
+    if depth < 1:
+        raise InvalidArgument(f"buffer depth must be >= 1, got {depth}")
+    if bytes_per_segment is None:
+        b = contour_bytes(c, n)
+    else:
+        b = np.broadcast_to(np.asarray(bytes_per_segment, dtype=np.int64), c.shape)
+    link = (raw_rate, utilisation, depth, preload)
+    return _check_stream(b, lengths * ts, starts, link, ts, axis, spec)
+
+
+def _check_segment_ranges(
+    c: npt.NDArray[np.int64],
+    n: npt.NDArray[np.int64],
+    starts: npt.NDArray[np.int64],
+    spec: ModelSpec,
+    ts: float,
+    axis: str | None,
+) -> None:
+    """DT and CD of every segment within the model's ranges."""
     lo, hi = spec.dt_range
     bad = np.flatnonzero((n < lo) | (n > hi))
     if bad.size:
@@ -351,30 +632,23 @@ def check_contour(
             axis=axis,
             model=spec.name,
         )
-    if baud is None and link_rate is None and not ethernet:
-        return None
-    if not 0 < utilisation <= 1:
-        raise InvalidArgument(f"utilisation must be in (0, 1], got {utilisation!r}")
-    if link_rate is not None:
-        raw_rate = float(link_rate)
-    elif baud is not None:
-        raw_rate = float(baud) / 10.0
-    else:
-        raw_rate = ETHERNET_BYTES_PER_S
-    if not raw_rate > 0:
-        raise InvalidArgument(f"link rate must be positive, got {raw_rate!r}")
+
+
+def _check_stream(
+    b: npt.NDArray[np.int64],
+    durations: FloatArray,
+    starts: npt.NDArray[np.int64],
+    link: tuple[float, float, int, bool],
+    ts: float,
+    axis: str | None,
+    spec: ModelSpec,
+) -> StreamReport:
+    """Segments of ``b`` bytes sent back to back: does each arrive before it is needed?"""
+    raw_rate, utilisation, depth, preload = link
     rate = raw_rate * utilisation
-    depth = spec.contour_buffer if buffer_depth is None else int(buffer_depth)
-    if depth < 1:
-        raise InvalidArgument(f"buffer depth must be >= 1, got {depth}")
-    if bytes_per_segment is None:
-        b = contour_bytes(c, n)
-    else:
-        b = np.broadcast_to(np.asarray(bytes_per_segment, dtype=np.int64), c.shape)
     total_bytes = int(b.sum())
-    if c.size == 0:
+    if b.size == 0:
         return StreamReport(rate, 0.0, 0, math.inf, depth)
-    durations = lengths * ts
     total_time = float(durations.sum())
     needed = total_bytes / total_time
     if needed > rate:
@@ -388,13 +662,13 @@ def check_contour(
             model=spec.name,
         )
     sent = np.cumsum(b) / rate  # completion times if sent back to back from t = 0
-    first = min(depth, c.size) - 1 if preload else 0
+    first = min(depth, b.size) - 1 if preload else 0
     s0 = float(sent[first])
     seg_start = s0 + np.concatenate([[0.0], np.cumsum(durations)[:-1]])
     # Segment i may be sent once segment i - depth has left the buffer (started).
-    gate = np.zeros(c.size)
-    if c.size > depth:
-        gate[depth:] = seg_start[: c.size - depth]
+    gate = np.zeros(b.size)
+    if b.size > depth:
+        gate[depth:] = seg_start[: b.size - depth]
     prev = np.concatenate([[0.0], sent[:-1]])
     arrive = sent + np.maximum.accumulate(gate - prev)
     slack = seg_start - arrive
@@ -444,12 +718,17 @@ def check(
     buffer_depth: int | None = None,
     axis: str | None = None,
     tm: float | None = None,
+    speed_limit: float | None = None,
+    accel_limit: float | None = None,
 ) -> Checked:
     """All pre-send checks in one call (the axis layer's entry point).
 
     Quantises and range-checks SP/JG, AC, DC and IT for ``model``; checks a predicted
-    ``profile`` against the soft limits FL/BL over its whole path; checks contour
-    ``increments``/``dt`` against CD/DT ranges and, given a link, the streaming feasibility.
+    ``profile`` against the soft limits FL/BL over its whole path and the speed and
+    acceleration it implies (:func:`check_profile_motion`: an IP step while jogging is an
+    acceleration); checks contour ``increments``/``dt`` against CD/DT ranges, the motion they
+    imply and, given a link, the streaming feasibility. ``speed_limit`` (counts/s) and
+    ``accel_limit`` (counts/s²) replace the model's maxima for this axis.
 
     Raises:
         LimitError: the first check that fails, naming the value, the limit and where.
@@ -474,6 +753,9 @@ def check(
                 axis=axis,
                 model=spec.name,
             )
+        check_profile_motion(
+            profile, model=spec, speed_limit=speed_limit, accel_limit=accel_limit, axis=axis
+        )
     stream = None
     if increments is not None:
         if dt is None:
@@ -488,5 +770,7 @@ def check(
             buffer_depth=buffer_depth,
             sample_period=q.sample_period,
             axis=axis,
+            speed_limit=speed_limit,
+            accel_limit=accel_limit,
         )
     return Checked(quantised=q, stream=stream)

@@ -22,7 +22,8 @@ import numpy.typing as npt
 
 from galil.codes import tc_text
 from galil.errors import CommandError, InvalidArgument
-from galil.predict.smoothing import IT_MAX, IT_MIN, PAGE, smooth_page
+from galil.predict.contour_queue import ContourQueue
+from galil.predict.smoothing import IT_MAX, IT_MIN, SmoothCache
 
 __all__ = [
     "FRACTION",
@@ -407,29 +408,19 @@ class AxisProfiler:
         self._v = 0.0  # slew / jog speed, counts/sample (jog: signed)
         self._a = 0.0
         self._d = 0.0
-        # smoothing cache: r and y for samples _cache_k + 1 ...
-        self._cache_k = 0
-        self._cache_r: Int64Array = np.empty(0, np.int64)
-        self._cache_y: FloatArray = np.empty(0)
-        self._smooth_end: int | None = None
-        # contour queue: increments and lengths (samples), head index, progress in the head
-        self._cq_c: list[int] = []
-        self._cq_n: list[int] = []
-        self._cq_head = 0
-        self._c_elapsed = 0
-        self._c_base = int(position)
-        self._c_rate = 0.0
-        self._c_ending = False
+        self._sc = SmoothCache(0)  # r and y of the plan in force, when smoothed
+        self._cq = ContourQueue(int(position))
 
     def __deepcopy__(self, memo: dict[int, object]) -> AxisProfiler:
-        # A simulator snapshots its axes often. Plans, their tables and the smoothing cache
-        # are replaced, never changed in place, so the copy shares them; the active plan's
-        # holder (an IP shifts it) and the contour queue (appended to) are copied.
+        # A simulator snapshots its axes often. Plans, their tables and the smoothing cache's
+        # arrays are replaced, never changed in place, so the copy shares them; the holders
+        # (an IP shifts the plan, stepping refills the cache) and the contour queue (appended
+        # to) are copied.
         new = copy.copy(self)
         if self._active is not None:
             new._active = copy.copy(self._active)
-        new._cq_c = list(self._cq_c)
-        new._cq_n = list(self._cq_n)
+        new._sc = copy.copy(self._sc)
+        new._cq = copy.deepcopy(self._cq, memo)
         return new
 
     # ---- helpers -----------------------------------------------------------------------
@@ -458,12 +449,11 @@ class AxisProfiler:
         self.velocity = self._state()[1] / self.sample_period
 
     def _invalidate(self) -> None:
-        self._cache_k = self.sample
-        self._cache_r = np.empty(0, np.int64)
-        self._cache_y = np.empty(0)
-        self._smooth_end = None
+        self._sc = SmoothCache(self.sample)
 
-    def _check_smoothing(self, smoothing: float) -> float:
+    def _check_smoothing(self, smoothing: float | None) -> float:
+        if smoothing is None:
+            return 1.0
         if not (IT_MIN <= smoothing <= IT_MAX):
             raise InvalidArgument(
                 f"smoothing (IT) must be in [{IT_MIN}, {IT_MAX}], got {smoothing!r}"
@@ -472,9 +462,16 @@ class AxisProfiler:
 
     # ---- commands ----------------------------------------------------------------------
     def begin_move(
-        self, target: int, speed: float, accel: float, decel: float, smoothing: float = 1.0
+        self,
+        target: int,
+        speed: float,
+        accel: float,
+        decel: float,
+        smoothing: float | None = 1.0,
     ) -> None:
         """PR/PA then BG: a trapezoid or triangle to ``target`` (counts).
+
+        ``smoothing`` is IT; ``None`` is the default, 1 (none).
 
         Raises:
             CommandError: TC 21 while moving.
@@ -491,8 +488,10 @@ class AxisProfiler:
         self.target = int(target)
         self._set_plan(plan_position(float(self.position), 0.0, float(target), v, a, d))
 
-    def begin_jog(self, speed: float, accel: float, decel: float, smoothing: float = 1.0) -> None:
-        """JG then BG: ramp to the signed ``speed`` and keep going.
+    def begin_jog(
+        self, speed: float, accel: float, decel: float, smoothing: float | None = 1.0
+    ) -> None:
+        """JG then BG: ramp to the signed ``speed`` and keep going (IT ``None``: 1).
 
         Raises:
             CommandError: TC 21 while moving.
@@ -512,7 +511,7 @@ class AxisProfiler:
         speed: float,
         accel: float,
         decel: float,
-        smoothing: float = 1.0,
+        smoothing: float | None = 1.0,
     ) -> None:
         """Start as if already jogging at ``velocity`` (counts/s), then JG ``speed``.
 
@@ -623,8 +622,7 @@ class AxisProfiler:
 
     def abort(self) -> None:
         """AB: stop at once where the reference is now (stop code 7); smoothing is dropped."""
-        self._cq_c, self._cq_n, self._cq_head = [], [], 0
-        self._c_ending = False
+        self._cq = ContourQueue(self.reference)
         self._active = None
         self._stopping = False
         self._invalidate()
@@ -650,11 +648,7 @@ class AxisProfiler:
         self.moving = True
         self.stop_code = 50
         self._invalidate()
-        self._cq_c, self._cq_n, self._cq_head = [], [], 0
-        self._c_elapsed = 0
-        self._c_base = self.position
-        self._c_rate = 0.0
-        self._c_ending = False
+        self._cq = ContourQueue(self.position)
 
     def add_segment(self, increment: int, n: int) -> None:
         """CD ``increment`` over ``2**n`` samples (DT n), queued behind earlier segments.
@@ -662,66 +656,33 @@ class AxisProfiler:
         Raises:
             CommandError: TC 8 outside contour mode, TC 6 for DT outside 1..8.
         """
-        if self.mode != "contour" or self._c_ending:
+        if self.mode != "contour" or self._cq.ending:
             raise _refuse(8, "CD")
         if not 1 <= int(n) <= 8:
             raise _refuse(6, "DT")
-        self._cq_c.append(int(increment))
-        self._cq_n.append(int(n))
+        self._cq.add(increment, n)
 
     def end_contour(self) -> None:
         """CD 0=0: leave contour mode once the queued segments have run."""
         if self.mode != "contour":
             return
-        self._c_ending = True
+        self._cq.ending = True
         if self.queued_segments == 0:
             self._finish_contour(51)
 
     @property
     def queued_segments(self) -> int:
         """Contour segments not yet finished (including the one running)."""
-        return len(self._cq_c) - self._cq_head
+        return self._cq.queued
 
     def _finish_contour(self, code: int) -> None:
-        self._cq_c, self._cq_n, self._cq_head = [], [], 0
-        self._c_ending = False
+        self._cq = ContourQueue(self.position)
         self.mode = "idle"
         self.moving = False
         self.stop_code = code
         self.velocity = 0.0
         self._y = float(self.position)
         self.reference = self.position
-
-    def _contour_window(self, n: int) -> tuple[Int64Array, int, int, int, float]:
-        """Positions of the next ``n`` samples and the queue state after them."""
-        h = self._cq_head
-        # Each segment lasts at least 2 samples, so this many always cover the window.
-        m = min(len(self._cq_c) - h, n // 2 + 2)
-        if m == 0:
-            return np.full(n, self._c_base, np.int64), 0, 0, self._c_base, 0.0
-        c = np.array(self._cq_c[h : h + m], dtype=np.int64)
-        e = np.array(self._cq_n[h : h + m], dtype=np.int64)
-        length = np.left_shift(1, e)
-        ends = np.cumsum(length) - self._c_elapsed
-        starts = ends - length
-        bases = self._c_base + np.cumsum(c) - c
-        s = np.arange(1, n + 1, dtype=np.int64)
-        idx = np.searchsorted(ends, s, side="left")
-        inside = idx < m
-        ic = np.minimum(idx, m - 1)
-        j = s - starts[ic]
-        pos = bases[ic] + np.right_shift(c[ic] * j, e[ic])
-        final = int(bases[-1] + c[-1])
-        out = np.where(inside, pos, final)
-        done = int(np.searchsorted(ends, n, side="right"))
-        if done < m:
-            elapsed = int(n - starts[done])
-            base = int(bases[done])
-        else:
-            elapsed, base = 0, final
-        last = int(idx[-1])
-        rate = float(c[last]) / float(length[last]) if last < m else 0.0
-        return out.astype(np.int64), done, elapsed, base, rate
 
     # ---- stepping ----------------------------------------------------------------------
     def _raw(self, start: int, n: int) -> Int64Array:
@@ -734,48 +695,27 @@ class AxisProfiler:
 
     def _fill(self, n: int) -> None:
         """Extend the smoothing cache, one page at a time, to cover n samples from now."""
-        assert self._active is not None
-        have = self._cache_r.size - (self.sample - self._cache_k)
-        if have >= n:
-            return
-        pages = -(-(n - have) // PAGE)
-        r_parts = [self._cache_r]
-        y_parts = [self._cache_y]
-        start = self._cache_k + self._cache_r.size + 1
-        y_prev = float(self._cache_y[-1]) if self._cache_y.size else self._y
-        end = self._active.end_sample
-        final = float(self._active.end_value)
-        for p in range(pages):
-            s0 = start + p * PAGE
-            r = self._raw(s0, PAGE)
-            if self._smooth_end is not None and s0 >= self._smooth_end:
-                y = np.full(PAGE, final)
-            else:
-                y = smooth_page(r.astype(np.float64), y_prev, self.smoothing)
-                if end is not None:
-                    k = np.arange(s0, s0 + PAGE)
-                    hit = np.flatnonzero((k >= end) & (np.abs(y - final) < 0.5))
-                    if hit.size:
-                        i = int(hit[0])
-                        self._smooth_end = s0 + i
-                        y[i:] = final
-            y_prev = float(y[-1])
-            r_parts.append(r)
-            y_parts.append(y)
-        self._cache_r = np.concatenate(r_parts)
-        self._cache_y = np.concatenate(y_parts)
+        act = self._active
+        assert act is not None
+        sc = self._sc
+        sc.fill(
+            self._raw, self.sample, n, self._y, self.smoothing, act.end_sample, float(act.end_value)
+        )
 
     def _window(self, n: int) -> tuple[Int64Array, Int64Array, FloatArray | None]:
         if self.mode == "contour":
-            r = self._contour_window(n)[0]
+            r = self._cq.window(n)[0]
             return r, r, None
         if self._active is None or self.smoothing >= 1.0:
             r = self._raw(self.sample + 1, n)
             return r, r, None  # fresh arrays: no copy needed
-        self._fill(n)
-        off = self.sample - self._cache_k
-        r = self._cache_r[off : off + n]
-        y = self._cache_y[off : off + n]
+        sc = self._sc
+        if sc.k + sc.r.size < self.sample + n:
+            self._fill(n)
+            sc = self._sc
+        off = self.sample - sc.k
+        r = sc.r[off : off + n]
+        y = sc.y[off : off + n]
         return r, np.floor(y + 0.5).astype(np.int64), y
 
     def preview(self, n: int) -> Int64Array:
@@ -811,17 +751,12 @@ class AxisProfiler:
         if n == 0:
             return np.empty(0, np.int64), np.empty(0, np.int64)
         if self.mode == "contour":
-            r, done, elapsed, base, rate = self._contour_window(n)
-            self._cq_head += done
-            self._c_elapsed, self._c_base, self._c_rate = elapsed, base, rate
-            if self._cq_head > 4096 and self._cq_head * 2 > len(self._cq_c):
-                del self._cq_c[: self._cq_head], self._cq_n[: self._cq_head]
-                self._cq_head = 0
+            r = self._cq.step(n)
             self.sample += n
             self.position = self.reference = int(r[-1])
             self._y = float(self.position)
-            self.velocity = rate / self.sample_period
-            if self._c_ending and self.queued_segments == 0:
+            self.velocity = self._cq.rate / self.sample_period
+            if self._cq.ending and self.queued_segments == 0:
                 self._finish_contour(51)
             return r, r
         r, ref, y = self._window(n)
@@ -835,7 +770,7 @@ class AxisProfiler:
         self._y = float(y[-1]) if y is not None else float(self.position)
         if self._active is not None:
             self.velocity = self._active.state(self.sample)[1] / self.sample_period
-            end = self._smooth_end if self.smoothing < 1.0 else self._active.end_sample
+            end = self._sc.end if self.smoothing < 1.0 else self._active.end_sample
             if end is not None and self.sample >= end:
                 self._finish()
         return r, ref
@@ -894,19 +829,29 @@ class AxisProfiler:
         """Profiler velocity (counts/s, before rounding) over the next ``n`` samples."""
         n = self._count(n)
         if self.mode == "contour" or self._active is None:
-            rate = self._c_rate if self.mode == "contour" else 0.0
+            rate = self._cq.rate if self.mode == "contour" else 0.0
             return np.full(n, rate / self.sample_period)
         out: FloatArray = self._active.velocities(self.sample + 1, n) / self.sample_period
         return out
 
     @property
     def end_sample(self) -> int | None:
-        """Sample at which the present plan ends, when known (``None`` for a jog)."""
-        if self._active is None:
+        """Sample at which the present plan ends, when known (``None`` for a jog).
+
+        With IT smoothing this is the first sample from which the filtered reference stays on
+        the target (``_BG`` falls there), known once the profile ends within
+        :data:`~galil.predict.smoothing.END_LOOKAHEAD` samples (``None`` before).
+        """
+        act = self._active
+        if act is None:
             return self.sample if not self.moving else None
-        if self.smoothing < 1.0:
-            return self._smooth_end
-        return self._active.end_sample
+        if self.smoothing >= 1.0 or act.end_sample is None:
+            return act.end_sample
+        if self._sc.end is not None:
+            return self._sc.end
+        return self._sc.find_end(
+            self._raw, self.sample, self._y, self.smoothing, act.end_sample, float(act.end_value)
+        )
 
     @property
     def plan(self) -> KinematicPlan | None:

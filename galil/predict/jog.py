@@ -26,7 +26,7 @@ def jog(
     duration: float | None = None,
     events: Sequence[Event] = (),
     sample_period: float = 1 / 1024,
-    smoothing: float = 1.0,
+    smoothing: float | None = 1.0,
     start: int = 0,
     initial_speed: float = 0.0,
     model: str | ModelSpec | None = None,
@@ -46,7 +46,7 @@ def jog(
         events: further changes in motion (:class:`~galil.predict.move.SetAccel`,
             :class:`~galil.predict.move.Increment`, ...).
         sample_period: seconds per sample.
-        smoothing: IT.
+        smoothing: IT (1 or ``None``: none).
         start: position at sample 0.
         initial_speed: velocity at sample 0 (counts/s): the axis is already jogging, and
             ``speed`` is a JG change in motion.

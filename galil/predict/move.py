@@ -18,6 +18,7 @@ from galil.errors import InvalidArgument, ScheduleError
 from galil.models import ModelSpec
 from galil.predict.engine import AxisProfiler, KinematicPlan, plan_position
 from galil.predict.profile import Profile
+from galil.predict.smoothing import END_LOOKAHEAD
 
 __all__ = [
     "Event",
@@ -34,6 +35,8 @@ __all__ = [
     "speed_schedule",
 ]
 
+# Samples previewed at a time while waiting for a speed schedule's trigger.
+_SCHEDULE_STEP = 4096
 #: Longest prediction, in samples (about 13.6 hours at 1024 Hz), so a mistake cannot hang.
 MAX_SAMPLES = 50_000_000
 
@@ -153,12 +156,15 @@ def _resolve(
     speed: float,
     accel: float,
     decel: float,
-    smoothing: float,
+    smoothing: float | None,
     sample_period: float,
     model: str | ModelSpec | None,
     *,
     jog: bool = False,
 ) -> tuple[float, float, float, float, float]:
+    """SP/AC/DC/IT/Ts as the engine takes them (quantised for ``model``; IT ``None`` is 1)."""
+    if smoothing is None:
+        smoothing = 1.0
     if model is None:
         return speed, accel, decel, smoothing, sample_period
     from galil.predict.checks import quantise
@@ -245,9 +251,12 @@ def run(
             if eng.sample - base > MAX_SAMPLES:
                 raise InvalidArgument(f"motion does not complete within {MAX_SAMPLES} samples")
             end = eng.end_sample
-            n = end - eng.sample if end is not None and end > eng.sample else step
+            # An unknown end is at least END_LOOKAHEAD samples away (a smoothed move ending
+            # later, or a jog): stepping that far cannot pass it. A plan that has already
+            # ended is complete on the next sample.
+            n = step if end is None else max(1, end - eng.sample)
             _advance(eng, n, out)
-            step = min(step * 2, 1 << 20)
+            step = min(step * 2, END_LOOKAHEAD)
     empty = np.empty(0, np.int64)
     r = np.concatenate(out.r) if out.r else empty
     ref = np.concatenate(out.ref) if out.ref else empty
@@ -261,7 +270,7 @@ def move(
     decel: float,
     *,
     sample_period: float = 1 / 1024,
-    smoothing: float = 1.0,
+    smoothing: float | None = 1.0,
     start: int = 0,
     events: Sequence[Event] = (),
     model: str | ModelSpec | None = None,
@@ -274,7 +283,7 @@ def move(
         accel: AC, counts/s².
         decel: DC, counts/s².
         sample_period: seconds per servo sample (``TM/1_024_000``).
-        smoothing: IT (1 = none).
+        smoothing: IT (1 or ``None`` = none).
         start: position at sample 0.
         events: changes in motion (:class:`SetSpeed`, :class:`SetAccel`, :class:`Increment`,
             :class:`Stop`) at given times.
@@ -352,7 +361,7 @@ def speed_schedule(
     *,
     sample_period: float = 1 / 1024,
     start: int = 0,
-    smoothing: float = 1.0,
+    smoothing: float | None = 1.0,
 ) -> SpeedSchedule:
     """Validate and predict a move that changes speed at given distances from its start.
 
@@ -360,7 +369,7 @@ def speed_schedule(
     ``initial_speed``; at each ``(at, speed)`` (``at`` counts from the start, increasing) an
     ``AD`` trippoint then ``SP speed``. A change is valid only if the previous ramp has finished
     when its trigger is reached; the last ramp must also leave room for the final deceleration.
-    Speed rises at ``accel`` and falls at ``decel``.
+    Speed rises at ``accel`` and falls at ``decel``. ``smoothing`` is IT (1 or ``None``: none).
 
     Raises:
         ScheduleError: a change point that is not valid, with the earliest valid one.
@@ -415,7 +424,7 @@ def speed_schedule(
         # AD watches the profiler position r (before smoothing); SP acts from the next sample.
         while True:
             end = eng.end_sample
-            n = max(1, (end - eng.sample) if end is not None else 1024)
+            n = max(1, (end - eng.sample) if end is not None else _SCHEDULE_STEP)
             r = eng.preview_profile(n)
             hit = np.flatnonzero(sign * (r - int(start)) >= trig)
             if hit.size:
