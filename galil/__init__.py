@@ -5,7 +5,7 @@ from __future__ import annotations
 from galil.axis import Axis
 from galil.codes import stop_text, tc_text
 from galil.contour import ContourResult
-from galil.controller import Controller, connect
+from galil.controller import Controller, ReconnectPolicy, connect
 from galil.errors import (
     CommandError,
     ContourUnderrunError,
@@ -45,6 +45,7 @@ __all__ = [
     "MultiProfile",
     "Profile",
     "ProtocolError",
+    "ReconnectPolicy",
     "RecordStream",
     "ScheduleError",
     "__version__",

@@ -16,9 +16,12 @@ message room (:mod:`galil.messages`) routes unsolicited output, the record room
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import threading
+import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from galil import predict
@@ -40,10 +43,47 @@ from galil.transport import Transport, open_transport
 from galil.units import path_to_counts
 from galil.watchdog import Watchdog, check_watchdog_args
 
-__all__ = ["CLIENT_OPTIONS", "Controller", "connect"]
+__all__ = ["CLIENT_OPTIONS", "Controller", "ReconnectPolicy", "connect"]
+
+_LOG = logging.getLogger("galil.controller")
+
+
+@dataclass(frozen=True)
+class ReconnectPolicy:
+    """How a :class:`Controller` reopens a dead link by itself (``connect(..., reconnect=...)``).
+
+    When the link dies, the controller reopens it (identify, route messages, ``DR`` streams
+    again), waiting ``delay`` seconds between attempts (growing by ``backoff`` up to
+    ``max_delay``). The query that found the link dead is asked again; a command that may have
+    changed something is never sent twice: it raises :class:`GalilConnectionError` saying so.
+    Every reconnect is logged at WARNING on ``galil.controller``.
+    """
+
+    attempts: int = 5
+    delay: float = 0.2
+    backoff: float = 2.0
+    max_delay: float = 5.0
+
+    def __post_init__(self) -> None:
+        if (
+            isinstance(self.attempts, bool)
+            or not isinstance(self.attempts, int)
+            or self.attempts < 1
+        ):
+            raise InvalidArgument(f"attempts must be a positive integer, not {self.attempts!r}")
+        check_timeout(self.delay, 0.2, "delay")
+        check_timeout(self.max_delay, 5.0, "max_delay")
+        if (
+            isinstance(self.backoff, bool)
+            or not isinstance(self.backoff, (int, float))
+            or not (1 <= self.backoff <= 10)
+        ):
+            raise InvalidArgument(f"backoff must be a number in [1, 10], not {self.backoff!r}")
+
 
 CLIENT_OPTIONS = frozenset(
     {
+        "reconnect",
         "timeout",
         "model",
         "handshake",
@@ -76,6 +116,8 @@ class Controller:
             setting): ``False`` (default) switches the echo off with ``EO 0``, as Galil's own
             library does, and :meth:`close` switches it back on; ``True`` leaves it on and
             strips the echo from every reply.
+        reconnect: reopen a dead link by itself: ``True`` (the default
+            :class:`ReconnectPolicy`) or a policy; needs an address, not a transport object.
 
     Attributes:
         link: the command link (:class:`~galil.link.Link`).
@@ -95,6 +137,7 @@ class Controller:
         poll_interval: float = 0.02,
         max_messages: int = 1000,
         echo: bool = False,
+        reconnect: bool | ReconnectPolicy = False,
     ) -> None:
         if not isinstance(echo, bool):
             raise InvalidArgument(f"echo must be True or False, not {echo!r}")
@@ -125,6 +168,9 @@ class Controller:
         else:
             self._factory = None
             first = transport
+        self._policy = _policy(reconnect, self._factory is not None)
+        if self._policy is not None:
+            self.link.on_dead = self._reopen_dead_link
         self._open(first)
 
     # -- life cycle -------------------------------------------------------------------------
@@ -162,12 +208,13 @@ class Controller:
         with self._life:
             self._close_parts(keep_watchdogs=False)
 
-    def _close_parts(self, *, keep_watchdogs: bool) -> None:
+    def _close_parts(self, *, keep_watchdogs: bool, keep_streams: bool = False) -> None:
         if not keep_watchdogs:
             for dog in self._watchdogs:
                 dog.stop()  # leaving on purpose is not dying: the routine is halted
             self._watchdogs.clear()
-        self.records_room.close_all()
+        if not keep_streams:
+            self.records_room.close_all()
         self.link.detach()
         self.messages_room.stop()
 
@@ -190,8 +237,39 @@ class Controller:
             if self._generation != seen and self.link.is_open and not self.link.dead:
                 return  # another thread reconnected while this one waited
             with self.link.reopening():  # commands meanwhile wait for the new link
-                self._close_parts(keep_watchdogs=True)
+                self.records_room.suspend()
+                self._close_parts(keep_watchdogs=True, keep_streams=True)
                 self._open(None)
+                self.records_room.resume()
+
+    def _reopen_dead_link(self, error: GalilConnectionError) -> None:
+        """The automatic reconnect (:class:`ReconnectPolicy`), called by the link."""
+        policy = self._policy
+        assert policy is not None
+        delay = policy.delay
+        for attempt in range(1, policy.attempts + 1):
+            try:
+                self.reconnect()
+            except GalilConnectionError as exc:
+                _LOG.warning(
+                    "galil: reconnect %d/%d to %s failed: %s",
+                    attempt,
+                    policy.attempts,
+                    self.link.model_name,
+                    str(exc).splitlines()[0],
+                )
+                if attempt == policy.attempts:
+                    raise exc from error
+                time.sleep(delay)
+                delay = min(delay * policy.backoff, policy.max_delay)
+            else:
+                _LOG.warning(
+                    "galil: link to %s died (%s); reconnected (attempt %d)",
+                    self.link.model_name,
+                    str(error).splitlines()[0],
+                    attempt,
+                )
+                return
 
     @property
     def closed(self) -> bool:
@@ -557,6 +635,18 @@ class Controller:
     W: Axis
 
 
+def _policy(reconnect: object, has_address: bool) -> ReconnectPolicy | None:
+    if reconnect is False or reconnect is None:
+        return None
+    if not has_address:
+        raise InvalidArgument("reconnect= needs an address (it opens the link again)")
+    if reconnect is True:
+        return ReconnectPolicy()
+    if isinstance(reconnect, ReconnectPolicy):
+        return reconnect
+    raise InvalidArgument(f"reconnect is True, False or a ReconnectPolicy, not {reconnect!r}")
+
+
 def connect(address: str | Transport, **options: Any) -> Controller:
     """Connect to a controller with one line.
 
@@ -566,8 +656,8 @@ def connect(address: str | Transport, **options: Any) -> Controller:
             ``usb://[vid:pid][?serial=...]``, ``/dev/galilpci0``, ``sim://DMC-4040``; or an
             open :class:`~galil.transport.Transport`.
         **options: client options (``timeout``, ``model``, ``handshake``, ``unsolicited``,
-            ``history``, ``poll_interval``, ``max_messages``, ``echo``); the rest go to the
-            transport (``baudrate=``, ``connect_timeout=``, ``backend=`` ...).
+            ``history``, ``poll_interval``, ``max_messages``, ``echo``, ``reconnect``); the
+            rest go to the transport (``baudrate=``, ``connect_timeout=``, ``backend=`` ...).
 
     Raises:
         InvalidArgument: the address or an option is not understood.

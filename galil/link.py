@@ -38,7 +38,7 @@ from galil.errors import (
 )
 from galil.models import ModelSpec
 from galil.protocol import commands as cmds
-from galil.protocol.commands import Command
+from galil.protocol.commands import Command, ReplyKind
 from galil.protocol.framing import Unsolicited
 from galil.protocol.numbers import parse_number
 from galil.protocol.session import Completed, Session
@@ -50,6 +50,7 @@ __all__ = [
     "WireCapture",
     "WireLog",
     "check_timeout",
+    "is_query",
     "parse_numbers_reply",
 ]
 
@@ -101,6 +102,16 @@ def check_timeout(timeout: object, default: float, what: str = "timeout") -> flo
             f"{what} must be a positive, finite number of seconds, not {timeout!r}"
         )
     return float(timeout)
+
+
+_QUERY_KINDS = frozenset({ReplyKind.DATA, ReplyKind.RECORD, ReplyKind.CTRL_Z})
+
+
+def is_query(command: Command) -> bool:
+    """Whether a command only reads (its reply carries data): safe to ask again."""
+    parts = command.parts or (command,)
+    # ANY: a raw line whose reply shape is unknown (an assignment, a program line): not a query.
+    return all(p.expect.kind in _QUERY_KINDS and not p.payload for p in parts)
 
 
 def parse_numbers_reply(reply: str) -> list[float]:
@@ -290,6 +301,9 @@ class LinkCore:
         self._keepalive: tuple[Command, float] | None = None
         self._reopened = threading.Event()  # cleared while a reconnect is under way
         self._reopened.set()
+        #: Called with the error when the link is found dead (automatic reconnect).
+        self.on_dead: Callable[[GalilConnectionError], None] | None = None
+        self._recovering = False
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -405,6 +419,35 @@ class LinkCore:
         except _ReopeningError:
             self._await_reopen(t)
             return self._transact(batch, t)
+        except GalilConnectionError as exc:
+            if not self._recover(exc):
+                raise
+            return self._after_recovery(batch, t, exc)
+
+    def _recover(self, exc: GalilConnectionError) -> bool:
+        """Reopen a dead link through ``on_dead`` (automatic reconnect); False if none."""
+        hook = self.on_dead
+        if hook is None or not self._dead or self._recovering:
+            return False
+        self._recovering = True
+        try:
+            hook(exc)
+        finally:
+            self._recovering = False
+        return True
+
+    def _after_recovery(
+        self, batch: Sequence[Command], t: float, exc: GalilConnectionError
+    ) -> list[Completed]:
+        # Queries are asked again on the new link; anything else may have run already.
+        if all(is_query(c) for c in batch):
+            return self._transact(batch, t)
+        texts = ", ".join(repr(c.text) for c in batch[:3])
+        raise self.error(
+            GalilConnectionError,
+            f"the link died during {texts} and was reopened; it was not sent again "
+            "(it may or may not have run)",
+        ) from exc
 
     def _transact(self, batch: Sequence[Command], t: float) -> list[Completed]:
         try:
@@ -836,6 +879,11 @@ class Link(LinkCore):
             # A reconnect is under way: wait for it, then send as if nothing happened.
             self._await_reopen(t)
             return self.command(text, timeout=timeout, allow_compound=allow_compound)
+        except GalilConnectionError as exc:
+            if not self._recover(exc):
+                raise
+            done = self._after_recovery(cmd.parts or (cmd,), t, exc)
+            return "\r\n".join(d.text for d in done if d.text)
 
     def _quick(self, cmd: Command, t: float) -> str | list[Completed]:
         """One command, no hooks, a real link (lock held): the usual exchange, inlined.

@@ -75,18 +75,36 @@ class RecordStream:
         self._subscribers: list[RecordCallback] = []
         self._next_due: float | None = None
         self._thread: threading.Thread | None = None
+        self._suspended = False
 
     def _start_reader(self, layout: Layout) -> None:
+        self._suspended = False
         self._thread = threading.Thread(
             target=self._read, args=(layout,), name="galil-records", daemon=True
         )
         self._thread.start()
 
+    def _suspend(self) -> None:
+        """Stop reading and drop the handle (the link is being reopened)."""
+        self._suspended = True
+        if self._handle is not None:
+            with contextlib.suppress(GalilError, OSError):
+                self._handle.close()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
+        self._handle = self._thread = None
+
+    def _resume(self, handle: Transport, layout: Layout) -> None:
+        with self._cond:
+            self._error = None  # the old handle's death is healed
+        self._handle = handle
+        self._start_reader(layout)
+
     def _read(self, layout: Layout) -> None:
         handle = self._handle
         assert handle is not None
         splitter = RecordSplitter(layout)
-        while not self._closed:
+        while not self._closed and not self._suspended:
             try:
                 chunk = handle.read(0.25)
                 records = [decode_record(r, layout) for r in splitter.feed(chunk)] if chunk else []
@@ -95,7 +113,7 @@ class RecordStream:
                 self._fail(exc)
                 return
             except GalilConnectionError as exc:
-                if not self._closed:
+                if not self._closed and not self._suspended:
                     self._fail(exc)
                 return
             if records:
@@ -223,7 +241,7 @@ class RecordStream:
             link = self._source.link
             if link.is_open:
                 with contextlib.suppress(GalilError):
-                    link.command("DR 0")
+                    link.command_line([cmds.dr(0)])
             if self._handle is not None:
                 with contextlib.suppress(GalilError, OSError):
                     self._handle.close()
@@ -311,6 +329,8 @@ class Records:
             raise InvalidArgument(
                 f"DR needs a second Ethernet handle; {transport!r} has none (use 'QR')"
             )
+        if method != "QR" and pusher is not None:
+            cmds.dr(period, 0, model=self.link.model)  # the model's DR range, before any byte
         layout = self.layout()
         if method == "QR" or pusher is None:
             stream = RecordStream(self, period, "QR", maxlen=maxlen)
@@ -331,7 +351,7 @@ class Records:
         try:
             index = self._which_handle(handle)
             stream = RecordStream(self, period, "DR", handle=handle, maxlen=maxlen)
-            link.command(f"DR {period},{index}")
+            link.command_line([cmds.dr(period, index, model=link.model)])
         except BaseException:
             with contextlib.suppress(GalilError, OSError):
                 handle.close()
@@ -352,6 +372,32 @@ class Records:
         if not 0 <= index <= 7:
             raise link.error(ProtocolError, f"MG _WH answered {text!r}: not a handle 0..7")
         return index
+
+    def suspend(self) -> None:
+        """Before a reconnect: pushed streams let go of their handles (they stay open)."""
+        with self._lock:
+            streams = [s for s in self._streams if s.method == "DR"]
+        for s in streams:
+            s._suspend()
+
+    def resume(self) -> None:
+        """After a reconnect: pushed streams get new handles and ``DR`` again, same period."""
+        with self._lock:
+            streams = [s for s in self._streams if s.method == "DR" and not s.closed]
+        transport: object = self.link.transport
+        if not streams or not isinstance(transport, HandleSource):
+            return
+        layout = self.layout()
+        for s in streams:
+            handle = transport.open_handle()
+            try:
+                index = self._which_handle(handle)
+                self.link.command_line([cmds.dr(s.period, index, model=self.link.model)])
+            except BaseException:
+                with contextlib.suppress(GalilError, OSError):
+                    handle.close()
+                raise
+            s._resume(handle, layout)
 
     def forget(self, stream: RecordStream) -> None:
         """A stream closed itself."""

@@ -147,6 +147,26 @@ class Routines:
         for t, label in restart.items():
             self.link.command_line([cmds.xq(label, t)])
 
+    def check_free(self, thread: int, label: str) -> None:
+        """Refuse a thread that does not exist or runs another program (one query).
+
+        Raises:
+            InvalidArgument: the thread does not exist or runs a program.
+        """
+        model = self.link.model
+        if isinstance(thread, bool) or not isinstance(thread, int):
+            raise InvalidArgument(f"thread must be an integer, not {thread!r}")
+        if not 0 <= thread < model.threads:
+            raise InvalidArgument(
+                f"{model.name} has threads 0..{model.threads - 1}, not {thread}",
+                model=model.name,
+            )
+        if thread in self.running() and self._threads.get(thread) != label:
+            raise InvalidArgument(
+                f"thread {thread} runs a program; choose another thread (thread=...)",
+                model=model.name,
+            )
+
     def start(self, label: str, thread: int) -> None:
         """Run the routine at ``label`` on ``thread`` (which must be free).
 
@@ -154,19 +174,7 @@ class Routines:
             InvalidArgument: the thread does not exist or runs a program.
         """
         with self._lock:
-            model = self.link.model
-            if isinstance(thread, bool) or not isinstance(thread, int):
-                raise InvalidArgument(f"thread must be an integer, not {thread!r}")
-            if not 0 <= thread < model.threads:
-                raise InvalidArgument(
-                    f"{model.name} has threads 0..{model.threads - 1}, not {thread}",
-                    model=model.name,
-                )
-            if thread in self.running() and self._threads.get(thread) != label:
-                raise InvalidArgument(
-                    f"thread {thread} runs a program; choose another thread (thread=...)",
-                    model=model.name,
-                )
+            self.check_free(thread, label)
             self.link.command_line([cmds.xq(label, thread)])
             self._threads[thread] = label
 

@@ -98,7 +98,10 @@ def transcript(controller: Controller) -> Iterator[Transcript]:
         remove()
 
 
-_READ_ONLY = re.compile(r"MG [_A-Za-z][_A-Za-z0-9]*(?:\s*,\s*[_A-Za-z][_A-Za-z0-9]*)*")
+# Lines that only read: operands and variables (MG), the program (UL), array listings.
+_READ_ONLY = re.compile(
+    r"MG [_A-Za-z][_A-Za-z0-9]*(?:\s*,\s*[_A-Za-z][_A-Za-z0-9]*)*|UL|LA|LV|QU [A-Za-z0-9\[\],]*|QZ"
+)
 
 
 @contextlib.contextmanager

@@ -87,6 +87,7 @@ class Watchdog:
             raise InvalidArgument(
                 f"watchdog timeout {self.timeout!r} s is {samples} samples; it needs 2 or more"
             )
+        self._routines.check_free(self.thread, LABEL)  # before anything is sent
         self._routines.install(watchdog_routine(link.model.axes))
         link.command_line([cmds.assign(LIMIT, samples), self._beat])
         self._routines.start(LABEL, self.thread)

@@ -19,14 +19,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import galil.controller
-from galil.controller import Controller, RecordStream
-from galil.errors import CommandError, InvalidArgument, ProtocolError
+from galil.controller import Controller
+from galil.errors import InvalidArgument, LimitError, ProtocolError
 from galil.models import get_model
 from galil.protocol.records import RecordSplitter, decode_record, record_size
+from galil.records import RecordStream
 from galil.sim.clock import ManualClock
 from galil.sim.controller import SimController
 from galil.sim.link import SimLink
 from galil.sim.server import SimTcpServer
+from galil.testing import nothing_sent
 
 WAIT = 5.0
 
@@ -122,10 +124,10 @@ def test_dr_callbacks_and_iteration(tcp: tuple[SimTcpServer, Controller]) -> Non
 
 def test_dr_period_below_the_minimum_is_refused(tcp: tuple[SimTcpServer, Controller]) -> None:
     srv, c = tcp
-    with pytest.raises(CommandError) as info:
+    with nothing_sent(c), pytest.raises(LimitError, match="DR period") as info:
         c.records(1)
-    assert info.value.code == 6
-    handles_closed(srv.controller, 2)  # the record handle was given back
+    assert info.value.limit == 2
+    handles_closed(srv.controller, 2)  # no record handle was opened
     with pytest.raises(InvalidArgument):
         c.records(0)
     with pytest.raises(InvalidArgument):
@@ -135,7 +137,7 @@ def test_dr_period_below_the_minimum_is_refused(tcp: tuple[SimTcpServer, Control
 def test_econo_model_records_over_tcp() -> None:
     sim = SimController("DMC-2143", ManualClock())
     with SimTcpServer(sim) as srv, galil.controller.connect(srv.url, timeout=2.0) as c:
-        with pytest.raises(CommandError):
+        with nothing_sent(c), pytest.raises(LimitError):
             c.records(4)  # 8 samples at least on the 21x3
         with c.records(8) as stream:
             srv.advance(0.05)

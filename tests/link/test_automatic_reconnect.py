@@ -1,0 +1,81 @@
+"""``connect(..., reconnect=True)``: a long-running script survives a dropped link. Queries are
+asked again on the new link; a command that may have changed something is never repeated."""
+
+from __future__ import annotations
+
+import logging
+
+import pytest
+
+import galil
+from galil.sim.clock import ManualClock, RealTimeClock
+from galil.sim.controller import SimController
+from galil.sim.link import SimLink
+from galil.sim.proxy import FaultProxy
+from galil.sim.server import SimTcpServer
+
+FAST = galil.ReconnectPolicy(attempts=3, delay=0.01)
+
+
+def test_a_query_survives_a_pulled_cable_and_the_reconnect_is_logged(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    with (
+        SimTcpServer(sim) as server,
+        FaultProxy(server.address) as proxy,
+        galil.connect(proxy.url, reconnect=FAST, timeout=1.0) as dmc,
+    ):
+        assert dmc.query_number("MG 1") == 1
+        with caplog.at_level(logging.WARNING, logger="galil.controller"):
+            proxy.cut()
+            assert dmc.query_number("MG 2") == 2
+            proxy.cut()
+            assert dmc.query_operands(["_TPA", "_TPB"]) == [0, 0]
+        assert sum("reconnected" in r.getMessage() for r in caplog.records) == 2
+        assert proxy.connections >= 4  # command and message handles, twice over
+
+
+def test_a_command_that_may_have_run_is_not_sent_twice() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    with (
+        SimTcpServer(sim) as server,
+        FaultProxy(server.address) as proxy,
+        galil.connect(proxy.url, reconnect=FAST, timeout=1.0) as dmc,
+    ):
+        dmc.command("count=0")
+        proxy.cut()
+        with pytest.raises(galil.GalilConnectionError, match="not sent again"):
+            dmc.command("count=count+1")
+        assert dmc.query_number("MG count") in (0, 1)  # at most once, never twice
+        assert dmc.query_number("MG 3") == 3  # and the link works again
+
+
+def test_a_data_record_stream_goes_on_after_a_reconnect() -> None:
+    sim = SimController("DMC-4040", RealTimeClock())
+    with (
+        SimTcpServer(sim) as server,
+        FaultProxy(server.address) as proxy,
+        galil.connect(proxy.url, reconnect=FAST, timeout=1.0) as dmc,
+        dmc.records(64, method="DR") as stream,
+    ):
+        dmc.sleep(0.2)
+        assert stream.get(timeout=2) is not None
+        proxy.cut()
+        assert dmc.query_number("MG 4") == 4  # finds the link dead, reopens it
+        stream.take(len(stream) + 1)  # drain what came before
+        dmc.sleep(0.2)
+        after = stream.get(timeout=2)
+        assert int(after["sample"]) > 0
+
+
+def test_without_an_address_there_is_no_automatic_reconnect() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+
+    with pytest.raises(galil.InvalidArgument, match="address"):
+        galil.connect(SimLink(sim), reconnect=True)
+    for bad in ("yes", 3, galil.ReconnectPolicy):
+        with pytest.raises((galil.InvalidArgument, TypeError)):
+            galil.connect("sim://DMC-4040", reconnect=bad)
+    with pytest.raises(galil.InvalidArgument):
+        galil.ReconnectPolicy(attempts=0)

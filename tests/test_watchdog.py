@@ -1,0 +1,116 @@
+"""The controller stops itself when the host dies: ``controller.watchdog(timeout)``."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from collections.abc import Callable
+
+import pytest
+
+import galil
+from galil.protocol import commands as cmds
+from galil.routines import MARKER
+from galil.sim.clock import RealTimeClock
+from galil.sim.controller import SimController
+from galil.sim.server import SimTcpServer
+from galil.testing import nothing_sent, sim_of, simulated
+
+
+def test_heartbeats_keep_motion_going_and_silence_stops_it() -> None:
+    with simulated() as dmc:
+        dog = dmc.watchdog(0.5)
+        assert dog.running
+        assert not dog.fired
+        jog = dmc.A.jog(20_000)
+        dmc.sleep(3.0)  # the host waits; its heartbeats go on
+        assert dmc.A.moving
+        assert not dog.fired
+        sim_of(dmc).advance(0.8)  # time passes with the host silent (frozen, unplugged...)
+        assert not sim_of(dmc).motion("A").moving
+        assert dog.fired
+        assert dmc.A.stop_code[0] == 4  # an ST: a deceleration at DC, not an abort
+        assert dmc.messages.get(timeout=1).startswith("galil watchdog")
+        assert jog.done
+
+
+def test_the_watchdog_leaves_the_users_program_and_threads_alone() -> None:
+    program = ["#MAIN", "uv=1", "#LOOP", "WT 10", "JP #LOOP", "EN"]
+    with simulated() as dmc:
+        assert dmc.exchange(cmds.dl(program)).ok
+        dog = dmc.watchdog(0.5)
+        lines = dmc.exchange(cmds.ul()).text.split("\r\n")
+        assert lines[: len(program)] == program  # every line of the user's program kept
+        assert lines[len(program)] == MARKER
+        dmc.command_line([cmds.xq("#MAIN", 0)])
+        assert dmc.query_operands(["_XQ0"])[0] >= 0
+        with nothing_sent(dmc, allow_queries=True), pytest.raises(galil.InvalidArgument):
+            dmc.watchdog(0.5, thread=0)  # a thread the user's program runs on
+        dog.stop()
+        assert not dog.running
+        assert dmc.query_operands(["_XQ0"])[0] >= 0  # the user's thread still runs
+
+
+def test_watchdog_arguments_are_checked_before_anything_is_sent() -> None:
+    with simulated() as dmc:
+        for bad in (
+            {"timeout": 0},
+            {"timeout": float("inf")},
+            {"timeout": "1"},
+            {"timeout": 1.0, "thread": 8},
+            {"timeout": 1.0, "interval": 2.0},
+        ):
+            with nothing_sent(dmc), pytest.raises(galil.InvalidArgument):
+                dmc.watchdog(**bad)  # type: ignore[arg-type]
+
+
+def test_a_clean_close_halts_the_watchdog_instead_of_firing_it() -> None:
+    sim = SimController("DMC-4040")
+    with galil.connect("sim://DMC-4040", controller=sim) as dmc:
+        dmc.watchdog(0.3)
+        dmc.A.jog(10_000)
+    sim.advance(1.0)
+    assert sim.motion("A").moving  # leaving on purpose is not dying
+
+
+_CHILD = textwrap.dedent(
+    """
+    import sys, time
+    import galil
+    dmc = galil.connect(sys.argv[1], timeout=2.0)
+    dmc.watchdog({timeout})
+    dmc.A.jog({speed})
+    print("jogging", flush=True)
+    time.sleep(60)
+    """
+)
+
+
+def test_killing_the_host_mid_jog_stops_the_axis_within_the_timeout(
+    spawn: Callable[..., subprocess.Popen[str]],
+) -> None:
+    timeout, speed = 0.3, 20_000
+    sim = SimController("DMC-4040", RealTimeClock())
+    with SimTcpServer(sim) as server, galil.connect(server.url, timeout=2.0) as observer:
+        child = spawn(
+            [sys.executable, "-c", _CHILD.format(timeout=timeout, speed=speed), server.url],
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        assert child.stdout is not None
+        assert child.stdout.readline().strip() == "jogging"
+        decel = speed / observer.query_number("MG _DCA")
+        assert observer.A.moving
+        child.send_signal(signal.SIGKILL)
+        killed = time.monotonic()
+        while observer.A.moving:
+            assert time.monotonic() - killed < timeout + decel + 2.0, "the axis kept moving"
+            time.sleep(0.005)
+        stopped = time.monotonic() - killed
+        child.wait(10)
+        assert observer.A.stop_code[0] == 4
+        assert observer.query_number("MG gwfire") == 1
+    assert stopped <= timeout + decel + 0.15
