@@ -239,7 +239,7 @@ class ContourStream:
                 self.increments[:, j], self.dt, start=round(rp), sample_period=link.sample_period
             )
             # The whole path against FL/BL, as for any move, before CM goes out.
-            predict.check_soft_limits(prof, low=bl, high=fl, axis=a)
+            predict.check_soft_limits(prof, forward_limit=fl, backward_limit=bl, axis=a)
             show = self._display.get(a)
             self.profiles[a] = prof if show is None else show(prof)
 

@@ -138,7 +138,7 @@ def _plan_axis(
     track = Track("position", state.rp, params, None, amount=distance)
     profile = predict_track(link, track)
     try:
-        predict.check_soft_limits(profile, low=state.bl, high=state.fl, axis=a)
+        predict.check_soft_limits(profile, forward_limit=state.fl, backward_limit=state.bl, axis=a)
     except LimitError as exc:
         exc.end = profile.end
         raise
@@ -357,7 +357,7 @@ def speed_schedule(
         start=round(rp),
         smoothing=it,
     )
-    predict.check_soft_limits(schedule.profile, low=bl, high=fl, axis=a)
+    predict.check_soft_limits(schedule.profile, forward_limit=fl, backward_limit=bl, axis=a)
     program = _schedule_program(link, a, label, first, distance, schedule)
     routines.install(Routine(f"#{label}", tuple(program)))  # beside the user's program
     link.command_line([cmds.assign(SCHEDULE_BEGIN, -1)])

@@ -216,20 +216,15 @@ def check_soft_limits(
     forward_limit: float | None = None,
     backward_limit: float | None = None,
     axis: str | None = None,
-    low: float | None = None,
-    high: float | None = None,
 ) -> None:
     """Check the whole predicted path, not just its end, against FL and BL.
 
-    ``high``/``low`` are aliases of ``forward_limit``/``backward_limit``. Like the controller,
-    only motion *outwards* beyond a limit is refused: an axis that starts past FL may move
-    back towards (and inside) it.
+    Like the controller, only motion *outwards* beyond a limit is refused: an axis that starts
+    past FL may move back towards (and inside) it.
 
     Raises:
         LimitError: at the first sample beyond a limit (``name`` is ``"FL"`` or ``"BL"``).
     """
-    forward_limit = high if forward_limit is None else forward_limit
-    backward_limit = low if backward_limit is None else backward_limit
     pos = profile.position
     prev = np.concatenate((pos[:1], pos[:-1]))
     checks: list[tuple[str, float, npt.NDArray[np.bool_]]] = []

@@ -77,25 +77,35 @@ def jog(
     if duration is not None:
         until = _sample_of(duration, ts)
     elif stop_at is None and not any(isinstance(e, Stop) for e in all_events):
-        # No end given: run past the last event until the last ramp (and smoothing) settles.
-        last = max((_sample_of(e.time, ts) for e in all_events), default=0)
-        r, ref, peak = run(eng, all_events, speed=speed, accel=accel, decel=decel, until=last)
-        plan = eng.plan
-        extra = 0
-        if plan is not None:
-            ramp = sum(s.duration for s in plan.segments if math.isfinite(s.duration))
-            extra = max(0, math.ceil(ramp - 1e-9) - (eng.sample - last))
-        if smoothing < 1.0:
-            extra += math.ceil(8 / smoothing)
-        r2, ref2, peak2 = run(eng, (), speed=speed, accel=accel, decel=decel, until=extra)
-        r = np.concatenate([r, r2])
-        ref = np.concatenate([ref, ref2])
-        peak = max(peak, peak2)
+        r, ref, peak = _run_until_settled(eng, all_events, speed, accel, decel, smoothing)
         peak = max(peak, abs(initial_speed))
         return _profile(start, r, ref, ts, peak, eng.stop_code, initial_speed)
     r, ref, peak = run(eng, all_events, speed=speed, accel=accel, decel=decel, until=until)
     peak = max(peak, abs(initial_speed))
     return _profile(start, r, ref, ts, peak, eng.stop_code, initial_speed)
+
+
+def _run_until_settled(
+    eng: AxisProfiler,
+    events: Sequence[Event],
+    speed: float,
+    accel: float,
+    decel: float,
+    smoothing: float,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """No end given: run past the last event until the last ramp (and smoothing) settles."""
+    ts = eng.sample_period
+    last = max((_sample_of(e.time, ts) for e in events), default=0)
+    r, ref, peak = run(eng, events, speed=speed, accel=accel, decel=decel, until=last)
+    plan = eng.plan
+    extra = 0
+    if plan is not None:
+        ramp = sum(s.duration for s in plan.segments if math.isfinite(s.duration))
+        extra = max(0, math.ceil(ramp - 1e-9) - (eng.sample - last))
+    if smoothing < 1.0:
+        extra += math.ceil(8 / smoothing)
+    r2, ref2, peak2 = run(eng, (), speed=speed, accel=accel, decel=decel, until=extra)
+    return np.concatenate([r, r2]), np.concatenate([ref, ref2]), max(peak, peak2)
 
 
 def _profile(

@@ -317,16 +317,125 @@ def move(
             peak_speed=plan.peak / sample_period,
             stop_code=1,
         )
+    return _run_move(eng, events, speed, accel, decel, plan.shape, int(start))
+
+
+def _run_move(
+    eng: AxisProfiler,
+    events: Sequence[Event],
+    speed: float,
+    accel: float,
+    decel: float,
+    shape: str,
+    start: int,
+) -> Profile:
     r, ref, peak = run(eng, events, speed=speed, accel=accel, decel=decel)
-    shape = plan.shape
     if events:
         shape = "stopped" if eng.stop_code == 4 else "changed"
     return Profile.from_samples(
-        np.concatenate([[int(start)], ref]),
-        profiler=np.concatenate([[int(start)], r]),
-        sample_period=sample_period,
+        np.concatenate([[start], ref]),
+        profiler=np.concatenate([[start], r]),
+        sample_period=eng.sample_period,
         shape=shape,
         peak_speed=peak,
+        stop_code=eng.stop_code,
+    )
+
+
+def _schedule_points(
+    distance: int,
+    initial_speed: float,
+    changes: Sequence[tuple[float, float]],
+    accel: float,
+    decel: float,
+) -> tuple[list[int], list[float], list[float]]:
+    """Check each change point; return the triggers, the speeds and where each ramp ends.
+
+    Raises:
+        ScheduleError: a change before the previous ramp ends, or no room to stop.
+        InvalidArgument: malformed points.
+    """
+    total = abs(int(distance))
+    if total == 0:
+        raise InvalidArgument("a speed schedule needs a non-zero distance")
+    speeds = [float(initial_speed)]
+    ramp_end = initial_speed**2 / (2 * accel)
+    ramp_ends = [ramp_end]
+    triggers: list[int] = []
+    prev_at = 0.0
+    for i, (at, sp) in enumerate(changes):
+        if not (math.isfinite(sp) and sp > 0):
+            raise InvalidArgument(f"change {i}: speed must be positive, got {sp!r}")
+        if not (math.isfinite(at) and prev_at < at < total):
+            raise InvalidArgument(
+                f"change {i}: trigger distance {at!r} must lie in ({prev_at:g}, {total})"
+            )
+        if at < ramp_end:
+            earliest = math.ceil(ramp_end)
+            raise ScheduleError(
+                f"change {i} at {at:g} counts comes before the previous ramp ends at"
+                f" {ramp_end:.6g} counts; the earliest valid trigger is {earliest}",
+                index=i,
+                earliest=earliest,
+                value=at,
+            )
+        rate = accel if sp > speeds[-1] else decel
+        ramp_end = at + abs(sp**2 - speeds[-1] ** 2) / (2 * rate)
+        ramp_ends.append(ramp_end)
+        speeds.append(float(sp))
+        triggers.append(math.ceil(at))
+        prev_at = at
+    _room_to_stop(ramp_end, speeds[-1], decel, total, len(triggers))
+    return triggers, speeds, ramp_ends
+
+
+def _room_to_stop(ramp_end: float, speed: float, decel: float, total: int, index: int) -> None:
+    need = ramp_end + speed**2 / (2 * decel)
+    if need > total:
+        raise ScheduleError(
+            f"the final deceleration from {speed:g} counts/s needs the move to be at least"
+            f" {need:.6g} counts long, not {total}",
+            index=index,
+            earliest=math.ceil(need),
+            value=total,
+        )
+
+
+def _predict_schedule(
+    distance: int,
+    triggers: Sequence[int],
+    speeds: Sequence[float],
+    accel: float,
+    decel: float,
+    sample_period: float,
+    start: int,
+    smoothing: float | None,
+) -> Profile:
+    """Run the schedule on the engine: AD watches r (before smoothing), SP from the next sample."""
+    sign = 1 if distance > 0 else -1
+    eng = AxisProfiler(sample_period=sample_period, position=int(start))
+    eng.begin_move(int(start) + int(distance), speeds[0], accel, decel, smoothing)
+    out = _Run([], [], 0.0)
+    for trig, sp in zip(triggers, speeds[1:], strict=True):
+        while True:
+            end = eng.end_sample
+            n = max(1, (end - eng.sample) if end is not None else _SCHEDULE_STEP)
+            r = eng.preview_profile(n)
+            hit = np.flatnonzero(sign * (r - int(start)) >= trig)
+            if hit.size:
+                _advance(eng, int(hit[0]) + 1, out)
+                break
+            _advance(eng, n, out)
+        eng.set_speed(sp)
+    r, ref, peak = run(eng, (), speed=speeds[-1], accel=accel, decel=decel)
+    out.r.append(r)
+    out.ref.append(ref)
+    return Profile.from_samples(
+        np.concatenate([[int(start)], *out.ref]),
+        profiler=np.concatenate([[int(start)], *out.r]),
+        sample_period=sample_period,
+        shape="schedule",
+        peak_speed=max(out.peak, peak),
         stop_code=eng.stop_code,
     )
 
@@ -376,72 +485,9 @@ def speed_schedule(
         InvalidArgument: malformed arguments.
     """
     _validate(initial_speed, accel, decel, sample_period)
-    total = abs(int(distance))
-    if total == 0:
-        raise InvalidArgument("a speed schedule needs a non-zero distance")
-    speeds = [float(initial_speed)]
-    ramp_end = initial_speed**2 / (2 * accel)
-    ramp_ends = [ramp_end]
-    triggers: list[int] = []
-    prev_at = 0.0
-    for i, (at, sp) in enumerate(changes):
-        if not (math.isfinite(sp) and sp > 0):
-            raise InvalidArgument(f"change {i}: speed must be positive, got {sp!r}")
-        if not (math.isfinite(at) and prev_at < at < total):
-            raise InvalidArgument(
-                f"change {i}: trigger distance {at!r} must lie in ({prev_at:g}, {total})"
-            )
-        if at < ramp_end:
-            earliest = math.ceil(ramp_end)
-            raise ScheduleError(
-                f"change {i} at {at:g} counts comes before the previous ramp ends at"
-                f" {ramp_end:.6g} counts; the earliest valid trigger is {earliest}",
-                index=i,
-                earliest=earliest,
-                value=at,
-            )
-        rate = accel if sp > speeds[-1] else decel
-        ramp_end = at + abs(sp**2 - speeds[-1] ** 2) / (2 * rate)
-        ramp_ends.append(ramp_end)
-        speeds.append(float(sp))
-        triggers.append(math.ceil(at))
-        prev_at = at
-    need = ramp_end + speeds[-1] ** 2 / (2 * decel)
-    if need > total:
-        earliest = math.ceil(need)
-        raise ScheduleError(
-            f"the final deceleration from {speeds[-1]:g} counts/s needs the move to be at least"
-            f" {need:.6g} counts long, not {total}",
-            index=len(triggers),
-            earliest=earliest,
-            value=total,
-        )
-    sign = 1 if distance > 0 else -1
-    eng = AxisProfiler(sample_period=sample_period, position=int(start))
-    eng.begin_move(int(start) + int(distance), initial_speed, accel, decel, smoothing)
-    out = _Run([], [], 0.0)
-    for trig, sp in zip(triggers, speeds[1:], strict=True):
-        # AD watches the profiler position r (before smoothing); SP acts from the next sample.
-        while True:
-            end = eng.end_sample
-            n = max(1, (end - eng.sample) if end is not None else _SCHEDULE_STEP)
-            r = eng.preview_profile(n)
-            hit = np.flatnonzero(sign * (r - int(start)) >= trig)
-            if hit.size:
-                _advance(eng, int(hit[0]) + 1, out)
-                break
-            _advance(eng, n, out)
-        eng.set_speed(sp)
-    r, ref, peak = run(eng, (), speed=speeds[-1], accel=accel, decel=decel)
-    out.r.append(r)
-    out.ref.append(ref)
-    profile = Profile.from_samples(
-        np.concatenate([[int(start)], *out.ref]),
-        profiler=np.concatenate([[int(start)], *out.r]),
-        sample_period=sample_period,
-        shape="schedule",
-        peak_speed=max(out.peak, peak),
-        stop_code=eng.stop_code,
+    triggers, speeds, ramp_ends = _schedule_points(distance, initial_speed, changes, accel, decel)
+    profile = _predict_schedule(
+        distance, triggers, speeds, accel, decel, sample_period, start, smoothing
     )
     return SpeedSchedule(
         distance=int(distance),

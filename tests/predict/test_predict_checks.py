@@ -218,15 +218,15 @@ def test_speed_schedule_reports_the_earliest_valid_trigger() -> None:
 def test_soft_limits_refuse_only_outward_motion() -> None:
     # An axis already past FL may come back inside; it may not go further out.
     back = predict.move(-4500, 10_000, 102_400, 102_400, start=5000)
-    predict.check_soft_limits(back, high=1000)
+    predict.check_soft_limits(back, forward_limit=1000)
     further = predict.move(500, 10_000, 102_400, 102_400, start=5000)
     with pytest.raises(LimitError) as info:
-        predict.check_soft_limits(further, high=1000)
+        predict.check_soft_limits(further, forward_limit=1000)
     assert info.value.name == "FL"
     assert info.value.sample is not None
     assert info.value.sample > 0
     below = predict.move(4500, 10_000, 102_400, 102_400, start=-5000)
-    predict.check_soft_limits(below, low=-1000)
+    predict.check_soft_limits(below, backward_limit=-1000)
 
 
 def test_profile_with_units_changes_only_what_is_shown() -> None:

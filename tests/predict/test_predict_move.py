@@ -321,4 +321,4 @@ def test_single_value_quantise_forms() -> None:
     assert getattr(info.value, "axis", None) == "C"
     p = predict.move(100, 1000, 10_240, 10_240)
     with pytest.raises(InvalidArgument):
-        predict.check_soft_limits(p, high=50)
+        predict.check_soft_limits(p, forward_limit=50)
