@@ -300,8 +300,15 @@ def listen_bootp(
     timeout: float = 5.0,
     address: tuple[str, int] = ("0.0.0.0", BOOTP_SERVER_PORT),
     on_request: Callable[[BootpRequest], None] | None = None,
+    count: int | None = None,
 ) -> list[BootpRequest]:
     """Listen for Galil controllers asking for an IP address (BOOTP/DHCP) for ``timeout`` s.
+
+    Args:
+        timeout: seconds to listen.
+        address: where to listen (the BOOTP server port, 67, on every interface).
+        on_request: called with each controller the first time it asks.
+        count: return as soon as this many different controllers asked.
 
     Raises:
         GalilConnectionError: the port cannot be bound (port 67 needs root on most systems).
@@ -328,6 +335,8 @@ def listen_bootp(
                 seen[request.mac] = request
                 if on_request is not None:
                     on_request(request)
+                if count is not None and len(seen) >= count:
+                    break
     return list(seen.values())
 
 

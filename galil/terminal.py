@@ -17,9 +17,11 @@ from __future__ import annotations
 
 import os
 import re
+import signal
 import sys
 from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import Any
 
 from galil.controller import Controller
 from galil.errors import (
@@ -182,7 +184,10 @@ class Terminal:
         elif isinstance(exc, InvalidArgument):
             self.write(f"not sent: {message}")
         elif isinstance(exc, GalilConnectionError):
-            raise exc
+            if self.controller.link.dead or self.controller.closed:
+                raise exc
+            # Out of step and not back yet: an earlier AM, MC or WT still holds the line.
+            self.write(f"not sent: {message} (an earlier AM, MC or WT may still be waiting)")
         else:
             self.write(f"error: {message}")
 
@@ -191,10 +196,10 @@ class Terminal:
         self.cancel()
         try:
             self.controller.stop()
-        except GalilConnectionError:
-            raise
         except GalilError as exc:
-            self.write(f"Ctrl-C: ST failed: {exc.args[0] if exc.args else exc}")
+            if isinstance(exc, GalilConnectionError) and self.controller.link.dead:
+                raise
+            self.write(f"Ctrl-C: ST not sent: {exc.args[0] if exc.args else exc}")
             return
         self.write("Ctrl-C: sent ST, motion stopped on every axis (Ctrl-D leaves)")
 
@@ -246,7 +251,6 @@ def _piped(term: Terminal) -> None:
 def _interactive(term: Terminal, history_file: Path | None) -> None:
     from prompt_toolkit import PromptSession
     from prompt_toolkit.history import FileHistory, History, InMemoryHistory
-    from prompt_toolkit.patch_stdout import patch_stdout
 
     history: History = InMemoryHistory()
     if history_file is not None:
@@ -256,20 +260,53 @@ def _interactive(term: Terminal, history_file: Path | None) -> None:
         except OSError:
             pass  # a read-only home: keep the history for this session only
     session: PromptSession[str] = PromptSession(history=history)
+    # Ctrl-C at the prompt is a key; between prompts (the tty is then in cooked mode) it is a
+    # SIGINT, which must not land inside prompt-toolkit's setup: it is noted and handled here.
+    state = {"interrupted": False}
+
+    def note(signum: int, frame: object) -> None:
+        state["interrupted"] = True
+
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        _prompt_loop(term, session, note, state)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _prompt_loop(
+    term: Terminal, session: Any, note: Callable[[int, Any], None], state: dict[str, bool]
+) -> None:
     # Output printed while the prompt is shown (messages from the poll thread) goes above it.
+    from prompt_toolkit.patch_stdout import patch_stdout
+
     with patch_stdout(raw=True):
         while True:
+            signal.signal(signal.SIGINT, note)
+            line: str | None = None
+
+            def check(app: Any = session.app) -> None:
+                # A Ctrl-C that came while the prompt was being set up: act on it now.
+                if state["interrupted"]:
+                    app.exit(exception=KeyboardInterrupt())
+
             try:
-                line = session.prompt(term.prompt)
+                line = session.prompt(term.prompt, pre_run=check)
             except KeyboardInterrupt:
+                state["interrupted"] = True
+            except EOFError:
+                if not term.downloading:
+                    return
+                term.cancel()
+            if state["interrupted"]:
+                state["interrupted"] = False
                 term.interrupt()
                 continue
-            except EOFError:
-                if term.downloading:
-                    term.cancel()
-                    continue
-                return
+            if line is None:
+                continue
+            signal.signal(signal.SIGINT, signal.default_int_handler)
             try:
                 term.feed(line)
             except KeyboardInterrupt:
+                signal.signal(signal.SIGINT, note)
                 term.interrupt()
