@@ -91,8 +91,11 @@ def run_demo(
             + ", ".join(f"{k} {v} counts" for k, v in diffs.items())
         )
         if png:
-            _plot(runs, dmc.sample_period, png, f"galil demo, simulated {dmc.model.name}")
-            say(f"plot saved to {png}")
+            try:
+                _plot(runs, dmc.sample_period, png, f"galil demo, simulated {dmc.model.name}")
+                say(f"plot saved to {png}")
+            except ImportError:
+                say("no plot: matplotlib is missing (pip install 'galil[jupyter]')")
         say(f"demo finished in {time.monotonic() - began:.1f} s")
     return 0 if max(diffs.values()) == 0 else 1
 
