@@ -128,8 +128,7 @@ def _bar(total: int, letters: str) -> Any:
         from tqdm.auto import tqdm
     except ImportError:
         return None
-    # disable=None: no bar when stderr is not a terminal (a log, CI); notebooks still show it.
-    return tqdm(total=total, desc=f"contour {letters}", unit="seg", disable=None)
+    return tqdm(total=total, desc=f"contour {letters}", unit="seg")
 
 
 @dataclass

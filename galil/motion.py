@@ -497,9 +497,7 @@ def progress_bar(kind: str, axes: str, duration: float) -> Any:
         return None
     total = duration if math.isfinite(duration) else None
     fmt = "{l_bar}{bar}| {n:.2f}/{total:.2f} s" if total is not None else "{desc}: {n:.2f} s"
-    # disable=None: no bar when stderr is not a terminal (a log, CI), as tqdm documents; the
-    # notebook bar ignores it and always shows.
-    return tqdm(total=total, desc=f"{kind} {axes}", unit="s", bar_format=fmt, disable=None)
+    return tqdm(total=total, desc=f"{kind} {axes}", unit="s", bar_format=fmt)
 
 
 # ----------------------------------------------------------------------------------- stopping
