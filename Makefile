@@ -4,14 +4,18 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
+<<<<<<< HEAD
 .PHONY: demo test lint typecheck layers bench soak clean
+=======
+.PHONY: demo test lint typecheck layers bench docs clean
+>>>>>>> cli-docs
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade "pip>=25.1"
 
 $(STAMP): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e ".[jupyter]" --group dev
+	$(BIN)/python -m pip install --quiet -e ".[jupyter]" --group dev --group docs
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -30,6 +34,10 @@ layers: $(STAMP)
 test: lint typecheck layers
 	$(BIN)/pytest -q
 
+# The documentation site (MkDocs, Material, mkdocstrings) in site/; a warning fails the build.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
+
 bench: $(STAMP)
 	$(BIN)/python benchmarks/protocol.py
 	$(BIN)/python benchmarks/predict.py
@@ -40,4 +48,4 @@ soak: $(STAMP)
 	$(BIN)/python benchmarks/soak.py
 
 clean:
-	rm -rf $(VENV) build dist .mypy_cache .pytest_cache .ruff_cache
+	rm -rf $(VENV) build dist site .mypy_cache .pytest_cache .ruff_cache

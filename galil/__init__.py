@@ -6,6 +6,7 @@ from galil.axis import Axis
 from galil.codes import stop_text, tc_text
 from galil.contour import ContourResult
 from galil.controller import Controller, ReconnectPolicy, connect
+from galil.discovery import Found, find
 from galil.errors import (
     CommandError,
     ContourUnderrunError,
@@ -32,6 +33,7 @@ __all__ = [
     "ContourResult",
     "ContourUnderrunError",
     "Controller",
+    "Found",
     "GalilConnectionError",
     "GalilError",
     "GalilTimeoutError",
@@ -50,6 +52,7 @@ __all__ = [
     "ScheduleError",
     "__version__",
     "connect",
+    "find",
     "get_model",
     "stop_text",
     "tc_text",

@@ -1,18 +1,50 @@
-"""The ``galil`` console command: ``demo``, ``sim``, ``plan``, ``info`` and ``terminal``."""
+"""The ``galil`` console command (also ``python -m galil``).
+
+Subcommands: ``terminal``, ``list``, ``info``, ``dl``, ``ul``, ``plan``, ``sim`` and ``demo``.
+Errors from the library are reported as one line (``galil: ...``) with exit status 2.
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
 from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
+
+DESCRIPTION = """\
+Talk to Galil DMC motion controllers, find them, and simulate one.
+
+Addresses: tcp://192.168.0.42 (or just 192.168.0.42), /dev/ttyUSB0, COM3,
+usb://, /dev/galilpci0, sim://DMC-4040 (the built-in simulator).
+"""
+
+EPILOG = """\
+examples:
+  galil list                         serial, USB and PCI controllers on this computer
+  galil terminal sim://DMC-4040      a terminal on the simulator (Ctrl-D leaves)
+  galil dl program.dmc 192.168.0.42  download a program
+  galil plan 12.5mm --speed 20mm/s --accel 200mm/s^2 --scale 2000/mm
+  galil demo --quick                 the end-to-end job on the simulator, in a few seconds
+"""
+
+
+def _version() -> str:
+    from galil import __version__
+
+    return __version__
+
+
+# ----------------------------------------------------------------------------------- commands
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     from galil.demo import run_demo
 
-    return run_demo(png=args.png, model=args.model, quiet=args.quiet)
+    png = None if args.no_png or args.quick else args.png
+    return run_demo(png=png, model=args.model, quiet=args.quiet, quick=args.quick)
 
 
 def _cmd_sim(args: argparse.Namespace) -> int:
@@ -29,34 +61,81 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     return sim_main(argv)
 
 
-def _cmd_plan(args: argparse.Namespace) -> int:
+def _quantity(text: str, what: str) -> Any:
+    """``"12.5mm"`` as a pint Quantity, ``"10000"`` as a plain number."""
+    from galil.errors import InvalidArgument
+    from galil.units import ureg
+
+    try:
+        return float(text)
+    except ValueError:
+        pass
+    try:
+        return ureg.Quantity(text.replace("^", "**"))
+    except Exception as exc:  # pint raises several kinds for text it cannot read
+        raise InvalidArgument(f"{what}: cannot read {text!r} as a number or a quantity") from exc
+
+
+def plan_profile(args: argparse.Namespace) -> Any:
+    """The profile ``galil plan`` prints: counts, or the units of ``--scale``."""
     from galil import predict
+    from galil.errors import InvalidArgument
     from galil.models import get_model
+    from galil.units import Scale, counts_or_plain
 
     model = get_model(args.model)
-    speed = predict.check_parameter("SP", args.speed, model)
-    accel = predict.check_parameter("AC", args.accel, model)
-    decel = predict.check_parameter("DC", args.decel if args.decel else args.accel, model)
+    values = {
+        "distance": _quantity(args.distance, "distance"),
+        "SP": _quantity(args.speed, "--speed"),
+        "AC": _quantity(args.accel, "--accel"),
+        "DC": _quantity(args.decel if args.decel else args.accel, "--decel"),
+    }
+    scale = Scale(counts_per=_quantity(args.scale, "--scale")) if args.scale else None
+    counts: dict[str, float] = {}
+    for name, value in values.items():
+        if scale is None or isinstance(value, float):
+            counts[name] = counts_or_plain(value, name)
+        elif name == "distance":
+            counts[name] = scale.distance_to_counts(value)
+        else:
+            counts[name] = abs(scale.rate_to_counts(value, 1 if name == "SP" else 2, name))
+    distance = round(counts["distance"])
+    if abs(distance - counts["distance"]) > 1e-6 * max(1.0, abs(distance)):
+        raise InvalidArgument(f"the distance is {counts['distance']:g} counts, not a whole number")
     profile = predict.move(
-        args.distance,
-        speed,
-        accel,
-        decel,
+        distance,
+        predict.check_parameter("SP", counts["SP"], model),
+        predict.check_parameter("AC", counts["AC"], model),
+        predict.check_parameter("DC", counts["DC"], model),
         sample_period=model.sample_period,
         smoothing=args.smoothing,
     )
+    if scale is not None:
+        profile = profile.with_units(float(scale.counts_per.magnitude), f"{scale.unit:~}")
+    return profile
+
+
+def _cmd_plan(args: argparse.Namespace) -> int:
+    profile = plan_profile(args)
     print(profile)
     if args.png:
-        fig = profile.plot(title=f"PR {args.distance} on {model.name}")
+        fig = profile.plot(title=f"PR {args.distance} on {args.model}")
         fig.savefig(args.png, dpi=100)
         print(f"plot saved to {args.png}")
     return 0
 
 
-def _cmd_info(args: argparse.Namespace) -> int:
+def _connect(address: str, timeout: float) -> Any:
     import galil
 
-    with galil.connect(args.address) as dmc:
+    options: dict[str, Any] = {"timeout": timeout}
+    if address.startswith("sim:") and "clock=" not in address:
+        options["clock"] = "real"  # a person is typing: the simulator runs in real time
+    return galil.connect(address, **options)
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    with _connect(args.address, args.timeout) as dmc:
         ident = dmc.identity
         assert ident is not None  # connect() identifies unless told not to
         print(f"{ident.raw_model} firmware {ident.firmware} ({dmc.model.family})")
@@ -69,41 +148,159 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 
 def _cmd_terminal(args: argparse.Namespace) -> int:
-    import galil
+    from galil.terminal import default_history_path, run_terminal
 
-    with galil.connect(args.address) as dmc:
-        print(f"connected to {dmc.model.name}; Ctrl-D to leave", file=sys.stderr)
-        while True:
-            try:
-                line = input(":")
-            except EOFError:
-                return 0
-            if not line.strip():
-                continue
-            try:
-                print(dmc.command(line.strip()))
-            except galil.CommandError as exc:
-                print(f"? {exc.code} {exc.text}")
-            while True:
-                try:
-                    print(f"(message) {dmc.messages.get_nowait()}")
-                except Exception:
-                    break
+    history = None if args.no_history else (args.history or default_history_path())
+    with _connect(args.address, args.timeout) as dmc:
+        ident = dmc.identity
+        name = ident.raw_model if ident is not None else dmc.model.name
+        print(
+            f"connected to {name} at {args.address}; Ctrl-C sends ST, Ctrl-D leaves",
+            file=sys.stderr,
+            flush=True,
+        )
+        return run_terminal(dmc, timeout=args.timeout, history=history)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``galil`` command."""
-    parser = argparse.ArgumentParser(prog="galil", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
+def _cmd_dl(args: argparse.Namespace) -> int:
+    from galil.terminal import Terminal, program_lines
 
+    lines = program_lines(Path(args.file).read_text(encoding="ascii", errors="replace"))
+    with _connect(args.address, args.timeout) as dmc:
+        return 0 if Terminal(dmc, timeout=args.timeout).download(lines) else 2
+
+
+def _cmd_ul(args: argparse.Namespace) -> int:
+    from galil.protocol import commands as cmds
+
+    with _connect(args.address, args.timeout) as dmc:
+        text = dmc.send(cmds.ul(), timeout=max(args.timeout, 10.0))
+    program = "\n".join(text.splitlines()) + "\n"
+    if args.file:
+        Path(args.file).write_text(program, encoding="ascii")
+        print(f"{len(program.splitlines())} lines saved to {args.file}", file=sys.stderr)
+    else:
+        sys.stdout.write(program)
+    return 0
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    from galil.discovery import find
+
+    found = find(
+        serial=not args.no_serial,
+        usb=not args.no_usb,
+        pci=not args.no_pci,
+        network=args.network,
+        probe=args.probe,
+        bootp=args.bootp,
+        identify=not args.no_identify,
+        timeout=args.timeout,
+    )
+    for item in found:
+        print(item)
+    if not found:
+        print("no controller found", file=sys.stderr)
+    if not (args.network or args.probe or args.bootp):
+        print(
+            "(Ethernet not searched: --network asks the LAN, --probe 192.168.0.0/24 asks "
+            "given addresses)",
+            file=sys.stderr,
+        )
+    return 0 if found else 1
+
+
+# ----------------------------------------------------------------------------------- parser
+
+
+def _timeout(p: argparse.ArgumentParser, default: float) -> None:
+    p.add_argument(
+        "--timeout",
+        type=float,
+        default=default,
+        metavar="S",
+        help=f"seconds to wait for each reply (default {default:g})",
+    )
+
+
+def _add_connection_commands(sub: Any) -> None:
+    p = sub.add_parser(
+        "terminal",
+        help="type commands, see replies and program output as it arrives",
+        description="A Galil terminal: lines go to the controller as typed (PRA=1000;BGA); "
+        "a rejected line is explained with TC1; DL alone starts a program download ending "
+        "with a line holding a backslash; Ctrl-C sends ST; Ctrl-D leaves.",
+    )
+    p.add_argument("address", help="controller address, e.g. 192.168.0.42 or sim://DMC-4040")
+    _timeout(p, 5.0)
+    p.add_argument(
+        "--history", type=Path, metavar="FILE", help="history file (default: in ~/.local/state)"
+    )
+    p.add_argument("--no-history", action="store_true", help="keep no history file")
+    p.set_defaults(func=_cmd_terminal)
+
+    p = sub.add_parser("info", help="connect and describe the controller and its axes")
+    p.add_argument("address", help="e.g. tcp://192.168.0.42, /dev/ttyUSB0, sim://DMC-4040")
+    _timeout(p, 1.0)
+    p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser("dl", help="download a program file (DL)")
+    p.add_argument("file", help="program text; blank lines and indentation are dropped")
+    p.add_argument("address", help="controller address")
+    _timeout(p, 5.0)
+    p.set_defaults(func=_cmd_dl)
+
+    p = sub.add_parser("ul", help="upload the program (UL) to standard output or a file")
+    p.add_argument("address", help="controller address")
+    p.add_argument("file", nargs="?", help="where to save it (default: standard output)")
+    _timeout(p, 5.0)
+    p.set_defaults(func=_cmd_ul)
+
+    p = sub.add_parser(
+        "list",
+        help="find controllers: serial ports, USB, PCI, and Ethernet when asked",
+        description="Lists serial ports whose USB IDs are Galil's or a USB-serial bridge's, "
+        "Galil USB devices, Galil PCI nodes, and Ethernet controllers when asked.",
+    )
+    p.add_argument(
+        "--network",
+        action="store_true",
+        help="also ask the LAN: ^R^V to Galil's multicast group 239.255.19.56",
+    )
+    p.add_argument(
+        "--probe",
+        action="append",
+        default=[],
+        metavar="ADDR",
+        help="ask these hosts over TCP: 192.168.0.42, 192.168.0.42:23 or 192.168.0.0/24 "
+        "(repeatable)",
+    )
+    p.add_argument(
+        "--bootp",
+        action="store_true",
+        help="listen 5 s for controllers asking for an IP address (UDP 67: needs root)",
+    )
+    p.add_argument("--no-serial", action="store_true", help="skip serial ports")
+    p.add_argument("--no-usb", action="store_true", help="skip USB devices")
+    p.add_argument("--no-pci", action="store_true", help="skip PCI nodes")
+    p.add_argument(
+        "--no-identify", action="store_true", help="do not open what is found to ask ^R^V"
+    )
+    _timeout(p, 1.0)
+    p.set_defaults(func=_cmd_list)
+
+
+def _add_offline_commands(sub: Any) -> None:
     p = sub.add_parser("demo", help="run the end-to-end job on the built-in simulator")
-    p.add_argument("--model", default="DMC-4040")
+    p.add_argument("--model", default="DMC-4040", help="simulated model (default DMC-4040)")
     p.add_argument("--png", default="galil-demo.png", help="where to save the plot")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--no-png", action="store_true", help="do not draw the plot")
+    p.add_argument("--quick", action="store_true", help="short moves, no plot: a smoke test")
+    p.add_argument("--quiet", action="store_true", help="print nothing; the status tells")
     p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("sim", help="serve a simulated controller over TCP or a pty")
-    p.add_argument("--model", default="DMC-4040")
+    p.add_argument("--model", default="DMC-4040", help="simulated model (default DMC-4040)")
     p.add_argument("--tcp", metavar="HOST:PORT", help="e.g. 127.0.0.1:0 (0 picks a free port)")
     p.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal")
     p.add_argument(
@@ -115,25 +312,46 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--lag", type=float, default=0.003, help="servo lag time constant, s")
     p.set_defaults(func=_cmd_sim)
 
-    p = sub.add_parser("plan", help="predict a position move and print (or plot) it")
-    p.add_argument("distance", type=int, help="relative move, counts")
-    p.add_argument("--speed", type=float, default=25_000, help="SP, counts/s")
-    p.add_argument("--accel", type=float, default=256_000, help="AC, counts/s²")
-    p.add_argument("--decel", type=float, default=None, help="DC, counts/s² (default: AC)")
+    p = sub.add_parser(
+        "plan",
+        help="predict a position move and print (or plot) it",
+        description="Predict a relative move as the controller's profiler will run it. "
+        "Plain numbers are counts; with --scale, values take units (12.5mm, 20mm/s).",
+    )
+    p.add_argument("distance", help="relative move: counts, or a length with --scale (12.5mm)")
+    p.add_argument("--speed", default="25000", help="SP: counts/s, or e.g. 20mm/s")
+    p.add_argument("--accel", default="256000", help="AC: counts/s^2, or e.g. 200mm/s^2")
+    p.add_argument("--decel", default=None, help="DC (default: the acceleration)")
+    p.add_argument("--scale", default=None, help="counts per unit, e.g. 2000/mm or 4096/deg")
     p.add_argument("--smoothing", type=float, default=1.0, help="IT, 0.004..1 (1: none)")
-    p.add_argument("--model", default="DMC-4040")
-    p.add_argument("--png", default=None)
+    p.add_argument("--model", default="DMC-4040", help="model whose ranges apply")
+    p.add_argument("--png", default=None, help="save a plot of the profile here")
     p.set_defaults(func=_cmd_plan)
 
-    p = sub.add_parser("info", help="connect and describe the controller")
-    p.add_argument("address", help="e.g. tcp://192.168.0.42, /dev/ttyUSB0, sim://DMC-4040")
-    p.set_defaults(func=_cmd_info)
 
-    p = sub.add_parser("terminal", help="type commands, see replies and messages")
-    p.add_argument("address")
-    p.set_defaults(func=_cmd_terminal)
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the ``galil`` command."""
+    parser = argparse.ArgumentParser(
+        prog="galil",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"galil {_version()}")
+    sub = parser.add_subparsers(
+        dest="command",
+        required=True,
+        metavar="COMMAND",
+        help="what to do (COMMAND -h: its options)",
+    )
+    _add_connection_commands(sub)
+    _add_offline_commands(sub)
+    return parser
 
-    args = parser.parse_args(argv)
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``galil`` command; returns the exit status."""
+    args = build_parser().parse_args(argv)
     try:
         return int(args.func(args))
     except KeyboardInterrupt:
@@ -142,6 +360,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         from galil.errors import GalilError
 
         if isinstance(exc, GalilError):
+            print(f"galil: {exc.args[0] if exc.args else exc}", file=sys.stderr)
+            return 2
+        if isinstance(exc, OSError):  # a file or a device that cannot be opened
             print(f"galil: {exc}", file=sys.stderr)
             return 2
         raise

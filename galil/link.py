@@ -304,6 +304,7 @@ class LinkCore:
         #: Called with the error when the link is found dead (automatic reconnect).
         self.on_dead: Callable[[GalilConnectionError], None] | None = None
         self._recovering = False
+        self._asked = 0  # TC1 questions so far (each gets a marker of its own)
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -606,23 +607,28 @@ class LinkCore:
         self.note("link back in step")
 
     def _explain(self, rejected: Completed, t: float) -> GalilError:
-        """Ask ``TC1`` why a command was refused; a doubtful ``?`` is no refusal."""
+        """Ask ``TC1`` why a command was refused; a doubtful ``?`` is no refusal.
+
+        ``TC1`` goes out with a fresh marker (``MG "TCOKn"``) right behind it: unless the
+        marker comes back as the second reply, the answers were not the ones asked for (a
+        stray ``?`` followed by the command's own reply), and the link is out of step.
+        """
         command = rejected.command.text
+        self._asked += 1
+        token = f"TCOK{self._asked}"
         try:
-            tc = self._roundtrip([cmds.tc(1)], t)[0]
+            tc, mark = self._roundtrip([cmds.tc(1), cmds.mg(token)], t)
         except (GalilTimeoutError, ProtocolError) as exc:
             why = exc.args[0] if exc.args else exc
-            return self.error(
-                ProtocolError,
-                f"{command!r} got '?' and the link went out of step asking why ({why}); "
-                "the command may have executed",
-            )
+            return self._doubt(command, f"the link went out of step asking why ({why})")
+        if not mark.ok or mark.text.strip() != token:
+            return self._doubt(command, "the answer to TC1 was not the controller's")
         code: int | None = None
         if tc.ok:
             try:
                 code, text = parse_tc1(tc.text)
             except ProtocolError:
-                text = f"(TC1 answered {tc.text!r})"
+                return self._doubt(command, f"TC1 answered {tc.text!r}")
         else:
             text = "(TC1 was refused too)"
         if code == 0:
@@ -638,6 +644,12 @@ class LinkCore:
         if hint is not None:
             error.args = (f"{error.args[0]} ({hint})",)
         return error
+
+    def _doubt(self, command: str, why: str) -> ProtocolError:
+        self._session.abandon()  # whatever is still on its way must not pass for a reply
+        return self.error(
+            ProtocolError, f"{command!r} got '?' but {why}; the command may have executed"
+        )
 
     # -- raw I/O (lock held) ------------------------------------------------------------------
 

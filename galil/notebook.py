@@ -28,10 +28,14 @@ def compare_plot(
 ) -> Any:
     """Plot predicted positions against recorded ones, and their difference in counts.
 
+    Positions are drawn in each profile's unit (millimetres for a profile of a scaled axis,
+    see :meth:`~galil.predict.Profile.with_units`), counts otherwise.
+
     Args:
         predicted: profile per axis letter.
-        recorded: ``(t, position)`` per axis letter, ``t`` in seconds from the same start;
-            any sampling: the difference is taken against the prediction at those times.
+        recorded: ``(t, position)`` per axis letter, positions in counts, ``t`` in seconds
+            from the same start; any sampling: the difference is taken against the
+            prediction at those times.
         title: figure title.
 
     Returns:
@@ -43,23 +47,34 @@ def compare_plot(
 
     fig = Figure(figsize=(9, 6), layout="constrained")
     ax_pos, ax_diff = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    units = {_display(p)[2] for p in predicted.values()}
     for letter, prof in predicted.items():
+        k, offset, unit = _display(prof)
+        suffix = "" if len(units) == 1 else f" ({unit})"
         (line,) = ax_pos.plot(
-            prof.t, prof.position, label=f"{letter} predicted", linewidth=2, alpha=0.6
+            prof.t,
+            prof.position / k + offset,
+            label=f"{letter} predicted{suffix}",
+            linewidth=2,
+            alpha=0.6,
         )
         if letter in recorded:
             t, pos = (np.asarray(v, dtype=float) for v in recorded[letter])
             # Same colour, dashed: each recording reads as the twin of its prediction.
-            ax_pos.plot(t, pos, "--", color=line.get_color(), label=f"{letter} recorded")
+            ax_pos.plot(
+                t, pos / k + offset, "--", color=line.get_color(), label=f"{letter} recorded"
+            )
             # Compare at the recorded times, not index by index: a recording taken at another
             # rate (records every few samples, a polling loop) must not be misaligned. The
-            # prediction holds its end after it finishes, as the axis does.
+            # prediction holds its end after it finishes, as the axis does. The difference
+            # stays in counts: an exact prediction is 0 counts off.
             if prof.t.size:
                 expected = np.interp(t, prof.t, prof.position)
             else:
                 expected = np.full(t.size, float(prof.end))
             ax_diff.plot(t, pos - expected, color=line.get_color(), label=letter)
-    ax_pos.set_ylabel("position (counts)")
+    shown = next(iter(units)) if len(units) == 1 else "each axis's unit"
+    ax_pos.set_ylabel(f"position ({shown})")
     ax_pos.legend(loc="best", fontsize="small")
     ax_pos.set_title(title)
     ax_pos.grid(True, alpha=0.3)
@@ -69,6 +84,11 @@ def compare_plot(
     if len(ax_diff.lines) > 1:
         ax_diff.legend(loc="best", fontsize="small")
     return fig
+
+
+def _display(profile: Profile) -> tuple[float, float, str]:
+    """(counts per unit, offset, unit) the profile is shown in; counts without a scale."""
+    return profile.display if profile.display is not None else (1.0, 0.0, "counts")
 
 
 def jog_widget(axis: Axis, *, max_speed: float | None = None) -> Any:

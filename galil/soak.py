@@ -62,7 +62,7 @@ def _one_thread(dmc: Controller, k: int, pairs: int, hang: float) -> SoakReport:
     report = SoakReport()
     name = f"soak{k}"
     known = {0.0}  # values the variable may hold (one once a set is confirmed)
-    dmc.command(f"{name}=0")
+    _reset(dmc, name)
     for i in range(1, pairs + 1):
         value = float(k * 1_000_000 + i)
         start = time.monotonic()
@@ -89,6 +89,18 @@ def _one_thread(dmc: Controller, k: int, pairs: int, hang: float) -> SoakReport:
         _timed(report, hang, start)
         report.pairs += 1
     return report
+
+
+def _reset(dmc: Controller, name: str) -> None:
+    """Set the variable to 0, however many tries the faulty link needs."""
+    for _ in range(100):
+        try:
+            dmc.command(f"{name}=0")
+            if dmc.query_number(f"MG {name}") == 0:
+                return
+        except GalilError:
+            continue
+    raise GalilError(f"could not set {name} through the link")
 
 
 def _ran(dmc: Controller, name: str, value: float) -> int:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import os
 import re
 import signal
@@ -13,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+import galil
 from galil import cli
 
 GALIL = [sys.executable, "-m", "galil.cli"]
@@ -132,3 +134,41 @@ def test_sim_stops_cleanly_on_sigterm(spawn: Spawn) -> None:
         proc.terminate()
         _, err = proc.communicate(timeout=20)
     assert proc.returncode == 0, err
+
+
+def test_python_m_galil_is_the_galil_command() -> None:
+    run = subprocess.run(
+        [sys.executable, "-m", "galil", "--version"], capture_output=True, text=True, timeout=60
+    )
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == f"galil {galil.__version__}"
+
+
+def _parsers() -> list[argparse.ArgumentParser]:
+    parser = cli.build_parser()
+    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return [parser, *subs[0].choices.values()]
+
+
+def test_every_option_has_help_and_no_markup_shows() -> None:
+    for parser in _parsers():
+        for action in parser._actions:
+            assert action.help, f"{parser.prog}: {action.option_strings or action.dest} has no help"
+        text = parser.format_help()
+        for markup in ("``", ":class:", ":meth:", ":func:", ".. "):
+            assert markup not in text, f"{parser.prog} --help shows {markup!r}"
+
+
+def test_plan_takes_units_with_a_scale(capsys: pytest.CaptureFixture[str]) -> None:
+    args = ["plan", "12.5mm", "--speed", "20mm/s", "--accel", "200mm/s^2", "--scale", "2000/mm"]
+    assert cli.main(args) == 0
+    out = capsys.readouterr().out
+    assert "0 → 12.5 mm (0 → 25000 counts)" in out
+    assert "peak speed 20 mm/s" in out
+
+
+def test_plan_refuses_units_without_a_scale(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["plan", "12.5mm"]) == 2
+    assert "scale" in capsys.readouterr().err
+    assert cli.main(["plan", "1.5", "--scale", "2000/mm"]) == 2
+    assert "not a whole number" in capsys.readouterr().err

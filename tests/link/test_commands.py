@@ -174,7 +174,7 @@ def test_question_mark_is_explained_with_tc1(c: Controller, peer: FakeGalil) -> 
     assert err.model == "DMC-4040"
     assert "'BG A' rejected by DMC-4040: TC 20 Begin not valid with motor off" in str(err)
     assert any("'BG A'" in r and "?" in r for r in err.recent)
-    assert peer.log[-1] == "TC1"
+    assert peer.log[-2] == "TC1"  # and a marker behind it: the answers are in step
     assert c.command("MG 1") == " 1"  # the link is fine afterwards
 
 
@@ -234,9 +234,10 @@ def test_errors_carry_the_ring_buffer(peer: FakeGalil) -> None:
         c.command("BGA")
     recent = info.value.recent
     assert len(recent) == 4
-    assert recent[0] == "-> 'MG 8'  <- ' 8'"
-    assert recent[-2] == "-> 'BGA'  <- ?"
-    assert recent[-1] == "-> 'TC1'  <- ' 20 Begin not valid with motor off'"
+    assert recent[0] == "-> 'MG 9'  <- ' 9'"
+    assert recent[-3] == "-> 'BGA'  <- ?"
+    assert recent[-2] == "-> 'TC1'  <- ' 20 Begin not valid with motor off'"
+    assert recent[-1] == "-> 'MG \"TCOK1\"'  <- ' TCOK1'"
     c.close()
     with pytest.raises(InvalidArgument):
         connect("fakegalil://x", history=0)

@@ -15,9 +15,11 @@ from hypothesis import strategies as st
 
 import galil
 from galil.errors import GalilError, ProtocolError
-from galil.sim.clock import ManualClock
+from galil.sim.clock import ManualClock, RealTimeClock
 from galil.sim.controller import SimController
 from galil.sim.link import SimLink
+from galil.sim.proxy import FaultProxy
+from galil.sim.server import SimTcpServer
 
 
 class Interrupt(BaseException):
@@ -188,6 +190,35 @@ def test_a_stray_question_mark_is_never_reported_as_a_rejection() -> None:
         assert not isinstance(info.value, galil.CommandError)
         assert dmc.query_number("MG _BGA") == 1  # it did run
         _pairs_all_right(dmc, 10)
+
+
+def test_a_stray_question_mark_before_a_late_reply_cannot_shift_later_replies() -> None:
+    # Over TCP: the '?' arrives on its own, the query's own reply 5 ms later, and the reply to
+    # the TC1 that asks why 50 ms after that. TC1 must not take the query's reply for its own,
+    # or every later reply would be one behind.
+    plan = {"step": 0}
+
+    def faults(data: bytes) -> list[tuple[float, bytes]]:
+        step = plan["step"]
+        if step == 1:
+            plan["step"] = 2
+            return [(0.0, b"?"), (0.005, data)]
+        if step == 2:
+            plan["step"] = 0
+            return [(0.05, data)]
+        return [(0.0, data)]
+
+    sim = SimController("DMC-4040", RealTimeClock())
+    with (
+        SimTcpServer(sim) as server,
+        FaultProxy(server.address, faults=faults) as proxy,
+        galil.connect(proxy.url, timeout=0.5) as dmc,
+    ):
+        dmc.command("gv=12345")
+        plan["step"] = 1
+        with pytest.raises(ProtocolError, match="may have executed"):
+            dmc.query_number("MG gv")
+        _pairs_all_right(dmc, 50)
 
 
 def test_a_400_digit_reply_is_a_protocol_error_not_an_overflow() -> None:

@@ -1,0 +1,426 @@
+"""Finding controllers: ``galil.find()`` and ``galil list``.
+
+Where it looks, and how sure each way is (sources in ``docs/decisions/0010``):
+
+- **Serial ports** (pyserial's ``list_ports``): ports whose USB vendor id is Galil's (0x1079,
+  as given to this project; not in the public USB id list) or whose manufacturer or
+  description names Galil are listed and asked ``^R^V``; ports of common USB-serial bridges
+  (FTDI, Prolific, Silicon Labs, WCH) are listed as *possible* and only opened when asked
+  (``identify_bridges=True``), since opening a port can reset the device behind it.
+- **USB** (pyusb, needs libusb): devices with Galil's vendor id, listed, not opened.
+- **PCI**: the nodes of Galil's driver, ``/dev/galilpci*``, opened and asked ``^R^V``.
+- **Ethernet, by address**: ``probe=["192.168.0.0/24", "10.0.0.5:23"]`` connects to TCP port
+  23 and asks ``^R^V`` (documented: the command port and the identity query).
+- **Ethernet, the LAN** (``network=True``): ``^R^V`` in one UDP datagram to Galil's multicast
+  group 239.255.19.56, port 23, and every answer within ``timeout``. The group is documented;
+  that Galil's own tools find controllers this way is not (their wire format is unpublished).
+- **Controllers without an IP address** (``bootp=True``): listens on UDP port 67 for the
+  BOOTP/DHCP requests they broadcast (needs root or CAP_NET_BIND_SERVICE on Linux). This
+  library does not assign addresses: use ``IA`` over serial or USB, or a DHCP reservation.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import glob
+import ipaddress
+import socket
+import time
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Any
+
+from galil.errors import GalilConnectionError, GalilError, InvalidArgument, ProtocolError
+from galil.protocol.discovery import (
+    BOOTP_SERVER_PORT,
+    COMMAND_PORT,
+    IDENTIFY,
+    MULTICAST_GROUP,
+    BootpRequest,
+    parse_bootp_request,
+    parse_identify_reply,
+)
+from galil.transport import Transport, open_transport
+
+__all__ = [
+    "GALIL_USB_VENDOR_ID",
+    "USB_SERIAL_BRIDGES",
+    "Found",
+    "ask_group",
+    "find",
+    "listen_bootp",
+    "pci_nodes",
+    "probe_hosts",
+    "serial_ports",
+    "usb_devices",
+]
+
+#: Galil's USB vendor id as given to this project (unconfirmed: not in the public USB id list).
+GALIL_USB_VENDOR_ID = 0x1079
+#: Vendor ids of the USB-serial bridges commonly found between a PC and a controller's RS-232.
+USB_SERIAL_BRIDGES = {
+    0x0403: "FTDI",
+    0x067B: "Prolific",
+    0x10C4: "Silicon Labs",
+    0x1A86: "WCH",
+}
+_MAX_HOSTS = 1024
+_PCI_GLOB = "/dev/galilpci*"
+
+
+@dataclass(frozen=True)
+class Found:
+    """One controller (or a place one may be).
+
+    Attributes:
+        address: what :func:`galil.connect` takes (``""`` for a controller with no IP yet).
+        kind: ``"serial"``, ``"usb"``, ``"pci"``, ``"ethernet"`` or ``"bootp"``.
+        description: what the operating system or the network says about it.
+        identity: the controller's answer to ``^R^V`` (``DMC4040 Rev 1.2f``), ``""`` if not
+            asked or no answer.
+        likely: ``False`` for a place a controller may be but nothing says one is (a
+            USB-serial bridge that was not asked).
+    """
+
+    address: str
+    kind: str
+    description: str
+    identity: str = ""
+    likely: bool = True
+
+    def __str__(self) -> str:
+        what = self.identity or self.description
+        if self.identity and self.description:
+            what = f"{self.identity} ({self.description})"
+        return f"{self.address or '(no address)':<28} {self.kind:<8} {what}"
+
+
+# ----------------------------------------------------------------------------------- asking
+
+
+def _ask_transport(transport: Transport, timeout: float) -> str:
+    """Write ``^R^V`` on an open transport and return the identity (``""`` if none)."""
+    try:
+        transport.write(IDENTIFY)
+        got = b""
+        deadline = time.monotonic() + timeout
+        while not got.rstrip().endswith((b":", b"?")):
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return ""
+            got += transport.read(left)
+        return parse_identify_reply(got)
+    except (GalilError, OSError):
+        return ""
+    finally:
+        with contextlib.suppress(GalilError, OSError):
+            transport.close()
+
+
+def _identify_address(address: str, timeout: float) -> str:
+    try:
+        transport = open_transport(address)
+    except (GalilError, OSError):
+        return ""
+    return _ask_transport(transport, timeout)
+
+
+def _ask_tcp(host: str, port: int, timeout: float) -> str:
+    try:
+        with socket.create_connection((host, port), timeout=timeout) as sock:
+            sock.sendall(IDENTIFY)
+            got = b""
+            deadline = time.monotonic() + timeout
+            while not got.rstrip().endswith((b":", b"?")):
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return ""
+                sock.settimeout(left)
+                chunk = sock.recv(256)
+                if not chunk:
+                    return ""
+                got += chunk
+        return parse_identify_reply(got)
+    except (OSError, ProtocolError):
+        return ""
+
+
+# ----------------------------------------------------------------------------------- buses
+
+
+def _comports() -> list[Any]:
+    from serial.tools import list_ports
+
+    return list(list_ports.comports())
+
+
+def serial_ports(
+    *, identify: bool = True, identify_bridges: bool = False, timeout: float = 1.0
+) -> list[Found]:
+    """Serial ports that are (or may be) a controller, from pyserial's ``list_ports``."""
+    out: list[Found] = []
+    for port in _comports():
+        vid = getattr(port, "vid", None)
+        text = " ".join(
+            str(getattr(port, k, "") or "") for k in ("manufacturer", "description", "product")
+        )
+        ids = f"USB {vid:04x}:{port.pid or 0:04x}" if vid is not None else ""
+        if vid == GALIL_USB_VENDOR_ID or "galil" in text.lower():
+            label = ", ".join(x for x in (ids, text.strip()) if x)
+            ident = _identify_address(port.device, timeout) if identify else ""
+            out.append(Found(port.device, "serial", f"Galil USB serial port {label}", ident))
+        elif vid in USB_SERIAL_BRIDGES:
+            bridge = f"{USB_SERIAL_BRIDGES[vid]} USB-serial bridge ({ids})"
+            ident = _identify_address(port.device, timeout) if identify_bridges else ""
+            out.append(Found(port.device, "serial", bridge, ident, likely=bool(ident)))
+    return out
+
+
+def usb_devices(*, backend: Any = None) -> list[Found]:
+    """USB devices with Galil's vendor id (pyusb; empty when no libusb backend is found)."""
+    try:
+        import usb.core
+    except ImportError:  # pragma: no cover - pyusb is a dependency
+        return []
+    kwargs: dict[str, Any] = {"find_all": True, "idVendor": GALIL_USB_VENDOR_ID}
+    if backend is not None:
+        kwargs["backend"] = backend
+    try:
+        devices = list(usb.core.find(**kwargs))
+    except (usb.core.NoBackendError, usb.core.USBError, OSError):
+        return []
+    return [
+        Found(
+            f"usb://{d.idVendor:04x}:{d.idProduct:04x}",
+            "usb",
+            f"USB bus {getattr(d, 'bus', '?')} device {getattr(d, 'address', '?')}",
+        )
+        for d in devices
+    ]
+
+
+def pci_nodes(
+    *, pattern: str = _PCI_GLOB, identify: bool = True, timeout: float = 1.0
+) -> list[Found]:
+    """The device nodes of Galil's PCI driver (``/dev/galilpci0`` ...)."""
+    out = []
+    for path in sorted(glob.glob(pattern)):
+        ident = _identify_address(path, timeout) if identify else ""
+        out.append(Found(path, "pci", "Galil PCI driver node", ident))
+    return out
+
+
+# ----------------------------------------------------------------------------------- Ethernet
+
+
+def _targets(specs: Iterable[str]) -> list[tuple[str, int]]:
+    """``"10.0.0.5"``, ``"10.0.0.5:23"``, ``"10.0.0.0/24"`` -> (host, port) pairs.
+
+    Raises:
+        InvalidArgument: a spec that is none of these, or more than 1024 hosts in all.
+    """
+    out: list[tuple[str, int]] = []
+    for spec in specs:
+        if not isinstance(spec, str) or not spec.strip():
+            raise InvalidArgument(f"not an address to probe: {spec!r}")
+        text = spec.strip()
+        host, port = text, COMMAND_PORT
+        if text.count(":") == 1:
+            host, _, port_text = text.partition(":")
+            if not port_text.isdigit() or not 0 < int(port_text) < 65536:
+                raise InvalidArgument(f"bad port in {spec!r}")
+            port = int(port_text)
+        try:
+            if "/" in host:
+                net = ipaddress.ip_network(host, strict=False)
+                hosts = [str(h) for h in net.hosts()] if net.num_addresses > 1 else [str(net)]
+            else:
+                hosts = [str(ipaddress.ip_address(host))]
+        except ValueError as exc:
+            raise InvalidArgument(f"not an IP address or network: {spec!r}") from exc
+        out += [(h, port) for h in hosts]
+        if len(out) > _MAX_HOSTS:
+            raise InvalidArgument(f"more than {_MAX_HOSTS} addresses to probe; narrow the range")
+    return out
+
+
+def probe_hosts(specs: Iterable[str], *, timeout: float = 1.0) -> list[Found]:
+    """Ask each address (or every host of a network) ``^R^V`` over TCP; return who answered.
+
+    Raises:
+        InvalidArgument: an address that cannot be read, or too many of them.
+    """
+    targets = _targets(specs)
+    if not targets:
+        return []
+    with ThreadPoolExecutor(max_workers=min(64, len(targets))) as pool:
+        answers = list(pool.map(lambda hp: _ask_tcp(hp[0], hp[1], timeout), targets))
+    return [
+        Found(_tcp_address(host, port), "ethernet", "answered on TCP", ident)
+        for (host, port), ident in zip(targets, answers, strict=True)
+        if ident
+    ]
+
+
+def _tcp_address(host: str, port: int) -> str:
+    return f"tcp://{host}" if port == COMMAND_PORT else f"tcp://{host}:{port}"
+
+
+def ask_group(
+    group: str = MULTICAST_GROUP, port: int = COMMAND_PORT, *, timeout: float = 1.0
+) -> list[Found]:
+    """Send ``^R^V`` in one UDP datagram to ``group`` and collect the answers for ``timeout`` s.
+
+    ``group`` is Galil's multicast group by default (TTL 1: the local network only); any
+    address that answers the same way works (the tests use the simulator on 127.0.0.1).
+    """
+    found: dict[str, Found] = {}
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
+        try:
+            sock.sendto(IDENTIFY, (group, port))
+        except OSError as exc:
+            raise GalilConnectionError(f"cannot send to {group}:{port}: {exc}") from exc
+        deadline = time.monotonic() + timeout
+        while (left := deadline - time.monotonic()) > 0:
+            sock.settimeout(left)
+            try:
+                data, (host, _) = sock.recvfrom(2048)
+            except TimeoutError:
+                break
+            with contextlib.suppress(ProtocolError):
+                ident = parse_identify_reply(data)
+                found[host] = Found(f"tcp://{host}", "ethernet", f"answered {group}", ident)
+    return list(found.values())
+
+
+def listen_bootp(
+    *,
+    timeout: float = 5.0,
+    address: tuple[str, int] = ("0.0.0.0", BOOTP_SERVER_PORT),
+    on_request: Callable[[BootpRequest], None] | None = None,
+    count: int | None = None,
+) -> list[BootpRequest]:
+    """Listen for Galil controllers asking for an IP address (BOOTP/DHCP) for ``timeout`` s.
+
+    Args:
+        timeout: seconds to listen.
+        address: where to listen (the BOOTP server port, 67, on every interface).
+        on_request: called with each controller the first time it asks.
+        count: return as soon as this many different controllers asked.
+
+    Raises:
+        GalilConnectionError: the port cannot be bound (port 67 needs root on most systems).
+    """
+    seen: dict[bytes, BootpRequest] = {}
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind(address)
+        except OSError as exc:
+            raise GalilConnectionError(
+                f"cannot listen on UDP {address[0]}:{address[1]} ({exc}); BOOTP/DHCP requests "
+                "arrive on port 67, which needs root (or CAP_NET_BIND_SERVICE) to bind"
+            ) from exc
+        deadline = time.monotonic() + timeout
+        while (left := deadline - time.monotonic()) > 0:
+            sock.settimeout(left)
+            try:
+                data = sock.recv(2048)
+            except TimeoutError:
+                break
+            request = parse_bootp_request(data)
+            if request is not None and request.mac not in seen:
+                seen[request.mac] = request
+                if on_request is not None:
+                    on_request(request)
+                if count is not None and len(seen) >= count:
+                    break
+    return list(seen.values())
+
+
+def _bootp_found(request: BootpRequest) -> Found:
+    family = f"{request.family} " if request.family else ""
+    what = "DHCP" if request.dhcp else "BOOTP"
+    return Found(
+        "",
+        "bootp",
+        f"{family}serial {request.serial_number}, MAC {request.mac_text}, asking for an IP "
+        f"address ({what})",
+    )
+
+
+# ----------------------------------------------------------------------------------- find
+
+
+def _check_seconds(value: object, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < 3600:
+        raise InvalidArgument(f"{what} must be a number of seconds in (0, 3600), not {value!r}")
+    return float(value)
+
+
+def find(
+    *,
+    serial: bool = True,
+    usb: bool = True,
+    pci: bool = True,
+    network: bool = False,
+    probe: Sequence[str] = (),
+    bootp: bool = False,
+    identify: bool = True,
+    identify_bridges: bool = False,
+    timeout: float = 1.0,
+    group: tuple[str, int] = (MULTICAST_GROUP, COMMAND_PORT),
+    bootp_address: tuple[str, int] = ("0.0.0.0", BOOTP_SERVER_PORT),
+    bootp_timeout: float = 5.0,
+) -> list[Found]:
+    """Find controllers on this computer's buses and, when asked, on the network.
+
+    Nothing goes out on the network unless ``network``, ``probe`` or ``bootp`` asks for it.
+
+    Args:
+        serial: list serial ports whose USB ids are Galil's or a USB-serial bridge's.
+        usb: list USB devices with Galil's vendor id.
+        pci: list Galil PCI driver nodes.
+        network: send ``^R^V`` to Galil's multicast group (``group``) and take the answers.
+        probe: addresses or networks to ask over TCP (``"192.168.0.0/24"``, ``"10.0.0.5:23"``).
+        bootp: listen ``bootp_timeout`` s for controllers asking for an IP address.
+        identify: open what is found on serial and PCI and ask ``^R^V``.
+        identify_bridges: ask USB-serial bridge ports too (opening a port may reset the
+            device behind it).
+        timeout: seconds to wait for each answer (and for the multicast answers).
+        group: (address, port) the ``network`` query goes to.
+        bootp_address: (address, port) to listen on for BOOTP/DHCP requests.
+        bootp_timeout: seconds to listen for them.
+
+    Raises:
+        InvalidArgument: a bad address, network or timeout (checked before anything is sent).
+        GalilConnectionError: the network query could not be sent, or port 67 not bound.
+    """
+    timeout = _check_seconds(timeout, "timeout")
+    bootp_timeout = _check_seconds(bootp_timeout, "bootp_timeout")
+    if isinstance(probe, str):
+        probe = [probe]
+    _targets(probe)  # validate before anything goes out
+    found: list[Found] = []
+    if serial:
+        found += serial_ports(identify=identify, identify_bridges=identify_bridges, timeout=timeout)
+    if usb:
+        found += usb_devices()
+    if pci:
+        found += pci_nodes(identify=identify, timeout=timeout)
+    if probe:
+        found += probe_hosts(probe, timeout=timeout)
+    if network:
+        found += ask_group(group[0], group[1], timeout=timeout)
+    if bootp:
+        found += [
+            _bootp_found(r) for r in listen_bootp(timeout=bootp_timeout, address=bootp_address)
+        ]
+    unique: dict[str, Found] = {}
+    for item in found:
+        key = item.address or item.description
+        if key not in unique or (item.identity and not unique[key].identity):
+            unique[key] = item
+    return list(unique.values())

@@ -1,0 +1,312 @@
+"""``galil terminal``: type to a controller as in Galil's own terminal.
+
+Every line goes to the controller as typed, compound lines included (``PRA=1000;BGA``); the
+reply is printed, a ``?`` is explained with ``TC1`` and the session goes on, and unsolicited
+output (a program's ``MG``) is printed the moment it arrives. ``DL`` alone starts a program
+download: the lines typed (or pasted) after it are collected until a line holding ``\\`` and
+sent as one ``DL``. ``UL`` prints the program. Ctrl-C sends ``ST`` (and says so), Ctrl-D
+leaves; a reply that does not come in time is reported and the next command resynchronises the
+link first.
+
+On a terminal, input goes through prompt-toolkit (history, line editing, messages printed above
+the prompt); piped input is read line by line, so ``galil terminal ADDRESS < setup.txt`` runs a
+script.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import sys
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any
+
+from galil.controller import Controller
+from galil.errors import (
+    CommandError,
+    GalilConnectionError,
+    GalilError,
+    GalilTimeoutError,
+    InvalidArgument,
+)
+from galil.protocol import commands as cmds
+
+__all__ = ["Terminal", "default_history_path", "program_lines", "run_terminal"]
+
+PROMPT = ":"
+DOWNLOAD_PROMPT = "DL> "
+# A download, and a burn, may take the controller a while (EPICS allows 10 s for a DL).
+DOWNLOAD_TIMEOUT = 10.0
+_WT = re.compile(r"^\s*WT\s*(\d+)", re.IGNORECASE)
+
+
+def program_lines(text: str) -> list[str]:
+    """The lines of a program file as ``DL`` sends them.
+
+    Leading and trailing blanks are stripped (indentation would only use program memory),
+    empty lines are dropped (the controller rejects them) and tabs become spaces. A line
+    holding only ``\\`` ends the program, as it ends a download typed at a terminal.
+
+    Raises:
+        InvalidArgument: nothing left to download.
+    """
+    lines: list[str] = []
+    for raw in text.splitlines():
+        line = raw.replace("\t", " ").strip()
+        if line == "\\":
+            break
+        if line:
+            lines.append(line)
+    if not lines:
+        raise InvalidArgument("the program is empty")
+    return lines
+
+
+def default_history_path() -> Path:
+    """Where the terminal keeps its history: ``$XDG_STATE_HOME/galil/terminal-history``."""
+    base = os.environ.get("XDG_STATE_HOME") or os.path.join(
+        os.path.expanduser("~"), ".local", "state"
+    )
+    return Path(base) / "galil" / "terminal-history"
+
+
+class Terminal:
+    """The terminal's behaviour, without any input device: feed it lines, it prints.
+
+    Args:
+        controller: the connected controller.
+        write: prints one line of output (``print`` by default).
+        timeout: seconds to wait for a reply (a ``WT n`` gets ``n`` ms more).
+    """
+
+    def __init__(
+        self,
+        controller: Controller,
+        *,
+        write: Callable[[str], None] | None = None,
+        timeout: float = 5.0,
+    ) -> None:
+        self.controller = controller
+        self.write: Callable[[str], None] = write if write is not None else _print
+        self.timeout = timeout
+        self._download: list[str] | None = None
+
+    @property
+    def prompt(self) -> str:
+        """The prompt to show: ``:`` as on the controller, ``DL>`` while collecting a program."""
+        return PROMPT if self._download is None else DOWNLOAD_PROMPT
+
+    @property
+    def downloading(self) -> bool:
+        """Whether program lines are being collected for a ``DL``."""
+        return self._download is not None
+
+    def feed(self, text: str) -> None:
+        """Handle what was typed: one line, or several when text was pasted."""
+        for line in text.splitlines() or [""]:
+            self._line(line)
+
+    def _line(self, line: str) -> None:
+        if self._download is not None:
+            self._collect(line)
+            return
+        command = line.strip()
+        if not command:
+            return
+        if command.upper() == "DL":
+            self._download = []
+            self.write("download: type or paste the program, then a line with \\ (Ctrl-C cancels)")
+            return
+        self._send(command)
+
+    def _collect(self, line: str) -> None:
+        assert self._download is not None
+        text = line.replace("\t", " ").strip()
+        head, slash, _ = text.partition("\\")
+        if head:
+            self._download.append(head)
+        if not slash:
+            return
+        lines, self._download = self._download, None
+        if not lines:
+            self.write("download cancelled: no program lines")
+            return
+        self.download(lines)
+
+    def download(self, lines: Iterable[str]) -> bool:
+        """Send a program with ``DL``; print what happened. Returns whether it was accepted."""
+        try:
+            command = cmds.dl(list(lines), model=self.controller.model)
+            self.controller.send(command, timeout=max(self.timeout, DOWNLOAD_TIMEOUT))
+        except GalilError as exc:
+            self._report(exc, "DL")
+            return False
+        count = command.payload.count(b"\r")
+        self.write(f"downloaded {count} line{'s' if count != 1 else ''}")
+        return True
+
+    def cancel(self) -> None:
+        """Drop a program being collected."""
+        if self._download is not None:
+            self._download = None
+            self.write("download cancelled")
+
+    def _timeout_for(self, command: str) -> float:
+        # WT n holds the reply for n ms (in the controller's time): wait that long as well.
+        extra = sum(int(m.group(1)) for p in cmds.split_commands(command) if (m := _WT.match(p)))
+        return self.timeout + extra / 1000.0
+
+    def _send(self, command: str) -> None:
+        try:
+            reply = self.controller.command(
+                command, timeout=self._timeout_for(command), allow_compound=True
+            )
+        except GalilError as exc:
+            self._report(exc, command)
+            return
+        for text in reply.splitlines():
+            self.write(text)
+
+    def _report(self, exc: GalilError, command: str) -> None:
+        message = str(exc.args[0]) if exc.args else type(exc).__name__
+        if isinstance(exc, CommandError):
+            code = "?" if exc.code is None else str(exc.code)
+            self.write(f"? {code} {exc.text}")
+            hint = message.partition("(Galil commands")
+            if hint[1]:
+                self.write(f"  (Galil commands{hint[2]}")
+            elif exc.command != command:
+                self.write(f"  (refused: {exc.command!r})")
+        elif isinstance(exc, GalilTimeoutError):
+            self.write(f"timeout: {message}; the controller may still be busy (Ctrl-C sends ST)")
+        elif isinstance(exc, InvalidArgument):
+            self.write(f"not sent: {message}")
+        elif isinstance(exc, GalilConnectionError):
+            if self.controller.link.dead or self.controller.closed:
+                raise exc
+            # Out of step and not back yet: an earlier AM, MC or WT still holds the line.
+            self.write(f"not sent: {message} (an earlier AM, MC or WT may still be waiting)")
+        else:
+            self.write(f"error: {message}")
+
+    def interrupt(self) -> None:
+        """Ctrl-C: cancel a download being typed and stop all motion with ``ST``."""
+        self.cancel()
+        try:
+            self.controller.stop()
+        except GalilError as exc:
+            if isinstance(exc, GalilConnectionError) and self.controller.link.dead:
+                raise
+            self.write(f"Ctrl-C: ST not sent: {exc.args[0] if exc.args else exc}")
+            return
+        self.write("Ctrl-C: sent ST, motion stopped on every axis (Ctrl-D leaves)")
+
+
+def _print(text: str) -> None:
+    print(text, flush=True)
+
+
+def run_terminal(
+    controller: Controller,
+    *,
+    timeout: float = 5.0,
+    history: Path | None = None,
+    interactive: bool | None = None,
+) -> int:
+    """Run the terminal on ``controller`` until Ctrl-D (or the end of piped input).
+
+    Args:
+        controller: the connected controller.
+        timeout: seconds to wait for each reply.
+        history: file that keeps the typed lines between sessions (``None``: memory only).
+        interactive: use the line editor; default: when stdin and stdout are terminals.
+    """
+    term = Terminal(controller, timeout=timeout)
+    unsubscribe = controller.subscribe(term.write)
+    try:
+        if interactive is None:
+            interactive = sys.stdin.isatty() and sys.stdout.isatty()
+        if interactive:
+            _interactive(term, history)
+        else:
+            _piped(term)
+    finally:
+        unsubscribe()
+    return 0
+
+
+def _piped(term: Terminal) -> None:
+    while True:
+        try:
+            line = sys.stdin.readline()
+            if not line:
+                return
+            term.feed(line.rstrip("\r\n"))
+        except KeyboardInterrupt:
+            term.interrupt()
+
+
+def _interactive(term: Terminal, history_file: Path | None) -> None:
+    from prompt_toolkit import PromptSession
+    from prompt_toolkit.history import FileHistory, History, InMemoryHistory
+
+    history: History = InMemoryHistory()
+    if history_file is not None:
+        try:
+            history_file.parent.mkdir(parents=True, exist_ok=True)
+            history = FileHistory(str(history_file))
+        except OSError:
+            pass  # a read-only home: keep the history for this session only
+    session: PromptSession[str] = PromptSession(history=history)
+    # Ctrl-C at the prompt is a key; between prompts (the tty is then in cooked mode) it is a
+    # SIGINT, which must not land inside prompt-toolkit's setup: it is noted and handled here.
+    state = {"interrupted": False}
+
+    def note(signum: int, frame: object) -> None:
+        state["interrupted"] = True
+
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        _prompt_loop(term, session, note, state)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _prompt_loop(
+    term: Terminal, session: Any, note: Callable[[int, Any], None], state: dict[str, bool]
+) -> None:
+    # Output printed while the prompt is shown (messages from the poll thread) goes above it.
+    from prompt_toolkit.patch_stdout import patch_stdout
+
+    with patch_stdout(raw=True):
+        while True:
+            signal.signal(signal.SIGINT, note)
+            line: str | None = None
+
+            def check(app: Any = session.app) -> None:
+                # A Ctrl-C that came while the prompt was being set up: act on it now.
+                if state["interrupted"]:
+                    app.exit(exception=KeyboardInterrupt())
+
+            try:
+                line = session.prompt(term.prompt, pre_run=check)
+            except KeyboardInterrupt:
+                state["interrupted"] = True
+            except EOFError:
+                if not term.downloading:
+                    return
+                term.cancel()
+            if state["interrupted"]:
+                state["interrupted"] = False
+                term.interrupt()
+                continue
+            if line is None:
+                continue
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+            try:
+                term.feed(line)
+            except KeyboardInterrupt:
+                signal.signal(signal.SIGINT, note)
+                term.interrupt()

@@ -1,0 +1,222 @@
+"""Finding controllers: serial ports by USB ids, TCP probes, the multicast query, BOOTP requests.
+
+All network traffic stays on 127.0.0.1: the simulator answers where a controller would.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+from pathlib import Path
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from serial.tools import list_ports
+from serial.tools.list_ports_common import ListPortInfo
+
+import galil
+from galil import cli
+from galil.discovery import ask_group, listen_bootp, pci_nodes, probe_hosts, serial_ports
+from galil.errors import GalilConnectionError, InvalidArgument
+from galil.protocol.discovery import (
+    GALIL_MAC_PREFIX,
+    build_bootp_request,
+    parse_bootp_request,
+    parse_identify_reply,
+)
+from galil.sim.clock import ManualClock
+from galil.sim.controller import SimController
+from galil.sim.discovery import SimDiscoveryResponder, send_bootp_request
+from galil.sim.server import SimPtyServer, SimTcpServer
+
+
+def _port(device: str, vid: int | None, pid: int = 0, manufacturer: str = "") -> ListPortInfo:
+    info = ListPortInfo(device, skip_link_detection=True)
+    info.vid, info.pid = vid, pid
+    info.manufacturer = manufacturer or None
+    info.description = "USB serial" if vid is not None else "ttyS0"
+    return info
+
+
+@pytest.fixture
+def pty_sim() -> object:
+    with SimPtyServer() as server:
+        yield server
+
+
+def test_a_galil_usb_serial_port_is_listed_and_identified(
+    monkeypatch: pytest.MonkeyPatch, pty_sim: SimPtyServer
+) -> None:
+    ports = [
+        _port(pty_sim.path, 0x1079, 0x0001),
+        _port("/dev/ttyS0", None),  # a motherboard port: not a controller
+        _port("/dev/ttyUSB7", 0x0403, 0x6001),  # an FTDI bridge: listed, not opened
+    ]
+    monkeypatch.setattr(list_ports, "comports", lambda: ports)
+    found = serial_ports(timeout=2.0)
+    assert [f.address for f in found] == [pty_sim.path, "/dev/ttyUSB7"]
+    galil_port, bridge = found
+    assert galil_port.identity == pty_sim.controller.identity
+    assert galil_port.likely
+    assert "FTDI" in bridge.description
+    assert not bridge.likely
+    assert bridge.identity == ""
+
+
+def test_a_port_whose_manufacturer_names_galil_is_asked(
+    monkeypatch: pytest.MonkeyPatch, pty_sim: SimPtyServer
+) -> None:
+    monkeypatch.setattr(
+        list_ports, "comports", lambda: [_port(pty_sim.path, 0x9999, 1, "Galil Motion Control")]
+    )
+    (found,) = serial_ports(timeout=2.0)
+    assert found.identity.startswith("DMC4040")
+
+
+def test_galil_list_finds_a_pty_posing_as_galil_usb_and_a_controller_over_loopback(
+    monkeypatch: pytest.MonkeyPatch, pty_sim: SimPtyServer, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(list_ports, "comports", lambda: [_port(pty_sim.path, 0x1079, 2)])
+    with SimTcpServer(model="DMC-30010") as tcp:
+        host, port = tcp.address
+        code = cli.main(["list", "--no-usb", "--no-pci", "--probe", f"{host}:{port}"])
+    out = capsys.readouterr().out
+    assert code == 0
+    lines = out.splitlines()
+    assert any(pty_sim.path in line and "DMC4040" in line for line in lines), out
+    assert any(f"tcp://{host}:{port}" in line and "DMC30010" in line for line in lines), out
+
+
+def test_galil_list_says_when_nothing_is_found(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(list_ports, "comports", lambda: [])
+    assert cli.main(["list", "--no-usb", "--no-pci"]) == 1
+    err = capsys.readouterr().err
+    assert "no controller found" in err
+    assert "Ethernet not searched" in err
+
+
+def test_probing_skips_addresses_that_do_not_answer() -> None:
+    with socket.socket() as closed:  # a port that nobody listens on any more
+        closed.bind(("127.0.0.1", 0))
+        dead_port = closed.getsockname()[1]
+    with SimTcpServer() as tcp:
+        host, port = tcp.address
+        found = probe_hosts([f"{host}:{port}", f"{host}:{dead_port}"], timeout=1.0)
+    assert [f.address for f in found] == [f"tcp://{host}:{port}"]
+    assert found[0].identity == tcp.controller.identity
+
+
+def test_the_multicast_query_collects_every_answer() -> None:
+    first = SimController("DMC-4040", ManualClock()).identity
+    with SimDiscoveryResponder(first) as responder:
+        found = ask_group(*responder.address, timeout=0.3)
+    assert [(f.address, f.identity) for f in found] == [("tcp://127.0.0.1", first)]
+    assert responder.answered == 1
+
+
+def test_find_sends_nothing_to_the_network_unless_asked(monkeypatch: pytest.MonkeyPatch) -> None:
+    def no_network(*args: object, **kwargs: object) -> None:
+        raise AssertionError("find() touched the network")
+
+    monkeypatch.setattr(list_ports, "comports", lambda: [])
+    monkeypatch.setattr(socket, "create_connection", no_network)
+    monkeypatch.setattr(socket.socket, "sendto", no_network)
+    assert galil.find(usb=False, pci=False) == []
+
+
+def test_find_asks_the_group_it_is_given() -> None:
+    with SimDiscoveryResponder("DMC4020 Rev 1.2e") as responder:
+        found = galil.find(
+            serial=False, usb=False, pci=False, network=True, group=responder.address, timeout=0.3
+        )
+    assert [f.identity for f in found] == ["DMC4020 Rev 1.2e"]
+
+
+def test_find_validates_before_sending_anything() -> None:
+    with pytest.raises(InvalidArgument, match="not an IP address"):
+        galil.find(serial=False, usb=False, pci=False, probe=["controller.lab"])
+    with pytest.raises(InvalidArgument, match="more than 1024"):
+        galil.find(serial=False, usb=False, pci=False, probe=["10.0.0.0/16"])
+    with pytest.raises(InvalidArgument, match="timeout"):
+        galil.find(serial=False, usb=False, pci=False, timeout=0)
+
+
+def test_pci_nodes_are_listed_by_their_driver_names(tmp_path: Path) -> None:
+    assert pci_nodes(pattern=str(tmp_path / "galilpci*")) == []
+    (tmp_path / "galilpci0").write_bytes(b"")
+    (found,) = pci_nodes(pattern=str(tmp_path / "galilpci*"), identify=False)
+    assert found.address.endswith("galilpci0")
+    assert found.kind == "pci"
+
+
+def test_a_controller_asking_for_an_ip_address_is_heard() -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        address = probe.getsockname()
+    got = threading.Event()
+    result: list[object] = []
+
+    def listen() -> None:
+        result.extend(
+            listen_bootp(timeout=5.0, address=address, count=1, on_request=lambda r: got.set())
+        )
+
+    listener = threading.Thread(target=listen)
+    listener.start()
+    try:
+        # A controller repeats its request until answered; so does the test until heard.
+        for _ in range(50):
+            send_bootp_request(address, serial_number=34023, family=0x00)
+            if got.wait(0.1):
+                break
+    finally:
+        listener.join(10)
+    (request,) = result
+    assert request.mac_text == "00:50:4C:00:84:E7"  # gclib's own example: DMC2000 serial 34023
+    assert request.serial_number == 34023
+    assert request.family == "DMC-2000/2100"
+    assert request.dhcp
+
+
+def test_listening_on_a_port_that_cannot_be_bound_says_why() -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        with pytest.raises(GalilConnectionError, match="port 67"):
+            listen_bootp(timeout=0.1, address=taken.getsockname())
+
+
+@given(serial=st.integers(0, 0xFFFF), family=st.integers(0, 255), xid=st.integers(0, 2**32 - 1))
+def test_bootp_requests_round_trip(serial: int, family: int, xid: int) -> None:
+    mac = GALIL_MAC_PREFIX + bytes([family, serial >> 8, serial & 0xFF])
+    request = parse_bootp_request(build_bootp_request(mac, xid))
+    assert request is not None
+    assert (request.mac, request.serial_number, request.xid) == (mac, serial, xid)
+
+
+def test_other_packets_are_not_taken_for_a_controller() -> None:
+    other_vendor = build_bootp_request(b"\x00\x11\x22\x33\x44\x55")
+    assert parse_bootp_request(other_vendor) is None
+    galil_request = build_bootp_request(GALIL_MAC_PREFIX + b"\x58\x00\x07")
+    assert parse_bootp_request(galil_request[:100]) is None  # truncated
+    reply = b"\x02" + galil_request[1:]
+    assert parse_bootp_request(reply) is None  # a server's reply, not a request
+    request = parse_bootp_request(build_bootp_request(GALIL_MAC_PREFIX + b"\x58\x00\x07"))
+    assert request is not None
+    assert (request.family, request.serial_number) == ("DMC-2105", 7)
+
+
+def test_identify_replies_are_read_or_refused() -> None:
+    assert parse_identify_reply(b"DMC4040 Rev 1.2f\r\n:") == "DMC4040 Rev 1.2f"
+    for bad in (b"?", b"DMC4040 Rev", b"\r\n:"):
+        with pytest.raises(galil.ProtocolError):
+            parse_identify_reply(bad)
+
+
+def test_the_simulator_answers_discovery_on_loopback_only() -> None:
+    with pytest.raises(InvalidArgument):
+        SimDiscoveryResponder("DMC4040 Rev 1.0", host="0.0.0.0")
+    with pytest.raises(InvalidArgument):
+        send_bootp_request(("192.168.1.255", 67))

@@ -1,0 +1,277 @@
+"""``galil terminal``: what a person types, through a real pseudo-terminal and in-process."""
+
+from __future__ import annotations
+
+import os
+import re
+import select
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+import galil
+from galil import cli
+from galil.errors import InvalidArgument
+from galil.sim.clock import RealTimeClock
+from galil.sim.server import SimPtyServer, SimTcpServer
+from galil.terminal import Terminal, program_lines
+
+Spawn = Callable[..., subprocess.Popen[str]]
+
+PROGRAM = ["#A", "WT 100", 'MG "hello"', "EN"]
+
+
+# ----------------------------------------------------------------------------------- in-process
+
+
+@pytest.fixture
+def term() -> Iterator[tuple[Terminal, list[str]]]:
+    with galil.connect("sim://DMC-4040") as dmc:
+        out: list[str] = []
+        dmc.subscribe(out.append)
+        yield Terminal(dmc, write=out.append, timeout=1.0), out
+
+
+def test_compound_lines_pass_through_and_replies_print(term: tuple[Terminal, list[str]]) -> None:
+    t, out = term
+    t.feed("PRA=1000;BGA;AMA")
+    t.feed("MG _RPA;MG 6*7")
+    assert out == [" 1000.0000", " 42.0000"]
+
+
+def test_a_rejected_line_is_explained_and_the_session_goes_on(
+    term: tuple[Terminal, list[str]],
+) -> None:
+    t, out = term
+    t.feed("bg")
+    t.feed("PRA=10;BGX")
+    t.feed("MG 1+2")
+    assert out[:2] == [
+        "? 1 Unrecognized command",
+        "  (Galil commands and operands are upper case: did you mean 'BG'?)",
+    ]
+    assert out[2].startswith("? ")
+    assert out[3] == "  (refused: 'BGX')"
+    assert out[-1] == " 3.0000"
+
+
+def test_a_typed_download_is_sent_as_one_dl_and_its_program_runs(
+    term: tuple[Terminal, list[str]],
+) -> None:
+    t, out = term
+    t.feed("DL")
+    assert t.downloading
+    assert t.prompt == "DL> "
+    t.feed("\n".join(PROGRAM))  # pasted: several lines at once
+    t.feed("\\")
+    assert not t.downloading
+    assert out[-1] == "downloaded 4 lines"
+    t.feed("XQ #A")
+    t.controller.sleep(0.2)
+    t.feed("MG 0")  # on this link the message comes with the next reply
+    assert "hello" in out[-2:]
+    t.feed("UL")
+    assert out[-4:] == PROGRAM
+
+
+def test_a_timeout_says_so_and_the_next_command_works(term: tuple[Terminal, list[str]]) -> None:
+    t, out = term
+    t.timeout = 0.05
+    t.feed("PRA=3000;BGA;AMA")  # AM answers when the move ends, after the timeout
+    assert out[-1].startswith("timeout: ")
+    t.feed("MG 1")  # resynchronises first (once AM has answered), then sends
+    assert out[-1] == " 1.0000"
+    t.feed("JGA=1000;BGA")
+    t.interrupt()
+    assert out[-1].startswith("Ctrl-C: sent ST")
+    t.controller.sleep(0.5)
+    t.feed("MG _BGA")
+    assert out[-1] == " 0.0000"
+
+
+def test_wt_waits_as_long_as_it_asks(term: tuple[Terminal, list[str]]) -> None:
+    t, out = term
+    t.feed("WT 2000;MG 5")  # longer than the 1 s timeout
+    assert out == [" 5.0000"]
+
+
+def test_ctrl_c_cancels_a_download_being_typed(term: tuple[Terminal, list[str]]) -> None:
+    t, out = term
+    t.feed("DL")
+    t.feed("#A")
+    t.interrupt()
+    assert not t.downloading
+    assert "download cancelled" in out
+
+
+def test_program_files_lose_blank_lines_and_indentation() -> None:
+    text = "#A\n\n\tMG 1\n  EN  \r\n\\\nignored\n"
+    assert program_lines(text) == ["#A", "MG 1", "EN"]
+    with pytest.raises(InvalidArgument):
+        program_lines("\n \n")
+
+
+def test_dl_and_ul_commands_round_trip_a_program_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    source = tmp_path / "prog.dmc"
+    source.write_text("#A\n  MG 1\n\nEN\n")
+    saved = tmp_path / "back.dmc"
+    with SimTcpServer() as srv:
+        assert cli.main(["dl", str(source), srv.url]) == 0
+        assert cli.main(["ul", srv.url, str(saved)]) == 0
+        assert cli.main(["ul", srv.url]) == 0
+    assert saved.read_text().splitlines() == ["#A", "MG 1", "EN"]
+    assert capsys.readouterr().out.splitlines()[-3:] == ["#A", "MG 1", "EN"]
+
+
+def test_the_terminal_runs_the_simulator_in_real_time() -> None:
+    with cli._connect("sim://DMC-4040", 1.0) as dmc:
+        assert isinstance(dmc.transport.controller.clock, RealTimeClock)  # type: ignore[attr-defined]
+
+
+# ----------------------------------------------------------------------------------- pty
+
+
+_ANSI = re.compile(rb"\x1b\[[0-9;?]*[A-Za-z]|\x1b[()][A-Z0-9]|\x1b[=>]|\r")
+
+
+class PtyScreen:
+    """A child process on a real pseudo-terminal, read as plain text."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+        self.text = ""
+
+    def send(self, data: str) -> None:
+        os.write(self.fd, data.encode())
+
+    def expect(self, pattern: str, timeout: float = 15.0) -> re.Match[str]:
+        rx = re.compile(pattern)
+        deadline = time.monotonic() + timeout
+        while True:
+            found = rx.search(self.text)
+            if found:
+                self.text = self.text[found.end() :]
+                return found
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise AssertionError(f"{pattern!r} not seen; screen: {self.text[-800:]!r}")
+            ready, _, _ = select.select([self.fd], [], [], left)
+            if ready:
+                try:
+                    chunk = os.read(self.fd, 4096)
+                except OSError:
+                    chunk = b""
+                if not chunk:
+                    raise AssertionError(f"the terminal ended before {pattern!r}: {self.text!r}")
+                self.text += _ANSI.sub(b"", chunk).decode("utf-8", "replace")
+
+    def wait_closed(self, timeout: float = 15.0) -> None:
+        """Read until the child closes the terminal (it left)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([self.fd], [], [], 0.1)
+            if ready:
+                try:
+                    if not os.read(self.fd, 4096):
+                        return
+                except OSError:
+                    return  # EIO: the other side is closed
+        raise AssertionError(f"the terminal did not end; screen: {self.text[-400:]!r}")
+
+
+@pytest.fixture
+def pty_terminal(spawn: Spawn, tmp_path: Path) -> Iterator[Callable[..., PtyScreen]]:
+    started: list[tuple[subprocess.Popen[str], int]] = []
+
+    def start(*args: str) -> PtyScreen:
+        master, slave = os.openpty()
+        env = dict(os.environ, TERM="xterm", PROMPT_TOOLKIT_NO_CPR="1")
+        env["XDG_STATE_HOME"] = str(tmp_path)  # the history file goes here
+        proc = spawn(
+            [sys.executable, "-m", "galil", "terminal", *args],
+            stdin=slave,
+            stdout=slave,
+            stderr=slave,
+            env=env,
+            start_new_session=True,
+            preexec_fn=_ctty,  # the pty is its controlling terminal: ^C in a wait is SIGINT
+        )
+        os.close(slave)
+        started.append((proc, master))
+        return PtyScreen(master)
+
+    yield start
+    for proc, master in started:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(timeout=30)
+        os.close(master)
+    for proc, _ in started:
+        assert proc.returncode == 0
+
+
+def _ctty() -> None:
+    import fcntl
+    import termios
+
+    fcntl.ioctl(0, termios.TIOCSCTTY, 0)
+
+
+@pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pseudo-terminal")
+def test_a_session_against_a_serial_simulator_through_a_real_pty(
+    pty_terminal: Callable[..., PtyScreen],
+) -> None:
+    with SimPtyServer(model="DMC-4040") as sim:
+        screen = pty_terminal(sim.path, "--timeout", "1")
+        screen.expect(r"Ctrl-D leaves")
+        screen.send("PRA=1000;BGA\r")
+        screen.send("AMA;MG _RPA\r")
+        screen.expect(r" 1000\.0000")
+        screen.send("bg\r")
+        screen.expect(r"\? 1 Unrecognized command")
+        screen.send("MG 2*3\r")  # the session goes on
+        screen.expect(r" 6\.0000")
+        screen.send("DL\r")
+        screen.expect(r"download: ")
+        for line in PROGRAM:
+            screen.send(line + "\r")
+        screen.send("\\\r")
+        screen.expect(r"downloaded 4 lines")
+        screen.send("XQ #A\r")
+        screen.expect(r"hello")  # program output shows as it arrives, with no Enter
+        screen.send("\x1b[A\r")  # Up arrow: the last line again
+        screen.expect(r"XQ #A.*\n.*hello")
+        screen.send("JGA=5000;BGA\r")
+        screen.send("MG _BGA\r")
+        screen.expect(r" 1\.0000")
+        screen.send("\x03")  # Ctrl-C
+        screen.expect(r"Ctrl-C: sent ST")
+        screen.send("AMA;MG _BGA\r")
+        screen.expect(r" 0\.0000")
+        screen.send("PRA=35000;BGA;AMA\r")  # 1.5 s of motion: a timeout, the session goes on
+        screen.expect(r"timeout: ")
+        screen.send("MG 7\r")  # once AM has answered
+        screen.expect(r" 7\.0000\n:")
+        screen.send("\x04")  # Ctrl-D, at the prompt, leaves
+        screen.wait_closed()
+
+
+@pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pseudo-terminal")
+def test_a_session_on_the_in_process_simulator_runs_in_real_time(
+    pty_terminal: Callable[..., PtyScreen],
+) -> None:
+    screen = pty_terminal("sim://DMC-4040")
+    screen.expect(r"Ctrl-D leaves")
+    screen.send("JGA=1000;BGA\r")
+    screen.send("WT 200;MG _TPA>100\r")  # the clock runs while nobody waits on a reply
+    screen.expect(r" 1\.0000")
+    screen.send("\x03")
+    screen.expect(r"sent ST.*\n:")
+    screen.send("\x04")
+    screen.wait_closed()
