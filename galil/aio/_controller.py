@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 from galil.aio._motion import MotionRoom, motion_twin
 from galil.aio._streams import AsyncMessages, AsyncRecordStream
-from galil.aio._worker import Worker, twin
+from galil.aio._worker import Worker, shielded, twin
 from galil.axis import Axis
 from galil.contour import ContourResult
 from galil.controller import Controller
@@ -364,7 +364,7 @@ class AsyncController(MotionRoom[Controller]):
             self.sync.contour, axes, path, dt=dt, progress=progress, timeout=timeout
         )
         try:
-            return await asyncio.shield(asyncio.wrap_future(future))
+            return await shielded(future)
         except asyncio.CancelledError:
             if not future.cancel():
                 with contextlib.suppress(GalilError):
@@ -441,7 +441,7 @@ async def connect(address: str | Transport, *, threads: int = 4, **options: Any)
     worker = Worker(str(next(_names)), threads)
     future = worker.submit(_open, address, options, messages.deliver)
     try:
-        sync, unsubscribe = await asyncio.shield(asyncio.wrap_future(future))
+        sync, unsubscribe = await shielded(future)
     except asyncio.CancelledError:
         if future.cancel():
             worker.close()

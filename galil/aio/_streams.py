@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from galil.aio._worker import Worker
+from galil.aio._worker import Worker, shielded
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.records import RecordStream
 
@@ -174,7 +174,7 @@ class AsyncRecordStream:
     async def _fetch(self, wait: float, limit: int) -> list[np.void]:
         future = self._worker.submit(_take, self.sync, wait, limit)
         try:
-            return await asyncio.shield(asyncio.wrap_future(future))
+            return await shielded(future)
         except asyncio.CancelledError:
             # Records the worker takes after the cancellation wait for the next reader.
             future.add_done_callback(self._keep)

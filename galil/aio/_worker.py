@@ -26,13 +26,30 @@ from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
 
 from galil.errors import GalilConnectionError
 
-__all__ = ["Room", "Worker", "twin"]
+__all__ = ["Room", "Worker", "shielded", "twin"]
 
 P = ParamSpec("P")
 R = TypeVar("R")
 S = TypeVar("S")
 
 _Job = tuple["concurrent.futures.Future[Any]", Callable[[], Any]]
+
+
+async def shielded(future: concurrent.futures.Future[R]) -> R:
+    """Await a worker's future; cancelling the awaiting task leaves the call running, and
+    its outcome (an exception too) is then dropped quietly instead of logged as unretrieved.
+    """
+    inner = asyncio.wrap_future(future)
+    try:
+        return await asyncio.shield(inner)
+    except asyncio.CancelledError:
+        inner.add_done_callback(_retrieve)
+        raise
+
+
+def _retrieve(future: asyncio.Future[Any]) -> None:
+    if not future.cancelled():
+        future.exception()
 
 
 class Worker:
@@ -99,7 +116,7 @@ class Worker:
 
     async def run_shielded(self, fn: Callable[P, R], /, *args: P.args, **kwargs: P.kwargs) -> R:
         """Like :meth:`run`, but the call completes even if the awaiting task is cancelled."""
-        return await asyncio.shield(asyncio.wrap_future(self.submit(fn, *args, **kwargs)))
+        return await shielded(self.submit(fn, *args, **kwargs))
 
     async def run_or_undo(
         self,
@@ -114,7 +131,7 @@ class Worker:
         returns. A call that had not started never runs."""
         future = self.submit(fn, *args, **kwargs)
         try:
-            return await asyncio.shield(asyncio.wrap_future(future))
+            return await shielded(future)
         except asyncio.CancelledError:
             if not future.cancel():
                 future.add_done_callback(functools.partial(self._undo, undo))

@@ -75,7 +75,7 @@ class LoopWatch:
 
     def _record(self, wall: float, cpu: float, handle: asyncio.Handle) -> None:
         if wall > self.max_wall:
-            self.slowest = repr(handle)
+            self.slowest = _describe(handle)
         self.wall.append(wall)
         self.cpu.append(cpu)
 
@@ -87,6 +87,16 @@ class LoopWatch:
             f"p99 {self.percentile(99) * us:.0f} us, max {self.max_wall * us:.0f} us; "
             f"CPU max {self.max_cpu * us:.0f} us"
         )
+
+
+def _describe(handle: asyncio.Handle) -> str:
+    """Which code a callback ran: the task's coroutine for a task step, else the handle."""
+    task = getattr(getattr(handle, "_callback", None), "__self__", None)
+    if isinstance(task, asyncio.Task):
+        coro = task.get_coro()
+        name = getattr(coro, "__qualname__", None) or repr(coro)
+        return f"step of task {task.get_name()} running {name}"
+    return repr(handle)
 
 
 def _timed_run(handle: asyncio.Handle) -> None:
