@@ -152,7 +152,7 @@ async def run(urls: list[str], seconds: float, moves: bool, sims: list[int]) -> 
     )
     print(
         f"    loop blocking: {watch.summary()}; callbacks over 1 ms: wall {watch.over(1e-3)}, "
-        f"CPU {watch.over(1e-3, cpu=True)}"
+        f"CPU {watch.over(1e-3, cpu=True)} (GC included)"
     )
     print(f"    mean poll {statistics.fmean(latencies) * ms:.2f} ms")
 

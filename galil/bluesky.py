@@ -76,7 +76,7 @@ class _Shared:
     users: int = 0
 
 
-_shared: dict[tuple[int, str], _Shared] = {}
+_shared: dict[tuple[asyncio.AbstractEventLoop, str], _Shared] = {}
 
 
 def _mock_address(address: str) -> str:
@@ -86,7 +86,7 @@ def _mock_address(address: str) -> str:
 async def _acquire(address: str, mock: bool) -> AsyncController:
     """The loop's controller at ``address`` (connected once, shared by its devices)."""
     loop = asyncio.get_running_loop()
-    key = (id(loop), f"mock:{address}" if mock else address)
+    key = (loop, f"mock:{address}" if mock else address)
     entry = _shared.get(key)
     if entry is None or (entry.connecting.done() and _unusable(entry.connecting)):
         target = _mock_address(address) if mock else address
@@ -120,9 +120,9 @@ async def _release(controller: AsyncController) -> None:
 
 async def release_all() -> None:
     """Close every controller the devices of this event loop share (end of a session)."""
-    loop_id = id(asyncio.get_running_loop())
+    loop = asyncio.get_running_loop()
     for key, entry in list(_shared.items()):
-        if key[0] != loop_id:
+        if key[0] is not loop:
             continue
         del _shared[key]
         if entry.connecting.done() and not _unusable(entry.connecting):

@@ -12,12 +12,15 @@ Wall time includes waits that are not the loop's own doing (the OS running anoth
 the GIL held by another thread); CPU time is the work done on the loop's thread itself. This
 is a diagnostic: while a watch is active, ``asyncio.Handle._run`` is wrapped (the technique of
 the ``aiodebug`` project), for every loop of the process, and unwrapped when the last watch
-ends. It costs about a microsecond per callback.
+ends. It costs about a microsecond per callback. Garbage collection that runs inside a
+callback is timed too (``gc``), so a pause of the whole process can be told from the work of
+the callback it interrupted.
 """
 
 from __future__ import annotations
 
 import asyncio
+import gc
 import threading
 import time
 from array import array
@@ -39,12 +42,17 @@ class LoopWatch:
     Attributes:
         wall: wall-clock duration of each callback.
         cpu: CPU time of the loop's thread in each callback.
+        gc: CPU time the garbage collector took inside each callback (a pause of the whole
+            process that happened to start there, not the callback's own work).
         slowest: the repr of the callback with the longest wall time.
     """
 
     wall: array[float] = field(default_factory=lambda: array("d"))
     cpu: array[float] = field(default_factory=lambda: array("d"))
+    gc: array[float] = field(default_factory=lambda: array("d"))
     slowest: str = ""
+    _gc_started: float = 0.0
+    _gc_in_step: float = 0.0
 
     @property
     def steps(self) -> int:
@@ -60,6 +68,11 @@ class LoopWatch:
     def max_cpu(self) -> float:
         """Most CPU time of one callback."""
         return max(self.cpu, default=0.0)
+
+    @property
+    def max_own_cpu(self) -> float:
+        """Most CPU time of one callback, garbage collection left out."""
+        return max((c - g for c, g in zip(self.cpu, self.gc, strict=True)), default=0.0)
 
     def percentile(self, q: float, *, cpu: bool = False) -> float:
         """The ``q``-th percentile (0..100) of the wall (or CPU) times."""
@@ -78,6 +91,7 @@ class LoopWatch:
             self.slowest = _describe(handle)
         self.wall.append(wall)
         self.cpu.append(cpu)
+        self.gc.append(self._gc_in_step)
 
     def summary(self) -> str:
         """One line: steps, p50/p99/max wall and max CPU in microseconds."""
@@ -85,7 +99,7 @@ class LoopWatch:
         return (
             f"{self.steps} loop steps: wall p50 {self.percentile(50) * us:.0f} us, "
             f"p99 {self.percentile(99) * us:.0f} us, max {self.max_wall * us:.0f} us; "
-            f"CPU max {self.max_cpu * us:.0f} us"
+            f"CPU max {self.max_cpu * us:.0f} us ({self.max_own_cpu * us:.0f} us without GC)"
         )
 
 
@@ -106,12 +120,23 @@ def _timed_run(handle: asyncio.Handle) -> None:
     if watch is None:
         run(handle)
         return
+    watch._gc_in_step = 0.0
     w0 = time.perf_counter()
     c0 = time.thread_time()
     try:
         run(handle)
     finally:
         watch._record(time.perf_counter() - w0, time.thread_time() - c0, handle)
+
+
+def _gc_phase(phase: str, info: dict[str, int]) -> None:
+    watch = _active.get(threading.get_ident())
+    if watch is None:
+        return
+    if phase == "start":
+        watch._gc_started = time.thread_time()
+    else:
+        watch._gc_in_step += time.thread_time() - watch._gc_started
 
 
 @contextmanager
@@ -135,6 +160,7 @@ def watch_loop(thread: threading.Thread | None = None) -> Iterator[LoopWatch]:
         if not _active:
             _original = asyncio.Handle._run
             setattr(asyncio.Handle, "_run", _timed_run)  # noqa: B010 - a method we wrap
+            gc.callbacks.append(_gc_phase)
         _active[ident] = watch
     try:
         yield watch
@@ -143,4 +169,5 @@ def watch_loop(thread: threading.Thread | None = None) -> Iterator[LoopWatch]:
             del _active[ident]
             if not _active:
                 setattr(asyncio.Handle, "_run", _original)  # noqa: B010
+                gc.callbacks.remove(_gc_phase)
                 _original = None
