@@ -26,6 +26,8 @@ __all__ = ["SLICE", "AsyncMessages", "AsyncRecordStream"]
 
 #: Longest a worker thread blocks in one call while waiting for a record (seconds).
 SLICE = 0.1
+#: Most records taken from the sync stream in one worker call.
+BATCH = 1000
 
 
 def _check_wait(timeout: float | None) -> float:
@@ -199,10 +201,9 @@ class AsyncRecordStream:
         deadline = loop.time() + wait
         while not self._ready:
             left = deadline - loop.time()
-            got = await self._fetch(max(0.0, min(SLICE, left)), limit)
-            if got:
-                return got
-            if loop.time() >= deadline:
+            # Take what is there in one worker call, even when asked for one record.
+            self._ready.extend(await self._fetch(max(0.0, min(SLICE, left)), max(limit, BATCH)))
+            if not self._ready and loop.time() >= deadline:
                 raise queue.Empty(f"no data record within {timeout} s")
         out: list[np.void] = []
         while self._ready and len(out) < limit:
