@@ -118,7 +118,8 @@ def test_mv_reports_progress_from_the_prediction(server: SimTcpServer, engine: R
     assert first["precision"] == 4
     assert first["target"] == 5
     assert first["initial"] == pytest.approx(0, abs=0.001)
-    assert first["time_remaining"] == pytest.approx(0.11, abs=0.03)  # 5 mm at 50 mm/s, ramps
+    # Known from the first update: 5 mm at 50 mm/s with 10 ms ramps, as predicted.
+    assert first["time_elapsed"] + first["time_remaining"] == pytest.approx(0.11, abs=0.005)
     left = [u["time_remaining"] for u in updates]
     assert left == sorted(left, reverse=True)
     assert left[-1] == 0
@@ -153,7 +154,10 @@ def test_a_fly_scan_returns_the_recorded_points_beside_the_prediction(
     assert len(samples) >= 32
     assert data["fly-A-reference"] == pytest.approx(data["fly-A-predicted"], abs=1e-9)
     assert data["fly-A-predicted"][-1] == pytest.approx(3.2)
-    assert data["fly-A-position"][-1] == pytest.approx(3.2, abs=0.01)
+    # The encoder follows the reference through the simulator's 3 ms servo lag: at the path's
+    # 12.4 mm/s it trails by up to 0.04 mm when the last record is taken.
+    assert data["fly-A-position"][-1] == pytest.approx(3.2, abs=0.05)
+    assert data["fly-A-position"][-1] <= data["fly-A-reference"][-1]
     descriptor = next(d for name, d in docs if name == "descriptor")
     assert descriptor["data_keys"]["fly-A-predicted"]["units"] == "mm"
 
