@@ -73,6 +73,8 @@ def test_links_resolve(page: Path) -> None:
 def test_page_code_runs(
     page: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    if page.name == "bluesky.md":
+        pytest.importorskip("ophyd_async")  # the optional extra galil[bluesky]
     monkeypatch.setenv("MPLBACKEND", "Agg")
     monkeypatch.chdir(tmp_path)  # a block that saves a file saves it here
     blocks = python_blocks(page.read_text(encoding="utf-8"))
@@ -97,4 +99,8 @@ def test_page_code_runs(
                 value.close()
             elif isinstance(value, SimTcpServer):
                 value.stop()  # idempotent
+            elif type(value).__name__ == "RunEngine":
+                # A RunEngine runs its loop on a thread of its own for the whole session.
+                value.loop.call_soon_threadsafe(value.loop.stop)
+                value._th.join(5)
         capsys.readouterr()

@@ -47,7 +47,7 @@ def test_the_wheel_carries_complete_metadata(dist: Path) -> None:
     assert meta["Requires-Python"] == ">=3.10"
     assert meta["License-Expression"] == "MIT"
     assert meta["Summary"]
-    assert meta.get_all("Provides-Extra") == ["jupyter"]
+    assert sorted(meta.get_all("Provides-Extra") or []) == ["bluesky", "jupyter"]
     classifiers = meta.get_all("Classifier")
     assert "Typing :: Typed" in classifiers
     assert any(c.startswith("Development Status") for c in classifiers)

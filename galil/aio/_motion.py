@@ -1,0 +1,340 @@
+"""Motion from a coroutine: awaitable handles over the sync :class:`~galil.motion.MoveHandle`.
+
+The sync handle keeps the prediction, the changes sent since the start and the comparison at
+the end; here it is only polled, from a worker thread, at the sync handle's own cadence (a
+quarter of the predicted time left, between :data:`~galil.motion.MIN_POLL` and
+:data:`~galil.motion.MAX_POLL`), with the loop free between polls.
+
+Cancelling a task that awaits a move stops the move (``ST``, sent before the cancellation
+completes), and cancelling a task while its move is being started stops the move as soon as
+it has started: a cancelled coroutine never leaves an axis running.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+from collections.abc import AsyncIterator, Awaitable, Callable, Generator
+from dataclasses import dataclass
+from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
+
+from galil import predict
+from galil.aio._worker import Room, Worker
+from galil.errors import GalilError, GalilTimeoutError, InvalidArgument
+from galil.link import Link
+from galil.motion import MAX_POLL, MIN_POLL, MoveHandle, MoveParams, MoveResult
+
+__all__ = ["AsyncMoveHandle", "MotionRoom", "MoveProgress", "motion_twin", "start_motion"]
+
+P = ParamSpec("P")
+S = TypeVar("S")
+
+
+@dataclass(frozen=True)
+class MoveProgress:
+    """Where a move is, by its prediction (no position query).
+
+    Attributes:
+        elapsed: seconds since the move started, on the controller's clock.
+        duration: predicted duration in seconds (``inf`` for a jog not yet stopped).
+        positions: predicted position per axis at ``elapsed``, in the axis's unit (counts
+            without a scale); empty while the end of a jog is unknown.
+        units: the unit of each position (``"mm"``, ``"counts"``).
+    """
+
+    elapsed: float
+    duration: float
+    positions: dict[str, float]
+    units: dict[str, str]
+
+    @property
+    def remaining(self) -> float:
+        """Predicted seconds left (0 once over; ``inf`` for a running jog)."""
+        return max(0.0, self.duration - self.elapsed)
+
+    @property
+    def fraction(self) -> float | None:
+        """Share of the predicted duration gone by (``None`` for a running jog)."""
+        if not math.isfinite(self.duration):
+            return None
+        if self.duration <= 0:
+            return 1.0
+        return min(1.0, self.elapsed / self.duration)
+
+
+def shown(profile: predict.Profile, counts: float) -> float:
+    """A position in counts in the unit a profile is shown in (its axis's user unit)."""
+    per, offset, _ = profile.display if profile.display is not None else (1.0, 0.0, "")
+    return counts / per + offset
+
+
+def _unit(profile: predict.Profile) -> str:
+    return profile.display[2] if profile.display is not None else "counts"
+
+
+def progress_of(handle: MoveHandle, now: float) -> MoveProgress:
+    """The predicted state of ``handle`` at controller time ``now`` (worker side)."""
+    elapsed = max(0.0, now - handle.started_at)
+    duration = handle.duration
+    profiles = handle.profiles
+    units = {a: _unit(p) for a, p in profiles.items()}
+    positions: dict[str, float] = {}
+    if math.isfinite(duration):
+        positions = {a: shown(p, float(p.at(elapsed))) for a, p in profiles.items()}
+    return MoveProgress(elapsed, duration, positions, units)
+
+
+class _Poll:
+    """One wait's deadline and cadence; every call runs on a worker thread."""
+
+    def __init__(self, handle: MoveHandle, link: Link, timeout: float | None) -> None:
+        self.handle = handle
+        self.link = link
+        duration = handle.duration
+        if timeout is None and math.isfinite(duration):
+            timeout = duration * 1.5 + 2.0  # as MoveHandle.wait
+        self.timeout = timeout
+        self.deadline = None if timeout is None else link.clock() + timeout
+
+    def __call__(self) -> tuple[MoveProgress, float] | None:
+        """``None`` once done, else the progress and the pause before the next poll.
+
+        Raises:
+            GalilTimeoutError: past the deadline (the move is NOT stopped).
+        """
+        handle, link = self.handle, self.link
+        if handle.done:
+            return None
+        now = link.clock()
+        if self.deadline is not None and now >= self.deadline:
+            raise link.error(
+                GalilTimeoutError,
+                f"move on {handle.axes} not done after {self.timeout:.3g} s "
+                f"(predicted {handle.duration:.3g} s)",
+            )
+        progress = progress_of(handle, now)
+        remaining = progress.duration - progress.elapsed
+        pause = remaining / 4 if math.isfinite(remaining) else MAX_POLL
+        if self.deadline is not None:
+            pause = min(pause, self.deadline - now)
+        return progress, min(max(pause, MIN_POLL), MAX_POLL)
+
+
+def _check_timeout(timeout: float | None) -> None:
+    if timeout is not None and (
+        isinstance(timeout, bool)
+        or not isinstance(timeout, (int, float))
+        or not math.isfinite(timeout)
+        or timeout < 0
+    ):
+        raise InvalidArgument(f"timeout must be a non-negative number, got {timeout!r}")
+
+
+class AsyncMoveHandle:
+    """A move in progress, awaited from a coroutine: ``result = await handle``.
+
+    The prediction is the sync handle's (:attr:`sync`): :attr:`profile`, :attr:`duration`
+    and :attr:`params` read what it computed when the move started or changed.
+
+    Attributes:
+        sync: the :class:`~galil.motion.MoveHandle` this one polls.
+    """
+
+    def __init__(self, handle: MoveHandle, worker: Worker, link: Link) -> None:
+        self.sync = handle
+        self._worker = worker
+        self._link = link
+        self._callbacks: list[Callable[[AsyncMoveHandle], None]] = []
+        self._watcher: asyncio.Task[None] | None = None
+
+    # -- the prediction (computed by the sync handle) ----------------------------------------
+    @property
+    def kind(self) -> str:
+        """``"position"``, ``"jog"`` or ``"schedule"``."""
+        return self.sync.kind
+
+    @property
+    def axes(self) -> str:
+        """The axis letters this move drives."""
+        return self.sync.axes
+
+    @property
+    def profiles(self) -> dict[str, predict.Profile]:
+        """Predicted profile per axis, in each axis's unit for display."""
+        return self.sync.profiles
+
+    @property
+    def profile(self) -> predict.Profile:
+        """The predicted profile of the (first) axis."""
+        return self.sync.profile
+
+    @property
+    def duration(self) -> float:
+        """Predicted duration in seconds (``inf`` for a jog that has not been stopped)."""
+        return self.sync.duration
+
+    @property
+    def params(self) -> dict[str, MoveParams]:
+        """The quantised SP/AC/DC/IT each axis started with."""
+        return self.sync.params
+
+    @property
+    def finished(self) -> bool:
+        """Whether the move was seen done (no query)."""
+        return self.sync.finished
+
+    @property
+    def result(self) -> MoveResult | None:
+        """The comparison with the prediction, once the move is done."""
+        return self.sync.result
+
+    # -- completion ----------------------------------------------------------------------
+    async def done(self) -> bool:
+        """Whether every axis's profile is complete (one query unless already seen done)."""
+        return await self._worker.run(_is_done, self.sync)
+
+    async def begin(self) -> dict[str, int | None]:
+        """Controller sample at which each axis's motion began (see ``MoveHandle.begin``)."""
+        return await self._worker.run(_begin_of, self.sync)
+
+    async def watch(
+        self, timeout: float | None = None, *, stop_on_cancel: bool = True
+    ) -> AsyncIterator[MoveProgress]:
+        """Yield the predicted progress at every poll until the move is done.
+
+        Polls come at the sync handle's cadence (at most 100 ms apart); on a manual-clock
+        simulator each pause lets simulated time pass instead of sleeping.
+
+        Args:
+            timeout: seconds to wait at most (``None``: the predicted duration plus a margin,
+                or for ever for a jog that has not been stopped).
+            stop_on_cancel: stop the move (``ST``) when the task iterating is cancelled.
+
+        Raises:
+            GalilTimeoutError: not done in time (the move is NOT stopped).
+        """
+        _check_timeout(timeout)
+        worker, link = self._worker, self._link
+        try:
+            poll = await worker.run(_Poll, self.sync, link, timeout)
+            while (step := await worker.run(poll)) is not None:
+                progress, pause = step
+                yield progress
+                if link.simulated_time:
+                    await worker.run(link.pause, pause)
+                else:
+                    await asyncio.sleep(pause)
+        except asyncio.CancelledError:
+            if stop_on_cancel:
+                await self._stop_after_cancel()
+            raise
+
+    async def wait(self, timeout: float | None = None) -> MoveResult:
+        """Wait until the move is done and compare its end with the prediction.
+
+        Cancelling the waiting task stops the move (``ST``) before the cancellation ends.
+
+        Raises:
+            GalilTimeoutError: the move did not finish in time (it is NOT stopped).
+            MotionError: an axis stopped on a limit switch or soft limit.
+        """
+        async for _ in self.watch(timeout):
+            pass
+        # Done: the sync handle's own wait returns at once with the result (or raises).
+        return await self._worker.run(self.sync.wait, 0)
+
+    def __await__(self) -> Generator[Any, None, MoveResult]:
+        return self.wait().__await__()
+
+    async def stop(self) -> None:
+        """Decelerate the move's axes to a stop (``ST``) at their DC."""
+        await self._worker.run(self.sync.stop)
+
+    async def _stop_after_cancel(self) -> None:
+        if self.sync.finished:
+            return
+        with contextlib.suppress(GalilError):
+            await self._worker.run_shielded(self.sync.stop)
+
+    def add_callback(self, callback: Callable[[AsyncMoveHandle], None]) -> None:
+        """Call ``callback(handle)`` on the event loop once the move is done (at once if it
+        already is); the move is watched by a task of this loop, not by a thread."""
+        if self.sync.finished:
+            callback(self)
+            return
+        self._callbacks.append(callback)
+        if self._watcher is None:
+            self._watcher = asyncio.get_running_loop().create_task(self._watch_for_callbacks())
+
+    async def _watch_for_callbacks(self) -> None:
+        with contextlib.suppress(GalilError):
+            async for _ in self.watch(stop_on_cancel=False):
+                pass
+        callbacks, self._callbacks = self._callbacks, []
+        for cb in callbacks:
+            cb(self)
+
+    def __repr__(self) -> str:
+        return f"<AsyncMoveHandle of {self.sync!r}>"
+
+
+def _is_done(handle: MoveHandle) -> bool:
+    return handle.done
+
+
+def _begin_of(handle: MoveHandle) -> dict[str, int | None]:
+    return handle.begin
+
+
+async def start_motion(
+    worker: Worker, link: Link, start: Callable[P, MoveHandle], *args: P.args, **kwargs: P.kwargs
+) -> AsyncMoveHandle:
+    """Run a sync call that starts motion; if the caller is cancelled meanwhile, the motion it
+    started is stopped as soon as the call returns (a call not yet started never runs)."""
+    handle = await worker.run_or_undo(MoveHandle.stop, start, *args, **kwargs)
+    return AsyncMoveHandle(handle, worker, link)
+
+
+class MotionRoom(Room[S]):
+    """A room whose methods start motion: it also knows the link (clock, pauses)."""
+
+    def __init__(self, sync: S, worker: Worker, link: Link) -> None:
+        super().__init__(sync, worker)
+        self._link = link
+
+
+class motion_twin(Generic[S, P]):  # noqa: N801 - used like a decorator
+    """The async twin of a sync method that starts motion and returns a ``MoveHandle``:
+    ``await room.name(...)`` returns an :class:`AsyncMoveHandle` (see :func:`start_motion`).
+    """
+
+    def __init__(self, method: Callable[Concatenate[S, P], MoveHandle]) -> None:
+        self._method = method
+        self.__doc__ = method.__doc__
+        self.__name__ = getattr(method, "__name__", "motion_twin")
+
+    @overload
+    def __get__(self, room: None, owner: type[object]) -> motion_twin[S, P]: ...
+
+    @overload
+    def __get__(
+        self, room: MotionRoom[S], owner: type[object]
+    ) -> Callable[P, Awaitable[AsyncMoveHandle]]: ...
+
+    def __get__(
+        self, room: MotionRoom[S] | None, owner: type[object]
+    ) -> motion_twin[S, P] | Callable[P, Awaitable[AsyncMoveHandle]]:
+        if room is None:
+            return self
+        method = self._method
+        sync = room.sync
+        worker = room._worker
+        link = room._link
+
+        async def call(*args: P.args, **kwargs: P.kwargs) -> AsyncMoveHandle:
+            return await start_motion(worker, link, method, sync, *args, **kwargs)
+
+        call.__doc__ = method.__doc__
+        call.__name__ = self.__name__
+        return call

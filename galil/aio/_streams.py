@@ -1,0 +1,250 @@
+"""Unsolicited messages and data records as async iterators.
+
+Messages arrive through the sync controller's subscription (a reader thread calls back) and
+are handed to the loop with ``call_soon_threadsafe``: no thread waits for them. Records stay
+in the sync :class:`~galil.records.RecordStream` (its queue, its ``dropped`` count, its
+errors) and are taken from it in batches on a worker thread, in slices of at most
+:data:`SLICE` seconds so a cancelled reader frees its thread soon.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import math
+import queue
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from galil.aio._worker import Worker, shielded
+from galil.errors import GalilConnectionError, InvalidArgument
+from galil.records import RecordStream
+
+__all__ = ["SLICE", "AsyncMessages", "AsyncRecordStream"]
+
+#: Longest a worker thread blocks in one call while waiting for a record (seconds).
+SLICE = 0.1
+#: Most records taken from the sync stream in one worker call.
+BATCH = 1000
+
+
+def _check_wait(timeout: float | None) -> float:
+    if timeout is None:
+        return math.inf
+    if (
+        isinstance(timeout, bool)
+        or not isinstance(timeout, (int, float))
+        or math.isnan(timeout)
+        or timeout < 0
+    ):
+        raise InvalidArgument(f"timeout must be a non-negative number or None, got {timeout!r}")
+    return float(timeout)
+
+
+class AsyncMessages:
+    """Unsolicited lines (program ``MG`` output ...), oldest first: ``async for line in
+    controller.messages`` or ``await controller.messages.get(timeout)``.
+
+    Bounded: when nobody reads, the oldest lines drop (``dropped`` counts them).
+    """
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, maxlen: int) -> None:
+        self._loop = loop
+        self._items: deque[str] = deque()
+        self._maxlen = maxlen
+        self._wakeup: asyncio.Event = asyncio.Event()
+        self._closed = False
+        self.dropped = 0
+
+    def deliver(self, line: str) -> None:
+        """Hand a line over from any thread (the sync controller's subscriber)."""
+        if not self._loop.is_closed():
+            self._loop.call_soon_threadsafe(self._put, line)
+
+    def _put(self, line: str) -> None:
+        if len(self._items) >= self._maxlen:
+            self._items.popleft()
+            self.dropped += 1
+        self._items.append(line)
+        self._wakeup.set()
+
+    async def get(self, timeout: float | None = None) -> str:
+        """The oldest line, waiting up to ``timeout`` seconds (``None``: for ever).
+
+        Raises:
+            queue.Empty: nothing arrived in time.
+            GalilConnectionError: the controller was closed.
+        """
+        wait = _check_wait(timeout)
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + wait
+        while not self._items:
+            if self._closed:
+                raise GalilConnectionError("the async controller is closed")
+            left = deadline - loop.time()
+            if left <= 0:
+                raise queue.Empty(f"no unsolicited message within {timeout} s")
+            self._wakeup.clear()
+            try:
+                await asyncio.wait_for(self._wakeup.wait(), None if math.isinf(left) else left)
+            except asyncio.TimeoutError:
+                continue
+        return self._items.popleft()
+
+    def get_nowait(self) -> str:
+        """The oldest line at once; ``queue.Empty`` when there is none."""
+        if not self._items:
+            raise queue.Empty("no unsolicited message waiting")
+        return self._items.popleft()
+
+    def drain(self) -> list[str]:
+        """Remove and return every waiting line."""
+        out = list(self._items)
+        self._items.clear()
+        return out
+
+    def close(self) -> None:
+        """End the iteration of every reader (the controller is closing)."""
+        self._closed = True
+        self._wakeup.set()
+
+    def __aiter__(self) -> AsyncMessages:
+        return self
+
+    async def __anext__(self) -> str:
+        try:
+            return await self.get()
+        except GalilConnectionError:
+            raise StopAsyncIteration from None
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __repr__(self) -> str:
+        return f"<AsyncMessages {len(self)} waiting, {self.dropped} dropped>"
+
+
+def _take(stream: RecordStream, wait: float, limit: int) -> list[np.void]:
+    """Up to ``limit`` records: the first waited for (at most ``wait`` s), the rest ready."""
+    try:
+        out = [stream.get(wait)]
+    except queue.Empty:
+        return []
+    while len(out) < limit:
+        try:
+            out.append(stream.get(0.0))
+        except queue.Empty:
+            break
+    return out
+
+
+class AsyncRecordStream:
+    """Data records every ``period`` samples, decoded: ``async for rec in stream``.
+
+    Build it with ``await controller.records(period)``; close it (or use ``async with``) to
+    stop it. Records are the sync stream's (:attr:`sync`): pushed by ``DR`` over Ethernet,
+    polled with ``QR`` elsewhere, on the controller's clock.
+    """
+
+    def __init__(self, stream: RecordStream, worker: Worker) -> None:
+        self.sync = stream
+        self._worker = worker
+        self._ready: deque[np.void] = deque()
+
+    @property
+    def period(self) -> int:
+        """Servo samples between records."""
+        return self.sync.period
+
+    @property
+    def method(self) -> str:
+        """``"DR"`` (pushed) or ``"QR"`` (polled)."""
+        return self.sync.method
+
+    @property
+    def dropped(self) -> int:
+        """Records dropped from a full queue (``DR`` only)."""
+        return self.sync.dropped
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` was called."""
+        return self.sync.closed
+
+    async def _fetch(self, wait: float, limit: int) -> list[np.void]:
+        future = self._worker.submit(_take, self.sync, wait, limit)
+        try:
+            return await shielded(future)
+        except asyncio.CancelledError:
+            # Records the worker takes after the cancellation wait for the next reader.
+            future.add_done_callback(self._keep)
+            raise
+
+    def _keep(self, future: concurrent.futures.Future[list[np.void]]) -> None:
+        if not future.cancelled() and future.exception() is None:
+            self._ready.extend(future.result())
+
+    async def batch(self, limit: int = 1000, timeout: float | None = None) -> list[np.void]:
+        """The records waiting (at least one, at most ``limit``), waiting up to ``timeout`` s
+        for the first.
+
+        Raises:
+            queue.Empty: no record within ``timeout``.
+            GalilConnectionError: the stream is closed (or its handle died).
+        """
+        if isinstance(limit, bool) or not isinstance(limit, int) or limit < 1:
+            raise InvalidArgument(f"limit must be a positive integer, not {limit!r}")
+        wait = _check_wait(timeout)
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + wait
+        while not self._ready:
+            left = deadline - loop.time()
+            # Take what is there in one worker call, even when asked for one record.
+            self._ready.extend(await self._fetch(max(0.0, min(SLICE, left)), max(limit, BATCH)))
+            if not self._ready and loop.time() >= deadline:
+                raise queue.Empty(f"no data record within {timeout} s")
+        out: list[np.void] = []
+        while self._ready and len(out) < limit:
+            out.append(self._ready.popleft())
+        return out
+
+    async def get(self, timeout: float | None = None) -> np.void:
+        """The next record, waiting up to ``timeout`` seconds (``None``: for ever)."""
+        got = await self.batch(1, timeout)
+        return got[0]
+
+    async def take(self, n: int, timeout: float | None = None) -> np.ndarray[Any, np.dtype[Any]]:
+        """The next ``n`` records as one structured array; ``timeout`` bounds each wait."""
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            raise InvalidArgument(f"n must be a positive integer, not {n!r}")
+        records: list[np.void] = []
+        while len(records) < n:
+            records.extend(await self.batch(n - len(records), timeout))
+        out = np.empty(n, dtype=records[0].dtype)
+        for i, rec in enumerate(records):
+            out[i] = rec
+        return out
+
+    def __aiter__(self) -> AsyncRecordStream:
+        return self
+
+    async def __anext__(self) -> np.void:
+        try:
+            return await self.get()
+        except GalilConnectionError:
+            raise StopAsyncIteration from None
+
+    async def close(self) -> None:
+        """Stop the stream (``DR 0``) and close its handle; idempotent."""
+        await self._worker.run_shielded(self.sync.close)
+
+    async def __aenter__(self) -> AsyncRecordStream:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    def __repr__(self) -> str:
+        return f"<AsyncRecordStream of {self.sync!r}>"

@@ -1,0 +1,211 @@
+"""Where the blocking calls run: a few threads per controller, and twins of sync methods.
+
+The sync core (:mod:`galil.controller` and the rooms below it) is thread-safe and does its
+I/O in the calling thread. The async layer never calls it on the event loop: every call goes
+to the controller's :class:`Worker` and the loop only awaits a future (``docs/decisions/0012``).
+
+A method of a sync room gets its async twin in one line, without a copy of its logic or its
+signature::
+
+    class AsyncThing(Room[Thing]):
+        read = twin(Thing.read)          # await async_thing.read(...) runs Thing.read(...)
+
+:func:`twin` keeps the sync method's parameters (mypy checks the calls) and docstring.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import contextlib
+import functools
+import queue
+import threading
+from collections.abc import Awaitable, Callable
+from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
+
+from galil.errors import GalilConnectionError
+
+__all__ = ["Room", "Worker", "shielded", "twin"]
+
+P = ParamSpec("P")
+R = TypeVar("R")
+S = TypeVar("S")
+
+_Job = tuple["concurrent.futures.Future[Any]", Callable[[], Any]]
+
+
+async def shielded(future: concurrent.futures.Future[R]) -> R:
+    """Await a worker's future; cancelling the awaiting task leaves the call running, and
+    its outcome (an exception too) is then dropped quietly instead of logged as unretrieved.
+    """
+    inner = asyncio.wrap_future(future)
+    try:
+        return await asyncio.shield(inner)
+    except asyncio.CancelledError:
+        inner.add_done_callback(_retrieve)
+        raise
+
+
+def _retrieve(future: asyncio.Future[Any]) -> None:
+    if not future.cancelled():
+        future.exception()
+
+
+class Worker:
+    """Threads that run one controller's blocking calls, started once and reused.
+
+    The threads start at construction (a thread start is the one thing here that takes the
+    loop's time, so it happens at connect, not in the middle of a scan). Several threads let
+    a stop get through while another call (a contour, a polled record) is still running; the
+    link's own lock keeps their round trips apart.
+
+    Args:
+        name: names the threads (``galil-aio-<name>-<i>``).
+        threads: how many calls may run at once.
+    """
+
+    def __init__(self, name: str, threads: int = 3) -> None:
+        self._jobs: queue.SimpleQueue[_Job | None] = queue.SimpleQueue()
+        self._closed = False
+        self._threads = [
+            threading.Thread(target=self._serve, name=f"galil-aio-{name}-{i}", daemon=True)
+            for i in range(threads)
+        ]
+        for t in self._threads:
+            t.start()
+
+    def _serve(self) -> None:
+        while True:
+            job = self._jobs.get()
+            if job is None:
+                return
+            future, call = job
+            if not future.set_running_or_notify_cancel():
+                continue  # cancelled before it started: it never runs
+            try:
+                result = call()
+            except BaseException as exc:  # handed to whoever awaits it
+                future.set_exception(exc)
+            else:
+                future.set_result(result)
+            del future, call, job
+
+    def submit(
+        self, fn: Callable[P, R], /, *args: P.args, **kwargs: P.kwargs
+    ) -> concurrent.futures.Future[R]:
+        """Queue ``fn(*args, **kwargs)`` for a worker thread; never blocks.
+
+        Raises:
+            GalilConnectionError: the worker was closed.
+        """
+        if self._closed:
+            raise GalilConnectionError("the async controller is closed")
+        future: concurrent.futures.Future[R] = concurrent.futures.Future()
+        self._jobs.put((future, functools.partial(fn, *args, **kwargs)))
+        return future
+
+    async def run(self, fn: Callable[P, R], /, *args: P.args, **kwargs: P.kwargs) -> R:
+        """Run ``fn(*args, **kwargs)`` on a worker thread and await its result.
+
+        Cancelling the awaiting task drops a call that has not started yet; one already
+        running finishes on its thread (callers that start motion stop it, see
+        :func:`galil.aio._motion.start_motion`).
+        """
+        return await asyncio.wrap_future(self.submit(fn, *args, **kwargs))
+
+    async def run_shielded(self, fn: Callable[P, R], /, *args: P.args, **kwargs: P.kwargs) -> R:
+        """Like :meth:`run`, but the call completes even if the awaiting task is cancelled."""
+        return await shielded(self.submit(fn, *args, **kwargs))
+
+    async def run_or_undo(
+        self,
+        undo: Callable[[R], object],
+        fn: Callable[P, R],
+        /,
+        *args: P.args,
+        **kwargs: P.kwargs,
+    ) -> R:
+        """Run a call that leaves something behind (motion, a connection); if the awaiting
+        task is cancelled while it runs, ``undo(result)`` runs on a worker as soon as it
+        returns. A call that had not started never runs."""
+        future = self.submit(fn, *args, **kwargs)
+        try:
+            return await shielded(future)
+        except asyncio.CancelledError:
+            if not future.cancel():
+                future.add_done_callback(functools.partial(self._undo, undo))
+            raise
+
+    def _undo(self, undo: Callable[[R], object], future: concurrent.futures.Future[R]) -> None:
+        if future.cancelled() or future.exception() is not None:
+            return  # nothing was left behind
+        with contextlib.suppress(GalilConnectionError):
+            self.submit(undo, future.result())
+
+    @property
+    def threads(self) -> list[threading.Thread]:
+        """The worker threads (for tests that check nothing outlives a controller)."""
+        return list(self._threads)
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` was called."""
+        return self._closed
+
+    def close(self) -> None:
+        """Let the threads finish what they run and end; idempotent, never blocks."""
+        if self._closed:
+            return
+        self._closed = True
+        for _ in self._threads:
+            self._jobs.put(None)
+
+
+class Room(Generic[S]):
+    """An async twin of one sync object: the object and the worker its calls run on.
+
+    Attributes:
+        sync: the sync object (its cheap, I/O-free members may be used directly).
+    """
+
+    def __init__(self, sync: S, worker: Worker) -> None:
+        self.sync = sync
+        self._worker = worker
+
+    async def run(self, fn: Callable[P, R], /, *args: P.args, **kwargs: P.kwargs) -> R:
+        """Run any blocking callable on this controller's worker (a room without a twin)."""
+        return await self._worker.run(fn, *args, **kwargs)
+
+
+class twin(Generic[S, P, R]):  # noqa: N801 - used like a decorator
+    """The async twin of a sync method: ``await room.name(...)`` runs ``S.name(room.sync, ...)``
+    on the room's worker. Parameters, return type and docstring are the sync method's.
+    """
+
+    def __init__(self, method: Callable[Concatenate[S, P], R]) -> None:
+        self._method = method
+        self.__doc__ = method.__doc__
+        self.__name__ = getattr(method, "__name__", "twin")
+
+    @overload
+    def __get__(self, room: None, owner: type[object]) -> twin[S, P, R]: ...
+
+    @overload
+    def __get__(self, room: Room[S], owner: type[object]) -> Callable[P, Awaitable[R]]: ...
+
+    def __get__(
+        self, room: Room[S] | None, owner: type[object]
+    ) -> twin[S, P, R] | Callable[P, Awaitable[R]]:
+        if room is None:
+            return self
+        method = self._method
+        sync = room.sync
+        worker = room._worker
+
+        async def call(*args: P.args, **kwargs: P.kwargs) -> R:
+            return await worker.run(method, sync, *args, **kwargs)
+
+        call.__doc__ = method.__doc__
+        call.__name__ = self.__name__
+        return call

@@ -1,0 +1,346 @@
+"""galil.aio against in-process simulators (manual clock): the sync vocabulary, awaited.
+
+Every wait lets simulated time pass (the worker pauses the simulator's clock), so nothing here
+sleeps for motion; cancellation is made deterministic by holding the link's lock.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import gc
+import itertools
+import queue
+import threading
+import time
+from collections.abc import Awaitable, Callable
+from typing import Any, TypeVar
+
+import numpy as np
+import pytest
+
+import galil
+import galil.aio as aio
+from galil.controller import Controller
+from galil.testing import sim_of
+from galil.units import ureg
+
+mm, s = ureg.mm, ureg.s
+T = TypeVar("T")
+
+
+def run(body: Callable[[], Awaitable[T]]) -> T:
+    return asyncio.run(asyncio.wait_for(body(), 30))  # type: ignore[arg-type]
+
+
+async def sim(model: str = "DMC-4040") -> aio.AsyncController:
+    return await aio.connect(f"sim://{model}")
+
+
+def commands_of(c: aio.AsyncController) -> list[str]:
+    return [text for _, text in sim_of(c.sync).command_log]
+
+
+def test_commands_and_queries_are_awaited() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            assert await c.query_number("MG 1+2") == 3.0
+            await c.command("SHA")
+            assert await c.A.motor_on()
+            assert await c.query_operands(["_TPA", "_TPB"]) == [0.0, 0.0]
+            assert c.model.name == "DMC-4040"
+
+    run(body)
+
+
+def test_a_twin_keeps_the_sync_methods_documentation() -> None:
+    assert aio.AsyncController.command.__doc__ == Controller.command.__doc__
+    assert aio.AsyncAxis.move_to.__doc__ == galil.Axis.move_to.__doc__
+
+
+def test_a_move_knows_its_prediction_and_awaiting_it_compares_the_end() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            x = c.A.set_scale(2000 / mm)
+            await x.set_speed(20 * mm / s)
+            move = await x.move_to(5 * mm)
+            assert move.duration == pytest.approx(0.40625)  # known before it ends
+            assert not move.finished
+            result = await move
+            assert result.final == {"A": 10000}
+            assert result.deviation == {"A": 0}
+            assert await x.reference_position() == 5 * mm
+            assert await move.done()
+
+    run(body)
+
+
+def test_progress_comes_from_the_prediction_in_user_units() -> None:
+    async def body() -> list[aio.MoveProgress]:
+        async with await sim() as c:
+            x = c.A.set_scale(2000 / mm)
+            await x.set_speed(20 * mm / s)
+            move = await x.move_to(5 * mm)
+            return [p async for p in move.watch()]
+
+    seen = run(body)
+    assert len(seen) > 3
+    assert all(p.units == {"A": "mm"} for p in seen)
+    elapsed = [p.elapsed for p in seen]
+    assert elapsed == sorted(elapsed)
+    remaining = [p.remaining for p in seen]
+    assert remaining == sorted(remaining, reverse=True)
+    positions = [p.positions["A"] for p in seen]
+    assert positions == sorted(positions)
+    assert 0 <= positions[0] < positions[-1] <= 5.0
+    assert seen[-1].fraction is not None
+    assert seen[-1].fraction > 0.5
+
+
+def test_cancelling_the_task_that_awaits_a_move_stops_the_axis() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            x = c.A
+            move = await x.move_to(200_000)
+            waiting = asyncio.ensure_future(move.wait())
+            await c.sleep(0.05)  # simulated time: the move is under way
+            waiting.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await waiting
+            assert any(t.startswith("ST") for t in commands_of(c))  # before the cancel ended
+            assert (await x.stop_code())[0] == 4
+            result = await move  # the stop, as predicted
+            assert result.final["A"] < 200_000
+            assert result.deviation == {"A": 0}
+
+    run(body)
+
+
+def test_cancelling_while_a_move_is_being_sent_stops_it_once_it_started() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            lock = c.sync.link.locked()
+            lock.__enter__()  # the worker will start the move, then wait for the link
+            task = asyncio.ensure_future(c.A.move_to(100_000))
+            await asyncio.sleep(0.05)
+            task.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await task
+            lock.__exit__(None, None, None)
+            for _ in range(200):  # the stop follows the move on a worker thread
+                sent = commands_of(c)
+                if any(t.startswith("ST") for t in sent):
+                    break
+                await asyncio.sleep(0.005)
+            begin = next(i for i, t in enumerate(sent) if "BG" in t)
+            stop = next(i for i, t in enumerate(sent) if t.startswith("ST"))
+            assert begin < stop
+            await c.sleep(2.0)
+            assert not await c.A.moving()
+            assert await c.A.reference_position() < 100_000
+
+    run(body)
+
+
+def test_a_jog_runs_until_stopped_and_cancelling_its_waiter_stops_it() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            jog = await c.A.jog(5000)
+            assert jog.duration == float("inf")
+            waiter = asyncio.ensure_future(jog.wait())
+            await c.sleep(0.2)
+            assert not waiter.done()
+            waiter.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await waiter
+            await jog  # stopped: it ends
+            assert (await c.A.stop_code())[0] == 4
+
+    run(body)
+
+
+def test_the_motion_guard_stops_the_axes_when_the_block_fails() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+
+            async def fail_while_moving() -> None:
+                async with c.motion("A"):
+                    await c.A.move_to(100_000)
+                    await c.sleep(0.05)
+                    raise RuntimeError("boom")
+
+            with pytest.raises(RuntimeError, match="boom"):
+                await fail_while_moving()
+            assert not await c.A.moving()
+            assert (await c.A.stop_code())[0] == 4
+
+    run(body)
+
+
+def test_a_contour_runs_from_a_coroutine() -> None:
+    async def body() -> galil.ContourResult:
+        async with await sim() as c:
+            c.A.set_scale(1000 / mm)
+            result = await c.contour("A", np.linspace(0, 2, 40) * mm, dt=3)
+            assert await c.A.reference_position() == 2 * mm
+            return result
+
+    result = run(body)
+    assert result.increments.sum() == 2000
+
+
+def test_cancelling_a_contour_stops_its_axes() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            task = asyncio.ensure_future(c.contour("A", np.arange(1, 401) * 50.0, dt=4))
+            while not await c.A.moving():
+                await asyncio.sleep(0.001)
+            task.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await task
+            assert any(t.startswith("ST") for t in commands_of(c))
+            await c.sleep(0.5)
+            assert not await c.A.moving()
+            assert await c.A.reference_position() < 400 * 50
+
+    run(body)
+
+
+def test_records_arrive_as_an_async_iterator_one_period_apart() -> None:
+    async def body() -> list[int]:
+        async with await sim() as c:
+            samples = []
+            async with await c.records(64) as stream:
+                assert stream.method == "QR"
+                async for rec in stream:
+                    samples.append(int(rec["sample"]))
+                    if len(samples) == 4:
+                        break
+                more = await stream.take(2)
+            return [*samples, *more["sample"].tolist()]
+
+    samples = run(body)
+    assert np.diff(samples).tolist() == [64] * 5
+
+
+def test_messages_arrive_as_an_async_iterator_and_reach_subscribers_on_the_loop() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            loop_thread = threading.current_thread()
+            seen: list[tuple[str, threading.Thread]] = []
+            unsubscribe = await c.subscribe(lambda m: seen.append((m, threading.current_thread())))
+            sim_of(c.sync).emit_message("hello")
+            await c.command("MG 1")  # the line is read with the next exchange
+            assert await c.messages.get(timeout=5) == "hello"
+            await asyncio.sleep(0.01)
+            assert seen == [("hello", loop_thread)]
+            unsubscribe()
+            sim_of(c.sync).emit_message("again")
+            await c.command("MG 1")
+            async for line in c.messages:
+                assert line == "again"
+                break
+            with pytest.raises(queue.Empty):
+                await c.messages.get(timeout=0.01)
+
+    run(body)
+
+
+def test_refusals_surface_as_the_sync_errors() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            c.A.set_scale(2000 / mm)
+            with pytest.raises(galil.InvalidArgument):
+                await c.A.move_to(5)  # a bare number on a scaled axis
+            with pytest.raises(galil.CommandError):
+                await c.command("XYZZY")
+
+    run(body)
+
+
+def test_closing_ends_the_worker_threads_and_further_calls_fail() -> None:
+    async def body() -> None:
+        c = await sim()
+        threads = c.worker.threads
+        assert all(t.is_alive() for t in threads)
+        await c.aclose()
+        await c.aclose()  # idempotent
+        for t in threads:
+            t.join(5)
+        assert not any(t.is_alive() for t in threads)
+        with pytest.raises(galil.GalilConnectionError):
+            await c.command("MG 1")
+
+    run(body)
+
+
+def test_the_loop_watch_sees_a_blocking_callback() -> None:
+    async def body() -> aio.LoopWatch:
+        with aio.watch_loop() as watch:
+            await asyncio.sleep(0)
+            time.sleep(0.005)  # a blocking call inside a coroutine step
+            await asyncio.sleep(0)
+        return watch
+
+    watch = run(body)
+    assert watch.max_wall >= 0.005
+    assert watch.max_own_cpu < 0.004  # sleeping is not work
+    assert watch.over(0.004) == 1
+    assert "body" in watch.slowest
+
+
+def test_the_loop_watch_tells_garbage_collection_from_a_callbacks_work() -> None:
+    async def body() -> aio.LoopWatch:
+        with aio.watch_loop() as watch:
+            await asyncio.sleep(0)
+            junk = [[i] for i in range(200_000)]
+            for a, b in itertools.pairwise(junk):
+                a.append(b)  # many objects in cycles-capable containers
+            gc.collect()
+            await asyncio.sleep(0)
+        return watch
+
+    watch = run(body)
+    assert max(watch.gc) > 0
+    assert watch.max_own_cpu < watch.max_cpu
+
+
+async def _busy(c: aio.AsyncController, letter: str, n: int) -> list[Any]:
+    """Moves one axis back and forth and reads it between moves."""
+    axis = c.axis(letter)
+    out = []
+    for i in range(n):
+        move = await axis.move_to(2000 * (i % 2 + 1))
+        await move
+        out.append(await axis.reference_position())
+        out.append(await c.query_operands([f"_TP{letter}", f"_SC{letter}"]))
+    return out
+
+
+def test_four_controllers_in_one_loop_never_block_it_for_a_millisecond() -> None:
+    async def body() -> tuple[aio.LoopWatch, list[Any]]:
+        controllers = await asyncio.gather(*(sim() for _ in range(4)))
+        try:
+            for c in controllers:
+                for a in "AB":
+                    await c.axis(a).set_speed(100_000)
+            with aio.watch_loop() as watch:
+                results = await asyncio.gather(
+                    *(_busy(c, a, 6) for c in controllers for a in "AB"),
+                    *(c.records(32) for c in controllers),
+                )
+                streams = results[8:]
+                for stream in streams:
+                    await stream.take(5)
+                    await stream.close()
+        finally:
+            await asyncio.gather(*(c.aclose() for c in controllers))
+        return watch, results[:8]
+
+    watch, results = run(body)
+    for moves in results:
+        assert moves[0::2] == [2000, 4000] * 3  # every move arrived, 6 per axis
+    assert watch.steps > 200
+    # The loop thread's own work per callback (CPU time: what blocking means, free of the
+    # OS's and the GIL's scheduling on a shared machine, and of the garbage collector's pauses
+    # of the whole process).
+    assert watch.max_own_cpu < 1e-3, watch.summary() + " " + watch.slowest

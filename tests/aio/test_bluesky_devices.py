@@ -1,0 +1,238 @@
+"""galil.bluesky under a real bluesky RunEngine, against the simulator served over TCP.
+
+The simulator runs in real time here (a RunEngine waits on the wall clock); moves are made
+short with high speeds so the whole file takes a few seconds.
+"""
+
+from __future__ import annotations
+
+import re
+import threading
+from collections.abc import Coroutine, Iterator
+from typing import Any, TypeVar
+
+import numpy as np
+import pytest
+
+pytest.importorskip("ophyd_async")
+
+import bluesky.plan_stubs as bps
+import bluesky.plans as bp
+from bluesky import RunEngine
+from bluesky.run_engine import RunEngineInterrupted, call_in_bluesky_event_loop
+from ophyd_async.core import soft_signal_rw
+
+import galil
+from galil.bluesky import ContourPath, GalilContourFlyer, GalilMotor, release_all
+from galil.sim.server import SimTcpServer
+from galil.units import ureg
+
+mm, s = ureg.mm, ureg.s
+T = TypeVar("T")
+Docs = list[tuple[str, dict[str, Any]]]
+
+
+def in_loop(coro: Coroutine[Any, Any, T]) -> T:
+    return call_in_bluesky_event_loop(coro)  # type: ignore[no-any-return]
+
+
+@pytest.fixture
+def server() -> Iterator[SimTcpServer]:
+    with SimTcpServer() as srv:
+        yield srv
+
+
+@pytest.fixture
+def engine() -> Iterator[RunEngine]:
+    run_engine = RunEngine({}, context_managers=[])
+    yield run_engine
+    in_loop(release_all())
+    run_engine.loop.call_soon_threadsafe(run_engine.loop.stop)
+    run_engine._th.join(5)
+    run_engine.loop.close()
+
+
+@pytest.fixture
+def docs(engine: RunEngine) -> Docs:
+    out: Docs = []
+    engine.subscribe(lambda name, doc: out.append((name, doc)))
+    return out
+
+
+def motor(url: str, name: str = "x", speed: float = 200.0) -> GalilMotor:
+    m = GalilMotor(url, "A", name=name, scale=2000 / mm)
+    in_loop(m.connect())
+    in_loop(m.axis.set_speed(speed * mm / s))
+    in_loop(m.axis.set_accel(5000 * mm / s**2))
+    in_loop(m.axis.set_decel(5000 * mm / s**2))
+    return m
+
+
+def detector() -> Any:
+    det = soft_signal_rw(float, 1.0, name="det")
+    in_loop(det.connect())
+    return det
+
+
+def events(docs: Docs, key: str) -> list[float]:
+    return [d["data"][key] for name, d in docs if name == "event"]
+
+
+def test_a_scan_reads_back_every_position_in_user_units(
+    server: SimTcpServer, engine: RunEngine, docs: Docs
+) -> None:
+    x = motor(server.url)
+    engine(bp.scan([detector()], x, 0, 10, 5))
+    one_count = 0.0005 + 1e-9
+    assert events(docs, "x") == pytest.approx([0, 2.5, 5, 7.5, 10], abs=one_count)
+    descriptor = next(d for name, d in docs if name == "descriptor")
+    assert descriptor["data_keys"]["x"]["units"] == "mm"
+    assert descriptor["data_keys"]["x"]["precision"] == 4
+    assert descriptor["hints"]["x"]["fields"] == ["x"]
+
+
+def test_a_relative_scan_moves_around_where_the_motor_is(
+    server: SimTcpServer, engine: RunEngine, docs: Docs
+) -> None:
+    x = motor(server.url)
+    engine(bps.mv(x, 4))
+    engine(bp.rel_scan([detector()], x, -1, 1, 3))
+    assert events(docs, "x") == pytest.approx([3, 4, 5], abs=0.0006)
+    assert in_loop(x.locate())["readback"] == pytest.approx(4, abs=0.0006)  # back at the start
+
+
+def test_mv_reports_progress_from_the_prediction(server: SimTcpServer, engine: RunEngine) -> None:
+    x = motor(server.url, speed=50.0)
+    updates: list[dict[str, Any]] = []
+
+    def hook(statuses: Any) -> None:
+        for st in statuses or ():
+            if hasattr(st, "watch"):  # the move's; not the stage and read statuses
+                st.watch(lambda **kw: updates.append(kw))
+
+    engine.waiting_hook = hook
+    engine(bps.mv(x, 5))
+    assert len(updates) >= 3
+    first, last = updates[0], updates[-1]
+    assert first["unit"] == "mm"
+    assert first["precision"] == 4
+    assert first["target"] == 5
+    assert first["initial"] == pytest.approx(0, abs=0.001)
+    # Known from the first update: 5 mm at 50 mm/s with 10 ms ramps, as predicted.
+    assert first["time_elapsed"] + first["time_remaining"] == pytest.approx(0.11, abs=0.005)
+    left = [u["time_remaining"] for u in updates]
+    assert left == sorted(left, reverse=True)
+    assert left[-1] == 0
+    assert last["fraction"] == 1.0
+    assert last["current"] == pytest.approx(5, abs=0.001)
+    loc = in_loop(x.locate())
+    assert loc["setpoint"] == 5
+    assert loc["readback"] == pytest.approx(5, abs=0.001)
+
+
+def test_a_fly_scan_returns_the_recorded_points_beside_the_prediction(
+    server: SimTcpServer, engine: RunEngine, docs: Docs
+) -> None:
+    flyer = GalilContourFlyer(server.url, "A", name="fly", scales={"A": 2000 / mm})
+    in_loop(flyer.connect())
+    path = np.linspace(0.1, 3.2, 32) * mm  # 32 segments of 8 samples
+
+    def fly() -> Any:
+        yield from bps.open_run()
+        yield from bps.prepare(flyer, ContourPath(path, dt=3), wait=True)
+        yield from bps.kickoff(flyer, wait=True)
+        yield from bps.complete(flyer, wait=True)
+        yield from bps.collect(flyer)
+        yield from bps.close_run()
+
+    engine(fly())
+    assert flyer.predicted["A"].samples == 32 * 8
+    page = next(d for name, d in docs if name == "event_page")
+    data = page["data"]
+    samples = np.array(data["fly-sample"])
+    assert np.all(np.diff(samples) == 8)  # one record per segment
+    assert len(samples) >= 32
+    assert data["fly-A-reference"] == pytest.approx(data["fly-A-predicted"], abs=1e-9)
+    assert data["fly-A-predicted"][-1] == pytest.approx(3.2)
+    # The encoder follows the reference through the simulator's 3 ms servo lag: at the path's
+    # 12.4 mm/s it trails by up to 0.04 mm when the last record is taken.
+    assert data["fly-A-position"][-1] == pytest.approx(3.2, abs=0.05)
+    assert data["fly-A-position"][-1] <= data["fly-A-reference"][-1]
+    descriptor = next(d for name, d in docs if name == "descriptor")
+    assert descriptor["data_keys"]["fly-A-predicted"]["units"] == "mm"
+
+
+def test_abort_in_the_middle_of_a_move_stops_the_axis(
+    server: SimTcpServer, engine: RunEngine, docs: Docs
+) -> None:
+    x = motor(server.url, speed=20.0)
+    moving = threading.Event()
+    engine.waiting_hook = lambda sts: [
+        st.watch(lambda **kw: moving.set()) for st in sts or () if hasattr(st, "watch")
+    ]
+
+    def abort_when_moving() -> None:
+        if moving.wait(10):
+            engine.abort("test")
+
+    aborter = threading.Thread(target=abort_when_moving)
+    aborter.start()
+    with pytest.raises(RunEngineInterrupted):
+        engine(bp.scan([detector()], x, 50, 100, 2))  # the first move, to 50 mm, takes 2.5 s
+    aborter.join(10)
+    stop = next(d for name, d in docs if name == "stop")
+    assert stop["exit_status"] == "abort"
+    assert any(text.startswith("ST") for _, text in server.controller.command_log)
+    axis = x.axis
+
+    async def settled() -> float:
+        while await axis.moving():
+            await x.controller.sleep(0.01)
+        return float(await x.readback.get_value())
+
+    assert 0 < in_loop(settled()) < 50
+    assert in_loop(axis.stop_code())[0] == 4
+
+
+def test_stop_with_failure_makes_the_move_fail(server: SimTcpServer, engine: RunEngine) -> None:
+    x = motor(server.url, speed=20.0)
+
+    async def body() -> BaseException | None:
+        status = x.set(50)
+        while not await x.axis.moving():
+            await x.controller.sleep(0.005)
+        await x.stop(success=False)
+        try:
+            await status
+        except RuntimeError as exc:
+            return exc
+        return None
+
+    error = in_loop(body())
+    assert error is not None
+    assert "was stopped" in str(error)
+
+
+def test_a_target_beyond_a_soft_limit_is_refused_before_moving(
+    server: SimTcpServer, engine: RunEngine
+) -> None:
+    x = motor(server.url)
+    in_loop(x.axis.set_soft_limits((-5 * mm, 5 * mm)))
+    with pytest.raises(galil.LimitError):
+        in_loop(x.check_value(6))
+    in_loop(x.check_value(4))
+    assert not any(re.search(r"(^|;)BG", text) for _, text in server.controller.command_log)
+
+
+def test_mock_mode_moves_a_simulator_instantly(engine: RunEngine, docs: Docs) -> None:
+    x = GalilMotor("tcp://127.0.0.1:1", "A", name="x", scale=2000 / mm)
+    y = GalilMotor("tcp://127.0.0.1:1", "B", name="y")
+    in_loop(x.connect(mock=True))
+    in_loop(y.connect(mock=True))
+    assert x.controller is y.controller  # one simulated controller for one address
+    engine(bp.grid_scan([detector()], x, 0, 1, 2, y, 0, 100, 2))
+    assert events(docs, "x") == pytest.approx([0, 0, 1, 1], abs=0.0006)
+    assert events(docs, "y") == pytest.approx([0, 100, 0, 100], abs=1)  # counts: no scale
+    in_loop(x.disconnect())
+    assert not y.controller.closed  # y still holds it
+    in_loop(y.disconnect())
