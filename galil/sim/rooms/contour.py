@@ -24,6 +24,7 @@ class Contour(Room):
     def reset(self) -> None:
         self.exponent = 1  # DT: segments of 2**n samples
         self.fed: set[str] = set()  # contouring axes given segments: an empty queue is an error
+        self._active = False  # some axis may be in contour mode: the service hook has work
 
     def axes(self) -> list[Axis]:
         """The axes in contour mode."""
@@ -39,6 +40,7 @@ class Contour(Room):
         for ax in self.machine.servo.axes.values():
             ax.contour = False
         self.fed.clear()
+        self._active = False
 
     def watches(self, out: list[Watch]) -> None:
         if self.fed:
@@ -47,9 +49,13 @@ class Contour(Room):
                     out.append(functools.partial(_ran_dry, ax.letter, self.machine.servo.axes))
 
     def service(self) -> None:
+        if not self._active:
+            return
+        active = False
         for ax in self.machine.servo.axes.values():
             if not ax.contour:
                 continue
+            active = True
             prof = ax.m.profiler
             if prof.mode != "contour":
                 ax.contour = False
@@ -57,6 +63,7 @@ class Contour(Room):
             elif ax.letter in self.fed and prof.queued_segments == 0:
                 self.fed.discard(ax.letter)
                 self.machine.interp.tc = 42  # the buffer ran dry: data sent too slowly
+        self._active = active
 
     # ---- commands ----------------------------------------------------------------------
     @handler("CM", Args.AXES)
@@ -67,7 +74,7 @@ class Contour(Room):
         for ax in axes:
             if not ax.contour:
                 engine(ax.m.profiler.begin_contour)
-                ax.contour = True
+                ax.contour = self._active = True
                 self.fed.discard(ax.letter)
         return ""
 

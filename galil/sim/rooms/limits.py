@@ -39,6 +39,7 @@ class Limits(Room):
     def reset(self) -> None:
         self.axes = {letter: _AxisLimits() for letter in self.machine.spec.axes}
         self._switched = False  # any switch active: the service hook has work
+        self._soft = False  # any soft limit set: the horizon hook has work
 
     # ---- used by other rooms -----------------------------------------------------------
     def check_start(self, ax: Axis, direction: float) -> None:
@@ -77,6 +78,8 @@ class Limits(Room):
 
     # ---- servo-loop hooks --------------------------------------------------------------
     def horizon(self, k: int) -> int:
+        if not self._soft:
+            return k
         for ax in self.machine.servo.axes.values():
             s = self.axes[ax.letter]
             if (
@@ -136,6 +139,7 @@ class Limits(Room):
     def fl(self, fields: list[tuple[Axis, str]]) -> str:
         def apply(ax: Axis, v: float) -> None:
             self.axes[ax.letter].fl = int(v)
+            self._soft_limits_changed()
 
         i = self.machine.interp
         return i.parameters(fields, self.forward_limit, lambda ax, v: int32(v), apply, i.pnum)
@@ -144,9 +148,13 @@ class Limits(Room):
     def bl(self, fields: list[tuple[Axis, str]]) -> str:
         def apply(ax: Axis, v: float) -> None:
             self.axes[ax.letter].bl = int(v)
+            self._soft_limits_changed()
 
         i = self.machine.interp
         return i.parameters(fields, self.reverse_limit, lambda ax, v: int32(v), apply, i.pnum)
+
+    def _soft_limits_changed(self) -> None:
+        self._soft = any(a.fl < INT32_MAX or a.bl > INT32_MIN for a in self.axes.values())
 
     @handler("TS", Args.AXES)
     def ts(self, axes: list[Axis]) -> str:
