@@ -88,14 +88,18 @@ class Limits(Room):
                 and not ax.limit_stop
                 and not ax.contour
             ):
-                k = min(k, self._crossing(s, ax.m.profiler.preview(k)))
+                prof = ax.m.profiler
+                k = min(k, self._crossing(s, prof.reference, prof.preview(k)))
         return k
 
     @staticmethod
-    def _crossing(s: _AxisLimits, refs: npt.NDArray[np.int64]) -> int:
-        """Samples until the path is beyond a soft limit moving outwards (large if never)."""
+    def _crossing(s: _AxisLimits, now: int, refs: npt.NDArray[np.int64]) -> int:
+        """Samples until the path is beyond a soft limit moving outwards (large if never).
+
+        ``now`` is the reference before the first sample of ``refs``.
+        """
         r = np.asarray(refs)
-        prev = np.concatenate(([r[0]], r[:-1]))
+        prev = np.concatenate(([now], r[:-1]))
         beyond = ((r > s.fl) & (r > prev)) | ((r < s.bl) & (r < prev))
         hits = np.flatnonzero(beyond)
         return int(hits[0]) + 1 if hits.size else r.size + 1

@@ -82,7 +82,7 @@ class Trippoints(Room):
         i = self.machine.interp
         fields = split_fields(args.partition("=")[2] if "=" in args else args)
         if "=" in args:
-            letters = [self.machine.spec.axis_letter(c) for c in args.partition("=")[0].strip()]
+            letters = [i.axis(c).letter for c in args.partition("=")[0].strip()]
             values = [i.evaluate(fields[0])] * len(letters)
         else:
             axes = self.machine.servo.axes
