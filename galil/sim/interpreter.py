@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 from galil.models import INT32_MAX, INT32_MIN, ModelSpec
 from galil.protocol.numbers import format_reply
-from galil.sim.parse import Refused, evaluate, split_fields
+from galil.sim.parse import FUNCTIONS, Refused, evaluate, split_fields
 from galil.sim.ports import Port
 from galil.sim.programs import Thread
 from galil.sim.registry import Args, HandlerSpec, Result
@@ -61,6 +61,7 @@ class Interpreter:
         operands: plain operands (``_TC``) -> value.
         axis_operands: axis operands (``_TPA``) -> value of an axis.
         index_operands: indexed operands (``_XQ0``) -> value for the text after the name.
+        functions: expression functions (``@ABS[x]``) -> value for the argument.
         caller: who runs the command being executed (``WH``, ``CF I``, ``DL``).
         tc: the error code of the last refused command.
     """
@@ -72,6 +73,7 @@ class Interpreter:
         self.operands: dict[str, Callable[[], float]] = {}
         self.axis_operands: dict[str, Callable[[Axis], float]] = {}
         self.index_operands: dict[str, Callable[[str], float]] = {}
+        self.functions: dict[str, Callable[[float], float]] = dict(FUNCTIONS)
         self.caller: Caller = None
         self._variable = re.compile(rf"[A-Za-z][A-Za-z0-9]{{0,{spec.variable_length - 1}}}")
         self._letters = frozenset(spec.axes) | frozenset(spec.aliases)
@@ -156,7 +158,7 @@ class Interpreter:
         Raises:
             Refused: a syntax error or an unknown name.
         """
-        return evaluate(text, self.lookup)
+        return evaluate(text, self.lookup, self.functions)
 
     def lookup(self, name: str) -> float:
         """The value of a variable, ``TIME`` or an operand (``_TPA``).

@@ -8,12 +8,13 @@ The core is four parts, none of which knows a single command:
 - :class:`~galil.sim.programs.Programs`: the downloaded program and its threads.
 
 Everything a controller *does* lives in rooms (:mod:`galil.sim.rooms`). A room is a class with
-its own state; it marks its methods with :func:`~galil.sim.registry.handler` and
-:func:`~galil.sim.registry.operand`, and overrides the hooks it needs (:meth:`Room.reset`,
-:meth:`Room.abort`, :meth:`Room.port_closed` and the servo-loop hooks :meth:`Room.horizon`,
-:meth:`Room.watches`, :meth:`Room.after_step`, :meth:`Room.service`). The machine builds the
-command and operand tables from the marks and wires only the hooks a room overrides. Adding a
-room is adding a module; the core stays as it is.
+its own state; it marks its methods with :func:`~galil.sim.registry.handler`,
+:func:`~galil.sim.registry.operand` and :func:`~galil.sim.registry.function`, and overrides the
+hooks it needs (:meth:`Room.reset`, :meth:`Room.abort`, :meth:`Room.port_closed` and the
+servo-loop hooks :meth:`Room.horizon`, :meth:`Room.watches`, :meth:`Room.after_step`,
+:meth:`Room.service`). The machine builds the command, operand and function tables from the
+marks and wires only the hooks a room overrides. Adding a room is adding a module; the core
+stays as it is.
 """
 
 from __future__ import annotations
@@ -28,7 +29,15 @@ from galil.sim.interpreter import Command, Interpreter
 from galil.sim.parse import Refused, next_command
 from galil.sim.ports import Port, Ports
 from galil.sim.programs import Programs
-from galil.sim.registry import Download, HandlerSpec, OperandKind, OperandSpec, Wait, marks
+from galil.sim.registry import (
+    Download,
+    FunctionSpec,
+    HandlerSpec,
+    Mark,
+    OperandKind,
+    Wait,
+    marks,
+)
 from galil.sim.servo import Servo, Watch
 
 __all__ = ["Machine", "Room"]
@@ -159,6 +168,8 @@ class Machine:
                 fn = getattr(room, attr)
                 if isinstance(spec, HandlerSpec):
                     _claim(interp.commands, spec.name, Command(spec, fn), "command")
+                elif isinstance(spec, FunctionSpec):
+                    _claim(interp.functions, spec.name, fn, "function")
                 elif spec.kind is OperandKind.AXIS:
                     _claim(interp.axis_operands, spec.name, fn, "operand")
                 elif spec.kind is OperandKind.INDEX:
@@ -282,7 +293,7 @@ class Machine:
                 out.append(w.predicate)
 
 
-def _marks(cls: type[Room], attr: str) -> tuple[HandlerSpec | OperandSpec, ...]:
+def _marks(cls: type[Room], attr: str) -> tuple[Mark, ...]:
     """The marks of ``cls.attr``; an override without marks keeps those of what it overrides."""
     for klass in cls.__mro__:
         if attr in klass.__dict__:

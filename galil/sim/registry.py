@@ -1,8 +1,8 @@
 """The handler contract: how a room of the simulator declares its commands and operands.
 
-A room (see :mod:`galil.sim.machine`) marks its methods with :func:`handler` and
-:func:`operand`; the machine collects the marks of every room into one command table and one
-operand table when a controller is built. Nothing here knows which commands exist.
+A room (see :mod:`galil.sim.machine`) marks its methods with :func:`handler`, :func:`operand`
+and :func:`function`; the machine collects the marks of every room into the interpreter's
+tables when a controller is built. Nothing here knows which commands exist.
 
 A handler returns its reply text (``""`` for a bare ``:``; data ends with CR LF), a
 :class:`Wait` (a trippoint: the ``:`` is held until it is released), or :data:`DOWNLOAD` (the
@@ -21,11 +21,13 @@ __all__ = [
     "DOWNLOAD",
     "Args",
     "Download",
+    "FunctionSpec",
     "HandlerSpec",
     "OperandKind",
     "OperandSpec",
     "Result",
     "Wait",
+    "function",
     "handler",
     "marks",
     "operand",
@@ -73,6 +75,16 @@ class OperandSpec:
 
     name: str
     kind: OperandKind = OperandKind.PLAIN
+
+
+@dataclass(frozen=True)
+class FunctionSpec:
+    """One expression function a room answers (``@IN[n]`` is ``FunctionSpec("IN")``)."""
+
+    name: str
+
+
+Mark = HandlerSpec | OperandSpec | FunctionSpec
 
 
 @dataclass
@@ -142,7 +154,19 @@ def operand(*names: str, kind: OperandKind = OperandKind.PLAIN) -> Callable[[_F]
     return _mark(*(OperandSpec(n, kind) for n in names))
 
 
-def _mark(*specs: HandlerSpec | OperandSpec) -> Callable[[_F], _F]:
+def function(name: str) -> Callable[[_F], _F]:
+    """Mark a room method as the expression function ``@NAME[x]``: it takes the argument's
+    value and returns a number.
+
+    Raises:
+        ValueError: ``name`` is not upper-case letters.
+    """
+    if not (name.isalpha() and name.isupper()):
+        raise ValueError(f"a function name is upper-case letters: {name!r}")
+    return _mark(FunctionSpec(name))
+
+
+def _mark(*specs: Mark) -> Callable[[_F], _F]:
     def mark(fn: _F) -> _F:
         setattr(fn, _MARK, (*marks(fn), *specs))
         return fn
@@ -150,7 +174,7 @@ def _mark(*specs: HandlerSpec | OperandSpec) -> Callable[[_F], _F]:
     return mark
 
 
-def marks(fn: object) -> tuple[HandlerSpec | OperandSpec, ...]:
-    """The marks :func:`handler` and :func:`operand` put on ``fn`` (none: ``()``)."""
-    found: tuple[HandlerSpec | OperandSpec, ...] = getattr(fn, _MARK, ())
+def marks(fn: object) -> tuple[Mark, ...]:
+    """The marks :func:`handler`, :func:`operand` and :func:`function` put on ``fn``."""
+    found: tuple[Mark, ...] = getattr(fn, _MARK, ())
     return found

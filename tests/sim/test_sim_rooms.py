@@ -9,7 +9,7 @@ from galil.sim.clock import ManualClock
 from galil.sim.controller import SimController
 from galil.sim.machine import Room
 from galil.sim.parse import Refused
-from galil.sim.registry import Args, OperandKind, handler, operand
+from galil.sim.registry import Args, OperandKind, function, handler, operand
 from galil.sim.rooms import ROOMS, Motion, Reports, rooms_with
 from galil.sim.servo import Axis, Watch
 
@@ -19,7 +19,7 @@ class Beeper(Room):
 
     ``ZB n`` beeps (an unsolicited message) n samples from now, at that exact sample, however
     the host lets time pass; ``ZP x`` beeps when axis A's reference first passes x; ``_ZB`` is
-    the beeps still due, ``_ZDA`` twice an axis's reference.
+    the beeps still due, ``_ZDA`` twice an axis's reference, ``@ZT[x]`` three times x.
     """
 
     requires = (Motion,)
@@ -48,6 +48,10 @@ class Beeper(Room):
     @operand("ZD", kind=OperandKind.AXIS)
     def doubled(self, ax: Axis) -> float:
         return 2 * ax.m.reference
+
+    @function("ZT")
+    def tripled(self, x: float) -> float:
+        return 3 * x
 
     def horizon(self, k: int) -> int:
         now = self.machine.servo.sample
@@ -81,6 +85,7 @@ def test_a_room_from_outside_answers_its_commands_and_operands() -> None:
     assert sim.poll() == b"BEEP 5\r\nBEEP 9\r\n"
     assert sim.feed(b"MG _ZDA;MG _ZB\r") == b" 200.0000\r\n: 0.0000\r\n:"
     assert sim.feed(b"RS;MG _ZB\r") == b": 0.0000\r\n:"  # its reset hook ran
+    assert sim.feed(b"MG @ZT[@ABS[-2]]+1\r") == b" 7.0000\r\n:"
 
 
 @pytest.mark.parametrize("chunks", [[1.0], [3 * TS, 1.0], [0.001] * 40])
@@ -120,7 +125,12 @@ def test_two_rooms_cannot_answer_one_command_or_operand() -> None:
         def tp(self, ax: Axis) -> float:
             return 0.0
 
-    for extra in (AnotherPR, AnotherTP):
+    class AnotherABS(Room):
+        @function("ABS")
+        def absolute(self, x: float) -> float:
+            return x
+
+    for extra in (AnotherPR, AnotherTP, AnotherABS):
         with pytest.raises(ValueError, match="two rooms answer"):
             SimController(rooms=(*ROOMS, extra))
     with pytest.raises(ValueError, match="two rooms are a Reports"):
@@ -137,6 +147,8 @@ def test_marks_are_checked_when_written() -> None:
         handler("pr")
     with pytest.raises(ValueError, match="two upper-case letters"):
         operand("TPA")
+    with pytest.raises(ValueError, match="upper-case letters"):
+        function("in")
 
 
 def test_an_override_keeps_its_command_and_a_subclass_replaces_its_room() -> None:
