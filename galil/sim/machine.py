@@ -68,7 +68,8 @@ class Room:
         """A handle closed; forget output aimed at it."""
 
     def horizon(self, k: int) -> int:
-        """The longest step (<= ``k``, ``k`` >= 2) before this room's next event."""
+        """The longest step (``1 <= step <= k``) that ends at or before this room's next event
+        (a room that previews the profile should come late in the list: ``k`` is smallest)."""
         return k
 
     def watches(self, out: list[Watch]) -> None:

@@ -2,15 +2,17 @@
 
 Every axis runs the one motion engine shared with the predictor
 (:class:`galil.predict.engine.AxisProfiler`, inside :class:`~galil.sim.motion.AxisMotion`); the
-loop only decides how many samples to run at once. A step ends early where something happens:
+loop only decides how many samples to run at once. Before each step it asks, in this order:
 
-- ``horizon`` hooks cut a step before it starts (a thread's ``WT`` wakes, a ``DR`` record is
-  due, a soft limit is crossed on the previewed path); the end of a known profile cuts it too;
-- ``watch`` hooks give conditions (a trippoint's, an emptied contour buffer); when one turns
+- where a known profile ends (a step ends there, so ``AM`` needs no bisection);
+- the ``watch`` hooks, for conditions (a trippoint's, an emptied contour buffer); when one turns
   true inside a step, the loop bisects the step from a snapshot of the axes to find the exact
   sample where it fires;
-- ``after_step`` hooks run after each step (a soft limit reached starts its stop);
-- ``service`` runs at every step boundary (releases held replies, runs program threads).
+- the ``horizon`` hooks, which cut the step before an event at a known sample (a thread's
+  ``WT`` wakes, a ``DR`` record is due, a soft limit is crossed on the previewed path).
+
+After each step the ``after_step`` hooks run (a soft limit reached starts its stop), and
+``service`` runs at every step boundary (releases held replies, runs program threads).
 
 State that rooms change with time must live in the axes (the snapshot covers only them) or be
 recomputed in ``after_step``/``service``, which run once the step is final.
