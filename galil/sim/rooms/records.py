@@ -28,8 +28,6 @@ from galil.sim.servo import Axis
 
 __all__ = ["Records"]
 
-#: General-block sizes of the layouts the simulator fills (40x0 style, 21x3 style, 30010).
-_GENERAL_SIZES = (52, 24, 18)
 #: What every known general block starts with; an unsourced block (the DMC-30010's 18 bytes,
 #: kept raw by galil.protocol.records) gets these and nothing else.
 _GENERAL_START = np.dtype([("sample", "<u2"), ("inputs", "u1", (10,))])
@@ -76,7 +74,7 @@ class Records(Room):
         """
         spec = self.machine.spec
         qz = spec.qz
-        if qz is None or qz[1] not in _GENERAL_SIZES:
+        if qz is None:
             raise InvalidArgument(f"{spec.name}: no data record layout in the simulator")
         present = [
             ax
@@ -166,8 +164,7 @@ class Records(Room):
 
     # ---- commands ----------------------------------------------------------------------
     def _check_model(self) -> None:
-        qz = self.machine.spec.qz
-        if qz is None or qz[1] not in _GENERAL_SIZES:
+        if self.machine.spec.qz is None:
             raise Refused(1, "no data record on this model")
 
     @handler("QZ")
