@@ -1,15 +1,14 @@
 """The binary data record: ``QZ``, ``QR`` and the ``DR`` stream.
 
 The record is built from the dtype :func:`galil.protocol.records.record_dtype` gives for the
-model's ``QZ`` sizes: a zeroed numpy record whose fields are filled by name, then taken as
-bytes. Inputs read high (nothing is connected). ``QR AB`` limits the axis blocks (the header
-says which); ``DR n,h`` streams a record every ``n`` samples to handle ``h``, without ``:``,
-at the exact sample it is due.
+model's ``QZ`` sizes: a zeroed numpy record (one per set of axis blocks, reused) whose fields
+are filled by name, then taken as bytes. Inputs read high (nothing is connected). ``QR AB``
+limits the axis blocks (the header says which); ``DR n,h`` streams a record every ``n`` samples
+to handle ``h``, without ``:``, at the exact sample it is due.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -31,26 +30,47 @@ __all__ = ["Records"]
 #: What every known general block starts with; an unsourced block (the DMC-30010's 18 bytes,
 #: kept raw by galil.protocol.records) gets these and nothing else.
 _GENERAL_START = np.dtype([("sample", "<u2"), ("inputs", "u1", (10,))])
+#: The general fields that change (those a layout has), filled by name.
+_GENERAL = ("sample", "error_code", "thread_status", "contour_buffer", "general_status")
+#: The axis fields that change, in the order :meth:`Records._axis` gives their values.
+_AXIS = ["status", "switches", "stop_code", "reference", "position", "error"]
+_AXIS += ["aux_position", "velocity"]
 
 
-@dataclass(frozen=True)
 class _Layout:
-    """A record layout with some axis blocks: its dtype, header and where the blocks are."""
+    """One record with some axis blocks, reused: the fields that never change are set once;
+    ``general`` and ``axes`` are views of the fields that change (by name, from the dtype)."""
 
-    dtype: np.dtype[Any]
-    mask: int
-    general_at: int | None  # byte offset of a general block of unknown layout (kept raw)
-    axes_at: int  # byte offset of the first axis block
-    axis: np.dtype[Any] | None
+    def __init__(self, dtype: np.dtype[Any], mask: int, letters: str) -> None:
+        self.buf = np.zeros(1, dtype)
+        self.buf["header"] = 0x87
+        self.buf["axes_present"] = mask
+        self.buf["size"] = dtype.itemsize
+        names = dtype.names or ()
+        if "general" in names:  # a general block of unknown layout
+            start = self._view(_GENERAL_START, _offset(dtype, "general"))
+            start["inputs"] = 0xFF
+            self.general_names: tuple[str, ...] = ("sample",)
+            self.general = start[["sample"]]
+        else:
+            self.buf["inputs"] = 0xFF  # inputs read high when nothing is connected
+            self.general_names = tuple(n for n in _GENERAL if n in names)
+            self.general = self.buf[list(self.general_names)]
+        self.axes: np.ndarray[Any, Any] | None = None
+        if letters:
+            block = dtype.fields[letters[0]][0]  # type: ignore[index]
+            blocks = self._view(block, _offset(dtype, letters[0]), len(letters))
+            self.axes = blocks[_AXIS]
+
+    def _view(self, dtype: np.dtype[Any], offset: int, n: int = 1) -> np.ndarray[Any, Any]:
+        view: np.ndarray[Any, Any] = np.ndarray(n, dtype, buffer=self.buf.data, offset=offset)
+        return view
 
 
-def _field(dtype: np.dtype[Any], name: str) -> tuple[np.dtype[Any], int] | None:
-    """The dtype and byte offset of field ``name``, or None."""
+def _offset(dtype: np.dtype[Any], name: str) -> int:
     fields = dtype.fields
-    if fields is None or name not in fields:
-        return None
-    sub, offset = fields[name][:2]
-    return sub, int(offset)
+    assert fields is not None
+    return int(fields[name][1])
 
 
 class Records(Room):
@@ -81,86 +101,62 @@ class Records(Room):
             for ax in list(self.machine.servo.axes.values())[: qz[0]]
             if not axes or ax.letter in axes
         ]
-        layout = self._layout(present)
-        buf = np.zeros((), layout.dtype)
-        buf["header"] = 0x87
-        buf["axes_present"] = layout.mask
-        buf["size"] = layout.dtype.itemsize
-        self._general(buf, layout)
-        if present:
-            assert layout.axis is not None
-            blocks = np.ndarray(len(present), layout.axis, buffer=buf.data, offset=layout.axes_at)
-            self._fill_axes(blocks, present)
-        return buf.tobytes()
-
-    def _layout(self, present: list[Axis]) -> _Layout:
         letters = "".join(ax.letter for ax in present)
         layout = self._layouts.get(letters)
         if layout is None:
-            spec = self.machine.spec
             dtype = record_dtype(spec, axes=len(present), letters=letters)
-            general = _field(dtype, "general")
-            first = _field(dtype, letters[0]) if letters else None
-            layout = _Layout(
-                dtype,
-                sum(1 << spec.axes.index(c) for c in letters),
-                general[1] if general else None,
-                first[1] if first else dtype.itemsize,
-                first[0] if first else None,
-            )
-            self._layouts[letters] = layout
-        return layout
+            mask = sum(1 << spec.axes.index(c) for c in letters)
+            layout = self._layouts[letters] = _Layout(dtype, mask, letters)
+        layout.general[0] = self._general(layout.general_names)
+        if layout.axes is not None:
+            motion, limits = self.machine.room(Motion), self.machine.room(Limits)
+            layout.axes[:] = [self._axis(ax, motion, limits) for ax in present]
+        return layout.buf.tobytes()
 
-    def _general(self, buf: np.ndarray[Any, Any], layout: _Layout) -> None:
+    def _general(self, names: tuple[str, ...]) -> tuple[int, ...]:
         m = self.machine
-        if layout.general_at is not None:  # a general block of unknown layout
-            start = np.ndarray((), _GENERAL_START, buffer=buf.data, offset=layout.general_at)
-            start["sample"] = m.servo.sample & 0xFFFF
-            start["inputs"] = 0xFF
-            return
-        names = layout.dtype.names or ()
+        sample = m.servo.sample & 0xFFFF
+        if len(names) == 1:
+            return (sample,)
         threads = sum(1 << t for t in m.programs.threads)
-        buf["sample"] = m.servo.sample & 0xFFFF
-        buf["inputs"] = 0xFF
-        buf["error_code"] = m.interp.tc & 0xFF
-        if "thread_status" in names:
-            buf["thread_status"] = threads & 0xFF
+        values = {
+            "sample": sample,
+            "error_code": m.interp.tc & 0xFF,
+            "thread_status": threads & 0xFF,
+            "general_status": (0x80 if threads else 0) | (1 if m.ports.echo else 0),
+        }
         if "contour_buffer" in names:
-            buf["contour_buffer"] = m.room(Contour).free()
-        if "general_status" in names:
-            buf["general_status"] = (0x80 if threads else 0) | (1 if m.ports.echo else 0)
+            values["contour_buffer"] = m.room(Contour).free()
+        return tuple(values[n] for n in names)
 
-    def _fill_axes(self, blocks: np.ndarray[Any, Any], present: list[Axis]) -> None:
-        limits = self.machine.room(Limits)
-        ms = [ax.m for ax in present]
-        blocks["status"] = [self._status_word(ax) for ax in present]
-        blocks["switches"] = [limits.switch_bits(ax) for ax in present]
-        blocks["stop_code"] = [int(m.profiler.stop_code) & 0xFF for m in ms]
-        blocks["reference"] = [_clamp32(m.reference) for m in ms]
-        encoders = [_clamp32(m.encoder) for m in ms]
-        blocks["position"] = encoders
-        blocks["error"] = [_clamp32(m.error) for m in ms]
-        blocks["aux_position"] = encoders
-        blocks["velocity"] = [_clamp32(round(64 * m.velocity)) for m in ms]
-
-    def _status_word(self, ax: Axis) -> int:
+    @staticmethod
+    def _axis(ax: Axis, motion: Motion, limits: Limits) -> tuple[int, ...]:
         m = ax.m
         prof = m.profiler
-        word = 0
-        if m.moving:
-            word |= 0x8000
+        status = 0
+        if prof.moving:
+            status |= 0x8000
             if prof.mode == "position":
-                absolute = self.machine.room(Motion).params(ax).absolute
-                word |= 0x4000 | (0x2000 if absolute else 0)
+                status |= 0x6000 if motion.params(ax).absolute else 0x4000
             if prof.velocity < 0:
-                word |= 0x0080
+                status |= 0x0080
             if ax.limit_stop or prof.stop_code in (2, 3, 4):
-                word |= 0x0010
+                status |= 0x0010
         if prof.mode == "contour":
-            word |= 0x0040
+            status |= 0x0040
         if not m.motor_on:
-            word |= 0x0001
-        return word
+            status |= 0x0001
+        encoder = _clamp32(m.encoder)
+        return (
+            status,
+            limits.switch_bits(ax),
+            int(prof.stop_code) & 0xFF,
+            _clamp32(m.reference),
+            encoder,
+            _clamp32(m.error),
+            encoder,
+            _clamp32(round(64 * m.velocity)),
+        )
 
     # ---- commands ----------------------------------------------------------------------
     def _check_model(self) -> None:
