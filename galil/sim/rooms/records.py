@@ -48,7 +48,7 @@ class _Layout:
         self.buf["size"] = dtype.itemsize
         names = dtype.names or ()
         if "general" in names:  # a general block of unknown layout
-            start = self._view(_GENERAL_START, _offset(dtype, "general"))
+            start = self._view(_GENERAL_START, _field(dtype, "general")[1])
             start["inputs"] = 0xFF
             self.general_names: tuple[str, ...] = ("sample",)
             self.general = start[["sample"]]
@@ -58,8 +58,8 @@ class _Layout:
             self.general = self.buf[list(self.general_names)]
         self.axes: np.ndarray[Any, Any] | None = None
         if letters:
-            block = dtype.fields[letters[0]][0]  # type: ignore[index]
-            blocks = self._view(block, _offset(dtype, letters[0]), len(letters))
+            block, at = _field(dtype, letters[0])
+            blocks = self._view(block, at, len(letters))
             self.axes = blocks[_AXIS]
 
     def _view(self, dtype: np.dtype[Any], offset: int, n: int = 1) -> np.ndarray[Any, Any]:
@@ -67,10 +67,12 @@ class _Layout:
         return view
 
 
-def _offset(dtype: np.dtype[Any], name: str) -> int:
+def _field(dtype: np.dtype[Any], name: str) -> tuple[np.dtype[Any], int]:
+    """The dtype and byte offset of field ``name``."""
     fields = dtype.fields
     assert fields is not None
-    return int(fields[name][1])
+    sub, offset = fields[name][:2]
+    return sub, int(offset)
 
 
 class Records(Room):
