@@ -153,7 +153,8 @@ class SimLink:
             self.secondary.close()
 
     def __repr__(self) -> str:
-        return f"SimLink({self.controller.identity!r})"
+        state = "closed" if self._closed else "open"
+        return f"<SimLink {self.controller.identity!r} {state}>"
 
 
 class SimMessageHandle:

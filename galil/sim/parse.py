@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 from galil.protocol.commands import split_commands
 
 __all__ = [
+    "FUNCTIONS",
     "Refused",
     "evaluate",
     "next_command",
@@ -82,7 +83,8 @@ _TOKEN = re.compile(
     r"|(?P<op><=|>=|<>|[-+*/&|<>=()\]])"
     r")"
 )
-_FUNCS: dict[str, Callable[[float], float]] = {
+#: The interpreter's own functions (``@ABS[x]``); rooms may add more (``@IN[n]``).
+FUNCTIONS: dict[str, Callable[[float], float]] = {
     "ABS": abs,
     "INT": lambda x: float(math.floor(x)),
     "FRAC": lambda x: x - math.trunc(x),
@@ -90,6 +92,9 @@ _FUNCS: dict[str, Callable[[float], float]] = {
     "SQR": lambda x: math.sqrt(x) if x >= 0 else math.nan,
     "COM": lambda x: float(~int(x) & 0xFFFFFFFF),
 }
+
+
+_Env = tuple[Callable[[str], float], Mapping[str, Callable[[float], float]]]
 
 
 def _tokens(text: str) -> list[tuple[str, str]]:
@@ -107,12 +112,17 @@ def _tokens(text: str) -> list[tuple[str, str]]:
     return out
 
 
-def evaluate(text: str, lookup: Callable[[str], float]) -> float:
+def evaluate(
+    text: str,
+    lookup: Callable[[str], float],
+    functions: Mapping[str, Callable[[float], float]] = FUNCTIONS,
+) -> float:
     """Evaluate a Galil expression, left to right.
 
     Args:
         text: the expression (``"_TPA+100"``, ``"(a<5)&(b>2)"``, ``"-$10"``).
         lookup: returns the value of a variable or operand name, or raises :class:`Refused`.
+        functions: the ``@NAME[x]`` functions known.
 
     Raises:
         Refused: a syntax error (TC 1), unbalanced parentheses (TC 59), a bad value (TC 6).
@@ -120,7 +130,7 @@ def evaluate(text: str, lookup: Callable[[str], float]) -> float:
     tokens = _tokens(text)
     if not tokens:
         raise Refused(1, "missing value")
-    value, pos = _sequence(tokens, 0, lookup)
+    value, pos = _sequence(tokens, 0, (lookup, functions))
     if pos != len(tokens):
         raise Refused(59 if tokens[pos][1] in ")]" else 1, f"unexpected {tokens[pos][1]!r}")
     if not math.isfinite(value):
@@ -154,22 +164,18 @@ def _apply(op: str, a: float, b: float) -> float:
     return 1.0 if comparisons[op] else 0.0
 
 
-def _sequence(
-    tokens: list[tuple[str, str]], pos: int, lookup: Callable[[str], float]
-) -> tuple[float, int]:
-    value, pos = _operand(tokens, pos, lookup)
+def _sequence(tokens: list[tuple[str, str]], pos: int, env: _Env) -> tuple[float, int]:
+    value, pos = _operand(tokens, pos, env)
     while pos < len(tokens) and tokens[pos][0] == "op" and tokens[pos][1] not in ")]":
         op = tokens[pos][1]
         if op == "(":
             raise Refused(1, "missing operator")
-        rhs, pos = _operand(tokens, pos + 1, lookup)
+        rhs, pos = _operand(tokens, pos + 1, env)
         value = _apply(op, value, rhs)
     return value, pos
 
 
-def _operand(
-    tokens: list[tuple[str, str]], pos: int, lookup: Callable[[str], float]
-) -> tuple[float, int]:
+def _operand(tokens: list[tuple[str, str]], pos: int, env: _Env) -> tuple[float, int]:
     if pos >= len(tokens):
         raise Refused(1, "missing value")
     kind, text = tokens[pos]
@@ -182,22 +188,23 @@ def _operand(
             value += int(frac, 16) / 16 ** len(frac)
         return value, pos + 1
     if kind == "name":
-        return lookup(text), pos + 1
+        return env[0](text), pos + 1
     if kind == "func":
         name = text[1:-1]
-        if name not in _FUNCS:
+        fn = env[1].get(name)
+        if fn is None:
             raise Refused(57, f"unknown function @{name}")
-        arg, pos = _sequence(tokens, pos + 1, lookup)
+        arg, pos = _sequence(tokens, pos + 1, env)
         if pos >= len(tokens) or tokens[pos][1] != "]":
             raise Refused(55, "missing ]")
-        return _FUNCS[name](arg), pos + 1
+        return fn(arg), pos + 1
     if text == "-":
-        value, pos = _operand(tokens, pos + 1, lookup)
+        value, pos = _operand(tokens, pos + 1, env)
         return -value, pos
     if text == "+":
-        return _operand(tokens, pos + 1, lookup)
+        return _operand(tokens, pos + 1, env)
     if text == "(":
-        value, pos = _sequence(tokens, pos + 1, lookup)
+        value, pos = _sequence(tokens, pos + 1, env)
         if pos >= len(tokens) or tokens[pos][1] != ")":
             raise Refused(59, "mismatched parentheses")
         return value, pos + 1

@@ -25,6 +25,7 @@ from galil.sim.controller import SimController
 from galil.sim.faults import FaultPlan
 from galil.sim.link import SimLink
 from galil.sim.parse import Refused
+from galil.sim.rooms import Settings, rooms_with
 from galil.sim.server import SimPtyServer
 
 
@@ -97,17 +98,17 @@ def test_no_echo_means_no_eo_sent() -> None:
     assert not [text for _, text in sim.command_log if text.startswith("EO")]
 
 
-class _StubbornEcho(SimController):
-    """A controller whose echo cannot be switched off (EO 0 refused)."""
+class _StubbornEcho(Settings):
+    """Settings whose echo cannot be switched off (EO 0 refused)."""
 
-    def _cmd_eo(self, args: str, th: object) -> str:
+    def eo(self, args: str) -> str:
         if args.strip() == "0":
             raise Refused(6, "echo is fixed on this port")
-        return super()._cmd_eo(args, th)  # type: ignore[arg-type]
+        return super().eo(args)
 
 
 def test_echo_that_cannot_be_switched_off_is_stripped_with_a_warning() -> None:
-    sim = _StubbornEcho("DMC-4040", ManualClock())
+    sim = SimController("DMC-4040", ManualClock(), rooms=rooms_with(_StubbornEcho))
     sim.feed(b"EO 1\r")
     with pytest.warns(RuntimeWarning, match="refused EO 0"):
         c = Controller(SimLink(sim))

@@ -6,7 +6,11 @@ simulator's manual clock.
 
 from __future__ import annotations
 
+from engine_expect import in_position_after, lagged, move, references, soft_limit_stop
 from sim_fronts import Front
+
+from galil.models import get_model
+from galil.predict.checks import quantise_accel
 
 PROGRAM = (
     b'#A\rMG "hello"\rWT 100\rMG "bye"\rEN\r#LOOP\rn=0\r#L2\rn=n+1\rJP #L2,n<5\rMG "n=",n\rEN\r\\'
@@ -74,6 +78,12 @@ def test_refused_command_changes_nothing(front: Front) -> None:
     assert front.ask(b"MG _BGA") == b" 0.0000\r\n:"
 
 
+def test_an_unknown_axis_is_refused_with_tc_4(front: Front) -> None:
+    for line in (b"TP Q", b"BG AQ", b"AD Q=5", b"MG _TPQ"):
+        assert front.ask(line) == b"?"
+        assert tc1(front) == b" 4 Operand error\r\n:"
+
+
 def test_motion_codes(front: Front) -> None:
     assert front.ask(b"PR 100000;SP 10000;BG A") == b":::"
     assert front.ask(b"BG A") == b"?"
@@ -109,27 +119,15 @@ def test_mc_waits_for_the_motor_after_am(front: Front) -> None:
     front.write(b"AM A;MG TIME;TE A;MC A;MG TIME\r")
     assert front.quiet() == b""
     front.advance(1.0)
-    parts = front.read_terminators(5).split(b"\r\n:")
-    assert parts[0].startswith(b":")
-    t_am, te, t_mc = int(float(parts[0][1:])), int(parts[1]), int(float(parts[2][1:]))
-    assert te > 0  # the motor lags the reference when the profile is done
-    assert t_mc > t_am
+    accel = quantise_accel(1000000, get_model("DMC-4040"))  # AC/DC as the controller stores them
+    refs = references(move(2000, 20000, accel, accel))
+    te = refs[-1] - lagged(refs, 0.05)[-1]  # the motor lags the reference when AM releases
+    t_mc = in_position_after(refs, 0.05)
+    assert te > 0
+    assert front.read_terminators(5) == (
+        f": {len(refs)}.0000\r\n: {te}\r\n:: {t_mc}.0000\r\n:".encode()
+    )
     assert front.ask(b"TEA;TPA") == b" 0\r\n: 2000\r\n:"
-
-
-def test_mc_releases_later_than_am() -> None:
-    from galil.sim.clock import ManualClock
-    from galil.sim.controller import SimController
-
-    sim = SimController("DMC-4040", ManualClock(), servo_lag=0.05)
-    assert sim.feed(b"PR 2000;SP 20000;BG A;AM A\r") == b":::"
-    assert sim.advance_until_output(5.0) == b":"
-    t_am = sim.sample
-    assert sim.feed(b"TEA\r") != b" 0\r\n:"
-    assert sim.feed(b"MC A\r") == b""
-    assert sim.advance_until_output(5.0) == b":"
-    assert sim.sample > t_am
-    assert sim.feed(b"TEA\r") == b" 0\r\n:"
 
 
 def test_time_and_mg(front: Front) -> None:
@@ -165,8 +163,7 @@ def test_soft_limit(front: Front) -> None:
     assert front.ask(b"FL 500;PR 2000;BG A") == b":::"
     front.advance(2.0)
     assert front.ask(b"SC A") == b" 2\r\n:"
-    rp = int(front.ask(b"RPA")[:-3])
-    assert 500 < rp < 2000
+    assert front.ask(b"RPA") == f" {soft_limit_stop(2000, 500)}\r\n:".encode()
     assert front.ask(b"PR 10;BG A") == b":?"
     assert front.ask(b"PR -10;BG A") == b"::"
 

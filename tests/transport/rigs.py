@@ -126,8 +126,7 @@ def usb_rig() -> Iterator[Rig]:
 @contextlib.contextmanager
 def sim_rig() -> Iterator[Rig]:
     t = galil.sim.link.open_transport("sim://DMC-4040")
-    gap = "SimLink's repr names the controller, not the link's state (galil/sim is read-only here)"
-    yield Rig(t, "sim", _sim_answer, frozenset({ControllerClock}), repr_gap=gap)
+    yield Rig(t, "sim", _sim_answer, frozenset({ControllerClock}))
     t.close()
 
 

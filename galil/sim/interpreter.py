@@ -1,0 +1,298 @@
+"""The interpreter: one command's text to its handler, variables, operands and reply formats.
+
+A command is two upper-case letters and arguments; the command table (filled from the rooms'
+:func:`~galil.sim.registry.handler` marks) names its handler and how its arguments are parsed.
+``name=expression`` assigns a variable unless the name is a command followed by axis letters
+(``PRA=5``). Expressions read variables, ``TIME`` and operands (``_TPA``, ``_TC``, ``_XQ0``) from
+the operand tables. Replies are printed in the PF/VF formats with LZ, a blank in the sign
+position of positive numbers; ``TC`` keeps the error code of the last refused command.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+from galil.models import INT32_MAX, INT32_MIN, ModelSpec
+from galil.protocol.numbers import format_reply
+from galil.sim.parse import FUNCTIONS, Refused, evaluate, split_fields
+from galil.sim.ports import Port
+from galil.sim.programs import Thread
+from galil.sim.registry import Args, HandlerSpec, Result
+from galil.sim.servo import Axis, Servo
+
+__all__ = ["Caller", "Command", "Interpreter", "int32"]
+
+#: Who runs a command: a host port, a program thread, or nobody (a released wait).
+Caller = Port | Thread | None
+
+_RESERVED = frozenset({"TIME"})
+
+
+@dataclass(frozen=True)
+class Command:
+    """A command of the table: its spec and the bound handler."""
+
+    spec: HandlerSpec
+    run: Callable[..., Result]
+
+
+def int32(value: float) -> int:
+    """A 32-bit integer argument (positions, PR/PA/IP, FL/BL), rounded.
+
+    Raises:
+        Refused: TC 6, out of the controller's integer range.
+    """
+    if not INT32_MIN <= value <= INT32_MAX:
+        raise Refused(6, "position out of range")
+    return round(value)
+
+
+class Interpreter:
+    """Runs command text against the command and operand tables.
+
+    Args:
+        spec: the model (axis letters, name lengths).
+        servo: the servo loop (axes and ``TIME``).
+
+    Attributes:
+        commands: command name -> :class:`Command`.
+        operands: plain operands (``_TC``) -> value.
+        axis_operands: axis operands (``_TPA``) -> value of an axis.
+        index_operands: indexed operands (``_XQ0``) -> value for the text after the name.
+        functions: expression functions (``@ABS[x]``) -> value for the argument.
+        caller: who runs the command being executed (``WH``, ``CF I``, ``DL``).
+        tc: the error code of the last refused command.
+    """
+
+    def __init__(self, spec: ModelSpec, servo: Servo) -> None:
+        self.spec = spec
+        self.servo = servo
+        self.commands: dict[str, Command] = {}
+        self.operands: dict[str, Callable[[], float]] = {}
+        self.axis_operands: dict[str, Callable[[Axis], float]] = {}
+        self.index_operands: dict[str, Callable[[str], float]] = {}
+        self.functions: dict[str, Callable[[float], float]] = dict(FUNCTIONS)
+        self.caller: Caller = None
+        self._variable = re.compile(rf"[A-Za-z][A-Za-z0-9]{{0,{spec.variable_length - 1}}}")
+        self._letters = frozenset(spec.axes) | frozenset(spec.aliases)
+        self.reset()
+
+    def reset(self) -> None:
+        """Power-on defaults: no variables, no error, PF 10.0, VF 10.4, LZ 1."""
+        self.variables: dict[str, float] = {}
+        self.tc = 0
+        self.pf = "10.0"
+        self.vf = "10.4"
+        self.lz = True
+
+    # ---- running a command -------------------------------------------------------------
+    def execute(self, text: str, caller: Caller) -> Result:
+        """Run one command for ``caller``; return its data text (with CR LF), a wait, or
+        ``DOWNLOAD``.
+
+        Raises:
+            Refused: the command is rejected; nothing was changed.
+        """
+        before, self.caller = self.caller, caller
+        try:
+            return self._execute(text)
+        finally:
+            self.caller = before
+
+    def _execute(self, text: str) -> Result:
+        s = text.strip(" \t\n")
+        if not s:
+            return ""
+        if s[0] == "\x12":
+            control = self.commands.get(s)
+            if control is None:
+                raise Refused(1, "unknown control command")
+            return control.run("")
+        eq = _find_eq(s)
+        command = self.commands.get(s[:2])
+        if command is not None:
+            if eq > 0 and not command.spec.equals:
+                name = s[:eq].strip()
+                if not self._is_axis_spec(s[2:eq].strip()) and self._variable.fullmatch(name):
+                    return self.assign(name, s[eq + 1 :])
+            args = s[2:]
+            kind = command.spec.args
+            if kind is Args.TEXT:
+                return command.run(args)
+            if kind is Args.AXES:
+                return command.run(self.axis_list(args))
+            return command.run(self.axis_fields(args))
+        if eq > 0:
+            return self.assign(s[:eq].strip(), s[eq + 1 :])
+        raise Refused(1, f"unrecognised command {s!r}")
+
+    def _is_axis_spec(self, text: str) -> bool:
+        letters = text.replace(" ", "").replace(",", "")
+        return bool(letters) and all(c in self._letters for c in letters)
+
+    # ---- variables and expressions -----------------------------------------------------
+    def assign(self, name: str, rhs: str) -> str:
+        """``name=expression`` (or ``name=`` to read it back).
+
+        Raises:
+            Refused: a bad name, an undefined variable read, a value out of range.
+        """
+        if not self._variable.fullmatch(name) or name in _RESERVED:
+            raise Refused(1, f"bad variable name {name!r}")
+        rhs = rhs.strip()
+        if rhs in ("", "?"):
+            if name not in self.variables:
+                raise Refused(1, f"undefined variable {name!r}")
+            return self.vnum(self.variables[name]) + "\r\n"
+        value = self.evaluate(rhs)
+        if not INT32_MIN <= value < INT32_MAX + 1:
+            raise Refused(6, "out of range")
+        self.variables[name] = round(value * 65536) / 65536
+        return ""
+
+    def evaluate(self, text: str) -> float:
+        """Evaluate an expression (left to right) with this controller's names.
+
+        Raises:
+            Refused: a syntax error or an unknown name.
+        """
+        return evaluate(text, self.lookup, self.functions)
+
+    def lookup(self, name: str) -> float:
+        """The value of a variable, ``TIME`` or an operand (``_TPA``).
+
+        Raises:
+            Refused: no such name.
+        """
+        if name == "TIME":
+            return float(self.servo.sample)
+        if name.startswith("_"):
+            return self.operand(name[1:])
+        try:
+            return self.variables[name]
+        except KeyError:
+            raise Refused(1, f"undefined variable {name!r}") from None
+
+    def operand(self, name: str) -> float:
+        """The value of operand ``_name`` (name without the underscore).
+
+        Raises:
+            Refused: TC 1 for an unknown operand, TC 4 for an unknown axis.
+        """
+        code, rest = name[:2], name[2:]
+        if not rest:
+            plain = self.operands.get(code)
+            if plain is not None:
+                return float(plain())
+        indexed = self.index_operands.get(code)
+        if indexed is not None:
+            return float(indexed(rest))
+        if len(rest) != 1:
+            raise Refused(1, f"unknown operand _{name}")
+        ax = self.axis(rest)
+        getter = self.axis_operands.get(code)
+        if getter is None:
+            raise Refused(1, f"unknown operand _{name}")
+        return float(getter(ax))
+
+    # ---- arguments ---------------------------------------------------------------------
+    def axis(self, letter: str) -> Axis:
+        """The axis named ``letter`` (aliases accepted).
+
+        Raises:
+            Refused: TC 4, no such axis.
+        """
+        axes = self.servo.axes
+        found = axes.get(letter)
+        if found is not None:
+            return found
+        letter = self.spec.aliases.get(letter.upper(), letter.upper())
+        if letter not in axes:
+            raise Refused(4, f"no axis {letter!r}")
+        return axes[letter]
+
+    def axis_list(self, args: str) -> list[Axis]:
+        """The axes named in ``args`` (``"AB"``, ``"A,C"``), in order; none named: all."""
+        letters = args.replace(" ", "").replace(",", "")
+        if not letters:
+            return list(self.servo.axes.values())
+        out: list[Axis] = []
+        for c in letters:
+            ax = self.axis(c)
+            if ax not in out:
+                out.append(ax)
+        return out
+
+    def axis_fields(self, args: str) -> list[tuple[Axis, str]]:
+        """Per-axis fields: ``"1,,3"`` by position, ``"AB=5"`` by name; empty fields skipped.
+
+        Raises:
+            Refused: a missing value, more fields than axes, an unknown axis.
+        """
+        a = args.strip()
+        if not a:
+            return []
+        eq = a.find("=")
+        if eq >= 0:
+            value = a[eq + 1 :].strip()
+            if not value:
+                raise Refused(1, "missing value")
+            return [(ax, value) for ax in self.axis_list(a[:eq])] if a[:eq].strip() else []
+        fields = split_fields(a)
+        axes = list(self.servo.axes.values())
+        if len(fields) > len(axes):
+            raise Refused(4, "more fields than axes")
+        return [(axes[i], f.strip()) for i, f in enumerate(fields) if f.strip()]
+
+    def parameters(
+        self,
+        fields: list[tuple[Axis, str]],
+        get: Callable[[Axis], float],
+        check: Callable[[Axis, float], float],
+        apply: Callable[[Axis, float], None],
+        fmt: Callable[[float], str],
+    ) -> str:
+        """Set and/or interrogate a per-axis parameter; all checks come before any change."""
+        queries: list[Axis] = []
+        sets: list[tuple[Axis, float]] = []
+        for ax, text in fields:
+            if text == "?":
+                queries.append(ax)
+            else:
+                sets.append((ax, check(ax, self.evaluate(text))))
+        for ax, value in sets:
+            apply(ax, value)
+        if not queries:
+            return ""
+        return ",".join(fmt(get(ax)) for ax in queries) + "\r\n"
+
+    # ---- replies -----------------------------------------------------------------------
+    def pnum(self, value: float) -> str:
+        """A number in the position format (PF)."""
+        return format_reply(value, self.pf, self.lz, sign_space=True)
+
+    def vnum(self, value: float) -> str:
+        """A number in the variable format (VF)."""
+        return format_reply(value, self.vf, self.lz, sign_space=True)
+
+    def num(self, value: float, fmt: str) -> str:
+        """A number in a fixed format (``"10.0"``), with LZ."""
+        return format_reply(value, fmt, self.lz, sign_space=True)
+
+    def report(
+        self, axes: Iterable[Axis], get: Callable[[Axis], float], fmt: Callable[[float], str]
+    ) -> str:
+        """One value per axis, comma separated, as a reply line."""
+        return ",".join(fmt(get(ax)) for ax in axes) + "\r\n"
+
+
+def _find_eq(s: str) -> int:
+    quoted = False
+    for i, ch in enumerate(s):
+        if ch == '"':
+            quoted = not quoted
+        elif ch == "=" and not quoted:
+            return i
+    return -1

@@ -1,0 +1,150 @@
+"""Contour mode: ``CM`` ``DT`` ``CD`` and the contour buffer (``_CM``).
+
+Segments go to each contouring axis's profiler (``CD`` with ``DT n``: 2**n samples). A ``CD``
+into a full buffer holds its ``:`` until there is room; ``CD 0=0`` ends the stream once the
+queue drains. A buffer that runs dry while contouring (data sent too slowly) sets the error
+code to 42; the servo loop watches for it so it happens at its exact sample.
+"""
+
+from __future__ import annotations
+
+import functools
+
+from galil.sim.machine import Room
+from galil.sim.parse import Refused, split_fields
+from galil.sim.registry import Args, Result, Wait, handler, operand
+from galil.sim.servo import Axis, Watch, engine
+
+__all__ = ["Contour"]
+
+
+class Contour(Room):
+    """The contour buffer and the axes that run it."""
+
+    def reset(self) -> None:
+        self.exponent = 1  # DT: segments of 2**n samples
+        self.fed: set[str] = set()  # contouring axes given segments: an empty queue is an error
+        self._active = False  # some axis may be in contour mode: the service hook has work
+
+    def axes(self) -> list[Axis]:
+        """The axes in contour mode."""
+        return [ax for ax in self.machine.servo.axes.values() if ax.contour]
+
+    def free(self) -> int:
+        """Free places in the contour buffer (``_CM``): the segment running takes none."""
+        waiting = max((ax.m.profiler.queued_segments for ax in self.axes()), default=0)
+        return self.machine.spec.contour_buffer - max(0, waiting - 1)
+
+    # ---- hooks -------------------------------------------------------------------------
+    def abort(self) -> None:
+        for ax in self.machine.servo.axes.values():
+            ax.contour = False
+        self.fed.clear()
+        self._active = False
+
+    def watches(self, out: list[Watch]) -> None:
+        if self.fed:
+            for ax in self.machine.servo.axes.values():
+                if ax.contour and ax.letter in self.fed:
+                    out.append(functools.partial(_ran_dry, ax.letter, self.machine.servo.axes))
+
+    def service(self) -> None:
+        if not self._active:
+            return
+        active = False
+        for ax in self.machine.servo.axes.values():
+            if not ax.contour:
+                continue
+            active = True
+            prof = ax.m.profiler
+            if prof.mode != "contour":
+                ax.contour = False
+                self.fed.discard(ax.letter)
+            elif ax.letter in self.fed and prof.queued_segments == 0:
+                self.fed.discard(ax.letter)
+                self.machine.interp.tc = 42  # the buffer ran dry: data sent too slowly
+        self._active = active
+
+    # ---- commands ----------------------------------------------------------------------
+    @handler("CM", Args.AXES)
+    def cm(self, axes: list[Axis]) -> str:
+        for ax in axes:
+            if ax.m.moving and not ax.contour:
+                raise Refused(7, "CM while moving")
+        for ax in axes:
+            if not ax.contour:
+                engine(ax.m.profiler.begin_contour)
+                ax.contour = self._active = True
+                self.fed.discard(ax.letter)
+        return ""
+
+    @handler("DT")
+    def dt(self, args: str) -> str:
+        i = self.machine.interp
+        a = args.strip()
+        if a == "?":
+            return i.num(self.exponent, "1.0") + "\r\n"
+        value = i.evaluate(a)
+        low, high = self.machine.spec.dt_range
+        if (value != 0 and not low <= value <= high) or value != int(value):
+            raise Refused(6, "DT out of range")
+        self.exponent = int(value)
+        return ""
+
+    @handler("CD", equals=True)
+    def cd(self, args: str) -> Result:
+        text, _, dt_text = args.partition("=")
+        incs, n = self._segment(text, dt_text)
+        axes = self.axes()
+        if not axes:
+            raise Refused(8, "not in contour mode")
+        if n == 0:
+            if any(incs.values()):
+                raise Refused(41, "increment with DT 0")
+            for ax in axes:
+                ax.m.profiler.end_contour()
+                self.fed.discard(ax.letter)
+            return ""
+        if not self.machine.spec.dt_range[0] <= n <= self.machine.spec.dt_range[1]:
+            raise Refused(41, "DT out of range")
+
+        def add() -> str:
+            for ax in axes:
+                engine(functools.partial(ax.m.profiler.add_segment, incs.get(ax.letter, 0), n))
+                self.fed.add(ax.letter)
+            return ""
+
+        if self.free() > 0:
+            return add()
+        return Wait(lambda: self.free() > 0, then=add)
+
+    def _segment(self, text: str, dt_text: str) -> tuple[dict[str, int], int]:
+        """The increments per axis and the DT exponent of a ``CD``."""
+        i = self.machine.interp
+        axes = self.machine.servo.axes
+        fields = split_fields(text)
+        if len(fields) > len(axes):
+            raise Refused(4, "more fields than axes")
+        n = int(i.evaluate(dt_text)) if dt_text.strip() else self.exponent
+        incs: dict[str, int] = {}
+        for ax, f in zip(axes.values(), fields, strict=False):
+            value = i.evaluate(f) if f.strip() else 0.0
+            if abs(value) > self.machine.spec.cd_max or value != int(value):
+                raise Refused(41, "CD increment out of range")
+            if value and not ax.contour:
+                raise Refused(41, "axis is not in contour mode")
+            incs[ax.letter] = int(value)
+        return incs, n
+
+    # ---- operands ----------------------------------------------------------------------
+    @operand("CM")
+    def buffer_free(self) -> float:
+        return self.free()
+
+    @operand("DT")
+    def default_exponent(self) -> float:
+        return self.exponent
+
+
+def _ran_dry(letter: str, axes: dict[str, Axis]) -> bool:
+    return axes[letter].m.profiler.queued_segments == 0

@@ -1,0 +1,317 @@
+"""Motion: independent moves and jogs (PR PA DP SP AC DC JG IT BG IP ST AB SH MO).
+
+The values stored are the ones the predictor plans with (its quantisation), and every change in
+motion is a call on the axis's :class:`~galil.predict.engine.AxisProfiler`: this room holds no
+motion math. ``BG`` begins the mode chosen last: a position move after ``PR``/``PA``, a jog
+after ``JG``.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from galil.errors import InvalidArgument, LimitError
+from galil.predict.checks import quantise_accel, quantise_speed
+from galil.predict.smoothing import quantise_it
+from galil.sim.interpreter import int32
+from galil.sim.machine import Room
+from galil.sim.parse import Refused
+from galil.sim.registry import Args, OperandKind, handler, operand
+from galil.sim.rooms.limits import Limits
+from galil.sim.servo import Axis, engine
+
+__all__ = ["Motion"]
+
+Fields = list[tuple[Axis, str]]
+Check = Callable[[Axis, float], float]
+
+
+@dataclass
+class Params:
+    """The motion parameters of one axis."""
+
+    sp: float = 25000.0
+    ac: float = 256000.0
+    dc: float = 256000.0
+    jg: float = 25000.0
+    it: float = 1.0
+    pr: int = 0
+    pa: int = 0
+    absolute: bool = False
+    next_mode: str = "position"
+    move_start: int = 0  # profiler position at the last BG: AD/AR measure from here
+
+
+class Motion(Room):
+    """Per-axis motion parameters, and the commands that start, change and stop motion."""
+
+    requires = (Limits,)
+
+    def reset(self) -> None:
+        self.axes = {letter: Params() for letter in self.machine.spec.axes}
+
+    def params(self, ax: Axis) -> Params:
+        """The motion parameters of ``ax``."""
+        return self.axes[ax.letter]
+
+    # ---- checks: the predictor's quantisation, so the values stored are the ones it plans
+    def _accel(self, ax: Axis, value: float) -> float:
+        try:
+            return float(quantise_accel(value, self.machine.spec))
+        except LimitError:
+            raise Refused(6, "AC/DC out of range") from None
+
+    def _speed(self, value: float) -> float:
+        try:
+            return float(quantise_speed(value, self.machine.spec, signed=True))
+        except LimitError:
+            raise Refused(6, "speed out of range") from None
+
+    @staticmethod
+    def _still(command: str, then: Check) -> Check:
+        """A check that refuses ``command`` while the axis moves (TC 7), then ``then``."""
+
+        def check(ax: Axis, v: float) -> float:
+            if ax.m.moving:
+                raise Refused(7, f"{command} while moving")
+            return then(ax, v)
+
+        return check
+
+    def _set(
+        self,
+        fields: Fields,
+        get: Callable[[Axis], float],
+        check: Check,
+        apply: Callable[[Axis, float], None],
+        fmt: str = "",
+    ) -> str:
+        i = self.machine.interp
+        out = functools.partial(i.num, fmt=fmt) if fmt else i.pnum
+        return i.parameters(fields, get, check, apply, out)
+
+    # ---- positions ---------------------------------------------------------------------
+    @handler("PR", Args.VALUES)
+    def pr(self, fields: Fields) -> str:
+        def apply(ax: Axis, v: float) -> None:
+            p = self.axes[ax.letter]
+            p.pr, p.absolute, p.next_mode = int(v), False, "position"
+
+        return self._set(fields, self.relative, self._still("PR", _position), apply)
+
+    @handler("PA", Args.VALUES)
+    def pa(self, fields: Fields) -> str:
+        def apply(ax: Axis, v: float) -> None:
+            p = self.axes[ax.letter]
+            p.pa, p.absolute, p.next_mode = int(v), True, "position"
+
+        return self._set(fields, self.absolute, self._still("PA", _position), apply)
+
+    @handler("DP", Args.VALUES)
+    def dp(self, fields: Fields) -> str:
+        def apply(ax: Axis, v: float) -> None:
+            self.machine.servo.reseat(ax, int(v))
+            self.axes[ax.letter].pa = int(v)
+
+        return self._set(fields, lambda ax: ax.m.encoder, self._still("DP", _position), apply)
+
+    # ---- speeds, accelerations, smoothing ----------------------------------------------
+    @handler("SP", Args.VALUES)
+    def sp(self, fields: Fields) -> str:
+        def check(ax: Axis, v: float) -> float:
+            if v < 0:
+                raise Refused(6, "negative speed")
+            return self._speed(v)
+
+        def apply(ax: Axis, v: float) -> None:
+            self.axes[ax.letter].sp = v
+            prof = ax.m.profiler
+            if prof.moving and prof.mode == "position" and v > 0:
+                engine(lambda: prof.set_speed(v))
+
+        return self._set(fields, self.speed, check, apply, "10.0")
+
+    @handler("AC", Args.VALUES)
+    def ac(self, fields: Fields) -> str:
+        def apply(ax: Axis, v: float) -> None:
+            self.axes[ax.letter].ac = v
+            prof = ax.m.profiler
+            if prof.moving and prof.mode in ("position", "jog"):
+                engine(lambda: prof.set_accel(v))
+
+        return self._set(fields, self.accel, self._accel, apply, "10.0")
+
+    @handler("DC", Args.VALUES)
+    def dc(self, fields: Fields) -> str:
+        def apply(ax: Axis, v: float) -> None:
+            self.axes[ax.letter].dc = v
+
+        return self._set(fields, self.decel, self._still("DC", self._accel), apply, "10.0")
+
+    @handler("JG", Args.VALUES)
+    def jg(self, fields: Fields) -> str:
+        def check(ax: Axis, v: float) -> float:
+            prof = ax.m.profiler
+            if prof.moving and prof.mode != "jog":
+                raise Refused(13, "JG while not jogging")
+            return self._speed(v)
+
+        def apply(ax: Axis, v: float) -> None:
+            p = self.axes[ax.letter]
+            p.jg, p.next_mode = v, "jog"
+            prof = ax.m.profiler
+            if prof.moving and prof.mode == "jog":
+                engine(lambda: prof.set_speed(v))
+
+        return self._set(fields, self.jog_speed, check, apply, "10.0")
+
+    @handler("IT", Args.VALUES)
+    def it(self, fields: Fields) -> str:
+        def check(ax: Axis, v: float) -> float:
+            try:
+                return quantise_it(v)
+            except InvalidArgument:
+                raise Refused(6, "IT out of range") from None
+
+        def apply(ax: Axis, v: float) -> None:
+            self.axes[ax.letter].it = v
+
+        return self._set(fields, self.smoothing, check, apply, "1.4")
+
+    # ---- starting and stopping ---------------------------------------------------------
+    def _start_check(self, ax: Axis, direction: float) -> None:
+        if ax.contour:
+            raise Refused(18, "axis is contouring")
+        if not ax.m.motor_on:
+            raise Refused(20, "motor off")
+        if ax.m.moving:
+            raise Refused(21, "already moving")
+        self.machine.room(Limits).check_start(ax, direction)
+
+    @handler("BG", Args.AXES)
+    def bg(self, axes: list[Axis]) -> str:
+        plans: list[tuple[Axis, int | None]] = []
+        for ax in axes:
+            p = self.axes[ax.letter]
+            if p.next_mode == "jog":
+                self._start_check(ax, p.jg)
+                plans.append((ax, None))
+            else:
+                base = ax.m.profiler.position
+                target = p.pa if p.absolute else base + p.pr
+                int32(target)
+                self._start_check(ax, target - base)
+                if p.sp <= 0:
+                    raise Refused(6, "SP is 0")
+                plans.append((ax, target))
+        for ax, goal in plans:
+            p = self.axes[ax.letter]
+            prof = ax.m.profiler
+            ax.limit_stop = False
+            p.move_start = prof.position
+            if goal is None:
+                engine(functools.partial(prof.begin_jog, p.jg, p.ac, p.dc, p.it))
+            else:
+                p.pa = goal
+                engine(functools.partial(prof.begin_move, goal, p.sp, p.ac, p.dc, p.it))
+        return ""
+
+    @handler("IP", Args.VALUES)
+    def ip(self, fields: Fields) -> str:
+        i = self.machine.interp
+        if any(t == "?" for _, t in fields):
+            return ",".join(i.pnum(ax.m.profiler.target) for ax, _ in fields) + "\r\n"
+        moves = [(ax, int32(i.evaluate(t))) for ax, t in fields]
+        for ax, n in moves:
+            if ax.contour:
+                raise Refused(18, "axis is contouring")
+            if not ax.m.moving:
+                self._start_check(ax, n)
+                if self.axes[ax.letter].sp <= 0:
+                    raise Refused(6, "SP is 0")
+        for ax, n in moves:
+            p = self.axes[ax.letter]
+            prof = ax.m.profiler
+            if not prof.moving:
+                p.pr, p.absolute, p.next_mode, ax.limit_stop = n, False, "position", False
+            engine(functools.partial(prof.increment, n, p.sp, p.ac, p.dc, p.it))
+            p.pa = prof.target
+        return ""
+
+    @handler("ST", Args.AXES)
+    def st(self, axes: list[Axis]) -> str:
+        for ax in axes:
+            ax.m.profiler.stop()
+        return ""
+
+    @handler("AB")
+    def ab(self, args: str) -> str:
+        a = args.strip()
+        if a not in ("", "0", "1"):
+            raise Refused(6, "AB takes 0 or 1")
+        for ax in self.machine.servo.axes.values():
+            if ax.m.moving:
+                ax.m.profiler.abort()
+        self.machine.abort()
+        if a != "1":
+            self.machine.programs.reset()
+        return ""
+
+    @handler("SH", Args.AXES)
+    def sh(self, axes: list[Axis]) -> str:
+        for ax in axes:
+            if not ax.m.motor_on:
+                ax.m.motor_on = True
+                self.machine.servo.reseat(ax, ax.m.encoder)
+        return ""
+
+    @handler("MO", Args.AXES)
+    def mo(self, axes: list[Axis]) -> str:
+        if any(ax.m.moving for ax in axes):
+            raise Refused(7, "MO while moving")
+        for ax in axes:
+            ax.m.motor_on = False
+        return ""
+
+    # ---- operands ----------------------------------------------------------------------
+    @operand("PR", kind=OperandKind.AXIS)
+    def relative(self, ax: Axis) -> float:
+        return self.axes[ax.letter].pr
+
+    @operand("PA", kind=OperandKind.AXIS)
+    def absolute(self, ax: Axis) -> float:
+        return self.axes[ax.letter].pa
+
+    @operand("SP", kind=OperandKind.AXIS)
+    def speed(self, ax: Axis) -> float:
+        return self.axes[ax.letter].sp
+
+    @operand("AC", kind=OperandKind.AXIS)
+    def accel(self, ax: Axis) -> float:
+        return self.axes[ax.letter].ac
+
+    @operand("DC", kind=OperandKind.AXIS)
+    def decel(self, ax: Axis) -> float:
+        return self.axes[ax.letter].dc
+
+    @operand("JG", kind=OperandKind.AXIS)
+    def jog_speed(self, ax: Axis) -> float:
+        return self.axes[ax.letter].jg
+
+    @operand("IT", kind=OperandKind.AXIS)
+    def smoothing(self, ax: Axis) -> float:
+        return self.axes[ax.letter].it
+
+    @operand("BG", kind=OperandKind.AXIS)
+    def moving(self, ax: Axis) -> float:
+        return 1 if ax.m.moving else 0
+
+    @operand("MO", kind=OperandKind.AXIS)
+    def motor_off(self, ax: Axis) -> float:
+        return 0 if ax.m.motor_on else 1
+
+
+def _position(ax: Axis, value: float) -> float:
+    return int32(value)

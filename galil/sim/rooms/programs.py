@@ -1,0 +1,90 @@
+"""Program commands: ``DL`` ``UL`` ``XQ`` ``HX``, and ``JP``/``EN``/``NO`` from the host.
+
+The program store and the threads are the core's :class:`~galil.sim.programs.Programs`;
+``JP`` and ``EN`` are flow control that only a thread runs (from a host they are refused).
+``_XQn`` is thread n's line, -1 when it is not running; ``_NO`` the running threads' bits.
+"""
+
+from __future__ import annotations
+
+from galil.sim.machine import Room
+from galil.sim.parse import Refused, split_fields
+from galil.sim.programs import Thread
+from galil.sim.registry import DOWNLOAD, Download, OperandKind, handler, operand
+
+__all__ = ["ProgramCommands"]
+
+
+class ProgramCommands(Room):
+    """DL, UL, XQ, HX, JP, EN, NO."""
+
+    @handler("DL")
+    def dl(self, args: str) -> Download:
+        if isinstance(self.machine.interp.caller, Thread):
+            raise Refused(3, "DL not valid in a program")
+        if self.machine.programs.threads:
+            raise Refused(17, "DL while a program runs")
+        return DOWNLOAD
+
+    @handler("UL")
+    def ul(self, args: str) -> str:
+        if isinstance(self.machine.interp.caller, Thread):
+            raise Refused(3, "UL not valid in a program")
+        return "".join(line + "\r\n" for line in self.machine.programs.program) + "\x1a"
+
+    @handler("XQ")
+    def xq(self, args: str) -> str:
+        programs = self.machine.programs
+        fields = split_fields(args)
+        label = fields[0].strip()
+        number = self._thread(fields[1]) if len(fields) > 1 and fields[1].strip() else 0
+        if label:
+            line = programs.line_of(label)
+        elif not programs.program:
+            raise Refused(10, "no program")
+        else:
+            line = 0
+        running = programs.threads.get(number)
+        if running is not None and running is not self.machine.interp.caller:
+            raise Refused(19, "thread already running")
+        programs.threads[number] = Thread(number, line=line)
+        return ""
+
+    @handler("HX")
+    def hx(self, args: str) -> str:
+        programs = self.machine.programs
+        if not args.strip():
+            programs.reset()
+            return ""
+        programs.threads.pop(self._thread(args), None)
+        return ""
+
+    def _thread(self, text: str) -> int:
+        n = int(self.machine.interp.evaluate(text))
+        if not 0 <= n < self.machine.spec.threads:
+            raise Refused(6, "no such thread")
+        return n
+
+    @handler("JP")
+    def jp(self, args: str) -> str:
+        raise Refused(2, "JP only in a program")
+
+    @handler("EN")
+    def en(self, args: str) -> str:
+        raise Refused(2, "EN only in a program")
+
+    @handler("NO")
+    def no(self, args: str) -> str:
+        return ""
+
+    @operand("XQ", kind=OperandKind.INDEX)
+    def thread_line(self, index: str) -> float:
+        n = int(index) if index.isdigit() else 0 if not index else -1
+        if not 0 <= n < self.machine.spec.threads:
+            raise Refused(1, "bad thread")
+        th = self.machine.programs.threads.get(n)
+        return float(th.line) if th is not None else -1.0
+
+    @operand("NO")
+    def running_threads(self) -> float:
+        return float(sum(1 << n for n in self.machine.programs.threads))

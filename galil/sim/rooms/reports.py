@@ -1,0 +1,137 @@
+"""Reports and queries: ``TP`` ``RP`` ``TE`` ``TD`` ``TV`` ``SC`` ``TC`` and ``MG``.
+
+Positions print in the PF format, ``MG`` numbers in VF (or a ``{Fm.n}``, ``{Zm.n}``, ``{$m.n}``
+format); ``TC`` clears the code while ``_TC`` does not. ``TD`` reads an auxiliary encoder
+rigidly coupled to the motor (equal to ``TP``); ``TV`` is the encoder velocity averaged over a
+quarter second, as the manuals describe.
+"""
+
+from __future__ import annotations
+
+import re
+
+from galil.codes import tc_text
+from galil.errors import InvalidArgument
+from galil.protocol.numbers import format_reply
+from galil.sim.machine import Room
+from galil.sim.parse import Refused, split_fields
+from galil.sim.registry import Args, OperandKind, handler, operand
+from galil.sim.servo import Axis
+
+__all__ = ["Reports"]
+
+_BRACES = re.compile(r"\{([^}]*)\}")
+
+
+class Reports(Room):
+    """What the controller tells about its axes and itself."""
+
+    # ---- per-axis reports --------------------------------------------------------------
+    @handler("TP", Args.AXES)
+    def tp(self, axes: list[Axis]) -> str:
+        return self.machine.interp.report(axes, self.position, self.machine.interp.pnum)
+
+    @handler("TD", Args.AXES)
+    def td(self, axes: list[Axis]) -> str:
+        return self.machine.interp.report(axes, self.position, self.machine.interp.pnum)
+
+    @handler("RP", Args.AXES)
+    def rp(self, axes: list[Axis]) -> str:
+        return self.machine.interp.report(axes, self.reference, self.machine.interp.pnum)
+
+    @handler("TE", Args.AXES)
+    def te(self, axes: list[Axis]) -> str:
+        return self.machine.interp.report(axes, self.error, self.machine.interp.pnum)
+
+    @handler("TV", Args.AXES)
+    def tv(self, axes: list[Axis]) -> str:
+        i = self.machine.interp
+        return i.report(axes, self.velocity, lambda v: i.num(v, "8.0"))
+
+    @handler("SC", Args.AXES)
+    def sc(self, axes: list[Axis]) -> str:
+        i = self.machine.interp
+        return i.report(axes, self.stop_code, lambda v: i.num(v, "3.0"))
+
+    @operand("TP", "TD", kind=OperandKind.AXIS)
+    def position(self, ax: Axis) -> float:
+        return ax.m.encoder
+
+    @operand("RP", kind=OperandKind.AXIS)
+    def reference(self, ax: Axis) -> float:
+        return ax.m.reference
+
+    @operand("TE", kind=OperandKind.AXIS)
+    def error(self, ax: Axis) -> float:
+        return ax.m.error
+
+    @operand("TV", kind=OperandKind.AXIS)
+    def velocity(self, ax: Axis) -> float:
+        return round(ax.m.velocity)
+
+    @operand("SC", kind=OperandKind.AXIS)
+    def stop_code(self, ax: Axis) -> float:
+        return int(ax.m.profiler.stop_code)
+
+    # ---- the error code ----------------------------------------------------------------
+    @handler("TC")
+    def tc(self, args: str) -> str:
+        i = self.machine.interp
+        a = args.strip()
+        if a not in ("", "0", "1"):
+            raise Refused(6, "TC takes 0 or 1")
+        code = i.tc
+        i.tc = 0
+        if a == "1" and code:
+            return f"{i.num(code, '3.0')} {tc_text(code)}\r\n"
+        return i.num(code, "3.0") + "\r\n"
+
+    @operand("TC")
+    def error_code(self) -> float:
+        return self.machine.interp.tc
+
+    # ---- MG ----------------------------------------------------------------------------
+    @handler("MG")
+    def mg(self, args: str) -> str:
+        if not args.strip():
+            return "\r\n"
+        out: list[str] = []
+        newline = True
+        for part in split_fields(args):
+            fmt: str | None = None
+            for spec in _BRACES.findall(part):
+                s = spec.strip()
+                if s.upper() == "N":
+                    newline = False
+                elif s.startswith("^"):
+                    out.append(self._character(s[1:]))
+                elif s[:1].upper() in ("F", "Z", "$"):
+                    fmt = s
+                elif s[:1].upper() not in ("E", "P"):
+                    raise Refused(53, f"bad format {{{s}}}")
+            expr = _BRACES.sub("", part).strip()
+            if expr.startswith('"'):
+                if len(expr) < 2 or not expr.endswith('"') or '"' in expr[1:-1]:
+                    raise Refused(52, "missing quote")
+                out.append(expr[1:-1])
+            elif expr:
+                out.append(self._number(self.machine.interp.evaluate(expr), fmt))
+        return "".join(out) + ("\r\n" if newline else "")
+
+    def _character(self, text: str) -> str:
+        code = int(self.machine.interp.evaluate(text))
+        if not 0 <= code <= 255:
+            raise Refused(53, "bad character code")
+        return chr(code)
+
+    def _number(self, value: float, fmt: str | None) -> str:
+        i = self.machine.interp
+        if fmt is None:
+            return i.vnum(value)
+        kind, body = fmt[0].upper(), fmt[1:]
+        try:
+            if kind == "$":
+                return format_reply(value, "$" + body)
+            return format_reply(value, body, kind == "Z", sign_space=True)
+        except InvalidArgument:
+            raise Refused(53, f"bad format {fmt}") from None

@@ -1,0 +1,162 @@
+"""Settings and formats: ``LZ`` ``PF`` ``VF`` ``EO`` ``CW`` ``TM`` ``RS``, ``^R^V`` and ``^R^S``.
+
+The formats belong to the interpreter and the output settings to the ports; this room only
+answers the commands that read and change them. ``TM`` changes the sample period (the facts
+come from the model: its range, or a fixed period); samples already run keep their times.
+"""
+
+from __future__ import annotations
+
+from galil.errors import InvalidArgument
+from galil.protocol.numbers import parse_format
+from galil.sim.machine import Room
+from galil.sim.parse import Refused, split_fields
+from galil.sim.registry import handler, operand
+
+__all__ = ["Settings"]
+
+
+class Settings(Room):
+    """Reply formats, echo, unsolicited marking, the sample period, resets and identity."""
+
+    def _choice(self, args: str, choices: tuple[int, ...]) -> int | None:
+        """The value of a setting that takes one of ``choices`` (the first by default);
+        None for ``?``."""
+        a = args.strip()
+        if a == "?":
+            return None
+        value = self.machine.interp.evaluate(a) if a else choices[0]
+        if value not in choices:
+            raise Refused(6, f"value must be one of {choices}")
+        return int(value)
+
+    @staticmethod
+    def _format(args: str) -> str | None:
+        """A PF/VF format (``"10.4"``, ``"$4.0"``); None for ``?``."""
+        a = args.strip()
+        if a == "?":
+            return None
+        try:
+            is_hex, m, n = parse_format(a)
+        except InvalidArgument:
+            raise Refused(6, "bad format") from None
+        return f"{'$' if is_hex else ''}{m}.{n}"
+
+    # ---- formats -----------------------------------------------------------------------
+    @handler("LZ")
+    def lz(self, args: str) -> str:
+        i = self.machine.interp
+        v = self._choice(args, (1, 0))
+        if v is None:
+            return i.num(int(i.lz), "1.0") + "\r\n"
+        i.lz = bool(v)
+        return ""
+
+    @handler("PF")
+    def pf(self, args: str) -> str:
+        v = self._format(args)
+        if v is None:
+            return f" {self.machine.interp.pf}\r\n"
+        self.machine.interp.pf = v
+        return ""
+
+    @handler("VF")
+    def vf(self, args: str) -> str:
+        v = self._format(args)
+        if v is None:
+            return f" {self.machine.interp.vf}\r\n"
+        self.machine.interp.vf = v
+        return ""
+
+    @operand("LZ")
+    def leading_zeros(self) -> float:
+        return 1.0 if self.machine.interp.lz else 0.0
+
+    # ---- output ------------------------------------------------------------------------
+    @handler("EO")
+    def eo(self, args: str) -> str:
+        ports = self.machine.ports
+        v = self._choice(args, (1, 0))
+        if v is None:
+            return self.machine.interp.num(int(ports.echo), "1.0") + "\r\n"
+        ports.echo = bool(v)
+        return ""
+
+    @handler("CW")
+    def cw(self, args: str) -> str:
+        ports = self.machine.ports
+        i = self.machine.interp
+        fields = split_fields(args)
+        if fields[0].strip() == "?":
+            return i.num(ports.cw, "1.0") + "\r\n"
+        mode = ports.cw
+        if fields[0].strip():
+            mode = int(i.evaluate(fields[0]))
+            if mode not in (0, 1, 2):
+                raise Refused(6, "CW takes 1 or 2")
+        pause = ports.cw_mode
+        if len(fields) > 1 and fields[1].strip():
+            pause = int(i.evaluate(fields[1]))
+            if pause not in (0, 1):
+                raise Refused(6, "CW second field is 0 or 1")
+        ports.cw = 2 if mode == 0 else mode
+        ports.cw_mode = pause
+        return ""
+
+    @operand("EO")
+    def echo(self) -> float:
+        return 1.0 if self.machine.ports.echo else 0.0
+
+    @operand("CW")
+    def marking(self) -> float:
+        return self.machine.ports.cw
+
+    # ---- the sample period -------------------------------------------------------------
+    @handler("TM")
+    def tm(self, args: str) -> str:
+        servo = self.machine.servo
+        spec = self.machine.spec
+        a = args.strip()
+        if a == "?":
+            return self.machine.interp.num(servo.tm, "5.2") + "\r\n"
+        if not a:
+            return ""
+        value = self.machine.interp.evaluate(a)
+        if not spec.tm_adjustable:
+            if value != servo.tm:
+                raise Refused(6, "this model's sample period is fixed")
+            return ""
+        low, high = spec.tm_range
+        if not low <= value <= high:
+            raise Refused(6, "TM out of range")
+        if any(ax.m.moving for ax in servo.axes.values()):
+            raise Refused(7, "TM while moving")
+        servo.set_tm(value)
+        for ax in servo.axes.values():
+            servo.reseat(ax, ax.m.reference)
+        return ""
+
+    @operand("TM")
+    def sample_time(self) -> float:
+        return self.machine.servo.tm
+
+    # ---- reset and identity ------------------------------------------------------------
+    @handler("RS")
+    def rs(self, args: str) -> str:
+        if args.strip():
+            raise Refused(6, "RS takes no argument")
+        self.machine.reset()
+        return ""
+
+    @handler("\x12\x13")
+    def master_reset(self, args: str) -> str:
+        self.machine.reset()
+        return ""
+
+    @handler("\x12\x16")
+    def revision(self, args: str) -> str:
+        return self.machine.identity + "\r\n"
+
+    @operand("BN")
+    def serial_number(self) -> float:
+        return 4040.0

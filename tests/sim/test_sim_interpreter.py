@@ -1,0 +1,51 @@
+"""The interpreter: expressions left to right, variables, operands and the caller's handle."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from galil.sim.clock import ManualClock
+from galil.sim.controller import SimController
+from galil.sim.parse import Refused, evaluate
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.integers(-1000, 1000), min_size=1, max_size=6), st.sampled_from("+-*"))
+def test_expressions_run_left_to_right(values: list[int], op: str) -> None:
+    text = op.join(f"({v})" for v in values)
+    expected = float(values[0])
+    for v in values[1:]:
+        expected = {"+": expected + v, "-": expected - v, "*": expected * v}[op]
+    assert evaluate(text, lambda name: 0.0) == expected
+
+
+def test_expression_errors() -> None:
+    with pytest.raises(Refused) as e:
+        evaluate("(1+2", lambda n: 0.0)
+    assert e.value.code == 59
+    assert evaluate("@ABS[-3]+$10", lambda n: 0.0) == 19
+    assert evaluate("1+2*3", lambda n: 0.0) == 9
+
+
+def test_a_variable_name_is_as_long_as_the_model_allows() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    longest = "v" * sim.spec.variable_length
+    assert sim.feed(f"{longest}=2;MG {longest}\r".encode()) == b": 2.0000\r\n:"
+    assert sim.feed(f"{longest}x=2\r".encode()) == b"?"
+
+
+def test_an_assignment_to_a_command_name_with_axes_is_the_command() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    assert sim.feed(b"PRB=500;PR ?,?;MG _PRB\r") == b": 0, 500\r\n: 500.0000\r\n:"
+    assert sim.feed(b"PRQ=7;MG PRQ\r") == b": 7.0000\r\n:"  # not an axis: a variable
+    assert sim.feed(b"CD 0=2\r") == b"?"  # CD's '=' is its own (no contour mode: TC 8)
+    assert sim.feed(b"TC\r") == b" 8\r\n:"
+
+
+def test_wh_names_the_asking_handle() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    handle = sim.open_port("host")
+    assert sim.feed(b"WH;MG _WH\r") == b"RS232\r\n:-1.0000\r\n:"
+    assert sim.feed(b"WH;MG _WH\r", port=handle) == b"IHA\r\n: 0.0000\r\n:"
