@@ -409,61 +409,6 @@ class LinkCore:
 
     # -- the exchange -----------------------------------------------------------------------
 
-    def transact(self, batch: Sequence[Command], timeout: float | None) -> list[Completed]:
-        """Send ``batch`` (pipelined) under the lock; raise for the first rejected command.
-
-        While a reconnect is under way it waits for it (up to the timeout) instead of failing.
-        """
-        t = self.timeout if timeout is None else check_timeout(timeout, self.timeout)
-        try:
-            return self._transact(batch, t)
-        except _ReopeningError:
-            self._await_reopen(t)
-            return self._transact(batch, t)
-        except GalilConnectionError as exc:
-            if not self._recover(exc):
-                raise
-            return self._after_recovery(batch, t, exc)
-
-    def _recover(self, exc: GalilConnectionError) -> bool:
-        """Reopen a dead link through ``on_dead`` (automatic reconnect); False if none."""
-        hook = self.on_dead
-        if hook is None or not self._dead or self._recovering:
-            return False
-        self._recovering = True
-        try:
-            hook(exc)
-        finally:
-            self._recovering = False
-        return True
-
-    def _after_recovery(
-        self, batch: Sequence[Command], t: float, exc: GalilConnectionError
-    ) -> list[Completed]:
-        # Queries are asked again on the new link; anything else may have run already.
-        if all(is_query(c) for c in batch):
-            return self._transact(batch, t)
-        texts = ", ".join(repr(c.text) for c in batch[:3])
-        raise self.error(
-            GalilConnectionError,
-            f"the link died during {texts} and was reopened; it was not sent again "
-            "(it may or may not have run)",
-        ) from exc
-
-    def _transact(self, batch: Sequence[Command], t: float) -> list[Completed]:
-        try:
-            with self._lock:
-                if not self._open or self._dead:
-                    raise self._closed_error()
-                done = self._roundtrip(batch, t)
-                for d in done:
-                    if not d.ok:
-                        raise self._explain(d, t)
-                return done
-        finally:
-            if self._inbox:
-                self._flush()
-
     def _roundtrip(self, batch: Sequence[Command], t: float) -> list[Completed]:
         """Write ``batch`` and read until every reply is complete (lock held).
 
@@ -605,51 +550,6 @@ class LinkCore:
                     " call reconnect()",
                 )
         self.note("link back in step")
-
-    def _explain(self, rejected: Completed, t: float) -> GalilError:
-        """Ask ``TC1`` why a command was refused; a doubtful ``?`` is no refusal.
-
-        ``TC1`` goes out with a fresh marker (``MG "TCOKn"``) right behind it: unless the
-        marker comes back as the second reply, the answers were not the ones asked for (a
-        stray ``?`` followed by the command's own reply), and the link is out of step.
-        """
-        command = rejected.command.text
-        self._asked += 1
-        token = f"TCOK{self._asked}"
-        try:
-            tc, mark = self._roundtrip([cmds.tc(1), cmds.mg(token)], t)
-        except (GalilTimeoutError, ProtocolError) as exc:
-            why = exc.args[0] if exc.args else exc
-            return self._doubt(command, f"the link went out of step asking why ({why})")
-        if not mark.ok or mark.text.strip() != token:
-            return self._doubt(command, "the answer to TC1 was not the controller's")
-        code: int | None = None
-        if tc.ok:
-            try:
-                code, text = parse_tc1(tc.text)
-            except ProtocolError:
-                return self._doubt(command, f"TC1 answered {tc.text!r}")
-        else:
-            text = "(TC1 was refused too)"
-        if code == 0:
-            # The controller has no error to report: that '?' was not its answer to us.
-            self._session.abandon()
-            return self.error(
-                ProtocolError,
-                f"{command!r} got a '?' the controller does not explain (TC1: no error); "
-                "the command may have executed",
-            )
-        error = CommandError(code, text, command, model=self.model_name, recent=self.recent)
-        hint = _case_hint(command) if code == 1 else None
-        if hint is not None:
-            error.args = (f"{error.args[0]} ({hint})",)
-        return error
-
-    def _doubt(self, command: str, why: str) -> ProtocolError:
-        self._session.abandon()  # whatever is still on its way must not pass for a reply
-        return self.error(
-            ProtocolError, f"{command!r} got '?' but {why}; the command may have executed"
-        )
 
     # -- raw I/O (lock held) ------------------------------------------------------------------
 
@@ -831,6 +731,108 @@ class LinkCore:
 class Link(LinkCore):
     """The command link: :class:`LinkCore` plus the commands the rooms above send."""
 
+    # -- the exchange -----------------------------------------------------------------------
+
+    def transact(self, batch: Sequence[Command], timeout: float | None) -> list[Completed]:
+        """Send ``batch`` (pipelined) under the lock; raise for the first rejected command.
+
+        While a reconnect is under way it waits for it (up to the timeout) instead of failing.
+        """
+        t = self.timeout if timeout is None else check_timeout(timeout, self.timeout)
+        try:
+            return self._transact(batch, t)
+        except _ReopeningError:
+            self._await_reopen(t)
+            return self._transact(batch, t)
+        except GalilConnectionError as exc:
+            if not self._recover(exc):
+                raise
+            return self._after_recovery(batch, t, exc)
+
+    def _recover(self, exc: GalilConnectionError) -> bool:
+        """Reopen a dead link through ``on_dead`` (automatic reconnect); False if none."""
+        hook = self.on_dead
+        if hook is None or not self._dead or self._recovering:
+            return False
+        self._recovering = True
+        try:
+            hook(exc)
+        finally:
+            self._recovering = False
+        return True
+
+    def _after_recovery(
+        self, batch: Sequence[Command], t: float, exc: GalilConnectionError
+    ) -> list[Completed]:
+        # Queries are asked again on the new link; anything else may have run already.
+        if all(is_query(c) for c in batch):
+            return self._transact(batch, t)
+        texts = ", ".join(repr(c.text) for c in batch[:3])
+        raise self.error(
+            GalilConnectionError,
+            f"the link died during {texts} and was reopened; it was not sent again "
+            "(it may or may not have run)",
+        ) from exc
+
+    def _transact(self, batch: Sequence[Command], t: float) -> list[Completed]:
+        try:
+            with self._lock:
+                if not self._open or self._dead:
+                    raise self._closed_error()
+                done = self._roundtrip(batch, t)
+                for d in done:
+                    if not d.ok:
+                        raise self._explain(d, t)
+                return done
+        finally:
+            if self._inbox:
+                self._flush()
+
+    def _explain(self, rejected: Completed, t: float) -> GalilError:
+        """Ask ``TC1`` why a command was refused; a doubtful ``?`` is no refusal.
+
+        ``TC1`` goes out with a fresh marker (``MG "TCOKn"``) right behind it: unless the
+        marker comes back as the second reply, the answers were not the ones asked for (a
+        stray ``?`` followed by the command's own reply), and the link is out of step.
+        """
+        command = rejected.command.text
+        self._asked += 1
+        token = f"TCOK{self._asked}"
+        try:
+            tc, mark = self._roundtrip([cmds.tc(1), cmds.mg(token)], t)
+        except (GalilTimeoutError, ProtocolError) as exc:
+            why = exc.args[0] if exc.args else exc
+            return self._doubt(command, f"the link went out of step asking why ({why})")
+        if not mark.ok or mark.text.strip() != token:
+            return self._doubt(command, "the answer to TC1 was not the controller's")
+        code: int | None = None
+        if tc.ok:
+            try:
+                code, text = parse_tc1(tc.text)
+            except ProtocolError:
+                return self._doubt(command, f"TC1 answered {tc.text!r}")
+        else:
+            text = "(TC1 was refused too)"
+        if code == 0:
+            # The controller has no error to report: that '?' was not its answer to us.
+            self._session.abandon()
+            return self.error(
+                ProtocolError,
+                f"{command!r} got a '?' the controller does not explain (TC1: no error); "
+                "the command may have executed",
+            )
+        error = CommandError(code, text, command, model=self.model_name, recent=self.recent)
+        hint = _case_hint(command) if code == 1 else None
+        if hint is not None:
+            error.args = (f"{error.args[0]} ({hint})",)
+        return error
+
+    def _doubt(self, command: str, why: str) -> ProtocolError:
+        self._session.abandon()  # whatever is still on its way must not pass for a reply
+        return self.error(
+            ProtocolError, f"{command!r} got '?' but {why}; the command may have executed"
+        )
+
     # -- commands ---------------------------------------------------------------------------
 
     def command(
@@ -849,13 +851,8 @@ class Link(LinkCore):
             GalilConnectionError: the link is closed or dead.
         """
         cmd = _PARSED.get(text) if type(text) is str else None
-        if cmd is None:
-            cmd = _parse(text) if type(text) is str else cmds.parse_line(text)
-        if cmd.parts and not allow_compound:
-            raise InvalidArgument(
-                f"{text!r} holds {len(cmd.parts)} commands; send one command, or pass "
-                "allow_compound=True, or use command_line([...])"
-            )
+        if cmd is None or (cmd.parts and not allow_compound):
+            cmd = _one_command(text, allow_compound)
         t = self.timeout if timeout is None else check_timeout(timeout, self.timeout)
         lock = self._lock
         # acquire/release rather than `with`: half the cost on the hot path (~0.3 us).
@@ -1028,6 +1025,17 @@ class Link(LinkCore):
     def query_ints(self, names: Sequence[str], *, timeout: float | None = None) -> list[int]:
         """:meth:`query_operands`, each value rounded to an integer."""
         return [round(v) for v in self.query_operands(names, timeout=timeout)]
+
+
+def _one_command(text: str, allow_compound: bool) -> Command:
+    """Parse a raw line; refuse a stray ``;`` unless a compound line is asked for."""
+    cmd = _parse(text) if type(text) is str else cmds.parse_line(text)
+    if cmd.parts and not allow_compound:
+        raise InvalidArgument(
+            f"{text!r} holds {len(cmd.parts)} commands; send one command, or pass "
+            "allow_compound=True, or use command_line([...])"
+        )
+    return cmd
 
 
 class _ReopeningError(GalilConnectionError):

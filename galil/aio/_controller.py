@@ -319,7 +319,7 @@ class AsyncController(MotionRoom[Controller]):
 
         def __getattr__(self, name: str) -> AsyncAxis:
             if len(name) == 1 and name.isupper():
-                sync = self.__dict__.get("sync")
+                sync = self.__dict__.get("_sync")
                 if sync is not None:
                     with contextlib.suppress(InvalidArgument):
                         return self.axis(name)

@@ -31,6 +31,7 @@ __all__ = ["Room", "Worker", "shielded", "twin"]
 P = ParamSpec("P")
 R = TypeVar("R")
 S = TypeVar("S")
+S_co = TypeVar("S_co", covariant=True)
 
 _Job = tuple["concurrent.futures.Future[Any]", Callable[[], Any]]
 
@@ -162,16 +163,24 @@ class Worker:
             self._jobs.put(None)
 
 
-class Room(Generic[S]):
+class Room(Generic[S_co]):
     """An async twin of one sync object: the object and the worker its calls run on.
+
+    Covariant: a twin of a base class's method (``LinkFacade.command``) serves a room of a
+    subclass (``Controller``).
 
     Attributes:
         sync: the sync object (its cheap, I/O-free members may be used directly).
     """
 
-    def __init__(self, sync: S, worker: Worker) -> None:
-        self.sync = sync
+    def __init__(self, sync: S_co, worker: Worker) -> None:
+        self._sync = sync
         self._worker = worker
+
+    @property
+    def sync(self) -> S_co:
+        """The sync object (its cheap, I/O-free members may be used directly)."""
+        return self._sync
 
     async def run(self, fn: Callable[P, R], /, *args: P.args, **kwargs: P.kwargs) -> R:
         """Run any blocking callable on this controller's worker (a room without a twin)."""

@@ -1,0 +1,184 @@
+"""What a user holds of the link: commands, queries, time, messages and data records.
+
+:class:`LinkFacade` is the part of :class:`~galil.controller.Controller` that only passes
+calls on to the link (:mod:`galil.link`), the message room and the record room; it holds no
+logic. The controller adds the life cycle, the axes and motion on top.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any
+
+from galil.errors import GalilConnectionError, InvalidArgument
+from galil.link import Link, WireLog, check_timeout
+from galil.messages import MessageCallback, MessageQueue, Messages
+from galil.models import ModelSpec
+from galil.protocol.commands import Command
+from galil.protocol.session import Completed
+from galil.records import Records, RecordStream
+from galil.transport import Transport
+
+__all__ = ["LinkFacade"]
+
+
+class LinkFacade:
+    """Commands, queries, time, messages and records of one controller (see ``Controller``).
+
+    Attributes:
+        link: the command link.
+        messages_room: unsolicited output.
+        records_room: data records.
+    """
+
+    link: Link
+    messages_room: Messages
+    records_room: Records
+
+    @property
+    def model(self) -> ModelSpec:
+        """The controller's :class:`~galil.models.ModelSpec`."""
+        return self.link.model
+
+    @property
+    def transport(self) -> Transport:
+        """The open :class:`~galil.transport.Transport`."""
+        t = self.link.transport
+        if t is None:  # pragma: no cover - a Controller always has one
+            raise GalilConnectionError("no transport")
+        return t
+
+    @property
+    def timeout(self) -> float:
+        """Default seconds to wait for each reply."""
+        return self.link.timeout
+
+    @timeout.setter
+    def timeout(self, seconds: float) -> None:
+        self.link.timeout = check_timeout(seconds, self.link.timeout)
+
+    @property
+    def wire_log(self) -> WireLog:
+        """Hooks on the raw bytes of the command link."""
+        return self.link.wire_log
+
+    @property
+    def bytes_sent(self) -> int:
+        """Bytes written to the command link."""
+        return self.link.bytes_sent
+
+    @property
+    def bytes_received(self) -> int:
+        """Bytes read from the command link."""
+        return self.link.bytes_received
+
+    @property
+    def recent(self) -> tuple[str, ...]:
+        """The last exchanges on the link, oldest first (what errors carry)."""
+        return self.link.recent
+
+    @property
+    def sample_period(self) -> float:
+        """Seconds per servo sample."""
+        return self.link.sample_period
+
+    def command(
+        self, text: str, *, timeout: float | None = None, allow_compound: bool = False
+    ) -> str:
+        """Send one raw command line and return its reply text (see :meth:`Link.command`).
+
+        Raises:
+            InvalidArgument: the text cannot be sent (CR/LF, non-ASCII, a stray ``;``).
+            CommandError: the controller answered ``?`` (code and text from ``TC1``).
+            ProtocolError: the link went out of step during the exchange (it may have run).
+            GalilTimeoutError: no complete reply within the timeout.
+            GalilConnectionError: the link is closed or dead.
+        """
+        return self.link.command(text, timeout=timeout, allow_compound=allow_compound)
+
+    def command_line(
+        self, parts: Sequence[str | Command], *, timeout: float | None = None
+    ) -> list[str]:
+        """Send several commands as compound line(s) (``PRA=1;BGA``); one reply per part."""
+        return self.link.command_line(parts, timeout=timeout)
+
+    def send(self, command: Command, *, timeout: float | None = None) -> str:
+        """Send a prepared :class:`~galil.protocol.commands.Command`; return its reply text."""
+        return self.link.send(command, timeout=timeout)
+
+    def exchange(self, command: Command, *, timeout: float | None = None) -> Completed:
+        """Send a prepared command and return the whole reply (``record`` for QR)."""
+        return self.link.exchange(command, timeout=timeout)
+
+    def send_many(self, commands: Iterable[Command], *, timeout: float | None = None) -> list[str]:
+        """Send prepared commands back to back (pipelined) and return every reply text."""
+        return self.link.send_many(commands, timeout=timeout)
+
+    def query_number(self, text: str, *, timeout: float | None = None) -> float:
+        """Send a query (``"MG _TPA"``, ``"TPA"``) and return its one number."""
+        return self.link.query_number(text, timeout=timeout)
+
+    def query_numbers(self, text: str, *, timeout: float | None = None) -> list[float]:
+        """Send a query and return every number in its reply (``"TP"`` -> ``[0.0, 5.0, ...]``)."""
+        return self.link.query_numbers(text, timeout=timeout)
+
+    def query_operands(self, names: Sequence[str], *, timeout: float | None = None) -> list[float]:
+        """Read operands or variables (``["_TPA", "_SCA", "speed"]``) in as few lines as fit."""
+        return self.link.query_operands(names, timeout=timeout)
+
+    def sleep(self, seconds: float) -> None:
+        """Let ``seconds`` pass for the controller (simulated time on a manual-clock simulator).
+
+        Scripts that wait between commands should use this rather than ``time.sleep`` so the
+        same script runs instantly against the simulator in tests.
+        """
+        if (
+            isinstance(seconds, bool)
+            or not isinstance(seconds, (int, float))
+            or not math.isfinite(seconds)
+            or seconds < 0
+        ):
+            raise InvalidArgument(f"seconds must be a non-negative finite number, got {seconds!r}")
+        self.link.pause(float(seconds))
+
+    # -- unsolicited output and records -----------------------------------------------------
+
+    @property
+    def messages(self) -> MessageQueue:
+        """Unsolicited lines (program ``MG`` output ...) as a queue: ``messages.get(timeout)``.
+
+        Reading it starts the background poll of an idle link.
+        """
+        self.messages_room.ensure_polling()
+        return self.messages_room.queue
+
+    def subscribe(self, callback: MessageCallback) -> Callable[[], None]:
+        """Call ``callback(line)`` for each unsolicited line, in order, outside the link lock
+        (a callback may send commands itself). Returns a function that unsubscribes."""
+        return self.messages_room.subscribe(callback)
+
+    def record(self, axes: str = "", *, as_dict: bool = False, timeout: float | None = None) -> Any:
+        """Read one data record (``QR``) and decode it.
+
+        Returns:
+            A structured numpy record (``rec["A"]["position"]``, ``rec["sample"]``,
+            ``rec["error_code"]``; field names in :mod:`galil.protocol.records`), or a dict.
+        """
+        if as_dict:
+            return self.records_room.record_dict(axes, timeout=timeout)
+        return self.records_room.record(axes, timeout=timeout)
+
+    def records(self, period: int, *, method: str = "auto", maxlen: int = 10_000) -> RecordStream:
+        """Stream data records every ``period`` servo samples.
+
+        ``"DR"`` (the default over Ethernet) has the controller push them (``DR period,h``) to
+        a handle opened for them alone; ``"QR"`` (elsewhere) polls, one ``QR`` per record when
+        it is due. Close the stream (or use it as a context manager) to stop it.
+
+        Raises:
+            InvalidArgument: bad period or method, DR where there is no handle for it, or the
+                model has no data record.
+            CommandError: the controller refused ``DR`` (a period below its minimum ...).
+        """
+        return self.records_room.stream(period, method=method, maxlen=maxlen)
