@@ -44,9 +44,12 @@ __all__ = [
     "assign",
     "bg",
     "bl",
+    "ca",
     "cd",
     "cd_end",
     "cm",
+    "cr",
+    "cs",
     "cw",
     "dc",
     "dl",
@@ -54,11 +57,16 @@ __all__ = [
     "dt",
     "eo",
     "fl",
+    "ga",
+    "gr",
     "hx",
     "identify",
     "ip",
     "it",
     "jg",
+    "le",
+    "li",
+    "lm",
     "lz",
     "mc",
     "mg",
@@ -86,6 +94,13 @@ __all__ = [
     "ts",
     "tv",
     "ul",
+    "va",
+    "vd",
+    "ve",
+    "vm",
+    "vp",
+    "vs",
+    "vt",
     "wc",
     "xq",
 ]
@@ -431,7 +446,7 @@ def _checker(kind: str, model: ModelSpec | None) -> _Checker:
     key: tuple[object, ...] = (kind,)
     if model is not None:
         key = (kind, model.name, model.ac_min, model.ac_max, model.sp_max, model.cd_max)
-        key += model.it_range
+        key += (*model.it_range, model.li_max, model.gr_max)
     found = _CHECKERS.get(key)
     if found is not None:
         return found
@@ -455,6 +470,12 @@ def _checker(kind: str, model: ModelSpec | None) -> _Checker:
     elif kind == "CD":
         hi = INT32_MAX if model is None else model.cd_max
         found = _Checker(kind, -hi, hi, model, integer=True)
+    elif kind == "LI":
+        hi = _DEFAULT_NAMES.li_max if model is None else model.li_max
+        found = _Checker(kind, -hi, hi, model, integer=True)
+    elif kind == "GR":
+        g = _DEFAULT_NAMES.gr_max if model is None else model.gr_max
+        found = _Checker(kind, -g, g, model, integer=False)
     else:  # pragma: no cover - programming error
         raise KeyError(kind)
     _CHECKERS[key] = found
@@ -681,6 +702,186 @@ def dt(n: int, *, model: ModelSpec | None = None) -> Command:
 def wc() -> Command:
     """WC: trippoint, the ``:`` comes when the current contour segment is complete."""
     return Command("WC")
+
+
+# ------------------------------------------------------------------------- coordinated motion
+
+_MASTER = re.compile(r"[CD]?([A-HXYZW])|[ST]|N")
+
+
+def _plane(plane: str) -> str:
+    if plane not in ("S", "T"):
+        raise InvalidArgument(f"a coordinate system (plane) is S or T, not {plane!r}")
+    return plane
+
+
+def ca(plane: str = "S") -> Command:
+    """CA: select the coordinate system (``S`` or ``T``) the sequence commands apply to."""
+    return Command(f"CA {_plane(plane)}")
+
+
+def cs(plane: str = "S") -> Command:
+    """CS: clear the sequence (the queued segments) of coordinate system ``plane``."""
+    return Command(f"CS {_plane(plane)}")
+
+
+def vm(axes: str | Iterable[str], *, model: ModelSpec | None = None) -> Command:
+    """VM: vector mode on two axes, the plane of ``VP`` and ``CR`` (``VM AB``)."""
+    letters = _axis_list(axes, model)
+    if len(letters) != 2:
+        raise InvalidArgument(f"VM takes two axes (the plane), got {letters!r}")
+    return Command(f"VM {letters}")
+
+
+def lm(axes: str | Iterable[str], *, model: ModelSpec | None = None) -> Command:
+    """LM: linear interpolation on 1 to 8 axes (``LM ABC``)."""
+    letters = _axis_list(axes, model)
+    if not letters:
+        raise InvalidArgument("LM needs at least one axis")
+    return Command(f"LM {letters}")
+
+
+def vp(x: object, y: object) -> Command:
+    """VP: a straight segment to ``(x, y)``, counts from where the sequence began (32-bit)."""
+    return Command(f"VP {_count(x, 'VP')},{_count(y, 'VP')}")
+
+
+def cr(radius: object, start: object, sweep: object, *, model: ModelSpec | None = None) -> Command:
+    """CR: a circular segment of ``radius`` counts from angle ``start`` through ``sweep`` degrees.
+
+    0 degrees is the first plane axis's positive direction; a positive sweep turns
+    counter-clockwise. Ranges (radius, angles, radius × sweep) come from the model.
+    """
+    spec = _DEFAULT_NAMES if model is None else model
+    name = None if model is None else model.name
+    lo, hi = spec.cr_radius
+    r = _ranged(radius, lo, hi, "CR radius", model=name)
+    amax = spec.cr_angle_max
+    theta = _ranged(start, -amax, amax, "CR start angle", model=name)
+    delta = _ranged(sweep, -amax, amax, "CR sweep", model=name)
+    if float(delta) == 0:
+        raise InvalidArgument("CR sweep must not be 0 degrees")
+    arc = _number(radius, "CR radius") * _number(sweep, "CR sweep")
+    _ranged(arc, -spec.cr_arc_max, spec.cr_arc_max, "CR radius × sweep", model=name)
+    return Command(f"CR {r},{theta},{delta}")
+
+
+def ve() -> Command:
+    """VE: the vector sequence ends with the segments given (decelerate to the last one)."""
+    return Command("VE")
+
+
+def le() -> Command:
+    """LE: the linear-interpolation sequence ends with the segments given."""
+    return Command("LE")
+
+
+def li(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """LI: one linear segment, an increment per axis in counts (fields by axis, as PR)."""
+    text = _axis_command("LI", values, by_axis, model)
+    if "=" in text:  # "LIA=5" is a valid form, but one form is easier to read in a log
+        table = _axes(model)
+        ((letter, value),) = by_axis.items()
+        fields = [""] * (table.position(letter) + 1)
+        fields[-1] = _checker("LI", model)(value, letter)
+        text = "LI " + ",".join(fields)
+    return Command(text)
+
+
+def _plane_value(
+    mnemonic: str,
+    value: object,
+    lo: float,
+    hi: float,
+    plane: str,
+    model: str | None,
+    *,
+    integer: bool = False,
+) -> Command:
+    text = _ranged(value, lo, hi, mnemonic, model=model, integer=integer)
+    return Command(f"{mnemonic}{_plane(plane)}={text}")
+
+
+def vs(speed: object, plane: str = "S", *, model: ModelSpec | None = None) -> Command:
+    """VS: vector speed of ``plane`` along the path, counts/s (``VSS=20000``)."""
+    spec = _DEFAULT_NAMES if model is None else model
+    hi = spec.vs_max if spec.vs_max is not None else spec.sp_max
+    return _plane_value(
+        "VS", speed, spec.sp_resolution, hi, plane, None if model is None else model.name
+    )
+
+
+def va(accel: object, plane: str = "S", *, model: ModelSpec | None = None) -> Command:
+    """VA: vector acceleration of ``plane``, counts/s² (``VAS=256000``)."""
+    spec = _DEFAULT_NAMES if model is None else model
+    hi = spec.va_max if spec.va_max is not None else spec.ac_max
+    return _plane_value("VA", accel, spec.ac_min, hi, plane, None if model is None else model.name)
+
+
+def vd(decel: object, plane: str = "S", *, model: ModelSpec | None = None) -> Command:
+    """VD: vector deceleration of ``plane``, counts/s² (``VDS=256000``)."""
+    spec = _DEFAULT_NAMES if model is None else model
+    hi = spec.va_max if spec.va_max is not None else spec.ac_max
+    return _plane_value("VD", decel, spec.ac_min, hi, plane, None if model is None else model.name)
+
+
+def vt(smoothing: object, plane: str = "S", *, model: ModelSpec | None = None) -> Command:
+    """VT: vector time constant (smoothing) of ``plane``, as IT (refused where the model has
+    none: those smooth a sequence with the axes' IT)."""
+    if model is not None and not model.vt:
+        raise InvalidArgument(
+            f"{model.name} has no VT; its sequences are smoothed by the axes' IT", model=model.name
+        )
+    lo, hi = IT_RANGE if model is None else model.it_range
+    return _plane_value("VT", smoothing, lo, hi, plane, None if model is None else model.name)
+
+
+def ga(*masters: str | None, model: ModelSpec | None = None, **by_axis: str) -> Command:
+    """GA: the gearing master of each follower, by follower position (``GA ,CA``).
+
+    A master is an axis letter (its main encoder), ``C`` + letter (its commanded position),
+    ``D`` + letter (its auxiliary encoder), ``S``/``T`` (the vector distance of a plane) or
+    ``N`` (the virtual axis).
+    """
+    table = _axes(model)
+    fields: list[str] = ["" if m is None else m for m in masters]
+    if len(fields) > table.nax:
+        raise InvalidArgument(f"GA: {len(fields)} masters for {table.nax} axes")
+    for letter, master in by_axis.items():
+        idx = table.position(letter)
+        if idx >= len(fields):
+            fields.extend([""] * (idx + 1 - len(fields)))
+        elif fields[idx]:
+            raise InvalidArgument(f"GA: axis {letter!r} given twice")
+        fields[idx] = master
+    for i, master in enumerate(fields):
+        if not master:
+            continue
+        m = _MASTER.fullmatch(master) if isinstance(master, str) else None
+        if m is None or (m.group(1) is not None and m.group(1) not in table.index):
+            raise InvalidArgument(
+                f"GA: {master!r} is not a master (an axis, C or D + axis, S, T or N)",
+                model=table.model_name,
+            )
+        if m.group(1) is not None and table.index[m.group(1)] == i:
+            raise InvalidArgument(f"GA: axis {table.ordered[i]} cannot follow itself (TC 46)")
+    while fields and not fields[-1]:
+        fields.pop()
+    if not fields:
+        raise InvalidArgument("GA: no master given")
+    return Command("GA " + ",".join(fields))
+
+
+def gr(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """GR: gear ratio per follower (``GR ,0.5``); 0 turns that axis's gearing off."""
+    text = _axis_command("GR", values, by_axis, model)
+    if "=" in text:
+        table = _axes(model)
+        ((letter, value),) = by_axis.items()
+        fields = [""] * (table.position(letter) + 1)
+        fields[-1] = _checker("GR", model)(value, letter)
+        text = "GR " + ",".join(fields)
+    return Command(text)
 
 
 # --------------------------------------------------------------------------------- queries, setup
