@@ -164,6 +164,12 @@ class VectorProfiler:
         return self._ended
 
     @property
+    def end_point(self) -> tuple[float, ...]:
+        """Ideal end of the path queued so far, counts from the sequence origin (a ``VP``'s
+        absolute coordinates minus this, from its whole-count anchor, give its ``Line``)."""
+        return self._layout.end_point
+
+    @property
     def kind(self) -> str | None:
         """``"vector"`` (VP/CR), ``"linear"`` (LI), or ``None`` before the first segment."""
         return self._layout.kind

@@ -28,6 +28,8 @@ __all__ = ["Caller", "Command", "Interpreter", "int32"]
 Caller = Port | Thread | None
 
 _RESERVED = frozenset({"TIME"})
+#: The coordinate systems (vector planes).
+_PLANES = ("S", "T")
 
 
 @dataclass(frozen=True)
@@ -61,6 +63,9 @@ class Interpreter:
         operands: plain operands (``_TC``) -> value.
         axis_operands: axis operands (``_TPA``) -> value of an axis.
         index_operands: indexed operands (``_XQ0``) -> value for the text after the name.
+        plane_commands: commands for coordinate systems (``BG S``) -> :class:`Command`,
+            beside (not instead of) the axis command of the same name.
+        plane_operands: coordinate-system operands (``_BGS``) -> value for the plane letter.
         functions: expression functions (``@ABS[x]``) -> value for the argument.
         caller: who runs the command being executed (``WH``, ``CF I``, ``DL``).
         tc: the error code of the last refused command.
@@ -73,6 +78,8 @@ class Interpreter:
         self.operands: dict[str, Callable[[], float]] = {}
         self.axis_operands: dict[str, Callable[[Axis], float]] = {}
         self.index_operands: dict[str, Callable[[str], float]] = {}
+        self.plane_commands: dict[str, Command] = {}
+        self.plane_operands: dict[str, Callable[[str], float]] = {}
         self.functions: dict[str, Callable[[float], float]] = dict(FUNCTIONS)
         self.caller: Caller = None
         self._variable = re.compile(rf"[A-Za-z][A-Za-z0-9]{{0,{spec.variable_length - 1}}}")
@@ -112,6 +119,10 @@ class Interpreter:
             return control.run("")
         eq = _find_eq(s)
         command = self.commands.get(s[:2])
+        if self.plane_commands:
+            planes = self._planes(s)
+            if planes is not None:
+                return self.plane_commands[s[:2]].run(planes)
         if command is not None:
             if eq > 0 and not command.spec.equals:
                 name = s[:eq].strip()
@@ -127,6 +138,15 @@ class Interpreter:
         if eq > 0:
             return self.assign(s[:eq].strip(), s[eq + 1 :])
         raise Refused(1, f"unrecognised command {s!r}")
+
+    def _planes(self, s: str) -> list[str] | None:
+        """The planes a plane command names (``BG ST``), or ``None`` if it is not one."""
+        if s[:2] not in self.plane_commands:
+            return None
+        letters = s[2:].replace(" ", "").replace(",", "")
+        if not letters or any(c not in _PLANES for c in letters):
+            return None
+        return list(dict.fromkeys(letters))
 
     def _is_axis_spec(self, text: str) -> bool:
         letters = text.replace(" ", "").replace(",", "")
@@ -182,6 +202,10 @@ class Interpreter:
             Refused: TC 1 for an unknown operand, TC 4 for an unknown axis.
         """
         code, rest = name[:2], name[2:]
+        if rest in _PLANES:
+            plane = self.plane_operands.get(code)
+            if plane is not None:
+                return float(plane(rest))
         if not rest:
             plain = self.operands.get(code)
             if plain is not None:

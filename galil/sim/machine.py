@@ -30,6 +30,7 @@ from galil.sim.parse import Refused, next_command
 from galil.sim.ports import Port, Ports
 from galil.sim.programs import Programs
 from galil.sim.registry import (
+    Args,
     Download,
     FunctionSpec,
     HandlerSpec,
@@ -167,7 +168,9 @@ class Machine:
         for attr in dir(type(room)):
             for spec in _marks(type(room), attr):
                 fn = getattr(room, attr)
-                if isinstance(spec, HandlerSpec):
+                if isinstance(spec, HandlerSpec) and spec.args is Args.PLANES:
+                    _claim(interp.plane_commands, spec.name, Command(spec, fn), "plane command")
+                elif isinstance(spec, HandlerSpec):
                     _claim(interp.commands, spec.name, Command(spec, fn), "command")
                 elif isinstance(spec, FunctionSpec):
                     _claim(interp.functions, spec.name, fn, "function")
@@ -175,6 +178,8 @@ class Machine:
                     _claim(interp.axis_operands, spec.name, fn, "operand")
                 elif spec.kind is OperandKind.INDEX:
                     _claim(interp.index_operands, spec.name, fn, "operand")
+                elif spec.kind is OperandKind.PLANE:
+                    _claim(interp.plane_operands, spec.name, fn, "plane operand")
                 else:
                     _claim(interp.operands, spec.name, fn, "operand")
 

@@ -120,6 +120,19 @@ class AxisMotion:
             return True
         return not self.profiler.moving and self.encoder == self.reference
 
+    def preview_encoder(self, n: int) -> npt.NDArray[np.int64]:
+        """The encoder positions of the next ``n`` samples, without running them (what an
+        axis geared to this one's encoder follows)."""
+        refs = self.profiler.preview(n)
+        if not self.motor_on:
+            return np.full(refs.size, self.encoder, dtype=np.int64)
+        if self._alpha >= 1.0:
+            return refs
+        out: npt.NDArray[np.int64] = np.rint(smooth(refs, self._alpha, self.actual)).astype(
+            np.int64
+        )
+        return out
+
     def start_trace(self) -> None:
         """Start keeping every sample's reference position (drops an earlier trace)."""
         self._trace = [np.array([self.reference], dtype=np.int64)]

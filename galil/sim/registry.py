@@ -43,14 +43,20 @@ class Args(enum.Enum):
     AXES = "axes"
     #: Per-axis fields (``PR 1,,3``, ``PRB=5``, ``SP ?``): ``list[tuple[Axis, str]]``.
     VALUES = "values"
+    #: Coordinate systems (``BG S``, ``ST ST``): ``list[str]`` of plane letters. Such a
+    #: handler answers a command another room answers for axes (``BG A``); the interpreter
+    #: calls it when every letter named is a plane.
+    PLANES = "planes"
 
 
 class OperandKind(enum.Enum):
-    """Where an operand's name ends: ``_TC`` (plain), ``_TPA`` (axis), ``_XQ0`` (index)."""
+    """Where an operand's name ends: ``_TC`` (plain), ``_TPA`` (axis), ``_XQ0`` (index),
+    ``_BGS`` (a coordinate system, S or T: the method takes the plane letter)."""
 
     PLAIN = "plain"
     AXIS = "axis"
     INDEX = "index"
+    PLANE = "plane"
 
 
 @dataclass(frozen=True)

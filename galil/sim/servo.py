@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from galil.errors import CommandError, InvalidArgument
@@ -90,6 +90,7 @@ class Servo:
         self._time_base = clock.now()
         self._sample_base = 0
         self.axes: dict[str, Axis] = {}
+        self._order: list[Axis] = []
         self.horizon_hooks: list[Callable[[int], int]] = []
         self.watch_hooks: list[Callable[[list[Watch]], None]] = []
         self.after_step_hooks: list[Callable[[], None]] = []
@@ -101,6 +102,16 @@ class Servo:
         self.axes = {
             letter: Axis(letter, AxisMotion(self.ts, 0, self.lag)) for letter in self.spec.axes
         }
+        self.step_first(())
+
+    def step_first(self, letters: Sequence[str]) -> None:
+        """Step the axes ``letters`` before the others, in that order, at every step.
+
+        An axis whose reference follows another axis's (a gear follower) reads that axis's
+        preview of the step, so it must step before it: the room that couples them says so.
+        """
+        first = [self.axes[c] for c in letters]
+        self._order = first + [ax for ax in self.axes.values() if ax not in first]
 
     # ---- time --------------------------------------------------------------------------
     def set_tm(self, tm: float) -> None:
@@ -155,19 +166,19 @@ class Servo:
 
     def _profile_ends(self, k: int) -> int:
         """Shorten a step to end where a profile ends (saves a bisection for AM)."""
-        now = self.sample
         for ax in self.axes.values():
             prof = ax.m.profiler
             if prof.moving:
                 end = prof.end_sample
-                if end is not None and now < end < now + k:
-                    k = end - now
+                # A profiler counts its own samples (a reseated axis starts again at 0).
+                if end is not None and 0 < end - prof.sample < k:
+                    k = end - prof.sample
         return k
 
     def _step(self, n: int, watches: list[Watch]) -> int:
         """Advance ``n`` samples, or fewer when a watch fires first; return samples run."""
         if not watches:
-            for ax in self.axes.values():
+            for ax in self._order:
                 ax.m.step(n)
             self.sample += n
         else:
@@ -200,17 +211,21 @@ class Servo:
         return hi
 
     def _advance(self, n: int) -> None:
-        for ax in self.axes.values():
+        for ax in self._order:
             ax.m.step(n)
         self.sample += n
 
     def _snapshot(self) -> tuple[int, dict[str, AxisMotion]]:
-        return self.sample, {k: copy.deepcopy(a.m) for k, a in self.axes.items()}
+        # One memo for every axis: what several axes share (the sequence that drives the
+        # axes of a vector plane) stays shared in the copy.
+        memo: dict[int, object] = {}
+        return self.sample, {k: copy.deepcopy(a.m, memo) for k, a in self.axes.items()}
 
     def _restore(self, snap: tuple[int, dict[str, AxisMotion]]) -> None:
         self.sample = snap[0]
+        memo: dict[int, object] = {}
         for k, m in snap[1].items():
-            self.axes[k].m = copy.deepcopy(m)
+            self.axes[k].m = copy.deepcopy(m, memo)
 
 
 def _nothing() -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from galil.sim.machine import Room
 from galil.sim.rooms.contour import Contour
+from galil.sim.rooms.gearing import Gearing
 from galil.sim.rooms.handles import Handles
 from galil.sim.rooms.limits import Limits
 from galil.sim.rooms.motion import Motion
@@ -18,10 +19,12 @@ from galil.sim.rooms.records import Records
 from galil.sim.rooms.reports import Reports
 from galil.sim.rooms.settings import Settings
 from galil.sim.rooms.trippoints import Trippoints
+from galil.sim.rooms.vector import Vector
 
 __all__ = [
     "ROOMS",
     "Contour",
+    "Gearing",
     "Handles",
     "Limits",
     "Motion",
@@ -30,6 +33,7 @@ __all__ = [
     "Reports",
     "Settings",
     "Trippoints",
+    "Vector",
     "rooms_with",
 ]
 
@@ -39,6 +43,8 @@ ROOMS: tuple[type[Room], ...] = (
     Records,
     Limits,
     Contour,
+    Vector,
+    Gearing,
     Motion,
     Trippoints,
     Reports,
