@@ -24,10 +24,13 @@ from galil.models import ModelSpec, get_model
 from galil.motion import MoveHandle, MoveResult
 from galil.predict import MultiProfile, Profile
 from galil.records import RecordStream
+from galil.segments import Arc, Line, VectorPlan
+from galil.vector import VectorHandle
 
 __version__ = "0.1.0.dev0"
 
 __all__ = [
+    "Arc",
     "Axis",
     "CommandError",
     "ContourResult",
@@ -39,6 +42,7 @@ __all__ = [
     "GalilTimeoutError",
     "InvalidArgument",
     "LimitError",
+    "Line",
     "MessageQueue",
     "ModelSpec",
     "MotionError",
@@ -50,6 +54,8 @@ __all__ = [
     "ReconnectPolicy",
     "RecordStream",
     "ScheduleError",
+    "VectorHandle",
+    "VectorPlan",
     "__version__",
     "connect",
     "find",

@@ -14,6 +14,7 @@ from typing import Any
 
 from galil import codes, predict
 from galil.errors import InvalidArgument, LimitError
+from galil.gearing import Gearing, gear_to
 from galil.link import CommandLink
 from galil.models import INT32_MAX, INT32_MIN
 from galil.motion import Display, MotionTracker, MoveHandle, stop_axes
@@ -453,6 +454,21 @@ class Axis:
                 )
             )
         return pairs
+
+    def gear_to(self, master: Axis | str, ratio: float) -> Gearing:
+        """Follow ``master`` (an axis, or ``"S"``: the path of the S sequences) at ``ratio``.
+
+        Sends ``GA`` (the master's commanded position) and ``GR``. Every move of the master
+        then predicts this axis too (in its handle's ``profiles``); ``ST``, a limit or ``AB``
+        on this axis turns the gearing off, as does :meth:`Gearing.off`.
+
+        Raises:
+            InvalidArgument: this axis or the master moving, a master that is geared itself
+                (TC 46), the motor off.
+            LimitError: a ratio beyond the model's range.
+        """
+        name = master.letter if isinstance(master, Axis) else master
+        return gear_to(self._link, self._tracker, self.letter, name, ratio, display=self._display)
 
     def stop(self) -> None:
         """Decelerate to a stop (``ST``) at DC."""

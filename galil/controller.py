@@ -19,7 +19,7 @@ import contextlib
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -37,8 +37,10 @@ from galil.moves import execute_move
 from galil.protocol import commands as cmds
 from galil.records import Records
 from galil.routines import Routines
+from galil.segments import Arc, Line, PathAxis, VectorPlan, show
 from galil.transport import Transport, open_transport
 from galil.units import path_to_counts
+from galil.vector import VectorHandle, VectorStream
 from galil.watchdog import Watchdog, check_watchdog_args
 
 __all__ = ["CLIENT_OPTIONS", "Controller", "ReconnectPolicy", "connect"]
@@ -446,6 +448,85 @@ class Controller(LinkFacade):
         )
         with user_units({a.letter: a for a in chosen}):
             return stream.run(progress=progress, timeout=timeout)
+
+    def _vector(self, axes: str, segments: Sequence[Line | Arc], **options: Any) -> VectorStream:
+        names = list(axes) if isinstance(axes, str) else [str(a) for a in axes]
+        chosen = [self.axis(a) for a in names]
+        path_axes = [PathAxis(a.letter, a.scale, a.display) for a in chosen]
+        masters = "".join(a.letter for a in chosen) + "S"
+        return VectorStream(
+            self.link,
+            path_axes,
+            segments,
+            byte_rate=self.link.byte_rate,
+            followers=self.tracker.followers(masters),
+            **options,
+        )
+
+    def vector_move(
+        self,
+        axes: str,
+        segments: Sequence[Line | Arc],
+        *,
+        speed: Any,
+        accel: Any = None,
+        decel: Any = None,
+        smoothing: float | None = None,
+        mode: str | None = None,
+        stream: bool = True,
+    ) -> VectorHandle:
+        """Run a path of :class:`~galil.Line` and :class:`~galil.Arc` segments on ``axes``.
+
+        The whole path is predicted and checked first (VS/VA/VD ranges, segment lengths and
+        the total (TC 30/31), the buffer, each axis's speed and acceleration along the path,
+        the soft limits); a refusal names the segment and the sample, and nothing is sent.
+        Then the sequence goes out (``VM``/``VP``/``CR`` on two axes, ``LM``/``LI`` on more,
+        or as ``mode`` says), begins with ``BG S``, and what the buffer cannot hold yet is
+        streamed as it frees up; the call returns once everything is sent.
+
+        Args:
+            axes: the path's axes, in the order of the segments' components (``"AB"``).
+            segments: the path, in each axis's user units (counts without a scale).
+            speed, accel, decel: along the path (a Quantity when the axes share a scale,
+                counts otherwise); ``accel``/``decel`` default to the controller's VA/VD.
+            smoothing: VT, on models that have it (others smooth with the first axis's IT).
+            mode: ``"vector"`` (VM) or ``"linear"`` (LM); default: vector on two axes.
+            stream: with ``False`` a path longer than the buffer is refused instead.
+
+        Returns:
+            A :class:`~galil.vector.VectorHandle`: ``wait()``, ``stop()``, ``profiles`` per
+            axis, ``vector`` (the prediction in user units), ``begin``.
+        """
+        options = {"speed": speed, "accel": accel, "decel": decel}
+        run = self._vector(axes, segments, smoothing=smoothing, mode=mode, stream=stream, **options)
+        with user_units({a.letter: self.axes[a.letter] for a in run.axes}):
+            run.prepare()
+        return run.start(self.tracker)
+
+    def plan_vector(
+        self,
+        axes: str,
+        segments: Sequence[Line | Arc],
+        *,
+        speed: Any,
+        accel: Any = None,
+        decel: Any = None,
+        smoothing: float | None = None,
+        mode: str | None = None,
+        stream: bool = True,
+    ) -> VectorPlan:
+        """Predict and check :meth:`vector_move` without sending anything (one state query).
+
+        Returns:
+            A :class:`~galil.segments.VectorPlan`: ``duration``, ``position(axis)`` and
+            ``profiles`` per axis, ``path`` and ``speed`` along the path (in the axes' common
+            unit), ``plot()``.
+        """
+        options = {"speed": speed, "accel": accel, "decel": decel}
+        run = self._vector(axes, segments, smoothing=smoothing, mode=mode, stream=stream, **options)
+        with user_units({a.letter: self.axes[a.letter] for a in run.axes}):
+            profile = run.prepare()
+        return show(profile, run.axes, run.path)
 
     if not TYPE_CHECKING:  # mypy knows the letters below, and nothing else
 

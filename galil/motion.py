@@ -10,6 +10,7 @@ motion exactly (a speed change, an ``IP``, an ``ST``) instead of guessing from t
 from __future__ import annotations
 
 import contextlib
+import copy
 import math
 import threading
 import time
@@ -17,6 +18,9 @@ import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
+
+import numpy as np
+import numpy.typing as npt
 
 from galil import codes, predict
 from galil.errors import (
@@ -32,6 +36,7 @@ from galil.protocol import commands as cmds
 
 __all__ = [
     "Display",
+    "GearLink",
     "MotionTracker",
     "MoveHandle",
     "MoveParams",
@@ -114,6 +119,37 @@ class Track:
         return self.kind == "jog" and not self.stopped and self.aborted is None
 
 
+@dataclass
+class GearLink:
+    """An axis geared to a master (``GA``/``GR``), as the tracker knows it.
+
+    Attributes:
+        follower: the geared axis.
+        master: the master axis letter (its commanded position, ``GA CA``) or ``"S"`` (the
+            distance along the S sequences).
+        ratio: GR as the controller stores it.
+        anchor: the follower's fixed-point state since the gearing engaged (or its ratio last
+            changed): the follower at any later master position, fraction included.
+        display: shows the follower's profiles in its unit.
+        released: controller sample at which ``ST``, ``AB`` or a limit turned the gearing off
+            (``None`` while it holds).
+        travelled: for ``"S"``, the master position the next sequence starts from (the S
+            distance counted since engagement; each predicted sequence adds its length).
+    """
+
+    follower: str
+    master: str
+    ratio: float
+    anchor: predict.GearFollower
+    display: Display | None = None
+    released: int | None = None
+    travelled: int = 0
+
+    def positions(self, master: npt.ArrayLike) -> npt.NDArray[np.int64]:
+        """The follower at each of ``master``'s positions (the anchor is left as it is)."""
+        return copy.deepcopy(self.anchor).follow(master)
+
+
 def sample_of(reply: str) -> int | None:
     """The controller sample in a ``MG TIME`` reply (``None`` if it is not a number)."""
     try:
@@ -168,11 +204,16 @@ class MotionTracker:
 
     def __init__(self) -> None:
         self._active: dict[str, MoveHandle] = {}
+        self.gears: dict[str, GearLink] = {}  # follower letter -> its gearing, while engaged
 
     def started(self, handle: MoveHandle) -> None:
-        """``handle`` now drives its axes."""
-        for a in handle.axes:
+        """``handle`` now drives its axes (and the axes geared to them)."""
+        for a in handle.axes + handle.followers:
             self._active[a] = handle
+
+    def followers(self, masters: str) -> dict[str, GearLink]:
+        """The engaged gearings whose master is one of ``masters`` (letters, or ``"S"``)."""
+        return {f: g for f, g in self.gears.items() if g.master in masters}
 
     def active(self, letter: str) -> MoveHandle | None:
         """The handle of the move in progress on ``letter`` (``None`` if none or done)."""
@@ -187,8 +228,15 @@ class MotionTracker:
     def notify(
         self, letters: str, sample: int | None, make: Callable[[float], predict.Event] | None
     ) -> None:
-        """A change sent to ``letters`` at controller ``sample`` (``make=None``: an abort)."""
+        """A change sent to ``letters`` at controller ``sample`` (``make=None``: an abort).
+
+        A stop or abort of a follower turns its gearing off (outside gantry mode).
+        """
         for a in letters:
+            gear = self.gears.get(a)
+            if gear is not None and (make is None or isinstance(make(0.0), predict.Stop)):
+                gear.released = sample
+                del self.gears[a]
             handle = self._active.get(a)
             if handle is not None:
                 handle.add_event(a, sample, make)
@@ -224,6 +272,7 @@ class MoveHandle:
         self._cache: dict[str, predict.Profile] = {}
         self._watcher: threading.Thread | None = None
         self._error: BaseException | None = None
+        self._followers: dict[str, GearLink] = {}
 
     # -- predictions -------------------------------------------------------------------------
     @property
@@ -268,12 +317,54 @@ class MoveHandle:
 
     @property
     def profiles(self) -> dict[str, predict.Profile]:
-        """Predicted profile per axis letter, including every change sent since the start."""
+        """Predicted profile per axis letter, including every change sent since the start,
+        and the profile of every axis geared to one of them (see :meth:`follow`)."""
         with self._lock:
             for a, t in self._tracks.items():
                 if a not in self._cache:
                     self._cache[a] = self._predict(a, t)
+            for f, gear in self._followers.items():
+                if f not in self._cache:
+                    self._cache[f] = self._follower(gear)
             return dict(self._cache)
+
+    @property
+    def followers(self) -> str:
+        """The axes geared to this move's axes, whose motion it predicts too."""
+        return "".join(self._followers)
+
+    def follow(self, gears: Mapping[str, GearLink]) -> None:
+        """Predict the axes geared to this move's axes too."""
+        with self._lock:
+            for f, gear in gears.items():
+                if f not in self._tracks:
+                    self._followers[f] = gear
+                    self._cache.pop(f, None)
+
+    def _master_positions(self, gear: GearLink) -> predict.Profile:
+        """The predicted positions of ``gear``'s master (one of this move's axes)."""
+        master = gear.master
+        if master not in self._cache:
+            self._cache[master] = self._predict(master, self._tracks[master])
+        return self._cache[master]
+
+    def _follower(self, gear: GearLink) -> predict.Profile:
+        master = self._master_positions(gear)
+        pos = gear.positions(master.position)
+        begin = next(iter(self._tracks.values())).begin
+        if gear.released is not None and begin is not None:
+            k = gear.released - begin
+            if 0 <= k < pos.size:
+                pos = pos.copy()
+                pos[k + 1 :] = pos[k]  # gearing off: the follower holds where it was
+        profile = predict.Profile.from_samples(
+            pos,
+            sample_period=master.sample_period,
+            shape="geared",
+            peak_speed=abs(gear.ratio) * master.peak_speed,
+            stop_code=master.stop_code,
+        )
+        return profile if gear.display is None else gear.display(profile)
 
     @property
     def profile(self) -> predict.Profile:
@@ -299,6 +390,9 @@ class MoveHandle:
         ignored: the move was over when it arrived.
         """
         with self._lock:
+            for f, gear in self._followers.items():
+                if letter in (f, gear.master):
+                    self._cache.pop(f, None)
             t = self._tracks.get(letter)
             if t is None or self._done:
                 return

@@ -176,12 +176,20 @@ def execute_move(
     order = link.model.axes
     moves = sorted(moves, key=lambda m: order.index(m.letter))
     letters = "".join(m.letter for m in moves)
+    gears = {f: g for f, g in tracker.followers(letters).items() if f not in letters}
     state = _read_state(link, letters)
     tracks: dict[str, Track] = {}
     profiles: dict[str, predict.Profile] = {}
     sent: dict[str, float] = {}
     for m in moves:
         if not dry_run:
+            gear = tracker.gears.get(m.letter)
+            if gear is not None:
+                raise InvalidArgument(
+                    f"axis {m.letter} is geared to {gear.master}: turn the gearing off before"
+                    " moving it (its own moves on top of the gearing are not predicted)",
+                    model=link.model.name,
+                )
             _ready(link, m.letter, state[m.letter])
         track, profile, target = _plan_axis(link, m, state[m.letter], relative)
         tracks[m.letter] = track
@@ -190,6 +198,7 @@ def execute_move(
         sent[m.letter] = track.amount if command == "IP" else target
     handle = MoveHandle(link, tracks, "position", display=display, tracker=tracker)
     handle.preset(profiles)
+    handle.follow(gears)
     if dry_run:
         return handle
     parts: list[Command] = []
@@ -263,6 +272,7 @@ def jog(
     new = MoveHandle(
         link, {a: track}, "jog", display={a: display} if display else None, tracker=tracker
     )
+    new.follow(tracker.followers(a))
     tracker.started(new)
     return new
 

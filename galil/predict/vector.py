@@ -41,7 +41,7 @@ from galil.predict.profile import Profile
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["VectorProfile", "VectorProfiler", "vector"]
+__all__ = ["SequenceEvent", "VectorProfile", "VectorProfiler", "replay", "vector"]
 
 #: Longest prediction, in samples (about 13.6 hours at 1024 Hz), as for single-axis moves.
 MAX_SAMPLES = 50_000_000
@@ -589,17 +589,35 @@ def vector(
     return _predict(eng, (speed, accel, decel, smoothing))
 
 
-def _predict(eng: VectorProfiler, settings: tuple[float, float, float, float]) -> VectorProfile:
-    """Step a begun, ended sequence to its end and collect its profile."""
+_Parts = tuple[list[Int64Array], list[Int64Array], list[FloatArray]]
+
+
+def _predict(
+    eng: VectorProfiler,
+    settings: tuple[float, float, float, float],
+    first: Int64Array | None = None,
+    before: _Parts | None = None,
+    shape: str | None = None,
+) -> VectorProfile:
+    """Step a begun, ended (or stopping) sequence to its end and collect its profile.
+
+    ``first`` (the axes at sample 0) and ``before`` (chunks already stepped since) are given
+    when the sequence was stepped by :func:`replay` first.
+    """
     ts = eng.sample_period
     plan = eng._path.plan
-    assert plan is not None
-    first = np.array(eng.position, dtype=np.int64)[:, None]
-    s_parts, p_parts, v_parts = _run(eng)
+    if first is None:
+        first = np.array(eng.position, dtype=np.int64)[:, None]
+    s_parts, p_parts, v_parts = before if before is not None else ([], [], [])
+    more = _run(eng)
+    s_parts, p_parts, v_parts = s_parts + more[0], p_parts + more[1], v_parts + more[2]
     layout = eng.path()
     s = np.concatenate([np.zeros(1, np.int64), *s_parts])
     pos = np.concatenate([first, *p_parts], axis=1)
     v = np.concatenate([np.zeros(1), *v_parts])
+    if shape is None:
+        assert plan is not None
+        shape = plan.shape
     return VectorProfile(
         t=np.arange(s.size, dtype=np.float64) * ts,
         position=pos,
@@ -609,11 +627,113 @@ def _predict(eng: VectorProfiler, settings: tuple[float, float, float, float]) -
         duration=(s.size - 1) * ts,
         sample_period=ts,
         layout=layout,
-        shape=plan.shape,
-        peak_speed=plan.peak / ts,
+        shape=shape,
+        peak_speed=float(np.abs(v).max()) if plan is None or before else plan.peak / ts,
         speed_settings=settings,
         stop_code=eng.stop_code if eng.stop_code is not None else COMPLETED,
     )
+
+
+@dataclass(frozen=True)
+class SequenceEvent:
+    """What the host sent during a sequence, at a sample counted from its ``BGS``.
+
+    Attributes:
+        sample: samples after the ``BGS`` sample (the ``MG TIME`` of the line, minus that of
+            the ``BGS`` line).
+        kind: ``"add"`` (segments), ``"end"`` (``VE``/``LE``), ``"stop"`` (``ST``) or
+            ``"abort"`` (``AB``).
+        segments: the segments of an ``"add"``.
+    """
+
+    sample: int
+    kind: str
+    segments: tuple[PathSegment, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("add", "end", "stop", "abort"):
+            raise InvalidArgument(f"event kind is add, end, stop or abort, not {self.kind!r}")
+
+
+def _apply(eng: VectorProfiler, event: SequenceEvent) -> None:
+    if event.kind == "add":
+        eng.extend(event.segments)
+    elif event.kind == "end":
+        eng.end()
+    elif event.kind == "stop":
+        eng.stop()
+    else:
+        eng.abort()
+
+
+def replay(
+    segments: Sequence[PathSegment],
+    speed: float,
+    accel: float,
+    decel: float,
+    *,
+    events: Iterable[SequenceEvent] = (),
+    ended: bool = True,
+    sample_period: float = 1 / 1024,
+    start: Sequence[int] | None = None,
+    smoothing: float = 1.0,
+    angle_resolution: float = ANGLE_RESOLUTION,
+) -> VectorProfile:
+    """Predict a sequence from what was sent when: segments queued before ``BGS``, then
+    segments, ``VE``/``LE``, ``ST`` or ``AB`` at known samples (a streamed path, a stop).
+
+    Values must already be quantised (:func:`galil.predict.quantise_vector`). A sequence that
+    is neither ended nor stopped after the last event is predicted as if ``VE``/``LE``
+    followed it: it stops at the end of its segments.
+
+    Args:
+        segments: the segments queued before ``BGS`` (at least one).
+        speed, accel, decel, smoothing, sample_period, start: as :func:`vector`.
+        events: what came after ``BGS``, by sample.
+        ended: ``VE``/``LE`` was sent before ``BGS``.
+        angle_resolution: CR angle step, degrees.
+
+    Raises:
+        InvalidArgument: no segments, a bad event; CommandError: what the controller would
+            refuse (TC 33 mixing segment kinds).
+    """
+    segs = tuple(segments)
+    if not segs:
+        raise InvalidArgument("a vector sequence needs at least one segment")
+    eng = VectorProfiler(
+        _axes_of(segs),
+        sample_period=sample_period,
+        position=start,
+        buffer=1 << 40,
+        angle_resolution=angle_resolution,
+    )
+    eng.extend(segs)
+    if ended:
+        eng.end()
+    eng.begin(speed, accel, decel, smoothing)
+    settings = (float(speed), float(accel), float(decel), float(smoothing))
+    first = np.array(eng.position, dtype=np.int64)[:, None]
+    parts: _Parts = ([], [], [])
+    shape: str | None = None
+    for event in sorted(events, key=lambda e: e.sample):
+        if not eng.moving:
+            break
+        if event.sample > eng.sample:
+            _collect(eng, event.sample - eng.sample, parts)
+        _apply(eng, event)
+        if event.kind != "end":
+            shape = "stopped" if event.kind in ("stop", "abort") else (shape or "changed")
+    if eng.moving and not eng.ended and eng.stop_code != 4:
+        eng.end()
+    return _predict(eng, settings, first, parts, shape)
+
+
+def _collect(eng: VectorProfiler, n: int, parts: _Parts) -> None:
+    """Step ``n`` samples of a running sequence into ``parts``."""
+    parts[2].append(eng.preview_speed(n))
+    s, pos = eng.advance_path(n)
+    parts[0].append(s)
+    parts[1].append(pos)
 
 
 def _run(eng: VectorProfiler) -> tuple[list[Int64Array], list[Int64Array], list[FloatArray]]:

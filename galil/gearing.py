@@ -1,0 +1,204 @@
+"""Electronic gearing, host side: an axis that follows another at a ratio (``GA``, ``GR``).
+
+``follower.gear_to(master, ratio)`` sends ``GA`` (the master's *commanded* position, ``CA``,
+so the follower is exactly predictable: ADR 0009) and ``GR``, and returns a :class:`Gearing`.
+From then on every move of the master predicts the follower too: the master's handle has the
+follower in its ``profiles``, the ratio (as the controller stores it) times the master's
+motion, sample by sample (:func:`galil.predict.gear`). ``master`` may also be ``"S"``, the
+distance along the sequences of coordinate system S (``GA S``).
+
+Outside gantry mode an ``ST``, a limit or ``AB`` on the follower turns its gearing off (the
+manuals); the predictions follow that too. The controller superimposes a geared axis's own
+moves on the gearing; the library does not predict that, so it refuses to move a geared axis.
+"""
+
+from __future__ import annotations
+
+from galil import predict
+from galil.errors import InvalidArgument, LimitError
+from galil.link import CommandLink
+from galil.motion import Display, GearLink, MotionTracker, sample_of
+from galil.protocol import commands as cmds
+from galil.protocol.numbers import format_number
+
+__all__ = ["Gearing", "gear_to"]
+
+
+def _ratio(link: CommandLink, ratio: object) -> float:
+    """GR as the controller will store it: four decimals on the wire, then its step.
+
+    Raises:
+        LimitError: beyond the model's range. InvalidArgument: not a number.
+    """
+    if isinstance(ratio, bool) or not isinstance(ratio, (int, float)):
+        raise InvalidArgument(f"a gear ratio is a number, got {ratio!r}")
+    try:
+        sent = float(format_number(float(ratio)))
+    except InvalidArgument as exc:
+        raise InvalidArgument(f"gear ratio {ratio!r}: {exc}") from None
+    return predict.quantise_ratio(sent, link.model)
+
+
+class Gearing:
+    """A follower geared to its master (from :meth:`galil.Axis.gear_to`).
+
+    Attributes:
+        follower: the geared axis.
+        master: the master axis (its commanded position), or ``"S"``.
+    """
+
+    def __init__(self, link: CommandLink, tracker: MotionTracker, gear: GearLink) -> None:
+        self._link = link
+        self._tracker = tracker
+        self._gear = gear
+        self.follower = gear.follower
+        self.master = gear.master
+
+    @property
+    def ratio(self) -> float:
+        """GR as the controller stores it (truncated to 1/65536)."""
+        return self._gear.ratio
+
+    @property
+    def engaged(self) -> bool:
+        """Whether the gearing holds (no ``GR 0``, ``ST``, limit or ``AB`` since)."""
+        return self._tracker.gears.get(self.follower) is self._gear
+
+    def predict(self, master: predict.Profile, *, start: int | None = None) -> predict.Profile:
+        """The follower's profile for a master profile (counts; ``start``: the follower's
+        position at the master's sample 0, default where it is now).
+
+        Raises:
+            InvalidArgument: the gearing is off.
+        """
+        if not self.engaged:
+            raise InvalidArgument(f"axis {self.follower} is not geared any more")
+        if start is None:
+            start = round(self._link.query_operands([f"_RP{self.follower}"])[0])
+        profile = predict.gear_profile(master, self.ratio, start=start, model=self._link.model)
+        show = self._gear.display
+        return profile if show is None else show(profile)
+
+    def set_ratio(self, ratio: float) -> None:
+        """A new ratio (``GR``), while the master is at rest.
+
+        Raises:
+            InvalidArgument: the gearing is off, or the master is moving (the prediction of
+                its move would not know when the ratio changed).
+            LimitError: a ratio beyond the model's range.
+        """
+        q = _ratio(self._link, ratio)
+        if q == 0:
+            raise InvalidArgument("a ratio of 0 turns the gearing off: call off()")
+        if not self.engaged:
+            raise InvalidArgument(f"axis {self.follower} is not geared any more")
+        _master_at_rest(self._link, self.master)
+        model = self._link.model
+        name = "_AVS" if self.master == "S" else f"_RP{self.master}"
+        (now,) = self._link.query_operands([name])
+        gear = self._gear
+        master_now = gear.travelled if self.master == "S" else round(now)
+        self._link.command_line([cmds.gr(model=model, **{self.follower: q})])
+        gear.anchor.follow([master_now])  # the controller carries on from the exact follower
+        gear.anchor.set_ratio(q)
+        gear.ratio = q
+
+    def off(self) -> None:
+        """Turn the gearing off (``GR 0``): the follower stays where it is."""
+        if not self.engaged:
+            return
+        model = self._link.model
+        replies = self._link.command_line(
+            [cmds.gr(model=model, **{self.follower: 0}), cmds.time_stamp()]
+        )
+        self._gear.released = sample_of(replies[-1])
+        self._tracker.gears.pop(self.follower, None)
+
+    def __enter__(self) -> Gearing:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.off()
+
+    def __repr__(self) -> str:
+        state = "engaged" if self.engaged else "off"
+        return f"<Gearing {self.follower} = {self.ratio:g} x {self.master} {state}>"
+
+
+def _master_at_rest(link: CommandLink, master: str) -> None:
+    name = "_BGS" if master == "S" else f"_BG{master}"
+    if link.query_operands([name])[0]:
+        raise InvalidArgument(
+            f"master {master} is moving: engage or change gearing while it is at rest (the "
+            "prediction of its move in progress would not include the follower)",
+            model=link.model.name,
+        )
+
+
+def gear_to(
+    link: CommandLink,
+    tracker: MotionTracker,
+    follower: str,
+    master: str,
+    ratio: object,
+    *,
+    display: Display | None = None,
+) -> Gearing:
+    """Gear ``follower`` to ``master`` (an axis letter, or ``"S"``) at ``ratio``.
+
+    Sends ``GA`` (commanded position ``C<master>``, or ``S``) and ``GR`` on one line.
+
+    Raises:
+        InvalidArgument: an axis geared to itself, a master that is a follower or a follower
+            that is a master (TC 46), the follower or the master moving, the follower's motor
+            off.
+        LimitError: a ratio beyond the model's range (``GR``, ±127).
+    """
+    model = link.model
+    if master != "S":
+        master = model.axis_letter(master)
+    follower = model.axis_letter(follower)
+    if master == follower:
+        raise InvalidArgument(f"axis {follower} cannot follow itself (TC 46)")
+    q = _ratio(link, ratio)
+    if q == 0:
+        raise LimitError(
+            "a gear ratio of 0 is no gearing", name="GR", value=0.0, limit=model.gr_resolution
+        )
+    gears = tracker.gears
+    if follower in gears:
+        raise InvalidArgument(
+            f"axis {follower} is already geared to {gears[follower].master}; turn that gearing"
+            " off first",
+            model=model.name,
+        )
+    if master in gears or any(g.master == follower for g in gears.values()):
+        raise InvalidArgument(
+            f"axis {master if master in gears else follower} would be a master and a follower"
+            " (TC 46: gear axis both master and follower)",
+            model=model.name,
+        )
+    m_name = "_AVS" if master == "S" else f"_RP{master}"
+    bg, mo, f0, m0 = link.query_operands(
+        [f"_BG{follower}", f"_MO{follower}", f"_RP{follower}", m_name]
+    )
+    if bg:
+        raise InvalidArgument(f"axis {follower} is moving; stop it first", model=model.name)
+    if mo:
+        raise InvalidArgument(
+            f"axis {follower} has its motor off; call controller.servo_here()", model=model.name
+        )
+    _master_at_rest(link, master)
+    source = "S" if master == "S" else f"C{master}"
+    link.command_line(
+        [
+            cmds.ga(model=model, **{follower: source}),
+            cmds.gr(model=model, **{follower: q}),
+        ]
+    )
+    anchor = predict.GearFollower(
+        q, master=round(m0), position=round(f0), resolution=model.gr_resolution
+    )
+    gear = GearLink(follower, master, q, anchor, display, travelled=round(m0))
+    gears[follower] = gear
+    return Gearing(link, tracker, gear)

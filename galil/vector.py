@@ -1,0 +1,519 @@
+"""Coordinated motion, host side: a path checked and predicted, then sent and streamed.
+
+A path is a list of :class:`~galil.segments.Line` and :class:`~galil.segments.Arc` segments
+in each axis's user units. It becomes the predictor's counts-level segments through each axis's
+scale (:mod:`galil.segments`), is predicted and checked as a whole
+(:func:`galil.predict.check_vector`: buffer depth, TC 30/31/33, each axis's speed and
+acceleration along the path, soft limits over the whole path) before a byte is sent, and then
+goes out as one sequence:
+
+- vector mode (``CA S``, ``CS S``, ``VM``, ``VP``/``CR``, ``VE``) for lines and arcs in a
+  plane of two axes, or linear interpolation (``LM``, ``LI``, ``LE``) for lines on one to
+  eight axes;
+- ``VS``/``VA``/``VD`` (and ``VT`` where the model has it) for the plane, the first segments
+  (as many as the buffer holds), then ``BG S`` with ``MG TIME`` on its line;
+- the rest streamed as buffer slots free up (``_LMS``), each line stamped with ``MG TIME``,
+  so the handle re-predicts the sequence exactly as the controller ran it
+  (:func:`galil.predict.vector.replay`), even if the host was late.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from galil import predict
+from galil.errors import GalilError, InvalidArgument, LimitError
+from galil.link import CommandLink
+from galil.motion import GearLink, MotionTracker, MoveHandle, MoveParams, Track, sample_of
+from galil.predict.vector import SequenceEvent, replay
+from galil.protocol import commands as cmds
+from galil.protocol.commands import Command
+from galil.segments import (
+    Arc,
+    Line,
+    PathAxis,
+    PathInCounts,
+    VectorPlan,
+    describe_scales,
+    show,
+    to_counts,
+)
+from galil.units import counts_or_plain, is_quantity
+
+__all__ = ["VectorHandle", "VectorStream"]
+
+#: The coordinate system the library's sequences use.
+PLANE = "S"
+
+
+# --------------------------------------------------------------------------- sending
+
+
+@dataclass
+class _Sequence:
+    """What is known of one sent sequence: enough to predict it again, exactly."""
+
+    initial: tuple[predict.PathSegment, ...]
+    settings: tuple[float, float, float, float]  # VS, VA, VD, smoothing (quantised)
+    sample_period: float
+    start: tuple[int, ...]
+    angle_resolution: float
+    ended: bool
+    begin: int | None = None
+    events: list[SequenceEvent] = field(default_factory=list)
+    _profile: predict.VectorProfile | None = None
+
+    def profile(self) -> predict.VectorProfile:
+        if self._profile is None:
+            vs, va, vd, vt = self.settings
+            self._profile = replay(
+                self.initial,
+                vs,
+                va,
+                vd,
+                events=self.events,
+                ended=self.ended,
+                sample_period=self.sample_period,
+                start=self.start,
+                smoothing=vt,
+                angle_resolution=self.angle_resolution,
+            )
+        return self._profile
+
+    def event(
+        self, sample: int | None, kind: str, segments: Sequence[predict.PathSegment] = ()
+    ) -> bool:
+        """Record what went out at controller ``sample``; False if it cannot be placed."""
+        if sample is None or self.begin is None:
+            return False
+        if kind in ("stop", "abort") and any(e.kind == kind for e in self.events):
+            return True  # the first ST (or AB) is the one that counts
+        self.events.append(SequenceEvent(max(0, sample - self.begin), kind, tuple(segments)))
+        self._profile = None
+        return True
+
+
+class VectorHandle(MoveHandle):
+    """A sequence in progress on its axes: a :class:`~galil.motion.MoveHandle` whose
+    prediction is the whole path's (``profiles`` per axis, :attr:`vector` in user units).
+
+    ``stop()`` sends ``ST S``; ``controller.stop()``, ``AB`` and the ``motion()`` guard reach
+    it through the tracker. The prediction follows every segment streamed, ``VE``, ``ST`` and
+    ``AB`` at the controller sample it took effect.
+    """
+
+    def __init__(
+        self,
+        link: CommandLink,
+        sequence: _Sequence,
+        axes: Sequence[PathAxis],
+        path: PathInCounts,
+        *,
+        tracker: MotionTracker | None = None,
+    ) -> None:
+        vs, va, vd, vt = sequence.settings
+        params = MoveParams(vs, va, vd, vt)
+        tracks = {
+            a.letter: Track("vector", sequence.start[i], params, sequence.begin)
+            for i, a in enumerate(axes)
+        }
+        displays = {a.letter: a.display for a in axes if a.display is not None}
+        super().__init__(link, tracks, "vector", display=displays, tracker=tracker)
+        self._sequence = sequence
+        self._path_axes = tuple(axes)
+        self._path = path
+
+    @property
+    def counts(self) -> predict.VectorProfile:
+        """The prediction in counts, with everything sent so far."""
+        with self._lock:
+            return self._sequence.profile()
+
+    @property
+    def vector(self) -> VectorPlan:
+        """The prediction in the axes' user units (path, speed along it, ``plot()``)."""
+        return show(self.counts, self._path_axes, self._path)
+
+    def _master_positions(self, gear: GearLink) -> predict.Profile:
+        if gear.master != PLANE:
+            return super()._master_positions(gear)
+        counts = self.counts  # GA S: the distance along the path, after the ones before
+        return predict.Profile.from_samples(
+            gear.travelled + counts.path,
+            sample_period=counts.sample_period,
+            shape="vector",
+            peak_speed=counts.peak_speed,
+            stop_code=counts.stop_code,
+        )
+
+    def _finish(self, rp: Sequence[int], sc: Sequence[int]) -> None:
+        with self._lock:
+            if not self._done:
+                for gear in self._followers.values():
+                    if gear.master == PLANE:
+                        gear.travelled += int(self.counts.path[-1])
+        super()._finish(rp, sc)
+
+    def _predict(self, letter: str, t: Track) -> predict.Profile:
+        i = self._path.letters.index(letter)
+        profile = self.counts.axis(i)
+        show_in = self._display.get(letter)
+        return profile if show_in is None else show_in(profile)
+
+    def add_event(self, letter: str, sample: int | None, make: Any) -> None:
+        """A stop (``ST``) or abort (``AB``) sent at controller ``sample`` (other changes,
+        SP or AC of an axis, do not touch a sequence)."""
+        with self._lock:
+            if self._done:
+                return
+            if make is None:
+                kind = "abort"
+            elif isinstance(make(0.0), predict.Stop):
+                kind = "stop"
+            else:
+                return
+            if not self._sequence.event(sample, kind):
+                for t in self._tracks.values():
+                    t.exact = False
+            self._cache.clear()
+
+    def record(
+        self, sample: int | None, kind: str, segments: Sequence[predict.PathSegment]
+    ) -> None:
+        """Segments or the end sent during the sequence, at controller ``sample``."""
+        with self._lock:
+            if not self._sequence.event(sample, kind, segments):
+                for t in self._tracks.values():
+                    t.exact = False
+            self._cache.clear()
+
+    def stop(self) -> None:
+        """Decelerate the sequence to a stop along its path at VD (``ST S``)."""
+        link = self._link
+        replies = link.command_line([cmds.st(PLANE, model=link.model), cmds.time_stamp()])
+        sample = sample_of(replies[-1])
+        if self._tracker is not None:
+            self._tracker.notify(self.axes, sample, predict.Stop)
+        else:
+            self.add_event(self.axes[0], sample, predict.Stop)
+
+
+_STATE = ("RP", "BG", "MO", "FL", "BL")
+#: What a line of streamed segments ends with: the sample it ran in.
+_STAMP_SIZE = len(cmds.time_stamp().text) + 1
+
+
+@dataclass(frozen=True)
+class _State:
+    start: tuple[int, ...]
+    forward: list[float | None]
+    backward: list[float | None]
+    accel: float
+    decel: float
+    smoothing: float
+
+
+class VectorStream:
+    """One sequence: :meth:`prepare` (one state query, the prediction, every check; nothing
+    sent) and :meth:`start` (send, begin, stream the rest, return the handle).
+
+    Args:
+        link: the command link.
+        axes: the path's axes (letter, scale, display), in the order of its components.
+        segments: :class:`Line` and :class:`Arc` segments in user units.
+        speed, accel, decel: along the path; Quantities need a scale common to every axis,
+            plain numbers are counts/s (counts/s²); ``accel``/``decel`` ``None``: the
+            controller's VA/VD.
+        smoothing: VT (on models that have it); ``None``: the controller's (VT, or the first
+            axis's IT on models without VT).
+        mode: ``"vector"``, ``"linear"`` or ``None`` (see :func:`to_counts`).
+        stream: send segments during the motion when the path is longer than the buffer; with
+            ``False`` such a path is refused (TC 32).
+        byte_rate: the link's bytes per second where it is slow (a serial port): a streamed
+            path it cannot deliver in time is refused.
+        followers: axes geared to the path's axes or to ``S``: the handle predicts them too.
+    """
+
+    def __init__(
+        self,
+        link: CommandLink,
+        axes: Sequence[PathAxis],
+        segments: Sequence[Line | Arc],
+        *,
+        speed: object,
+        accel: object = None,
+        decel: object = None,
+        smoothing: float | None = None,
+        mode: str | None = None,
+        stream: bool = True,
+        byte_rate: float | None = None,
+        followers: Mapping[str, GearLink] | None = None,
+    ) -> None:
+        self.link = link
+        self.byte_rate = byte_rate
+        self.axes = tuple(axes)
+        model = link.model
+        self.path = to_counts(
+            segments, self.axes, mode=mode, angle_resolution=model.cr_angle_resolution
+        )
+        self.speed = self._rate(speed, 1, "speed")
+        self.accel = None if accel is None else self._rate(accel, 2, "accel")
+        self.decel = None if decel is None else self._rate(decel, 2, "decel")
+        if smoothing is not None and not model.vt:
+            raise InvalidArgument(
+                f"{model.name} has no VT: its sequences are smoothed by the first axis's IT "
+                "(axis.smoothing)",
+                model=model.name,
+            )
+        self.smoothing = smoothing
+        self.stream = bool(stream)
+        letters = self.path.letters
+        self.followers = {f: g for f, g in (followers or {}).items() if f not in letters}
+        self.profile: predict.VectorProfile | None = None
+        self._state: _State | None = None
+
+    def _rate(self, value: object, power: int, what: str) -> float:
+        """A speed or acceleration along the path, counts/s**power (> 0)."""
+        scaled = [a.scale for a in self.axes if a.scale is not None]
+        if is_quantity(value) and scaled:
+            if self.path.per_unit is None:
+                raise InvalidArgument(
+                    f"{what} along the path in user units needs the same counts per unit on "
+                    f"every axis ({describe_scales(self.axes)}); give it in counts"
+                )
+            counts = abs(scaled[0].rate_to_counts(value, power, what))
+        elif scaled and self.path.per_unit is not None:
+            raise InvalidArgument(
+                f"{what}: {value!r} has no units but the axes have scales; give a Quantity"
+                f" such as 10 * ureg.{self.path.unit}/s" + ("²" if power == 2 else "")
+            )
+        else:
+            counts = counts_or_plain(value, what)
+        if not counts > 0:
+            raise InvalidArgument(f"{what} along the path must be positive, got {value!r}")
+        return counts
+
+    # ---- prepare -------------------------------------------------------------------------
+    def _read_state(self) -> _State:
+        link = self.link
+        model = link.model
+        letters = self.path.letters
+        names = [f"_{op}{a}" for a in letters for op in _STATE] + ["_BGS"]
+        extra = []
+        if self.accel is None:
+            extra.append("_VAS")
+        if self.decel is None:
+            extra.append("_VDS")
+        if self.smoothing is None:
+            extra.append("_VTS" if model.vt else f"_IT{letters[0]}")
+        values = link.query_operands(names + extra)
+        n = len(_STATE)
+        rows = [values[i * n : (i + 1) * n] for i in range(len(letters))]
+        if values[len(letters) * n]:
+            raise InvalidArgument(
+                "a sequence is running on S; wait for it or stop it", model=model.name
+            )
+        for a, (_, bg, mo, _, _) in zip(letters, rows, strict=True):
+            if bg:
+                raise InvalidArgument(f"axis {a} is moving; stop it or wait", model=model.name)
+            if mo:
+                raise InvalidArgument(
+                    f"axis {a} has its motor off; call controller.servo_here()", model=model.name
+                )
+        rest = iter(values[len(letters) * n + 1 :])
+        return _State(
+            start=tuple(round(r[0]) for r in rows),
+            forward=[r[3] for r in rows],
+            backward=[r[4] for r in rows],
+            accel=self.accel if self.accel is not None else next(rest),
+            decel=self.decel if self.decel is not None else next(rest),
+            smoothing=self.smoothing if self.smoothing is not None else next(rest),
+        )
+
+    def prepare(self) -> predict.VectorProfile:
+        """Read where the axes are (one query), predict, and check everything.
+
+        Raises:
+            InvalidArgument: an axis moving or its motor off, a sequence running.
+            LimitError: a check failed (named segment and sample): VS/VA/VD ranges, TC 30,
+                31, the buffer (``stream=False``, or a link too slow to keep it fed), an
+                axis's speed or acceleration along the path, a soft limit.
+        """
+        link = self.link
+        model = link.model
+        state = self._read_state()
+        segs = self.path.segments
+        profile = predict.check_vector(
+            segs,
+            self.speed,
+            state.accel,
+            state.decel,
+            model=model,
+            start=state.start,
+            smoothing=state.smoothing,
+            tm=link.sample_period * 1_024_000,
+            forward_limits=state.forward,
+            backward_limits=state.backward,
+            streaming=self.stream,
+            axes=self.path.letters,
+        )
+        if self.stream and len(segs) > model.vector_buffer:
+            self._check_link_rate(profile)
+        self.profile = profile
+        self._state = state
+        return profile
+
+    def _check_link_rate(self, profile: predict.VectorProfile) -> None:
+        rate = self.byte_rate
+        if rate is None or rate <= 0:
+            return  # Ethernet or the simulator: far faster than any segment
+        deadlines = predict.segment_deadlines(profile)
+        texts = self._texts(profile)
+        depth = self.link.model.vector_buffer
+        sizes = np.array([len(t.text) + 1 + _STAMP_SIZE for t in texts[depth:]], dtype=float)
+        arrival = np.cumsum(sizes) / rate  # seconds after BG S, at best
+        ts = profile.sample_period
+        late = np.flatnonzero(arrival > deadlines[depth:] * ts)
+        if late.size:
+            i = depth + int(late[0])
+            k = int(deadlines[i])
+            raise _buffer_error(
+                f"segment {i} must be in the buffer by t={k * ts:.6g} s (sample {k}) for the"
+                f" motion to keep its speed, but the link ({rate:g} bytes/s) delivers it at"
+                f" t={arrival[late[0]]:.6g} s at best: slow the path down or use Ethernet",
+                k,
+                ts,
+                i,
+            )
+
+    # ---- send ----------------------------------------------------------------------------
+    def _texts(self, profile: predict.VectorProfile) -> list[Command]:
+        model = self.link.model
+        out: list[Command] = []
+        ends = profile.layout.end
+        for i, seg in enumerate(self.path.segments):
+            if isinstance(seg, predict.Line):
+                out.append(cmds.vp(int(ends[i][0]), int(ends[i][1])))
+            elif isinstance(seg, predict.Arc):
+                out.append(cmds.cr(seg.radius, seg.start, seg.sweep, model=model))
+            else:
+                incs = dict(zip(self.path.letters, seg.increments, strict=True))
+                out.append(cmds.li(model=model, **incs))
+        return out
+
+    def _setup(self, state: _State) -> list[Command]:
+        model = self.link.model
+        letters = self.path.letters
+        mode = (
+            cmds.vm(letters, model=model)
+            if self.path.kind == "vector"
+            else cmds.lm(letters, model=model)
+        )
+        assert self.profile is not None
+        vs, va, vd, vt = self.profile.speed_settings
+        out = [
+            cmds.ca(PLANE),
+            cmds.cs(PLANE),
+            mode,
+            cmds.vs(vs, PLANE, model=model),
+            cmds.va(va, PLANE, model=model),
+            cmds.vd(vd, PLANE, model=model),
+        ]
+        if model.vt and self.smoothing is not None:
+            out.append(cmds.vt(vt, PLANE, model=model))
+        return out
+
+    def _end(self) -> Command:
+        return cmds.ve() if self.path.kind == "vector" else cmds.le()
+
+    def start(self, tracker: MotionTracker | None) -> VectorHandle:
+        """Send the sequence and begin it; stream what the buffer cannot hold yet.
+
+        Returns once every segment and ``VE``/``LE`` are in the controller (at once for a
+        path that fits the buffer). Whatever goes wrong while streaming, the sequence is
+        stopped (``ST S``) before the error is raised.
+        """
+        if self.profile is None or self._state is None:
+            self.prepare()
+        profile, state = self.profile, self._state
+        assert profile is not None
+        assert state is not None
+        link = self.link
+        texts = self._texts(profile)
+        first = min(len(texts), link.model.vector_buffer)
+        ended = first == len(texts)
+        link.command_line(self._setup(state) + texts[:first] + ([self._end()] if ended else []))
+        replies = link.command_line([cmds.bg(PLANE, model=link.model), cmds.time_stamp()])
+        sequence = _Sequence(
+            initial=self.path.segments[:first],
+            settings=profile.speed_settings,
+            sample_period=profile.sample_period,
+            start=state.start,
+            angle_resolution=link.model.cr_angle_resolution,
+            ended=ended,
+            begin=sample_of(replies[-1]),
+            _profile=profile if ended else None,
+        )
+        handle = VectorHandle(link, sequence, self.axes, self.path, tracker=tracker)
+        handle.follow(self.followers)
+        if tracker is not None:
+            tracker.started(handle)
+        if not ended:
+            try:
+                self._feed(handle, texts, first)
+            except BaseException:
+                with contextlib.suppress(GalilError):
+                    handle.stop()
+                raise
+        return handle
+
+    def _groups(self, start: int, stop: int, texts: Sequence[Command]) -> list[tuple[int, int]]:
+        """Runs of segments that fit one line with ``MG TIME`` after them."""
+        limit = self.link.model.line_length
+        out: list[tuple[int, int]] = []
+        i = start
+        while i < stop:
+            j, size = i, _STAMP_SIZE
+            while j < stop and (j == i or size + len(texts[j].text) + 1 <= limit):
+                size += len(texts[j].text) + 1
+                j += 1
+            out.append((i, j))
+            i = j
+        return out
+
+    def _feed(self, handle: VectorHandle, texts: Sequence[Command], sent: int) -> None:
+        link = self.link
+        profile = self.profile
+        assert profile is not None
+        segs = self.path.segments
+        depth = link.model.vector_buffer
+        refill = max(1, depth // 4)
+        deadlines = predict.segment_deadlines(profile)
+        begin = handle.begin[self.path.letters[0]] or 0
+        ts = link.sample_period
+        while sent < len(texts):
+            free, now = link.query_operands([f"_LM{PLANE}", "TIME"])
+            room = round(free) - 1  # one spare: whether the running segment counts is unsure
+            if room >= min(refill, len(texts) - sent):
+                stop = sent + min(room, len(texts) - sent)
+                for i, j in self._groups(sent, stop, texts):
+                    replies = link.command_line([*texts[i:j], cmds.time_stamp()])
+                    handle.record(sample_of(replies[-1]), "add", segs[i:j])
+                sent = stop
+            else:
+                left = (deadlines[sent] - (now - begin)) * ts
+                link.pause(min(0.05, max(4 * ts, left / 4)))
+        replies = link.command_line([self._end(), cmds.time_stamp()])
+        handle.record(sample_of(replies[-1]), "end", ())
+
+
+def _buffer_error(text: str, sample: int, ts: float, segment: int) -> LimitError:
+    """A refusal for the segment buffer, at ``sample``."""
+    return LimitError(
+        text, name="segment buffer", value=segment, limit=None, time=sample * ts, sample=sample
+    )
