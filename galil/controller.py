@@ -487,8 +487,10 @@ class Controller(LinkFacade):
         Args:
             axes: the path's axes, in the order of the segments' components (``"AB"``).
             segments: the path, in each axis's user units (counts without a scale).
-            speed, accel, decel: along the path (a Quantity when the axes share a scale,
-                counts otherwise); ``accel``/``decel`` default to the controller's VA/VD.
+            speed: along the path (a Quantity when the axes share a scale, counts/s
+                otherwise).
+            accel: along the path (default: the controller's VA).
+            decel: along the path (default: the controller's VD).
             smoothing: VT, on models that have it (others smooth with the first axis's IT).
             mode: ``"vector"`` (VM) or ``"linear"`` (LM); default: vector on two axes.
             stream: with ``False`` a path longer than the buffer is refused instead.

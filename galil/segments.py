@@ -186,6 +186,7 @@ def _common_scale(axes: Sequence[PathAxis]) -> tuple[float, str] | None:
 
 
 def describe_scales(axes: Sequence[PathAxis]) -> str:
+    """The axes' scales in words, for messages (``"A 2000 1 / mm, B in counts"``)."""
     parts = []
     for a in axes:
         if a.scale is None:

@@ -226,9 +226,10 @@ class VectorStream:
         link: the command link.
         axes: the path's axes (letter, scale, display), in the order of its components.
         segments: :class:`Line` and :class:`Arc` segments in user units.
-        speed, accel, decel: along the path; Quantities need a scale common to every axis,
-            plain numbers are counts/s (counts/s²); ``accel``/``decel`` ``None``: the
-            controller's VA/VD.
+        speed: along the path; a Quantity needs a scale common to every axis, a plain
+            number is counts/s.
+        accel: along the path, likewise (``None``: the controller's VA).
+        decel: along the path, likewise (``None``: the controller's VD).
         smoothing: VT (on models that have it); ``None``: the controller's (VT, or the first
             axis's IT on models without VT).
         mode: ``"vector"``, ``"linear"`` or ``None`` (see :func:`to_counts`).

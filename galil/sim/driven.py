@@ -137,10 +137,10 @@ class DrivenProfiler(AxisProfiler):
         self.velocity = (last - prev) / self.sample_period
         self.position = self.reference = last
         self._y = float(last)
-        self._sync()
+        self.sync()
         return r, r
 
-    def _sync(self) -> None:
+    def sync(self) -> None:
         """Take the source's state (in motion, stop code); released once it is done."""
         source = self.source
         assert source is not None
@@ -184,7 +184,7 @@ class DrivenProfiler(AxisProfiler):
         if self.driven:
             assert self.source is not None
             self.source.stop(4)
-            self._sync()
+            self.sync()
             return
         super().stop()
 
@@ -192,7 +192,7 @@ class DrivenProfiler(AxisProfiler):
         if self.driven:
             assert self.source is not None
             self.source.stop(int(code))
-            self._sync()
+            self.sync()
             return
         super().limit_stop(code)
 

@@ -466,9 +466,14 @@ class Vector(Room):
     @handler("ST", Args.PLANES)
     def stop(self, planes: list[str]) -> str:
         for p in planes:
-            found = self.feed(self.planes[p]) if self.planes[p].running else None
+            plane = self.planes[p]
+            found = self.feed(plane) if plane.running else None
             if found is not None:
                 found.stop(4)
+                for c in plane.axes:
+                    prof = self.machine.servo.axes[c].m.profiler
+                    if isinstance(prof, DrivenProfiler) and prof.driven:
+                        prof.sync()
         return ""
 
     @handler("AM", Args.PLANES)
