@@ -474,6 +474,8 @@ class Controller(LinkFacade):
         smoothing: float | None = None,
         mode: str | None = None,
         stream: bool = True,
+        axis_speed: Mapping[str, Any] | None = None,
+        axis_accel: Mapping[str, Any] | None = None,
     ) -> VectorHandle:
         """Run a path of :class:`~galil.Line` and :class:`~galil.Arc` segments on ``axes``.
 
@@ -494,13 +496,17 @@ class Controller(LinkFacade):
             smoothing: VT, on models that have it (others smooth with the first axis's IT).
             mode: ``"vector"`` (VM) or ``"linear"`` (LM); default: vector on two axes.
             stream: with ``False`` a path longer than the buffer is refused instead.
+            axis_speed: the most an axis may move along the path (``{"B": 20 * mm / s}``);
+                default: the model's maximum.
+            axis_accel: likewise for acceleration, tangential and centripetal.
 
         Returns:
             A :class:`~galil.vector.VectorHandle`: ``wait()``, ``stop()``, ``profiles`` per
             axis, ``vector`` (the prediction in user units), ``begin``.
         """
-        options = {"speed": speed, "accel": accel, "decel": decel}
-        run = self._vector(axes, segments, smoothing=smoothing, mode=mode, stream=stream, **options)
+        options = {"speed": speed, "accel": accel, "decel": decel, "smoothing": smoothing}
+        limits = {"axis_speed": axis_speed, "axis_accel": axis_accel}
+        run = self._vector(axes, segments, mode=mode, stream=stream, **options, **limits)
         with user_units({a.letter: self.axes[a.letter] for a in run.axes}):
             run.prepare()
         return run.start(self.tracker)
@@ -516,6 +522,8 @@ class Controller(LinkFacade):
         smoothing: float | None = None,
         mode: str | None = None,
         stream: bool = True,
+        axis_speed: Mapping[str, Any] | None = None,
+        axis_accel: Mapping[str, Any] | None = None,
     ) -> VectorPlan:
         """Predict and check :meth:`vector_move` without sending anything (one state query).
 
@@ -524,8 +532,9 @@ class Controller(LinkFacade):
             ``profiles`` per axis, ``path`` and ``speed`` along the path (in the axes' common
             unit), ``plot()``.
         """
-        options = {"speed": speed, "accel": accel, "decel": decel}
-        run = self._vector(axes, segments, smoothing=smoothing, mode=mode, stream=stream, **options)
+        options = {"speed": speed, "accel": accel, "decel": decel, "smoothing": smoothing}
+        limits = {"axis_speed": axis_speed, "axis_accel": axis_accel}
+        run = self._vector(axes, segments, mode=mode, stream=stream, **options, **limits)
         with user_units({a.letter: self.axes[a.letter] for a in run.axes}):
             profile = run.prepare()
         return show(profile, run.axes, run.path)

@@ -238,6 +238,10 @@ class VectorStream:
         byte_rate: the link's bytes per second where it is slow (a serial port): a streamed
             path it cannot deliver in time is refused.
         followers: axes geared to the path's axes or to ``S``: the handle predicts them too.
+        axis_speed: the most each axis may move along the path, by letter, in its unit per
+            second (counts/s without a scale); default: the model's SP maximum.
+        axis_accel: the same for acceleration (tangential and centripetal), default the
+            model's AC maximum.
     """
 
     def __init__(
@@ -254,6 +258,8 @@ class VectorStream:
         stream: bool = True,
         byte_rate: float | None = None,
         followers: Mapping[str, GearLink] | None = None,
+        axis_speed: Mapping[str, object] | None = None,
+        axis_accel: Mapping[str, object] | None = None,
     ) -> None:
         self.link = link
         self.byte_rate = byte_rate
@@ -273,6 +279,8 @@ class VectorStream:
             )
         self.smoothing = smoothing
         self.stream = bool(stream)
+        self.speed_limits = self._limits(axis_speed, 1, "axis_speed", model.sp_max)
+        self.accel_limits = self._limits(axis_accel, 2, "axis_accel", model.ac_max)
         letters = self.path.letters
         self.followers = {f: g for f, g in (followers or {}).items() if f not in letters}
         self.profile: predict.VectorProfile | None = None
@@ -298,6 +306,25 @@ class VectorStream:
         if not counts > 0:
             raise InvalidArgument(f"{what} along the path must be positive, got {value!r}")
         return counts
+
+    def _limits(
+        self, given: Mapping[str, object] | None, power: int, what: str, default: float
+    ) -> list[float | None]:
+        """Per-axis limits in counts, in the path's axis order (the model's by default)."""
+        out: list[float | None] = [float(default)] * len(self.axes)
+        by_letter = {a.letter: i for i, a in enumerate(self.axes)}
+        for name, value in (given or {}).items():
+            letter = self.link.model.axis_letter(name)
+            if letter not in by_letter:
+                raise InvalidArgument(f"{what}: {name!r} is not an axis of the path")
+            axis = self.axes[by_letter[letter]]
+            label = f"{what} of {letter}"
+            if axis.scale is not None:
+                counts = abs(axis.scale.rate_to_counts(value, power, label))
+            else:
+                counts = abs(counts_or_plain(value, label))
+            out[by_letter[letter]] = min(counts, float(default))
+        return out
 
     # ---- prepare -------------------------------------------------------------------------
     def _read_state(self) -> _State:
@@ -360,6 +387,8 @@ class VectorStream:
             tm=link.sample_period * 1_024_000,
             forward_limits=state.forward,
             backward_limits=state.backward,
+            speed_limits=self.speed_limits,
+            accel_limits=self.accel_limits,
             streaming=self.stream,
             axes=self.path.letters,
         )

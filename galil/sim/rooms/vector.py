@@ -168,9 +168,7 @@ class Vector(Room):
     def engine(self, plane: Plane) -> VectorProfiler | None:
         """The sequence of ``plane``: the running one, else the one queued or last run."""
         if plane.running:
-            found = self.feed(plane)
-            if found is not None:
-                return found.eng
+            self._refresh(plane)  # a sequence may end in a command (ST at rest), not a step
         return plane.eng
 
     def busy(self, plane: Plane) -> bool:
@@ -233,6 +231,8 @@ class Vector(Room):
                 self._refresh(plane)
 
     def _refresh(self, plane: Plane) -> None:
+        """Take the running sequence from the axes (a snapshot may have replaced it), and
+        note when it has ended."""
         found = self.feed(plane)
         if found is not None:
             plane.eng = found.eng
@@ -268,6 +268,7 @@ class Vector(Room):
             raise Refused(6, "axes must be distinct")
         if kind == "vector" and len(letters) != 2:
             raise Refused(6, "VM takes two axes")
+        self.engine(plane)
         if plane.running:
             raise Refused(29, "sequence running")
         plane.kind, plane.axes, plane.eng = kind, "".join(letters), None
@@ -284,6 +285,7 @@ class Vector(Room):
     @handler("CS")
     def cs(self, args: str) -> str:
         plane = self._plane(args)
+        self.engine(plane)
         if plane.running:
             raise Refused(29, "sequence running")
         plane.eng = None
@@ -429,9 +431,9 @@ class Vector(Room):
         return ""
 
     def _check_begin(self, plane: Plane) -> None:
+        eng = self.engine(plane)
         if plane.running or self.busy(plane):
             raise Refused(21, "sequence running")
-        eng = self.engine(plane)
         if plane.kind is None or eng is None or eng.segments == 0 or eng.moving:
             raise Refused(24, "no sequence")
         if eng.stop_code is not None:
