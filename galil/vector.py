@@ -20,7 +20,7 @@ goes out as one sequence:
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -376,27 +376,44 @@ class VectorStream:
         model = link.model
         state = self._read_state()
         segs = self.path.segments
-        profile = predict.check_vector(
-            segs,
-            self.speed,
-            state.accel,
-            state.decel,
-            model=model,
-            start=state.start,
-            smoothing=state.smoothing,
-            tm=link.sample_period * 1_024_000,
-            forward_limits=state.forward,
-            backward_limits=state.backward,
-            speed_limits=self.speed_limits,
-            accel_limits=self.accel_limits,
-            streaming=self.stream,
-            axes=self.path.letters,
-        )
+        with self._in_user_units():
+            profile = predict.check_vector(
+                segs,
+                self.speed,
+                state.accel,
+                state.decel,
+                model=model,
+                start=state.start,
+                smoothing=state.smoothing,
+                tm=link.sample_period * 1_024_000,
+                forward_limits=state.forward,
+                backward_limits=state.backward,
+                speed_limits=self.speed_limits,
+                accel_limits=self.accel_limits,
+                streaming=self.stream,
+                axes=self.path.letters,
+            )
         if self.stream and len(segs) > model.vector_buffer:
             self._check_link_rate(profile)
         self.profile = profile
         self._state = state
         return profile
+
+    @contextlib.contextmanager
+    def _in_user_units(self) -> Iterator[None]:
+        """Add the axis's unit to a refusal of its speed or acceleration along the path."""
+        try:
+            yield
+        except LimitError as exc:
+            power = {"axis speed": 1, "axis acceleration": 2}.get(str(exc.name))
+            axis = next((a for a in self.axes if a.letter == exc.axis), None)
+            scale = None if axis is None else axis.scale
+            if power and scale is not None and exc.value is not None and exc.limit is not None:
+                value = abs(scale.counts_to_rate(exc.value, power))
+                limit = abs(scale.counts_to_rate(exc.limit, power))
+                note = f" (in user units: {value:~.6g}, limit {limit:~.6g})"
+                exc.args = (f"{exc.args[0]}{note}", *exc.args[1:])
+            raise
 
     def _check_link_rate(self, profile: predict.VectorProfile) -> None:
         rate = self.byte_rate

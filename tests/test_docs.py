@@ -24,6 +24,7 @@ GUIDE = [
     "position.md",
     "contour.md",
     "speed-schedule.md",
+    "vector.md",
     "units.md",
     "safety.md",
     "predictor.md",

@@ -49,6 +49,13 @@ EXPECTED = {
         "trippoints at [10.0, 20.0] mm",
         "end vs prediction {'A': 0} counts",
     ],
+    "06_draw_a_shape.py": [
+        "plan: 151.416 mm of path in 3.886 s, top speed 40.0 mm/s",
+        "drawn: stop codes {'A': 101, 'B': 101}, end vs prediction {'A': 0, 'B': 0}",
+        "back at A 0.00 mm, B 0.00 mm",
+        "refused: segment 1: axis B speed",
+        "C follows A at 0.5: predicted 10.000 mm, at 10.000 mm",
+    ],
 }
 
 

@@ -29,6 +29,7 @@ controller log may overturn:
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -342,6 +343,17 @@ class PathLayout:
         self._anchor = np.zeros(self.axes)  # that end rounded to whole counts
         self._cap = 0
         self._grow(16)
+
+    def __deepcopy__(self, memo: dict[int, object]) -> PathLayout:
+        # A simulator snapshots its sequences often: copy the tables (numpy copies) and share
+        # the segments, which are frozen.
+        new = copy.copy(self)
+        for name in ("_start", "_end", "_centre", "_len", "_radius", "_theta0", "_sweep"):
+            setattr(new, name, getattr(self, name).copy())
+        for name in ("_counts", "_bounds", "_arc", "_point", "_anchor"):
+            setattr(new, name, getattr(self, name).copy())
+        new._segments = list(self._segments)
+        return new
 
     def _grow(self, cap: int) -> None:
         """Give the per-segment tables room for ``cap`` segments (keeping what is there)."""

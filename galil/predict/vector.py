@@ -15,6 +15,7 @@ the host streams too slowly the motion slows down and waits, and the sequence st
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -339,6 +340,12 @@ class VectorProfiler:
             self._finish(COMPLETED)
 
     # ---- stepping ----------------------------------------------------------------------
+    def preview(self, n: int) -> Int64Array:
+        """The axis references of the next ``n`` samples, without committing them."""
+        ahead = copy.copy(self)  # advancing reads the layout, never changes it
+        ahead._path = copy.deepcopy(self._path)
+        return ahead.advance(n)
+
     def preview_speed(self, n: int) -> FloatArray:
         """Profiler speed along the path over the next ``n`` samples, counts/s."""
         return self._path.preview_velocity(n)

@@ -22,7 +22,6 @@ while it runs and 101 once it completes. Where the manuals are silent (assumptio
 
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import dataclass
 
@@ -99,8 +98,7 @@ class PlaneFeed:
         if t + n <= have:
             out: Int64Array = self._buf[index, t : t + n].copy()
             return out
-        ahead = copy.deepcopy(self.eng)  # a preview must not commit the sequence
-        more = ahead.advance(t + n - have)
+        more = self.eng.preview(t + n - have)
         out = np.concatenate([self._buf[index, t:], more[index]])
         return out
 
