@@ -37,7 +37,7 @@ from galil.moves import execute_move
 from galil.protocol import commands as cmds
 from galil.records import Records
 from galil.routines import Routines
-from galil.segments import Arc, Line, PathAxis, VectorPlan, show
+from galil.segments import PathAxis, Segment, VectorPlan, show
 from galil.transport import Transport, open_transport
 from galil.units import path_to_counts
 from galil.vector import VectorHandle, VectorStream
@@ -449,7 +449,7 @@ class Controller(LinkFacade):
         with user_units({a.letter: a for a in chosen}):
             return stream.run(progress=progress, timeout=timeout)
 
-    def _vector(self, axes: str, segments: Sequence[Line | Arc], **options: Any) -> VectorStream:
+    def _vector(self, axes: str, segments: Sequence[Segment], **options: Any) -> VectorStream:
         names = list(axes) if isinstance(axes, str) else [str(a) for a in axes]
         chosen = [self.axis(a) for a in names]
         path_axes = [PathAxis(a.letter, a.scale, a.display) for a in chosen]
@@ -466,7 +466,7 @@ class Controller(LinkFacade):
     def vector_move(
         self,
         axes: str,
-        segments: Sequence[Line | Arc],
+        segments: Sequence[Segment],
         *,
         speed: Any,
         accel: Any = None,
@@ -514,7 +514,7 @@ class Controller(LinkFacade):
     def plan_vector(
         self,
         axes: str,
-        segments: Sequence[Line | Arc],
+        segments: Sequence[Segment],
         *,
         speed: Any,
         accel: Any = None,

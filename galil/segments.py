@@ -37,6 +37,7 @@ __all__ = [
     "Line",
     "PathAxis",
     "PathInCounts",
+    "Segment",
     "VectorPlan",
     "describe_scales",
     "show",
@@ -66,8 +67,14 @@ def _finite(value: object, what: str) -> None:
     raise InvalidArgument(f"{what} must be a finite number or a pint Quantity, got {value!r}")
 
 
+class Segment:
+    """A segment of a path in user units: a :class:`Line` or an :class:`Arc`."""
+
+    __slots__ = ()
+
+
 @dataclass(frozen=True, init=False)
-class Line:
+class Line(Segment):
     """A straight segment: how far each axis of the path moves, relative to where the
     previous segment ended, in each axis's user units (counts on an axis without a scale).
 
@@ -96,7 +103,7 @@ class Line:
 
 
 @dataclass(frozen=True)
-class Arc:
+class Arc(Segment):
     """A circular segment in the plane of two axes (``CR``), starting where the path is.
 
     Attributes:
@@ -231,7 +238,7 @@ def _arc_in_counts(i: int, arc: Arc, axes: Sequence[PathAxis], resolution: float
     return predict.Arc(round(radius, 4), quantise_angle(theta, resolution), sweep_q)
 
 
-def _kind(segments: Sequence[Line | Arc], n: int, mode: str | None) -> str:
+def _kind(segments: Sequence[Segment], n: int, mode: str | None) -> str:
     if mode not in (None, "vector", "linear"):
         raise InvalidArgument(f"mode is 'vector' (VM) or 'linear' (LM), not {mode!r}")
     has_arc = any(isinstance(s, Arc) for s in segments)
@@ -244,7 +251,7 @@ def _kind(segments: Sequence[Line | Arc], n: int, mode: str | None) -> str:
 
 
 def to_counts(
-    segments: Sequence[Line | Arc],
+    segments: Sequence[Segment],
     axes: Sequence[PathAxis],
     *,
     mode: str | None = None,
@@ -295,7 +302,7 @@ def _line_counts(i: int, line: Line, axes: Sequence[PathAxis]) -> list[float]:
 
 
 def _vector_segments(
-    segs: Sequence[Line | Arc], axes: Sequence[PathAxis], resolution: float
+    segs: Sequence[Segment], axes: Sequence[PathAxis], resolution: float
 ) -> list[predict.PathSegment]:
     layout = PathLayout(2, angle_resolution=resolution)
     ideal = np.zeros(2)  # where the user's path is, counts (unrounded)
@@ -305,6 +312,7 @@ def _vector_segments(
         if isinstance(seg, Arc):
             piece = _arc_in_counts(i, seg, axes, resolution)
         else:
+            assert isinstance(seg, Line)
             ideal = ideal + np.array(_line_counts(i, seg, axes))
             anchor = np.floor(np.array(layout.end_point) + 0.5)
             step = np.floor(ideal + 0.5) - anchor
@@ -317,7 +325,7 @@ def _vector_segments(
 
 
 def _linear_segments(
-    segs: Sequence[Line | Arc], axes: Sequence[PathAxis]
+    segs: Sequence[Segment], axes: Sequence[PathAxis]
 ) -> list[predict.PathSegment]:
     ideal = np.zeros(len(axes))
     done = np.zeros(len(axes))

@@ -34,10 +34,9 @@ from galil.predict.vector import SequenceEvent, replay
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
 from galil.segments import (
-    Arc,
-    Line,
     PathAxis,
     PathInCounts,
+    Segment,
     VectorPlan,
     describe_scales,
     show,
@@ -248,7 +247,7 @@ class VectorStream:
         self,
         link: CommandLink,
         axes: Sequence[PathAxis],
-        segments: Sequence[Line | Arc],
+        segments: Sequence[Segment],
         *,
         speed: object,
         accel: object = None,

@@ -9,6 +9,7 @@ from typing_extensions import assert_type
 
 import galil
 from galil.contour import ContourResult
+from galil.gearing import Gearing
 from galil.predict import MultiProfile, Profile
 
 
@@ -27,3 +28,11 @@ def check(dmc: galil.Controller) -> None:
     assert_type(dmc.records(8), galil.RecordStream)
     assert_type(dmc.A.move_to(10).wait(), galil.MoveResult)
     assert_type(dmc.messages, galil.MessageQueue)
+
+
+def check_coordinated(dmc: galil.Controller) -> None:
+    path = [galil.Line(1000, 0), galil.Arc(500, 270, 90)]
+    assert_type(dmc.vector_move("AB", path, speed=20_000), galil.VectorHandle)
+    assert_type(dmc.plan_vector("AB", path, speed=20_000), galil.VectorPlan)
+    assert_type(dmc.vector_move("AB", path, speed=20_000).wait(), galil.MoveResult)
+    assert_type(dmc.B.gear_to(dmc.A, 0.5), Gearing)
