@@ -16,6 +16,7 @@ message room (:mod:`galil.messages`) routes unsolicited output, the record room
 from __future__ import annotations
 
 import contextlib
+import inspect
 import logging
 import threading
 import time
@@ -449,19 +450,22 @@ class Controller(LinkFacade):
         with user_units({a.letter: a for a in chosen}):
             return stream.run(progress=progress, timeout=timeout)
 
-    def _vector(self, axes: str, segments: Sequence[Segment], **options: Any) -> VectorStream:
-        names = list(axes) if isinstance(axes, str) else [str(a) for a in axes]
-        chosen = [self.axis(a) for a in names]
-        path_axes = [PathAxis(a.letter, a.scale, a.display) for a in chosen]
-        masters = "".join(a.letter for a in chosen) + "S"
-        return VectorStream(
+    def _prepared(self, axes: str, segments: Sequence[Segment], **options: Any) -> VectorStream:
+        unknown = sorted(set(options) - set(inspect.signature(self.vector_move).parameters))
+        if unknown:
+            raise TypeError(f"got an unexpected keyword argument {unknown[0]!r}")
+        chosen = [self.axis(a) for a in (list(axes) if isinstance(axes, str) else axes)]
+        run = VectorStream(
             self.link,
-            path_axes,
+            [PathAxis(a.letter, a.scale, a.display) for a in chosen],
             segments,
             byte_rate=self.link.byte_rate,
-            followers=self.tracker.followers(masters),
+            followers=self.tracker.followers("".join(a.letter for a in chosen) + "S"),
             **options,
         )
+        with user_units({a.letter: a for a in chosen}):
+            run.prepare()
+        return run
 
     def vector_move(
         self,
@@ -479,12 +483,10 @@ class Controller(LinkFacade):
     ) -> VectorHandle:
         """Run a path of :class:`~galil.Line` and :class:`~galil.Arc` segments on ``axes``.
 
-        The whole path is predicted and checked first (VS/VA/VD ranges, segment lengths and
-        the total (TC 30/31), the buffer, each axis's speed and acceleration along the path,
-        the soft limits); a refusal names the segment and the sample, and nothing is sent.
-        Then the sequence goes out (``VM``/``VP``/``CR`` on two axes, ``LM``/``LI`` on more,
-        or as ``mode`` says), begins with ``BG S``, and what the buffer cannot hold yet is
-        streamed as it frees up; the call returns once everything is sent.
+        The whole path is predicted and checked first (see :mod:`galil.vector`); a refusal
+        names the segment and the sample, and nothing is sent. Then it goes out as one
+        sequence (``VM`` on two axes, ``LM`` on more), begins (``BG S``), and what the buffer
+        cannot hold yet is streamed; the call returns once everything is sent.
 
         Args:
             axes: the path's axes, in the order of the segments' components (``"AB"``).
@@ -504,40 +506,23 @@ class Controller(LinkFacade):
             A :class:`~galil.vector.VectorHandle`: ``wait()``, ``stop()``, ``profiles`` per
             axis, ``vector`` (the prediction in user units), ``begin``.
         """
-        options = {"speed": speed, "accel": accel, "decel": decel, "smoothing": smoothing}
-        limits = {"axis_speed": axis_speed, "axis_accel": axis_accel}
-        run = self._vector(axes, segments, mode=mode, stream=stream, **options, **limits)
-        with user_units({a.letter: self.axes[a.letter] for a in run.axes}):
-            run.prepare()
+        run = self._prepared(
+            axes, segments, speed=speed, accel=accel, decel=decel, smoothing=smoothing,
+            mode=mode, stream=stream, axis_speed=axis_speed, axis_accel=axis_accel,
+        )  # fmt: skip
         return run.start(self.tracker)
 
-    def plan_vector(
-        self,
-        axes: str,
-        segments: Sequence[Segment],
-        *,
-        speed: Any,
-        accel: Any = None,
-        decel: Any = None,
-        smoothing: float | None = None,
-        mode: str | None = None,
-        stream: bool = True,
-        axis_speed: Mapping[str, Any] | None = None,
-        axis_accel: Mapping[str, Any] | None = None,
-    ) -> VectorPlan:
-        """Predict and check :meth:`vector_move` without sending anything (one state query).
+    def plan_vector(self, axes: str, segments: Sequence[Segment], **options: Any) -> VectorPlan:
+        """Predict and check :meth:`vector_move` (same arguments) without sending anything.
 
         Returns:
             A :class:`~galil.segments.VectorPlan`: ``duration``, ``position(axis)`` and
             ``profiles`` per axis, ``path`` and ``speed`` along the path (in the axes' common
             unit), ``plot()``.
         """
-        options = {"speed": speed, "accel": accel, "decel": decel, "smoothing": smoothing}
-        limits = {"axis_speed": axis_speed, "axis_accel": axis_accel}
-        run = self._vector(axes, segments, mode=mode, stream=stream, **options, **limits)
-        with user_units({a.letter: self.axes[a.letter] for a in run.axes}):
-            profile = run.prepare()
-        return show(profile, run.axes, run.path)
+        run = self._prepared(axes, segments, **options)
+        assert run.profile is not None
+        return show(run.profile, run.axes, run.path)
 
     if not TYPE_CHECKING:  # mypy knows the letters below, and nothing else
 

@@ -158,26 +158,8 @@ def gear_to(
     if master != "S":
         master = model.axis_letter(master)
     follower = model.axis_letter(follower)
-    if master == follower:
-        raise InvalidArgument(f"axis {follower} cannot follow itself (TC 46)")
     q = _ratio(link, ratio)
-    if q == 0:
-        raise LimitError(
-            "a gear ratio of 0 is no gearing", name="GR", value=0.0, limit=model.gr_resolution
-        )
-    gears = tracker.gears
-    if follower in gears:
-        raise InvalidArgument(
-            f"axis {follower} is already geared to {gears[follower].master}; turn that gearing"
-            " off first",
-            model=model.name,
-        )
-    if master in gears or any(g.master == follower for g in gears.values()):
-        raise InvalidArgument(
-            f"axis {master if master in gears else follower} would be a master and a follower"
-            " (TC 46: gear axis both master and follower)",
-            model=model.name,
-        )
+    _check_pair(link, tracker, follower, master, q)
     m_name = "_AVS" if master == "S" else f"_RP{master}"
     bg, mo, f0, m0 = link.query_operands(
         [f"_BG{follower}", f"_MO{follower}", f"_RP{follower}", m_name]
@@ -200,5 +182,31 @@ def gear_to(
         q, master=round(m0), position=round(f0), resolution=model.gr_resolution
     )
     gear = GearLink(follower, master, q, anchor, display, travelled=round(m0))
-    gears[follower] = gear
+    tracker.gears[follower] = gear
     return Gearing(link, tracker, gear)
+
+
+def _check_pair(
+    link: CommandLink, tracker: MotionTracker, follower: str, master: str, ratio: float
+) -> None:
+    """Refuse a follower of itself, a ratio of 0, and a chain of gearings (TC 46)."""
+    model = link.model
+    if master == follower:
+        raise InvalidArgument(f"axis {follower} cannot follow itself (TC 46)")
+    if ratio == 0:
+        raise LimitError(
+            "a gear ratio of 0 is no gearing", name="GR", value=0.0, limit=model.gr_resolution
+        )
+    gears = tracker.gears
+    if follower in gears:
+        raise InvalidArgument(
+            f"axis {follower} is already geared to {gears[follower].master}; turn that gearing"
+            " off first",
+            model=model.name,
+        )
+    if master in gears or any(g.master == follower for g in gears.values()):
+        raise InvalidArgument(
+            f"axis {master if master in gears else follower} would be a master and a follower"
+            " (TC 46: gear axis both master and follower)",
+            model=model.name,
+        )

@@ -99,7 +99,14 @@ def check_int32(name: str, value: float, axis: str, model: str) -> None:
         )
 
 
-def _ready(link: CommandLink, a: str, state: _State) -> None:
+def _ready(link: CommandLink, a: str, state: _State, tracker: MotionTracker) -> None:
+    gear = tracker.gears.get(a)
+    if gear is not None:
+        raise InvalidArgument(
+            f"axis {a} is geared to {gear.master}: turn the gearing off before moving it (its"
+            " own moves on top of the gearing are not predicted)",
+            model=link.model.name,
+        )
     if state.bg:
         raise InvalidArgument(
             f"axis {a} is already moving; stop it or wait first", model=link.model.name
@@ -176,21 +183,13 @@ def execute_move(
     order = link.model.axes
     moves = sorted(moves, key=lambda m: order.index(m.letter))
     letters = "".join(m.letter for m in moves)
-    gears = {f: g for f, g in tracker.followers(letters).items() if f not in letters}
     state = _read_state(link, letters)
     tracks: dict[str, Track] = {}
     profiles: dict[str, predict.Profile] = {}
     sent: dict[str, float] = {}
     for m in moves:
         if not dry_run:
-            gear = tracker.gears.get(m.letter)
-            if gear is not None:
-                raise InvalidArgument(
-                    f"axis {m.letter} is geared to {gear.master}: turn the gearing off before"
-                    " moving it (its own moves on top of the gearing are not predicted)",
-                    model=link.model.name,
-                )
-            _ready(link, m.letter, state[m.letter])
+            _ready(link, m.letter, state[m.letter], tracker)
         track, profile, target = _plan_axis(link, m, state[m.letter], relative)
         tracks[m.letter] = track
         show = (display or {}).get(m.letter)
@@ -198,7 +197,7 @@ def execute_move(
         sent[m.letter] = track.amount if command == "IP" else target
     handle = MoveHandle(link, tracks, "position", display=display, tracker=tracker)
     handle.preset(profiles)
-    handle.follow(gears)
+    handle.follow(tracker.followers(letters))  # (an axis of the move is skipped)
     if dry_run:
         return handle
     parts: list[Command] = []
