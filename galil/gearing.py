@@ -64,18 +64,24 @@ class Gearing:
         """Whether the gearing holds (no ``GR 0``, ``ST``, limit or ``AB`` since)."""
         return self._tracker.gears.get(self.follower) is self._gear
 
-    def predict(self, master: predict.Profile, *, start: int | None = None) -> predict.Profile:
-        """The follower's profile for a master profile (counts; ``start``: the follower's
-        position at the master's sample 0, default where it is now).
+    def predict(self, master: predict.Profile) -> predict.Profile:
+        """The follower's profile for a profile of the master's commanded position (counts,
+        absolute; for ``"S"``, the distance counted since the gearing engaged), with the
+        fraction of a count the controller carries.
 
         Raises:
             InvalidArgument: the gearing is off.
         """
         if not self.engaged:
             raise InvalidArgument(f"axis {self.follower} is not geared any more")
-        if start is None:
-            start = round(self._link.query_operands([f"_RP{self.follower}"])[0])
-        profile = predict.gear_profile(master, self.ratio, start=start, model=self._link.model)
+        pos = self._gear.positions(master.position)
+        profile = predict.Profile.from_samples(
+            pos,
+            sample_period=master.sample_period,
+            shape="geared",
+            peak_speed=abs(self.ratio) * master.peak_speed,
+            stop_code=master.stop_code,
+        )
         show = self._gear.display
         return profile if show is None else show(profile)
 

@@ -161,6 +161,19 @@ def test_stop_decelerates_along_the_path_and_the_prediction_follows(
         np.testing.assert_array_equal(trace[a][k : k + p.size], p)
 
 
+def test_an_abort_stops_a_sequence_at_once_and_the_prediction_follows(
+    dmc: galil.Controller,
+) -> None:
+    h = dmc.vector_move("AB", [Line(60_000, 80_000)], speed=40_000, accel=256_000)
+    dmc.sleep(0.4)
+    dmc.abort()
+    r = h.wait()
+    assert r.stop_codes == {"A": 7, "B": 7}
+    assert r.worst == 0
+    assert h.counts.stop_code == 7
+    assert 0 < r.final["A"] < 60_000
+
+
 def test_the_motion_guard_and_controller_stop_reach_a_sequence(dmc: galil.Controller) -> None:
 
     def scan() -> None:
@@ -285,7 +298,9 @@ def test_a_follower_is_predicted_with_its_master_sample_by_sample(dmc: galil.Con
         return dmc.A.move_by(10.0005 * mm, speed=20 * mm / s)
 
     followed(dmc, move, "AB")
+    expected = gearing.predict(dmc.A.plan_by(10.0005 * mm))  # the next move, beforehand
     followed(dmc, move, "AB")  # the fraction is carried from one move to the next
+    assert expected.end == dmc.query_operands(["_RPB"])[0]
     with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="geared"):
         dmc.B.move_by(1 * mm)
     gearing.off()

@@ -157,6 +157,7 @@ def test_a_running_sequence_owns_its_axes(sim: SimController) -> None:
     [
         ("BG S", 24),  # no segments
         ("VP 0,0", 30),  # no length
+        ("VP 2147483647,0", 31),  # longer than two billion counts
         ("LI 5,5", 33),  # LI in a VM sequence
         ("CR 5,0,90", 6),  # radius below 10
         ("VP 1,2<5000", 6),  # per-segment speed: not simulated
