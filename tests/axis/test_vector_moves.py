@@ -356,3 +356,18 @@ def test_a_ratio_change_at_rest_keeps_the_prediction_exact() -> None:
         gearing.set_ratio(-0.7)
         assert gearing.ratio == galil.predict.quantise_ratio(-0.7)
         followed(dmc, lambda: dmc.A.move_by(2002), "AB")
+
+
+@pytest.mark.parametrize(("model", "smoothing"), [("DMC-4040", None), ("DMC-2183", 0.3)])
+def test_smoothing_is_predicted_vt_where_the_model_has_it_else_the_first_axis_it(
+    model: str, smoothing: float | None
+) -> None:
+    with simulated(model) as dmc:
+        if smoothing is None:
+            dmc.A.smoothing = 0.25  # no VT: the sequence is smoothed by its first axis's IT
+        path = [Line(20_000, 0), Arc(2000, 270, 90), Line(0, 5000)]
+        options = {"speed": 30_000, "accel": 512_000, "smoothing": smoothing}
+        followed(dmc, lambda: dmc.vector_move("AB", path, **options), "AB")
+        h = dmc.vector_move("AB", [Line(-20_000, 0)], **options)
+        assert h.counts.speed_settings[3] in (0.25, 77 / 256)
+        h.wait()
