@@ -587,9 +587,7 @@ _add(
     "RIO47300",
 )
 
-_IDENT = re.compile(
-    r"^\s*(?P<model>[A-Z]{2,4}-?\d+\w*?)\s+Rev\.?\s+(?P<rev>\S+)", re.IGNORECASE
-)
+_IDENT = re.compile(r"^\s*(?P<model>[A-Z]{2,4}-?\d+\w*?)\s+Rev\.?\s+(?P<rev>\S+)", re.IGNORECASE)
 
 
 # Four-digit part numbers are <family digits><axis count><family suffix>: DMC-4040 is a
