@@ -161,6 +161,8 @@ class HomingSequence:
             encoder plus an origin; 0 when both are the same).
 
     Attributes:
+        prof: the engine it drives; a caller that replaces the axis's engine object (the
+            simulator restores snapshots while it bisects a step) sets it again.
         stage: 1, 2, 3 (to the index), 4 (back to it); 0 once done.
         zero_at: where, in the profiler's frame, the position to define as 0 is (set when
             the sequence ends with a defined position).

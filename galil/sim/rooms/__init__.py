@@ -11,6 +11,8 @@ from __future__ import annotations
 from galil.sim.machine import Room
 from galil.sim.rooms.contour import Contour
 from galil.sim.rooms.handles import Handles
+from galil.sim.rooms.homing import Homing
+from galil.sim.rooms.io import IO
 from galil.sim.rooms.limits import Limits
 from galil.sim.rooms.motion import Motion
 from galil.sim.rooms.programs import ProgramCommands
@@ -18,11 +20,14 @@ from galil.sim.rooms.records import Records
 from galil.sim.rooms.reports import Reports
 from galil.sim.rooms.settings import Settings
 from galil.sim.rooms.trippoints import Trippoints
+from galil.sim.rooms.tuning import Tuning
 
 __all__ = [
+    "IO",
     "ROOMS",
     "Contour",
     "Handles",
+    "Homing",
     "Limits",
     "Motion",
     "ProgramCommands",
@@ -30,6 +35,7 @@ __all__ = [
     "Reports",
     "Settings",
     "Trippoints",
+    "Tuning",
     "rooms_with",
 ]
 
@@ -45,6 +51,9 @@ ROOMS: tuple[type[Room], ...] = (
     Settings,
     Handles,
     ProgramCommands,
+    Tuning,
+    Homing,
+    IO,
 )
 
 
