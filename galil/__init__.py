@@ -19,15 +19,20 @@ from galil.errors import (
     ProtocolError,
     ScheduleError,
 )
+from galil.homing import Homed, Switches, SwitchPolarity
+from galil.io import IO
 from galil.messages import MessageQueue
 from galil.models import ModelSpec, get_model
 from galil.motion import MoveHandle, MoveResult
 from galil.predict import MultiProfile, Profile
+from galil.predict.homing import HomeSwitch
 from galil.records import RecordStream
+from galil.tuning import MotorType
 
 __version__ = "0.1.0.dev0"
 
 __all__ = [
+    "IO",
     "Axis",
     "CommandError",
     "ContourResult",
@@ -37,11 +42,14 @@ __all__ = [
     "GalilConnectionError",
     "GalilError",
     "GalilTimeoutError",
+    "HomeSwitch",
+    "Homed",
     "InvalidArgument",
     "LimitError",
     "MessageQueue",
     "ModelSpec",
     "MotionError",
+    "MotorType",
     "MoveHandle",
     "MoveResult",
     "MultiProfile",
@@ -50,6 +58,8 @@ __all__ = [
     "ReconnectPolicy",
     "RecordStream",
     "ScheduleError",
+    "SwitchPolarity",
+    "Switches",
     "__version__",
     "connect",
     "find",

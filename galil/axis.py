@@ -14,12 +14,14 @@ from typing import Any
 
 from galil import codes, predict
 from galil.errors import InvalidArgument, LimitError
+from galil.homing import AxisHoming, Homed, Switches, read_switches
 from galil.link import CommandLink
 from galil.models import INT32_MAX, INT32_MIN
 from galil.motion import Display, MotionTracker, MoveHandle, stop_axes
 from galil.moves import AxisMove, execute_move, increment, jog, speed_schedule
 from galil.protocol import commands as cmds
 from galil.routines import Routines
+from galil.tuning import Setting, motor_type, whole
 from galil.units import Scale, counts_or_plain, is_quantity
 
 __all__ = ["OVERRIDES", "Axis", "check_overrides", "resolve_moves", "user_units"]
@@ -63,6 +65,7 @@ class Axis:
         self._routines = routines
         self.letter = letter
         self._scale: Scale | None = None
+        self._homing = AxisHoming(link, letter, tracker)
 
     # -- units ------------------------------------------------------------------------------
     def set_scale(self, counts_per: Any, offset: Any = None, sign: int = 1) -> Axis:
@@ -457,6 +460,67 @@ class Axis:
     def stop(self) -> None:
         """Decelerate to a stop (``ST``) at DC."""
         stop_axes(self._link, self._tracker, self.letter)
+
+    # -- homing and switches (galil.homing) ------------------------------------------------
+    def home(self, *, switch: predict.HomeSwitch | None = None) -> MoveHandle:
+        """Home the axis (``HM``): find the home switch's edge, then the index, which becomes
+        position 0; stop code 10. ``switch`` (positions in counts) makes a prediction.
+
+        Raises:
+            InvalidArgument: moving, motor off, SP or HV 0, or into an active limit switch.
+        """
+        return self._homing.start("HM", switch, display=self._display)
+
+    def find_edge(self, *, switch: predict.HomeSwitch | None = None) -> MoveHandle:
+        """Move at SP to the home switch's edge (``FE``); stop code 9, no position defined."""
+        return self._homing.start("FE", switch, display=self._display)
+
+    def find_index(self, *, switch: predict.HomeSwitch | None = None) -> MoveHandle:
+        """Move at the jog speed (its sign is the direction) to the next index pulse (``FI``),
+        which becomes position 0; stop code 10."""
+        return self._homing.start("FI", switch, display=self._display)
+
+    @property
+    def homed(self) -> Homed:
+        """Whether the axis is homed, and how the library knows (``bool(axis.homed)``)."""
+        return self._homing.homed()
+
+    @property
+    def switches(self) -> Switches:
+        """Limit and home switches (``TS``, one round trip); True means tripped."""
+        return read_switches(self._link, self.letter)
+
+    @property
+    def home_speed(self) -> Any:
+        """``HV``: the slow speed of HM's last stages and FI's return."""
+        return self._out_rate(self._operand("HV"), 1)
+
+    @home_speed.setter
+    def home_speed(self, value: Any) -> None:
+        counts = self.check_parameter("SP", self.rate_counts(value, 1, "home_speed"))
+        self._link.command_line([cmds.hv(model=self._link.model, **{self.letter: counts})])
+
+    # -- motor and loop settings (galil.tuning; ranges per model) --------------------------
+    motor_type = Setting("MT", cmds.mt, motor_type)
+    """``MT``: a :class:`~galil.tuning.MotorType` (servo, stepper variants ...)."""
+    kp = Setting("KP", cmds.kp, float)
+    """``KP``: proportional gain."""
+    ki = Setting("KI", cmds.ki, float)
+    """``KI``: integral gain."""
+    kd = Setting("KD", cmds.kd, float)
+    """``KD``: derivative gain."""
+    stepper_smoothing = Setting("KS", cmds.ks, float)
+    """``KS``: smoothing of a stepper's step pulses (0.25 .. 64)."""
+    integrator_limit = Setting("IL", cmds.il, float)
+    """``IL``: integrator limit, volts."""
+    torque_limit = Setting("TL", cmds.tl, float)
+    """``TL``: torque (output) limit, volts."""
+    error_limit = Setting("ER", cmds.er, whole)
+    """``ER``: position-error limit, counts."""
+    off_on_error = Setting("OE", cmds.oe, whole)
+    """``OE``: 0 off, 1 on position error / amplifier error / abort, 2 on limits, 3 all."""
+    brush = Setting("BR", cmds.br, whole)
+    """``BR``: -1 external drive, 0 brushless, 1 brush."""
 
     def __repr__(self) -> str:
         unit = f" in {self._scale.unit:~}" if self._scale is not None else " in counts"

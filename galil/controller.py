@@ -29,6 +29,8 @@ from galil.contour import ContourResult, ContourStream
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.facade import LinkFacade
 from galil.handshake import identify
+from galil.homing import SwitchPolarity, read_polarity, set_polarity
+from galil.io import IO
 from galil.link import Link, check_timeout
 from galil.messages import Messages
 from galil.models import Identity, ModelSpec, get_model
@@ -38,6 +40,7 @@ from galil.protocol import commands as cmds
 from galil.records import Records
 from galil.routines import Routines
 from galil.transport import Transport, open_transport
+from galil.tuning import burn
 from galil.units import path_to_counts
 from galil.watchdog import Watchdog, check_watchdog_args
 
@@ -119,6 +122,7 @@ class Controller(LinkFacade):
 
     Attributes:
         link: the command link (:class:`~galil.link.Link`).
+        io: digital and analog I/O (:class:`~galil.io.IO`).
         identity: the parsed ``^R^V`` reply (``None`` without a handshake).
         echo: whether the controller echoes (found at the handshake and kept).
     """
@@ -154,6 +158,7 @@ class Controller(LinkFacade):
         self.records_room = Records(self.link)
         self.tracker = MotionTracker()
         self.routines = Routines(self.link)
+        self.io = IO(self.link, self.messages_room, self.routines)
         self._watchdogs: list[Watchdog] = []
         self.identity: Identity | None = None
         self.echo = False
@@ -305,6 +310,11 @@ class Controller(LinkFacade):
         return self.axes[self.model.axis_letter(name)]
 
     def _letters(self, axes: str) -> str:
+        if not self.model.axes:
+            raise InvalidArgument(
+                f"{self.model.name} is an I/O controller with no axes: it cannot move",
+                model=self.model.name,
+            )
         if not isinstance(axes, str):
             raise InvalidArgument(f"axes must be a string of axis letters, got {axes!r}")
         out = ""
@@ -447,6 +457,29 @@ class Controller(LinkFacade):
         with user_units({a.letter: a for a in chosen}):
             return stream.run(progress=progress, timeout=timeout)
 
+    # -- switches and flash (galil.homing, galil.tuning) -------------------------------------
+
+    @property
+    def switch_polarity(self) -> SwitchPolarity:
+        """``CN``: limit polarity, home direction and latch edge (``MG _CN0,_CN1,_CN2``)."""
+        return read_polarity(self.link)
+
+    @switch_polarity.setter
+    def switch_polarity(self, polarity: SwitchPolarity) -> None:
+        set_polarity(self.link, polarity)
+
+    def save(self, timeout: float | None = None) -> None:
+        """Burn the parameters to flash (``BN``), waiting as long as a flash write takes."""
+        burn(self.link, "BN", timeout)
+
+    def save_program(self, timeout: float | None = None) -> None:
+        """Burn the program to flash (``BP``)."""
+        burn(self.link, "BP", timeout)
+
+    def save_variables(self, timeout: float | None = None) -> None:
+        """Burn the variables and arrays to flash (``BV``)."""
+        burn(self.link, "BV", timeout)
+
     if not TYPE_CHECKING:  # mypy knows the letters below, and nothing else
 
         def __getattr__(self, name: str) -> Axis:
@@ -461,6 +494,11 @@ class Controller(LinkFacade):
                 return self.axes[model.axis_letter(name)]
             except InvalidArgument:
                 pass
+        if len(name) == 1 and name.isalpha() and model is not None and not model.axes:
+            raise AttributeError(
+                f"{type(self).__name__!s} has no attribute {name!r}: {model.name} is an I/O "
+                "controller with no axes (controller.io)"
+            )
         if len(name) == 1 and name.isalpha() and model is not None:
             # Most likely an axis letter: a typo, a lower-case letter, or one the model lacks.
             raise AttributeError(

@@ -230,6 +230,12 @@ class ModelSpec:
         Raises:
             InvalidArgument: the model has no such axis.
         """
+        if not self.axes:
+            raise InvalidArgument(
+                f"{self.name} is an I/O controller with no axes (axis {name!r}): it cannot "
+                "move; use controller.io",
+                model=self.name,
+            )
         letter = name.upper() if isinstance(name, str) else ""
         letter = self.aliases.get(letter, letter)
         if len(letter) != 1 or letter not in self.axes:

@@ -34,7 +34,8 @@ class IO(Room):
         self.aq = [2.0] * spec.analog_inputs
 
     # ---- channels ------------------------------------------------------------------------
-    def _index(self, n: float, count: int) -> int:
+    def channel(self, n: float, count: int) -> int:
+        """The list index of channel ``n`` among ``count`` (TC 6 if there is none)."""
         k = int(n) - self.first
         if n != int(n) or not 0 <= k < count:
             raise Refused(6, "no such I/O point")
@@ -42,12 +43,12 @@ class IO(Room):
 
     def set_input(self, n: int, high: bool) -> None:
         """Test hook: drive digital input ``n`` high or low."""
-        self.inputs[self._index(n, len(self.inputs))] = bool(high)
+        self.inputs[self.channel(n, len(self.inputs))] = bool(high)
 
     def set_analog_input(self, n: int, volts: float) -> None:
         """Test hook: put ``volts`` on analog input ``n`` (clipped to the model's range)."""
         lo, hi = self.machine.spec.analog_in_range
-        self.analog_in[self._index(n, len(self.analog_in))] = min(max(float(volts), lo), hi)
+        self.analog_in[self.channel(n, len(self.analog_in))] = min(max(float(volts), lo), hi)
 
     def input_bits(self) -> int:
         """Every input as one integer (bit k = input ``first + k``)."""
@@ -60,19 +61,19 @@ class IO(Room):
     # ---- functions and operands --------------------------------------------------------
     @function("IN")
     def read_input(self, n: float) -> float:
-        return 1.0 if self.inputs[self._index(n, len(self.inputs))] else 0.0
+        return 1.0 if self.inputs[self.channel(n, len(self.inputs))] else 0.0
 
     @function("OUT")
     def read_output(self, n: float) -> float:
-        return 1.0 if self.outputs[self._index(n, len(self.outputs))] else 0.0
+        return 1.0 if self.outputs[self.channel(n, len(self.outputs))] else 0.0
 
     @function("AN")
     def read_analog(self, n: float) -> float:
-        return round(self.analog_in[self._index(n, len(self.analog_in))], 4)
+        return round(self.analog_in[self.channel(n, len(self.analog_in))], 4)
 
     @function("AO")
     def read_analog_output(self, n: float) -> float:
-        return round(self.analog_out[self._index(n, len(self.analog_out))], 4)
+        return round(self.analog_out[self.channel(n, len(self.analog_out))], 4)
 
     @operand("TI", kind=OperandKind.INDEX)
     def input_bank(self, index: str) -> float:
@@ -91,7 +92,7 @@ class IO(Room):
         fields = split_fields(args)
         if len(fields) != 1 or not fields[0].strip():
             raise Refused(4, "one output number")
-        return self._index(self.machine.interp.evaluate(fields[0]), len(self.outputs))
+        return self.channel(self.machine.interp.evaluate(fields[0]), len(self.outputs))
 
     @handler("SB")
     def sb(self, args: str) -> str:
@@ -109,7 +110,7 @@ class IO(Room):
         if len(fields) != 2:
             raise Refused(50, "OB n,state")
         i = self.machine.interp
-        k = self._index(i.evaluate(fields[0]), len(self.outputs))
+        k = self.channel(i.evaluate(fields[0]), len(self.outputs))
         self.outputs[k] = i.evaluate(fields[1]) != 0
         return ""
 
@@ -136,7 +137,7 @@ class IO(Room):
         if len(fields) != 2:
             raise Refused(50, "AO n,volts")
         i = self.machine.interp
-        k = self._index(i.evaluate(fields[0]), len(self.analog_out))
+        k = self.channel(i.evaluate(fields[0]), len(self.analog_out))
         volts = i.evaluate(fields[1])
         lo, hi = self.machine.spec.analog_out_range
         if not lo <= volts <= hi:
@@ -150,7 +151,7 @@ class IO(Room):
         if len(fields) != 2:
             raise Refused(50, "AQ n,range")
         i = self.machine.interp
-        k = self._index(i.evaluate(fields[0]), len(self.analog_in))
+        k = self.channel(i.evaluate(fields[0]), len(self.analog_in))
         code = i.evaluate(fields[1])
         if abs(code) not in (1, 2, 3, 4):
             raise Refused(6, "AQ range is ±1..±4")
@@ -162,7 +163,7 @@ class IO(Room):
         """AI n: hold until input n is high (``AI -n``: low)."""
         n = self.machine.interp.evaluate(args)
         want = n > 0
-        k = self._index(abs(n), len(self.inputs))
+        k = self.channel(abs(n), len(self.inputs))
         return Wait(lambda: self.inputs[k] == want)
 
     # ---- the data record -----------------------------------------------------------------
