@@ -124,7 +124,8 @@ class HomeSwitch:
 
     def shifted(self, by: int) -> HomeSwitch:
         """The same switch in a frame shifted by ``by`` counts (positions + by)."""
-        return HomeSwitch(self.edge + by, self.side, self.index_period, self.index_offset + by)
+        offset = (self.index_offset + by) % self.index_period
+        return HomeSwitch(self.edge + by, self.side, self.index_period, offset)
 
 
 @dataclass(frozen=True)

@@ -370,10 +370,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="TCP port for unsolicited messages (0: any free one; -1: none, use CF I)",
     )
     parser.add_argument("--lag", type=float, default=0.003, help="servo lag time constant, s")
+    parser.add_argument(
+        "--limits",
+        metavar="REV,FWD",
+        help="put every axis's limit switches at these positions in counts (default: none)",
+    )
     args = parser.parse_args(argv)
     try:
         controller = SimController(args.model, RealTimeClock(), servo_lag=args.lag)
-    except InvalidArgument as e:
+        if args.limits:
+            reverse, forward = (int(v) for v in args.limits.split(","))
+            for letter in controller.spec.axes:
+                controller.place_limit_switches(letter, forward=forward, reverse=reverse)
+    except (InvalidArgument, ValueError) as e:
         parser.error(str(e))
     server: _Server
     if args.pty:

@@ -135,6 +135,7 @@ class Servo:
         old = ax.m
         ax.origin += old.encoder - int(position)  # the motor stays where it is
         ax.m = AxisMotion(self.ts, position, old.lag)
+        ax.m.keep_trace(old)
         ax.m.motor_on = old.motor_on
         ax.m.profiler.stop_code = old.profiler.stop_code
 
