@@ -59,7 +59,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         argv += ["--message-port", str(args.message_port)]
     argv += ["--lag", str(args.lag)]
     if args.limits:
-        argv += ["--limits", args.limits]
+        argv += [f"--limits={args.limits}"]
     return sim_main(argv)
 
 
