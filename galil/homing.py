@@ -214,8 +214,13 @@ class AxisHoming:
         found = predict.homing(
             kind, params, switch, start=rp, sample_period=self._link.sample_period
         )
-        zero = "" if found.zero_at is None else f"; position 0 at {found.zero_at} (old counts)"
-        note = f"predicted from the given switch positions{zero}"
+        note = "predicted from the given switch positions, on the reference position"
+        if found.zero_at is None:
+            # FE ends where the motor met the edge: later than the reference by the servo lag
+            # (speed x lag counts), which the predictor does not model.
+            note += "; the end is approximate (the edge is met by the lagging motor)"
+            return Track(mode, rp, move, None, fixed=found.profile, note=note, exact=False)
+        note += f"; position 0 at {found.zero_at} (old counts), exact"
         return Track(mode, rp, move, None, fixed=found.profile, note=note)
 
     def homed(self) -> Homed:

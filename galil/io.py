@@ -291,10 +291,10 @@ class IO:
             self._routines.install(_input_routine())
             self._routines.check_free(t, _INPUT_ROUTINE)
             seen = threading.Event()
-            tag = f"{_INPUT_MESSAGE} {n}"
+            tag = [_INPUT_MESSAGE, str(n)]
 
             def on_message(line: str) -> None:
-                if line.strip().startswith(tag):
+                if line.split()[:2] == tag:
                     seen.set()
 
             unsubscribe = self._messages.subscribe(on_message)
