@@ -63,18 +63,22 @@ def _day_one_on_an_axis(dmc: galil.Controller) -> None:
     result = a.home().wait(timeout=30)
     assert result.stop_codes == {"A": 10}
     assert a.position == 0
-    assert a.homed and "stop code 10" in a.homed.how
+    assert a.homed
+    assert "stop code 10" in a.homed.how
     # find the edge: stop code 9, on the home switch now
     assert a.switches.home is False
     assert a.find_edge().wait(timeout=30).stop_codes == {"A": 9}
-    assert a.switches.home is True and a.switches.home_input == 0
+    assert a.switches.home is True
+    assert a.switches.home_input == 0
     # drive onto the forward limit: the switches before and after
     before = a.switches
-    assert not before.forward_limit and not before.reverse_limit
+    assert not before.forward_limit
+    assert not before.reverse_limit
     with pytest.raises(galil.MotionError):
         a.jog(200_000).wait(timeout=30)
     after = a.switches
-    assert after.forward_limit and not after.reverse_limit
+    assert after.forward_limit
+    assert not after.reverse_limit
     assert a.stop_code[0] == 2
     # gains and motor type, read back as the controller stores them
     a.kp, a.ki, a.kd = 12.3, 0.5, 80
@@ -113,7 +117,7 @@ def _io_day_one(dmc: galil.Controller) -> None:
         with pytest.raises(galil.InvalidArgument):
             io.outputs[first - 1] = True
         with pytest.raises(galil.InvalidArgument):
-            io.inputs[first + dmc.model.digital_inputs]  # noqa: B018 - reading is the test
+            io.inputs[first + dmc.model.digital_inputs]
 
 
 @pytest.mark.parametrize("model", ["DMC-50040", "DMC-4240"])
@@ -127,7 +131,8 @@ def test_a_motion_controller_does_a_labs_day_one(served: Callable[[str], str], m
 
 def test_a_rio_does_io_and_refuses_motion(served: Callable[[str], str]) -> None:
     with galil.connect(served("RIO-47120"), timeout=5) as rio:
-        assert rio.model.family == "RIO-47xxx" and rio.model.axes == ""
+        assert rio.model.family == "RIO-47xxx"
+        assert rio.model.axes == ""
         _io_day_one(rio)
         rio.io.analog_out[0] = 2.5 * ureg.volt
         assert rio.io.analog_out[0].to("V").magnitude == 2.5

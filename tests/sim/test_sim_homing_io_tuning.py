@@ -72,7 +72,9 @@ def test_the_predictor_and_the_simulator_agree_sample_for_sample(kind: str) -> N
     start=st.integers(-20_000, 20_000),
     cn=st.sampled_from([-1, 1]),
 )
-def test_hm_finds_the_same_index_wherever_it_starts(edge: int, side: int, start: int, cn: int) -> None:
+def test_hm_finds_the_same_index_wherever_it_starts(
+    edge: int, side: int, start: int, cn: int
+) -> None:
     sim = SimController("DMC-4040", servo_lag=0.0)
     sim.set_home_switch("A", edge=edge, side=side, index_period=3000, index_offset=100)
     ask(sim, f"DPA={start};SPA=60000;ACA=1024000;DCA=1024000;HVA=6000;CN ,{cn}")
@@ -87,7 +89,8 @@ def test_hm_finds_the_same_index_wherever_it_starts(edge: int, side: int, start:
     origin = sim._m.servo.axes["A"].origin  # where 0 is in the fixed frame
     assert (origin - 100) % 3000 == 0  # an index pulse
     below = edge - 1 if side < 0 else edge
-    assert origin > below and origin - 3000 <= below  # the first index above the edge
+    assert origin > below
+    assert origin - 3000 <= below
 
 
 def test_a_stepper_homes_in_two_stages_and_zero_is_the_edge() -> None:
@@ -104,7 +107,8 @@ def test_homing_status_bits_show_in_the_data_record() -> None:
     ask(sim, "HMA;BGA")
     sim.advance(0.05)
     status = decode_record(sim.record(), sim.spec)["A"]["status"]
-    assert status & 0x0800 and status & 0x8000  # HM in progress, moving
+    assert status & 0x0800
+    assert status & 0x8000
     assert sim.room(Homing).runs
 
 
@@ -145,7 +149,8 @@ def test_placed_limit_switches_stop_motion_where_they_are_and_show_in_ts() -> No
 def test_cn_active_high_makes_an_untripped_switch_active() -> None:
     sim = SimController("DMC-4040")
     ask(sim, "CN 1")
-    assert number(sim, "_LFA") == 0 and number(sim, "_LRA") == 0
+    assert number(sim, "_LFA") == 0
+    assert number(sim, "_LRA") == 0
     assert ask(sim, "CN ?") == " 1, -1, -1\r\n:"
     ask(sim, "CN -1")
     assert number(sim, "_LFA") == 1
@@ -155,9 +160,11 @@ def test_cn_active_high_makes_an_untripped_switch_active() -> None:
 def test_digital_io_numbered_from_1_on_a_dmc_and_0_on_a_rio() -> None:
     dmc = SimController("DMC-4040")
     ask(dmc, "SB 3;CB 3;SB 8")
-    assert number(dmc, "@OUT[8]") == 1 and number(dmc, "@OUT[3]") == 0
+    assert number(dmc, "@OUT[8]") == 1
+    assert number(dmc, "@OUT[3]") == 0
     assert number(dmc, "_OP0") == 128
-    assert ask(dmc, "SB 0") == "?" and ask(dmc, "SB 9") == "?"
+    assert ask(dmc, "SB 0") == "?"
+    assert ask(dmc, "SB 9") == "?"
     dmc.set_input(2, False)
     assert number(dmc, "_TI0") == 0xFD
     rio = SimController("RIO-47120")
@@ -165,7 +172,8 @@ def test_digital_io_numbered_from_1_on_a_dmc_and_0_on_a_rio() -> None:
     assert number(rio, "_OP0") == 0x8001
     assert ask(rio, "SB 16") == "?"
     record = decode_record(rio.record(), rio.spec)
-    assert record["outputs"] == 0x8001 and record["inputs"] == 0xFFFF
+    assert record["outputs"] == 0x8001
+    assert record["inputs"] == 0xFFFF
 
 
 def test_analog_outputs_are_range_checked_and_reported_in_the_rio_record() -> None:
@@ -198,7 +206,8 @@ def test_loop_settings_are_stored_quantised_and_range_checked() -> None:
     assert ask(sim, "KPA=1024") == "?"
     assert ask(sim, "MTA=10;MTB=-2.5") == "::"  # EtherCAT types exist on the 500x0
     assert ask(SimController("DMC-4040"), "MTA=10") == "?"
-    assert ask(sim, "KS 0.1") == "?" and ask(sim, "KS 4") == ":"
+    assert ask(sim, "KS 0.1") == "?"
+    assert ask(sim, "KS 4") == ":"
     assert ask(sim, "OE 1,2,3,0;BR -1") == "::"
     assert ask(sim, "OE 4") == "?"
     assert ask(sim, "KP ?,?") == " 10.250, 6.000\r\n:"
