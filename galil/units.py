@@ -12,7 +12,7 @@ import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
-from typing import Any
+from typing import Any, TypeAlias
 
 import numpy as np
 import numpy.typing as npt
@@ -20,7 +20,16 @@ import pint
 
 from galil.errors import InvalidArgument
 
-__all__ = ["Scale", "counts_or_plain", "get_registry", "is_quantity", "path_to_counts", "ureg"]
+__all__ = [
+    "PathSamples",
+    "Scale",
+    "counts_or_plain",
+    "get_registry",
+    "is_quantity",
+    "path_to_counts",
+    "sampled_values",
+    "ureg",
+]
 
 
 @cache
@@ -183,17 +192,17 @@ class Scale:
         q = self._convert(value, unit, what)
         return self.sign * float(q.magnitude) * self._k
 
-    def counts_to_position(self, counts: float) -> Any:
+    def counts_to_position(self, counts: float | npt.NDArray[np.float64]) -> Any:
         """Counts to a position Quantity."""
         return (counts * self.sign / self._k) * get_registry().Quantity(
             1.0, self.unit
         ) + self.offset
 
-    def counts_to_distance(self, counts: float) -> Any:
+    def counts_to_distance(self, counts: float | npt.NDArray[np.float64]) -> Any:
         """Counts to a relative distance Quantity."""
         return get_registry().Quantity(counts * self.sign / self._k, self.unit)
 
-    def counts_to_rate(self, counts: float, power: int) -> Any:
+    def counts_to_rate(self, counts: float | npt.NDArray[np.float64], power: int) -> Any:
         """Counts/s**power to a speed or acceleration Quantity."""
         unit = self.unit / get_registry().second ** power
         return get_registry().Quantity(counts * self.sign / self._k, unit)
@@ -238,6 +247,23 @@ def path_to_counts(
         else:
             out[:, j] = columns[:, j] * scale.distance_to_counts(1.0 * unit_of, what)
     return out.ravel() if magnitude.ndim == 1 else out
+
+
+PathSamples: TypeAlias = "npt.NDArray[np.float64] | pint.Quantity[npt.NDArray[np.float64]]"
+"""Positions sampled along a path: a float array in counts, or a pint Quantity array."""
+
+
+def sampled_values(values: object, what: str) -> PathSamples:
+    """Real numbers as floats: a Quantity stays a Quantity (of floats), never stripped.
+
+    Raises:
+        InvalidArgument: strings, complex numbers, NaN or infinity.
+    """
+    if is_quantity(values):
+        q: Any = values
+        out: PathSamples = q.__class__(_real_array(q.magnitude, what), q.units)
+        return out
+    return _real_array(values, what)
 
 
 def _real_array(values: object, what: str) -> npt.NDArray[np.float64]:

@@ -450,6 +450,7 @@ def _refuse_motion(
         sample=sample,
         axis=name,
         model=spec.name,
+        segment=min(row, m - 1),
     )
 
 
@@ -612,6 +613,7 @@ def _check_segment_ranges(
             sample=int(starts[i]),
             axis=axis,
             model=spec.name,
+            segment=i,
         )
     bad = np.flatnonzero(np.abs(c) > spec.cd_max)
     if bad.size:
@@ -626,6 +628,7 @@ def _check_segment_ranges(
             sample=int(starts[i]),
             axis=axis,
             model=spec.name,
+            segment=i,
         )
 
 
@@ -682,6 +685,7 @@ def _check_stream(
             sample=k,
             axis=axis,
             model=spec.name,
+            segment=i,
         )
     return StreamReport(rate, needed, total_bytes, float(slack.min()), depth)
 
