@@ -41,6 +41,9 @@ _POWER = {"SP": 1, "JG": 1, "AC": 2, "DC": 2}
 _SETTERS = {"SP": cmds.sp, "AC": cmds.ac, "DC": cmds.dc, "IT": cmds.it, "JG": cmds.jg}
 
 
+_PROFILE_FIELDS = tuple(f.name for f in fields(predict.Profile) if f.name != "display")
+
+
 @dataclass(frozen=True)
 class UnitProfile(predict.Profile):
     """A predicted profile of a scaled axis: everything a :class:`~galil.predict.Profile` has
@@ -170,12 +173,10 @@ class Axis:
         scale = self._scale
         if scale is None:
             return profile
-        shown = profile.with_units(
-            scale.sign * float(scale.counts_per.magnitude),
-            f"{scale.unit:~}",
-            offset=float(scale.offset.magnitude),
-        )
-        return UnitProfile(**{f.name: getattr(shown, f.name) for f in fields(shown)}, scale=scale)
+        shown = (scale.sign * float(scale.counts_per.magnitude), float(scale.offset.magnitude))
+        values = {f: getattr(profile, f) for f in _PROFILE_FIELDS}
+        values["display"] = (*shown, scale.unit_text)
+        return UnitProfile(**values, scale=scale)
 
     @property
     def _display(self) -> Display | None:

@@ -11,7 +11,7 @@ import math
 import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, cached_property, lru_cache
 from typing import Any, TypeAlias
 
 import numpy as np
@@ -70,10 +70,27 @@ def _ours(q: Any) -> Any:
     return reg.Quantity(q.magnitude, str(q.units))
 
 
+@lru_cache(maxsize=256)
 def _angle_power(units: Any) -> int:
     """The power of angle in ``units`` (pint treats angles as dimensionless: count radians)."""
     root = get_registry().Quantity(1.0, units).to_root_units()
     return int(dict(root.unit_items()).get("radian", 0))
+
+
+@lru_cache(maxsize=256)
+def _offset(units: Any) -> bool:
+    """Whether ``units`` has an offset (degC ...): those go through pint's own conversion."""
+    return not get_registry().Quantity(1.0, units)._ok_for_muldiv()
+
+
+@lru_cache(maxsize=256)
+def _factor(source: Any, target: Any) -> float:
+    """Multiply a magnitude in ``source`` units by this to get ``target`` units.
+
+    Raises:
+        pint.DimensionalityError: the units do not convert (offset units never reach here).
+    """
+    return float(get_registry().Quantity(1.0, source).to(target).magnitude)
 
 
 def _without_counts(q: Any) -> Any:
@@ -147,14 +164,24 @@ class Scale:
         else:
             object.__setattr__(self, "offset", self._convert(self.offset, unit, "offset"))
 
-    @property
+    @cached_property
     def unit(self) -> Any:
         """The user's position unit (``mm`` for ``2000 / mm``)."""
         return (1 / self.counts_per).units
 
-    @property
+    @cached_property
+    def unit_text(self) -> str:
+        """The unit as text (``"mm"``)."""
+        return f"{self.unit:~}"
+
+    @cached_property
     def _k(self) -> float:
         return float(self.counts_per.magnitude)
+
+    @cached_property
+    def _rate_units(self) -> tuple[Any, Any]:
+        reg = get_registry()
+        return self.unit / reg.second, self.unit / reg.second**2
 
     def _convert(self, value: Any, unit: Any, what: str) -> Any:
         if not is_quantity(value):
@@ -163,7 +190,14 @@ class Scale:
             )
         q = _ours(value)
         try:
-            out = q.to(unit)
+            if q.units == unit:
+                out = q  # the usual case: the axis's own unit, nothing to convert
+            elif getattr(q, "_magnitude", None).__class__ in (int, float) and not _offset(
+                q.units
+            ):
+                out = q.__class__(q.magnitude * _factor(q.units, unit), unit)
+            else:
+                out = q.to(unit)
         except pint.DimensionalityError as exc:
             raise InvalidArgument(
                 f"{what}: {value:~} has the wrong dimension; expected {unit:~}-compatible units"
@@ -188,7 +222,7 @@ class Scale:
 
     def rate_to_counts(self, value: Any, power: int, what: str) -> float:
         """A speed (power 1) or acceleration (power 2) Quantity to counts/s**power."""
-        unit = self.unit / get_registry().second ** power
+        unit = self._rate_units[power - 1]
         q = self._convert(value, unit, what)
         return self.sign * float(q.magnitude) * self._k
 
@@ -204,7 +238,7 @@ class Scale:
 
     def counts_to_rate(self, counts: float | npt.NDArray[np.float64], power: int) -> Any:
         """Counts/s**power to a speed or acceleration Quantity."""
-        unit = self.unit / get_registry().second ** power
+        unit = self._rate_units[power - 1]
         return get_registry().Quantity(counts * self.sign / self._k, unit)
 
 

@@ -226,6 +226,16 @@ def check_soft_limits(
         LimitError: at the first sample beyond a limit (``name`` is ``"FL"`` or ``"BL"``).
     """
     pos = profile.position
+    # Quick look first (one pass for the extremes): nothing can be beyond a limit when the
+    # whole path lies inside every one of them; the usual case, and cheap.
+    low, high = int(pos.min()), int(pos.max())
+    if (
+        (forward_limit is None or high <= forward_limit)
+        and (backward_limit is None or low >= backward_limit)
+        and _POSITION_MIN <= low
+        and high <= _POSITION_MAX
+    ):
+        return
     prev = np.concatenate((pos[:1], pos[:-1]))
     checks: list[tuple[str, float, npt.NDArray[np.bool_]]] = []
     if forward_limit is not None:
