@@ -26,6 +26,7 @@ GUIDE = [
     "speed-schedule.md",
     "units.md",
     "safety.md",
+    "reliability.md",
     "predictor.md",
     "transports.md",
     "testing.md",
