@@ -110,7 +110,7 @@ def plan_profile(args: argparse.Namespace) -> Any:
         predict.check_parameter("AC", counts["AC"], model),
         predict.check_parameter("DC", counts["DC"], model),
         sample_period=model.sample_period,
-        smoothing=args.smoothing,
+        smoothing=predict.check_parameter("IT", args.smoothing, model),  # stored in 1/256ths
     )
     if scale is not None:
         profile = profile.with_units(float(scale.counts_per.magnitude), f"{scale.unit:~}")

@@ -433,19 +433,39 @@ class Controller(LinkFacade):
         dt: int,
         progress: bool = False,
         timeout: float | None = None,
+        speed_limit: object = None,
+        accel_limit: object = None,
     ) -> ContourResult:
         """Run a contour path on ``axes`` and return when it is done.
 
         ``path`` holds ideal positions relative to where each axis is now, one per
         ``2**dt``-sample segment (shape (segments,) or (segments, axes)): plain numbers are
         counts, a pint Quantity array goes through each axis's scale. The stream is checked
-        first (CD range, DT, soft limits, link speed against the model's buffer), then
-        CM/DT/CD lines keep the controller's buffer fed, and ``CD 0=0`` ends it.
+        first (CD range, DT, the speed and acceleration the path implies on each axis, soft
+        limits, link speed against the model's buffer), then CM/DT/CD lines keep the
+        controller's buffer fed, and ``CD 0=0`` ends it.
+
+        Args:
+            axes: the contour axes, e.g. ``"AB"``.
+            path: the ideal positions (see above).
+            dt: the DT exponent (segments of ``2**dt`` samples).
+            progress: show a progress bar over the segments.
+            timeout: seconds to wait for the end after the last segment.
+            speed_limit: your own limit on each axis's speed along the path (the axis's
+                units; one value or a mapping per axis); default the model's SP maximum.
+            accel_limit: the same for acceleration; default the model's AC maximum.
         """
         names = list(axes) if isinstance(axes, str) else [str(a) for a in axes]
         chosen = [self.axis(a) for a in names]
         letters = "".join(a.letter for a in chosen)
         counts = path_to_counts(path, [a.scale for a in chosen], letters)
+        limits = {
+            a.letter: (
+                a.limit_counts(speed_limit, 1, "speed_limit"),
+                a.limit_counts(accel_limit, 2, "accel_limit"),
+            )
+            for a in chosen
+        }
         stream = ContourStream(
             self.link,
             letters,
@@ -453,6 +473,7 @@ class Controller(LinkFacade):
             dt=dt,
             display={a.letter: a.display for a in chosen},
             byte_rate=self.link.byte_rate,
+            limits=limits,
         )
         with user_units({a.letter: a for a in chosen}):
             return stream.run(progress=progress, timeout=timeout)

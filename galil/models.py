@@ -87,6 +87,8 @@ class ModelSpec:
         variable_length: characters of a variable or array name.
         threads: program threads (``XQ``).
         program_lines: lines of program memory (``DL``).
+        default_speed: SP and JG at power-on, counts/s.
+        default_accel: AC and DC at power-on, counts/s².
         vector_buffer: LM/VM segments the coordinated-motion buffer holds (``_LMS`` when
             empty): 511 (EPICS ``GalilController.h``; Galil 2004 catalogue "up to 511 LI
             segments"); assumed the same on every family.
@@ -154,6 +156,10 @@ class ModelSpec:
     threads: int = 8  # EPICS: 8 by default, DMC-1xxx 2, DMC-3xxxx 6, RIO 4
     # Assumption: 2000 program lines on every family (no per-family figure found yet).
     program_lines: int = 2000
+    # Power-on values of SP, JG, AC and DC (the command references' defaults: 25,000 counts/s
+    # and 256,000 counts/s²; assumed the same on every family).
+    default_speed: float = 25_000.0
+    default_accel: float = 256_000.0
     # Coordinated motion (LM/LI, VM/VP/CR) and gearing (GA/GR); sources in the docstring.
     vector_buffer: int = 511
     vs_max: int | None = None

@@ -29,6 +29,7 @@ GUIDE = [
     "tuning.md",
     "units.md",
     "safety.md",
+    "reliability.md",
     "predictor.md",
     "transports.md",
     "testing.md",

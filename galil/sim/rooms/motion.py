@@ -63,7 +63,16 @@ class Motion(Room):
         self.modes: dict[str, Mode] = {}
 
     def reset(self) -> None:
-        self.axes = {letter: Params() for letter in self.machine.spec.axes}
+        spec = self.machine.spec
+        self.axes = {
+            letter: Params(
+                sp=spec.default_speed,
+                jg=spec.default_speed,
+                ac=spec.default_accel,
+                dc=spec.default_accel,
+            )
+            for letter in spec.axes
+        }
 
     def params(self, ax: Axis) -> Params:
         """The motion parameters of ``ax``."""
