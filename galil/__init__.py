@@ -19,17 +19,22 @@ from galil.errors import (
     ProtocolError,
     ScheduleError,
 )
+from galil.homing import Homed, Switches, SwitchPolarity
+from galil.io import IO
 from galil.messages import MessageQueue
 from galil.models import ModelSpec, get_model
 from galil.motion import MoveHandle, MoveResult
 from galil.predict import MultiProfile, Profile
+from galil.predict.homing import HomeSwitch
 from galil.records import RecordStream
 from galil.segments import Arc, Line, VectorPlan
+from galil.tuning import MotorType
 from galil.vector import VectorHandle
 
 __version__ = "0.1.0.dev0"
 
 __all__ = [
+    "IO",
     "Arc",
     "Axis",
     "CommandError",
@@ -40,12 +45,15 @@ __all__ = [
     "GalilConnectionError",
     "GalilError",
     "GalilTimeoutError",
+    "HomeSwitch",
+    "Homed",
     "InvalidArgument",
     "LimitError",
     "Line",
     "MessageQueue",
     "ModelSpec",
     "MotionError",
+    "MotorType",
     "MoveHandle",
     "MoveResult",
     "MultiProfile",
@@ -54,6 +62,8 @@ __all__ = [
     "ReconnectPolicy",
     "RecordStream",
     "ScheduleError",
+    "SwitchPolarity",
+    "Switches",
     "VectorHandle",
     "VectorPlan",
     "__version__",

@@ -49,7 +49,16 @@ EXPECTED = {
         "trippoints at [10.0, 20.0] mm",
         "end vs prediction {'A': 0} counts",
     ],
-    "06_draw_a_shape.py": [
+    "06_lab_day_one.py": [
+        "homed? False",
+        "homed with stop code 10, position 0",
+        "homed? True: HM started by this Controller ended with stop code 10",
+        "gains KP 8.0 KI 0.25 KD 64.0, motor SERVO",
+        "refused before sending: KP",
+        "output 1 is True",
+        "parameters saved",
+    ],
+    "07_draw_a_shape.py": [
         "plan: 151.416 mm of path in 3.886 s, top speed 40.0 mm/s",
         "drawn: stop codes {'A': 101, 'B': 101}, end vs prediction {'A': 0, 'B': 0}",
         "back at A 0.00 mm, B 0.00 mm",

@@ -28,6 +28,19 @@ def check(dmc: galil.Controller) -> None:
     assert_type(dmc.records(8), galil.RecordStream)
     assert_type(dmc.A.move_to(10).wait(), galil.MoveResult)
     assert_type(dmc.messages, galil.MessageQueue)
+    # issue 11: homing, switches, I/O, settings
+    assert_type(dmc.A.home(), galil.MoveHandle)
+    assert_type(dmc.A.find_edge(), galil.MoveHandle)
+    assert_type(dmc.A.find_index(), galil.MoveHandle)
+    assert_type(dmc.A.homed, galil.Homed)
+    assert_type(dmc.A.switches, galil.Switches)
+    assert_type(dmc.switch_polarity, galil.SwitchPolarity)
+    assert_type(dmc.io, galil.IO)
+    assert_type(dmc.io.inputs[1], bool)
+    assert_type(dmc.io.inputs[1:9], tuple[bool, ...])
+    assert_type(dmc.A.kp, float)
+    assert_type(dmc.A.error_limit, int)
+    assert_type(dmc.A.motor_type, galil.MotorType | float)
 
 
 def check_coordinated(dmc: galil.Controller) -> None:

@@ -12,6 +12,8 @@ from galil.sim.machine import Room
 from galil.sim.rooms.contour import Contour
 from galil.sim.rooms.gearing import Gearing
 from galil.sim.rooms.handles import Handles
+from galil.sim.rooms.homing import Homing
+from galil.sim.rooms.io import IO
 from galil.sim.rooms.limits import Limits
 from galil.sim.rooms.motion import Motion
 from galil.sim.rooms.programs import ProgramCommands
@@ -19,13 +21,16 @@ from galil.sim.rooms.records import Records
 from galil.sim.rooms.reports import Reports
 from galil.sim.rooms.settings import Settings
 from galil.sim.rooms.trippoints import Trippoints
+from galil.sim.rooms.tuning import Tuning
 from galil.sim.rooms.vector import Vector
 
 __all__ = [
+    "IO",
     "ROOMS",
     "Contour",
     "Gearing",
     "Handles",
+    "Homing",
     "Limits",
     "Motion",
     "ProgramCommands",
@@ -33,6 +38,7 @@ __all__ = [
     "Reports",
     "Settings",
     "Trippoints",
+    "Tuning",
     "Vector",
     "rooms_with",
 ]
@@ -51,6 +57,9 @@ ROOMS: tuple[type[Room], ...] = (
     Settings,
     Handles,
     ProgramCommands,
+    Tuning,
+    Homing,
+    IO,
 )
 
 
