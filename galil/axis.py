@@ -557,17 +557,9 @@ class Axis:
         return pairs
 
     def gear_to(self, master: Axis | str, ratio: float) -> Gearing:
-        """Follow ``master`` (an axis, or ``"S"``: the path of the S sequences) at ``ratio``.
-
-        Sends ``GA`` (the master's commanded position) and ``GR``. Every move of the master
-        then predicts this axis too (in its handle's ``profiles``); ``ST``, a limit or ``AB``
-        on this axis turns the gearing off, as does :meth:`Gearing.off`.
-
-        Raises:
-            InvalidArgument: this axis or the master moving, a master that is geared itself
-                (TC 46), the motor off.
-            LimitError: a ratio beyond the model's range.
-        """
+        """Follow ``master`` (an axis, or ``"S"``: the S sequences' path) at ``ratio`` (``GA``
+        its commanded position, ``GR``); its moves then predict this axis too. See
+        :mod:`galil.gearing`."""
         name = master.letter if isinstance(master, Axis) else master
         return gear_to(self._link, self._tracker, self.letter, name, ratio, display=self._display)
 

@@ -16,7 +16,6 @@ message room (:mod:`galil.messages`) routes unsolicited output, the record room
 from __future__ import annotations
 
 import contextlib
-import inspect
 import logging
 import threading
 import time
@@ -482,21 +481,11 @@ class Controller(LinkFacade):
             return stream.run(progress=progress, timeout=timeout)
 
     def _prepared(self, axes: str, segments: Sequence[Segment], **options: Any) -> VectorStream:
-        unknown = sorted(set(options) - set(inspect.signature(self.vector_move).parameters))
-        if unknown:
-            raise TypeError(f"got an unexpected keyword argument {unknown[0]!r}")
         chosen = [self.axis(a) for a in (list(axes) if isinstance(axes, str) else axes)]
-        run = VectorStream(
-            self.link,
-            [PathAxis(a.letter, a.scale, a.display) for a in chosen],
-            segments,
-            byte_rate=self.link.byte_rate,
-            followers=self.tracker.followers("".join(a.letter for a in chosen) + "S"),
-            **options,
-        )
+        path_axes = [PathAxis(a.letter, a.scale, a.display) for a in chosen]
+        options.setdefault("byte_rate", self.link.byte_rate)
         with user_units({a.letter: a for a in chosen}):
-            run.prepare()
-        return run
+            return VectorStream.prepared(self.link, path_axes, segments, self.tracker, **options)
 
     def vector_move(
         self,
@@ -512,30 +501,20 @@ class Controller(LinkFacade):
         axis_speed: Mapping[str, Any] | None = None,
         axis_accel: Mapping[str, Any] | None = None,
     ) -> VectorHandle:
-        """Run a path of :class:`~galil.Line` and :class:`~galil.Arc` segments on ``axes``.
+        """Run a path of :class:`~galil.Line` and :class:`~galil.Arc` segments on ``axes``
+        (in the order of the segments' components), in the axes' user units.
 
-        The whole path is predicted and checked first (see :mod:`galil.vector`); a refusal
-        names the segment and the sample, and nothing is sent. Then it goes out as one
-        sequence (``VM`` on two axes, ``LM`` on more), begins (``BG S``), and what the buffer
-        cannot hold yet is streamed; the call returns once everything is sent.
-
-        Args:
-            axes: the path's axes, in the order of the segments' components (``"AB"``).
-            segments: the path, in each axis's user units (counts without a scale).
-            speed: along the path (a Quantity when the axes share a scale, counts/s
-                otherwise).
-            accel: along the path (default: the controller's VA).
-            decel: along the path (default: the controller's VD).
-            smoothing: VT, on models that have it (others smooth with the first axis's IT).
-            mode: ``"vector"`` (VM) or ``"linear"`` (LM); default: vector on two axes.
-            stream: with ``False`` a path longer than the buffer is refused instead.
-            axis_speed: the most an axis may move along the path (``{"B": 20 * mm / s}``);
-                default: the model's maximum.
-            axis_accel: likewise for acceleration, tangential and centripetal.
+        The whole path is predicted and checked first (:mod:`galil.vector`): a refusal names
+        the segment and the sample, and nothing is sent. ``speed``, ``accel``, ``decel`` are
+        along the path (Quantities when the axes share a scale, else counts; VA/VD default to
+        the controller's); ``smoothing`` is VT where the model has it; ``mode`` is
+        ``"vector"`` (VM, two axes, the default there) or ``"linear"`` (LM); ``stream=False``
+        refuses a path longer than the buffer; ``axis_speed``/``axis_accel`` cap an axis's
+        share (``{"B": 20 * mm / s}``). Returns once everything is sent (streamed if needed).
 
         Returns:
-            A :class:`~galil.vector.VectorHandle`: ``wait()``, ``stop()``, ``profiles`` per
-            axis, ``vector`` (the prediction in user units), ``begin``.
+            A :class:`~galil.vector.VectorHandle` (``wait()``, ``stop()``, ``profiles``,
+            ``vector``: the prediction in user units, ``begin``).
         """
         run = self._prepared(
             axes, segments, speed=speed, accel=accel, decel=decel, smoothing=smoothing,

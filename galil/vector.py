@@ -285,6 +285,22 @@ class VectorStream:
         self.profile: predict.VectorProfile | None = None
         self._state: _State | None = None
 
+    @classmethod
+    def prepared(
+        cls,
+        link: CommandLink,
+        axes: Sequence[PathAxis],
+        segments: Sequence[Segment],
+        tracker: MotionTracker,
+        **options: Any,
+    ) -> VectorStream:
+        """A stream for ``axes``, already prepared (:meth:`prepare`), its followers from
+        ``tracker``."""
+        masters = "".join(a.letter for a in axes) + PLANE
+        run = cls(link, axes, segments, followers=tracker.followers(masters), **options)
+        run.prepare()
+        return run
+
     def _rate(self, value: object, power: int, what: str) -> float:
         """A speed or acceleration along the path, counts/s**power (> 0)."""
         scaled = [a.scale for a in self.axes if a.scale is not None]
