@@ -4,11 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-<<<<<<< HEAD
-.PHONY: demo test lint typecheck layers bench soak clean
-=======
-.PHONY: demo test lint typecheck layers bench docs clean
->>>>>>> cli-docs
+.PHONY: demo test lint typecheck layers bench soak docs clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
