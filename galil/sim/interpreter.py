@@ -28,6 +28,7 @@ __all__ = ["Caller", "Command", "Interpreter", "int32"]
 Caller = Port | Thread | None
 
 _RESERVED = frozenset({"TIME"})
+_ELEMENT = re.compile(r"([A-Za-z][A-Za-z0-9]*)\[(.+)\]")
 
 
 @dataclass(frozen=True)
@@ -62,6 +63,9 @@ class Interpreter:
         axis_operands: axis operands (``_TPA``) -> value of an axis.
         index_operands: indexed operands (``_XQ0``) -> value for the text after the name.
         functions: expression functions (``@ABS[x]``) -> value for the argument.
+        element: an array element's value (``arr[3]`` in an expression), set by the room
+            that keeps the arrays; ``None`` while no room does (``arr[3]`` is refused).
+        store_element: ``arr[3]=expression``, set by the same room.
         caller: who runs the command being executed (``WH``, ``CF I``, ``DL``).
         tc: the error code of the last refused command.
     """
@@ -74,6 +78,8 @@ class Interpreter:
         self.axis_operands: dict[str, Callable[[Axis], float]] = {}
         self.index_operands: dict[str, Callable[[str], float]] = {}
         self.functions: dict[str, Callable[[float], float]] = dict(FUNCTIONS)
+        self.element: Callable[[str, float], float] | None = None
+        self.store_element: Callable[[str, float, float], None] | None = None
         self.caller: Caller = None
         self._variable = re.compile(rf"[A-Za-z][A-Za-z0-9]{{0,{spec.variable_length - 1}}}")
         self._letters = frozenset(spec.axes) | frozenset(spec.aliases)
@@ -111,6 +117,12 @@ class Interpreter:
                 raise Refused(1, "unknown control command")
             return control.run("")
         eq = _find_eq(s)
+        if eq > 0 and s[eq - 1] == "]" and self.store_element is not None:
+            target = _ELEMENT.fullmatch(s[:eq].strip())
+            if target is not None:
+                index = self.evaluate(target.group(2))
+                self.store_element(target.group(1), index, self.evaluate(s[eq + 1 :]))
+                return ""
         command = self.commands.get(s[:2])
         if command is not None:
             if eq > 0 and not command.spec.equals:
@@ -133,6 +145,10 @@ class Interpreter:
         return bool(letters) and all(c in self._letters for c in letters)
 
     # ---- variables and expressions -----------------------------------------------------
+    def is_name(self, name: str) -> bool:
+        """Whether ``name`` is a valid variable or array name on this model."""
+        return bool(self._variable.fullmatch(name)) and name not in _RESERVED
+
     def assign(self, name: str, rhs: str) -> str:
         """``name=expression`` (or ``name=`` to read it back).
 
@@ -158,7 +174,7 @@ class Interpreter:
         Raises:
             Refused: a syntax error or an unknown name.
         """
-        return evaluate(text, self.lookup, self.functions)
+        return evaluate(text, self.lookup, self.functions, self.element)
 
     def lookup(self, name: str) -> float:
         """The value of a variable, ``TIME`` or an operand (``_TPA``).

@@ -9,8 +9,11 @@ built with more (``SimController(rooms=(*ROOMS, Homing))``) without touching the
 from __future__ import annotations
 
 from galil.sim.machine import Room
+from galil.sim.rooms.arrays import Arrays
+from galil.sim.rooms.capture import Capture
 from galil.sim.rooms.contour import Contour
 from galil.sim.rooms.handles import Handles
+from galil.sim.rooms.interrupts import Interrupts
 from galil.sim.rooms.limits import Limits
 from galil.sim.rooms.motion import Motion
 from galil.sim.rooms.programs import ProgramCommands
@@ -21,8 +24,11 @@ from galil.sim.rooms.trippoints import Trippoints
 
 __all__ = [
     "ROOMS",
+    "Arrays",
+    "Capture",
     "Contour",
     "Handles",
+    "Interrupts",
     "Limits",
     "Motion",
     "ProgramCommands",
@@ -45,6 +51,9 @@ ROOMS: tuple[type[Room], ...] = (
     Settings,
     Handles,
     ProgramCommands,
+    Arrays,
+    Capture,
+    Interrupts,
 )
 
 
