@@ -24,16 +24,20 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from galil import predict
+from galil.arrays import Arrays, Variables
 from galil.axis import Axis, check_overrides, resolve_moves, user_units
+from galil.capture import Capture
 from galil.contour import ContourResult, ContourStream
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.facade import LinkFacade
 from galil.handshake import identify
+from galil.interrupts import Interrupts
 from galil.link import Link, check_timeout
 from galil.messages import Messages
 from galil.models import Identity, ModelSpec, get_model
 from galil.motion import MotionTracker, MoveHandle, abort_all, motion_guard, stop_axes
 from galil.moves import execute_move
+from galil.programs import Programs
 from galil.protocol import commands as cmds
 from galil.records import Records
 from galil.routines import Routines
@@ -121,6 +125,10 @@ class Controller(LinkFacade):
         link: the command link (:class:`~galil.link.Link`).
         identity: the parsed ``^R^V`` reply (``None`` without a handshake).
         echo: whether the controller echoes (found at the handshake and kept).
+        programs: the user's program and threads (:class:`~galil.programs.Programs`).
+        arrays: the controller's arrays (:class:`~galil.arrays.Arrays`).
+        variables: the controller's variables (:class:`~galil.arrays.Variables`).
+        interrupts: ``UI``/``EI`` interrupts (:class:`~galil.interrupts.Interrupts`).
     """
 
     def __init__(
@@ -154,6 +162,10 @@ class Controller(LinkFacade):
         self.records_room = Records(self.link)
         self.tracker = MotionTracker()
         self.routines = Routines(self.link)
+        self.programs = Programs(self.link, self.routines)
+        self.arrays = Arrays(self.link)
+        self.variables = Variables(self.link)
+        self.interrupts = Interrupts(self.link)
         self._watchdogs: list[Watchdog] = []
         self.identity: Identity | None = None
         self.echo = False
@@ -213,6 +225,9 @@ class Controller(LinkFacade):
             self._watchdogs.clear()
         if not keep_streams:
             self.records_room.close_all()
+            self.interrupts.disable()
+        else:
+            self.interrupts.close(keep_mask=True)
         self.link.detach()
         self.messages_room.stop()
 
@@ -239,6 +254,7 @@ class Controller(LinkFacade):
                 self._close_parts(keep_watchdogs=True, keep_streams=True)
                 self._open(None)
                 self.records_room.resume()
+                self.interrupts.reopen()
 
     def _reopen_dead_link(self, error: GalilConnectionError) -> None:
         """The automatic reconnect (:class:`ReconnectPolicy`), called by the link."""
@@ -446,6 +462,32 @@ class Controller(LinkFacade):
         )
         with user_units({a.letter: a for a in chosen}):
             return stream.run(progress=progress, timeout=timeout)
+
+    def capture(
+        self,
+        sources: list[str],
+        *,
+        every: int = 2,
+        count: int | None = None,
+        seconds: float | None = None,
+    ) -> Capture:
+        """Start recording ``sources`` on the controller, every ``every`` samples, at servo
+        rate (``RA``/``RD``/``RC``); see :mod:`galil.capture`.
+
+        Start it right before a move: its values line up sample by sample with the move's
+        prediction. ``wait()`` (or leaving a ``with`` block, or ``stop()``) uploads them.
+
+        Args:
+            sources: operands (``["_RPA", "_TPA", "_TEA", "_TVA"]``).
+            every: samples between values: 2, 4, ... 256 (``RC n`` records every ``2**n``).
+            count: values per source; or ``seconds``: how long to record.
+
+        Raises:
+            InvalidArgument: a source ``RD`` cannot record, ``every`` not allowed, too many
+                values for the array space (nothing is sent), or a recording running
+                already (``_RC`` read, nothing set up).
+        """
+        return Capture(self.link, sources, every=every, count=count, seconds=seconds).start()
 
     if not TYPE_CHECKING:  # mypy knows the letters below, and nothing else
 

@@ -1004,13 +1004,13 @@ def da(*names: str) -> Command:
 
 
 def la() -> Command:
-    """LA: list the arrays (one ``name[size]`` line each)."""
-    return Command("LA", Expect.DATA)
+    """LA: list the arrays (one ``name[size]`` line each; a bare ``:`` when there is none)."""
+    return Command("LA", Expect.ANY)
 
 
 def lv() -> Command:
-    """LV: list the variables (one ``name= value`` line each)."""
-    return Command("LV", Expect.DATA)
+    """LV: list the variables (one ``name= value`` line each; a bare ``:`` when none)."""
+    return Command("LV", Expect.ANY)
 
 
 # The operands RD records (DMC-1600/1700/1800 manuals: _DE _TP _TE _SH _RL _TS _SC _NO _TT
@@ -1165,8 +1165,6 @@ _QUERIES = frozenset(
         "TH",
         "ID",
         "LS",
-        "LA",
-        "LV",
         "TB",
         "TI",
         "TT",

@@ -165,6 +165,8 @@ class Interpreter:
         value = self.evaluate(rhs)
         if not INT32_MIN <= value < INT32_MAX + 1:
             raise Refused(6, "out of range")
+        if name not in self.variables and len(self.variables) >= self.spec.variables:
+            raise Refused(67, "too many variables")
         self.variables[name] = round(value * 65536) / 65536
         return ""
 
