@@ -131,6 +131,10 @@ def run_demo(
                 f"{name}: largest |recorded - predicted| "
                 + ", ".join(f"{v} counts ({k})" for k, v in ways.items())
             )
+        say(
+            "largest difference, recorded - predicted: "
+            + ", ".join(f"{k} {max(v.values())} counts" for k, v in worst.items())
+        )
         if png:
             try:
                 _plot(runs, png, f"galil demo, simulated {dmc.model.name}")

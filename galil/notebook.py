@@ -24,6 +24,8 @@ from galil.units import get_registry
 __all__ = ["Comparison", "compare", "compare_plot", "jog_widget"]
 
 FloatArray = npt.NDArray[np.float64]
+#: The operand a capture records for each data-record field compared.
+_OPERANDS = {"reference": "RP", "position": "TP", "error": "TE", "aux_position": "TD"}
 Predicted = MoveHandle | ContourResult | Mapping[str, Profile]
 Recorded = Recording | np.ndarray[Any, Any] | Mapping[str, tuple[npt.ArrayLike, npt.ArrayLike]]
 
@@ -73,10 +75,10 @@ def _recorded(
 ) -> tuple[npt.NDArray[np.int64], FloatArray] | None:
     """(controller samples, positions) of ``letter`` in a recording, or None if absent."""
     if isinstance(recorded, Recording):
-        try:
-            return recorded.samples, recorded.position(letter)
-        except KeyError:
+        source = f"_{_OPERANDS.get(field, '')}{letter}"
+        if source not in recorded.values:
             return None
+        return recorded.samples, recorded.values[source]
     names = recorded.dtype.names or ()
     if "time" not in names:
         raise InvalidArgument("these data records carry no time (take them from records())")
@@ -126,8 +128,9 @@ def compare(
             ``controller.capture``), data records (from ``controller.records(...)``, which
             carry their controller ``time``), or ``(t, positions)`` per axis with ``t`` in
             seconds from the prediction's start.
-        field: the data-record field compared (``"reference"``: what the profiler
-            commanded; ``"position"``: the encoder).
+        field: what is compared: ``"reference"`` (what the profiler commanded: a data
+            record's ``reference``, a capture's ``_RPx``) or ``"position"`` (the encoder:
+            ``position``, ``_TPx``).
 
     Returns:
         A :class:`Comparison` per axis found in both.

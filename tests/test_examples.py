@@ -44,6 +44,12 @@ EXPECTED = {
         "refused: CD 40000",
         "too slow",
     ],
+    "06_capture.py": [
+        "plan A -> 10 mm: trapezoid",
+        "reference vs prediction: largest difference 0 counts",
+        "plot saved to capture_A.png",
+        "data records at samples",
+    ],
     "05_speed_schedule.py": [
         "earliest valid is",
         "trippoints at [10.0, 20.0] mm",
