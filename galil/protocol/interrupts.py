@@ -130,10 +130,11 @@ class InterruptParser:
                     raise ProtocolError("interrupt packet longer than 16 statuses")
                 break  # the length byte has not arrived
             statuses = bytes(buf[1:end])
-            if not statuses or buf[end] != len(statuses) + 2:
+            length = buf[end]
+            if not statuses or length != len(statuses) + 2:
                 self.reset()
                 raise ProtocolError(
-                    f"interrupt packet of {len(statuses)} statuses says length {buf[end]}"
+                    f"interrupt packet of {len(statuses)} statuses says length {length}"
                 )
             del buf[: end + 1]
             out += [decode_status(s) for s in statuses]
