@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from galil.axis import Axis
+from galil.capture import Capture, Recording
 from galil.codes import stop_text, tc_text
 from galil.contour import ContourResult
 from galil.controller import Controller, ReconnectPolicy, connect
@@ -23,12 +24,15 @@ from galil.messages import MessageQueue
 from galil.models import ModelSpec, get_model
 from galil.motion import MoveHandle, MoveResult
 from galil.predict import MultiProfile, Profile
+from galil.protocol.interrupts import Interrupt
+from galil.protocol.records import RecordFields, decode_fields
 from galil.records import RecordStream
 
 __version__ = "0.1.0.dev0"
 
 __all__ = [
     "Axis",
+    "Capture",
     "CommandError",
     "ContourResult",
     "ContourUnderrunError",
@@ -37,6 +41,7 @@ __all__ = [
     "GalilConnectionError",
     "GalilError",
     "GalilTimeoutError",
+    "Interrupt",
     "InvalidArgument",
     "LimitError",
     "MessageQueue",
@@ -48,10 +53,13 @@ __all__ = [
     "Profile",
     "ProtocolError",
     "ReconnectPolicy",
+    "RecordFields",
     "RecordStream",
+    "Recording",
     "ScheduleError",
     "__version__",
     "connect",
+    "decode_fields",
     "find",
     "get_model",
     "stop_text",

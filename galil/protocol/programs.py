@@ -40,7 +40,8 @@ def _comment_start(line: str) -> int:
     """Index where a comment begins (``'`` or ``REM`` at the start of a command), or -1."""
     quoted = False
     command_start = True
-    i = 0
+    label = _LABEL_START.match(line)
+    i = label.end() if label is not None else 0  # a label is followed by a command or a comment
     while i < len(line):
         ch = line[i]
         if ch == '"':

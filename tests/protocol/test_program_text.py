@@ -38,10 +38,11 @@ REM another one
 PR 1000;' after a command
 MG "it's here";BG A;' trailing
 MG "a;b"
+#B ' after a label
 """
     lines = program_lines(text, strip_comments=True)
-    assert texts(lines) == ["#A", "PR 1000", 'MG "it\'s here";BG A', 'MG "a;b"']
-    assert [p.source for p in lines] == [1, 4, 5, 6]
+    assert texts(lines) == ["#A", "PR 1000", 'MG "it\'s here";BG A', 'MG "a;b"', "#B"]
+    assert [p.source for p in lines] == [1, 4, 5, 6, 7]
 
 
 def test_packing_joins_lines_but_starts_each_label_on_a_line_of_its_own() -> None:
