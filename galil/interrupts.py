@@ -176,12 +176,13 @@ class Interrupts:
                 _LOG.warning("galil: interrupt packet dropped: %s", exc)
                 continue
             for event in events:
-                self.queue.put(event)
+                # Callbacks first: once an interrupt is in the queue, every callback has had it.
                 for cb in self._subscribers:
                     try:
                         cb(event)
                     except Exception:
                         _LOG.exception("interrupt callback %r failed", cb)
+                self.queue.put(event)
 
     def subscribe(self, callback: InterruptCallback) -> Callable[[], None]:
         """Call ``callback(interrupt)`` for each interrupt, on the reader thread; returns an

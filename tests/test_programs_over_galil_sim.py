@@ -36,12 +36,8 @@ def _default_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
-@pytest.fixture(params=["tcp", "pty"])
-def address(request: pytest.FixtureRequest, spawn: Spawn) -> Iterator[str]:
-    """The address of a ``galil sim`` child process, over TCP or a pty."""
-    if request.param == "pty" and not hasattr(os, "openpty"):
-        pytest.skip("needs a pty")
-    where = ["--tcp", "127.0.0.1:0"] if request.param == "tcp" else ["--pty"]
+def _serve(spawn: Spawn, where: list[str]) -> Iterator[str]:
+    """Start ``galil sim`` as a child process; yield its address; stop it."""
     proc = spawn(
         [sys.executable, "-m", "galil.cli", "sim", *where],
         stdout=subprocess.PIPE,
@@ -58,6 +54,21 @@ def address(request: pytest.FixtureRequest, spawn: Spawn) -> Iterator[str]:
     finally:
         proc.send_signal(signal.SIGINT)
         proc.wait(timeout=20)
+
+
+@pytest.fixture(params=["tcp", "pty"])
+def address(request: pytest.FixtureRequest, spawn: Spawn) -> Iterator[str]:
+    """The address of a ``galil sim`` child process, over TCP or a pty."""
+    if request.param == "pty" and not hasattr(os, "openpty"):
+        pytest.skip("needs a pty")
+    where = ["--tcp", "127.0.0.1:0"] if request.param == "tcp" else ["--pty"]
+    yield from _serve(spawn, where)
+
+
+@pytest.fixture
+def tcp_address(spawn: Spawn) -> Iterator[str]:
+    """The address of a ``galil sim`` child process on TCP."""
+    yield from _serve(spawn, ["--tcp", "127.0.0.1:0"])
 
 
 def test_a_program_fills_an_array_on_thread_1_and_stays_beside_a_speed_schedule(
@@ -85,38 +96,22 @@ def test_a_program_fills_an_array_on_thread_1_and_stays_beside_a_speed_schedule(
         dmc.programs.wait(1, timeout=5)
 
 
-def test_a_user_interrupt_from_a_program_reaches_a_callback_over_tcp(spawn: Spawn) -> None:
-    proc = spawn(
-        [sys.executable, "-m", "galil.cli", "sim", "--tcp", "127.0.0.1:0"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        preexec_fn=_default_sigint,
-    )
-    try:
-        assert proc.stdout is not None
-        url = re.search(r"tcp://127\.0\.0\.1:\d+", proc.stdout.readline())
-        assert url
-        with galil.connect(url.group(0), timeout=2.0) as dmc:
-            heard: list[galil.Interrupt] = []
-            dmc.interrupts.subscribe(heard.append)
-            dmc.interrupts.enable(axes="A")
-            dmc.programs.download("#TELL\nUI 7\nEN")
-            dmc.programs.run("#TELL", thread=3)
-            first = dmc.interrupts.get(timeout=5)
-            assert (first.kind, first.number) == ("user", 7)
-            dmc.A.move_by(500).wait(timeout=5)
-            assert str(dmc.interrupts.get(timeout=5)) == "axis A done"
-            assert [str(i) for i in heard] == ["UI 7", "axis A done"]
-    finally:
-        proc.send_signal(signal.SIGINT)
-        proc.wait(timeout=20)
+def test_a_user_interrupt_from_a_program_reaches_a_callback_over_tcp(tcp_address: str) -> None:
+    with galil.connect(tcp_address, timeout=2.0) as dmc:
+        heard: list[galil.Interrupt] = []
+        dmc.interrupts.subscribe(heard.append)
+        dmc.interrupts.enable(axes="A")
+        dmc.programs.download("#TELL\nUI 7\nEN")
+        dmc.programs.run("#TELL", thread=3)
+        first = dmc.interrupts.get(timeout=5)
+        assert (first.kind, first.number) == ("user", 7)
+        dmc.A.move_by(500).wait(timeout=5)
+        assert str(dmc.interrupts.get(timeout=5)) == "axis A done"
+        assert [str(i) for i in heard] == ["UI 7", "axis A done"]
 
 
-def test_a_capture_over_tcp_lines_up_with_the_move_it_recorded(address: str) -> None:
-    if not address.startswith("tcp"):
-        pytest.skip("one transport is enough for the capture; the program test runs on both")
-    with galil.connect(address, timeout=2.0) as dmc:
+def test_a_capture_over_tcp_lines_up_with_the_move_it_recorded(tcp_address: str) -> None:
+    with galil.connect(tcp_address, timeout=2.0) as dmc:
         cap = dmc.capture(["_RPA"], every=2, count=200)
         move = dmc.A.move_by(3000)
         move.wait(timeout=5)
