@@ -27,7 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from galil.arrays import Arrays
-from galil.errors import GalilTimeoutError, InvalidArgument, ProtocolError
+from galil.errors import GalilError, GalilTimeoutError, InvalidArgument, ProtocolError
 from galil.link import CommandLink
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import parse_number
@@ -264,9 +264,13 @@ class Capture:
             self.start()
         return self
 
-    def __exit__(self, *exc: object) -> None:
+    def __exit__(self, kind: object, *exc: object) -> None:
         if self.result is None and self.start_sample is not None:
-            self.stop()
+            try:
+                self.stop()
+            except GalilError:
+                if kind is None:
+                    raise  # the block's own exception, if any, matters more
 
     def __repr__(self) -> str:
         state = (
