@@ -20,17 +20,22 @@ from galil.errors import (
     ProtocolError,
     ScheduleError,
 )
+from galil.homing import Homed, Switches, SwitchPolarity
+from galil.io import IO
 from galil.messages import MessageQueue
 from galil.models import ModelSpec, get_model
 from galil.motion import MoveHandle, MoveResult
 from galil.predict import MultiProfile, Profile
+from galil.predict.homing import HomeSwitch
 from galil.protocol.interrupts import Interrupt
 from galil.protocol.records import RecordFields, decode_fields
 from galil.records import RecordStream
+from galil.tuning import MotorType
 
 __version__ = "0.1.0.dev0"
 
 __all__ = [
+    "IO",
     "Axis",
     "Capture",
     "CommandError",
@@ -41,12 +46,15 @@ __all__ = [
     "GalilConnectionError",
     "GalilError",
     "GalilTimeoutError",
+    "HomeSwitch",
+    "Homed",
     "Interrupt",
     "InvalidArgument",
     "LimitError",
     "MessageQueue",
     "ModelSpec",
     "MotionError",
+    "MotorType",
     "MoveHandle",
     "MoveResult",
     "MultiProfile",
@@ -57,6 +65,8 @@ __all__ = [
     "RecordStream",
     "Recording",
     "ScheduleError",
+    "SwitchPolarity",
+    "Switches",
     "__version__",
     "connect",
     "decode_fields",

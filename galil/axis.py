@@ -10,24 +10,108 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field, fields
 from typing import Any
+
+import numpy as np
 
 from galil import codes, predict
 from galil.errors import InvalidArgument, LimitError
+from galil.homing import AxisHoming, Homed, Switches, read_switches
 from galil.link import CommandLink
 from galil.models import INT32_MAX, INT32_MIN
 from galil.motion import Display, MotionTracker, MoveHandle, stop_axes
 from galil.moves import AxisMove, execute_move, increment, jog, speed_schedule
 from galil.protocol import commands as cmds
 from galil.routines import Routines
-from galil.units import Scale, counts_or_plain, is_quantity
+from galil.tuning import Setting, motor_type, whole
+from galil.units import Scale, counts_or_plain, get_registry, is_quantity
 
-__all__ = ["OVERRIDES", "Axis", "check_overrides", "resolve_moves", "user_units"]
+__all__ = [
+    "OVERRIDES",
+    "Axis",
+    "ProfileQuantities",
+    "UnitProfile",
+    "check_overrides",
+    "resolve_moves",
+    "user_units",
+]
 
 #: The keyword overrides a move takes, and the command each sets.
 OVERRIDES = {"speed": "SP", "accel": "AC", "decel": "DC"}
 _POWER = {"SP": 1, "JG": 1, "AC": 2, "DC": 2}
 _SETTERS = {"SP": cmds.sp, "AC": cmds.ac, "DC": cmds.dc, "IT": cmds.it, "JG": cmds.jg}
+
+
+_PROFILE_FIELDS = tuple(f.name for f in fields(predict.Profile) if f.name != "display")
+
+
+@dataclass(frozen=True)
+class UnitProfile(predict.Profile):
+    """A predicted profile of a scaled axis: everything a :class:`~galil.predict.Profile` has
+    (arrays in counts, for comparing with the controller), and :attr:`q`, the same motion in
+    the axis's units."""
+
+    scale: Scale | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def q(self) -> ProfileQuantities:
+        """Times, positions, speeds and accelerations as pint Quantities in the axis's units."""
+        assert self.scale is not None
+        return ProfileQuantities(self, self.scale)
+
+
+@dataclass(frozen=True)
+class ProfileQuantities:
+    """A profile read in an axis's units (``plan.q.peak_speed`` -> ``20 mm/s``)."""
+
+    profile: predict.Profile
+    scale: Scale
+
+    @property
+    def t(self) -> Any:
+        """Sample times, seconds."""
+        return self.profile.t * get_registry().second
+
+    @property
+    def duration(self) -> Any:
+        """Duration, seconds."""
+        return self.profile.duration * get_registry().second
+
+    @property
+    def position(self) -> Any:
+        """Reference position at each sample."""
+        return self.scale.counts_to_position(self.profile.position.astype(np.float64))
+
+    @property
+    def velocity(self) -> Any:
+        """Velocity at each sample (signed, in the user's direction)."""
+        return self.scale.counts_to_rate(self.profile.velocity, 1)
+
+    @property
+    def acceleration(self) -> Any:
+        """Per-sample change of velocity (signed)."""
+        return self.scale.counts_to_rate(self.profile.acceleration, 2)
+
+    @property
+    def peak_speed(self) -> Any:
+        """Largest speed."""
+        return abs(self.scale.counts_to_rate(self.profile.peak_speed, 1))
+
+    @property
+    def start(self) -> Any:
+        """Position at sample 0."""
+        return self.scale.counts_to_position(self.profile.start)
+
+    @property
+    def end(self) -> Any:
+        """Position at the last sample."""
+        return self.scale.counts_to_position(self.profile.end)
+
+    @property
+    def distance(self) -> Any:
+        """End minus start."""
+        return self.scale.counts_to_distance(self.profile.distance)
 
 
 def check_overrides(where: str, overrides: Mapping[str, object]) -> None:
@@ -63,6 +147,7 @@ class Axis:
         self._routines = routines
         self.letter = letter
         self._scale: Scale | None = None
+        self._homing = AxisHoming(link, letter, tracker)
 
     # -- units ------------------------------------------------------------------------------
     def set_scale(self, counts_per: Any, offset: Any = None, sign: int = 1) -> Axis:
@@ -85,15 +170,16 @@ class Axis:
         return self._scale
 
     def display(self, profile: predict.Profile) -> predict.Profile:
-        """``profile`` shown in this axis's unit (its arrays stay in counts)."""
+        """``profile`` in this axis's unit: summaries and plots in it, and ``profile.q`` (a
+        :class:`UnitProfile`) for positions, speeds and times as Quantities; the arrays
+        themselves stay in counts."""
         scale = self._scale
         if scale is None:
             return profile
-        return profile.with_units(
-            scale.sign * float(scale.counts_per.magnitude),
-            f"{scale.unit:~}",
-            offset=float(scale.offset.magnitude),
-        )
+        shown = (scale.sign * float(scale.counts_per.magnitude), float(scale.offset.magnitude))
+        values = {f: getattr(profile, f) for f in _PROFILE_FIELDS}
+        values["display"] = (*shown, scale.unit_text)
+        return UnitProfile(**values, scale=scale)
 
     @property
     def _display(self) -> Display | None:
@@ -138,6 +224,20 @@ class Axis:
                 "call axis.set_scale(counts_per=...) or pass counts"
             )
         return counts_or_plain(value, what)
+
+    def limit_counts(self, limit: object, power: int, what: str) -> float | None:
+        """A user's speed (power 1) or acceleration (2) limit for this axis, in counts.
+
+        ``limit`` is ``None``, one value, or a mapping of axis letters (or names) to values.
+        """
+        if isinstance(limit, Mapping):
+            limit = next((v for k, v in limit.items() if str(k).upper() == self.letter), None)
+        if limit is None:
+            return None
+        counts = self.rate_counts(limit, power, what)
+        if not counts > 0:
+            raise InvalidArgument(f"{what} must be positive, got {limit!r}")
+        return counts
 
     def _out_pos(self, counts: float) -> Any:
         return counts if self._scale is None else self._scale.counts_to_position(counts)
@@ -207,6 +307,7 @@ class Axis:
                 power = _POWER.get(cmd, 1)
                 value = abs(scale.counts_to_rate(exc.value, power))
                 limit = abs(scale.counts_to_rate(exc.limit, power))
+                exc.value_in_units, exc.limit_in_units = value, limit
                 exc.args = (f"{exc.args[0]} (in user units: {value:~.6g}, limit {limit:~.6g})",)
             raise
 
@@ -458,6 +559,67 @@ class Axis:
         """Decelerate to a stop (``ST``) at DC."""
         stop_axes(self._link, self._tracker, self.letter)
 
+    # -- homing and switches (galil.homing) ------------------------------------------------
+    def home(self, *, switch: predict.HomeSwitch | None = None) -> MoveHandle:
+        """Home the axis (``HM``): find the home switch's edge, then the index, which becomes
+        position 0; stop code 10. ``switch`` (positions in counts) makes a prediction.
+
+        Raises:
+            InvalidArgument: moving, motor off, SP or HV 0, or into an active limit switch.
+        """
+        return self._homing.start("HM", switch, display=self._display)
+
+    def find_edge(self, *, switch: predict.HomeSwitch | None = None) -> MoveHandle:
+        """Move at SP to the home switch's edge (``FE``); stop code 9, no position defined."""
+        return self._homing.start("FE", switch, display=self._display)
+
+    def find_index(self, *, switch: predict.HomeSwitch | None = None) -> MoveHandle:
+        """Move at the jog speed (its sign is the direction) to the next index pulse (``FI``),
+        which becomes position 0; stop code 10."""
+        return self._homing.start("FI", switch, display=self._display)
+
+    @property
+    def homed(self) -> Homed:
+        """Whether the axis is homed, and how the library knows (``bool(axis.homed)``)."""
+        return self._homing.homed()
+
+    @property
+    def switches(self) -> Switches:
+        """Limit and home switches (``TS``, one round trip); True means tripped."""
+        return read_switches(self._link, self.letter)
+
+    @property
+    def home_speed(self) -> Any:
+        """``HV``: the slow speed of HM's last stages and FI's return."""
+        return self._out_rate(self._operand("HV"), 1)
+
+    @home_speed.setter
+    def home_speed(self, value: Any) -> None:
+        counts = self.check_parameter("SP", self.rate_counts(value, 1, "home_speed"))
+        self._link.command_line([cmds.hv(model=self._link.model, **{self.letter: counts})])
+
+    # -- motor and loop settings (galil.tuning; ranges per model) --------------------------
+    motor_type = Setting("MT", cmds.mt, motor_type)
+    """``MT``: a :class:`~galil.tuning.MotorType` (servo, stepper variants ...)."""
+    kp = Setting("KP", cmds.kp, float)
+    """``KP``: proportional gain."""
+    ki = Setting("KI", cmds.ki, float)
+    """``KI``: integral gain."""
+    kd = Setting("KD", cmds.kd, float)
+    """``KD``: derivative gain."""
+    stepper_smoothing = Setting("KS", cmds.ks, float)
+    """``KS``: smoothing of a stepper's step pulses (0.25 .. 64)."""
+    integrator_limit = Setting("IL", cmds.il, float)
+    """``IL``: integrator limit, volts."""
+    torque_limit = Setting("TL", cmds.tl, float)
+    """``TL``: torque (output) limit, volts."""
+    error_limit = Setting("ER", cmds.er, whole)
+    """``ER``: position-error limit, counts."""
+    off_on_error = Setting("OE", cmds.oe, whole)
+    """``OE``: 0 off, 1 on position error / amplifier error / abort, 2 on limits, 3 all."""
+    brush = Setting("BR", cmds.br, whole)
+    """``BR``: -1 external drive, 0 brushless, 1 brush."""
+
     def __repr__(self) -> str:
         unit = f" in {self._scale.unit:~}" if self._scale is not None else " in counts"
         return f"<Axis {self.letter}{unit} of {self._link.model.name}>"
@@ -511,21 +673,37 @@ def resolve_moves(
 
 @contextlib.contextmanager
 def user_units(axes: Mapping[str, Axis]) -> Iterator[None]:
-    """Add the user's units to a soft-limit refusal raised in counts inside the block."""
+    """Add the user's units to a refusal raised in counts inside the block: positions (soft
+    limits, the 32-bit range) and the speed and acceleration a path implies."""
     try:
         yield
     except LimitError as exc:
         axis = axes.get(exc.axis) if exc.axis else None
         scale = None if axis is None else axis.scale
-        if (
-            scale is not None
-            and exc.value is not None
-            and exc.limit is not None
-            and exc.name in ("FL", "BL")
-        ):
-            points = [("reaches", exc.value), ("limit", exc.limit)]
-            if exc.end is not None:
-                points.append(("end", exc.end))
-            text = ", ".join(f"{label} {scale.counts_to_position(v):~.6g}" for label, v in points)
-            exc.args = (f"{exc.args[0]} (in user units: {text})", *exc.args[1:])
+        if scale is not None and exc.value is not None and exc.limit is not None:
+            _in_units(exc, scale)
         raise
+
+
+_RATE_POWER = {"speed": 1, "acceleration": 2, "SP": 1, "JG": 1, "AC": 2, "DC": 2}
+
+
+def _in_units(exc: LimitError, scale: Scale) -> None:
+    assert exc.value is not None
+    assert exc.limit is not None
+    power = _RATE_POWER.get(exc.name)
+    if power is not None:
+        value = abs(scale.counts_to_rate(exc.value, power))
+        limit = abs(scale.counts_to_rate(exc.limit, power))
+        points = [("needs", value), ("limit", limit)]
+    elif exc.name in ("FL", "BL", "PA", "PR", "position range", "position"):
+        value = scale.counts_to_position(exc.value)
+        limit = scale.counts_to_position(exc.limit)
+        points = [("reaches", value), ("limit", limit)]
+        if exc.end is not None:
+            points.append(("end", scale.counts_to_position(exc.end)))
+    else:
+        return
+    exc.value_in_units, exc.limit_in_units = value, limit
+    text = ", ".join(f"{label} {v:~.6g}" for label, v in points)
+    exc.args = (f"{exc.args[0]} (in user units: {text})", *exc.args[1:])

@@ -58,6 +58,8 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     if args.message_port is not None:
         argv += ["--message-port", str(args.message_port)]
     argv += ["--lag", str(args.lag)]
+    if args.limits:
+        argv += [f"--limits={args.limits}"]
     return sim_main(argv)
 
 
@@ -108,7 +110,7 @@ def plan_profile(args: argparse.Namespace) -> Any:
         predict.check_parameter("AC", counts["AC"], model),
         predict.check_parameter("DC", counts["DC"], model),
         sample_period=model.sample_period,
-        smoothing=args.smoothing,
+        smoothing=predict.check_parameter("IT", args.smoothing, model),  # stored in 1/256ths
     )
     if scale is not None:
         profile = profile.with_units(float(scale.counts_per.magnitude), f"{scale.unit:~}")
@@ -310,6 +312,9 @@ def _add_offline_commands(sub: Any) -> None:
         help="TCP port for unsolicited messages (0 picks one, -1 none: use CF on a handle)",
     )
     p.add_argument("--lag", type=float, default=0.003, help="servo lag time constant, s")
+    p.add_argument(
+        "--limits", metavar="REV,FWD", help="limit switches of every axis at these positions"
+    )
     p.set_defaults(func=_cmd_sim)
 
     p = sub.add_parser(

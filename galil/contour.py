@@ -31,6 +31,7 @@ from galil.predict import Profile
 from galil.predict.checks import check_contour
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
+from galil.units import PathSamples, sampled_values
 
 __all__ = ["ContourResult", "ContourStream", "ContourUnderrunError", "increments", "sample_path"]
 
@@ -76,41 +77,49 @@ def increments(path: npt.ArrayLike, *, start: int = 0) -> npt.NDArray[np.int64]:
 
 
 def sample_path(
-    func: Callable[[npt.NDArray[np.float64]], npt.ArrayLike],
+    func: Callable[[npt.NDArray[np.float64]], object],
     duration: float,
     dt: int,
     sample_period: float = 1 / 1024,
-) -> npt.NDArray[np.float64]:
+) -> PathSamples:
     """Sample ``func(t)`` (t in seconds) at the end of each ``2**dt``-sample segment.
 
     The last segment end is clipped to ``duration`` so the path ends on ``func(duration)``
     (that segment then moves its whole remainder in ``2**dt`` samples).
 
     Args:
-        func: position in counts as a function of time; called once with an array of times.
+        func: positions as a function of time, called once with the array of segment-end
+            times: one axis (shape ``(n,)``) or several (shape ``(n, axes)``); plain numbers
+            (counts) or a pint Quantity array, which stays a Quantity so that
+            ``controller.contour`` converts it through each axis's scale (never stripped).
         duration: seconds covered.
         dt: the DT exponent (1..8).
         sample_period: seconds per servo sample.
 
     Returns:
-        Ideal absolute positions at the segment ends (floats), ready for :func:`increments`.
+        Ideal positions at the segment ends, floats (or a Quantity of floats), ready for
+        ``controller.contour`` or, in counts, :func:`increments`.
 
     Raises:
-        InvalidArgument: bad duration, DT or sample period, or ``func`` returns a wrong shape.
+        InvalidArgument: bad duration, DT or sample period, or ``func`` returns a wrong shape
+            or something that is not numbers.
     """
     if not (math.isfinite(duration) and duration > 0):
         raise InvalidArgument(f"duration must be positive, got {duration!r}")
-    if not 1 <= int(dt) <= 8 or int(dt) != dt:
+    if isinstance(dt, bool) or not isinstance(dt, int) or not 1 <= dt <= 8:
         raise InvalidArgument(f"DT must be an integer in 1..8, got {dt!r}")
     if not (math.isfinite(sample_period) and sample_period > 0):
         raise InvalidArgument(f"sample_period must be positive, got {sample_period!r}")
-    seg = (1 << int(dt)) * sample_period
+    seg = (1 << dt) * sample_period
     count = max(1, math.ceil(duration / seg - 1e-9))
     t = np.minimum(np.arange(1, count + 1, dtype=np.float64) * seg, duration)
-    x = np.asarray(func(t), dtype=np.float64)
-    if x.shape != t.shape:
-        raise InvalidArgument(f"func returned shape {x.shape}, expected {t.shape}")
-    return x
+    samples = sampled_values(func(t), "the path function's result")
+    shape = samples.shape  # a Quantity of an array has its array's shape
+    if not (shape == t.shape or (len(shape) == 2 and shape[0] == t.size and shape[1] >= 1)):
+        raise InvalidArgument(
+            f"func returned shape {shape}; expected ({t.size},) or ({t.size}, axes)"
+        )
+    return samples
 
 
 @dataclass(frozen=True)
@@ -195,6 +204,7 @@ class ContourStream:
         dt: int,
         display: dict[str, Display] | None = None,
         byte_rate: float | None = None,
+        limits: dict[str, tuple[float | None, float | None]] | None = None,
     ) -> None:
         if not letters or len(set(letters)) != len(letters):
             raise InvalidArgument(f"contour axes must be distinct and non-empty, got {letters!r}")
@@ -211,13 +221,15 @@ class ContourStream:
         self.increments = np.stack([increments(ideal[:, j]) for j in range(len(letters))], axis=1)
         self._display = display or {}
         self._byte_rate = byte_rate
+        self._limits = limits or {}
         self.profiles: dict[str, Profile] = {}
 
     def _cd(self, row: Sequence[int]) -> Command:
         return cmds.cd(model=self.link.model, **dict(zip(self.letters, row, strict=True)))
 
     def check(self) -> None:
-        """The segments against the model's CD and DT ranges and the link's speed.
+        """The segments against the model's CD and DT ranges, the speed and acceleration they
+        imply on each axis (the model's maxima or the limits given), and the link's speed.
 
         Raises:
             LimitError: a value out of range or a link too slow for the stream.
@@ -225,6 +237,7 @@ class ContourStream:
         link = self.link
         size = len(self._cd(self.increments[0].tolist()).text) + 1
         for j, a in enumerate(self.letters):
+            speed, accel = self._limits.get(a, (None, None))
             check_contour(
                 self.increments[:, j],
                 self.dt,
@@ -233,6 +246,8 @@ class ContourStream:
                 sample_period=link.sample_period,
                 bytes_per_segment=size,
                 link_rate=self._byte_rate,
+                speed_limit=speed,
+                accel_limit=accel,
             )
 
     def prepare(self) -> None:

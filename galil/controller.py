@@ -31,7 +31,9 @@ from galil.contour import ContourResult, ContourStream
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.facade import LinkFacade
 from galil.handshake import identify
+from galil.homing import SwitchPolarity, read_polarity, set_polarity
 from galil.interrupts import Interrupts
+from galil.io import IO
 from galil.link import Link, check_timeout
 from galil.messages import Messages
 from galil.models import Identity, ModelSpec, get_model
@@ -42,6 +44,7 @@ from galil.protocol import commands as cmds
 from galil.records import Records
 from galil.routines import Routines
 from galil.transport import Transport, open_transport
+from galil.tuning import burn
 from galil.units import path_to_counts
 from galil.watchdog import Watchdog, check_watchdog_args
 
@@ -123,6 +126,7 @@ class Controller(LinkFacade):
 
     Attributes:
         link: the command link (:class:`~galil.link.Link`).
+        io: digital and analog I/O (:class:`~galil.io.IO`).
         identity: the parsed ``^R^V`` reply (``None`` without a handshake).
         echo: whether the controller echoes (found at the handshake and kept).
         programs: the user's program and threads (:class:`~galil.programs.Programs`).
@@ -162,6 +166,7 @@ class Controller(LinkFacade):
         self.records_room = Records(self.link)
         self.tracker = MotionTracker()
         self.routines = Routines(self.link)
+        self.io = IO(self.link, self.messages_room, self.routines)
         self.programs = Programs(self.link, self.routines)
         self.arrays = Arrays(self.link)
         self.variables = Variables(self.link)
@@ -321,6 +326,11 @@ class Controller(LinkFacade):
         return self.axes[self.model.axis_letter(name)]
 
     def _letters(self, axes: str) -> str:
+        if not self.model.axes:
+            raise InvalidArgument(
+                f"{self.model.name} is an I/O controller with no axes: it cannot move",
+                model=self.model.name,
+            )
         if not isinstance(axes, str):
             raise InvalidArgument(f"axes must be a string of axis letters, got {axes!r}")
         out = ""
@@ -439,19 +449,39 @@ class Controller(LinkFacade):
         dt: int,
         progress: bool = False,
         timeout: float | None = None,
+        speed_limit: object = None,
+        accel_limit: object = None,
     ) -> ContourResult:
         """Run a contour path on ``axes`` and return when it is done.
 
         ``path`` holds ideal positions relative to where each axis is now, one per
         ``2**dt``-sample segment (shape (segments,) or (segments, axes)): plain numbers are
         counts, a pint Quantity array goes through each axis's scale. The stream is checked
-        first (CD range, DT, soft limits, link speed against the model's buffer), then
-        CM/DT/CD lines keep the controller's buffer fed, and ``CD 0=0`` ends it.
+        first (CD range, DT, the speed and acceleration the path implies on each axis, soft
+        limits, link speed against the model's buffer), then CM/DT/CD lines keep the
+        controller's buffer fed, and ``CD 0=0`` ends it.
+
+        Args:
+            axes: the contour axes, e.g. ``"AB"``.
+            path: the ideal positions (see above).
+            dt: the DT exponent (segments of ``2**dt`` samples).
+            progress: show a progress bar over the segments.
+            timeout: seconds to wait for the end after the last segment.
+            speed_limit: your own limit on each axis's speed along the path (the axis's
+                units; one value or a mapping per axis); default the model's SP maximum.
+            accel_limit: the same for acceleration; default the model's AC maximum.
         """
         names = list(axes) if isinstance(axes, str) else [str(a) for a in axes]
         chosen = [self.axis(a) for a in names]
         letters = "".join(a.letter for a in chosen)
         counts = path_to_counts(path, [a.scale for a in chosen], letters)
+        limits = {
+            a.letter: (
+                a.limit_counts(speed_limit, 1, "speed_limit"),
+                a.limit_counts(accel_limit, 2, "accel_limit"),
+            )
+            for a in chosen
+        }
         stream = ContourStream(
             self.link,
             letters,
@@ -459,9 +489,33 @@ class Controller(LinkFacade):
             dt=dt,
             display={a.letter: a.display for a in chosen},
             byte_rate=self.link.byte_rate,
+            limits=limits,
         )
         with user_units({a.letter: a for a in chosen}):
             return stream.run(progress=progress, timeout=timeout)
+
+    # -- switches and flash (galil.homing, galil.tuning) -------------------------------------
+
+    @property
+    def switch_polarity(self) -> SwitchPolarity:
+        """``CN``: limit polarity, home direction and latch edge (``MG _CN0,_CN1,_CN2``)."""
+        return read_polarity(self.link)
+
+    @switch_polarity.setter
+    def switch_polarity(self, polarity: SwitchPolarity) -> None:
+        set_polarity(self.link, polarity)
+
+    def save(self, timeout: float | None = None) -> None:
+        """Burn the parameters to flash (``BN``), waiting as long as a flash write takes."""
+        burn(self.link, "BN", timeout)
+
+    def save_program(self, timeout: float | None = None) -> None:
+        """Burn the program to flash (``BP``)."""
+        burn(self.link, "BP", timeout)
+
+    def save_variables(self, timeout: float | None = None) -> None:
+        """Burn the variables and arrays to flash (``BV``)."""
+        burn(self.link, "BV", timeout)
 
     def capture(
         self,
@@ -503,6 +557,11 @@ class Controller(LinkFacade):
                 return self.axes[model.axis_letter(name)]
             except InvalidArgument:
                 pass
+        if len(name) == 1 and name.isalpha() and model is not None and not model.axes:
+            raise AttributeError(
+                f"{type(self).__name__!s} has no attribute {name!r}: {model.name} is an I/O "
+                "controller with no axes (controller.io)"
+            )
         if len(name) == 1 and name.isalpha() and model is not None:
             # Most likely an axis letter: a typo, a lower-case letter, or one the model lacks.
             raise AttributeError(

@@ -128,6 +128,10 @@ class LimitError(InvalidArgument):
         sample: sample index where it is crossed, if known.
         axis: axis letter, if known.
         end: where the refused motion would have ended (counts), if known.
+        segment: index of the path segment (contour, vector) where it is crossed, if known.
+        value_in_units: ``value`` in the user's units (a pint Quantity) when the axis has a
+            scale; ``value`` stays in counts.
+        limit_in_units: ``limit`` likewise.
     """
 
     def __init__(
@@ -142,6 +146,7 @@ class LimitError(InvalidArgument):
         axis: str | None = None,
         model: str | None = None,
         end: float | None = None,
+        segment: int | None = None,
     ) -> None:
         super().__init__(message, model=model)
         self.name = name
@@ -151,6 +156,9 @@ class LimitError(InvalidArgument):
         self.sample = sample
         self.axis = axis
         self.end = end
+        self.segment = segment
+        self.value_in_units: object | None = None
+        self.limit_in_units: object | None = None
 
 
 class ScheduleError(LimitError):

@@ -19,6 +19,7 @@ from galil.protocol.commands import Command
 from galil.protocol.session import Completed
 from galil.records import Records, RecordStream
 from galil.transport import Transport
+from galil.tuning import follow_tm
 
 __all__ = ["LinkFacade"]
 
@@ -95,13 +96,24 @@ class LinkFacade:
             GalilTimeoutError: no complete reply within the timeout.
             GalilConnectionError: the link is closed or dead.
         """
-        return self.link.command(text, timeout=timeout, allow_compound=allow_compound)
+        reply = self.link.command(text, timeout=timeout, allow_compound=allow_compound)
+        self._follow_tm([text])
+        return reply
+
+    def _follow_tm(self, parts: Sequence[str | Command]) -> None:
+        """A TM the controller accepted changes the sample period predictions use."""
+        for part in parts:
+            period = follow_tm(self.link.model, part if isinstance(part, str) else part.text)
+            if period is not None:
+                self.link.sample_period = period
 
     def command_line(
         self, parts: Sequence[str | Command], *, timeout: float | None = None
     ) -> list[str]:
         """Send several commands as compound line(s) (``PRA=1;BGA``); one reply per part."""
-        return self.link.command_line(parts, timeout=timeout)
+        replies = self.link.command_line(parts, timeout=timeout)
+        self._follow_tm(parts)
+        return replies
 
     def send(self, command: Command, *, timeout: float | None = None) -> str:
         """Send a prepared :class:`~galil.protocol.commands.Command`; return its reply text."""

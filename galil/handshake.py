@@ -79,7 +79,19 @@ def _settle_model(
         warnings.warn(f"{problem}; using model={given.name} as given", RuntimeWarning, stacklevel=5)
         link.model = given
         return
+    if ident.model.generic and given is not None:
+        link.model = given  # the caller named the family: use its tables
+        return
     link.model = ident.model
+    if ident.model.generic:
+        warnings.warn(
+            f"{ident.raw_model} (firmware {ident.firmware}) is a Galil controller the tables "
+            f"do not know; connected as a generic model with conservative limits "
+            f"({len(ident.model.axes)} axes, no data record); pass model= to choose tables",
+            RuntimeWarning,
+            stacklevel=5,
+        )
+        return
     if given is not None and given.name != ident.model.name:
         warnings.warn(
             f"model={given.name} was given but the controller says {ident.raw_model}; "

@@ -18,7 +18,9 @@ __all__ = [
     "INT32_MIN",
     "IT_RANGE",
     "MODELS",
+    "MOTOR_TYPES",
     "ModelSpec",
+    "generic_model",
     "get_model",
     "parse_identity",
 ]
@@ -34,6 +36,23 @@ INT32_MAX = 2_147_483_647
 ETHERNET_BYTES_PER_S = 64_000.0
 #: IT (independent smoothing) range on every model found; resolution 1/256.
 IT_RANGE = (0.004, 1.0)
+#: MT values and what they mean (EPICS writeInt32 MT table; BLISS constants agree).
+MOTOR_TYPES: dict[float, str] = {
+    1.0: "servo",
+    -1.0: "servo, reversed",
+    1.5: "PWM servo",
+    -1.5: "PWM servo, reversed",
+    -2.0: "stepper, active-high step pulses",
+    2.0: "stepper, active-low step pulses",
+    -2.5: "stepper, active-high step pulses, reversed direction",
+    2.5: "stepper, active-low step pulses, reversed direction",
+    4.0: "servo 2PB",
+    -4.0: "servo 2PB, reversed",
+    10.0: "EtherCAT position",
+    11.0: "EtherCAT torque",
+    -11.0: "EtherCAT torque, reversed",
+}
+_MT_STANDARD = frozenset({1.0, -1.0, 1.5, -1.5, 2.0, -2.0, 2.5, -2.5})
 
 
 @dataclass(frozen=True)
@@ -77,6 +96,8 @@ class ModelSpec:
             record_position example: ``RC 1`` records at 512 Hz at TM 1000).
         record_arrays: arrays ``RA``/``RD`` record at once (DMC-1700/1800: eight).
         user_interrupts: ``UI n``: n from 0 to this value minus one (40x0 reference: 0-15).
+        default_speed: SP and JG at power-on, counts/s.
+        default_accel: AC and DC at power-on, counts/s².
         vector_buffer: LM/VM segments the coordinated-motion buffer holds (``_LMS`` when
             empty): 511 (EPICS ``GalilController.h``; Galil 2004 catalogue "up to 511 LI
             segments"); assumed the same on every family.
@@ -97,6 +118,21 @@ class ModelSpec:
             manual says IT smooths VM/LM moves instead, assumed for the Accelera families.
         gr_max: largest |GR| gear ratio (40x0 and 18x6 references: ±127).
         gr_resolution: GR step (40x0 reference: 1/65536).
+        io_first: number of the first digital input, output and analog channel: 1 on DMC
+            controllers (``@IN[1]``), 0 on the RIO (``@IN[0]``) (gclib field comments; EPICS).
+        digital_inputs, digital_outputs: general-purpose digital inputs and outputs.
+        analog_inputs: analog inputs (``@AN[n]``).
+        analog_outputs: analog outputs (``AO n,v``); 0 where the model has none we know of.
+        analog_in_range, analog_out_range: volts at the default AQ/DQ setting.
+        motor_types: the MT values the model accepts (:data:`MOTOR_TYPES` says what each is).
+        kp_max, ki_max, kd_max: gain maxima; gain_resolution their step (KP 1/8, 40x0).
+        ks_range: stepper smoothing KS (40x0 user manual: 0.25 ... 64).
+        il_max, tl_max: integrator and torque limits in volts.
+        er_max: largest position-error limit (ER) in counts.
+        hv_default: HV (homing speed) at power-on, counts/s.
+        homing_stages: stages of HM on a servo axis (3: find the index last).
+        burn_timeout: seconds to wait for BN/BP/BV (flash writes; EPICS waits up to 3 s).
+        generic: the spec was made for an identity no table entry matches (conservative).
         assumptions: plain-language list of values that are guesses, and why.
     """
 
@@ -138,6 +174,10 @@ class ModelSpec:
     record_exponents: tuple[int, int] = (1, 8)
     record_arrays: int = 8
     user_interrupts: int = 16
+    # Power-on values of SP, JG, AC and DC (the command references' defaults: 25,000 counts/s
+    # and 256,000 counts/s²; assumed the same on every family).
+    default_speed: float = 25_000.0
+    default_accel: float = 256_000.0
     # Coordinated motion (LM/LI, VM/VP/CR) and gearing (GA/GR); sources in the docstring.
     vector_buffer: int = 511
     vs_max: int | None = None
@@ -152,7 +192,34 @@ class ModelSpec:
     vt: bool = False
     gr_max: float = 127.0
     gr_resolution: float = 1 / 65536
+    # I/O (facts section 3); the defaults are a 1-4 axis DMC-40x0.
+    io_first: int = 1
+    digital_inputs: int = 8
+    digital_outputs: int = 8
+    analog_inputs: int = 8
+    analog_outputs: int = 0
+    analog_in_range: tuple[float, float] = (-10.0, 10.0)
+    analog_out_range: tuple[float, float] = (-10.0, 10.0)
+    # Motor and loop settings (facts section 4).
+    motor_types: frozenset[float] = _MT_STANDARD
+    kp_max: float = 1023.875
+    ki_max: float = 255.999
+    kd_max: float = 4095.875
+    gain_resolution: float = 1 / 8
+    ks_range: tuple[float, float] = (0.25, 64.0)
+    il_max: float = 9.998
+    tl_max: float = 9.998
+    er_max: int = INT32_MAX
+    hv_default: float = 256.0
+    homing_stages: int = 3
+    burn_timeout: float = 3.0
+    generic: bool = False
     assumptions: tuple[str, ...] = ()
+
+    @property
+    def has_axes(self) -> bool:
+        """Whether the model drives motors (a RIO has none)."""
+        return bool(self.axes)
 
     @property
     def tm_range(self) -> tuple[float, float]:
@@ -187,6 +254,12 @@ class ModelSpec:
         Raises:
             InvalidArgument: the model has no such axis.
         """
+        if not self.axes:
+            raise InvalidArgument(
+                f"{self.name} is an I/O controller with no axes (axis {name!r}): it cannot "
+                "move; use controller.io",
+                model=self.name,
+            )
         letter = name.upper() if isinstance(name, str) else ""
         letter = self.aliases.get(letter, letter)
         if len(letter) != 1 or letter not in self.axes:
@@ -322,6 +395,7 @@ _add(
         qz=(8, 24, 16, 28),
         dr_range=(8, 30000),
         vt=True,
+        ki_max=2047.992,  # EPICS GalilAxis.h
         assumptions=(
             "contour buffer 511 as on Accelera-class firmware: not confirmed for 21x3",
             "DR minimum 8 samples on the Econo 21x3 (EPICS: 8 ms minimum update period)",
@@ -365,6 +439,8 @@ for _n in (1, 2, 3, 5, 6, 7, 8):
                 "name": f"DMC-40{_n}0",
                 "axes": _ALL_AXES[:_n],
                 "qz": (_n, 52, 26, 36),
+                "digital_inputs": 8 if _n <= 4 else 16,
+                "digital_outputs": 8 if _n <= 4 else 16,
             }
         ),
         f"DMC40{_n}0",
@@ -409,7 +485,139 @@ _add(
     "DMC-30000",
 )
 
-_IDENT = re.compile(r"^\s*(?P<model>(?:DMC|RIO)-?\d+\w*?)\s+Rev\s+(?P<rev>\S+)", re.IGNORECASE)
+#: Unconfirmed facts the families added for issue 11 share (see docs/decisions/0015).
+_LAB_ASSUMPTIONS = (
+    "KD and KI resolution 1/8 like KP: only KP's 1/8 is sourced (M40-CR p152)",
+    "IL and TL 0 ... 9.998 V, ER 1 ... 2**31-1 counts: no firmware range found",
+    "HV 256 counts/s at power-on (the Optima stage-2 rate), HV range as SP",
+    "KS resolution 1/32 and default 2: the range 0.25 ... 64 is sourced (40x0 manual)",
+    "BN/BP/BV finish within 3 s (EPICS's timeout for them); real durations unknown",
+    "no analog outputs on DMC motion controllers (the 40x0 command reference has no @AO)",
+)
+
+
+def _family(base: str, name: str, prefix: str, **changes: object) -> None:
+    """Add ``name`` (a 4-axis entry built on ``base``) and its 1-8 axis siblings."""
+    spec = ModelSpec(**{**MODELS[base].__dict__, "name": name, **changes})
+    _add(spec, name.replace("-", ""))
+    for n in range(1, 9):
+        sibling = f"{prefix}{n}0"
+        if sibling.replace("DMC", "DMC-") == name:
+            continue
+        _add(
+            ModelSpec(
+                **{
+                    **spec.__dict__,
+                    "name": sibling.replace("DMC", "DMC-"),
+                    "axes": _ALL_AXES[:n],
+                    "qz": (n, 52, 26, 36),
+                    "digital_inputs": 8 if n <= 4 else 16,
+                    "digital_outputs": 8 if n <= 4 else 16,
+                }
+            ),
+            sibling,
+        )
+
+
+_family(
+    "DMC-4040",
+    "DMC-4240",
+    "DMC42",
+    family="DMC-42x0",
+    assumptions=(
+        "ranges, buffers, TM and record as the DMC-40x0: the 42x0 shares the 4000 record "
+        "(gclib GDataRecord4000) and BLISS's MODEL_4000 tables",
+        "the 42x0 may not retain its IP address (ISIS): burn it with BN",
+        *_LAB_ASSUMPTIONS,
+    ),
+)
+_family(
+    "DMC-4040",
+    "DMC-50040",
+    "DMC500",
+    family="DMC-500x0",
+    ac_max=2_147_483_648,  # EPICS: the 50000 series' maximum acceleration
+    motor_types=_MT_STANDARD | {10.0, 11.0, -11.0},  # EtherCAT types (EPICS MT table)
+    assumptions=(
+        "TM range, program memory, contour and vector buffers as the DMC-40x0 (not found "
+        "for the 500x0)",
+        "record as the 4000 (gclib uses GDataRecord4000 for 500x0): QZ n,52,26,36",
+        "SP maximum 22,000,000 c/s as the 40x0: not sourced",
+        *_LAB_ASSUMPTIONS,
+    ),
+)
+MODELS["DMC-42x0"] = MODELS["DMC-4240"]
+MODELS["DMC-500x0"] = MODELS["DMC-50040"]
+
+_RIO_ASSUMPTIONS = (
+    "no motion: a RIO has no axes; motion commands are refused before sending",
+    "QZ 0,4,48,0 (general block at 4-7, I/O block at 8-55): inferred from gclib's RIO "
+    "layout and EPICS's 'I/O block 48' for the RIO-471xx",
+    "TM 1000 and a servo-loop clock as the DMC-40x0 (TIME counts samples): not sourced",
+    "BN/BP/BV finish within 3 s (EPICS's timeout for them); real durations unknown",
+)
+_add(
+    ModelSpec(
+        name="RIO-47120",
+        family="RIO-47xxx",
+        axes="",
+        transports=frozenset({"ethernet"}),
+        qz=(0, 4, 48, 0),
+        line_length=40,  # "under 40 chars max" (IRTF field notes)
+        threads=4,  # EPICS
+        io_first=0,
+        digital_inputs=16,
+        digital_outputs=16,
+        analog_inputs=8,
+        analog_outputs=8,
+        motor_types=frozenset(),
+        homing_stages=0,
+        assumptions=(
+            "16 inputs, 16 outputs, 8 analog inputs and outputs at ±10 V (IRTF's "
+            "RIO-47120-16bit); AQ 2 and DQ 4 (±10 V) assumed at power-on",
+            *_RIO_ASSUMPTIONS,
+        ),
+    ),
+    "RIO-47xxx",
+    "RIO47120",
+    "RIO47122",
+    "RIO-47122",
+)
+_add(
+    ModelSpec(
+        **{
+            **MODELS["RIO-47120"].__dict__,
+            "name": "RIO-47100",
+            "analog_in_range": (0.0, 5.0),
+            "analog_out_range": (0.0, 5.0),
+            "assumptions": (
+                "AQ 0 (0-5 V) at power-on and AO fixed at 0-5 V (RIO-47100 user manual p.44)",
+                *_RIO_ASSUMPTIONS,
+            ),
+        }
+    ),
+    "RIO47100",
+    "RIO47102",
+    "RIO-47102",
+)
+_add(
+    ModelSpec(
+        **{
+            **MODELS["RIO-47120"].__dict__,
+            "name": "RIO-47300",
+            "digital_inputs": 24,
+            "digital_outputs": 24,
+            "qz": (0, 4, 52, 0),  # EPICS: I/O block 52 on the RIO-47300
+            "assumptions": (
+                "24 inputs and 24 outputs (gclib's 47300 record: 0-23 each)",
+                *_RIO_ASSUMPTIONS,
+            ),
+        }
+    ),
+    "RIO47300",
+)
+
+_IDENT = re.compile(r"^\s*(?P<model>[A-Z]{2,4}-?\d+\w*?)\s+Rev\.?\s+(?P<rev>\S+)", re.IGNORECASE)
 
 
 # Four-digit part numbers are <family digits><axis count><family suffix>: DMC-4040 is a
@@ -427,8 +635,22 @@ _FAMILY_BY_DIGITS = {
     ("22", "0"): "DMC-2183",
     ("40", "0"): "DMC-4040",
     ("41", "3"): "DMC-4143",
+    ("42", "0"): "DMC-4240",
 }
 _PART = re.compile(r"DMC-?(\d{4,5})")
+
+
+def _with_axes(base: ModelSpec, name: str, n: int) -> ModelSpec:
+    return ModelSpec(
+        **{
+            **base.__dict__,
+            "name": name,
+            "axes": _ALL_AXES[:n],
+            "qz": None if base.qz is None else (n, *base.qz[1:]),
+            "digital_inputs": base.digital_inputs if n <= 4 else 2 * base.digital_inputs,
+            "digital_outputs": base.digital_outputs if n <= 4 else 2 * base.digital_outputs,
+        }
+    )
 
 
 def get_model(name: str) -> ModelSpec:
@@ -451,23 +673,74 @@ def get_model(name: str) -> ModelSpec:
         if len(digits) == 4 and (digits[:2], digits[3]) in _FAMILY_BY_DIGITS:
             base = MODELS[_FAMILY_BY_DIGITS[digits[:2], digits[3]]]
             n = int(digits[2]) if digits[2] in "12345678" else len(base.axes)
-            return ModelSpec(
-                **{
-                    **base.__dict__,
-                    "name": f"DMC-{digits}",
-                    "axes": _ALL_AXES[:n],
-                    "qz": None if base.qz is None else (n, *base.qz[1:]),
-                }
-            )
+            return _with_axes(base, f"DMC-{digits}", n)
         if len(digits) == 4 and digits.startswith("15"):
             return MODELS["DMC-1500"]
         if len(digits) == 5 and digits[:2] in ("30", "31"):
             return MODELS["DMC-30010"]
+        if len(digits) == 5 and digits[:3] in ("500", "520") and digits[3] in "12345678":
+            return _with_axes(MODELS["DMC-50040"], f"DMC-{digits}", int(digits[3]))
     for known, spec in MODELS.items():
         if known.upper().replace("-", "") == compact:
             return spec
     known = ", ".join(sorted({s.name for s in MODELS.values()}))
     raise InvalidArgument(f"unknown controller model {name!r}; known: {known}")
+
+
+def _generic_axes(compact: str) -> int:
+    """Axes of an unknown DMC part number, read as EPICS does (``GalilController::connected``).
+
+    ``DMC5xxxx`` has the count at index 6, ``DMC3xxxx`` one axis, others at index 5.
+    """
+    digit = compact[6:7] if compact[3:4] == "5" else compact[5:6]
+    if compact[3:4] == "3":
+        return 1
+    return int(digit) if digit in tuple("12345678") else 1
+
+
+def generic_model(raw_model: str) -> ModelSpec:
+    """A conservative spec for a genuine Galil identity that no table entry matches.
+
+    Motion controllers get their axis count the way EPICS reads it from the part number,
+    the narrowest ranges of the known families, a one-deep contour buffer, no data record and
+    no analog outputs; a ``RIO...`` gets the I/O of the smallest RIO. ``generic`` is set so
+    the caller can warn.
+    """
+    compact = raw_model.strip().upper().replace("-", "")
+    note = (
+        f"{compact} matches no table entry: conservative limits (narrowest known ranges, "
+        "no data record, no analog outputs); pass model= to pick a family's tables"
+    )
+    if compact.startswith("RIO"):
+        return ModelSpec(
+            **{
+                **MODELS["RIO-47120"].__dict__,
+                "name": compact,
+                "family": "RIO (generic)",
+                "qz": None,
+                "digital_inputs": 8,
+                "digital_outputs": 8,
+                "analog_in_range": (0.0, 5.0),
+                "analog_out_range": (0.0, 5.0),
+                "generic": True,
+                "assumptions": (note,),
+            }
+        )
+    n = _generic_axes(compact) if compact.startswith("DMC") else 1
+    return ModelSpec(
+        name=compact,
+        family="generic",
+        axes=_ALL_AXES[:n],
+        ac_max=67_107_840,
+        sp_max=3_000_000,
+        contour_buffer=1,
+        transports=_ETH_USB,
+        qz=None,
+        threads=2,
+        ki_max=255.999,
+        generic=True,
+        assumptions=(note,),
+    )
 
 
 @dataclass(frozen=True)
@@ -482,11 +755,18 @@ class Identity:
 def parse_identity(reply: str) -> Identity:
     """Parse a ``^R^V`` reply like ``"DMC4040 Rev 1.2f"`` into an :class:`Identity`.
 
+    A well-formed identity of a model the tables do not know gets :func:`generic_model`
+    (``identity.model.generic`` is then true).
+
     Raises:
-        InvalidArgument: the text is not a model string or names an unknown model.
+        InvalidArgument: the text is not a Galil identification string.
     """
     m = _IDENT.match(reply)
     if m is None:
         raise InvalidArgument(f"not a Galil identification string: {reply!r}")
     raw = m.group("model").upper()
-    return Identity(model=get_model(raw), raw_model=raw, firmware=m.group("rev"))
+    try:
+        model = get_model(raw)
+    except InvalidArgument:
+        model = generic_model(raw)  # a genuine identity: connect, conservatively (the caller warns)
+    return Identity(model=model, raw_model=raw, firmware=m.group("rev"))

@@ -31,6 +31,7 @@ from galil.link import CommandLink
 from galil.protocol import commands as cmds
 
 __all__ = [
+    "HOMING_KINDS",
     "Display",
     "MotionTracker",
     "MoveHandle",
@@ -50,6 +51,9 @@ MAX_POLL = 0.1
 SCHEDULE_BEGIN = "gsbegin"
 # How long the guard waits for stopped axes to come to rest before giving up.
 _GUARD_WAIT = 30.0
+
+#: Track kinds of HM, FE and FI (:mod:`galil.homing`).
+HOMING_KINDS = frozenset({"home", "edge", "index"})
 
 Display = Callable[[predict.Profile], predict.Profile]
 """Shows a profile in an axis's user unit (arrays stay in counts)."""
@@ -97,7 +101,7 @@ class MoveResult:
 class Track:
     """What is known of one axis's motion since its BG: enough to predict it again."""
 
-    kind: str  # "position" | "jog" | "schedule"
+    kind: str  # "position" | "jog" | "schedule" | "home" | "edge" | "index"
     start: int
     params: MoveParams
     begin: int | None  # controller sample (TIME) of the BG line; None while unknown
@@ -106,12 +110,14 @@ class Track:
     aborted: int | None = None  # sample of an AB
     stopped: bool = False  # an ST went out (host side): the jog has an end
     exact: bool = True  # False once something happened that the predictor cannot follow
-    fixed: predict.Profile | None = None  # a prediction made elsewhere (speed schedule)
+    fixed: predict.Profile | None = None  # a prediction made elsewhere (schedule, homing)
+    note: str = ""  # what is known of the prediction, in words (homing says it here)
 
     @property
     def open_jog(self) -> bool:
-        """A jog has a known end only once the library stopped (or aborted) it."""
-        return self.kind == "jog" and not self.stopped and self.aborted is None
+        """A jog (or a homing sequence nobody predicted) has no known end until stopped."""
+        unknown = self.kind in HOMING_KINDS and self.fixed is None
+        return (self.kind == "jog" or unknown) and not self.stopped and self.aborted is None
 
 
 def sample_of(reply: str) -> int | None:
@@ -128,6 +134,11 @@ def predict_track(link: CommandLink, t: Track) -> predict.Profile:
     p = t.params
     if t.fixed is not None:
         profile = t.fixed
+    elif t.kind in HOMING_KINDS:
+        # Nothing known of the switches: only the start (the handle's note says so).
+        profile = predict.Profile.from_samples(
+            [t.start], sample_period=ts, shape="unknown", peak_speed=p.speed
+        )
     elif t.kind == "jog":
         profile = predict.jog(
             t.amount,
@@ -198,7 +209,8 @@ class MoveHandle:
     """A move in progress on one or more axes.
 
     Attributes:
-        kind: ``"position"``, ``"jog"`` or ``"schedule"``.
+        kind: ``"position"``, ``"jog"``, ``"schedule"``, or ``"home"``/``"edge"``/``"index"``
+            for HM/FE/FI (stop code 10, 9, 10 at their end).
         started_at: the controller clock (seconds) when the handle was made.
     """
 
@@ -239,6 +251,12 @@ class MoveHandle:
     def track(self, letter: str) -> Track | None:
         """The motion record of one axis (``None`` if the move does not drive it)."""
         return self._tracks.get(letter)
+
+    @property
+    def notes(self) -> dict[str, str]:
+        """What is known of each axis's prediction, where the handle has something to say
+        (a homing sequence: predicted from given switch positions, or unknown)."""
+        return {a: t.note for a, t in self._tracks.items() if t.note}
 
     @property
     def params(self) -> dict[str, MoveParams]:
@@ -302,7 +320,8 @@ class MoveHandle:
             t = self._tracks.get(letter)
             if t is None or self._done:
                 return
-            if sample is None or t.begin is None or t.kind == "schedule" or t.aborted is not None:
+            fixed_plan = t.kind == "schedule" or t.kind in HOMING_KINDS
+            if sample is None or t.begin is None or fixed_plan or t.aborted is not None:
                 t.exact = False
                 return
             k = sample - t.begin

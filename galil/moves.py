@@ -294,6 +294,8 @@ def increment(
         raise InvalidArgument(
             f"axis {a} is stopping; the controller refuses IP now (TC 16)", model=model.name
         )
+    if track is not None and track.kind == "jog":
+        _check_step(link, a, counts)
     if track is None or track.kind != "jog":
         remaining = round(pa) - round(rp)
         if counts and remaining and (counts > 0) != (remaining > 0):
@@ -312,6 +314,27 @@ def increment(
         return MoveHandle(link, {a: lone}, "position", display=shows, tracker=tracker)
     handle.add_event(a, sample_of(replies[-1]), lambda t: predict.Increment(t, counts))
     return handle
+
+
+def _check_step(link: CommandLink, a: str, counts: int) -> None:
+    """An IP while jogging steps the reference by ``counts`` in one sample: refuse a step
+    whose speed in that sample is beyond the model's SP maximum.
+
+    Raises:
+        LimitError: the step is too large.
+    """
+    speed = abs(counts) / link.sample_period
+    if speed > link.model.sp_max:
+        raise LimitError(
+            f"IP {counts} while jogging steps axis {a} by {counts} counts in one sample: "
+            f"{speed:.6g} counts/s, beyond the {link.model.name} maximum {link.model.sp_max}",
+            name="speed",
+            value=speed,
+            limit=link.model.sp_max,
+            sample=1,
+            axis=a,
+            model=link.model.name,
+        )
 
 
 def speed_schedule(

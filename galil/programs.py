@@ -35,11 +35,11 @@ from galil.link import CommandLink
 from galil.protocol import commands as cmds
 from galil.protocol.programs import check_program, program_lines
 from galil.routines import MARKER, Routines, split_program
+from galil.tuning import burn
 
 __all__ = ["Download", "Programs"]
 
 _LOG = logging.getLogger("galil.programs")
-_BURN_TIMEOUT = 10.0  # EPICS allows 3 s for BP; flash is slow, a margin costs nothing
 
 
 @dataclass(frozen=True)
@@ -210,7 +210,9 @@ class Programs:
                 raise link.error(GalilTimeoutError, f"thread {n} still runs after {timeout} s")
             link.pause(0.01)
 
-    def burn(self) -> None:
+    def burn(self, timeout: float | None = None) -> None:
         """Burn the program into flash (``BP``), the library's routines with it; it then
-        survives a power cycle. Slow: seconds."""
-        self.link.command_line([cmds.bp()], timeout=_BURN_TIMEOUT)
+        survives a power cycle. Slow: the model's ``burn_timeout`` is allowed. The same as
+        ``controller.save_program()``; refused while a program runs (TC 17), the watchdog's
+        included."""
+        burn(self.link, "BP", timeout)

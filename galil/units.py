@@ -11,8 +11,8 @@ import math
 import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import cache
-from typing import Any
+from functools import cache, cached_property, lru_cache
+from typing import Any, TypeAlias
 
 import numpy as np
 import numpy.typing as npt
@@ -20,7 +20,16 @@ import pint
 
 from galil.errors import InvalidArgument
 
-__all__ = ["Scale", "counts_or_plain", "get_registry", "is_quantity", "path_to_counts", "ureg"]
+__all__ = [
+    "PathSamples",
+    "Scale",
+    "counts_or_plain",
+    "get_registry",
+    "is_quantity",
+    "path_to_counts",
+    "sampled_values",
+    "ureg",
+]
 
 
 @cache
@@ -61,10 +70,27 @@ def _ours(q: Any) -> Any:
     return reg.Quantity(q.magnitude, str(q.units))
 
 
+@lru_cache(maxsize=256)
 def _angle_power(units: Any) -> int:
     """The power of angle in ``units`` (pint treats angles as dimensionless: count radians)."""
     root = get_registry().Quantity(1.0, units).to_root_units()
     return int(dict(root.unit_items()).get("radian", 0))
+
+
+@lru_cache(maxsize=256)
+def _offset(units: Any) -> bool:
+    """Whether ``units`` has an offset (degC ...): those go through pint's own conversion."""
+    return not get_registry().Quantity(1.0, units)._ok_for_muldiv()
+
+
+@lru_cache(maxsize=256)
+def _factor(source: Any, target: Any) -> float:
+    """Multiply a magnitude in ``source`` units by this to get ``target`` units.
+
+    Raises:
+        pint.DimensionalityError: the units do not convert (offset units never reach here).
+    """
+    return float(get_registry().Quantity(1.0, source).to(target).magnitude)
 
 
 def _without_counts(q: Any) -> Any:
@@ -138,14 +164,24 @@ class Scale:
         else:
             object.__setattr__(self, "offset", self._convert(self.offset, unit, "offset"))
 
-    @property
+    @cached_property
     def unit(self) -> Any:
         """The user's position unit (``mm`` for ``2000 / mm``)."""
         return (1 / self.counts_per).units
 
-    @property
+    @cached_property
+    def unit_text(self) -> str:
+        """The unit as text (``"mm"``)."""
+        return f"{self.unit:~}"
+
+    @cached_property
     def _k(self) -> float:
         return float(self.counts_per.magnitude)
+
+    @cached_property
+    def _rate_units(self) -> tuple[Any, Any]:
+        reg = get_registry()
+        return self.unit / reg.second, self.unit / reg.second**2
 
     def _convert(self, value: Any, unit: Any, what: str) -> Any:
         if not is_quantity(value):
@@ -154,7 +190,12 @@ class Scale:
             )
         q = _ours(value)
         try:
-            out = q.to(unit)
+            if q.units == unit:
+                out = q  # the usual case: the axis's own unit, nothing to convert
+            elif getattr(q, "_magnitude", None).__class__ in (int, float) and not _offset(q.units):
+                out = q.__class__(q.magnitude * _factor(q.units, unit), unit)
+            else:
+                out = q.to(unit)
         except pint.DimensionalityError as exc:
             raise InvalidArgument(
                 f"{what}: {value:~} has the wrong dimension; expected {unit:~}-compatible units"
@@ -179,23 +220,23 @@ class Scale:
 
     def rate_to_counts(self, value: Any, power: int, what: str) -> float:
         """A speed (power 1) or acceleration (power 2) Quantity to counts/s**power."""
-        unit = self.unit / get_registry().second ** power
+        unit = self._rate_units[power - 1]
         q = self._convert(value, unit, what)
         return self.sign * float(q.magnitude) * self._k
 
-    def counts_to_position(self, counts: float) -> Any:
+    def counts_to_position(self, counts: float | npt.NDArray[np.float64]) -> Any:
         """Counts to a position Quantity."""
         return (counts * self.sign / self._k) * get_registry().Quantity(
             1.0, self.unit
         ) + self.offset
 
-    def counts_to_distance(self, counts: float) -> Any:
+    def counts_to_distance(self, counts: float | npt.NDArray[np.float64]) -> Any:
         """Counts to a relative distance Quantity."""
         return get_registry().Quantity(counts * self.sign / self._k, self.unit)
 
-    def counts_to_rate(self, counts: float, power: int) -> Any:
+    def counts_to_rate(self, counts: float | npt.NDArray[np.float64], power: int) -> Any:
         """Counts/s**power to a speed or acceleration Quantity."""
-        unit = self.unit / get_registry().second ** power
+        unit = self._rate_units[power - 1]
         return get_registry().Quantity(counts * self.sign / self._k, unit)
 
 
@@ -238,6 +279,23 @@ def path_to_counts(
         else:
             out[:, j] = columns[:, j] * scale.distance_to_counts(1.0 * unit_of, what)
     return out.ravel() if magnitude.ndim == 1 else out
+
+
+PathSamples: TypeAlias = "npt.NDArray[np.float64] | pint.Quantity[npt.NDArray[np.float64]]"
+"""Positions sampled along a path: a float array in counts, or a pint Quantity array."""
+
+
+def sampled_values(values: object, what: str) -> PathSamples:
+    """Real numbers as floats: a Quantity stays a Quantity (of floats), never stripped.
+
+    Raises:
+        InvalidArgument: strings, complex numbers, NaN or infinity.
+    """
+    if is_quantity(values):
+        q: Any = values
+        out: PathSamples = q.__class__(_real_array(q.magnitude, what), q.units)
+        return out
+    return _real_array(values, what)
 
 
 def _real_array(values: object, what: str) -> npt.NDArray[np.float64]:

@@ -44,16 +44,25 @@ EXPECTED = {
         "refused: CD 40000",
         "too slow",
     ],
-    "06_capture.py": [
-        "plan A -> 10 mm: trapezoid",
-        "reference vs prediction: largest difference 0 counts",
-        "plot saved to capture_A.png",
-        "data records at samples",
-    ],
     "05_speed_schedule.py": [
         "earliest valid is",
         "trippoints at [10.0, 20.0] mm",
         "end vs prediction {'A': 0} counts",
+    ],
+    "06_lab_day_one.py": [
+        "homed? False",
+        "homed with stop code 10, position 0",
+        "homed? True: HM started by this Controller ended with stop code 10",
+        "gains KP 8.0 KI 0.25 KD 64.0, motor SERVO",
+        "refused before sending: KP",
+        "output 1 is True",
+        "parameters saved",
+    ],
+    "07_capture.py": [
+        "plan A -> 10 mm: trapezoid",
+        "reference vs prediction: largest difference 0 counts",
+        "plot saved to capture_A.png",
+        "data records at samples",
     ],
 }
 

@@ -32,6 +32,13 @@ from galil.predict.checks import (
 from galil.predict.contour import contour
 from galil.predict.engine import AxisProfiler, KinematicPlan
 from galil.predict.gearing import GearFollower, gear, gear_profile, quantise_ratio
+from galil.predict.homing import (
+    HomeSwitch,
+    HomingParams,
+    HomingPrediction,
+    homing,
+    stepper_output,
+)
 from galil.predict.jog import jog
 from galil.predict.move import (
     Event,
@@ -64,6 +71,9 @@ __all__ = [
     "Checked",
     "Event",
     "GearFollower",
+    "HomeSwitch",
+    "HomingParams",
+    "HomingPrediction",
     "Increment",
     "KinematicPlan",
     "Line",
@@ -95,6 +105,7 @@ __all__ = [
     "contour",
     "gear",
     "gear_profile",
+    "homing",
     "jog",
     "move",
     "plan_move",
@@ -108,6 +119,7 @@ __all__ = [
     "quantise_vector",
     "segment_deadlines",
     "speed_schedule",
+    "stepper_output",
     "together",
     "vector",
 ]

@@ -226,6 +226,16 @@ def check_soft_limits(
         LimitError: at the first sample beyond a limit (``name`` is ``"FL"`` or ``"BL"``).
     """
     pos = profile.position
+    # Quick look first (one pass for the extremes): nothing can be beyond a limit when the
+    # whole path lies inside every one of them; the usual case, and cheap.
+    low, high = int(pos.min()), int(pos.max())
+    if (
+        (forward_limit is None or high <= forward_limit)
+        and (backward_limit is None or low >= backward_limit)
+        and low >= _POSITION_MIN
+        and high <= _POSITION_MAX
+    ):
+        return
     prev = np.concatenate((pos[:1], pos[:-1]))
     checks: list[tuple[str, float, npt.NDArray[np.bool_]]] = []
     if forward_limit is not None:
@@ -450,6 +460,7 @@ def _refuse_motion(
         sample=sample,
         axis=name,
         model=spec.name,
+        segment=min(row, m - 1),
     )
 
 
@@ -612,6 +623,7 @@ def _check_segment_ranges(
             sample=int(starts[i]),
             axis=axis,
             model=spec.name,
+            segment=i,
         )
     bad = np.flatnonzero(np.abs(c) > spec.cd_max)
     if bad.size:
@@ -626,6 +638,7 @@ def _check_segment_ranges(
             sample=int(starts[i]),
             axis=axis,
             model=spec.name,
+            segment=i,
         )
 
 
@@ -682,6 +695,7 @@ def _check_stream(
             sample=k,
             axis=axis,
             model=spec.name,
+            segment=i,
         )
     return StreamReport(rate, needed, total_bytes, float(slack.min()), depth)
 

@@ -633,6 +633,15 @@ class AxisProfiler:
         self.mode = "idle"
         self.stop_code = 7
 
+    def halt(self, code: int) -> None:
+        """Stop at once where the reference is now, ending with stop code ``code``.
+
+        The second stage of HM stops this way at the home switch's edge; ``AB`` is the same
+        stop with code 7 (:meth:`abort`).
+        """
+        self.abort()
+        self.stop_code = int(code)
+
     # ---- contour -----------------------------------------------------------------------
     def begin_contour(self) -> None:
         """CM: enter contour mode; an empty queue holds position.

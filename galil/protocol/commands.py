@@ -22,7 +22,7 @@ from __future__ import annotations
 import enum
 import math
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from numbers import Real
 from typing import ClassVar, NamedTuple
@@ -41,15 +41,18 @@ __all__ = [
     "ab",
     "ac",
     "am",
+    "ao",
     "array_name",
     "assign",
     "bg",
     "bl",
-    "bn",
-    "bp",
+    "br",
+    "burn",
+    "cb",
     "cd",
     "cd_end",
     "cm",
+    "cn",
     "cw",
     "da",
     "dc",
@@ -59,12 +62,22 @@ __all__ = [
     "dt",
     "ei",
     "eo",
+    "er",
+    "fe",
+    "fi",
     "fl",
+    "hm",
+    "hv",
     "hx",
     "identify",
+    "il",
     "ip",
     "it",
     "jg",
+    "kd",
+    "ki",
+    "kp",
+    "ks",
     "la",
     "lv",
     "lz",
@@ -72,6 +85,9 @@ __all__ = [
     "mg",
     "mg_operand",
     "mo",
+    "mt",
+    "oe",
+    "op",
     "pa",
     "pack",
     "parse_line",
@@ -85,6 +101,7 @@ __all__ = [
     "rd",
     "record_source",
     "rp",
+    "sb",
     "sc",
     "sh",
     "sp",
@@ -93,6 +110,7 @@ __all__ = [
     "td",
     "te",
     "th",
+    "tl",
     "tm",
     "tp",
     "ts",
@@ -1090,16 +1108,6 @@ def ei(mask: int, inputs: int | None = None, handle: int | None = None) -> Comma
     return Command(text)
 
 
-def bp() -> Command:
-    """BP: burn the program (and arrays) into flash; slow (seconds)."""
-    return Command("BP")
-
-
-def bn() -> Command:
-    """BN: burn the parameters into flash; slow (seconds)."""
-    return Command("BN")
-
-
 # --------------------------------------------------------------------------------- lines
 
 
@@ -1219,3 +1227,214 @@ def _raw_command(text: str) -> Command:
     if head in _QUERIES or text.startswith("\x12\x16"):
         return Command(text, Expect.DATA)
     return Command(text, Expect.ANY)
+
+
+# ------------------------------------------------------- homing, switches, I/O, loop settings
+# Builders for issue 11 (decision 0015). Ranges come from the model (galil.models); without
+# one, the DMC-40x0 defaults of ModelSpec apply.
+
+_DEFAULT_SPEC = ModelSpec("DMC", "DMC", "ABCDEFGH")
+
+
+def hm(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """HM: arm the homing sequence on ``axes`` (``BG`` starts it; stop code 10 at its end)."""
+    return _plain(_list_command("HM", axes, model))
+
+
+def fe(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """FE: arm find-edge on ``axes`` (``BG`` starts it; stop code 9 at the home input's edge)."""
+    return _plain(_list_command("FE", axes, model))
+
+
+def fi(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
+    """FI: arm find-index on ``axes`` (``BG`` starts it at ``JG``; stop code 10 at the index)."""
+    return _plain(_list_command("FI", axes, model))
+
+
+def _setting(
+    mnemonic: str,
+    by_axis: dict[str, object],
+    model: ModelSpec | None,
+    check: _Checker | Callable[[object, str], str],
+) -> Command:
+    """A per-axis setting in the ``KPA=10`` form (one axis) or ``KP 10,,5`` (several)."""
+    if not by_axis:
+        raise InvalidArgument(f"{mnemonic}: no value given (e.g. {mnemonic.lower()}(A=1))")
+    table = _axes(model)
+    fields: list[str] = [""] * table.nax
+    for letter, value in by_axis.items():
+        idx = table.position(letter)
+        if fields[idx]:
+            raise InvalidArgument(f"{mnemonic}: axis {letter!r} given twice")
+        fields[idx] = check(value, table.ordered[idx])
+    if len(by_axis) == 1:
+        ((letter, _),) = by_axis.items()
+        return _plain(f"{mnemonic}{table.ordered[table.position(letter)]}={''.join(fields)}")
+    while fields and not fields[-1]:
+        fields.pop()
+    return _plain(f"{mnemonic} {','.join(fields)}")
+
+
+def _range_check(
+    name: str, lo: float, hi: float, model: ModelSpec | None, *, integer: bool = False
+) -> _Checker:
+    return _Checker(name, lo, hi, model, integer=integer)
+
+
+def hv(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """HV: homing speed in counts/s (stages 2 and 3 of HM, the return of FI): 0 .. SP max."""
+    spec = model or _DEFAULT_SPEC
+    return _setting("HV", by_axis, model, _range_check("HV", 0, spec.sp_max, model))
+
+
+def kp(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """KP: proportional gain, 0 .. ``model.kp_max`` (1023.875 on the 40x0)."""
+    spec = model or _DEFAULT_SPEC
+    return _setting("KP", by_axis, model, _range_check("KP", 0, spec.kp_max, model))
+
+
+def ki(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """KI: integral gain, 0 .. ``model.ki_max`` (255.999 on the 40x0, 2047.992 on the 21x3)."""
+    spec = model or _DEFAULT_SPEC
+    return _setting("KI", by_axis, model, _range_check("KI", 0, spec.ki_max, model))
+
+
+def kd(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """KD: derivative gain, 0 .. ``model.kd_max`` (4095.875)."""
+    spec = model or _DEFAULT_SPEC
+    return _setting("KD", by_axis, model, _range_check("KD", 0, spec.kd_max, model))
+
+
+def ks(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """KS: stepper smoothing, ``model.ks_range`` (0.25 .. 64)."""
+    lo, hi = (model or _DEFAULT_SPEC).ks_range
+    return _setting("KS", by_axis, model, _range_check("KS", lo, hi, model))
+
+
+def il(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """IL: integrator limit in volts, 0 .. ``model.il_max``."""
+    spec = model or _DEFAULT_SPEC
+    return _setting("IL", by_axis, model, _range_check("IL", 0, spec.il_max, model))
+
+
+def tl(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """TL: torque limit in volts, 0 .. ``model.tl_max``."""
+    spec = model or _DEFAULT_SPEC
+    return _setting("TL", by_axis, model, _range_check("TL", 0, spec.tl_max, model))
+
+
+def er(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """ER: position-error limit in counts, 1 .. ``model.er_max`` (whole counts)."""
+    spec = model or _DEFAULT_SPEC
+    return _setting("ER", by_axis, model, _range_check("ER", 1, spec.er_max, model, integer=True))
+
+
+def _one_of(name: str, allowed: Iterable[float], model: ModelSpec | None) -> Callable[..., str]:
+    choices = sorted(set(allowed))
+
+    def check(value: object, axis: str) -> str:
+        v = _number(value, name)
+        if v not in choices:
+            where = f" on {model.name}" if model is not None else ""
+            shown = ", ".join(format_number(c) for c in choices) or "none"
+            raise InvalidArgument(
+                f"{name}: {value!r} on {axis} is not one of {shown}{where}",
+                model=None if model is None else model.name,
+            )
+        return format_number(v)
+
+    return check
+
+
+def mt(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """MT: motor type per axis, one of ``model.motor_types`` (see ``galil.models.MOTOR_TYPES``)."""
+    allowed = (model or _DEFAULT_SPEC).motor_types
+    return _setting("MT", by_axis, model, _one_of("MT", allowed, model))
+
+
+def oe(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """OE: off-on-error, 0 off, 1 position/amplifier error or abort input, 2 limits, 3 all."""
+    return _setting("OE", by_axis, model, _one_of("OE", (0, 1, 2, 3), model))
+
+
+def br(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """BR: brush setting, -1 external drive, 0 brushless, 1 brush."""
+    return _setting("BR", by_axis, model, _one_of("BR", (-1, 0, 1), model))
+
+
+def cn(
+    limit: int | None = None,
+    home: int | None = None,
+    latch: int | None = None,
+) -> Command:
+    """CN: switch configuration: limit polarity (1 active high, -1 active low), home
+    direction (1 drive forward when the home input is high, -1 reverse), latch edge.
+
+    ``None`` leaves a field as it is (``cn(limit=1)`` -> ``CN 1``).
+    """
+    fields = []
+    for name, value in (("limit", limit), ("home", home), ("latch", latch)):
+        if value is None:
+            fields.append("")
+            continue
+        if isinstance(value, bool) or value not in (-1, 1):
+            raise InvalidArgument(f"CN {name} is 1 or -1, not {value!r}")
+        fields.append(str(int(value)))
+    while fields and not fields[-1]:
+        fields.pop()
+    if not fields:
+        raise InvalidArgument("CN: no field given")
+    return Command("CN " + ",".join(fields))
+
+
+def _channel(n: object, first: int, count: int, what: str, model: ModelSpec | None) -> int:
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
+        raise InvalidArgument(f"{what} number must be an integer, not {n!r}")
+    last = first + count - 1
+    if not first <= int(n) <= last:
+        name = model.name if model is not None else "this model"
+        span = f"{first} .. {last}" if count else "none"
+        raise InvalidArgument(f"{what} {n} does not exist on {name} ({span})", model=name)
+    return int(n)
+
+
+def _io_counts(model: ModelSpec | None) -> ModelSpec:
+    return model or _DEFAULT_SPEC
+
+
+def sb(n: int, *, model: ModelSpec | None = None) -> Command:
+    """SB: set digital output ``n`` (numbered from ``model.io_first``)."""
+    m = _io_counts(model)
+    return _plain(f"SB {_channel(n, m.io_first, m.digital_outputs, 'output', model)}")
+
+
+def cb(n: int, *, model: ModelSpec | None = None) -> Command:
+    """CB: clear digital output ``n``."""
+    m = _io_counts(model)
+    return _plain(f"CB {_channel(n, m.io_first, m.digital_outputs, 'output', model)}")
+
+
+def op(*banks: int, model: ModelSpec | None = None) -> Command:
+    """OP: write the outputs as 8-bit banks (bank 0 = the first eight outputs)."""
+    m = _io_counts(model)
+    nbanks = max(1, (m.digital_outputs + 7) // 8)
+    if not banks or len(banks) > nbanks:
+        raise InvalidArgument(f"OP takes 1 .. {nbanks} bank values, got {len(banks)}")
+    fields = [_ranged(b, 0, 255, "OP bank", integer=True) for b in banks]
+    return _plain("OP " + ",".join(fields))
+
+
+def ao(n: int, volts: float, *, model: ModelSpec | None = None) -> Command:
+    """AO: set analog output ``n`` to ``volts`` (the model's range; refused where none)."""
+    m = _io_counts(model)
+    ch = _channel(n, m.io_first, m.analog_outputs, "analog output", model)
+    lo, hi = m.analog_out_range
+    name = None if model is None else model.name
+    return _plain(f"AO {ch},{_ranged(volts, lo, hi, 'AO', model=name)}")
+
+
+def burn(what: str) -> Command:
+    """BN (parameters), BP (program) or BV (variables and arrays): write flash memory."""
+    if what not in ("BN", "BP", "BV"):
+        raise InvalidArgument(f"burn takes 'BN', 'BP' or 'BV', not {what!r}")
+    return Command(what)

@@ -134,6 +134,31 @@ _COORD_30000: list[tuple[Any, ...]] = [
     ("s_distance", "<i4"),
     ("s_buffer", "<u2"),
 ]
+# RIO-47xxx (gclib GDataRecord47000_ENC / 47300): a 4-byte general block and the I/O in the
+# "coordinated" block of QZ; no axis blocks. Analog values are 16-bit counts.
+_GENERAL_RIO: list[tuple[Any, ...]] = [
+    ("sample", "<u2"),
+    ("error_code", "u1"),
+    ("general_status", "u1"),
+]
+_IO_RIO_47100: list[tuple[Any, ...]] = [
+    ("analog_out", "<u2", (8,)),
+    ("analog_in", "<u2", (8,)),
+    ("outputs", "<u2"),
+    ("inputs", "<u2"),
+    ("pulse_count", "<u4"),
+    ("zc", "<i4"),
+    ("zd", "<i4"),
+]
+_IO_RIO_47300: list[tuple[Any, ...]] = [
+    ("analog_out", "<u2", (8,)),
+    ("analog_in", "<u2", (8,)),
+    ("outputs", "<u4"),
+    ("inputs", "<u4"),
+    ("pulse_count", "<u4"),
+    ("zc", "<i4"),
+    ("zd", "<i4"),
+]
 
 
 def parse_qz(reply: str) -> tuple[int, int, int, int]:
@@ -179,6 +204,9 @@ def record_dtype(
         g, c, a = _GENERAL_4000, _COORD_4000, _AXIS_4000
     elif general == 18:
         g, c, a = _GENERAL_30000, _COORD_30000, _AXIS_4000
+    elif general == _size(_GENERAL_RIO) and qz[0] == 0:
+        g, a = _GENERAL_RIO, _AXIS_4000
+        c = _IO_RIO_47300 if coord == _size(_IO_RIO_47300) else _IO_RIO_47100
     else:
         g, c, a = _GENERAL_2103, _COORD_2103, _AXIS_2103[: 9 if per_axis == 26 else 10]
     gen = g if _size(g) == general else [("general", f"V{general}")]

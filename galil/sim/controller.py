@@ -41,10 +41,13 @@ import numpy.typing as npt
 
 from galil.errors import InvalidArgument
 from galil.models import ModelSpec, get_model
+from galil.predict.homing import HomeSwitch
 from galil.sim.clock import Clock, ManualClock
 from galil.sim.machine import Machine, Room
 from galil.sim.motion import AxisMotion
-from galil.sim.rooms import ROOMS, Limits, Records
+from galil.sim.parse import Refused
+from galil.sim.rooms import IO, ROOMS, Limits, Records
+from galil.sim.rooms.limits import DEFAULT_HOME_EDGE, DEFAULT_INDEX_PERIOD, HomeGeometry
 
 __all__ = ["SimController"]
 
@@ -61,6 +64,8 @@ class SimController:
         servo_lag: time constant (s) of the motor following the reference, for every axis.
         rooms: the rooms that make up the controller (default :data:`galil.sim.rooms.ROOMS`);
             add one to give the simulator new commands, operands or servo-loop behaviour.
+        identity: the ``^R^V`` text, when it should not follow ``model`` (a controller the
+            library's tables do not know, behind ``model``'s behaviour).
 
     Raises:
         InvalidArgument: unknown model.
@@ -76,10 +81,11 @@ class SimController:
         firmware: str = "1.2f-sim",
         servo_lag: float = 0.003,
         rooms: Sequence[type[Room]] = ROOMS,
+        identity: str | None = None,
     ) -> None:
         self.spec: ModelSpec = get_model(model)
         compact = model.strip().upper().replace("-", "")
-        self.identity = f"{compact} Rev {firmware}"
+        self.identity = f"{compact} Rev {firmware}" if identity is None else identity
         self.clock: Clock = clock if clock is not None else ManualClock()
         self._lock = threading.RLock()
         self._m = Machine(self.spec, self.identity, self.clock, servo_lag, rooms)
@@ -297,3 +303,103 @@ class SimController:
         """
         with self._lock:
             return self._m.room(Records).record(axes)
+
+    # ---- switches, home, I/O (issue 11) --------------------------------------------------
+    def place_limit_switches(
+        self, axis: str, *, forward: int | None = None, reverse: int | None = None
+    ) -> None:
+        """Test hook: put the limit switches of ``axis`` at fixed positions (``None``: none).
+
+        Positions are in the machine's fixed frame: encoder counts from power-on, before any
+        position was defined (DP, HM). A switch is tripped at and beyond its position and
+        stops motion towards it (SC 2/3), as :meth:`set_limit_switch` does by hand.
+
+        Raises:
+            InvalidArgument: bad axis, or forward below reverse.
+        """
+        if forward is not None and reverse is not None and forward <= reverse:
+            raise InvalidArgument(f"forward ({forward}) must be above reverse ({reverse})")
+        with self._lock:
+            self._m.servo.sync()
+            self._m.room(Limits).place(self.spec.axis_letter(axis), forward, reverse)
+            self._m.service()
+
+    def set_home_switch(
+        self,
+        axis: str,
+        *,
+        edge: int = DEFAULT_HOME_EDGE,
+        side: int = -1,
+        index_period: int = DEFAULT_INDEX_PERIOD,
+        index_offset: int = 0,
+        pressed: bool | None = None,
+    ) -> None:
+        """Test hook: where the home switch's edge and the index pulses of ``axis`` are.
+
+        Args:
+            axis: axis letter.
+            edge: the edge, fixed frame (default -10,000).
+            side: -1 when the switch is tripped below the edge, +1 at and above.
+            index_period: counts between index pulses (default 4,000).
+            index_offset: one index pulse's position (default 0).
+            pressed: hold the home switch tripped (True) or released (False) whatever the
+                position; ``None`` follows the edge.
+
+        Raises:
+            InvalidArgument: bad axis, side or period.
+        """
+        if side not in (-1, 1) or index_period <= 0:
+            raise InvalidArgument("side is -1 or 1 and index_period > 0")
+        with self._lock:
+            self._m.servo.sync()
+            geometry = HomeGeometry(int(edge), side, int(index_period), int(index_offset))
+            self._m.room(Limits).set_home(self.spec.axis_letter(axis), geometry, pressed)
+            self._m.service()
+
+    def home_switch(self, axis: str) -> HomeSwitch:
+        """The home switch and index of ``axis`` in its present encoder frame: what a
+        prediction of HM, FE or FI needs (``axis.home(switch=...)``)."""
+        with self._lock:
+            letter = self.spec.axis_letter(axis)
+            g = self._m.room(Limits).axes[letter].home
+            origin = self._m.servo.axes[letter].origin
+            return HomeSwitch(g.edge, g.side, g.index_period, g.index_offset).shifted(-origin)
+
+    def set_input(self, n: int, high: bool) -> None:
+        """Test hook: drive digital input ``n`` (the model's numbering) high or low.
+
+        Raises:
+            InvalidArgument: no such input.
+        """
+        with self._lock:
+            self._m.servo.sync()
+            io = self._m.room(IO)
+            try:
+                io.set_input(n, high)
+            except Refused:
+                raise InvalidArgument(f"{self.spec.name} has no input {n}") from None
+            self._m.service()
+
+    def set_analog_input(self, n: int, volts: float) -> None:
+        """Test hook: put ``volts`` on analog input ``n`` (clipped to the model's range).
+
+        Raises:
+            InvalidArgument: no such analog input.
+        """
+        with self._lock:
+            try:
+                self._m.room(IO).set_analog_input(n, volts)
+            except Refused:
+                raise InvalidArgument(f"{self.spec.name} has no analog input {n}") from None
+
+    def output(self, n: int) -> bool:
+        """Whether digital output ``n`` is set."""
+        with self._lock:
+            io = self._m.room(IO)
+            return io.outputs[io.channel(n, len(io.outputs))]
+
+    def analog_output(self, n: int) -> float:
+        """The volts on analog output ``n``."""
+        with self._lock:
+            io = self._m.room(IO)
+            return io.analog_out[io.channel(n, len(io.analog_out))]

@@ -124,6 +124,10 @@ class AxisMotion:
         """Start keeping every sample's reference position (drops an earlier trace)."""
         self._trace = [np.array([self.reference], dtype=np.int64)]
 
+    def keep_trace(self, old: AxisMotion) -> None:
+        """Go on with ``old``'s trace (a position was defined: the servo loop is new)."""
+        self._trace = old._trace
+
     def stop_trace(self) -> npt.NDArray[np.int64]:
         """Stop tracing; return the reference positions since :meth:`start_trace`.
 

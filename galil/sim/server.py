@@ -358,22 +358,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     ``galil sim --model DMC-4040 --tcp 127.0.0.1:0`` or ``galil sim --pty``.
     """
-    parser = argparse.ArgumentParser(prog="galil sim", description="Serve a simulated Galil DMC")
-    parser.add_argument("--model", default="DMC-4040", help="controller model (DMC-4040)")
-    where = parser.add_mutually_exclusive_group()
-    where.add_argument("--tcp", metavar="HOST:PORT", help="serve TCP (default 127.0.0.1:0)")
-    where.add_argument("--pty", action="store_true", help="serve a pseudo-terminal")
-    parser.add_argument(
-        "--message-port",
-        type=int,
-        default=0,
-        help="TCP port for unsolicited messages (0: any free one; -1: none, use CF I)",
-    )
-    parser.add_argument("--lag", type=float, default=0.003, help="servo lag time constant, s")
+    parser = _parser()
     args = parser.parse_args(argv)
     try:
-        controller = SimController(args.model, RealTimeClock(), servo_lag=args.lag)
-    except InvalidArgument as e:
+        controller = _controller(args.model, args.lag, args.limits)
+    except (InvalidArgument, ValueError) as e:
         parser.error(str(e))
     server: _Server
     if args.pty:
@@ -413,6 +402,38 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         server.stop()
     return 0
+
+
+def _parser() -> argparse.ArgumentParser:
+    """The options of ``galil sim``."""
+    parser = argparse.ArgumentParser(prog="galil sim", description="Serve a simulated Galil DMC")
+    parser.add_argument("--model", default="DMC-4040", help="controller model (DMC-4040)")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--tcp", metavar="HOST:PORT", help="serve TCP (default 127.0.0.1:0)")
+    where.add_argument("--pty", action="store_true", help="serve a pseudo-terminal")
+    parser.add_argument(
+        "--message-port",
+        type=int,
+        default=0,
+        help="TCP port for unsolicited messages (0: any free one; -1: none, use CF I)",
+    )
+    parser.add_argument("--lag", type=float, default=0.003, help="servo lag time constant, s")
+    parser.add_argument(
+        "--limits",
+        metavar="REV,FWD",
+        help="put every axis's limit switches at these positions in counts (default: none)",
+    )
+    return parser
+
+
+def _controller(model: str, lag: float, limits: str | None) -> SimController:
+    """The served controller, its limit switches placed at ``limits`` ("REV,FWD")."""
+    controller = SimController(model, RealTimeClock(), servo_lag=lag)
+    if limits:
+        reverse, forward = (int(v) for v in limits.split(","))
+        for letter in controller.spec.axes:
+            controller.place_limit_switches(letter, forward=forward, reverse=reverse)
+    return controller
 
 
 def _interrupt(signum: int, frame: object) -> None:

@@ -49,12 +49,20 @@ class Axis:
         contour: the axis is in contour mode (the contour room sets it; the others leave the
             axis alone while it is set).
         limit_stop: a limit (switch or soft limit) is stopping the axis; a new start clears it.
+        origin: where encoder count 0 is in the machine's fixed frame (the frame switches are
+            placed in); defining a position (DP, the end of HM/FI) moves it, motion does not.
     """
 
     letter: str
     m: AxisMotion
     contour: bool = False
     limit_stop: bool = False
+    origin: int = 0
+
+    @property
+    def physical(self) -> int:
+        """The motor's position in the machine's fixed frame (encoder + origin), counts."""
+        return self.m.encoder + self.origin
 
 
 def engine(call: Callable[[], None]) -> None:
@@ -125,7 +133,9 @@ class Servo:
     def reseat(self, ax: Axis, position: int) -> None:
         """Start a fresh servo loop for ``ax`` at ``position`` (DP, SH, TM)."""
         old = ax.m
+        ax.origin += old.encoder - int(position)  # the motor stays where it is
         ax.m = AxisMotion(self.ts, position, old.lag)
+        ax.m.keep_trace(old)
         ax.m.motor_on = old.motor_on
         ax.m.profiler.stop_code = old.profiler.stop_code
 

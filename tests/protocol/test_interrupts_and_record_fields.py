@@ -154,8 +154,6 @@ def test_program_array_and_capture_builders() -> None:
     assert c.ei(1, 2).text == "EI 1,2"
     assert c.la().returns_data
     assert c.lv().returns_data
-    assert c.bp().text == "BP"
-    assert c.bn().text == "BN"
 
 
 @pytest.mark.parametrize(

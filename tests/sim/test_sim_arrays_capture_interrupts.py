@@ -1,4 +1,4 @@
-"""The simulator's arrays, variables, RA/RD/RC capture, UI/EI interrupts and burning."""
+"""The simulator's arrays, variables, RA/RD/RC capture and UI/EI interrupts."""
 
 from __future__ import annotations
 
@@ -146,13 +146,3 @@ def test_user_interrupts_and_motion_complete_reach_the_ei_handle(sim: SimControl
     ask(sim, "PRA=100;BG A")
     sim.advance(0.2)
     assert sim.poll(handle) == b""
-
-
-def test_burning_is_accepted_and_bn_waits_for_programs(sim: SimController) -> None:
-    assert ask(sim, "BP") == b":"
-    assert ask(sim, "BV") == b":"
-    sim.feed(b"DL\r#W\rWT 1000\rEN\r\\")
-    ask(sim, "XQ #W")
-    assert ask(sim, "BN") == b"?"
-    assert tc(sim) == 17
-    assert ask(sim, "BP") == b":"

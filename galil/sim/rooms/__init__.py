@@ -13,7 +13,9 @@ from galil.sim.rooms.arrays import Arrays
 from galil.sim.rooms.capture import Capture
 from galil.sim.rooms.contour import Contour
 from galil.sim.rooms.handles import Handles
+from galil.sim.rooms.homing import Homing
 from galil.sim.rooms.interrupts import Interrupts
+from galil.sim.rooms.io import IO
 from galil.sim.rooms.limits import Limits
 from galil.sim.rooms.motion import Motion
 from galil.sim.rooms.programs import ProgramCommands
@@ -21,13 +23,16 @@ from galil.sim.rooms.records import Records
 from galil.sim.rooms.reports import Reports
 from galil.sim.rooms.settings import Settings
 from galil.sim.rooms.trippoints import Trippoints
+from galil.sim.rooms.tuning import Tuning
 
 __all__ = [
+    "IO",
     "ROOMS",
     "Arrays",
     "Capture",
     "Contour",
     "Handles",
+    "Homing",
     "Interrupts",
     "Limits",
     "Motion",
@@ -36,6 +41,7 @@ __all__ = [
     "Reports",
     "Settings",
     "Trippoints",
+    "Tuning",
     "rooms_with",
 ]
 
@@ -51,6 +57,9 @@ ROOMS: tuple[type[Room], ...] = (
     Settings,
     Handles,
     ProgramCommands,
+    Tuning,
+    Homing,
+    IO,
     Arrays,
     Capture,
     Interrupts,

@@ -1,15 +1,24 @@
-"""Limits: soft limits (``FL``/``BL``), limit switches and the switch status (``TS``).
+"""Limits: soft limits (``FL``/``BL``), limit and home switches, ``CN``, and ``TS``.
 
 Soft limits act on the reference position (``RP``) and stop at DC, like a limit switch, and
 only motion *outwards* is stopped, so an axis beyond a limit can always be moved back (decision
 0003). A step of the servo loop ends where the previewed path first crosses a limit outwards.
-``_LFx``/``_LRx`` are 1 while the switch is inactive, as the TS bits are. Switches are set by a
-test hook (:meth:`Limits.set_switch`); the home input reads high.
+
+Switches live in the machine's fixed frame (:attr:`~galil.sim.servo.Axis.physical`: the encoder
+plus an origin that moves when a position is defined). A limit switch is *tripped* when the
+test hook presses it (:meth:`Limits.set_switch`) or the motor is at or beyond the position it
+was placed at (:meth:`Limits.place`; none are placed by default). A tripped switch pulls its
+input low; ``CN`` field 1 says which level is *active* (-1, the default: low), so with ``CN 1``
+an untripped switch reads active, as on a real controller. ``_LFx``/``_LRx`` are 0 and the TS
+bits 3/2 are 0 while a switch is active. The home switch is a flag on one side of an edge
+(default: below -10,000 counts) that pulls the home input (TS bit 1, ``_HMx``) low; index
+pulses come every 4,000 counts from 0 (:class:`HomeGeometry`). Decision 0015.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -18,19 +27,58 @@ from galil.errors import InvalidArgument
 from galil.models import INT32_MAX, INT32_MIN
 from galil.sim.interpreter import int32
 from galil.sim.machine import Room
-from galil.sim.parse import Refused
+from galil.sim.parse import Refused, split_fields
 from galil.sim.registry import Args, OperandKind, handler, operand
 from galil.sim.servo import Axis
 
-__all__ = ["Limits"]
+__all__ = ["DEFAULT_HOME_EDGE", "DEFAULT_INDEX_PERIOD", "HomeGeometry", "Limits"]
+
+#: Where the home flag ends by default (fixed frame, counts): the flag covers what is below.
+DEFAULT_HOME_EDGE = -10_000
+#: Counts between index pulses by default (one motor turn of a 1000-line encoder).
+DEFAULT_INDEX_PERIOD = 4_000
+
+
+@dataclass(frozen=True)
+class HomeGeometry:
+    """Where an axis's home flag and index pulses are, in the machine's fixed frame.
+
+    Attributes:
+        edge: where the home flag ends.
+        side: -1 when the flag covers positions below ``edge``, +1 above (at ``edge`` too).
+        index_period: counts between index pulses.
+        index_offset: where one index pulse is (the others every ``index_period``).
+    """
+
+    edge: int = DEFAULT_HOME_EDGE
+    side: int = -1
+    index_period: int = DEFAULT_INDEX_PERIOD
+    index_offset: int = 0
+
+    def on_flag(self, physical: int) -> bool:
+        """Whether the home switch is tripped at ``physical``."""
+        return physical < self.edge if self.side < 0 else physical >= self.edge
+
+    def next_index(self, physical: int, direction: int) -> int:
+        """The first index pulse strictly beyond ``physical`` in ``direction``."""
+        p, off = self.index_period, self.index_offset
+        k = (physical - off) // p
+        if direction > 0:
+            return off + (k + 1) * p
+        below = off + k * p
+        return below if below < physical else below - p
 
 
 @dataclass
 class _AxisLimits:
     fl: int = INT32_MAX
     bl: int = INT32_MIN
-    forward: bool = False  # forward limit switch active
+    forward: bool = False  # forward limit switch pressed by the test hook
     reverse: bool = False
+    forward_at: int | None = None  # placed: tripped at or beyond this (fixed frame)
+    reverse_at: int | None = None
+    home: HomeGeometry = field(default_factory=HomeGeometry)
+    home_pressed: bool | None = None  # the test hook holds the home switch (None: geometry)
 
 
 class Limits(Room):
@@ -38,8 +86,45 @@ class Limits(Room):
 
     def reset(self) -> None:
         self.axes = {letter: _AxisLimits() for letter in self.machine.spec.axes}
-        self._switched = False  # any switch active: the service hook has work
+        self._switched = False  # any switch may be active: the service hook has work
         self._soft = False  # any soft limit set: the horizon hook has work
+        #: CN fields: limit polarity (-1 active low), home direction, latch edge, two more.
+        self.cn = [-1.0, -1.0, -1.0, 0.0, 1.0]
+
+    # ---- switch states -----------------------------------------------------------------
+    def tripped(self, ax: Axis, which: str) -> bool:
+        """Whether the forward or reverse limit switch is physically tripped."""
+        s = self.axes[ax.letter]
+        if which == "forward":
+            return s.forward or (s.forward_at is not None and ax.physical >= s.forward_at)
+        return s.reverse or (s.reverse_at is not None and ax.physical <= s.reverse_at)
+
+    def active(self, ax: Axis, which: str) -> bool:
+        """Whether the controller sees the switch active (tripped pulls low; CN picks the level)."""
+        return self.tripped(ax, which) != (self.cn[0] > 0)
+
+    def home_level(self, ax: Axis) -> int:
+        """The home input: 0 (low) while the home switch is tripped, 1 otherwise."""
+        s = self.axes[ax.letter]
+        on = s.home.on_flag(ax.physical) if s.home_pressed is None else s.home_pressed
+        return 0 if on else 1
+
+    def place(self, letter: str, forward: int | None, reverse: int | None) -> None:
+        """Place the limit switches of ``letter`` at fixed-frame positions (``None``: none)."""
+        s = self.axes[letter]
+        s.forward_at, s.reverse_at = forward, reverse
+        self._update_switched()
+
+    def set_home(self, letter: str, geometry: HomeGeometry, pressed: bool | None = None) -> None:
+        """Set where the home flag and index pulses are; ``pressed`` holds the switch."""
+        s = self.axes[letter]
+        s.home, s.home_pressed = geometry, pressed
+
+    def _update_switched(self) -> None:
+        self._switched = self.cn[0] > 0 or any(
+            a.forward or a.reverse or a.forward_at is not None or a.reverse_at is not None
+            for a in self.axes.values()
+        )
 
     # ---- used by other rooms -----------------------------------------------------------
     def check_start(self, ax: Axis, direction: float) -> None:
@@ -50,15 +135,18 @@ class Limits(Room):
         """
         s = self.axes[ax.letter]
         ref = ax.m.reference
-        if direction > 0 and (s.forward or ref > s.fl):
+        if direction > 0 and (self.active(ax, "forward") or ref > s.fl):
             raise Refused(22, "forward limit")
-        if direction < 0 and (s.reverse or ref < s.bl):
+        if direction < 0 and (self.active(ax, "reverse") or ref < s.bl):
             raise Refused(22, "reverse limit")
 
     def switch_bits(self, ax: Axis) -> int:
-        """Home input high, and the limit bits (set while the switch is inactive)."""
-        s = self.axes[ax.letter]
-        return 0x02 | (0 if s.forward else 0x08) | (0 if s.reverse else 0x04)
+        """The home input (bit 1) and the limit bits (3 forward, 2 reverse; set while inactive)."""
+        if not self._switched and self.home_level(ax):
+            return 0x0E
+        forward = 0 if self.active(ax, "forward") else 0x08
+        reverse = 0 if self.active(ax, "reverse") else 0x04
+        return 0x02 * self.home_level(ax) | forward | reverse
 
     def set_switch(self, letter: str, which: str, active: bool) -> None:
         """Set a limit switch; an active one stops motion towards it (SC 2/3).
@@ -73,7 +161,7 @@ class Limits(Room):
             s.forward = bool(active)
         else:
             s.reverse = bool(active)
-        self._switched = any(a.forward or a.reverse for a in self.axes.values())
+        self._update_switched()
         self._check_switch(self.machine.servo.axes[letter])
 
     # ---- servo-loop hooks --------------------------------------------------------------
@@ -118,25 +206,37 @@ class Limits(Room):
                 ax.limit_stop = True
                 prof.limit_stop(3)
 
+    def watches(self, out: list[Callable[[], bool]]) -> None:
+        if not self._switched:
+            return
+        for ax in self.machine.servo.axes.values():
+            s = self.axes[ax.letter]
+            placed = s.forward_at is not None or s.reverse_at is not None
+            if placed and ax.m.moving and not ax.limit_stop and not ax.contour:
+                out.append(lambda ax=ax: self._runs_into(ax) != 0)  # type: ignore[misc]
+
+    def _runs_into(self, ax: Axis) -> int:
+        """2 or 3 when ``ax`` moves towards an active limit switch, else 0."""
+        v = ax.m.profiler.velocity
+        if v > 0 and self.active(ax, "forward"):
+            return 2
+        if v < 0 and self.active(ax, "reverse"):
+            return 3
+        return 0
+
     def service(self) -> None:
         if self._switched:
             for ax in self.machine.servo.axes.values():
                 self._check_switch(ax)
 
     def _check_switch(self, ax: Axis) -> None:
-        s = self.axes[ax.letter]
-        if not (s.forward or s.reverse):
-            return
         m = ax.m
         if not m.moving or ax.limit_stop or ax.contour:
             return
-        v = m.profiler.velocity
-        if s.forward and v > 0:
+        code = self._runs_into(ax)
+        if code:
             ax.limit_stop = True
-            m.profiler.limit_stop(2)
-        elif s.reverse and v < 0:
-            ax.limit_stop = True
-            m.profiler.limit_stop(3)
+            m.profiler.limit_stop(code)
 
     # ---- commands and operands ---------------------------------------------------------
     @handler("FL", Args.VALUES)
@@ -175,11 +275,43 @@ class Limits(Room):
 
     @operand("LF", kind=OperandKind.AXIS)
     def forward_switch(self, ax: Axis) -> float:
-        return 0 if self.axes[ax.letter].forward else 1
+        return 0 if self.active(ax, "forward") else 1
 
     @operand("LR", kind=OperandKind.AXIS)
     def reverse_switch(self, ax: Axis) -> float:
-        return 0 if self.axes[ax.letter].reverse else 1
+        return 0 if self.active(ax, "reverse") else 1
+
+    @operand("HM", kind=OperandKind.AXIS)
+    def home_input(self, ax: Axis) -> float:
+        return self.home_level(ax)
+
+    @operand("CN", kind=OperandKind.INDEX)
+    def configuration(self, index: str) -> float:
+        """``_CN0`` .. ``_CN4``: the CN fields (an assumption: no source shows the operand)."""
+        if not index.isdigit() or not 0 <= int(index) < len(self.cn):
+            raise Refused(4, "CN field 0..4")
+        return self.cn[int(index)]
+
+    @handler("CN")
+    def cn_command(self, args: str) -> str:
+        """CN m,n,o,p,q: limit polarity, home direction, latch edge (each 1 or -1), two more."""
+        fields = split_fields(args)
+        if any(f.strip() == "?" for f in fields):
+            i = self.machine.interp
+            return ", ".join(i.num(v, "2.0") for v in self.cn[:3]) + "\r\n"
+        if len(fields) > len(self.cn):
+            raise Refused(50, "CN has five fields")
+        new = list(self.cn)
+        for k, text in enumerate(fields):
+            if not text.strip():
+                continue
+            value = self.machine.interp.evaluate(text)
+            if k < 3 and value not in (-1, 1):
+                raise Refused(6, "CN fields 1-3 are 1 or -1")
+            new[k] = value
+        self.cn = new
+        self._update_switched()
+        return ""
 
     @operand("TS", kind=OperandKind.AXIS)
     def status_byte(self, ax: Axis) -> float:

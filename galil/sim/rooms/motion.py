@@ -16,7 +16,7 @@ from galil.errors import InvalidArgument, LimitError
 from galil.predict.checks import quantise_accel, quantise_speed
 from galil.predict.smoothing import quantise_it
 from galil.sim.interpreter import int32
-from galil.sim.machine import Room
+from galil.sim.machine import Machine, Room
 from galil.sim.parse import Refused
 from galil.sim.registry import Args, OperandKind, handler, operand
 from galil.sim.rooms.limits import Limits
@@ -44,13 +44,35 @@ class Params:
     move_start: int = 0  # profiler position at the last BG: AD/AR measure from here
 
 
+#: A mode another room starts with BG: ``check(ax)`` refuses (before any axis starts),
+#: ``start(ax)`` begins it.
+Mode = tuple[Callable[[Axis], None], Callable[[Axis], None]]
+
+
 class Motion(Room):
-    """Per-axis motion parameters, and the commands that start, change and stop motion."""
+    """Per-axis motion parameters, and the commands that start, change and stop motion.
+
+    ``modes`` maps a ``next_mode`` name to the room that starts it at ``BG`` (HM, FE and FI
+    register theirs), so this room stays the one place ``BG`` is answered.
+    """
 
     requires = (Limits,)
 
+    def __init__(self, machine: Machine) -> None:
+        super().__init__(machine)
+        self.modes: dict[str, Mode] = {}
+
     def reset(self) -> None:
-        self.axes = {letter: Params() for letter in self.machine.spec.axes}
+        spec = self.machine.spec
+        self.axes = {
+            letter: Params(
+                sp=spec.default_speed,
+                jg=spec.default_speed,
+                ac=spec.default_accel,
+                dc=spec.default_accel,
+            )
+            for letter in spec.axes
+        }
 
     def params(self, ax: Axis) -> Params:
         """The motion parameters of ``ax``."""
@@ -192,10 +214,14 @@ class Motion(Room):
 
     @handler("BG", Args.AXES)
     def bg(self, axes: list[Axis]) -> str:
-        plans: list[tuple[Axis, int | None]] = []
+        plans: list[tuple[Axis, int | str | None]] = []
         for ax in axes:
             p = self.axes[ax.letter]
-            if p.next_mode == "jog":
+            if p.next_mode in self.modes:
+                self._start_check(ax, 0)
+                self.modes[p.next_mode][0](ax)
+                plans.append((ax, p.next_mode))
+            elif p.next_mode == "jog":
                 self._start_check(ax, p.jg)
                 plans.append((ax, None))
             else:
@@ -211,7 +237,9 @@ class Motion(Room):
             prof = ax.m.profiler
             ax.limit_stop = False
             p.move_start = prof.position
-            if goal is None:
+            if isinstance(goal, str):
+                self.modes[goal][1](ax)
+            elif goal is None:
                 engine(functools.partial(prof.begin_jog, p.jg, p.ac, p.dc, p.it))
             else:
                 p.pa = goal

@@ -1,5 +1,4 @@
-"""Program commands: ``DL`` ``UL`` ``XQ`` ``HX``, ``BP``/``BN``/``BV`` (accepted, nothing
-is burnt), and ``JP``/``EN``/``NO`` from the host.
+"""Program commands: ``DL`` ``UL`` ``XQ`` ``HX``, and ``JP``/``EN``/``NO`` from the host.
 
 The program store and the threads are the core's :class:`~galil.sim.programs.Programs`;
 ``JP`` and ``EN`` are flow control that only a thread runs (from a host they are refused).
@@ -17,7 +16,7 @@ __all__ = ["ProgramCommands"]
 
 
 class ProgramCommands(Room):
-    """DL, UL, XQ, HX, BP, BN, BV, JP, EN, NO."""
+    """DL, UL, XQ, HX, JP, EN, NO."""
 
     @handler("DL")
     def dl(self, args: str) -> Download:
@@ -65,21 +64,6 @@ class ProgramCommands(Room):
         if not 0 <= n < self.machine.spec.threads:
             raise Refused(6, "no such thread")
         return n
-
-    @handler("BP")
-    @handler("BV")
-    def burn(self, args: str) -> str:
-        """Burning to flash: accepted, nothing is kept across a simulated power cycle."""
-        if isinstance(self.machine.interp.caller, Thread):
-            raise Refused(3, "burning is not valid in a program")
-        return ""
-
-    @handler("BN")
-    def burn_parameters(self, args: str) -> str:
-        """``BN``: as :meth:`burn`; refused while a program runs (TC 17)."""
-        if self.machine.programs.threads:
-            raise Refused(17, "BN not valid while a program runs")
-        return self.burn(args)
 
     @handler("JP")
     def jp(self, args: str) -> str:

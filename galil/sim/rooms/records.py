@@ -9,6 +9,8 @@ to handle ``h``, without ``:``, at the exact sample it is due.
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -21,6 +23,8 @@ from galil.sim.parse import Refused, split_fields
 from galil.sim.ports import HANDLES, Port
 from galil.sim.registry import handler, operand
 from galil.sim.rooms.contour import Contour
+from galil.sim.rooms.homing import Homing
+from galil.sim.rooms.io import IO
 from galil.sim.rooms.limits import Limits
 from galil.sim.rooms.motion import Motion
 from galil.sim.servo import Axis
@@ -86,6 +90,7 @@ class Records(Room):
         #: ``DR`` stream: (samples between records, port number), and the next record's sample.
         self.stream: tuple[int, int] | None = None
         self._next = 0
+        self._fill: list[Callable[[np.ndarray[Any, Any], str], None]] | None = None
 
     # ---- the record --------------------------------------------------------------------
     def record(self, axes: str = "") -> bytes:
@@ -113,7 +118,19 @@ class Records(Room):
         if layout.axes is not None:
             motion, limits = self.machine.room(Motion), self.machine.room(Limits)
             layout.axes[:] = [self._axis(ax, motion, limits) for ax in present]
+        for fill in self._fillers():
+            fill(layout.buf, letters)
         return layout.buf.tobytes()
+
+    def _fillers(self) -> list[Callable[[np.ndarray[Any, Any], str], None]]:
+        """Rooms that put their own fields into the record (I/O, homing status bits)."""
+        if self._fill is None:
+            self._fill = []
+            with contextlib.suppress(KeyError):
+                self._fill.append(self.machine.room(IO).fill_record)
+            with contextlib.suppress(KeyError):
+                self._fill.append(self.machine.room(Homing).fill_record)
+        return self._fill
 
     def _general(self, names: tuple[str, ...]) -> tuple[int, ...]:
         m = self.machine

@@ -1,7 +1,7 @@
 """Record a move on the controller, sample by sample, and plot it against its prediction.
 
-    python examples/06_capture.py                       # the simulator
-    python examples/06_capture.py tcp://192.168.0.42    # a real controller
+    python examples/07_capture.py                       # the simulator
+    python examples/07_capture.py tcp://192.168.0.42    # a real controller
 
 The controller records the reference position (what its profiler commanded) and the encoder
 position of axis A every 2 servo samples into arrays of its own (``RA``, ``RD``, ``RC``); the

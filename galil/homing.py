@@ -1,0 +1,252 @@
+"""Homing and switches, in counts: HM, FE, FI, HV, the switch state, CN and the homed flag.
+
+An :class:`~galil.axis.Axis` holds one :class:`AxisHoming`; ``axis.home()``,
+``axis.find_edge()`` and ``axis.find_index()`` call :meth:`AxisHoming.start`, which reads
+the axis's state in one round trip, refuses what the controller would refuse, predicts the
+sequence when the switch positions are known (:func:`galil.predict.homing`), and sends
+``HM A;BG A;MG TIME`` (or ``FE``/``FI``) as one line. The :class:`~galil.motion.MoveHandle`
+it returns waits, shows progress and stops like any move; its stop code is 10 after HM and
+FI, 9 after FE.
+
+Switches (:func:`read_switches`) come from ``TS`` in one round trip: the limit bits of TS
+are 0 while a switch is active whatever ``CN``'s polarity, so the booleans mean "tripped".
+The home input has no "active" level of its own: ``home`` is true when the input is at the
+level CN field 1 calls active (low by default), an assumption recorded in decision 0015.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from galil import predict
+from galil.errors import InvalidArgument
+from galil.link import CommandLink
+from galil.motion import Display, MotionTracker, MoveHandle, MoveParams, Track, sample_of
+from galil.protocol import commands as cmds
+
+__all__ = [
+    "AxisHoming",
+    "Homed",
+    "SwitchPolarity",
+    "Switches",
+    "read_polarity",
+    "read_switches",
+    "set_polarity",
+]
+
+_KINDS = {"HM": ("home", cmds.hm), "FE": ("edge", cmds.fe), "FI": ("index", cmds.fi)}
+_STATE = ("RP", "BG", "MO", "SP", "AC", "DC", "JG", "HV", "TS", "MT")
+
+
+@dataclass(frozen=True)
+class Switches:
+    """The switches of one axis, read in one round trip.
+
+    Attributes:
+        forward_limit: the forward limit switch is active (tripped), whatever CN's polarity.
+        reverse_limit: the reverse limit switch is active.
+        home: the home input is at the level CN calls active (see the module docstring).
+        home_input: the home input's level as read (``_HM``: 1 high, 0 low).
+    """
+
+    forward_limit: bool
+    reverse_limit: bool
+    home: bool
+    home_input: int
+
+
+@dataclass(frozen=True)
+class SwitchPolarity:
+    """``CN``: how the controller reads its switches.
+
+    Attributes:
+        limit: 1 when a limit switch is active high, -1 active low (the default).
+        home: 1 drives forward (HM, FE) while the home input is high, -1 in reverse.
+        latch: 1 latches on a rising edge, -1 on a falling one.
+    """
+
+    limit: int = -1
+    home: int = -1
+    latch: int = -1
+
+
+@dataclass(frozen=True)
+class Homed:
+    """Whether an axis is homed, and how the library knows (``bool(homed)`` works).
+
+    Attributes:
+        homed: the axis's position was defined at a home or index since power-on, as far as
+            the library can tell.
+        how: where that comes from: a sequence this Controller started and saw end with
+            stop code 10, the controller's stop code, or why neither says so.
+    """
+
+    homed: bool
+    how: str
+
+    def __bool__(self) -> bool:
+        return self.homed
+
+
+def read_switches(link: CommandLink, letter: str) -> Switches:
+    """The switches of ``letter`` (``MG _TSx,_CN0``: one round trip)."""
+    ts, cn = link.query_operands([f"_TS{letter}", "_CN0"])
+    bits = round(ts)
+    level = bits >> 1 & 1
+    return Switches(
+        forward_limit=not bits & 0x08,
+        reverse_limit=not bits & 0x04,
+        home=level == (1 if cn > 0 else 0),
+        home_input=level,
+    )
+
+
+def read_polarity(link: CommandLink) -> SwitchPolarity:
+    """``CN`` fields 1-3 (``MG _CN0,_CN1,_CN2``)."""
+    values = [round(v) for v in link.query_operands(["_CN0", "_CN1", "_CN2"])]
+    return SwitchPolarity(*values)
+
+
+def set_polarity(link: CommandLink, polarity: SwitchPolarity) -> None:
+    """Send ``CN`` (every field validated before the byte goes out)."""
+    if not isinstance(polarity, SwitchPolarity):
+        raise InvalidArgument(f"switch_polarity takes a SwitchPolarity, not {polarity!r}")
+    link.command_line([cmds.cn(polarity.limit, polarity.home, polarity.latch)])
+
+
+class AxisHoming:
+    """Homing of one axis, and what the library knows of its homed state."""
+
+    def __init__(self, link: CommandLink, letter: str, tracker: MotionTracker) -> None:
+        self._link = link
+        self.letter = letter
+        self._tracker = tracker
+        self._last: MoveHandle | None = None
+        self._confirmed: str | None = None
+
+    def start(
+        self,
+        kind: str,
+        switch: predict.HomeSwitch | None = None,
+        *,
+        display: Display | None = None,
+    ) -> MoveHandle:
+        """Start HM, FE or FI; predict it when ``switch`` (positions in counts) is given.
+
+        Raises:
+            InvalidArgument: the axis moves or its motor is off, a speed it needs is 0, or it
+                would start into an active limit switch.
+        """
+        if switch is not None and not isinstance(switch, predict.HomeSwitch):
+            raise InvalidArgument(f"switch must be a galil.predict.HomeSwitch, not {switch!r}")
+        link, a = self._link, self.letter
+        model = link.model
+        values = link.query_operands([f"_{op}{a}" for op in _STATE] + ["_CN1"])
+        rp, bg, mo, sp, ac, dc, jg, hv, ts, mt, cn_home = values
+        self._refuse(kind, bool(bg), bool(mo), sp, jg, hv)
+        params = predict.HomingParams(
+            speed=sp,
+            accel=ac,
+            decel=dc,
+            home_speed=hv,
+            jog_speed=jg,
+            home_direction=1 if cn_home > 0 else -1,
+            stepper=abs(mt) in (2.0, 2.5),
+        )
+        self._refuse_limit(kind, round(ts), params)
+        track = self._track(kind, round(rp), params, switch)
+        mode, build = _KINDS[kind]
+        replies = link.command_line(
+            [build(a, model=model), cmds.bg(a, model=model), cmds.time_stamp()]
+        )
+        track.begin = sample_of(replies[-1])
+        handle = MoveHandle(
+            link, {a: track}, mode, display={a: display} if display else None, tracker=self._tracker
+        )
+        self._tracker.started(handle)
+        self._last = handle
+        if kind != "FE":
+            self._confirmed = None
+        return handle
+
+    def _refuse(self, kind: str, bg: bool, mo: bool, sp: float, jg: float, hv: float) -> None:
+        name, a = self._link.model.name, self.letter
+        if bg:
+            raise InvalidArgument(f"axis {a} is moving; stop it or wait first", model=name)
+        if mo:
+            raise InvalidArgument(
+                f"axis {a} has its motor off; call controller.servo_here()", model=name
+            )
+        if kind != "FI" and sp <= 0:
+            raise InvalidArgument(f"axis {a} has SP 0: set a speed first", model=name)
+        if kind != "FE" and hv <= 0:
+            raise InvalidArgument(f"axis {a} has HV 0: set home_speed first", model=name)
+        if kind == "FI" and jg == 0:
+            raise InvalidArgument(
+                f"FI runs at JG, which is 0 on {a}: set jog_speed (its sign is the direction)",
+                model=name,
+            )
+
+    def _refuse_limit(self, kind: str, ts: int, params: predict.HomingParams) -> None:
+        # The direction of HM/FE comes from the home input (TS bit 1) and CN field 2.
+        if kind == "FI":
+            direction = 1 if params.jog_speed > 0 else -1
+        else:
+            high = bool(ts & 0x02)
+            direction = 1 if high == (params.home_direction > 0) else -1
+        blocked = not ts & 0x08 if direction > 0 else not ts & 0x04
+        if blocked:
+            side = "forward" if direction > 0 else "reverse"
+            raise InvalidArgument(
+                f"{kind} on {self.letter} would start towards its active {side} limit switch "
+                "(the controller refuses it with TC 22); move off the switch first",
+                model=self._link.model.name,
+            )
+
+    def _track(
+        self, kind: str, rp: int, params: predict.HomingParams, switch: predict.HomeSwitch | None
+    ) -> Track:
+        move = MoveParams(params.speed, params.accel, params.decel, 1.0)
+        mode = _KINDS[kind][0]
+        if switch is None:
+            note = "no switch positions given: duration and path unknown; the end is read back"
+            return Track(mode, rp, move, None, exact=False, note=note)
+        found = predict.homing(
+            kind, params, switch, start=rp, sample_period=self._link.sample_period
+        )
+        note = "predicted from the given switch positions, on the reference position"
+        if found.zero_at is None:
+            # FE ends where the motor met the edge: later than the reference by the servo lag
+            # (speed x lag counts), which the predictor does not model.
+            note += "; the end is approximate (the edge is met by the lagging motor)"
+            return Track(mode, rp, move, None, fixed=found.profile, note=note, exact=False)
+        note += f"; position 0 at {found.zero_at} (old counts), exact"
+        return Track(mode, rp, move, None, fixed=found.profile, note=note)
+
+    def homed(self) -> Homed:
+        """Whether the axis is homed and how that is known (one query at most)."""
+        a = self.letter
+        last = self._last
+        pending = last is not None and last.kind in ("home", "index") and self._confirmed is None
+        if pending and last is not None and last.done:
+            result = last.result
+            if result is not None and result.stop_codes.get(a) == 10:
+                name = "HM" if last.kind == "home" else "FI"
+                self._confirmed = (
+                    f"{name} started by this Controller ended with stop code 10 "
+                    "(it defined position 0)"
+                )
+        if self._confirmed is not None:
+            return Homed(True, self._confirmed)
+        code = round(self._link.query_operands([f"_SC{a}"])[0])
+        if code == 10:
+            return Homed(
+                True,
+                f"the controller's stop code on {a} is 10: its last motion was an HM or FI "
+                "that ended normally (not started by this Controller)",
+            )
+        return Homed(
+            False,
+            f"no HM or FI ended on {a} through this Controller, and the controller's stop "
+            f"code is {code}, not 10",
+        )

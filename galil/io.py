@@ -1,0 +1,341 @@
+"""Digital and analog I/O: ``controller.io``.
+
+Channels use the controller's own numbering: from 1 on DMC controllers (``io.inputs[1]`` is
+``@IN[1]``), from 0 on a RIO. Every index and value is checked against the model before a byte
+is sent::
+
+    dmc.io.inputs[3]                 # True while input 3 is high (@IN[3])
+    dmc.io.inputs[1:9]               # inputs 1..8 in one round trip (MG _TI0)
+    dmc.io.outputs[2] = True         # SB 2
+    dmc.io.analog_in[1]              # <Quantity(2.5, 'volt')> (@AN[1])
+    rio.io.analog_out[0] = 1.5 * ureg.volt   # AO 0,1.5 (range-checked per model)
+    dmc.io.wait_for_input(4, high=True, timeout=5)
+
+Slices read whole banks in one line (``_TIn`` holds 8 inputs, ``_OPn`` 16 outputs) and write
+outputs with one line of ``SB``/``CB``. :meth:`IO.wait_for_input` lets a small routine on the
+controller watch the input and report the edge as an unsolicited message, so the host waits on
+its message queue (pushed on a second Ethernet handle) instead of polling the input.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any, Protocol, overload
+
+from galil.errors import GalilTimeoutError, InvalidArgument
+from galil.link import CommandLink
+from galil.protocol import commands as cmds
+from galil.routines import Routine, Routines
+from galil.units import get_registry, is_quantity
+
+__all__ = ["IO", "AnalogInputs", "AnalogOutputs", "DigitalInputs", "DigitalOutputs"]
+
+_INPUT_ROUTINE = "#GINWAIT"
+_INPUT_MESSAGE = "galil-input"
+
+
+class MessageSource(Protocol):
+    """What the I/O room needs of the message room (:class:`galil.messages.Messages`)."""
+
+    def subscribe(self, callback: Callable[[str], None]) -> Callable[[], None]:
+        """Call ``callback(line)`` for each unsolicited line; return an unsubscribe."""
+        ...
+
+    def ensure_polling(self) -> None:
+        """Make sure unsolicited lines are being read."""
+        ...
+
+
+def volts(value: object, what: str) -> float:
+    """A voltage as a float: a pint Quantity convertible to volts, or a plain number."""
+    if is_quantity(value):
+        try:
+            v = float(value.to("volt").magnitude)  # type: ignore[attr-defined]
+        except Exception as exc:  # pint's DimensionalityError and friends
+            raise InvalidArgument(f"{what}: {value} is not a voltage") from exc
+    elif isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InvalidArgument(f"{what} takes volts (a number or a Quantity), not {value!r}")
+    else:
+        v = float(value)
+    if not math.isfinite(v):
+        raise InvalidArgument(f"{what}: {value!r} is not a finite voltage")
+    return v
+
+
+class _Channels:
+    """Channels ``first .. first + count - 1`` of one kind, indexed as the controller does."""
+
+    kind = "channel"
+
+    def __init__(self, link: CommandLink, first: int, count: int) -> None:
+        self._link = link
+        self.first = first
+        self.count = count
+
+    def __len__(self) -> int:
+        return self.count
+
+    def numbers(self) -> range:
+        """The channel numbers, in the controller's numbering."""
+        return range(self.first, self.first + self.count)
+
+    def __iter__(self) -> Iterator[Any]:
+        return iter(self._all())
+
+    def _all(self) -> Sequence[Any]:
+        """Every channel's value (one round trip)."""
+        raise NotImplementedError
+
+    def _check(self, n: object) -> int:
+        if isinstance(n, bool) or not isinstance(n, int):
+            raise InvalidArgument(f"{self.kind} number must be an integer, not {n!r}")
+        if not self.first <= n < self.first + self.count:
+            span = f"{self.first} .. {self.first + self.count - 1}" if self.count else "none"
+            raise InvalidArgument(
+                f"{self.kind} {n} does not exist on {self._link.model.name} ({span})",
+                model=self._link.model.name,
+            )
+        return n
+
+    def _span(self, key: slice) -> list[int]:
+        if key.step not in (None, 1):
+            raise InvalidArgument(f"{self.kind} slices take no step, got {key!r}")
+        start = self.first if key.start is None else key.start
+        stop = self.first + self.count if key.stop is None else key.stop
+        numbers = list(range(start, stop))
+        for n in numbers:
+            self._check(n)
+        if not numbers:
+            raise InvalidArgument(f"empty {self.kind} slice {key!r}")
+        return numbers
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.first}..{self.first + self.count - 1}>"
+
+
+class _Bits(_Channels):
+    """Digital channels read as banks of bits (``_TIn`` / ``_OPn``)."""
+
+    operand = "TI"
+    bank_bits = 8
+    function = "IN"
+
+    @overload
+    def __getitem__(self, key: int) -> bool: ...
+    @overload
+    def __getitem__(self, key: slice) -> tuple[bool, ...]: ...
+    def __getitem__(self, key: int | slice) -> bool | tuple[bool, ...]:
+        if isinstance(key, slice):
+            return self._read(self._span(key))
+        n = self._check(key)
+        return bool(round(self._link.query_operands([f"@{self.function}[{n}]"])[0]))
+
+    def _all(self) -> Sequence[Any]:
+        return self._read(list(self.numbers())) if self.count else ()
+
+    def _read(self, numbers: list[int]) -> tuple[bool, ...]:
+        size = self.bank_bits
+        banks = sorted({(n - self.first) // size for n in numbers})
+        values = self._link.query_operands([f"_{self.operand}{b}" for b in banks])
+        word = {b: round(v) for b, v in zip(banks, values, strict=True)}
+        return tuple(
+            bool(word[(n - self.first) // size] >> ((n - self.first) % size) & 1) for n in numbers
+        )
+
+
+class DigitalInputs(_Bits):
+    """``io.inputs[n]`` (``@IN[n]``), ``io.inputs[a:b]`` (input banks ``_TIn``, one line)."""
+
+    kind = "input"
+
+
+class DigitalOutputs(_Bits):
+    """``io.outputs[n]`` (``@OUT[n]``; set with ``SB``/``CB``), slices in one line."""
+
+    kind = "output"
+    operand = "OP"
+    bank_bits = 16
+    function = "OUT"
+
+    @overload
+    def __setitem__(self, key: int, value: bool) -> None: ...
+    @overload
+    def __setitem__(self, key: slice, value: Sequence[bool]) -> None: ...
+    def __setitem__(self, key: int | slice, value: Any) -> None:
+        model = self._link.model
+        if isinstance(key, slice):
+            numbers = self._span(key)
+            states = list(value)
+            if len(states) != len(numbers):
+                raise InvalidArgument(f"{len(states)} values for {len(numbers)} outputs")
+        else:
+            numbers, states = [self._check(key)], [value]
+        for s in states:
+            if not isinstance(s, (bool, int)) or s not in (0, 1):
+                raise InvalidArgument(f"an output is True or False, not {s!r}")
+        parts = [
+            (cmds.sb if s else cmds.cb)(n, model=model)
+            for n, s in zip(numbers, states, strict=True)
+        ]
+        self._link.command_line(parts)
+
+
+class AnalogInputs(_Channels):
+    """``io.analog_in[n]``: the volts on analog input ``n`` (``@AN[n]``) as a Quantity."""
+
+    kind = "analog input"
+
+    @overload
+    def __getitem__(self, key: int) -> Any: ...
+    @overload
+    def __getitem__(self, key: slice) -> tuple[Any, ...]: ...
+    def __getitem__(self, key: int | slice) -> Any:
+        numbers = self._span(key) if isinstance(key, slice) else [self._check(key)]
+        values = self._link.query_operands([f"@AN[{n}]" for n in numbers])
+        out = tuple(get_registry().Quantity(v, "volt") for v in values)
+        return out if isinstance(key, slice) else out[0]
+
+    def _all(self) -> Sequence[Any]:
+        return self[self.first : self.first + self.count] if self.count else ()
+
+
+class AnalogOutputs(_Channels):
+    """``io.analog_out[n]``: set (``AO n,v``, range-checked per model) and read (``@AO[n]``)."""
+
+    kind = "analog output"
+
+    def __getitem__(self, n: int) -> Any:
+        value = self._link.query_operands([f"@AO[{self._check(n)}]"])[0]
+        return get_registry().Quantity(value, "volt")
+
+    def _all(self) -> Sequence[Any]:
+        if not self.count:
+            return ()
+        values = self._link.query_operands([f"@AO[{n}]" for n in self.numbers()])
+        return tuple(get_registry().Quantity(v, "volt") for v in values)
+
+    def __setitem__(self, n: int, value: object) -> None:
+        v = volts(value, f"analog output {n}")
+        self._link.command_line([cmds.ao(self._check(n), v, model=self._link.model)])
+
+
+class IO:
+    """The controller's digital and analog I/O (``controller.io``)."""
+
+    def __init__(self, link: CommandLink, messages: MessageSource, routines: Routines) -> None:
+        self._link = link
+        self._messages = messages
+        self._routines = routines
+        self._wait_lock = threading.Lock()
+
+    def _model_channels(self) -> tuple[int, Any]:
+        m = self._link.model
+        return m.io_first, m
+
+    @property
+    def inputs(self) -> DigitalInputs:
+        """Digital inputs (``bool``), numbered as the controller numbers them."""
+        first, m = self._model_channels()
+        return DigitalInputs(self._link, first, m.digital_inputs)
+
+    @property
+    def outputs(self) -> DigitalOutputs:
+        """Digital outputs (``bool``); assign to set or clear them."""
+        first, m = self._model_channels()
+        return DigitalOutputs(self._link, first, m.digital_outputs)
+
+    @property
+    def analog_in(self) -> AnalogInputs:
+        """Analog inputs, in volts (pint Quantities)."""
+        first, m = self._model_channels()
+        return AnalogInputs(self._link, first, m.analog_inputs)
+
+    @property
+    def analog_out(self) -> AnalogOutputs:
+        """Analog outputs, in volts; none on models without them (every index refused)."""
+        first, m = self._model_channels()
+        return AnalogOutputs(self._link, first, m.analog_outputs)
+
+    def wait_for_input(
+        self, n: int, *, high: bool = True, timeout: float | None = None, thread: int | None = None
+    ) -> None:
+        """Block until input ``n`` is high (``high=False``: low).
+
+        A routine on the controller (installed beside your program, :mod:`galil.routines`)
+        watches the input and prints one message when it changes; the host waits for that
+        message, so the link carries no polling traffic (on Ethernet the message is pushed on
+        the message handle). Returns at once when the input already is at that level.
+
+        Args:
+            n: the input (the controller's numbering).
+            high: wait for high (True) or low (False).
+            timeout: seconds to wait at most (``None``: forever).
+            thread: program thread for the routine (default: the last one).
+
+        Raises:
+            InvalidArgument: no such input, a bad timeout, or a busy thread.
+            GalilTimeoutError: the input did not change in time (the routine is halted).
+        """
+        n = self.inputs._check(n)
+        if not isinstance(high, bool):
+            raise InvalidArgument(f"high is True or False, not {high!r}")
+        if timeout is not None and (
+            isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or timeout < 0
+        ):
+            raise InvalidArgument(f"timeout must be a number of seconds >= 0, not {timeout!r}")
+        link = self._link
+        t = link.model.threads - 1 if thread is None else thread
+        with self._wait_lock:
+            self._routines.install(_input_routine())
+            self._routines.check_free(t, _INPUT_ROUTINE)
+            seen = threading.Event()
+            tag = [_INPUT_MESSAGE, str(n)]
+
+            def on_message(line: str) -> None:
+                if line.split()[:2] == tag:
+                    seen.set()
+
+            unsubscribe = self._messages.subscribe(on_message)
+            try:
+                link.command_line(
+                    [cmds.assign("ginput", n), cmds.assign("ginlevel", 1 if high else 0)]
+                )
+                self._routines.start(_INPUT_ROUTINE, t)
+                self._messages.ensure_polling()
+                self._wait(seen, timeout, n, high, t)
+            finally:
+                unsubscribe()
+
+    def _wait(
+        self, seen: threading.Event, timeout: float | None, n: int, high: bool, thread: int
+    ) -> None:
+        link = self._link
+        deadline = None if timeout is None else link.clock() + timeout
+        while not seen.is_set():
+            now = link.clock()
+            if deadline is not None and now >= deadline:
+                self._routines.halt(thread)
+                raise link.error(
+                    GalilTimeoutError,
+                    f"input {n} did not go {'high' if high else 'low'} within {timeout} s",
+                )
+            step = 0.05 if deadline is None else min(0.05, max(deadline - now, 0.001))
+            link.pause(step)  # real time on hardware; simulated time on a manual clock
+
+
+def _input_routine() -> Routine:
+    """Wait in the controller until @IN[ginput] = ginlevel, then say so once."""
+    label = _INPUT_ROUTINE
+    loop = "#GINLOOP"
+    return Routine(
+        label,
+        (
+            label,
+            loop,
+            f"JP {loop},@IN[ginput]<>ginlevel",
+            f'MG "{_INPUT_MESSAGE} ",ginput{{Z3.0}}',
+            "EN",
+        ),
+    )

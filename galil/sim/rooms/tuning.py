@@ -1,0 +1,218 @@
+"""Motor and loop settings: MT KS KP KI KD IL TL ER OE BR, and the flash burns BN BP BV.
+
+Each setting is stored per axis with the model's range (:class:`~galil.models.ModelSpec`) and
+read back quantised as the controller stores it (gains to ``gain_resolution``, KS to 1/32).
+The simulated motor follows its reference whatever the gains: the values are kept and reported,
+not used by the plant (a stepper's KS filter is not modelled; see
+:func:`galil.predict.stepper_output`). ``BN``/``BP``/``BV`` hold their ``:`` for
+:data:`BURN_SECONDS` of simulated time, as a flash write keeps a real controller busy.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from galil.sim.machine import Room
+from galil.sim.parse import Refused
+from galil.sim.registry import Args, OperandKind, Wait, handler, operand
+from galil.sim.servo import Axis
+
+__all__ = ["BURN_SECONDS", "Tuning"]
+
+#: How long BN, BP and BV keep the controller busy in the simulator (an assumption: EPICS
+#: allows 3 s; no measured duration is known).
+BURN_SECONDS = 0.25
+
+Fields = list[tuple[Axis, str]]
+
+
+@dataclass
+class _Settings:
+    mt: float = 1.0
+    ks: float = 2.0
+    kp: float = 6.0
+    ki: float = 0.0
+    kd: float = 64.0
+    il: float = 9.998
+    tl: float = 9.998
+    er: float = 16384.0
+    oe: float = 0.0
+    br: float = 0.0
+
+
+def _floor(value: float, step: float) -> float:
+    return math.floor(value / step + 1e-9) * step
+
+
+class Tuning(Room):
+    """The motor type and the servo loop's settings of every axis, and the burns."""
+
+    def reset(self) -> None:
+        self.axes = {letter: _Settings() for letter in self.machine.spec.axes}
+        #: How many times each burn ran since power-on (BN, BP, BV).
+        self.burns = {"BN": 0, "BP": 0, "BV": 0}
+
+    def stepper(self, ax: Axis) -> bool:
+        """Whether the axis is configured as a stepper (MT ±2, ±2.5)."""
+        return abs(self.axes[ax.letter].mt) in (2.0, 2.5)
+
+    def _setting(
+        self,
+        name: str,
+        fields: Fields,
+        check: Callable[[Axis, float], float],
+        fmt: str,
+    ) -> str:
+        attr = name.lower()
+
+        def get(ax: Axis) -> float:
+            value: float = getattr(self.axes[ax.letter], attr)
+            return value
+
+        def apply(ax: Axis, v: float) -> None:
+            setattr(self.axes[ax.letter], attr, v)
+
+        i = self.machine.interp
+        return i.parameters(fields, get, check, apply, lambda v: i.num(v, fmt))
+
+    def _ranged(self, lo: float, hi: float, step: float | None = None) -> Callable[..., float]:
+        def check(ax: Axis, v: float) -> float:
+            if not lo <= v <= hi:
+                raise Refused(6, "number out of range")
+            return v if step is None else _floor(v, step)
+
+        return check
+
+    def _choice(self, allowed: frozenset[float] | tuple[float, ...]) -> Callable[..., float]:
+        def check(ax: Axis, v: float) -> float:
+            if v not in allowed:
+                raise Refused(6, "not a valid setting")
+            return v
+
+        return check
+
+    # ---- commands ----------------------------------------------------------------------
+    @handler("MT", Args.VALUES)
+    def mt(self, fields: Fields) -> str:
+        choose = self._choice(self.machine.spec.motor_types)
+
+        def check(ax: Axis, v: float) -> float:
+            if ax.m.moving:
+                raise Refused(7, "MT while moving")
+            return choose(ax, v)
+
+        return self._setting("MT", fields, check, "2.1")
+
+    @handler("KS", Args.VALUES)
+    def ks(self, fields: Fields) -> str:
+        lo, hi = self.machine.spec.ks_range
+        return self._setting("KS", fields, self._ranged(lo, hi, 1 / 32), "2.4")
+
+    @handler("KP", Args.VALUES)
+    def kp(self, fields: Fields) -> str:
+        spec = self.machine.spec
+        return self._setting(
+            "KP", fields, self._ranged(0, spec.kp_max, spec.gain_resolution), "4.3"
+        )
+
+    @handler("KI", Args.VALUES)
+    def ki(self, fields: Fields) -> str:
+        spec = self.machine.spec
+        return self._setting("KI", fields, self._ranged(0, spec.ki_max, 1 / 1024), "4.3")
+
+    @handler("KD", Args.VALUES)
+    def kd(self, fields: Fields) -> str:
+        spec = self.machine.spec
+        return self._setting(
+            "KD", fields, self._ranged(0, spec.kd_max, spec.gain_resolution), "4.3"
+        )
+
+    @handler("IL", Args.VALUES)
+    def il(self, fields: Fields) -> str:
+        return self._setting("IL", fields, self._ranged(0, self.machine.spec.il_max, 1e-4), "1.4")
+
+    @handler("TL", Args.VALUES)
+    def tl(self, fields: Fields) -> str:
+        return self._setting("TL", fields, self._ranged(0, self.machine.spec.tl_max, 1e-4), "1.4")
+
+    @handler("ER", Args.VALUES)
+    def er(self, fields: Fields) -> str:
+        return self._setting("ER", fields, self._ranged(1, self.machine.spec.er_max, 1), "10.0")
+
+    @handler("OE", Args.VALUES)
+    def oe(self, fields: Fields) -> str:
+        return self._setting("OE", fields, self._choice((0.0, 1.0, 2.0, 3.0)), "1.0")
+
+    @handler("BR", Args.VALUES)
+    def br(self, fields: Fields) -> str:
+        return self._setting("BR", fields, self._choice((-1.0, 0.0, 1.0)), "2.0")
+
+    # ---- operands ----------------------------------------------------------------------
+    @operand("MT", kind=OperandKind.AXIS)
+    def _mt_value(self, ax: Axis) -> float:
+        return self.axes[ax.letter].mt
+
+    @operand("KS", kind=OperandKind.AXIS)
+    def _ks_value(self, ax: Axis) -> float:
+        return self.axes[ax.letter].ks
+
+    @operand("KP", kind=OperandKind.AXIS)
+    def _kp_value(self, ax: Axis) -> float:
+        return self.axes[ax.letter].kp
+
+    @operand("KI", kind=OperandKind.AXIS)
+    def _ki_value(self, ax: Axis) -> float:
+        return self.axes[ax.letter].ki
+
+    @operand("KD", kind=OperandKind.AXIS)
+    def _kd_value(self, ax: Axis) -> float:
+        return self.axes[ax.letter].kd
+
+    @operand("IL", kind=OperandKind.AXIS)
+    def _il_value(self, ax: Axis) -> float:
+        return self.axes[ax.letter].il
+
+    @operand("TL", kind=OperandKind.AXIS)
+    def _tl_value(self, ax: Axis) -> float:
+        return self.axes[ax.letter].tl
+
+    @operand("ER", kind=OperandKind.AXIS)
+    def _er_value(self, ax: Axis) -> float:
+        return self.axes[ax.letter].er
+
+    @operand("OE", kind=OperandKind.AXIS)
+    def _oe_value(self, ax: Axis) -> float:
+        return self.axes[ax.letter].oe
+
+    @operand("BR", kind=OperandKind.AXIS)
+    def _br_value(self, ax: Axis) -> float:
+        return self.axes[ax.letter].br
+
+    # ---- burns -------------------------------------------------------------------------
+    def _burn(self, name: str, args: str) -> Wait:
+        if args.strip():
+            raise Refused(6, f"{name} takes no argument")
+        if name != "BV" and self.machine.programs.threads:
+            raise Refused(17, "BN and BP not valid while a program runs")
+        servo = self.machine.servo
+        wake = servo.sample + max(1, round(BURN_SECONDS / servo.ts))
+
+        def done() -> str:
+            self.burns[name] += 1
+            return ""
+
+        return Wait(wake=wake, then=done)
+
+    @handler("BN")
+    def bn(self, args: str) -> Wait:
+        return self._burn("BN", args)
+
+    @handler("BP")
+    def bp(self, args: str) -> Wait:
+        return self._burn("BP", args)
+
+    @handler("BV")
+    def bv(self, args: str) -> Wait:
+        return self._burn("BV", args)

@@ -1,0 +1,140 @@
+"""Motor and loop settings, flash burns, and the sample period that follows TM.
+
+Settings are typed, range-checked per model, and sent through the builders of
+:mod:`galil.protocol.commands`; an :class:`~galil.axis.Axis` declares each as one
+:class:`Setting` descriptor (``axis.kp = 10`` sends ``KPA=10``; ``axis.kp`` reads ``_KPA``)::
+
+    dmc.A.motor_type = MotorType.STEPPER_ACTIVE_LOW
+    dmc.A.kp, dmc.A.ki, dmc.A.kd = 10, 0.5, 80
+    dmc.save()          # BN: the parameters survive a power cycle
+
+``BN``, ``BP`` and ``BV`` write flash memory and keep the controller busy; they get the
+model's ``burn_timeout`` (3 s, as EPICS allows) rather than the link's default.
+"""
+
+from __future__ import annotations
+
+import enum
+import re
+from collections.abc import Callable
+from typing import Generic, Protocol, TypeVar, overload
+
+from galil.errors import InvalidArgument
+from galil.link import CommandLink
+from galil.models import MOTOR_TYPES, ModelSpec
+from galil.protocol import commands as cmds
+from galil.protocol.commands import Command
+
+__all__ = ["MotorType", "Setting", "burn", "follow_tm", "motor_type", "whole"]
+
+
+class MotorType(float, enum.Enum):
+    """``MT`` values (``galil.models.MOTOR_TYPES`` says what each means)."""
+
+    SERVO = 1.0
+    SERVO_REVERSED = -1.0
+    PWM_SERVO = 1.5
+    PWM_SERVO_REVERSED = -1.5
+    STEPPER_ACTIVE_HIGH = -2.0
+    STEPPER_ACTIVE_LOW = 2.0
+    STEPPER_ACTIVE_HIGH_REVERSED = -2.5
+    STEPPER_ACTIVE_LOW_REVERSED = 2.5
+    SERVO_2PB = 4.0
+    SERVO_2PB_REVERSED = -4.0
+    ETHERCAT_POSITION = 10.0
+    ETHERCAT_TORQUE = 11.0
+    ETHERCAT_TORQUE_REVERSED = -11.0
+
+    @property
+    def stepper(self) -> bool:
+        """Whether this is a stepper type (step and direction outputs)."""
+        return abs(self.value) in (2.0, 2.5)
+
+    @property
+    def description(self) -> str:
+        """What the controller does with it."""
+        return MOTOR_TYPES[self.value]
+
+
+class _HasLink(Protocol):
+    letter: str
+    _link: CommandLink
+
+
+Builder = Callable[..., Command]
+T = TypeVar("T")
+
+
+def motor_type(value: float) -> MotorType | float:
+    """The :class:`MotorType` of an MT value (the number itself for a type without a name)."""
+    try:
+        return MotorType(value)
+    except ValueError:
+        return value
+
+
+def whole(value: float) -> int:
+    """An integer setting (ER, OE, BR) as read back."""
+    return round(value)
+
+
+class Setting(Generic[T]):
+    """A per-axis setting read from ``_XXa`` and written with its command's builder.
+
+    Args:
+        mnemonic: the two letters (``"KP"``).
+        builder: the builder in :mod:`galil.protocol.commands` (range-checks per model).
+        convert: turns the number read back into the setting's type.
+    """
+
+    def __init__(self, mnemonic: str, builder: Builder, convert: Callable[[float], T]) -> None:
+        self.mnemonic = mnemonic
+        self.builder = builder
+        self.convert = convert
+        self.name = mnemonic.lower()
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    @overload
+    def __get__(self, obj: None, owner: type) -> Setting[T]: ...
+    @overload
+    def __get__(self, obj: _HasLink, owner: type) -> T: ...
+    def __get__(self, obj: _HasLink | None, owner: type) -> Setting[T] | T:
+        if obj is None:
+            return self
+        return self.convert(obj._link.query_operands([f"_{self.mnemonic}{obj.letter}"])[0])
+
+    def __set__(self, obj: _HasLink, value: float) -> None:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise InvalidArgument(f"{self.name} takes a number, not {value!r}")
+        number = float(value.value) if isinstance(value, MotorType) else value
+        link = obj._link
+        command = self.builder(model=link.model, **{obj.letter: number})
+        link.command_line([command])
+
+
+def burn(link: CommandLink, what: str, timeout: float | None = None) -> None:
+    """``BN``/``BP``/``BV`` with a timeout that fits a flash write (``model.burn_timeout``).
+
+    Raises:
+        InvalidArgument: ``what`` is not BN, BP or BV.
+        CommandError: the controller refused (a program running: TC 17).
+    """
+    command = cmds.burn(what)
+    link.command_line([command], timeout=link.model.burn_timeout if timeout is None else timeout)
+
+
+_TM = re.compile(r"^\s*TM\s*([0-9]+(?:\.[0-9]*)?)\s*$", re.IGNORECASE)
+
+
+def follow_tm(model: ModelSpec, text: str) -> float | None:
+    """The sample period (s) a command line sets, if it is ``TM <µs>``; ``None`` otherwise.
+
+    The link's ``sample_period`` is set from it after the controller accepted the line, so
+    predictions follow a ``TM`` sent as a raw command too.
+    """
+    found = _TM.match(text)
+    if found is None or not model.tm_adjustable:
+        return None
+    return model.sample_period_for(float(found.group(1)))

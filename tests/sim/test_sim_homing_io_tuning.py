@@ -1,0 +1,222 @@
+"""The simulator's homing, switch, I/O and loop-setting rooms, spoken to in raw commands."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from galil.predict.homing import HomeSwitch, HomingParams, homing
+from galil.protocol.records import decode_record
+from galil.sim.controller import SimController
+from galil.sim.rooms import Homing
+
+
+def ask(sim: SimController, text: str) -> str:
+    return sim.feed(text.encode() + b"\r").decode("latin-1")
+
+
+def number(sim: SimController, operand: str) -> float:
+    reply = ask(sim, f"MG {operand}")
+    assert reply.endswith("\r\n:"), reply
+    return float(reply[:-3])
+
+
+def run_until_idle(sim: SimController, axis: str = "A", limit: float = 60.0) -> None:
+    t = 0.0
+    while number(sim, f"_BG{axis}") and t < limit:
+        sim.advance(0.05)
+        t += 0.05
+    assert not number(sim, f"_BG{axis}"), "still moving"
+
+
+def trace_of(sim: SimController, command: str) -> np.ndarray:
+    sim.start_trace("A")
+    ask(sim, command)
+    run_until_idle(sim)
+    return sim.stop_trace("A")["A"]
+
+
+def test_hm_ends_at_the_index_with_position_zero_and_stop_code_10() -> None:
+    sim = SimController("DMC-4040", servo_lag=0.0)
+    assert ask(sim, "HMA;BGA") == "::"
+    run_until_idle(sim)
+    assert number(sim, "_TPA") == 0
+    assert number(sim, "_RPA") == 0
+    assert number(sim, "_SCA") == 10
+    # the index of the default geometry: 4000 counts apart from 0, first one above the edge
+    assert sim.home_switch("A") == HomeSwitch(edge=-2000, side=-1, index_period=4000)
+
+
+@pytest.mark.parametrize("kind", ["HM", "FE", "FI"])
+def test_the_predictor_and_the_simulator_agree_sample_for_sample(kind: str) -> None:
+    sim = SimController("DMC-4040", servo_lag=0.0)
+    ask(sim, "SPA=40000;ACA=512000;DCA=512000;HVA=2000;JGA=-3000")
+    params = HomingParams(40000, 512000, 512000, 2000, jog_speed=-3000)
+    expected = homing(kind, params, sim.home_switch("A"), start=0)
+    got = trace_of(sim, f"{kind}A;BGA")
+    shift = 0 if expected.zero_at is None else expected.zero_at
+    predicted = expected.profile.position + shift
+    # the trace runs until the host saw the end: the prediction is its beginning
+    assert np.array_equal(got[: predicted.size], predicted)
+    after = 0 if expected.zero_at is not None else predicted[-1]  # 0 once it is defined
+    assert np.all(got[predicted.size :] == after)
+    assert number(sim, "_SCA") == expected.stop_code
+
+
+@settings(max_examples=15, deadline=None)
+@given(
+    edge=st.integers(-30_000, 30_000),
+    side=st.sampled_from([-1, 1]),
+    start=st.integers(-20_000, 20_000),
+    cn=st.sampled_from([-1, 1]),
+)
+def test_hm_finds_the_same_index_wherever_it_starts(
+    edge: int, side: int, start: int, cn: int
+) -> None:
+    sim = SimController("DMC-4040", servo_lag=0.0)
+    sim.set_home_switch("A", edge=edge, side=side, index_period=3000, index_offset=100)
+    ask(sim, f"DPA={start};SPA=60000;ACA=1024000;DCA=1024000;HVA=6000;CN ,{cn}")
+    switch = sim.home_switch("A")
+    level = switch.level(start)
+    towards = (1 if level == 1 else -1) * (1 if cn > 0 else -1)
+    if switch.leaving(start).direction != towards:
+        return  # this CN drives away from the edge: a real axis would run to its limit
+    ask(sim, "HMA;BGA")
+    run_until_idle(sim)
+    assert number(sim, "_SCA") == 10
+    origin = sim._m.servo.axes["A"].origin  # where 0 is in the fixed frame
+    assert (origin - 100) % 3000 == 0  # an index pulse
+    below = edge - 1 if side < 0 else edge
+    assert origin > below
+    assert origin - 3000 <= below
+
+
+def test_a_stepper_homes_in_two_stages_and_zero_is_the_edge() -> None:
+    sim = SimController("DMC-4040", servo_lag=0.0)
+    ask(sim, "MTA=-2;HVA=4000")
+    ask(sim, "HMA;BGA")
+    run_until_idle(sim)
+    assert number(sim, "_SCA") == 10
+    assert sim._m.servo.axes["A"].origin == -10_000
+
+
+def test_homing_status_bits_show_in_the_data_record() -> None:
+    sim = SimController("DMC-4040", servo_lag=0.0)
+    ask(sim, "HMA;BGA")
+    sim.advance(0.05)
+    status = decode_record(sim.record(), sim.spec)["A"]["status"]
+    assert status & 0x0800
+    assert status & 0x8000
+    assert sim.room(Homing).runs
+
+
+def test_st_ends_a_homing_sequence_with_stop_code_4() -> None:
+    sim = SimController("DMC-4040")
+    ask(sim, "HMA;BGA")
+    sim.advance(0.1)
+    ask(sim, "STA")
+    run_until_idle(sim)
+    assert number(sim, "_SCA") == 4
+    assert not sim.room(Homing).runs
+
+
+def test_refusals_change_nothing() -> None:
+    sim = SimController("DMC-4040")
+    assert ask(sim, "HVA=0;HMA;BGA") == "::?"
+    assert number(sim, "_TC") == 6
+    assert ask(sim, "JGA=0;FIA;BGA") == "::?"
+    assert number(sim, "_BGA") == 0
+
+
+def test_placed_limit_switches_stop_motion_where_they_are_and_show_in_ts() -> None:
+    sim = SimController("DMC-4040", servo_lag=0.0)
+    sim.place_limit_switches("A", forward=5000, reverse=-5000)
+    assert number(sim, "_TSA") == 15
+    ask(sim, "PRA=20000;BGA")
+    run_until_idle(sim)
+    assert number(sim, "_SCA") == 2
+    assert number(sim, "_LFA") == 0
+    assert int(number(sim, "_TSA")) & 0x08 == 0
+    assert ask(sim, "PRA=10;BGA") == ":?"  # into the active switch: TC 22
+    assert number(sim, "_TC") == 22
+    ask(sim, "PRA=-20000;BGA")
+    run_until_idle(sim)
+    assert number(sim, "_SCA") == 3
+
+
+def test_cn_active_high_makes_an_untripped_switch_active() -> None:
+    sim = SimController("DMC-4040")
+    ask(sim, "CN 1")
+    assert number(sim, "_LFA") == 0
+    assert number(sim, "_LRA") == 0
+    assert ask(sim, "CN ?") == " 1, -1, -1\r\n:"
+    ask(sim, "CN -1")
+    assert number(sim, "_LFA") == 1
+    assert ask(sim, "CN 2") == "?"
+
+
+def test_digital_io_numbered_from_1_on_a_dmc_and_0_on_a_rio() -> None:
+    dmc = SimController("DMC-4040")
+    ask(dmc, "SB 3;CB 3;SB 8")
+    assert number(dmc, "@OUT[8]") == 1
+    assert number(dmc, "@OUT[3]") == 0
+    assert number(dmc, "_OP0") == 128
+    assert ask(dmc, "SB 0") == "?"
+    assert ask(dmc, "SB 9") == "?"
+    dmc.set_input(2, False)
+    assert number(dmc, "_TI0") == 0xFD
+    rio = SimController("RIO-47120")
+    ask(rio, "SB 0;SB 15")
+    assert number(rio, "_OP0") == 0x8001
+    assert ask(rio, "SB 16") == "?"
+    record = decode_record(rio.record(), rio.spec)
+    assert record["outputs"] == 0x8001
+    assert record["inputs"] == 0xFFFF
+
+
+def test_analog_outputs_are_range_checked_and_reported_in_the_rio_record() -> None:
+    rio = SimController("RIO-47120")
+    assert ask(rio, "AO 2,-2.5") == ":"
+    assert number(rio, "@AO[2]") == -2.5
+    assert ask(rio, "AO 2,10.5") == "?"
+    rio.set_analog_input(1, 3.0)
+    assert number(rio, "@AN[1]") == 3.0
+    record = decode_record(rio.record(), rio.spec)
+    assert record["analog_out"][2] == (-8192) & 0xFFFF
+    assert record["analog_in"][1] == 9830
+    assert ask(SimController("DMC-4040"), "AO 1,1") == "?"  # no analog outputs there
+
+
+def test_ai_holds_the_reply_until_the_input_changes() -> None:
+    sim = SimController("DMC-4040")
+    assert ask(sim, "AI -5") == ""
+    sim.advance(0.2)
+    assert sim.poll() == b""
+    sim.set_input(5, False)
+    assert sim.poll() == b":"
+
+
+def test_loop_settings_are_stored_quantised_and_range_checked() -> None:
+    sim = SimController("DMC-50040")
+    assert ask(sim, "KPA=10.3;KDB=100.06;KIC=1.5") == ":::"
+    assert number(sim, "_KPA") == 10.25
+    assert number(sim, "_KDB") == 100.0
+    assert ask(sim, "KPA=1024") == "?"
+    assert ask(sim, "MTA=10;MTB=-2.5") == "::"  # EtherCAT types exist on the 500x0
+    assert ask(SimController("DMC-4040"), "MTA=10") == "?"
+    assert ask(sim, "KS 0.1") == "?"
+    assert ask(sim, "KS 4") == ":"
+    assert ask(sim, "OE 1,2,3,0;BR -1") == "::"
+    assert ask(sim, "OE 4") == "?"
+    assert ask(sim, "KP ?,?") == " 10.250, 6.000\r\n:"
+
+
+def test_burns_keep_the_controller_busy_for_a_while() -> None:
+    sim = SimController("DMC-4040")
+    assert ask(sim, "BN") == ""
+    sim.advance(0.1)
+    assert sim.poll() == b""
+    sim.advance(0.2)
+    assert sim.poll() == b":"

@@ -1,0 +1,243 @@
+"""Today's controllers and the day-one API, in process (fast): models, homing, switches, I/O,
+settings, the sample period, refusals before any byte."""
+
+from __future__ import annotations
+
+import warnings
+
+import pytest
+
+import galil
+from galil.models import get_model, parse_identity
+from galil.sim.controller import SimController
+from galil.sim.rooms import Tuning
+from galil.testing import nothing_sent, sim_of, simulated, transcript
+from galil.units import ureg
+
+
+@pytest.mark.parametrize(
+    ("reply", "name", "family", "axes"),
+    [
+        ("DMC50040 Rev 1.2a", "DMC-50040", "DMC-500x0", "ABCD"),
+        ("DMC50080 Rev 1.2a", "DMC-50080", "DMC-500x0", "ABCDEFGH"),
+        ("DMC4240 Rev 1.2f", "DMC-4240", "DMC-42x0", "ABCD"),
+        ("DMC4280 Rev 1.2f", "DMC-4280", "DMC-42x0", "ABCDEFGH"),
+        ("RIO47120 Rev 1.1j", "RIO-47120", "RIO-47xxx", ""),
+        ("RIO47102 Rev 1.1j", "RIO-47100", "RIO-47xxx", ""),
+        ("RIO47122 Rev. 1.0", "RIO-47120", "RIO-47xxx", ""),
+    ],
+)
+def test_current_families_are_known(reply: str, name: str, family: str, axes: str) -> None:
+    spec = parse_identity(reply).model
+    assert (spec.name, spec.family, spec.axes, spec.generic) == (name, family, axes, False)
+    assert spec.assumptions  # every unconfirmed fact is listed
+    assert spec.record_size is not None
+
+
+def test_every_family_says_where_its_io_starts_and_how_much_it_has() -> None:
+    assert get_model("DMC-4040").io_first == 1
+    assert get_model("RIO-47120").io_first == 0
+    assert get_model("DMC-4080").digital_inputs == 16
+    assert get_model("RIO-47300").digital_outputs == 24
+    assert get_model("DMC-50040").motor_types > get_model("DMC-4040").motor_types
+
+
+@pytest.mark.parametrize(
+    ("identity", "axes", "family"),
+    [("DMC9940 Rev 1.0a", "ABCD", "generic"), ("DMC57060 Rev 1.0", "ABCDEF", "generic")],
+)
+def test_an_unknown_galil_connects_as_a_generic_model_with_a_warning(
+    identity: str, axes: str, family: str
+) -> None:
+    sim = SimController("DMC-4040", identity=identity)
+    with pytest.warns(RuntimeWarning, match="conservative limits"):
+        dmc = galil.connect("sim://DMC-4040", controller=sim)
+    with dmc:
+        assert (dmc.model.family, dmc.model.axes, dmc.model.generic) == (family, axes, True)
+        assert dmc.model.qz is None  # no record layout is guessed
+        assert dmc.A.position == 0
+
+
+def test_model_given_for_an_unknown_identity_picks_that_family() -> None:
+    sim = SimController("DMC-4040", identity="DMC9940 Rev 1.0a")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with galil.connect("sim://DMC-4040", controller=sim, model="DMC-4040") as dmc:
+            assert dmc.model.name == "DMC-4040"
+
+
+BLISS_QUERIES = [
+    "MG _BN",
+    "QZ",
+    "TPA",
+    "MG _TPA",
+    "TSA",
+    "MG _SCA",
+    "MG _BGA",
+    "MG _LFA,_LRA,_HMA",
+    "MG _MOA",
+    "KP ?,?",
+    "KD ?",
+    "KI ?",
+    "MT ?,?,?,?",
+    "CN ?",
+    "AC ?",
+    "SP ?",
+    "TL ?",
+    "ER ?",
+    "OE ?",
+    "MG _TC",
+    "MG @IN[1],@OUT[1]",
+    "MG _TI0",
+]
+
+
+def test_a_50040_answers_bliss_style_queries_as_a_4040_does() -> None:
+    old, new = SimController("DMC-4040"), SimController("DMC-50040")
+    for text in BLISS_QUERIES:
+        a = old.feed(text.encode() + b"\r")
+        b = new.feed(text.encode() + b"\r")
+        assert a == b, text
+    assert new.feed(b"\x12\x16\r").startswith(b"DMC50040 Rev")
+
+
+def test_home_predicts_from_the_simulators_switch_and_ends_at_zero() -> None:
+    with simulated("DMC-4040") as dmc:
+        sim = sim_of(dmc)
+        sim.set_servo_lag(0.0)
+        dmc.A.home_speed = 5000
+        handle = dmc.A.home(switch=sim.home_switch("A"))
+        assert handle.kind == "home"
+        assert "exact" in handle.notes["A"]
+        assert 0 < handle.duration < 10
+        result = handle.wait()
+        assert result.stop_codes == {"A": 10}
+        assert result.deviation == {"A": 0}
+        assert dmc.A.position == 0
+        assert dmc.A.homed.homed
+
+
+def test_homed_says_how_it_knows() -> None:
+    with simulated("DMC-4040") as dmc:
+        assert not dmc.A.homed
+        assert "not 10" in dmc.A.homed.how
+        dmc.command("HMA;BGA", allow_compound=True)  # behind the library's back
+        while dmc.A.moving:
+            dmc.sleep(0.5)
+        assert dmc.A.homed
+        assert "not started by this Controller" in dmc.A.homed.how
+
+
+def test_a_homing_without_switch_positions_has_no_known_end() -> None:
+    with simulated("DMC-4040") as dmc:
+        handle = dmc.A.find_edge()
+        assert handle.duration == float("inf")
+        assert "unknown" in handle.notes["A"]
+        assert handle.wait(timeout=30).stop_codes == {"A": 9}
+
+
+def test_homing_refusals_send_nothing_but_the_state_query() -> None:
+    with simulated("DMC-4040") as dmc:
+        dmc.command("HVA=0")
+        with (
+            nothing_sent(dmc, allow_queries=True),
+            pytest.raises(galil.InvalidArgument, match="HV 0"),
+        ):
+            dmc.A.home()
+        dmc.command("HVA=256;JGA=0", allow_compound=True)
+        with (
+            nothing_sent(dmc, allow_queries=True),
+            pytest.raises(galil.InvalidArgument, match="JG"),
+        ):
+            dmc.A.find_index()
+        sim_of(dmc).set_limit_switch("A", "reverse", True)
+        with (
+            nothing_sent(dmc, allow_queries=True),
+            pytest.raises(galil.InvalidArgument, match="reverse limit"),
+        ):
+            dmc.A.find_edge()  # the home input is high: FE drives in reverse
+
+
+def test_switches_follow_cn_polarity_so_true_always_means_tripped() -> None:
+    with simulated("DMC-4040") as dmc:
+        sim = sim_of(dmc)
+        sim.set_limit_switch("A", "forward", True)
+        assert dmc.A.switches.forward_limit
+        assert dmc.switch_polarity == galil.SwitchPolarity()
+        dmc.switch_polarity = galil.SwitchPolarity(limit=1)  # the wiring says otherwise now
+        assert dmc.switch_polarity.limit == 1
+        assert not dmc.A.switches.forward_limit
+        assert dmc.A.switches.reverse_limit
+
+
+def test_io_slices_take_one_line_each() -> None:
+    with simulated("DMC-4080") as dmc:
+        sim_of(dmc).set_input(12, False)
+        with transcript(dmc) as t:
+            values = dmc.io.inputs[1:17]
+            dmc.io.outputs[1:4] = [True, True, False]
+        t.assert_sent(["MG _TI0,_TI1", "SB 1;SB 2;CB 3"])
+        assert values == tuple(n != 12 for n in range(1, 17))
+        assert [sim_of(dmc).output(n) for n in (1, 2, 3)] == [True, True, False]
+
+
+def test_io_refuses_channels_and_values_the_model_lacks_before_sending() -> None:
+    with simulated("RIO-47100") as rio, nothing_sent(rio):
+        with pytest.raises(galil.InvalidArgument):
+            rio.io.inputs[16]
+        with pytest.raises(galil.LimitError):
+            rio.io.analog_out[0] = -1  # the RIO-47100's outputs are 0-5 V
+        with pytest.raises(galil.InvalidArgument, match="not a voltage"):
+            rio.io.analog_out[0] = 1 * ureg.mm
+        with pytest.raises(galil.InvalidArgument):
+            rio.io.outputs[0:2] = [True]
+
+
+def test_wait_for_input_returns_when_the_input_changes() -> None:
+    with simulated("DMC-4040") as dmc:
+        with pytest.raises(galil.GalilTimeoutError):
+            dmc.io.wait_for_input(2, high=False, timeout=0.3)
+        sim_of(dmc).set_input(2, False)
+        start = dmc.link.clock()
+        dmc.io.wait_for_input(2, high=False, timeout=5)
+        assert dmc.link.clock() - start < 1.0
+
+
+def test_settings_are_typed_and_refused_before_sending() -> None:
+    with simulated("DMC-4040") as dmc:
+        a = dmc.A
+        a.motor_type = galil.MotorType.STEPPER_ACTIVE_HIGH_REVERSED
+        assert a.motor_type is galil.MotorType.STEPPER_ACTIVE_HIGH_REVERSED
+        assert a.motor_type.stepper
+        a.stepper_smoothing = 4
+        a.integrator_limit, a.brush = 2.5, -1
+        assert (a.stepper_smoothing, a.integrator_limit, a.brush) == (4.0, 2.5, -1)
+        with nothing_sent(dmc):
+            for name, bad in (
+                ("motor_type", galil.MotorType.ETHERCAT_POSITION),  # a 500x0 type
+                ("stepper_smoothing", 100),
+                ("torque_limit", 10),
+                ("off_on_error", 4),
+                ("brush", 2),
+                ("kd", True),
+            ):
+                with pytest.raises(galil.InvalidArgument):
+                    setattr(a, name, bad)
+
+
+def test_save_waits_as_long_as_a_flash_write_takes() -> None:
+    with simulated("DMC-4040", timeout=0.1) as dmc:
+        dmc.save()  # held 0.25 s: longer than the link timeout, within burn_timeout
+        dmc.save_program()
+        dmc.save_variables()
+        assert sim_of(dmc).room(Tuning).burns == {"BN": 1, "BP": 1, "BV": 1}
+
+
+def test_sample_period_follows_tm() -> None:
+    with simulated("DMC-4040") as dmc:
+        dmc.command("TM 500")
+        assert dmc.sample_period == 500 / 1_024_000
+        dmc.command_line(["TM 1000"])
+        assert dmc.sample_period == 1000 / 1_024_000
+        profile = dmc.A.plan_by(1000)
+        assert profile.sample_period == 1000 / 1_024_000
