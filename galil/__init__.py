@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from galil.axis import Axis
+from galil.capture import Capture, Recording
 from galil.codes import stop_text, tc_text
 from galil.contour import ContourResult
 from galil.controller import Controller, ReconnectPolicy, connect
@@ -26,6 +27,8 @@ from galil.models import ModelSpec, get_model
 from galil.motion import MoveHandle, MoveResult
 from galil.predict import MultiProfile, Profile
 from galil.predict.homing import HomeSwitch
+from galil.protocol.interrupts import Interrupt
+from galil.protocol.records import RecordFields, decode_fields
 from galil.records import RecordStream
 from galil.segments import Arc, Line, VectorPlan
 from galil.tuning import MotorType
@@ -37,6 +40,7 @@ __all__ = [
     "IO",
     "Arc",
     "Axis",
+    "Capture",
     "CommandError",
     "ContourResult",
     "ContourUnderrunError",
@@ -47,6 +51,7 @@ __all__ = [
     "GalilTimeoutError",
     "HomeSwitch",
     "Homed",
+    "Interrupt",
     "InvalidArgument",
     "LimitError",
     "Line",
@@ -60,7 +65,9 @@ __all__ = [
     "Profile",
     "ProtocolError",
     "ReconnectPolicy",
+    "RecordFields",
     "RecordStream",
+    "Recording",
     "ScheduleError",
     "SwitchPolarity",
     "Switches",
@@ -68,6 +75,7 @@ __all__ = [
     "VectorPlan",
     "__version__",
     "connect",
+    "decode_fields",
     "find",
     "get_model",
     "stop_text",

@@ -257,7 +257,10 @@ def _add_connection_commands(sub: Any) -> None:
     p.add_argument("file", nargs="?", help="where to save it (default: standard output)")
     _timeout(p, 5.0)
     p.set_defaults(func=_cmd_ul)
+    _add_list_command(sub)
 
+
+def _add_list_command(sub: Any) -> None:
     p = sub.add_parser(
         "list",
         help="find controllers: serial ports, USB, PCI, and Ethernet when asked",

@@ -26,7 +26,7 @@ from galil.errors import (
 )
 from galil.link import CommandLink
 from galil.models import INT32_MAX
-from galil.motion import Display
+from galil.motion import Display, sample_of
 from galil.predict import Profile
 from galil.predict.checks import check_contour
 from galil.protocol import commands as cmds
@@ -133,6 +133,8 @@ class ContourResult:
         profiles: predicted profile per axis.
         low_water: fewest free buffer slots seen while streaming (``_CM``).
         lines: command lines sent for the segments.
+        begin: the controller sample (``TIME``) the first ``CD`` ran in, read on its line;
+            ``profiles[a].position[k]`` is the reference at sample ``begin + k``.
     """
 
     axes: str
@@ -141,6 +143,7 @@ class ContourResult:
     profiles: dict[str, Profile]
     low_water: int
     lines: int
+    begin: int | None = None
 
     @property
     def duration(self) -> float:
@@ -163,6 +166,19 @@ class _Progress:
     low_water: int = 0
     bar: Any = None
     texts: list[Command] = field(default_factory=list)
+    begin: int | None = None
+
+
+def _stamped(batch: list[Command], state: _Progress) -> list[Command]:
+    """The first batch gets ``MG TIME`` right after its first ``CD``: the contour's start."""
+    if state.sent:
+        return batch
+    return [batch[0], cmds.time_stamp(), *batch[1:]]
+
+
+def _note_begin(state: _Progress, replies: list[str]) -> None:
+    if state.sent == 0:
+        state.begin = sample_of(replies[1])
 
 
 class ContourStream:
@@ -313,12 +329,15 @@ class ContourStream:
         room = free - 1  # one spare: models differ in whether _CM counts the running one
         if depth <= 2:
             # A one-deep buffer: WC holds its ':' until the segment before is running.
-            link.command_line([texts[state.sent], cmds.wc()], timeout=seg_time * 4 + 1.0)
+            line = _stamped([texts[state.sent]], state)
+            replies = link.command_line([*line, cmds.wc()], timeout=seg_time * 4 + 1.0)
+            _note_begin(state, replies)
             state.sent += 1
             state.lines += 1
         elif room >= min(refill, len(texts) - state.sent):
             batch = texts[state.sent : state.sent + room]
-            link.command_line(batch)
+            replies = link.command_line(_stamped(batch, state))
+            _note_begin(state, replies)
             state.sent += len(batch)
             state.lines += len(cmds.pack(batch, model.line_length))
         else:
@@ -357,6 +376,7 @@ class ContourStream:
             dict(self.profiles),
             state.low_water,
             state.lines,
+            state.begin,
         )
 
     def run(self, *, progress: bool = False, timeout: float | None = None) -> ContourResult:

@@ -24,18 +24,22 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from galil import predict
+from galil.arrays import Arrays, Variables
 from galil.axis import Axis, check_overrides, resolve_moves, user_units
+from galil.capture import Capture
 from galil.contour import ContourResult, ContourStream
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.facade import LinkFacade
 from galil.handshake import identify
 from galil.homing import SwitchPolarity, read_polarity, set_polarity
+from galil.interrupts import Interrupts
 from galil.io import IO
 from galil.link import Link, check_timeout
 from galil.messages import Messages
 from galil.models import Identity, ModelSpec, get_model
 from galil.motion import MotionTracker, MoveHandle, abort_all, motion_guard, stop_axes
 from galil.moves import execute_move
+from galil.programs import Programs
 from galil.protocol import commands as cmds
 from galil.records import Records
 from galil.routines import Routines
@@ -46,7 +50,7 @@ from galil.units import path_to_counts
 from galil.vector import VectorHandle, VectorStream
 from galil.watchdog import Watchdog, check_watchdog_args
 
-__all__ = ["CLIENT_OPTIONS", "Controller", "ReconnectPolicy", "connect"]
+__all__ = ["CLIENT_OPTIONS", "Controller", "CoordinatedMotion", "ReconnectPolicy", "connect"]
 
 _LOG = logging.getLogger("galil.controller")
 
@@ -101,7 +105,73 @@ CLIENT_OPTIONS = frozenset(
 transport opener (``baudrate=``, ``port=``, ``backend=`` ...)."""
 
 
-class Controller(LinkFacade):
+class CoordinatedMotion:
+    """Coordinated motion on a :class:`Controller` (a class of its own only to keep each
+    class short): :meth:`vector_move` and :meth:`plan_vector` (see :mod:`galil.vector`)."""
+
+    link: Link
+    tracker: MotionTracker
+
+    def axis(self, name: str) -> Axis:
+        """The axis called ``name`` (the Controller's)."""
+        raise NotImplementedError
+
+    def _prepared(self, axes: str, segments: Sequence[Segment], **options: Any) -> VectorStream:
+        chosen = [self.axis(a) for a in (list(axes) if isinstance(axes, str) else axes)]
+        path_axes = [PathAxis(a.letter, a.scale, a.display) for a in chosen]
+        options.setdefault("byte_rate", self.link.byte_rate)
+        with user_units({a.letter: a for a in chosen}):
+            return VectorStream.prepared(self.link, path_axes, segments, self.tracker, **options)
+
+    def vector_move(
+        self,
+        axes: str,
+        segments: Sequence[Segment],
+        *,
+        speed: Any,
+        accel: Any = None,
+        decel: Any = None,
+        smoothing: float | None = None,
+        mode: str | None = None,
+        stream: bool = True,
+        axis_speed: Mapping[str, Any] | None = None,
+        axis_accel: Mapping[str, Any] | None = None,
+    ) -> VectorHandle:
+        """Run a path of :class:`~galil.Line` and :class:`~galil.Arc` segments on ``axes``
+        (in the order of the segments' components), in the axes' user units.
+
+        The whole path is predicted and checked first (:mod:`galil.vector`): a refusal names
+        the segment and the sample, and nothing is sent. ``speed``, ``accel``, ``decel`` are
+        along the path (Quantities when the axes share a scale, else counts; VA/VD default to
+        the controller's); ``smoothing`` is VT where the model has it; ``mode`` is
+        ``"vector"`` (VM, two axes, the default there) or ``"linear"`` (LM); ``stream=False``
+        refuses a path longer than the buffer; ``axis_speed``/``axis_accel`` cap an axis's
+        share (``{"B": 20 * mm / s}``). Returns once everything is sent (streamed if needed).
+
+        Returns:
+            A :class:`~galil.vector.VectorHandle` (``wait()``, ``stop()``, ``profiles``,
+            ``vector``: the prediction in user units, ``begin``).
+        """
+        run = self._prepared(
+            axes, segments, speed=speed, accel=accel, decel=decel, smoothing=smoothing,
+            mode=mode, stream=stream, axis_speed=axis_speed, axis_accel=axis_accel,
+        )  # fmt: skip
+        return run.start(self.tracker)
+
+    def plan_vector(self, axes: str, segments: Sequence[Segment], **options: Any) -> VectorPlan:
+        """Predict and check :meth:`vector_move` (same arguments) without sending anything.
+
+        Returns:
+            A :class:`~galil.segments.VectorPlan`: ``duration``, ``position(axis)`` and
+            ``profiles`` per axis, ``path`` and ``speed`` along the path (in the axes' common
+            unit), ``plot()``.
+        """
+        run = self._prepared(axes, segments, **options)
+        assert run.profile is not None
+        return show(run.profile, run.axes, run.path)
+
+
+class Controller(CoordinatedMotion, LinkFacade):
     """A connected controller. Build it with :func:`connect`.
 
     Args:
@@ -127,6 +197,10 @@ class Controller(LinkFacade):
         io: digital and analog I/O (:class:`~galil.io.IO`).
         identity: the parsed ``^R^V`` reply (``None`` without a handshake).
         echo: whether the controller echoes (found at the handshake and kept).
+        programs: the user's program and threads (:class:`~galil.programs.Programs`).
+        arrays: the controller's arrays (:class:`~galil.arrays.Arrays`).
+        variables: the controller's variables (:class:`~galil.arrays.Variables`).
+        interrupts: ``UI``/``EI`` interrupts (:class:`~galil.interrupts.Interrupts`).
     """
 
     def __init__(
@@ -161,6 +235,10 @@ class Controller(LinkFacade):
         self.tracker = MotionTracker()
         self.routines = Routines(self.link)
         self.io = IO(self.link, self.messages_room, self.routines)
+        self.programs = Programs(self.link, self.routines)
+        self.arrays = Arrays(self.link)
+        self.variables = Variables(self.link)
+        self.interrupts = Interrupts(self.link)
         self._watchdogs: list[Watchdog] = []
         self.identity: Identity | None = None
         self.echo = False
@@ -220,6 +298,9 @@ class Controller(LinkFacade):
             self._watchdogs.clear()
         if not keep_streams:
             self.records_room.close_all()
+            self.interrupts.disable()
+        else:
+            self.interrupts.close(keep_mask=True)
         self.link.detach()
         self.messages_room.stop()
 
@@ -246,6 +327,7 @@ class Controller(LinkFacade):
                 self._close_parts(keep_watchdogs=True, keep_streams=True)
                 self._open(None)
                 self.records_room.resume()
+                self.interrupts.reopen()
 
     def _reopen_dead_link(self, error: GalilConnectionError) -> None:
         """The automatic reconnect (:class:`ReconnectPolicy`), called by the link."""
@@ -480,60 +562,6 @@ class Controller(LinkFacade):
         with user_units({a.letter: a for a in chosen}):
             return stream.run(progress=progress, timeout=timeout)
 
-    def _prepared(self, axes: str, segments: Sequence[Segment], **options: Any) -> VectorStream:
-        chosen = [self.axis(a) for a in (list(axes) if isinstance(axes, str) else axes)]
-        path_axes = [PathAxis(a.letter, a.scale, a.display) for a in chosen]
-        options.setdefault("byte_rate", self.link.byte_rate)
-        with user_units({a.letter: a for a in chosen}):
-            return VectorStream.prepared(self.link, path_axes, segments, self.tracker, **options)
-
-    def vector_move(
-        self,
-        axes: str,
-        segments: Sequence[Segment],
-        *,
-        speed: Any,
-        accel: Any = None,
-        decel: Any = None,
-        smoothing: float | None = None,
-        mode: str | None = None,
-        stream: bool = True,
-        axis_speed: Mapping[str, Any] | None = None,
-        axis_accel: Mapping[str, Any] | None = None,
-    ) -> VectorHandle:
-        """Run a path of :class:`~galil.Line` and :class:`~galil.Arc` segments on ``axes``
-        (in the order of the segments' components), in the axes' user units.
-
-        The whole path is predicted and checked first (:mod:`galil.vector`): a refusal names
-        the segment and the sample, and nothing is sent. ``speed``, ``accel``, ``decel`` are
-        along the path (Quantities when the axes share a scale, else counts; VA/VD default to
-        the controller's); ``smoothing`` is VT where the model has it; ``mode`` is
-        ``"vector"`` (VM, two axes, the default there) or ``"linear"`` (LM); ``stream=False``
-        refuses a path longer than the buffer; ``axis_speed``/``axis_accel`` cap an axis's
-        share (``{"B": 20 * mm / s}``). Returns once everything is sent (streamed if needed).
-
-        Returns:
-            A :class:`~galil.vector.VectorHandle` (``wait()``, ``stop()``, ``profiles``,
-            ``vector``: the prediction in user units, ``begin``).
-        """
-        run = self._prepared(
-            axes, segments, speed=speed, accel=accel, decel=decel, smoothing=smoothing,
-            mode=mode, stream=stream, axis_speed=axis_speed, axis_accel=axis_accel,
-        )  # fmt: skip
-        return run.start(self.tracker)
-
-    def plan_vector(self, axes: str, segments: Sequence[Segment], **options: Any) -> VectorPlan:
-        """Predict and check :meth:`vector_move` (same arguments) without sending anything.
-
-        Returns:
-            A :class:`~galil.segments.VectorPlan`: ``duration``, ``position(axis)`` and
-            ``profiles`` per axis, ``path`` and ``speed`` along the path (in the axes' common
-            unit), ``plot()``.
-        """
-        run = self._prepared(axes, segments, **options)
-        assert run.profile is not None
-        return show(run.profile, run.axes, run.path)
-
     # -- switches and flash (galil.homing, galil.tuning) -------------------------------------
 
     @property
@@ -556,6 +584,32 @@ class Controller(LinkFacade):
     def save_variables(self, timeout: float | None = None) -> None:
         """Burn the variables and arrays to flash (``BV``)."""
         burn(self.link, "BV", timeout)
+
+    def capture(
+        self,
+        sources: list[str],
+        *,
+        every: int = 2,
+        count: int | None = None,
+        seconds: float | None = None,
+    ) -> Capture:
+        """Start recording ``sources`` on the controller, every ``every`` samples, at servo
+        rate (``RA``/``RD``/``RC``); see :mod:`galil.capture`.
+
+        Start it right before a move: its values line up sample by sample with the move's
+        prediction. ``wait()`` (or leaving a ``with`` block, or ``stop()``) uploads them.
+
+        Args:
+            sources: operands (``["_RPA", "_TPA", "_TEA", "_TVA"]``).
+            every: samples between values: 2, 4, ... 256 (``RC n`` records every ``2**n``).
+            count: values per source; or ``seconds``: how long to record.
+
+        Raises:
+            InvalidArgument: a source ``RD`` cannot record, ``every`` not allowed, too many
+                values for the array space (nothing is sent), or a recording running
+                already (``_RC`` read, nothing set up).
+        """
+        return Capture(self.link, sources, every=every, count=count, seconds=seconds).start()
 
     if not TYPE_CHECKING:  # mypy knows the letters below, and nothing else
 

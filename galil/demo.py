@@ -1,58 +1,100 @@
 """``galil demo``: the whole job end to end on the built-in simulator, over TCP loopback.
 
 It starts a simulated DMC behind a real TCP socket, connects as any program would, plans and runs
-a move in millimetres, jogs with a speed change, streams the manual's 1 - cos contour, then
-compares what the simulator's servo loop did with what the predictor says for the same commands,
-sample by sample.
+a move in millimetres, jogs with a speed change, streams the manual's 1 - cos contour, and
+compares what the controller did with what the predictor said, sample by sample. What the
+controller did is read the way it is read from hardware, through the public API only: a
+capture on the controller (``controller.capture``: ``RA``/``RD``/``RC``, uploaded with ``QU``)
+and a data-record stream (``controller.records``), both lined up with each prediction by the
+controller sample it began on. Given a controller's address instead of the simulator, the same
+code records the same things.
 """
 
 from __future__ import annotations
 
 import math
-import re
 import sys
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from galil.contour import sample_path
+from galil.capture import Recording
+from galil.contour import ContourResult, sample_path
 from galil.controller import Controller, connect
-from galil.notebook import compare_plot
-from galil.predict import Profile
-from galil.sim.controller import SimController
+from galil.motion import MoveHandle
+from galil.notebook import compare, compare_plot
+from galil.records import RecordStream
 from galil.sim.server import SimTcpServer
 from galil.units import ureg
 
-__all__ = ["compare", "run_demo"]
+__all__ = ["record_motion", "run_demo"]
 
-IntArray = npt.NDArray[np.int64]
+#: Samples between recorded values (the smallest ``RC`` allows; records as often).
+EVERY = 2
 
 
-def compare(trace: IntArray, trace_start: int, predicted: IntArray, begin: int) -> int:
-    """Largest |recorded - predicted| in counts over the predicted samples.
+@dataclass(frozen=True)
+class Recorded:
+    """One motion and what the controller recorded of it, two ways."""
+
+    name: str
+    letter: str
+    handle: MoveHandle | ContourResult
+    capture: Recording
+    records: npt.NDArray[np.void]
+
+    def worst(self) -> dict[str, int]:
+        """Largest |recorded - predicted| in counts, per way of recording."""
+        return {
+            "capture": round(compare(self.handle, self.capture)[self.letter].worst),
+            "data records": round(compare(self.handle, self.records)[self.letter].worst),
+        }
+
+
+def _records_until(stream: RecordStream, sample: int) -> npt.NDArray[np.void]:
+    """Every record of ``stream`` up to (and including) the first at or after ``sample``."""
+    out = []
+    while True:
+        rec = stream.get(timeout=5.0)
+        out.append(rec)
+        if int(rec["time"]) >= sample:
+            return np.array(out, dtype=rec.dtype)
+
+
+def record_motion(
+    dmc: Controller,
+    name: str,
+    letter: str,
+    start: Callable[[], MoveHandle | ContourResult],
+    seconds: float,
+) -> Recorded:
+    """Run ``start()`` while the controller records axis ``letter``'s reference, every
+    :data:`EVERY` samples, both in arrays (a capture) and in data records.
 
     Args:
-        trace: recorded reference positions, one per sample from sample ``trace_start``.
-        trace_start: sample number of ``trace[0]``.
-        predicted: predicted positions, ``predicted[0]`` at sample ``begin`` (the command's
-            sample: motion starts at the next one).
-        begin: sample number at which the command that started the motion ran.
+        dmc: the controller.
+        name: what the motion is called.
+        letter: the axis recorded.
+        start: starts the motion and returns its handle (or a finished contour's result);
+            a handle is waited for here.
+        seconds: how long to record at most (the capture stops once the motion is done).
     """
-    offset = begin - trace_start
-    if offset < 0:
-        raise ValueError("the trace starts after the motion began")
-    recorded = trace[offset : offset + predicted.size]
-    if recorded.size < predicted.size:  # the recording stopped at rest: pad with its last value
-        recorded = np.concatenate((recorded, np.full(predicted.size - recorded.size, trace[-1])))
-    return int(np.max(np.abs(recorded - predicted)))
-
-
-def _samples_of(log: Iterable[tuple[int, str]], pattern: str, since: int) -> list[tuple[int, str]]:
-    rx = re.compile(pattern)
-    return [(k, text) for k, text in log if k >= since and rx.fullmatch(text.strip())]
+    with dmc.records(EVERY) as stream:
+        with dmc.capture([f"_RP{letter}"], every=EVERY, seconds=seconds) as cap:
+            handle = start()
+            if isinstance(handle, MoveHandle):
+                handle.wait()
+                begin, samples = handle.begin[letter], handle.profile.samples
+            else:
+                begin, samples = handle.begin, handle.profiles[letter].samples
+            dmc.sleep(0.02)  # a few records past the end: the axis holds still
+        assert begin is not None
+        assert cap.result is not None
+        records = _records_until(stream, begin + samples + EVERY)
+    return Recorded(name, letter, handle, cap.result, records)
 
 
 def run_demo(
@@ -61,7 +103,7 @@ def run_demo(
     quiet: bool = False,
     quick: bool = False,
 ) -> int:
-    """Run the demo; return 0 when the simulator matched the predictions exactly.
+    """Run the demo; return 0 when the controller did exactly what was predicted.
 
     Args:
         png: where to save the plot (``None``: no plot).
@@ -78,40 +120,32 @@ def run_demo(
         say(f"simulated {ident.raw_model} (firmware {ident.firmware}) at {server.url}")
         target = 2.5 if quick else 12.5
         runs = [
-            _demo_move(dmc, server.controller, say, target),
-            _demo_jog(dmc, server.controller, say, 0.1 if quick else 0.4),
-            _demo_contour(dmc, server.controller, say),
+            _demo_move(dmc, say, target),
+            _demo_jog(dmc, say, 0.1 if quick else 0.4),
+            _demo_contour(dmc, say),
         ]
-        # Recorded against predicted, sample by sample.
-        diffs = {
-            r.name: compare(r.trace, r.trace_start, r.predicted.position, r.begin) for r in runs
-        }
+        # Recorded against predicted, sample by sample, both ways.
+        worst = {r.name: r.worst() for r in runs}
+        for name, ways in worst.items():
+            say(
+                f"{name}: largest |recorded - predicted| "
+                + ", ".join(f"{v} counts ({k})" for k, v in ways.items())
+            )
         say(
             "largest difference, recorded - predicted: "
-            + ", ".join(f"{k} {v} counts" for k, v in diffs.items())
+            + ", ".join(f"{k} {max(v.values())} counts" for k, v in worst.items())
         )
         if png:
             try:
-                _plot(runs, dmc.sample_period, png, f"galil demo, simulated {dmc.model.name}")
+                _plot(runs, png, f"galil demo, simulated {dmc.model.name}")
                 say(f"plot saved to {png}")
             except ImportError:
                 say("no plot: matplotlib is missing (pip install 'galil[jupyter]')")
         say(f"demo finished in {time.monotonic() - began:.1f} s")
-    return 0 if max(diffs.values()) == 0 else 1
+    return 0 if all(v == 0 for ways in worst.values() for v in ways.values()) else 1
 
 
-@dataclass(frozen=True)
-class _Run:
-    name: str
-    predicted: Profile
-    trace: IntArray
-    trace_start: int
-    begin: int
-
-
-def _demo_move(
-    dmc: Controller, sim: SimController, say: Callable[[str], None], target: float
-) -> _Run:
+def _demo_move(dmc: Controller, say: Callable[[str], None], target: float) -> Recorded:
     """A position move in millimetres, planned before anything is sent."""
     mm, s = ureg.mm, ureg.s
     x = dmc.A.set_scale(counts_per=2000 / mm)
@@ -123,36 +157,38 @@ def _demo_move(
         f"plan: A to {target:g} mm ({plan.distance} counts): {plan.shape}, "
         f"{plan.duration:.3f} s, peak {plan.peak_speed / 2000:.2f} mm/s"
     )
-    t0 = sim.start_trace("A")
-    move = x.move_to(target * mm)
-    # A bar on a terminal only: piped into a log, the lines above tell the story.
-    result = move.wait(progress=sys.stderr.isatty())
-    trace = sim.stop_trace("A")["A"]
-    say(f"moved: A reference {result.final['A']} counts, encoder {x.position:~.4f}")
-    begin = move.begin["A"]
-    assert begin is not None
-    return _Run("move", move.profile, trace, t0, begin)
+
+    def start() -> MoveHandle:
+        move = x.move_to(target * mm)
+        # A bar on a terminal only: piped into a log, the lines above tell the story.
+        move.wait(progress=sys.stderr.isatty())
+        return move
+
+    run = record_motion(dmc, "move", "A", start, plan.duration + 0.5)
+    say(f"moved: A at {x.position:~.4f}, recorded {len(run.capture)} values on the controller")
+    return run
 
 
-def _demo_jog(dmc: Controller, sim: SimController, say: Callable[[str], None], hold: float) -> _Run:
+def _demo_jog(dmc: Controller, say: Callable[[str], None], hold: float) -> Recorded:
     """A jog with a speed change in motion, then a stop: the handle follows both."""
     mm, s = ureg.mm, ureg.s
     x = dmc.A
-    t1 = sim.start_trace("A")
-    jog = x.jog(10 * mm / s)
-    dmc.sleep(hold)
-    x.jog(-5 * mm / s)
-    dmc.sleep(hold + 0.1)
-    x.stop()
-    jog.wait()
-    trace = sim.stop_trace("A")["A"]
+
+    def start() -> MoveHandle:
+        jog = x.jog(10 * mm / s)
+        dmc.sleep(hold)
+        x.jog(-5 * mm / s)
+        dmc.sleep(hold + 0.1)
+        x.stop()
+        jog.wait()
+        return jog
+
+    run = record_motion(dmc, "jog", "A", start, 2 * hold + 1.0)
     say(f"jogged: +10 mm/s, then -5 mm/s in motion, stopped at {x.position:~.4f}")
-    begin = jog.begin["A"]
-    assert begin is not None
-    return _Run("jog", jog.profile, trace, t1, begin)
+    return run
 
 
-def _demo_contour(dmc: Controller, sim: SimController, say: Callable[[str], None]) -> _Run:
+def _demo_contour(dmc: Controller, say: Callable[[str], None]) -> Recorded:
     """The manual's contour: 6000 counts (3 mm) in 120 ms along a 1 - cos velocity."""
     ts = dmc.sample_period
     dmc.B.set_scale(counts_per=2000 / ureg.mm)  # the path stays in counts; the plot shows mm
@@ -163,36 +199,26 @@ def _demo_contour(dmc: Controller, sim: SimController, say: Callable[[str], None
         dt=dt,
         sample_period=ts,
     )
-    t2 = sim.start_trace("B")
-    contour = dmc.contour("B", path, dt=dt)
-    trace = sim.stop_trace("B")["B"]
-    first_cd = _samples_of(sim.command_log, r"CD ,?-?\d+", t2)[0][0]
+    run = record_motion(dmc, "contour", "B", lambda: dmc.contour("B", path, dt=dt), b + 0.5)
+    contour = run.handle
+    assert isinstance(contour, ContourResult)
     incs = contour.increments
     say(
         f"contour: {incs.size} segments of {(1 << dt) * ts * 1e3:.3f} ms on B, "
         f"{int(incs.sum())} counts in {contour.duration * 1e3:.1f} ms, "
         f"{contour.lines} lines, buffer never below {contour.low_water} free"
     )
-    return _Run("contour", contour.profiles["B"], trace, t2, first_cd)
+    return run
 
 
-def _plot(runs: list[_Run], ts: float, png: str, title: str) -> None:
+def _plot(runs: list[Recorded], png: str, title: str) -> None:
     labels = {"move": "A move", "jog": "A jog", "contour": "B contour"}
-    fig = compare_plot(
-        {labels[r.name]: r.predicted for r in runs},
-        {
-            labels[r.name]: _window(r.trace, r.trace_start, r.begin, r.predicted.position.size, ts)
-            for r in runs
-        },
-        title=f"{title}: predicted vs recorded",
-    )
+    predicted = {}
+    recorded = {}
+    for r in runs:
+        profiles = r.handle.profiles
+        predicted[labels[r.name]] = profiles[r.letter]
+        pair = compare(r.handle, r.capture)[r.letter]
+        recorded[labels[r.name]] = (pair.t, pair.recorded)
+    fig = compare_plot(predicted, recorded, title=f"{title}: predicted vs recorded")
     fig.savefig(png, dpi=90)
-
-
-def _window(
-    trace: IntArray, trace_start: int, begin: int, n: int, ts: float
-) -> tuple[npt.NDArray[np.float64], IntArray]:
-    offset = begin - trace_start
-    rec = trace[offset : offset + n]
-    t: npt.NDArray[np.float64] = np.arange(rec.size, dtype=np.float64) * ts
-    return t, rec

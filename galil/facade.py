@@ -175,22 +175,40 @@ class LinkFacade:
 
         Returns:
             A structured numpy record (``rec["A"]["position"]``, ``rec["sample"]``,
-            ``rec["error_code"]``; field names in :mod:`galil.protocol.records`), or a dict.
+            ``rec["error_code"]``, ``rec["time"]``: the controller sample in full; field
+            names in :mod:`galil.protocol.records`), or a dict. ``galil.decode_fields(rec)``
+            names its status bits, switches and stop codes.
         """
         if as_dict:
             return self.records_room.record_dict(axes, timeout=timeout)
         return self.records_room.record(axes, timeout=timeout)
 
-    def records(self, period: int, *, method: str = "auto", maxlen: int = 10_000) -> RecordStream:
-        """Stream data records every ``period`` servo samples.
+    def records(
+        self,
+        period: int | None = None,
+        *,
+        seconds: object = None,
+        method: str = "auto",
+        maxlen: int = 10_000,
+    ) -> RecordStream:
+        """Stream data records every ``period`` servo samples (or every ``seconds``).
 
         ``"DR"`` (the default over Ethernet) has the controller push them (``DR period,h``) to
         a handle opened for them alone; ``"QR"`` (elsewhere) polls, one ``QR`` per record when
-        it is due. Close the stream (or use it as a context manager) to stop it.
+        it is due. Each record's ``time`` is the controller sample it was taken at; the
+        stream counts records that went missing (``missed``, ``gaps``). Close the stream (or
+        use it as a context manager) to stop it.
+
+        Args:
+            period: servo samples between records.
+            seconds: or the period in seconds (a number or a time Quantity), a whole number
+                of samples.
+            method: ``"auto"``, ``"DR"`` or ``"QR"``.
+            maxlen: records kept waiting before the oldest drop.
 
         Raises:
             InvalidArgument: bad period or method, DR where there is no handle for it, or the
                 model has no data record.
             CommandError: the controller refused ``DR`` (a period below its minimum ...).
         """
-        return self.records_room.stream(period, method=method, maxlen=maxlen)
+        return self.records_room.stream(period, seconds=seconds, method=method, maxlen=maxlen)

@@ -87,6 +87,15 @@ class ModelSpec:
         variable_length: characters of a variable or array name.
         threads: program threads (``XQ``).
         program_lines: lines of program memory (``DL``).
+        labels: labels a program may hold (TC 62 "too many labels" beyond).
+        variables: variables the controller holds (TC 67 beyond).
+        arrays: arrays the controller holds (``DM``; TC 67 beyond).
+        array_elements: array elements of all arrays together (``DM``; TC 66 beyond).
+        record_exponents: ``RC n``: ``2**n`` samples between captured values, n in this
+            range (DMC-1600/1700/1800 manuals: 1 to 8; ``RC 0`` stops; Galil's own
+            record_position example: ``RC 1`` records at 512 Hz at TM 1000).
+        record_arrays: arrays ``RA``/``RD`` record at once (DMC-1700/1800: eight).
+        user_interrupts: ``UI n``: n from 0 to this value minus one (40x0 reference: 0-15).
         default_speed: SP and JG at power-on, counts/s.
         default_accel: AC and DC at power-on, counts/s².
         vector_buffer: LM/VM segments the coordinated-motion buffer holds (``_LMS`` when
@@ -156,6 +165,15 @@ class ModelSpec:
     threads: int = 8  # EPICS: 8 by default, DMC-1xxx 2, DMC-3xxxx 6, RIO 4
     # Assumption: 2000 program lines on every family (no per-family figure found yet).
     program_lines: int = 2000
+    # Assumption: the DMC-40x0 figures as remembered from its user manual (510 labels, 510
+    # variables, 30 arrays of 24000 elements together) on every family; no source here.
+    labels: int = 510
+    variables: int = 510
+    arrays: int = 30
+    array_elements: int = 24_000
+    record_exponents: tuple[int, int] = (1, 8)
+    record_arrays: int = 8
+    user_interrupts: int = 16
     # Power-on values of SP, JG, AC and DC (the command references' defaults: 25,000 counts/s
     # and 256,000 counts/s²; assumed the same on every family).
     default_speed: float = 25_000.0

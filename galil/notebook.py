@@ -7,36 +7,169 @@ cheap. Nothing in the library imports it; notebooks do.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from galil.axis import Axis
-from galil.errors import GalilError
+from galil.capture import Recording
+from galil.contour import ContourResult
+from galil.errors import GalilError, InvalidArgument
+from galil.motion import MoveHandle
 from galil.predict import Profile
 from galil.units import get_registry
 
-__all__ = ["compare_plot", "jog_widget"]
+__all__ = ["Comparison", "compare", "compare_plot", "jog_widget"]
+
+FloatArray = npt.NDArray[np.float64]
+#: The operand a capture records for each data-record field compared.
+_OPERANDS = {"reference": "RP", "position": "TP", "error": "TE", "aux_position": "TD"}
+Predicted = MoveHandle | ContourResult | Mapping[str, Profile]
+Recorded = Recording | np.ndarray[Any, Any] | Mapping[str, tuple[npt.ArrayLike, npt.ArrayLike]]
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """One axis's recording next to its prediction, in counts.
+
+    Attributes:
+        t: seconds from the start of the prediction (the sample it began on).
+        recorded: the recorded positions.
+        predicted: the prediction at the same times (it holds its start before and its end
+            after, as the axis does).
+    """
+
+    t: FloatArray
+    recorded: FloatArray
+    predicted: FloatArray
+
+    @property
+    def difference(self) -> FloatArray:
+        """``recorded - predicted``, counts."""
+        out: FloatArray = self.recorded - self.predicted
+        return out
+
+    @property
+    def worst(self) -> float:
+        """Largest ``|recorded - predicted|``, counts (0 for an exact prediction)."""
+        return float(np.max(np.abs(self.difference))) if self.t.size else 0.0
+
+
+def _predictions(predicted: Predicted) -> tuple[dict[str, Profile], dict[str, int | None]]:
+    if isinstance(predicted, MoveHandle):
+        return predicted.profiles, predicted.begin
+    if isinstance(predicted, ContourResult):
+        return dict(predicted.profiles), dict.fromkeys(predicted.profiles, predicted.begin)
+    if isinstance(predicted, Mapping):
+        return dict(predicted), dict.fromkeys(predicted)
+    raise InvalidArgument(
+        "predicted is a MoveHandle, a ContourResult or a mapping of axis to Profile, "
+        f"not {type(predicted).__name__}"
+    )
+
+
+def _recorded(
+    recorded: Recording | np.ndarray[Any, Any], letter: str, field: str
+) -> tuple[npt.NDArray[np.int64], FloatArray] | None:
+    """(controller samples, positions) of ``letter`` in a recording, or None if absent."""
+    if isinstance(recorded, Recording):
+        source = f"_{_OPERANDS.get(field, '')}{letter}"
+        if source not in recorded.values:
+            return None
+        return recorded.samples, recorded.values[source]
+    names = recorded.dtype.names or ()
+    if "time" not in names:
+        raise InvalidArgument("these data records carry no time (take them from records())")
+    if letter not in names:
+        return None
+    block = recorded[letter]
+    if field not in (block.dtype.names or ()):
+        raise InvalidArgument(f"data records have no field {field!r} (try 'reference')")
+    return np.asarray(recorded["time"], dtype=np.int64), np.asarray(block[field], dtype=float)
+
+
+def _lined_up(
+    recorded: Recorded, letter: str, field: str, begin: int | None, ts: float
+) -> tuple[FloatArray, FloatArray] | None:
+    """(seconds from the prediction's start, positions) of ``letter``, or None if absent."""
+    if isinstance(recorded, (Recording, np.ndarray)):
+        found = _recorded(recorded, letter, field)
+        if found is None:
+            return None
+        if begin is None:
+            raise InvalidArgument(
+                f"the prediction of {letter} does not know the controller sample it began "
+                "on; give (t, positions) instead"
+            )
+        samples, pos = found
+        return np.multiply(samples - begin, ts, dtype=np.float64), pos
+    if not isinstance(recorded, Mapping):
+        raise InvalidArgument(
+            "recorded is a capture's Recording, data records (with their time), or a "
+            f"mapping of axis to (t, positions), not {type(recorded).__name__}"
+        )
+    if letter not in recorded:
+        return None
+    t, pos = (np.asarray(v, dtype=float) for v in recorded[letter])
+    return t, pos
+
+
+def compare(
+    predicted: Predicted, recorded: Recorded, *, field: str = "reference"
+) -> dict[str, Comparison]:
+    """Line a recording up with its prediction, sample by sample, per axis.
+
+    Args:
+        predicted: a :class:`~galil.motion.MoveHandle` (a move, a jog, a schedule), a
+            :class:`~galil.contour.ContourResult`, or profiles by axis.
+        recorded: what the controller did: a :class:`~galil.capture.Recording` (from
+            ``controller.capture``), data records (from ``controller.records(...)``, which
+            carry their controller ``time``), or ``(t, positions)`` per axis with ``t`` in
+            seconds from the prediction's start.
+        field: what is compared: ``"reference"`` (what the profiler commanded: a data
+            record's ``reference``, a capture's ``_RPx``) or ``"position"`` (the encoder:
+            ``position``, ``_TPx``).
+
+    Returns:
+        A :class:`Comparison` per axis found in both.
+
+    Raises:
+        InvalidArgument: a recording given by controller samples while the prediction does
+            not know the sample it began on.
+    """
+    profiles, begins = _predictions(predicted)
+    out: dict[str, Comparison] = {}
+    for letter, prof in profiles.items():
+        found = _lined_up(recorded, letter, field, begins.get(letter), prof.sample_period)
+        if found is None:
+            continue
+        t, pos = found
+        # Compare at the recorded times, not index by index: records every few samples or
+        # a polling loop must not be misaligned. The prediction holds its end after it
+        # finishes, and its start before it begins, as the axis does.
+        if prof.t.size:
+            expected = np.interp(t, prof.t, prof.position.astype(float))
+        else:
+            expected = np.full(t.size, float(prof.end))
+        out[letter] = Comparison(t, pos, expected)
+    return out
 
 
 def compare_plot(
-    predicted: Mapping[str, Profile],
-    recorded: Mapping[str, tuple[npt.ArrayLike, npt.ArrayLike]],
+    predicted: Predicted,
+    recorded: Recorded,
     *,
     title: str = "predicted vs recorded",
+    field: str = "reference",
 ) -> Any:
     """Plot predicted positions against recorded ones, and their difference in counts.
 
-    Positions are drawn in each profile's unit (millimetres for a profile of a scaled axis,
-    see :meth:`~galil.predict.Profile.with_units`), counts otherwise.
-
-    Args:
-        predicted: profile per axis letter.
-        recorded: ``(t, position)`` per axis letter, positions in counts, ``t`` in seconds
-            from the same start; any sampling: the difference is taken against the
-            prediction at those times.
-        title: figure title.
+    Positions are drawn in each profile's unit (millimetres for a move of a scaled axis,
+    see :meth:`~galil.predict.Profile.with_units`), counts otherwise. What can be compared
+    is what :func:`compare` takes: a move handle or contour result against a capture or data
+    records (lined up by controller sample), or profiles against ``(t, positions)``.
 
     Returns:
         The matplotlib Figure.
@@ -45,10 +178,12 @@ def compare_plot(
     # figure shows in Jupyter the same way Profile.plot()'s does.
     from matplotlib.figure import Figure
 
+    profiles, _ = _predictions(predicted)
+    pairs = compare(predicted, recorded, field=field)
     fig = Figure(figsize=(9, 6), layout="constrained")
     ax_pos, ax_diff = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
-    units = {_display(p)[2] for p in predicted.values()}
-    for letter, prof in predicted.items():
+    units = {_display(p)[2] for p in profiles.values()}
+    for letter, prof in profiles.items():
         k, offset, unit = _display(prof)
         suffix = "" if len(units) == 1 else f" ({unit})"
         (line,) = ax_pos.plot(
@@ -58,21 +193,18 @@ def compare_plot(
             linewidth=2,
             alpha=0.6,
         )
-        if letter in recorded:
-            t, pos = (np.asarray(v, dtype=float) for v in recorded[letter])
+        pair = pairs.get(letter)
+        if pair is not None:
             # Same colour, dashed: each recording reads as the twin of its prediction.
             ax_pos.plot(
-                t, pos / k + offset, "--", color=line.get_color(), label=f"{letter} recorded"
+                pair.t,
+                pair.recorded / k + offset,
+                "--",
+                color=line.get_color(),
+                label=f"{letter} recorded",
             )
-            # Compare at the recorded times, not index by index: a recording taken at another
-            # rate (records every few samples, a polling loop) must not be misaligned. The
-            # prediction holds its end after it finishes, as the axis does. The difference
-            # stays in counts: an exact prediction is 0 counts off.
-            if prof.t.size:
-                expected = np.interp(t, prof.t, prof.position)
-            else:
-                expected = np.full(t.size, float(prof.end))
-            ax_diff.plot(t, pos - expected, color=line.get_color(), label=letter)
+            # The difference stays in counts: an exact prediction is 0 counts off.
+            ax_diff.plot(pair.t, pair.difference, color=line.get_color(), label=letter)
     shown = next(iter(units)) if len(units) == 1 else "each axis's unit"
     ax_pos.set_ylabel(f"position ({shown})")
     ax_pos.legend(loc="best", fontsize="small")

@@ -1,7 +1,10 @@
 """Data records, host side: one record (``QR``) or a stream of them (``DR`` or polled ``QR``).
 
 The binary layout comes from ``QZ`` (the model table is the fallback) and is decoded by
-:mod:`galil.protocol.records` into numpy structured records.
+:mod:`galil.protocol.records` into numpy structured records. Every record carries ``time``:
+the controller sample it was taken at in full, its 16-bit ``sample`` counter extended against
+``TIME`` (read on the same round trip for ``QR``; on the ``DR`` line, then followed record by
+record, for a stream). A stream notices the records it lost from the gaps in ``time``.
 """
 
 from __future__ import annotations
@@ -26,7 +29,15 @@ from galil.errors import (
 from galil.link import Link, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import parse_number
-from galil.protocol.records import RecordSplitter, decode_record, parse_qz, record_to_dict
+from galil.protocol.records import (
+    SAMPLE_WRAP,
+    RecordSplitter,
+    decode_record,
+    extend_sample,
+    parse_qz,
+    record_to_dict,
+    with_time,
+)
 from galil.transport import HandleSource, Transport
 
 __all__ = ["RecordCallback", "RecordStream", "Records"]
@@ -47,10 +58,17 @@ class RecordStream:
     until the next record is due and asks for it with ``QR``, so records are as far apart as
     asked, in the controller's time (simulated time on a manual-clock simulator).
 
+    Each record's ``time`` field is the controller sample it was taken at. The stream checks
+    that consecutive records are ``period`` samples apart: :attr:`missed` counts the records
+    that never arrived (the controller sent them, or a poll came late), :attr:`gaps` says
+    where, and each gap is logged (WARNING on ``galil.records``).
+
     Attributes:
         period: servo samples between records.
         method: ``"DR"`` (pushed) or ``"QR"`` (polled).
         dropped: records dropped from a full queue (``DR`` only).
+        missed: records missing between the ones received.
+        gaps: ``(time, missed)`` for each gap: the record after it, and how many were missing.
     """
 
     def __init__(
@@ -65,6 +83,10 @@ class RecordStream:
         self.period = period
         self.method = method
         self.dropped = 0
+        self.missed = 0
+        self.gaps: list[tuple[int, int]] = []
+        self._last: int | None = None  # time of the last record
+        self._anchor: tuple[int, float] | None = None  # (TIME, host clock) on the DR line
         self._source = source
         self._handle = handle
         self._items: deque[np.void] = deque()
@@ -76,6 +98,48 @@ class RecordStream:
         self._next_due: float | None = None
         self._thread: threading.Thread | None = None
         self._suspended = False
+
+    @property
+    def period_seconds(self) -> float:
+        """Seconds between records."""
+        return self.period * self._source.link.sample_period
+
+    def _anchor_at(self, time: int) -> None:
+        """The controller's ``TIME`` read on the ``DR`` line (records come after it)."""
+        self._anchor = (time, self._source.link.clock())
+        self._last = None
+
+    def _time_of(self, rec: np.void) -> np.void:
+        """A pushed record with its ``time``: the next one expected, or where the host's
+        clock says the controller is when they disagree by more than a quarter wrap."""
+        expected = self._last + self.period if self._last is not None else None
+        if self._anchor is not None:
+            t0, c0 = self._anchor
+            link = self._source.link
+            by_clock = t0 + round((link.clock() - c0) / link.sample_period)
+            if expected is None:
+                expected = t0 + self.period
+            elif abs(by_clock - expected) > SAMPLE_WRAP // 4:
+                expected = by_clock
+        if expected is None:
+            expected = int(rec["sample"])
+        return with_time(rec, extend_sample(int(rec["sample"]), expected))
+
+    def _count_gap(self, rec: np.void) -> None:
+        t = int(rec["time"])
+        last, self._last = self._last, t
+        if last is None or t - last <= self.period:
+            return
+        missed = round((t - last) / self.period) - 1
+        if missed > 0:
+            self.missed += missed
+            self.gaps.append((t, missed))
+            _LOG.warning(
+                "galil: %d data record(s) missing before sample %d (every %d samples)",
+                missed,
+                t,
+                self.period,
+            )
 
     def _start_reader(self, layout: Layout) -> None:
         self._suspended = False
@@ -107,7 +171,7 @@ class RecordStream:
         while not self._closed and not self._suspended:
             try:
                 chunk = handle.read(0.25)
-                records = [decode_record(r, layout) for r in splitter.feed(chunk)] if chunk else []
+                records = [self._time_of(decode_record(r, layout)) for r in splitter.feed(chunk)]
             except ProtocolError as exc:
                 # A stream out of step cannot be re-cut reliably: stop and say why.
                 self._fail(exc)
@@ -125,6 +189,8 @@ class RecordStream:
             self._cond.notify_all()
 
     def _push(self, records: list[np.void]) -> None:
+        for rec in records:
+            self._count_gap(rec)
         with self._cond:
             for rec in records:
                 if len(self._items) >= self._maxlen:
@@ -193,6 +259,7 @@ class RecordStream:
                 raise queue.Empty(f"no data record within {timeout} s")
             link.pause(wait)
         rec = self._source.record()
+        self._count_gap(rec)
         # The next one is due a period after this one was due, so records do not drift.
         self._next_due = max(self._next_due, now) + self.period * link.sample_period
         self._notify(rec)
@@ -257,8 +324,10 @@ class RecordStream:
     def __repr__(self) -> str:
         state = "closed" if self._closed else "open"
         waiting = len(self)
+        lost = f", {self.missed} missed" if self.missed else ""
         return (
-            f"<RecordStream {self.method} every {self.period} samples, {waiting} waiting, {state}>"
+            f"<RecordStream {self.method} every {self.period} samples, {waiting} waiting"
+            f"{lost}, {state}>"
         )
 
 
@@ -294,7 +363,9 @@ class Records:
         return self._layout
 
     def record(self, axes: str = "", *, timeout: float | None = None) -> np.void:
-        """Read one data record (``QR``) and decode it.
+        """Read one data record (``QR``, with ``MG TIME`` behind it) and decode it.
+
+        The record's ``time`` is its sample counter extended against that ``TIME``.
 
         Raises:
             InvalidArgument: bad axes, or the model has no data record.
@@ -303,20 +374,61 @@ class Records:
         link = self.link
         command = cmds.qr(axes, model=link.model)
         layout = self.layout()
-        done = link.exchange(command, timeout=timeout)
+        done, stamp = link.transact((command, cmds.time_stamp()), timeout)
         if done.record is None:
             raise link.error(ProtocolError, f"{command.text!r} answered no binary record")
         try:
-            return decode_record(done.record, layout)
-        except ProtocolError as exc:
+            rec = decode_record(done.record, layout)
+            now = round(parse_number(stamp.text))
+        except (ProtocolError, InvalidArgument, ValueError) as exc:
             raise link.error(ProtocolError, f"{command.text!r}: {exc}") from exc
+        return with_time(rec, extend_sample(int(rec["sample"]), now))
 
     def record_dict(self, axes: str = "", *, timeout: float | None = None) -> dict[str, Any]:
         """:meth:`record` as plain Python values (nested dicts per axis)."""
         return record_to_dict(self.record(axes, timeout=timeout))
 
-    def stream(self, period: int, *, method: str = "auto", maxlen: int = 10_000) -> RecordStream:
-        """A stream of records every ``period`` samples (see ``Controller.records``)."""
+    def samples_of(self, seconds: object) -> int:
+        """A record period given in seconds (a number or a time Quantity), in samples.
+
+        The period is rounded to whole samples (``0.01`` s is 10 samples at TM 1000, 2.3 %
+        shorter: :attr:`RecordStream.period_seconds` says what it is).
+
+        Raises:
+            InvalidArgument: not a positive time, or more than 5 % from a whole number of
+                samples.
+        """
+        value = seconds
+        if hasattr(value, "to") and hasattr(value, "magnitude"):
+            try:
+                value = value.to("s").magnitude
+            except Exception as exc:
+                raise InvalidArgument(f"seconds must be a time, not {seconds!r}") from exc
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+            raise InvalidArgument(f"seconds must be a positive number, not {seconds!r}")
+        ts = self.link.sample_period
+        samples = round(float(value) / ts)
+        if samples < 1 or abs(samples * ts - value) > 0.05 * value:
+            raise InvalidArgument(
+                f"{value} s is not a whole number of {ts * 1e6:.6g} µs samples (nearest: "
+                f"{max(samples, 1)} samples, {max(samples, 1) * ts:.6g} s)"
+            )
+        return samples
+
+    def stream(
+        self,
+        period: int | None = None,
+        *,
+        seconds: object = None,
+        method: str = "auto",
+        maxlen: int = 10_000,
+    ) -> RecordStream:
+        """A stream of records every ``period`` samples or ``seconds`` (see
+        ``Controller.records``)."""
+        if (period is None) == (seconds is None):
+            raise InvalidArgument("give the record period in samples or in seconds=, not both")
+        if seconds is not None:
+            period = self.samples_of(seconds)
         if isinstance(period, bool) or not isinstance(period, int) or not 1 <= period <= 65535:
             raise InvalidArgument(f"period is a number of samples 1..65535, not {period!r}")
         if method not in ("auto", "DR", "QR"):
@@ -351,7 +463,10 @@ class Records:
         try:
             index = self._which_handle(handle)
             stream = RecordStream(self, period, "DR", handle=handle, maxlen=maxlen)
-            link.command_line([cmds.dr(period, index, model=link.model)])
+            replies = link.command_line(
+                [cmds.dr(period, index, model=link.model), cmds.time_stamp()]
+            )
+            stream._anchor_at(_stamp(link, replies[-1]))
         except BaseException:
             with contextlib.suppress(GalilError, OSError):
                 handle.close()
@@ -392,7 +507,10 @@ class Records:
             handle = transport.open_handle()
             try:
                 index = self._which_handle(handle)
-                self.link.command_line([cmds.dr(s.period, index, model=self.link.model)])
+                replies = self.link.command_line(
+                    [cmds.dr(s.period, index, model=self.link.model), cmds.time_stamp()]
+                )
+                s._anchor_at(_stamp(self.link, replies[-1]))
             except BaseException:
                 with contextlib.suppress(GalilError, OSError):
                     handle.close()
@@ -410,3 +528,15 @@ class Records:
             streams = list(self._streams)
         for s in streams:
             s.close()
+
+
+def _stamp(link: Link, reply: str) -> int:
+    """The sample in a ``MG TIME`` reply.
+
+    Raises:
+        ProtocolError: it is not a number.
+    """
+    try:
+        return round(parse_number(reply))
+    except (InvalidArgument, ValueError) as exc:
+        raise link.error(ProtocolError, f"MG TIME answered {reply!r}") from exc

@@ -130,15 +130,21 @@ class Routines:
             )
         return cmds.dl(lines, model=model)
 
-    def _download(self, download: cmds.Command) -> None:
+    def _download(self, download: cmds.Command, *, for_user: bool = False) -> tuple[int, ...]:
+        """Download, halting the library's own threads around it; return the threads halted
+        and started again."""
         running = self.running()
         users = sorted(t for t in running if t not in self._threads)
         if users:
+            what = (
+                "your new program cannot be downloaded without stopping it (halt it first: "
+                "controller.programs.halt())"
+                if for_user
+                else "the library cannot add its routine without disturbing it (halt it "
+                "first, or install the routine before you start your program)"
+            )
             raise InvalidArgument(
-                f"a program runs on thread(s) {users}; the library cannot add its routine "
-                "without disturbing it (halt it first, or install the routine before you start "
-                "your program)",
-                model=self.link.model.name,
+                f"a program runs on thread(s) {users}; {what}", model=self.link.model.name
             )
         restart = {t: label for t, label in self._threads.items() if t in running}
         for t in restart:
@@ -146,6 +152,34 @@ class Routines:
         self.link.exchange(download, timeout=_DOWNLOAD_TIMEOUT)
         for t, label in restart.items():
             self.link.command_line([cmds.xq(label, t)])
+        return tuple(sorted(restart))
+
+    def replace_user(self, lines: Sequence[str]) -> tuple[bool, tuple[int, ...]]:
+        """Put ``lines`` above the marker as the user's program, keeping the library's block.
+
+        Returns:
+            Whether a download was needed, and the library threads halted for it and started
+            again (the watchdog, say).
+
+        Raises:
+            InvalidArgument: a label of the library's routines in ``lines``, a program too
+                long with the routines, or a user program running.
+        """
+        with self._lock:
+            current = self.upload()
+            _, library = split_program(current)
+            clash = _labels(lines) & set(library)
+            if clash:
+                raise InvalidArgument(
+                    f"your program uses the label(s) {sorted(clash)} of the library's own "
+                    "routines (the watchdog, a speed schedule); rename them",
+                    model=self.link.model.name,
+                )
+            block = [line for routine in library.values() for line in routine]
+            combined = [*lines, MARKER, *block] if library else list(lines)
+            if combined == current:
+                return False, ()
+            return True, self._download(self._checked(combined), for_user=True)
 
     def check_free(self, thread: int, label: str) -> None:
         """Refuse a thread that does not exist or runs another program (one query).

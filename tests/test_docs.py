@@ -36,6 +36,8 @@ GUIDE = [
     "testing.md",
     "raw.md",
     "setup.md",
+    "programs.md",
+    "capture.md",
 ]
 
 # Pages of the site that are not guide pages: an overview, and two generated ones.

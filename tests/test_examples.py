@@ -58,7 +58,13 @@ EXPECTED = {
         "output 1 is True",
         "parameters saved",
     ],
-    "07_draw_a_shape.py": [
+    "07_capture.py": [
+        "plan A -> 10 mm: trapezoid",
+        "reference vs prediction: largest difference 0 counts",
+        "plot saved to capture_A.png",
+        "data records at samples",
+    ],
+    "08_draw_a_shape.py": [
         "plan: 151.416 mm of path in 3.886 s, top speed 40.0 mm/s",
         "drawn: stop codes {'A': 101, 'B': 101}, end vs prediction {'A': 0, 'B': 0}",
         "back at A 0.00 mm, B 0.00 mm",

@@ -63,3 +63,32 @@ def test_multiprofile_plot_draws_a_smoothed_velocity(dmc: galil.Controller) -> N
     cruise = slice(raw.size // 3, raw.size // 2)  # A runs at SP here
     assert np.ptp(velocity[cruise]) < np.ptp(raw[cruise])
     assert np.mean(velocity[cruise]) == pytest.approx(40_000, rel=1e-3)
+
+
+def test_compare_plot_takes_a_handle_and_a_capture_in_the_axis_unit(
+    dmc: galil.Controller, x: galil.Axis
+) -> None:
+    cap = dmc.capture(["_RPA"], every=4, seconds=0.4)
+    move = x.move_to(3 * mm)
+    fig = compare_plot(move, cap.wait())
+    top, diff = fig.axes
+    assert top.get_ylabel() == "position (mm)"
+    assert top.lines[1].get_ydata().max() == pytest.approx(3.0)  # recorded, in mm
+    assert np.all(diff.lines[0].get_ydata() == 0)
+
+
+def test_compare_plot_takes_data_records_and_needs_their_time(
+    dmc: galil.Controller, x: galil.Axis
+) -> None:
+    with dmc.records(8) as stream:
+        move = x.move_to(2 * mm)
+        records = stream.take(40)
+    fig = compare_plot(move, records, field="reference")
+    assert np.all(fig.axes[1].lines[0].get_ydata() == 0)
+    with pytest.raises(galil.InvalidArgument, match="no field"):
+        compare_plot(move, records, field="nope")
+    plain = records[[n for n in records.dtype.names if n != "time"]]
+    with pytest.raises(galil.InvalidArgument, match="carry no time"):
+        compare_plot(move, plain)
+    with pytest.raises(galil.InvalidArgument, match="does not know the controller sample"):
+        compare_plot({"A": move.profile}, records)

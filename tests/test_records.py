@@ -142,8 +142,11 @@ def test_econo_model_records_over_tcp() -> None:
         with c.records(8) as stream:
             srv.advance(0.05)
             recs = stream.take(3, timeout=WAIT)
-        assert recs.dtype.itemsize == 4 + 24 + 16 + 4 * 28
+        # The record's bytes, and the controller time each was taken at (8 bytes more).
+        assert recs.dtype.itemsize == 4 + 24 + 16 + 4 * 28 + 8
         assert np.all(np.diff(recs["sample"].astype(int)) == 8)
+        assert np.all(np.diff(recs["time"]) == 8)
+        assert stream.missed == 0
 
 
 def test_qr_polling_where_there_is_no_second_handle() -> None:

@@ -375,21 +375,10 @@ def check_motion(
     m, k = inc.shape
     if m == 0:
         return MotionReport((0.0,) * k, (0.0,) * k)
-    names = [None] * k if axes is None else list(axes)
-    if len(names) != k:
-        raise InvalidArgument(f"axes names {len(names)} axes, the path has {k}")
-    v_max = _per_axis(speed_limit, float(spec.sp_max), k, "speed_limit")
-    a_max = _per_axis(accel_limit, float(spec.ac_max), k, "accel_limit")
-    v0 = np.broadcast_to(np.asarray(start_velocity, dtype=np.float64), (k,))
-    starts = np.concatenate(([0.0], np.cumsum(n)))  # sample where each segment starts; total
-    vel = inc / (n * ts)[:, None]
-    slack = 2 * rounding / (n * ts)  # velocity error from rounding, per segment
-    knots_t = np.concatenate(([0.0], starts[:-1] + n / 2, starts[-1:] if stops else []))
-    knots_v = np.vstack([v0, vel, np.zeros((1, k))] if stops else [v0, vel])
-    knots_s = np.concatenate(([0.0], slack, [0.0] if stops else []))
-    dt = np.diff(knots_t) * ts
-    acc = np.diff(knots_v, axis=0) / dt[:, None]
-    acc_slack = (knots_s[:-1] + knots_s[1:]) / dt
+    names, v_max, a_max, v0 = _motion_limits(
+        spec, k, axes, speed_limit, accel_limit, start_velocity
+    )
+    vel, acc, slack, acc_slack, starts = _kinematics(inc, n, ts, v0, stops, rounding)
     tol = 1 + 1e-9
     fast = np.abs(vel) > (v_max[None, :] + slack[:, None]) * tol
     hard = np.abs(acc) > (a_max[None, :] + acc_slack[:, None]) * tol
@@ -403,6 +392,47 @@ def check_motion(
         peak_speed=tuple(float(x) for x in np.abs(vel).max(axis=0, initial=0.0)),
         peak_accel=tuple(float(x) for x in np.abs(acc).max(axis=0, initial=0.0)),
     )
+
+
+def _motion_limits(
+    spec: ModelSpec,
+    k: int,
+    axes: str | Sequence[str] | None,
+    speed_limit: Limit,
+    accel_limit: Limit,
+    start_velocity: float | Sequence[float],
+) -> tuple[list[str | None], FloatArray, FloatArray, FloatArray]:
+    """Axis names, speed and acceleration limits and start velocities, one per axis."""
+    names: list[str | None] = [None] * k if axes is None else list(axes)
+    if len(names) != k:
+        raise InvalidArgument(f"axes names {len(names)} axes, the path has {k}")
+    v_max = _per_axis(speed_limit, float(spec.sp_max), k, "speed_limit")
+    a_max = _per_axis(accel_limit, float(spec.ac_max), k, "accel_limit")
+    v0 = np.broadcast_to(np.asarray(start_velocity, dtype=np.float64), (k,))
+    return names, v_max, a_max, v0
+
+
+def _kinematics(
+    inc: FloatArray,
+    n: FloatArray,
+    ts: float,
+    v0: FloatArray,
+    stops: bool,
+    rounding: float,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Segment velocities, the accelerations between them, their rounding slack, and where
+    each segment starts (the last entry: the total)."""
+    k = inc.shape[1]
+    starts = np.concatenate(([0.0], np.cumsum(n)))  # sample where each segment starts; total
+    vel = inc / (n * ts)[:, None]
+    slack = 2 * rounding / (n * ts)  # velocity error from rounding, per segment
+    knots_t = np.concatenate(([0.0], starts[:-1] + n / 2, starts[-1:] if stops else []))
+    knots_v = np.vstack([v0, vel, np.zeros((1, k))] if stops else [v0, vel])
+    knots_s = np.concatenate(([0.0], slack, [0.0] if stops else []))
+    dt = np.diff(knots_t) * ts
+    acc = np.diff(knots_v, axis=0) / dt[:, None]
+    acc_slack = (knots_s[:-1] + knots_s[1:]) / dt
+    return vel, acc, slack, acc_slack, starts
 
 
 def _first_violation(
@@ -578,6 +608,26 @@ def check_contour(
         accel_limit=accel_limit,
         axes=None if axis is None else [axis],
     )
+    raw_rate = _link_rate(baud, link_rate, ethernet, utilisation)
+    if raw_rate is None:
+        return None
+    depth = spec.contour_buffer if buffer_depth is None else int(buffer_depth)
+    if depth < 1:
+        raise InvalidArgument(f"buffer depth must be >= 1, got {depth}")
+    b = (
+        contour_bytes(c, n)
+        if bytes_per_segment is None
+        else np.broadcast_to(np.asarray(bytes_per_segment, dtype=np.int64), c.shape)
+    )
+    return _check_stream(
+        b, lengths * ts, starts, (raw_rate, utilisation, depth, preload), ts, axis, spec
+    )
+
+
+def _link_rate(
+    baud: float | None, link_rate: float | None, ethernet: bool, utilisation: float
+) -> float | None:
+    """Bytes per second of the link given (``None``: no link, no stream check)."""
     if baud is None and link_rate is None and not ethernet:
         return None
     if not 0 < utilisation <= 1:
@@ -590,15 +640,7 @@ def check_contour(
         raw_rate = ETHERNET_BYTES_PER_S
     if not raw_rate > 0:
         raise InvalidArgument(f"link rate must be positive, got {raw_rate!r}")
-    depth = spec.contour_buffer if buffer_depth is None else int(buffer_depth)
-    if depth < 1:
-        raise InvalidArgument(f"buffer depth must be >= 1, got {depth}")
-    if bytes_per_segment is None:
-        b = contour_bytes(c, n)
-    else:
-        b = np.broadcast_to(np.asarray(bytes_per_segment, dtype=np.int64), c.shape)
-    link = (raw_rate, utilisation, depth, preload)
-    return _check_stream(b, lengths * ts, starts, link, ts, axis, spec)
+    return raw_rate
 
 
 def _check_segment_ranges(
@@ -625,7 +667,8 @@ def _check_segment_ranges(
             model=spec.name,
             segment=i,
         )
-    bad = np.flatnonzero(np.abs(c) > spec.cd_max)
+    # Not np.abs: the most negative int64 has no positive counterpart and stays negative.
+    bad = np.flatnonzero((c > spec.cd_max) | (c < -spec.cd_max))
     if bad.size:
         i = int(bad[0])
         raise LimitError(
@@ -700,6 +743,36 @@ def _check_stream(
     return StreamReport(rate, needed, total_bytes, float(slack.min()), depth)
 
 
+def _check_profile(
+    profile: Profile,
+    spec: ModelSpec,
+    forward_limit: float | None,
+    backward_limit: float | None,
+    axis: str | None,
+    speed_limit: float | None,
+    accel_limit: float | None,
+) -> None:
+    """A predicted profile against the soft limits, the model's peak speed and its motion."""
+    check_soft_limits(
+        profile, forward_limit=forward_limit, backward_limit=backward_limit, axis=axis
+    )
+    if profile.peak_speed > spec.sp_max:
+        k = int(np.argmax(np.abs(profile.velocity)))
+        raise LimitError(
+            f"peak speed {profile.peak_speed:g} counts/s is above the {spec.name} maximum",
+            name="speed",
+            value=profile.peak_speed,
+            limit=spec.sp_max,
+            time=float(profile.t[k]),
+            sample=k,
+            axis=axis,
+            model=spec.name,
+        )
+    check_profile_motion(
+        profile, model=spec, speed_limit=speed_limit, accel_limit=accel_limit, axis=axis
+    )
+
+
 @dataclass(frozen=True)
 class Checked:
     """Result of :func:`check`: the values the controller will use, and the stream report."""
@@ -747,24 +820,7 @@ def check(
         spec, speed=speed, accel=accel, decel=decel, smoothing=smoothing, jog=jog, tm=tm
     )
     if profile is not None:
-        check_soft_limits(
-            profile, forward_limit=forward_limit, backward_limit=backward_limit, axis=axis
-        )
-        if profile.peak_speed > spec.sp_max:
-            k = int(np.argmax(np.abs(profile.velocity)))
-            raise LimitError(
-                f"peak speed {profile.peak_speed:g} counts/s is above the {spec.name} maximum",
-                name="speed",
-                value=profile.peak_speed,
-                limit=spec.sp_max,
-                time=float(profile.t[k]),
-                sample=k,
-                axis=axis,
-                model=spec.name,
-            )
-        check_profile_motion(
-            profile, model=spec, speed_limit=speed_limit, accel_limit=accel_limit, axis=axis
-        )
+        _check_profile(profile, spec, forward_limit, backward_limit, axis, speed_limit, accel_limit)
     stream = None
     if increments is not None:
         if dt is None:

@@ -167,23 +167,32 @@ def plan_position(
         segs.append(_ramp(s * v, 0.0, d))
         shape = "trapezoid"
     else:
-        up_sq = (2 * dd * a * d + u0 * u0 * d) / (a + d)
-        if up_sq >= v * v:
-            up, shape = v, "trapezoid"
-        else:
-            up, shape = max(math.sqrt(up_sq), u0), "triangle"
+        up, shape = _accelerate_cruise_stop(segs, s, u0, dd, v, a, d)
         peak = max(peak, up)
-        d1 = (up * up - u0 * u0) / (2 * a)
-        d3 = up * up / (2 * d)
-        if up > u0:
-            segs.append(_ramp(s * u0, s * up, a))
-        cruise = dd - d1 - d3
-        if cruise > 0 and up > 0:
-            segs.append(Segment(cruise / up, s * up, 0.0))
-        if up > 0:
-            segs.append(_ramp(s * up, 0.0, d))
     total = sum(x.duration for x in segs)
     return KinematicPlan(x0, tuple(segs), float(target), total, peak, shape)
+
+
+def _accelerate_cruise_stop(
+    segs: list[Segment], s: float, u0: float, dd: float, v: float, a: float, d: float
+) -> tuple[float, str]:
+    """Append the ramp up (at ``a``), the cruise and the ramp down (at ``d``) of a move of
+    ``dd`` counts in direction ``s`` from speed ``u0``; return the peak speed and the shape."""
+    up_sq = (2 * dd * a * d + u0 * u0 * d) / (a + d)
+    if up_sq >= v * v:
+        up, shape = v, "trapezoid"
+    else:
+        up, shape = max(math.sqrt(up_sq), u0), "triangle"
+    d1 = (up * up - u0 * u0) / (2 * a)
+    d3 = up * up / (2 * d)
+    if up > u0:
+        segs.append(_ramp(s * u0, s * up, a))
+    cruise = dd - d1 - d3
+    if cruise > 0 and up > 0:
+        segs.append(Segment(cruise / up, s * up, 0.0))
+    if up > 0:
+        segs.append(_ramp(s * up, 0.0, d))
+    return up, shape
 
 
 def plan_jog(x0: float, v0: float, speed: float, a: float, d: float) -> KinematicPlan:

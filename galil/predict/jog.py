@@ -55,19 +55,12 @@ def jog(
     Raises:
         InvalidArgument: bad arguments. CommandError: an event the controller would refuse.
     """
-    for name, value in (("accel", accel), ("decel", decel)):
-        if not (math.isfinite(value) and value > 0):
-            raise InvalidArgument(f"{name} must be a positive number, got {value!r}")
-    if not math.isfinite(speed):
-        raise InvalidArgument(f"speed must be finite, got {speed!r}")
+    _validate_jog(speed, accel, decel)
     speed, accel, decel, smoothing, sample_period = _resolve(
         speed, accel, decel, smoothing, sample_period, model, jog=True
     )
     ts = sample_period
-    all_events: list[Event] = [SetSpeed(t, s) for t, s in changes]
-    all_events.extend(events)
-    if stop_at is not None:
-        all_events.append(Stop(stop_at))
+    all_events = _jog_events(changes, events, stop_at)
     eng = AxisProfiler(sample_period=ts, position=int(start))
     if initial_speed:
         eng.resume_jog(initial_speed, speed, accel, decel, smoothing)
@@ -83,6 +76,24 @@ def jog(
     r, ref, peak = run(eng, all_events, speed=speed, accel=accel, decel=decel, until=until)
     peak = max(peak, abs(initial_speed))
     return _profile(start, r, ref, ts, peak, eng.stop_code, initial_speed)
+
+
+def _validate_jog(speed: float, accel: float, decel: float) -> None:
+    for name, value in (("accel", accel), ("decel", decel)):
+        if not (math.isfinite(value) and value > 0):
+            raise InvalidArgument(f"{name} must be a positive number, got {value!r}")
+    if not math.isfinite(speed):
+        raise InvalidArgument(f"speed must be finite, got {speed!r}")
+
+
+def _jog_events(
+    changes: Sequence[tuple[float, float]], events: Sequence[Event], stop_at: float | None
+) -> list[Event]:
+    out: list[Event] = [SetSpeed(t, s) for t, s in changes]
+    out.extend(events)
+    if stop_at is not None:
+        out.append(Stop(stop_at))
+    return out
 
 
 def _run_until_settled(

@@ -42,6 +42,7 @@ __all__ = [
     "ac",
     "am",
     "ao",
+    "array_name",
     "assign",
     "bg",
     "bl",
@@ -56,10 +57,13 @@ __all__ = [
     "cr",
     "cs",
     "cw",
+    "da",
     "dc",
     "dl",
+    "dm",
     "dp",
     "dt",
+    "ei",
     "eo",
     "er",
     "fe",
@@ -79,9 +83,11 @@ __all__ = [
     "ki",
     "kp",
     "ks",
+    "la",
     "le",
     "li",
     "lm",
+    "lv",
     "lz",
     "mc",
     "mg",
@@ -98,6 +104,10 @@ __all__ = [
     "qr",
     "qu",
     "qz",
+    "ra",
+    "rc",
+    "rd",
+    "record_source",
     "rp",
     "sb",
     "sc",
@@ -113,8 +123,10 @@ __all__ = [
     "tp",
     "ts",
     "tv",
+    "ui",
     "ul",
     "va",
+    "variable_name",
     "vd",
     "ve",
     "vm",
@@ -1177,6 +1189,126 @@ def qd(name: str, values: Sequence[float], first: int | None = None) -> Command:
     return Command(text, _ACK, (data + "\\").encode("ascii"))
 
 
+def variable_name(name: str) -> str:
+    """``name`` if it is a valid variable name (letter, up to 7 more letters or digits, no
+    clash with a command such as ``CD0``), else :class:`InvalidArgument`."""
+    return _variable_name(name)
+
+
+def array_name(name: str) -> str:
+    """``name`` if it is a valid array name (the variable rules), else :class:`InvalidArgument`."""
+    return _variable_name(name, "array")
+
+
+def dm(name: str, size: int, *, model: ModelSpec | None = None) -> Command:
+    """DM: dimension array ``name`` with ``size`` elements (the model's array space)."""
+    _variable_name(name, "array")
+    most = 24_000 if model is None else model.array_elements
+    n = _ranged(
+        size,
+        1,
+        most,
+        f"DM {name}[] size",
+        model=None if model is None else model.name,
+        integer=True,
+    )
+    return Command(f"DM {name}[{n}]")
+
+
+def da(*names: str) -> Command:
+    """DA: deallocate arrays (``da("pos")`` -> ``DA pos[]``)."""
+    if not names:
+        raise InvalidArgument("DA needs at least one array name")
+    return Command("DA " + ",".join(f"{_variable_name(n, 'array')}[]" for n in names))
+
+
+def la() -> Command:
+    """LA: list the arrays (one ``name[size]`` line each; a bare ``:`` when there is none)."""
+    return Command("LA", Expect.ANY)
+
+
+def lv() -> Command:
+    """LV: list the variables (one ``name= value`` line each; a bare ``:`` when none)."""
+    return Command("LV", Expect.ANY)
+
+
+# The operands RD records (DMC-1600/1700/1800 manuals: _DE _TP _TE _SH _RL _TS _SC _NO _TT
+# per axis, _TI and _OP; _AF analog inputs; _RP and _TV as on the 40x0, assumed).
+_RECORD_AXIS = frozenset({"DE", "TP", "TE", "SH", "RL", "TS", "SC", "NO", "TT", "AF", "RP", "TV"})
+_RECORD_SOURCE = re.compile(r"_([A-Z]{2})([A-H])|_(TI|OP)(\d?)")
+
+
+def record_source(source: str, *, model: ModelSpec | None = None) -> str:
+    """``source`` if ``RD`` can record it (``"_RPA"``, ``"_TEB"``, ``"_TI0"``), else
+    :class:`InvalidArgument`."""
+    m = _RECORD_SOURCE.fullmatch(source) if isinstance(source, str) else None
+    if m is None or (m.group(1) is not None and m.group(1) not in _RECORD_AXIS):
+        known = ", ".join(f"_{op}A" for op in sorted(_RECORD_AXIS))
+        raise InvalidArgument(
+            f"cannot record {source!r}: RD records {known} (any axis), _TI and _OP"
+        )
+    if m.group(2) is not None:
+        _axes(model).position(m.group(2))
+    return source
+
+
+def ra(*names: str, model: ModelSpec | None = None) -> Command:
+    """RA: the arrays ``RD``'s sources are recorded into, in order."""
+    most = 8 if model is None else model.record_arrays
+    if not 1 <= len(names) <= most:
+        raise InvalidArgument(f"RA takes 1 to {most} arrays, not {len(names)}")
+    return Command("RA " + ",".join(f"{_variable_name(n, 'array')}[]" for n in names))
+
+
+def rd(*sources: str, model: ModelSpec | None = None) -> Command:
+    """RD: the operands to record (``rd("_RPA", "_TPA")``), one per ``RA`` array."""
+    most = 8 if model is None else model.record_arrays
+    if not 1 <= len(sources) <= most:
+        raise InvalidArgument(f"RD takes 1 to {most} sources, not {len(sources)}")
+    return Command("RD " + ",".join(record_source(s, model=model) for s in sources))
+
+
+def rc(every: int, count: int | None = None, *, model: ModelSpec | None = None) -> Command:
+    """RC: record every ``every`` samples (a power of two in the model's range), ``count``
+    values (default: as many as the smallest array holds); ``rc(0)`` stops recording."""
+    if isinstance(every, bool) or not isinstance(every, int):
+        raise InvalidArgument(f"RC interval is a whole number of samples, not {every!r}")
+    if every == 0:
+        return Command("RC 0")
+    lo, hi = (1, 8) if model is None else model.record_exponents
+    if every < 1 or every & (every - 1) or not lo <= every.bit_length() - 1 <= hi:
+        allowed = ", ".join(str(1 << n) for n in range(lo, hi + 1))
+        raise InvalidArgument(
+            f"the controller records every 2**n samples: every={every!r} is not one of {allowed}",
+            model=None if model is None else model.name,
+        )
+    text = f"RC {every.bit_length() - 1}"
+    if count is not None:
+        most = 24_000 if model is None else model.array_elements
+        text += "," + _ranged(count, 1, most, "RC count", integer=True)
+    return Command(text)
+
+
+def ui(n: int, *, model: ModelSpec | None = None) -> Command:
+    """UI: raise user interrupt ``n`` (status byte ``0xF0 + n``)."""
+    top = 16 if model is None else model.user_interrupts
+    return Command("UI " + _ranged(n, 0, top - 1, "UI", integer=True))
+
+
+def ei(mask: int, inputs: int | None = None, handle: int | None = None) -> Command:
+    """EI: enable interrupts: ``mask`` of events (bits 0-7 an axis done, 8 all done, 9
+    position error, 10 limit switch, 11 reserved), ``inputs`` (bit n: input n+1 going low)
+    and the Ethernet ``handle`` (0-7 for A-H) they are sent to. ``ei(0)`` turns them off."""
+    text = "EI " + _ranged(mask, 0, 0xFFFF, "EI mask", integer=True)
+    if inputs is not None or handle is not None:
+        text += "," + (
+            "" if inputs is None else _ranged(inputs, 0, 0xFF, "EI inputs", integer=True)
+        )
+    if handle is not None:
+        text += "," + _ranged(handle, 0, 7, "EI handle", integer=True)
+    return Command(text)
+
+
 # --------------------------------------------------------------------------------- lines
 
 
@@ -1242,8 +1374,6 @@ _QUERIES = frozenset(
         "TH",
         "ID",
         "LS",
-        "LA",
-        "LV",
         "TB",
         "TI",
         "TT",

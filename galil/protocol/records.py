@@ -2,29 +2,48 @@
 
 The layout is chosen from the ``QZ`` sizes (axes, general, coordinated, per-axis bytes), as
 EPICS does, not from fixed offsets: a 52-byte general block is the DMC-40x0/41x3/500x0 (and
-18x6) layout, a 24-byte one the DMC-21x3/2x00/1700/18x2 layout (28- or 26-byte axis blocks).
-Other general blocks (DMC-30010: 18 bytes) are kept as raw bytes, with the 36-byte axis block
-of the 40x0 when the axis size matches. All fields are little-endian. Offsets follow
+18x6) layout, a 24-byte one the DMC-21x3/2x00/1700/18x2 layout (28- or 26-byte axis blocks),
+an 18-byte one the DMC-30010 layout (gclib ``GDataRecord30000``: two input and two output
+banks, the analog input and outputs, the amplifier status; a 16-byte coordinated block with
+the contour and S-plane fields). Other blocks are kept as raw bytes, with the 36-byte axis
+block of the 40x0 when the axis size matches. All fields are little-endian. Offsets follow
 ``galil-protocol.md`` section 4 (gclib ``gclib_record.h``).
+
+Beyond the bulk form (numpy structured records), :func:`decode_fields` gives one record as
+named values: the axis status word, switch byte and stop code as booleans and text
+(:class:`AxisStatus`, :class:`Switches`). The record's sample counter is 16 bits and wraps;
+:func:`extend_sample` extends it against the controller's ``TIME``, and :func:`with_time`
+adds the extended value to a record as its ``time`` field.
 """
 
 from __future__ import annotations
 
+import functools
+import struct
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
 
+from galil.codes import stop_text
 from galil.errors import InvalidArgument, ProtocolError
 from galil.models import ModelSpec
 
 __all__ = [
     "AXIS_LETTERS",
+    "AxisFields",
+    "AxisStatus",
+    "RecordFields",
     "RecordSplitter",
+    "Switches",
+    "decode_fields",
     "decode_record",
+    "extend_sample",
     "parse_qz",
     "record_dtype",
     "record_size",
     "record_to_dict",
+    "with_time",
 ]
 
 AXIS_LETTERS = "ABCDEFGH"
@@ -97,6 +116,24 @@ _AXIS_2103: list[tuple[Any, ...]] = [
 ]
 
 
+_GENERAL_30000: list[tuple[Any, ...]] = [
+    ("sample", "<u2"),
+    ("inputs", "u1", (2,)),
+    ("outputs", "u1", (2,)),
+    ("error_code", "u1"),
+    ("thread_status", "u1"),
+    ("analog_in", "<u2"),
+    ("analog_out", "<i2", (2,)),
+    ("amplifier_status", "<u4"),
+]
+_COORD_30000: list[tuple[Any, ...]] = [
+    ("contour_segments", "<u4"),
+    ("contour_buffer", "<u2"),
+    ("s_segments", "<u2"),
+    ("s_status", "<u2"),
+    ("s_distance", "<i4"),
+    ("s_buffer", "<u2"),
+]
 # RIO-47xxx (gclib GDataRecord47000_ENC / 47300): a 4-byte general block and the I/O in the
 # "coordinated" block of QZ; no axis blocks. Analog values are 16-bit counts.
 _GENERAL_RIO: list[tuple[Any, ...]] = [
@@ -165,6 +202,8 @@ def record_dtype(
         raise InvalidArgument(f"{len(names)} axis letters for {n} axis blocks")
     if general == 52:
         g, c, a = _GENERAL_4000, _COORD_4000, _AXIS_4000
+    elif general == 18:
+        g, c, a = _GENERAL_30000, _COORD_30000, _AXIS_4000
     elif general == _size(_GENERAL_RIO) and qz[0] == 0:
         g, a = _GENERAL_RIO, _AXIS_4000
         c = _IO_RIO_47300 if coord == _size(_IO_RIO_47300) else _IO_RIO_47100
@@ -282,3 +321,240 @@ class RecordSplitter:
             out.append(bytes(buf[:size]))
             del buf[:size]
         return out
+
+
+# --------------------------------------------------------------------------------- time
+
+#: The record's sample counter wraps at this value (16 bits).
+SAMPLE_WRAP = 1 << 16
+
+
+def extend_sample(low: int, near: int) -> int:
+    """The controller sample whose low 16 bits are ``low``, nearest to sample ``near``.
+
+    The data record counts samples in 16 bits (it wraps every 64 s at TM 1000) while
+    ``TIME`` does not; ``near`` is a ``TIME`` read close to the record (within half a wrap,
+    32768 samples, either way).
+    """
+    low &= SAMPLE_WRAP - 1
+    base = near - (near % SAMPLE_WRAP) + low
+    if base - near > SAMPLE_WRAP // 2:
+        base -= SAMPLE_WRAP
+    elif near - base > SAMPLE_WRAP // 2:
+        base += SAMPLE_WRAP
+    return base
+
+
+@functools.lru_cache(maxsize=64)
+def _timed(dtype: np.dtype[Any]) -> np.dtype[Any]:
+    names = list(dtype.names or ())
+    spec = dtype.fields
+    assert spec is not None
+    return np.dtype(
+        {
+            "names": [*names, "time"],
+            "formats": [spec[n][0] for n in names] + ["<i8"],
+            "offsets": [spec[n][1] for n in names] + [dtype.itemsize],
+            "itemsize": dtype.itemsize + 8,
+        }
+    )
+
+
+def with_time(record: np.void, time: int) -> np.void:
+    """``record`` with one more field, ``time``: the controller sample it was taken at, in
+    full (see :func:`extend_sample`); the other fields are unchanged."""
+    names = record.dtype.names or ()
+    if "time" in names:
+        raise InvalidArgument("the record has a time already")
+    data = bytes(record.tobytes()) + struct.pack("<q", int(time))
+    out: np.void = np.frombuffer(data, dtype=_timed(record.dtype))[0]
+    return out
+
+
+# --------------------------------------------------------------------------------- named fields
+
+
+def _bits(cls: type[Any], value: int, width: int) -> dict[str, bool]:
+    order = [f.name for f in fields(cls) if f.name != "raw"]
+    return {name: bool(value >> (width - 1 - i) & 1) for i, name in enumerate(order)}
+
+
+@dataclass(frozen=True)
+class AxisStatus:
+    """An axis's status word (DMC-40x0 user manual; the 2x00 and 1700 share it), bit 15 first.
+
+    Attributes:
+        raw: the word itself.
+        moving: b15, a move is in progress.
+        position_mode: b14, the move is a PR or PA move.
+        absolute: b13, the move is a PA move.
+        finding_edge: b12, FE in progress.
+        homing: b11, HM in progress.
+        home_first_phase_done: b10.
+        home_second_phase_done: b9 (or FI issued).
+        coordinated: b8, coordinated motion mode.
+        negative: b7, moving in the negative direction.
+        contour: b6, contour mode.
+        slewing: b5.
+        stopping: b4, stopping because of ST or a limit.
+        final_decel: b3, in the final deceleration.
+        latch_armed: b2.
+        home_third_phase: b1 (40x0; "off-on-error armed" on the 2x00 and 1700).
+        motor_off: b0.
+    """
+
+    moving: bool
+    position_mode: bool
+    absolute: bool
+    finding_edge: bool
+    homing: bool
+    home_first_phase_done: bool
+    home_second_phase_done: bool
+    coordinated: bool
+    negative: bool
+    contour: bool
+    slewing: bool
+    stopping: bool
+    final_decel: bool
+    latch_armed: bool
+    home_third_phase: bool
+    motor_off: bool
+    raw: int = 0
+
+    @classmethod
+    def from_word(cls, word: int) -> AxisStatus:
+        """Decode a status word."""
+        return cls(**_bits(cls, int(word), 16), raw=int(word))
+
+
+@dataclass(frozen=True)
+class Switches:
+    """An axis's switch byte, bit 7 first (DMC-40x0 user manual).
+
+    The limit bits are 1 while the switch is *inactive*, as ``TS`` reports them;
+    :attr:`forward_limit` and :attr:`reverse_limit` say whether a switch is active.
+
+    Attributes:
+        raw: the byte itself.
+        latch_occurred: b7.
+        latch_input: b6, the state of the latch input.
+        forward_limit: b3 clear: the forward limit switch is active.
+        reverse_limit: b2 clear: the reverse limit switch is active.
+        home: b1, the state of the home input.
+        stepper: b0, stepper mode.
+    """
+
+    latch_occurred: bool
+    latch_input: bool
+    forward_limit: bool
+    reverse_limit: bool
+    home: bool
+    stepper: bool
+    raw: int = 0
+
+    @classmethod
+    def from_byte(cls, byte: int) -> Switches:
+        """Decode a switch byte."""
+        b = int(byte)
+        return cls(
+            latch_occurred=bool(b & 0x80),
+            latch_input=bool(b & 0x40),
+            forward_limit=not b & 0x08,
+            reverse_limit=not b & 0x04,
+            home=bool(b & 0x02),
+            stepper=bool(b & 0x01),
+            raw=b,
+        )
+
+
+@dataclass(frozen=True)
+class AxisFields:
+    """One axis block of a record, by name, in counts.
+
+    Attributes:
+        reference: reference position (``_RP``).
+        position: encoder position (``_TP``).
+        error: position error (``_TE``).
+        velocity: velocity in counts/s (the record holds 64 times ``TV``).
+        torque: torque (DAC counts).
+        aux_position: auxiliary encoder (``_TD``).
+        stop_code: ``_SC``; :attr:`stop_text` is its meaning.
+        status: the status word.
+        switches: the switch byte.
+    """
+
+    reference: int
+    position: int
+    error: int
+    velocity: float
+    torque: int
+    aux_position: int
+    stop_code: int
+    status: AxisStatus
+    switches: Switches
+
+    @property
+    def stop_text(self) -> str:
+        """What the stop code means."""
+        return stop_text(self.stop_code)
+
+
+@dataclass(frozen=True)
+class RecordFields:
+    """One data record, by name.
+
+    Attributes:
+        sample: the record's 16-bit sample counter.
+        time: the controller sample in full (``None`` when the record carries no ``time``).
+        error_code: ``_TC``.
+        threads: the program threads running.
+        inputs: the input bytes (bank 0 first).
+        axes: the axis blocks by letter.
+    """
+
+    sample: int
+    time: int | None
+    error_code: int | None
+    threads: frozenset[int]
+    inputs: tuple[int, ...]
+    axes: dict[str, AxisFields]
+
+
+def _axis_fields(block: np.void) -> AxisFields:
+    names = block.dtype.names or ()
+    value = {n: int(block[n]) for n in names if n != "raw"}
+    return AxisFields(
+        reference=value.get("reference", 0),
+        position=value.get("position", 0),
+        error=value.get("error", 0),
+        velocity=value.get("velocity", 0) / 64,
+        torque=value.get("torque", 0),
+        aux_position=value.get("aux_position", 0),
+        stop_code=value.get("stop_code", 0),
+        status=AxisStatus.from_word(value.get("status", 0)),
+        switches=Switches.from_byte(value.get("switches", 0)),
+    )
+
+
+def decode_fields(record: np.void) -> RecordFields:
+    """One decoded record (from :func:`decode_record`) as named values and booleans.
+
+    Raises:
+        InvalidArgument: not a data record (no ``sample`` field).
+    """
+    names = record.dtype.names or ()
+    if "sample" not in names:
+        if "general" in names:
+            raise InvalidArgument("this record's general block has no known layout")
+        raise InvalidArgument("not a decoded data record")
+    threads = int(record["thread_status"]) if "thread_status" in names else 0
+    inputs = tuple(int(v) for v in np.atleast_1d(record["inputs"])) if "inputs" in names else ()
+    axes = {n: _axis_fields(record[n]) for n in names if n in AXIS_LETTERS and len(n) == 1}
+    return RecordFields(
+        sample=int(record["sample"]),
+        time=int(record["time"]) if "time" in names else None,
+        error_code=int(record["error_code"]) if "error_code" in names else None,
+        threads=frozenset(t for t in range(8) if threads >> t & 1),
+        inputs=inputs,
+        axes=axes,
+    )

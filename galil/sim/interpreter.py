@@ -28,6 +28,7 @@ __all__ = ["Caller", "Command", "Interpreter", "int32"]
 Caller = Port | Thread | None
 
 _RESERVED = frozenset({"TIME"})
+_ELEMENT = re.compile(r"([A-Za-z][A-Za-z0-9]*)\[(.+)\]")
 #: The coordinate systems (vector planes).
 _PLANES = ("S", "T")
 
@@ -67,6 +68,9 @@ class Interpreter:
             beside (not instead of) the axis command of the same name.
         plane_operands: coordinate-system operands (``_BGS``) -> value for the plane letter.
         functions: expression functions (``@ABS[x]``) -> value for the argument.
+        element: an array element's value (``arr[3]`` in an expression), set by the room
+            that keeps the arrays; ``None`` while no room does (``arr[3]`` is refused).
+        store_element: ``arr[3]=expression``, set by the same room.
         caller: who runs the command being executed (``WH``, ``CF I``, ``DL``).
         tc: the error code of the last refused command.
     """
@@ -81,6 +85,8 @@ class Interpreter:
         self.plane_commands: dict[str, Command] = {}
         self.plane_operands: dict[str, Callable[[str], float]] = {}
         self.functions: dict[str, Callable[[float], float]] = dict(FUNCTIONS)
+        self.element: Callable[[str, float], float] | None = None
+        self.store_element: Callable[[str, float, float], None] | None = None
         self.caller: Caller = None
         self._variable = re.compile(rf"[A-Za-z][A-Za-z0-9]{{0,{spec.variable_length - 1}}}")
         self._letters = frozenset(spec.axes) | frozenset(spec.aliases)
@@ -118,6 +124,12 @@ class Interpreter:
                 raise Refused(1, "unknown control command")
             return control.run("")
         eq = _find_eq(s)
+        if eq > 0 and s[eq - 1] == "]" and self.store_element is not None:
+            target = _ELEMENT.fullmatch(s[:eq].strip())
+            if target is not None:
+                index = self.evaluate(target.group(2))
+                self.store_element(target.group(1), index, self.evaluate(s[eq + 1 :]))
+                return ""
         command = self.commands.get(s[:2])
         if self.plane_commands:
             planes = self._planes(s)
@@ -153,6 +165,10 @@ class Interpreter:
         return bool(letters) and all(c in self._letters for c in letters)
 
     # ---- variables and expressions -----------------------------------------------------
+    def is_name(self, name: str) -> bool:
+        """Whether ``name`` is a valid variable or array name on this model."""
+        return bool(self._variable.fullmatch(name)) and name not in _RESERVED
+
     def assign(self, name: str, rhs: str) -> str:
         """``name=expression`` (or ``name=`` to read it back).
 
@@ -169,6 +185,8 @@ class Interpreter:
         value = self.evaluate(rhs)
         if not INT32_MIN <= value < INT32_MAX + 1:
             raise Refused(6, "out of range")
+        if name not in self.variables and len(self.variables) >= self.spec.variables:
+            raise Refused(67, "too many variables")
         self.variables[name] = round(value * 65536) / 65536
         return ""
 
@@ -178,7 +196,7 @@ class Interpreter:
         Raises:
             Refused: a syntax error or an unknown name.
         """
-        return evaluate(text, self.lookup, self.functions)
+        return evaluate(text, self.lookup, self.functions, self.element)
 
     def lookup(self, name: str) -> float:
         """The value of a variable, ``TIME`` or an operand (``_TPA``).

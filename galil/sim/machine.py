@@ -31,6 +31,7 @@ from galil.sim.ports import Port, Ports
 from galil.sim.programs import Programs
 from galil.sim.registry import (
     Args,
+    Collect,
     Download,
     FunctionSpec,
     HandlerSpec,
@@ -212,6 +213,10 @@ class Machine:
                 if not self.programs.collect(p):
                     return
                 continue
+            if p.collect is not None:
+                if not self._collect(p):
+                    return
+                continue
             if p.swallow_cr and p.inbuf:
                 p.swallow_cr = False
                 if p.inbuf[0] == "\r":
@@ -240,8 +245,28 @@ class Machine:
                 p.wait = result
         elif isinstance(result, Download):
             p.download = []
+        elif isinstance(result, Collect):
+            p.collect = result
         else:
             p.out += result.encode("latin-1") + b":"
+
+    def _collect(self, p: Port) -> bool:
+        """Collect a command's data up to ``\\`` (``QD``); False while more is needed."""
+        assert p.collect is not None
+        end = p.inbuf.find("\\")
+        if end < 0:
+            return False
+        data, p.inbuf = p.inbuf[:end], p.inbuf[end + 1 :]
+        done, p.collect = p.collect.done, None
+        p.swallow_cr = True
+        try:
+            reply = done(data)
+        except Refused as e:
+            self.interp.tc = e.code
+            p.out += b"?"
+            return True
+        p.out += reply.encode("latin-1") + b":"
+        return True
 
     def _release(self, port: Port, w: Wait) -> None:
         data = ""

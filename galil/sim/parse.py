@@ -79,6 +79,7 @@ _TOKEN = re.compile(
     r"(?P<num>(?:\d+(?:\.\d*)?|\.\d+))"
     r"|(?P<hex>\$[0-9A-Fa-f]+(?:\.[0-9A-Fa-f]+)?)"
     r"|(?P<func>@[A-Z]+\[)"
+    r"|(?P<element>[A-Za-z][A-Za-z0-9]*\[)"
     r"|(?P<name>_?[A-Za-z][A-Za-z0-9_]*)"
     r"|(?P<op><=|>=|<>|[-+*/&|<>=()\]])"
     r")"
@@ -94,7 +95,10 @@ FUNCTIONS: dict[str, Callable[[float], float]] = {
 }
 
 
-_Env = tuple[Callable[[str], float], Mapping[str, Callable[[float], float]]]
+#: An array element's value: ``element(name, index)``.
+Element = Callable[[str, float], float]
+
+_Env = tuple[Callable[[str], float], Mapping[str, Callable[[float], float]], Element | None]
 
 
 def _tokens(text: str) -> list[tuple[str, str]]:
@@ -116,13 +120,15 @@ def evaluate(
     text: str,
     lookup: Callable[[str], float],
     functions: Mapping[str, Callable[[float], float]] = FUNCTIONS,
+    element: Element | None = None,
 ) -> float:
     """Evaluate a Galil expression, left to right.
 
     Args:
-        text: the expression (``"_TPA+100"``, ``"(a<5)&(b>2)"``, ``"-$10"``).
+        text: the expression (``"_TPA+100"``, ``"(a<5)&(b>2)"``, ``"-$10"``, ``"arr[i]*2"``).
         lookup: returns the value of a variable or operand name, or raises :class:`Refused`.
         functions: the ``@NAME[x]`` functions known.
+        element: returns an array element (``arr[3]``); ``None``: no arrays (TC 57).
 
     Raises:
         Refused: a syntax error (TC 1), unbalanced parentheses (TC 59), a bad value (TC 6).
@@ -130,7 +136,7 @@ def evaluate(
     tokens = _tokens(text)
     if not tokens:
         raise Refused(1, "missing value")
-    value, pos = _sequence(tokens, 0, (lookup, functions))
+    value, pos = _sequence(tokens, 0, (lookup, functions, element))
     if pos != len(tokens):
         raise Refused(59 if tokens[pos][1] in ")]" else 1, f"unexpected {tokens[pos][1]!r}")
     if not math.isfinite(value):
@@ -198,6 +204,14 @@ def _operand(tokens: list[tuple[str, str]], pos: int, env: _Env) -> tuple[float,
         if pos >= len(tokens) or tokens[pos][1] != "]":
             raise Refused(55, "missing ]")
         return fn(arg), pos + 1
+    if kind == "element":
+        get = env[2]
+        if get is None:
+            raise Refused(57, f"no array {text[:-1]!r}")
+        index, pos = _sequence(tokens, pos + 1, env)
+        if pos >= len(tokens) or tokens[pos][1] != "]":
+            raise Refused(55, "missing ]")
+        return get(text[:-1], index), pos + 1
     if text == "-":
         value, pos = _operand(tokens, pos + 1, env)
         return -value, pos

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.sim.parse import Refused
-from galil.sim.registry import Wait
+from galil.sim.registry import Collect, Wait
 
 __all__ = ["HANDLES", "Port", "Ports"]
 
@@ -33,6 +33,8 @@ class Port:
     out: bytearray = field(default_factory=bytearray)
     wait: Wait | None = None
     download: list[str] | None = None
+    collect: Collect | None = None
+    collected: str = ""
     swallow_cr: bool = False
 
     def take(self) -> bytes:
@@ -70,6 +72,7 @@ class Ports:
         for port in self.ports.values():
             port.wait = None
             port.download = None
+            port.collect = None
 
     def get(self, number: int) -> Port:
         """The open port ``number``.

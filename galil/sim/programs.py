@@ -16,7 +16,7 @@ from typing import Protocol
 
 from galil.sim.parse import Refused, split_fields, split_program_line
 from galil.sim.ports import Port
-from galil.sim.registry import Download, Result, Wait
+from galil.sim.registry import Collect, Download, Result, Wait
 
 __all__ = ["LINES_PER_SAMPLE", "Executor", "Programs", "Thread"]
 
@@ -192,7 +192,7 @@ class Programs:
             return False
         if isinstance(result, Wait):
             th.wait = result
-        elif isinstance(result, Download):
+        elif isinstance(result, (Download, Collect)):
             self._halt(th, 3)
             return False
         elif result:

@@ -20,6 +20,7 @@ from typing import TypeVar
 __all__ = [
     "DOWNLOAD",
     "Args",
+    "Collect",
     "Download",
     "FunctionSpec",
     "HandlerSpec",
@@ -124,8 +125,18 @@ class Download:
 
 DOWNLOAD = Download()
 
+
+@dataclass
+class Collect:
+    """Returned by a command whose data follows it (``QD``): the port collects the text up
+    to ``\\`` and hands it to ``done``, whose text is the reply (before its ``:``); ``done``
+    raises :class:`~galil.sim.parse.Refused` to answer ``?``."""
+
+    done: Callable[[str], str]
+
+
 #: What a handler returns.
-Result = str | Wait | Download
+Result = str | Wait | Download | Collect
 
 _F = TypeVar("_F", bound=Callable[..., object])
 _MARK = "_galil_sim_marks"

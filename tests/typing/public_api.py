@@ -5,6 +5,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+import numpy.typing as npt
 from typing_extensions import assert_type
 
 import galil
@@ -41,6 +43,16 @@ def check(dmc: galil.Controller) -> None:
     assert_type(dmc.A.kp, float)
     assert_type(dmc.A.error_limit, int)
     assert_type(dmc.A.motor_type, galil.MotorType | float)
+    # issue 12: programs, arrays, variables, interrupts, capture; issue 17: begin
+    assert_type(dmc.capture(["_RPA"], every=2, count=10), galil.Capture)
+    assert_type(dmc.capture(["_RPA"], seconds=1.0).wait(), galil.Recording)
+    assert_type(dmc.programs.download("#A\nEN").sent, bool)
+    assert_type(dmc.programs.threads, dict[int, int])
+    assert_type(dmc.arrays.upload("a"), npt.NDArray[np.float64])
+    assert_type(dmc.variables["x"], float)
+    assert_type(dmc.interrupts.get(1.0), galil.Interrupt)
+    assert_type(dmc.contour("A", [1.0], dt=2).begin, int | None)
+    assert_type(galil.decode_fields(dmc.record()), galil.RecordFields)
 
 
 def check_coordinated(dmc: galil.Controller) -> None:

@@ -9,10 +9,13 @@ built with more (``SimController(rooms=(*ROOMS, Homing))``) without touching the
 from __future__ import annotations
 
 from galil.sim.machine import Room
+from galil.sim.rooms.arrays import Arrays
+from galil.sim.rooms.capture import Capture
 from galil.sim.rooms.contour import Contour
 from galil.sim.rooms.gearing import Gearing
 from galil.sim.rooms.handles import Handles
 from galil.sim.rooms.homing import Homing
+from galil.sim.rooms.interrupts import Interrupts
 from galil.sim.rooms.io import IO
 from galil.sim.rooms.limits import Limits
 from galil.sim.rooms.motion import Motion
@@ -27,10 +30,13 @@ from galil.sim.rooms.vector import Vector
 __all__ = [
     "IO",
     "ROOMS",
+    "Arrays",
+    "Capture",
     "Contour",
     "Gearing",
     "Handles",
     "Homing",
+    "Interrupts",
     "Limits",
     "Motion",
     "ProgramCommands",
@@ -60,6 +66,9 @@ ROOMS: tuple[type[Room], ...] = (
     Tuning,
     Homing,
     IO,
+    Arrays,
+    Capture,
+    Interrupts,
 )
 
 

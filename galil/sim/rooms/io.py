@@ -176,9 +176,9 @@ class IO(Room):
         if "outputs" in names:
             _put_bits(buf, "outputs", self.output_bits())
         if "analog_in" in names:
-            buf["analog_in"][0][: len(self.analog_in)] = [_counts(v) for v in self.analog_in]
+            _put_counts(buf, "analog_in", self.analog_in)
         if "analog_out" in names:
-            buf["analog_out"][0][: len(self.analog_out)] = [_counts(v) for v in self.analog_out]
+            _put_counts(buf, "analog_out", self.analog_out)
 
 
 def _put_bits(buf: np.ndarray[Any, Any], name: str, bits: int) -> None:
@@ -188,6 +188,18 @@ def _put_bits(buf: np.ndarray[Any, Any], name: str, bits: int) -> None:
         return
     else:  # one word (RIO)
         field[0] = bits & ((1 << (8 * field.dtype.itemsize)) - 1)
+
+
+def _put_counts(buf: np.ndarray[Any, Any], name: str, volts: list[float]) -> None:
+    """As many channels as the record's field holds (the DMC-30010's holds one input)."""
+    field = buf[name]
+    signed = field.dtype.base.kind == "i"
+    values = [_counts(v) - (0x10000 if signed and _counts(v) & 0x8000 else 0) for v in volts]
+    if field.shape[1:]:
+        n = min(len(values), field.shape[1])
+        field[0][:n] = values[:n]
+    elif values:
+        field[0] = values[0]
 
 
 def _counts(volts: float) -> int:

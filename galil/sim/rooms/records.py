@@ -31,8 +31,8 @@ from galil.sim.servo import Axis
 
 __all__ = ["Records"]
 
-#: What every known general block starts with; an unsourced block (the DMC-30010's 18 bytes,
-#: kept raw by galil.protocol.records) gets these and nothing else.
+#: What every known general block starts with; a block of unknown layout (kept raw by
+#: galil.protocol.records) gets these and nothing else.
 _GENERAL_START = np.dtype([("sample", "<u2"), ("inputs", "u1", (10,))])
 #: The general fields that change (those a layout has), filled by name.
 _GENERAL = ("sample", "error_code", "thread_status", "contour_buffer", "general_status")

@@ -1,7 +1,7 @@
 """Coordinated motion: draw a shape with lines and arcs, at one speed along the path.
 
-    python examples/07_draw_a_shape.py                       # the simulator
-    python examples/07_draw_a_shape.py tcp://192.168.0.42    # a real controller
+    python examples/08_draw_a_shape.py                       # the simulator
+    python examples/08_draw_a_shape.py tcp://192.168.0.42    # a real controller
 
 A path of ``galil.Line`` and ``galil.Arc`` segments, in millimetres, runs as one vector
 sequence (VM, VP, CR, VE, BG S) on axes A and B: predicted and checked as a whole before

@@ -1,0 +1,245 @@
+"""Arrays and variables on the controller (``controller.arrays``, ``controller.variables``).
+
+Arrays are dimensioned with ``DM``, filled from the host with ``QD``, read back with ``QU``
+(as numpy arrays), listed with ``LA`` and freed with ``DA``; variables are read with ``MG``,
+written with an assignment and listed with ``LV``. Names follow the controller's rules (a
+letter, then up to seven letters or digits, never a command such as ``CD0``) and sizes the
+model's array space; both are checked before a byte is sent. Values are the controller's
+numbers: 32-bit with four decimals (1/65536 resolution)::
+
+    dmc.arrays.define("speeds", 4)
+    dmc.arrays.download("speeds", [1000, 2000, 4000, 8000])
+    dmc.arrays.upload("speeds")          # array([1000., 2000., 4000., 8000.])
+    dmc.variables["gain"] = 2.5
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from galil.errors import InvalidArgument, LimitError, ProtocolError
+from galil.link import CommandLink
+from galil.models import INT32_MAX, INT32_MIN
+from galil.protocol import commands as cmds
+from galil.protocol.numbers import parse_number
+
+__all__ = ["Arrays", "Variables"]
+
+_LA_LINE = re.compile(r"\s*([A-Za-z][A-Za-z0-9]*)\s*\[\s*(\d+)\s*\]")
+_LV_LINE = re.compile(r"\s*([A-Za-z][A-Za-z0-9]*)\s*=\s*(\S+)")
+_UPLOAD_TIMEOUT = 10.0
+
+
+def _values(values: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
+    try:
+        data = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InvalidArgument(f"values for {name}[] must be numbers: {exc}") from exc
+    if data.ndim != 1 or data.size == 0:
+        raise InvalidArgument(f"values for {name}[] must be a non-empty 1-D sequence")
+    if not np.all(np.isfinite(data)):
+        i = int(np.argmin(np.isfinite(data)))
+        raise InvalidArgument(f"{name}[{i}] is {data[i]!r}: NaN and infinity cannot be sent")
+    bad = np.flatnonzero((data < INT32_MIN) | (data >= INT32_MAX + 1))
+    if bad.size:
+        i = int(bad[0])
+        raise LimitError(
+            f"{name}[{i}] = {data[i]:.6g} is outside the controller's 32-bit range",
+            name=f"{name}[{i}]",
+            value=float(data[i]),
+            limit=INT32_MAX if data[i] > 0 else INT32_MIN,
+        )
+    return data
+
+
+class Arrays:
+    """The controller's arrays.
+
+    Args:
+        link: the command link.
+    """
+
+    def __init__(self, link: CommandLink) -> None:
+        self.link = link
+
+    def list(self) -> dict[str, int]:
+        """Every array and its size (``LA``)."""
+        text = self.link.exchange(cmds.la()).text
+        out: dict[str, int] = {}
+        for line in text.splitlines():
+            if not line.strip():
+                continue
+            m = _LA_LINE.match(line)
+            if m is None:
+                raise self.link.error(ProtocolError, f"LA answered a line {line!r}")
+            out[m.group(1)] = int(m.group(2))
+        return out
+
+    def _size(self, name: str) -> int:
+        size = self.list().get(name)
+        if size is None:
+            raise InvalidArgument(
+                f"there is no array {name!r} on the controller (define it first)",
+                model=self.link.model.name,
+            )
+        return size
+
+    def define(self, name: str, size: int, *, replace: bool = False) -> None:
+        """Dimension array ``name`` with ``size`` elements, all zero (``DM``).
+
+        Args:
+            name: the array's name.
+            size: its number of elements (within the model's array space).
+            replace: free an array of that name first (its values are lost); without it an
+                existing array is refused by the controller.
+
+        Raises:
+            InvalidArgument: a bad name, or a size outside the model's array space.
+            CommandError: the controller refused (the name exists, no room left).
+        """
+        command = cmds.dm(name, size, model=self.link.model)
+        parts = [command]
+        if replace and name in self.list():
+            parts.insert(0, cmds.da(name))
+        self.link.command_line(parts)
+
+    def delete(self, name: str) -> None:
+        """Free array ``name`` (``DA name[]``).
+
+        Raises:
+            InvalidArgument: a bad name.
+            CommandError: there is no such array.
+        """
+        self.link.command_line([cmds.da(name)])
+
+    def download(self, name: str, values: npt.ArrayLike, *, first: int = 0) -> None:
+        """Write ``values`` into array ``name`` from element ``first`` (``QD``).
+
+        The array's size is read first (``LA``), so values that would not fit are refused
+        before any of them is sent.
+
+        Raises:
+            InvalidArgument: a bad name or index, values that are not finite numbers, no such
+                array, more values than fit.
+            LimitError: a value outside the controller's 32-bit range.
+        """
+        cmds.array_name(name)
+        data = _values(values, name)
+        if isinstance(first, bool) or not isinstance(first, int) or first < 0:
+            raise InvalidArgument(f"first must be a non-negative index, not {first!r}")
+        size = self._size(name)
+        if first + data.size > size:
+            raise InvalidArgument(
+                f"{data.size} values from {name}[{first}] do not fit {name}[] of {size}",
+                model=self.link.model.name,
+            )
+        self.link.exchange(cmds.qd(name, data.tolist(), first), timeout=_UPLOAD_TIMEOUT)
+
+    def upload(
+        self, name: str, first: int | None = None, last: int | None = None
+    ) -> npt.NDArray[np.float64]:
+        """Read array ``name`` (elements ``first`` to ``last``, default all) with ``QU``.
+
+        Raises:
+            InvalidArgument: a bad name or range, or no such array.
+            ProtocolError: the reply is not the numbers asked for.
+        """
+        cmds.array_name(name)
+        lo = 0 if first is None else first
+        hi = last
+        if hi is None:
+            hi = self._size(name) - 1
+        command = cmds.qu(name, lo, hi, delim=1)
+        text = self.link.exchange(command, timeout=_UPLOAD_TIMEOUT).text
+        try:
+            out = np.array(
+                [parse_number(x) for x in re.split(r"[,\r\n]+", text) if x.strip()],
+                dtype=np.float64,
+            )
+        except (InvalidArgument, ValueError) as exc:
+            raise self.link.error(ProtocolError, f"{command.text!r} answered {text!r}") from exc
+        if out.size != hi - lo + 1:
+            raise self.link.error(
+                ProtocolError, f"{command.text!r} answered {out.size} values, not {hi - lo + 1}"
+            )
+        return out
+
+    def __contains__(self, name: object) -> bool:
+        return isinstance(name, str) and name in self.list()
+
+    def __repr__(self) -> str:
+        return f"<Arrays of {self.link.model.name}>"
+
+
+class Variables:
+    """The controller's variables, like a dict: ``variables["x"]``, ``variables["x"] = 2``.
+
+    Reading the whole mapping (iteration, ``len``) lists them with ``LV``; one item is one
+    ``MG``.
+
+    Args:
+        link: the command link.
+    """
+
+    def __init__(self, link: CommandLink) -> None:
+        self.link = link
+
+    def read(self, name: str) -> float:
+        """The value of variable ``name`` (``MG name``).
+
+        Raises:
+            InvalidArgument: a bad name.
+            CommandError: there is no such variable.
+        """
+        cmds.variable_name(name)
+        return self.link.query_operands([name])[0]
+
+    def write(self, name: str, value: float) -> None:
+        """Set variable ``name`` (it is created if needed).
+
+        Raises:
+            InvalidArgument: a bad name or value.
+            LimitError: a value outside the controller's 32-bit range.
+        """
+        command = cmds.assign(name, value)
+        _values([value], name)
+        self.link.command_line([command])
+
+    def list(self) -> dict[str, float]:
+        """Every variable and its value (``LV``)."""
+        text = self.link.exchange(cmds.lv()).text
+        out: dict[str, float] = {}
+        for line in text.splitlines():
+            if not line.strip():
+                continue
+            m = _LV_LINE.match(line)
+            if m is None:
+                raise self.link.error(ProtocolError, f"LV answered a line {line!r}")
+            try:
+                out[m.group(1)] = parse_number(m.group(2))
+            except (InvalidArgument, ValueError) as exc:
+                raise self.link.error(ProtocolError, f"LV answered a line {line!r}") from exc
+        return out
+
+    def __getitem__(self, name: str) -> float:
+        return self.read(name)
+
+    def __setitem__(self, name: str, value: float) -> None:
+        self.write(name, value)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.list())
+
+    def __len__(self) -> int:
+        return len(self.list())
+
+    def __contains__(self, name: Any) -> bool:
+        return isinstance(name, str) and name in self.list()
+
+    def __repr__(self) -> str:
+        return f"<Variables of {self.link.model.name}>"

@@ -1,0 +1,282 @@
+"""Data capture at servo rate on the controller (``controller.capture(...)``).
+
+The controller records operands (``_RPA``, ``_TPA``, ``_TEA``, ``_TVA`` ...) into arrays by
+itself, every ``2**n`` samples (``RA``, ``RD``, ``RC``), with nothing lost to the link; the
+host uploads the arrays afterwards (``QU``) into numpy. The recording starts on a line of its
+own, ``RC n,m;MG TIME``, so the controller sample of its first value is known exactly; start it
+just before a move and every value lines up with the move's prediction
+(``MoveHandle.begin``)::
+
+    cap = dmc.capture(["_RPA", "_TPA"], every=2, seconds=1.0)
+    move = dmc.A.move_to(10 * mm)
+    recording = cap.wait()                  # a Recording: .samples, .t, ["_RPA"]
+    compare_plot(move, recording)
+
+Why not ``RC`` on the move's own line: a refused ``RC`` would raise for a line whose motion
+did start; a line of its own costs a few samples of recording before the move (none on a
+simulator whose clock waits for the host), never a wrong answer. See ``docs/decisions/0018``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from galil.arrays import Arrays
+from galil.errors import GalilError, GalilTimeoutError, InvalidArgument, ProtocolError
+from galil.link import CommandLink
+from galil.protocol import commands as cmds
+from galil.protocol.numbers import parse_number
+
+__all__ = ["Capture", "Recording"]
+
+#: Arrays the library records into (deallocated once uploaded).
+ARRAY_PREFIX = "gcap"
+
+
+@dataclass(frozen=True)
+class Recording:
+    """Values the controller recorded, one every ``every`` samples from sample ``start``.
+
+    Attributes:
+        sources: the operands recorded (``"_RPA"`` ...), in order.
+        every: samples between values.
+        start: the controller sample (``TIME``) of the first value.
+        sample_period: seconds per sample.
+        values: the values per source, float64 (counts for positions).
+    """
+
+    sources: tuple[str, ...]
+    every: int
+    start: int
+    sample_period: float
+    values: Mapping[str, npt.NDArray[np.float64]] = field(repr=False)
+
+    def __len__(self) -> int:
+        return len(next(iter(self.values.values()))) if self.values else 0
+
+    def __getitem__(self, source: str) -> npt.NDArray[np.float64]:
+        try:
+            return self.values[source]
+        except KeyError:
+            raise KeyError(f"{source!r} was not recorded; recorded: {self.sources}") from None
+
+    @property
+    def samples(self) -> npt.NDArray[np.int64]:
+        """The controller sample of each value (``start``, ``start + every`` ...)."""
+        return self.start + self.every * np.arange(len(self), dtype=np.int64)
+
+    @property
+    def t(self) -> npt.NDArray[np.float64]:
+        """Seconds since the first value."""
+        return np.multiply(self.samples - self.start, self.sample_period, dtype=np.float64)
+
+    def position(self, axis: str) -> npt.NDArray[np.float64]:
+        """The recorded reference (``_RP``) of ``axis``, else its encoder position (``_TP``).
+
+        Raises:
+            KeyError: neither was recorded.
+        """
+        for op in ("RP", "TP"):
+            if f"_{op}{axis}" in self.values:
+                return self.values[f"_{op}{axis}"]
+        raise KeyError(f"neither _RP{axis} nor _TP{axis} was recorded; recorded: {self.sources}")
+
+
+def _count(count: object, seconds: object, every: int, sample_period: float) -> int:
+    if (count is None) == (seconds is None):
+        raise InvalidArgument("give how many values to record (count=) or for how long (seconds=)")
+    if seconds is not None:
+        if (
+            isinstance(seconds, bool)
+            or not isinstance(seconds, (int, float))
+            or not (math.isfinite(seconds) and seconds > 0)
+        ):
+            raise InvalidArgument(f"seconds must be a positive number, not {seconds!r}")
+        return math.ceil(seconds / (every * sample_period) - 1e-9) + 1
+    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+        raise InvalidArgument(f"count must be a positive integer, not {count!r}")
+    return count
+
+
+class Capture:
+    """A recording on the controller: started by :meth:`start`, read by :meth:`wait` or
+    :meth:`stop`. Build it with ``controller.capture(...)``.
+
+    Everything is checked when it is built, before a byte is sent: the sources (what ``RD``
+    records), ``every`` (a power of two the model allows), and that ``count`` values of every
+    source fit the model's array space.
+
+    Args:
+        link: the command link.
+        sources: operands to record (``["_RPA", "_TPA"]``).
+        every: samples between values (2, 4 ... 256).
+        count: values to record per source.
+        seconds: or how long to record (``count`` follows).
+
+    Attributes:
+        result: the :class:`Recording`, once uploaded.
+        start_sample: the controller sample of the first value, once started.
+    """
+
+    def __init__(
+        self,
+        link: CommandLink,
+        sources: Sequence[str],
+        *,
+        every: int = 2,
+        count: int | None = None,
+        seconds: float | None = None,
+    ) -> None:
+        model = link.model
+        if isinstance(sources, str) or not isinstance(sources, Sequence) or not sources:
+            raise InvalidArgument(
+                f"sources is a list of operands such as ['_RPA'], not {sources!r}"
+            )
+        names = tuple(sources)
+        if len(set(names)) != len(names):
+            raise InvalidArgument(f"a source is named twice in {list(names)}")
+        self._rd = cmds.rd(*names, model=model)
+        cmds.rc(every, None, model=model)  # a power of two in the model's range
+        n = _count(count, seconds, every, link.sample_period)
+        if n * len(names) > model.array_elements:
+            raise InvalidArgument(
+                f"{n} values of {len(names)} sources need {n * len(names)} array elements; "
+                f"{model.name} has {model.array_elements}",
+                model=model.name,
+            )
+        self.link = link
+        self.sources = names
+        self.every = every
+        self.count = n
+        self.arrays = tuple(f"{ARRAY_PREFIX}{i}" for i in range(len(names)))
+        self.start_sample: int | None = None
+        self.result: Recording | None = None
+        self._started_at = 0.0
+
+    @property
+    def duration(self) -> float:
+        """Seconds from the first value to the last."""
+        return (self.count - 1) * self.every * self.link.sample_period
+
+    def start(self) -> Capture:
+        """Set the arrays up and start recording (``RC n,m`` with ``MG TIME`` behind it).
+
+        Raises:
+            InvalidArgument: a recording runs already (``_RC`` is 1).
+            CommandError: the controller refused (no room for the arrays ...).
+        """
+        link = self.link
+        model = link.model
+        if self.start_sample is not None:
+            raise InvalidArgument("this capture was started already; make a new one")
+        if round(link.query_operands(["_RC"])[0]):
+            raise InvalidArgument(
+                "the controller is recording already (_RC is 1); wait for it or stop it "
+                "(RC 0) first",
+                model=model.name,
+            )
+        existing = set(Arrays(link).list())
+        old = [a for a in self.arrays if a in existing]
+        setup = [cmds.da(*old)] if old else []
+        setup += [cmds.dm(a, self.count, model=model) for a in self.arrays]
+        setup += [cmds.ra(*self.arrays, model=model), self._rd]
+        link.command_line(setup)
+        replies = link.command_line(
+            [cmds.rc(self.every, self.count, model=model), cmds.time_stamp()]
+        )
+        try:
+            self.start_sample = round(parse_number(replies[-1]))
+        except (InvalidArgument, ValueError) as exc:
+            raise link.error(ProtocolError, f"MG TIME answered {replies[-1]!r}") from exc
+        self._started_at = link.clock()
+        return self
+
+    @property
+    def done(self) -> bool:
+        """Whether the recording is over (``_RC`` is 0); one query."""
+        if self.start_sample is None:
+            return False
+        return not round(self.link.query_operands(["_RC"])[0])
+
+    def wait(self, timeout: float | None = None) -> Recording:
+        """Wait until every value is recorded, then upload them (``QU``).
+
+        Args:
+            timeout: seconds at most (default: the recording's duration plus a margin).
+
+        Raises:
+            InvalidArgument: the capture was not started.
+            GalilTimeoutError: still recording after ``timeout`` (it goes on; :meth:`stop`).
+        """
+        if self.result is not None:
+            return self.result
+        if self.start_sample is None:
+            raise InvalidArgument("start() the capture first")
+        link = self.link
+        limit = self.duration * 1.5 + 2.0 if timeout is None else timeout
+        deadline = self._started_at + limit
+        left = self._started_at + self.duration - link.clock()
+        if left > 0:
+            link.pause(min(left, limit))
+        while not self.done:
+            now = link.clock()
+            if now >= deadline:
+                raise link.error(
+                    GalilTimeoutError, f"the capture still records after {limit:.3g} s"
+                )
+            link.pause(min(0.05, max(deadline - now, 0.001), self.every * link.sample_period * 4))
+        return self._upload(self.count)
+
+    def stop(self) -> Recording:
+        """Stop recording now (``RC 0``) and upload what was recorded."""
+        if self.result is not None:
+            return self.result
+        if self.start_sample is None:
+            raise InvalidArgument("start() the capture first")
+        link = self.link
+        n = self.count
+        if round(link.query_operands(["_RC"])[0]):
+            link.command_line([cmds.rc(0)])
+            n = round(link.query_operands(["_RD"])[0])
+        return self._upload(n)
+
+    def _upload(self, n: int) -> Recording:
+        assert self.start_sample is not None
+        link = self.link
+        arrays = Arrays(link)
+        values = {
+            s: arrays.upload(a, 0, n - 1) if n > 0 else np.zeros(0)
+            for s, a in zip(self.sources, self.arrays, strict=True)
+        }
+        link.command_line([cmds.da(*self.arrays)])
+        self.result = Recording(
+            self.sources, self.every, self.start_sample, link.sample_period, values
+        )
+        return self.result
+
+    def __enter__(self) -> Capture:
+        if self.start_sample is None:
+            self.start()
+        return self
+
+    def __exit__(self, kind: object, *exc: object) -> None:
+        if self.result is None and self.start_sample is not None:
+            try:
+                self.stop()
+            except GalilError:
+                if kind is None:
+                    raise  # the block's own exception, if any, matters more
+
+    def __repr__(self) -> str:
+        state = (
+            "uploaded" if self.result else "recording" if self.start_sample is not None else "new"
+        )
+        return (
+            f"<Capture {', '.join(self.sources)} every {self.every} samples, "
+            f"{self.count} values, {state}>"
+        )

@@ -1,0 +1,239 @@
+"""Interrupts: ``UI`` from a program and ``EI`` events, as callbacks and a queue.
+
+Like gclib's ``GInterrupt``: the controller sends interrupt packets (one status byte per
+event, :mod:`galil.protocol.interrupts`) to the Ethernet handle ``EI`` names. :meth:`enable`
+opens a handle of its own for them, asks its letter (``MG _WH`` on it) and sends ``EI m,n,h``;
+a reader thread turns the packets into :class:`~galil.protocol.interrupts.Interrupt` events,
+which land in :attr:`queue` and go to every subscriber, in order, on that thread::
+
+    dmc.interrupts.enable(axes="A")              # a user interrupt (UI) needs no mask
+    dmc.interrupts.subscribe(lambda i: print(i)) # "UI 3", "axis A done" ...
+    dmc.interrupts.get(timeout=5)
+
+Interrupts need a second Ethernet handle: over serial or USB there is none (``enable``
+refuses). A controller sends them to a UDP handle; this room opens what the transport gives
+(TCP today): see ``docs/decisions/0017``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import queue
+import threading
+from collections import deque
+from collections.abc import Callable
+
+from galil.errors import GalilConnectionError, GalilError, InvalidArgument, ProtocolError
+from galil.link import Link, read_reply
+from galil.protocol import commands as cmds
+from galil.protocol.interrupts import Interrupt, InterruptParser
+from galil.protocol.numbers import parse_number
+from galil.transport import HandleSource, Transport
+
+__all__ = ["Interrupt", "InterruptCallback", "InterruptQueue", "Interrupts"]
+
+_LOG = logging.getLogger("galil.interrupts")
+
+InterruptCallback = Callable[[Interrupt], None]
+
+
+class InterruptQueue:
+    """Interrupts, oldest first; bounded (the oldest drop, counted in ``dropped``)."""
+
+    def __init__(self, maxlen: int = 1000) -> None:
+        self._items: deque[Interrupt] = deque()
+        self._maxlen = maxlen
+        self._cond = threading.Condition(threading.Lock())
+        self.dropped = 0
+
+    def put(self, item: Interrupt) -> None:
+        """Append an interrupt (used by the reader)."""
+        with self._cond:
+            if len(self._items) >= self._maxlen:
+                self._items.popleft()
+                self.dropped += 1
+            self._items.append(item)
+            self._cond.notify()
+
+    def get(self, timeout: float | None = None) -> Interrupt:
+        """The oldest interrupt, waiting up to ``timeout`` seconds (``None``: for ever).
+
+        Raises:
+            queue.Empty: none arrived in time.
+        """
+        with self._cond:
+            if not self._cond.wait_for(lambda: self._items, timeout):
+                raise queue.Empty(f"no interrupt within {timeout} s")
+            return self._items.popleft()
+
+    def drain(self) -> list[Interrupt]:
+        """Remove and return every waiting interrupt."""
+        with self._cond:
+            out = list(self._items)
+            self._items.clear()
+            return out
+
+    def __len__(self) -> int:
+        with self._cond:
+            return len(self._items)
+
+
+class Interrupts:
+    """The interrupts of one controller.
+
+    Args:
+        link: the command link.
+        maxlen: interrupts kept in :attr:`queue` before the oldest drop.
+
+    Attributes:
+        queue: the interrupts received, oldest first.
+        mask: the ``EI`` mask sent last (``None`` while not enabled).
+    """
+
+    def __init__(self, link: Link, *, maxlen: int = 1000) -> None:
+        self.link = link
+        self.queue = InterruptQueue(maxlen)
+        self.mask: int | None = None
+        self._handle: Transport | None = None
+        self._index = 0
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._subscribers: list[InterruptCallback] = []
+
+    def _mask(self, axes: str, all_done: bool) -> int:
+        model = self.link.model
+        mask = 0
+        if not isinstance(axes, str):
+            raise InvalidArgument(f"axes must be a string of axis letters, not {axes!r}")
+        for name in axes.replace(",", "").replace(" ", ""):
+            mask |= 1 << "ABCDEFGH".index(model.axis_letter(name))
+        if not isinstance(all_done, bool):
+            raise InvalidArgument(f"all_done must be True or False, not {all_done!r}")
+        return mask | (0x100 if all_done else 0)
+
+    def enable(self, axes: str = "", *, all_done: bool = False) -> None:
+        """Receive interrupts: user interrupts (``UI``), and motion complete on ``axes``
+        (status ``0xD0`` + axis) and on every axis (``all_done``, ``0xD8``).
+
+        Calling it again changes the mask and keeps the handle.
+
+        Raises:
+            InvalidArgument: a bad axis, or no second Ethernet handle on this link.
+            GalilConnectionError: the handle could not be opened.
+        """
+        mask = self._mask(axes, all_done)
+        link = self.link
+        transport: object = link.transport
+        if not isinstance(transport, HandleSource) or "ethernet" not in link.model.transports:
+            raise InvalidArgument(
+                f"interrupts come on an Ethernet handle of their own; {transport!r} has none "
+                "(poll _BG, or watch program output with controller.messages)",
+                model=link.model.name,
+            )
+        if self._handle is None:
+            self._open(transport)
+        link.command_line([cmds.ei(mask, None, self._index)])
+        self.mask = mask
+
+    def _open(self, transport: HandleSource) -> None:
+        link = self.link
+        try:
+            handle = transport.open_handle()
+        except GalilConnectionError as exc:
+            raise link.error(GalilConnectionError, f"no handle for interrupts: {exc}") from exc
+        try:
+            text = read_reply(handle, b"MG _WH\r", link.timeout)
+            index = round(parse_number(text))
+            if not 0 <= index <= 7:
+                raise ProtocolError(f"MG _WH answered {text!r}: not a handle 0..7")
+        except (GalilError, ValueError) as exc:
+            with contextlib.suppress(GalilError, OSError):
+                handle.close()
+            if isinstance(exc, GalilError):
+                raise
+            raise link.error(ProtocolError, f"MG _WH answered {exc}") from exc
+        self._handle, self._index = handle, index
+        self._stop = threading.Event()
+        self._thread = threading.Thread(
+            target=self._read, args=(handle, self._stop), name="galil-interrupts", daemon=True
+        )
+        self._thread.start()
+
+    def _read(self, handle: Transport, stop: threading.Event) -> None:
+        parser = InterruptParser()
+        while not stop.is_set():
+            try:
+                chunk = handle.read(0.25)
+            except GalilConnectionError:
+                return
+            if not chunk:
+                stop.wait(0.005)  # some handles return at once when idle
+                continue
+            try:
+                events = parser.feed(chunk)
+            except ProtocolError as exc:
+                _LOG.warning("galil: interrupt packet dropped: %s", exc)
+                continue
+            for event in events:
+                # Callbacks first: once an interrupt is in the queue, every callback has had it.
+                for cb in self._subscribers:
+                    try:
+                        cb(event)
+                    except Exception:
+                        _LOG.exception("interrupt callback %r failed", cb)
+                self.queue.put(event)
+
+    def subscribe(self, callback: InterruptCallback) -> Callable[[], None]:
+        """Call ``callback(interrupt)`` for each interrupt, on the reader thread; returns an
+        unsubscriber. Interrupts arrive only once :meth:`enable` was called."""
+        if not callable(callback):
+            raise InvalidArgument(f"callback must be callable, not {callback!r}")
+        self._subscribers = [*self._subscribers, callback]
+
+        def unsubscribe() -> None:
+            self._subscribers = [c for c in self._subscribers if c is not callback]
+
+        return unsubscribe
+
+    def get(self, timeout: float | None = None) -> Interrupt:
+        """The oldest interrupt (see :class:`InterruptQueue`)."""
+        return self.queue.get(timeout)
+
+    @property
+    def enabled(self) -> bool:
+        """Whether interrupts come (``enable`` was called and not undone)."""
+        return self._handle is not None
+
+    def disable(self) -> None:
+        """``EI 0`` (the controller forgets the mask and its queue) and close the handle."""
+        if self._handle is None:
+            return
+        if self.link.is_open:
+            with contextlib.suppress(GalilError):
+                self.link.command_line([cmds.ei(0)])
+        self.close()
+
+    def close(self, *, keep_mask: bool = False) -> None:
+        """Stop the reader and close the handle (the link is closing); idempotent.
+
+        With ``keep_mask`` (a reconnect), :meth:`reopen` enables the same mask again.
+        """
+        self._stop.set()
+        handle, self._handle = self._handle, None
+        if handle is not None:
+            with contextlib.suppress(GalilError, OSError):
+                handle.close()
+        thread, self._thread = self._thread, None
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=2.0)
+        if not keep_mask:
+            self.mask = None
+
+    def reopen(self) -> None:
+        """After a reconnect: a new handle and the same mask again (if enabled before)."""
+        mask = self.mask
+        self.close()
+        if mask is not None:
+            axes = "".join(c for i, c in enumerate("ABCDEFGH") if mask >> i & 1)
+            self.enable(axes, all_done=bool(mask & 0x100))

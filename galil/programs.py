@@ -1,0 +1,218 @@
+"""Programs and threads: the user's program on the controller (``controller.programs``).
+
+``download`` checks the whole program against the model before a byte is sent (line length,
+program lines, labels, characters, quotes, no empty lines; see
+:mod:`galil.protocol.programs`), then reads the program in memory (``UL``) and sends nothing
+when it is already there. The library's own routines (the watchdog, speed schedules) live in a
+block after a marker line (``docs/decisions/0013``); a download keeps that block and never
+takes a label of it. A download stops every thread, so it is refused while a program of the
+user's runs; the library's own threads are halted for it and started again, and the result
+says which (``docs/decisions/0017``)::
+
+    dmc.programs.download(\"\"\"
+    #SQUARES
+    i=0
+    #LOOP
+    sq[i]=i*i
+    i=i+1
+    JP #LOOP,i<10
+    EN
+    \"\"\")
+    dmc.programs.run("#SQUARES", thread=1)
+    dmc.programs.wait(1)
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from galil.errors import GalilTimeoutError, InvalidArgument
+from galil.link import CommandLink
+from galil.protocol import commands as cmds
+from galil.protocol.programs import check_program, program_lines
+from galil.routines import MARKER, Routines, split_program
+from galil.tuning import burn
+
+__all__ = ["Download", "Programs"]
+
+_LOG = logging.getLogger("galil.programs")
+
+
+@dataclass(frozen=True)
+class Download:
+    """What :meth:`Programs.download` did.
+
+    Attributes:
+        sent: whether the program went out (``False``: it was in memory already).
+        lines: lines of the user's program as stored.
+        restarted: library threads (the watchdog ...) halted for the download and started
+            again.
+    """
+
+    sent: bool
+    lines: int
+    restarted: tuple[int, ...] = ()
+
+    def __bool__(self) -> bool:
+        return self.sent
+
+
+def _read_source(source: str | os.PathLike[str]) -> str:
+    if isinstance(source, os.PathLike):
+        return Path(source).read_text(encoding="ascii", errors="strict")
+    if not isinstance(source, str):
+        raise InvalidArgument(f"a program is text or a path, not {source!r}")
+    if "\n" not in source and "\r" not in source and source.strip():
+        path = Path(source)
+        try:
+            if path.is_file():
+                return path.read_text(encoding="ascii", errors="strict")
+        except (OSError, ValueError):
+            pass
+    return source
+
+
+class Programs:
+    """The user's program, its threads, and burning it to flash.
+
+    Args:
+        link: the command link.
+        routines: the library's routines (their block is kept by every download).
+    """
+
+    def __init__(self, link: CommandLink, routines: Routines) -> None:
+        self.link = link
+        self.routines = routines
+
+    def download(
+        self,
+        source: str | os.PathLike[str],
+        *,
+        strip_comments: bool = False,
+        pack: bool = False,
+    ) -> Download:
+        """Download a program (text, or the path of a file), unless it is there already.
+
+        Args:
+            source: the program text, or a path (a :class:`~pathlib.Path`, or a one-line
+                string naming a file that exists).
+            strip_comments: drop comments and the lines they leave empty (program memory is
+                scarce; comments take it too).
+            pack: join lines into compound lines up to the model's line length.
+
+        Returns:
+            What was done (:class:`Download`; true when the program went out).
+
+        Raises:
+            InvalidArgument: a line or the program breaks a rule of the model (nothing is
+                sent), a label of the library's routines, or a program of the user's running.
+        """
+        model = self.link.model
+        try:
+            text = _read_source(source)
+        except (OSError, UnicodeError) as exc:
+            raise InvalidArgument(f"cannot read the program {source!r}: {exc}") from exc
+        lines = program_lines(
+            text, strip_comments=strip_comments, pack=model.line_length if pack else None
+        )
+        check_program(lines, model)
+        for line in lines:
+            if line.text == MARKER:
+                raise InvalidArgument(
+                    f"program line {line.source}: {MARKER!r} marks the library's routines; "
+                    "use another comment"
+                )
+        stored = [line.text for line in lines]
+        sent, restarted = self.routines.replace_user(stored)
+        if restarted:
+            _LOG.warning(
+                "galil: library thread(s) %s halted for the program download and started again",
+                list(restarted),
+            )
+        return Download(sent, len(stored), restarted)
+
+    def upload(self) -> str:
+        """The user's program in memory (``UL``), without the library's routines."""
+        user, _ = split_program(self.routines.upload())
+        return "\n".join(user)
+
+    def _thread(self, thread: object) -> int:
+        n = self.link.model.threads
+        if isinstance(thread, bool) or not isinstance(thread, int) or not 0 <= thread < n:
+            raise InvalidArgument(
+                f"{self.link.model.name} has threads 0..{n - 1}, not {thread!r}",
+                model=self.link.model.name,
+            )
+        library = self.routines.threads
+        if thread in library:
+            raise InvalidArgument(
+                f"thread {thread} runs the library's {library[thread]} (the watchdog or a "
+                "speed schedule); stop that through the library",
+                model=self.link.model.name,
+            )
+        return thread
+
+    def run(self, label: str = "#A", thread: int = 0) -> None:
+        """Run the program from ``label`` on ``thread`` (``XQ``).
+
+        Raises:
+            InvalidArgument: a bad label or thread, a thread that runs a program already or
+                one the library uses.
+            CommandError: the controller refused (TC 10: no such label).
+        """
+        command = cmds.xq(label, self._thread(thread))
+        if thread in self.threads:
+            raise InvalidArgument(
+                f"thread {thread} runs a program already; halt it first or pick another",
+                model=self.link.model.name,
+            )
+        self.link.command_line([command])
+
+    def halt(self, thread: int | None = None) -> None:
+        """Halt ``thread`` (``HX n``), or every thread of the user's (``None``); the library's
+        own threads (the watchdog) keep running."""
+        if thread is not None:
+            self.link.command_line([cmds.hx(self._thread(thread))])
+            return
+        busy = sorted(self.threads)
+        if busy:
+            self.link.command_line([cmds.hx(t) for t in busy])
+
+    @property
+    def threads(self) -> dict[int, int]:
+        """The user's running threads and the line each is on (``_XQn``); the library's own
+        threads are left out. One round trip."""
+        running = self.routines.running()
+        return {t: line for t, line in running.items() if t not in self.routines.threads}
+
+    def wait(self, thread: int = 0, timeout: float = 10.0) -> None:
+        """Wait until ``thread`` has finished (its ``_XQn`` reads -1), in controller time.
+
+        Raises:
+            InvalidArgument: a bad thread or timeout.
+            GalilTimeoutError: it still runs after ``timeout`` seconds (it is not halted).
+        """
+        n = self._thread(thread)
+        if (
+            isinstance(timeout, bool)
+            or not isinstance(timeout, (int, float))
+            or not (math.isfinite(timeout) and timeout >= 0)
+        ):
+            raise InvalidArgument(f"timeout must be a non-negative number, not {timeout!r}")
+        link = self.link
+        deadline = link.clock() + timeout
+        while round(link.query_operands([f"_XQ{n}"])[0]) >= 0:
+            if link.clock() >= deadline:
+                raise link.error(GalilTimeoutError, f"thread {n} still runs after {timeout} s")
+            link.pause(0.01)
+
+    def burn(self, timeout: float | None = None) -> None:
+        """Burn the program into flash (``BP``), the library's routines with it; it then
+        survives a power cycle. Slow: the model's ``burn_timeout`` is allowed. The same as
+        ``controller.save_program()``; refused while a program runs (TC 17), the watchdog's
+        included."""
+        burn(self.link, "BP", timeout)

@@ -1,0 +1,70 @@
+"""``controller.interrupts`` over TCP: the handle, the mask, reconnects, failing callbacks."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+
+import pytest
+
+import galil
+from galil.sim.server import SimTcpServer
+from galil.testing import transcript
+
+
+@pytest.fixture
+def served() -> Iterator[tuple[SimTcpServer, galil.Controller]]:
+    with SimTcpServer(model="DMC-4040") as server, galil.connect(server.url, timeout=2.0) as dmc:
+        yield server, dmc
+
+
+def test_enable_names_the_handle_it_opened_and_disable_turns_it_off(
+    served: tuple[SimTcpServer, galil.Controller],
+) -> None:
+    server, dmc = served
+    with transcript(dmc) as sent:
+        dmc.interrupts.enable(axes="AB", all_done=True)
+    assert sent.lines == ["EI 259,,2"]  # handles A (commands) and B (messages) were taken
+    assert dmc.interrupts.enabled
+    assert "IHC" in server.controller.describe_handles()
+    dmc.move({"A": 300, "B": 200}).wait(timeout=5)
+    got = {str(dmc.interrupts.get(timeout=5)) for _ in range(3)}
+    assert got == {"axis A done", "axis B done", "all done ($D8)"}
+    with transcript(dmc) as sent:
+        dmc.interrupts.disable()
+    assert sent.lines == ["EI 0"]
+    assert not dmc.interrupts.enabled
+
+
+def test_interrupts_come_back_after_a_reconnect() -> None:
+    with SimTcpServer(model="DMC-4040") as server, galil.connect(server.url) as dmc:
+        dmc.interrupts.enable(axes="A")
+        dmc.reconnect()
+        assert dmc.interrupts.enabled
+        assert dmc.interrupts.mask == 1
+        dmc.programs.download("#U\nUI 4\nEN")
+        dmc.programs.run("#U", thread=1)
+        assert str(dmc.interrupts.get(timeout=5)) == "UI 4"
+
+
+def test_a_failing_callback_is_logged_and_the_others_still_hear(
+    served: tuple[SimTcpServer, galil.Controller], caplog: pytest.LogCaptureFixture
+) -> None:
+    _, dmc = served
+    heard: list[galil.Interrupt] = []
+
+    def broken(_: galil.Interrupt) -> None:
+        raise RuntimeError("callback bug")
+
+    dmc.interrupts.subscribe(broken)
+    unsubscribe = dmc.interrupts.subscribe(heard.append)
+    dmc.interrupts.enable()
+    with caplog.at_level(logging.ERROR, logger="galil.interrupts"):
+        dmc.programs.download("#U\nUI 1\nUI 2\nEN")
+        dmc.programs.run("#U", thread=1)
+        assert [dmc.interrupts.get(timeout=5).number for _ in range(2)] == [1, 2]
+    assert [i.number for i in heard] == [1, 2]
+    assert "callback bug" in caplog.text
+    unsubscribe()
+    with pytest.raises(galil.InvalidArgument):
+        dmc.interrupts.subscribe("not callable")  # type: ignore[arg-type]

@@ -1,0 +1,192 @@
+"""``controller.programs``, ``arrays`` and ``variables`` on the in-process simulator."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import galil
+from galil.routines import MARKER
+from galil.testing import nothing_sent, simulated, transcript
+
+SQUARES = """
+#SQUARES
+i=0
+#LOOP
+sq[i]=i*i
+i=i+1
+JP #LOOP,i<10
+EN
+"""
+
+
+@pytest.fixture
+def dmc() -> galil.Controller:
+    with simulated() as controller:
+        yield controller
+
+
+def test_a_program_fills_an_array_and_its_thread_finishes(dmc: galil.Controller) -> None:
+    dmc.arrays.define("sq", 10)
+    assert dmc.programs.download(SQUARES).sent
+    dmc.programs.run("#SQUARES", thread=1)
+    assert 1 in dmc.programs.threads
+    dmc.programs.wait(1)
+    assert dmc.programs.threads == {}
+    assert dmc.arrays.upload("sq").tolist() == [i * i for i in range(10)]
+    assert dmc.variables["i"] == 10
+
+
+def test_the_same_program_again_sends_nothing_but_the_upload(dmc: galil.Controller) -> None:
+    dmc.programs.download(SQUARES)
+    assert dmc.programs.upload() == SQUARES.strip()
+    with transcript(dmc) as sent:
+        result = dmc.programs.download("  " + SQUARES.replace("\n", "  \n"))  # blanks differ
+    assert not result.sent
+    assert sent.lines == ["UL"]
+
+
+def test_a_file_is_read_and_comments_stripped_and_lines_packed(
+    dmc: galil.Controller, tmp_path: Path
+) -> None:
+    path = tmp_path / "move.dmc"
+    path.write_text("#M ' a move\n' set up\nPR 1000\nBG A\nAM A\nEN\n", encoding="ascii")
+    result = dmc.programs.download(path, strip_comments=True, pack=True)
+    assert result.lines == 1
+    assert dmc.programs.upload() == "#M;PR 1000;BG A;AM A;EN"
+    assert not dmc.programs.download(str(path), strip_comments=True, pack=True).sent
+
+
+@pytest.mark.parametrize(
+    ("call", "words"),
+    [
+        (lambda d: d.programs.download("#A\n\nEN"), "line 2 is empty"),
+        (lambda d: d.programs.download("#A\nMG \\\nEN"), "backslash"),
+        (lambda d: d.programs.download("#A\n" + "x=1;" * 25), "takes 80"),
+        (lambda d: d.programs.download("#A\nEN\n#A"), "already on line 1"),
+        (lambda d: d.programs.download("#LONGLABEL\nEN"), "allows 7"),
+        (lambda d: d.programs.download('#A\nMG "x'), "not closed"),
+        (lambda d: d.programs.download("#A\n" + "EN\n" * 2000), "holds 2000"),
+        (lambda d: d.programs.download(f"#A\n{MARKER}\nEN"), "marks the library"),
+        (lambda d: d.programs.run("#A", thread=8), "threads 0..7"),
+        (lambda d: d.programs.run("A", thread=0), "label"),
+        (lambda d: d.programs.halt(-1), "threads 0..7"),
+        (lambda d: d.arrays.define("CD0", 10), "clashes with the command CD"),
+        (lambda d: d.arrays.define("2ab", 10), "array name"),
+        (lambda d: d.arrays.define("toolongname", 10), "array name"),
+        (lambda d: d.arrays.define("a", 0), "size"),
+        (lambda d: d.arrays.define("a", 24_001), "size"),
+        (lambda d: d.arrays.define("a", 2.5), "whole number"),
+        (lambda d: d.arrays.download("a b", [1]), "array name"),
+        (lambda d: d.arrays.download("a", [np.nan]), "NaN"),
+        (lambda d: d.arrays.download("a", []), "non-empty"),
+        (lambda d: d.arrays.download("a", [[1, 2]]), "1-D"),
+        (lambda d: d.arrays.download("a", [3e9]), "32-bit"),
+        (lambda d: d.arrays.upload("SPA"), "clashes"),
+        (lambda d: d.arrays.delete("x y"), "array name"),
+        (lambda d: d.variables.write("TIME", 1), "variable name"),
+        (lambda d: d.variables.write("x", float("inf")), "NaN or infinity"),
+        (lambda d: d.variables.read("1x"), "variable name"),
+    ],
+)
+def test_every_bad_program_name_or_size_is_refused_before_a_byte(
+    dmc: galil.Controller, call: object, words: str
+) -> None:
+    with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match=words):
+        call(dmc)  # type: ignore[operator]
+
+
+def test_values_that_do_not_fit_are_refused_after_one_query(dmc: galil.Controller) -> None:
+    dmc.arrays.define("a", 3)
+    with (
+        nothing_sent(dmc, allow_queries=True) as sent,
+        pytest.raises(galil.InvalidArgument, match="do not fit"),
+    ):
+        dmc.arrays.download("a", [1, 2, 3], first=1)
+    assert sent.lines == ["LA"]
+    with pytest.raises(galil.InvalidArgument, match="no array 'b'"):
+        dmc.arrays.download("b", [1])
+
+
+def test_arrays_and_variables_round_trip(dmc: galil.Controller) -> None:
+    dmc.arrays.define("speeds", 4)
+    dmc.arrays.download("speeds", [1000, 2000.5, -4000, 0.0001])
+    got = dmc.arrays.upload("speeds")
+    assert got.dtype == np.float64
+    assert got.tolist() == [1000, 2000.5, -4000, 0.0001]
+    assert dmc.arrays.upload("speeds", 1, 2).tolist() == [2000.5, -4000]
+    assert dmc.arrays.list() == {"speeds": 4}
+    assert "speeds" in dmc.arrays
+    with pytest.raises(galil.CommandError) as info:
+        dmc.arrays.define("speeds", 8)  # exists
+    assert info.value.code == 4
+    dmc.arrays.define("speeds", 8, replace=True)
+    assert dmc.arrays.upload("speeds").tolist() == [0] * 8
+    dmc.arrays.delete("speeds")
+    assert dmc.arrays.list() == {}
+    dmc.variables["gain"] = 2.5
+    dmc.variables.write("shift", -3)
+    assert dmc.variables["gain"] == 2.5
+    assert dmc.variables.list() == {"gain": 2.5, "shift": -3.0}
+    assert sorted(dmc.variables) == ["gain", "shift"]
+    assert "gain" in dmc.variables
+    assert len(dmc.variables) == 2
+
+
+def test_a_users_running_program_is_never_replaced(dmc: galil.Controller) -> None:
+    dmc.programs.download("#W\nWT 10000\nEN")
+    dmc.programs.run("#W")
+    with (
+        nothing_sent(dmc, allow_queries=True),
+        pytest.raises(galil.InvalidArgument, match=r"runs on thread\(s\) \[0\]"),
+    ):
+        dmc.programs.download("#B\nEN")
+    with pytest.raises(galil.InvalidArgument, match="runs a program already"):
+        dmc.programs.run("#W", thread=0)
+    dmc.programs.halt()
+    assert dmc.programs.threads == {}
+    assert dmc.programs.download("#B\nEN").sent
+
+
+def test_the_watchdog_keeps_running_and_the_download_says_it_was_restarted(
+    dmc: galil.Controller, caplog: pytest.LogCaptureFixture
+) -> None:
+    dog = dmc.watchdog(1.0)
+    thread = next(iter(dmc.routines.threads))
+    dmc.programs.download("#A\nMG 1\nEN")
+    with caplog.at_level(logging.WARNING, logger="galil.programs"):
+        result = dmc.programs.download("#B\nMG 2\nEN")
+    assert result.restarted == (thread,)
+    assert "halted for the program download and started again" in caplog.text
+    assert thread in dmc.routines.running()
+    assert dmc.programs.upload() == "#B\nMG 2\nEN"
+    program = dmc.routines.upload()
+    assert program[:3] == ["#B", "MG 2", "EN"]
+    assert program[3] == MARKER
+    # The library's thread is the library's: the user's halt leaves it, run() refuses it.
+    dmc.programs.halt()
+    assert thread in dmc.routines.running()
+    with pytest.raises(galil.InvalidArgument, match="library"):
+        dmc.programs.run("#B", thread=thread)
+    with pytest.raises(galil.InvalidArgument, match="library"):
+        dmc.programs.halt(thread)
+    with pytest.raises(galil.InvalidArgument, match="label"):
+        dmc.programs.download("#GWDOG\nEN")
+    dog.stop()
+
+
+def test_burn_sends_bp(dmc: galil.Controller) -> None:
+    with transcript(dmc) as sent:
+        dmc.programs.burn()
+    assert sent.lines == ["BP"]
+
+
+def test_waiting_for_a_thread_times_out_in_controller_time(dmc: galil.Controller) -> None:
+    dmc.programs.download("#W\nWT 5000\nEN")
+    dmc.programs.run("#W", thread=2)
+    with pytest.raises(galil.GalilTimeoutError, match="thread 2 still runs"):
+        dmc.programs.wait(2, timeout=0.5)
+    dmc.programs.wait(2, timeout=6)
