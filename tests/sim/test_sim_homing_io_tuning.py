@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from galil.predict.homing import HomeSwitch, HomingParams, homing
@@ -75,6 +75,10 @@ def test_the_predictor_and_the_simulator_agree_sample_for_sample(kind: str) -> N
 def test_hm_finds_the_same_index_wherever_it_starts(
     edge: int, side: int, start: int, cn: int
 ) -> None:
+    # An index pulse within a count of the switch's edge is ambiguous on a real axis too
+    # (the classic "index too close to the home switch"): the test keeps clear of it.
+    phase = (edge - 100) % 3000
+    assume(min(phase, 3000 - phase) > 1)
     sim = SimController("DMC-4040", servo_lag=0.0)
     sim.set_home_switch("A", edge=edge, side=side, index_period=3000, index_offset=100)
     ask(sim, f"DPA={start};SPA=60000;ACA=1024000;DCA=1024000;HVA=6000;CN ,{cn}")
