@@ -5,20 +5,19 @@ without sampling; ruckig's ``Trajectory.at_time`` sampling the same motion in a 
 targets (>= 20 M samples/s, >= 5x ruckig, <= 50 us planning). Then ``predict.contour`` on a
 1 M-segment DT 1 path (>= 50 M samples/s, within 2x of the floor-interpolation formula written
 directly in numpy, measured in the same run; peak memory no more than the output arrays), and
-how its cost grows from 1 k to 1 M segments.
+how its cost grows from 1 k to 1 M segments; and how a move's prediction grows from 1 s to 1 h.
 
-Run: ``.venv/bin/python benchmarks/predict.py``
+Run: ``.venv/bin/python benchmarks/predict.py [--quick] [--json PATH]``
 """
 
 from __future__ import annotations
 
 import importlib
-import time
 import tracemalloc
-from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt
+from harness import Figure, Scaling, best, finish, options
 
 from galil import predict
 
@@ -32,17 +31,6 @@ AXES = {
     "C": (0.5 * SPEED * (10 - 0.5 * SPEED / ACCEL), 0.5 * SPEED, ACCEL, ACCEL),
     "D": (0.25 * SPEED * (10 - 0.25 * SPEED / ACCEL), 0.25 * SPEED, ACCEL, ACCEL),
 }
-
-
-def best(fn: Callable[[], object], repeat: int = 7, number: int = 1) -> float:
-    """Best wall time of ``number`` calls, over ``repeat`` rounds, per call."""
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        for _ in range(number):
-            fn()
-        times.append((time.perf_counter() - t0) / number)
-    return min(times)
 
 
 def predict_all() -> predict.MultiProfile:
@@ -67,8 +55,8 @@ def bare_contour(c: npt.NDArray[np.int64], n: int, start: int = 0) -> npt.NDArra
     return out
 
 
-def contour_bench() -> bool:
-    """predict.contour on DT 1 paths; return whether its targets are met."""
+def contour_bench() -> Figure:
+    """predict.contour on DT 1 paths against the bare kernel, with its scaling."""
     rng = np.random.default_rng(15)
     c = rng.integers(-3000, 3001, 1_000_000)
     samples = 2 * c.size
@@ -101,10 +89,34 @@ def contour_bench() -> bool:
     ]
     cells = ", ".join(f"{m // 1000}k {t * 1e3:.3f} ms" for m, t in zip(sizes, times, strict=True))
     print(f"  scaling: {cells} ({'; '.join(steps)})")
-    return rate >= 50e6 and ratio <= 2 and peak <= 1.05 * outputs
+    return Figure(
+        "predict.contour (1M segments, DT 1)",
+        rate / 1e6,
+        "M samples/s",
+        50,
+        anchor="bare numpy kernel",
+        anchor_value=samples / t_bare / 1e6,
+        ratio=ratio,
+        ratio_text="x the kernel's time",
+        ratio_target=2,
+        scaling=[Scaling("segments", [(float(m), t) for m, t in zip(sizes, times, strict=True)])],
+        note=f"peak memory {peak / outputs:.2f}x the output arrays (target <= 1.05)"
+        + ("" if peak <= 1.05 * outputs else ": MISSED"),
+    )
+
+
+def move_scaling() -> Scaling:
+    """predict.move of one axis for moves lasting 1 s to 1 h (the whole profile sampled)."""
+    points = []
+    for seconds in (1.0, 10.0, 100.0, 1000.0, 3600.0):
+        distance = int(SPEED * (seconds - SPEED / ACCEL))
+        t = best(lambda d=distance: predict.move(d, SPEED, ACCEL, ACCEL), repeat=3)
+        points.append((seconds, t))
+    return Scaling("s of motion", points)
 
 
 def main() -> None:
+    args = options(__doc__)
     multi = predict_all()
     samples = sum(round(p.duration / TS) + 1 for p in multi.profiles.values())
     t_pred = best(predict_all, repeat=15)
@@ -115,13 +127,23 @@ def main() -> None:
     print(f"predict: 4 axes, {multi.duration:.3f} s at 1024 Hz = {samples} samples")
     print(f"  sampling  {rate / 1e6:8.2f} M samples/s   ({t_pred * 1e3:.3f} ms)  target >= 20")
     print(f"  planning  {t_plan * 1e6:8.2f} us per move                   target <= 50")
-    contour_ok = contour_bench()  # after the moves: its large arrays change the allocator's state
-
+    growth = move_scaling()
+    contour = contour_bench()  # after the moves: its large arrays change the allocator's state
+    sampling = Figure(
+        "predict.move sampling (4 axes, 10 s)",
+        rate / 1e6,
+        "M samples/s",
+        20,
+        scaling=[growth],
+    )
+    planning = Figure("predict.plan_move", t_plan * 1e6, "us", 50, higher=False)
+    figures = [sampling, planning, contour]
     try:
         import ruckig
     except ImportError:
         print("ruckig not installed: no comparison")
-        print("targets met" if contour_ok else "TARGETS MISSED")
+        sampling.note = "ruckig not installed: no comparison"
+        finish(figures, args)
         return
     inp = ruckig.InputParameter(4)
     inp.current_position = [0.0] * 4
@@ -147,8 +169,11 @@ def main() -> None:
     print(f"  sampling  {r_rate / 1e6:8.2f} M samples/s   ({t_r * 1e3:.3f} ms)")
     print(f"  planning  {t_rplan * 1e6:8.2f} us per 4-axis trajectory")
     print(f"ratio predict/ruckig sampling: {rate / r_rate:6.1f}x   target >= 5")
-    ok = rate >= 20e6 and rate / r_rate >= 5 and t_plan <= 50e-6 and contour_ok
-    print("targets met" if ok else "TARGETS MISSED")
+    sampling.anchor, sampling.anchor_value = "ruckig at_time", r_rate / 1e6
+    sampling.ratio, sampling.ratio_text = rate / r_rate, "x ruckig's rate"
+    sampling.ratio_target, sampling.ratio_higher = 5, True
+    planning.anchor, planning.anchor_value = "ruckig calculate (4 axes)", t_rplan * 1e6
+    finish(figures, args)
 
 
 if __name__ == "__main__":

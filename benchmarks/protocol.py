@@ -9,15 +9,19 @@ Each mix runs several short times; the median rate is printed, measured in CPU t
 process ("per second on one core": other processes' load on the machine is not counted).
 
 Target: >= 200,000 pairs/s, so the host's share stays far below the controller's ~0.5 ms per
-command. Run: ``python benchmarks/protocol.py [repeats]``.
+command. The anchor is the least work any codec must do for a pair, timed the same way: format
+the command's bytes and look for the ``:`` at the end of the reply.
+
+Run: ``python benchmarks/protocol.py [--quick] [--json PATH]``.
 """
 
 from __future__ import annotations
 
 import statistics
-import sys
 import time
 from collections.abc import Callable
+
+from harness import Figure, Scaling, cpu_best, finish, options
 
 from galil.protocol import Session, commands, pack
 
@@ -36,8 +40,16 @@ def _rate(step: Callable[[], int], seconds: float = 0.3) -> float:
             return done / (now - start)
 
 
+def bare_pair() -> int:
+    """The anchor: the bytes of ``PRA=1000`` built, and a reply's ``:`` found."""
+    data = b"PRA=" + str(1000).encode() + b"\r"
+    reply = b":"
+    return 1 if data and reply.endswith(b":") else 0
+
+
 def main() -> None:
-    repeats = int(sys.argv[1]) if len(sys.argv) > 1 else 7
+    args = options(__doc__)
+    repeats = 3 if args.quick else 7
     session = Session()
 
     def ack_pair() -> int:
@@ -80,9 +92,41 @@ def main() -> None:
         ("prebuilt PRA=1000 -> ':'", prebuilt_pair),
     ]
     print(f"protocol core, one core (CPU time), median of {repeats}; target {TARGET:,} pairs/s")
+    bare = statistics.median(_rate(bare_pair) for _ in range(repeats))
+    print(f"  {'anchor: bytes built, reply end found':44s} {bare:12,.0f} pairs/s")
+    figures = []
     for name, step in rows:
         rate = statistics.median(_rate(step) for _ in range(repeats))
         print(f"  {name:44s} {rate:12,.0f} pairs/s   ratio to target {rate / TARGET:5.2f}")
+        figures.append(
+            Figure(
+                f"codec {name.split(' ->')[0].split(' (')[0]}",
+                rate,
+                "pairs/s",
+                TARGET,
+                anchor="bare bytes",
+                anchor_value=bare,
+                ratio=bare / rate,
+                ratio_text="x the anchor's time",
+            )
+        )
+    figures[-1].scaling.append(Scaling("pipelined commands", batch_scaling(session, prebuilt)))
+    finish(figures, args)
+
+
+def batch_scaling(session: Session, cmd: commands.Command) -> list[tuple[float, float]]:
+    """CPU time of N prebuilt commands sent back to back and their N replies in one chunk."""
+    points = []
+    for n in (10, 100, 1000, 10000):
+        replies = b":" * n
+
+        def batch(n: int = n, replies: bytes = replies) -> None:
+            for _ in range(n):
+                session.send(cmd)
+            session.receive_data(replies)
+
+        points.append((float(n), cpu_best(batch, repeat=5, number=max(1, 1000 // n))))
+    return points
 
 
 if __name__ == "__main__":
