@@ -12,7 +12,8 @@ Two parts:
    cost grows with the length of the move.
 
 Times are the median of interleaved pairs of short runs (each the best of a few blocks), so
-load from other processes hits both sides of a pair alike.
+load from other processes hits both sides of a pair alike; planning, which never waits, is
+timed in this process's CPU time.
 
 Run: ``.venv/bin/python benchmarks/host.py [--quick] [--json PATH]``
 """
@@ -23,7 +24,7 @@ import itertools
 import time
 from collections.abc import Callable
 
-from harness import Figure, Scaling, best, finish, interleaved, options
+from harness import Figure, Scaling, best, cpu_best, finish, interleaved, options
 
 import galil
 from galil.controller import Controller
@@ -87,9 +88,11 @@ class InstantTransport:
         pass
 
 
-def _per_call(fn: Callable[[], object], number: int) -> Callable[[], float]:
+def _per_call(fn: Callable[[], object], number: int, cpu: bool = False) -> Callable[[], float]:
+    timer = cpu_best if cpu else best
+
     def run() -> float:
-        return best(fn, repeat=3, number=number)
+        return timer(fn, repeat=3, number=number)
 
     return run
 
@@ -122,7 +125,9 @@ def planning(quick: bool) -> list[Figure]:
         if label.endswith("mm") and axis.scale is None:
             axis.set_scale(1000 / ureg.mm)
         fn()  # warm up (imports, caches of the first call)
-        t_query, t_plan, _ = interleaved(_per_call(query, number), _per_call(fn, number), pairs)
+        t_query, t_plan, _ = interleaved(
+            _per_call(query, number, cpu=True), _per_call(fn, number, cpu=True), pairs
+        )
         overhead = (t_plan - t_query) * 1e6
         print(
             f"  {label:16s} {t_plan * 1e6:7.1f} us; state query {t_query * 1e6:6.1f} us;"

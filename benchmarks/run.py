@@ -99,7 +99,7 @@ def main() -> int:
         "figures": [f.to_json() for f in figures],
     }
     args.out.write_text(json.dumps(record, indent=1) + "\n")
-    print(f"written: {args.out.relative_to(Path.cwd()) if args.out.is_relative_to(Path.cwd()) else args.out}")
+    print(f"written: {args.out}")
     return 0 if not failed and all(f.ok for f in figures) else 1
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -34,6 +34,7 @@ __all__ = [
     "ProfileQuantities",
     "UnitProfile",
     "check_overrides",
+    "in_user_units",
     "resolve_moves",
     "user_units",
 ]
@@ -42,9 +43,6 @@ __all__ = [
 OVERRIDES = {"speed": "SP", "accel": "AC", "decel": "DC"}
 _POWER = {"SP": 1, "JG": 1, "AC": 2, "DC": 2}
 _SETTERS = {"SP": cmds.sp, "AC": cmds.ac, "DC": cmds.dc, "IT": cmds.it, "JG": cmds.jg}
-
-
-_PROFILE_FIELDS = tuple(f.name for f in fields(predict.Profile) if f.name != "display")
 
 
 @dataclass(frozen=True)
@@ -177,10 +175,7 @@ class Axis:
         scale = self._scale
         if scale is None:
             return profile
-        shown = (scale.sign * float(scale.counts_per.magnitude), float(scale.offset.magnitude))
-        values = {f: getattr(profile, f) for f in _PROFILE_FIELDS}
-        values["display"] = (*shown, scale.unit_text)
-        return UnitProfile(**values, scale=scale)
+        return profile.recast(UnitProfile, display=scale.display, scale=scale)
 
     @property
     def _display(self) -> Display | None:
@@ -423,16 +418,20 @@ class Axis:
 
     # -- moves ------------------------------------------------------------------------------
     def _move(self, value: Any, relative: bool, dry_run: bool, **overrides: Any) -> MoveHandle:
-        moves = resolve_moves({self.letter: self}, {self.letter: value}, relative, overrides)
-        with user_units({self.letter: self}):
+        a = self.letter
+        moves = resolve_moves({a: self}, {a: value}, relative, overrides)
+        try:
             return execute_move(
                 self._link,
                 self._tracker,
                 moves,
                 relative=relative,
                 dry_run=dry_run,
-                display={self.letter: self.display},
+                display={a: self.display},
             )
+        except LimitError as exc:  # user_units() as a plain handler: cheaper on every move
+            in_user_units(exc, {a: self})
+            raise
 
     def move_to(self, position: Any, **overrides: Any) -> MoveHandle:
         """Move to an absolute position (``PA`` then ``BG``).
@@ -686,11 +685,16 @@ def user_units(axes: Mapping[str, Axis]) -> Iterator[None]:
     try:
         yield
     except LimitError as exc:
-        axis = axes.get(exc.axis) if exc.axis else None
-        scale = None if axis is None else axis.scale
-        if scale is not None and exc.value is not None and exc.limit is not None:
-            _in_units(exc, scale)
+        in_user_units(exc, axes)
         raise
+
+
+def in_user_units(exc: LimitError, axes: Mapping[str, Axis]) -> None:
+    """Add the user's units to ``exc`` (raised in counts) when its axis has a scale."""
+    axis = axes.get(exc.axis) if exc.axis else None
+    scale = None if axis is None else axis.scale
+    if scale is not None and exc.value is not None and exc.limit is not None:
+        _in_units(exc, scale)
 
 
 _RATE_POWER = {"speed": 1, "acceleration": 2, "SP": 1, "JG": 1, "AC": 2, "DC": 2}

@@ -71,6 +71,8 @@ _PARSED: dict[str, Command] = {}
 # before a negative one (" 1.0000-2.0000"); TP separates with commas (+ spaces).
 _NUMBER_TOKEN = re.compile(r"\$-?[0-9A-Fa-f]+(?:\.[0-9A-Fa-f]*)?|[-+]?(?:\d+(?:\.\d*)?|\.\d+)")
 _SEPARATORS = re.compile(r"[\s,]*")
+_DECIMAL = r"[-+]?(?:\d+(?:\.\d*)?|\.\d+)"
+_PLAIN_NUMBERS = re.compile(rf"[\s,]*{_DECIMAL}(?:[\s,]+{_DECIMAL})*[\s,]*")
 _QUOTED = re.compile(r'"[^"]*"?')
 
 
@@ -121,6 +123,13 @@ def parse_numbers_reply(reply: str) -> list[float]:
         InvalidArgument: no number, or something that is not a number between them.
         ProtocolError: a number the controller cannot have sent (hundreds of digits).
     """
+    if _PLAIN_NUMBERS.fullmatch(reply) is not None:
+        # The usual reply: decimals between blanks or commas (float() reads each exactly as
+        # parse_number does once its pattern matched).
+        values = [float(f) for f in reply.replace(",", " ").split()]
+        if not all(math.isfinite(v) for v in values):
+            raise ProtocolError(f"a number out of any controller's range in {reply!r}")
+        return values
     fields = _NUMBER_TOKEN.findall(reply)
     if not fields or _SEPARATORS.fullmatch(_NUMBER_TOKEN.sub("", reply)) is None:
         raise InvalidArgument("no number in the reply")

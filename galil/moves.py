@@ -8,6 +8,7 @@ raises before a byte goes out. Units are converted by the axis layer before anyt
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -71,9 +72,16 @@ class _State:
     mo: bool
 
 
-def _read_state(link: CommandLink, letters: str, ops: Sequence[str] = _STATE) -> dict[str, _State]:
+@functools.lru_cache(maxsize=256)
+def _operand_names(letters: str, ops: tuple[str, ...]) -> tuple[str, ...]:
+    return tuple(f"_{op}{a}" for a in letters for op in ops)
+
+
+def _read_state(
+    link: CommandLink, letters: str, ops: tuple[str, ...] = _STATE
+) -> dict[str, _State]:
     # One round trip for every axis's state (query_operands packs the MG lines together).
-    values = link.query_operands([f"_{op}{a}" for a in letters for op in ops])
+    values = link.query_operands(_operand_names(letters, ops))
     n = len(ops)
     out: dict[str, _State] = {}
     for i, a in enumerate(letters):
@@ -180,19 +188,21 @@ def execute_move(
     letters = "".join(m.letter for m in moves)
     if not letters or len(set(letters)) != len(letters):
         raise InvalidArgument(f"a move needs distinct axes, got {letters!r}")
-    order = link.model.axes
-    moves = sorted(moves, key=lambda m: order.index(m.letter))
-    letters = "".join(m.letter for m in moves)
+    if len(moves) > 1:
+        order = link.model.axes
+        moves = sorted(moves, key=lambda m: order.index(m.letter))
+        letters = "".join(m.letter for m in moves)
     state = _read_state(link, letters)
     tracks: dict[str, Track] = {}
     profiles: dict[str, predict.Profile] = {}
     sent: dict[str, float] = {}
+    shows = display or {}
     for m in moves:
         if not dry_run:
             _ready(link, m.letter, state[m.letter], tracker)
         track, profile, target = _plan_axis(link, m, state[m.letter], relative)
         tracks[m.letter] = track
-        show = (display or {}).get(m.letter)
+        show = shows.get(m.letter)
         profiles[m.letter] = profile if show is None else show(profile)
         sent[m.letter] = track.amount if command == "IP" else target
     handle = MoveHandle(link, tracks, "position", display=display, tracker=tracker)

@@ -57,6 +57,8 @@ ureg: Any = _LazyRegistry()
 
 def is_quantity(value: object) -> bool:
     """True for a pint Quantity of any registry."""
+    if isinstance(value, pint.Quantity):  # every registry's Quantity class derives from it
+        return True
     return (
         hasattr(value, "magnitude") and hasattr(value, "units") and hasattr(value, "dimensionality")
     )
@@ -179,6 +181,16 @@ class Scale:
         return float(self.counts_per.magnitude)
 
     @cached_property
+    def _offset(self) -> float:
+        return float(self.offset.magnitude)
+
+    @cached_property
+    def display(self) -> tuple[float, float, str]:
+        """``(counts per unit, offset, unit)`` as a profile shows itself in the axis's unit
+        (:attr:`galil.predict.Profile.display`); counts per unit is negative with sign -1."""
+        return (self.sign * self._k, self._offset, self.unit_text)
+
+    @cached_property
     def _rate_units(self) -> tuple[Any, Any]:
         reg = get_registry()
         return self.unit / reg.second, self.unit / reg.second**2
@@ -189,6 +201,11 @@ class Scale:
                 f"{what} needs units compatible with {unit:~} (the axis has a scale), got {value!r}"
             )
         q = _ours(value)
+        if getattr(q, "_units", None) == getattr(unit, "_units", False):
+            # The usual case, the axis's own unit (compared without building Unit objects):
+            # nothing to convert, and the angle check below is trivially met.
+            _magnitude(q, what)
+            return q
         try:
             if q.units == unit:
                 out = q  # the usual case: the axis's own unit, nothing to convert
@@ -211,7 +228,9 @@ class Scale:
     def position_to_counts(self, value: Any, what: str = "position") -> float:
         """A position Quantity to (unrounded) counts."""
         q = self._convert(value, self.unit, what)
-        return self.sign * float((q - self.offset).magnitude) * self._k
+        # q and the offset are in the axis's unit (a length or an angle, never an offset unit
+        # such as degC): subtracting magnitudes is what pint's subtraction does.
+        return self.sign * (_magnitude(q, what) - self._offset) * self._k
 
     def distance_to_counts(self, value: Any, what: str = "distance") -> float:
         """A relative distance Quantity to counts (no offset)."""

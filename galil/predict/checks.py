@@ -225,10 +225,9 @@ def check_soft_limits(
     Raises:
         LimitError: at the first sample beyond a limit (``name`` is ``"FL"`` or ``"BL"``).
     """
-    pos = profile.position
-    # Quick look first (one pass for the extremes): nothing can be beyond a limit when the
-    # whole path lies inside every one of them; the usual case, and cheap.
-    low, high = int(pos.min()), int(pos.max())
+    # Quick look first: nothing can be beyond a limit when the whole path lies inside every
+    # one of them; the usual case, and cheap (a planned profile knows bounds unsampled).
+    low, high = profile.bounds()
     if (
         (forward_limit is None or high <= forward_limit)
         and (backward_limit is None or low >= backward_limit)
@@ -236,6 +235,7 @@ def check_soft_limits(
         and high <= _POSITION_MAX
     ):
         return
+    pos = profile.position
     prev = np.concatenate((pos[:1], pos[:-1]))
     checks: list[tuple[str, float, npt.NDArray[np.bool_]]] = []
     if forward_limit is not None:

@@ -16,7 +16,7 @@ import numpy.typing as npt
 
 from galil.errors import InvalidArgument, ScheduleError
 from galil.models import ModelSpec
-from galil.predict.engine import AxisProfiler, KinematicPlan, plan_position
+from galil.predict.engine import AxisProfiler, KinematicPlan, PlanSamples, plan_position
 from galil.predict.profile import Profile
 from galil.predict.smoothing import END_LOOKAHEAD
 
@@ -301,23 +301,29 @@ def move(
     speed, accel, decel, smoothing, sample_period = _resolve(
         speed, accel, decel, smoothing, sample_period, model
     )
-    eng = AxisProfiler(sample_period=sample_period, position=int(start))
-    eng.begin_move(int(start) + int(distance), speed, accel, decel, smoothing)
-    plan = eng.plan
-    assert plan is not None
-    if not events and smoothing >= 1.0:
-        # Fast path: the same plan evaluated at samples 0..N in one go (sample 0 is the start).
-        end = eng.end_sample
-        assert end is not None
-        pos = eng.preview_from(0, end + 1)
-        return Profile.from_samples(
-            pos,
-            sample_period=sample_period,
+    if not events and smoothing == 1.0:
+        # The usual case: one plan from rest, unsmoothed, evaluated at samples 0..N in one go
+        # (sample 0 is the start) as the engine evaluates it, without stepping an engine, and
+        # only when the profile's arrays are first read (Profile.planned).
+        ts = sample_period
+        v = speed * ts
+        if v <= 0:
+            raise InvalidArgument(f"speed must be > 0, got {speed!r}")
+        x0 = float(int(start))
+        target = float(int(start) + int(distance))
+        plan = plan_position(x0, 0.0, target, v, accel * ts * ts, decel * ts * ts)
+        return Profile.planned(
+            PlanSamples.of(plan),
+            sample_period=ts,
             shape=plan.shape,
-            peak_speed=plan.peak / sample_period,
+            peak_speed=plan.peak / ts,
             stop_code=1,
         )
-    return _run_move(eng, events, speed, accel, decel, plan.shape, int(start))
+    eng = AxisProfiler(sample_period=sample_period, position=int(start))
+    eng.begin_move(int(start) + int(distance), speed, accel, decel, smoothing)
+    begun = eng.plan
+    assert begun is not None
+    return _run_move(eng, events, speed, accel, decel, begun.shape, int(start))
 
 
 def _run_move(

@@ -5,8 +5,8 @@ from __future__ import annotations
 import html
 import math
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -16,10 +16,39 @@ from galil.errors import InvalidArgument
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["MultiProfile", "Profile", "together"]
+__all__ = ["MultiProfile", "Profile", "SampleSource", "together"]
 
 FloatArray = npt.NDArray[np.float64]
 Int64Array = npt.NDArray[np.int64]
+
+#: The fields a profile made by :meth:`Profile.planned` fills when one of them is first read.
+_ARRAYS = ("t", "position", "velocity", "profiler")
+
+_P = TypeVar("_P", bound="Profile")
+
+
+class SampleSource(Protocol):
+    """The reference positions of a profile, computed when they are first needed.
+
+    ``start``, ``end`` and ``samples`` are known without computing them; ``bounds`` is a pair
+    that every position lies within (not necessarily reached).
+    """
+
+    @property
+    def start(self) -> int: ...
+
+    @property
+    def end(self) -> int: ...
+
+    @property
+    def samples(self) -> int: ...
+
+    @property
+    def bounds(self) -> tuple[int, int]: ...
+
+    def __call__(self) -> Int64Array:
+        """The positions at samples 0..N (int64)."""
+        ...
 
 
 def _moving_average(x: FloatArray, window: int) -> FloatArray:
@@ -47,6 +76,25 @@ def _summary_rows(p: Profile) -> list[tuple[str, str]]:
         ("peak speed", peak),
         ("sample period", f"{p.sample_period * 1e6:.6g} µs"),
     ]
+
+
+class _Pending:
+    """The arrays of planned profiles (one source, shared by their recast copies), computed
+    once. Two threads reading at once may both compute them: the values are the same."""
+
+    __slots__ = ("_arrays", "source")
+
+    def __init__(self, source: SampleSource) -> None:
+        self.source = source
+        self._arrays: dict[str, Any] | None = None
+
+    def arrays(self, sample_period: float) -> dict[str, Any]:
+        if self._arrays is None:
+            full = Profile.from_samples(
+                self.source(), sample_period=sample_period, shape="", peak_speed=0.0
+            )
+            self._arrays = {name: getattr(full, name) for name in _ARRAYS}
+        return self._arrays
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,6 +136,72 @@ class Profile:
             arr.setflags(write=False)
 
     @classmethod
+    def planned(
+        cls,
+        source: SampleSource,
+        *,
+        sample_period: float,
+        shape: str,
+        peak_speed: float,
+        stop_code: int = 1,
+    ) -> Profile:
+        """A profile whose arrays are computed from ``source`` when one is first read.
+
+        Planning a move needs its duration, its ends and whether it stays within the soft
+        limits (:meth:`bounds`), not every sample: a move that is only sent and waited for
+        never computes them. Once computed they are exactly those of :meth:`from_samples`.
+        """
+        new = object.__new__(cls)
+        values = {
+            "duration": source.samples * sample_period,
+            "shape": shape,
+            "peak_speed": float(peak_speed),
+            "sample_period": float(sample_period),
+            "stop_code": stop_code,
+            "display": None,
+            "_pending": _Pending(source),
+        }
+        new.__dict__.update(values)
+        return new
+
+    if not TYPE_CHECKING:  # hidden from type checkers: a typo must stay an error for them
+
+        def __getattr__(self, name: str) -> Any:
+            # Reached only for attributes not set: the arrays of a planned profile.
+            pending = self.__dict__.get("_pending")
+            if name in _ARRAYS and pending is not None:
+                arrays = pending.arrays(self.sample_period)
+                self.__dict__.update(arrays)
+                return arrays[name]
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    def _source(self) -> SampleSource | None:
+        """The source of a :meth:`planned` profile (``None`` for one built whole)."""
+        pending = self.__dict__.get("_pending")
+        return None if pending is None else pending.source
+
+    def recast(self, cls: type[_P], **changes: Any) -> _P:
+        """This profile as an instance of ``cls`` (a subclass) with some fields changed.
+
+        Arrays not computed yet stay so (:meth:`planned`), and once computed they are the
+        same arrays in both: unlike ``dataclasses.replace``, nothing is read that the caller
+        does not ask for.
+        """
+        new = object.__new__(cls)
+        new.__dict__.update(self.__dict__)
+        new.__dict__.update(changes)
+        return new
+
+    def bounds(self) -> tuple[int, int]:
+        """Two positions every sample lies within: the lowest and highest for a profile
+        built whole; for a :meth:`planned` one, a pair known without computing the samples."""
+        source = self._source()
+        if source is not None:
+            low, high = source.bounds
+            return int(low), int(high)
+        return int(self.position.min()), int(self.position.max())
+
+    @classmethod
     def from_samples(
         cls,
         reference: npt.ArrayLike,
@@ -126,16 +240,25 @@ class Profile:
     @property
     def samples(self) -> int:
         """N: the index of the last sample (the profile has N + 1 values)."""
+        source = self._source()
+        if source is not None:
+            return int(source.samples)
         return int(self.position.size - 1)
 
     @property
     def start(self) -> int:
         """Position at sample 0."""
+        source = self._source()
+        if source is not None:
+            return int(source.start)
         return int(self.position[0])
 
     @property
     def end(self) -> int:
         """Position at the last sample."""
+        source = self._source()
+        if source is not None:
+            return int(source.end)
         return int(self.position[-1])
 
     @property
@@ -158,7 +281,7 @@ class Profile:
             )
         if not math.isfinite(offset):
             raise InvalidArgument(f"offset must be finite, not {offset!r}")
-        return replace(self, display=(float(counts_per_unit), float(offset), str(unit)))
+        return self.recast(type(self), display=(float(counts_per_unit), float(offset), str(unit)))
 
     def _shown(self) -> tuple[float, float, str]:
         """(counts per shown unit, offset, unit name): counts themselves without a display."""

@@ -20,6 +20,7 @@ caller cannot smuggle a second command into a line.
 from __future__ import annotations
 
 import enum
+import functools
 import math
 import re
 from collections.abc import Callable, Iterable, Sequence
@@ -970,6 +971,15 @@ def mg_operand_lines(names: Sequence[str], line_length: int = 80) -> list[Comman
 
     Each line's reply has one number per name, in order; several lines go out pipelined.
     """
+    key = tuple(names)
+    try:
+        hash(key)
+    except TypeError:  # something that is not a name: refused with the reason
+        return list(_build_mg_lines(key, line_length))
+    return list(_cached_mg_lines(key, line_length))
+
+
+def _build_mg_lines(names: tuple[str, ...], line_length: int) -> tuple[Command, ...]:
     limit = line_length - 4  # "MG " and the CR
     batches: list[list[str]] = [[]]
     length = 0
@@ -979,7 +989,12 @@ def mg_operand_lines(names: Sequence[str], line_length: int = 80) -> list[Comman
             length = 0
         batches[-1].append(n)
         length += len(n) + 1
-    return [mg_operand(*b) for b in batches if b]
+    return tuple(mg_operand(*b) for b in batches if b)
+
+
+# The same few sets of operands are read again and again (a move's state, a handle's poll):
+# each is built and checked once. A refused name raises every time (nothing is cached then).
+_cached_mg_lines = functools.lru_cache(maxsize=1024)(_build_mg_lines)
 
 
 def tm(period_us: float, *, model: ModelSpec | None = None) -> Command:

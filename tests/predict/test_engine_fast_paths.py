@@ -1,4 +1,5 @@
-"""The engine's scalar path for short chunks gives exactly what its numpy path gives."""
+"""The engine's fast paths (scalar for short chunks, gathered for whole moves) give exactly
+what its segment-by-segment numpy path gives."""
 
 from __future__ import annotations
 
@@ -6,17 +7,22 @@ import copy
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from galil.errors import InvalidArgument
+from galil.predict import engine
 from galil.predict.engine import (
     AxisProfiler,
     KinematicPlan,
+    PlanSamples,
     _Active,
     _round_fixed,
     plan_jog,
     plan_position,
     plan_stop,
+    sample_plan,
 )
 
 SETTINGS = settings(max_examples=150, deadline=None)
@@ -53,6 +59,36 @@ def test_scalar_positions_are_the_vector_ones(
     assert active.rounded(start, n) == scalar
     if n:
         assert velocity == active.state(start + n - 1)[1]
+
+
+@SETTINGS
+@given(plan=plans(), k0=st.integers(-100, 100), where=st.floats(-0.05, 1.2), n=st.integers(0, 3000))
+def test_gathered_positions_are_the_segment_by_segment_ones(
+    plan: KinematicPlan, k0: int, where: float, n: int
+) -> None:
+    active = _Active(plan, k0)
+    span = plan.duration if math.isfinite(plan.duration) else 50_000.0
+    start = k0 + math.floor(where * min(span, 1e5))
+    gathered = active.fixed(start, n)
+    saved = engine._GATHER_MAX
+    engine._GATHER_MAX = -1  # every chunk segment by segment
+    try:
+        looped = active.fixed(start, n)
+    finally:
+        engine._GATHER_MAX = saved
+    np.testing.assert_array_equal(gathered, looped)
+
+
+def test_a_whole_plan_sampled_at_once_is_the_profiler_preview() -> None:
+    eng = AxisProfiler(position=-7)
+    eng.begin_move(123_456, 50_000, 512_000, 256_000)
+    end = eng.end_sample
+    assert end is not None
+    plan = eng.plan
+    assert plan is not None
+    np.testing.assert_array_equal(sample_plan(plan), eng.preview_from(0, end + 1))
+    with pytest.raises(InvalidArgument):
+        sample_plan(plan_jog(0.0, 0.0, 10.0, 1.0, 1.0))
 
 
 @SETTINGS
@@ -125,3 +161,27 @@ def test_a_deep_copy_is_independent_of_the_original() -> None:
     twin_values = twin.advance(20)
     np.testing.assert_array_equal(snap.advance(20), twin_values)
     assert snap.queued_segments == twin.queued_segments
+
+
+@SETTINGS
+@given(
+    start=st.integers(-2_000_000_000, 2_000_000_000),
+    distance=st.integers(-100_000, 100_000),
+    v=st.floats(1.0, 300.0),
+    a=rates,
+    d=rates,
+)
+def test_a_planned_move_knows_its_ends_and_bounds_without_sampling(
+    start: int, distance: int, v: float, a: float, d: float
+) -> None:
+    plan = plan_position(float(start), 0.0, float(start + distance), v, a, d)
+    known = PlanSamples.of(plan)
+    sampled = sample_plan(plan)
+    assert (known.start, known.end, known.samples) == (
+        sampled[0],
+        sampled[-1],
+        sampled.size - 1,
+    )
+    low, high = known.bounds
+    assert low <= sampled.min()
+    assert sampled.max() <= high
