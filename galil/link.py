@@ -226,6 +226,11 @@ class CommandLink(Protocol):
         """Let ``seconds`` pass for the controller."""
         ...
 
+    @property
+    def simulated_time(self) -> bool:
+        """Whether the controller runs on a clock of its own (pauses cost no real time)."""
+        ...
+
     def error(self, kind: type[_E], message: str) -> _E:
         """An error of ``kind`` carrying the model and the recent exchanges."""
         ...

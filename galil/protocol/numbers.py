@@ -178,6 +178,22 @@ def format_reply(
             return f" {value}" if sign_space else str(value)
         if -_POW10[digits] < value < 0:
             return str(value)
+    if (
+        type(value) is float
+        and lz
+        and digits
+        and not is_hex
+        and value.is_integer()
+        and -_POW10[digits] < value < _POW10[digits]
+        and _INT_LO <= value <= _INT_HI
+    ):
+        # A whole number held as a float (MG of an operand): what the fixed-point detour
+        # below prints for it, without the detour.
+        whole = int(value)
+        frac = "." + "0" * decimals if decimals else ""
+        if whole < 0:
+            return f"-{-whole}{frac}"
+        return f" {whole}{frac}" if sign_space else f"{whole}{frac}"
     raw = to_fixed(float(value))
     if is_hex:
         return _format_hex(raw, digits, decimals)

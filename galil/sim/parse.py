@@ -23,6 +23,11 @@ __all__ = [
 ]
 
 
+#: What ends a command, or opens a quote (outside quotes) / closes it (inside).
+_STOPS = re.compile(r'[\r;"]')
+_STOPS_QUOTED = re.compile(r'[\r"]')
+
+
 class Refused(Exception):  # noqa: N818 (a reply, not a failure)
     """The interpreter answers ``?``; ``code`` is the TC code it records."""
 
@@ -38,13 +43,20 @@ def next_command(buffer: str) -> tuple[str, int] | None:
         ``(command text without its terminator, index just past the terminator)``, or ``None``
         when no terminator has arrived yet. Line feeds are dropped (terminals send CR LF).
     """
-    quoted = False
-    for i, ch in enumerate(buffer):
+    # A CR always ends a command; a ';' only outside quotes (found a stop at a time).
+    pos = 0
+    stops = _STOPS
+    while True:
+        m = stops.search(buffer, pos)
+        if m is None:
+            return None
+        i = m.start()
+        ch = buffer[i]
         if ch == '"':
-            quoted = not quoted
-        elif ch == "\r" or (ch == ";" and not quoted):
-            return buffer[:i].replace("\n", ""), i + 1
-    return None
+            stops = _STOPS_QUOTED if stops is _STOPS else _STOPS
+            pos = i + 1
+            continue
+        return buffer[:i].replace("\n", ""), i + 1
 
 
 def split_program_line(line: str) -> list[str]:
@@ -84,6 +96,8 @@ _TOKEN = re.compile(
     r"|(?P<op><=|>=|<>|[-+*/&|<>=()\]])"
     r")"
 )
+#: An expression that is a name alone (leading and trailing blanks allowed): one name token.
+_NAME_ONLY = re.compile(r"\s*(_?[A-Za-z][A-Za-z0-9_]*)\s*")
 #: The interpreter's own functions (``@ABS[x]``); rooms may add more (``@IN[n]``).
 FUNCTIONS: dict[str, Callable[[float], float]] = {
     "ABS": abs,
@@ -133,12 +147,17 @@ def evaluate(
     Raises:
         Refused: a syntax error (TC 1), unbalanced parentheses (TC 59), a bad value (TC 6).
     """
-    tokens = _tokens(text)
-    if not tokens:
-        raise Refused(1, "missing value")
-    value, pos = _sequence(tokens, 0, (lookup, functions, element))
-    if pos != len(tokens):
-        raise Refused(59 if tokens[pos][1] in ")]" else 1, f"unexpected {tokens[pos][1]!r}")
+    plain = _NAME_ONLY.fullmatch(text)
+    if plain is not None:
+        # A name alone (MG _TPA, a variable): what the tokens below would give, directly.
+        value = lookup(plain.group(1))
+    else:
+        tokens = _tokens(text)
+        if not tokens:
+            raise Refused(1, "missing value")
+        value, pos = _sequence(tokens, 0, (lookup, functions, element))
+        if pos != len(tokens):
+            raise Refused(59 if tokens[pos][1] in ")]" else 1, f"unexpected {tokens[pos][1]!r}")
     if not math.isfinite(value):
         raise Refused(6, "value out of range")
     return value

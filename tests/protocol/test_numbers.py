@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -164,3 +165,21 @@ def test_hex_round_trip(raw: int, m: int, n: int) -> None:
         parsed = parse_number(text)
         truncated = math.floor(value * 16**n) / 16**n  # hex shows the top n fraction nibbles
         assert parsed == truncated
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    whole=st.integers(-(2**31), 2**31 - 1),
+    fmt=st.sampled_from(["10.4", "10.0", "4.2", "1.0", "8.1", "0.4"]),
+    lz=st.booleans(),
+    sign_space=st.booleans(),
+)
+def test_a_whole_float_prints_as_the_fixed_point_path_prints_it(
+    whole: int, fmt: str, lz: bool, sign_space: bool
+) -> None:
+    # np.float64 is not exactly float: it takes the fixed-point path, the reference here.
+    fast = format_reply(float(whole), fmt, lz, sign_space=sign_space)
+    assert fast == format_reply(np.float64(whole), fmt, lz, sign_space=sign_space)
+    assert format_reply(-0.0, fmt, lz, sign_space=sign_space) == format_reply(
+        np.float64(-0.0), fmt, lz, sign_space=sign_space
+    )

@@ -71,3 +71,20 @@ def test_a_trippoint_firing_on_the_last_sample_of_a_step_releases_there() -> Non
     assert sim.advance_until_output(3.0) == b":"
     assert sim.sample == 2048
     assert sim.feed(b"RPA\r") == f" {r[-1]}\r\n:".encode()
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    st.integers(49, 3000),
+    st.sampled_from([0.0, 0.003, 0.02]),
+    st.integers(-50_000, 50_000),
+)
+def test_an_axis_at_rest_stays_exactly_where_it_is_in_long_steps(
+    rest: int, lag: float, distance: int
+) -> None:
+    sim = started(f"PR {distance},,,;BG\r".encode(), lag)
+    sim.advance(4.0)  # well after the move: the motor has settled on the target
+    before = read(sim, b"TP\r"), read(sim, b"TV\r")
+    sim.advance(rest * TS)  # one long step of an axis at rest
+    assert (read(sim, b"TP\r"), read(sim, b"TV\r")) == before
+    assert read(sim, b"TP\r")[0] == distance

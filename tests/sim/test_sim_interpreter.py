@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from galil.sim.clock import ManualClock
 from galil.sim.controller import SimController
-from galil.sim.parse import Refused, evaluate
+from galil.sim.parse import Refused, evaluate, next_command
 
 
 @settings(max_examples=150, deadline=None)
@@ -49,3 +51,45 @@ def test_wh_names_the_asking_handle() -> None:
     handle = sim.open_port("host")
     assert sim.feed(b"WH;MG _WH\r") == b"RS232\r\n:-1.0000\r\n:"
     assert sim.feed(b"WH;MG _WH\r", port=handle) == b"IHA\r\n: 0.0000\r\n:"
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    name=st.from_regex(r"_?[A-Za-z][A-Za-z0-9_]{0,8}", fullmatch=True),
+    left=st.sampled_from(["", " ", "  ", "\t"]),
+    right=st.sampled_from(["", " ", "\t "]),
+    value=st.one_of(st.floats(-1e9, 1e9), st.just(math.inf)),
+)
+def test_a_name_alone_evaluates_as_its_tokens_do(
+    name: str, left: str, right: str, value: float
+) -> None:
+    def lookup(n: str) -> float:
+        if n.startswith("_Q"):
+            raise Refused(1, f"unknown operand {n}")
+        return value
+
+    def outcome(text: str) -> object:
+        try:
+            return evaluate(text, lookup)
+        except Refused as exc:
+            return ("refused", exc.code)
+
+    # In parentheses the same name goes through the tokenizer and the parser.
+    assert outcome(f"{left}{name}{right}") == outcome(f"({left}{name}{right})")
+
+
+def _next_command_by_characters(buffer: str) -> tuple[str, int] | None:
+    """The rule, one character at a time: a CR ends a command, a ';' outside quotes too."""
+    quoted = False
+    for i, ch in enumerate(buffer):
+        if ch == '"':
+            quoted = not quoted
+        elif ch == "\r" or (ch == ";" and not quoted):
+            return buffer[:i].replace("\n", ""), i + 1
+    return None
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.text(alphabet='AB1 ;"\r\n,{}', max_size=40))
+def test_commands_are_cut_where_the_character_rule_cuts_them(buffer: str) -> None:
+    assert next_command(buffer) == _next_command_by_characters(buffer)

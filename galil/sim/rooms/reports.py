@@ -99,6 +99,11 @@ class Reports(Room):
         newline = True
         for part in split_fields(args):
             fmt: str | None = None
+            if "{" not in part:  # the usual operand or expression: no formats to read
+                expr = part.strip()
+                if expr and expr[0] != '"':
+                    out.append(self._number(self.machine.interp.evaluate(expr), None))
+                    continue
             for spec in _BRACES.findall(part):
                 s = spec.strip()
                 if s.upper() == "N":
