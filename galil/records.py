@@ -13,6 +13,7 @@ import contextlib
 import logging
 import queue
 import threading
+import time
 from collections import deque
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -33,16 +34,24 @@ from galil.protocol.records import (
     SAMPLE_WRAP,
     RecordSplitter,
     decode_record,
+    decode_records,
     extend_sample,
+    follow_samples,
     parse_qz,
     record_to_dict,
     with_time,
+    with_times,
 )
 from galil.transport import HandleSource, Transport
 
-__all__ = ["RecordCallback", "RecordStream", "Records"]
+__all__ = ["READ_INTERVAL", "RecordCallback", "RecordStream", "Records"]
 
 _LOG = logging.getLogger("galil.records")
+
+#: A pushed stream's reader takes what has arrived at most this often (seconds): records
+#: reach ``get()`` and callbacks up to this late, and a fast stream costs the host one
+#: wake-up per interval rather than one per record.
+READ_INTERVAL = 0.02
 
 RecordCallback = Callable[[np.void], None]
 Layout = tuple[int, int, int, int]
@@ -109,9 +118,10 @@ class RecordStream:
         self._anchor = (time, self._source.link.clock())
         self._last = None
 
-    def _time_of(self, rec: np.void) -> np.void:
-        """A pushed record with its ``time``: the next one expected, or where the host's
-        clock says the controller is when they disagree by more than a quarter wrap."""
+    def _expected(self, sample: int) -> int:
+        """Where the next pushed record should be: a period after the last one, or where
+        the host's clock says the controller is when they disagree by more than a quarter
+        wrap (or for the first record after the ``DR`` line)."""
         expected = self._last + self.period if self._last is not None else None
         if self._anchor is not None:
             t0, c0 = self._anchor
@@ -121,16 +131,33 @@ class RecordStream:
                 expected = t0 + self.period
             elif abs(by_clock - expected) > SAMPLE_WRAP // 4:
                 expected = by_clock
-        if expected is None:
-            expected = int(rec["sample"])
-        return with_time(rec, extend_sample(int(rec["sample"]), expected))
+        return sample if expected is None else expected
+
+    def _timed(self, records: np.ndarray[Any, np.dtype[Any]]) -> np.ndarray[Any, np.dtype[Any]]:
+        """Pushed records with their ``time``: the first from :meth:`_expected`, each next
+        one a period after the one before (within half a wrap), at once."""
+        first = int(records["sample"][0])
+        times = follow_samples(records["sample"], self._expected(first), self.period)
+        return with_times(records, times)
 
     def _count_gap(self, rec: np.void) -> None:
         t = int(rec["time"])
         last, self._last = self._last, t
         if last is None or t - last <= self.period:
             return
-        missed = round((t - last) / self.period) - 1
+        self._gap(t, round((t - last) / self.period) - 1)
+
+    def _count_gaps(self, times: np.ndarray[Any, np.dtype[np.int64]]) -> None:
+        """:meth:`_count_gap` for a batch, in one pass (a loop only where records are missing)."""
+        before = np.empty(times.size, dtype=np.int64)
+        before[0] = times[0] if self._last is None else self._last
+        before[1:] = times[:-1]
+        steps = times - before
+        for i in np.flatnonzero(steps > self.period).tolist():
+            self._gap(int(times[i]), round(int(steps[i]) / self.period) - 1)
+        self._last = int(times[-1])
+
+    def _gap(self, t: int, missed: int) -> None:
         if missed > 0:
             self.missed += missed
             self.gaps.append((t, missed))
@@ -171,7 +198,8 @@ class RecordStream:
         while not self._closed and not self._suspended:
             try:
                 chunk = handle.read(0.25)
-                records = [self._time_of(decode_record(r, layout)) for r in splitter.feed(chunk)]
+                whole = splitter.feed_block(chunk)
+                records = self._timed(decode_records(whole, layout)) if whole else None
             except ProtocolError as exc:
                 # A stream out of step cannot be re-cut reliably: stop and say why.
                 self._fail(exc)
@@ -180,26 +208,37 @@ class RecordStream:
                 if not self._closed and not self._suspended:
                     self._fail(exc)
                 return
-            if records:
+            if records is not None:
                 self._push(records)
+            if chunk:
+                # Let a few more records arrive before the next read: one wake-up per
+                # interval, not one per record (a controller may send each on its own).
+                time.sleep(READ_INTERVAL)
 
     def _fail(self, exc: GalilError) -> None:
         with self._cond:
             self._error = exc
             self._cond.notify_all()
 
-    def _push(self, records: list[np.void]) -> None:
-        for rec in records:
-            self._count_gap(rec)
+    def _push(self, records: np.ndarray[Any, np.dtype[Any]]) -> None:
+        """Queue a batch of timed records (one wake-up for the reader of the queue)."""
+        self._count_gaps(records["time"])
+        rows = list(records)
         with self._cond:
-            for rec in records:
-                if len(self._items) >= self._maxlen:
-                    self._items.popleft()
-                    self.dropped += 1
-                self._items.append(rec)
+            items = self._items
+            over = len(items) + len(rows) - self._maxlen
+            if over > 0:
+                # The oldest go first, as if each had been pushed alone into a full queue.
+                skipped = max(0, over - len(items))
+                for _ in range(min(over, len(items))):
+                    items.popleft()
+                rows = rows[skipped:]
+                self.dropped += over
+            items.extend(rows)
             self._cond.notify_all()
-        for rec in records:
-            self._notify(rec)
+        if self._subscribers:
+            for rec in records:
+                self._notify(rec)
 
     def _notify(self, rec: np.void) -> None:
         for cb in self._subscribers:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import queue
 import socket
 import struct
+import time
 from collections.abc import Iterator
 
 import numpy as np
@@ -120,6 +121,22 @@ def test_dr_callbacks_and_iteration(tcp: tuple[SimTcpServer, Controller]) -> Non
     # be ahead of them until close() has joined that thread; then they have seen every record.
     assert seen == got + rest
     assert len(got + rest) <= 0.1 / srv.controller.sample_period / 16 + 1
+
+
+def test_a_full_queue_drops_the_oldest_records_and_counts_them(
+    tcp: tuple[SimTcpServer, Controller],
+) -> None:
+    srv, c = tcp
+    with c.records(8, maxlen=10) as stream:
+        srv.advance(0.5)  # 64 records, in several batches, nobody reading
+        deadline = time.monotonic() + WAIT
+        while stream.dropped + len(stream) < 60 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        kept = stream.take(len(stream), timeout=WAIT)
+    assert len(kept) == 10
+    assert stream.dropped >= 50
+    assert np.all(np.diff(kept["time"]) == 8)  # the newest ten, in order
+    assert stream.missed == 0  # dropped by the host, not missing from the stream
 
 
 def test_dr_period_below_the_minimum_is_refused(tcp: tuple[SimTcpServer, Controller]) -> None:

@@ -38,12 +38,15 @@ __all__ = [
     "Switches",
     "decode_fields",
     "decode_record",
+    "decode_records",
     "extend_sample",
+    "follow_samples",
     "parse_qz",
     "record_dtype",
     "record_size",
     "record_to_dict",
     "with_time",
+    "with_times",
 ]
 
 AXIS_LETTERS = "ABCDEFGH"
@@ -192,6 +195,12 @@ def record_dtype(
     if qz is None:
         name = model.name if isinstance(model, ModelSpec) else str(model)
         raise InvalidArgument(f"{name} has no binary data record layout")
+    return _record_dtype(tuple(qz), axes, letters)
+
+
+@functools.lru_cache(maxsize=256)
+def _record_dtype(qz: tuple[int, ...], axes: int | None, letters: str | None) -> np.dtype[Any]:
+    # Built once per layout and set of axis blocks: a stream decodes thousands a second.
     n, general, coord, per_axis = qz
     if axes is not None:
         n = axes
@@ -251,6 +260,44 @@ def decode_record(data: bytes, model: ModelSpec | tuple[int, int, int, int]) -> 
     return record
 
 
+def decode_records(
+    data: bytes | bytearray | memoryview, model: ModelSpec | tuple[int, int, int, int]
+) -> np.ndarray[Any, np.dtype[Any]]:
+    """Decode records laid end to end (a ``DR`` stream's bytes, whole records) in one pass.
+
+    Every header is checked (at once, as an array) against the first one: a stream's records
+    all have the same axis blocks. The result is a structured array viewing ``data``, nothing
+    copied: read-only for ``bytes``; copy it before changing a ``bytearray`` it views.
+
+    Raises:
+        ProtocolError: a header that is not a record's or differs from the first, a size the
+            layout disagrees with, or bytes left over after the last whole record.
+    """
+    raw = np.frombuffer(data, dtype=np.uint8)
+    if raw.size == 0:
+        return np.frombuffer(b"", dtype=record_dtype(model))
+    if raw.size < 4 or not raw[0] & 0x80:
+        raise ProtocolError("not a data record: missing header")
+    size = int(raw[2]) | int(raw[3]) << 8
+    mask = int(raw[1])
+    letters = "".join(AXIS_LETTERS[i] for i in range(8) if mask >> i & 1)
+    dtype = record_dtype(model, axes=len(letters), letters=letters)
+    if dtype.itemsize != size:
+        raise ProtocolError(f"record header says {size} bytes, the layout wants {dtype.itemsize}")
+    if raw.size % size:
+        raise ProtocolError(f"{raw.size} bytes are not whole records of {size} bytes")
+    heads = raw.reshape(-1, size)[:, :4]
+    good = (heads[:, 0] & 0x80).astype(bool)
+    good &= heads[:, 1] == raw[1]
+    good &= heads[:, 2] == raw[2]
+    good &= heads[:, 3] == raw[3]
+    if not good.all():
+        i = int(np.argmin(good))
+        raise ProtocolError(f"record {i}: header {bytes(heads[i])!r} is not the stream's")
+    records: np.ndarray[Any, np.dtype[Any]] = np.frombuffer(data, dtype=dtype)
+    return records
+
+
 def record_to_dict(record: np.void) -> dict[str, Any]:
     """Turn a decoded record into plain Python values (nested dicts per axis)."""
     out: dict[str, Any] = {}
@@ -287,6 +334,7 @@ class RecordSplitter:
         self.qz = qz
         self.max_size = max_size
         self._buf = bytearray()
+        self._sizes: dict[int, int] = {}  # record size by header axis byte
 
     def reset(self) -> None:
         """Forget a partial record (after an error, or to resynchronise)."""
@@ -299,28 +347,60 @@ class RecordSplitter:
             ProtocolError: a header is not a record header, or its size is impossible. The
                 partial record is dropped; call :meth:`reset` before feeding on.
         """
+        self._buf += data
+        ends = self._cut()
         buf = self._buf
-        buf += data
-        out: list[bytes] = []
-        while len(buf) >= 4:
-            if not buf[0] & 0x80:
+        out = [bytes(buf[a:b]) for a, b in zip([0, *ends], ends, strict=False)]
+        if ends:
+            del buf[: ends[-1]]
+        return out
+
+    def feed_block(self, data: bytes) -> bytes:
+        """:meth:`feed`, the complete records returned end to end in one piece (for
+        :func:`decode_records`): one copy, however many records.
+
+        Raises:
+            ProtocolError: as :meth:`feed`.
+        """
+        self._buf += data
+        ends = self._cut()
+        if not ends:
+            return b""
+        buf = self._buf
+        out = bytes(buf[: ends[-1]])
+        del buf[: ends[-1]]
+        return out
+
+    def _cut(self) -> list[int]:
+        """Where each complete record in the buffer ends; every header checked."""
+        buf = self._buf
+        n = len(buf)
+        ends: list[int] = []
+        at = 0
+        sizes = self._sizes
+        while n - at >= 4:
+            if not buf[at] & 0x80:
                 self.reset()
-                raise ProtocolError(f"not a data record header: {bytes(buf[:4])!r}")
-            size = buf[2] | buf[3] << 8
+                raise ProtocolError(f"not a data record header: {bytes(buf[at : at + 4])!r}")
+            size = buf[at + 2] | buf[at + 3] << 8
             if size < 4 or size > self.max_size:
                 self.reset()
                 raise ProtocolError(f"data record header announces {size} bytes")
-            if self.qz is not None and size != record_size(self.qz, buf[1]):
-                want = record_size(self.qz, buf[1])
-                self.reset()
-                raise ProtocolError(
-                    f"data record header announces {size} bytes; its axes need {want}"
-                )
-            if len(buf) < size:
+            if self.qz is not None:
+                mask = buf[at + 1]
+                want = sizes.get(mask)
+                if want is None:
+                    want = sizes[mask] = record_size(self.qz, mask)
+                if size != want:
+                    self.reset()
+                    raise ProtocolError(
+                        f"data record header announces {size} bytes; its axes need {want}"
+                    )
+            if n - at < size:
                 break
-            out.append(bytes(buf[:size]))
-            del buf[:size]
-        return out
+            at += size
+            ends.append(at)
+        return ends
 
 
 # --------------------------------------------------------------------------------- time
@@ -343,6 +423,54 @@ def extend_sample(low: int, near: int) -> int:
     elif near - base > SAMPLE_WRAP // 2:
         base += SAMPLE_WRAP
     return base
+
+
+def follow_samples(samples: Any, near: int, period: int) -> np.ndarray[Any, np.dtype[np.int64]]:
+    """Extend the 16-bit sample counters of consecutive records to full samples, at once.
+
+    The first is extended against ``near`` (a ``TIME`` close to it), each next one against
+    the one before plus ``period`` (the stream's samples between records): what
+    :func:`extend_sample` gives one record at a time, so a record that came late or early
+    (by less than half a wrap) still gets its own sample.
+    """
+    low = np.asarray(samples, dtype=np.int64) & (SAMPLE_WRAP - 1)
+    out = np.empty(low.size, dtype=np.int64)
+    if low.size == 0:
+        return out
+    first = extend_sample(int(low[0]), near)
+    # extend_sample(low[i], t[i-1] + period), written as steps: t[i-1] + period has the low
+    # bits (low[i-1] + period) mod the wrap, and the result is the nearest sample (ties as
+    # extend_sample breaks them: at exactly half a wrap the raw difference decides).
+    diff = low[1:] - (low[:-1] + period) % SAMPLE_WRAP
+    half = SAMPLE_WRAP // 2
+    diff[diff > half] -= SAMPLE_WRAP
+    diff[diff < -half] += SAMPLE_WRAP
+    out[0] = first
+    np.cumsum(diff + period, out=out[1:])
+    out[1:] += first
+    return out
+
+
+def with_times(
+    records: np.ndarray[Any, np.dtype[Any]], times: Any
+) -> np.ndarray[Any, np.dtype[Any]]:
+    """:func:`with_time` for an array of records: a new array with a ``time`` field last.
+
+    Raises:
+        InvalidArgument: the records have a time already, or the lengths differ.
+    """
+    dtype = records.dtype
+    if "time" in (dtype.names or ()):
+        raise InvalidArgument("the records have a time already")
+    t = np.asarray(times, dtype=np.int64)
+    if t.shape != records.shape or records.ndim != 1:
+        raise InvalidArgument(f"{t.size} times for {records.size} records")
+    out = np.empty(records.size, dtype=_timed(dtype))
+    size = dtype.itemsize
+    view = out.view(np.uint8).reshape(records.size, size + 8)
+    view[:, :size] = np.ascontiguousarray(records).view(np.uint8).reshape(records.size, size)
+    out["time"] = t
+    return out
 
 
 @functools.lru_cache(maxsize=64)
