@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import os
 import selectors
 import signal
@@ -296,10 +297,18 @@ class SimPtyServer(_Server):
 
     Unsolicited output is mixed into the replies, as on a serial port.
 
+    A pty moves bytes as fast as the processes at its ends; with ``baud`` the server paces
+    both directions as a serial line of that rate does (8N1: ten bits a byte, ``baud / 10``
+    bytes a second): it takes the host's bytes off the pty no faster (what the host has
+    written waits in the pty's buffer, as in a serial driver's), and its replies go out no
+    faster. Scheduling delays are caught up (up to :data:`_CATCH_UP` seconds' worth): the line
+    has kept moving while the server was not looking.
+
     Args:
         controller: the controller to serve (default: a new one on a real-time clock).
         model: model of the default controller.
         faults: fault hook applied to everything sent.
+        baud: the line rate to simulate (``None``: as fast as the pty goes).
     """
 
     def __init__(
@@ -308,15 +317,20 @@ class SimPtyServer(_Server):
         *,
         model: str = "DMC-4040",
         faults: FaultHook | None = None,
+        baud: float | None = None,
     ) -> None:
+        if baud is not None and not (math.isfinite(baud) and baud > 0):
+            raise InvalidArgument(f"baud must be a positive number, not {baud!r}")
         super().__init__(controller, model)
         self.controller.separate_messages = False
         self.faults = faults
+        self.baud = baud
         self._master = -1
         self._slave = -1
         self.path = ""
         self._box = _Outbox(faults)
         self._sel = selectors.DefaultSelector()
+        self._line = None if baud is None else _Line(baud / 10.0)
 
     def _open(self) -> None:
         self._master, self._slave = os.openpty()
@@ -335,15 +349,40 @@ class SimPtyServer(_Server):
         self._master = self._slave = -1
 
     def _tick(self) -> None:
-        if self._sel.select(timeout=_TICK):
-            try:
-                data = os.read(self._master, 4096)
-            except (BlockingIOError, OSError):
-                data = b""
-            if data:
-                self._box.put(self.controller.feed(data))
+        line = self._line
+        if line is None:
+            if self._sel.select(timeout=_TICK):
+                self._box.put(self.controller.feed(self._read(4096)))
+        else:
+            self._carry_inward(line)
         self._box.put(self.controller.poll())
-        out = self._box.due()
+        self._send(self._box.due())
+
+    def _read(self, n: int) -> bytes:
+        try:
+            return os.read(self._master, n)
+        except (BlockingIOError, OSError):
+            return b""
+
+    def _carry_inward(self, line: _Line) -> None:
+        """Take what the host wrote into the line's buffer (bounded, as a serial driver's
+        is), and hand the controller what the line has carried by now."""
+        line.refill()
+        space = _LINE_BUFFER - len(line.sending)
+        # With bytes on their way, only look (the line is the pace); else wait for some.
+        if space > 0 and self._sel.select(timeout=0 if line.sending else _TICK):
+            line.sending += self._read(space)
+        carried = line.carry()
+        if carried:
+            self._box.put(self.controller.feed(carried))
+        elif line.sending:
+            time.sleep(_TICK)  # the line is busy with them
+
+    def _send(self, out: bytes) -> None:
+        line = self._line
+        if line is not None:
+            line.waiting += out
+            out = line.take_outward()
         while out:
             try:
                 written = os.write(self._master, out)
@@ -351,6 +390,59 @@ class SimPtyServer(_Server):
                 time.sleep(_TICK)
                 continue
             out = out[written:]
+
+
+#: The most a paced line catches up after the server was late (seconds of line time).
+_CATCH_UP = 0.05
+#: Bytes a paced line holds between the host's writes and the wire (a serial driver's buffer).
+_LINE_BUFFER = 4096
+
+
+class _Line:
+    """A simulated serial line, both directions at ``rate`` bytes a second.
+
+    ``sending`` holds what the host has written and the line has not carried yet (bounded
+    by :data:`_LINE_BUFFER`: a full buffer blocks the host's writes, as a serial driver's
+    does); ``waiting`` holds the controller's replies not carried yet. Each direction
+    carries bytes only while it has some to carry: a quiet line saves up no time.
+    """
+
+    def __init__(self, rate: float) -> None:
+        self.rate = rate
+        self.sending = bytearray()
+        self.waiting = bytearray()
+        self._inward = 0.0  # bytes carried to the controller since the last carry()
+        self._outward = 0.0  # bytes the replies may have carried by now
+        self._last = time.monotonic()
+
+    def refill(self) -> None:
+        """Count the line time since the last call for the directions that were busy."""
+        now = time.monotonic()
+        more = (now - self._last) * self.rate
+        self._last = now
+        cap = max(1.0, self.rate * _CATCH_UP)
+        self._inward = min(self._inward + more, cap) if self.sending else 0.0
+        self._outward = min(self._outward + more, cap) if self.waiting else 0.0
+
+    def carry(self) -> bytes:
+        """The host's bytes the line has delivered by now."""
+        n = min(len(self.sending), int(self._inward))
+        if n <= 0:
+            return b""
+        out = bytes(self.sending[:n])
+        del self.sending[:n]
+        self._inward -= n
+        return out
+
+    def take_outward(self) -> bytes:
+        """The replies the line carries now (the rest waits for the next tick)."""
+        n = min(len(self.waiting), int(self._outward))
+        if n <= 0:
+            return b""
+        out = bytes(self.waiting[:n])
+        del self.waiting[:n]
+        self._outward -= n
+        return out
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -366,7 +458,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(str(e))
     server: _Server
     if args.pty:
-        server = SimPtyServer(controller)
+        server = SimPtyServer(controller, baud=args.baud)
     else:
         host, _, port = (args.tcp or "127.0.0.1:0").rpartition(":")
         try:
@@ -416,6 +508,9 @@ def _parser() -> argparse.ArgumentParser:
         type=int,
         default=0,
         help="TCP port for unsolicited messages (0: any free one; -1: none, use CF I)",
+    )
+    parser.add_argument(
+        "--baud", type=float, help="with --pty: pace the line at this rate (default: no limit)"
     )
     parser.add_argument("--lag", type=float, default=0.003, help="servo lag time constant, s")
     parser.add_argument(
