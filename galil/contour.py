@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -224,8 +224,9 @@ class ContourStream:
         self._limits = limits or {}
         self.profiles: dict[str, Profile] = {}
 
-    def _cd(self, row: Sequence[int]) -> Command:
-        return cmds.cd(model=self.link.model, **dict(zip(self.letters, row, strict=True)))
+    def commands(self) -> list[Command]:
+        """The ``CD`` command of every segment, in order (built and checked at once)."""
+        return cmds.cd_rows(self.increments, self.letters, model=self.link.model)
 
     def check(self) -> None:
         """The segments against the model's CD and DT ranges, the speed and acceleration they
@@ -235,7 +236,7 @@ class ContourStream:
             LimitError: a value out of range or a link too slow for the stream.
         """
         link = self.link
-        size = len(self._cd(self.increments[0].tolist()).text) + 1
+        size = len(cmds.cd_rows(self.increments[:1], self.letters, model=link.model)[0].text) + 1
         for j, a in enumerate(self.letters):
             speed, accel = self._limits.get(a, (None, None))
             check_contour(
@@ -284,7 +285,7 @@ class ContourStream:
         """
         link = self.link
         model = link.model
-        texts = [self._cd(row) for row in self.increments.tolist()]
+        texts = self.commands()
         state = _Progress(low_water=model.contour_buffer, texts=texts)
         state.bar = _bar(len(texts), self.letters) if progress else None
         if round(link.query_operands(["_TC"])[0]) == 42:

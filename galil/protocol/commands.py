@@ -53,6 +53,7 @@ __all__ = [
     "cb",
     "cd",
     "cd_end",
+    "cd_rows",
     "cm",
     "cn",
     "cr",
@@ -709,6 +710,54 @@ def cd(
         fields[-1] = _checker("CD", model)(value, letter)
         text = f"CD {','.join(fields)}{suffix}"
     return Command(text)
+
+
+def cd_rows(
+    increments: object, axes: str = "A", *, model: ModelSpec | None = None
+) -> list[Command]:
+    """CD for many segments at once: one command per row of ``increments``.
+
+    ``increments`` has one row per segment and one column per axis of ``axes`` (or one
+    value per segment for one axis). Each command is the one :func:`cd` builds from that row
+    (``cd(A=row[0], B=row[1], ...)``), the values checked together: a contour of a million
+    segments is built in a fraction of a second rather than one builder call at a time.
+
+    Raises:
+        InvalidArgument: bad axes, a shape that does not match them, values that are not
+            whole numbers.
+        LimitError: a value outside the model's CD range (the first one, as :func:`cd`
+            refuses it).
+    """
+    letters = _axis_list(axes, model)
+    if not letters:
+        raise InvalidArgument("cd_rows needs at least one axis")
+    table = _axes(model)
+    positions = [table.position(c) for c in letters]
+    if len(set(positions)) != len(positions):
+        raise InvalidArgument(f"CD: an axis of {axes!r} is given twice")
+    c = np.asarray(increments)
+    if c.ndim == 1 and len(letters) == 1:
+        c = c[:, None]
+    if c.ndim != 2 or c.shape[1] != len(letters):
+        raise InvalidArgument(f"CD rows must have shape (segments, {len(letters)}), not {c.shape}")
+    if c.dtype.kind not in "iu":
+        if c.dtype.kind != "f" or not np.all(np.isfinite(c)) or not np.all(c == np.round(c)):
+            raise InvalidArgument("CD increments must be whole numbers")
+    c = c.astype(np.int64)
+    hi = INT32_MAX if model is None else model.cd_max
+    bad = np.flatnonzero(((c > hi) | (c < -hi)).any(axis=1))
+    if bad.size:
+        row = c[int(bad[0])].tolist()
+        cd(model=model, **dict(zip(letters, row, strict=True)))  # raises as cd() does
+    order = sorted(range(len(letters)), key=lambda i: positions[i])
+    slots = [""] * (max(positions) + 1)
+    for i in order:
+        slots[positions[i]] = "%d"
+    form = "CD " + ",".join(slots)
+    rows = c[:, order].tolist()
+    if len(letters) == 1:
+        return [_plain(form % r[0]) for r in rows]
+    return [_plain(form % tuple(r)) for r in rows]
 
 
 def cd_end(axes: str = "A", *, model: ModelSpec | None = None) -> Command:

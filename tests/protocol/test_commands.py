@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -308,3 +309,40 @@ def test_axis_forms_round_trip(values: dict[str, int]) -> None:
         for letter, v in values.items():
             assert fields["ABCDEFGH".index(letter)] == str(v)
         assert sum(1 for f in fields if f) == len(values)
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    letters=st.sampled_from(["A", "C", "AB", "BA", "ABD", "DCBA", "XZ", "H"]),
+    rows=st.lists(
+        st.lists(st.integers(-40_000, 40_000), min_size=4, max_size=4), min_size=1, max_size=8
+    ),
+    model=st.sampled_from([None, "DMC-4040", "DMC-4080"]),
+)
+def test_cd_rows_are_the_cd_commands_of_each_row(
+    letters: str, rows: list[list[int]], model: str | None
+) -> None:
+    spec = None if model is None else get_model(model)
+    inc = np.array([r[: len(letters)] for r in rows], dtype=np.int64).reshape(-1, len(letters))
+
+    def outcome(build: object) -> object:
+        try:
+            return build()  # type: ignore[operator]
+        except (InvalidArgument, LimitError) as exc:
+            return type(exc)
+
+    one_by_one = outcome(
+        lambda: [c.cd(model=spec, **dict(zip(letters, r, strict=True))) for r in inc.tolist()]
+    )
+    assert outcome(lambda: c.cd_rows(inc, letters, model=spec)) == one_by_one
+
+
+def test_cd_rows_take_one_column_flat_and_refuse_fractions() -> None:
+    assert [k.text for k in c.cd_rows(np.array([3, -4]), "B")] == ["CD ,3", "CD ,-4"]
+    assert [k.text for k in c.cd_rows(np.array([[2.0], [5.0]]), "A")] == ["CD 2", "CD 5"]
+    with pytest.raises(InvalidArgument):
+        c.cd_rows(np.array([0.5]), "A")
+    with pytest.raises(InvalidArgument):
+        c.cd_rows(np.zeros((3, 2)), "A")
+    with pytest.raises(InvalidArgument):
+        c.cd_rows(np.zeros((3, 2)), "AX")
