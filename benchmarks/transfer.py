@@ -67,7 +67,7 @@ def transfers(
     address: str, sizes: dict[str, tuple[int, ...]]
 ) -> dict[str, list[tuple[int, float, float]]]:
     """Upload arrays and download programs of each size; (size, bytes, seconds) per kind."""
-    out: dict[str, list[tuple[int, float, float]]] = {"QU": [], "DL": []}
+    out: Rows = {"QU": [], "DL": []}
     with galil.connect(address, timeout=30.0) as c:
         for n in sizes["QU"]:
             c.arrays.define("bench", n, replace=True)

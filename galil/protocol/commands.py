@@ -740,9 +740,11 @@ def cd_rows(
         c = c[:, None]
     if c.ndim != 2 or c.shape[1] != len(letters):
         raise InvalidArgument(f"CD rows must have shape (segments, {len(letters)}), not {c.shape}")
-    if c.dtype.kind not in "iu":
-        if c.dtype.kind != "f" or not np.all(np.isfinite(c)) or not np.all(c == np.round(c)):
-            raise InvalidArgument("CD increments must be whole numbers")
+    whole = c.dtype.kind in "iu" or (
+        c.dtype.kind == "f" and bool(np.all(np.isfinite(c))) and bool(np.all(c == np.round(c)))
+    )
+    if not whole:
+        raise InvalidArgument("CD increments must be whole numbers")
     c = c.astype(np.int64)
     hi = INT32_MAX if model is None else model.cd_max
     bad = np.flatnonzero(((c > hi) | (c < -hi)).any(axis=1))
