@@ -63,9 +63,10 @@ def measure(c: galil.Controller, op: Callable[[], object], received: bool) -> tu
     return float(after - before), spent
 
 
-def transfers(
-    address: str, sizes: dict[str, tuple[int, ...]]
-) -> dict[str, list[tuple[int, float, float]]]:
+Rows = dict[str, list[tuple[int, float, float]]]
+
+
+def transfers(address: str, sizes: dict[str, tuple[int, ...]]) -> Rows:
     """Upload arrays and download programs of each size; (size, bytes, seconds) per kind."""
     out: Rows = {"QU": [], "DL": []}
     with galil.connect(address, timeout=30.0) as c:
@@ -85,9 +86,7 @@ def transfers(
     return out
 
 
-def run_over(
-    kind: str, sizes: dict[str, tuple[int, ...]]
-) -> dict[str, list[tuple[int, float, float]]]:
+def run_over(kind: str, sizes: dict[str, tuple[int, ...]]) -> Rows:
     ctx = mp.get_context("spawn")
     mine, theirs = ctx.Pipe()
     child = ctx.Process(target=serve, args=(kind, theirs), daemon=True)
@@ -99,7 +98,7 @@ def run_over(
         child.join(10)
 
 
-def figures_of(kind: str, results: dict[str, list[tuple[int, float, float]]]) -> list[Figure]:
+def figures_of(kind: str, results: Rows) -> list[Figure]:
     out = []
     for op, label, unit in (
         ("QU", "array upload (QU)", "elements"),
