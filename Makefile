@@ -34,11 +34,10 @@ test: lint typecheck layers
 docs: $(STAMP)
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 
+# Every benchmark, each figure against its target and its anchor, a one-line summary and
+# benchmarks/results/bench.json (about 6 minutes; BENCH="--quick" for a shorter, noisier run).
 bench: $(STAMP)
-	$(BIN)/python benchmarks/protocol.py
-	$(BIN)/python benchmarks/predict.py
-	$(BIN)/python benchmarks/sim.py
-	$(BIN)/python benchmarks/roundtrip.py
+	$(BIN)/python benchmarks/run.py $(BENCH)
 
 soak: $(STAMP)
 	$(BIN)/python benchmarks/soak.py

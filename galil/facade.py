@@ -97,7 +97,8 @@ class LinkFacade:
             GalilConnectionError: the link is closed or dead.
         """
         reply = self.link.command(text, timeout=timeout, allow_compound=allow_compound)
-        self._follow_tm([text])
+        if type(text) is str and text.lstrip()[:2].upper() == "TM":  # the rest, cheaply
+            self._follow_tm([text])
         return reply
 
     def _follow_tm(self, parts: Sequence[str | Command]) -> None:

@@ -134,6 +134,8 @@ def follow_tm(model: ModelSpec, text: str) -> float | None:
     The link's ``sample_period`` is set from it after the controller accepted the line, so
     predictions follow a ``TM`` sent as a raw command too.
     """
+    if text.lstrip()[:2].upper() != "TM":
+        return None  # every other command, cheaply (this runs after each raw command)
     found = _TM.match(text)
     if found is None or not model.tm_adjustable:
         return None
