@@ -709,6 +709,9 @@ class LinkCore:
                     source.let_time_pass(step)
                     left -= step
                     self._roundtrip((beat[0],), self.timeout)
+        # Time passed for everyone: give a thread waiting for the link its turn now (a lock
+        # is not fair, and the GIL would let this thread take it again at once).
+        time.sleep(0)
         if self._inbox:
             self._flush()
 

@@ -290,7 +290,7 @@ def plan_stop(x0: float, v0: float, d: float) -> KinematicPlan:
 _SCALAR_MAX = 48
 # Chunks up to this many samples that span several segments gather each sample's
 # coefficients and evaluate them in one pass (fewer numpy calls, 32 bytes a sample more).
-_GATHER_MAX = 16384
+_GATHER_MAX = 4096
 
 
 def _round_fixed(xq: Int64Array) -> Int64Array:

@@ -331,6 +331,8 @@ class Interpreter:
 
 
 def _find_eq(s: str) -> int:
+    if '"' not in s:
+        return s.find("=")  # no quotes: the first '=' is outside them
     quoted = False
     for i, ch in enumerate(s):
         if ch == '"':
