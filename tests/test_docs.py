@@ -38,6 +38,7 @@ GUIDE = [
     "setup.md",
     "programs.md",
     "capture.md",
+    "performance.md",
 ]
 
 # Pages of the site that are not guide pages: an overview, and two generated ones.
