@@ -52,6 +52,21 @@ class _Channels(Room[C], Generic[C]):
     def __len__(self) -> int:
         return len(self.sync)
 
+    @property
+    def kind(self) -> str:
+        """What a channel is (``"input"``, ``"analog output"`` ...)."""
+        return self.sync.kind
+
+    @property
+    def first(self) -> int:
+        """The first channel's number."""
+        return self.sync.first
+
+    @property
+    def count(self) -> int:
+        """How many channels the model has."""
+        return self.sync.count
+
     def numbers(self) -> range:
         """The channel numbers, in the controller's numbering."""
         return self.sync.numbers()
