@@ -165,7 +165,10 @@ def test_wait_for_input_returns_when_the_input_changes() -> None:
             await waiting
             return await c.run(c.sync.link.clock) - start
 
-    assert run(body) < aio.WAIT_SLICE + 0.1  # within the slice under way, or the next
+    # Within the slice under way, most often; the simulator's line reaches the host when the
+    # idle poll (20 ms of real time) reads it, so now and then a slice ends first and the
+    # next one sees the input at once.
+    assert run(body) < 3 * aio.WAIT_SLICE
 
 
 def test_wait_for_input_times_out_after_the_whole_timeout_not_a_slice() -> None:
