@@ -24,7 +24,7 @@ from galil.aio._streams import AsyncMessages, LoopQueue
 from galil.aio._worker import Worker, shielded, twin
 from galil.capture import Capture
 from galil.contour import ContourResult
-from galil.controller import Controller
+from galil.controller import Controller, CoordinatedMotion
 from galil.controller import connect as connect_sync
 from galil.errors import GalilError, InvalidArgument
 from galil.homing import SwitchPolarity
@@ -33,6 +33,7 @@ from galil.predict import MultiProfile
 from galil.protocol.interrupts import Interrupt
 from galil.segments import Segment, VectorPlan
 from galil.transport import Transport
+from galil.vector import VectorHandle
 
 __all__ = ["AsyncController", "connect"]
 
@@ -85,6 +86,19 @@ def _capture(
 
 def _stop_capture(started: tuple[Capture, float]) -> None:
     started[0].stop()
+
+
+def _stop_sequences(controller: CoordinatedMotion) -> None:
+    """Stop every sequence in progress (``ST S``), even one still streaming on its thread."""
+    if not isinstance(controller, Controller):
+        return
+    seen: set[int] = set()
+    for letter in controller.model.axes:
+        handle = controller.tracker.active(letter)
+        if isinstance(handle, VectorHandle) and id(handle) not in seen:
+            seen.add(id(handle))
+            with contextlib.suppress(GalilError):
+                handle.stop()
 
 
 class AsyncController(AsyncLinkFacade):
@@ -176,7 +190,7 @@ class AsyncController(AsyncLinkFacade):
     # -- motion ---------------------------------------------------------------------------
     move = motion_twin(_move)
     plan = twin(_plan)
-    vector_move = motion_twin(Controller.vector_move, AsyncVectorHandle)
+    vector_move = motion_twin(Controller.vector_move, AsyncVectorHandle).on_cancel(_stop_sequences)
     plan_vector = twin(_plan_vector)
     stop = twin(Controller.stop)
     abort = twin(Controller.abort)

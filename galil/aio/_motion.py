@@ -21,7 +21,7 @@ from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
 
 from galil import predict
 from galil.aio._worker import Room, Worker
-from galil.errors import GalilError, GalilTimeoutError, InvalidArgument
+from galil.errors import GalilConnectionError, GalilError, GalilTimeoutError, InvalidArgument
 from galil.link import Link
 from galil.motion import MAX_POLL, MIN_POLL, MoveHandle, MoveParams, MoveResult
 from galil.segments import VectorPlan
@@ -321,6 +321,11 @@ class AsyncVectorHandle(AsyncMoveHandle):
         return self._sequence.counts
 
     @property
+    def stopped(self) -> bool:
+        """Whether an ``ST`` or ``AB`` reached the sequence (a flag: no query)."""
+        return self._sequence.stopped
+
+    @property
     def vector(self) -> VectorPlan:
         """The prediction in the axes' user units (path, speed along it, ``plot()``)."""
         return self._sequence.vector
@@ -399,8 +404,16 @@ class motion_twin(Generic[S, P, H]):  # noqa: N801 - used like a decorator
     ) -> None:
         self._method = method
         self._wrap = wrap
+        self._at_once: Callable[[Any], object] | None = None
         self.__doc__ = method.__doc__
         self.__name__ = getattr(method, "__name__", "motion_twin")
+
+    def on_cancel(self, at_once: Callable[[S], object]) -> motion_twin[S, P, H]:
+        """Also run ``at_once(sync)`` on a worker the moment the caller is cancelled, while
+        the start is still running (a long path streaming on its thread is stopped then, not
+        only once every segment has been sent)."""
+        self._at_once = at_once
+        return self
 
     @overload
     def __get__(self, room: None, owner: type[object]) -> motion_twin[S, P, H]: ...
@@ -413,13 +426,19 @@ class motion_twin(Generic[S, P, H]):  # noqa: N801 - used like a decorator
     ) -> motion_twin[S, P, H] | Callable[P, Awaitable[H]]:
         if room is None:
             return self
-        method, wrap = self._method, self._wrap
+        method, wrap, at_once = self._method, self._wrap, self._at_once
         sync = room.sync
         worker = room._worker
         link = room._link
 
         async def call(*args: P.args, **kwargs: P.kwargs) -> H:
-            started: H = await start_motion(worker, link, wrap, method, sync, *args, **kwargs)
+            try:
+                started: H = await start_motion(worker, link, wrap, method, sync, *args, **kwargs)
+            except asyncio.CancelledError:
+                if at_once is not None:
+                    with contextlib.suppress(GalilConnectionError):
+                        worker.submit(at_once, sync)
+                raise
             return started
 
         call.__doc__ = method.__doc__

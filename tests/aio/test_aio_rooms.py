@@ -449,9 +449,9 @@ def test_cancelling_the_task_that_awaits_a_sequence_stops_it_along_its_path() ->
     run(body)
 
 
-def test_cancelled_while_a_long_path_streams_the_sequence_stops_once_it_is_all_sent() -> None:
-    """The sync stream cannot be interrupted from another thread (decision 0012): the stop
-    goes out as soon as the last segment has, before the buffered ones have run."""
+def test_cancelled_while_a_long_path_streams_the_sequence_stops_at_once() -> None:
+    """The stop goes out while the path is still streaming on its thread, and the stream
+    sends nothing more (no VE): a stop from any thread ends a streamed sequence."""
 
     async def body() -> None:
         async with await sim() as c:
@@ -469,8 +469,9 @@ def test_cancelled_while_a_long_path_streams_the_sequence_stops_once_it_is_all_s
                     break
                 await asyncio.sleep(0.001)
             log = commands_of(c)
-            assert log.index("VE") < log.index("ST S")
+            assert "ST S" in log
             await c.sleep(1.0)
+            assert "VE" not in commands_of(c)  # the stream saw the stop and sent no more
             assert await c.query_operands(["_BGS", "_SCA"]) == [0, 4]
             assert (await c.query_operands(["_RPA"]))[0] < 37 * 1400
 
