@@ -11,8 +11,9 @@ which land in :attr:`queue` and go to every subscriber, in order, on that thread
     dmc.interrupts.get(timeout=5)
 
 Interrupts need a second Ethernet handle: over serial or USB there is none (``enable``
-refuses). A controller sends them to a UDP handle; this room opens what the transport gives
-(TCP today): see ``docs/decisions/0017``.
+refuses). A controller sends them to a UDP handle: this room opens one where the transport
+can (``DatagramSource``: the TCP transport opens a UDP handle to the same port), else a TCP
+handle; see ``docs/decisions/0017``.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from galil.link import Link, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.interrupts import Interrupt, InterruptParser
 from galil.protocol.numbers import parse_number
-from galil.transport import HandleSource, Transport
+from galil.transport import DatagramSource, HandleSource, Transport
 
 __all__ = ["Interrupt", "InterruptCallback", "InterruptQueue", "Interrupts"]
 
@@ -139,7 +140,13 @@ class Interrupts:
     def _open(self, transport: HandleSource) -> None:
         link = self.link
         try:
-            handle = transport.open_handle()
+            # A controller sends interrupt packets to a UDP handle: one where the link can
+            # open it, else a TCP handle (which the simulator also accepts).
+            source: object = transport
+            if isinstance(source, DatagramSource):
+                handle = source.open_datagram_handle()
+            else:
+                handle = transport.open_handle()
         except GalilConnectionError as exc:
             raise link.error(GalilConnectionError, f"no handle for interrupts: {exc}") from exc
         try:

@@ -126,6 +126,7 @@ class VectorHandle(MoveHandle):
         self._sequence = sequence
         self._path_axes = tuple(axes)
         self._path = path
+        self._stopped = False
 
     @property
     def counts(self) -> predict.VectorProfile:
@@ -176,10 +177,16 @@ class VectorHandle(MoveHandle):
                 kind = "stop"
             else:
                 return
+            self._stopped = True  # whoever sent it: nothing more is streamed
             if not self._sequence.event(sample, kind):
                 for t in self._tracks.values():
                     t.exact = False
             self._cache.clear()
+
+    @property
+    def stopped(self) -> bool:
+        """Whether an ``ST`` or ``AB`` reached the sequence (from any thread)."""
+        return self._stopped
 
     def record(
         self, sample: int | None, kind: str, segments: Sequence[predict.PathSegment]
@@ -559,7 +566,9 @@ class VectorStream:
         begin = handle.begin[self.path.letters[0]] or 0
         ts = link.sample_period
         while sent < len(texts):
-            free, now = link.query_operands([f"_LM{PLANE}", "TIME"])
+            free, now, running = link.query_operands([f"_LM{PLANE}", "TIME", f"_BG{PLANE}"])
+            if handle.stopped or not round(running):
+                return  # stopped (ST, AB, a limit) from wherever: stream nothing more
             room = round(free) - 1  # one spare: whether the running segment counts is unsure
             if room >= min(refill, len(texts) - sent):
                 stop = sent + min(room, len(texts) - sent)

@@ -1,4 +1,4 @@
-"""The async controller and its axes: twins of :class:`galil.Controller` and :class:`galil.Axis`.
+"""The async controller: a twin of :class:`galil.Controller`, its axes and its rooms.
 
 Every method that talks to the controller runs the sync method on the controller's worker
 threads; nothing here converts a unit, predicts a move or builds a command.
@@ -10,46 +10,38 @@ import asyncio
 import concurrent.futures
 import contextlib
 import itertools
-import math
-from collections.abc import AsyncIterator, Callable, Mapping
+from collections.abc import AsyncIterator, Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
-from galil.aio._motion import MotionRoom, motion_twin
-from galil.aio._streams import AsyncMessages, AsyncRecordStream
+from galil.aio._axis import AsyncAxis
+from galil.aio._capture import AsyncCapture, AsyncWatchdog
+from galil.aio._facade import AsyncLinkFacade
+from galil.aio._interrupts import AsyncInterrupts
+from galil.aio._io import AsyncIO
+from galil.aio._motion import AsyncVectorHandle, motion_twin
+from galil.aio._programs import AsyncArrays, AsyncPrograms, AsyncVariables
+from galil.aio._streams import AsyncMessages, LoopQueue
 from galil.aio._worker import Worker, shielded, twin
-from galil.axis import Axis
+from galil.capture import Capture
 from galil.contour import ContourResult
-from galil.controller import Controller
+from galil.controller import Controller, CoordinatedMotion
 from galil.controller import connect as connect_sync
 from galil.errors import GalilError, InvalidArgument
-from galil.models import Identity, ModelSpec
+from galil.homing import SwitchPolarity
 from galil.motion import MoveHandle
-from galil.predict import MultiProfile, Profile
+from galil.predict import MultiProfile
+from galil.protocol.interrupts import Interrupt
+from galil.segments import Segment, VectorPlan
 from galil.transport import Transport
+from galil.vector import VectorHandle
 
-__all__ = ["AsyncAxis", "AsyncController", "connect"]
+__all__ = ["AsyncController", "connect"]
 
 _names = itertools.count(1)
 
 
 # Methods that take **overrides cannot bind ``self`` positionally for mypy; these forwarders
 # only make it positional-only (the sync methods do the work and hold the docstrings).
-def _move_to(axis: Axis, /, position: Any, **overrides: Any) -> MoveHandle:
-    return axis.move_to(position, **overrides)
-
-
-def _move_by(axis: Axis, /, distance: Any, **overrides: Any) -> MoveHandle:
-    return axis.move_by(distance, **overrides)
-
-
-def _plan_to(axis: Axis, /, position: Any, **overrides: Any) -> Profile:
-    return axis.plan_to(position, **overrides)
-
-
-def _plan_by(axis: Axis, /, distance: Any, **overrides: Any) -> Profile:
-    return axis.plan_by(distance, **overrides)
-
-
 def _move(
     c: Controller, /, targets: Mapping[str, Any], *, relative: bool = False, **overrides: Any
 ) -> MoveHandle:
@@ -62,147 +54,69 @@ def _plan(
     return c.plan(targets, relative=relative, **overrides)
 
 
+def _plan_vector(
+    c: Controller, /, axes: str, segments: Sequence[Segment], **options: Any
+) -> VectorPlan:
+    return c.plan_vector(axes, segments, **options)
+
+
 for _f, _sync in (
-    (_move_to, Axis.move_to),
-    (_move_by, Axis.move_by),
-    (_plan_to, Axis.plan_to),
-    (_plan_by, Axis.plan_by),
     (_move, Controller.move),
     (_plan, Controller.plan),
+    (_plan_vector, Controller.plan_vector),
 ):
     _f.__doc__ = _sync.__doc__
     _f.__name__ = _sync.__name__
 
 
-class AsyncAxis(MotionRoom[Axis]):
-    """One axis, awaited: ``await axis.position()``, ``handle = await axis.move_to(5 * mm)``.
-
-    Values go in and come out in the axis's user units, exactly as on the sync
-    :class:`~galil.axis.Axis` (:attr:`sync`), which does the work.
-    """
-
-    @property
-    def letter(self) -> str:
-        """The axis letter."""
-        return self.sync.letter
-
-    def set_scale(self, counts_per: Any, offset: Any = None, sign: int = 1) -> AsyncAxis:
-        """Give the axis a scale (no I/O; see :meth:`galil.Axis.set_scale`)."""
-        self.sync.set_scale(counts_per, offset, sign)
-        return self
-
-    @property
-    def scale(self) -> Any:
-        """The axis's :class:`~galil.units.Scale`, if any."""
-        return self.sync.scale
-
-    async def _get(self, name: str) -> Any:
-        return await self._worker.run(getattr, self.sync, name)
-
-    async def _set(self, name: str, value: Any) -> None:
-        await self._worker.run(setattr, self.sync, name, value)
-
-    # -- operands (one query each; see the sync properties) ---------------------------------
-    async def position(self) -> Any:
-        """Encoder position ``_TP``."""
-        return await self._get("position")
-
-    async def reference_position(self) -> Any:
-        """Commanded (reference) position ``_RP``."""
-        return await self._get("reference_position")
-
-    async def velocity(self) -> Any:
-        """Filtered actual velocity ``_TV`` (signed)."""
-        return await self._get("velocity")
-
-    async def error(self) -> Any:
-        """Position error ``_TE``."""
-        return await self._get("error")
-
-    async def moving(self) -> bool:
-        """True while the profiler is running (``_BG``)."""
-        return bool(await self._get("moving"))
-
-    async def motor_on(self) -> bool:
-        """True when the servo is enabled (``_MO`` is 0)."""
-        return bool(await self._get("motor_on"))
-
-    async def stop_code(self) -> tuple[int, str]:
-        """``_SC`` with its text."""
-        code, text = await self._get("stop_code")
-        return int(code), str(text)
-
-    # -- parameters ---------------------------------------------------------------------------
-    async def speed(self) -> Any:
-        """Slew speed ``SP``."""
-        return await self._get("speed")
-
-    async def set_speed(self, value: Any) -> None:
-        """Set ``SP`` (in motion too: the move's prediction follows)."""
-        await self._set("speed", value)
-
-    async def accel(self) -> Any:
-        """Acceleration ``AC``."""
-        return await self._get("accel")
-
-    async def set_accel(self, value: Any) -> None:
-        """Set ``AC`` (in motion too)."""
-        await self._set("accel", value)
-
-    async def decel(self) -> Any:
-        """Deceleration ``DC``."""
-        return await self._get("decel")
-
-    async def set_decel(self, value: Any) -> None:
-        """Set ``DC`` (the controller refuses a change in motion)."""
-        await self._set("decel", value)
-
-    async def smoothing(self) -> float:
-        """Independent time constant ``IT``."""
-        return float(await self._get("smoothing"))
-
-    async def set_smoothing(self, value: float) -> None:
-        """Set ``IT``."""
-        await self._set("smoothing", value)
-
-    async def jog_speed(self) -> Any:
-        """Jog speed ``JG`` (signed)."""
-        return await self._get("jog_speed")
-
-    async def set_jog_speed(self, value: Any) -> None:
-        """Set ``JG`` (while jogging: the speed changes in motion)."""
-        await self._set("jog_speed", value)
-
-    async def soft_limits(self) -> tuple[Any, Any]:
-        """``(low, high)`` soft limits (``BL``, ``FL``)."""
-        low, high = await self._get("soft_limits")
-        return low, high
-
-    async def set_soft_limits(self, limits: tuple[Any, Any]) -> None:
-        """Set ``(low, high)``; ``None`` on either side removes it."""
-        await self._set("soft_limits", limits)
-
-    # -- motion -------------------------------------------------------------------------------
-    move_to = motion_twin(_move_to)
-    move_by = motion_twin(_move_by)
-    jog = motion_twin(Axis.jog)
-    increment = motion_twin(Axis.increment)
-    speed_schedule = motion_twin(Axis.speed_schedule)
-    plan_to = twin(_plan_to)
-    plan_by = twin(_plan_by)
-    stop = twin(Axis.stop)
-
-    def __repr__(self) -> str:
-        return f"<AsyncAxis of {self.sync!r}>"
+def _polarity(c: Controller) -> SwitchPolarity:
+    return c.switch_polarity
 
 
-class AsyncController(MotionRoom[Controller]):
+def _set_polarity(c: Controller, polarity: SwitchPolarity) -> None:
+    c.switch_polarity = polarity
+
+
+def _capture(
+    c: Controller, sources: list[str], every: int, count: int | None, seconds: float | None
+) -> tuple[Capture, float]:
+    capture = c.capture(sources, every=every, count=count, seconds=seconds)
+    return capture, c.link.clock()
+
+
+def _stop_capture(started: tuple[Capture, float]) -> None:
+    started[0].stop()
+
+
+def _stop_sequences(controller: CoordinatedMotion) -> None:
+    """Stop every sequence in progress (``ST S``), even one still streaming on its thread."""
+    if not isinstance(controller, Controller):
+        return
+    seen: set[int] = set()
+    for letter in controller.model.axes:
+        handle = controller.tracker.active(letter)
+        if isinstance(handle, VectorHandle) and id(handle) not in seen:
+            seen.add(id(handle))
+            with contextlib.suppress(GalilError):
+                handle.stop()
+
+
+class AsyncController(AsyncLinkFacade):
     """A connected controller for coroutines. Build it with :func:`connect`.
 
     The vocabulary is the sync :class:`~galil.Controller`'s (:attr:`sync`) with ``await``:
     ``await c.command("TPA")``, ``c.A`` (an :class:`AsyncAxis`), ``await c.move({...})``,
-    ``await c.contour(...)``, ``async for rec in await c.records(8)``,
-    ``async for line in c.messages``. Close it with :meth:`aclose` (or ``async with``).
+    ``await c.vector_move(...)``, ``await c.contour(...)``, ``async for rec in await
+    c.records(8)``, ``async for line in c.messages``; the rooms ``c.io``, ``c.programs``,
+    ``c.arrays``, ``c.variables`` and ``c.interrupts`` (``async for i in c.interrupts``).
+    Close it with :meth:`aclose` (or ``async with``).
+
+    Attributes:
+        io: digital and analog I/O (:class:`~galil.aio.AsyncIO`).
+        programs: the user's program and threads (:class:`~galil.aio.AsyncPrograms`).
+        arrays: the controller's arrays (:class:`~galil.aio.AsyncArrays`).
+        variables: the controller's variables (:class:`~galil.aio.AsyncVariables`).
+        interrupts: ``UI``/``EI`` interrupts (:class:`~galil.aio.AsyncInterrupts`).
     """
 
     def __init__(
@@ -211,29 +125,18 @@ class AsyncController(MotionRoom[Controller]):
         worker: Worker,
         loop: asyncio.AbstractEventLoop,
         messages: AsyncMessages,
+        interrupts: LoopQueue[Interrupt],
         unsubscribe: Callable[[], None],
     ) -> None:
-        super().__init__(sync, worker, sync.link)
-        self._loop = loop
+        super().__init__(sync, worker, loop, messages)
         self._axes: dict[str, AsyncAxis] | None = None
-        self._messages = messages
         self._unsubscribe = unsubscribe
-
-    # -- what needs no I/O --------------------------------------------------------------------
-    @property
-    def model(self) -> ModelSpec:
-        """The controller's :class:`~galil.models.ModelSpec`."""
-        return self.sync.model
-
-    @property
-    def identity(self) -> Identity | None:
-        """The parsed ``^R^V`` reply."""
-        return self.sync.identity
-
-    @property
-    def sample_period(self) -> float:
-        """Seconds per servo sample."""
-        return self.sync.sample_period
+        link = sync.link
+        self.io = AsyncIO(sync.io, worker, link)
+        self.programs = AsyncPrograms(sync.programs, worker, link)
+        self.arrays = AsyncArrays(sync.arrays, worker)
+        self.variables = AsyncVariables(sync.variables, worker)
+        self.interrupts = AsyncInterrupts(sync.interrupts, worker, loop, interrupts)
 
     @property
     def closed(self) -> bool:
@@ -245,61 +148,7 @@ class AsyncController(MotionRoom[Controller]):
         """The threads this controller's blocking calls run on."""
         return self._worker
 
-    # -- the link -----------------------------------------------------------------------------
-    command = twin(Controller.command)
-    command_line = twin(Controller.command_line)
-    send = twin(Controller.send)
-    exchange = twin(Controller.exchange)
-    send_many = twin(Controller.send_many)
-    query_number = twin(Controller.query_number)
-    query_numbers = twin(Controller.query_numbers)
-    query_operands = twin(Controller.query_operands)
     reconnect = twin(Controller.reconnect)
-
-    async def sleep(self, seconds: float) -> None:
-        """Let ``seconds`` pass for the controller: simulated time on a manual-clock
-        simulator, ``asyncio.sleep`` otherwise (the loop stays free)."""
-        if (
-            isinstance(seconds, bool)
-            or not isinstance(seconds, (int, float))
-            or not math.isfinite(seconds)
-            or seconds < 0
-        ):
-            raise InvalidArgument(f"seconds must be a non-negative finite number, got {seconds!r}")
-        if self.sync.link.simulated_time:
-            await self._worker.run(self.sync.sleep, float(seconds))
-        else:
-            await asyncio.sleep(float(seconds))
-
-    # -- unsolicited output and records -----------------------------------------------------
-    @property
-    def messages(self) -> AsyncMessages:
-        """Unsolicited lines as an async iterator (``async for line in c.messages``)."""
-        return self._messages
-
-    async def subscribe(self, callback: Callable[[str], None]) -> Callable[[], None]:
-        """Call ``callback(line)`` on this event loop for each unsolicited line; returns a
-        function that unsubscribes."""
-        if not callable(callback):
-            raise InvalidArgument(f"callback must be callable, not {callback!r}")
-        loop = self._loop
-
-        def deliver(line: str) -> None:
-            if not loop.is_closed():
-                loop.call_soon_threadsafe(callback, line)
-
-        return await self._worker.run(self.sync.subscribe, deliver)
-
-    record = twin(Controller.record)
-
-    async def records(
-        self, period: int, *, method: str = "auto", maxlen: int = 10_000
-    ) -> AsyncRecordStream:
-        """Stream data records every ``period`` servo samples (see ``Controller.records``)."""
-        stream = await self._worker.run_or_undo(
-            _close_stream, self.sync.records, period, method=method, maxlen=maxlen
-        )
-        return AsyncRecordStream(stream, self._worker)
 
     # -- axes -------------------------------------------------------------------------------
     @property
@@ -341,6 +190,8 @@ class AsyncController(MotionRoom[Controller]):
     # -- motion ---------------------------------------------------------------------------
     move = motion_twin(_move)
     plan = twin(_plan)
+    vector_move = motion_twin(Controller.vector_move, AsyncVectorHandle).on_cancel(_stop_sequences)
+    plan_vector = twin(_plan_vector)
     stop = twin(Controller.stop)
     abort = twin(Controller.abort)
     servo_here = twin(Controller.servo_here)
@@ -354,6 +205,8 @@ class AsyncController(MotionRoom[Controller]):
         dt: int,
         progress: bool = False,
         timeout: float | None = None,
+        speed_limit: object = None,
+        accel_limit: object = None,
     ) -> ContourResult:
         """Run a contour path on ``axes`` (see ``Controller.contour``) and return when done.
 
@@ -361,7 +214,14 @@ class AsyncController(MotionRoom[Controller]):
         cancellation ends; the stream then leaves contour mode on its thread.
         """
         future = self._worker.submit(
-            self.sync.contour, axes, path, dt=dt, progress=progress, timeout=timeout
+            self.sync.contour,
+            axes,
+            path,
+            dt=dt,
+            progress=progress,
+            timeout=timeout,
+            speed_limit=speed_limit,
+            accel_limit=accel_limit,
         )
         try:
             return await shielded(future)
@@ -386,13 +246,65 @@ class AsyncController(MotionRoom[Controller]):
         else:
             guard.__exit__(None, None, None)
 
+    async def watchdog(
+        self, timeout: float, *, thread: int | None = None, interval: float | None = None
+    ) -> AsyncWatchdog:
+        """Start a dead-man switch: the controller stops every axis (``ST``) when the host has
+        been silent for ``timeout`` seconds (see ``Controller.watchdog``; the heartbeat runs
+        on a thread of the sync core). :meth:`aclose` stops it.
+
+        Raises:
+            InvalidArgument: a bad timeout, interval or thread, a busy thread, a user program
+                running while the routine must be installed.
+        """
+        dog = await self._worker.run_or_undo(
+            _stop_watchdog, self.sync.watchdog, timeout, thread=thread, interval=interval
+        )
+        return AsyncWatchdog(dog, self._worker)
+
+    async def capture(
+        self,
+        sources: list[str],
+        *,
+        every: int = 2,
+        count: int | None = None,
+        seconds: float | None = None,
+    ) -> AsyncCapture:
+        """Start recording ``sources`` on the controller, every ``every`` samples, at servo
+        rate (``RA``/``RD``/``RC``); see ``Controller.capture``. ``await cap.wait()`` (or
+        leaving an ``async with`` block, or ``await cap.stop()``) uploads them.
+
+        Raises:
+            InvalidArgument: a source ``RD`` cannot record, ``every`` not allowed, too many
+                values for the array space (nothing is sent), or a recording running
+                already.
+        """
+        capture, started = await self._worker.run_or_undo(
+            _stop_capture, _capture, self.sync, sources, every, count, seconds
+        )
+        return AsyncCapture(capture, self._worker, self._link, started)
+
+    # -- switches and flash -----------------------------------------------------------------
+    async def switch_polarity(self) -> SwitchPolarity:
+        """``CN``: limit polarity, home direction and latch edge (``MG _CN0,_CN1,_CN2``)."""
+        return await self._worker.run(_polarity, self.sync)
+
+    async def set_switch_polarity(self, polarity: SwitchPolarity) -> None:
+        """Send ``CN`` (every field validated before the byte goes out)."""
+        await self._worker.run(_set_polarity, self.sync, polarity)
+
+    save = twin(Controller.save)
+    save_program = twin(Controller.save_program)
+    save_variables = twin(Controller.save_variables)
+
     # -- life cycle -------------------------------------------------------------------------
     async def aclose(self) -> None:
-        """Close the sync controller (restoring what connect changed) and end the worker's
-        threads; idempotent."""
+        """Close the sync controller (restoring what connect changed; watchdogs, record
+        streams and interrupts stop) and end the worker's threads; idempotent."""
         if self._worker.closed:
             return
         self._messages.close()
+        self.interrupts.queue.close()
         self._unsubscribe()
         try:
             await self._worker.run_shielded(self.sync.close)
@@ -409,8 +321,8 @@ class AsyncController(MotionRoom[Controller]):
         return f"<AsyncController of {self.sync!r}>"
 
 
-def _close_stream(stream: Any) -> None:
-    stream.close()
+def _stop_watchdog(dog: Any) -> None:
+    dog.stop()
 
 
 def _close_controller(controller: Controller, worker: Worker) -> None:
@@ -438,8 +350,9 @@ async def connect(address: str | Transport, *, threads: int = 4, **options: Any)
         raise InvalidArgument(f"max_messages must be a positive integer, not {maxlen!r}")
     loop = asyncio.get_running_loop()
     messages = AsyncMessages(loop, maxlen)
+    interrupts: LoopQueue[Interrupt] = LoopQueue(loop, 1000, "interrupt")
     worker = Worker(str(next(_names)), threads)
-    future = worker.submit(_open, address, options, messages.deliver)
+    future = worker.submit(_open, address, options, messages.deliver, interrupts.deliver)
     try:
         sync, unsubscribe = await shielded(future)
     except asyncio.CancelledError:
@@ -451,7 +364,7 @@ async def connect(address: str | Transport, *, threads: int = 4, **options: Any)
     except BaseException:
         worker.close()
         raise
-    return AsyncController(sync, worker, loop, messages, unsubscribe)
+    return AsyncController(sync, worker, loop, messages, interrupts, unsubscribe)
 
 
 def _close_if_opened(
@@ -464,11 +377,21 @@ def _close_if_opened(
 
 
 def _open(
-    address: str | Transport, options: dict[str, Any], deliver: Callable[[str], None]
+    address: str | Transport,
+    options: dict[str, Any],
+    deliver: Callable[[str], None],
+    interrupt: Callable[[Interrupt], None],
 ) -> tuple[Controller, Callable[[], None]]:
     controller = connect_sync(address, **options)
     try:
-        return controller, controller.subscribe(deliver)
+        quiet = controller.subscribe(deliver)
+        deaf = controller.interrupts.subscribe(interrupt)
     except BaseException:
         controller.close()
         raise
+
+    def unsubscribe() -> None:
+        quiet()
+        deaf()
+
+    return controller, unsubscribe

@@ -21,14 +21,26 @@ from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
 
 from galil import predict
 from galil.aio._worker import Room, Worker
-from galil.errors import GalilError, GalilTimeoutError, InvalidArgument
+from galil.errors import GalilConnectionError, GalilError, GalilTimeoutError, InvalidArgument
 from galil.link import Link
 from galil.motion import MAX_POLL, MIN_POLL, MoveHandle, MoveParams, MoveResult
+from galil.segments import VectorPlan
+from galil.vector import VectorHandle
 
-__all__ = ["AsyncMoveHandle", "MotionRoom", "MoveProgress", "motion_twin", "start_motion"]
+__all__ = [
+    "AsyncMoveHandle",
+    "AsyncVectorHandle",
+    "MotionRoom",
+    "MoveProgress",
+    "motion_twin",
+    "start_motion",
+]
 
 P = ParamSpec("P")
 S = TypeVar("S")
+S_co = TypeVar("S_co", covariant=True)
+H = TypeVar("H")
+M = TypeVar("M", bound=MoveHandle)
 
 
 @dataclass(frozen=True)
@@ -151,8 +163,20 @@ class AsyncMoveHandle:
     # -- the prediction (computed by the sync handle) ----------------------------------------
     @property
     def kind(self) -> str:
-        """``"position"``, ``"jog"`` or ``"schedule"``."""
+        """``"position"``, ``"jog"``, ``"schedule"``, ``"vector"``, or ``"home"``/``"edge"``/
+        ``"index"`` for HM/FE/FI."""
         return self.sync.kind
+
+    @property
+    def notes(self) -> dict[str, str]:
+        """What is known of each axis's prediction, where the handle has something to say
+        (a homing sequence: predicted from given switch positions, or unknown)."""
+        return self.sync.notes
+
+    @property
+    def followers(self) -> str:
+        """The axes geared to this move's axes, whose motion it predicts too."""
+        return self.sync.followers
 
     @property
     def axes(self) -> str:
@@ -279,6 +303,37 @@ class AsyncMoveHandle:
         return f"<AsyncMoveHandle of {self.sync!r}>"
 
 
+class AsyncVectorHandle(AsyncMoveHandle):
+    """A coordinated sequence in progress (``await controller.vector_move(...)``): an
+    :class:`AsyncMoveHandle` whose prediction is the whole path's.
+
+    ``stop()`` and a cancelled waiter send ``ST S``; the prediction follows every segment
+    streamed, ``VE``, ``ST`` and ``AB`` (the sync :class:`~galil.vector.VectorHandle`).
+    """
+
+    def __init__(self, handle: VectorHandle, worker: Worker, link: Link) -> None:
+        super().__init__(handle, worker, link)
+        self._sequence = handle
+
+    @property
+    def counts(self) -> predict.VectorProfile:
+        """The prediction in counts, with everything sent so far."""
+        return self._sequence.counts
+
+    @property
+    def stopped(self) -> bool:
+        """Whether an ``ST`` or ``AB`` reached the sequence (a flag: no query)."""
+        return self._sequence.stopped
+
+    @property
+    def vector(self) -> VectorPlan:
+        """The prediction in the axes' user units (path, speed along it, ``plot()``)."""
+        return self._sequence.vector
+
+    def __repr__(self) -> str:
+        return f"<AsyncVectorHandle of {self.sync!r}>"
+
+
 def _is_done(handle: MoveHandle) -> bool:
     return handle.done
 
@@ -287,53 +342,104 @@ def _begin_of(handle: MoveHandle) -> dict[str, int | None]:
     return handle.begin
 
 
+def _stop(handle: MoveHandle) -> None:
+    handle.stop()  # the handle's own stop: ST on its axes, ST S for a sequence
+
+
+def _started(start: Callable[P, M], /, *args: P.args, **kwargs: P.kwargs) -> M:
+    """Start motion, then predict it here on the worker (the loop only reads the result)."""
+    handle = start(*args, **kwargs)
+    with contextlib.suppress(Exception):  # a prediction that fails fails again where read
+        handle.profiles  # noqa: B018 - computed and cached by the sync handle
+    return handle
+
+
 async def start_motion(
-    worker: Worker, link: Link, start: Callable[P, MoveHandle], *args: P.args, **kwargs: P.kwargs
-) -> AsyncMoveHandle:
-    """Run a sync call that starts motion; if the caller is cancelled meanwhile, the motion it
-    started is stopped as soon as the call returns (a call not yet started never runs)."""
-    handle = await worker.run_or_undo(MoveHandle.stop, start, *args, **kwargs)
-    return AsyncMoveHandle(handle, worker, link)
+    worker: Worker,
+    link: Link,
+    wrap: Callable[[M, Worker, Link], H],
+    start: Callable[P, M],
+    /,
+    *args: P.args,
+    **kwargs: P.kwargs,
+) -> H:
+    """Run a sync call that starts motion and wrap the handle it returns; if the caller is
+    cancelled meanwhile, the motion it started is stopped as soon as the call returns (a call
+    not yet started never runs)."""
+    handle = await worker.run_or_undo(_stop, _started, start, *args, **kwargs)
+    return wrap(handle, worker, link)
 
 
-class MotionRoom(Room[S]):
+class MotionRoom(Room[S_co]):
     """A room whose methods start motion: it also knows the link (clock, pauses)."""
 
-    def __init__(self, sync: S, worker: Worker, link: Link) -> None:
+    def __init__(self, sync: S_co, worker: Worker, link: Link) -> None:
         super().__init__(sync, worker)
         self._link = link
 
 
-class motion_twin(Generic[S, P]):  # noqa: N801 - used like a decorator
+class motion_twin(Generic[S, P, H]):  # noqa: N801 - used like a decorator
     """The async twin of a sync method that starts motion and returns a ``MoveHandle``:
-    ``await room.name(...)`` returns an :class:`AsyncMoveHandle` (see :func:`start_motion`).
+    ``await room.name(...)`` returns an :class:`AsyncMoveHandle` (or what ``wrap`` makes of
+    the handle, e.g. an :class:`AsyncVectorHandle`; see :func:`start_motion`).
     """
 
-    def __init__(self, method: Callable[Concatenate[S, P], MoveHandle]) -> None:
+    @overload
+    def __init__(
+        self: motion_twin[S, P, AsyncMoveHandle],
+        method: Callable[Concatenate[S, P], MoveHandle],
+    ) -> None: ...
+
+    @overload
+    def __init__(
+        self,
+        method: Callable[Concatenate[S, P], M],
+        wrap: Callable[[M, Worker, Link], H],
+    ) -> None: ...
+
+    def __init__(
+        self,
+        method: Callable[Concatenate[S, P], Any],
+        wrap: Callable[[Any, Worker, Link], Any] = AsyncMoveHandle,
+    ) -> None:
         self._method = method
+        self._wrap = wrap
+        self._at_once: Callable[[Any], object] | None = None
         self.__doc__ = method.__doc__
         self.__name__ = getattr(method, "__name__", "motion_twin")
 
-    @overload
-    def __get__(self, room: None, owner: type[object]) -> motion_twin[S, P]: ...
+    def on_cancel(self, at_once: Callable[[S], object]) -> motion_twin[S, P, H]:
+        """Also run ``at_once(sync)`` on a worker the moment the caller is cancelled, while
+        the start is still running (a long path streaming on its thread is stopped then, not
+        only once every segment has been sent)."""
+        self._at_once = at_once
+        return self
 
     @overload
-    def __get__(
-        self, room: MotionRoom[S], owner: type[object]
-    ) -> Callable[P, Awaitable[AsyncMoveHandle]]: ...
+    def __get__(self, room: None, owner: type[object]) -> motion_twin[S, P, H]: ...
+
+    @overload
+    def __get__(self, room: MotionRoom[S], owner: type[object]) -> Callable[P, Awaitable[H]]: ...
 
     def __get__(
         self, room: MotionRoom[S] | None, owner: type[object]
-    ) -> motion_twin[S, P] | Callable[P, Awaitable[AsyncMoveHandle]]:
+    ) -> motion_twin[S, P, H] | Callable[P, Awaitable[H]]:
         if room is None:
             return self
-        method = self._method
+        method, wrap, at_once = self._method, self._wrap, self._at_once
         sync = room.sync
         worker = room._worker
         link = room._link
 
-        async def call(*args: P.args, **kwargs: P.kwargs) -> AsyncMoveHandle:
-            return await start_motion(worker, link, method, sync, *args, **kwargs)
+        async def call(*args: P.args, **kwargs: P.kwargs) -> H:
+            try:
+                started: H = await start_motion(worker, link, wrap, method, sync, *args, **kwargs)
+            except asyncio.CancelledError:
+                if at_once is not None:
+                    with contextlib.suppress(GalilConnectionError):
+                        worker.submit(at_once, sync)
+                raise
+            return started
 
         call.__doc__ = method.__doc__
         call.__name__ = self.__name__

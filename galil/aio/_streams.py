@@ -1,7 +1,8 @@
-"""Unsolicited messages and data records as async iterators.
+"""Unsolicited messages, interrupts and data records as async iterators.
 
-Messages arrive through the sync controller's subscription (a reader thread calls back) and
-are handed to the loop with ``call_soon_threadsafe``: no thread waits for them. Records stay
+Messages and interrupts arrive through the sync controller's subscriptions (a reader thread
+calls back) and are handed to the loop with ``call_soon_threadsafe``: no thread waits for
+them (:class:`LoopQueue`). Records stay
 in the sync :class:`~galil.records.RecordStream` (its queue, its ``dropped`` count, its
 errors) and are taken from it in batches on a worker thread, in slices of at most
 :data:`SLICE` seconds so a cancelled reader frees its thread soon.
@@ -14,7 +15,7 @@ import concurrent.futures
 import math
 import queue
 from collections import deque
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
@@ -22,12 +23,14 @@ from galil.aio._worker import Worker, shielded
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.records import RecordStream
 
-__all__ = ["SLICE", "AsyncMessages", "AsyncRecordStream"]
+__all__ = ["SLICE", "AsyncMessages", "AsyncRecordStream", "LoopQueue"]
 
 #: Longest a worker thread blocks in one call while waiting for a record (seconds).
 SLICE = 0.1
 #: Most records taken from the sync stream in one worker call.
 BATCH = 1000
+
+T = TypeVar("T")
 
 
 def _check_wait(timeout: float | None) -> float:
@@ -43,35 +46,41 @@ def _check_wait(timeout: float | None) -> float:
     return float(timeout)
 
 
-class AsyncMessages:
-    """Unsolicited lines (program ``MG`` output ...), oldest first: ``async for line in
-    controller.messages`` or ``await controller.messages.get(timeout)``.
+class LoopQueue(Generic[T]):
+    """Items handed over from a thread of the sync core to one event loop, oldest first:
+    ``async for item in queue`` or ``await queue.get(timeout)``.
 
-    Bounded: when nobody reads, the oldest lines drop (``dropped`` counts them).
+    Bounded: when nobody reads, the oldest items drop (``dropped`` counts them).
+
+    Args:
+        loop: the loop the items are for.
+        maxlen: items kept before the oldest drop.
+        what: what an item is, for the ``queue.Empty`` text (``"unsolicited message"``).
     """
 
-    def __init__(self, loop: asyncio.AbstractEventLoop, maxlen: int) -> None:
+    def __init__(self, loop: asyncio.AbstractEventLoop, maxlen: int, what: str = "item") -> None:
         self._loop = loop
-        self._items: deque[str] = deque()
+        self._items: deque[T] = deque()
         self._maxlen = maxlen
+        self._what = what
         self._wakeup: asyncio.Event = asyncio.Event()
         self._closed = False
         self.dropped = 0
 
-    def deliver(self, line: str) -> None:
-        """Hand a line over from any thread (the sync controller's subscriber)."""
+    def deliver(self, item: T) -> None:
+        """Hand an item over from any thread (a subscriber of the sync core)."""
         if not self._loop.is_closed():
-            self._loop.call_soon_threadsafe(self._put, line)
+            self._loop.call_soon_threadsafe(self._put, item)
 
-    def _put(self, line: str) -> None:
+    def _put(self, item: T) -> None:
         if len(self._items) >= self._maxlen:
             self._items.popleft()
             self.dropped += 1
-        self._items.append(line)
+        self._items.append(item)
         self._wakeup.set()
 
-    async def get(self, timeout: float | None = None) -> str:
-        """The oldest line, waiting up to ``timeout`` seconds (``None``: for ever).
+    async def get(self, timeout: float | None = None) -> T:
+        """The oldest item, waiting up to ``timeout`` seconds (``None``: for ever).
 
         Raises:
             queue.Empty: nothing arrived in time.
@@ -85,7 +94,7 @@ class AsyncMessages:
                 raise GalilConnectionError("the async controller is closed")
             left = deadline - loop.time()
             if left <= 0:
-                raise queue.Empty(f"no unsolicited message within {timeout} s")
+                raise queue.Empty(f"no {self._what} within {timeout} s")
             self._wakeup.clear()
             try:
                 await asyncio.wait_for(self._wakeup.wait(), None if math.isinf(left) else left)
@@ -93,14 +102,14 @@ class AsyncMessages:
                 continue
         return self._items.popleft()
 
-    def get_nowait(self) -> str:
-        """The oldest line at once; ``queue.Empty`` when there is none."""
+    def get_nowait(self) -> T:
+        """The oldest item at once; ``queue.Empty`` when there is none."""
         if not self._items:
-            raise queue.Empty("no unsolicited message waiting")
+            raise queue.Empty(f"no {self._what} waiting")
         return self._items.popleft()
 
-    def drain(self) -> list[str]:
-        """Remove and return every waiting line."""
+    def drain(self) -> list[T]:
+        """Remove and return every waiting item."""
         out = list(self._items)
         self._items.clear()
         return out
@@ -110,10 +119,10 @@ class AsyncMessages:
         self._closed = True
         self._wakeup.set()
 
-    def __aiter__(self) -> AsyncMessages:
+    def __aiter__(self) -> LoopQueue[T]:
         return self
 
-    async def __anext__(self) -> str:
+    async def __anext__(self) -> T:
         try:
             return await self.get()
         except GalilConnectionError:
@@ -123,7 +132,18 @@ class AsyncMessages:
         return len(self._items)
 
     def __repr__(self) -> str:
-        return f"<AsyncMessages {len(self)} waiting, {self.dropped} dropped>"
+        return f"<{type(self).__name__} {len(self)} waiting, {self.dropped} dropped>"
+
+
+class AsyncMessages(LoopQueue[str]):
+    """Unsolicited lines (program ``MG`` output ...), oldest first: ``async for line in
+    controller.messages`` or ``await controller.messages.get(timeout)``.
+
+    Bounded: when nobody reads, the oldest lines drop (``dropped`` counts them).
+    """
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, maxlen: int) -> None:
+        super().__init__(loop, maxlen, "unsolicited message")
 
 
 def _take(stream: RecordStream, wait: float, limit: int) -> list[np.void]:

@@ -10,7 +10,9 @@ signature::
     class AsyncThing(Room[Thing]):
         read = twin(Thing.read)          # await async_thing.read(...) runs Thing.read(...)
 
-:func:`twin` keeps the sync method's parameters (mypy checks the calls) and docstring.
+:func:`twin` keeps the sync method's parameters (mypy checks the calls) and docstring;
+:class:`same` passes a method that does no I/O (a conversion, a prediction already made)
+straight through, called on the loop as it is.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
 
 from galil.errors import GalilConnectionError
 
-__all__ = ["Room", "Worker", "shielded", "twin"]
+__all__ = ["Backed", "Room", "Worker", "same", "shielded", "twin"]
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -163,7 +165,7 @@ class Worker:
             self._jobs.put(None)
 
 
-class Room(Generic[S_co]):
+class Backed(Generic[S_co]):
     """An async twin of one sync object: the object and the worker its calls run on.
 
     Covariant: a twin of a base class's method (``LinkFacade.command``) serves a room of a
@@ -181,6 +183,12 @@ class Room(Generic[S_co]):
     def sync(self) -> S_co:
         """The sync object (its cheap, I/O-free members may be used directly)."""
         return self._sync
+
+
+class Room(Backed[S_co]):
+    """A twin that also runs any blocking callable on its controller's worker (:meth:`run`),
+    for what has no twin. (A twin whose sync object has a ``run`` of its own, such as
+    ``programs.run``, is a :class:`Backed` only.)"""
 
     async def run(self, fn: Callable[P, R], /, *args: P.args, **kwargs: P.kwargs) -> R:
         """Run any blocking callable on this controller's worker (a room without a twin)."""
@@ -201,10 +209,10 @@ class twin(Generic[S, P, R]):  # noqa: N801 - used like a decorator
     def __get__(self, room: None, owner: type[object]) -> twin[S, P, R]: ...
 
     @overload
-    def __get__(self, room: Room[S], owner: type[object]) -> Callable[P, Awaitable[R]]: ...
+    def __get__(self, room: Backed[S], owner: type[object]) -> Callable[P, Awaitable[R]]: ...
 
     def __get__(
-        self, room: Room[S] | None, owner: type[object]
+        self, room: Backed[S] | None, owner: type[object]
     ) -> twin[S, P, R] | Callable[P, Awaitable[R]]:
         if room is None:
             return self
@@ -214,6 +222,39 @@ class twin(Generic[S, P, R]):  # noqa: N801 - used like a decorator
 
         async def call(*args: P.args, **kwargs: P.kwargs) -> R:
             return await worker.run(method, sync, *args, **kwargs)
+
+        call.__doc__ = method.__doc__
+        call.__name__ = self.__name__
+        return call
+
+
+class same(Generic[S, P, R]):  # noqa: N801 - used like a decorator
+    """A sync method that does no I/O (a unit conversion, reading a prediction already made),
+    called as it is: ``room.name(...)`` is ``S.name(room.sync, ...)``, on the caller's thread.
+    Parameters, return type and docstring are the sync method's.
+    """
+
+    def __init__(self, method: Callable[Concatenate[S, P], R]) -> None:
+        self._method = method
+        self.__doc__ = method.__doc__
+        self.__name__ = getattr(method, "__name__", "same")
+
+    @overload
+    def __get__(self, room: None, owner: type[object]) -> same[S, P, R]: ...
+
+    @overload
+    def __get__(self, room: Backed[S], owner: type[object]) -> Callable[P, R]: ...
+
+    def __get__(
+        self, room: Backed[S] | None, owner: type[object]
+    ) -> same[S, P, R] | Callable[P, R]:
+        if room is None:
+            return self
+        method = self._method
+        sync = room.sync
+
+        def call(*args: P.args, **kwargs: P.kwargs) -> R:
+            return method(sync, *args, **kwargs)
 
         call.__doc__ = method.__doc__
         call.__name__ = self.__name__

@@ -177,6 +177,9 @@ class SimTcpServer(_Server):
         self._clients: dict[socket.socket, tuple[int, _Outbox]] = {}
         self._msg_clients: dict[socket.socket, _Outbox] = {}
         self._backlog = bytearray()
+        # UDP handles on the command port's number, as on a controller: one per peer address.
+        self._udp: socket.socket | None = None
+        self._udp_peers: dict[tuple[str, int], tuple[int, _Outbox]] = {}
 
     @property
     def address(self) -> tuple[str, int]:
@@ -210,11 +213,55 @@ class SimTcpServer(_Server):
             self._sel.register(s, selectors.EVENT_READ, "listen" if i == 0 else "listen_msg")
             if i == 0:
                 self._listen = s
+                self._open_udp(s.getsockname()[1])
             else:
                 self._listen_msg = s
 
+    def _open_udp(self, port: int) -> None:
+        u = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        u.bind((self.host, port))
+        u.setblocking(False)
+        self._sel.register(u, selectors.EVENT_READ, "udp")
+        self._udp = u
+
+    def _datagram(self, sock: socket.socket) -> None:
+        """A command on UDP: the peer is a handle of its own (the first datagram opens it)."""
+        try:
+            data, peer = sock.recvfrom(4096)
+        except OSError:
+            return
+        entry = self._udp_peers.get(peer)
+        if entry is None:
+            name = f"UDP PORT {self.address[1]} TO IP ADDRESS 127,0,0,1 PORT {peer[1]}"
+            try:
+                number = self.controller.open_port(name)
+            except GalilConnectionError:
+                return  # all eight handles taken
+            entry = self._udp_peers[peer] = (number, _Outbox(self.faults))
+        number, box = entry
+        box.put(self.controller.feed(data, port=number))
+
+    def _send_datagrams(self) -> None:
+        assert self._udp is not None
+        for peer, (number, box) in list(self._udp_peers.items()):
+            box.put(self.controller.poll(port=number))
+            out = box.due()
+            if not out:
+                continue
+            try:
+                self._udp.sendto(out, peer)
+            except OSError:  # the peer's socket is gone: so is its handle
+                del self._udp_peers[peer]
+                self.controller.close_port(number)
+
     def _close(self) -> None:
-        for sock in [*self._clients, *self._msg_clients, self._listen, self._listen_msg]:
+        for sock in [
+            *self._clients,
+            *self._msg_clients,
+            self._listen,
+            self._listen_msg,
+            self._udp,
+        ]:
             if sock is not None:
                 with contextlib.suppress(KeyError, ValueError):
                     self._sel.unregister(sock)
@@ -235,6 +282,9 @@ class SimTcpServer(_Server):
         for key, _ in self._sel.select(timeout=_TICK):
             sock = key.fileobj
             assert isinstance(sock, socket.socket)
+            if key.data == "udp":
+                self._datagram(sock)
+                continue
             if key.data in ("listen", "listen_msg"):
                 conn, peer = sock.accept()
                 conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -267,6 +317,8 @@ class SimTcpServer(_Server):
         for sock, (number, box) in list(self._clients.items()):
             box.put(self.controller.poll(port=number))
             self._send(sock, box)
+        if self._udp_peers:
+            self._send_datagrams()
         if not self.controller.separate_messages:
             self.controller.poll(port=0)  # nobody listens on the serial port here
         messages = self.controller.read_messages()

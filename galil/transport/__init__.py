@@ -36,6 +36,7 @@ __all__ = [
     "ENTRY_POINT_GROUP",
     "ByteRate",
     "ControllerClock",
+    "DatagramSource",
     "HandleSource",
     "MessagesOnly",
     "Opener",
@@ -87,6 +88,7 @@ class Transport(Protocol):
 from galil.transport.capabilities import (  # noqa: E402 (they refer to Transport)
     ByteRate,
     ControllerClock,
+    DatagramSource,
     HandleSource,
     MessagesOnly,
 )

@@ -8,6 +8,7 @@ offering its methods; nothing has to inherit from anything.
   count in it, and the host's pauses let it pass (simulated time on a manual clock).
 - :class:`HandleSource`: further handles to the same controller (Ethernet): one for
   unsolicited output, more for data-record streams.
+- :class:`DatagramSource`: a UDP handle to the same controller (interrupt packets).
 - :class:`MessagesOnly`: a handle that carries only unsolicited output (no ``CF`` needed).
 - :class:`ByteRate`: how many bytes a second the link carries, for stream planning.
 """
@@ -19,7 +20,7 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 if TYPE_CHECKING:
     from galil.transport import Transport
 
-__all__ = ["ByteRate", "ControllerClock", "HandleSource", "MessagesOnly"]
+__all__ = ["ByteRate", "ControllerClock", "DatagramSource", "HandleSource", "MessagesOnly"]
 
 
 @runtime_checkable
@@ -45,6 +46,16 @@ class HandleSource(Protocol):
 
     def open_handle(self) -> Transport:
         """Open a further handle that the caller owns and closes (a record stream's)."""
+        ...
+
+
+@runtime_checkable
+class DatagramSource(Protocol):
+    """A transport that can open a UDP handle to the same controller (where ``EI`` sends its
+    interrupt packets)."""
+
+    def open_datagram_handle(self) -> Transport:
+        """Open a UDP handle that the caller owns and closes."""
         ...
 
 

@@ -19,7 +19,7 @@ from galil.models import ETHERNET_BYTES_PER_S
 from galil.transport import parse_options
 from galil.transport.base import TransportBase
 
-__all__ = ["DEFAULT_PORT", "TcpTransport", "open_tcp"]
+__all__ = ["DEFAULT_PORT", "TcpTransport", "UdpTransport", "open_tcp"]
 
 DEFAULT_PORT = 23
 _CHUNK = 65536
@@ -142,6 +142,61 @@ class TcpTransport(TransportBase[socket.socket]):
         """
         self._live()
         return TcpTransport(self.host, self.port, connect_timeout=self.connect_timeout)
+
+    def open_datagram_handle(self) -> UdpTransport:
+        """Open a UDP handle to the same controller and port (interrupts go to one); the
+        caller owns and closes it. The controller gives it a handle letter at its first
+        command.
+
+        Raises:
+            GalilConnectionError: this link is closed, or no socket could be made.
+        """
+        self._live()
+        return UdpTransport(self.host, self.port)
+
+
+class UdpTransport(TransportBase[socket.socket]):
+    """A UDP handle to a controller: each write is one datagram, each read one or more.
+
+    Galil controllers answer commands on UDP port 23 as on TCP, and send ``EI`` interrupt
+    packets only to a UDP handle. Loss is possible: use it for what may be lost (interrupts
+    are also visible as ``_BG``), not for motion commands.
+
+    Args:
+        host: controller host name or address.
+        port: UDP port (23 by default).
+    """
+
+    kind = "ethernet"
+
+    def __init__(self, host: str, port: int = DEFAULT_PORT) -> None:
+        if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
+            raise InvalidArgument(f"UDP port must be 1..65535, got {port!r}")
+        self.host = host
+        self.port = port
+        try:
+            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            sock.connect((host, port))
+        except OSError as exc:
+            raise GalilConnectionError(f"cannot open a UDP handle to {host}:{port}: {exc}") from exc
+        super().__init__(sock, name=f"udp {host}:{port}", label=f"UDP handle to {host}:{port}")
+
+    def _send(self, handle: socket.socket, data: bytes) -> None:
+        handle.send(data)
+
+    def _set_timeout(self, handle: socket.socket, seconds: float) -> None:
+        handle.settimeout(seconds)
+
+    def _recv(self, handle: socket.socket, timeout: float) -> bytes:
+        try:
+            return handle.recv(_CHUNK)
+        except (TimeoutError, BlockingIOError):
+            return b""
+        except ConnectionRefusedError as exc:  # an ICMP "port unreachable" came back
+            raise GalilConnectionError(f"nothing answers UDP at {self.host}:{self.port}") from exc
+
+    def _release(self, handle: socket.socket) -> None:
+        handle.close()
 
 
 def open_tcp(url: SplitResult, **options: Any) -> TcpTransport:

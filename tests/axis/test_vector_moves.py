@@ -371,3 +371,30 @@ def test_smoothing_is_predicted_vt_where_the_model_has_it_else_the_first_axis_it
         h = dmc.vector_move("AB", [Line(-20_000, 0)], **options)
         assert h.counts.speed_settings[3] in (0.25, 77 / 256)
         h.wait()
+
+
+def test_a_stop_from_another_thread_ends_a_streamed_path() -> None:
+    import threading
+
+    from galil.testing import simulated
+
+    with simulated() as dmc:
+        zigzag = [galil.Line(37, 19 * (-1) ** k) for k in range(1400)]
+        done: list[object] = []
+
+        def run() -> None:
+            done.append(dmc.vector_move("AB", zigzag, speed=30_000, accel=512_000, decel=512_000))
+
+        streaming = threading.Thread(target=run)
+        streaming.start()
+        while dmc.tracker.active("A") is None and streaming.is_alive():
+            threading.Event().wait(0.001)
+        dmc.stop()  # ST on every axis, from this thread, while the path streams
+        streaming.join(20)
+        assert not streaming.is_alive()  # the stream noticed and sent no more
+        handle = done[0]
+        assert isinstance(handle, galil.VectorHandle)
+        assert handle.stopped
+        handle.wait()
+        assert dmc.query_operands(["_BGS"]) == [0]
+        assert dmc.query_operands(["_RPA"])[0] < 37 * 1400

@@ -6,12 +6,15 @@ check when mypy infers anything else, e.g. ``Any``).
 
 from __future__ import annotations
 
+import numpy as np
+import numpy.typing as npt
 from typing_extensions import assert_type
 
 import galil
 import galil.aio as aio
 from galil.contour import ContourResult
 from galil.predict import MultiProfile, Profile
+from galil.programs import Download
 
 
 async def check(c: aio.AsyncController) -> None:
@@ -29,3 +32,55 @@ async def check(c: aio.AsyncController) -> None:
     assert_type(await c.records(8), aio.AsyncRecordStream)
     assert_type(await c.messages.get(), str)
     assert_type(await c.A.moving(), bool)
+
+
+async def check_rooms(c: aio.AsyncController) -> None:
+    # I/O: indexing reads (awaited), set() writes.
+    assert_type(await c.io.inputs[1], bool)
+    assert_type(await c.io.inputs[1:9], tuple[bool, ...])
+    assert_type(await c.io.outputs.all(), tuple[bool, ...])
+    assert_type(await c.io.outputs.set(2, True), None)
+    assert_type(await c.io.wait_for_input(4, high=False, timeout=5), None)
+    # Programs, arrays, variables.
+    assert_type(await c.programs.download("#A\nEN"), Download)
+    assert_type(await c.programs.run("#A", thread=1), None)
+    assert_type(await c.programs.threads(), dict[int, int])
+    assert_type(await c.programs.wait(1, timeout=5), None)
+    assert_type(await c.arrays.upload("sq"), npt.NDArray[np.float64])
+    assert_type(await c.arrays.list(), dict[str, int])
+    assert_type(await c.variables["gain"], float)
+    assert_type(await c.variables.write("gain", 2.5), None)
+    # Interrupts: an async iterator.
+    assert_type(await c.interrupts.enable("A", all_done=True), None)
+    assert_type(await c.interrupts.get(timeout=1), galil.Interrupt)
+    async for interrupt in c.interrupts:
+        assert_type(interrupt, galil.Interrupt)
+    # Capture, watchdog, switches and flash.
+    capture = await c.capture(["_RPA"], seconds=1.0)
+    assert_type(capture, aio.AsyncCapture)
+    assert_type(await capture.wait(), galil.Recording)
+    assert_type(await c.watchdog(0.5), aio.AsyncWatchdog)
+    assert_type(await c.switch_polarity(), galil.SwitchPolarity)
+    assert_type(await c.save(), None)
+
+
+async def check_motion(c: aio.AsyncController) -> None:
+    path = [galil.Line(1000, 0), galil.Arc(500, 270, 90)]
+    handle = await c.vector_move("AB", path, speed=20_000)
+    assert_type(handle, aio.AsyncVectorHandle)
+    assert_type(await handle, galil.MoveResult)
+    assert_type(handle.vector, galil.VectorPlan)
+    assert_type(await c.plan_vector("AB", path, speed=20_000), galil.VectorPlan)
+    assert_type(await c.A.home(), aio.AsyncMoveHandle)
+    assert_type(await c.A.find_index(switch=None), aio.AsyncMoveHandle)
+    assert_type(await c.A.homed(), galil.Homed)
+    assert_type(await c.A.switches(), galil.Switches)
+    assert_type(await c.A.kp(), float)
+    assert_type(await c.A.error_limit(), int)
+    assert_type(await c.A.motor_type(), galil.MotorType | float)
+    assert_type(await c.A.set_kp(10), None)
+    gearing = await c.B.gear_to(c.A, 0.5)
+    assert_type(gearing, aio.AsyncGearing)
+    assert_type(gearing.predict(await c.A.plan_to(10)), Profile)
+    assert_type(await gearing.off(), None)
+    assert_type(c.A.position_counts(5), float)

@@ -6,8 +6,8 @@ bit 8: every axis complete) and names the handle ``h`` (0-7 for A-H) the packets
 are sent at the next step boundary of the servo loop, up to sixteen per packet
 (:func:`galil.protocol.interrupts.packet`).
 
-Simplifications, where the controller does more or the sources are silent: the handle may be
-any open handle (a controller wants a UDP handle); the position-error and limit-switch bits
+Simplifications, where the controller does more or the sources are silent: the handle must be
+a UDP handle, as on a controller (a TCP handle: TC 133); the position-error and limit-switch bits
 (9, 10) and the input mask ``n`` are accepted and send nothing; a ``UI`` with no handle named
 yet is accepted and its interrupt dropped (there is nowhere to send it).
 """
@@ -51,7 +51,10 @@ class Interrupts(Room):
                 raise Refused(6, "EI value out of range")
         port = self.port
         if len(values) > 2 and values[2] is not None:
-            port = self.machine.ports.handle(HANDLES[int(values[2])]).number
+            handle = self.machine.ports.handle(HANDLES[int(values[2])])
+            if handle.name.startswith("TCP"):
+                raise Refused(133, "interrupts go to a UDP handle")
+            port = handle.number
         if values[0] is not None:
             self.mask = int(values[0])
             if self.mask == 0:
