@@ -192,12 +192,11 @@ def moving(quick: bool) -> Figure:
         "x one query",
         3,
         higher=False,
-        anchor="state query",
+        anchor="state query (us)",
         anchor_value=t_query * 1e6,
-        ratio=t_move * 1e6,
-        ratio_text=" us per move (0.1 s of motion)",
         scaling=[Scaling("s of motion", points)],
-        note="in-process simulator, manual clock: the simulator's stepping counts too",
+        note=f"{t_move * 1e6:.0f} us per move of 0.1 s; in-process simulator, manual clock:"
+        " the simulator's command handling and stepping count too",
     )
 
 
