@@ -180,8 +180,7 @@ def streaming(quick: bool) -> list[Figure]:
                 f" {r['missed']:.0f}, dropped (queue full) {r['dropped']:.0f}",
             )
         )
-    figures[0].scaling.append(Scaling("records/s", points))
-    figures[0].note = "scaling: CPU share (s/s) against the record rate"
+    figures[0].scaling.append(Scaling("CPU a second at records/s", points))
     return figures
 
 
