@@ -35,7 +35,8 @@ docs: $(STAMP)
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 
 # Every benchmark, each figure against its target and its anchor, a one-line summary and
-# benchmarks/results/bench.json (about 6 minutes; BENCH="--quick" for a shorter, noisier run).
+# benchmarks/results/bench.json (about 3 minutes; BENCH="--quick" for a shorter, noisier run);
+# it exits non-zero while a target is missed.
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run.py $(BENCH)
 
