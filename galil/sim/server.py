@@ -403,8 +403,9 @@ class SimPtyServer(_Server):
     def _tick(self) -> None:
         line = self._line
         if line is None:
-            if self._sel.select(timeout=_TICK):
-                self._box.put(self.controller.feed(self._read(4096)))
+            data = self._read(4096) if self._sel.select(timeout=_TICK) else b""
+            if data:
+                self._box.put(self.controller.feed(data))
         else:
             self._carry_inward(line)
         self._box.put(self.controller.poll())
