@@ -589,13 +589,6 @@ class LinkCore:
                 self._observe("in", data)
         return data
 
-    def write_raw(self, data: bytes) -> None:
-        """Write bytes that expect no reply tracking (a resync of a terminal), under the lock."""
-        with self._lock:
-            if not self._open or self._dead:
-                raise self._closed_error()
-            self._write(data)
-
     def _observe(self, direction: str, data: bytes) -> None:
         if _WIRE.isEnabledFor(_DEBUG):
             _WIRE.debug("%s %r", "->" if direction == "out" else "<-", data)
@@ -1038,10 +1031,6 @@ class Link(LinkCore):
                 )
             out += values
         return out
-
-    def query_ints(self, names: Sequence[str], *, timeout: float | None = None) -> list[int]:
-        """:meth:`query_operands`, each value rounded to an integer."""
-        return [round(v) for v in self.query_operands(names, timeout=timeout)]
 
 
 def _one_command(text: str, allow_compound: bool) -> Command:
