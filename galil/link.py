@@ -703,8 +703,10 @@ class LinkCore:
                     left -= step
                     self._roundtrip((beat[0],), self.timeout)
         # Time passed for everyone: give a thread waiting for the link its turn now (a lock
-        # is not fair, and the GIL would let this thread take it again at once).
-        time.sleep(0)
+        # is not fair, and the GIL would let this thread take it again at once). Alone, there
+        # is nobody to give it to, and the yield would cost more than the pause.
+        if threading.active_count() > 1:
+            time.sleep(0)
         if self._inbox:
             self._flush()
 
