@@ -20,9 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import queue
 import threading
-from collections import deque
 from collections.abc import Callable
 
 from galil.errors import GalilConnectionError, GalilError, InvalidArgument, ProtocolError
@@ -30,6 +28,7 @@ from galil.link import Link, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.interrupts import Interrupt, InterruptParser
 from galil.protocol.numbers import parse_number
+from galil.queues import BoundedQueue
 from galil.transport import DatagramSource, HandleSource, Transport
 
 __all__ = ["Interrupt", "InterruptCallback", "InterruptQueue", "Interrupts"]
@@ -39,45 +38,11 @@ _LOG = logging.getLogger("galil.interrupts")
 InterruptCallback = Callable[[Interrupt], None]
 
 
-class InterruptQueue:
+class InterruptQueue(BoundedQueue[Interrupt]):
     """Interrupts, oldest first; bounded (the oldest drop, counted in ``dropped``)."""
 
     def __init__(self, maxlen: int = 1000) -> None:
-        self._items: deque[Interrupt] = deque()
-        self._maxlen = maxlen
-        self._cond = threading.Condition(threading.Lock())
-        self.dropped = 0
-
-    def put(self, item: Interrupt) -> None:
-        """Append an interrupt (used by the reader)."""
-        with self._cond:
-            if len(self._items) >= self._maxlen:
-                self._items.popleft()
-                self.dropped += 1
-            self._items.append(item)
-            self._cond.notify()
-
-    def get(self, timeout: float | None = None) -> Interrupt:
-        """The oldest interrupt, waiting up to ``timeout`` seconds (``None``: for ever).
-
-        Raises:
-            queue.Empty: none arrived in time.
-        """
-        with self._cond:
-            if not self._cond.wait_for(lambda: self._items, timeout):
-                raise queue.Empty(f"no interrupt within {timeout} s")
-            return self._items.popleft()
-
-    def drain(self) -> list[Interrupt]:
-        """Remove and return every waiting interrupt."""
-        with self._cond:
-            out = list(self._items)
-            self._items.clear()
-            return out
-
-    def __len__(self) -> int:
-        with self._cond:
-            return len(self._items)
+        super().__init__(maxlen, "interrupt")
 
 
 class Interrupts:

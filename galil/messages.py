@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import queue
 import threading
 import warnings
 from collections import deque
@@ -22,6 +21,7 @@ from galil.link import Link, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.framing import FrameParser, Unsolicited
 from galil.protocol.numbers import parse_number
+from galil.queues import BoundedQueue
 from galil.transport import HandleSource, MessagesOnly, Transport
 
 __all__ = ["MessageCallback", "MessageQueue", "Messages"]
@@ -31,7 +31,7 @@ _LOG = logging.getLogger("galil.messages")
 MessageCallback = Callable[[str], None]
 
 
-class MessageQueue:
+class MessageQueue(BoundedQueue[str]):
     """Unsolicited lines from the controller, oldest first; a bounded, thread-safe queue.
 
     When nobody reads it, the oldest lines are dropped (``dropped`` counts them) rather than
@@ -39,51 +39,7 @@ class MessageQueue:
     """
 
     def __init__(self, maxlen: int = 1000) -> None:
-        self._items: deque[str] = deque()
-        self._maxlen = maxlen
-        self._cond = threading.Condition(threading.Lock())
-        self.dropped = 0
-
-    def put(self, line: str) -> None:
-        """Append a line (used by the client)."""
-        with self._cond:
-            if len(self._items) >= self._maxlen:
-                self._items.popleft()
-                self.dropped += 1
-            self._items.append(line)
-            self._cond.notify()
-
-    def get(self, timeout: float | None = None) -> str:
-        """Return the oldest line, waiting up to ``timeout`` seconds (``None``: for ever).
-
-        Raises:
-            queue.Empty: nothing arrived in time.
-        """
-        with self._cond:
-            if not self._cond.wait_for(lambda: self._items, timeout):
-                raise queue.Empty(f"no unsolicited message within {timeout} s")
-            return self._items.popleft()
-
-    def get_nowait(self) -> str:
-        """Return the oldest line at once; raise ``queue.Empty`` when there is none."""
-        with self._cond:
-            if not self._items:
-                raise queue.Empty("no unsolicited message waiting")
-            return self._items.popleft()
-
-    def drain(self) -> list[str]:
-        """Remove and return every waiting line."""
-        with self._cond:
-            out = list(self._items)
-            self._items.clear()
-            return out
-
-    def __len__(self) -> int:
-        with self._cond:
-            return len(self._items)
-
-    def __repr__(self) -> str:
-        return f"<MessageQueue {len(self)} waiting, {self.dropped} dropped>"
+        super().__init__(maxlen, "unsolicited message")
 
 
 class _Dispatcher:
