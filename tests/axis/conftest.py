@@ -8,6 +8,9 @@ import pytest
 
 import galil
 from galil.testing import simulated
+from galil.units import ureg
+
+mm, s = ureg.mm, ureg.s
 
 
 @pytest.fixture
@@ -15,3 +18,12 @@ def dmc() -> Iterator[galil.Controller]:
     """A DMC-4040 on an in-process simulator with a manual clock."""
     with simulated("DMC-4040") as controller:
         yield controller
+
+
+@pytest.fixture
+def x(dmc: galil.Controller) -> galil.Axis:
+    """Axis A scaled to millimetres (2000 counts/mm), 20 mm/s, 200 mm/s² both ways."""
+    axis = dmc.A.set_scale(counts_per=2000 / mm)
+    axis.speed = 20 * mm / s
+    axis.accel = axis.decel = 200 * mm / s**2
+    return axis

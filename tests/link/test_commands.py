@@ -6,16 +6,12 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Iterator
-from typing import Any
-from urllib.parse import SplitResult
 
 import pytest
-from client_fakes import FakeGalil, FakeLink
+from client_fakes import FakeGalil
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import galil.transport as transport_registry
 from galil.controller import Controller, connect
 from galil.errors import (
     CommandError,
@@ -25,27 +21,6 @@ from galil.errors import (
     ProtocolError,
 )
 from galil.protocol import commands as cmds
-
-
-@pytest.fixture
-def peer() -> Iterator[FakeGalil]:
-    fake = FakeGalil()
-
-    def opener(url: SplitResult, **options: Any) -> FakeLink:
-        if options:
-            raise InvalidArgument(f"unknown option(s) {sorted(options)}")
-        return fake.open()
-
-    transport_registry.register_scheme("fakegalil", opener, replace=True)
-    yield fake
-    transport_registry._registry.pop("fakegalil", None)
-
-
-@pytest.fixture
-def c(peer: FakeGalil) -> Iterator[Controller]:
-    ctl = connect("fakegalil://x", timeout=0.2)
-    yield ctl
-    ctl.close()
 
 
 def test_command_and_typed_queries(c: Controller, peer: FakeGalil) -> None:

@@ -5,40 +5,16 @@ scriptable firmware stand-in, tests/client_fakes.py).
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterator
 from typing import Any
-from urllib.parse import SplitResult
 
 import pytest
-from client_fakes import FakeGalil, FakeLink
+from client_fakes import FakeGalil
 
-import galil.transport as transport_registry
 from galil.controller import Controller, connect
 from galil.errors import (
     GalilConnectionError,
     InvalidArgument,
 )
-
-
-@pytest.fixture
-def peer() -> Iterator[FakeGalil]:
-    fake = FakeGalil()
-
-    def opener(url: SplitResult, **options: Any) -> FakeLink:
-        if options:
-            raise InvalidArgument(f"unknown option(s) {sorted(options)}")
-        return fake.open()
-
-    transport_registry.register_scheme("fakegalil", opener, replace=True)
-    yield fake
-    transport_registry._registry.pop("fakegalil", None)
-
-
-@pytest.fixture
-def c(peer: FakeGalil) -> Iterator[Controller]:
-    ctl = connect("fakegalil://x", timeout=0.2)
-    yield ctl
-    ctl.close()
 
 
 def test_connect_identifies_and_marks_unsolicited(c: Controller, peer: FakeGalil) -> None:

@@ -6,23 +6,12 @@ import pytest
 
 import galil
 from galil.testing import simulated
-from galil.units import ureg
-
-mm, s = ureg.mm, ureg.s
 
 
 @pytest.fixture
 def dmc() -> galil.Controller:
     with simulated() as controller:
         yield controller
-
-
-@pytest.fixture
-def x(dmc: galil.Controller) -> galil.Axis:
-    axis = dmc.A.set_scale(counts_per=2000 / mm)
-    axis.speed = 20 * mm / s
-    axis.accel = axis.decel = 200 * mm / s**2
-    return axis
 
 
 @pytest.mark.parametrize(
