@@ -7,7 +7,10 @@ pty that a later test is using; the check below names the test that left it.
 
 from __future__ import annotations
 
+import re
+import signal
 import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -35,9 +38,18 @@ def _no_thread_outlives_its_test() -> Iterator[None]:
     assert not alive, f"threads still running {THREAD_GRACE:g} s after the test: {alive}"
 
 
+def _default_sigint() -> None:
+    # A shell that starts a job in the background ignores SIGINT for it, and a Python started
+    # with SIGINT ignored never raises KeyboardInterrupt: give the child Ctrl-C back.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.fixture
 def spawn() -> Iterator[Callable[..., subprocess.Popen[str]]]:
     """Start a child process that is killed at teardown if the test left it running.
+
+    The child gets Ctrl-C back (SIGINT at its default) unless the test passes its own
+    ``preexec_fn``.
 
     The test still stops the child itself and checks how it stopped; this only keeps a failed
     test from leaving a server behind (it would outlive the whole run on CI).
@@ -45,6 +57,7 @@ def spawn() -> Iterator[Callable[..., subprocess.Popen[str]]]:
     procs: list[subprocess.Popen[str]] = []
 
     def start(args: list[str], **kwargs: Any) -> subprocess.Popen[str]:
+        kwargs.setdefault("preexec_fn", _default_sigint)
         proc: subprocess.Popen[str] = subprocess.Popen(args, **kwargs)
         procs.append(proc)
         return proc
@@ -57,3 +70,31 @@ def spawn() -> Iterator[Callable[..., subprocess.Popen[str]]]:
         for pipe in (proc.stdin, proc.stdout, proc.stderr):
             if pipe is not None:
                 pipe.close()
+
+
+@pytest.fixture
+def galil_sim(spawn: Callable[..., subprocess.Popen[str]]) -> Iterator[Callable[..., str]]:
+    """Start ``galil sim`` child processes: ``galil_sim(*args)`` returns the address it announces.
+
+    Each is stopped with Ctrl-C at teardown, as a user at its terminal would.
+    """
+    procs: list[subprocess.Popen[str]] = []
+
+    def start(*args: str) -> str:
+        proc = spawn(
+            [sys.executable, "-m", "galil.cli", "sim", *args],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        procs.append(proc)
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        found = re.search(r"(tcp://\S+|/dev/\S+)", line)
+        assert found, line
+        return found.group(1)
+
+    yield start
+    for proc in procs:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=20)

@@ -22,12 +22,6 @@ GALIL = [sys.executable, "-m", "galil.cli"]
 Spawn = Callable[..., subprocess.Popen[str]]  # the `spawn` fixture of tests/conftest.py
 
 
-def _default_sigint() -> None:
-    # A shell that starts a job in the background ignores SIGINT for it, and a Python started
-    # with SIGINT ignored never raises KeyboardInterrupt: give the child Ctrl-C back.
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 def test_plan_prints_the_profile_and_saves_a_plot(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -72,7 +66,6 @@ def test_sim_serves_tcp_until_interrupted(spawn: Spawn) -> None:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-        preexec_fn=_default_sigint,
     )
     try:
         assert proc.stdout is not None
@@ -102,7 +95,6 @@ def test_sim_serves_a_pty_until_interrupted(spawn: Spawn) -> None:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-        preexec_fn=_default_sigint,
     )
     try:
         assert proc.stdout is not None

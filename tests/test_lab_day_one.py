@@ -5,11 +5,7 @@
 from __future__ import annotations
 
 import os
-import re
-import signal
-import subprocess
-import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 import pytest
 
@@ -17,42 +13,20 @@ import galil
 from galil.testing import nothing_sent
 from galil.units import ureg
 
-Spawn = Callable[..., "subprocess.Popen[str]"]
-GALIL = [sys.executable, "-m", "galil.cli"]
 LIMITS = "-30000,30000"  # fixed-frame positions of every axis's limit switches
 
 
-def _default_sigint() -> None:
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 @pytest.fixture(params=["tcp", "pty"])
-def served(request: pytest.FixtureRequest, spawn: Spawn) -> Iterator[Callable[[str], str]]:
-    """Start ``galil sim`` for a model on TCP or a pty; yield a function giving its address."""
+def served(request: pytest.FixtureRequest, galil_sim: Callable[..., str]) -> Callable[[str], str]:
+    """Start ``galil sim`` for a model on TCP or a pty; return a function giving its address."""
     if request.param == "pty" and not hasattr(os, "openpty"):
         pytest.skip("needs a pty")
-    procs: list[subprocess.Popen[str]] = []
+    where = ["--tcp", "127.0.0.1:0"] if request.param == "tcp" else ["--pty"]
 
     def start(model: str) -> str:
-        where = ["--tcp", "127.0.0.1:0"] if request.param == "tcp" else ["--pty"]
-        proc = spawn(
-            [*GALIL, "sim", "--model", model, *where, "--lag", "0", f"--limits={LIMITS}"],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            preexec_fn=_default_sigint,
-        )
-        procs.append(proc)
-        assert proc.stdout is not None
-        line = proc.stdout.readline()
-        found = re.search(r"(tcp://\S+|/dev/\S+)", line)
-        assert found, line
-        return found.group(1)
+        return galil_sim("--model", model, *where, "--lag", "0", f"--limits={LIMITS}")
 
-    yield start
-    for proc in procs:
-        proc.send_signal(signal.SIGINT)
-        proc.wait(timeout=20)
+    return start
 
 
 def _day_one_on_an_axis(dmc: galil.Controller) -> None:

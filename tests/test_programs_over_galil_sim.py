@@ -7,19 +7,13 @@ on the network or a serial port: ``galil.connect(address)`` and nothing else.
 from __future__ import annotations
 
 import os
-import re
-import signal
-import subprocess
-import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 import numpy as np
 import pytest
 
 import galil
 from galil.testing import transcript
-
-Spawn = Callable[..., subprocess.Popen[str]]
 
 FILL = """
 #FILL
@@ -32,43 +26,18 @@ EN
 """
 
 
-def _default_sigint() -> None:
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
-def _serve(spawn: Spawn, where: list[str]) -> Iterator[str]:
-    """Start ``galil sim`` as a child process; yield its address; stop it."""
-    proc = spawn(
-        [sys.executable, "-m", "galil.cli", "sim", *where],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        preexec_fn=_default_sigint,
-    )
-    try:
-        assert proc.stdout is not None
-        line = proc.stdout.readline()
-        found = re.search(r"(tcp://127\.0\.0\.1:\d+|/dev/\S+)", line)
-        assert found, line
-        yield found.group(1)
-    finally:
-        proc.send_signal(signal.SIGINT)
-        proc.wait(timeout=20)
-
-
 @pytest.fixture(params=["tcp", "pty"])
-def address(request: pytest.FixtureRequest, spawn: Spawn) -> Iterator[str]:
+def address(request: pytest.FixtureRequest, galil_sim: Callable[..., str]) -> str:
     """The address of a ``galil sim`` child process, over TCP or a pty."""
     if request.param == "pty" and not hasattr(os, "openpty"):
         pytest.skip("needs a pty")
-    where = ["--tcp", "127.0.0.1:0"] if request.param == "tcp" else ["--pty"]
-    yield from _serve(spawn, where)
+    return galil_sim(*(["--tcp", "127.0.0.1:0"] if request.param == "tcp" else ["--pty"]))
 
 
 @pytest.fixture
-def tcp_address(spawn: Spawn) -> Iterator[str]:
+def tcp_address(galil_sim: Callable[..., str]) -> str:
     """The address of a ``galil sim`` child process on TCP."""
-    yield from _serve(spawn, ["--tcp", "127.0.0.1:0"])
+    return galil_sim("--tcp", "127.0.0.1:0")
 
 
 def test_a_program_fills_an_array_on_thread_1_and_stays_beside_a_speed_schedule(

@@ -23,12 +23,6 @@ from galil.sim.link import SimLink, open_transport
 from galil.sim.server import SimTcpServer
 
 
-def _default_sigint() -> None:
-    # A shell that starts a job in the background ignores SIGINT for it, and a Python started
-    # with SIGINT ignored never raises KeyboardInterrupt: give the child Ctrl-C back.
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 def test_url_opens_a_link_with_its_controller() -> None:
     t = open_transport("sim://DMC-4040?lag=0.01")
     assert t.kind == "sim"
@@ -147,7 +141,6 @@ def test_cli_prints_address_and_stops_on_ctrl_c(
         [sys.executable, "-c", "from galil.sim.server import main; main()", "--tcp", "127.0.0.1:0"],
         stdout=subprocess.PIPE,
         text=True,
-        preexec_fn=_default_sigint,
     )
     try:
         assert proc.stdout is not None
