@@ -164,6 +164,23 @@ def _axis_values(builder: str, values: Mapping[str, float], link: CommandLink) -
     return _BUILDERS[builder](model=link.model, **dict(values))
 
 
+def _move_line(
+    link: CommandLink, moves: Sequence[AxisMove], sent: Mapping[str, float], command: str
+) -> list[Command]:
+    """The move's one line: any SP/AC/DC given, the targets (PA or IP), BG, ``MG TIME``."""
+    parts: list[Command] = []
+    for name in ("SP", "AC", "DC"):
+        values = {m.letter: getattr(m, _FIELD[name]) for m in moves}
+        given = {a: v for a, v in values.items() if v is not None}
+        if given:
+            parts.append(_axis_values(name, given, link))
+    parts.append(_axis_values("IP" if command == "IP" else "PA", sent, link))
+    if command != "IP":
+        parts.append(cmds.bg("".join(m.letter for m in moves), model=link.model))
+    parts.append(cmds.time_stamp())
+    return parts
+
+
 def execute_move(
     link: CommandLink,
     tracker: MotionTracker,
@@ -210,17 +227,7 @@ def execute_move(
     handle.follow(tracker.followers(letters))  # (an axis of the move is skipped)
     if dry_run:
         return handle
-    parts: list[Command] = []
-    for name in ("SP", "AC", "DC"):
-        values = {m.letter: getattr(m, _FIELD[name]) for m in moves}
-        given = {a: v for a, v in values.items() if v is not None}
-        if given:
-            parts.append(_axis_values(name, given, link))
-    parts.append(_axis_values("IP" if command == "IP" else "PA", sent, link))
-    if command != "IP":
-        parts.append(cmds.bg(letters, model=link.model))
-    parts.append(cmds.time_stamp())
-    replies = link.command_line(parts)
+    replies = link.command_line(_move_line(link, moves, sent, command))
     begin = sample_of(replies[-1])
     for t in tracks.values():
         t.begin = begin
