@@ -28,7 +28,7 @@ from galil.link import Link, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.interrupts import Interrupt, InterruptParser
 from galil.protocol.numbers import parse_number
-from galil.queues import BoundedQueue
+from galil.queues import BoundedQueue, Subscribers
 from galil.transport import DatagramSource, HandleSource, Transport
 
 __all__ = ["Interrupt", "InterruptCallback", "InterruptQueue", "Interrupts"]
@@ -65,7 +65,7 @@ class Interrupts:
         self._index = 0
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
-        self._subscribers: list[InterruptCallback] = []
+        self._subscribers: Subscribers[Interrupt] = Subscribers("interrupt", _LOG)
 
     def _mask(self, axes: str, all_done: bool) -> int:
         model = self.link.model
@@ -149,24 +149,13 @@ class Interrupts:
                 continue
             for event in events:
                 # Callbacks first: once an interrupt is in the queue, every callback has had it.
-                for cb in self._subscribers:
-                    try:
-                        cb(event)
-                    except Exception:
-                        _LOG.exception("interrupt callback %r failed", cb)
+                self._subscribers.notify(event)
                 self.queue.put(event)
 
     def subscribe(self, callback: InterruptCallback) -> Callable[[], None]:
         """Call ``callback(interrupt)`` for each interrupt, on the reader thread; returns an
         unsubscriber. Interrupts arrive only once :meth:`enable` was called."""
-        if not callable(callback):
-            raise InvalidArgument(f"callback must be callable, not {callback!r}")
-        self._subscribers = [*self._subscribers, callback]
-
-        def unsubscribe() -> None:
-            self._subscribers = [c for c in self._subscribers if c is not callback]
-
-        return unsubscribe
+        return self._subscribers.add(callback)
 
     def get(self, timeout: float | None = None) -> Interrupt:
         """The oldest interrupt (see :class:`InterruptQueue`)."""

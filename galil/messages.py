@@ -21,7 +21,7 @@ from galil.link import Link, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.framing import FrameParser, Unsolicited
 from galil.protocol.numbers import parse_number
-from galil.queues import BoundedQueue
+from galil.queues import BoundedQueue, Subscribers
 from galil.transport import HandleSource, MessagesOnly, Transport
 
 __all__ = ["MessageCallback", "MessageQueue", "Messages"]
@@ -52,7 +52,7 @@ class _Dispatcher:
     """
 
     def __init__(self) -> None:
-        self.callbacks: list[MessageCallback] = []
+        self.subscribers: Subscribers[str] = Subscribers("unsolicited-message", _LOG)
         self._pending: deque[str] = deque()
         self._state = threading.Lock()
         self._delivering = False
@@ -60,8 +60,8 @@ class _Dispatcher:
     def __call__(self, lines: list[str]) -> None:
         with self._state:
             self._pending.extend(lines)
-            if self._delivering or not self.callbacks:
-                if not self.callbacks:
+            if self._delivering or not self.subscribers:
+                if not self.subscribers:
                     self._pending.clear()
                 return
             self._delivering = True
@@ -72,11 +72,7 @@ class _Dispatcher:
                         self._delivering = False
                         return
                     line = self._pending.popleft()
-                for cb in self.callbacks:
-                    try:
-                        cb(line)
-                    except Exception:
-                        _LOG.exception("unsolicited-message callback %r failed", cb)
+                self.subscribers.notify(line)
         except BaseException:
             with self._state:
                 self._delivering = False
@@ -115,15 +111,8 @@ class Messages:
 
     def subscribe(self, callback: MessageCallback) -> Callable[[], None]:
         """Call ``callback(line)`` for each unsolicited line; returns an unsubscriber."""
-        if not callable(callback):
-            raise InvalidArgument(f"callback must be callable, not {callback!r}")
-        d = self._dispatch
-        d.callbacks = [*d.callbacks, callback]
+        unsubscribe = self._dispatch.subscribers.add(callback)
         self.ensure_polling()
-
-        def unsubscribe() -> None:
-            d.callbacks = [c for c in d.callbacks if c is not callback]
-
         return unsubscribe
 
     # -- routing at connect -----------------------------------------------------------------

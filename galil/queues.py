@@ -1,17 +1,22 @@
-"""A bounded, thread-safe queue: what unsolicited lines and interrupts wait in.
+"""Where unsolicited lines, interrupts and records go: a bounded, thread-safe queue, and the
+callbacks subscribed to them.
 
-When nobody reads it, the oldest items are dropped (``dropped`` counts them) rather than the
-queue growing without end.
+When nobody reads the queue, the oldest items are dropped (``dropped`` counts them) rather than
+the queue growing without end. A callback that fails is logged and the others still run.
 """
 
 from __future__ import annotations
 
+import logging
 import queue
 import threading
 from collections import deque
+from collections.abc import Callable
 from typing import Generic, TypeVar
 
-__all__ = ["BoundedQueue"]
+from galil.errors import InvalidArgument
+
+__all__ = ["BoundedQueue", "Subscribers"]
 
 T = TypeVar("T")
 
@@ -71,3 +76,47 @@ class BoundedQueue(Generic[T]):
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {len(self)} waiting, {self.dropped} dropped>"
+
+
+class Subscribers(Generic[T]):
+    """The callbacks each item goes to, in the order they subscribed.
+
+    Subscribing and unsubscribing replace the list rather than change it, so a thread
+    delivering an item never sees it change under it; a callback that raises is logged on
+    ``log`` (``"<what> callback ... failed"``) and the rest still get the item.
+
+    Args:
+        what: what an item is, for the log (``"interrupt"``).
+        log: the logger of the room that delivers the items.
+    """
+
+    def __init__(self, what: str, log: logging.Logger) -> None:
+        self._callbacks: list[Callable[[T], object]] = []
+        self._what = what
+        self._log = log
+
+    def add(self, callback: Callable[[T], object]) -> Callable[[], None]:
+        """Subscribe ``callback``; return the function that unsubscribes it.
+
+        Raises:
+            InvalidArgument: ``callback`` is not callable.
+        """
+        if not callable(callback):
+            raise InvalidArgument(f"callback must be callable, not {callback!r}")
+        self._callbacks = [*self._callbacks, callback]
+
+        def unsubscribe() -> None:
+            self._callbacks = [c for c in self._callbacks if c is not callback]
+
+        return unsubscribe
+
+    def notify(self, item: T) -> None:
+        """Call every callback with ``item`` (on the calling thread)."""
+        for cb in self._callbacks:
+            try:
+                cb(item)
+            except Exception:
+                self._log.exception("%s callback %r failed", self._what, cb)
+
+    def __bool__(self) -> bool:
+        return bool(self._callbacks)

@@ -42,6 +42,7 @@ from galil.protocol.records import (
     with_time,
     with_times,
 )
+from galil.queues import Subscribers
 from galil.transport import HandleSource, Transport
 
 __all__ = ["READ_INTERVAL", "RecordCallback", "RecordStream", "Records"]
@@ -103,7 +104,7 @@ class RecordStream:
         self._cond = threading.Condition(threading.Lock())
         self._closed = False
         self._error: GalilError | None = None
-        self._subscribers: list[RecordCallback] = []
+        self._subscribers: Subscribers[np.void] = Subscribers("data-record", _LOG)
         self._next_due: float | None = None
         self._thread: threading.Thread | None = None
         self._suspended = False
@@ -238,28 +239,14 @@ class RecordStream:
             self._cond.notify_all()
         if self._subscribers:
             for rec in records:
-                self._notify(rec)
-
-    def _notify(self, rec: np.void) -> None:
-        for cb in self._subscribers:
-            try:
-                cb(rec)
-            except Exception:
-                _LOG.exception("data-record callback %r failed", cb)
+                self._subscribers.notify(rec)
 
     def subscribe(self, callback: RecordCallback) -> Callable[[], None]:
         """Call ``callback(record)`` for each record as it arrives; returns an unsubscriber.
 
         With ``DR`` the callback runs on the reader thread; with ``QR`` inside :meth:`get`.
         """
-        if not callable(callback):
-            raise InvalidArgument(f"callback must be callable, not {callback!r}")
-        self._subscribers = [*self._subscribers, callback]
-
-        def unsubscribe() -> None:
-            self._subscribers = [c for c in self._subscribers if c is not callback]
-
-        return unsubscribe
+        return self._subscribers.add(callback)
 
     def get(self, timeout: float | None = None) -> np.void:
         """Return the next record, waiting up to ``timeout`` seconds (``None``: for ever).
@@ -301,7 +288,7 @@ class RecordStream:
         self._count_gap(rec)
         # The next one is due a period after this one was due, so records do not drift.
         self._next_due = max(self._next_due, now) + self.period * link.sample_period
-        self._notify(rec)
+        self._subscribers.notify(rec)
         return rec
 
     def take(self, n: int, timeout: float | None = None) -> np.ndarray[Any, np.dtype[Any]]:

@@ -29,7 +29,7 @@ from galil.sim.clock import ManualClock
 from galil.sim.controller import SimController
 from galil.sim.link import SimLink
 from galil.sim.server import SimTcpServer
-from galil.testing import nothing_sent
+from galil.testing import nothing_sent, simulated
 
 WAIT = 5.0
 
@@ -281,3 +281,28 @@ def test_dmc30010_answers_qr_in_the_layout_qz_describes() -> None:
         rec = dmc.record()
         assert int(rec["A"]["reference"]) == 1000
         assert int(rec["A"]["stop_code"]) == 1
+
+
+def test_a_failing_record_callback_is_logged_and_the_others_still_get_records(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    with simulated() as c:
+        stream = c.records(8, method="QR")
+        seen: list[int] = []
+
+        def broken(rec: np.void) -> None:
+            raise RuntimeError("callback bug")
+
+        stream.subscribe(broken)
+        unsubscribe = stream.subscribe(lambda rec: seen.append(int(rec["sample"])))
+        with caplog.at_level("ERROR", logger="galil"):
+            first = [int(stream.get(timeout=1)["sample"]) for _ in range(3)]
+        assert seen == first
+        assert "data-record callback" in caplog.text
+        assert "callback bug" in caplog.text
+        unsubscribe()
+        stream.get(timeout=1)
+        assert seen == first
+        with pytest.raises(InvalidArgument, match="callable"):
+            stream.subscribe("not callable")  # type: ignore[arg-type]
+        stream.close()
