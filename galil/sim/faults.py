@@ -14,10 +14,16 @@ from dataclasses import dataclass, field
 
 from galil.errors import InvalidArgument
 
-__all__ = ["FaultHook", "FaultPlan", "apply_faults"]
+__all__ = ["FaultHook", "FaultPlan", "apply_faults", "check_probability"]
 
 #: ``data -> [(delay_seconds, piece), ...]``: the pieces are delivered in order.
 FaultHook = Callable[[bytes], list[tuple[float, bytes]]]
+
+
+def check_probability(name: str, p: float) -> None:
+    """Refuse a probability outside [0, 1] (NaN included) with ``InvalidArgument``."""
+    if not 0.0 <= p <= 1.0:
+        raise InvalidArgument(f"{name} is a probability in [0, 1], not {p!r}")
 
 
 @dataclass
@@ -46,9 +52,7 @@ class FaultPlan:
 
     def __post_init__(self) -> None:
         for name in ("drop", "corrupt", "interleave"):
-            p = getattr(self, name)
-            if not 0.0 <= p <= 1.0:
-                raise InvalidArgument(f"{name} is a probability in [0, 1], not {p!r}")
+            check_probability(name, getattr(self, name))
         if not self.delay >= 0.0:
             raise InvalidArgument(f"delay must be >= 0 seconds, not {self.delay!r}")
         self._rng = random.Random(self.seed)

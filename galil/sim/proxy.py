@@ -18,7 +18,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 from galil.errors import InvalidArgument
-from galil.sim.faults import FaultHook, apply_faults
+from galil.sim.faults import FaultHook, apply_faults, check_probability
 
 __all__ = ["FaultProxy", "MixedFaults", "Stray"]
 
@@ -34,8 +34,7 @@ class Stray:
     _rng: random.Random = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.p <= 1.0:
-            raise InvalidArgument(f"p is a probability in [0, 1], not {self.p!r}")
+        check_probability("p", self.p)
         self._rng = random.Random(self.seed)
 
     def __call__(self, data: bytes) -> list[tuple[float, bytes]]:
@@ -59,8 +58,7 @@ class MixedFaults:
     _rng: random.Random = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.p <= 1.0:
-            raise InvalidArgument(f"p is a probability in [0, 1], not {self.p!r}")
+        check_probability("p", self.p)
         self._rng = random.Random(self.seed)
 
     def __call__(self, data: bytes) -> list[tuple[float, bytes]]:
