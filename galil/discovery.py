@@ -42,6 +42,7 @@ from galil.protocol.discovery import (
     parse_identify_reply,
 )
 from galil.transport import Transport, open_transport
+from galil.transport.tcp import TcpTransport
 
 __all__ = [
     "GALIL_USB_VENDOR_ID",
@@ -128,22 +129,10 @@ def _identify_address(address: str, timeout: float) -> str:
 
 def _ask_tcp(host: str, port: int, timeout: float) -> str:
     try:
-        with socket.create_connection((host, port), timeout=timeout) as sock:
-            sock.sendall(IDENTIFY)
-            got = b""
-            deadline = time.monotonic() + timeout
-            while not got.rstrip().endswith((b":", b"?")):
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return ""
-                sock.settimeout(left)
-                chunk = sock.recv(256)
-                if not chunk:
-                    return ""
-                got += chunk
-        return parse_identify_reply(got)
-    except (OSError, ProtocolError):
+        transport = TcpTransport(host, port, connect_timeout=timeout)
+    except (GalilError, OSError):
         return ""
+    return _ask_transport(transport, timeout)
 
 
 # ----------------------------------------------------------------------------------- buses
