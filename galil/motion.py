@@ -44,6 +44,7 @@ __all__ = [
     "MoveResult",
     "Track",
     "abort_all",
+    "check_wait_timeout",
     "motion_guard",
     "sample_of",
     "stop_axes",
@@ -251,6 +252,21 @@ class MotionTracker:
             handle = self._active.get(a)
             if handle is not None:
                 handle.add_event(a, sample, make)
+
+
+def check_wait_timeout(timeout: object) -> None:
+    """Refuse a wait's timeout that is not ``None`` or a finite number of seconds >= 0.
+
+    Raises:
+        InvalidArgument: a bool, a string, a negative number, NaN or infinity.
+    """
+    if timeout is not None and (
+        isinstance(timeout, bool)
+        or not isinstance(timeout, (int, float))
+        or not math.isfinite(timeout)
+        or timeout < 0
+    ):
+        raise InvalidArgument(f"timeout must be a non-negative number, got {timeout!r}")
 
 
 class MoveHandle:
@@ -507,13 +523,7 @@ class MoveHandle:
             GalilTimeoutError: the move did not finish in time (it is NOT stopped).
             MotionError: an axis stopped on a limit switch or soft limit.
         """
-        if timeout is not None and (
-            isinstance(timeout, bool)
-            or not isinstance(timeout, (int, float))
-            or not math.isfinite(timeout)
-            or timeout < 0
-        ):
-            raise InvalidArgument(f"timeout must be a non-negative number, got {timeout!r}")
+        check_wait_timeout(timeout)
         duration = self.duration
         if timeout is None and math.isfinite(duration):
             timeout = duration * 1.5 + 2.0

@@ -21,9 +21,16 @@ from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
 
 from galil import predict
 from galil.aio._worker import Room, Worker
-from galil.errors import GalilConnectionError, GalilError, GalilTimeoutError, InvalidArgument
+from galil.errors import GalilConnectionError, GalilError, GalilTimeoutError
 from galil.link import Link
-from galil.motion import MAX_POLL, MIN_POLL, MoveHandle, MoveParams, MoveResult
+from galil.motion import (
+    MAX_POLL,
+    MIN_POLL,
+    MoveHandle,
+    MoveParams,
+    MoveResult,
+    check_wait_timeout,
+)
 from galil.segments import VectorPlan
 from galil.vector import VectorHandle
 
@@ -133,16 +140,6 @@ class _Poll:
         return progress, min(max(pause, MIN_POLL), MAX_POLL)
 
 
-def _check_timeout(timeout: float | None) -> None:
-    if timeout is not None and (
-        isinstance(timeout, bool)
-        or not isinstance(timeout, (int, float))
-        or not math.isfinite(timeout)
-        or timeout < 0
-    ):
-        raise InvalidArgument(f"timeout must be a non-negative number, got {timeout!r}")
-
-
 class AsyncMoveHandle:
     """A move in progress, awaited from a coroutine: ``result = await handle``.
 
@@ -238,7 +235,7 @@ class AsyncMoveHandle:
         Raises:
             GalilTimeoutError: not done in time (the move is NOT stopped).
         """
-        _check_timeout(timeout)
+        check_wait_timeout(timeout)
         worker, link = self._worker, self._link
         try:
             poll = await worker.run(_Poll, self.sync, link, timeout)

@@ -19,6 +19,7 @@ from typing import Any, Generic, TypeVar
 
 import numpy as np
 
+from galil.aio._waits import check_wait
 from galil.aio._worker import Worker, shielded
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.records import RecordStream
@@ -34,16 +35,8 @@ T = TypeVar("T")
 
 
 def _check_wait(timeout: float | None) -> float:
-    if timeout is None:
-        return math.inf
-    if (
-        isinstance(timeout, bool)
-        or not isinstance(timeout, (int, float))
-        or math.isnan(timeout)
-        or timeout < 0
-    ):
-        raise InvalidArgument(f"timeout must be a non-negative number or None, got {timeout!r}")
-    return float(timeout)
+    seconds = check_wait(timeout)
+    return math.inf if seconds is None else seconds
 
 
 class LoopQueue(Generic[T]):

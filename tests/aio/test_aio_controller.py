@@ -12,11 +12,11 @@ import itertools
 import queue
 import threading
 import time
-from collections.abc import Awaitable, Callable
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
 import pytest
+from aio_helpers import commands_of, run, sim
 
 import galil
 import galil.aio as aio
@@ -25,19 +25,6 @@ from galil.testing import sim_of
 from galil.units import ureg
 
 mm, s = ureg.mm, ureg.s
-T = TypeVar("T")
-
-
-def run(body: Callable[[], Awaitable[T]]) -> T:
-    return asyncio.run(asyncio.wait_for(body(), 30))  # type: ignore[arg-type]
-
-
-async def sim(model: str = "DMC-4040") -> aio.AsyncController:
-    return await aio.connect(f"sim://{model}")
-
-
-def commands_of(c: aio.AsyncController) -> list[str]:
-    return [text for _, text in sim_of(c.sync).command_log]
 
 
 def test_commands_and_queries_are_awaited() -> None:
@@ -253,6 +240,23 @@ def test_refusals_surface_as_the_sync_errors() -> None:
                 await c.A.move_to(5)  # a bare number on a scaled axis
             with pytest.raises(galil.CommandError):
                 await c.command("XYZZY")
+
+    run(body)
+
+
+def test_bad_wait_timeouts_are_refused_before_waiting() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            move = await c.A.move_by(1000)
+            for bad in (float("inf"), float("nan"), -1, True, "1"):
+                with pytest.raises(galil.InvalidArgument, match="timeout"):
+                    await move.wait(timeout=bad)  # type: ignore[arg-type]
+            assert (await move.wait()).stop_codes == {"A": 1}
+            for bad in (float("nan"), -1, True, "1"):
+                with pytest.raises(galil.InvalidArgument, match="timeout"):
+                    await c.messages.get(timeout=bad)  # type: ignore[arg-type]
+            with pytest.raises(queue.Empty):
+                await c.messages.get(timeout=0)
 
     run(body)
 
