@@ -2,7 +2,8 @@
 
 It answers like firmware does (``:``, data + CR LF + ``:``, ``?`` and a ``TC1`` explanation) and
 lets a test refuse commands, hold replies back, inject unsolicited output or garbage, and kill
-the link. The simulator-backed scenario tests live in tests/transport/test_scenarios.py.
+the link. The simulator-backed scenario tests live in tests/transport/test_scenarios.py;
+``SimLinkWrapper`` is the base for tests that step between the host and the simulator.
 """
 
 from __future__ import annotations
@@ -12,6 +13,33 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from galil.errors import GalilConnectionError
+from galil.sim.link import SimLink
+
+
+@dataclass
+class SimLinkWrapper:
+    """A transport around the simulator's link: subclasses change ``write``/``read``; the
+    simulated clock and ``close`` pass through."""
+
+    inner: SimLink
+    secondary: None = None
+    kind: str = "sim"
+
+    def write(self, data: bytes) -> None:
+        self.inner.write(data)
+
+    def read(self, timeout: float) -> bytes:
+        return self.inner.read(timeout)
+
+    def controller_time(self) -> float:
+        return self.inner.controller_time()
+
+    def let_time_pass(self, seconds: float) -> None:
+        self.inner.let_time_pass(seconds)
+
+    def close(self) -> None:
+        self.inner.close()
+
 
 TC_TEXT = {
     1: "Unrecognized command",

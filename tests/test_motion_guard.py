@@ -8,6 +8,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import pytest
+from client_fakes import SimLinkWrapper
 
 import galil
 from galil.sim.clock import ManualClock
@@ -16,15 +17,12 @@ from galil.sim.link import SimLink, open_transport
 
 
 @dataclass
-class Gate:
+class Gate(SimLinkWrapper):
     """A transport around the simulator's link that can refuse or swallow chosen commands."""
 
-    inner: SimLink
     refuse: Callable[[bytes], bool] = lambda _data: False
     swallow: Callable[[bytes], bool] = lambda _data: False
     sent: list[str] = field(default_factory=list)
-    secondary: None = None
-    kind: str = "sim"
     _queued: bytes = b""
 
     def write(self, data: bytes) -> None:
@@ -39,15 +37,6 @@ class Gate:
             out, self._queued = self._queued, b""
             return out
         return self.inner.read(timeout)
-
-    def controller_time(self) -> float:
-        return self.inner.controller_time()
-
-    def let_time_pass(self, seconds: float) -> None:
-        self.inner.let_time_pass(seconds)
-
-    def close(self) -> None:
-        self.inner.close()
 
 
 @pytest.fixture

@@ -9,11 +9,11 @@ from __future__ import annotations
 import asyncio
 import inspect
 import threading
-from collections.abc import Awaitable, Callable
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
 import pytest
+from aio_helpers import commands_of, run, sim
 
 import galil
 import galil.aio as aio
@@ -34,19 +34,6 @@ from galil.vector import VectorHandle
 from galil.watchdog import Watchdog
 
 mm, s, V = ureg.mm, ureg.s, ureg.volt
-T = TypeVar("T")
-
-
-def run(body: Callable[[], Awaitable[T]]) -> T:
-    return asyncio.run(asyncio.wait_for(body(), 30))  # type: ignore[arg-type]
-
-
-async def sim(model: str = "DMC-4040") -> aio.AsyncController:
-    return await aio.connect(f"sim://{model}")
-
-
-def commands_of(c: aio.AsyncController) -> list[str]:
-    return [text for _, text in sim_of(c.sync).command_log]
 
 
 # -- the whole vocabulary ------------------------------------------------------------------

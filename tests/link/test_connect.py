@@ -126,16 +126,6 @@ def test_bad_timeouts_are_refused(c: Controller, bad: Any) -> None:
     assert c.bytes_sent == sent
 
 
-def _unquoted_semicolon(text: str) -> bool:
-    quoted = False
-    for ch in text:
-        if ch == '"':
-            quoted = not quoted
-        elif ch == ";" and not quoted:
-            return True
-    return False
-
-
 def test_dead_link_and_reconnect(c: Controller, peer: FakeGalil) -> None:
     peer.links[0].dead = True
     with pytest.raises(GalilConnectionError, match="died") as info:

@@ -14,16 +14,6 @@ from galil.errors import (
 )
 
 
-def _unquoted_semicolon(text: str) -> bool:
-    quoted = False
-    for ch in text:
-        if ch == '"':
-            quoted = not quoted
-        elif ch == ";" and not quoted:
-            return True
-    return False
-
-
 def test_unsolicited_inside_a_reply_is_split_out(c: Controller, peer: FakeGalil) -> None:
     peer.extra = lambda cmd: (
         " 4" + "".join(chr(b | 0x80) for b in b"hello\r\n") + "2\r\n:" if cmd == "MG 42" else None

@@ -10,6 +10,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import pytest
+from client_fakes import SimLinkWrapper
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -27,16 +28,13 @@ class Interrupt(BaseException):
 
 
 @dataclass
-class Tripwire:
+class Tripwire(SimLinkWrapper):
     """A transport around the simulator's link that raises at the n-th read or write."""
 
-    inner: SimLink
     at: int = -1  # which call raises (-1: none)
     after: bool = False  # raise after the call did its work (bytes written / read and lost)
     error: type[BaseException] = Interrupt
     calls: int = 0
-    secondary: None = None
-    kind: str = "sim"
     log: list[str] = field(default_factory=list)
 
     def _trip(self) -> bool:
@@ -61,15 +59,6 @@ class Tripwire:
         if hit:
             raise self.error("interrupted after the read (its bytes are lost)")
         return data
-
-    def controller_time(self) -> float:
-        return self.inner.controller_time()
-
-    def let_time_pass(self, seconds: float) -> None:
-        self.inner.let_time_pass(seconds)
-
-    def close(self) -> None:
-        self.inner.close()
 
 
 @pytest.fixture
