@@ -25,6 +25,11 @@ DEFAULT_PORT = 23
 _CHUNK = 65536
 
 
+def _check_port(port: object, what: str) -> None:
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
+        raise InvalidArgument(f"{what} must be 1..65535, got {port!r}")
+
+
 class TcpTransport(TransportBase[socket.socket]):
     """A connected TCP handle.
 
@@ -58,14 +63,9 @@ class TcpTransport(TransportBase[socket.socket]):
         message_port: int | None = None,
         messages_only: bool = False,
     ) -> None:
-        if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
-            raise InvalidArgument(f"TCP port must be 1..65535, got {port!r}")
-        if message_port is not None and (
-            isinstance(message_port, bool)
-            or not isinstance(message_port, int)
-            or not 0 < message_port < 65536
-        ):
-            raise InvalidArgument(f"message port must be 1..65535, got {message_port!r}")
+        _check_port(port, "TCP port")
+        if message_port is not None:
+            _check_port(message_port, "message port")
         self.host = host
         self.port = port
         self.connect_timeout = connect_timeout
@@ -170,8 +170,7 @@ class UdpTransport(TransportBase[socket.socket]):
     kind = "ethernet"
 
     def __init__(self, host: str, port: int = DEFAULT_PORT) -> None:
-        if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
-            raise InvalidArgument(f"UDP port must be 1..65535, got {port!r}")
+        _check_port(port, "UDP port")
         self.host = host
         self.port = port
         try:
