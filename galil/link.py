@@ -50,6 +50,7 @@ __all__ = [
     "WireCapture",
     "WireLog",
     "check_timeout",
+    "check_wait_timeout",
     "is_query",
     "parse_numbers_reply",
 ]
@@ -104,6 +105,21 @@ def check_timeout(timeout: object, default: float, what: str = "timeout") -> flo
             f"{what} must be a positive, finite number of seconds, not {timeout!r}"
         )
     return float(timeout)
+
+
+def check_wait_timeout(timeout: object) -> None:
+    """Refuse a wait's timeout that is not ``None`` or a finite number of seconds >= 0.
+
+    Raises:
+        InvalidArgument: a bool, a string, a negative number, NaN or infinity.
+    """
+    if timeout is not None and (
+        isinstance(timeout, bool)
+        or not isinstance(timeout, (int, float))
+        or not math.isfinite(timeout)
+        or timeout < 0
+    ):
+        raise InvalidArgument(f"timeout must be a non-negative number, got {timeout!r}")
 
 
 _QUERY_KINDS = frozenset({ReplyKind.DATA, ReplyKind.RECORD, ReplyKind.CTRL_Z})

@@ -31,7 +31,7 @@ from galil.errors import (
     InvalidArgument,
     MotionError,
 )
-from galil.link import CommandLink
+from galil.link import CommandLink, check_wait_timeout
 from galil.protocol import commands as cmds
 
 __all__ = [
@@ -44,7 +44,6 @@ __all__ = [
     "MoveResult",
     "Track",
     "abort_all",
-    "check_wait_timeout",
     "motion_guard",
     "sample_of",
     "stop_axes",
@@ -252,21 +251,6 @@ class MotionTracker:
             handle = self._active.get(a)
             if handle is not None:
                 handle.add_event(a, sample, make)
-
-
-def check_wait_timeout(timeout: object) -> None:
-    """Refuse a wait's timeout that is not ``None`` or a finite number of seconds >= 0.
-
-    Raises:
-        InvalidArgument: a bool, a string, a negative number, NaN or infinity.
-    """
-    if timeout is not None and (
-        isinstance(timeout, bool)
-        or not isinstance(timeout, (int, float))
-        or not math.isfinite(timeout)
-        or timeout < 0
-    ):
-        raise InvalidArgument(f"timeout must be a non-negative number, got {timeout!r}")
 
 
 class MoveHandle:

@@ -25,13 +25,12 @@ says which (``docs/decisions/0017``)::
 from __future__ import annotations
 
 import logging
-import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
 
 from galil.errors import GalilTimeoutError, InvalidArgument
-from galil.link import CommandLink
+from galil.link import CommandLink, check_wait_timeout
 from galil.protocol import commands as cmds
 from galil.protocol.programs import check_program, program_lines
 from galil.routines import MARKER, Routines, split_program
@@ -197,12 +196,9 @@ class Programs:
             GalilTimeoutError: it still runs after ``timeout`` seconds (it is not halted).
         """
         n = self._thread(thread)
-        if (
-            isinstance(timeout, bool)
-            or not isinstance(timeout, (int, float))
-            or not (math.isfinite(timeout) and timeout >= 0)
-        ):
-            raise InvalidArgument(f"timeout must be a non-negative number, not {timeout!r}")
+        if timeout is None:
+            raise InvalidArgument("timeout must be a non-negative number, not None")
+        check_wait_timeout(timeout)
         link = self.link
         deadline = link.clock() + timeout
         while round(link.query_operands([f"_XQ{n}"])[0]) >= 0:

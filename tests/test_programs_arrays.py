@@ -190,3 +190,11 @@ def test_waiting_for_a_thread_times_out_in_controller_time(dmc: galil.Controller
     with pytest.raises(galil.GalilTimeoutError, match="thread 2 still runs"):
         dmc.programs.wait(2, timeout=0.5)
     dmc.programs.wait(2, timeout=6)
+
+
+@pytest.mark.parametrize("bad", [None, -1, float("nan"), float("inf"), True, "1"])
+def test_waiting_for_a_thread_refuses_a_bad_timeout_before_asking(
+    dmc: galil.Controller, bad: object
+) -> None:
+    with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match="timeout"):
+        dmc.programs.wait(0, timeout=bad)  # type: ignore[arg-type]

@@ -22,14 +22,13 @@ from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
 from galil import predict
 from galil.aio._worker import Room, Worker
 from galil.errors import GalilConnectionError, GalilError, GalilTimeoutError
-from galil.link import Link
+from galil.link import Link, check_wait_timeout
 from galil.motion import (
     MAX_POLL,
     MIN_POLL,
     MoveHandle,
     MoveParams,
     MoveResult,
-    check_wait_timeout,
 )
 from galil.segments import VectorPlan
 from galil.vector import VectorHandle
