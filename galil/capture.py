@@ -28,7 +28,7 @@ import numpy.typing as npt
 
 from galil.arrays import Arrays
 from galil.errors import GalilError, GalilTimeoutError, InvalidArgument, ProtocolError
-from galil.link import CommandLink
+from galil.link import CommandLink, check_count
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import parse_number
 
@@ -98,9 +98,7 @@ def _count(count: object, seconds: object, every: int, sample_period: float) -> 
         ):
             raise InvalidArgument(f"seconds must be a positive number, not {seconds!r}")
         return math.ceil(seconds / (every * sample_period) - 1e-9) + 1
-    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
-        raise InvalidArgument(f"count must be a positive integer, not {count!r}")
-    return count
+    return check_count(count, "count")
 
 
 class Capture:

@@ -34,7 +34,7 @@ from galil.handshake import identify
 from galil.homing import SwitchPolarity, read_polarity, set_polarity
 from galil.interrupts import Interrupts
 from galil.io import IO
-from galil.link import Link, check_timeout
+from galil.link import Link, check_count, check_timeout
 from galil.messages import Messages
 from galil.models import Identity, ModelSpec, get_model
 from galil.motion import MotionTracker, MoveHandle, abort_all, motion_guard, stop_axes
@@ -72,12 +72,7 @@ class ReconnectPolicy:
     max_delay: float = 5.0
 
     def __post_init__(self) -> None:
-        if (
-            isinstance(self.attempts, bool)
-            or not isinstance(self.attempts, int)
-            or self.attempts < 1
-        ):
-            raise InvalidArgument(f"attempts must be a positive integer, not {self.attempts!r}")
+        check_count(self.attempts, "attempts")
         check_timeout(self.delay, 0.2, "delay")
         check_timeout(self.max_delay, 5.0, "max_delay")
         if (

@@ -49,6 +49,7 @@ __all__ = [
     "Link",
     "WireCapture",
     "WireLog",
+    "check_count",
     "check_timeout",
     "check_wait_timeout",
     "is_query",
@@ -105,6 +106,17 @@ def check_timeout(timeout: object, default: float, what: str = "timeout") -> flo
             f"{what} must be a positive, finite number of seconds, not {timeout!r}"
         )
     return float(timeout)
+
+
+def check_count(value: object, name: str) -> int:
+    """``value`` as a positive whole number (a bool is refused too).
+
+    Raises:
+        InvalidArgument: naming ``name``.
+    """
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise InvalidArgument(f"{name} must be a positive integer, not {value!r}")
+    return value
 
 
 def check_wait_timeout(timeout: object) -> None:
@@ -310,8 +322,7 @@ class LinkCore:
 
     def __init__(self, *, timeout: float = 1.0, history: int = 64) -> None:
         self.timeout = check_timeout(timeout, 1.0)
-        if isinstance(history, bool) or not isinstance(history, int) or history < 1:
-            raise InvalidArgument(f"history must be a positive integer, not {history!r}")
+        check_count(history, "history")
         self.transport: Transport | None = None
         self._model: ModelSpec | None = None
         self._sample_period: float | None = None

@@ -16,8 +16,8 @@ import warnings
 from collections import deque
 from collections.abc import Callable
 
-from galil.errors import GalilConnectionError, GalilError, InvalidArgument, ProtocolError
-from galil.link import Link, read_reply
+from galil.errors import GalilConnectionError, GalilError, ProtocolError
+from galil.link import Link, check_count, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.framing import FrameParser, Unsolicited
 from galil.protocol.numbers import parse_number
@@ -89,8 +89,7 @@ class Messages:
     """
 
     def __init__(self, link: Link, *, max_messages: int = 1000, poll_interval: float = 0.02):
-        if isinstance(max_messages, bool) or not isinstance(max_messages, int) or max_messages < 1:
-            raise InvalidArgument(f"max_messages must be a positive integer, not {max_messages!r}")
+        check_count(max_messages, "max_messages")
         self.link = link
         self.queue = MessageQueue(max_messages)
         self._dispatch = _Dispatcher()

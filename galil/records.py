@@ -27,7 +27,7 @@ from galil.errors import (
     InvalidArgument,
     ProtocolError,
 )
-from galil.link import Link, read_reply
+from galil.link import Link, check_count, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import parse_number
 from galil.protocol.records import (
@@ -296,8 +296,7 @@ class RecordStream:
 
         ``timeout`` bounds the wait for each record.
         """
-        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-            raise InvalidArgument(f"n must be a positive integer, not {n!r}")
+        check_count(n, "n")
         first = self.get(timeout)
         out = np.empty(n, dtype=first.dtype)
         out[0] = first
@@ -459,8 +458,7 @@ class Records:
             raise InvalidArgument(f"period is a number of samples 1..65535, not {period!r}")
         if method not in ("auto", "DR", "QR"):
             raise InvalidArgument(f"method is 'auto', 'DR' or 'QR', not {method!r}")
-        if isinstance(maxlen, bool) or not isinstance(maxlen, int) or maxlen < 1:
-            raise InvalidArgument(f"maxlen must be a positive integer, not {maxlen!r}")
+        check_count(maxlen, "maxlen")
         transport: object = self.link.transport
         pusher = transport if isinstance(transport, HandleSource) else None
         if method == "DR" and pusher is None:

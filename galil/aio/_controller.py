@@ -28,6 +28,7 @@ from galil.controller import Controller, CoordinatedMotion
 from galil.controller import connect as connect_sync
 from galil.errors import GalilError, InvalidArgument
 from galil.homing import SwitchPolarity
+from galil.link import check_count
 from galil.motion import MoveHandle
 from galil.predict import MultiProfile
 from galil.protocol.interrupts import Interrupt
@@ -345,9 +346,7 @@ async def connect(address: str | Transport, *, threads: int = 4, **options: Any)
     """
     if isinstance(threads, bool) or not isinstance(threads, int) or not 1 <= threads <= 64:
         raise InvalidArgument(f"threads must be an integer 1..64, not {threads!r}")
-    maxlen = options.get("max_messages", 1000)
-    if isinstance(maxlen, bool) or not isinstance(maxlen, int) or maxlen < 1:
-        raise InvalidArgument(f"max_messages must be a positive integer, not {maxlen!r}")
+    maxlen = check_count(options.get("max_messages", 1000), "max_messages")
     loop = asyncio.get_running_loop()
     messages = AsyncMessages(loop, maxlen)
     interrupts: LoopQueue[Interrupt] = LoopQueue(loop, 1000, "interrupt")

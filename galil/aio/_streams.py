@@ -21,7 +21,8 @@ import numpy as np
 
 from galil.aio._waits import check_wait
 from galil.aio._worker import Worker, shielded
-from galil.errors import GalilConnectionError, InvalidArgument
+from galil.errors import GalilConnectionError
+from galil.link import check_count
 from galil.records import RecordStream
 
 __all__ = ["SLICE", "AsyncMessages", "AsyncRecordStream", "LoopQueue"]
@@ -207,8 +208,7 @@ class AsyncRecordStream:
             queue.Empty: no record within ``timeout``.
             GalilConnectionError: the stream is closed (or its handle died).
         """
-        if isinstance(limit, bool) or not isinstance(limit, int) or limit < 1:
-            raise InvalidArgument(f"limit must be a positive integer, not {limit!r}")
+        check_count(limit, "limit")
         wait = _check_wait(timeout)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + wait
@@ -230,8 +230,7 @@ class AsyncRecordStream:
 
     async def take(self, n: int, timeout: float | None = None) -> np.ndarray[Any, np.dtype[Any]]:
         """The next ``n`` records as one structured array; ``timeout`` bounds each wait."""
-        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-            raise InvalidArgument(f"n must be a positive integer, not {n!r}")
+        check_count(n, "n")
         records: list[np.void] = []
         while len(records) < n:
             records.extend(await self.batch(n - len(records), timeout))
