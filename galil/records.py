@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import queue
 import threading
 import time
@@ -429,7 +430,11 @@ class Records:
                 value = value.to("s").magnitude
             except Exception as exc:
                 raise InvalidArgument(f"seconds must be a time, not {seconds!r}") from exc
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or not (math.isfinite(value) and value > 0)
+        ):
             raise InvalidArgument(f"seconds must be a positive number, not {seconds!r}")
         ts = self.link.sample_period
         samples = round(float(value) / ts)

@@ -138,6 +138,14 @@ def test_records_carry_controller_time_and_a_period_in_seconds(dmc: galil.Contro
     assert dmc.records(seconds=16 / 1024 * ureg.s).period == 16
 
 
+@pytest.mark.parametrize("bad", [float("inf"), float("nan"), 0, -0.01, True, "0.01"])
+def test_a_record_period_in_seconds_must_be_a_positive_finite_time(
+    dmc: galil.Controller, bad: object
+) -> None:
+    with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match="seconds"):
+        dmc.records(seconds=bad)
+
+
 def test_a_late_poll_is_counted_as_missed_records(
     dmc: galil.Controller, caplog: pytest.LogCaptureFixture
 ) -> None:
