@@ -156,8 +156,27 @@ def _move_wait(c: Controller, distance: int) -> None:
     handle.wait()
 
 
-def moving(quick: bool) -> Figure:
-    """move_by + wait on sim:// against one state query on the same link."""
+def _by_hand(c: Controller, names: list[str], pause: float) -> Callable[[int], None]:
+    """The move's exchanges without the library: what any client of this simulator pays.
+
+    The state query, the move line, the predicted time passing, one poll; no units, no
+    prediction, no checks, no handle (``pause`` is the move's predicted time plus a sample).
+    """
+    link = c.link
+    poll = ["_BGA", "_RPA", "_SCA"]
+
+    def move(distance: int) -> None:
+        link.query_operands(names)
+        link.command_line([f"PRA={distance}", "BG A", "MG TIME"])
+        link.pause(pause)
+        if link.query_operands(poll)[0]:
+            raise RuntimeError("the move by hand is still running after its predicted time")
+
+    return move
+
+
+def moving(quick: bool) -> list[Figure]:
+    """move_by + wait on sim:// against one state query on the same link, and by hand."""
     c = galil.connect("sim://DMC-4040")
     link = c.link
     names = [f"_{op}A" for op in ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")]
@@ -170,11 +189,23 @@ def moving(quick: bool) -> Figure:
     def move() -> None:
         _move_wait(c, next(sign) * 1000)
 
+    pause = c.A.plan_by(1000).duration + link.sample_period
+    by_hand = _by_hand(c, names, pause)
+
+    def raw() -> None:
+        by_hand(next(sign) * 1000)
+
     move()
+    raw()
     t_query, t_move, ratio = interleaved(_per_call(query, number), _per_call(move, number), pairs)
+    t_query2, t_raw, raw_ratio = interleaved(
+        _per_call(query, number), _per_call(raw, number), pairs
+    )
+    _, _, lib_ratio = interleaved(_per_call(raw, number), _per_call(move, number), pairs)
     print(
         f"  move_by(1000) + wait {t_move * 1e6:7.1f} us; state query {t_query * 1e6:6.1f} us;"
-        f" {ratio:.2f}x"
+        f" {ratio:.2f}x\n  the same exchanges by hand {t_raw * 1e6:7.1f} us;"
+        f" {raw_ratio:.2f}x the query; the library's move is {lib_ratio:.2f}x them"
     )
     points = []
     c.A.speed = 100_000
@@ -186,18 +217,33 @@ def moving(quick: bool) -> Figure:
         _move_wait(c, next(sign) * distance)
         points.append((seconds, time.perf_counter() - t0))
     c.close()
-    return Figure(
-        "host move_by + wait (sim://)",
-        ratio,
-        "x one query",
-        3,
-        higher=False,
-        anchor="state query (us)",
-        anchor_value=t_query * 1e6,
-        scaling=[Scaling("s of motion", points)],
-        note=f"{t_move * 1e6:.0f} us per move of 0.1 s; in-process simulator, manual clock:"
-        " the simulator's command handling and stepping count too",
-    )
+    return [
+        Figure(
+            "host move_by + wait (sim://)",
+            ratio,
+            "x one query",
+            3,
+            higher=False,
+            anchor="state query (us)",
+            anchor_value=t_query * 1e6,
+            scaling=[Scaling("s of motion", points)],
+            note=f"{t_move * 1e6:.0f} us per move of 0.14 s; in-process simulator, manual clock:"
+            f" the same exchanges by hand cost {raw_ratio:.2f}x the query (next line)",
+        ),
+        Figure(
+            "sim:// move exchanged by hand (floor)",
+            raw_ratio,
+            "x one query",
+            None,
+            higher=False,
+            anchor="state query (us)",
+            anchor_value=t_query2 * 1e6,
+            ratio=lib_ratio,
+            ratio_text="x: the library's move_by + wait against it",
+            note="state query, PR/BG/MG TIME, the predicted time, one poll: no library work;"
+            " the simulator's command handling and servo stepping",
+        ),
+    ]
 
 
 def main() -> None:
@@ -205,7 +251,7 @@ def main() -> None:
     print("planning over a transport that answers at once (DMC-4040, axis A):")
     figures = planning(args.quick)
     print("moving on the in-process simulator (DMC-4040, axis A):")
-    figures.append(moving(args.quick))
+    figures.extend(moving(args.quick))
     finish(figures, args)
 
 
