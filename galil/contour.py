@@ -278,7 +278,8 @@ class ContourStream:
     def feed(self, *, progress: bool = False) -> _Progress:
         """Enter contour mode and send every segment, keeping the buffer fed.
 
-        Whatever goes wrong, the controller is left out of contour mode (``CD 0=0``).
+        Whatever goes wrong, the controller is left out of contour mode (``CD 0=0``, or
+        ``DT 0`` and ``CD 0`` on the models that end it so).
 
         Raises:
             ContourUnderrunError: the buffer ran dry while streaming (TC 42).
@@ -301,7 +302,7 @@ class ContourStream:
         except BaseException:
             # Leave the controller out of contour mode whatever happened.
             with contextlib.suppress(GalilError):
-                link.command_line([cmds.cd_end(self.letters, model=model)])
+                link.command_line(cmds.contour_end(self.letters, model=model))
             raise
         finally:
             if state.bar is not None:
@@ -349,13 +350,13 @@ class ContourStream:
             link.pause(max(seg_time, min(need, queued / 4, 0.05)))
 
     def finish(self, state: _Progress, timeout: float | None = None) -> ContourResult:
-        """End contour mode (``CD 0=0``) and wait for the axes to stop.
+        """End contour mode (``CD 0=0``, or ``DT 0`` then ``CD 0``) and wait for the axes to stop.
 
         Raises:
             GalilTimeoutError: the contour did not finish in time.
         """
         link = self.link
-        link.command_line([cmds.cd_end(self.letters, model=link.model)])
+        link.command_line(cmds.contour_end(self.letters, model=link.model))
         seg_time = (1 << self.dt) * link.sample_period
         wait = (
             timeout

@@ -73,11 +73,17 @@ class ModelSpec:
         cd_max: largest |CD| increment per segment.
         dt_range: allowed DT exponents (segment = 2**n samples).
         contour_buffer: contour segments the controller can queue (``_CM`` when empty).
+        contour_dt_suffix: ``CD`` takes a segment's own DT as ``=n`` and ``CD 0=0`` ends
+            contour mode. Without it (the DMC-1500/1700/18x2 manuals show only that form)
+            ``DT 0`` then ``CD 0`` ends it, and a segment cannot carry its own DT.
         line_length: longest command line the controller accepts, in characters.
         mg_max: longest MG text.
         transports: buses the family offers.
         qz: the ``QZ`` reply (axes, general block, coordinated block, axis block bytes), or
             ``None`` when the family has no binary data record we know of.
+        record_axis_analog: the last two bytes of a 28-byte axis block are the axis's
+            analog input (gclib ``GDataRecord2103``); without it they are reserved (gclib
+            ``GDataRecord1802``: "no analog in axis data").
         it_range: smoothing (IT) range.
         tm_min_by_axes: smallest TM (µs) of the normal firmware for 1-2, 3-4, 5-6 and 7-8
             axes (M40-CR p246); see :attr:`tm_range`.
@@ -151,10 +157,12 @@ class ModelSpec:
     cd_max: int = 32_000
     dt_range: tuple[int, int] = (1, 8)
     contour_buffer: int = 511
+    contour_dt_suffix: bool = True
     line_length: int = 80
     mg_max: int = 72
     transports: frozenset[str] = frozenset({"serial"})
     qz: tuple[int, int, int, int] | None = None
+    record_axis_analog: bool = True
     it_range: tuple[float, float] = IT_RANGE
     # Sourced for the 40x0 (M40-CR p246); other adjustable families are assumed to share it.
     tm_min_by_axes: tuple[float, float, float, float] = (62.5, 125.0, 156.25, 187.5)
@@ -294,6 +302,7 @@ _add(
         sp_max=8_000_000,
         cd_max=32_000,
         contour_buffer=1,
+        contour_dt_suffix=False,
         line_length=80,
         mg_max=31,
         transports=frozenset({"serial"}),
@@ -319,6 +328,7 @@ _add(
         ac_max=67_107_840,
         sp_max=12_000_000,
         contour_buffer=1,
+        contour_dt_suffix=False,
         line_length=80,
         transports=frozenset({"pci"}),
         qz=(8, 24, 16, 28),
@@ -346,13 +356,16 @@ _add(
         cd_max=32_000,
         contour_buffer=1,
         transports=frozenset({"pci"}),
-        qz=(4, 24, 16, 26),
+        contour_dt_suffix=False,
+        qz=(4, 24, 16, 28),
+        record_axis_analog=False,
         threads=2,
         vt=True,
         assumptions=(
             "CD range ±32,000 from the seed manual excerpt",
             "contour buffer of 1: the seed shows WC pacing one segment at a time",
-            "26-byte axis blocks (gclib GDataRecord1802)",
+            "QZ 4, 24, 16, 28: gclib GDataRecord1802 (the 21x3 record, the axis blocks' last "
+            "two bytes reserved); QZ itself not seen on an 18x2",
         ),
     ),
     "DMC-1842",
@@ -474,11 +487,15 @@ _add(
         contour_buffer=511,
         transports=_ETH_USB,
         qz=(1, 18, 16, 36),
-        dr_range=(4, 30000),
+        dr_range=(4, 30000),  # gclib GRecordRate: 4 on the 30010/31010
         threads=6,
+        # gclib GDataRecord30000: analog input 1 in the axis block, input 2 and outputs 1-2
+        # in the general block; EPICS drives AO ±10 V (3276.8 counts/V) on the 30010.
+        analog_inputs=2,
+        analog_outputs=2,
         assumptions=(
             "contour buffer 511 as on Accelera-class firmware: not confirmed",
-            "DR minimum 4 samples: not confirmed",
+            "analog input 2 reads 0-5 V (EPICS); both inputs are modelled at ±10 V",
         ),
     ),
     "DMC30010",
@@ -536,7 +553,9 @@ _family(
     "DMC-50040",
     "DMC500",
     family="DMC-500x0",
-    ac_max=2_147_483_648,  # EPICS: the 50000 series' maximum acceleration
+    # EPICS gives 2,147,483,648 as the 50000 series' maximum acceleration; one past the
+    # controller's 32-bit number range, so the largest multiple of AC's 1024 within it.
+    ac_max=2_147_482_624,
     motor_types=_MT_STANDARD | {10.0, 11.0, -11.0},  # EtherCAT types (EPICS MT table)
     assumptions=(
         "TM range, program memory, contour and vector buffers as the DMC-40x0 (not found "

@@ -241,3 +241,17 @@ def test_sample_period_follows_tm() -> None:
         assert dmc.sample_period == 1000 / 1_024_000
         profile = dmc.A.plan_by(1000)
         assert profile.sample_period == 1000 / 1_024_000
+
+
+def test_the_30010s_two_analog_outputs_and_inputs_are_driven_and_recorded() -> None:
+    with simulated("DMC-30010") as dmc:
+        dmc.io.analog_out[2] = -2.5 * ureg.volt
+        assert dmc.io.analog_out[2].to("V").magnitude == -2.5
+        assert sim_of(dmc).analog_output(2) == -2.5
+        sim_of(dmc).set_analog_input(2, 1.5)
+        assert dmc.io.analog_in[2].to("V").magnitude == pytest.approx(1.5, abs=1e-3)
+        record = dmc.record()
+        assert record["analog_out"].tolist() == [0, round(-2.5 * 3276.8)]
+        assert record["analog_in"] == round(1.5 * 3276.8)
+        with nothing_sent(dmc), pytest.raises(galil.InvalidArgument):
+            dmc.io.analog_out[3] = 1.0  # it has two

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from galil.errors import InvalidArgument
-from galil.models import MODELS, get_model, parse_identity
+from galil.errors import InvalidArgument, LimitError
+from galil.models import INT32_MAX, MODELS, get_model, parse_identity
+from galil.testing import nothing_sent, simulated
 
 
 @pytest.mark.parametrize(
@@ -77,3 +78,18 @@ def test_axis_letters_and_aliases() -> None:
         m4040.axis_letter("E")
     with pytest.raises(InvalidArgument):
         m4040.axis_letter("X")
+
+
+def test_every_models_largest_accel_is_a_number_the_controller_holds() -> None:
+    for name, spec in MODELS.items():
+        assert spec.ac_max <= INT32_MAX, name
+        assert spec.ac_max % spec.ac_resolution == 0, name
+
+
+def test_the_500x0s_largest_accel_is_accepted_and_one_step_more_refused_unsent() -> None:
+    with simulated("DMC-50040") as dmc:
+        top = dmc.model.ac_max
+        dmc.A.accel = top
+        assert dmc.A.accel == top
+        with nothing_sent(dmc), pytest.raises(LimitError):
+            dmc.A.accel = top + dmc.model.ac_resolution

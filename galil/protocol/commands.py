@@ -56,6 +56,7 @@ __all__ = [
     "cd_rows",
     "cm",
     "cn",
+    "contour_end",
     "cr",
     "cs",
     "cw",
@@ -697,9 +698,17 @@ def sc(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Com
 def cd(
     *values: object, dt: int | None = None, model: ModelSpec | None = None, **by_axis: object
 ) -> Command:
-    """CD: one contour segment of increments per axis, optionally with its own DT (``=n``)."""
+    """CD: one contour segment of increments per axis, optionally with its own DT (``=n``).
+
+    Raises:
+        InvalidArgument: ``dt`` on a model whose ``CD`` takes no ``=n`` (set ``DT`` instead).
+    """
     suffix = ""
     if dt is not None:
+        if model is not None and not model.contour_dt_suffix:
+            raise InvalidArgument(
+                f"{model.name}: CD takes no '=n'; send DT {dt} before the segments instead"
+            )
         suffix = "=" + _ranged(dt, 0, 8, "CD =n (DT)", integer=True)
     text = _axis_command("CD", values, by_axis, model, suffix)
     if "=" in text and not text.startswith("CD "):
@@ -763,13 +772,31 @@ def cd_rows(
 
 
 def cd_end(axes: str = "A", *, model: ModelSpec | None = None) -> Command:
-    """End contour mode: ``CD 0=0`` (the space matters: ``CD0=0`` assigns a variable CD0)."""
+    """End contour mode: ``CD 0=0`` (the space matters: ``CD0=0`` assigns a variable CD0).
+
+    On a model whose ``CD`` takes no ``=n`` (``contour_dt_suffix`` false: the DMC-1500,
+    1700/1800 and 18x2) it is ``CD 0`` with a zero per axis, which ends contour mode after
+    ``DT 0`` (send :func:`dt` ``(0)`` first; :func:`contour_end` gives both).
+    """
     letters = _axis_list(axes, model)
     if not letters:
         raise InvalidArgument("cd_end needs at least one axis")
     table = _axes(model)
     n = max(table.position(c) for c in letters) + 1
-    return Command("CD " + ",".join(["0"] * n) + "=0")
+    zeros = "CD " + ",".join(["0"] * n)
+    if model is not None and not model.contour_dt_suffix:
+        return Command(zeros)
+    return Command(zeros + "=0")
+
+
+def contour_end(axes: str = "A", *, model: ModelSpec | None = None) -> list[Command]:
+    """The commands that end contour mode on ``model``: ``[CD 0=0]``, or ``[DT 0, CD 0]``
+    where ``CD`` takes no ``=n`` ("zero parameters for DT followed by zero parameters for
+    CD exit the contour mode", DMC-18x2 manual)."""
+    end = cd_end(axes, model=model)
+    if model is not None and not model.contour_dt_suffix:
+        return [dt(0, model=model), end]
+    return [end]
 
 
 def dt(n: int, *, model: ModelSpec | None = None) -> Command:

@@ -2,7 +2,8 @@
 
 The layout is chosen from the ``QZ`` sizes (axes, general, coordinated, per-axis bytes), as
 EPICS does, not from fixed offsets: a 52-byte general block is the DMC-40x0/41x3/500x0 (and
-18x6) layout, a 24-byte one the DMC-21x3/2x00/1700/18x2 layout (28- or 26-byte axis blocks),
+18x6) layout, a 24-byte one the DMC-21x3/2x00/1700/18x2 layout (28-byte axis blocks; the 18x2's
+end in two reserved bytes where the others carry the axis's analog input),
 an 18-byte one the DMC-30010 layout (gclib ``GDataRecord30000``: two input and two output
 banks, the analog input and outputs, the amplifier status; a 16-byte coordinated block with
 the contour and S-plane fields). Other blocks are kept as raw bytes, with the 36-byte axis
@@ -117,6 +118,8 @@ _AXIS_2103: list[tuple[Any, ...]] = [
     ("torque", "<i2"),
     ("analog_in", "<u2"),
 ]
+# DMC-18x2 (gclib GDataRecord1802): the 21x3 block, "no analog in axis data".
+_AXIS_1802 = [*_AXIS_2103[:-1], ("reserved", "<u2")]
 
 
 _GENERAL_30000: list[tuple[Any, ...]] = [
@@ -195,12 +198,16 @@ def record_dtype(
     if qz is None:
         name = model.name if isinstance(model, ModelSpec) else str(model)
         raise InvalidArgument(f"{name} has no binary data record layout")
-    return _record_dtype(tuple(qz), axes, letters)
+    analog = model.record_axis_analog if isinstance(model, ModelSpec) else True
+    return _record_dtype(tuple(qz), axes, letters, analog)
 
 
 @functools.lru_cache(maxsize=256)
-def _record_dtype(qz: tuple[int, ...], axes: int | None, letters: str | None) -> np.dtype[Any]:
+def _record_dtype(
+    qz: tuple[int, ...], axes: int | None, letters: str | None, analog: bool = True
+) -> np.dtype[Any]:
     # Built once per layout and set of axis blocks: a stream decodes thousands a second.
+    # ``analog``: the 2103 axis block ends with the analog input (the 18x2's: reserved).
     n, general, coord, per_axis = qz
     if axes is not None:
         n = axes
@@ -217,7 +224,7 @@ def _record_dtype(qz: tuple[int, ...], axes: int | None, letters: str | None) ->
         g, a = _GENERAL_RIO, _AXIS_4000
         c = _IO_RIO_47300 if coord == _size(_IO_RIO_47300) else _IO_RIO_47100
     else:
-        g, c, a = _GENERAL_2103, _COORD_2103, _AXIS_2103[: 9 if per_axis == 26 else 10]
+        g, c, a = _GENERAL_2103, _COORD_2103, _AXIS_2103 if analog else _AXIS_1802
     gen = g if _size(g) == general else [("general", f"V{general}")]
     crd = c if _size(c) == coord else [("coordinated", f"V{coord}")]
     if _size(a) == per_axis:

@@ -115,6 +115,12 @@ def test_one_deep_buffer_paces_with_wc() -> None:
         first_cd = min(k for k, text in sim.command_log if k >= t0 and text.startswith("CD "))
         assert_follows(trace, t0, result.profiles["A"], first_cd)
         assert dmc.X.reference_position == round(path[-1])
+        # The DMC-1500's CD takes no "=n": DT 0 then CD 0 end contour mode, as its manual says.
+        ends = [text for text in lines if text in ("DT 0", "CD 0")]
+        assert ends == ["DT 0", "CD 0"]
+        assert lines.index("CD 0") == lines.index("DT 0") + 1
+        assert not any("=" in text for text in lines if text.startswith("CD"))
+        dmc.X.move_by(100).wait()  # out of contour mode: an ordinary move runs
 
 
 def test_contour_bad_input_sends_nothing(dmc: galil.Controller) -> None:

@@ -113,7 +113,7 @@ def test_parse_qz() -> None:
         ("DMC-4040", 82 + 4 * 36, 13),
         ("DMC-4080", 82 + 8 * 36, 13),
         ("DMC-2183", 44 + 8 * 28, 10),
-        ("DMC-1842", 44 + 4 * 26, 9),
+        ("DMC-1842", 44 + 4 * 28, 10),  # gclib GDataRecord1802: 2 reserved bytes per axis
         ("DMC-30010", 4 + 18 + 16 + 36, 13),
     ],
 )

@@ -346,3 +346,13 @@ def test_cd_rows_take_one_column_flat_and_refuse_fractions() -> None:
         c.cd_rows(np.zeros((3, 2)), "A")
     with pytest.raises(InvalidArgument):
         c.cd_rows(np.zeros((3, 2)), "AX")
+
+
+def test_models_whose_cd_takes_no_dt_end_contour_with_dt_0_then_cd_0() -> None:
+    old = get_model("DMC-18x2")
+    assert [x.text for x in c.contour_end("AB", model=old)] == ["DT 0", "CD 0,0"]
+    assert [x.text for x in c.contour_end("AB", model=M4040)] == ["CD 0,0=0"]
+    assert c.cd_end("A", model=old).text == "CD 0"
+    with pytest.raises(InvalidArgument, match="DT 3"):
+        c.cd(100, dt=3, model=old)
+    assert c.cd(100, model=old).text == "CD 100"

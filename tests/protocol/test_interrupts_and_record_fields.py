@@ -184,3 +184,20 @@ def test_program_array_and_capture_builders() -> None:
 def test_bad_arguments_are_refused_by_the_builders(build: object) -> None:
     with pytest.raises(InvalidArgument):
         build()  # type: ignore[operator]
+
+
+def test_the_18x2_axis_blocks_are_28_bytes_as_in_gclib() -> None:
+    dtype = record_dtype(get_model("DMC-18x2"))
+    assert dtype.itemsize == 4 + 24 + 16 + 4 * 28
+    fields = dtype.fields
+    assert fields is not None
+    # gclib GDataRecord1802 offsets (which omit the 4-byte QR header): A at 40, B at 68.
+    assert [fields[a][1] - 4 for a in "ABCD"] == [40, 68, 96, 124]
+    block = dtype["A"]
+    assert block.fields is not None
+    assert block.fields["reference"][1] == 44 - 40
+    assert block.fields["torque"][1] == 64 - 40
+    assert block.names is not None
+    assert block.names[-1] == "reserved"
+    # The same sizes from a QZ reply (the 21x3's) decode the analog input there.
+    assert record_dtype((8, 24, 16, 28))["A"].names[-1] == "analog_in"

@@ -136,3 +136,37 @@ def test_dr_streams_a_record_every_period_at_its_exact_sample() -> None:
     samples = [decode_record(r, sim.spec)["sample"] for r in records]
     assert samples == list(range(start + 8, sim.sample + 1, 8))
     assert sim.feed(b"DR 0;MG _DR\r", port=port) == b": 0.0000\r\n:"
+
+
+@pytest.mark.parametrize(
+    ("model", "blocks", "general"),
+    [("DMC-4040", "ABCD", None), ("DMC-2183", "ABCDEFGH", None), ("DMC-30010", "A", 2)],
+)
+def test_analog_inputs_are_in_their_axis_blocks_and_the_30010s_second_in_the_general_block(
+    model: str, blocks: str, general: int | None
+) -> None:
+    sim = SimController(model, ManualClock())
+    volts = [(-1) ** n * 1.25 * (n + 1) for n in range(sim.spec.analog_inputs)]
+    for n, v in enumerate(volts, start=1):
+        sim.set_analog_input(n, v)
+        assert number(sim, f"MG @AN[{n}]*10000") == round(v * 10000)
+
+    def counts(v: float) -> int:
+        return round(v * 32768 / 10) & 0xFFFF
+
+    rec = record_to_dict(decode_record(sim.record(), sim.spec))
+    for k, letter in enumerate(blocks):
+        want = counts(volts[k]) if k < len(volts) else 0
+        assert rec[letter]["analog_in"] == want, letter
+    if general is not None:
+        assert rec["analog_in"] == counts(volts[general - 1])
+
+
+def test_the_18x2_record_ends_each_axis_block_in_two_reserved_bytes() -> None:
+    sim = SimController("DMC-18x2", ManualClock())
+    sim.set_analog_input(1, 5.0)
+    data = sim.record()
+    assert len(data) == 4 + 24 + 16 + 4 * 28  # gclib GDataRecord1802 after the QR header
+    rec = record_to_dict(decode_record(data, sim.spec))
+    assert rec["A"]["reserved"] == 0  # not the analog input: the 18x2 puts none there
+    assert "analog_in" not in rec["A"]

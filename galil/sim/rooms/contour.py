@@ -1,9 +1,10 @@
 """Contour mode: ``CM`` ``DT`` ``CD`` and the contour buffer (``_CM``).
 
 Segments go to each contouring axis's profiler (``CD`` with ``DT n``: 2**n samples). A ``CD``
-into a full buffer holds its ``:`` until there is room; ``CD 0=0`` ends the stream once the
-queue drains. A buffer that runs dry while contouring (data sent too slowly) sets the error
-code to 42; the servo loop watches for it so it happens at its exact sample.
+into a full buffer holds its ``:`` until there is room; ``CD 0=0`` (``DT 0`` then ``CD 0`` on
+the models whose ``CD`` takes no ``=n``) ends the stream once the queue drains. A buffer that
+runs dry while contouring (data sent too slowly) sets the error code to 42; the servo loop
+watches for it so it happens at its exact sample.
 """
 
 from __future__ import annotations
@@ -93,7 +94,11 @@ class Contour(Room):
 
     @handler("CD", equals=True)
     def cd(self, args: str) -> Result:
-        text, _, dt_text = args.partition("=")
+        text, equals, dt_text = args.partition("=")
+        if equals and not self.machine.spec.contour_dt_suffix:
+            # The DMC-1500/1700/18x2 manuals know no "=n" (DT 0 then CD 0 ends contour mode);
+            # refusing it as an unknown form is this simulator's assumption.
+            raise Refused(1, "CD takes no =n on this model")
         incs, n = self._segment(text, dt_text)
         axes = self.axes()
         if not axes:

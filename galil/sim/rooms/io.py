@@ -176,9 +176,20 @@ class IO(Room):
         if "outputs" in names:
             _put_bits(buf, "outputs", self.output_bits())
         if "analog_in" in names:
-            _put_counts(buf, "analog_in", self.analog_in)
+            if buf.dtype["analog_in"].shape:  # the RIO's eight
+                _put_counts(buf, "analog_in", self.analog_in)
+            else:  # the DMC-30010's input 2 (input 1 is in its axis block)
+                _put_counts(buf, "analog_in", self.analog_in[1:2])
         if "analog_out" in names:
             _put_counts(buf, "analog_out", self.analog_out)
+        for letter in letters:
+            # An axis block's analog input is the input of the axis's number (gclib: "A axis
+            # analog input"); blocks for axes past the model's inputs keep 0.
+            block = buf[letter]
+            if "analog_in" in (block.dtype.names or ()):
+                number = self.machine.spec.axes.index(letter)
+                if number < len(self.analog_in):
+                    block["analog_in"] = _counts(self.analog_in[number])
 
 
 def _put_bits(buf: np.ndarray[Any, Any], name: str, bits: int) -> None:
