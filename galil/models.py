@@ -131,7 +131,9 @@ class ModelSpec:
         analog_outputs: analog outputs (``AO n,v``); 0 where the model has none we know of.
         analog_in_range, analog_out_range: volts at the default AQ/DQ setting.
         motor_types: the MT values the model accepts (:data:`MOTOR_TYPES` says what each is).
-        kp_max, ki_max, kd_max: gain maxima; gain_resolution their step (KP 1/8, 40x0).
+        kp_max, ki_max, kd_max: gain maxima; gain_resolution the step of KP and KD (KP 1/8,
+            40x0); ki_resolution KI's (1/1024: the step that makes 255.999 the largest KI
+            below 256; assumed).
         ks_range: stepper smoothing KS (40x0 user manual: 0.25 ... 64).
         il_max, tl_max: integrator and torque limits in volts.
         er_max: largest position-error limit (ER) in counts.
@@ -212,6 +214,7 @@ class ModelSpec:
     motor_types: frozenset[float] = _MT_STANDARD
     kp_max: float = 1023.875
     ki_max: float = 255.999
+    ki_resolution: float = 1 / 1024
     kd_max: float = 4095.875
     gain_resolution: float = 1 / 8
     ks_range: tuple[float, float] = (0.25, 64.0)
@@ -504,7 +507,8 @@ _add(
 
 #: Unconfirmed facts the families added for issue 11 share (see docs/decisions/0015).
 _LAB_ASSUMPTIONS = (
-    "KD and KI resolution 1/8 like KP: only KP's 1/8 is sourced (M40-CR p152)",
+    "KD resolution 1/8 like KP (only KP's 1/8 is sourced, M40-CR p152); KI 1/1024, read"
+    " from its largest value 255.999",
     "IL and TL 0 ... 9.998 V, ER 1 ... 2**31-1 counts: no firmware range found",
     "HV 256 counts/s at power-on (the Optima stage-2 rate), HV range as SP",
     "KS resolution 1/32 and default 2: the range 0.25 ... 64 is sourced (40x0 manual)",

@@ -120,7 +120,7 @@ class Tuning(Room):
     @handler("KI", Args.VALUES)
     def ki(self, fields: Fields) -> str:
         spec = self.machine.spec
-        return self._setting("KI", fields, self._ranged(0, spec.ki_max, 1 / 1024), "4.3")
+        return self._setting("KI", fields, self._ranged(0, spec.ki_max, spec.ki_resolution), "4.3")
 
     @handler("KD", Args.VALUES)
     def kd(self, fields: Fields) -> str:
