@@ -459,22 +459,25 @@ class LinkCore:
         session = self._session
         if session.out_of_step:
             self._resync(t)
-        if len(batch) == 1:
-            data = session.send(batch[0])
-        else:
-            data = b"".join([session.send(c) for c in batch])
         transport = self.transport
         assert transport is not None
-        # Bookkeeping happens before the write: any Python work between the write and the
-        # read delays the reply (a local peer may be waiting for the GIL we hold).
-        self.bytes_sent += len(data)
-        watch = bool(self.wire_log.hooks) or _WIRE.isEnabledFor(_DEBUG)
-        if watch:
-            self._observe("out", data)
-        clock = self._clock_source
-        sim_start = clock.controller_time() if clock is not None else 0.0
-        start = _monotonic()
         try:
+            # From the first command queued in the session on, whatever is raised (even
+            # before the write: a wire-log hook, Ctrl-C) leaves the session out of step, so
+            # no reply can be matched to a command that was queued but never written.
+            if len(batch) == 1:
+                data = session.send(batch[0])
+            else:
+                data = b"".join([session.send(c) for c in batch])
+            # Bookkeeping happens before the write: any Python work between the write and
+            # the read delays the reply (a local peer may be waiting for the GIL we hold).
+            self.bytes_sent += len(data)
+            watch = bool(self.wire_log.hooks) or _WIRE.isEnabledFor(_DEBUG)
+            if watch:
+                self._observe("out", data)
+            clock = self._clock_source
+            sim_start = clock.controller_time() if clock is not None else 0.0
+            start = _monotonic()
             transport.write(data)
             chunk = transport.read(t)  # the timeout as given, so transports can cache it
         except BaseException as exc:

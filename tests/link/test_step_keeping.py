@@ -138,6 +138,24 @@ def test_a_failing_wire_hook_cannot_shift_replies(
     _pairs_all_right(dmc)
 
 
+def test_an_interruption_before_the_write_cannot_shift_replies(
+    wired: tuple[galil.Controller, Tripwire],
+) -> None:
+    dmc, _ = wired
+
+    def hook(direction: str, data: bytes) -> None:
+        if direction == "out" and b"MG 7" in data:
+            raise KeyboardInterrupt  # queued in the session, never written
+
+    remove = dmc.wire_log.add(hook)
+    with pytest.raises(KeyboardInterrupt):
+        dmc.query_number("MG 7")
+    remove()
+    assert dmc.query_number("MG 1") == 1  # not a reply matched to the unwritten MG 7
+    dmc.command("SPA=1000")  # an acknowledgement goes to its own command too
+    _pairs_all_right(dmc)
+
+
 def test_an_infinite_timeout_is_refused_before_the_wire(
     wired: tuple[galil.Controller, Tripwire],
 ) -> None:
