@@ -7,7 +7,6 @@ logic. The controller adds the life cycle, the axes and motion on top.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
@@ -21,7 +20,28 @@ from galil.records import Records, RecordStream
 from galil.transport import Transport
 from galil.tuning import follow_tm
 
-__all__ = ["LinkFacade"]
+__all__ = ["LONGEST_SLEEP", "LinkFacade", "check_sleep"]
+
+#: The longest :meth:`LinkFacade.sleep` in seconds (a simulator steps every sample of it:
+#: about a billion at 1024 Hz).
+LONGEST_SLEEP = 1e6
+
+
+def check_sleep(seconds: object) -> float:
+    """``seconds`` as a float from 0 to :data:`LONGEST_SLEEP`.
+
+    Raises:
+        InvalidArgument: not a number (a bool neither), negative, NaN, or too long.
+    """
+    if (
+        isinstance(seconds, bool)
+        or not isinstance(seconds, (int, float))
+        or not 0 <= seconds <= LONGEST_SLEEP
+    ):
+        raise InvalidArgument(
+            f"seconds must be a number from 0 to {LONGEST_SLEEP:g}, got {seconds!r}"
+        )
+    return float(seconds)
 
 
 class LinkFacade:
@@ -144,15 +164,13 @@ class LinkFacade:
         """Let ``seconds`` pass for the controller (simulated time on a manual-clock simulator).
 
         Scripts that wait between commands should use this rather than ``time.sleep`` so the
-        same script runs instantly against the simulator in tests.
+        same script runs instantly against the simulator in tests. At most
+        :data:`LONGEST_SLEEP` (about 11 days) at once: a simulator steps every sample of it.
+
+        Raises:
+            InvalidArgument: not a number, negative, not finite or longer than that.
         """
-        if (
-            isinstance(seconds, bool)
-            or not isinstance(seconds, (int, float))
-            or not math.isfinite(seconds)
-            or seconds < 0
-        ):
-            raise InvalidArgument(f"seconds must be a non-negative finite number, got {seconds!r}")
+        check_sleep(seconds)
         self.link.pause(float(seconds))
 
     # -- unsolicited output and records -----------------------------------------------------

@@ -36,6 +36,8 @@ def _ratio(link: CommandLink, ratio: object) -> float:
         sent = float(format_number(float(ratio)))
     except InvalidArgument as exc:
         raise InvalidArgument(f"gear ratio {ratio!r}: {exc}") from None
+    except OverflowError:  # an int too large for any float
+        raise InvalidArgument(f"gear ratio {ratio!r:.40} is far out of range") from None
     return predict.quantise_ratio(sent, link.model)
 
 

@@ -437,6 +437,8 @@ class Records:
         ):
             raise InvalidArgument(f"seconds must be a positive number, not {seconds!r}")
         ts = self.link.sample_period
+        if value / ts > 2**53:
+            raise InvalidArgument(f"{value} s is longer than a record stream can count")
         samples = round(float(value) / ts)
         if samples < 1 or abs(samples * ts - value) > 0.05 * value:
             raise InvalidArgument(

@@ -107,10 +107,18 @@ def _finite(value: float, what: str) -> float:
     return value
 
 
+def _real(value: numbers.Real, what: str) -> float:
+    """``float(value)``, a typed error for a number no float holds (an int of 400 digits)."""
+    try:
+        return _finite(float(value), what)
+    except OverflowError:
+        raise InvalidArgument(f"{what} is too large for any controller: {value!r:.40}") from None
+
+
 def _plain_number(value: object, what: str) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise InvalidArgument(f"{what} must be a number or a pint Quantity, got {value!r}")
-    return _finite(float(value), what)
+    return _real(value, what)
 
 
 def _magnitude(q: Any, what: str) -> float:
@@ -120,7 +128,7 @@ def _magnitude(q: Any, what: str) -> float:
         m = m.item()
     if isinstance(m, bool) or not isinstance(m, numbers.Real):
         raise InvalidArgument(f"{what} must be one real value, got {q!r}")
-    return _finite(float(m), what)
+    return _real(m, what)
 
 
 @dataclass(frozen=True)
@@ -145,7 +153,11 @@ class Scale:
             raise InvalidArgument(
                 f"counts_per must be a Quantity such as 2000 / ureg.mm, got {self.counts_per!r}"
             )
-        cp = _without_counts(_ours(self.counts_per))
+        try:
+            cp = _without_counts(_ours(self.counts_per))
+            magnitude = float(cp.magnitude)
+        except OverflowError:
+            raise InvalidArgument(f"counts_per is too large: {self.counts_per!r:.60}") from None
         linear = cp.dimensionality == get_registry().Quantity(1.0, "1/m").dimensionality
         rotary = cp.dimensionless and _angle_power(cp.units) == -1
         if not (linear or rotary):
@@ -153,12 +165,12 @@ class Scale:
                 "counts_per must be counts per a length or an angle, e.g. 2000 / ureg.mm or "
                 f"4096 / ureg.degree, got {self.counts_per!r}"
             )
-        if not math.isfinite(float(cp.magnitude)) or float(cp.magnitude) <= 0:
+        if not math.isfinite(magnitude) or magnitude <= 0:
             raise InvalidArgument(
                 f"counts_per must be positive and finite, got {self.counts_per!r}"
             )
         object.__setattr__(self, "counts_per", cp)
-        if self.sign not in (1, -1):
+        if isinstance(self.sign, bool) or self.sign not in (1, -1):
             raise InvalidArgument(f"sign must be +1 or -1, got {self.sign!r}")
         unit = self.unit
         if self.offset is None:

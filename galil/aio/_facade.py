@@ -4,7 +4,6 @@ data records (the twin of :class:`galil.facade.LinkFacade`; no logic of its own)
 from __future__ import annotations
 
 import asyncio
-import math
 from collections.abc import Callable
 from typing import Any
 
@@ -13,6 +12,7 @@ from galil.aio._streams import AsyncMessages, AsyncRecordStream
 from galil.aio._worker import Worker, twin
 from galil.controller import Controller
 from galil.errors import InvalidArgument
+from galil.facade import check_sleep
 from galil.link import WireLog
 from galil.models import Identity, ModelSpec
 from galil.transport import Transport
@@ -102,13 +102,7 @@ class AsyncLinkFacade(MotionRoom[Controller]):
     async def sleep(self, seconds: float) -> None:
         """Let ``seconds`` pass for the controller: simulated time on a manual-clock
         simulator, ``asyncio.sleep`` otherwise (the loop stays free)."""
-        if (
-            isinstance(seconds, bool)
-            or not isinstance(seconds, (int, float))
-            or not math.isfinite(seconds)
-            or seconds < 0
-        ):
-            raise InvalidArgument(f"seconds must be a non-negative finite number, got {seconds!r}")
+        check_sleep(seconds)
         if self.sync.link.simulated_time:
             await self._worker.run(self.sync.sleep, float(seconds))
         else:

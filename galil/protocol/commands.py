@@ -335,7 +335,10 @@ def _number(value: object, what: str) -> float:
     # bool is an int, but True as a count is almost always a bug.
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, Real):
         raise InvalidArgument(f"{what}: {value!r} is not a number")
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:  # an int too large for any float
+        raise InvalidArgument(f"{what}: {value!r:.40} is far out of range") from None
     if not math.isfinite(v):
         raise InvalidArgument(f"{what}: {value!r} cannot be sent (NaN or infinity)")
     return v
