@@ -3,6 +3,8 @@ user's labels (inner labels included), and a watchdog that says it beats only wh
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 import galil
@@ -97,3 +99,17 @@ def test_a_watchdog_whose_routine_does_not_run_raises_instead_of_beating(
         dog.stop()
         assert "stopped" in repr(dog)
 
+
+def test_waiting_for_an_input_checks_the_thread_before_anything_is_sent() -> None:
+    with simulated() as dmc:
+        for thread in (99, -1, "7", True):
+            with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match="thread"):
+                dmc.io.wait_for_input(2, timeout=0.1, thread=thread)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("timeout", [math.nan, -1, "1", True])
+def test_waiting_for_an_input_refuses_a_bad_timeout_before_anything_is_sent(
+    timeout: object,
+) -> None:
+    with simulated() as dmc, nothing_sent(dmc), pytest.raises(galil.InvalidArgument):
+        dmc.io.wait_for_input(2, timeout=timeout)  # type: ignore[arg-type]
