@@ -24,7 +24,7 @@ from galil.errors import (
     InvalidArgument,
     LimitError,
 )
-from galil.link import CommandLink
+from galil.link import CommandLink, check_wait_timeout
 from galil.models import INT32_MAX
 from galil.motion import Display, sample_of
 from galil.predict import Profile
@@ -278,8 +278,10 @@ class ContourStream:
     def feed(self, *, progress: bool = False) -> _Progress:
         """Enter contour mode and send every segment, keeping the buffer fed.
 
-        Whatever goes wrong, the controller is left out of contour mode (``CD 0=0``, or
-        ``DT 0`` and ``CD 0`` on the models that end it so).
+        Whatever goes wrong (an error, a timeout, a ``KeyboardInterrupt``), the contour axes
+        are stopped (``ST``) and the controller is left out of contour mode (``CD 0=0``, or
+        ``DT 0`` and ``CD 0`` on the models that end it so): the queued segments never run
+        on after the exception.
 
         Raises:
             ContourUnderrunError: the buffer ran dry while streaming (TC 42).
@@ -300,14 +302,23 @@ class ContourStream:
             # How full the buffer got: the last batch is the fullest moment of a short path.
             state.low_water = min(state.low_water, round(link.query_operands(["_CM"])[0]))
         except BaseException:
-            # Leave the controller out of contour mode whatever happened.
-            with contextlib.suppress(GalilError):
-                link.command_line(cmds.contour_end(self.letters, model=model))
+            self._halt(end=True)
             raise
         finally:
             if state.bar is not None:
                 state.bar.close()
         return state
+
+    def _halt(self, *, end: bool) -> None:
+        """Stop the contour axes (``ST``), then leave contour mode if ``end``: after an
+        exception nothing queued may run on. Errors on the way are dropped (the exception
+        that brought us here is the one to see)."""
+        link = self.link
+        with contextlib.suppress(GalilError):
+            link.command_line([cmds.st(self.letters, model=link.model)])
+        if end:
+            with contextlib.suppress(GalilError):
+                link.command_line(cmds.contour_end(self.letters, model=link.model))
 
     def _refill(self, state: _Progress) -> None:
         link = self.link
@@ -352,11 +363,33 @@ class ContourStream:
     def finish(self, state: _Progress, timeout: float | None = None) -> ContourResult:
         """End contour mode (``CD 0=0``, or ``DT 0`` then ``CD 0``) and wait for the axes to stop.
 
+        Whatever interrupts the wait (the timeout, an error, a ``KeyboardInterrupt``) stops
+        the contour axes (``ST``) before it propagates.
+
         Raises:
-            GalilTimeoutError: the contour did not finish in time.
+            GalilTimeoutError: the contour did not finish in time (the axes are stopped).
         """
         link = self.link
-        link.command_line(cmds.contour_end(self.letters, model=link.model))
+        ended = False
+        try:
+            link.command_line(cmds.contour_end(self.letters, model=link.model))
+            ended = True
+            self._wait_stopped(timeout)
+        except BaseException:
+            self._halt(end=not ended)
+            raise
+        return ContourResult(
+            self.letters,
+            self.increments,
+            self.dt,
+            dict(self.profiles),
+            state.low_water,
+            state.lines,
+            state.begin,
+        )
+
+    def _wait_stopped(self, timeout: float | None) -> None:
+        link = self.link
         seg_time = (1 << self.dt) * link.sample_period
         wait = (
             timeout
@@ -371,18 +404,14 @@ class ContourStream:
                     GalilTimeoutError, f"contour on {self.letters} not finished after {wait:.3g} s"
                 )
             link.pause(min(0.05, max(seg_time, 0.005), max(deadline - now, 0.001)))
-        return ContourResult(
-            self.letters,
-            self.increments,
-            self.dt,
-            dict(self.profiles),
-            state.low_water,
-            state.lines,
-            state.begin,
-        )
 
     def run(self, *, progress: bool = False, timeout: float | None = None) -> ContourResult:
-        """Check, prepare, feed and finish: the whole contour, nothing sent if a check fails."""
+        """Check, prepare, feed and finish: the whole contour, nothing sent if a check fails.
+
+        Raises:
+            InvalidArgument: a timeout that is not ``None`` or a finite number >= 0.
+        """
+        check_wait_timeout(timeout)
         self.check()
         self.prepare()
         state = self.feed(progress=progress)

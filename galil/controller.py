@@ -34,7 +34,7 @@ from galil.handshake import identify
 from galil.homing import SwitchPolarity, read_polarity, set_polarity
 from galil.interrupts import Interrupts
 from galil.io import IO
-from galil.link import Link, check_count, check_timeout
+from galil.link import Link, check_count, check_timeout, check_wait_timeout
 from galil.messages import Messages
 from galil.models import Identity, ModelSpec, get_model
 from galil.motion import MotionTracker, MoveHandle, abort_all, motion_guard, stop_axes
@@ -533,7 +533,17 @@ class Controller(CoordinatedMotion, LinkFacade):
             speed_limit: your own limit on each axis's speed along the path (the axis's
                 units; one value or a mapping per axis); default the model's SP maximum.
             accel_limit: the same for acceleration; default the model's AC maximum.
+
+        An exception while streaming or waiting for the end (the timeout, an error, a
+        ``KeyboardInterrupt``) stops the contour axes (``ST``) and leaves contour mode
+        before it propagates.
+
+        Raises:
+            InvalidArgument: bad axes, path, DT or timeout (nothing sent), or an axis moving.
+            LimitError: the path beyond the model's or the given limits (nothing sent).
+            GalilTimeoutError: the contour not finished within ``timeout`` (axes stopped).
         """
+        check_wait_timeout(timeout)
         names = list(axes) if isinstance(axes, str) else [str(a) for a in axes]
         chosen = [self.axis(a) for a in names]
         letters = "".join(a.letter for a in chosen)

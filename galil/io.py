@@ -282,14 +282,14 @@ class IO:
         if not isinstance(high, bool):
             raise InvalidArgument(f"high is True or False, not {high!r}")
         if timeout is not None and (
-            isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or timeout < 0
-        ):
+            isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not timeout >= 0
+        ):  # NaN too; infinity waits for ever, as None does
             raise InvalidArgument(f"timeout must be a number of seconds >= 0, not {timeout!r}")
         link = self._link
         t = link.model.threads - 1 if thread is None else thread
         with self._wait_lock:
+            self._routines.check_free(t, _INPUT_ROUTINE)  # before the install sends a byte
             self._routines.install(_input_routine())
-            self._routines.check_free(t, _INPUT_ROUTINE)
             seen = threading.Event()
             tag = [_INPUT_MESSAGE, str(n)]
 

@@ -6,8 +6,14 @@ is the user's program and is never changed. Installing a routine uploads the pro
 only the library block, and downloads the result (nothing is sent when it is already there).
 See ``docs/decisions/0013``.
 
+A routine is its label line, its lines, and ``EN`` last; it may hold inner labels (a loop),
+but only its first label may follow an ``EN`` line: that is how the routines in memory are told
+apart (a routine starts at the first line of the block, or at a label right after an ``EN``).
+A routine owns all its labels: installing it again replaces the whole routine.
+
 Rules, all checked before the download:
-- a routine's label may not be one of the user's labels (``InvalidArgument``);
+- none of a routine's labels (inner ones included) may be one of the user's labels, or a label
+  of another of the library's routines (``InvalidArgument``);
 - the whole program must fit the model's line length and line count;
 - no user program may be running (a download would disturb it): the caller is told which
   thread runs; the library's own threads are halted for the download and started again.
@@ -29,12 +35,28 @@ __all__ = ["MARKER", "Routine", "Routines", "split_program"]
 #: The line that separates the user's program (above) from the library's routines (below).
 MARKER = "'galil library"
 _LABEL = re.compile(r"#([A-Za-z][A-Za-z0-9]*)")
+_END = re.compile(r"EN\b")
 _DOWNLOAD_TIMEOUT = 10.0  # EPICS allows 10 s for a download
+
+
+def _label_of(line: str) -> str | None:
+    m = _LABEL.match(line.strip())
+    return None if m is None else "#" + m.group(1)
+
+
+def _is_end(line: str) -> bool:
+    return _END.match(line.strip()) is not None
 
 
 @dataclass(frozen=True)
 class Routine:
-    """A piece of program the library installs: its label line first, then its lines."""
+    """A piece of program the library installs: its label line first, its lines, ``EN``
+    last. Inner labels are allowed, never right after an ``EN`` (there a routine starts).
+
+    Raises:
+        InvalidArgument: a bad label, lines that do not start with it or end with ``EN``, an
+            inner label right after an ``EN``, or a label twice.
+    """
 
     label: str
     lines: tuple[str, ...]
@@ -43,19 +65,35 @@ class Routine:
         cmds.xq(self.label)  # the label rules (refused before anything is sent)
         if not self.lines or self.lines[0] != self.label:
             raise InvalidArgument(f"a routine starts with its label line {self.label!r}")
+        if not _is_end(self.lines[-1]):
+            raise InvalidArgument(f"routine {self.label} must end with EN")
+        seen: set[str] = set()
+        for before, line in zip(self.lines, self.lines[1:], strict=False):
+            inner = _label_of(line)
+            if inner is not None and _is_end(before):
+                raise InvalidArgument(
+                    f"routine {self.label}: label {inner} right after an EN would read as "
+                    "another routine's start"
+                )
+            if inner is not None and (inner in seen or inner == self.label):
+                raise InvalidArgument(f"routine {self.label} holds label {inner} twice")
+            if inner is not None:
+                seen.add(inner)
+
+    @property
+    def labels(self) -> frozenset[str]:
+        """Every label of the routine, its first one and the inner ones."""
+        return frozenset(_labels(self.lines))
 
 
 def _labels(lines: Sequence[str]) -> set[str]:
-    out = set()
-    for line in lines:
-        m = _LABEL.match(line.strip())
-        if m:
-            out.add("#" + m.group(1))
-    return out
+    return {label for line in lines if (label := _label_of(line)) is not None}
 
 
 def split_program(lines: Sequence[str]) -> tuple[list[str], dict[str, tuple[str, ...]]]:
-    """The user's lines, and the library's routines by label, from an uploaded program."""
+    """The user's lines, and the library's routines by their first label, from an uploaded
+    program. A routine starts at the block's first line or at a label right after an ``EN``
+    line, and runs to the next routine's start: its inner labels stay in it."""
     if MARKER not in lines:
         return list(lines), {}
     at = list(lines).index(MARKER)
@@ -63,14 +101,46 @@ def split_program(lines: Sequence[str]) -> tuple[list[str], dict[str, tuple[str,
     routines: dict[str, tuple[str, ...]] = {}
     current: list[str] = []
     for line in library:
-        m = _LABEL.match(line.strip())
-        if m and current:
-            routines[current[0]] = tuple(current)
+        if current and _label_of(line) is not None and _is_end(current[-1]):
+            _keep(routines, current)
             current = []
         current.append(line)
     if current:
-        routines[current[0]] = tuple(current)
+        _keep(routines, current)
     return user, routines
+
+
+def _keep(routines: dict[str, tuple[str, ...]], lines: list[str]) -> None:
+    # A second block under the same first label (left by an older version) joins the first:
+    # both go when the routine is installed again.
+    routines[lines[0]] = routines.get(lines[0], ()) + tuple(lines)
+
+
+def _merge(library: dict[str, tuple[str, ...]], routines: Sequence[Routine]) -> None:
+    """Put ``routines`` into ``library`` in place of the ones of the same first label, and
+    drop stale blocks of their inner labels.
+
+    Raises:
+        InvalidArgument: a label shared with another routine (installed or given).
+    """
+    owners: dict[str, str] = {}
+    for r in routines:
+        for label in r.labels:
+            if owners.setdefault(label, r.label) != r.label:
+                raise InvalidArgument(f"routines {owners[label]} and {r.label} share {label}")
+    for r in routines:
+        for key, lines in list(library.items()):
+            if key == r.label:
+                continue
+            shared = _labels(lines) & r.labels
+            if shared and key in r.labels and _labels(lines) <= r.labels:
+                del library[key]  # an inner block split off by an older version: stale
+            elif shared:
+                raise InvalidArgument(
+                    f"the library's routine {key} uses the label(s) {sorted(shared)} of "
+                    f"routine {r.label}"
+                )
+        library[r.label] = r.lines
 
 
 class Routines:
@@ -93,26 +163,28 @@ class Routines:
         return {t: round(v) for t, v in enumerate(values) if round(v) >= 0}
 
     def install(self, *routines: Routine) -> bool:
-        """Put ``routines`` into the library block (replacing ones of the same label).
+        """Put ``routines`` into the library block, each replacing the whole routine of the
+        same first label (inner labels and stale copies of its inner blocks included).
 
         Returns:
             Whether a download was needed.
 
         Raises:
-            InvalidArgument: a label the user's program uses, a program too long for the
+            InvalidArgument: a label (inner ones included) the user's program or another
+                of the library's routines uses, a program too long for the
                 model, or a user program running (the download would disturb it).
         """
         with self._lock:
             current = self.upload()
             user, library = split_program(current)
-            clash = _labels(user) & {r.label for r in routines}
+            clash = _labels(user).intersection(*(r.labels for r in routines))
             if clash:
                 raise InvalidArgument(
                     f"the program in memory uses the label(s) {sorted(clash)} that the library "
-                    "needs; rename them in your program"
+                    "needs; rename them in your program",
+                    model=self.link.model.name,
                 )
-            for r in routines:
-                library[r.label] = r.lines
+            _merge(library, routines)
             combined = [*user, MARKER, *(line for lines in library.values() for line in lines)]
             if combined == current:
                 return False
@@ -168,7 +240,7 @@ class Routines:
         with self._lock:
             current = self.upload()
             _, library = split_program(current)
-            clash = _labels(lines) & set(library)
+            clash = _labels(lines) & _labels([line for r in library.values() for line in r])
             if clash:
                 raise InvalidArgument(
                     f"your program uses the label(s) {sorted(clash)} of the library's own "

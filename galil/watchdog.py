@@ -80,6 +80,8 @@ class Watchdog:
 
         Raises:
             InvalidArgument: the thread is busy, or the routine cannot be installed.
+            GalilError: the routine is not running after ``XQ`` (it is halted; no heartbeat
+                is started, so the watchdog never claims to guard what it does not).
         """
         link = self._link
         samples = round(self.timeout / link.sample_period)
@@ -91,6 +93,14 @@ class Watchdog:
         self._routines.install(watchdog_routine(link.model.axes))
         link.command_line([cmds.assign(LIMIT, samples), self._beat])
         self._routines.start(LABEL, self.thread)
+        if not self.running:
+            with contextlib.suppress(GalilError):
+                self._routines.halt(self.thread)
+            raise link.error(
+                GalilError,
+                f"the watchdog routine {LABEL} is not running on thread {self.thread} after "
+                "XQ; the watchdog is not started",
+            )
         link.set_keepalive(self._beat, self.interval)
         self._stop.clear()
         self._beater = threading.Thread(target=self._run, name="galil-watchdog", daemon=True)
@@ -140,7 +150,8 @@ class Watchdog:
         self.stop()
 
     def __repr__(self) -> str:
-        state = "beating" if self._beater is not None else "stopped"
+        beater = self._beater
+        state = "beating" if beater is not None and beater.is_alive() else "stopped"
         return f"<Watchdog {self.timeout:g} s on thread {self.thread}, {state}>"
 
 

@@ -28,7 +28,7 @@ from galil.controller import Controller, CoordinatedMotion
 from galil.controller import connect as connect_sync
 from galil.errors import GalilError, InvalidArgument
 from galil.homing import SwitchPolarity
-from galil.link import check_count
+from galil.link import check_count, check_wait_timeout
 from galil.motion import MoveHandle
 from galil.predict import MultiProfile
 from galil.protocol.interrupts import Interrupt
@@ -213,7 +213,12 @@ class AsyncController(AsyncLinkFacade):
 
         Cancelling the awaiting task stops the contour's axes (``ST``) before the
         cancellation ends; the stream then leaves contour mode on its thread.
+
+        Raises:
+            InvalidArgument: a bad timeout (refused before anything is sent), and the sync
+                method's errors.
         """
+        check_wait_timeout(timeout)
         future = self._worker.submit(
             self.sync.contour,
             axes,

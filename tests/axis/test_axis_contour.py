@@ -13,7 +13,7 @@ from galil.contour import sample_path
 from galil.errors import InvalidArgument, LimitError
 from galil.sim.controller import SimController
 from galil.sim.faults import FaultPlan
-from galil.testing import nothing_sent, sim_of, simulated
+from galil.testing import nothing_sent, sim_of, simulated, transcript
 
 
 def _ramp(n: int, step: float = 37.3) -> np.ndarray:
@@ -172,3 +172,58 @@ def test_contour_path_in_millimetres_follows_the_scale() -> None:
             dmc.contour("B", np.linspace(1, 2, 4) * ureg.s, dt=2)
         with nothing_sent(dmc), pytest.raises(InvalidArgument):
             dmc.contour("C", np.linspace(1, 2, 4) * ureg.mm, dt=2)  # C has no scale
+
+
+def _interrupt_on_pause(dmc: galil.Controller, monkeypatch: pytest.MonkeyPatch, call: int) -> None:
+    """Make the link's ``call``-th pause raise KeyboardInterrupt (a Ctrl-C while waiting)."""
+    real = dmc.link.pause
+    calls = [0]
+
+    def pause(seconds: float) -> None:
+        calls[0] += 1
+        if calls[0] == call:
+            raise KeyboardInterrupt
+        real(seconds)
+
+    monkeypatch.setattr(dmc.link, "pause", pause)
+
+
+def test_interrupted_contour_stream_stops_the_axes(
+    dmc: galil.Controller, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _interrupt_on_pause(dmc, monkeypatch, 3)
+    with transcript(dmc) as wire, pytest.raises(KeyboardInterrupt):
+        dmc.contour("AB", np.stack([_ramp(2000), -_ramp(2000)], axis=1), dt=8)
+    monkeypatch.undo()
+    wire.assert_contains("ST AB")
+    dmc.sleep(0.5)  # a decel, not the 127 s of queued segments
+    assert dmc.A.moving is False
+    assert dmc.B.moving is False
+    dmc.A.move_by(100).wait()  # out of contour mode: an ordinary move runs
+
+
+def test_contour_interrupted_while_finishing_stops_the_axes(
+    dmc: galil.Controller, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # 20 segments of DT 8 (5 s) fit the buffer at once: the first pause is the finish's wait.
+    _interrupt_on_pause(dmc, monkeypatch, 1)
+    with transcript(dmc) as wire, pytest.raises(KeyboardInterrupt):
+        dmc.contour("A", _ramp(20, step=200.0), dt=8)
+    monkeypatch.undo()
+    wire.assert_contains("ST A")
+    dmc.sleep(0.5)
+    assert dmc.A.moving is False
+    dmc.A.move_by(100).wait()
+
+
+def test_contour_that_times_out_stops_the_axes(dmc: galil.Controller) -> None:
+    with pytest.raises(galil.GalilTimeoutError):
+        dmc.contour("A", _ramp(20, step=200.0), dt=8, timeout=0.5)
+    dmc.sleep(0.5)
+    assert dmc.A.moving is False
+
+
+@pytest.mark.parametrize("timeout", ["5", -1, math.nan, math.inf, True])
+def test_contour_bad_timeout_sends_nothing(dmc: galil.Controller, timeout: object) -> None:
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="timeout"):
+        dmc.contour("A", [1, 2], dt=1, timeout=timeout)  # type: ignore[arg-type]

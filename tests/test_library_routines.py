@@ -1,0 +1,115 @@
+"""The library's routines in program memory: one copy each, whole, never clashing with the
+user's labels (inner labels included), and a watchdog that says it beats only when it runs."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+import galil
+from galil.protocol import commands as cmds
+from galil.routines import MARKER, Routine
+from galil.testing import nothing_sent, simulated
+
+
+def _library_labels(dmc: galil.Controller) -> list[str]:
+    program = dmc.routines.upload()
+    return [line for line in program[program.index(MARKER) + 1 :] if line.startswith("#")]
+
+
+def test_waiting_for_an_input_twice_keeps_one_copy_of_its_routine() -> None:
+    with simulated() as dmc:
+        for _ in range(2):
+            with pytest.raises(galil.GalilTimeoutError):
+                dmc.io.wait_for_input(2, high=False, timeout=0.1)
+        assert _library_labels(dmc) == ["#GINWAIT", "#GINLOOP"]
+
+
+def test_starting_the_watchdog_twice_keeps_one_copy_of_its_routine() -> None:
+    with simulated() as dmc:
+        dmc.watchdog(0.5).stop()
+        with pytest.raises(galil.GalilTimeoutError):
+            dmc.io.wait_for_input(2, high=False, timeout=0.1)
+        dog = dmc.watchdog(0.5)
+        assert _library_labels(dmc) == ["#GWDOG", "#GWDOGL", "#GINWAIT", "#GINLOOP"]
+        dmc.sleep(0.2)
+        assert dog.running
+        dog.stop()
+
+
+def test_a_stale_inner_block_left_in_memory_is_replaced_with_the_routine() -> None:
+    with simulated() as dmc:
+        loop = ["#GINLOOP", "JP #GINLOOP,@IN[ginput]<>ginlevel", "EN"]
+        assert dmc.exchange(cmds.dl(["#A", "EN", MARKER, "#GINWAIT", *loop, *loop])).ok
+        with pytest.raises(galil.GalilTimeoutError):
+            dmc.io.wait_for_input(2, high=False, timeout=0.1)
+        assert _library_labels(dmc) == ["#GINWAIT", "#GINLOOP"]
+        assert dmc.programs.upload() == "#A\nEN"
+
+
+def test_a_user_label_equal_to_a_routines_inner_label_is_refused_before_download() -> None:
+    with simulated() as dmc:
+        dmc.programs.download("#A\nEN\n#GWDOGL\nEN")
+        with (
+            nothing_sent(dmc, allow_queries=True),
+            pytest.raises(galil.InvalidArgument, match="GWDOGL"),
+        ):
+            dmc.watchdog(0.5)
+        assert dmc.routines.threads == {}
+
+
+def test_a_user_program_with_a_routines_inner_label_is_refused_beside_it() -> None:
+    with simulated() as dmc:
+        dog = dmc.watchdog(0.5)
+        with (
+            nothing_sent(dmc, allow_queries=True),
+            pytest.raises(galil.InvalidArgument, match="GWDOGL"),
+        ):
+            dmc.programs.download("#A\nEN\n#GWDOGL\nEN")
+        dmc.sleep(0.2)
+        assert dog.running
+        dog.stop()
+
+
+def test_a_routine_whose_inner_label_follows_an_en_is_refused() -> None:
+    with pytest.raises(galil.InvalidArgument, match="#GSUB"):
+        Routine("#GMAIN", ("#GMAIN", "JS #GSUB", "EN", "#GSUB", "EN"))
+    with pytest.raises(galil.InvalidArgument, match="EN"):
+        Routine("#GLOOP", ("#GLOOP", "JP #GLOOP"))
+
+
+def test_a_watchdog_whose_routine_does_not_run_raises_instead_of_beating(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    with simulated() as dmc:
+        real = dmc.link.command_line
+
+        def swallow_xq(commands: list[cmds.Command], **kw: object) -> list[str]:
+            kept = [c for c in commands if not c.text.startswith("XQ #GWDOG")]
+            return real(kept, **kw) if kept else []  # type: ignore[arg-type]
+
+        monkeypatch.setattr(dmc.link, "command_line", swallow_xq)
+        with pytest.raises(galil.GalilError, match="not running"):
+            dmc.watchdog(0.5)
+        monkeypatch.undo()
+        assert dmc.routines.threads == {}
+        dog = dmc.watchdog(0.5)  # nothing left behind: the next start works
+        assert "beating" in repr(dog)
+        dog.stop()
+        assert "stopped" in repr(dog)
+
+
+def test_waiting_for_an_input_checks_the_thread_before_anything_is_sent() -> None:
+    with simulated() as dmc:
+        for thread in (99, -1, "7", True):
+            with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match="thread"):
+                dmc.io.wait_for_input(2, timeout=0.1, thread=thread)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("timeout", [math.nan, -1, "1", True])
+def test_waiting_for_an_input_refuses_a_bad_timeout_before_anything_is_sent(
+    timeout: object,
+) -> None:
+    with simulated() as dmc, nothing_sent(dmc), pytest.raises(galil.InvalidArgument):
+        dmc.io.wait_for_input(2, timeout=timeout)  # type: ignore[arg-type]
