@@ -84,10 +84,11 @@ class Watchdog:
                 is started, so the watchdog never claims to guard what it does not).
         """
         link = self._link
-        samples = round(self.timeout / link.sample_period)
+        ticks = self.timeout / link.sample_period
+        samples = round(ticks) if ticks <= INT32_MAX else INT32_MAX + 1
         if not 2 <= samples <= INT32_MAX:
             raise InvalidArgument(
-                f"watchdog timeout {self.timeout!r} s is {samples} samples; it needs 2 or more"
+                f"watchdog timeout {self.timeout!r} s is not 2 to {INT32_MAX} samples"
             )
         self._routines.check_free(self.thread, LABEL)  # before anything is sent
         self._routines.install(watchdog_routine(link.model.axes))

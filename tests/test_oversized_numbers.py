@@ -34,12 +34,13 @@ def _cases(dmc: galil.Controller) -> dict[str, Callable[[], object]]:
         "set_scale sign": lambda: a.set_scale(1000 / ureg.mm, sign=True),  # type: ignore[arg-type]
         "sleep": lambda: dmc.sleep(1e300),
         "records": lambda: dmc.records(seconds=1e308),
+        "watchdog": lambda: dmc.watchdog(1e308),
     }
 
 
 NAMES = ["move_to", "move_by", "jog", "increment", "speed", "accel", "soft_limits", "kp"]
 NAMES += ["ki", "kd", "error_limit", "gear_to", "set_scale counts_per", "set_scale offset"]
-NAMES += ["set_scale sign", "sleep", "records"]
+NAMES += ["set_scale sign", "sleep", "records", "watchdog"]
 
 
 def test_every_case_is_listed() -> None:
@@ -55,3 +56,11 @@ def test_numbers_nothing_can_hold_get_typed_errors_and_nothing_is_sent(case: str
         assert dmc.A.scale is None
         assert dmc.query_number("MG 1+1") == 2
         dmc.A.move_by(100).wait()  # the link and the axis are as they were
+
+
+def test_an_analog_output_of_a_number_no_float_holds_is_refused_unsent() -> None:
+    with simulated("DMC-30010") as dmc:  # a DMC with analog outputs
+        with nothing_sent(dmc), pytest.raises(galil.InvalidArgument):
+            dmc.io.analog_out[1] = HUGE
+        dmc.io.analog_out[1] = 2
+        assert dmc.io.analog_out[1].to("V").magnitude == 2
