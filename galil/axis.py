@@ -22,7 +22,7 @@ from galil.homing import AxisHoming, Homed, Switches, read_switches
 from galil.link import CommandLink
 from galil.models import INT32_MAX, INT32_MIN, ModelSpec
 from galil.motion import Display, MotionTracker, MoveHandle, stop_axes
-from galil.moves import AxisMove, execute_move, increment, jog, speed_schedule
+from galil.moves import AxisMove, execute_move, increment, jog, set_jog_speed, speed_schedule
 from galil.protocol import commands as cmds
 from galil.routines import Routines
 from galil.tuning import Setting, motor_type, whole
@@ -388,17 +388,16 @@ class Axis:
 
     @property
     def jog_speed(self) -> Any:
-        """Jog speed ``JG`` (signed); setting it while jogging changes the speed in motion."""
+        """Jog speed ``JG`` (signed). Setting it never starts a jog: while the controller runs
+        one it changes the speed in motion, otherwise it is kept for the next jog."""
         v = self._operand("JG")
         return v if self._scale is None else self._scale.counts_to_rate(v, 1)
 
     @jog_speed.setter
     def jog_speed(self, value: Any) -> None:
-        track = self._tracker.track(self.letter)
-        if track is not None and track.kind == "jog":
-            self.jog(value)
-            return
-        self._set_param("JG", self.signed_rate_counts(value, 1, "jog speed"))
+        # Never a BG: the controller is asked whether a jog runs (see moves.set_jog_speed).
+        v = self.check_parameter("JG", self.signed_rate_counts(value, 1, "jog speed"))
+        set_jog_speed(self._link, self._tracker, self.letter, v)
 
     @property
     def soft_limits(self) -> tuple[Any, Any]:
