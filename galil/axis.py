@@ -143,7 +143,7 @@ def _limit_of(model: ModelSpec, letter: str, limits: Mapping[Any, object], what:
         try:
             name = model.axis_letter(key)
         except InvalidArgument as exc:
-            raise InvalidArgument(f"{what}: {exc}", model=model.name) from None
+            raise InvalidArgument(f"{what}: {exc.args[0]}", model=model.name) from None
         if name in found:
             raise InvalidArgument(
                 f"{what}: axis {name} given twice (an alias names the same axis)",
