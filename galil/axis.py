@@ -20,9 +20,9 @@ from galil.errors import InvalidArgument, LimitError
 from galil.gearing import Gearing, gear_to
 from galil.homing import AxisHoming, Homed, Switches, read_switches
 from galil.link import CommandLink
-from galil.models import INT32_MAX, INT32_MIN
+from galil.models import INT32_MAX, INT32_MIN, ModelSpec
 from galil.motion import Display, MotionTracker, MoveHandle, stop_axes
-from galil.moves import AxisMove, execute_move, increment, jog, speed_schedule
+from galil.moves import AxisMove, execute_move, increment, jog, set_jog_speed, speed_schedule
 from galil.protocol import commands as cmds
 from galil.routines import Routines
 from galil.tuning import Setting, motor_type, whole
@@ -131,6 +131,28 @@ def _show(value: object) -> str:
     return f"{value:~}" if is_quantity(value) else repr(value)
 
 
+def _limit_of(model: ModelSpec, letter: str, limits: Mapping[Any, object], what: str) -> object:
+    """Axis ``letter``'s entry of a mapping of axis letters or aliases to limits (``None`` if
+    it has none).
+
+    Raises:
+        InvalidArgument: a key that is no axis of ``model``, or an axis given twice.
+    """
+    found: dict[str, object] = {}
+    for key, value in limits.items():
+        try:
+            name = model.axis_letter(key)
+        except InvalidArgument as exc:
+            raise InvalidArgument(f"{what}: {exc.args[0]}", model=model.name) from None
+        if name in found:
+            raise InvalidArgument(
+                f"{what}: axis {name} given twice (an alias names the same axis)",
+                model=model.name,
+            )
+        found[name] = value
+    return found.get(letter)
+
+
 class Axis:
     """One axis of a controller.
 
@@ -227,7 +249,7 @@ class Axis:
         ``limit`` is ``None``, one value, or a mapping of axis letters (or names) to values.
         """
         if isinstance(limit, Mapping):
-            limit = next((v for k, v in limit.items() if str(k).upper() == self.letter), None)
+            limit = _limit_of(self._link.model, self.letter, limit, what)
         if limit is None:
             return None
         counts = self.rate_counts(limit, power, what)
@@ -366,17 +388,16 @@ class Axis:
 
     @property
     def jog_speed(self) -> Any:
-        """Jog speed ``JG`` (signed); setting it while jogging changes the speed in motion."""
+        """Jog speed ``JG`` (signed). Setting it never starts a jog: while the controller runs
+        one it changes the speed in motion, otherwise it is kept for the next jog."""
         v = self._operand("JG")
         return v if self._scale is None else self._scale.counts_to_rate(v, 1)
 
     @jog_speed.setter
     def jog_speed(self, value: Any) -> None:
-        track = self._tracker.track(self.letter)
-        if track is not None and track.kind == "jog":
-            self.jog(value)
-            return
-        self._set_param("JG", self.signed_rate_counts(value, 1, "jog speed"))
+        # Never a BG: the controller is asked whether a jog runs (see moves.set_jog_speed).
+        v = self.check_parameter("JG", self.signed_rate_counts(value, 1, "jog speed"))
+        set_jog_speed(self._link, self._tracker, self.letter, v)
 
     @property
     def soft_limits(self) -> tuple[Any, Any]:

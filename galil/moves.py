@@ -19,6 +19,7 @@ from galil.models import INT32_MAX, INT32_MIN
 from galil.motion import (
     SCHEDULE_BEGIN,
     Display,
+    GearLink,
     MotionTracker,
     MoveHandle,
     MoveParams,
@@ -35,6 +36,7 @@ __all__ = [
     "execute_move",
     "increment",
     "jog",
+    "set_jog_speed",
     "speed_schedule",
 ]
 
@@ -78,16 +80,75 @@ def _operand_names(letters: str, ops: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def _read_state(
-    link: CommandLink, letters: str, ops: tuple[str, ...] = _STATE
-) -> dict[str, _State]:
-    # One round trip for every axis's state (query_operands packs the MG lines together).
-    values = link.query_operands(_operand_names(letters, ops))
-    n = len(ops)
+    link: CommandLink, letters: str, followers: str = ""
+) -> tuple[dict[str, _State], dict[str, tuple[float, float]]]:
+    """Every axis's state and the followers' soft limits ``(BL, FL)``, in one round trip
+    (query_operands packs the MG lines together)."""
+    values = link.query_operands(
+        _operand_names(letters, _STATE) + _operand_names(followers, ("BL", "FL"))
+    )
+    n = len(_STATE)
     out: dict[str, _State] = {}
     for i, a in enumerate(letters):
         rp, bg, sp, ac, dc, it, bl, fl, mo = values[i * n : (i + 1) * n]
         out[a] = _State(round(rp), bool(bg), sp, ac, dc, it, bl, fl, bool(mo))
-    return out
+    rest = values[len(letters) * n :]
+    limits = {f: (rest[2 * i], rest[2 * i + 1]) for i, f in enumerate(followers)}
+    return out, limits
+
+
+def _follower_error(exc: LimitError, gear: GearLink) -> None:
+    """Say in ``exc`` that its axis only moves because it follows ``gear.master``."""
+    exc.args = (
+        f"axis {gear.follower} is geared to {gear.master} at {gear.ratio:g}: {exc.args[0]}",
+        *exc.args[1:],
+    )
+
+
+def _check_follower_speed(link: CommandLink, gear: GearLink, master_speed: float) -> None:
+    """Refuse a master speed that drives the follower beyond the model's SP maximum.
+
+    Raises:
+        LimitError: naming the follower.
+    """
+    model = link.model
+    speed = abs(gear.ratio) * abs(master_speed)
+    if speed > model.sp_max:
+        raise LimitError(
+            f"axis {gear.follower} is geared to {gear.master} at {gear.ratio:g}: it would run "
+            f"at {speed:.6g} counts/s, beyond the {model.name} maximum {model.sp_max}",
+            name="speed",
+            value=speed,
+            limit=model.sp_max,
+            axis=gear.follower,
+            model=model.name,
+        )
+
+
+def _check_followers(
+    link: CommandLink,
+    handle: MoveHandle,
+    gears: Mapping[str, GearLink],
+    limits: Mapping[str, tuple[float, float]],
+) -> None:
+    """The followers' predicted profiles against their soft limits and the model's SP maximum.
+
+    Raises:
+        LimitError: naming the follower.
+    """
+    if not handle.followers:
+        return
+    profiles = handle.profiles
+    for f in handle.followers:
+        gear, profile = gears[f], profiles[f]
+        bl, fl = limits[f]
+        try:
+            predict.check_soft_limits(profile, forward_limit=fl, backward_limit=bl, axis=f)
+        except LimitError as exc:
+            exc.end = profile.end
+            _follower_error(exc, gear)
+            raise
+        _check_follower_speed(link, gear, profile.peak_speed / abs(gear.ratio))
 
 
 def check_int32(name: str, value: float, axis: str, model: str) -> None:
@@ -200,7 +261,8 @@ def execute_move(
 
     Raises:
         InvalidArgument: no or repeated axes, an axis moving or its motor off.
-        LimitError: a path crossing a soft limit or the 32-bit range.
+        LimitError: a path crossing a soft limit or the 32-bit range, or taking an axis geared
+            to one of the move's past its soft limits or beyond the model's SP maximum.
     """
     letters = "".join(m.letter for m in moves)
     if not letters or len(set(letters)) != len(letters):
@@ -209,7 +271,9 @@ def execute_move(
         order = link.model.axes
         moves = sorted(moves, key=lambda m: order.index(m.letter))
         letters = "".join(m.letter for m in moves)
-    state = _read_state(link, letters)
+    gears = tracker.followers(letters)
+    followers = "".join(f for f in gears if f not in letters)
+    state, limits = _read_state(link, letters, followers)
     tracks: dict[str, Track] = {}
     profiles: dict[str, predict.Profile] = {}
     sent: dict[str, float] = {}
@@ -224,7 +288,8 @@ def execute_move(
         sent[m.letter] = track.amount if command == "IP" else target
     handle = MoveHandle(link, tracks, "position", display=display, tracker=tracker)
     handle.preset(profiles)
-    handle.follow(tracker.followers(letters))  # (an axis of the move is skipped)
+    handle.follow(gears)  # (an axis of the move is skipped)
+    _check_followers(link, handle, gears, limits)
     if dry_run:
         return handle
     replies = link.command_line(_move_line(link, moves, sent, command))
@@ -236,6 +301,36 @@ def execute_move(
 
 
 _FIELD = {"SP": "speed", "AC": "accel", "DC": "decel"}
+
+
+def _stopping(link: CommandLink, a: str, what: str) -> InvalidArgument:
+    return InvalidArgument(
+        f"axis {a} is stopping; wait for it before {what}", model=link.model.name
+    )
+
+
+def _change_jog(
+    link: CommandLink, tracker: MotionTracker, handle: MoveHandle, a: str, velocity: float
+) -> MoveHandle:
+    """A new JG for the jog ``handle`` runs on ``a``, stamped so its prediction follows.
+
+    Raises:
+        LimitError: an axis geared to ``a`` would run beyond the model's SP maximum.
+    """
+    for gear in tracker.followers(a).values():
+        _check_follower_speed(link, gear, velocity)
+    replies = link.command_line([cmds.jg(model=link.model, **{a: velocity}), cmds.time_stamp()])
+    handle.add_event(a, sample_of(replies[-1]), lambda t: predict.SetSpeed(t, velocity))
+    return handle
+
+
+def _open_jog(tracker: MotionTracker, a: str) -> MoveHandle | None:
+    """The handle of the library's jog on ``a`` if it has not been stopped (host side)."""
+    handle = tracker.active(a)
+    track = tracker.track(a)
+    if handle is None or track is None or track.kind != "jog" or not track.open_jog:
+        return None
+    return handle
 
 
 def jog(
@@ -253,21 +348,18 @@ def jog(
 
     Raises:
         InvalidArgument: a position move in progress, a stopping jog, or the motor off.
+        LimitError: an axis geared to ``letter`` would run beyond the model's SP maximum.
     """
     a = letter
-    rp, bg, ac, dc, it, mo = link.query_operands(
-        [f"_{op}{a}" for op in ("RP", "BG", "AC", "DC", "IT", "MO")]
+    rp, bg, sc, ac, dc, it, mo = link.query_operands(
+        [f"_{op}{a}" for op in ("RP", "BG", "SC", "AC", "DC", "IT", "MO")]
     )
-    handle = tracker.active(a)
     track = tracker.track(a)
-    if bg and track is not None and track.kind == "jog" and handle is not None:
-        if track.stopped or track.aborted is not None:
-            raise InvalidArgument(
-                f"axis {a} is stopping; wait for it before jogging again", model=link.model.name
-            )
-        replies = link.command_line([cmds.jg(model=link.model, **{a: velocity}), cmds.time_stamp()])
-        handle.add_event(a, sample_of(replies[-1]), lambda t: predict.SetSpeed(t, velocity))
-        return handle
+    if bg and track is not None and track.kind == "jog":
+        handle = _open_jog(tracker, a)
+        if handle is None or sc:  # ST, AB or a limit: _SC says why while it ramps down
+            raise _stopping(link, a, "jogging again")
+        return _change_jog(link, tracker, handle, a, velocity)
     if bg:
         raise InvalidArgument(
             f"axis {a} is in another move; stop it before jogging", model=link.model.name
@@ -276,6 +368,9 @@ def jog(
         raise InvalidArgument(
             f"axis {a} has its motor off; call controller.servo_here()", model=link.model.name
         )
+    gears = tracker.followers(a)
+    for gear in gears.values():
+        _check_follower_speed(link, gear, velocity)
     params = MoveParams(abs(velocity), ac, dc, it)
     replies = link.command_line(
         [
@@ -288,9 +383,44 @@ def jog(
     new = MoveHandle(
         link, {a: track}, "jog", display={a: display} if display else None, tracker=tracker
     )
-    new.follow(tracker.followers(a))
+    new.follow(gears)
     tracker.started(new)
     return new
+
+
+def set_jog_speed(link: CommandLink, tracker: MotionTracker, letter: str, velocity: float) -> None:
+    """``JG`` on ``letter``, never ``BG``: a jog the controller is running changes speed in
+    motion (the library's own jog: stamped, so its prediction follows); an idle axis only
+    keeps the value for its next jog. The controller is asked (``_BG``, ``_SC``) rather than
+    the library's record, which holds a stopped jog until its handle is polled.
+
+    Raises:
+        InvalidArgument: the axis is stopping, or in one of the library's position moves (the
+            controller takes JG only in jog mode).
+        LimitError: an axis geared to ``letter`` would run beyond the model's SP maximum.
+    """
+    a = letter
+    bg, sc = link.query_operands([f"_BG{a}", f"_SC{a}"])
+    command = cmds.jg(model=link.model, **{a: velocity})
+    if not bg:
+        link.command_line([command])  # a preset: JG alone starts nothing
+        return
+    if sc:  # a forced stop ramping down (4 ST, 2/3 a limit)
+        raise _stopping(link, a, "setting its jog speed")
+    handle = _open_jog(tracker, a)
+    if handle is not None:
+        _change_jog(link, tracker, handle, a, velocity)
+        return
+    track = tracker.track(a)
+    if track is not None and track.kind != "jog":
+        raise InvalidArgument(
+            f"axis {a} is in a {track.kind} move; the jog speed can be set when it is over "
+            "(the controller takes JG only in jog mode)",
+            model=link.model.name,
+        )
+    # Motion the library did not start: the controller changes a jog's speed, refuses the
+    # rest (TC 13); either way JG starts nothing.
+    link.command_line([command])
 
 
 def increment(
@@ -305,10 +435,17 @@ def increment(
 
     Raises:
         InvalidArgument: a reversal of a move in progress, or an axis stopping.
+        LimitError: the new target (or a jog's step) beyond a soft limit or the 32-bit range,
+            for the axis or one geared to it; a jog's step too large for one sample.
     """
     a = letter
     model = link.model
-    rp, bg, pa = link.query_operands([f"_RP{a}", f"_BG{a}", f"_PA{a}"])
+    gears = tracker.followers(a)
+    followers = "".join(gears)
+    rp, bg, pa, bl, fl, *rest = link.query_operands(
+        [f"_{op}{a}" for op in ("RP", "BG", "PA", "BL", "FL")]
+        + list(_operand_names(followers, ("BL", "FL")))
+    )
     shows = {a: display} if display else None
     if not bg:
         return execute_move(
@@ -320,16 +457,24 @@ def increment(
         raise InvalidArgument(
             f"axis {a} is stopping; the controller refuses IP now (TC 16)", model=model.name
         )
-    if track is not None and track.kind == "jog":
+    jogging = track is not None and track.kind == "jog"
+    if jogging:
         _check_step(link, a, counts)
-    if track is None or track.kind != "jog":
-        remaining = round(pa) - round(rp)
-        if counts and remaining and (counts > 0) != (remaining > 0):
-            raise InvalidArgument(
-                f"IP {counts} would reverse the move in progress on {a} "
-                f"({remaining:+d} counts to go); the controller refuses it (TC 16)",
-                model=model.name,
-            )
+        for gear in gears.values():
+            _check_follower_speed(link, gear, counts / link.sample_period)
+    else:
+        _check_same_direction(link, a, counts, round(pa) - round(rp))
+    end = round(rp if jogging else pa) + counts
+    what = "steps the jog's reference to" if jogging else "moves the target of the move to"
+    limits = {f: (rest[2 * i], rest[2 * i + 1]) for i, f in enumerate(followers)}
+    _check_reach(link, a, counts, end, (bl, fl), what)
+    for f, gear in gears.items():
+        f_end = int(gear.positions([end])[-1])
+        try:
+            _check_reach(link, f, round(counts * gear.ratio), f_end, limits[f], what)
+        except LimitError as exc:
+            _follower_error(exc, gear)
+            raise
     replies = link.command_line([cmds.ip(model=model, **{a: counts}), cmds.time_stamp()])
     if handle is None or track is None:
         # Someone else's move: nothing to follow; a handle that only waits for it.
@@ -340,6 +485,45 @@ def increment(
         return MoveHandle(link, {a: lone}, "position", display=shows, tracker=tracker)
     handle.add_event(a, sample_of(replies[-1]), lambda t: predict.Increment(t, counts))
     return handle
+
+
+def _check_same_direction(link: CommandLink, a: str, counts: int, remaining: int) -> None:
+    """Refuse an IP against the direction of the move in progress (the controller: TC 16)."""
+    if counts and remaining and (counts > 0) != (remaining > 0):
+        raise InvalidArgument(
+            f"IP {counts} would reverse the move in progress on {a} "
+            f"({remaining:+d} counts to go); the controller refuses it (TC 16)",
+            model=link.model.name,
+        )
+
+
+def _check_reach(
+    link: CommandLink, a: str, step: int, end: int, limits: tuple[float, float], what: str
+) -> None:
+    """Refuse an IP that takes ``a`` (``step`` counts) to ``end``: beyond the 32-bit range or
+    a soft limit ``(BL, FL)`` in its direction, as a move to ``end`` would be refused.
+
+    Raises:
+        LimitError: name ``"PA"``, ``"FL"`` or ``"BL"``.
+    """
+    model = link.model
+    check_int32("PA", end, a, model.name)
+    bl, fl = limits
+    if step > 0 and end > fl:
+        name, limit = "FL", fl
+    elif step < 0 and end < bl:
+        name, limit = "BL", bl
+    else:
+        return
+    raise LimitError(
+        f"IP on axis {a} {what} {end}, beyond {name} {limit:g}",
+        name=name,
+        value=end,
+        limit=limit,
+        axis=a,
+        model=model.name,
+        end=end,
+    )
 
 
 def _check_step(link: CommandLink, a: str, counts: int) -> None:

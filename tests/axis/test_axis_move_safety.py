@@ -1,0 +1,176 @@
+"""Refusals before the first byte and setters that never start motion: jog_speed on a stopped
+jog, an increment past a soft limit, gear followers past theirs.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import re
+
+import pytest
+
+import galil
+import galil.aio as aio
+from galil.errors import InvalidArgument, LimitError
+from galil.testing import nothing_sent, transcript
+
+
+def _begins(lines: list[str]) -> list[str]:
+    """The lines that hold a BG command (not an ``MG _BGA`` query)."""
+    return [line for line in lines if re.search(r"(^|;)\s*BG", line)]
+
+
+# -- jog_speed ------------------------------------------------------------------------------
+@pytest.mark.parametrize("how", ["stop", "abort"])
+def test_setting_jog_speed_after_a_stopped_jog_only_presets_it(
+    dmc: galil.Controller, how: str
+) -> None:
+    a = dmc.A
+    a.jog(1000)
+    dmc.sleep(0.5)
+    if how == "stop":
+        a.stop()
+    else:
+        dmc.abort()
+        dmc.servo_here()
+    dmc.sleep(1.0)  # the jog's handle is never polled: the tracker still holds it
+    with transcript(dmc) as sent:
+        a.jog_speed = 500
+    dmc.sleep(1.0)
+    assert not a.moving
+    assert not _begins(sent.lines)
+    assert a.jog_speed == 500
+
+
+def test_setting_jog_speed_after_a_limit_stop_does_not_restart_the_jog(
+    dmc: galil.Controller,
+) -> None:
+    a = dmc.A
+    a.soft_limits = (-1000, 2000)
+    a.jog(4000)
+    dmc.sleep(2.0)  # the soft limit stops the jog; nobody looks at its handle
+    assert not a.moving
+    with transcript(dmc) as sent:
+        a.jog_speed = -500
+    dmc.sleep(0.5)
+    assert not a.moving
+    assert not _begins(sent.lines)
+
+
+def test_setting_jog_speed_while_jogging_changes_the_running_jog(dmc: galil.Controller) -> None:
+    j = dmc.B.jog(2000)
+    dmc.sleep(0.3)
+    dmc.B.jog_speed = 3000
+    dmc.sleep(0.5)
+    assert dmc.B.velocity == pytest.approx(3000, rel=0.01)
+    j.stop()
+    r = j.wait()
+    assert r.predicted == r.final
+
+
+def test_setting_jog_speed_while_the_jog_stops_is_refused(dmc: galil.Controller) -> None:
+    dmc.C.accel = dmc.C.decel = 1024
+    dmc.C.jog(5000)
+    dmc.sleep(0.5)
+    dmc.C.stop()  # 5 s of deceleration
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="stopping"):
+        dmc.C.jog_speed = 8000
+
+
+def test_setting_jog_speed_during_a_position_move_is_refused(dmc: galil.Controller) -> None:
+    dmc.A.move_by(50_000)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="move"):
+        dmc.A.jog_speed = 1000
+
+
+def test_async_set_jog_speed_after_a_stopped_jog_only_presets_it() -> None:
+    async def body() -> None:
+        async with await aio.connect("sim://DMC-4040") as c:
+            await c.A.jog(1000)
+            await c.sleep(0.5)
+            await c.A.stop()
+            await c.sleep(1.0)
+            await c.A.set_jog_speed(500)
+            await c.sleep(1.0)
+            assert not await c.A.moving()
+
+    asyncio.run(asyncio.wait_for(body(), 30))
+
+
+# -- increment ------------------------------------------------------------------------------
+def test_increment_during_a_move_past_the_soft_limit_is_refused(dmc: galil.Controller) -> None:
+    a = dmc.A
+    a.soft_limits = (-1000, 5000)
+    h = a.move_to(4000)
+    dmc.sleep(0.2)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as caught:
+        a.increment(3000)
+    assert caught.value.name == "FL"
+    assert caught.value.axis == "A"
+    a.increment(1000)  # to 5000, on the limit: allowed
+    r = h.wait()
+    assert r.final == {"A": 5000}
+
+
+def test_increment_during_a_move_beyond_32_bits_is_refused(dmc: galil.Controller) -> None:
+    dmc.A.move_to(2_147_000_000)  # far away: still moving when the increment comes
+    dmc.sleep(0.2)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError, match="32-bit"):
+        dmc.A.increment(1_000_000)
+
+
+def test_increment_while_jogging_past_the_soft_limit_is_refused(dmc: galil.Controller) -> None:
+    d = dmc.D
+    d.soft_limits = (-5000, 5000)
+    d.jog(1000)
+    dmc.sleep(0.2)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as caught:
+        d.increment(6000)
+    assert caught.value.name == "FL"
+    d.stop()
+
+
+def test_increment_during_a_master_move_past_a_followers_limit_is_refused(
+    dmc: galil.Controller,
+) -> None:
+    dmc.A.soft_limits = (-1000, 1000)
+    dmc.A.gear_to("B", 2)
+    dmc.B.move_by(400)
+    dmc.sleep(0.01)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as caught:
+        dmc.B.increment(200)  # B ends at 600: A at 1200
+    assert caught.value.axis == "A"
+
+
+# -- gear followers -------------------------------------------------------------------------
+def test_a_master_move_taking_a_follower_past_its_soft_limit_is_refused(
+    dmc: galil.Controller,
+) -> None:
+    dmc.A.soft_limits = (-1000, 1000)
+    dmc.A.gear_to("B", 100)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as caught:
+        dmc.B.move_by(100)
+    assert caught.value.axis == "A"
+    assert caught.value.name == "FL"
+    with pytest.raises(LimitError, match="axis A"):
+        dmc.B.plan_by(100)
+    r = dmc.B.move_by(10).wait()  # A to 1000: on its limit
+    assert r.final == {"B": 10}
+    assert dmc.A.reference_position == 1000
+
+
+def test_a_master_move_driving_a_follower_too_fast_is_refused(dmc: galil.Controller) -> None:
+    dmc.A.gear_to("B", 100)
+    dmc.B.speed = 500_000  # the follower would run at 50 M counts/s
+    dmc.B.accel = dmc.B.decel = 5_000_000
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as caught:
+        dmc.B.move_by(100_000)
+    assert caught.value.axis == "A"
+    assert caught.value.name == "speed"
+
+
+def test_a_master_jog_driving_a_follower_too_fast_is_refused(dmc: galil.Controller) -> None:
+    dmc.A.gear_to("B", 100)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as caught:
+        dmc.B.jog(500_000)
+    assert caught.value.axis == "A"
