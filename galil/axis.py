@@ -9,6 +9,7 @@ Moves return a :class:`~galil.motion.MoveHandle` that knows its predicted profil
 from __future__ import annotations
 
 import contextlib
+import numbers
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -382,9 +383,14 @@ class Axis:
     @smoothing.setter
     def smoothing(self, value: float) -> None:
         low, high = self._link.model.it_range
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise InvalidArgument(f"smoothing must be a number in [{low}, {high}], got {value!r}")
-        self._set_param("IT", float(value))
+        v: object = value  # numpy's numbers too, so not only float
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
+            raise InvalidArgument(f"smoothing must be a number in [{low}, {high}], got {v!r}")
+        try:
+            it = float(v)
+        except OverflowError:  # an int no float holds (10**400)
+            raise InvalidArgument(f"smoothing must be in [{low}, {high}], got {v!r:.40}") from None
+        self._set_param("IT", it)
 
     @property
     def jog_speed(self) -> Any:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import numpy as np
 import pytest
 
 import galil
@@ -35,12 +36,13 @@ def _cases(dmc: galil.Controller) -> dict[str, Callable[[], object]]:
         "sleep": lambda: dmc.sleep(1e300),
         "records": lambda: dmc.records(seconds=1e308),
         "watchdog": lambda: dmc.watchdog(1e308),
+        "smoothing": lambda: setattr(a, "smoothing", HUGE),
     }
 
 
 NAMES = ["move_to", "move_by", "jog", "increment", "speed", "accel", "soft_limits", "kp"]
 NAMES += ["ki", "kd", "error_limit", "gear_to", "set_scale counts_per", "set_scale offset"]
-NAMES += ["set_scale sign", "sleep", "records", "watchdog"]
+NAMES += ["set_scale sign", "sleep", "records", "watchdog", "smoothing"]
 
 
 def test_every_case_is_listed() -> None:
@@ -64,3 +66,22 @@ def test_an_analog_output_of_a_number_no_float_holds_is_refused_unsent() -> None
             dmc.io.analog_out[1] = HUGE
         dmc.io.analog_out[1] = 2
         assert dmc.io.analog_out[1].to("V").magnitude == 2
+
+
+def test_smoothing_takes_numpy_numbers_like_python_ones() -> None:
+    with simulated("DMC-4040") as dmc:
+        dmc.A.smoothing = np.float32(0.5)
+        assert dmc.A.smoothing == 0.5
+        with nothing_sent(dmc), pytest.raises(galil.InvalidArgument):
+            dmc.A.smoothing = np.bool_(True)
+
+
+def test_a_speed_schedule_too_long_to_predict_is_refused_before_anything_moves() -> None:
+    with simulated("DMC-4040") as dmc:
+        with nothing_sent(dmc, allow_queries=True), pytest.raises(galil.LimitError) as info:
+            dmc.A.speed_schedule(2_000_000_000, [(50_000, 2000)])  # 11 days at 2000 c/s
+        assert info.value.name == "samples"
+        assert dmc.A.moving is False
+        handle = dmc.A.speed_schedule(40_000, [(10_000, 5000)])  # an ordinary one still runs
+        handle.wait()
+        assert dmc.A.reference_position == 40_000

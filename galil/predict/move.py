@@ -14,13 +14,14 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from galil.errors import InvalidArgument, ScheduleError
+from galil.errors import InvalidArgument, LimitError, ScheduleError
 from galil.models import ModelSpec
 from galil.predict.engine import AxisProfiler, KinematicPlan, PlanSamples, plan_position
 from galil.predict.profile import Profile
 from galil.predict.smoothing import END_LOOKAHEAD
 
 __all__ = [
+    "SCHEDULE_MAX_SAMPLES",
     "Event",
     "Increment",
     "MovePlan",
@@ -348,6 +349,23 @@ def _run_move(
     )
 
 
+#: The most samples a speed schedule is predicted in (2.3 h at 1024 Hz; about 300 MB).
+SCHEDULE_MAX_SAMPLES = 1 << 23
+
+
+def _schedule_seconds(
+    total: int, triggers: Sequence[int], speeds: Sequence[float], accel: float, decel: float
+) -> float:
+    """An upper bound of a schedule's duration: each stretch at the slower of the speeds it
+    joins, plus the first ramp up and the last ramp down."""
+    edges = [0, *triggers, total]
+    seconds = speeds[0] / accel + speeds[-1] / decel
+    for i in range(len(speeds)):
+        slowest = speeds[i] if i == 0 else min(speeds[i - 1], speeds[i])
+        seconds += (edges[i + 1] - edges[i]) / slowest
+    return seconds
+
+
 def _schedule_points(
     distance: int,
     initial_speed: float,
@@ -489,9 +507,21 @@ def speed_schedule(
     Raises:
         ScheduleError: a change point that is not valid, with the earliest valid one.
         InvalidArgument: malformed arguments.
+        LimitError: a schedule longer than :data:`SCHEDULE_MAX_SAMPLES` samples.
     """
     _validate(initial_speed, accel, decel, sample_period)
     triggers, speeds, ramp_ends = _schedule_points(distance, initial_speed, changes, accel, decel)
+    longest = _schedule_seconds(abs(int(distance)), triggers, speeds, accel, decel)
+    if longest / sample_period > SCHEDULE_MAX_SAMPLES:
+        # Every sample is predicted up front (8 bytes each in several arrays): refuse what
+        # would take gigabytes rather than run out of memory.
+        raise LimitError(
+            f"a speed schedule of up to {longest:.6g} s is more than the"
+            f" {SCHEDULE_MAX_SAMPLES} samples it can be predicted in; split the move",
+            name="samples",
+            value=math.ceil(longest / sample_period),
+            limit=SCHEDULE_MAX_SAMPLES,
+        )
     profile = _predict_schedule(
         distance, triggers, speeds, accel, decel, sample_period, start, smoothing
     )
