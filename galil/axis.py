@@ -154,6 +154,17 @@ def _limit_of(model: ModelSpec, letter: str, limits: Mapping[Any, object], what:
     return found.get(letter)
 
 
+def _smoothing_value(value: object, model: ModelSpec) -> float:
+    """IT as a float: numpy's numbers too; a bool or an int no float holds refused."""
+    low, high = model.it_range
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise InvalidArgument(f"smoothing must be a number in [{low}, {high}], got {value!r}")
+    try:
+        return float(value)
+    except OverflowError:  # 10**400
+        raise InvalidArgument(f"smoothing must be in [{low}, {high}], got {value!r:.40}") from None
+
+
 class Axis:
     """One axis of a controller.
 
@@ -382,15 +393,7 @@ class Axis:
 
     @smoothing.setter
     def smoothing(self, value: float) -> None:
-        low, high = self._link.model.it_range
-        v: object = value  # numpy's numbers too, so not only float
-        if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
-            raise InvalidArgument(f"smoothing must be a number in [{low}, {high}], got {v!r}")
-        try:
-            it = float(v)
-        except OverflowError:  # an int no float holds (10**400)
-            raise InvalidArgument(f"smoothing must be in [{low}, {high}], got {v!r:.40}") from None
-        self._set_param("IT", it)
+        self._set_param("IT", _smoothing_value(value, self._link.model))
 
     @property
     def jog_speed(self) -> Any:
