@@ -548,6 +548,9 @@ class Controller(CoordinatedMotion, LinkFacade):
         chosen = [self.axis(a) for a in names]
         letters = "".join(a.letter for a in chosen)
         counts = path_to_counts(path, [a.scale for a in chosen], letters)
+        _limits_name_only(
+            self.link.model, letters, speed_limit=speed_limit, accel_limit=accel_limit
+        )
         limits = {
             a.letter: (
                 a.limit_counts(speed_limit, 1, "speed_limit"),
@@ -703,3 +706,24 @@ def connect(address: str | Transport, **options: Any) -> Controller:
     if not isinstance(address, Transport):
         raise InvalidArgument(f"connect() takes an address or a Transport, not {address!r}")
     return Controller(address, **client_opts)
+
+
+def _limits_name_only(model: ModelSpec, letters: str, **given: object) -> None:
+    """Refuse a per-axis limit for an axis the contour does not drive (it would be ignored).
+
+    Raises:
+        InvalidArgument: a key naming another axis (or no axis: see ``axis.limit_counts``).
+    """
+    for what, limits in given.items():
+        if not isinstance(limits, Mapping):
+            continue
+        for key in limits:
+            try:
+                letter = model.axis_letter(key)
+            except InvalidArgument:
+                continue  # limit_counts names the bad key
+            if letter not in letters:
+                raise InvalidArgument(
+                    f"{what}: axis {letter} is not one of the contour's axes ({letters})",
+                    model=model.name,
+                )

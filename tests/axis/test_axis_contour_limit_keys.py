@@ -27,3 +27,12 @@ def test_contour_limit_naming_no_axis_is_refused() -> None:
             c.contour("A", path, dt=3, speed_limit={"E": 1000})
         with nothing_sent(c, allow_queries=True), pytest.raises(InvalidArgument, match="twice"):
             c.contour("A", path, dt=3, accel_limit={"A": 1e6, "X": 1e6})
+
+
+def test_a_limit_for_an_axis_the_contour_does_not_drive_is_refused_not_ignored() -> None:
+    with simulated("DMC-18x2") as c:
+        path = np.linspace(0, 20_000, 11)[1:]
+        with nothing_sent(c), pytest.raises(InvalidArgument, match="not one of the contour"):
+            c.contour("A", path, dt=3, speed_limit={"B": 1000})
+        with nothing_sent(c), pytest.raises(InvalidArgument, match="accel_limit: axis B"):
+            c.contour("A", path, dt=3, accel_limit={"Y": 1e6})
