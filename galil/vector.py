@@ -342,9 +342,14 @@ class VectorStream:
             axis = self.axes[by_letter[letter]]
             label = f"{what} of {letter}"
             if axis.scale is not None:
-                counts = abs(axis.scale.rate_to_counts(value, power, label))
+                # The axis's sign reverses positions, not rates: undo it before the check.
+                counts = axis.scale.sign * axis.scale.rate_to_counts(value, power, label)
             else:
-                counts = abs(counts_or_plain(value, label))
+                counts = counts_or_plain(value, label)
+            if counts < 0:
+                raise InvalidArgument(
+                    f"{label} must not be negative, got {value!r}", model=self.link.model.name
+                )
             out[by_letter[letter]] = min(counts, float(default))
         return out
 

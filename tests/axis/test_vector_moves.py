@@ -273,6 +273,16 @@ def test_bad_paths_and_values_are_refused_before_a_byte(dmc: galil.Controller) -
     _refused(dmc, LimitError, "TC 30", segments=[Line(1 * mm, 0), Line(0, 0)], speed=SPEED)
     _refused(dmc, LimitError, "VS", segments=[Line(1 * mm, 0)], speed=1e6 * mm / s)
     _refused(dmc, InvalidArgument, "no VT", segments=[Line(1 * mm, 0)], speed=SPEED, smoothing=0.5)
+    _refused(  # a limit is a magnitude: a minus is a mistake, not a direction
+        dmc,
+        InvalidArgument,
+        "must not be negative",
+        segments=[Line(1 * mm, 0)],
+        speed=SPEED,
+        axis_speed={"A": -5 * mm / s},
+    )
+    dmc.B.set_scale(counts_per=2000 / mm, sign=-1)  # a reversed axis still takes a positive one
+    dmc.plan_vector("AB", [Line(1 * mm, 1 * mm)], speed=SPEED, axis_speed={"B": 50 * mm / s})
     with pytest.raises(InvalidArgument, match="Line needs"):
         Line()
     with pytest.raises(InvalidArgument, match="must not be 0"):
