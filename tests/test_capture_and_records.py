@@ -58,6 +58,29 @@ def test_a_capture_armed_with_a_move_is_its_prediction_at_every_recorded_sample(
     assert dmc.arrays.list() == {}  # its arrays are freed once uploaded
 
 
+def test_compare_measures_how_far_a_recording_strays_from_its_prediction(
+    dmc: galil.Controller,
+) -> None:
+    plan = dmc.A.plan_by(5000)
+    cap = dmc.capture(["_RPA"], every=2, seconds=plan.duration)
+    move = dmc.A.move_by(5000)
+    dmc.sleep(plan.duration / 2)
+    dmc.link.command_line(["ST A"])  # the library does not know: the recording strays
+    with pytest.warns(RuntimeWarning):
+        move.wait()
+    rec = cap.wait()
+    got = compare(move, rec)["A"]
+    k = rec.samples - move.begin["A"]  # type: ignore[operator]
+    inside = k <= plan.samples
+    expected = plan.position[k[inside]]
+    np.testing.assert_array_equal(got.difference[inside], rec["_RPA"][inside] - expected)
+    assert got.worst == np.max(np.abs(rec["_RPA"][inside] - expected)) > 1000
+    # (t, positions) by hand: one sample 7 counts off is a worst of 7.
+    shifted = plan.position.astype(float)
+    shifted[10] += 7
+    assert compare({"A": plan}, {"A": (plan.t, shifted)})["A"].worst == 7
+
+
 def test_a_capture_of_a_contour_every_4_samples_is_exact(dmc: galil.Controller) -> None:
     path = 3000 * (1 - np.cos(np.linspace(0, math.pi, 40))) / 2
     cap = dmc.capture(["_RPB"], every=4, seconds=0.2)

@@ -14,7 +14,7 @@ from axis_helpers import assert_follows
 
 import galil
 from galil.errors import GalilTimeoutError, InvalidArgument
-from galil.testing import nothing_sent, sim_of, transcript
+from galil.testing import nothing_sent, sim_of, simulated, transcript
 from galil.units import ureg
 
 
@@ -240,3 +240,18 @@ def test_motor_off_refused(dmc: galil.Controller) -> None:
         dmc.B.move_by(100)
     with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="motor off"):
         dmc.B.jog(100)
+
+
+def test_a_stop_the_library_did_not_send_shows_as_a_deviation_and_a_warning() -> None:
+    with simulated("DMC-4040") as dmc:
+        handle = dmc.A.move_by(20_000)
+        dmc.sleep(0.1)
+        dmc.link.command_line(["ST A"])  # behind the library's back: the prediction is wrong
+        with pytest.warns(RuntimeWarning, match=r"counts away from the prediction"):
+            result = handle.wait()
+        final = dmc.A.reference_position
+        assert result.final == {"A": final}
+        assert result.predicted == {"A": 20_000}
+        assert result.deviation == {"A": final - 20_000}
+        assert result.worst == 20_000 - final > 10_000
+        assert result.stop_codes == {"A": 4}
