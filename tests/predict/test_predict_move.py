@@ -212,10 +212,33 @@ def test_jog_ramps_respect_ac_when_growing_and_dc_when_shrinking(
     dv = np.diff(v)
     assert np.max(np.abs(dv), initial=0) <= max(ac, dc) * ts * ts + 2
     assert np.max(np.abs(v), initial=0) <= max(abs(j) for j in js) * ts + 1
-    # the sampled speed where the ramps have settled is the commanded one
-    eng = AxisProfiler()
-    eng.begin_jog(js[0], ac, dc)
-    assert np.array_equal(eng.advance(p.samples), p.profiler[1:]) or changes
+    if not changes:  # one jog: the engine run directly gives the same samples
+        eng = AxisProfiler()
+        eng.begin_jog(js[0], ac, dc)
+        assert np.array_equal(eng.advance(p.samples), p.profiler[1:])
+
+
+# Closed forms for a slow-down in the same direction (the rate must be DC, not AC): from rest
+# to 20,480 counts/s at AC 204,800 (0.1 s, 1,024 counts), cruise to t = 1 s (19,456 counts),
+# then 10,240 counts/s: 0.2 s at DC 51,200 adds 4,096 - 1,024 counts (at AC it would be
+# 0.05 s, and 768 counts fewer by t = 1.2 s).
+SLOWED_AT_1_2 = 19_456 + 20_480 * 0.2 - 0.5 * 51_200 * 0.2**2
+
+
+def test_a_jog_slowed_in_its_direction_ramps_at_dc_closed_form() -> None:
+    p = predict.jog(20_480, 204_800, 51_200, changes=[(1.0, 10_240)], duration=1.5)
+    assert p.at(1.0) == pytest.approx(19_456, abs=25)
+    assert p.at(1.2) == pytest.approx(SLOWED_AT_1_2, abs=25)
+    assert p.at(1.5) == pytest.approx(SLOWED_AT_1_2 + 10_240 * 0.3, abs=25)
+
+
+def test_a_move_slowed_by_sp_ramps_at_dc_closed_form() -> None:
+    p = predict.move(60_000, 20_480, 204_800, 51_200, events=[predict.SetSpeed(1.0, 10_240)])
+    assert p.at(1.2) == pytest.approx(SLOWED_AT_1_2, abs=25)
+    # then 10,240 counts/s until the last 1,024 counts, which take 0.2 s at DC
+    cruise = (60_000 - SLOWED_AT_1_2 - 1_024) / 10_240
+    assert p.duration == pytest.approx(1.2 + cruise + 0.2, abs=3 / 1024)
+    assert p.end == 60_000
 
 
 def test_jog_without_end_runs_until_the_ramp_settles_then_stop() -> None:
@@ -264,7 +287,8 @@ def test_profile_at_plot_and_reprs() -> None:
     assert mid[0] == 0
     assert mid[-1] == 1000
     assert 400 < mid[1] < 600
-    assert "trapezoid" in p._repr_html_() or "triangle" in p._repr_html_()
+    assert p.shape == "triangle"  # 1,000 counts: too short to reach 10,240 counts/s
+    assert "triangle" in p._repr_html_()
     assert "Profile" in repr(p)
 
     class Printer:
