@@ -529,7 +529,9 @@ class StreamReport:
         link_rate: bytes/s assumed for the link (after the utilisation margin).
         needed_rate: average bytes/s the segments need.
         bytes_total: bytes to send.
-        min_slack: smallest margin, seconds, between a segment's arrival and its start.
+        min_slack: smallest margin, seconds, between a segment's arrival and its start,
+            over every segment but the first (which starts as it arrives: the stream's time
+            begins there); ``inf`` for a single segment.
         buffer_depth: contour segments the controller can hold.
     """
 
@@ -740,7 +742,8 @@ def _check_stream(
             model=spec.name,
             segment=i,
         )
-    return StreamReport(rate, needed, total_bytes, float(slack.min()), depth)
+    margin = float(slack[1:].min()) if slack.size > 1 else math.inf
+    return StreamReport(rate, needed, total_bytes, margin, depth)
 
 
 def _check_profile(

@@ -28,11 +28,15 @@ def test_long_contour_keeps_the_buffer_fed(
     dmc.A.move_to(1000).wait()
     path = _ramp(2000)  # four times the 511-deep buffer
     t0 = sim.start_trace("A")
+    wire: list[tuple[str, bytes]] = []
+    remove = dmc.wire_log.add(lambda direction, data: wire.append((direction, data)))
     result = dmc.contour("A", path, dt=1, progress=True)
+    remove()
     trace = sim.stop_trace("A")["A"]
     log = [text for k, text in sim.command_log if k >= t0]
     cds = [text for text in log if text.startswith("CD ") and text != "CD 0=0"]
-    assert log[0] == "TC 0" or log[0].startswith("MG") or log[0] == "CM A"
+    at = log.index("MG _TC")  # after the state read: the error code, then contour mode
+    assert log[at : at + 3] == ["MG _TC", "CM A", "DT 1"]
     assert "CM A" in log
     assert "DT 1" in log
     assert len(cds) == 2000
@@ -43,6 +47,7 @@ def test_long_contour_keeps_the_buffer_fed(
     np.testing.assert_array_equal(sent, result.increments[:, 0])
     assert 1000 + sent.sum() == round(path[-1]) + 1000 == dmc.A.reference_position
     assert 0 < result.low_water < 511  # filled, never overfilled (a CD never waited for room)
+    assert result.low_water == min(_free_places(wire))  # the fewest any _CM reply gave
     assert result.lines < 2000 / 4  # several segments per line
     first_cd = min(k for k, text in sim.command_log if k >= t0 and text.startswith("CD "))
     assert_follows(trace, t0, result.profiles["A"], first_cd)
@@ -100,6 +105,23 @@ def test_fast_enough_link_does_not_underrun() -> None:
     with galil.connect("sim://DMC-4040", controller=sim, faults=hook) as dmc:
         result = dmc.contour("A", _ramp(1500), dt=1)
         assert result.increments.shape == (1500, 1)
+
+
+def _free_places(wire: list[tuple[str, bytes]]) -> list[float]:
+    """Every ``_CM`` the library read (the first number of the reply to an ``MG _CM...``)."""
+    return [
+        float(reply.split()[0])
+        for (d, line), (_, reply) in zip(wire, wire[1:], strict=False)
+        if d == "out" and line.startswith(b"MG _CM")
+    ]
+
+
+def test_a_short_contour_reports_how_full_the_buffer_got(dmc: galil.Controller) -> None:
+    wire: list[tuple[str, bytes]] = []
+    remove = dmc.wire_log.add(lambda direction, data: wire.append((direction, data)))
+    result = dmc.contour("A", _ramp(300), dt=1)  # fits in the 511-deep buffer at once
+    remove()
+    assert 511 - 300 <= result.low_water == min(_free_places(wire)) < 511
 
 
 def test_one_deep_buffer_paces_with_wc() -> None:

@@ -12,6 +12,8 @@ from hypothesis import strategies as st
 from galil import contour as planner
 from galil import predict
 from galil.errors import InvalidArgument, LimitError
+from galil.predict.checks import contour_bytes
+from galil.protocol import commands as cmds
 
 
 def test_quantise_as_the_controller_stores_values() -> None:
@@ -108,8 +110,21 @@ def test_contour_stream_too_slow_for_serial() -> None:
     report = predict.check_contour(c, 6, baud=115_200)
     assert report is not None
     assert report.needed_rate < report.link_rate
-    assert report.min_slack >= 0
+    # 500 segments of 64 ms each, "CD 100" (7 bytes) at 11.5 kB/s: each is sent long before
+    # it runs, the first of them after the "=6" of the DT (9 bytes).
+    assert report.bytes_total == 9 + 499 * 7
+    assert report.min_slack > 0.05
     assert predict.check_contour(c, 1, ethernet=True) is not None
+
+
+def test_contour_bytes_are_the_bytes_the_builder_writes() -> None:
+    c = [100, -5, 0, 12345, -32000, 7]
+    dt = [3, 3, 4, 4, 4, 1]
+    wire = []
+    for i, (inc, n) in enumerate(zip(c, dt, strict=True)):
+        changed = i == 0 or dt[i - 1] != n
+        wire.append(len(cmds.cd(inc, dt=n if changed else None).text) + 1)  # + CR
+    assert contour_bytes(c, dt).tolist() == wire
 
 
 def test_contour_buffer_runs_dry_when_fast_segments_come_first() -> None:
