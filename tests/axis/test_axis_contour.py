@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -111,7 +112,7 @@ def _free_places(wire: list[tuple[str, bytes]]) -> list[float]:
     """Every ``_CM`` the library read (the first number of the reply to an ``MG _CM...``)."""
     return [
         float(reply.split()[0])
-        for (d, line), (_, reply) in zip(wire, wire[1:], strict=False)
+        for (d, line), (_, reply) in itertools.pairwise(wire)
         if d == "out" and line.startswith(b"MG _CM")
     ]
 
