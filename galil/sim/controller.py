@@ -365,6 +365,13 @@ class SimController:
             origin = self._m.servo.axes[letter].origin
             return HomeSwitch(g.edge, g.side, g.index_period, g.index_offset).shifted(-origin)
 
+    def machine_position(self, axis: str) -> int:
+        """Test hook: the motor's position in the machine's fixed frame, counts (the frame
+        :meth:`set_home_switch` places switches in; DP and homing do not move it)."""
+        with self._lock:
+            self._m.servo.sync()
+            return self._m.servo.axes[self.spec.axis_letter(axis)].physical
+
     def set_input(self, n: int, high: bool) -> None:
         """Test hook: drive digital input ``n`` (the model's numbering) high or low.
 

@@ -65,9 +65,10 @@ def test_the_predictor_and_the_simulator_agree_sample_for_sample(kind: str) -> N
     assert number(sim, "_SCA") == expected.stop_code
 
 
-@settings(max_examples=15, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(
-    edge=st.integers(-30_000, 30_000),
+    edge=st.integers(-30_000, 30_000)
+    | st.builds(lambda k, d: 100 + 3000 * k + d, st.integers(-10, 9), st.integers(-40, 40)),
     side=st.sampled_from([-1, 1]),
     start=st.integers(-20_000, 20_000),
     cn=st.sampled_from([-1, 1]),
@@ -75,22 +76,24 @@ def test_the_predictor_and_the_simulator_agree_sample_for_sample(kind: str) -> N
 def test_hm_finds_the_same_index_wherever_it_starts(
     edge: int, side: int, start: int, cn: int
 ) -> None:
-    # An index pulse within a count of the switch's edge is ambiguous on a real axis too
-    # (the classic "index too close to the home switch"): the test keeps clear of it.
+    # An index pulse closer to the switch's edge than the axis overshoots it when it stops on
+    # the edge at HV (HV**2 / 2 DC = 17.6 counts here) is ambiguous on a real axis too (the
+    # classic "index too close to the home switch"): which one is found depends on where
+    # stage 2 stopped. The test keeps clear of that zone.
     phase = (edge - 100) % 3000
-    assume(min(phase, 3000 - phase) > 1)
+    assume(min(phase, 3000 - phase) > 6000**2 / (2 * 1_024_000) + 1)
     sim = SimController("DMC-4040", servo_lag=0.0)
     sim.set_home_switch("A", edge=edge, side=side, index_period=3000, index_offset=100)
     ask(sim, f"DPA={start};SPA=60000;ACA=1024000;DCA=1024000;HVA=6000;CN ,{cn}")
     switch = sim.home_switch("A")
     level = switch.level(start)
     towards = (1 if level == 1 else -1) * (1 if cn > 0 else -1)
-    if switch.leaving(start).direction != towards:
-        return  # this CN drives away from the edge: a real axis would run to its limit
+    # (a CN that drives away from the edge would run a real axis to its limit: not this test)
+    assume(switch.leaving(start).direction == towards)
     ask(sim, "HMA;BGA")
     run_until_idle(sim)
     assert number(sim, "_SCA") == 10
-    origin = sim._m.servo.axes["A"].origin  # where 0 is in the fixed frame
+    origin = sim.machine_position("A") - number(sim, "_TPA")  # where 0 is in the fixed frame
     assert (origin - 100) % 3000 == 0  # an index pulse
     below = edge - 1 if side < 0 else edge
     assert origin > below
