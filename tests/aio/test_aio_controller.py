@@ -179,8 +179,11 @@ def test_cancelling_a_contour_stops_its_axes() -> None:
     async def body() -> None:
         async with await sim() as c:
             task = asyncio.ensure_future(c.contour("A", np.arange(1, 401) * 50.0, dt=4))
-            while not await c.A.moving():
+            for _ in range(2000):  # the worker starts it; a deadline, not an endless poll
+                if await c.A.moving():
+                    break
                 await asyncio.sleep(0.001)
+            assert await c.A.moving()
             task.cancel()
             with pytest.raises(asyncio.CancelledError):
                 await task
