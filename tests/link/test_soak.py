@@ -49,7 +49,7 @@ def test_ctrl_c_during_wait_inside_motion_always_sends_st() -> None:
             with dmc.wire_log.capture() as wire:
                 try:
                     with dmc.motion("A"):
-                        move = dmc.A.move_by(60_000)
+                        move = dmc.A.move_by(600_000)  # 3 s: far longer than the timer
                         timer.start()
                         move.wait()
                 except KeyboardInterrupt:
