@@ -10,6 +10,9 @@ import os
 import signal
 import threading
 import time
+from collections.abc import Iterator
+
+import pytest
 
 import galil
 from galil.sim.clock import RealTimeClock
@@ -35,6 +38,18 @@ def test_a_faulty_link_never_gives_a_wrong_reply_a_hang_or_a_false_rejection() -
     assert (report.wrong, report.hangs, report.rejected_but_ran) == (0, 0, 0), report.examples
 
 
+@pytest.fixture
+def ctrl_c_raises() -> Iterator[None]:
+    """SIGINT raises KeyboardInterrupt, as in a terminal, however pytest was started (a shell
+    starts background jobs with SIGINT ignored, and Python then installs no handler)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+@pytest.mark.usefixtures("ctrl_c_raises")
 def test_ctrl_c_during_wait_inside_motion_always_sends_st() -> None:
     sim = SimController("DMC-4040", RealTimeClock())
     with (
