@@ -212,8 +212,11 @@ class Controller(CoordinatedMotion, LinkFacade):
         echo: bool = False,
         reconnect: bool | ReconnectPolicy = False,
     ) -> None:
-        if not isinstance(echo, bool):
-            raise InvalidArgument(f"echo must be True or False, not {echo!r}")
+        for flag, value in (("echo", echo), ("handshake", handshake), ("unsolicited", unsolicited)):
+            if not isinstance(value, bool):
+                raise InvalidArgument(f"{flag} must be True or False, not {value!r}")
+        if model is not None and not isinstance(model, (str, ModelSpec)):
+            raise InvalidArgument(f"model is a name such as 'DMC-4040' or a ModelSpec: {model!r}")
         if not handshake and model is None:
             raise InvalidArgument("handshake=False needs model= (nothing identifies it then)")
         self.link = Link(timeout=timeout, history=history)

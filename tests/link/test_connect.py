@@ -103,6 +103,18 @@ def test_no_handshake_sends_nothing(peer: FakeGalil) -> None:
         connect("fakegalil://x", handshake=False)
 
 
+@pytest.mark.parametrize(
+    "options",
+    [{"model": 123}, {"handshake": "no"}, {"unsolicited": "x"}, {"echo": 1}],
+)
+def test_client_options_of_the_wrong_type_are_refused_before_a_byte(
+    peer: FakeGalil, options: dict[str, object]
+) -> None:
+    with pytest.raises(InvalidArgument, match=next(iter(options))):
+        connect("fakegalil://x", **options)
+    assert peer.log == []
+
+
 def test_transport_options_are_passed_on_and_checked(peer: FakeGalil) -> None:
     with pytest.raises(InvalidArgument, match="unknown option"):
         connect("fakegalil://x", baudrate=9600)
