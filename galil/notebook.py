@@ -6,6 +6,8 @@ cheap. Nothing in the library imports it; notebooks do.
 
 from __future__ import annotations
 
+import math
+import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -19,7 +21,7 @@ from galil.contour import ContourResult
 from galil.errors import GalilError, InvalidArgument
 from galil.motion import MoveHandle
 from galil.predict import Profile
-from galil.units import get_registry
+from galil.units import counts_or_plain, get_registry, is_quantity
 
 __all__ = ["Comparison", "compare", "compare_plot", "jog_widget"]
 
@@ -59,6 +61,11 @@ class Comparison:
 
 def _predictions(predicted: Predicted) -> tuple[dict[str, Profile], dict[str, int | None]]:
     if isinstance(predicted, MoveHandle):
+        if not math.isfinite(predicted.duration):
+            raise InvalidArgument(
+                "a jog still running has no predicted end to compare with: stop it first"
+                " (its handle then predicts the whole motion)"
+            )
         return predicted.profiles, predicted.begin
     if isinstance(predicted, ContourResult):
         return dict(predicted.profiles), dict.fromkeys(predicted.profiles, predicted.begin)
@@ -139,6 +146,8 @@ def compare(
         InvalidArgument: a recording given by controller samples while the prediction does
             not know the sample it began on.
     """
+    if field not in _OPERANDS:
+        raise InvalidArgument(f"field is one of {', '.join(_OPERANDS)}, not {field!r}")
     profiles, begins = _predictions(predicted)
     out: dict[str, Comparison] = {}
     for letter, prof in profiles.items():
@@ -223,6 +232,29 @@ def _display(profile: Profile) -> tuple[float, float, str]:
     return profile.display if profile.display is not None else (1.0, 0.0, "counts")
 
 
+def _slider_limit(axis: Axis, max_speed: object) -> float:
+    """The slider's range: ``max_speed`` in the axis's units per second (a Quantity or a
+    number), 10,000 by default.
+
+    Raises:
+        InvalidArgument: not a positive speed.
+    """
+    if max_speed is None:
+        return 10_000.0
+    if is_quantity(max_speed):
+        if axis.scale is None:
+            value = counts_or_plain(max_speed, "max_speed")
+        else:  # counts/s back to the axis's unit per second (display: sign * counts/unit)
+            value = axis.scale.rate_to_counts(max_speed, 1, "max_speed") / axis.scale.display[0]
+    elif isinstance(max_speed, bool) or not isinstance(max_speed, numbers.Real):
+        raise InvalidArgument(f"max_speed is a speed, not {max_speed!r}")
+    else:
+        value = float(max_speed)
+    if not (math.isfinite(value) and value > 0):
+        raise InvalidArgument(f"max_speed must be a positive speed, not {max_speed!r}")
+    return value
+
+
 def jog_widget(axis: Axis, *, max_speed: float | None = None) -> Any:
     """A slider that jogs ``axis`` at the chosen speed, and a Stop button; needs ipywidgets.
 
@@ -238,7 +270,7 @@ def jog_widget(axis: Axis, *, max_speed: float | None = None) -> Any:
     """
     import ipywidgets as widgets
 
-    limit = max_speed if max_speed is not None else 10_000.0
+    limit = _slider_limit(axis, max_speed)
     unit = "counts/s" if axis.scale is None else f"{axis.scale.unit:~}/s"
     slider = widgets.FloatSlider(
         value=0.0, min=-limit, max=limit, description=f"jog {axis.letter}", continuous_update=False

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import galil
 from galil import predict
-from galil.notebook import compare_plot, jog_widget
+from galil.notebook import compare, compare_plot, jog_widget
 from galil.testing import simulated, transcript
 from galil.units import ureg
 
@@ -49,3 +50,31 @@ def test_jog_widget_shows_a_refusal_instead_of_raising() -> None:
         slider.value = 1e9  # above the model's maximum jog speed
         assert status.value.startswith("refused:")
         assert not dmc.A.moving
+
+
+def test_jog_widget_takes_its_range_as_a_speed_and_refuses_a_nonsense_one() -> None:
+    pytest.importorskip("ipywidgets")
+    with simulated() as dmc:
+        axis = dmc.A.set_scale(counts_per=2000 / ureg.mm)
+        slider = jog_widget(axis, max_speed=5 * ureg.cm / ureg.s).children[0].children[0]
+        assert (slider.min, slider.max) == pytest.approx((-50, 50))
+        reversed_axis = dmc.B.set_scale(counts_per=2000 / ureg.mm, sign=-1)
+        slider = jog_widget(reversed_axis, max_speed=50 * ureg.mm / ureg.s).children[0].children[0]
+        assert slider.max == pytest.approx(50)
+        for bad in (-5, 0, 5 * ureg.mm, float("nan"), True):
+            with pytest.raises(galil.InvalidArgument):
+                jog_widget(axis, max_speed=bad)
+
+
+def test_compare_refuses_a_misspelt_field_and_a_jog_still_running() -> None:
+    with simulated() as dmc:
+        move = dmc.A.move_by(1000)
+        move.wait()
+        with pytest.raises(galil.InvalidArgument, match="field"):
+            compare(move, {"A": ([0.0], [0.0])}, field="positon")
+        jog = dmc.A.jog(1000)
+        with pytest.raises(galil.InvalidArgument, match="still running"):
+            compare(jog, {"A": ([0.0], [0.0])})
+        dmc.A.stop()
+        dmc.sleep(0.5)
+        assert compare(jog, {"A": ([0.0], [1000.0])})["A"].worst == 0  # it began at 1000
