@@ -11,10 +11,11 @@ from __future__ import annotations
 import ipaddress
 import math
 import re
+from collections.abc import Collection
 
 from galil.errors import InvalidArgument
 
-__all__ = ["check_port", "dotted_quad", "seconds", "whole_number"]
+__all__ = ["check_port", "choice", "dotted_quad", "flag", "seconds", "whole_number"]
 
 _DOTTED = re.compile(r"^[0-9.]+$")
 
@@ -64,3 +65,20 @@ def dotted_quad(host: str, what: str) -> None:
             ipaddress.IPv4Address(host)
         except ValueError as exc:
             raise InvalidArgument(f"{what}: {host!r} is not an IPv4 address") from exc
+
+
+def flag(value: object, what: str) -> bool:
+    """``value`` as a ``bool``: ``True``/``False``, or 1/0 (as a URL query gives them)."""
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, int) and value in (0, 1):
+        return bool(value)
+    raise InvalidArgument(f"{what} must be true or false, got {value!r}")
+
+
+def choice(value: object, what: str, allowed: Collection[object]) -> object:
+    """``value`` itself if it is one of ``allowed`` (``True`` is not taken for 1)."""
+    if isinstance(value, bool) or value not in allowed:
+        shown = ", ".join(str(a) for a in allowed)
+        raise InvalidArgument(f"{what} must be one of {shown}, got {value!r}")
+    return value

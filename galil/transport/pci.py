@@ -16,6 +16,7 @@ from urllib.parse import SplitResult
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.transport import parse_options
 from galil.transport.base import TransportBase
+from galil.transport.options import seconds
 
 __all__ = ["PciTransport", "open_pci"]
 
@@ -37,7 +38,7 @@ class PciTransport(TransportBase[int]):
 
     def __init__(self, path: str, *, write_timeout: float = 1.0) -> None:
         self.path = path
-        self.write_timeout = write_timeout
+        self.write_timeout = seconds(write_timeout, "write_timeout")
         try:
             flags = os.O_RDWR | os.O_NONBLOCK | os.O_NOCTTY | getattr(os, "O_CLOEXEC", 0)
             fd = os.open(path, flags)
@@ -90,14 +91,14 @@ def open_pci(url: SplitResult, **options: Any) -> PciTransport:
     """Open ``/dev/galilpciN`` or ``pci:///path/to/node``; option ``write_timeout``.
 
     Raises:
-        InvalidArgument: no path, or an unknown option.
+        InvalidArgument: no path, a bad ``write_timeout``, or an unknown option.
         GalilConnectionError: the node cannot be opened.
     """
     opts = parse_options(url, options)
     path = url.netloc + url.path
     if not path:
         raise InvalidArgument(f"no device node in {url.geturl()!r}; e.g. /dev/galilpci0")
-    write_timeout = float(opts.pop("write_timeout", 1.0))
+    write_timeout = seconds(opts.pop("write_timeout", 1.0), "write_timeout")
     if opts:
         raise InvalidArgument(f"unknown PCI option(s): {', '.join(sorted(opts))}")
     return PciTransport(path, write_timeout=write_timeout)
