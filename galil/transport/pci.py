@@ -10,6 +10,7 @@ from __future__ import annotations
 import errno
 import os
 import select
+import time
 from typing import Any
 from urllib.parse import SplitResult
 
@@ -22,6 +23,7 @@ __all__ = ["PciTransport", "open_pci"]
 
 _CHUNK = 4096
 _DEAD = select.POLLERR | select.POLLHUP | select.POLLNVAL
+_EOF_STEP = 0.01  # how often a node at end of file is read again while a read waits
 
 
 class PciTransport(TransportBase[int]):
@@ -66,6 +68,20 @@ class PciTransport(TransportBase[int]):
             raise GalilConnectionError(f"{self.label} is gone")
 
     def _recv(self, handle: int, timeout: float) -> bytes:
+        deadline = time.monotonic() + max(0.0, timeout)
+        while True:
+            data = self._recv_once(handle, deadline - time.monotonic())
+            if data is not None:
+                return data
+            # End of file without a hang-up (/dev/null does this): poll says readable at
+            # once, every time. Read again now and then until the timeout, not in a spin.
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return b""
+            time.sleep(min(_EOF_STEP, left))
+
+    def _recv_once(self, handle: int, timeout: float) -> bytes | None:
+        """What one read gets within ``timeout``; ``None`` for end of file."""
         events = self._poll_in.poll(max(0.0, timeout) * 1000)
         if not events:
             return b""
@@ -73,7 +89,7 @@ class PciTransport(TransportBase[int]):
         try:
             data = os.read(handle, _CHUNK)
         except BlockingIOError:
-            data = b""
+            return b""
         except OSError as exc:
             # A pty master reports its closed peer as EIO; a driver node as ENODEV.
             if exc.errno in (errno.EIO, errno.ENODEV, errno.ENXIO):
@@ -81,7 +97,7 @@ class PciTransport(TransportBase[int]):
             raise
         if not data and mask & _DEAD:
             raise GalilConnectionError(f"{self.label} is gone (peer hung up)")
-        return data
+        return data or None
 
     def _release(self, handle: int) -> None:
         os.close(handle)
