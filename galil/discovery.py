@@ -42,6 +42,7 @@ from galil.protocol.discovery import (
     parse_identify_reply,
 )
 from galil.transport import Transport, open_transport
+from galil.transport.options import check_port
 from galil.transport.tcp import TcpTransport
 
 __all__ = [
@@ -220,18 +221,28 @@ def _targets(specs: Iterable[str]) -> list[tuple[str, int]]:
             if not port_text.isdigit() or not 0 < int(port_text) < 65536:
                 raise InvalidArgument(f"bad port in {spec!r}")
             port = int(port_text)
-        try:
-            if "/" in host:
-                net = ipaddress.ip_network(host, strict=False)
-                hosts = [str(h) for h in net.hosts()] if net.num_addresses > 1 else [str(net)]
-            else:
-                hosts = [str(ipaddress.ip_address(host))]
-        except ValueError as exc:
-            raise InvalidArgument(f"not an IP address or network: {spec!r}") from exc
-        out += [(h, port) for h in hosts]
-        if len(out) > _MAX_HOSTS:
-            raise InvalidArgument(f"more than {_MAX_HOSTS} addresses to probe; narrow the range")
+        out += [(h, port) for h in _hosts(host, spec, _MAX_HOSTS - len(out))]
     return out
+
+
+def _hosts(text: str, spec: str, room: int) -> list[str]:
+    """The addresses ``text`` (an address or a network) names; more than ``room`` is refused.
+
+    The size of a network is checked before its hosts are listed: a /8 has 16 million.
+    """
+    try:
+        net = ipaddress.ip_network(text, strict=False)
+    except ValueError as exc:
+        raise InvalidArgument(f"not an IP address or network: {spec!r}") from exc
+    # hosts() leaves out at most two addresses (the network's own and its broadcast).
+    if net.num_addresses - 2 > room:
+        raise InvalidArgument(f"more than {_MAX_HOSTS} addresses to probe; narrow the range")
+    # 10.0.0.5 or 10.0.0.5/32: that address, without the prefix.
+    single = net.num_addresses == 1
+    hosts = [str(net.network_address)] if single else [str(h) for h in net.hosts()]
+    if len(hosts) > room:
+        raise InvalidArgument(f"more than {_MAX_HOSTS} addresses to probe; narrow the range")
+    return hosts
 
 
 def probe_hosts(specs: Iterable[str], *, timeout: float = 1.0) -> list[Found]:
@@ -263,7 +274,13 @@ def ask_group(
 
     ``group`` is Galil's multicast group by default (TTL 1: the local network only); any
     address that answers the same way works (the tests use the simulator on 127.0.0.1).
+
+    Raises:
+        InvalidArgument: ``group`` is no IPv4 address, or ``port`` no port number.
+        GalilConnectionError: the query could not be sent.
     """
+    _check_endpoint((group, port), "group")
+    timeout = _check_seconds(timeout, "timeout")
     found: dict[str, Found] = {}
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
@@ -300,8 +317,10 @@ def listen_bootp(
         count: return as soon as this many different controllers asked.
 
     Raises:
+        InvalidArgument: ``address`` is no (IPv4 address, port) pair.
         GalilConnectionError: the port cannot be bound (port 67 needs root on most systems).
     """
+    _check_endpoint(address, "bootp_address")
     seen: dict[bytes, BootpRequest] = {}
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -349,6 +368,17 @@ def _check_seconds(value: object, what: str) -> float:
     return float(value)
 
 
+def _check_endpoint(value: object, what: str) -> None:
+    """Refuse anything but an (IPv4 address, port) pair: no name to look up, no bad port."""
+    if not isinstance(value, tuple) or len(value) != 2 or not isinstance(value[0], str):
+        raise InvalidArgument(f"{what} must be an (IPv4 address, port) pair, not {value!r}")
+    try:
+        ipaddress.IPv4Address(value[0])
+    except ValueError as exc:
+        raise InvalidArgument(f"{what}: {value[0]!r} is not an IPv4 address") from exc
+    check_port(value[1], f"{what} port", zero=what == "bootp_address")
+
+
 def find(
     *,
     serial: bool = True,
@@ -384,7 +414,8 @@ def find(
         bootp_timeout: seconds to listen for them.
 
     Raises:
-        InvalidArgument: a bad address, network or timeout (checked before anything is sent).
+        InvalidArgument: a bad address, network, group or timeout (checked before any port
+            or device is opened and anything is sent).
         GalilConnectionError: the network query could not be sent, or port 67 not bound.
     """
     timeout = _check_seconds(timeout, "timeout")
@@ -392,6 +423,8 @@ def find(
     if isinstance(probe, str):
         probe = [probe]
     _targets(probe)  # validate before anything goes out
+    _check_endpoint(group, "group")
+    _check_endpoint(bootp_address, "bootp_address")
     found: list[Found] = []
     if serial:
         found += serial_ports(identify=identify, identify_bridges=identify_bridges, timeout=timeout)

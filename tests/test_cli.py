@@ -164,3 +164,42 @@ def test_plan_refuses_units_without_a_scale(capsys: pytest.CaptureFixture[str]) 
     assert "scale" in capsys.readouterr().err
     assert cli.main(["plan", "1.5", "--scale", "2000/mm"]) == 2
     assert "not a whole number" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["sim", "--tcp", "127.0.0.1:70000"],
+        ["sim", "--tcp", "127.0.0.1:port"],
+        ["sim", "--message-port", "70000"],
+        ["sim", "--message-port", "-2"],
+    ],
+)
+def test_sim_refuses_a_port_out_of_range_in_one_line(
+    argv: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("galil: ")
+    assert "port" in err
+    assert "Traceback" not in err
+
+
+@pytest.mark.parametrize(
+    "address",
+    [
+        "tcp://[::1",
+        "tcp://127.0.0.1:1?connect_timeout=abc",
+        "usb://1079:4040?interface=abc",
+        "pci:///dev/null?write_timeout=abc",
+        "loop://?bogus=1",
+        "300.300.300.300:23",
+    ],
+)
+def test_info_reports_a_bad_address_in_one_line(
+    address: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert cli.main(["info", address]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("galil: ")
+    assert err.count("\n") == 1

@@ -5,6 +5,7 @@ All network traffic stays on 127.0.0.1: the simulator answers where a controller
 
 from __future__ import annotations
 
+import ipaddress
 import socket
 import threading
 from pathlib import Path
@@ -220,3 +221,69 @@ def test_the_simulator_answers_discovery_on_loopback_only() -> None:
         SimDiscoveryResponder("DMC4040 Rev 1.0", host="0.0.0.0")
     with pytest.raises(InvalidArgument):
         send_bootp_request(("192.168.1.255", 67))
+
+
+def test_a_huge_network_is_refused_at_once_without_listing_its_hosts(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    def listed(self: object) -> object:
+        raise AssertionError("the hosts of the network were listed")
+
+    monkeypatch.setattr(ipaddress.IPv4Network, "hosts", listed)
+    for spec in ("127.0.0.0/8", "127.0.0.0/12", "10.0.0.0/21"):
+        with pytest.raises(InvalidArgument, match="more than 1024"):
+            probe_hosts([spec])
+
+
+def test_a_single_address_network_probes_that_address() -> None:
+    with SimTcpServer() as tcp:
+        host, port = tcp.address
+        found = probe_hosts([f"{host}/32:{port}"], timeout=1.0)
+    assert [f.address for f in found] == [f"tcp://{host}:{port}"]
+
+
+@pytest.mark.parametrize(
+    ("group", "message"),
+    [
+        (("127.0.0.1", 70000), "port"),
+        (("127.0.0.1", "23"), "port"),
+        (("127.0.0.1", True), "port"),
+        (("galil.invalid", 23), "group"),
+        (("127.0.0.1",), "group"),
+        ("127.0.0.1:23", "group"),
+    ],
+)
+def test_find_checks_the_group_before_opening_anything(
+    monkeypatch: pytest.MonkeyPatch, group: object, message: str
+) -> None:
+    def touched(*args: object, **kwargs: object) -> None:
+        raise AssertionError("find() opened something before checking its arguments")
+
+    monkeypatch.setattr(list_ports, "comports", touched)
+    monkeypatch.setattr("glob.glob", touched)
+    monkeypatch.setattr(socket, "getaddrinfo", touched)
+    monkeypatch.setattr(socket.socket, "sendto", touched)
+    with pytest.raises(InvalidArgument, match=message):
+        galil.find(network=True, group=group)  # type: ignore[arg-type]
+
+
+def test_find_checks_the_bootp_address_before_opening_anything(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    def touched(*args: object, **kwargs: object) -> None:
+        raise AssertionError("find() opened something before checking its arguments")
+
+    monkeypatch.setattr(list_ports, "comports", touched)
+    monkeypatch.setattr(socket.socket, "bind", touched)
+    with pytest.raises(InvalidArgument, match="port"):
+        galil.find(usb=False, pci=False, bootp=True, bootp_address=("127.0.0.1", 70000))
+
+
+def test_ask_group_refuses_a_port_out_of_range() -> None:
+    with pytest.raises(InvalidArgument, match="port"):
+        ask_group("127.0.0.1", 70000, timeout=0.1)
+
+
+def test_listen_bootp_refuses_a_port_out_of_range() -> None:
+    with pytest.raises(InvalidArgument, match="port"):
+        listen_bootp(timeout=0.1, address=("127.0.0.1", 70000))

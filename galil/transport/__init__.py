@@ -21,6 +21,7 @@ Other packages add schemes with :func:`register_scheme` or through the entry-poi
 
 from __future__ import annotations
 
+import ipaddress
 import re
 import threading
 from collections.abc import Callable, Mapping
@@ -219,7 +220,10 @@ def split_address(address: str) -> SplitResult:
         raise InvalidArgument(f"empty or non-text address: {address!r}")
     text = address.strip()
     if "://" in text:
-        url = urlsplit(text)
+        try:
+            url = urlsplit(text)
+        except ValueError as exc:  # an unclosed "[" of an IPv6 host
+            raise InvalidArgument(f"malformed address {address!r}: {exc}") from exc
         if not _SCHEME_RE.match(url.scheme):
             raise InvalidArgument(f"malformed address {address!r}")
         return url
@@ -229,6 +233,10 @@ def split_address(address: str) -> SplitResult:
         # A device path keeps its text whole in .path (Windows COM names too).
         return SplitResult("serial", "", text, "", "")
     if _IPV4.match(text):
+        try:
+            ipaddress.IPv4Address(text.partition(":")[0])
+        except ValueError as exc:  # 999.1.1.1 is no address, and no name to look up either
+            raise InvalidArgument(f"{address!r}: not an IPv4 address ({exc})") from exc
         return urlsplit("tcp://" + text)
     raise InvalidArgument(
         f"cannot tell which bus {address!r} is on; write it as a URL, e.g. tcp://{text}, "

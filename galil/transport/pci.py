@@ -10,17 +10,20 @@ from __future__ import annotations
 import errno
 import os
 import select
+import time
 from typing import Any
 from urllib.parse import SplitResult
 
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.transport import parse_options
 from galil.transport.base import TransportBase
+from galil.transport.options import seconds
 
 __all__ = ["PciTransport", "open_pci"]
 
 _CHUNK = 4096
 _DEAD = select.POLLERR | select.POLLHUP | select.POLLNVAL
+_EOF_STEP = 0.01  # how often a node at end of file is read again while a read waits
 
 
 class PciTransport(TransportBase[int]):
@@ -37,7 +40,7 @@ class PciTransport(TransportBase[int]):
 
     def __init__(self, path: str, *, write_timeout: float = 1.0) -> None:
         self.path = path
-        self.write_timeout = write_timeout
+        self.write_timeout = seconds(write_timeout, "write_timeout")
         try:
             flags = os.O_RDWR | os.O_NONBLOCK | os.O_NOCTTY | getattr(os, "O_CLOEXEC", 0)
             fd = os.open(path, flags)
@@ -65,6 +68,20 @@ class PciTransport(TransportBase[int]):
             raise GalilConnectionError(f"{self.label} is gone")
 
     def _recv(self, handle: int, timeout: float) -> bytes:
+        deadline = time.monotonic() + max(0.0, timeout)
+        while True:
+            data = self._recv_once(handle, deadline - time.monotonic())
+            if data is not None:
+                return data
+            # End of file without a hang-up (/dev/null does this): poll says readable at
+            # once, every time. Read again now and then until the timeout, not in a spin.
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return b""
+            time.sleep(min(_EOF_STEP, left))
+
+    def _recv_once(self, handle: int, timeout: float) -> bytes | None:
+        """What one read gets within ``timeout``; ``None`` for end of file."""
         events = self._poll_in.poll(max(0.0, timeout) * 1000)
         if not events:
             return b""
@@ -72,7 +89,7 @@ class PciTransport(TransportBase[int]):
         try:
             data = os.read(handle, _CHUNK)
         except BlockingIOError:
-            data = b""
+            return b""
         except OSError as exc:
             # A pty master reports its closed peer as EIO; a driver node as ENODEV.
             if exc.errno in (errno.EIO, errno.ENODEV, errno.ENXIO):
@@ -80,7 +97,7 @@ class PciTransport(TransportBase[int]):
             raise
         if not data and mask & _DEAD:
             raise GalilConnectionError(f"{self.label} is gone (peer hung up)")
-        return data
+        return data or None
 
     def _release(self, handle: int) -> None:
         os.close(handle)
@@ -90,14 +107,14 @@ def open_pci(url: SplitResult, **options: Any) -> PciTransport:
     """Open ``/dev/galilpciN`` or ``pci:///path/to/node``; option ``write_timeout``.
 
     Raises:
-        InvalidArgument: no path, or an unknown option.
+        InvalidArgument: no path, a bad ``write_timeout``, or an unknown option.
         GalilConnectionError: the node cannot be opened.
     """
     opts = parse_options(url, options)
     path = url.netloc + url.path
     if not path:
         raise InvalidArgument(f"no device node in {url.geturl()!r}; e.g. /dev/galilpci0")
-    write_timeout = float(opts.pop("write_timeout", 1.0))
+    write_timeout = seconds(opts.pop("write_timeout", 1.0), "write_timeout")
     if opts:
         raise InvalidArgument(f"unknown PCI option(s): {', '.join(sorted(opts))}")
     return PciTransport(path, write_timeout=write_timeout)

@@ -7,34 +7,57 @@ follow Galil's own host library: 8 data bits, no parity, 1 stop bit, RTS/CTS han
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, Protocol
-from urllib.parse import SplitResult
+from urllib.parse import SplitResult, parse_qsl
 
 import serial
 
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.transport import PYSERIAL_SCHEMES, parse_options
 from galil.transport.base import TransportBase
+from galil.transport.options import choice, flag, seconds, whole_number
 
 __all__ = ["DEFAULT_BAUDRATE", "SerialPort", "SerialTransport", "open_serial"]
 
 DEFAULT_BAUDRATE = 115200
 
-# Options forwarded to pyserial; anything else is a typo we report.
-_PYSERIAL_OPTIONS = frozenset(
-    {
-        "baudrate",
-        "bytesize",
-        "parity",
-        "stopbits",
-        "xonxoff",
-        "rtscts",
-        "dsrdtr",
-        "write_timeout",
-        "exclusive",
-        "inter_byte_timeout",
-    }
-)
+
+_LOG_LEVELS = ("debug", "info", "warning", "error")
+# The query parameters of pyserial's URL handlers (pyserial 3.5); a scheme not listed here
+# (cp2110) is left to pyserial. The value checked, where pyserial looks it up in a table.
+_PYSERIAL_QUERY: dict[str, dict[str, tuple[str, ...] | None]] = {
+    "loop": {"logging": _LOG_LEVELS},
+    "socket": {"logging": _LOG_LEVELS},
+    "rfc2217": {
+        "logging": _LOG_LEVELS,
+        "ign_set_control": None,
+        "poll_modem": None,
+        "timeout": None,
+    },
+    "spy": {"file": None, "color": None, "raw": None, "all": None},
+    "hwgrep": {"n": None, "skip_busy": None},
+    "alt": {"class": None},
+}
+
+
+def _maybe_seconds(value: object, what: str) -> float | None:
+    return None if value is None else seconds(value, what)
+
+
+# Each option pyserial takes, with the check it gets before the port is opened.
+_CHECKS: dict[str, Callable[[object, str], object]] = {
+    "baudrate": lambda v, w: whole_number(v, w, 1, 100_000_000),
+    "bytesize": lambda v, w: choice(v, w, (5, 6, 7, 8)),
+    "parity": lambda v, w: choice(v.upper() if isinstance(v, str) else v, w, "NEOMS"),
+    "stopbits": lambda v, w: choice(v, w, (1, 1.5, 2)),
+    "xonxoff": flag,
+    "rtscts": flag,
+    "dsrdtr": flag,
+    "exclusive": lambda v, w: None if v is None else flag(v, w),
+    "write_timeout": _maybe_seconds,
+    "inter_byte_timeout": _maybe_seconds,
+}
 
 
 class SerialPort(Protocol):
@@ -114,14 +137,42 @@ class SerialTransport(TransportBase[SerialPort]):
         handle.close()  # best effort: the base ignores the errors of a vanished device
 
 
+def _check_url_query(url: SplitResult, target: str) -> None:
+    """Refuse what pyserial's URL handler would not take in the query of ``target``."""
+    known = _PYSERIAL_QUERY.get(url.scheme.lower())
+    if known is None:
+        return
+    for key, value in parse_qsl(url.query, keep_blank_values=True):
+        if key not in known:
+            names = ", ".join(known) or "none"
+            raise InvalidArgument(f"unknown option {key!r} in {target!r}; known: {names}")
+        allowed = known[key]
+        if allowed is not None:
+            choice(value, f"{key} in {target!r}", allowed)
+
+
+def _checked(opts: dict[str, Any]) -> dict[str, Any]:
+    """The pyserial options, each checked, with this library's defaults filled in."""
+    unknown = set(opts) - set(_CHECKS)
+    if unknown:
+        raise InvalidArgument(
+            f"unknown serial option(s): {', '.join(sorted(unknown))}; "
+            f"known: {', '.join(sorted(_CHECKS))}"
+        )
+    opts.setdefault("baudrate", DEFAULT_BAUDRATE)
+    opts.setdefault("rtscts", True)
+    return {key: _CHECKS[key](value, key) for key, value in opts.items()}
+
+
 def open_serial(url: SplitResult, **options: Any) -> SerialTransport:
     """Open a serial port or pyserial URL.
 
     Options (URL query or keywords): ``baudrate`` (115200), ``bytesize``, ``parity``,
-    ``stopbits``, ``rtscts`` (True), ``xonxoff``, ``dsrdtr``, ``write_timeout``, ``exclusive``.
+    ``stopbits``, ``rtscts`` (True), ``xonxoff``, ``dsrdtr``, ``write_timeout``, ``exclusive``,
+    ``inter_byte_timeout``.
 
     Raises:
-        InvalidArgument: unknown option or no port named.
+        InvalidArgument: unknown option, a bad value, or no port named.
         GalilConnectionError: the port cannot be opened.
     """
     scheme = url.scheme.lower()
@@ -131,22 +182,18 @@ def open_serial(url: SplitResult, **options: Any) -> SerialTransport:
         target = f"{url.scheme}://{url.netloc}{url.path}"
         if url.query:
             target += "?" + url.query
+        _check_url_query(url, target)
         opts = dict(options)
     else:
         target = url.netloc + url.path
         opts = parse_options(url, options)
         if not target:
             raise InvalidArgument(f"no serial port in {url.geturl()!r}; e.g. serial:///dev/ttyS0")
-    unknown = set(opts) - _PYSERIAL_OPTIONS
-    if unknown:
-        raise InvalidArgument(
-            f"unknown serial option(s): {', '.join(sorted(unknown))}; "
-            f"known: {', '.join(sorted(_PYSERIAL_OPTIONS))}"
-        )
-    opts.setdefault("baudrate", DEFAULT_BAUDRATE)
-    opts.setdefault("rtscts", True)
+    opts = _checked(opts)
     try:
         port = serial.serial_for_url(target, timeout=0, **opts)
-    except (serial.SerialException, OSError, ValueError) as exc:
+    except (serial.SerialException, OSError) as exc:
         raise GalilConnectionError(f"cannot open serial port {target!r}: {exc}") from exc
+    except ValueError as exc:  # pyserial refused a value (a query we do not check)
+        raise InvalidArgument(f"cannot open serial port {target!r}: {exc}") from exc
     return SerialTransport(port, target)

@@ -10,6 +10,8 @@ own).
 from __future__ import annotations
 
 import contextlib
+import select
+import selectors
 import socket
 from typing import Any
 from urllib.parse import SplitResult
@@ -18,16 +20,14 @@ from galil.errors import GalilConnectionError, InvalidArgument
 from galil.models import ETHERNET_BYTES_PER_S
 from galil.transport import parse_options
 from galil.transport.base import TransportBase
+from galil.transport.options import check_port, dotted_quad, seconds
 
 __all__ = ["DEFAULT_PORT", "TcpTransport", "UdpTransport", "open_tcp"]
 
 DEFAULT_PORT = 23
 _CHUNK = 65536
-
-
-def _check_port(port: object, what: str) -> None:
-    if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
-        raise InvalidArgument(f"{what} must be 1..65535, got {port!r}")
+# poll() where there is one (no FD_SETSIZE ceiling, no descriptor of its own), else select().
+_Selector = selectors.PollSelector if hasattr(select, "poll") else selectors.SelectSelector
 
 
 class TcpTransport(TransportBase[socket.socket]):
@@ -41,6 +41,8 @@ class TcpTransport(TransportBase[socket.socket]):
         host: controller host name or address.
         port: TCP port (23, the Galil command port, by default).
         connect_timeout: seconds allowed for the TCP handshake.
+        write_timeout: seconds a write may wait for the peer to take more data (whatever
+            the read timeout is).
         sock: an already connected socket to adopt instead of connecting (tests, tunnels).
         message_port: a port that carries only unsolicited output (the simulator's server,
             protocol gateways); :meth:`open_secondary` connects there instead of to ``port``.
@@ -59,19 +61,22 @@ class TcpTransport(TransportBase[socket.socket]):
         port: int = DEFAULT_PORT,
         *,
         connect_timeout: float = 5.0,
+        write_timeout: float = 5.0,
         sock: socket.socket | None = None,
         message_port: int | None = None,
         messages_only: bool = False,
     ) -> None:
-        _check_port(port, "TCP port")
+        check_port(port, "TCP port")
         if message_port is not None:
-            _check_port(message_port, "message port")
+            check_port(message_port, "message port")
         self.host = host
         self.port = port
-        self.connect_timeout = connect_timeout
+        self.connect_timeout = seconds(connect_timeout, "connect_timeout")
+        self.write_timeout = seconds(write_timeout, "write_timeout")
         self.message_port = message_port
         self.messages_only = messages_only
         if sock is None:
+            dotted_quad(host, "TCP host")  # no DNS query for 999.1.1.1
             try:
                 sock = socket.create_connection((host, port), timeout=connect_timeout)
             except OSError as exc:
@@ -82,7 +87,14 @@ class TcpTransport(TransportBase[socket.socket]):
         # (A socketpair adopted in tests is no TCP socket: nothing to tune then.)
         with contextlib.suppress(OSError):
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        # timeout=None: the socket still has the connect timeout; the first read sets its own.
+        # The socket stays non-blocking: a read waits for input and a write for room, each
+        # with its own timeout. (A socket timeout would be shared: a zero-timeout poll would
+        # leave the next large write unable to wait for the peer.)
+        sock.setblocking(False)
+        self._readable = _Selector()
+        self._readable.register(sock, selectors.EVENT_READ)
+        self._writable = _Selector()
+        self._writable.register(sock, selectors.EVENT_WRITE)
         super().__init__(sock, name=f"{host}:{port}", label=f"TCP link to {host}:{port}")
 
     @property
@@ -90,22 +102,32 @@ class TcpTransport(TransportBase[socket.socket]):
         """Sustained command bytes per second (round trips, not the wire, set the pace)."""
         return ETHERNET_BYTES_PER_S
 
-    def _send(self, handle: socket.socket, data: bytes) -> None:
-        handle.sendall(data)
+    def _send_some(self, handle: socket.socket, data: memoryview) -> int:
+        try:
+            return handle.send(data)
+        except BlockingIOError:
+            return 0
 
-    def _set_timeout(self, handle: socket.socket, seconds: float) -> None:
-        handle.settimeout(seconds)  # 0 makes the socket non-blocking: a poll
+    def _wait_writable(self, handle: socket.socket) -> None:
+        if not self._writable.select(self.write_timeout):
+            raise GalilConnectionError(
+                f"{self.label} did not accept data within {self.write_timeout:g} s"
+            )
 
     def _recv(self, handle: socket.socket, timeout: float) -> bytes:
+        if timeout > 0 and not self._readable.select(timeout):
+            return b""
         try:
             data = handle.recv(_CHUNK)
-        except (TimeoutError, BlockingIOError):
+        except BlockingIOError:
             return b""
         if not data:
             raise GalilConnectionError(f"controller at {self.host}:{self.port} closed the link")
         return data
 
     def _release(self, handle: socket.socket) -> None:
+        self._readable.close()
+        self._writable.close()
         with contextlib.suppress(OSError):  # already reset by the peer
             handle.shutdown(socket.SHUT_RDWR)
         handle.close()
@@ -126,10 +148,11 @@ class TcpTransport(TransportBase[socket.socket]):
                 self.host,
                 self.message_port,
                 connect_timeout=self.connect_timeout,
+                write_timeout=self.write_timeout,
                 messages_only=True,
             )
         else:
-            second = TcpTransport(self.host, self.port, connect_timeout=self.connect_timeout)
+            second = self._another()
         self.secondary = second
         return second
 
@@ -141,7 +164,15 @@ class TcpTransport(TransportBase[socket.socket]):
                 (it has eight at most).
         """
         self._live()
-        return TcpTransport(self.host, self.port, connect_timeout=self.connect_timeout)
+        return self._another()
+
+    def _another(self) -> TcpTransport:
+        return TcpTransport(
+            self.host,
+            self.port,
+            connect_timeout=self.connect_timeout,
+            write_timeout=self.write_timeout,
+        )
 
     def open_datagram_handle(self) -> UdpTransport:
         """Open a UDP handle to the same controller and port (interrupts go to one); the
@@ -170,7 +201,8 @@ class UdpTransport(TransportBase[socket.socket]):
     kind = "ethernet"
 
     def __init__(self, host: str, port: int = DEFAULT_PORT) -> None:
-        _check_port(port, "UDP port")
+        check_port(port, "UDP port")
+        dotted_quad(host, "UDP host")
         self.host = host
         self.port = port
         try:
@@ -199,10 +231,12 @@ class UdpTransport(TransportBase[socket.socket]):
 
 
 def open_tcp(url: SplitResult, **options: Any) -> TcpTransport:
-    """Open ``tcp://host[:port]``; options: ``port``, ``connect_timeout``, ``message_port``.
+    """Open ``tcp://host[:port]``.
+
+    Options: ``port``, ``connect_timeout``, ``write_timeout``, ``message_port``.
 
     Raises:
-        InvalidArgument: no host, or an option we do not know.
+        InvalidArgument: no host, a path after it, a bad value, or an option we do not know.
         GalilConnectionError: the connection failed.
     """
     opts = parse_options(url, options)
@@ -213,9 +247,20 @@ def open_tcp(url: SplitResult, **options: Any) -> TcpTransport:
     host = url.hostname
     if not host:
         raise InvalidArgument(f"no host in {url.geturl()!r}; write tcp://host[:port]")
-    port = opts.pop("port", url_port if url_port is not None else DEFAULT_PORT)
-    connect_timeout = float(opts.pop("connect_timeout", 5.0))
+    if url.path not in ("", "/") or url.fragment:
+        raise InvalidArgument(f"a TCP address has no path: {url.geturl()!r}")
+    port = check_port(opts.pop("port", DEFAULT_PORT if url_port is None else url_port), "TCP port")
+    connect_timeout = seconds(opts.pop("connect_timeout", 5.0), "connect_timeout")
+    write_timeout = seconds(opts.pop("write_timeout", 5.0), "write_timeout")
     message_port = opts.pop("message_port", None)
+    if message_port is not None:
+        check_port(message_port, "message port")
     if opts:
         raise InvalidArgument(f"unknown TCP option(s): {', '.join(sorted(opts))}")
-    return TcpTransport(host, port, connect_timeout=connect_timeout, message_port=message_port)
+    return TcpTransport(
+        host,
+        port,
+        connect_timeout=connect_timeout,
+        write_timeout=write_timeout,
+        message_port=message_port,
+    )

@@ -18,6 +18,7 @@ import usb.util
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.transport import parse_options
 from galil.transport.base import TransportBase
+from galil.transport.options import seconds, whole_number
 
 __all__ = ["UsbTransport", "open_usb"]
 
@@ -40,10 +41,13 @@ class UsbTransport(TransportBase[Any]):
     kind = "usb"
 
     def __init__(self, device: Any, *, interface: int = 0, write_timeout: float = 1.0) -> None:
+        _check_device(device)
+        interface = whole_number(interface, "interface", 0, 255)
+        write_ms = max(1, round(seconds(write_timeout, "write_timeout") * 1000))
         name = f"{device.idVendor:04x}:{device.idProduct:04x}"
         super().__init__(device, name=name, label=f"USB device {name}")
         self.interface = interface
-        self.write_timeout_ms = max(1, round(write_timeout * 1000))
+        self.write_timeout_ms = write_ms
         try:
             self._detach_kernel_driver(device)
             try:
@@ -98,6 +102,14 @@ class UsbTransport(TransportBase[Any]):
             usb.util.release_interface(handle, self.interface)
         finally:  # unplugged: nothing left to release, but pyusb's resources still go
             usb.util.dispose_resources(handle)
+
+
+def _check_device(device: object) -> None:
+    """Refuse a ``device=`` that is not a USB device (it has no 16-bit vendor and product ids)."""
+    for attr in ("idVendor", "idProduct"):
+        value = getattr(device, attr, None)
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 0xFFFF:
+            raise InvalidArgument(f"device must be a usb.core.Device, got {device!r}")
 
 
 def _bulk_endpoint(intf: Any, direction: int) -> Any:
@@ -182,18 +194,20 @@ def open_usb(url: SplitResult, **options: Any) -> UsbTransport:
     ``device`` (a ready ``usb.core.Device``; skips the search).
 
     Raises:
-        InvalidArgument: malformed address or unknown option.
+        InvalidArgument: malformed address, a bad value, or an unknown option.
         GalilConnectionError: no such device, or it cannot be claimed.
     """
     opts = parse_options(url, options)
     vid, pid = _parse_ids(url.netloc)
     serial = opts.pop("serial", None)
-    interface = int(opts.pop("interface", 0))
-    write_timeout = float(opts.pop("write_timeout", 1.0))
+    interface = whole_number(opts.pop("interface", 0), "interface", 0, 255)
+    write_timeout = seconds(opts.pop("write_timeout", 1.0), "write_timeout")
     backend = opts.pop("backend", None)
     device = opts.pop("device", None)
     if opts:
         raise InvalidArgument(f"unknown USB option(s): {', '.join(sorted(opts))}")
+    if device is not None:
+        _check_device(device)
     if device is None:
         device = find_device(vid, pid, None if serial is None else str(serial), backend=backend)
     return UsbTransport(device, interface=interface, write_timeout=write_timeout)

@@ -6,6 +6,9 @@ timeouts, large writes, close, a vanished peer) is in test_contract.py.
 
 from __future__ import annotations
 
+import os
+import time
+
 import pytest
 from transport_peers import PtyPair
 
@@ -47,3 +50,27 @@ def test_bad_options() -> None:
         open_transport("/dev/galilpci0", baudrate=9600)
     with pytest.raises(InvalidArgument, match="no device node"):
         open_transport("pci://")
+
+
+def test_a_node_at_end_of_file_waits_out_the_read_timeout_instead_of_spinning(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # /dev/null polls readable and reads as end of file, with no hang-up: each read used to
+    # return at once, so a caller waiting for a reply spun on the CPU until its deadline.
+    reads = 0
+    real_read = os.read
+
+    def counting_read(fd: int, n: int) -> bytes:
+        nonlocal reads
+        reads += 1
+        return real_read(fd, n)
+
+    t = open_transport("pci:///dev/null")
+    monkeypatch.setattr(os, "read", counting_read)
+    try:
+        deadline = time.monotonic() + 0.3
+        while (left := deadline - time.monotonic()) > 0:
+            assert t.read(left) == b""
+        assert reads < 100
+    finally:
+        t.close()

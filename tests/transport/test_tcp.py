@@ -7,6 +7,7 @@ test_contract.py.
 from __future__ import annotations
 
 import socket
+import threading
 
 import pytest
 from transport_peers import TcpPeer, read_until
@@ -150,3 +151,48 @@ def test_adopts_a_connected_socket() -> None:
     finally:
         t.close()
         b.close()
+
+
+def test_a_large_write_after_a_polling_read_waits_for_a_slow_reader() -> None:
+    # A zero-timeout read must not leave the socket unable to wait: an 8 MB write overflows
+    # every socket buffer, so it has to block until the (slow) peer has read it all.
+    size = 8_000_000
+    got = bytearray()
+    with socket.create_server(("127.0.0.1", 0)) as server:
+        t = open_transport(f"tcp://127.0.0.1:{server.getsockname()[1]}", write_timeout=10.0)
+        conn, _ = server.accept()
+
+        def drain_slowly() -> None:
+            while len(got) < size:
+                chunk = conn.recv(4096)  # small reads: the writer outpaces it
+                if not chunk:
+                    return
+                got.extend(chunk)
+
+        reader = threading.Thread(target=drain_slowly)
+        try:
+            assert t.read(0.0) == b""  # a poll
+            reader.start()
+            t.write(b"x" * size)
+            reader.join(timeout=30)
+            assert len(got) == size
+            assert t.read(0.0) == b""  # still a poll afterwards
+            conn.sendall(b":")
+            assert read_until(t.read, b":") == b":"
+        finally:
+            t.close()
+            conn.close()
+            reader.join(timeout=30)
+
+
+def test_a_write_the_peer_never_takes_gives_up_after_the_write_timeout() -> None:
+    with socket.create_server(("127.0.0.1", 0)) as server:
+        t = open_transport(f"tcp://127.0.0.1:{server.getsockname()[1]}", write_timeout=0.05)
+        conn, _ = server.accept()
+        try:
+            t.read(0.0)
+            with pytest.raises(GalilConnectionError, match=r"did not accept data within 0\.05 s"):
+                t.write(b"x" * 50_000_000)
+        finally:
+            t.close()
+            conn.close()
