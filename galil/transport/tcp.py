@@ -87,12 +87,10 @@ class TcpTransport(TransportBase[socket.socket]):
         # (A socketpair adopted in tests is no TCP socket: nothing to tune then.)
         with contextlib.suppress(OSError):
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        # The socket stays non-blocking: a read waits for input and a write for room, each
-        # with its own timeout. (A socket timeout would be shared: a zero-timeout poll would
-        # leave the next large write unable to wait for the peer.)
-        sock.setblocking(False)
-        self._readable = _Selector()
-        self._readable.register(sock, selectors.EVENT_READ)
+        # Reads wait with the socket's timeout (one C-level poll and recv: the round trip's
+        # hot path). A write goes out with whatever timeout the last read left, 0 included;
+        # when the peer takes no more, it waits for room up to write_timeout on a selector of
+        # its own (a zero-timeout poll must not leave a large write unable to wait).
         self._writable = _Selector()
         self._writable.register(sock, selectors.EVENT_WRITE)
         super().__init__(sock, name=f"{host}:{port}", label=f"TCP link to {host}:{port}")
@@ -105,8 +103,11 @@ class TcpTransport(TransportBase[socket.socket]):
     def _send_some(self, handle: socket.socket, data: memoryview) -> int:
         try:
             return handle.send(data)
-        except BlockingIOError:
+        except (BlockingIOError, TimeoutError):  # no room now: _wait_writable waits for it
             return 0
+
+    def _set_timeout(self, handle: socket.socket, seconds: float) -> None:
+        handle.settimeout(seconds)  # 0 makes the socket non-blocking: a poll
 
     def _wait_writable(self, handle: socket.socket) -> None:
         if not self._writable.select(self.write_timeout):
@@ -115,18 +116,15 @@ class TcpTransport(TransportBase[socket.socket]):
             )
 
     def _recv(self, handle: socket.socket, timeout: float) -> bytes:
-        if timeout > 0 and not self._readable.select(timeout):
-            return b""
         try:
             data = handle.recv(_CHUNK)
-        except BlockingIOError:
+        except (TimeoutError, BlockingIOError):
             return b""
         if not data:
             raise GalilConnectionError(f"controller at {self.host}:{self.port} closed the link")
         return data
 
     def _release(self, handle: socket.socket) -> None:
-        self._readable.close()
         self._writable.close()
         with contextlib.suppress(OSError):  # already reset by the peer
             handle.shutdown(socket.SHUT_RDWR)
