@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import numbers
 import time
 from collections.abc import AsyncIterator, Mapping
 from dataclasses import dataclass, field
@@ -53,7 +54,7 @@ from ophyd_async.core import (
 )
 from ophyd_async.core import StandardReadableFormat as Format
 
-from galil.aio import AsyncAxis, AsyncController, AsyncRecordStream
+from galil.aio import AsyncAxis, AsyncController, AsyncMoveHandle, AsyncRecordStream
 from galil.aio import connect as aio_connect
 from galil.contour import ContourResult, ContourStream
 from galil.controller import Controller
@@ -213,8 +214,10 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
             where the axis really is).
 
     Signals (in the axis's unit): ``readback`` (``_TP``, read under the device's name, with
-    ``units`` and ``precision`` in ``describe()``), ``setpoint`` (the last target), and the
-    configuration ``velocity`` (``SP``) and ``acceleration`` (``AC``).
+    ``units`` and ``precision`` in ``describe()``), ``setpoint`` (the target of the ``set()``
+    in progress, else the controller's commanded position ``_RP``: where the last move,
+    made here or not, ended), and the configuration ``velocity`` (``SP``) and
+    ``acceleration`` (``AC``).
     """
 
     def __init__(
@@ -238,6 +241,7 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         self._settle_timeout = float(settle_timeout)
         self._axis: AsyncAxis | None = None
         self._stopped: bool | None = None  # success flag of a stop() during set()
+        self._moving_to: float | None = None  # the target of the set() in progress
         unit, precision = _unit_and_precision(self._scale)
         self._unit = unit
         self._precision = precision
@@ -252,8 +256,10 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
             self.acceleration, _ = soft_signal_r_and_setter(
                 float, 0.0, units=f"{unit}/s**2", getter=self._read_accel
             )
-        self.setpoint, self._set_setpoint = soft_signal_r_and_setter(
-            float, 0.0, units=unit, precision=precision
+        # Read from the controller, as an ophyd-async EPICS motor reads its setpoint PV: a
+        # cached last target would be wrong at connect and after a move made elsewhere.
+        self.setpoint, _ = soft_signal_r_and_setter(
+            float, 0.0, units=unit, precision=precision, getter=self._read_setpoint
         )
         super().__init__(name=name, connector=_GalilConnector(address))
 
@@ -285,12 +291,14 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
             return float(value)
         return float(value.m_as(self._scale.unit / get_registry().s ** power))
 
-    def _target(self, value: float) -> Any:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
+    def _target(self, value: object) -> Any:
+        """``value`` as the axis takes it (any real number, numpy's included; not a bool)."""
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
             raise InvalidArgument(f"{self.name}: a position is a number, not {value!r}")
+        number = int(value) if isinstance(value, numbers.Integral) else float(value)
         if self._scale is None:
-            return value
-        return get_registry().Quantity(float(value), self._scale.unit)
+            return number
+        return get_registry().Quantity(float(number), self._scale.unit)
 
     async def _read_position(self) -> float:
         return self._user(await self.axis.position())
@@ -301,46 +309,86 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
     async def _read_accel(self) -> float:
         return self._rate(await self.axis.accel(), 2)
 
+    async def _read_setpoint(self) -> float:
+        if self._moving_to is not None:
+            return self._moving_to
+        return self._user(await self.axis.reference_position())
+
     # -- Movable, Checkable, Locatable, Stoppable ---------------------------------------------
-    @WatchableAsyncStatus.wrap
-    async def set(
+    def set(
         self, value: float, timeout: CalculatableTimeout = "CALCULATE_TIMEOUT"
-    ) -> AsyncIterator[WatcherUpdate[float]]:
+    ) -> WatchableAsyncStatus[float]:
         """Move to ``value`` (the axis's unit); progress comes from the move's prediction.
 
         ``timeout``: the default allows the predicted duration with a margin; ``None`` waits
-        for ever. A ``stop(success=False)`` during the move makes the status fail.
+        for ever. A status that fails (a timeout, an error, a cancellation) leaves no motion:
+        the axis is stopped first. A ``stop()`` at any point of the move, even before it has
+        started, stops it; with ``success=False`` the status then fails.
         """
+        self._stopped = None  # from the call on, not once the move's task runs: stop() counts
+        return self._move(value, timeout)
+
+    @WatchableAsyncStatus.wrap
+    async def _move(
+        self, value: float, timeout: CalculatableTimeout
+    ) -> AsyncIterator[WatcherUpdate[float]]:
         axis = self.axis
         target = self._target(value)
-        self._stopped = None
         initial = await self.readback.get_value()
-        handle = await axis.move_to(target)
-        self._set_setpoint(float(value))
-        wait = None if timeout == CALCULATE_TIMEOUT else (1e9 if timeout is None else timeout)
-
-        def update(
-            current: float, fraction: float | None, elapsed: float | None, left: float
-        ) -> WatcherUpdate[float]:
-            return WatcherUpdate(
-                current=current,
-                initial=initial,
-                target=float(value),
-                name=self.name,
-                unit=self._unit,
-                precision=self._precision,
-                fraction=fraction,
-                time_elapsed=elapsed,
-                time_remaining=left,
-            )
-
-        async for p in handle.watch(None if wait is None else float(wait)):
-            yield update(p.positions.get(axis.letter, initial), p.fraction, p.elapsed, p.remaining)
-        await handle.wait()
-        await self._settle()
-        yield update(await self.readback.get_value(), 1.0, None, 0.0)
+        if not self._stop_requested():  # else stopped before the move began: it never does
+            self._moving_to = float(value)
+            try:
+                handle = await axis.move_to(target)
+                try:
+                    if self._stop_requested():  # stop() came while the move was starting
+                        await handle.stop()
+                    async for update in self._progress(handle, float(value), initial, timeout):
+                        yield update
+                    await handle.wait()
+                except BaseException:
+                    await handle.stop_unless_done()  # motion never outlives a failed status
+                    raise
+            finally:
+                self._moving_to = None
+            await self._settle()
+            yield self._update(await self.readback.get_value(), initial, float(value), 1.0, 0.0)
         if self._stopped is False:
             raise RuntimeError(f"{self.name} was stopped")
+
+    def _stop_requested(self) -> bool:
+        """Whether ``stop()`` was called since the last ``set()`` (read again after awaits)."""
+        return self._stopped is not None
+
+    async def _progress(
+        self, handle: AsyncMoveHandle, value: float, initial: float, timeout: CalculatableTimeout
+    ) -> AsyncIterator[WatcherUpdate[float]]:
+        """The predicted progress of ``handle`` until it is done (or ``timeout`` passes)."""
+        wait = None if timeout == CALCULATE_TIMEOUT else (1e9 if timeout is None else timeout)
+        letter = handle.axes[0]
+        async for p in handle.watch(None if wait is None else float(wait)):
+            current = p.positions.get(letter, initial)
+            yield self._update(current, initial, value, p.fraction, p.remaining, p.elapsed)
+
+    def _update(
+        self,
+        current: float,
+        initial: float,
+        target: float,
+        fraction: float | None,
+        left: float,
+        elapsed: float | None = None,
+    ) -> WatcherUpdate[float]:
+        return WatcherUpdate(
+            current=current,
+            initial=initial,
+            target=target,
+            name=self.name,
+            unit=self._unit,
+            precision=self._precision,
+            fraction=fraction,
+            time_elapsed=elapsed,
+            time_remaining=left,
+        )
 
     async def _settle(self) -> None:
         """Wait (briefly) for the servo to bring the encoder onto the reference."""
@@ -356,7 +404,8 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         await self.axis.plan_to(self._target(value))
 
     async def locate(self) -> Location[float]:
-        """Where the motor was asked to go and where it is."""
+        """Where the motor is going (a ``set()`` in progress) or was commanded to (``_RP``),
+        and where it is (``_TP``)."""
         setpoint, readback = await asyncio.gather(
             self.setpoint.get_value(), self.readback.get_value()
         )

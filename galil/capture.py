@@ -28,7 +28,7 @@ import numpy.typing as npt
 
 from galil.arrays import Arrays
 from galil.errors import GalilError, GalilTimeoutError, InvalidArgument, ProtocolError
-from galil.link import CommandLink, check_count
+from galil.link import CommandLink, check_count, check_wait_timeout
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import parse_number
 
@@ -208,9 +208,11 @@ class Capture:
             timeout: seconds at most (default: the recording's duration plus a margin).
 
         Raises:
-            InvalidArgument: the capture was not started.
+            InvalidArgument: the capture was not started, or ``timeout`` is not ``None`` or a
+                finite number >= 0 (:func:`~galil.link.check_wait_timeout`).
             GalilTimeoutError: still recording after ``timeout`` (it goes on; :meth:`stop`).
         """
+        check_wait_timeout(timeout)
         if self.result is not None:
             return self.result
         if self.start_sample is None:

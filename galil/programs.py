@@ -36,7 +36,7 @@ from galil.protocol.programs import check_program, program_lines
 from galil.routines import MARKER, Routines, split_program
 from galil.tuning import burn
 
-__all__ = ["Download", "Programs"]
+__all__ = ["Download", "Programs", "check_thread_timeout"]
 
 _LOG = logging.getLogger("galil.programs")
 
@@ -58,6 +58,21 @@ class Download:
 
     def __bool__(self) -> bool:
         return self.sent
+
+
+def check_thread_timeout(timeout: object) -> float:
+    """A thread wait's timeout: a finite number of seconds >= 0 (``None`` and infinity are
+    refused: a wait for a program has an end). ``Programs.wait`` and its async twin both
+    use it.
+
+    Raises:
+        InvalidArgument: anything else.
+    """
+    if timeout is None:
+        raise InvalidArgument("timeout must be a non-negative number, not None")
+    check_wait_timeout(timeout)
+    assert isinstance(timeout, (int, float))
+    return float(timeout)
 
 
 def _read_source(source: str | os.PathLike[str]) -> str:
@@ -196,9 +211,7 @@ class Programs:
             GalilTimeoutError: it still runs after ``timeout`` seconds (it is not halted).
         """
         n = self._thread(thread)
-        if timeout is None:
-            raise InvalidArgument("timeout must be a non-negative number, not None")
-        check_wait_timeout(timeout)
+        timeout = check_thread_timeout(timeout)
         link = self.link
         deadline = link.clock() + timeout
         while round(link.query_operands([f"_XQ{n}"])[0]) >= 0:

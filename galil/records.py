@@ -28,7 +28,7 @@ from galil.errors import (
     InvalidArgument,
     ProtocolError,
 )
-from galil.link import Link, check_count, read_reply
+from galil.link import Link, check_count, check_wait_timeout, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import parse_number
 from galil.protocol.records import (
@@ -253,10 +253,13 @@ class RecordStream:
         """Return the next record, waiting up to ``timeout`` seconds (``None``: for ever).
 
         Raises:
+            InvalidArgument: ``timeout`` not ``None`` or a finite number >= 0
+                (:func:`~galil.link.check_wait_timeout`, as the async stream), before a read.
             queue.Empty: no record within ``timeout``.
             GalilConnectionError: the stream is closed (or its handle died).
             ProtocolError: the record stream could not be decoded.
         """
+        check_wait_timeout(timeout)
         if self.method == "QR":
             return self._poll(timeout)
         with self._cond:

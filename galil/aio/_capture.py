@@ -16,11 +16,10 @@ from __future__ import annotations
 import asyncio
 from types import TracebackType
 
-from galil.aio._waits import check_wait
 from galil.aio._worker import Room, Worker, twin
 from galil.capture import Capture, Recording
 from galil.errors import GalilError, GalilTimeoutError, InvalidArgument
-from galil.link import Link
+from galil.link import Link, check_wait_timeout
 from galil.motion import MAX_POLL, MIN_POLL
 from galil.watchdog import Watchdog
 
@@ -110,13 +109,15 @@ class AsyncCapture(Room[Capture]):
             timeout: seconds from the start at most (default: the duration plus a margin).
 
         Raises:
+            InvalidArgument: as the sync wait: ``timeout`` not ``None`` or a finite number
+                >= 0 (:func:`~galil.link.check_wait_timeout`).
             GalilTimeoutError: still recording after ``timeout`` (it goes on; :meth:`stop`).
         """
+        check_wait_timeout(timeout)
         if self.sync.result is not None:
             return self.sync.result
-        total = check_wait(timeout)
         worker, link = self._worker, self._link
-        poll = _CapturePoll(self.sync, link, self._started, total)
+        poll = _CapturePoll(self.sync, link, self._started, timeout)
         while (pause := await worker.run(poll)) is not None:
             if link.simulated_time:
                 await worker.run(link.pause, pause)

@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import math
-from collections.abc import AsyncIterator, Awaitable, Callable, Generator
+from collections.abc import AsyncGenerator, Awaitable, Callable, Generator
 from dataclasses import dataclass
 from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
 
@@ -41,6 +42,8 @@ __all__ = [
     "motion_twin",
     "start_motion",
 ]
+
+_LOG = logging.getLogger("galil.aio")
 
 P = ParamSpec("P")
 S = TypeVar("S")
@@ -220,7 +223,7 @@ class AsyncMoveHandle:
 
     async def watch(
         self, timeout: float | None = None, *, stop_on_cancel: bool = True
-    ) -> AsyncIterator[MoveProgress]:
+    ) -> AsyncGenerator[MoveProgress, None]:
         """Yield the predicted progress at every poll until the move is done.
 
         Polls come at the sync handle's cadence (at most 100 ms apart); on a manual-clock
@@ -229,7 +232,10 @@ class AsyncMoveHandle:
         Args:
             timeout: seconds to wait at most (``None``: the predicted duration plus a margin,
                 or for ever for a jog that has not been stopped).
-            stop_on_cancel: stop the move (``ST``) when the task iterating is cancelled.
+            stop_on_cancel: stop the move (``ST``) when the task iterating is cancelled, or
+                when the generator is closed before the move is done (``aclose()``, or its
+                finalisation after the loop was left by ``break``, an exception or a
+                cancellation in the loop's body); ``False`` only watches.
 
         Raises:
             GalilTimeoutError: not done in time (the move is NOT stopped).
@@ -245,9 +251,10 @@ class AsyncMoveHandle:
                     await worker.run(link.pause, pause)
                 else:
                     await asyncio.sleep(pause)
-        except asyncio.CancelledError:
+        except (asyncio.CancelledError, GeneratorExit):
+            # GeneratorExit: closed while suspended at ``yield`` (the consumer left its loop).
             if stop_on_cancel:
-                await self._stop_after_cancel()
+                await self.stop_unless_done()
             raise
 
     async def wait(self, timeout: float | None = None) -> MoveResult:
@@ -271,7 +278,11 @@ class AsyncMoveHandle:
         """Decelerate the move's axes to a stop (``ST``) at their DC."""
         await self._worker.run(self.sync.stop)
 
-    async def _stop_after_cancel(self) -> None:
+    async def stop_unless_done(self) -> None:
+        """Stop the move (``ST``) unless it was seen done: for clean-up on the way out of a
+        failure. The stop runs to its end even if the caller is cancelled meanwhile, and its
+        own :class:`~galil.errors.GalilError` is suppressed (the caller's error matters more).
+        """
         if self.sync.finished:
             return
         with contextlib.suppress(GalilError):
@@ -279,7 +290,13 @@ class AsyncMoveHandle:
 
     def add_callback(self, callback: Callable[[AsyncMoveHandle], None]) -> None:
         """Call ``callback(handle)`` on the event loop once the move is done (at once if it
-        already is); the move is watched by a task of this loop, not by a thread."""
+        already is); the move is watched by a task of this loop, not by a thread.
+
+        The callbacks run only for a move seen done. If watching it fails first (the
+        controller is closed, the connection is lost, the move outlasts its predicted
+        duration plus the margin of :meth:`watch`), they are never called: the error is
+        logged (logger ``galil.aio``) and they are dropped.
+        """
         if self.sync.finished:
             callback(self)
             return
@@ -288,9 +305,18 @@ class AsyncMoveHandle:
             self._watcher = asyncio.get_running_loop().create_task(self._watch_for_callbacks())
 
     async def _watch_for_callbacks(self) -> None:
-        with contextlib.suppress(GalilError):
+        try:
             async for _ in self.watch(stop_on_cancel=False):
                 pass
+        except GalilError as exc:
+            dropped, self._callbacks = self._callbacks, []
+            _LOG.warning(
+                "%r: %d callback(s) dropped, the move was not seen done: %s",
+                self,
+                len(dropped),
+                exc,
+            )
+            return
         callbacks, self._callbacks = self._callbacks, []
         for cb in callbacks:
             cb(self)

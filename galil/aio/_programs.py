@@ -16,11 +16,11 @@ from __future__ import annotations
 import operator
 from collections.abc import Awaitable
 
-from galil.aio._waits import check_wait, in_slices
+from galil.aio._waits import in_slices
 from galil.aio._worker import Backed, Room, Worker, twin
 from galil.arrays import Arrays, Variables
 from galil.link import Link
-from galil.programs import Programs
+from galil.programs import Programs, check_thread_timeout
 
 __all__ = ["AsyncArrays", "AsyncPrograms", "AsyncVariables"]
 
@@ -56,7 +56,7 @@ class AsyncPrograms(Backed[Programs]):
             InvalidArgument: a bad thread or timeout.
             GalilTimeoutError: it still runs after ``timeout`` seconds (it is not halted).
         """
-        total = check_wait(timeout)
+        total = check_thread_timeout(timeout)  # as the sync wait: None and inf refused
         programs = self.sync
 
         def wait(seconds: float) -> None:

@@ -22,7 +22,7 @@ import numpy as np
 from galil.aio._waits import check_wait
 from galil.aio._worker import Worker, shielded
 from galil.errors import GalilConnectionError
-from galil.link import check_count
+from galil.link import check_count, check_wait_timeout
 from galil.records import RecordStream
 
 __all__ = ["SLICE", "AsyncMessages", "AsyncRecordStream", "LoopQueue"]
@@ -38,6 +38,13 @@ T = TypeVar("T")
 def _check_wait(timeout: float | None) -> float:
     seconds = check_wait(timeout)
     return math.inf if seconds is None else seconds
+
+
+def _record_wait(timeout: object) -> float:
+    """A record wait's timeout, checked as the sync ``RecordStream.get`` checks it
+    (:func:`~galil.link.check_wait_timeout`: ``None`` is for ever, infinity is refused)."""
+    check_wait_timeout(timeout)
+    return math.inf if timeout is None else float(timeout)  # type: ignore[arg-type]
 
 
 class LoopQueue(Generic[T]):
@@ -205,11 +212,13 @@ class AsyncRecordStream:
         for the first.
 
         Raises:
+            InvalidArgument: ``limit`` or ``timeout`` refused (as by the sync stream's
+                ``get``), before anything is read.
             queue.Empty: no record within ``timeout``.
             GalilConnectionError: the stream is closed (or its handle died).
         """
         check_count(limit, "limit")
-        wait = _check_wait(timeout)
+        wait = _record_wait(timeout)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + wait
         while not self._ready:

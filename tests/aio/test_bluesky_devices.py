@@ -6,6 +6,7 @@ short with high speeds so the whole file takes a few seconds.
 
 from __future__ import annotations
 
+import asyncio
 import re
 import threading
 from collections.abc import Coroutine, Iterator
@@ -25,6 +26,7 @@ from ophyd_async.core import soft_signal_rw
 import galil
 from galil.bluesky import ContourPath, GalilContourFlyer, GalilMotor, release_all
 from galil.sim.server import SimTcpServer
+from galil.testing import sim_of
 from galil.units import ureg
 
 mm, s = ureg.mm, ureg.s
@@ -236,3 +238,110 @@ def test_mock_mode_moves_a_simulator_instantly(engine: RunEngine, docs: Docs) ->
     in_loop(x.disconnect())
     assert not y.controller.closed  # y still holds it
     in_loop(y.disconnect())
+
+
+def mock_motor(address: str, name: str = "x") -> GalilMotor:
+    """A motor on an in-process simulator (manual clock: moves take no wall-clock time)."""
+    m = GalilMotor(address, "A", name=name, scale=2000 / mm)
+    in_loop(m.connect(mock=True))
+    in_loop(m.axis.set_speed(20 * mm / s))
+    return m
+
+
+def test_a_relative_scan_of_a_motor_moved_outside_bluesky_moves_around_where_it_is(
+    engine: RunEngine, docs: Docs
+) -> None:
+    x = mock_motor("tcp://127.0.0.1:2")
+
+    async def move_outside_bluesky() -> None:
+        await (await x.axis.move_to(4 * mm))
+
+    in_loop(move_outside_bluesky())
+    assert in_loop(x.locate())["setpoint"] == 4
+    engine(bp.rel_scan([detector()], x, -1, 1, 3))
+    assert events(docs, "x") == pytest.approx([3, 4, 5], abs=0.0006)
+    assert in_loop(x.locate()) == {"setpoint": 4, "readback": pytest.approx(4, abs=0.0006)}
+
+
+async def _settled(x: GalilMotor) -> float:
+    while await x.axis.moving():
+        await x.controller.sleep(0.01)
+    return float(await x.readback.get_value())
+
+
+async def _failure_of(status: Any) -> BaseException | None:
+    try:
+        await status
+    except RuntimeError as exc:
+        return exc
+    return None
+
+
+@pytest.mark.parametrize("turns", [0, 1, 5])
+def test_a_stop_before_the_move_has_begun_keeps_it_from_beginning(
+    engine: RunEngine, turns: int
+) -> None:
+    x = mock_motor(f"tcp://127.0.0.1:{10 + turns}")
+
+    async def body() -> BaseException | None:
+        status = x.set(50)
+        for _ in range(turns):  # the set task may have begun, not the move
+            await asyncio.sleep(0)
+        await x.stop(success=False)
+        return await _failure_of(status)
+
+    error = in_loop(body())
+    assert error is not None
+    assert "was stopped" in str(error)
+    assert in_loop(_settled(x)) == 0
+    sent = [text for _, text in sim_of(x.controller.sync).command_log]
+    assert not any(re.search(r"(^|;)BG", text) for text in sent)
+
+
+def test_a_stop_while_the_move_is_being_started_stops_it(engine: RunEngine) -> None:
+    x = mock_motor("tcp://127.0.0.1:20")
+    axis = x.axis
+    start = axis.move_to
+
+    async def stopped_on_the_way(target: Any) -> Any:
+        await x.stop(success=False)  # its ST goes out before the move's BG
+        return await start(target)
+
+    axis.move_to = stopped_on_the_way  # type: ignore[method-assign]
+
+    async def body() -> BaseException | None:
+        return await _failure_of(x.set(50))
+
+    error = in_loop(body())
+    assert error is not None
+    assert "was stopped" in str(error)
+    sent = [text for _, text in sim_of(x.controller.sync).command_log]
+    begin = next(i for i, t in enumerate(sent) if re.search(r"(^|;)BG", t))
+    assert any(t.startswith("ST") for t in sent[begin:])
+    assert in_loop(_settled(x)) < 1
+
+
+def test_a_set_that_times_out_stops_the_axis(engine: RunEngine) -> None:
+    x = mock_motor("tcp://127.0.0.1:3")
+
+    async def body() -> float:
+        with pytest.raises(galil.GalilTimeoutError):
+            await x.set(50, timeout=0.05)
+        return await _settled(x)
+
+    assert in_loop(body()) < 5
+    assert in_loop(x.axis.stop_code())[0] == 4
+
+
+def test_numpy_numbers_are_positions(engine: RunEngine, docs: Docs) -> None:
+    x = mock_motor("tcp://127.0.0.1:4")
+    engine(bp.list_scan([detector()], x, np.arange(3)))
+    assert events(docs, "x") == pytest.approx([0, 1, 2], abs=0.0006)
+
+    async def move(value: Any) -> None:
+        await x.set(value)
+
+    in_loop(move(np.float32(0.5)))
+    assert in_loop(x.locate())["setpoint"] == 0.5
+    with pytest.raises(galil.InvalidArgument):
+        in_loop(move(True))

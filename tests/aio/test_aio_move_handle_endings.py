@@ -1,0 +1,105 @@
+"""How an async move handle ends when its watcher does not see it through: a closed or
+abandoned ``watch()`` stops the move, and ``add_callback`` callbacks run only for a move seen
+done. In-process simulators on a manual clock: nothing sleeps for motion.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import gc
+
+import pytest
+from aio_helpers import commands_of, run, sim
+
+import galil.aio as aio
+
+
+async def _until_stopped(c: aio.AsyncController) -> None:
+    for _ in range(400):
+        if not await c.A.moving():
+            return
+        await c.sleep(0.01)
+
+
+def test_cancelling_a_task_inside_its_watch_loop_body_stops_the_move() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            move = await c.A.move_to(200_000)
+            in_body = asyncio.Event()
+
+            async def watcher() -> None:
+                async for _ in move.watch():
+                    in_body.set()
+                    await asyncio.Event().wait()  # the cancel lands here, not in watch()
+
+            task = asyncio.ensure_future(watcher())
+            await in_body.wait()
+            task.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await task
+            del task
+            gc.collect()  # the abandoned generator is finalised: aclose() on this loop
+            await _until_stopped(c)
+            assert any(t.startswith("ST") for t in commands_of(c))
+            assert await c.A.reference_position() < 200_000
+
+    run(body)
+
+
+def test_closing_a_watch_before_the_move_is_done_stops_it() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            move = await c.A.move_to(200_000)
+            progress = move.watch()
+            await anext(progress)
+            await progress.aclose()
+            assert any(t.startswith("ST") for t in commands_of(c))  # before aclose returned
+            await _until_stopped(c)
+            assert await c.A.reference_position() < 200_000
+
+    run(body)
+
+
+def test_closing_a_watch_that_only_watches_leaves_the_move_running() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            move = await c.A.move_to(20_000)
+            progress = move.watch(stop_on_cancel=False)
+            await anext(progress)
+            await progress.aclose()
+            await move
+            assert not any(t.startswith("ST") for t in commands_of(c))
+            assert await c.A.reference_position() == 20_000
+
+    run(body)
+
+
+def test_callbacks_are_not_called_when_the_controller_closes_before_the_move_ends() -> None:
+    async def body() -> list[object]:
+        c = await sim()
+        move = await c.A.move_to(200_000)
+        called: list[object] = []
+        move.add_callback(called.append)
+        watcher = move._watcher
+        assert watcher is not None
+        await c.aclose()
+        await watcher
+        assert not move.finished
+        return called
+
+    assert run(body) == []
+
+
+def test_callbacks_run_once_the_move_is_done() -> None:
+    async def body() -> list[object]:
+        async with await sim() as c:
+            move = await c.A.move_to(2_000)
+            called: list[object] = []
+            move.add_callback(called.append)
+            await move
+            watcher = move._watcher
+            assert watcher is not None
+            await watcher
+            return called
+
+    assert len(run(body)) == 1
