@@ -85,7 +85,7 @@ def test_compare_plot_takes_data_records_and_needs_their_time(
         records = stream.take(40)
     fig = compare_plot(move, records, field="reference")
     assert np.all(fig.axes[1].lines[0].get_ydata() == 0)
-    with pytest.raises(galil.InvalidArgument, match="no field"):
+    with pytest.raises(galil.InvalidArgument, match="field is one of"):
         compare_plot(move, records, field="nope")
     plain = records[[n for n in records.dtype.names if n != "time"]]
     with pytest.raises(galil.InvalidArgument, match="carry no time"):
