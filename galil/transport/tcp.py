@@ -100,7 +100,12 @@ class TcpTransport(TransportBase[socket.socket]):
         """Sustained command bytes per second (round trips, not the wire, set the pace)."""
         return ETHERNET_BYTES_PER_S
 
-    def _send_some(self, handle: socket.socket, data: memoryview) -> int:
+    def _send(self, handle: socket.socket, data: bytes) -> None:
+        n = self._send_some(handle, data)  # a command line fits the socket buffer: one send
+        if n < len(data):
+            super()._send(handle, data[n:])  # the rest piece by piece, waiting for room
+
+    def _send_some(self, handle: socket.socket, data: bytes | memoryview) -> int:
         try:
             return handle.send(data)
         except (BlockingIOError, TimeoutError):  # no room now: _wait_writable waits for it
