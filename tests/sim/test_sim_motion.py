@@ -200,3 +200,30 @@ def test_soft_limit_stops_on_the_first_sample_beyond_however_time_is_chunked(
     sim.advance(second * TS)
     sim.advance(2.0)
     assert sim.feed(b"RPA;SCA\r") == f" {soft_limit_stop(2000, 500)}\r\n: 2\r\n:".encode()
+
+
+def test_dt_minus_one_holds_the_segments_until_a_positive_dt() -> None:
+    sim = new_sim()
+    ok(sim, "CM A;DT -1;CD 48;CD 240=3;CD 48")
+    assert sim.feed(b"MG _CM\r").split()[0] == b"508.0000"  # three held in the buffer
+    sim.advance(0.05)
+    assert sim.motion("A").reference == 0  # nothing runs while held
+    assert sim.feed(b"MG _TC\r").split()[0] == b"0.0000"  # and it is not running dry
+    ok(sim, "DT 2")  # resume: the held segments run, those without their own DT at DT 2
+    prof = AxisProfiler(sample_period=TS)
+    prof.begin_contour()
+    for inc, n in ((48, 2), (240, 3), (48, 2)):
+        prof.add_segment(inc, n)
+    np.testing.assert_array_equal(sample_rp(sim, 20), prof.advance(20))
+    assert sim.motion("A").reference == 336
+
+
+def test_the_end_of_a_held_stream_waits_behind_it_too() -> None:
+    sim = new_sim()
+    ok(sim, "CM A;DT -1;CD 100;CD 0=0")
+    sim.advance(0.05)
+    assert sim.motion("A").reference == 0
+    ok(sim, "DT 3")
+    sim.advance(0.05)
+    assert sim.motion("A").reference == 100
+    assert sim.feed(b"MG _BGA\r").split()[0] == b"0.0000"  # the stream ended after it

@@ -2,7 +2,8 @@
 
 Segments go to each contouring axis's profiler (``CD`` with ``DT n``: 2**n samples). A ``CD``
 into a full buffer holds its ``:`` until there is room; ``CD 0=0`` (``DT 0`` then ``CD 0`` on
-the models whose ``CD`` takes no ``=n``) ends the stream once the queue drains. A buffer that
+the models whose ``CD`` takes no ``=n``) ends the stream once the queue drains. ``DT -1``
+(buffered models) holds every segment, and the end, until a positive ``DT``. A buffer that
 runs dry while contouring (data sent too slowly) sets the error code to 42; the servo loop
 watches for it so it happens at its exact sample.
 """
@@ -23,9 +24,11 @@ class Contour(Room):
     """The contour buffer and the axes that run it."""
 
     def reset(self) -> None:
-        self.exponent = 1  # DT: segments of 2**n samples
+        self.exponent = 1  # DT: segments of 2**n samples (-1: held, see :meth:`dt`)
         self.fed: set[str] = set()  # contouring axes given segments: an empty queue is an error
         self._active = False  # some axis may be in contour mode: the service hook has work
+        # Segments received under DT -1: (increments by axis, own DT or None), oldest first.
+        self.held: list[tuple[dict[str, int], int | None]] = []
 
     def axes(self) -> list[Axis]:
         """The axes in contour mode."""
@@ -34,13 +37,14 @@ class Contour(Room):
     def free(self) -> int:
         """Free places in the contour buffer (``_CM``): the segment running takes none."""
         waiting = max((ax.m.profiler.queued_segments for ax in self.axes()), default=0)
-        return self.machine.spec.contour_buffer - max(0, waiting - 1)
+        return self.machine.spec.contour_buffer - max(0, waiting - 1) - len(self.held)
 
     # ---- hooks -------------------------------------------------------------------------
     def abort(self) -> None:
         for ax in self.machine.servo.axes.values():
             ax.contour = False
         self.fed.clear()
+        self.held.clear()
         self._active = False
 
     def watches(self, out: list[Watch]) -> None:
@@ -86,10 +90,20 @@ class Contour(Room):
         if a == "?":
             return i.num(self.exponent, "1.0") + "\r\n"
         value = i.evaluate(a)
-        low, high = self.machine.spec.dt_range
-        if (value != 0 and not low <= value <= high) or value != int(value):
+        spec = self.machine.spec
+        low, high = spec.dt_range
+        held = value == -1 and spec.contour_buffer > 1
+        if (value != 0 and not held and not low <= value <= high) or value != int(value):
             raise Refused(6, "DT out of range")
         self.exponent = int(value)
+        if held:
+            # DT -1 (40x0): segments are kept in the buffer and not run (preload or pause);
+            # a running contour finishes what it has and waits, without running dry.
+            self.fed.clear()
+        elif value > 0 and self.held:
+            held_segments, self.held = self.held, []
+            for incs, own in held_segments:  # own 0 is the end of the stream
+                self._run_segment(incs, int(value) if own is None else own)
         return ""
 
     @handler("CD", equals=True)
@@ -100,28 +114,44 @@ class Contour(Room):
             # refusing it as an unknown form is this simulator's assumption.
             raise Refused(1, "CD takes no =n on this model")
         incs, n = self._segment(text, dt_text)
-        axes = self.axes()
-        if not axes:
+        if not self.axes():
             raise Refused(8, "not in contour mode")
-        if n == 0:
-            if any(incs.values()):
-                raise Refused(41, "increment with DT 0")
-            for ax in axes:
-                ax.m.profiler.end_contour()
-                self.fed.discard(ax.letter)
-            return ""
-        if not self.machine.spec.dt_range[0] <= n <= self.machine.spec.dt_range[1]:
+        if n == 0 and any(incs.values()):
+            raise Refused(41, "increment with DT 0")
+        low, high = self.machine.spec.dt_range
+        if n not in (0, -1) and not low <= n <= high:
             raise Refused(41, "DT out of range")
+        if n == -1 and dt_text.strip():
+            raise Refused(41, "CD =-1")
+        if self.exponent == -1:
+            # Under DT -1 every segment (and the end) waits until a positive DT; one without
+            # its own DT takes that DT then.
+            own = None if n == -1 else n
+
+            def hold() -> str:
+                self.held.append((incs, own))
+                return ""
+
+            return hold() if self.free() > 0 else Wait(lambda: self.free() > 0, then=hold)
 
         def add() -> str:
-            for ax in axes:
-                engine(functools.partial(ax.m.profiler.add_segment, incs.get(ax.letter, 0), n))
-                self.fed.add(ax.letter)
+            self._run_segment(incs, n)
             return ""
 
-        if self.free() > 0:
+        if n == 0 or self.free() > 0:
             return add()
         return Wait(lambda: self.free() > 0, then=add)
+
+    def _run_segment(self, incs: dict[str, int], n: int) -> None:
+        """Give one segment of 2**n samples to every contouring axis's profiler (n = 0: the
+        end of the stream, once the queue drains)."""
+        for ax in self.axes():
+            if n == 0:
+                ax.m.profiler.end_contour()
+                self.fed.discard(ax.letter)
+            else:
+                engine(functools.partial(ax.m.profiler.add_segment, incs.get(ax.letter, 0), n))
+                self.fed.add(ax.letter)
 
     def _segment(self, text: str, dt_text: str) -> tuple[dict[str, int], int]:
         """The increments per axis and the DT exponent of a ``CD``."""
