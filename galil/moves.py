@@ -92,9 +92,12 @@ def _read_state(
     for i, a in enumerate(letters):
         rp, bg, sp, ac, dc, it, bl, fl, mo = values[i * n : (i + 1) * n]
         out[a] = _State(round(rp), bool(bg), sp, ac, dc, it, bl, fl, bool(mo))
-    rest = values[len(letters) * n :]
-    limits = {f: (rest[2 * i], rest[2 * i + 1]) for i, f in enumerate(followers)}
-    return out, limits
+    return out, _limit_pairs(followers, values[len(letters) * n :])
+
+
+def _limit_pairs(followers: str, values: Sequence[float]) -> dict[str, tuple[float, float]]:
+    """``(BL, FL)`` per follower from the values of ``_operand_names(followers, ("BL", "FL"))``."""
+    return {f: (values[2 * i], values[2 * i + 1]) for i, f in enumerate(followers)}
 
 
 def _follower_error(exc: LimitError, gear: GearLink) -> None:
@@ -105,14 +108,25 @@ def _follower_error(exc: LimitError, gear: GearLink) -> None:
     )
 
 
-def _check_follower_speed(link: CommandLink, gear: GearLink, master_speed: float) -> None:
-    """Refuse a master speed that drives the follower beyond the model's SP maximum.
+def _check_geared_speed(
+    link: CommandLink, gears: Mapping[str, GearLink], master_speed: float
+) -> None:
+    """Refuse a master speed that drives an axis geared to it beyond the model's SP maximum.
+
+    Raises:
+        LimitError: naming the follower.
+    """
+    for gear in gears.values():
+        _check_follower_speed(link, gear, abs(gear.ratio) * abs(master_speed))
+
+
+def _check_follower_speed(link: CommandLink, gear: GearLink, speed: float) -> None:
+    """Refuse a follower speed (counts/s) beyond the model's SP maximum.
 
     Raises:
         LimitError: naming the follower.
     """
     model = link.model
-    speed = abs(gear.ratio) * abs(master_speed)
     if speed > model.sp_max:
         raise LimitError(
             f"axis {gear.follower} is geared to {gear.master} at {gear.ratio:g}: it would run "
@@ -148,7 +162,7 @@ def _check_followers(
             exc.end = profile.end
             _follower_error(exc, gear)
             raise
-        _check_follower_speed(link, gear, profile.peak_speed / abs(gear.ratio))
+        _check_follower_speed(link, gear, profile.peak_speed)
 
 
 def check_int32(name: str, value: float, axis: str, model: str) -> None:
@@ -317,8 +331,7 @@ def _change_jog(
     Raises:
         LimitError: an axis geared to ``a`` would run beyond the model's SP maximum.
     """
-    for gear in tracker.followers(a).values():
-        _check_follower_speed(link, gear, velocity)
+    _check_geared_speed(link, tracker.followers(a), velocity)
     replies = link.command_line([cmds.jg(model=link.model, **{a: velocity}), cmds.time_stamp()])
     handle.add_event(a, sample_of(replies[-1]), lambda t: predict.SetSpeed(t, velocity))
     return handle
@@ -369,8 +382,7 @@ def jog(
             f"axis {a} has its motor off; call controller.servo_here()", model=link.model.name
         )
     gears = tracker.followers(a)
-    for gear in gears.values():
-        _check_follower_speed(link, gear, velocity)
+    _check_geared_speed(link, gears, velocity)
     params = MoveParams(abs(velocity), ac, dc, it)
     replies = link.command_line(
         [
@@ -460,21 +472,13 @@ def increment(
     jogging = track is not None and track.kind == "jog"
     if jogging:
         _check_step(link, a, counts)
-        for gear in gears.values():
-            _check_follower_speed(link, gear, counts / link.sample_period)
+        _check_geared_speed(link, gears, counts / link.sample_period)
     else:
         _check_same_direction(link, a, counts, round(pa) - round(rp))
     end = round(rp if jogging else pa) + counts
     what = "steps the jog's reference to" if jogging else "moves the target of the move to"
-    limits = {f: (rest[2 * i], rest[2 * i + 1]) for i, f in enumerate(followers)}
     _check_reach(link, a, counts, end, (bl, fl), what)
-    for f, gear in gears.items():
-        f_end = int(gear.positions([end])[-1])
-        try:
-            _check_reach(link, f, round(counts * gear.ratio), f_end, limits[f], what)
-        except LimitError as exc:
-            _follower_error(exc, gear)
-            raise
+    _check_followers_reach(link, gears, _limit_pairs(followers, rest), counts, end, what)
     replies = link.command_line([cmds.ip(model=model, **{a: counts}), cmds.time_stamp()])
     if handle is None or track is None:
         # Someone else's move: nothing to follow; a handle that only waits for it.
@@ -485,6 +489,25 @@ def increment(
         return MoveHandle(link, {a: lone}, "position", display=shows, tracker=tracker)
     handle.add_event(a, sample_of(replies[-1]), lambda t: predict.Increment(t, counts))
     return handle
+
+
+def _check_followers_reach(
+    link: CommandLink,
+    gears: Mapping[str, GearLink],
+    limits: Mapping[str, tuple[float, float]],
+    step: int,
+    end: int,
+    what: str,
+) -> None:
+    """:func:`_check_reach` for every axis geared to one that an IP takes ``step`` counts to
+    ``end``."""
+    for f, gear in gears.items():
+        f_end = int(gear.positions([end])[-1])
+        try:
+            _check_reach(link, f, round(step * gear.ratio), f_end, limits[f], what)
+        except LimitError as exc:
+            _follower_error(exc, gear)
+            raise
 
 
 def _check_same_direction(link: CommandLink, a: str, counts: int, remaining: int) -> None:
