@@ -36,6 +36,7 @@ __all__ = [
     "UnitProfile",
     "check_overrides",
     "in_user_units",
+    "limits_by_axis",
     "resolve_moves",
     "user_units",
 ]
@@ -132,12 +133,14 @@ def _show(value: object) -> str:
     return f"{value:~}" if is_quantity(value) else repr(value)
 
 
-def _limit_of(model: ModelSpec, letter: str, limits: Mapping[Any, object], what: str) -> object:
-    """Axis ``letter``'s entry of a mapping of axis letters or aliases to limits (``None`` if
-    it has none).
+def limits_by_axis(
+    model: ModelSpec, limits: Mapping[Any, object], what: str, letters: str | None = None
+) -> dict[str, object]:
+    """A mapping of axis letters or aliases to limits, keyed by axis letter.
 
     Raises:
-        InvalidArgument: a key that is no axis of ``model``, or an axis given twice.
+        InvalidArgument: a key that is no axis of ``model``, an axis given twice, or (with
+            ``letters``) an axis not among ``letters``, whose limit would be ignored.
     """
     found: dict[str, object] = {}
     for key, value in limits.items():
@@ -150,8 +153,13 @@ def _limit_of(model: ModelSpec, letter: str, limits: Mapping[Any, object], what:
                 f"{what}: axis {name} given twice (an alias names the same axis)",
                 model=model.name,
             )
+        if letters is not None and name not in letters:
+            raise InvalidArgument(
+                f"{what}: axis {name} is not one of the contour's axes ({letters})",
+                model=model.name,
+            )
         found[name] = value
-    return found.get(letter)
+    return found
 
 
 def _smoothing_value(value: object, model: ModelSpec) -> float:
@@ -261,7 +269,7 @@ class Axis:
         ``limit`` is ``None``, one value, or a mapping of axis letters (or names) to values.
         """
         if isinstance(limit, Mapping):
-            limit = _limit_of(self._link.model, self.letter, limit, what)
+            limit = limits_by_axis(self._link.model, limit, what).get(self.letter)
         if limit is None:
             return None
         counts = self.rate_counts(limit, power, what)

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 from galil import predict
 from galil.arrays import Arrays, Variables
-from galil.axis import Axis, check_overrides, resolve_moves, user_units
+from galil.axis import Axis, check_overrides, limits_by_axis, resolve_moves, user_units
 from galil.capture import Capture
 from galil.contour import ContourResult, ContourStream
 from galil.errors import GalilConnectionError, InvalidArgument
@@ -34,7 +34,7 @@ from galil.handshake import identify
 from galil.homing import SwitchPolarity, read_polarity, set_polarity
 from galil.interrupts import Interrupts
 from galil.io import IO
-from galil.link import Link, check_count, check_timeout, check_wait_timeout
+from galil.link import Link, check_count, check_timeout
 from galil.messages import Messages
 from galil.models import Identity, ModelSpec, get_model
 from galil.motion import MotionTracker, MoveHandle, abort_all, motion_guard, stop_axes
@@ -546,14 +546,13 @@ class Controller(CoordinatedMotion, LinkFacade):
             LimitError: the path beyond the model's or the given limits (nothing sent).
             GalilTimeoutError: the contour not finished within ``timeout`` (axes stopped).
         """
-        check_wait_timeout(timeout)
         names = list(axes) if isinstance(axes, str) else [str(a) for a in axes]
         chosen = [self.axis(a) for a in names]
         letters = "".join(a.letter for a in chosen)
         counts = path_to_counts(path, [a.scale for a in chosen], letters)
-        _limits_name_only(
-            self.link.model, letters, speed_limit=speed_limit, accel_limit=accel_limit
-        )
+        for what, given in (("speed_limit", speed_limit), ("accel_limit", accel_limit)):
+            if isinstance(given, Mapping):  # a limit for an axis not driven would be ignored
+                limits_by_axis(self.link.model, given, what, letters)
         limits = {
             a.letter: (
                 a.limit_counts(speed_limit, 1, "speed_limit"),
@@ -709,24 +708,3 @@ def connect(address: str | Transport, **options: Any) -> Controller:
     if not isinstance(address, Transport):
         raise InvalidArgument(f"connect() takes an address or a Transport, not {address!r}")
     return Controller(address, **client_opts)
-
-
-def _limits_name_only(model: ModelSpec, letters: str, **given: object) -> None:
-    """Refuse a per-axis limit for an axis the contour does not drive (it would be ignored).
-
-    Raises:
-        InvalidArgument: a key naming another axis (or no axis: see ``axis.limit_counts``).
-    """
-    for what, limits in given.items():
-        if not isinstance(limits, Mapping):
-            continue
-        for key in limits:
-            try:
-                letter = model.axis_letter(key)
-            except InvalidArgument:
-                continue  # limit_counts names the bad key
-            if letter not in letters:
-                raise InvalidArgument(
-                    f"{what}: axis {letter} is not one of the contour's axes ({letters})",
-                    model=model.name,
-                )
