@@ -177,7 +177,7 @@ class Routines:
         with self._lock:
             current = self.upload()
             user, library = split_program(current)
-            clash = _labels(user).intersection(*(r.labels for r in routines))
+            clash = _labels(user).intersection(set().union(*(r.labels for r in routines)))
             if clash:
                 raise InvalidArgument(
                     f"the program in memory uses the label(s) {sorted(clash)} that the library "

@@ -59,6 +59,18 @@ def test_a_user_label_equal_to_a_routines_inner_label_is_refused_before_download
         assert dmc.routines.threads == {}
 
 
+def test_installing_two_routines_refuses_a_user_label_of_either() -> None:
+    with simulated() as dmc:
+        dmc.programs.download("#A\nEN\n#RTWOL\nEN")
+        one = Routine("#RONE", ("#RONE", "WT 10", "EN"))
+        two = Routine("#RTWO", ("#RTWO", "#RTWOL", "JP #RTWOL", "EN"))
+        with (
+            nothing_sent(dmc, allow_queries=True),
+            pytest.raises(galil.InvalidArgument, match="RTWOL"),
+        ):
+            dmc.routines.install(one, two)
+
+
 def test_a_user_program_with_a_routines_inner_label_is_refused_beside_it() -> None:
     with simulated() as dmc:
         dog = dmc.watchdog(0.5)
