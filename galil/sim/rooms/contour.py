@@ -123,24 +123,21 @@ class Contour(Room):
             raise Refused(41, "DT out of range")
         if n == -1 and dt_text.strip():
             raise Refused(41, "CD =-1")
-        if self.exponent == -1:
-            # Under DT -1 every segment (and the end) waits until a positive DT; one without
-            # its own DT takes that DT then.
-            own = None if n == -1 else n
+        held = self.exponent == -1
+        # Under DT -1 every segment (and the end) waits until a positive DT; one without its
+        # own DT takes that DT then.
+        own = None if n == -1 else n
 
-            def hold() -> str:
+        def take() -> str:
+            if held:
                 self.held.append((incs, own))
-                return ""
-
-            return hold() if self.free() > 0 else Wait(lambda: self.free() > 0, then=hold)
-
-        def add() -> str:
-            self._run_segment(incs, n)
+            else:
+                self._run_segment(incs, n)
             return ""
 
-        if n == 0 or self.free() > 0:
-            return add()
-        return Wait(lambda: self.free() > 0, then=add)
+        if (n == 0 and not held) or self.free() > 0:
+            return take()
+        return Wait(lambda: self.free() > 0, then=take)
 
     def _run_segment(self, incs: dict[str, int], n: int) -> None:
         """Give one segment of 2**n samples to every contouring axis's profiler (n = 0: the
