@@ -218,9 +218,9 @@ def _targets(specs: Iterable[str]) -> list[tuple[str, int]]:
         host, port = text, COMMAND_PORT
         if text.count(":") == 1:
             host, _, port_text = text.partition(":")
-            if not port_text.isdigit() or not 0 < int(port_text) < 65536:
+            if not port_text.isdigit():
                 raise InvalidArgument(f"bad port in {spec!r}")
-            port = int(port_text)
+            port = check_port(int(port_text), f"the port in {spec!r}")
         out += [(h, port) for h in _hosts(host, spec, _MAX_HOSTS - len(out))]
     return out
 
