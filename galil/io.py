@@ -57,10 +57,13 @@ def volts(value: object, what: str) -> float:
             raise InvalidArgument(f"{what}: {value} is not a voltage") from exc
     elif isinstance(value, bool) or not isinstance(value, (int, float)):
         raise InvalidArgument(f"{what} takes volts (a number or a Quantity), not {value!r}")
-    elif isinstance(value, int) and abs(value) > 1e6:  # no float holds 10**400; no DAC 1 MV
-        raise InvalidArgument(f"{what}: {value!r:.40} is not a voltage any output gives")
     else:
-        v = float(value)
+        try:
+            v = float(value)
+        except OverflowError:  # an int no float holds (10**400)
+            raise InvalidArgument(
+                f"{what}: {value!r:.40} is not a voltage any output gives"
+            ) from None
     if not math.isfinite(v):
         raise InvalidArgument(f"{what}: {value!r} is not a finite voltage")
     return v
