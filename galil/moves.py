@@ -84,9 +84,10 @@ def _read_state(
 ) -> tuple[dict[str, _State], dict[str, tuple[float, float]]]:
     """Every axis's state and the followers' soft limits ``(BL, FL)``, in one round trip
     (query_operands packs the MG lines together)."""
-    values = link.query_operands(
-        _operand_names(letters, _STATE) + _operand_names(followers, ("BL", "FL"))
-    )
+    names = _operand_names(letters, _STATE)
+    if followers:  # (the common move has none: the cached tuple as it is)
+        names += _operand_names(followers, ("BL", "FL"))
+    values = link.query_operands(names)
     n = len(_STATE)
     out: dict[str, _State] = {}
     for i, a in enumerate(letters):
