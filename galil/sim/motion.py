@@ -27,6 +27,8 @@ __all__ = ["TV_WINDOW_SECONDS", "AxisMotion"]
 
 # Chunks up to this many samples run the servo lag as a scalar recursion.
 _SCALAR_MAX = 48
+# The longest tail of lag weights a long chunk's closed form uses.
+_LAG_TAIL_MAX = 4096
 
 #: The manuals' "special averaging filter (over approximately 0.25 sec)" for TV.
 TV_WINDOW_SECONDS = 0.25
@@ -54,7 +56,9 @@ class AxisMotion:
         # Short chunks not yet expanded into _history: (lag state before, alpha, references).
         # Only TV reads the history, so a polling host's chunks are expanded when it asks
         # (and the ones the window has left behind never are).
-        self._unexpanded: deque[tuple[float, float, list[int]]] = deque()
+        self._unexpanded: deque[
+            tuple[float, float, list[int] | list[float] | npt.NDArray[np.int64]]
+        ] = deque()
         self._unexpanded_n = 0
         self.lag = 0.0
         self._alpha = 1.0
@@ -154,21 +158,15 @@ class AxisMotion:
         ref = np.asarray(self.profiler.advance(n), dtype=np.int64)
         if self._trace is not None:
             self._trace.append(ref)
-        if self._unexpanded:
-            self._expand()
-        history = self._history
         if not self.motor_on:
             # No servo: the motor stays where it is.
-            history.extend([float(round(self.actual))] * min(n, self._window + 1))
+            if self._unexpanded:
+                self._expand()
+            self._history.extend([float(round(self.actual))] * min(n, self._window + 1))
         elif n <= _SCALAR_MAX:
             self._follow(ref.tolist())
         else:
-            if self._alpha >= 1.0:
-                actual = ref.astype(np.float64)
-            else:
-                actual = smooth(ref, self._alpha, self.actual)
-            self.actual = float(actual[-1])
-            history.extend(np.rint(actual[-(self._window + 1) :]).tolist())
+            self._follow_long(ref)
         return ref
 
     def step(self, n: int) -> None:
@@ -185,9 +183,13 @@ class AxisMotion:
             # every sample (its paged filter would give it within an ulp), and the profiler
             # only counts the samples. No arrays.
             prof.advance_values(n)
-            if self._unexpanded:
-                self._expand()
-            self._history.extend([self.actual] * min(n, self._window + 1))
+            still = [self.actual] * min(n, self._window + 1)
+            if self._unexpanded:  # after chunks TV has not read yet: one more of them
+                self._unexpanded.append((self.actual, 1.0, still))
+                self._unexpanded_n += len(still)
+                self._forget_old_chunks()
+            else:
+                self._history.extend(still)
             return
         if n > _SCALAR_MAX or self._trace is not None or not self.motor_on:
             self.advance(n)
@@ -206,6 +208,29 @@ class AxisMotion:
             self.actual = carry * y0 + sum(map(operator.mul, weights, refs))
         self._unexpanded.append((y0, alpha, refs))
         self._unexpanded_n += len(refs)
+        self._forget_old_chunks()
+
+    def _follow_long(self, refs: npt.NDArray[np.int64]) -> None:
+        # A long chunk: the lag's closed form over the samples whose weight is not lost in
+        # rounding (a dot product), the encoder values for TV only when TV is read.
+        alpha = self._alpha
+        y0 = self.actual
+        weights = _lag_tail(alpha) if alpha < 1.0 else None
+        if weights is None:
+            self.actual = float(refs[-1])
+        elif refs.size > weights.size == _LAG_TAIL_MAX:
+            # A lag slower than the tail covers: the paged filter over the whole chunk.
+            self.actual = float(smooth(refs, alpha, y0)[-1])
+        else:
+            k = min(refs.size, weights.size)
+            tail = refs[: -k - 1 : -1].astype(np.float64)  # newest first
+            carry = (1.0 - alpha) ** refs.size
+            self.actual = carry * y0 + float(np.dot(weights[:k], tail))
+        self._unexpanded.append((y0, alpha, refs))
+        self._unexpanded_n += refs.size
+        self._forget_old_chunks()
+
+    def _forget_old_chunks(self) -> None:
         if self._unexpanded_n > 4 * self._window:
             # Forget the chunks the TV window has left behind (now and then, not every call).
             keep = self._window + 1
@@ -213,16 +238,40 @@ class AxisMotion:
                 self._unexpanded_n -= len(self._unexpanded.popleft()[2])
 
     def _expand(self) -> None:
-        """Put the encoder values of the short chunks into the TV history, oldest first."""
+        """Put the encoder values of the chunks not yet expanded into the TV history, oldest
+        first (a long chunk through the paged filter, its last window's values only)."""
         history = self._history
+        keep = self._window + 1
         for y, alpha, refs in self._unexpanded:
-            if alpha >= 1.0:
+            if isinstance(refs, np.ndarray):
+                actual = refs.astype(np.float64) if alpha >= 1.0 else smooth(refs, alpha, y)
+                history.extend(np.rint(actual[-keep:]).tolist())
+            elif alpha >= 1.0:
                 history.extend(refs)
             else:
                 # round() is half to even, as numpy.rint
                 history.extend([round(y := y + alpha * (r - y)) for r in refs])
         self._unexpanded.clear()
         self._unexpanded_n = 0
+
+
+@functools.lru_cache(maxsize=64)
+def _lag_tail(alpha: float) -> npt.NDArray[np.float64]:
+    """``alpha * c**j`` for ``j = 0, 1, ...`` (``c = 1 - alpha``) while the weight still counts.
+
+    The newest sample's weight first. Past the last one ``c**j`` is below ``2**-64``: a
+    reference of up to ``2**31`` counts would move the sum by less than ``2**-33`` counts. A lag
+    too slow for that within ``_LAG_TAIL_MAX`` samples gets no more (see ``_follow_long``).
+    """
+    c = 1.0 - alpha
+    n = _LAG_TAIL_MAX
+    if 0.0 < c < 1.0:
+        n = min(n, math.ceil(-64.0 * math.log(2.0) / math.log(c)) + 1)
+    elif c <= 0.0:
+        n = 1
+    out = alpha * c ** np.arange(n, dtype=np.float64)
+    out.setflags(write=False)
+    return out
 
 
 @functools.lru_cache(maxsize=256)

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import engine_expect
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from galil.predict.engine import AxisProfiler
 from galil.sim.clock import ManualClock
 from galil.sim.controller import SimController
+from galil.sim.motion import AxisMotion
 
 TS = 1 / 1024
 
@@ -88,3 +91,35 @@ def test_an_axis_at_rest_stays_exactly_where_it_is_in_long_steps(
     sim.advance(rest * TS)  # one long step of an axis at rest
     assert (read(sim, b"TP\r"), read(sim, b"TV\r")) == before
     assert read(sim, b"TP\r")[0] == distance
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.integers(49, 4000),
+    st.sampled_from([0.001, 0.003, 0.02, 0.5, 5.0]),
+    st.integers(-50_000, 50_000),
+)
+def test_a_long_step_gives_the_encoder_and_tv_of_the_lag_sample_by_sample(
+    n: int, lag: float, distance: int
+) -> None:
+    # One long step of a moving axis: the closed form of the lag (a dot product over the
+    # samples whose weight still counts, or the paged filter for a lag slower than that)
+    # against the recursion run sample by sample; a slow lag (5 s) keeps every sample.
+    sim = started(f"PR {distance},,,;SP 100000,,,;BG\r".encode(), lag)
+    sim.advance(n * TS)
+    prof = engine_expect.move(distance, sp=100000)
+    refs = [int(r) for r in prof.advance(n)]
+    encoders = engine_expect.lagged(refs, lag)
+    assert read(sim, b"RP\r")[0] == refs[-1]
+    assert abs(read(sim, b"TP\r")[0] - encoders[-1]) <= 1
+    assert abs(read(sim, b"TV\r")[0] - engine_expect.tv(encoders)) <= 1
+
+
+@pytest.mark.parametrize("lag", [0.003, 5.0])
+def test_a_chunk_longer_than_the_lag_tail_follows_the_recursion(lag: float) -> None:
+    # 5,000 samples in one call: a fast lag drops the weights lost in rounding, a slow one
+    # (whose weights outlast the tail) goes through the paged filter.
+    m = AxisMotion(TS, 0, lag)
+    m.profiler.begin_move(300_000, 100000, 256000, 256000)
+    refs = [int(r) for r in m.advance(5000)]
+    assert m.encoder == engine_expect.lagged(refs, lag)[-1]
