@@ -47,26 +47,11 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return run_demo(png=png, model=args.model, quiet=args.quiet, quick=args.quick)
 
 
-def _check_sim_ports(args: argparse.Namespace) -> None:
-    """Refuse ``--tcp HOST:PORT`` and ``--message-port`` values no port can have."""
-    from galil.errors import InvalidArgument
-    from galil.transport.options import check_port
-
-    if args.tcp:
-        port = args.tcp.rpartition(":")[2]
-        if not port.isdigit():
-            raise InvalidArgument(
-                f"--tcp wants HOST:PORT (port 0 picks a free one), not {args.tcp!r}"
-            )
-        check_port(int(port), "--tcp port", zero=True)
-    if args.message_port is not None and args.message_port != -1:
-        check_port(args.message_port, "--message-port (-1: none)", zero=True)
-
-
 def _cmd_sim(args: argparse.Namespace) -> int:
+    from galil.sim.server import check_ports
     from galil.sim.server import main as sim_main
 
-    _check_sim_ports(args)
+    check_ports(args.tcp, args.message_port)  # refused in one line, before the server's parser
     argv = ["--model", args.model]
     if args.tcp:
         argv += ["--tcp", args.tcp]

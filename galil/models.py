@@ -53,6 +53,21 @@ MOTOR_TYPES: dict[float, str] = {
     -11.0: "EtherCAT torque, reversed",
 }
 _MT_STANDARD = frozenset({1.0, -1.0, 1.5, -1.5, 2.0, -2.0, 2.5, -2.5})
+#: Interrogation reply formats (``KP ?``, ``TM ?``): the command references' "Default Format",
+#: m.n = digits before and after the point. KP and KD 4.2 (DMC-40x0 command reference KP p.142,
+#: KD p.140; DMC-18x6 manc18x6-127, -125; Optima DMC-1xxx/18x2 optcom-125; DMC-1000/1500 KP
+#: p.79), KI 4.4 (DMC-40x0 p.141; DMC-18x6 manc18x6-126), TM 1.0 (DMC-40x0 p.236; DMC-18x6
+#: manc18x6-206). ``MG _KPA`` prints in the variable format (VF) instead.
+_REPLY_FORMATS = {"KP": "4.2", "KI": "4.4", "KD": "4.2", "TM": "1.0"}
+#: The Optima DMC-1xxx/18x2 reference gives KI format 4.0 (optcom-126; DMC-1400 reference too).
+_OPTIMA_REPLY_FORMATS = {**_REPLY_FORMATS, "KI": "4.0"}
+#: OP's fields per model, where the sources stop (documented, not settled; see ``assumptions``).
+_OP_ASSUMPTION = (
+    "OP fields: 8-bit banks (OP n0,n1: outputs 1-8, 9-16). Sourced only for outputs 1-8 (DMC-3425"
+    " user manual p.180: 'OP m,a,b,c,d', m = outputs 1-8, a-d = extended I/O 17-80 in 16-bit"
+    " groups) and for the RIO (IRTF notes: 'OP $00,$01' sets DO8); how a DMC with 16 general"
+    " outputs takes outputs 9-16 is not found, and extended I/O (CO) is not modelled"
+)
 
 
 @dataclass(frozen=True)
@@ -130,6 +145,12 @@ class ModelSpec:
         analog_inputs: analog inputs (``@AN[n]``).
         analog_outputs: analog outputs (``AO n,v``); 0 where the model has none we know of.
         analog_in_range, analog_out_range: volts at the default AQ/DQ setting.
+        reply_formats: format (``"4.2"``) of the interrogation replies ``KP ?``, ``KI ?``,
+            ``KD ?`` and ``TM ?``, by command: the command reference's "Default Format"
+            (sources at ``_REPLY_FORMATS``; families without a page of their own are assumed
+            to share the DMC-40x0's). A whole part wider than m prints in full, so TM 1.0
+            gives ``1000``: an assumption (the TM page's own default, 1000, does not fit one
+            digit, so m cannot be a cap there as it is for PF/VF).
         motor_types: the MT values the model accepts (:data:`MOTOR_TYPES` says what each is).
         kp_max, ki_max, kd_max: gain maxima; gain_resolution the step of KP and KD (KP 1/8,
             40x0); ki_resolution KI's (1/1024: the step that makes 255.999 the largest KI
@@ -211,6 +232,7 @@ class ModelSpec:
     analog_in_range: tuple[float, float] = (-10.0, 10.0)
     analog_out_range: tuple[float, float] = (-10.0, 10.0)
     # Motor and loop settings (facts section 4).
+    reply_formats: dict[str, str] = field(default_factory=lambda: dict(_REPLY_FORMATS))
     motor_types: frozenset[float] = _MT_STANDARD
     kp_max: float = 1023.875
     ki_max: float = 255.999
@@ -312,12 +334,16 @@ _add(
         qz=None,
         threads=2,
         vt=True,
+        reply_formats=_OPTIMA_REPLY_FORMATS,
         assumptions=(
             "4 axes: the DMC-1500 manual excerpt names X Y Z W; the axis count is not sourced",
             "serial only: the DMC-1500 is a stand-alone RS-232 controller in the sources",
             "contour buffer of 1: pre-Accelera controllers had a 1-deep contour queue",
             "SP maximum 8,000,000 c/s: no primary source; picked below the 2xxx recollection",
             "no binary data record: no layout found for this family",
+            "KI ? in format 4.0 as on the Optima and DMC-1400 references; the DMC-1000/1500"
+            " reference's KI page was not found (its KP page gives 4.2)",
+            _OP_ASSUMPTION,
         ),
     ),
     "DMC1500",
@@ -337,11 +363,13 @@ _add(
         qz=(8, 24, 16, 28),
         threads=2,
         vt=True,
+        reply_formats=_OPTIMA_REPLY_FORMATS,
         assumptions=(
             "ISA/PCI bus card: reached through a Galil driver device node",
             "data record like the 2x00 (QZ 8,24,16,28): the 1700 manual shares that layout",
             "contour buffer of 1: pre-Accelera firmware",
             "SP maximum 12,000,000 c/s: recollection, not a primary page",
+            _OP_ASSUMPTION,
         ),
     ),
     "DMC-1800",
@@ -364,11 +392,13 @@ _add(
         record_axis_analog=False,
         threads=2,
         vt=True,
+        reply_formats=_OPTIMA_REPLY_FORMATS,
         assumptions=(
             "CD range ±32,000 from the seed manual excerpt",
             "contour buffer of 1: the seed shows WC pacing one segment at a time",
             "QZ 4, 24, 16, 28: gclib GDataRecord1802 (the 21x3 record, the axis blocks' last "
             "two bytes reserved); QZ itself not seen on an 18x2",
+            _OP_ASSUMPTION,
         ),
     ),
     "DMC-1842",
@@ -391,6 +421,10 @@ _add(
         assumptions=(
             "CD range ±32,762 as printed on the 18x6 CD page (sic)",
             "record laid out like the 40x0 one (gclib GDataRecord1806); sizes assumed equal",
+            "8 threads as on the 40x0 (the 18x6 is an Accelera card like it): no 18x6 page gives"
+            " the count, and EPICS (GalilController.cpp, model_[3] == '1') gives every DMC-1xxx,"
+            " the 18x6 included, 2 threads",
+            _OP_ASSUMPTION,
         ),
     ),
     "DMC-18x6",
@@ -416,6 +450,9 @@ _add(
             "contour buffer 511 as on Accelera-class firmware: not confirmed for 21x3",
             "DR minimum 8 samples on the Econo 21x3 (EPICS: 8 ms minimum update period)",
             "SP maximum 12,000,000 c/s: recollection, not a primary page",
+            "KI ? in format 4.4 as on the 40x0: no 21x3 page found (its KI maximum, 2047.992,"
+            " is the older range, whose Optima page gives 4.0)",
+            _OP_ASSUMPTION,
         ),
     ),
     "DMC-21x3",
@@ -441,6 +478,7 @@ _add(
             "CD range ±32,000 from the 40x0 manual summary; the 18x6 page says ±32,762",
             "DR at most 30,000 samples between records: not sourced",
             "SP maximum 22,000,000 c/s: recollection, not a primary page",
+            _OP_ASSUMPTION,
         ),
     ),
     "DMC-40x0",
@@ -499,6 +537,7 @@ _add(
         assumptions=(
             "contour buffer 511 as on Accelera-class firmware: not confirmed",
             "analog input 2 reads 0-5 V (EPICS); both inputs are modelled at ±10 V",
+            _OP_ASSUMPTION,
         ),
     ),
     "DMC30010",
@@ -514,6 +553,7 @@ _LAB_ASSUMPTIONS = (
     "KS resolution 1/32 and default 2: the range 0.25 ... 64 is sourced (40x0 manual)",
     "BN/BP/BV finish within 3 s (EPICS's timeout for them); real durations unknown",
     "no analog outputs on DMC motion controllers (the 40x0 command reference has no @AO)",
+    _OP_ASSUMPTION,
 )
 
 

@@ -16,6 +16,8 @@ import pytest
 
 import galil
 from galil import cli
+from galil.errors import InvalidArgument
+from galil.sim import server as sim_server
 
 GALIL = [sys.executable, "-m", "galil.cli"]
 
@@ -183,6 +185,29 @@ def test_sim_refuses_a_port_out_of_range_in_one_line(
     assert err.startswith("galil: ")
     assert "port" in err
     assert "Traceback" not in err
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--tcp", "127.0.0.1:70000"],
+        ["--tcp", "127.0.0.1:port"],
+        ["--message-port", "70000"],
+        ["--message-port", "-2"],
+    ],
+)
+def test_the_sim_modules_entry_point_checks_ports_as_the_cli_does(
+    argv: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    # `python -m galil.sim.server`: a usage error (exit 2), not an OverflowError from bind().
+    with pytest.raises(SystemExit) as exit_:
+        sim_server.main(argv)
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "galil sim: error: --" in err
+    assert "port" in err
+    with pytest.raises(InvalidArgument, match=r"must be 0\.\.65535"):
+        sim_server.SimTcpServer(port=70000)
 
 
 @pytest.mark.parametrize(

@@ -1712,7 +1712,11 @@ def cb(n: int, *, model: ModelSpec | None = None) -> Command:
 
 
 def op(*banks: int, model: ModelSpec | None = None) -> Command:
-    """OP: write the outputs as 8-bit banks (bank 0 = the first eight outputs)."""
+    """OP: write the outputs as 8-bit banks (bank 0 = the first eight outputs).
+
+    Sourced for the RIO and for outputs 1-8; the banks past them are an assumption (a model's
+    ``assumptions`` say so; the DMC-3425 manual gives extended I/O 16-bit fields).
+    """
     m = _io_counts(model)
     nbanks = max(1, (m.digital_outputs + 7) // 8)
     if not banks or len(banks) > nbanks:

@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from galil.models import INT32_MAX, INT32_MIN, ModelSpec
-from galil.protocol.numbers import format_reply
+from galil.protocol.numbers import format_reply, parse_format
 from galil.sim.parse import FUNCTIONS, Refused, evaluate, split_fields
 from galil.sim.ports import Port
 from galil.sim.programs import Thread
@@ -320,7 +320,16 @@ class Interpreter:
         return format_reply(value, self.vf, self.lz, sign_space=True)
 
     def num(self, value: float, fmt: str) -> str:
-        """A number in a fixed format (``"10.0"``), with LZ."""
+        """A number in a command's own format (``"10.0"``), with LZ.
+
+        Unlike PF and VF, whose overflow prints nines, m is taken as a minimum width here: a
+        wider whole part prints in full (``TM ?`` in format 1.0 gives ``1000``; see
+        :attr:`galil.models.ModelSpec.reply_formats`).
+        """
+        is_hex, digits, decimals = parse_format(fmt)
+        if not is_hex and abs(value) >= 10**digits - 0.5:
+            width = len(str(int(round(abs(value), decimals))))
+            fmt = f"{min(max(digits, width), 10)}.{decimals}"
         return format_reply(value, fmt, self.lz, sign_space=True)
 
     def report(

@@ -38,7 +38,7 @@ from galil.sim.clock import RealTimeClock
 from galil.sim.controller import SimController
 from galil.sim.faults import FaultHook, apply_faults
 
-__all__ = ["SimPtyServer", "SimTcpServer", "main"]
+__all__ = ["SimPtyServer", "SimTcpServer", "check_ports", "main"]
 
 #: How often the serving thread runs the servo loop and flushes output (seconds).
 _TICK = 0.002
@@ -164,6 +164,9 @@ class SimTcpServer(_Server):
     ) -> None:
         if not host.startswith("127.") and host not in ("localhost", "::1"):
             raise InvalidArgument(f"the simulator serves loopback only, not {host!r}")
+        _check_port(port, "port")
+        if message_port is not None:
+            _check_port(message_port, "message_port")
         super().__init__(controller, model)
         self.host = host
         self._want = (port,) if message_port is None else (port, message_port)
@@ -498,6 +501,34 @@ class _Line:
         return out
 
 
+def _check_port(port: object, what: str) -> int:
+    """``port`` as a port number to listen on, 0..65535 (0: a free one).
+
+    The transports' ``check_port`` does the same for the host side; the simulator may not
+    import ``galil.transport`` (import contract), so the server keeps its own.
+    """
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
+        raise InvalidArgument(f"{what} must be 0..65535, got {port!r}")
+    return port
+
+
+def check_ports(tcp: str | None, message_port: int | None) -> tuple[str, int]:
+    """The host and port of ``--tcp HOST:PORT`` (127.0.0.1:0 when None), both ports checked.
+
+    The one check of the port options of ``galil sim`` and ``python -m galil.sim.server``;
+    ``message_port`` None (not given) or -1 (no message port) needs no check.
+
+    Raises:
+        InvalidArgument: a port that is no number or outside 0..65535.
+    """
+    host, _, port = (tcp or "127.0.0.1:0").rpartition(":")
+    if not port.isdigit():
+        raise InvalidArgument(f"--tcp wants HOST:PORT (port 0 picks a free one), not {tcp!r}")
+    if message_port is not None and message_port != -1:
+        _check_port(message_port, "--message-port (-1: none)")
+    return host or "127.0.0.1", _check_port(int(port), "--tcp port")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """``galil sim``: serve a simulated controller until Ctrl-C.
 
@@ -506,6 +537,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
     try:
+        host, port = check_ports(args.tcp, args.message_port)
         controller = _controller(args.model, args.lag, args.limits)
     except (InvalidArgument, ValueError) as e:
         parser.error(str(e))
@@ -513,12 +545,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.pty:
         server = SimPtyServer(controller, baud=args.baud)
     else:
-        host, _, port = (args.tcp or "127.0.0.1:0").rpartition(":")
         try:
             server = SimTcpServer(
                 controller,
-                host=host or "127.0.0.1",
-                port=int(port or 0),
+                host=host,
+                port=port,
                 message_port=None if args.message_port < 0 else args.message_port,
             )
         except (InvalidArgument, ValueError) as e:

@@ -8,9 +8,11 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from galil.predict.homing import HomeSwitch, HomingParams, homing
+from galil.protocol.numbers import parse_number, parse_numbers
 from galil.protocol.records import decode_record
 from galil.sim.controller import SimController
 from galil.sim.rooms import Homing
+from galil.testing import simulated
 
 
 def ask(sim: SimController, text: str) -> str:
@@ -196,6 +198,17 @@ def test_analog_outputs_are_range_checked_and_reported_in_the_rio_record() -> No
     assert ask(SimController("DMC-4040"), "AO 1,1") == "?"  # no analog outputs there
 
 
+def test_op_sets_outputs_as_the_sourced_examples_show() -> None:
+    # The RIO's 8-bit banks (IRTF notes: "OP $00,$01" sets DO8); OP m sets outputs 1-8 (DMC-3425
+    # manual p.180). Wider DMC banks are an assumption (models.py _OP_ASSUMPTION).
+    rio = SimController("RIO-47120")
+    assert ask(rio, "OP $00,$01") == ":"
+    assert ask(rio, "MG @OUT[7],@OUT[8],@OUT[9]") == " 0.0000 1.0000 0.0000\r\n:"
+    dmc = SimController("DMC-4040")
+    assert ask(dmc, "OP 129") == ":"
+    assert ask(dmc, "MG @OUT[1],@OUT[2],@OUT[8]") == " 1.0000 0.0000 1.0000\r\n:"
+
+
 def test_ai_holds_the_reply_until_the_input_changes() -> None:
     sim = SimController("DMC-4040")
     assert ask(sim, "AI -5") == ""
@@ -217,7 +230,32 @@ def test_loop_settings_are_stored_quantised_and_range_checked() -> None:
     assert ask(sim, "KS 4") == ":"
     assert ask(sim, "OE 1,2,3,0;BR -1") == "::"
     assert ask(sim, "OE 4") == "?"
-    assert ask(sim, "KP ?,?") == " 10.250, 6.000\r\n:"
+    assert ask(sim, "KP ?,?") == " 10.25, 6.00\r\n:"
+
+
+@pytest.mark.parametrize(
+    ("model", "ki_reply"),
+    [("DMC-4040", " 0.5000"), ("DMC-1806", " 0.5000"), ("DMC-18x2", " 1")],
+)
+def test_gains_and_tm_answer_in_their_command_reference_formats(model: str, ki_reply: str) -> None:
+    # KP, KD 4.2; KI 4.4 (40x0, 18x6) or 4.0 (Optima 18x2); TM 1.0 (models.py _REPLY_FORMATS).
+    sim = SimController(model)
+    assert ask(sim, "KPA=10.125;KIA=0.5;KDA=100.375") == ":::"
+    assert ask(sim, "KP ?") == " 10.13\r\n:"
+    assert ask(sim, "KD ?") == " 100.38\r\n:"
+    assert ask(sim, "KI ?") == ki_reply + "\r\n:"
+    assert ask(sim, "TM ?") == " 1000\r\n:"
+    # MG prints operands in the variable format (VF 10.4), the stored value in full.
+    assert ask(sim, "MG _KPA,_TM") == " 10.1250 1000.0000\r\n:"
+    assert ask(sim, "LZ 0;KP ?;TM ?") == ": 0010.13\r\n: 1000\r\n:"
+
+
+def test_the_host_reads_gains_back_exactly_whatever_kp_query_prints() -> None:
+    with simulated("DMC-4040") as dmc:
+        dmc.A.kp, dmc.A.ki, dmc.A.kd = 10.125, 0.5, 100.375
+        assert (dmc.A.kp, dmc.A.ki, dmc.A.kd) == (10.125, 0.5, 100.375)  # MG _KPA etc.
+        assert parse_numbers(dmc.command("KP ?,?")) == [10.13, 6.0]
+        assert parse_number(dmc.command("TM ?")) == 1000
 
 
 def test_burns_keep_the_controller_busy_for_a_while() -> None:

@@ -114,6 +114,8 @@ class IO(Room):
         self.outputs[k] = i.evaluate(fields[1]) != 0
         return ""
 
+    # OP n0,n1,...: 8-bit banks. Sourced for the RIO (IRTF notes) and for outputs 1-8 (DMC-3425
+    # manual); the banks past them are an assumption (models.py _OP_ASSUMPTION).
     @handler("OP")
     def op(self, args: str) -> str:
         fields = split_fields(args)

@@ -118,7 +118,7 @@ class Settings(Room):
         spec = self.machine.spec
         a = args.strip()
         if a == "?":
-            return self.machine.interp.num(servo.tm, "5.2") + "\r\n"
+            return self.machine.interp.num(servo.tm, spec.reply_formats["TM"]) + "\r\n"
         if not a:
             return ""
         value = self.machine.interp.evaluate(a)

@@ -110,24 +110,26 @@ class Tuning(Room):
         lo, hi = self.machine.spec.ks_range
         return self._setting("KS", fields, self._ranged(lo, hi, 1 / 32), "2.4")
 
+    # ``KP ?`` answers in the command's own format (the model's reply_formats: KP and KD 4.2,
+    # KI 4.4 or 4.0); ``MG _KPA`` prints the same value in VF.
+    def _gain(self, name: str, fields: Fields, high: float, step: float) -> str:
+        spec = self.machine.spec
+        return self._setting(name, fields, self._ranged(0, high, step), spec.reply_formats[name])
+
     @handler("KP", Args.VALUES)
     def kp(self, fields: Fields) -> str:
         spec = self.machine.spec
-        return self._setting(
-            "KP", fields, self._ranged(0, spec.kp_max, spec.gain_resolution), "4.3"
-        )
+        return self._gain("KP", fields, spec.kp_max, spec.gain_resolution)
 
     @handler("KI", Args.VALUES)
     def ki(self, fields: Fields) -> str:
         spec = self.machine.spec
-        return self._setting("KI", fields, self._ranged(0, spec.ki_max, spec.ki_resolution), "4.3")
+        return self._gain("KI", fields, spec.ki_max, spec.ki_resolution)
 
     @handler("KD", Args.VALUES)
     def kd(self, fields: Fields) -> str:
         spec = self.machine.spec
-        return self._setting(
-            "KD", fields, self._ranged(0, spec.kd_max, spec.gain_resolution), "4.3"
-        )
+        return self._gain("KD", fields, spec.kd_max, spec.gain_resolution)
 
     @handler("IL", Args.VALUES)
     def il(self, fields: Fields) -> str:
