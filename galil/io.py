@@ -239,6 +239,13 @@ class IO:
         m = self._link.model
         return m.io_first, m
 
+    def __repr__(self) -> str:
+        m = self._link.model
+        return (
+            f"<IO of {m.name}: {m.digital_inputs} inputs, {m.digital_outputs} outputs,"
+            f" {m.analog_inputs} analog in, {m.analog_outputs} analog out>"
+        )
+
     @property
     def inputs(self) -> DigitalInputs:
         """Digital inputs (``bool``), numbered as the controller numbers them."""

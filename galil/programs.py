@@ -102,6 +102,10 @@ class Programs:
         self.link = link
         self.routines = routines
 
+    def __repr__(self) -> str:
+        m = self.link.model
+        return f"<Programs of {m.name}: {m.threads} threads, {m.program_lines} lines>"
+
     def download(
         self,
         source: str | os.PathLike[str],

@@ -181,6 +181,16 @@ def test_io_slices_take_one_line_each() -> None:
         assert [sim_of(dmc).output(n) for n in (1, 2, 3)] == [True, True, False]
 
 
+def test_io_and_programs_say_what_the_model_has_without_asking_it() -> None:
+    with simulated("RIO-47100") as rio, nothing_sent(rio):
+        assert repr(rio.io) == "<IO of RIO-47100: 16 inputs, 16 outputs, 8 analog in, 8 analog out>"
+        m = rio.link.model
+        assert (
+            repr(rio.programs)
+            == f"<Programs of RIO-47100: {m.threads} threads, {m.program_lines} lines>"
+        )
+
+
 def test_io_refuses_channels_and_values_the_model_lacks_before_sending() -> None:
     with simulated("RIO-47100") as rio, nothing_sent(rio):
         with pytest.raises(galil.InvalidArgument):
