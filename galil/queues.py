@@ -2,7 +2,9 @@
 callbacks subscribed to them.
 
 When nobody reads the queue, the oldest items are dropped (``dropped`` counts them) rather than
-the queue growing without end. A callback that fails is logged and the others still run.
+the queue growing without end. A callback that fails is logged and the others still run. A
+wait's timeout is checked as every wait's is (:func:`~galil.link.check_wait_timeout`), the
+same check as the async twin's (:class:`galil.aio.LoopQueue`).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from collections.abc import Callable
 from typing import Generic, TypeVar
 
 from galil.errors import InvalidArgument
+from galil.link import check_wait_timeout
 
 __all__ = ["BoundedQueue", "Subscribers"]
 
@@ -49,8 +52,11 @@ class BoundedQueue(Generic[T]):
         """Return the oldest item, waiting up to ``timeout`` seconds (``None``: for ever).
 
         Raises:
+            InvalidArgument: a timeout that is not ``None`` or a finite number >= 0 (infinity
+                too: ``None`` waits for ever).
             queue.Empty: nothing arrived in time.
         """
+        check_wait_timeout(timeout)
         with self._cond:
             if not self._cond.wait_for(lambda: self._items, timeout):
                 raise queue.Empty(f"no {self._what} within {timeout} s")

@@ -19,7 +19,6 @@ from typing import Any, Generic, TypeVar
 
 import numpy as np
 
-from galil.aio._waits import check_wait
 from galil.aio._worker import Worker, shielded
 from galil.errors import GalilConnectionError
 from galil.link import check_count, check_wait_timeout
@@ -35,13 +34,8 @@ BATCH = 1000
 T = TypeVar("T")
 
 
-def _check_wait(timeout: float | None) -> float:
-    seconds = check_wait(timeout)
-    return math.inf if seconds is None else seconds
-
-
-def _record_wait(timeout: object) -> float:
-    """A record wait's timeout, checked as the sync ``RecordStream.get`` checks it
+def _wait_seconds(timeout: object) -> float:
+    """A queue's or a record stream's wait, checked as its sync twin checks it
     (:func:`~galil.link.check_wait_timeout`: ``None`` is for ever, infinity is refused)."""
     check_wait_timeout(timeout)
     return math.inf if timeout is None else float(timeout)  # type: ignore[arg-type]
@@ -84,10 +78,12 @@ class LoopQueue(Generic[T]):
         """The oldest item, waiting up to ``timeout`` seconds (``None``: for ever).
 
         Raises:
+            InvalidArgument: a timeout the sync queue refuses too (not ``None`` or a finite
+                number >= 0), before anything is awaited.
             queue.Empty: nothing arrived in time.
             GalilConnectionError: the controller was closed.
         """
-        wait = _check_wait(timeout)
+        wait = _wait_seconds(timeout)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + wait
         while not self._items:
@@ -218,7 +214,7 @@ class AsyncRecordStream:
             GalilConnectionError: the stream is closed (or its handle died).
         """
         check_count(limit, "limit")
-        wait = _record_wait(timeout)
+        wait = _wait_seconds(timeout)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + wait
         while not self._ready:

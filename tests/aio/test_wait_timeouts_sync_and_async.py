@@ -1,5 +1,6 @@
 """A wait's timeout is checked by one function on both sides, sync and async: the same bad
-values are refused with InvalidArgument, before anything is sent or read.
+values are refused with InvalidArgument, before anything is sent or read (a program's thread,
+a capture, a record stream, and the queues of unsolicited messages and interrupts).
 """
 
 from __future__ import annotations
@@ -22,6 +23,8 @@ SYNC: dict[str, tuple[Callable[[galil.Controller], Any], Call]] = {
     "programs.wait": (lambda c: c.programs, lambda p, t: p.wait(0, t)),
     "capture.wait": (lambda c: c.capture(["_RPA"], every=2, count=10), lambda k, t: k.wait(t)),
     "records.get": (lambda c: c.records(8), lambda r, t: r.get(t)),
+    "messages.get": (lambda c: c.messages, lambda q, t: q.get(t)),
+    "interrupts.get": (lambda c: c.interrupts, lambda i, t: i.get(t)),
 }
 
 
@@ -37,10 +40,20 @@ async def _records(c: Any) -> Any:
     return await c.records(8)
 
 
+async def _messages(c: Any) -> Any:
+    return c.messages
+
+
+async def _interrupts(c: Any) -> Any:
+    return c.interrupts
+
+
 ASYNC: dict[str, tuple[Callable[[Any], Any], Call]] = {
     "programs.wait": (_programs, lambda p, t: p.wait(0, t)),
     "capture.wait": (_capture, lambda k, t: k.wait(t)),
     "records.get": (_records, lambda r, t: r.get(t)),
+    "messages.get": (_messages, lambda q, t: q.get(t)),
+    "interrupts.get": (_interrupts, lambda i, t: i.get(t)),
 }
 
 
@@ -78,6 +91,21 @@ def test_a_bad_wait_timeout_is_refused_alike_sync_and_async(what: str, timeout: 
 def test_a_thread_wait_without_an_end_is_refused_sync_and_async() -> None:
     _refused_sync("programs.wait", None)
     _refused_async("programs.wait", None)
+
+
+def test_none_waits_for_ever_for_a_message_sync_and_async() -> None:
+    with simulated() as dmc:
+        sim_of(dmc).emit_message("hello")
+        dmc.command("MG 1")  # the line is read with the next exchange
+        assert dmc.messages.get(None) == "hello"
+
+    async def body() -> None:
+        async with await sim() as c:
+            sim_of(c.sync).emit_message("hello")
+            await c.command("MG 1")
+            assert await c.messages.get(None) == "hello"
+
+    run(body)
 
 
 def test_none_waits_the_default_for_a_capture_and_for_ever_for_a_record() -> None:
