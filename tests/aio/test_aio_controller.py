@@ -1,7 +1,8 @@
 """galil.aio against in-process simulators (manual clock): the sync vocabulary, awaited.
 
 Every wait lets simulated time pass (the worker pauses the simulator's clock), so nothing here
-sleeps for motion; cancellation is made deterministic by holding the link's lock.
+sleeps for motion; a cancellation while a command is on its way is made deterministic by a wire
+hook that holds the worker inside the write until the test has cancelled.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ import asyncio
 import gc
 import itertools
 import queue
+import re
 import threading
 import time
 from typing import Any
@@ -105,25 +107,37 @@ def test_cancelling_the_task_that_awaits_a_move_stops_the_axis() -> None:
 def test_cancelling_while_a_move_is_being_sent_stops_it_once_it_started() -> None:
     async def body() -> None:
         async with await sim() as c:
-            lock = c.sync.link.locked()
-            lock.__enter__()  # the worker will start the move, then wait for the link
+            loop = asyncio.get_running_loop()
+            writing = asyncio.Event()  # the worker is writing the line with the move's BG
+            stop_sent = asyncio.Event()
+            go_on = threading.Event()  # lets that write go on
+
+            def hook(direction: str, data: bytes) -> None:
+                # Runs on the worker thread, under the link's lock, before the bytes go out.
+                if direction != "out":
+                    return
+                if re.search(rb"(^|;)BG", data) and not go_on.is_set():
+                    loop.call_soon_threadsafe(writing.set)
+                    go_on.wait(timeout=10)  # bounded: a broken test fails, never hangs
+                if re.search(rb"(^|;)ST", data):
+                    loop.call_soon_threadsafe(stop_sent.set)
+
+            remove = c.wire_log.add(hook)
             task = asyncio.ensure_future(c.A.move_to(100_000))
-            await asyncio.sleep(0.05)
+            await writing.wait()
             task.cancel()
             with pytest.raises(asyncio.CancelledError):
                 await task
-            lock.__exit__(None, None, None)
-            for _ in range(200):  # the stop follows the move on a worker thread
-                sent = commands_of(c)
-                if any(t.startswith("ST") for t in sent):
-                    break
-                await asyncio.sleep(0.005)
-            begin = next(i for i, t in enumerate(sent) if "BG" in t)
-            stop = next(i for i, t in enumerate(sent) if t.startswith("ST"))
-            assert begin < stop
-            await c.sleep(2.0)
+            go_on.set()
+            await stop_sent.wait()  # the stop follows the move on a worker thread
+            remove()
+            await c.sleep(2.0)  # through the link's lock: after the stop's whole exchange
             assert not await c.A.moving()
             assert await c.A.reference_position() < 100_000
+            sent = commands_of(c)
+            begin = next(i for i, t in enumerate(sent) if re.search(r"(^|;)BG", t))
+            stop = next(i for i, t in enumerate(sent) if re.search(r"(^|;)ST", t))
+            assert begin < stop
 
     run(body)
 
