@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import threading
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -255,11 +256,95 @@ def _slider_limit(axis: Axis, max_speed: object) -> float:
     return value
 
 
+class _JogControl:
+    """What the jog widget does with the speeds asked for, on whichever thread asks.
+
+    A speed asked for while the widget's jog ramps down from a stop (the controller takes no
+    new jog then) is kept, not refused: once the stop is over (the stopped jog's handle calls
+    back, from its watcher thread), the slider's value at that moment is applied. Nothing here
+    waits: the UI thread only sends commands and sets labels.
+    """
+
+    def __init__(self, axis: Axis, slider: Any, status: Any, unit: str) -> None:
+        self.axis = axis
+        self.slider = slider
+        self.status = status
+        self.unit = unit
+        self._lock = threading.RLock()  # the callback may run on the thread that asks
+        self._handle: MoveHandle | None = None  # the widget's jog, until seen stopped
+        self._waiting = False  # a callback is due once that jog has stopped
+
+    def apply(self, value: float) -> None:
+        """Jog at ``value`` (axis units per second; 0 stops), or as soon as a stop is over."""
+        with self._lock:
+            if value != 0:
+                self._jog(value)
+                return
+            try:
+                self.axis.stop()
+                self.status.value = "stopped"
+            except GalilError as exc:
+                self.status.value = f"refused: {exc}".splitlines()[0]
+
+    def _jog(self, value: float) -> None:
+        speed: Any = value
+        if self.axis.scale is not None:
+            reg = get_registry()
+            speed = reg.Quantity(value, self.axis.scale.unit / reg.second)
+        try:
+            handle = self.axis.jog(speed)
+        except GalilError as exc:
+            if not self._after_stop(value):
+                self.status.value = f"refused: {exc}".splitlines()[0]
+            return
+        self._handle, self._waiting = handle, False
+        self.status.value = f"jogging at {value:g} {self.unit}"
+
+    def _after_stop(self, value: float) -> bool:
+        """After a refusal: jog at ``value`` once the widget's jog has stopped, if it is
+        ramping down from a stop (``_SC`` not 0); ``False`` when it is not."""
+        handle = self._handle
+        if handle is None or handle.finished:
+            return False
+        try:
+            done = handle.done
+            stopping = not done and self.axis.stop_code[0] != 0
+        except GalilError:
+            return False
+        if done:  # the stop ended after the jog's own query: once more, now
+            if self._handle is handle:  # (unless its callback has just done so)
+                self._handle = None
+                self._jog(value)
+            return True
+        if not stopping:
+            return False
+        self.status.value = (
+            f"axis {self.axis.letter} is stopping; then jogging at {value:g} {self.unit}"
+        )
+        if not self._waiting:
+            self._waiting = True
+            handle.add_callback(self._stopped)  # called here at once if it stopped meanwhile
+        return True
+
+    def _stopped(self, handle: MoveHandle) -> None:
+        with self._lock:
+            if handle is not self._handle or not self._waiting:
+                return  # a jog started since then: nothing to catch up
+            self._handle, self._waiting = None, False
+            value = float(self.slider.value)
+            if value == 0:
+                self.status.value = "stopped"
+            else:
+                self._jog(value)
+
+
 def jog_widget(axis: Axis, *, max_speed: float | None = None) -> Any:
     """A slider that jogs ``axis`` at the chosen speed, and a Stop button; needs ipywidgets.
 
     Moving the slider jogs (or changes the jog speed in motion); 0 or Stop decelerates to a
-    stop. A refused speed shows its error under the slider instead of raising in a callback.
+    stop. A speed chosen while the axis still ramps down from a stop is applied once the stop
+    is over (the latest one chosen by then). A refused speed shows its error under the slider
+    instead of raising in a callback.
 
     Args:
         axis: the axis to jog.
@@ -277,30 +362,16 @@ def jog_widget(axis: Axis, *, max_speed: float | None = None) -> Any:
     )
     stop = widgets.Button(description="Stop", button_style="danger")
     status = widgets.Label(value="stopped")
-
-    def jog(value: float) -> None:
-        try:
-            if value == 0:
-                axis.stop()
-                status.value = "stopped"
-                return
-            speed: Any = value
-            if axis.scale is not None:
-                reg = get_registry()
-                speed = reg.Quantity(value, axis.scale.unit / reg.second)
-            axis.jog(speed)
-            status.value = f"jogging at {value:g} {unit}"
-        except GalilError as exc:
-            status.value = f"refused: {exc}".splitlines()[0]
+    control = _JogControl(axis, slider, status, unit)
 
     def on_change(change: Mapping[str, Any]) -> None:
-        jog(float(change["new"]))
+        control.apply(float(change["new"]))
 
     def on_stop(_button: Any) -> None:
         if slider.value != 0:
             slider.value = 0.0  # observing the change sends the stop
         else:
-            jog(0.0)
+            control.apply(0.0)
 
     slider.observe(on_change, names="value")
     stop.on_click(on_stop)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 
@@ -40,6 +42,52 @@ def test_jog_widget_jogs_changes_speed_and_stops() -> None:
         assert status.value == "stopped"
         dmc.sleep(0.5)
         assert not axis.moving
+
+
+def test_jog_widget_takes_the_latest_speed_once_a_stop_is_over() -> None:
+    pytest.importorskip("ipywidgets")
+    with simulated() as dmc:
+        axis = dmc.A.set_scale(counts_per=2000 / ureg.mm)
+        box = jog_widget(axis, max_speed=50)
+        slider, status = box.children[0].children[0], box.children[1]
+        slider.value = 10.0
+        dmc.sleep(0.5)
+        jogging_again = threading.Event()
+
+        def seen(change: dict[str, str]) -> None:
+            if change["new"] == "jogging at 7 mm/s":
+                jogging_again.set()
+
+        status.observe(seen, names="value")
+        slider.value = 0.0  # ST: the axis ramps down (no simulated time passes meanwhile)
+        slider.value = 5.0
+        assert status.value.startswith("axis A is stopping"), status.value
+        slider.value = 7.0  # the latest request is the one applied
+        assert status.value == "axis A is stopping; then jogging at 7 mm/s"
+        dmc.sleep(0.5)  # the stop ends on the controller
+        assert jogging_again.wait(timeout=10), status.value
+        dmc.sleep(0.5)
+        assert axis.velocity.to("mm/s").magnitude == pytest.approx(7, rel=0.05)
+        slider.value = 0.0
+        dmc.sleep(0.5)
+        assert not axis.moving
+        assert status.value == "stopped"
+
+
+def test_jog_widget_refuses_a_speed_beyond_the_model_while_jogging_without_waiting() -> None:
+    pytest.importorskip("ipywidgets")
+    with simulated() as dmc:
+        box = jog_widget(dmc.A, max_speed=1e9)
+        slider, status = box.children[0].children[0], box.children[1]
+        slider.value = 1000.0
+        slider.value = 1e9  # refused: nothing is stopping, so nothing is kept for later
+        assert status.value.startswith("refused:"), status.value
+        dmc.sleep(0.5)
+        assert dmc.A.velocity == pytest.approx(1000, rel=0.05)  # still jogging as before
+        assert status.value.startswith("refused:")
+        slider.value = 0.0
+        dmc.sleep(0.5)
+        assert not dmc.A.moving
 
 
 def test_jog_widget_shows_a_refusal_instead_of_raising() -> None:
