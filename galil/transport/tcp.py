@@ -13,6 +13,7 @@ import contextlib
 import select
 import selectors
 import socket
+import time
 from typing import Any
 from urllib.parse import SplitResult
 
@@ -186,7 +187,7 @@ class TcpTransport(TransportBase[socket.socket]):
             GalilConnectionError: this link is closed, or no socket could be made.
         """
         self._live()
-        return UdpTransport(self.host, self.port)
+        return UdpTransport(self.host, self.port, write_timeout=self.write_timeout)
 
 
 class UdpTransport(TransportBase[socket.socket]):
@@ -196,27 +197,59 @@ class UdpTransport(TransportBase[socket.socket]):
     packets only to a UDP handle. Loss is possible: use it for what may be lost (interrupts
     are also visible as ``_BG``), not for motion commands.
 
+    As on TCP, reads wait with the socket's timeout and a write goes out with whatever
+    timeout the last read left (a poll before the first read, so no write waits for ever); a
+    datagram the socket has no room for then waits for room on a selector until
+    ``write_timeout`` has passed since the write began, and fails with
+    :class:`~galil.errors.GalilConnectionError`.
+
     Args:
         host: controller host name or address.
         port: UDP port (23 by default).
+        write_timeout: seconds a datagram may wait for room in the socket.
+        sock: an already connected datagram socket to adopt instead of making one (tests).
     """
 
     kind = "ethernet"
 
-    def __init__(self, host: str, port: int = DEFAULT_PORT) -> None:
+    def __init__(
+        self,
+        host: str,
+        port: int = DEFAULT_PORT,
+        *,
+        write_timeout: float = 5.0,
+        sock: socket.socket | None = None,
+    ) -> None:
         check_port(port, "UDP port")
-        dotted_quad(host, "UDP host")
+        self.write_timeout = seconds(write_timeout, "write_timeout")
         self.host = host
         self.port = port
-        try:
-            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            sock.connect((host, port))
-        except OSError as exc:
-            raise GalilConnectionError(f"cannot open a UDP handle to {host}:{port}: {exc}") from exc
-        super().__init__(sock, name=f"udp {host}:{port}", label=f"UDP handle to {host}:{port}")
+        if sock is None:
+            dotted_quad(host, "UDP host")
+            sock = _udp_socket(host, port)
+        sock.settimeout(0.0)  # a poll until the first read sets its timeout
+        self._writable = _Selector()
+        self._writable.register(sock, selectors.EVENT_WRITE)
+        super().__init__(
+            sock, name=f"udp {host}:{port}", label=f"UDP handle to {host}:{port}", timeout=0.0
+        )
 
     def _send(self, handle: socket.socket, data: bytes) -> None:
-        handle.send(data)
+        # One datagram: it goes whole or not at all, so a retry sends all of it again.
+        deadline = time.monotonic() + self.write_timeout
+        while True:
+            try:
+                handle.send(data)
+                return
+            except (BlockingIOError, TimeoutError):  # no room now
+                pass
+            except ConnectionRefusedError as exc:  # an ICMP "port unreachable" came back
+                raise self._unanswered() from exc
+            left = deadline - time.monotonic()
+            if left <= 0 or not self._writable.select(left):
+                raise GalilConnectionError(
+                    f"{self.label} did not accept data within {self.write_timeout:g} s"
+                )
 
     def _set_timeout(self, handle: socket.socket, seconds: float) -> None:
         handle.settimeout(seconds)
@@ -227,10 +260,24 @@ class UdpTransport(TransportBase[socket.socket]):
         except (TimeoutError, BlockingIOError):
             return b""
         except ConnectionRefusedError as exc:  # an ICMP "port unreachable" came back
-            raise GalilConnectionError(f"nothing answers UDP at {self.host}:{self.port}") from exc
+            raise self._unanswered() from exc
+
+    def _unanswered(self) -> GalilConnectionError:
+        return GalilConnectionError(f"nothing answers UDP at {self.host}:{self.port}")
 
     def _release(self, handle: socket.socket) -> None:
+        self._writable.close()
         handle.close()
+
+
+def _udp_socket(host: str, port: int) -> socket.socket:
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sock.connect((host, port))
+    except OSError as exc:
+        sock.close()
+        raise GalilConnectionError(f"cannot open a UDP handle to {host}:{port}: {exc}") from exc
+    return sock
 
 
 def open_tcp(url: SplitResult, **options: Any) -> TcpTransport:

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import math
 import queue
+import socket
+import threading
 
 import pytest
 
@@ -52,3 +55,93 @@ def test_interrupts_come_on_a_udp_handle_and_a_tcp_handle_is_refused() -> None:
         with pytest.raises(galil.CommandError) as info:
             dmc.command("EI 256,,0")
         assert info.value.code == 133
+
+
+def test_a_udp_handle_takes_the_tcp_links_write_timeout_and_refuses_a_bad_one() -> None:
+    with SimTcpServer() as server:
+        host, port = server.address
+        tcp = TcpTransport(host, port, write_timeout=0.25)
+        udp = tcp.open_datagram_handle()
+        try:
+            assert isinstance(udp, UdpTransport)
+            assert udp.write_timeout == 0.25
+        finally:
+            udp.close()
+            tcp.close()
+
+    def no_socket(*args: object, **kwargs: object) -> socket.socket:
+        raise AssertionError("a socket was made before the options were checked")
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(socket, "socket", no_socket)
+        for bad in (0, -1, math.nan, math.inf, "x", True):
+            with pytest.raises(InvalidArgument, match="write_timeout"):
+                UdpTransport("127.0.0.1", 23, write_timeout=bad)  # type: ignore[arg-type]
+
+
+def _full_datagram_pair() -> tuple[socket.socket, socket.socket]:
+    """Two connected datagram sockets, the first with no room left for another datagram.
+
+    A UDP send over loopback never waits on Linux (the loopback device frees the sender's
+    buffer at once), so a datagram socket pair stands in for a UDP socket that is full.
+    """
+    a, b = socket.socketpair(socket.AF_UNIX, socket.SOCK_DGRAM)
+    a.setblocking(False)
+    try:
+        while True:
+            a.send(b"f" * 1000)
+    except BlockingIOError:
+        return a, b
+
+
+def test_a_udp_write_with_no_room_gives_up_after_the_write_timeout() -> None:
+    a, b = _full_datagram_pair()
+    udp = UdpTransport("127.0.0.1", 23, sock=a, write_timeout=0.05)
+    try:
+        assert udp.read(0.0) == b""  # a poll: the socket's timeout is 0 now
+        with pytest.raises(GalilConnectionError, match=r"did not accept data within 0\.05 s"):
+            udp.write(b"MG 1\r")
+    finally:
+        udp.close()
+        b.close()
+
+
+def test_a_udp_write_after_a_polling_read_waits_for_room_as_the_peer_reads() -> None:
+    a, b = _full_datagram_pair()
+    b.settimeout(10.0)  # a failed test ends its reader too
+    udp = UdpTransport("127.0.0.1", 23, sock=a, write_timeout=10.0)
+    mine = [b"%04d" % i + b"x" * 996 for i in range(300)]  # about three socketfuls
+    got: list[bytes] = []
+
+    def drain() -> None:
+        while len(got) == 0 or got[-1] != mine[-1]:
+            try:
+                got.append(b.recv(2000))
+            except OSError:  # the writer failed: the test closed the socket
+                return
+
+    reader = threading.Thread(target=drain)
+    try:
+        assert udp.read(0.0) == b""
+        reader.start()
+        for datagram in mine:
+            udp.write(datagram)
+        reader.join(timeout=30)
+        assert [g for g in got if not g.startswith(b"f")] == mine
+    finally:
+        udp.close()
+        b.close()
+        reader.join(timeout=30)
+
+
+def test_a_udp_write_to_a_port_nothing_answers_raises_the_transports_error() -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]  # free again once closed: nothing listens there
+    udp = UdpTransport("127.0.0.1", port)
+    try:
+        udp.write(b"MG 1\r")  # over loopback the ICMP "port unreachable" is back at once
+        with pytest.raises(GalilConnectionError, match=f"nothing answers UDP at 127.0.0.1:{port}"):
+            udp.write(b"MG 1\r")
+    finally:
+        udp.close()
