@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from galil.errors import InvalidArgument, LimitError, ProtocolError
+from galil.errors import CommandError, InvalidArgument, LimitError, ProtocolError
 from galil.link import CommandLink
 from galil.models import INT32_MAX, INT32_MIN
 from galil.protocol import commands as cmds
@@ -33,6 +33,8 @@ __all__ = ["Arrays", "Variables"]
 _LA_LINE = re.compile(r"\s*([A-Za-z][A-Za-z0-9]*)\s*\[\s*(\d+)\s*\]")
 _LV_LINE = re.compile(r"\s*([A-Za-z][A-Za-z0-9]*)\s*=\s*(\S+)")
 _UPLOAD_TIMEOUT = 10.0
+#: TC codes of ``MG name[-1]`` for an array that is not there (bad array, undefined array).
+_NO_ARRAY = frozenset({57, 82})
 
 
 def _values(values: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
@@ -81,13 +83,29 @@ class Arrays:
         return out
 
     def _size(self, name: str) -> int:
-        size = self.list().get(name)
-        if size is None:
+        """How many elements array ``name`` has (``MG name[-1]``: element -1 is the size).
+
+        Raises:
+            InvalidArgument: there is no such array.
+            ProtocolError: the answer is no size.
+        """
+        command = cmds.array_size(name)
+        try:
+            text = self.link.exchange(command).text
+        except CommandError as exc:
+            if exc.code not in _NO_ARRAY:
+                raise
             raise InvalidArgument(
                 f"there is no array {name!r} on the controller (define it first)",
                 model=self.link.model.name,
-            )
-        return size
+            ) from exc
+        try:
+            size = parse_number(text)
+        except (InvalidArgument, ValueError) as exc:
+            raise self.link.error(ProtocolError, f"{command.text!r} answered {text!r}") from exc
+        if size != round(size) or size < 1:
+            raise self.link.error(ProtocolError, f"{command.text!r} answered {text!r}, no size")
+        return round(size)
 
     def define(self, name: str, size: int, *, replace: bool = False) -> None:
         """Dimension array ``name`` with ``size`` elements, all zero (``DM``).
@@ -120,8 +138,8 @@ class Arrays:
     def download(self, name: str, values: npt.ArrayLike, *, first: int = 0) -> None:
         """Write ``values`` into array ``name`` from element ``first`` (``QD``).
 
-        The array's size is read first (``LA``), so values that would not fit are refused
-        before any of them is sent.
+        The array's size is read first (``MG name[-1]``), so values that would not fit are
+        refused before any of them is sent.
 
         Raises:
             InvalidArgument: a bad name or index, values that are not finite numbers, no such
@@ -145,15 +163,23 @@ class Arrays:
     ) -> npt.NDArray[np.float64]:
         """Read array ``name`` (elements ``first`` to ``last``, default all) with ``QU``.
 
+        The array's size is read first (``MG name[-1]``), so a range outside the array is
+        refused before the upload is sent.
+
         Raises:
-            InvalidArgument: a bad name or range, or no such array.
+            InvalidArgument: a bad name or range, a range outside the array, or no such array.
             ProtocolError: the reply is not the numbers asked for.
         """
-        cmds.array_name(name)
+        cmds.qu(name, first, last)  # a bad name or index: refused before the size query
+        size = self._size(name)
         lo = 0 if first is None else first
-        hi = last
-        if hi is None:
-            hi = self._size(name) - 1
+        hi = size - 1 if last is None else last
+        if not lo <= hi < size:
+            shown = f"{lo}..{hi}" if last is not None else f"{lo}.."
+            raise InvalidArgument(
+                f"{name}[{shown}] is outside {name}[] of {size} (indices 0..{size - 1})",
+                model=self.link.model.name,
+            )
         command = cmds.qu(name, lo, hi, delim=1)
         text = self.link.exchange(command, timeout=_UPLOAD_TIMEOUT).text
         try:

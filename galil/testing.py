@@ -98,10 +98,10 @@ def transcript(controller: Controller) -> Iterator[Transcript]:
         remove()
 
 
-# Lines that only read: operands and variables (MG), the program (UL), array listings.
-_READ_ONLY = re.compile(
-    r"MG [_A-Za-z][_A-Za-z0-9]*(?:\s*,\s*[_A-Za-z][_A-Za-z0-9]*)*|UL|LA|LV|QU [A-Za-z0-9\[\],]*|QZ"
-)
+# Lines that only read: operands, variables and array elements or sizes (MG), the program
+# (UL), array listings.
+_MG_ITEM = r"[_A-Za-z][_A-Za-z0-9]*(?:\[-?\d+\])?"
+_READ_ONLY = re.compile(rf"MG {_MG_ITEM}(?:\s*,\s*{_MG_ITEM})*|UL|LA|LV|QU [A-Za-z0-9\[\],]*|QZ")
 
 
 @contextlib.contextmanager

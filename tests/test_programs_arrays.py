@@ -106,9 +106,33 @@ def test_values_that_do_not_fit_are_refused_after_one_query(dmc: galil.Controlle
         pytest.raises(galil.InvalidArgument, match="do not fit"),
     ):
         dmc.arrays.download("a", [1, 2, 3], first=1)
-    assert sent.lines == ["LA"]
+    assert sent.lines == ["MG a[-1]"]
     with pytest.raises(galil.InvalidArgument, match="no array 'b'"):
         dmc.arrays.download("b", [1])
+
+
+@pytest.mark.parametrize(("first", "last"), [(0, 10), (0, 5), (4, 5), (5, None), (7, 9)])
+def test_an_upload_outside_the_array_is_refused_after_the_size_query(
+    dmc: galil.Controller, first: int, last: int | None
+) -> None:
+    dmc.arrays.define("a", 5)
+    dmc.arrays.download("a", [1, 2, 3, 4, 5])
+    with (
+        transcript(dmc) as sent,
+        pytest.raises(galil.InvalidArgument, match=r"outside a\[\] of 5 \(indices 0\.\.4\)"),
+    ):
+        dmc.arrays.upload("a", first, last)
+    assert sent.lines == ["MG a[-1]"]  # the size, and nothing else
+    assert dmc.query_number("MG _TC") == 0  # the controller refused nothing
+    assert dmc.arrays.upload("a", 3, 4).tolist() == [4, 5]
+    assert dmc.arrays.upload("a", 4).tolist() == [5]
+
+
+def test_an_upload_of_an_array_that_is_not_there_is_refused(dmc: galil.Controller) -> None:
+    with pytest.raises(galil.InvalidArgument, match="no array 'b'"):
+        dmc.arrays.upload("b", 0, 1)
+    with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match="last index"):
+        dmc.arrays.upload("b", 3, 1)  # a range that is no range: refused before the size query
 
 
 def test_arrays_and_variables_round_trip(dmc: galil.Controller) -> None:

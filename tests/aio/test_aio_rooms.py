@@ -222,6 +222,19 @@ def test_programs_arrays_and_variables_are_awaited() -> None:
     run(body)
 
 
+def test_an_awaited_upload_outside_the_array_is_refused_after_the_size_query() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            await c.arrays.define("a", 5)
+            before = len(commands_of(c))
+            with pytest.raises(galil.InvalidArgument, match=r"outside a\[\] of 5"):
+                await c.arrays.upload("a", 0, 10)
+            assert commands_of(c)[before:] == ["MG a[-1]"]
+            assert (await c.arrays.upload("a", 3, 4)).tolist() == [0, 0]
+
+    run(body)
+
+
 def test_waiting_for_a_program_times_out_after_the_whole_timeout() -> None:
     async def body() -> str:
         async with await sim() as c:

@@ -32,6 +32,13 @@ def test_arrays_are_dimensioned_read_and_written_in_expressions(sim: SimControll
     assert ask(sim, "MG _DM") == f" {24_000 - 7}.0000\r\n:".encode()
 
 
+def test_element_minus_one_is_an_arrays_size_as_in_the_firmware(sim: SimController) -> None:
+    ask(sim, "DM sq[5],cube[2]")
+    assert ask(sim, "MG sq[-1],cube[-1]") == b" 5.0000 2.0000\r\n:"
+    assert ask(sim, "n=sq[-1]*2") == b":"
+    assert ask(sim, "MG n") == b" 10.0000\r\n:"
+
+
 def test_a_program_fills_an_array_in_a_loop(sim: SimController) -> None:
     ask(sim, "DM sq[10]")
     program = "#SQ\ri=0\r#LOOP\rsq[i]=i*i\ri=i+1\rJP #LOOP,i<10\rEN\r\\"
@@ -60,6 +67,8 @@ def test_qu_separates_by_comma_or_cr_lf_and_qd_takes_either(sim: SimController) 
         (["DM big[24001]"], 66),
         (["DM a[0]"], 6),
         (["DM a[2]", "a[2]=1"], 56),
+        (["DM a[2]", "a[-1]=5"], 56),  # the size is read-only
+        (["MG nope[-1]"], 82),
         (["b[0]=1"], 82),
         (["MG nope[0]"], 82),
         (["QU nope[],0,1,1"], 82),

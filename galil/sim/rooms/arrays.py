@@ -10,7 +10,9 @@ beyond) and how many variables (``variables``; TC 67). Choices where the sources
 - ``QU name[],first,last,delim`` prints the values separated by commas (delim 1) or CR LF
   (delim 0), then CR LF and ^Z; ``QD name[],first,last`` takes values separated by commas,
   CR or CR LF up to ``\\``, and refuses too many (TC 84), too few or a bad number (TC 83);
-- ``_DM`` is the number of array elements still free.
+- ``_DM`` is the number of array elements still free;
+- ``name[-1]`` in an expression (``MG name[-1]``) is the array's size, as in the firmware;
+  assigning to it is refused (TC 56).
 """
 
 from __future__ import annotations
@@ -68,6 +70,8 @@ class Arrays(Room):
 
     def element(self, name: str, index: float) -> float:
         values = self._array(name)
+        if index == -1:  # element -1 reads the array's size
+            return float(len(values))
         return values[self._index(values, index)]
 
     def store(self, name: str, index: float, value: float) -> None:
