@@ -155,6 +155,27 @@ class GearLink:
         """The follower at each of ``master``'s positions (the anchor is left as it is)."""
         return copy.deepcopy(self.anchor).follow(master)
 
+    def profile(self, master: predict.Profile, *, hold_after: int | None = None) -> predict.Profile:
+        """The follower's profile, shown in its unit, for a profile of the master's position
+        (counts; for ``"S"``, the distance counted since the gearing engaged).
+
+        Args:
+            master: the master's predicted profile.
+            hold_after: the sample after which the follower holds where it is (its gearing
+                turned off there); ``None``: it follows to the end.
+        """
+        pos = self.positions(master.position)
+        if hold_after is not None and 0 <= hold_after < pos.size:
+            pos[hold_after + 1 :] = pos[hold_after]
+        profile = predict.Profile.from_samples(
+            pos,
+            sample_period=master.sample_period,
+            shape="geared",
+            peak_speed=abs(self.ratio) * master.peak_speed,
+            stop_code=master.stop_code,
+        )
+        return profile if self.display is None else self.display(profile)
+
 
 def sample_of(reply: str) -> int | None:
     """The controller sample in a ``MG TIME`` reply (``None`` if it is not a number)."""
@@ -367,22 +388,11 @@ class MoveHandle:
         return self._cache[master]
 
     def _follower(self, gear: GearLink) -> predict.Profile:
-        master = self._master_positions(gear)
-        pos = gear.positions(master.position)
         begin = next(iter(self._tracks.values())).begin
+        held = None  # gearing off (ST, AB): the follower holds where it was
         if gear.released is not None and begin is not None:
-            k = gear.released - begin
-            if 0 <= k < pos.size:
-                pos = pos.copy()
-                pos[k + 1 :] = pos[k]  # gearing off: the follower holds where it was
-        profile = predict.Profile.from_samples(
-            pos,
-            sample_period=master.sample_period,
-            shape="geared",
-            peak_speed=abs(gear.ratio) * master.peak_speed,
-            stop_code=master.stop_code,
-        )
-        return profile if gear.display is None else gear.display(profile)
+            held = gear.released - begin
+        return gear.profile(self._master_positions(gear), hold_after=held)
 
     @property
     def profile(self) -> predict.Profile:

@@ -33,9 +33,12 @@ from galil.routines import Routine, Routines
 
 __all__ = [
     "AxisMove",
+    "check_followers",
     "execute_move",
+    "follower_limit_operands",
     "increment",
     "jog",
+    "limit_pairs",
     "set_jog_speed",
     "speed_schedule",
 ]
@@ -86,18 +89,18 @@ def _read_state(
     (query_operands packs the MG lines together)."""
     names = _operand_names(letters, _STATE)
     if followers:  # (the common move has none: the cached tuple as it is)
-        names += _operand_names(followers, ("BL", "FL"))
+        names += follower_limit_operands(followers)
     values = link.query_operands(names)
     n = len(_STATE)
     out: dict[str, _State] = {}
     for i, a in enumerate(letters):
         rp, bg, sp, ac, dc, it, bl, fl, mo = values[i * n : (i + 1) * n]
         out[a] = _State(round(rp), bool(bg), sp, ac, dc, it, bl, fl, bool(mo))
-    return out, _limit_pairs(followers, values[len(letters) * n :])
+    return out, limit_pairs(followers, values[len(letters) * n :])
 
 
-def _limit_pairs(followers: str, values: Sequence[float]) -> dict[str, tuple[float, float]]:
-    """``(BL, FL)`` per follower from the values of ``_operand_names(followers, ("BL", "FL"))``."""
+def limit_pairs(followers: str, values: Sequence[float]) -> dict[str, tuple[float, float]]:
+    """``(BL, FL)`` per follower from the values of :func:`follower_limit_operands`."""
     return {f: (values[2 * i], values[2 * i + 1]) for i, f in enumerate(followers)}
 
 
@@ -140,22 +143,30 @@ def _check_follower_speed(link: CommandLink, gear: GearLink, speed: float) -> No
         )
 
 
-def _check_followers(
+def follower_limit_operands(followers: str) -> tuple[str, ...]:
+    """The operands of the followers' soft limits, ``_BL`` and ``_FL`` per follower, in the
+    order :func:`limit_pairs` reads them back."""
+    return _operand_names(followers, ("BL", "FL"))
+
+
+def check_followers(
     link: CommandLink,
-    handle: MoveHandle,
     gears: Mapping[str, GearLink],
+    profiles: Mapping[str, predict.Profile],
     limits: Mapping[str, tuple[float, float]],
 ) -> None:
     """The followers' predicted profiles against their soft limits and the model's SP maximum.
 
+    Args:
+        gears: the followers to check, by letter.
+        profiles: each follower's predicted profile (positions in counts).
+        limits: each follower's ``(BL, FL)`` (:func:`limit_pairs`).
+
     Raises:
         LimitError: naming the follower.
     """
-    if not handle.followers:
-        return
-    profiles = handle.profiles
-    for f in handle.followers:
-        gear, profile = gears[f], profiles[f]
+    for f, gear in gears.items():
+        profile = profiles[f]
         bl, fl = limits[f]
         try:
             predict.check_soft_limits(profile, forward_limit=fl, backward_limit=bl, axis=f)
@@ -304,7 +315,8 @@ def execute_move(
     handle = MoveHandle(link, tracks, "position", display=display, tracker=tracker)
     handle.preset(profiles)
     handle.follow(gears)  # (an axis of the move is skipped)
-    _check_followers(link, handle, gears, limits)
+    if handle.followers:
+        check_followers(link, {f: gears[f] for f in handle.followers}, handle.profiles, limits)
     if dry_run:
         return handle
     replies = link.command_line(_move_line(link, moves, sent, command))
@@ -457,7 +469,7 @@ def increment(
     followers = "".join(gears)
     rp, bg, pa, bl, fl, *rest = link.query_operands(
         [f"_{op}{a}" for op in ("RP", "BG", "PA", "BL", "FL")]
-        + list(_operand_names(followers, ("BL", "FL")))
+        + list(follower_limit_operands(followers))
     )
     shows = {a: display} if display else None
     if not bg:
@@ -479,7 +491,7 @@ def increment(
     end = round(rp if jogging else pa) + counts
     what = "steps the jog's reference to" if jogging else "moves the target of the move to"
     _check_reach(link, a, counts, end, (bl, fl), what)
-    _check_followers_reach(link, gears, _limit_pairs(followers, rest), counts, end, what)
+    _check_followers_reach(link, gears, limit_pairs(followers, rest), counts, end, what)
     replies = link.command_line([cmds.ip(model=model, **{a: counts}), cmds.time_stamp()])
     if handle is None or track is None:
         # Someone else's move: nothing to follow; a handle that only waits for it.
@@ -593,14 +605,19 @@ def speed_schedule(
         ScheduleError: a change point the profiler cannot honour.
         InvalidArgument: a bad label, the axis busy or its motor off, a label the user's
             program uses, or a user program running (the download would disturb it).
-        LimitError: a path crossing a soft limit.
+        LimitError: a path crossing a soft limit, or taking an axis geared to ``letter`` past
+            its soft limits or beyond the model's SP maximum.
     """
     a = letter
     model = link.model
     cmds.xq(f"#{label}")  # the label is checked before anything is read or sent
-    rp, bg, sp0, ac, dc, it, bl, fl, mo = link.query_operands(
+    gears = tracker.followers(a)
+    followers = "".join(gears)
+    values = link.query_operands(
         [f"_{op}{a}" for op in ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")]
+        + list(follower_limit_operands(followers))
     )
+    rp, bg, sp0, ac, dc, it, bl, fl, mo = values[:9]
     if bg or mo:
         raise InvalidArgument(f"axis {a} is moving or its motor is off", model=model.name)
     first = sp0 if speed is None else speed
@@ -615,6 +632,9 @@ def speed_schedule(
         smoothing=it,
     )
     predict.check_soft_limits(schedule.profile, forward_limit=fl, backward_limit=bl, axis=a)
+    if gears:
+        geared = {f: g.profile(schedule.profile) for f, g in gears.items()}
+        check_followers(link, gears, geared, limit_pairs(followers, values[9:]))
     program = _schedule_program(link, a, label, first, distance, schedule)
     routines.install(Routine(f"#{label}", tuple(program)))  # beside the user's program
     link.command_line([cmds.assign(SCHEDULE_BEGIN, -1)])
@@ -624,6 +644,7 @@ def speed_schedule(
     handle = MoveHandle(
         link, {a: track}, "schedule", display={a: display} if display else None, tracker=tracker
     )
+    handle.follow(gears)
     tracker.started(handle)
     return handle
 
