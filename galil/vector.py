@@ -145,13 +145,15 @@ class VectorHandle(MoveHandle):
             return super()._master_positions(gear)
         return _path_master(self.counts, gear)
 
-    def _finish(self, rp: Sequence[int], sc: Sequence[int]) -> None:
+    def _finish(
+        self, rp: Sequence[int], sc: Sequence[int], followers: Mapping[str, tuple[int, int]]
+    ) -> None:
         with self._lock:
             if not self._done:
                 for gear in self._followers.values():
                     if gear.master == PLANE:
                         gear.travelled += int(self.counts.path[-1])
-        super()._finish(rp, sc)
+        super()._finish(rp, sc, followers)
 
     def _predict(self, letter: str, t: Track) -> predict.Profile:
         i = self._path.letters.index(letter)

@@ -1,6 +1,7 @@
 """Axes geared to a moving master: refused before sending when the master's path would take
-them past their soft limits or the SP maximum (vector paths, contours, speed schedules), and
-homing a master refused while anything follows it.
+them past their soft limits or the SP maximum (vector paths, contours, speed schedules), homing
+a master refused while anything follows it, and a follower stopped by a limit reported by the
+master's handle.
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ import pytest
 
 import galil
 from galil import Line
-from galil.errors import InvalidArgument, LimitError
+from galil.errors import InvalidArgument, LimitError, MotionError
 from galil.testing import nothing_sent, sim_of
 
 
@@ -103,3 +104,44 @@ def test_homing_a_geared_axis_is_refused(dmc: galil.Controller) -> None:
     dmc.A.gear_to("B", 2)
     with nothing_sent(dmc), pytest.raises(InvalidArgument, match="axis A is geared to B"):
         dmc.A.home()
+
+
+# -- a follower stopped by a limit ----------------------------------------------------------
+def test_wait_reports_a_follower_stopped_by_its_soft_limit(dmc: galil.Controller) -> None:
+    dmc.A.soft_limits = (-1000, 1000)
+    gearing = dmc.A.gear_to("B", 2)
+    jog = dmc.B.jog(1000)  # a jog has no end to check: A runs into its FL on the controller
+    dmc.sleep(1.0)
+    jog.stop()
+    with pytest.raises(MotionError) as caught:
+        jog.wait()
+    err = caught.value
+    assert err.axis == "A"
+    assert err.stop_codes["A"] == 2
+    assert err.position is not None
+    assert err.position > 1000
+    assert "geared to B" in str(err)
+    assert not gearing.engaged  # the controller turned the gearing off: so does the library
+    assert jog.result is not None
+    assert jog.result.follower_stop_codes == {"A": 2}
+    r = dmc.B.move_by(-100).wait()  # A does not follow any more: nothing more to report
+    assert r.follower_stop_codes == {}
+
+
+def test_wait_reports_a_follower_of_a_vector_path_stopped_by_a_limit(
+    dmc: galil.Controller,
+) -> None:
+    dmc.C.gear_to("S", 1)
+    h = dmc.vector_move("AB", [Line(3000, 4000)], speed=5000)
+    dmc.C.soft_limits = (-1000, 1000)  # tightened after the check, while C follows
+    with pytest.raises(MotionError) as caught:
+        h.wait()
+    assert caught.value.axis == "C"
+    assert caught.value.stop_codes == {"A": 101, "B": 101, "C": 2}
+
+
+def test_a_follower_that_still_follows_is_not_an_error(dmc: galil.Controller) -> None:
+    dmc.A.gear_to("B", 2)
+    r = dmc.B.move_by(400).wait()
+    assert r.follower_final == {"A": 800}
+    assert r.follower_stop_codes == {"A": 0}
