@@ -270,16 +270,25 @@ class MotionTracker:
     ) -> None:
         """A change sent to ``letters`` at controller ``sample`` (``make=None``: an abort).
 
-        A stop or abort of a follower turns its gearing off (outside gantry mode).
+        A stop or abort of a follower turns its gearing off (outside gantry mode). A stop or
+        abort of a move in progress runs what the move left to undo (:meth:`MoveHandle.on_cancel`).
         """
+        stopping = make is None or isinstance(make(0.0), predict.Stop)
+        undo: list[Callable[[int | None], None]] = []
         for a in letters:
             gear = self.gears.get(a)
-            if gear is not None and (make is None or isinstance(make(0.0), predict.Stop)):
+            if gear is not None and stopping:
                 gear.released = sample
                 del self.gears[a]
             handle = self._active.get(a)
             if handle is not None:
                 handle.add_event(a, sample, make)
+                # (a follower's stop leaves its master's move to run on)
+                cancel = handle.take_cancel() if stopping and a in handle.axes else None
+                if cancel is not None:
+                    undo.append(cancel)
+        for cancel in undo:  # once every handle knows of the stop
+            cancel(sample)
 
 
 class MoveHandle:
@@ -314,6 +323,7 @@ class MoveHandle:
         self._watcher: threading.Thread | None = None
         self._error: BaseException | None = None
         self._followers: dict[str, GearLink] = {}
+        self._cancel: Callable[[int | None], None] | None = None
 
     # -- predictions -------------------------------------------------------------------------
     @property
@@ -411,6 +421,21 @@ class MoveHandle:
         profile = predict_track(self._link, t)
         show = self._display.get(letter)
         return profile if show is None else show(profile)
+
+    def on_cancel(self, undo: Callable[[int | None], None]) -> None:
+        """Call ``undo(sample)`` once, when the library stops or aborts this move before it
+        was seen done (``stop()``, an axis's or the controller's ``stop()``, ``abort()``, the
+        ``motion()`` guard), right after the ``ST``/``AB`` line, with the controller sample it
+        took effect at (``None`` if unknown). A speed schedule undoes its changes there."""
+        with self._lock:
+            self._cancel = undo
+
+    def take_cancel(self) -> Callable[[int | None], None] | None:
+        """What :meth:`on_cancel` registered, handed out once (``None`` once the move was
+        seen done: nothing was cancelled)."""
+        with self._lock:
+            undo, self._cancel = self._cancel, None
+            return None if self._done else undo
 
     def preset(self, profiles: Mapping[str, predict.Profile]) -> None:
         """Profiles already predicted (and displayed) by whoever made the handle."""

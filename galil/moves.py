@@ -599,12 +599,15 @@ def speed_schedule(
 
     Every change point, the label and the program are validated before the first byte; the
     program runs the schedule with ``AD`` trippoints on thread 0, installed beside the user's
-    program (:mod:`galil.routines`), never over it.
+    program (:mod:`galil.routines`), never over it. Stopped or aborted through the library
+    before its end, the schedule is cancelled (:func:`_cancel_schedule`): its routine is
+    halted and ``SP`` is put back as it was before it.
 
     Raises:
         ScheduleError: a change point the profiler cannot honour.
-        InvalidArgument: a bad label, the axis busy or its motor off, a label the user's
-            program uses, or a user program running (the download would disturb it).
+        InvalidArgument: a bad label, the axis busy or its motor off, thread 0 running (a
+            schedule in progress, or a program), a label the user's program uses, or a user
+            program running (the download would disturb it).
         LimitError: a path crossing a soft limit, or taking an axis geared to ``letter`` past
             its soft limits or beyond the model's SP maximum.
     """
@@ -615,11 +618,17 @@ def speed_schedule(
     followers = "".join(gears)
     values = link.query_operands(
         [f"_{op}{a}" for op in ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")]
-        + list(follower_limit_operands(followers))
+        + ["_XQ0", *follower_limit_operands(followers)]
     )
-    rp, bg, sp0, ac, dc, it, bl, fl, mo = values[:9]
+    rp, bg, sp0, ac, dc, it, bl, fl, mo, xq = values[:10]
     if bg or mo:
         raise InvalidArgument(f"axis {a} is moving or its motor is off", model=model.name)
+    if xq >= 0:
+        raise InvalidArgument(
+            "thread 0 runs a program (a speed schedule still in progress, or yours): wait for "
+            "the schedule to end or stop it first",
+            model=model.name,
+        )
     first = sp0 if speed is None else speed
     schedule = predict.speed_schedule(
         distance,
@@ -634,19 +643,48 @@ def speed_schedule(
     predict.check_soft_limits(schedule.profile, forward_limit=fl, backward_limit=bl, axis=a)
     if gears:
         geared = {f: g.profile(schedule.profile) for f, g in gears.items()}
-        check_followers(link, gears, geared, limit_pairs(followers, values[9:]))
+        check_followers(link, gears, geared, limit_pairs(followers, values[10:]))
     program = _schedule_program(link, a, label, first, distance, schedule)
     routines.install(Routine(f"#{label}", tuple(program)))  # beside the user's program
     link.command_line([cmds.assign(SCHEDULE_BEGIN, -1)])
-    routines.start(f"#{label}", 0)
+    run = object()  # this schedule's hold on thread 0
+    routines.start(f"#{label}", 0, owner=run)
     params = MoveParams(first, ac, dc, it)
     track = Track("schedule", round(rp), params, None, amount=distance, fixed=schedule.profile)
     handle = MoveHandle(
         link, {a: track}, "schedule", display={a: display} if display else None, tracker=tracker
     )
     handle.follow(gears)
+    handle.on_cancel(functools.partial(_cancel_schedule, link, routines, handle, a, sp0, run))
     tracker.started(handle)
     return handle
+
+
+def _cancel_schedule(
+    link: CommandLink,
+    routines: Routines,
+    handle: MoveHandle,
+    letter: str,
+    speed: float,
+    run: object,
+    sample: int | None,
+) -> None:
+    """A speed schedule the library stopped or aborted (``ST``/``AB`` at ``sample``).
+
+    Its routine is halted (``HX0``, only while this schedule holds thread 0): no change point
+    may run after the stop (the controller releases a waiting ``AD`` when the motion ends,
+    and the ``SP`` after it would run), nor may a trippoint wait on into a later move. If the
+    stop came before the schedule's predicted end (or when is unknown), ``SP`` goes back to
+    ``speed``, its value before the schedule: the speeds of a schedule that did not run its
+    course are not left behind. One that ran to its end keeps its last speed, as a move's
+    ``speed=`` stays set.
+    """
+    routines.halt(0, owner=run)
+    begin = handle.begin.get(letter)
+    track = handle.track(letter)
+    plan = None if track is None else track.fixed
+    if sample is None or begin is None or plan is None or sample - begin < plan.samples:
+        link.command_line([cmds.sp(model=link.model, **{letter: speed})])
 
 
 def _schedule_program(
