@@ -546,10 +546,15 @@ class Axis:
             label: the routine's label (without ``#``, up to 7 characters); the routine is
                 installed beside the program in memory, which stays as it was.
 
+        Stopped or aborted through the library before its end, it is cancelled: its routine
+        halted, ``SP`` back as before it (one run to its end keeps its last speed).
+
         Raises:
             ScheduleError: a change point the profiler cannot honour (nothing is sent).
-            InvalidArgument: wrong units, bad values or label, the axis busy or its motor off.
-            LimitError: a speed out of range or a path crossing a soft limit.
+            InvalidArgument: wrong units, bad values or label, the axis busy or its motor off,
+                another schedule still running (its routine holds thread 0).
+            LimitError: a speed out of range, a path crossing a soft limit or taking a
+                follower past its soft limits or the model's SP maximum.
         """
         if not isinstance(label, str):
             raise InvalidArgument(f"label must be a string such as 'GSCHED', not {label!r}")

@@ -466,6 +466,7 @@ def _build_stream(
         dt=dt,
         display={a.letter: a.display for a in chosen},
         byte_rate=controller.link.byte_rate,
+        followers=controller.tracker.followers(letters),
     )
     stream.check()
     stream.prepare()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -26,7 +26,8 @@ from galil.errors import (
 )
 from galil.link import CommandLink, check_wait_timeout
 from galil.models import INT32_MAX
-from galil.motion import Display, sample_of
+from galil.motion import Display, GearLink, sample_of
+from galil.moves import check_followers, follower_limit_operands, limit_pairs
 from galil.predict import Profile
 from galil.predict.checks import check_contour
 from galil.protocol import commands as cmds
@@ -193,6 +194,8 @@ class ContourStream:
             ``2**dt``-sample segment, shape (segments,) or (segments, axes).
         dt: the DT exponent (segments last ``2**dt`` samples).
         display: per-axis display of the predictions in user units.
+        followers: the axes geared to contour axes (``MotionTracker.followers``): their
+            paths are checked too.
     """
 
     def __init__(
@@ -205,6 +208,7 @@ class ContourStream:
         display: dict[str, Display] | None = None,
         byte_rate: float | None = None,
         limits: dict[str, tuple[float | None, float | None]] | None = None,
+        followers: Mapping[str, GearLink] | None = None,
     ) -> None:
         if not letters or len(set(letters)) != len(letters):
             raise InvalidArgument(f"contour axes must be distinct and non-empty, got {letters!r}")
@@ -222,6 +226,7 @@ class ContourStream:
         self._display = display or {}
         self._byte_rate = byte_rate
         self._limits = limits or {}
+        self._followers = {f: g for f, g in (followers or {}).items() if f not in letters}
         self.profiles: dict[str, Profile] = {}
 
     def commands(self) -> list[Command]:
@@ -256,11 +261,17 @@ class ContourStream:
 
         Raises:
             InvalidArgument: an axis is moving.
-            LimitError: the path crosses a soft limit.
+            LimitError: the path crosses a soft limit, or takes an axis geared to a contour
+                axis past its soft limits or beyond the model's SP maximum.
         """
         link = self.link
         ops = ("RP", "BG", "BL", "FL")
-        state = link.query_operands([f"_{op}{a}" for a in self.letters for op in ops])
+        followers = "".join(self._followers)
+        state = link.query_operands(
+            [f"_{op}{a}" for a in self.letters for op in ops]
+            + list(follower_limit_operands(followers))
+        )
+        counts: dict[str, Profile] = {}
         for j, a in enumerate(self.letters):
             rp, bg, bl, fl = state[j * len(ops) : (j + 1) * len(ops)]
             if bg:
@@ -272,6 +283,15 @@ class ContourStream:
             )
             # The whole path against FL/BL, as for any move, before CM goes out.
             predict.check_soft_limits(prof, forward_limit=fl, backward_limit=bl, axis=a)
+            counts[a] = prof
+        if followers:  # the followers' paths too (GA C<master>: the contour's reference)
+            check_followers(
+                link,
+                self._followers,
+                {f: g.profile(counts[g.master]) for f, g in self._followers.items()},
+                limit_pairs(followers, state[len(self.letters) * len(ops) :]),
+            )
+        for a, prof in counts.items():
             show = self._display.get(a)
             self.profiles[a] = prof if show is None else show(prof)
 

@@ -568,6 +568,7 @@ class Controller(CoordinatedMotion, LinkFacade):
             display={a.letter: a.display for a in chosen},
             byte_rate=self.link.byte_rate,
             limits=limits,
+            followers=self.tracker.followers(letters),
         )
         with user_units({a.letter: a for a in chosen}):
             return stream.run(progress=progress, timeout=timeout)

@@ -76,16 +76,7 @@ class Gearing:
         """
         if not self.engaged:
             raise InvalidArgument(f"axis {self.follower} is not geared any more")
-        pos = self._gear.positions(master.position)
-        profile = predict.Profile.from_samples(
-            pos,
-            sample_period=master.sample_period,
-            shape="geared",
-            peak_speed=abs(self.ratio) * master.peak_speed,
-            stop_code=master.stop_code,
-        )
-        show = self._gear.display
-        return profile if show is None else show(profile)
+        return self._gear.profile(master)
 
     def set_ratio(self, ratio: float) -> None:
         """A new ratio (``GR``), while the master is at rest.

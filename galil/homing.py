@@ -134,11 +134,13 @@ class AxisHoming:
         """Start HM, FE or FI; predict it when ``switch`` (positions in counts) is given.
 
         Raises:
-            InvalidArgument: the axis moves or its motor is off, a speed it needs is 0, or it
-                would start into an active limit switch.
+            InvalidArgument: the axis moves or its motor is off, a speed it needs is 0, it
+                would start into an active limit switch, it is geared to another axis, or
+                another axis is geared to it (see :meth:`_refuse_gearing`).
         """
         if switch is not None and not isinstance(switch, predict.HomeSwitch):
             raise InvalidArgument(f"switch must be a galil.predict.HomeSwitch, not {switch!r}")
+        self._refuse_gearing(kind)
         link, a = self._link, self.letter
         model = link.model
         values = link.query_operands([f"_{op}{a}" for op in _STATE] + ["_CN1"])
@@ -168,6 +170,39 @@ class AxisHoming:
         if kind != "FE":
             self._confirmed = None
         return handle
+
+    def _refuse_gearing(self, kind: str) -> None:
+        """Refuse homing a gear master, or a follower (no query: the tracker knows).
+
+        A follower of the axis would move with it, but how far is not known before the
+        sequence runs: it searches for a switch (unbounded without switch positions; with
+        them, FE's end still depends on the servo lag), so the follower's path cannot be
+        checked against its soft limits and the SP maximum as a position move's is. HM and
+        FI then define the axis's position at the index, and a follower of the commanded
+        position would take that jump at once (the simulator's follower does). So homing a
+        master is refused while anything follows it.
+
+        Raises:
+            InvalidArgument: naming the followers, or the master of a follower.
+        """
+        a, tracker, name = self.letter, self._tracker, self._link.model.name
+        gear = tracker.gears.get(a)
+        if gear is not None:
+            raise InvalidArgument(
+                f"axis {a} is geared to {gear.master}: turn the gearing off before {kind} "
+                "(its own motion on top of the gearing is not predicted)",
+                model=name,
+            )
+        followers = tracker.followers(a)
+        if followers:
+            who = ", ".join(f"{f} (GR {g.ratio:g})" for f, g in followers.items())
+            raise InvalidArgument(
+                f"axis {a} is the gear master of {who}: {kind} searches for a switch or an "
+                "index, so how far it moves, and its followers with it, is not known before it "
+                f"runs (their soft limits cannot be checked), and HM/FI redefine {a}'s position "
+                "at the end; turn the gearing off (gearing.off()) and gear again after homing",
+                model=name,
+            )
 
     def _refuse(self, kind: str, bg: bool, mo: bool, sp: float, jg: float, hv: float) -> None:
         name, a = self._link.model.name, self.letter

@@ -56,6 +56,8 @@ MAX_POLL = 0.1
 SCHEDULE_BEGIN = "gsbegin"
 # How long the guard waits for stopped axes to come to rest before giving up.
 _GUARD_WAIT = 30.0
+# Stop codes of a forward and a reverse limit (switch or soft limit).
+_LIMIT_CODES = (2, 3)
 
 #: Track kinds of HM, FE and FI (:mod:`galil.homing`).
 HOMING_KINDS = frozenset({"home", "edge", "index"})
@@ -85,12 +87,18 @@ class MoveResult:
             change sent behind the library's back) are left out.
         deviation: ``final - predicted`` for the axes in ``predicted``, counts.
         stop_codes: ``_SC`` per axis.
+        follower_final: final reference position (``_RP``) of each axis geared to the move's
+            axes (see :attr:`MoveHandle.followers`), counts.
+        follower_stop_codes: ``_SC`` of each of those followers: 0 while it still follows,
+            2 or 3 when a limit stopped it (and turned its gearing off).
     """
 
     final: dict[str, int]
     predicted: dict[str, int]
     deviation: dict[str, int]
     stop_codes: dict[str, int]
+    follower_final: dict[str, int] = field(default_factory=dict)
+    follower_stop_codes: dict[str, int] = field(default_factory=dict)
 
     @property
     def worst(self) -> int:
@@ -154,6 +162,27 @@ class GearLink:
     def positions(self, master: npt.ArrayLike) -> npt.NDArray[np.int64]:
         """The follower at each of ``master``'s positions (the anchor is left as it is)."""
         return copy.deepcopy(self.anchor).follow(master)
+
+    def profile(self, master: predict.Profile, *, hold_after: int | None = None) -> predict.Profile:
+        """The follower's profile, shown in its unit, for a profile of the master's position
+        (counts; for ``"S"``, the distance counted since the gearing engaged).
+
+        Args:
+            master: the master's predicted profile.
+            hold_after: the sample after which the follower holds where it is (its gearing
+                turned off there); ``None``: it follows to the end.
+        """
+        pos = self.positions(master.position)
+        if hold_after is not None and 0 <= hold_after < pos.size:
+            pos[hold_after + 1 :] = pos[hold_after]
+        profile = predict.Profile.from_samples(
+            pos,
+            sample_period=master.sample_period,
+            shape="geared",
+            peak_speed=abs(self.ratio) * master.peak_speed,
+            stop_code=master.stop_code,
+        )
+        return profile if self.display is None else self.display(profile)
 
 
 def sample_of(reply: str) -> int | None:
@@ -241,16 +270,25 @@ class MotionTracker:
     ) -> None:
         """A change sent to ``letters`` at controller ``sample`` (``make=None``: an abort).
 
-        A stop or abort of a follower turns its gearing off (outside gantry mode).
+        A stop or abort of a follower turns its gearing off (outside gantry mode). A stop or
+        abort of a move in progress runs what the move left to undo (:meth:`MoveHandle.on_cancel`).
         """
+        stopping = make is None or isinstance(make(0.0), predict.Stop)
+        undo: list[Callable[[int | None], None]] = []
         for a in letters:
             gear = self.gears.get(a)
-            if gear is not None and (make is None or isinstance(make(0.0), predict.Stop)):
+            if gear is not None and stopping:
                 gear.released = sample
                 del self.gears[a]
             handle = self._active.get(a)
             if handle is not None:
                 handle.add_event(a, sample, make)
+                # (a follower's stop leaves its master's move to run on)
+                cancel = handle.take_cancel() if stopping and a in handle.axes else None
+                if cancel is not None:
+                    undo.append(cancel)
+        for cancel in undo:  # once every handle knows of the stop
+            cancel(sample)
 
 
 class MoveHandle:
@@ -285,6 +323,7 @@ class MoveHandle:
         self._watcher: threading.Thread | None = None
         self._error: BaseException | None = None
         self._followers: dict[str, GearLink] = {}
+        self._cancel: Callable[[int | None], None] | None = None
 
     # -- predictions -------------------------------------------------------------------------
     @property
@@ -367,22 +406,11 @@ class MoveHandle:
         return self._cache[master]
 
     def _follower(self, gear: GearLink) -> predict.Profile:
-        master = self._master_positions(gear)
-        pos = gear.positions(master.position)
         begin = next(iter(self._tracks.values())).begin
+        held = None  # gearing off (ST, AB): the follower holds where it was
         if gear.released is not None and begin is not None:
-            k = gear.released - begin
-            if 0 <= k < pos.size:
-                pos = pos.copy()
-                pos[k + 1 :] = pos[k]  # gearing off: the follower holds where it was
-        profile = predict.Profile.from_samples(
-            pos,
-            sample_period=master.sample_period,
-            shape="geared",
-            peak_speed=abs(gear.ratio) * master.peak_speed,
-            stop_code=master.stop_code,
-        )
-        return profile if gear.display is None else gear.display(profile)
+            held = gear.released - begin
+        return gear.profile(self._master_positions(gear), hold_after=held)
 
     @property
     def profile(self) -> predict.Profile:
@@ -393,6 +421,21 @@ class MoveHandle:
         profile = predict_track(self._link, t)
         show = self._display.get(letter)
         return profile if show is None else show(profile)
+
+    def on_cancel(self, undo: Callable[[int | None], None]) -> None:
+        """Call ``undo(sample)`` once, when the library stops or aborts this move before it
+        was seen done (``stop()``, an axis's or the controller's ``stop()``, ``abort()``, the
+        ``motion()`` guard), right after the ``ST``/``AB`` line, with the controller sample it
+        took effect at (``None`` if unknown). A speed schedule undoes its changes there."""
+        with self._lock:
+            self._cancel = undo
+
+    def take_cancel(self) -> Callable[[int | None], None] | None:
+        """What :meth:`on_cancel` registered, handed out once (``None`` once the move was
+        seen done: nothing was cancelled)."""
+        with self._lock:
+            undo, self._cancel = self._cancel, None
+            return None if self._done else undo
 
     def preset(self, profiles: Mapping[str, predict.Profile]) -> None:
         """Profiles already predicted (and displayed) by whoever made the handle."""
@@ -456,18 +499,26 @@ class MoveHandle:
 
     @property
     def done(self) -> bool:
-        """True once every axis's profile is complete (``_BG`` is 0); one query per call."""
+        """True once every axis's profile is complete (``_BG`` is 0); one query per call
+        (the followers' ``_RP`` and ``_SC`` ride on it)."""
         if self._done:
             return True
         letters = self.axes
+        followers = self.followers
         names = [f"_{op}{a}" for op in ("BG", "RP", "SC") for a in letters]
+        names += [f"_{op}{f}" for op in ("RP", "SC") for f in followers]
         values = [round(v) for v in self._link.query_operands(names)]
-        n = len(letters)
+        n, m = len(letters), len(followers)
         if not any(values[:n]):
-            self._finish(values[n : 2 * n], values[2 * n :])
+            rest = values[3 * n :]
+            ends = dict(zip(followers, zip(rest[:m], rest[m:], strict=True), strict=True))
+            self._finish(values[n : 2 * n], values[2 * n : 3 * n], ends)
         return self._done
 
-    def _finish(self, rp: Sequence[int], sc: Sequence[int]) -> None:
+    def _finish(
+        self, rp: Sequence[int], sc: Sequence[int], followers: Mapping[str, tuple[int, int]]
+    ) -> None:
+        """Record the result: ``rp`` and ``sc`` of the move's axes, ``(RP, SC)`` per follower."""
         with self._lock:
             if self._done:
                 return
@@ -480,7 +531,15 @@ class MoveHandle:
                 if t.exact and not t.open_jog and stop[a] not in (2, 3):
                     predicted[a] = profiles[a].end
             deviation = {a: final[a] - v for a, v in predicted.items()}
-            self._result = MoveResult(final, predicted, deviation, stop)
+            self._result = MoveResult(
+                final,
+                predicted,
+                deviation,
+                stop,
+                {f: end[0] for f, end in followers.items()},
+                {f: end[1] for f, end in followers.items()},
+            )
+            self._release_limited_followers(self._result.follower_stop_codes)
             self._done = True
             callbacks, self._callbacks = self._callbacks, []
         if self._result.worst > 1:
@@ -491,6 +550,17 @@ class MoveHandle:
             )
         for cb in callbacks:
             cb(self)
+
+    def _release_limited_followers(self, codes: Mapping[str, int]) -> None:
+        """A follower a limit stopped is geared no more (the controller turned its gearing
+        off, outside gantry mode): the tracker forgets the gearing, as it does after an
+        ``ST`` or ``AB`` the library sent (the sample is unknown: the prediction is kept)."""
+        tracker = self._tracker
+        if tracker is None:
+            return
+        for f, code in codes.items():
+            if code in _LIMIT_CODES and tracker.gears.get(f) is self._followers[f]:
+                del tracker.gears[f]
 
     def wait(self, timeout: float | None = None, progress: bool = False) -> MoveResult:
         """Block until the move is done, polling without holding the link between polls.
@@ -505,7 +575,9 @@ class MoveHandle:
 
         Raises:
             GalilTimeoutError: the move did not finish in time (it is NOT stopped).
-            MotionError: an axis stopped on a limit switch or soft limit.
+            MotionError: an axis stopped on a limit switch or soft limit, or a limit stopped
+                an axis geared to one of them (its gearing is then off); raised once the
+                move's own axes are done, so nothing of the move is left moving.
         """
         check_wait_timeout(timeout)
         duration = self.duration
@@ -568,16 +640,23 @@ class MoveHandle:
             link.pause(pause)
 
     def _raise_if_limited(self, result: MoveResult) -> None:
-        limited = {a: c for a, c in result.stop_codes.items() if c in (2, 3)}
-        if not limited:
+        limited = {a: c for a, c in result.stop_codes.items() if c in _LIMIT_CODES}
+        dropped = {f: c for f, c in result.follower_stop_codes.items() if c in _LIMIT_CODES}
+        if not limited and not dropped:
             return
-        text = ", ".join(f"{a}: {codes.stop_text(c)}" for a, c in limited.items())
-        first = next(iter(limited))
+        parts = [f"{a}: {codes.stop_text(c)}" for a, c in limited.items()]
+        parts += [
+            f"{f}, geared to {self._followers[f].master}: {codes.stop_text(c)}; its gearing is off"
+            for f, c in dropped.items()
+        ]
+        first = next(iter(limited or dropped))
+        final = {**result.final, **result.follower_final}
+        what = "move stopped early" if limited else "a follower stopped early"
         raise MotionError(
-            f"move stopped early ({text})",
+            f"{what} ({', '.join(parts)})",
             axis=first,
-            stop_codes=result.stop_codes,
-            position=result.final[first],
+            stop_codes={**result.stop_codes, **result.follower_stop_codes},
+            position=final[first],
             model=self._link.model.name,
             recent=self._link.recent,
         )

@@ -33,9 +33,12 @@ from galil.routines import Routine, Routines
 
 __all__ = [
     "AxisMove",
+    "check_followers",
     "execute_move",
+    "follower_limit_operands",
     "increment",
     "jog",
+    "limit_pairs",
     "set_jog_speed",
     "speed_schedule",
 ]
@@ -86,18 +89,18 @@ def _read_state(
     (query_operands packs the MG lines together)."""
     names = _operand_names(letters, _STATE)
     if followers:  # (the common move has none: the cached tuple as it is)
-        names += _operand_names(followers, ("BL", "FL"))
+        names += follower_limit_operands(followers)
     values = link.query_operands(names)
     n = len(_STATE)
     out: dict[str, _State] = {}
     for i, a in enumerate(letters):
         rp, bg, sp, ac, dc, it, bl, fl, mo = values[i * n : (i + 1) * n]
         out[a] = _State(round(rp), bool(bg), sp, ac, dc, it, bl, fl, bool(mo))
-    return out, _limit_pairs(followers, values[len(letters) * n :])
+    return out, limit_pairs(followers, values[len(letters) * n :])
 
 
-def _limit_pairs(followers: str, values: Sequence[float]) -> dict[str, tuple[float, float]]:
-    """``(BL, FL)`` per follower from the values of ``_operand_names(followers, ("BL", "FL"))``."""
+def limit_pairs(followers: str, values: Sequence[float]) -> dict[str, tuple[float, float]]:
+    """``(BL, FL)`` per follower from the values of :func:`follower_limit_operands`."""
     return {f: (values[2 * i], values[2 * i + 1]) for i, f in enumerate(followers)}
 
 
@@ -140,22 +143,30 @@ def _check_follower_speed(link: CommandLink, gear: GearLink, speed: float) -> No
         )
 
 
-def _check_followers(
+def follower_limit_operands(followers: str) -> tuple[str, ...]:
+    """The operands of the followers' soft limits, ``_BL`` and ``_FL`` per follower, in the
+    order :func:`limit_pairs` reads them back."""
+    return _operand_names(followers, ("BL", "FL"))
+
+
+def check_followers(
     link: CommandLink,
-    handle: MoveHandle,
     gears: Mapping[str, GearLink],
+    profiles: Mapping[str, predict.Profile],
     limits: Mapping[str, tuple[float, float]],
 ) -> None:
     """The followers' predicted profiles against their soft limits and the model's SP maximum.
 
+    Args:
+        gears: the followers to check, by letter.
+        profiles: each follower's predicted profile (positions in counts).
+        limits: each follower's ``(BL, FL)`` (:func:`limit_pairs`).
+
     Raises:
         LimitError: naming the follower.
     """
-    if not handle.followers:
-        return
-    profiles = handle.profiles
-    for f in handle.followers:
-        gear, profile = gears[f], profiles[f]
+    for f, gear in gears.items():
+        profile = profiles[f]
         bl, fl = limits[f]
         try:
             predict.check_soft_limits(profile, forward_limit=fl, backward_limit=bl, axis=f)
@@ -304,7 +315,8 @@ def execute_move(
     handle = MoveHandle(link, tracks, "position", display=display, tracker=tracker)
     handle.preset(profiles)
     handle.follow(gears)  # (an axis of the move is skipped)
-    _check_followers(link, handle, gears, limits)
+    if handle.followers:
+        check_followers(link, {f: gears[f] for f in handle.followers}, handle.profiles, limits)
     if dry_run:
         return handle
     replies = link.command_line(_move_line(link, moves, sent, command))
@@ -457,7 +469,7 @@ def increment(
     followers = "".join(gears)
     rp, bg, pa, bl, fl, *rest = link.query_operands(
         [f"_{op}{a}" for op in ("RP", "BG", "PA", "BL", "FL")]
-        + list(_operand_names(followers, ("BL", "FL")))
+        + list(follower_limit_operands(followers))
     )
     shows = {a: display} if display else None
     if not bg:
@@ -479,7 +491,7 @@ def increment(
     end = round(rp if jogging else pa) + counts
     what = "steps the jog's reference to" if jogging else "moves the target of the move to"
     _check_reach(link, a, counts, end, (bl, fl), what)
-    _check_followers_reach(link, gears, _limit_pairs(followers, rest), counts, end, what)
+    _check_followers_reach(link, gears, limit_pairs(followers, rest), counts, end, what)
     replies = link.command_line([cmds.ip(model=model, **{a: counts}), cmds.time_stamp()])
     if handle is None or track is None:
         # Someone else's move: nothing to follow; a handle that only waits for it.
@@ -587,22 +599,36 @@ def speed_schedule(
 
     Every change point, the label and the program are validated before the first byte; the
     program runs the schedule with ``AD`` trippoints on thread 0, installed beside the user's
-    program (:mod:`galil.routines`), never over it.
+    program (:mod:`galil.routines`), never over it. Stopped or aborted through the library
+    before its end, the schedule is cancelled (:func:`_cancel_schedule`): its routine is
+    halted and ``SP`` is put back as it was before it.
 
     Raises:
         ScheduleError: a change point the profiler cannot honour.
-        InvalidArgument: a bad label, the axis busy or its motor off, a label the user's
-            program uses, or a user program running (the download would disturb it).
-        LimitError: a path crossing a soft limit.
+        InvalidArgument: a bad label, the axis busy or its motor off, thread 0 running (a
+            schedule in progress, or a program), a label the user's program uses, or a user
+            program running (the download would disturb it).
+        LimitError: a path crossing a soft limit, or taking an axis geared to ``letter`` past
+            its soft limits or beyond the model's SP maximum.
     """
     a = letter
     model = link.model
     cmds.xq(f"#{label}")  # the label is checked before anything is read or sent
-    rp, bg, sp0, ac, dc, it, bl, fl, mo = link.query_operands(
+    gears = tracker.followers(a)
+    followers = "".join(gears)
+    values = link.query_operands(
         [f"_{op}{a}" for op in ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")]
+        + ["_XQ0", *follower_limit_operands(followers)]
     )
+    rp, bg, sp0, ac, dc, it, bl, fl, mo, xq = values[:10]
     if bg or mo:
         raise InvalidArgument(f"axis {a} is moving or its motor is off", model=model.name)
+    if xq >= 0:
+        raise InvalidArgument(
+            "thread 0 runs a program (a speed schedule still in progress, or yours): wait for "
+            "the schedule to end or stop it first",
+            model=model.name,
+        )
     first = sp0 if speed is None else speed
     schedule = predict.speed_schedule(
         distance,
@@ -615,17 +641,50 @@ def speed_schedule(
         smoothing=it,
     )
     predict.check_soft_limits(schedule.profile, forward_limit=fl, backward_limit=bl, axis=a)
+    if gears:
+        geared = {f: g.profile(schedule.profile) for f, g in gears.items()}
+        check_followers(link, gears, geared, limit_pairs(followers, values[10:]))
     program = _schedule_program(link, a, label, first, distance, schedule)
     routines.install(Routine(f"#{label}", tuple(program)))  # beside the user's program
     link.command_line([cmds.assign(SCHEDULE_BEGIN, -1)])
-    routines.start(f"#{label}", 0)
+    run = object()  # this schedule's hold on thread 0
+    routines.start(f"#{label}", 0, owner=run)
     params = MoveParams(first, ac, dc, it)
     track = Track("schedule", round(rp), params, None, amount=distance, fixed=schedule.profile)
     handle = MoveHandle(
         link, {a: track}, "schedule", display={a: display} if display else None, tracker=tracker
     )
+    handle.follow(gears)
+    handle.on_cancel(functools.partial(_cancel_schedule, link, routines, handle, a, sp0, run))
     tracker.started(handle)
     return handle
+
+
+def _cancel_schedule(
+    link: CommandLink,
+    routines: Routines,
+    handle: MoveHandle,
+    letter: str,
+    speed: float,
+    run: object,
+    sample: int | None,
+) -> None:
+    """A speed schedule the library stopped or aborted (``ST``/``AB`` at ``sample``).
+
+    Its routine is halted (``HX0``, only while this schedule holds thread 0): no change point
+    may run after the stop (the controller releases a waiting ``AD`` when the motion ends,
+    and the ``SP`` after it would run), nor may a trippoint wait on into a later move. If the
+    stop came before the schedule's predicted end (or when is unknown), ``SP`` goes back to
+    ``speed``, its value before the schedule: the speeds of a schedule that did not run its
+    course are not left behind. One that ran to its end keeps its last speed, as a move's
+    ``speed=`` stays set.
+    """
+    routines.halt(0, owner=run)
+    begin = handle.begin.get(letter)
+    track = handle.track(letter)
+    plan = None if track is None else track.fixed
+    if sample is None or begin is None or plan is None or sample - begin < plan.samples:
+        link.command_line([cmds.sp(model=link.model, **{letter: speed})])
 
 
 def _schedule_program(

@@ -149,6 +149,7 @@ class Routines:
     def __init__(self, link: CommandLink) -> None:
         self.link = link
         self._threads: dict[int, str] = {}  # library thread -> label it runs
+        self._owners: dict[int, object] = {}  # thread -> the one-shot run that holds it
         self._lock = threading.RLock()
 
     def upload(self) -> list[str]:
@@ -218,6 +219,13 @@ class Routines:
             raise InvalidArgument(
                 f"a program runs on thread(s) {users}; {what}", model=self.link.model.name
             )
+        once = sorted(t for t in running if t in self._owners)
+        if once:
+            raise InvalidArgument(
+                f"thread(s) {once} run a speed schedule, which a download would start again "
+                "(its motion with it): wait for the schedule to end or stop it first",
+                model=self.link.model.name,
+            )
         restart = {t: label for t, label in self._threads.items() if t in running}
         for t in restart:
             self.link.command_line([cmds.hx(t)])
@@ -273,8 +281,13 @@ class Routines:
                 model=model.name,
             )
 
-    def start(self, label: str, thread: int) -> None:
+    def start(self, label: str, thread: int, *, owner: object | None = None) -> None:
         """Run the routine at ``label`` on ``thread`` (which must be free).
+
+        Args:
+            owner: marks a one-shot run (a speed schedule: it starts motion): a download
+                refuses to start it again while it runs, and ``halt(thread, owner=owner)``
+                halts the thread only while this run holds it.
 
         Raises:
             InvalidArgument: the thread does not exist or runs a program.
@@ -283,12 +296,24 @@ class Routines:
             self.check_free(thread, label)
             self.link.command_line([cmds.xq(label, thread)])
             self._threads[thread] = label
+            self._owners.pop(thread, None)
+            if owner is not None:
+                self._owners[thread] = owner
 
-    def halt(self, thread: int) -> None:
-        """Halt a library thread (``HX n``)."""
+    def halt(self, thread: int, *, owner: object | None = None) -> bool:
+        """Halt a library thread (``HX n``); with ``owner``, only if the run started with
+        that owner still holds it (a later run on the thread is left alone).
+
+        Returns:
+            Whether ``HX`` was sent.
+        """
         with self._lock:
+            if owner is not None and self._owners.get(thread) is not owner:
+                return False
             self.link.command_line([cmds.hx(thread)])
             self._threads.pop(thread, None)
+            self._owners.pop(thread, None)
+            return True
 
     @property
     def threads(self) -> dict[int, str]:

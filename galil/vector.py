@@ -30,6 +30,7 @@ from galil import predict
 from galil.errors import GalilError, InvalidArgument, LimitError
 from galil.link import CommandLink
 from galil.motion import GearLink, MotionTracker, MoveHandle, MoveParams, Track, sample_of
+from galil.moves import check_followers, follower_limit_operands, limit_pairs
 from galil.predict.vector import SequenceEvent, replay
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
@@ -142,22 +143,17 @@ class VectorHandle(MoveHandle):
     def _master_positions(self, gear: GearLink) -> predict.Profile:
         if gear.master != PLANE:
             return super()._master_positions(gear)
-        counts = self.counts  # GA S: the distance along the path, after the ones before
-        return predict.Profile.from_samples(
-            gear.travelled + counts.path,
-            sample_period=counts.sample_period,
-            shape="vector",
-            peak_speed=counts.peak_speed,
-            stop_code=counts.stop_code,
-        )
+        return _path_master(self.counts, gear)
 
-    def _finish(self, rp: Sequence[int], sc: Sequence[int]) -> None:
+    def _finish(
+        self, rp: Sequence[int], sc: Sequence[int], followers: Mapping[str, tuple[int, int]]
+    ) -> None:
         with self._lock:
             if not self._done:
                 for gear in self._followers.values():
                     if gear.master == PLANE:
                         gear.travelled += int(self.counts.path[-1])
-        super()._finish(rp, sc)
+        super()._finish(rp, sc, followers)
 
     def _predict(self, letter: str, t: Track) -> predict.Profile:
         i = self._path.letters.index(letter)
@@ -209,6 +205,18 @@ class VectorHandle(MoveHandle):
             self.add_event(self.axes[0], sample, predict.Stop)
 
 
+def _path_master(counts: predict.VectorProfile, gear: GearLink) -> predict.Profile:
+    """What a ``GA S`` follower follows: the distance along the path, counted on from the
+    sequences before (``gear.travelled``)."""
+    return predict.Profile.from_samples(
+        gear.travelled + counts.path,
+        sample_period=counts.sample_period,
+        shape="vector",
+        peak_speed=counts.peak_speed,
+        stop_code=counts.stop_code,
+    )
+
+
 _STATE = ("RP", "BG", "MO", "FL", "BL")
 #: What a line of streamed segments ends with: the sample it ran in.
 _STAMP_SIZE = len(cmds.time_stamp().text) + 1
@@ -222,6 +230,7 @@ class _State:
     accel: float
     decel: float
     smoothing: float
+    follower_limits: dict[str, tuple[float, float]]
 
 
 class VectorStream:
@@ -366,7 +375,8 @@ class VectorStream:
             extra.append("_VDS")
         if self.smoothing is None:
             extra.append("_VTS" if model.vt else f"_IT{letters[0]}")
-        values = link.query_operands(names + extra)
+        followers = "".join(self.followers)
+        values = link.query_operands(names + extra + list(follower_limit_operands(followers)))
         n = len(_STATE)
         rows = [values[i * n : (i + 1) * n] for i in range(len(letters))]
         if values[len(letters) * n]:
@@ -380,7 +390,7 @@ class VectorStream:
                 raise InvalidArgument(
                     f"axis {a} has its motor off; call controller.servo_here()", model=model.name
                 )
-        rest = iter(values[len(letters) * n + 1 :])
+        rest = iter(values[len(letters) * n + 1 : len(values) - 2 * len(followers)])
         return _State(
             start=tuple(round(r[0]) for r in rows),
             forward=[r[3] for r in rows],
@@ -388,6 +398,7 @@ class VectorStream:
             accel=self.accel if self.accel is not None else next(rest),
             decel=self.decel if self.decel is not None else next(rest),
             smoothing=self.smoothing if self.smoothing is not None else next(rest),
+            follower_limits=limit_pairs(followers, values[len(values) - 2 * len(followers) :]),
         )
 
     def prepare(self) -> predict.VectorProfile:
@@ -397,7 +408,9 @@ class VectorStream:
             InvalidArgument: an axis moving or its motor off, a sequence running.
             LimitError: a check failed (named segment and sample): VS/VA/VD ranges, TC 30,
                 31, the buffer (``stream=False``, or a link too slow to keep it fed), an
-                axis's speed or acceleration along the path, a soft limit.
+                axis's speed or acceleration along the path, a soft limit; or an axis
+                geared to a path axis or to ``S`` taken past its soft limits or beyond the
+                model's SP maximum.
         """
         link = self.link
         model = link.model
@@ -422,9 +435,32 @@ class VectorStream:
             )
         if self.stream and len(segs) > model.vector_buffer:
             self._check_link_rate(profile)
+        self._check_followers(profile, state.follower_limits)
         self.profile = profile
         self._state = state
         return profile
+
+    def _check_followers(
+        self, profile: predict.VectorProfile, limits: Mapping[str, tuple[float, float]]
+    ) -> None:
+        """The axes geared to a path axis or to ``S``, over the whole path, against their soft
+        limits and the model's SP maximum (as for a position move of their master).
+
+        Raises:
+            LimitError: naming the follower.
+        """
+        if not self.followers:
+            return
+        letters = self.path.letters
+        profiles = {
+            f: gear.profile(
+                _path_master(profile, gear)
+                if gear.master == PLANE
+                else profile.axis(letters.index(gear.master))
+            )
+            for f, gear in self.followers.items()
+        }
+        check_followers(self.link, self.followers, profiles, limits)
 
     @contextlib.contextmanager
     def _in_user_units(self) -> Iterator[None]:

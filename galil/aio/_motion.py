@@ -264,7 +264,8 @@ class AsyncMoveHandle:
 
         Raises:
             GalilTimeoutError: the move did not finish in time (it is NOT stopped).
-            MotionError: an axis stopped on a limit switch or soft limit.
+            MotionError: an axis stopped on a limit switch or soft limit, or a limit stopped
+                an axis geared to one of them (see ``MoveHandle.wait``).
         """
         async for _ in self.watch(timeout):
             pass

@@ -43,6 +43,7 @@ mm, s, V = ureg.mm, ureg.s, ureg.volt
 NOT_TWINNED = {
     "link", "tracker", "messages_room", "records_room", "routines", "close",  # Controller
     "track", "add_event", "follow", "preset", "record",  # MoveHandle, VectorHandle internals
+    "on_cancel", "take_cancel",
     "queue", "reopen",  # Interrupts: the sync queue, the reconnect hook
     "start",  # Capture, Watchdog: the async ones come started
     "operand", "bank_bits", "function",  # the bank layout of the digital I/O rooms

@@ -59,6 +59,104 @@ def test_invalid_change_point_names_the_earliest(dmc: galil.Controller) -> None:
         )
 
 
+def _cancel(dmc: galil.Controller, handle: galil.MoveHandle, how: str) -> None:
+    if how == "handle":
+        handle.stop()
+    elif how == "axis":
+        dmc.B.stop()
+    elif how == "controller":
+        dmc.stop()
+    elif how == "abort":
+        dmc.abort()
+    else:
+        with pytest.raises(RuntimeError), dmc.motion("B"):
+            raise RuntimeError("the scan failed")
+
+
+@pytest.mark.parametrize("how", ["handle", "axis", "controller", "abort", "guard"])
+def test_cancelling_a_speed_schedule_before_its_change_point_restores_the_speed(
+    dmc: galil.Controller, how: str
+) -> None:
+    b = dmc.B
+    b.speed = 20_000
+    h = b.speed_schedule(50_000, [(30_000, 10_000)], speed=40_000)
+    dmc.sleep(0.2)  # at 40 000 counts/s, well before the change point
+    _cancel(dmc, h, how)
+    dmc.sleep(1.0)  # at rest: the controller releases the AD that waited for 30 000 counts
+    assert b.speed == 20_000  # neither the schedule's 40 000 nor its change to 10 000
+    assert dmc.query_operands(["_XQ0"]) == [-1]  # the routine was halted
+    if how == "abort":
+        dmc.servo_here()
+    move = b.move_by(1000)
+    assert move.params["B"].speed == 20_000
+    assert move.wait().worst == 0
+
+
+def test_stopping_a_follower_of_a_speed_schedule_leaves_the_schedule_running(
+    dmc: galil.Controller,
+) -> None:
+    gearing = dmc.A.gear_to("B", 1)
+    h = dmc.B.speed_schedule(50_000, [(30_000, 10_000)], speed=40_000)
+    dmc.sleep(0.2)
+    dmc.A.stop()  # the follower only: its gearing goes, the schedule runs on
+    assert not gearing.engaged
+    r = h.wait()
+    assert r.final == {"B": 50_000}
+    assert r.worst == 0
+    assert dmc.B.speed == 10_000  # its change point ran
+
+
+def test_cancelling_a_speed_schedule_leaves_a_later_schedules_routine_alone(
+    dmc: galil.Controller,
+) -> None:
+    b = dmc.B.speed_schedule(50_000, [(10_000, 20_000)], speed=40_000)
+    dmc.sleep(1.0)  # past its change point (its routine is over), still moving
+    c = dmc.C.speed_schedule(50_000, [(30_000, 10_000)], speed=40_000)  # thread 0 again
+    b.stop()
+    assert c.wait().final == {"C": 50_000}
+    assert dmc.C.speed == 10_000  # C's routine ran its change point: B's cancel left it alone
+
+
+def test_a_speed_schedule_that_ran_its_course_keeps_its_last_speed(
+    dmc: galil.Controller,
+) -> None:
+    dmc.B.speed = 20_000
+    dmc.B.speed_schedule(20_000, [(10_000, 10_000)], speed=40_000)
+    dmc.sleep(5.0)  # over, though its handle was never polled
+    dmc.B.stop()  # nothing left to cancel
+    assert dmc.B.speed == 10_000
+
+
+def test_a_speed_schedule_while_another_runs_is_refused_before_sending(
+    dmc: galil.Controller,
+) -> None:
+    h = dmc.B.speed_schedule(50_000, [(30_000, 10_000)], speed=40_000)
+    dmc.sleep(0.2)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="thread 0"):
+        dmc.C.speed_schedule(20_000, [(10_000, 10_000)], speed=30_000, label="GSCHED2")
+    assert not dmc.C.moving
+    r = h.wait()  # the first one ran its course, its change point included
+    assert r.final == {"B": 50_000}
+    assert r.worst == 0
+    assert dmc.B.speed == 10_000
+
+
+def test_a_download_during_a_speed_schedule_is_refused_rather_than_restarting_it(
+    dmc: galil.Controller,
+) -> None:
+    sim = sim_of(dmc)
+    t0 = sim.start_trace("B")
+    h = dmc.B.speed_schedule(50_000, [(30_000, 10_000)], speed=40_000)
+    dmc.sleep(0.2)
+    with transcript(dmc) as sent, pytest.raises(InvalidArgument, match="speed schedule"):
+        dmc.watchdog(1.0)  # its routine needs a download
+    assert not [line for line in sent.lines if line.startswith(("HX", "DL", "XQ"))]
+    h.wait()
+    begin = h.begin["B"]
+    assert begin is not None
+    assert_follows(sim.stop_trace("B")["B"], t0, h.profile, begin)
+
+
 def _fail_during_moves(dmc: galil.Controller, exc: BaseException, guarded: str | None) -> None:
     with dmc.motion(guarded):
         dmc.A.move_by(100_000)

@@ -1,0 +1,147 @@
+"""Axes geared to a moving master: refused before sending when the master's path would take
+them past their soft limits or the SP maximum (vector paths, contours, speed schedules), homing
+a master refused while anything follows it, and a follower stopped by a limit reported by the
+master's handle.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import galil
+from galil import Line
+from galil.errors import InvalidArgument, LimitError, MotionError
+from galil.testing import nothing_sent, sim_of
+
+
+# -- vector paths ---------------------------------------------------------------------------
+@pytest.mark.parametrize("master", ["A", "S"])
+def test_a_vector_move_taking_a_follower_past_its_soft_limit_is_refused(
+    dmc: galil.Controller, master: str
+) -> None:
+    dmc.C.soft_limits = (-1000, 1000)
+    dmc.C.gear_to(master, 2)
+    path = [Line(2000, 1000)]  # C: 2 x 2000 along A, 2 x 2236 along the path
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as caught:
+        dmc.vector_move("AB", path, speed=5000)
+    assert caught.value.axis == "C"
+    assert caught.value.name == "FL"
+    assert f"geared to {master}" in str(caught.value)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError, match="axis C"):
+        dmc.plan_vector("AB", path, speed=5000)
+    h = dmc.vector_move("AB", [Line(200, 100)], speed=5000)  # C stays inside
+    h.wait()
+    assert dmc.C.reference_position == h.profiles["C"].end
+
+
+def test_a_vector_move_driving_a_follower_too_fast_is_refused(dmc: galil.Controller) -> None:
+    dmc.C.gear_to("A", 100)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as caught:
+        dmc.vector_move("AB", [Line(1_000_000, 0)], speed=250_000)  # C at 25 M counts/s
+    assert caught.value.axis == "C"
+    assert caught.value.name == "speed"
+
+
+# -- contours -------------------------------------------------------------------------------
+def test_a_contour_taking_a_follower_past_its_soft_limit_is_refused(
+    dmc: galil.Controller,
+) -> None:
+    dmc.A.soft_limits = (-1000, 1000)
+    dmc.A.gear_to("B", 2)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as caught:
+        dmc.contour("B", np.linspace(0, 2000, 40), dt=4)  # A to 4000
+    assert caught.value.axis == "A"
+    assert caught.value.name == "FL"
+    assert "geared to B" in str(caught.value)
+    dmc.contour("B", np.linspace(0, 500, 40), dt=4)  # A to 1000: on its limit
+    assert dmc.query_operands(["_RPA", "_RPB", "_SCA"]) == [1000, 500, 0]
+
+
+def test_a_contour_driving_a_follower_too_fast_is_refused(dmc: galil.Controller) -> None:
+    dmc.A.gear_to("B", 100)
+    path = np.arange(1, 41) * 4000.0  # B at 4000 counts per 16 samples: A at 25.6 M counts/s
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as caught:
+        dmc.contour("B", path, dt=4)
+    assert caught.value.axis == "A"
+    assert caught.value.name == "speed"
+
+
+# -- speed schedules ------------------------------------------------------------------------
+def test_a_speed_schedule_taking_a_follower_past_its_soft_limit_is_refused(
+    dmc: galil.Controller,
+) -> None:
+    dmc.A.soft_limits = (-10_000, 10_000)
+    dmc.A.gear_to("B", 2)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as caught:
+        dmc.B.speed_schedule(15_000, [(5000, 10_000)], speed=20_000)  # A to 30 000
+    assert caught.value.axis == "A"
+    assert caught.value.name == "FL"
+    h = dmc.B.speed_schedule(5000, [(2500, 10_000)], speed=20_000)  # A to 10 000: on it
+    assert h.followers == "A"  # predicted with its master
+    assert h.profiles["A"].end == 10_000
+    h.wait()
+    assert dmc.A.reference_position == 10_000
+
+
+# -- homing ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("start", ["home", "find_edge", "find_index"])
+def test_homing_a_gear_master_is_refused_while_an_axis_follows_it(
+    dmc: galil.Controller, start: str
+) -> None:
+    dmc.B.jog_speed = 2000
+    gearing = dmc.A.gear_to("B", 2)
+    switch = sim_of(dmc).home_switch("B")
+    with nothing_sent(dmc), pytest.raises(InvalidArgument) as caught:
+        getattr(dmc.B, start)(switch=switch)
+    assert "gear master of A" in str(caught.value)
+    gearing.off()
+    getattr(dmc.B, start)(switch=switch).wait(timeout=60)
+    assert dmc.A.reference_position == 0  # A stayed where it was
+
+
+def test_homing_a_geared_axis_is_refused(dmc: galil.Controller) -> None:
+    dmc.A.gear_to("B", 2)
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="axis A is geared to B"):
+        dmc.A.home()
+
+
+# -- a follower stopped by a limit ----------------------------------------------------------
+def test_wait_reports_a_follower_stopped_by_its_soft_limit(dmc: galil.Controller) -> None:
+    dmc.A.soft_limits = (-1000, 1000)
+    gearing = dmc.A.gear_to("B", 2)
+    jog = dmc.B.jog(1000)  # a jog has no end to check: A runs into its FL on the controller
+    dmc.sleep(1.0)
+    jog.stop()
+    with pytest.raises(MotionError) as caught:
+        jog.wait()
+    err = caught.value
+    assert err.axis == "A"
+    assert err.stop_codes["A"] == 2
+    assert err.position is not None
+    assert err.position > 1000
+    assert "geared to B" in str(err)
+    assert not gearing.engaged  # the controller turned the gearing off: so does the library
+    assert jog.result is not None
+    assert jog.result.follower_stop_codes == {"A": 2}
+    r = dmc.B.move_by(-100).wait()  # A does not follow any more: nothing more to report
+    assert r.follower_stop_codes == {}
+
+
+def test_wait_reports_a_follower_of_a_vector_path_stopped_by_a_limit(
+    dmc: galil.Controller,
+) -> None:
+    dmc.C.gear_to("S", 1)
+    h = dmc.vector_move("AB", [Line(3000, 4000)], speed=5000)
+    dmc.C.soft_limits = (-1000, 1000)  # tightened after the check, while C follows
+    with pytest.raises(MotionError) as caught:
+        h.wait()
+    assert caught.value.axis == "C"
+    assert caught.value.stop_codes == {"A": 101, "B": 101, "C": 2}
+
+
+def test_a_follower_that_still_follows_is_not_an_error(dmc: galil.Controller) -> None:
+    dmc.A.gear_to("B", 2)
+    r = dmc.B.move_by(400).wait()
+    assert r.follower_final == {"A": 800}
+    assert r.follower_stop_codes == {"A": 0}
