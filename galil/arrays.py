@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from galil.errors import CommandError, InvalidArgument, LimitError, ProtocolError
+from galil.errors import InvalidArgument, LimitError, ProtocolError
 from galil.link import CommandLink
 from galil.models import INT32_MAX, INT32_MIN
 from galil.protocol import commands as cmds
@@ -33,8 +33,6 @@ __all__ = ["Arrays", "Variables"]
 _LA_LINE = re.compile(r"\s*([A-Za-z][A-Za-z0-9]*)\s*\[\s*(\d+)\s*\]")
 _LV_LINE = re.compile(r"\s*([A-Za-z][A-Za-z0-9]*)\s*=\s*(\S+)")
 _UPLOAD_TIMEOUT = 10.0
-#: TC codes of ``MG name[-1]`` for an array that is not there (bad array, undefined array).
-_NO_ARRAY = frozenset({57, 82})
 
 
 def _values(values: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
@@ -83,29 +81,19 @@ class Arrays:
         return out
 
     def _size(self, name: str) -> int:
-        """How many elements array ``name`` has (``MG name[-1]``: element -1 is the size).
+        """How many elements array ``name`` has, from the ``LA`` listing (gclib reads array
+        sizes this way; ``MG name[-1]`` is not in the references, so it is not relied on).
 
         Raises:
             InvalidArgument: there is no such array.
-            ProtocolError: the answer is no size.
         """
-        command = cmds.array_size(name)
-        try:
-            text = self.link.exchange(command).text
-        except CommandError as exc:
-            if exc.code not in _NO_ARRAY:
-                raise
+        size = self.list().get(name)
+        if size is None:
             raise InvalidArgument(
                 f"there is no array {name!r} on the controller (define it first)",
                 model=self.link.model.name,
-            ) from exc
-        try:
-            size = parse_number(text)
-        except (InvalidArgument, ValueError) as exc:
-            raise self.link.error(ProtocolError, f"{command.text!r} answered {text!r}") from exc
-        if size != round(size) or size < 1:
-            raise self.link.error(ProtocolError, f"{command.text!r} answered {text!r}, no size")
-        return round(size)
+            )
+        return size
 
     def define(self, name: str, size: int, *, replace: bool = False) -> None:
         """Dimension array ``name`` with ``size`` elements, all zero (``DM``).
@@ -138,7 +126,7 @@ class Arrays:
     def download(self, name: str, values: npt.ArrayLike, *, first: int = 0) -> None:
         """Write ``values`` into array ``name`` from element ``first`` (``QD``).
 
-        The array's size is read first (``MG name[-1]``), so values that would not fit are
+        The array's size is read first (``LA``), so values that would not fit are
         refused before any of them is sent.
 
         Raises:
@@ -163,7 +151,7 @@ class Arrays:
     ) -> npt.NDArray[np.float64]:
         """Read array ``name`` (elements ``first`` to ``last``, default all) with ``QU``.
 
-        The array's size is read first (``MG name[-1]``), so a range outside the array is
+        The array's size is read first (``LA``), so a range outside the array is
         refused before the upload is sent.
 
         Raises:

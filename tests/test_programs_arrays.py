@@ -106,7 +106,7 @@ def test_values_that_do_not_fit_are_refused_after_one_query(dmc: galil.Controlle
         pytest.raises(galil.InvalidArgument, match="do not fit"),
     ):
         dmc.arrays.download("a", [1, 2, 3], first=1)
-    assert sent.lines == ["MG a[-1]"]
+    assert sent.lines == ["LA"]
     with pytest.raises(galil.InvalidArgument, match="no array 'b'"):
         dmc.arrays.download("b", [1])
 
@@ -122,7 +122,7 @@ def test_an_upload_outside_the_array_is_refused_after_the_size_query(
         pytest.raises(galil.InvalidArgument, match=r"outside a\[\] of 5 \(indices 0\.\.4\)"),
     ):
         dmc.arrays.upload("a", first, last)
-    assert sent.lines == ["MG a[-1]"]  # the size, and nothing else
+    assert sent.lines == ["LA"]  # the size, and nothing else
     assert dmc.query_number("MG _TC") == 0  # the controller refused nothing
     assert dmc.arrays.upload("a", 3, 4).tolist() == [4, 5]
     assert dmc.arrays.upload("a", 4).tolist() == [5]

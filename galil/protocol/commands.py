@@ -1318,11 +1318,6 @@ def da(*names: str) -> Command:
     return Command("DA " + ",".join(f"{_variable_name(n, 'array')}[]" for n in names))
 
 
-def array_size(name: str) -> Command:
-    """``MG name[-1]``: the number of elements of array ``name`` (element -1 holds it)."""
-    return Command(f"MG {_variable_name(name, 'array')}[-1]", _LINE)
-
-
 def la() -> Command:
     """LA: list the arrays (one ``name[size]`` line each; a bare ``:`` when there is none)."""
     return Command("LA", Expect.ANY)

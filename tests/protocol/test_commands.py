@@ -91,7 +91,6 @@ GOLDEN: list[tuple[Callable[[], Command], bytes, ReplyKind]] = [
     (lambda: c.dl(["#A", 'MG "hi"', "EN"]), b'DL\r#A\rMG "hi"\rEN\r\\', ReplyKind.DOUBLE_ACK),
     (lambda: c.dl("#A\nEN\n"), b"DL\r#A\rEN\r\\", ReplyKind.DOUBLE_ACK),
     (lambda: c.ul(), b"UL\r", ReplyKind.CTRL_Z),
-    (lambda: c.array_size("arr"), b"MG arr[-1]\r", ReplyKind.DATA),
     (lambda: c.qu("arr"), b"QU arr[],,,1\r", ReplyKind.CTRL_Z),
     (lambda: c.qu("arr", 0, 9, delim=0), b"QU arr[],0,9,0\r", ReplyKind.CTRL_Z),
     (lambda: c.qd("arr", [1, 2.5, -3]), b"QD arr[],0,2\r1,2.5,-3\\", ReplyKind.ACK),

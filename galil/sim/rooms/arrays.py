@@ -11,7 +11,8 @@ beyond) and how many variables (``variables``; TC 67). Choices where the sources
   (delim 0), then CR LF and ^Z; ``QD name[],first,last`` takes values separated by commas,
   CR or CR LF up to ``\\``, and refuses too many (TC 84), too few or a bad number (TC 83);
 - ``_DM`` is the number of array elements still free;
-- ``name[-1]`` in an expression (``MG name[-1]``) is the array's size, as in the firmware;
+- ``name[-1]`` in an expression (``MG name[-1]``) is the array's size, as the user manual's
+  chapter on arrays is remembered (unconfirmed: not in the shared references);
   assigning to it is refused (TC 56).
 """
 
