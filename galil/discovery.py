@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from galil.errors import GalilConnectionError, GalilError, InvalidArgument, ProtocolError
+from galil.portnumber import check_port
 from galil.protocol.discovery import (
     BOOTP_SERVER_PORT,
     COMMAND_PORT,
@@ -42,7 +43,6 @@ from galil.protocol.discovery import (
     parse_identify_reply,
 )
 from galil.transport import Transport, open_transport
-from galil.transport.options import check_port
 from galil.transport.tcp import TcpTransport
 
 __all__ = [

@@ -34,6 +34,7 @@ from types import TracebackType
 from typing import TypeVar
 
 from galil.errors import GalilConnectionError, InvalidArgument
+from galil.portnumber import check_port
 from galil.sim.clock import RealTimeClock
 from galil.sim.controller import SimController
 from galil.sim.faults import FaultHook, apply_faults
@@ -164,9 +165,9 @@ class SimTcpServer(_Server):
     ) -> None:
         if not host.startswith("127.") and host not in ("localhost", "::1"):
             raise InvalidArgument(f"the simulator serves loopback only, not {host!r}")
-        _check_port(port, "port")
+        check_port(port, "port", zero=True)
         if message_port is not None:
-            _check_port(message_port, "message_port")
+            check_port(message_port, "message_port", zero=True)
         super().__init__(controller, model)
         self.host = host
         self._want = (port,) if message_port is None else (port, message_port)
@@ -501,17 +502,6 @@ class _Line:
         return out
 
 
-def _check_port(port: object, what: str) -> int:
-    """``port`` as a port number to listen on, 0..65535 (0: a free one).
-
-    The transports' ``check_port`` does the same for the host side; the simulator may not
-    import ``galil.transport`` (import contract), so the server keeps its own.
-    """
-    if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
-        raise InvalidArgument(f"{what} must be 0..65535, got {port!r}")
-    return port
-
-
 def check_ports(tcp: str | None, message_port: int | None) -> tuple[str, int]:
     """The host and port of ``--tcp HOST:PORT`` (127.0.0.1:0 when None), both ports checked.
 
@@ -525,8 +515,8 @@ def check_ports(tcp: str | None, message_port: int | None) -> tuple[str, int]:
     if not port.isdigit():
         raise InvalidArgument(f"--tcp wants HOST:PORT (port 0 picks a free one), not {tcp!r}")
     if message_port is not None and message_port != -1:
-        _check_port(message_port, "--message-port (-1: none)")
-    return host or "127.0.0.1", _check_port(int(port), "--tcp port")
+        check_port(message_port, "--message-port (-1: none)", zero=True)
+    return host or "127.0.0.1", check_port(int(port), "--tcp port", zero=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

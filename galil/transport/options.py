@@ -4,6 +4,7 @@ Options arrive as keywords or from a URL query (already turned into ``int``/``fl
 by :func:`galil.transport.parse_options` where they look like one; otherwise text). Each check
 returns the value in its working type or raises :class:`InvalidArgument` naming the option,
 so that a bad value is refused before any device is searched for, opened or written to.
+Port numbers are checked by :func:`galil.portnumber.check_port`, which the simulator shares.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from collections.abc import Collection
 
 from galil.errors import InvalidArgument
 
-__all__ = ["check_port", "choice", "dotted_quad", "flag", "seconds", "whole_number"]
+__all__ = ["choice", "dotted_quad", "flag", "seconds", "whole_number"]
 
 _DOTTED = re.compile(r"^[0-9.]+$")
 
@@ -42,17 +43,6 @@ def whole_number(value: object, what: str, low: int, high: int) -> int:
     if number is None or not low <= number <= high:
         raise InvalidArgument(f"{what} must be a whole number {low}..{high}, got {value!r}")
     return number
-
-
-def check_port(port: object, what: str, *, zero: bool = False) -> int:
-    """``port`` as a TCP/UDP port number, 1..65535 (0 too with ``zero``: "pick a free one").
-
-    Only an ``int`` is taken, not text: ports come from URLs already converted.
-    """
-    low = 0 if zero else 1
-    if isinstance(port, bool) or not isinstance(port, int) or not low <= port <= 65535:
-        raise InvalidArgument(f"{what} must be {low}..65535, got {port!r}")
-    return port
 
 
 def dotted_quad(host: str, what: str) -> None:

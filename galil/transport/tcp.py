@@ -19,9 +19,10 @@ from urllib.parse import SplitResult
 
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.models import ETHERNET_BYTES_PER_S
+from galil.portnumber import check_port
 from galil.transport import parse_options
 from galil.transport.base import TransportBase
-from galil.transport.options import check_port, dotted_quad, seconds
+from galil.transport.options import dotted_quad, seconds
 
 __all__ = ["DEFAULT_PORT", "TcpTransport", "UdpTransport", "open_tcp"]
 
