@@ -16,7 +16,7 @@ import pytest
 
 import galil
 from galil import cli
-from galil.errors import InvalidArgument
+from galil.errors import GalilConnectionError, InvalidArgument
 from galil.sim import server as sim_server
 
 GALIL = [sys.executable, "-m", "galil.cli"]
@@ -208,6 +208,43 @@ def test_the_sim_modules_entry_point_checks_ports_as_the_cli_does(
     assert "port" in err
     with pytest.raises(InvalidArgument, match=r"must be 0\.\.65535"):
         sim_server.SimTcpServer(port=70000)
+
+
+@pytest.mark.parametrize("option", ["--tcp", "--message-port"])
+@pytest.mark.parametrize("entry", ["module", "cli"])
+def test_sim_on_a_port_in_use_is_one_line_and_status_2(
+    option: str, entry: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # `python -m galil.sim.server` and `galil sim` on a taken port: no OSError traceback.
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        argv = [f"--tcp=127.0.0.1:{port}"] if option == "--tcp" else [f"--message-port={port}"]
+        status = sim_server.main(argv) if entry == "module" else cli.main(["sim", *argv])
+    assert status == 2
+    err = capsys.readouterr().err
+    which = "command" if option == "--tcp" else "message"
+    assert err.startswith(f"galil sim: error: cannot serve the {which} port on 127.0.0.1:{port}: ")
+    assert "(port 0 picks a free one)" in err
+    assert err.count("\n") == 1
+    assert "Traceback" not in err
+
+
+def test_a_sim_server_that_cannot_have_its_port_says_which_and_closes_the_rest() -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        free = probe.getsockname()[1]
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        server = sim_server.SimTcpServer(port=free, message_port=port)
+        with pytest.raises(GalilConnectionError, match=f"message port on 127.0.0.1:{port}"):
+            server.start()
+    # The command port (TCP and UDP), bound before the message port failed, was let go.
+    with sim_server.SimTcpServer(port=free) as again:
+        assert again.address == ("127.0.0.1", free)
 
 
 @pytest.mark.parametrize(

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import math
 import os
 import selectors
@@ -33,7 +34,7 @@ from collections.abc import Sequence
 from types import TracebackType
 from typing import TypeVar
 
-from galil.errors import GalilConnectionError, InvalidArgument
+from galil.errors import GalilConnectionError, GalilError, InvalidArgument
 from galil.portnumber import check_port
 from galil.sim.clock import RealTimeClock
 from galil.sim.controller import SimController
@@ -84,10 +85,19 @@ class _Server:
         self._error: BaseException | None = None
 
     def start(self) -> None:
-        """Start serving on a background thread."""
+        """Start serving on a background thread.
+
+        Raises:
+            GalilConnectionError: a port cannot be had (in use, or not ours to take); whatever
+                was opened before it is closed again.
+        """
         if self._thread is not None:
             return
-        self._open()
+        try:
+            self._open()
+        except BaseException:
+            self._close()  # what was opened before the failure
+            raise
         self._thread = threading.Thread(target=self._serve, name=type(self).__name__, daemon=True)
         self._thread.start()
 
@@ -211,7 +221,7 @@ class SimTcpServer(_Server):
         for i, want in enumerate(self._want):
             s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
             s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            s.bind((self.host, want))
+            self._bind(s, want, "command port" if i == 0 else "message port")
             s.listen(8)
             s.setblocking(False)
             self._sel.register(s, selectors.EVENT_READ, "listen" if i == 0 else "listen_msg")
@@ -223,10 +233,27 @@ class SimTcpServer(_Server):
 
     def _open_udp(self, port: int) -> None:
         u = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        u.bind((self.host, port))
+        self._bind(u, port, "command port (UDP)")
         u.setblocking(False)
         self._sel.register(u, selectors.EVENT_READ, "udp")
         self._udp = u
+
+    def _bind(self, sock: socket.socket, port: int, what: str) -> None:
+        """Bind ``sock``, or close it and say which port could not be had, and why.
+
+        Raises:
+            GalilConnectionError: the port is taken (or not ours to take); also an OSError.
+        """
+        try:
+            sock.bind((self.host, port))
+        except OSError as e:
+            sock.close()
+            why = e.strerror or str(e)
+            if e.errno == errno.EADDRINUSE:
+                why += " (port 0 picks a free one)"
+            raise GalilConnectionError(
+                f"cannot serve the {what} on {self.host}:{port}: {why}"
+            ) from e
 
     def _datagram(self, sock: socket.socket) -> None:
         """A command on UDP: the peer is a handle of its own (the first datagram opens it)."""
@@ -522,7 +549,9 @@ def check_ports(tcp: str | None, message_port: int | None) -> tuple[str, int]:
 def main(argv: Sequence[str] | None = None) -> int:
     """``galil sim``: serve a simulated controller until Ctrl-C.
 
-    ``galil sim --model DMC-4040 --tcp 127.0.0.1:0`` or ``galil sim --pty``.
+    ``galil sim --model DMC-4040 --tcp 127.0.0.1:0`` or ``galil sim --pty``. A bad option is a
+    usage error; a port that cannot be had (in use, not ours) is one line on stderr. Both
+    return (or exit with) status 2, without a traceback.
     """
     parser = _parser()
     args = parser.parse_args(argv)
@@ -544,18 +573,33 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
         except (InvalidArgument, ValueError) as e:
             parser.error(str(e))
+    try:
+        server.start()
+    except (GalilError, OSError) as e:
+        print(f"{parser.prog}: error: {e}", file=sys.stderr)
+        return 2
+    try:
+        _serve(server, announce_messages=args.message_port >= 0)
+    finally:
+        server.stop()
+    return 0
+
+
+def _serve(server: _Server, *, announce_messages: bool) -> None:
+    """Say where the started ``server`` is, then serve until Ctrl-C or SIGTERM."""
+    previous = None
     if threading.current_thread() is threading.main_thread():
         # `kill` (a service manager, a CI job ending) stops the server as cleanly as Ctrl-C.
         # Installed before the address is printed: whoever waits for that line may signal at once.
-        signal.signal(signal.SIGTERM, _interrupt)
+        previous = signal.signal(signal.SIGTERM, _interrupt)
+    identity = server.controller.identity
     try:
-        server.start()
         if isinstance(server, SimPtyServer):
-            print(f"{controller.identity} on serial port {server.path}", flush=True)
+            print(f"{identity} on serial port {server.path}", flush=True)
         else:
             assert isinstance(server, SimTcpServer)
-            print(f"{controller.identity} on {server.url}", flush=True)
-            if args.message_port >= 0:
+            print(f"{identity} on {server.url}", flush=True)
+            if announce_messages:
                 mhost, mport = server.message_address
                 print(
                     f"unsolicited messages on tcp://{mhost}:{mport} (or CF I on a handle)",
@@ -566,8 +610,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         pass
     finally:
-        server.stop()
-    return 0
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 def _parser() -> argparse.ArgumentParser:
