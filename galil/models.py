@@ -61,6 +61,12 @@ _MT_STANDARD = frozenset({1.0, -1.0, 1.5, -1.5, 2.0, -2.0, 2.5, -2.5})
 _REPLY_FORMATS = {"KP": "4.2", "KI": "4.4", "KD": "4.2", "TM": "1.0"}
 #: The Optima DMC-1xxx/18x2 reference gives KI format 4.0 (optcom-126; DMC-1400 reference too).
 _OPTIMA_REPLY_FORMATS = {**_REPLY_FORMATS, "KI": "4.0"}
+#: KI on the Optima DMC-1xxx/18x2: "0 to 2047.875 with a resolution of 1/128" (optcom-126; the
+#: DMC-1400 reference's KI page says the same, manualsdump galil-dmc-1400/152344/128). EPICS
+#: (GalilAxis.cpp setIGain) caps every model but the 2xxx at 255.999, the 40x0/41x3 maximum;
+#: its comment names only the 21x3, 41x3 and 40x0, so the vendor page is taken for the Optima.
+_OPTIMA_KI_MAX = 2047.875
+_OPTIMA_KI_RESOLUTION = 1 / 128
 #: OP's fields per model, where the sources stop (documented, not settled; see ``assumptions``).
 _OP_ASSUMPTION = (
     "OP fields: 8-bit banks (OP n0,n1: outputs 1-8, 9-16). Sourced only for outputs 1-8 (DMC-3425"
@@ -154,7 +160,8 @@ class ModelSpec:
         motor_types: the MT values the model accepts (:data:`MOTOR_TYPES` says what each is).
         kp_max, ki_max, kd_max: gain maxima; gain_resolution the step of KP and KD (KP 1/8,
             40x0); ki_resolution KI's (1/1024: the step that makes 255.999 the largest KI
-            below 256; assumed).
+            below 256; assumed). The Optima-era cards (DMC-1700/1800, 18x2) take KI up to
+            2047.875 in steps of 1/128 (``_OPTIMA_KI_MAX``); the DMC-1500 is assumed to.
         ks_range: stepper smoothing KS (40x0 user manual: 0.25 ... 64).
         il_max, tl_max: integrator and torque limits in volts.
         er_max: largest position-error limit (ER) in counts.
@@ -335,14 +342,17 @@ _add(
         threads=2,
         vt=True,
         reply_formats=_OPTIMA_REPLY_FORMATS,
+        ki_max=_OPTIMA_KI_MAX,  # assumed (see assumptions)
+        ki_resolution=_OPTIMA_KI_RESOLUTION,
         assumptions=(
             "4 axes: the DMC-1500 manual excerpt names X Y Z W; the axis count is not sourced",
             "serial only: the DMC-1500 is a stand-alone RS-232 controller in the sources",
             "contour buffer of 1: pre-Accelera controllers had a 1-deep contour queue",
             "SP maximum 8,000,000 c/s: no primary source; picked below the 2xxx recollection",
             "no binary data record: no layout found for this family",
-            "KI ? in format 4.0 as on the Optima and DMC-1400 references; the DMC-1000/1500"
-            " reference's KI page was not found (its KP page gives 4.2)",
+            "KI ? in format 4.0, and KI 0 ... 2047.875 in steps of 1/128, as on the Optima and"
+            " DMC-1400 references; the DMC-1000/1500 reference's KI page was not found (its KP"
+            " page gives 4.2)",
             _OP_ASSUMPTION,
         ),
     ),
@@ -364,6 +374,8 @@ _add(
         threads=2,
         vt=True,
         reply_formats=_OPTIMA_REPLY_FORMATS,
+        ki_max=_OPTIMA_KI_MAX,  # optcom-126
+        ki_resolution=_OPTIMA_KI_RESOLUTION,
         assumptions=(
             "ISA/PCI bus card: reached through a Galil driver device node",
             "data record like the 2x00 (QZ 8,24,16,28): the 1700 manual shares that layout",
@@ -393,6 +405,8 @@ _add(
         threads=2,
         vt=True,
         reply_formats=_OPTIMA_REPLY_FORMATS,
+        ki_max=_OPTIMA_KI_MAX,  # optcom-126
+        ki_resolution=_OPTIMA_KI_RESOLUTION,
         assumptions=(
             "CD range ±32,000 from the seed manual excerpt",
             "contour buffer of 1: the seed shows WC pacing one segment at a time",
@@ -452,6 +466,8 @@ _add(
             "SP maximum 12,000,000 c/s: recollection, not a primary page",
             "KI ? in format 4.4 as on the 40x0: no 21x3 page found (its KI maximum, 2047.992,"
             " is the older range, whose Optima page gives 4.0)",
+            "KI in steps of 1/1024 (the default): 2047.992 (EPICS) is 2048 - 1/128, the Optima"
+            " page's step, but no 21x3 page gives the step",
             _OP_ASSUMPTION,
         ),
     ),

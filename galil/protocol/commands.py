@@ -1591,7 +1591,8 @@ def kp(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
 
 
 def ki(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
-    """KI: integral gain, 0 .. ``model.ki_max`` (255.999 on the 40x0, 2047.992 on the 21x3)."""
+    """KI: integral gain, 0 .. ``model.ki_max`` (255.999 on the 40x0, 2047.992 on the 21x3,
+    2047.875 on the Optima DMC-1700/1800 and 18x2)."""
     spec = model or _DEFAULT_SPEC
     return _setting("KI", by_axis, model, _range_check("KI", 0, spec.ki_max, model))
 

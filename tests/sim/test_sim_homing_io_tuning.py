@@ -7,12 +7,13 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from galil.errors import LimitError
 from galil.predict.homing import HomeSwitch, HomingParams, homing
 from galil.protocol.numbers import parse_number, parse_numbers
 from galil.protocol.records import decode_record
 from galil.sim.controller import SimController
 from galil.sim.rooms import Homing
-from galil.testing import simulated
+from galil.testing import nothing_sent, simulated
 
 
 def ask(sim: SimController, text: str) -> str:
@@ -248,6 +249,31 @@ def test_gains_and_tm_answer_in_their_command_reference_formats(model: str, ki_r
     # MG prints operands in the variable format (VF 10.4), the stored value in full.
     assert ask(sim, "MG _KPA,_TM") == " 10.1250 1000.0000\r\n:"
     assert ask(sim, "LZ 0;KP ?;TM ?") == ": 0010.13\r\n: 1000\r\n:"
+
+
+@pytest.mark.parametrize("model", ["DMC-1700", "DMC-1800", "DMC-18x2", "DMC-1500"])
+def test_ki_on_the_optima_era_models_goes_to_2047_875_in_128ths(model: str) -> None:
+    # Optima DMC-1xxx/18x2 reference optcom-126: KI 0 to 2047.875, resolution 1/128 (the
+    # DMC-1500's is assumed the same: models.py).
+    sim = SimController(model)
+    assert ask(sim, "KIA=2047.875;KIB=300") == "::"
+    assert number(sim, "_KIA") == 2047.875
+    assert number(sim, "_KIB") == 300
+    assert ask(sim, "KIA=2047.9") == "?"
+    assert ask(sim, "TC1") == " 6 Number out of range\r\n:"
+    assert ask(sim, "KIA=0.01") == ":"
+    assert number(sim, "_KIA") == 0.0078  # 1/128 (0.0078125) in VF 10.4; 1/1024 steps: 0.0098
+
+
+@pytest.mark.parametrize(("model", "top"), [("DMC-1800", 2047.875), ("DMC-4040", 255.999)])
+def test_the_host_refuses_ki_beyond_the_models_maximum_before_sending(
+    model: str, top: float
+) -> None:
+    with simulated(model) as dmc:
+        dmc.A.ki = top
+        assert dmc.A.ki == pytest.approx(top, abs=0.01)  # as the model's step stores it
+        with nothing_sent(dmc), pytest.raises(LimitError, match="KI"):
+            dmc.A.ki = top + 0.5
 
 
 def test_the_host_reads_gains_back_exactly_whatever_kp_query_prints() -> None:
