@@ -85,9 +85,11 @@ class ModelSpec:
         family: family name, e.g. ``"DMC-40x0"``.
         axes: axis letters in order (``"ABCD"``; ``"XYZW"`` on families that name them so).
         aliases: other letters the firmware accepts for the same axes (X=A, Y=B, Z=C, W=D).
-        tm_default: default TM in microseconds (1000 gives 1024 Hz).
-        tm_adjustable: whether TM may be changed (the DMC-1500 has a fixed 2 ms sample).
-        sample_period_fixed: seconds per sample when TM is not adjustable.
+        tm_default: TM at power-on in microseconds (1000 gives 1024 Hz: a sample lasts
+            TM / 1,024,000 s). Where TM cannot be changed, the TM of the fixed sample, which
+            ``TM ?`` and ``_TM`` answer (DMC-1500: 2048, its 2 ms).
+        tm_adjustable: whether TM may be changed (the DMC-1500 has a fixed 2 ms sample); see
+            :attr:`sample_period_fixed`.
         ac_min, ac_max, ac_resolution: AC/DC range in counts/s²; values round down to the
             resolution.
         sp_max, sp_resolution: SP/JG maximum and step in counts/s.
@@ -178,7 +180,6 @@ class ModelSpec:
     aliases: dict[str, str] = field(default_factory=dict)
     tm_default: float = 1000.0
     tm_adjustable: bool = True
-    sample_period_fixed: float | None = None
     ac_min: int = 1024
     ac_max: int = 1_073_740_800
     ac_resolution: int = 1024
@@ -270,14 +271,17 @@ class ModelSpec:
     @property
     def sample_period(self) -> float:
         """Seconds per servo sample at the default TM."""
-        if self.sample_period_fixed is not None:
-            return self.sample_period_fixed
         return self.tm_default / 1_024_000.0
+
+    @property
+    def sample_period_fixed(self) -> float | None:
+        """Seconds per sample where TM cannot be changed (``None`` where it can)."""
+        return None if self.tm_adjustable else self.sample_period
 
     def sample_period_for(self, tm: float) -> float:
         """Seconds per sample for a given TM (µs), honouring fixed-rate models."""
-        if self.sample_period_fixed is not None:
-            return self.sample_period_fixed
+        if not self.tm_adjustable:
+            return self.sample_period
         return tm / 1_024_000.0
 
     @property
@@ -328,8 +332,10 @@ _add(
         family="DMC-1500",
         axes="ABCD",
         aliases=_XYZW,
+        # The 2 ms fixed sample (AN3312 p.4) as TM counts it (TM / 1,024,000 s), one fact: the
+        # sample period and what TM ? answers both come from it.
+        tm_default=2048.0,
         tm_adjustable=False,
-        sample_period_fixed=0.002,
         ac_max=67_107_840,
         sp_max=8_000_000,
         cd_max=32_000,
@@ -350,6 +356,9 @@ _add(
             "contour buffer of 1: pre-Accelera controllers had a 1-deep contour queue",
             "SP maximum 8,000,000 c/s: no primary source; picked below the 2xxx recollection",
             "no binary data record: no layout found for this family",
+            "TM ? (and _TM) answer 2048, the fixed 2 ms sample in TM's units as on later"
+            " models (TM 1000 = 1/1024 s), and TM n is refused (TC 6) whatever n: the"
+            " DMC-1000/1500 reference's TM page, if it has one, was not found",
             "KI ? in format 4.0, and KI 0 ... 2047.875 in steps of 1/128, as on the Optima and"
             " DMC-1400 references; the DMC-1000/1500 reference's KI page was not found (its KP"
             " page gives 4.2)",

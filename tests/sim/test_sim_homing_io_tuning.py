@@ -7,7 +7,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from galil.errors import LimitError
+from galil.errors import CommandError, LimitError
 from galil.predict.homing import HomeSwitch, HomingParams, homing
 from galil.protocol.numbers import parse_number, parse_numbers
 from galil.protocol.records import decode_record
@@ -274,6 +274,24 @@ def test_the_host_refuses_ki_beyond_the_models_maximum_before_sending(
         assert dmc.A.ki == pytest.approx(top, abs=0.01)  # as the model's step stores it
         with nothing_sent(dmc), pytest.raises(LimitError, match="KI"):
             dmc.A.ki = top + 0.5
+
+
+def test_a_fixed_sample_period_is_what_tm_answers_and_tm_cannot_change_it() -> None:
+    # The DMC-1500's 2 ms sample is fixed (models.py: tm_adjustable False, TM 2048).
+    sim = SimController("DMC-1500")
+    assert ask(sim, "TM ?") == " 2048\r\n:"
+    assert number(sim, "_TM") == 2048
+    for value in ("1000", "2048", "500"):
+        assert ask(sim, f"TM {value}") == "?"
+        assert ask(sim, "TC1") == " 6 Number out of range\r\n:"
+    assert ask(sim, "TM ?") == " 2048\r\n:"
+    with simulated("DMC-1500") as dmc:
+        # The host's model and the simulator say the same: 2048 µs-of-TM, 0.002 s a sample.
+        assert parse_number(dmc.command("TM ?")) == dmc.sample_period * 1_024_000
+        assert dmc.sample_period == 0.002
+        with pytest.raises(CommandError):
+            dmc.command("TM 1000")
+        assert dmc.sample_period == 0.002
 
 
 def test_the_host_reads_gains_back_exactly_whatever_kp_query_prints() -> None:

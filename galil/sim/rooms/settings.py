@@ -122,10 +122,8 @@ class Settings(Room):
         if not a:
             return ""
         value = self.machine.interp.evaluate(a)
-        if not spec.tm_adjustable:
-            if value != servo.tm:
-                raise Refused(6, "this model's sample period is fixed")
-            return ""
+        if not spec.tm_adjustable:  # as the host's TM builder refuses it (models.py)
+            raise Refused(6, "this model's sample period is fixed")
         low, high = spec.tm_range
         if not low <= value <= high:
             raise Refused(6, "TM out of range")
