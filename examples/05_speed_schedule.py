@@ -4,9 +4,10 @@
     python examples/05_speed_schedule.py tcp://192.168.0.42    # a real controller
 
 This is the Galil form of the manual's "distance to change" moves: each (distance, speed) pair
-becomes an AD trippoint followed by SP in a small program downloaded to the controller and run
-with XQ. On hardware: the download REPLACES the program in the controller's memory, and axis A
-MOVES 30 mm forward.
+becomes an AD trippoint followed by SP in a small routine run with XQ on thread 0. The routine
+is installed beside the program in the controller's memory (after the line 'galil library),
+which stays as it was; it is refused while a program runs. On hardware: axis A MOVES 30 mm
+forward.
 """
 
 from __future__ import annotations
