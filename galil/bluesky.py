@@ -59,6 +59,7 @@ from galil.aio import connect as aio_connect
 from galil.contour import ContourResult, ContourStream
 from galil.controller import Controller
 from galil.errors import InvalidArgument
+from galil.link import check_seconds, check_wait_timeout
 from galil.predict import Profile
 from galil.units import Scale, get_registry, path_to_counts
 
@@ -198,6 +199,20 @@ def _unit_and_precision(scale: Scale | None) -> tuple[str, int]:
 # ------------------------------------------------------------------------------------ motor
 
 
+def _watch_timeout(timeout: object) -> float | None:
+    """``set()``'s timeout as :meth:`AsyncMoveHandle.watch` takes it: ``CALCULATE_TIMEOUT``
+    is the watch's own default (``None``: the predicted duration plus a margin), ``None``
+    for ever (1e9 s), anything else checked as every wait's (:func:`check_wait_timeout`).
+
+    Raises:
+        InvalidArgument: a bad timeout.
+    """
+    if isinstance(timeout, str) and timeout == CALCULATE_TIMEOUT:
+        return None
+    seconds = check_wait_timeout(timeout)
+    return 1e9 if seconds is None else seconds
+
+
 class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[float], Stoppable):
     """One Galil axis as an ophyd-async motor.
 
@@ -211,7 +226,8 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         in_position: after the profile ends, ``set()`` waits until the position error
             (``_TE``) is within this distance (the axis's unit; default one count) ...
         settle_timeout: ... or this many seconds have passed (then the readback reports
-            where the axis really is).
+            where the axis really is): a finite number >= 0, checked as every wait's
+            timeout (:func:`~galil.link.check_seconds`).
 
     Signals (in the axis's unit): ``readback`` (``_TP``, read under the device's name, with
     ``units`` and ``precision`` in ``describe()``), ``setpoint`` (the target of the ``set()``
@@ -238,7 +254,7 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         self._scale = _scale_of(scale, offset, sign)
         per = 1.0 if self._scale is None else float(self._scale.counts_per.magnitude)
         self._in_position = 1.0 if in_position is None else abs(float(in_position)) * per
-        self._settle_timeout = float(settle_timeout)
+        self._settle_timeout = check_seconds(settle_timeout, "settle_timeout")
         self._axis: AsyncAxis | None = None
         self._stopped: bool | None = None  # success flag of a stop() during set()
         self._moving_to: float | None = None  # the target of the set() in progress
@@ -321,9 +337,11 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         """Move to ``value`` (the axis's unit); progress comes from the move's prediction.
 
         ``timeout``: the default allows the predicted duration with a margin; ``None`` waits
-        for ever. A status that fails (a timeout, an error, a cancellation) leaves no motion:
-        the axis is stopped first. A ``stop()`` at any point of the move, even before it has
-        started, stops it; with ``success=False`` the status then fails.
+        for ever; else a finite number of seconds >= 0, as every wait's (a bad one fails the
+        status with :class:`~galil.errors.InvalidArgument` before anything is sent). A status
+        that fails (a timeout, an error, a cancellation) leaves no motion: the axis is stopped
+        first. A ``stop()`` at any point of the move, even before it has started, stops it;
+        with ``success=False`` the status then fails.
         """
         self._stopped = None  # from the call on, not once the move's task runs: stop() counts
         return self._move(value, timeout)
@@ -334,6 +352,7 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
     ) -> AsyncIterator[WatcherUpdate[float]]:
         axis = self.axis
         target = self._target(value)
+        wait = _watch_timeout(timeout)
         initial = await self.readback.get_value()
         if not self._stop_requested():  # else stopped before the move began: it never does
             self._moving_to = float(value)
@@ -342,7 +361,7 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
                 try:
                     if self._stop_requested():  # stop() came while the move was starting
                         await handle.stop()
-                    async for update in self._progress(handle, float(value), initial, timeout):
+                    async for update in self._progress(handle, float(value), initial, wait):
                         yield update
                     await handle.wait()
                 except BaseException:
@@ -360,12 +379,11 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         return self._stopped is not None
 
     async def _progress(
-        self, handle: AsyncMoveHandle, value: float, initial: float, timeout: CalculatableTimeout
+        self, handle: AsyncMoveHandle, value: float, initial: float, wait: float | None
     ) -> AsyncIterator[WatcherUpdate[float]]:
-        """The predicted progress of ``handle`` until it is done (or ``timeout`` passes)."""
-        wait = None if timeout == CALCULATE_TIMEOUT else (1e9 if timeout is None else timeout)
+        """The predicted progress of ``handle`` until it is done (or ``wait`` s pass)."""
         letter = handle.axes[0]
-        async for p in handle.watch(None if wait is None else float(wait)):
+        async for p in handle.watch(wait):
             current = p.positions.get(letter, initial)
             yield self._update(current, initial, value, p.fraction, p.remaining, p.elapsed)
 

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from galil.errors import GalilConnectionError, GalilError, InvalidArgument, ProtocolError
+from galil.link import check_seconds
 from galil.portnumber import check_port
 from galil.protocol.discovery import (
     BOOTP_SERVER_PORT,
@@ -148,7 +149,12 @@ def _comports() -> list[Any]:
 def serial_ports(
     *, identify: bool = True, identify_bridges: bool = False, timeout: float = 1.0
 ) -> list[Found]:
-    """Serial ports that are (or may be) a controller, from pyserial's ``list_ports``."""
+    """Serial ports that are (or may be) a controller, from pyserial's ``list_ports``.
+
+    Raises:
+        InvalidArgument: a bad timeout (before any port is opened).
+    """
+    timeout = _check_seconds(timeout, "timeout")
     out: list[Found] = []
     for port in _comports():
         vid = getattr(port, "vid", None)
@@ -193,7 +199,12 @@ def usb_devices(*, backend: Any = None) -> list[Found]:
 def pci_nodes(
     *, pattern: str = _PCI_GLOB, identify: bool = True, timeout: float = 1.0
 ) -> list[Found]:
-    """The device nodes of Galil's PCI driver (``/dev/galilpci0`` ...)."""
+    """The device nodes of Galil's PCI driver (``/dev/galilpci0`` ...).
+
+    Raises:
+        InvalidArgument: a bad timeout (before any node is opened).
+    """
+    timeout = _check_seconds(timeout, "timeout")
     out = []
     for path in sorted(glob.glob(pattern)):
         ident = _identify_address(path, timeout) if identify else ""
@@ -249,8 +260,9 @@ def probe_hosts(specs: Iterable[str], *, timeout: float = 1.0) -> list[Found]:
     """Ask each address (or every host of a network) ``^R^V`` over TCP; return who answered.
 
     Raises:
-        InvalidArgument: an address that cannot be read, or too many of them.
+        InvalidArgument: an address that cannot be read, too many of them, or a bad timeout.
     """
+    timeout = _check_seconds(timeout, "timeout")
     targets = _targets(specs)
     if not targets:
         return []
@@ -317,10 +329,11 @@ def listen_bootp(
         count: return as soon as this many different controllers asked.
 
     Raises:
-        InvalidArgument: ``address`` is no (IPv4 address, port) pair.
+        InvalidArgument: ``address`` is no (IPv4 address, port) pair, or a bad timeout.
         GalilConnectionError: the port cannot be bound (port 67 needs root on most systems).
     """
     _check_endpoint(address, "bootp_address")
+    timeout = _check_seconds(timeout, "timeout")
     seen: dict[bytes, BootpRequest] = {}
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -363,9 +376,12 @@ def _bootp_found(request: BootpRequest) -> Found:
 
 
 def _check_seconds(value: object, what: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < 3600:
-        raise InvalidArgument(f"{what} must be a number of seconds in (0, 3600), not {value!r}")
-    return float(value)
+    """Seconds to wait for answers or requests: :func:`~galil.link.check_seconds` (more than
+    0: nothing answers in no time) and less than an hour."""
+    seconds = check_seconds(value, what, positive=True)
+    if seconds >= 3600:
+        raise InvalidArgument(f"{what} must be less than 3600 s, not {value!r}")
+    return seconds
 
 
 def _check_endpoint(value: object, what: str) -> None:

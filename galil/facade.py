@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from galil.errors import GalilConnectionError, InvalidArgument
-from galil.link import Link, WireLog, check_timeout
+from galil.link import Link, WireLog, check_seconds, check_timeout
 from galil.messages import MessageCallback, MessageQueue, Messages
 from galil.models import ModelSpec
 from galil.protocol.commands import Command
@@ -28,20 +28,17 @@ LONGEST_SLEEP = 1e6
 
 
 def check_sleep(seconds: object) -> float:
-    """``seconds`` as a float from 0 to :data:`LONGEST_SLEEP`.
+    """``seconds`` as a float from 0 to :data:`LONGEST_SLEEP` (:func:`~galil.link.check_seconds`,
+    as every wait's timeout, and not too long).
 
     Raises:
-        InvalidArgument: not a number (a bool neither), negative, NaN, or too long.
+        InvalidArgument: not a number (a bool neither, nor ``None``), negative, NaN, infinity,
+            or too long.
     """
-    if (
-        isinstance(seconds, bool)
-        or not isinstance(seconds, (int, float))
-        or not 0 <= seconds <= LONGEST_SLEEP
-    ):
-        raise InvalidArgument(
-            f"seconds must be a number from 0 to {LONGEST_SLEEP:g}, got {seconds!r}"
-        )
-    return float(seconds)
+    value = check_seconds(seconds, "seconds")
+    if value > LONGEST_SLEEP:
+        raise InvalidArgument(f"seconds must be at most {LONGEST_SLEEP:g}, not {seconds!r}")
+    return value
 
 
 class LinkFacade:

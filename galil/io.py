@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterator, Sequence
 from typing import Any, Protocol, overload
 
 from galil.errors import GalilTimeoutError, InvalidArgument
-from galil.link import CommandLink
+from galil.link import CommandLink, check_wait_timeout
 from galil.protocol import commands as cmds
 from galil.routines import Routine, Routines
 from galil.units import get_registry, is_quantity
@@ -283,20 +283,19 @@ class IO:
         Args:
             n: the input (the controller's numbering).
             high: wait for high (True) or low (False).
-            timeout: seconds to wait at most (``None``: forever).
+            timeout: seconds to wait at most (``None``: for ever), a finite number >= 0
+                (:func:`~galil.link.check_wait_timeout`).
             thread: program thread for the routine (default: the last one).
 
         Raises:
-            InvalidArgument: no such input, a bad timeout, or a busy thread.
+            InvalidArgument: no such input, a bad timeout (infinity too: ``None`` waits for
+                ever), or a busy thread.
             GalilTimeoutError: the input did not change in time (the routine is halted).
         """
         n = self.inputs._check(n)
         if not isinstance(high, bool):
             raise InvalidArgument(f"high is True or False, not {high!r}")
-        if timeout is not None and (
-            isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not timeout >= 0
-        ):  # NaN too; infinity waits for ever, as None does
-            raise InvalidArgument(f"timeout must be a number of seconds >= 0, not {timeout!r}")
+        timeout = check_wait_timeout(timeout)
         link = self._link
         t = link.model.threads - 1 if thread is None else thread
         with self._wait_lock:

@@ -50,6 +50,7 @@ __all__ = [
     "WireCapture",
     "WireLog",
     "check_count",
+    "check_seconds",
     "check_timeout",
     "check_wait_timeout",
     "is_query",
@@ -88,26 +89,6 @@ def _parse(text: str) -> Command:
     return cmd
 
 
-def check_timeout(timeout: object, default: float, what: str = "timeout") -> float:
-    """A positive, finite number of seconds (``None``: ``default``).
-
-    Raises:
-        InvalidArgument: anything else (a bool, a string, 0, a negative number, NaN, inf).
-    """
-    if timeout is None:
-        return default
-    if (
-        isinstance(timeout, bool)
-        or not isinstance(timeout, (int, float))
-        or not math.isfinite(timeout)
-        or not timeout > 0
-    ):
-        raise InvalidArgument(
-            f"{what} must be a positive, finite number of seconds, not {timeout!r}"
-        )
-    return float(timeout)
-
-
 def check_count(value: object, name: str) -> int:
     """``value`` as a positive whole number (a bool is refused too).
 
@@ -119,19 +100,49 @@ def check_count(value: object, name: str) -> int:
     return value
 
 
-def check_wait_timeout(timeout: object) -> None:
-    """Refuse a wait's timeout that is not ``None`` or a finite number of seconds >= 0.
+def check_seconds(value: object, name: str = "timeout", *, positive: bool = False) -> float:
+    """The one check of every timeout, wait and pause in the public API: ``value`` must be a
+    finite number of seconds >= 0 (``> 0`` with ``positive``: a reply timeout, a watchdog
+    period, where 0 cannot be met). The wrappers below decide what ``None`` means.
+
+    Returns:
+        ``value`` as a float.
 
     Raises:
-        InvalidArgument: a bool, a string, a negative number, NaN or infinity.
+        InvalidArgument: naming ``name``: ``None``, a bool, a string or anything else that is
+            not an int or a float, NaN, infinity, a negative number (or 0 with ``positive``).
     """
-    if timeout is not None and (
-        isinstance(timeout, bool)
-        or not isinstance(timeout, (int, float))
-        or not math.isfinite(timeout)
-        or timeout < 0
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float))
+        or not math.isfinite(value)
+        or value < 0
+        or (positive and value == 0)
     ):
-        raise InvalidArgument(f"timeout must be a non-negative number, got {timeout!r}")
+        least = "> 0" if positive else ">= 0"
+        raise InvalidArgument(f"{name} must be a finite number of seconds {least}, not {value!r}")
+    return float(value)
+
+
+def check_wait_timeout(timeout: object, name: str = "timeout") -> float | None:
+    """A wait's timeout: ``None`` (what it means is the wait's own: for ever, or a default it
+    works out, such as a move's predicted duration plus a margin) or :func:`check_seconds`.
+    Infinity is refused: ``None`` is the way to wait for ever.
+
+    Raises:
+        InvalidArgument: naming ``name`` (see :func:`check_seconds`).
+    """
+    return None if timeout is None else check_seconds(timeout, name)
+
+
+def check_timeout(timeout: object, default: float, what: str = "timeout") -> float:
+    """A reply timeout (or another link setting in seconds): ``None`` is ``default``, else
+    :func:`check_seconds` with ``positive`` (no reply comes in 0 s).
+
+    Raises:
+        InvalidArgument: naming ``what`` (see :func:`check_seconds`).
+    """
+    return default if timeout is None else check_seconds(timeout, what, positive=True)
 
 
 _QUERY_KINDS = frozenset({ReplyKind.DATA, ReplyKind.RECORD, ReplyKind.CTRL_Z})

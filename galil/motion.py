@@ -574,6 +574,8 @@ class MoveHandle:
             progress: show a ``tqdm.auto`` bar driven by the predicted duration.
 
         Raises:
+            InvalidArgument: a timeout that is not ``None`` or a finite number of seconds
+                >= 0 (:func:`~galil.link.check_wait_timeout`), before anything is sent.
             GalilTimeoutError: the move did not finish in time (it is NOT stopped).
             MotionError: an axis stopped on a limit switch or soft limit, or a limit stopped
                 an axis geared to one of them (its gearing is then off); raised once the

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from galil.errors import GalilTimeoutError, InvalidArgument
-from galil.link import CommandLink, check_wait_timeout
+from galil.link import CommandLink, check_seconds
 from galil.protocol import commands as cmds
 from galil.protocol.programs import check_program, program_lines
 from galil.routines import MARKER, Routines, split_program
@@ -61,18 +61,14 @@ class Download:
 
 
 def check_thread_timeout(timeout: object) -> float:
-    """A thread wait's timeout: a finite number of seconds >= 0 (``None`` and infinity are
-    refused: a wait for a program has an end). ``Programs.wait`` and its async twin both
-    use it.
+    """A thread wait's timeout: :func:`~galil.link.check_seconds`, a finite number of
+    seconds >= 0, as every wait's; ``None`` is refused too (a thread wait has an end: the
+    default is 10 s). ``Programs.wait`` and its async twin both use it.
 
     Raises:
-        InvalidArgument: anything else.
+        InvalidArgument: anything else, naming ``timeout``.
     """
-    if timeout is None:
-        raise InvalidArgument("timeout must be a non-negative number, not None")
-    check_wait_timeout(timeout)
-    assert isinstance(timeout, (int, float))
-    return float(timeout)
+    return check_seconds(timeout, "timeout")
 
 
 def _read_source(source: str | os.PathLike[str]) -> str:

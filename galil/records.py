@@ -28,7 +28,7 @@ from galil.errors import (
     InvalidArgument,
     ProtocolError,
 )
-from galil.link import Link, check_count, check_wait_timeout, read_reply
+from galil.link import Link, check_count, check_timeout, check_wait_timeout, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import parse_number
 from galil.protocol.records import (
@@ -397,13 +397,16 @@ class Records:
         The record's ``time`` is its sample counter extended against that ``TIME``.
 
         Raises:
-            InvalidArgument: bad axes, or the model has no data record.
+            InvalidArgument: bad axes or timeout (a reply timeout: ``None`` is the link's,
+                else :func:`~galil.link.check_timeout`), before the first byte (``QZ``), or
+                the model has no data record.
             ProtocolError: the record does not match the layout ``QZ`` gave.
         """
         link = self.link
+        wait = check_timeout(timeout, link.timeout)
         command = cmds.qr(axes, model=link.model)
         layout = self.layout()
-        done, stamp = link.transact((command, cmds.time_stamp()), timeout)
+        done, stamp = link.transact((command, cmds.time_stamp()), wait)
         if done.record is None:
             raise link.error(ProtocolError, f"{command.text!r} answered no binary record")
         try:

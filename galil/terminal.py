@@ -31,6 +31,7 @@ from galil.errors import (
     GalilTimeoutError,
     InvalidArgument,
 )
+from galil.link import check_seconds
 from galil.protocol import commands as cmds
 
 __all__ = ["Terminal", "default_history_path", "program_lines", "run_terminal"]
@@ -78,7 +79,11 @@ class Terminal:
     Args:
         controller: the connected controller.
         write: prints one line of output (``print`` by default).
-        timeout: seconds to wait for a reply (a ``WT n`` gets ``n`` ms more).
+        timeout: seconds to wait for a reply (a ``WT n`` gets ``n`` ms more): a finite
+            number > 0 (:func:`~galil.link.check_seconds`).
+
+    Raises:
+        InvalidArgument: a bad timeout.
     """
 
     def __init__(
@@ -90,7 +95,7 @@ class Terminal:
     ) -> None:
         self.controller = controller
         self.write: Callable[[str], None] = write if write is not None else _print
-        self.timeout = timeout
+        self.timeout = check_seconds(timeout, "timeout", positive=True)  # a reply timeout
         self._download: list[str] | None = None
 
     @property

@@ -16,12 +16,11 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import math
 import threading
 from types import TracebackType
 
 from galil.errors import GalilConnectionError, GalilError, InvalidArgument
-from galil.link import CommandLink, Link
+from galil.link import CommandLink, Link, check_seconds
 from galil.models import INT32_MAX
 from galil.protocol import commands as cmds
 from galil.routines import Routine, Routines
@@ -165,13 +164,7 @@ def check_watchdog_args(
         InvalidArgument: a timeout that is not a positive finite number, a thread that does
             not exist, an interval not shorter than the timeout.
     """
-    if (
-        isinstance(timeout, bool)
-        or not isinstance(timeout, (int, float))
-        or not math.isfinite(timeout)
-        or timeout <= 0
-    ):
-        raise InvalidArgument(f"watchdog timeout must be positive seconds, not {timeout!r}")
+    seconds = check_seconds(timeout, "watchdog timeout", positive=True)  # a period, not a wait
     model = link.model
     chosen = model.threads - 1 if thread is None else thread
     if isinstance(chosen, bool) or not isinstance(chosen, int) or not 0 <= chosen < model.threads:
@@ -179,13 +172,9 @@ def check_watchdog_args(
             f"thread must be 0..{model.threads - 1} on {model.name}, not {thread!r}",
             model=model.name,
         )
-    every = float(timeout) / 4 if interval is None else interval
-    if (
-        isinstance(every, bool)
-        or not isinstance(every, (int, float))
-        or not 0 < every < float(timeout)
-    ):
+    every = seconds / 4 if interval is None else interval
+    if isinstance(every, bool) or not isinstance(every, (int, float)) or not 0 < every < seconds:
         raise InvalidArgument(
             f"heartbeat interval must be positive and shorter than the timeout, not {interval!r}"
         )
-    return float(timeout), chosen, float(every)
+    return seconds, chosen, float(every)

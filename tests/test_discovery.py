@@ -6,9 +6,12 @@ All network traffic stays on 127.0.0.1: the simulator answers where a controller
 from __future__ import annotations
 
 import ipaddress
+import math
 import socket
 import threading
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 from hypothesis import given
@@ -143,6 +146,29 @@ def test_find_validates_before_sending_anything() -> None:
         galil.find(serial=False, usb=False, pci=False, probe=["10.0.0.0/16"])
     with pytest.raises(InvalidArgument, match="timeout"):
         galil.find(serial=False, usb=False, pci=False, timeout=0)
+
+
+SEARCHES: dict[str, Callable[[Any, Path], object]] = {
+    "serial_ports": lambda t, _: serial_ports(timeout=t),
+    "pci_nodes": lambda t, tmp: pci_nodes(pattern=str(tmp / "none*"), timeout=t),
+    "probe_hosts": lambda t, _: probe_hosts(["127.0.0.1:1"], timeout=t),
+    "listen_bootp": lambda t, _: listen_bootp(address=("127.0.0.1", 0), timeout=t),
+    "ask_group": lambda t, _: ask_group("127.0.0.1", 1, timeout=t),
+    "find": lambda t, _: galil.find(usb=False, pci=False, timeout=t),
+}
+
+
+@pytest.mark.parametrize("search", sorted(SEARCHES))
+@pytest.mark.parametrize("timeout", [math.inf, math.nan, -1, "5", True, 0, None, 3600], ids=repr)
+def test_every_search_checks_its_timeout_before_it_opens_or_sends_anything(
+    search: str, timeout: object, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    # The rule of every timeout (galil.link.check_seconds), more than 0 and less than an hour.
+    touched: list[str] = []
+    monkeypatch.setattr(list_ports, "comports", lambda: touched.append("comports") or [])
+    with pytest.raises(InvalidArgument, match="timeout"):
+        SEARCHES[search](timeout, tmp_path)
+    assert touched == []
 
 
 def test_pci_nodes_are_listed_by_their_driver_names(tmp_path: Path) -> None:

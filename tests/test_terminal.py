@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import select
@@ -19,6 +20,7 @@ from galil.errors import InvalidArgument
 from galil.sim.clock import RealTimeClock
 from galil.sim.server import SimPtyServer, SimTcpServer
 from galil.terminal import Terminal, program_lines
+from galil.testing import nothing_sent, simulated
 
 Spawn = Callable[..., subprocess.Popen[str]]
 
@@ -106,6 +108,14 @@ def test_ctrl_c_cancels_a_download_being_typed(term: tuple[Terminal, list[str]])
     t.interrupt()
     assert not t.downloading
     assert "download cancelled" in out
+
+
+@pytest.mark.parametrize("timeout", [math.inf, math.nan, -1, "5", True, 0, None], ids=repr)
+def test_a_bad_reply_timeout_is_refused_before_the_terminal_starts(timeout: object) -> None:
+    # A reply's timeout, checked as every timeout is (galil.link.check_seconds, more than 0):
+    # before, "5" and None failed with a TypeError at the first command, and True was 1 s.
+    with simulated() as dmc, nothing_sent(dmc), pytest.raises(InvalidArgument, match="timeout"):
+        Terminal(dmc, timeout=timeout)  # type: ignore[arg-type]
 
 
 def test_program_files_lose_blank_lines_and_indentation() -> None:

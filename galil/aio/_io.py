@@ -18,10 +18,10 @@ import operator
 from collections.abc import Awaitable, Iterable, Sequence
 from typing import Any, Generic, TypeVar, overload
 
-from galil.aio._waits import check_wait, in_slices
+from galil.aio._waits import in_slices
 from galil.aio._worker import Room, Worker
 from galil.io import IO, AnalogInputs, AnalogOutputs, DigitalInputs, DigitalOutputs
-from galil.link import Link
+from galil.link import Link, check_wait_timeout
 
 __all__ = [
     "AsyncAnalogInputs",
@@ -197,10 +197,11 @@ class AsyncIO(Room[IO]):
         the routine, and the next starts it again.
 
         Raises:
-            InvalidArgument: no such input, a bad timeout, or a busy thread.
+            InvalidArgument: no such input, a bad timeout (refused before anything is sent,
+                as by the sync wait: infinity too, ``None`` waits for ever), or a busy thread.
             GalilTimeoutError: the input did not change in time (the routine is halted).
         """
-        total = check_wait(timeout)
+        total = check_wait_timeout(timeout)  # as the sync wait: inf refused, None for ever
         io = self.sync
 
         def wait(seconds: float) -> None:

@@ -238,6 +238,9 @@ class AsyncMoveHandle:
                 cancellation in the loop's body); ``False`` only watches.
 
         Raises:
+            InvalidArgument: a timeout that is not ``None`` or a finite number of seconds
+                >= 0 (:func:`~galil.link.check_wait_timeout`, as ``MoveHandle.wait``), before
+                anything is sent.
             GalilTimeoutError: not done in time (the move is NOT stopped).
         """
         check_wait_timeout(timeout)
@@ -263,6 +266,7 @@ class AsyncMoveHandle:
         Cancelling the waiting task stops the move (``ST``) before the cancellation ends.
 
         Raises:
+            InvalidArgument: a bad timeout (see :meth:`watch`), before anything is sent.
             GalilTimeoutError: the move did not finish in time (it is NOT stopped).
             MotionError: an axis stopped on a limit switch or soft limit, or a limit stopped
                 an axis geared to one of them (see ``MoveHandle.wait``).

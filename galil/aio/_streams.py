@@ -37,8 +37,8 @@ T = TypeVar("T")
 def _wait_seconds(timeout: object) -> float:
     """A queue's or a record stream's wait, checked as its sync twin checks it
     (:func:`~galil.link.check_wait_timeout`: ``None`` is for ever, infinity is refused)."""
-    check_wait_timeout(timeout)
-    return math.inf if timeout is None else float(timeout)  # type: ignore[arg-type]
+    seconds = check_wait_timeout(timeout)
+    return math.inf if seconds is None else seconds
 
 
 class LoopQueue(Generic[T]):

@@ -16,33 +16,15 @@ from collections.abc import Callable
 from typing import TypeVar
 
 from galil.aio._worker import Worker
-from galil.errors import GalilTimeoutError, InvalidArgument
+from galil.errors import GalilTimeoutError
 from galil.link import Link
 
-__all__ = ["WAIT_SLICE", "check_wait", "in_slices"]
+__all__ = ["WAIT_SLICE", "in_slices"]
 
 #: Longest a sliced wait holds a worker thread in one call (seconds of controller time).
 WAIT_SLICE = 0.5
 
 R = TypeVar("R")
-
-
-def check_wait(timeout: object, what: str = "timeout") -> float | None:
-    """``timeout`` as seconds (``None``: for ever), refused before anything is sent.
-
-    Raises:
-        InvalidArgument: not ``None`` or a non-negative number.
-    """
-    if timeout is None:
-        return None
-    if (
-        isinstance(timeout, bool)
-        or not isinstance(timeout, (int, float))
-        or math.isnan(timeout)
-        or timeout < 0
-    ):
-        raise InvalidArgument(f"{what} must be a number of seconds >= 0 or None, not {timeout!r}")
-    return None if math.isinf(timeout) else float(timeout)
 
 
 class _Deadline:
@@ -79,7 +61,8 @@ async def in_slices(
         worker: runs each slice.
         link: the controller's clock.
         wait: the sync wait, given the slice's timeout.
-        timeout: seconds in all (``None``: for ever); checked with :func:`check_wait` first.
+        timeout: seconds in all (``None``: for ever), checked by the caller first, as its
+            sync twin checks it (:func:`~galil.link.check_wait_timeout`).
         expired: the message of the :class:`GalilTimeoutError` once ``timeout`` has passed.
 
     Raises:

@@ -7,6 +7,7 @@ short with high speeds so the whole file takes a few seconds.
 from __future__ import annotations
 
 import asyncio
+import math
 import re
 import threading
 from collections.abc import Coroutine, Iterator
@@ -26,7 +27,7 @@ from ophyd_async.core import soft_signal_rw
 import galil
 from galil.bluesky import ContourPath, GalilContourFlyer, GalilMotor, release_all
 from galil.sim.server import SimTcpServer
-from galil.testing import sim_of
+from galil.testing import nothing_sent, sim_of
 from galil.units import ureg
 
 mm, s = ureg.mm, ureg.s
@@ -331,6 +332,27 @@ def test_a_set_that_times_out_stops_the_axis(engine: RunEngine) -> None:
 
     assert in_loop(body()) < 5
     assert in_loop(x.axis.stop_code())[0] == 4
+
+
+@pytest.mark.parametrize("timeout", [math.inf, math.nan, -1, "5", True], ids=repr)
+def test_a_bad_set_timeout_fails_the_status_before_anything_is_sent(
+    engine: RunEngine, timeout: object
+) -> None:
+    # As every wait's timeout (galil.link.check_wait_timeout): before, the move began and
+    # was stopped again (inf, NaN, -1), or "5" and True were taken for seconds.
+    x = mock_motor("tcp://127.0.0.1:30")
+
+    async def body() -> None:
+        with nothing_sent(x.controller.sync), pytest.raises(galil.InvalidArgument, match="timeout"):
+            await x.set(1, timeout=timeout)  # type: ignore[arg-type]
+
+    in_loop(body())
+
+
+@pytest.mark.parametrize("settle", [math.inf, math.nan, -1, "5", True, None], ids=repr)
+def test_a_bad_settle_timeout_is_refused(settle: object) -> None:
+    with pytest.raises(galil.InvalidArgument, match="settle_timeout"):
+        GalilMotor("sim://DMC-4040", "A", settle_timeout=settle)  # type: ignore[arg-type]
 
 
 def test_numpy_numbers_are_positions(engine: RunEngine, docs: Docs) -> None:
