@@ -550,16 +550,6 @@ class Controller(CoordinatedMotion, LinkFacade):
         chosen = [self.axis(a) for a in names]
         letters = "".join(a.letter for a in chosen)
         counts = path_to_counts(path, [a.scale for a in chosen], letters)
-        for what, given in (("speed_limit", speed_limit), ("accel_limit", accel_limit)):
-            if isinstance(given, Mapping):  # a limit for an axis not driven would be ignored
-                limits_by_axis(self.link.model, given, what, letters)
-        limits = {
-            a.letter: (
-                a.limit_counts(speed_limit, 1, "speed_limit"),
-                a.limit_counts(accel_limit, 2, "accel_limit"),
-            )
-            for a in chosen
-        }
         stream = ContourStream(
             self.link,
             letters,
@@ -567,7 +557,7 @@ class Controller(CoordinatedMotion, LinkFacade):
             dt=dt,
             display={a.letter: a.display for a in chosen},
             byte_rate=self.link.byte_rate,
-            limits=limits,
+            limits=_contour_limits(self.link.model, chosen, speed_limit, accel_limit),
             followers=self.tracker.followers(letters),
         )
         with user_units({a.letter: a for a in chosen}):
@@ -674,6 +664,24 @@ def _policy(reconnect: object, has_address: bool) -> ReconnectPolicy | None:
     if isinstance(reconnect, ReconnectPolicy):
         return reconnect
     raise InvalidArgument(f"reconnect is True, False or a ReconnectPolicy, not {reconnect!r}")
+
+
+def _contour_limits(
+    model: ModelSpec, chosen: Sequence[Axis], speed_limit: object, accel_limit: object
+) -> dict[str, tuple[float | None, float | None]]:
+    """Each contour axis's own speed and acceleration limits in counts (``None``: the
+    model's); a mapping naming an axis the contour does not drive is refused."""
+    letters = "".join(a.letter for a in chosen)
+    for what, given in (("speed_limit", speed_limit), ("accel_limit", accel_limit)):
+        if isinstance(given, Mapping):  # a limit for an axis not driven would be ignored
+            limits_by_axis(model, given, what, letters)
+    return {
+        a.letter: (
+            a.limit_counts(speed_limit, 1, "speed_limit"),
+            a.limit_counts(accel_limit, 2, "accel_limit"),
+        )
+        for a in chosen
+    }
 
 
 def connect(address: str | Transport, **options: Any) -> Controller:

@@ -453,9 +453,13 @@ def find(
     if network:
         found += ask_group(group[0], group[1], timeout=timeout)
     if bootp:
-        found += [
-            _bootp_found(r) for r in listen_bootp(timeout=bootp_timeout, address=bootp_address)
-        ]
+        requests = listen_bootp(timeout=bootp_timeout, address=bootp_address)
+        found += [_bootp_found(r) for r in requests]
+    return _unique(found)
+
+
+def _unique(found: Sequence[Found]) -> list[Found]:
+    """One entry per address (or description), the identified one where there are two."""
     unique: dict[str, Found] = {}
     for item in found:
         key = item.address or item.description

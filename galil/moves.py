@@ -612,23 +612,10 @@ def speed_schedule(
             its soft limits or beyond the model's SP maximum.
     """
     a = letter
-    model = link.model
     cmds.xq(f"#{label}")  # the label is checked before anything is read or sent
     gears = tracker.followers(a)
-    followers = "".join(gears)
-    values = link.query_operands(
-        [f"_{op}{a}" for op in ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")]
-        + ["_XQ0", *follower_limit_operands(followers)]
-    )
-    rp, bg, sp0, ac, dc, it, bl, fl, mo, xq = values[:10]
-    if bg or mo:
-        raise InvalidArgument(f"axis {a} is moving or its motor is off", model=model.name)
-    if xq >= 0:
-        raise InvalidArgument(
-            "thread 0 runs a program (a speed schedule still in progress, or yours): wait for "
-            "the schedule to end or stop it first",
-            model=model.name,
-        )
+    state, limits = _schedule_state(link, a, "".join(gears))
+    rp, sp0, ac, dc, it, bl, fl = state
     first = sp0 if speed is None else speed
     schedule = predict.speed_schedule(
         distance,
@@ -643,7 +630,7 @@ def speed_schedule(
     predict.check_soft_limits(schedule.profile, forward_limit=fl, backward_limit=bl, axis=a)
     if gears:
         geared = {f: g.profile(schedule.profile) for f, g in gears.items()}
-        check_followers(link, gears, geared, limit_pairs(followers, values[10:]))
+        check_followers(link, gears, geared, limits)
     program = _schedule_program(link, a, label, first, distance, schedule)
     routines.install(Routine(f"#{label}", tuple(program)))  # beside the user's program
     link.command_line([cmds.assign(SCHEDULE_BEGIN, -1)])
@@ -658,6 +645,33 @@ def speed_schedule(
     handle.on_cancel(functools.partial(_cancel_schedule, link, routines, handle, a, sp0, run))
     tracker.started(handle)
     return handle
+
+
+def _schedule_state(
+    link: CommandLink, a: str, followers: str
+) -> tuple[tuple[float, ...], dict[str, tuple[float, float]]]:
+    """``(RP, SP, AC, DC, IT, BL, FL)`` of axis ``a`` and the followers' ``(BL, FL)``, in one
+    query that also asks whether thread 0 runs.
+
+    Raises:
+        InvalidArgument: the axis moving or its motor off, or thread 0 running (a schedule in
+            progress, or the user's program).
+    """
+    values = link.query_operands(
+        [f"_{op}{a}" for op in ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")]
+        + ["_XQ0", *follower_limit_operands(followers)]
+    )
+    rp, bg, sp, ac, dc, it, bl, fl, mo, xq = values[:10]
+    model = link.model.name
+    if bg or mo:
+        raise InvalidArgument(f"axis {a} is moving or its motor is off", model=model)
+    if xq >= 0:
+        raise InvalidArgument(
+            "thread 0 runs a program (a speed schedule still in progress, or yours): wait for "
+            "the schedule to end or stop it first",
+            model=model,
+        )
+    return (rp, sp, ac, dc, it, bl, fl), limit_pairs(followers, values[10:])
 
 
 def _cancel_schedule(
