@@ -4,8 +4,9 @@
     python examples/05_speed_schedule.py tcp://192.168.0.42    # a real controller
 
 This is the Galil form of the manual's "distance to change" moves: each (distance, speed) pair
-becomes an AD trippoint followed by SP in a small program downloaded to the controller and run
-with XQ. On hardware: the download REPLACES the program in the controller's memory, and axis A
+becomes an AD trippoint followed by SP in a small program run with XQ on thread 0. The program
+is one of the library's routines: it is kept beside the program in the controller's memory,
+never over it, and a schedule is refused while a program of yours runs. On hardware axis A
 MOVES 30 mm forward.
 """
 
