@@ -5,8 +5,9 @@
 
 In contour mode (CM) the host sends position increments (CD), each lasting 2**DT servo
 samples; the controller runs them back to back from a buffer. ``controller.contour`` checks the
-whole path first (CD range, DT, whether the link is fast enough), keeps the buffer fed, and ends
-with ``CD 0=0``. On hardware this MOVES axes A and B by about 5 mm: make sure they have room.
+whole path first (CD range, DT, the speed and acceleration it implies, soft limits, whether the
+link is fast enough), keeps the buffer fed, and ends with ``CD 0=0``. On hardware this MOVES
+axis A by 8 mm (3 mm, then 5 mm more) and axis B by 5 mm: make sure they have room.
 """
 
 from __future__ import annotations

@@ -2,7 +2,8 @@
 
 Every ```python block of a page runs, in order, in one namespace per page (a block may use what
 an earlier block of the same page made). A block fenced ```python no-run is skipped: it needs
-hardware or a process the page cannot start. Relative links between pages must resolve.
+hardware or a process the page cannot start. What a block shows it prints (a ``# -> ...``
+comment, see ``doc_outputs``) it must print. Relative links between pages must resolve.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from doc_outputs import missing_outputs, shown_outputs
 
 import galil
 
@@ -69,6 +71,20 @@ def test_block_extraction() -> None:
     assert python_blocks(page) == [(3, "a = 1\n", True), (9, "b = 2\n", False)]
 
 
+def test_shown_outputs_are_the_arrow_comments_matched_in_order() -> None:
+    code = (
+        'print("a -> b")  # prose -> not checked\n'
+        "print(1, 2)  # -> 1 2\n"
+        "# -> tcp://127.0.0.1:...\n"
+        "x = '# -> in a string'\n"
+    )
+    shown = shown_outputs(code)
+    assert shown == ["1 2", "tcp://127.0.0.1:..."]
+    assert missing_outputs(shown, "a -> b\n1 2\nnoise\n  tcp://127.0.0.1:4012\n") == []
+    assert missing_outputs(shown, "tcp://127.0.0.1:4012\n1 2\n") == ["tcp://127.0.0.1:..."]
+    assert missing_outputs(["1 2"], "1 2 3\n") == ["1 2"]  # a whole line, not a prefix
+
+
 @pytest.mark.parametrize("page", PAGES, ids=lambda p: p.name)
 def test_links_resolve(page: Path) -> None:
     for target in _LINK.findall(page.read_text(encoding="utf-8")):
@@ -94,10 +110,18 @@ def test_page_code_runs(
             if not runnable:
                 compile(code, f"{page.name}:{line}", "exec")  # it must still be valid Python
                 continue
+            capsys.readouterr()
             try:
                 exec(compile(code, f"{page.name}:{line}", "exec"), namespace)
             except Exception as exc:
                 pytest.fail(f"{page.name}, block at line {line}: {type(exc).__name__}: {exc}")
+            printed = capsys.readouterr().out
+            missing = missing_outputs(shown_outputs(code), printed)
+            if missing:
+                pytest.fail(
+                    f"{page.name}, block at line {line} shows {missing[0]!r} but printed:\n"
+                    f"{printed}"
+                )
     finally:
         # Pages connect to simulators (some behind a socket); close whatever they left open.
         from galil.sim.server import SimTcpServer

@@ -108,7 +108,9 @@ class Profile:
             ``velocity[0]`` is the velocity at the start.
         duration: ``N * sample_period``: until the profiler has issued the final position.
         shape: ``"trapezoid"``, ``"triangle"``, ``"none"``, ``"jog"``, ``"contour"``,
-            ``"changed"`` (re-planned in motion) or ``"stopped"``.
+            ``"changed"`` (re-planned in motion) or ``"stopped"``; also ``"schedule"``,
+            ``"vector"`` (an axis of a sequence), ``"geared"`` (a follower) and ``"HM"``,
+            ``"FE"``, ``"FI"`` (homing).
         peak_speed: largest |profiler velocity| (before rounding to counts), counts/s.
         sample_period: seconds per sample.
         profiler: the profiler position ``r`` before smoothing (what AD/AR trippoints watch);
