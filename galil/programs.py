@@ -161,11 +161,11 @@ class Programs:
                 f"{self.link.model.name} has threads 0..{n - 1}, not {thread!r}",
                 model=self.link.model.name,
             )
-        library = self.routines.threads
-        if thread in library:
+        label = self.routines.holder(thread)
+        if label is not None:
             raise InvalidArgument(
-                f"thread {thread} runs the library's {library[thread]} (the watchdog or a "
-                "speed schedule); stop that through the library",
+                f"thread {thread} runs the library's {label} (the watchdog or a speed "
+                "schedule); stop that through the library",
                 model=self.link.model.name,
             )
         return thread
@@ -200,7 +200,7 @@ class Programs:
     def threads(self) -> dict[int, int]:
         """The user's running threads and the line each is on (``_XQn``); the library's own
         threads are left out. One round trip."""
-        running = self.routines.running()
+        running = self.routines.running()  # (forgets the library's runs that ended)
         return {t: line for t, line in running.items() if t not in self.routines.threads}
 
     def wait(self, thread: int = 0, timeout: float = 10.0) -> None:

@@ -158,10 +158,27 @@ class Routines:
         return [line for line in text.replace("\r\n", "\n").split("\n") if line.strip()]
 
     def running(self) -> dict[int, int]:
-        """Running threads and the line each is on (``_XQn``), read in one round trip."""
+        """Running threads and the line each is on (``_XQn``), read in one round trip.
+
+        A one-shot run of the library's (a speed schedule) whose thread no longer runs has
+        ended: the library holds that thread no more.
+        """
         n = self.link.model.threads
         values = self.link.query_operands([f"_XQ{t}" for t in range(n)])
-        return {t: round(v) for t, v in enumerate(values) if round(v) >= 0}
+        running = {t: round(v) for t, v in enumerate(values) if round(v) >= 0}
+        with self._lock:
+            for t in [t for t in self._owners if t not in running]:
+                del self._owners[t]
+                self._threads.pop(t, None)
+        return running
+
+    def holder(self, thread: int) -> str | None:
+        """The label of the library's routine on ``thread``, or ``None`` when the library does
+        not hold it (a one-shot run is asked whether it still runs: one query)."""
+        with self._lock:
+            if thread in self._owners:
+                self.running()
+            return self._threads.get(thread)
 
     def install(self, *routines: Routine) -> bool:
         """Put ``routines`` into the library block, each replacing the whole routine of the
@@ -317,5 +334,6 @@ class Routines:
 
     @property
     def threads(self) -> dict[int, str]:
-        """The threads the library runs, and the label each started at."""
+        """The threads the library runs, and the label each started at (as last seen: a
+        speed schedule that has ended is forgotten at the next :meth:`running`)."""
         return dict(self._threads)

@@ -236,3 +236,22 @@ def test_nothing_sent_catches_a_command(dmc: galil.Controller) -> None:
         nothing_sent(dmc, allow_queries=True),
     ):
         dmc.A.move_by(10)
+
+
+def test_thread_0_is_the_users_again_once_a_speed_schedule_has_ended(
+    dmc: galil.Controller,
+) -> None:
+    # The schedule's routine ends with its move: the library holds thread 0 no more, so the
+    # user's program runs there (its default thread), and can be waited for and halted.
+    dmc.programs.download('#A\nMG "hello"\nEN')
+    dmc.A.speed_schedule(30_000, [(10_000, 10_000)], speed=20_000).wait()
+    dmc.programs.run("#A")
+    dmc.programs.wait(0)
+    dmc.programs.halt(0)
+    assert dmc.programs.threads == {}
+    # A schedule still running keeps the thread: the user's program is refused there.
+    h = dmc.A.speed_schedule(-30_000, [(10_000, 10_000)], speed=20_000)
+    with pytest.raises(InvalidArgument, match="library's #GSCHED"):
+        dmc.programs.run("#A")
+    h.wait()
+    dmc.programs.run("#A")
