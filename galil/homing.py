@@ -186,13 +186,7 @@ class AxisHoming:
             InvalidArgument: naming the followers, or the master of a follower.
         """
         a, tracker, name = self.letter, self._tracker, self._link.model.name
-        gear = tracker.gears.get(a)
-        if gear is not None:
-            raise InvalidArgument(
-                f"axis {a} is geared to {gear.master}: turn the gearing off before {kind} "
-                "(its own motion on top of the gearing is not predicted)",
-                model=name,
-            )
+        tracker.refuse_geared(a, kind, name)
         followers = tracker.followers(a)
         if followers:
             who = ", ".join(f"{f} (GR {g.ratio:g})" for f, g in followers.items())

@@ -255,6 +255,20 @@ class MotionTracker:
         """The engaged gearings whose master is one of ``masters`` (letters, or ``"S"``)."""
         return {f: g for f, g in self.gears.items() if g.master in masters}
 
+    def refuse_geared(self, letter: str, what: str, model: str) -> None:
+        """Refuse to move a gear follower by itself (before any byte is sent).
+
+        Raises:
+            InvalidArgument: ``letter`` follows another axis (``what``: the refused action).
+        """
+        gear = self.gears.get(letter)
+        if gear is not None:
+            raise InvalidArgument(
+                f"axis {letter} is geared to {gear.master}: turn the gearing off before {what}"
+                " (its own motion on top of the gearing is not predicted)",
+                model=model,
+            )
+
     def active(self, letter: str) -> MoveHandle | None:
         """The handle of the move in progress on ``letter`` (``None`` if none or done)."""
         h = self._active.get(letter)

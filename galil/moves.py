@@ -194,14 +194,7 @@ def check_int32(name: str, value: float, axis: str, model: str) -> None:
         )
 
 
-def _ready(link: CommandLink, a: str, state: _State, tracker: MotionTracker) -> None:
-    gear = tracker.gears.get(a)
-    if gear is not None:
-        raise InvalidArgument(
-            f"axis {a} is geared to {gear.master}: turn the gearing off before moving it (its"
-            " own moves on top of the gearing are not predicted)",
-            model=link.model.name,
-        )
+def _ready(link: CommandLink, a: str, state: _State) -> None:
     if state.bg:
         raise InvalidArgument(
             f"axis {a} is already moving; stop it or wait first", model=link.model.name
@@ -297,6 +290,9 @@ def execute_move(
         order = link.model.axes
         moves = sorted(moves, key=lambda m: order.index(m.letter))
         letters = "".join(m.letter for m in moves)
+    if not dry_run:
+        for a in letters:
+            tracker.refuse_geared(a, "moving it", link.model.name)
     gears = tracker.followers(letters)
     followers = "".join(f for f in gears if f not in letters)
     state, limits = _read_state(link, letters, followers)
@@ -306,7 +302,7 @@ def execute_move(
     shows = display or {}
     for m in moves:
         if not dry_run:
-            _ready(link, m.letter, state[m.letter], tracker)
+            _ready(link, m.letter, state[m.letter])
         track, profile, target = _plan_axis(link, m, state[m.letter], relative)
         tracks[m.letter] = track
         show = shows.get(m.letter)
@@ -377,6 +373,7 @@ def jog(
         LimitError: an axis geared to ``letter`` would run beyond the model's SP maximum.
     """
     a = letter
+    tracker.refuse_geared(a, "jogging it", link.model.name)
     rp, bg, sc, ac, dc, it, mo = link.query_operands(
         [f"_{op}{a}" for op in ("RP", "BG", "SC", "AC", "DC", "IT", "MO")]
     )
@@ -465,6 +462,7 @@ def increment(
     """
     a = letter
     model = link.model
+    tracker.refuse_geared(a, "an increment", model.name)
     gears = tracker.followers(a)
     followers = "".join(gears)
     rp, bg, pa, bl, fl, *rest = link.query_operands(

@@ -6,6 +6,8 @@ master's handle.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 
@@ -104,6 +106,23 @@ def test_homing_a_geared_axis_is_refused(dmc: galil.Controller) -> None:
     dmc.A.gear_to("B", 2)
     with nothing_sent(dmc), pytest.raises(InvalidArgument, match="axis A is geared to B"):
         dmc.A.home()
+
+
+@pytest.mark.parametrize(
+    ("move", "what"),
+    [
+        (lambda ax: ax.jog(1000), "jogging it"),
+        (lambda ax: ax.increment(10), "an increment"),
+        (lambda ax: ax.move_by(100), "moving it"),
+    ],
+)
+def test_moving_a_geared_axis_by_itself_is_refused_as_geared_before_sending(
+    dmc: galil.Controller, move: Callable[[galil.Axis], object], what: str
+) -> None:
+    # (a follower reads _BG 1: the jog said "in another move", and IP went out for TC 141)
+    dmc.A.gear_to("B", 2)
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match=f"geared to B.*before {what}"):
+        move(dmc.A)
 
 
 # -- a follower stopped by a limit ----------------------------------------------------------
