@@ -601,8 +601,10 @@ class LinkCore:
             elif wait <= 0:
                 raise self.error(
                     GalilConnectionError,
-                    f"the link is out of step and did not resynchronise within {limit:g} s;"
-                    " call reconnect()",
+                    f"the link is out of step and did not resynchronise within {limit:g} s:"
+                    " a command the controller still holds (AM, MC, WT ...) delays its"
+                    " answers, so try again once it is done; if the controller does not"
+                    " answer at all, call reconnect()",
                 )
         self.note("link back in step")
 

@@ -191,6 +191,23 @@ def test_resync_impossible_says_so(c: Controller, peer: FakeGalil) -> None:
         c.command("MG 8", timeout=0.05)
 
 
+def test_resync_delayed_by_a_held_command_succeeds_on_a_later_try(
+    c: Controller, peer: FakeGalil
+) -> None:
+    # A held reply (AM on a long move, say) keeps the marker's answer back too: the link says
+    # to try again, and once the controller answers, the next command resynchronises.
+    peer.hold.add("MG 7")
+    with pytest.raises(GalilTimeoutError):
+        c.command("MG 7", timeout=0.05)
+    peer.silent = True  # the controller answers nothing while it holds MG 7
+    with pytest.raises(GalilConnectionError, match="try again once it is done"):
+        c.command("MG 8", timeout=0.05)
+    peer.silent = False
+    peer.hold.clear()
+    peer.release_held()
+    assert c.command("MG 9") == " 9"
+
+
 def test_garbage_is_a_protocol_error_then_recovers(c: Controller, peer: FakeGalil) -> None:
     peer.extra = lambda cmd: ":::" if cmd == "SHB" else None
     with pytest.raises(ProtocolError, match="no command is pending") as info:
