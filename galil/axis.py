@@ -27,7 +27,14 @@ from galil.moves import AxisMove, execute_move, increment, jog, set_jog_speed, s
 from galil.protocol import commands as cmds
 from galil.routines import Routines
 from galil.tuning import Setting, motor_type, whole
-from galil.units import Scale, counts_or_plain, get_registry, is_quantity
+from galil.units import (
+    Scale,
+    counts_or_plain,
+    get_registry,
+    is_quantity,
+    rate_magnitude_counts,
+    signed_rate_counts,
+)
 
 __all__ = [
     "OVERRIDES",
@@ -241,27 +248,16 @@ class Axis:
         Raises:
             InvalidArgument: a negative value (the direction of a move comes from its target).
         """
-        counts = self.signed_rate_counts(value, power, what)
-        sign = 1 if self._scale is None else self._scale.sign
-        if counts * sign < 0:
-            # abs() would run a "-5 mm/s" silently at +5 mm/s: the direction of a position
-            # move comes from its target, so a negative value is a mistake worth naming.
-            hint = " (the direction comes from the target; jog takes a signed speed)"
-            raise InvalidArgument(
-                f"{what} must not be negative, got {value!r}{hint if power == 1 else ''}"
-            )
-        return abs(counts)
+        # abs() would run a "-5 mm/s" silently at +5 mm/s: the direction of a position move
+        # comes from its target, so a negative value is a mistake worth naming.
+        hint = " (the direction comes from the target; jog takes a signed speed)"
+        return rate_magnitude_counts(
+            self._scale, value, power, what, self.letter, hint if power == 1 else ""
+        )
 
     def signed_rate_counts(self, value: object, power: int, what: str) -> float:
         """A signed speed or acceleration as counts/s^power."""
-        if self._scale is not None:
-            return self._scale.rate_to_counts(value, power, what)
-        if is_quantity(value):
-            raise InvalidArgument(
-                f"{what}: {value} has units but axis {self.letter} has no scale; "
-                "call axis.set_scale(counts_per=...) or pass counts"
-            )
-        return counts_or_plain(value, what)
+        return signed_rate_counts(self._scale, value, power, what, self.letter)
 
     def limit_counts(self, limit: object, power: int, what: str) -> float | None:
         """A user's speed (power 1) or acceleration (2) limit for this axis, in counts.

@@ -284,6 +284,36 @@ def counts_or_plain(value: object, what: str) -> float:
     return _plain_number(value, what)
 
 
+def signed_rate_counts(
+    scale: Scale | None, value: object, power: int, what: str, letter: str
+) -> float:
+    """A signed speed (power 1) or acceleration (power 2) as counts/s^power, through the
+    ``scale`` of axis ``letter`` (``None``: plain counts; a Quantity is then refused)."""
+    if scale is not None:
+        return scale.rate_to_counts(value, power, what)
+    if is_quantity(value):
+        raise InvalidArgument(
+            f"{what}: {value} has units but axis {letter} has no scale; "
+            "call axis.set_scale(counts_per=...) or pass counts"
+        )
+    return counts_or_plain(value, what)
+
+
+def rate_magnitude_counts(
+    scale: Scale | None, value: object, power: int, what: str, letter: str, hint: str = ""
+) -> float:
+    """A speed or acceleration magnitude as counts/s^power (see :func:`signed_rate_counts`).
+
+    Raises:
+        InvalidArgument: a negative value in the user's direction (the scale's sign reverses
+            positions, not magnitudes), with ``hint`` after the message.
+    """
+    counts = signed_rate_counts(scale, value, power, what, letter)
+    if counts * (1 if scale is None else scale.sign) < 0:
+        raise InvalidArgument(f"{what} must not be negative, got {value!r}{hint}")
+    return abs(counts)
+
+
 def path_to_counts(
     path: object, scales: Sequence[Scale | None], letters: str
 ) -> npt.NDArray[np.float64]:

@@ -43,7 +43,7 @@ from galil.segments import (
     show,
     to_counts,
 )
-from galil.units import counts_or_plain, is_quantity
+from galil.units import counts_or_plain, is_quantity, rate_magnitude_counts
 
 __all__ = ["VectorHandle", "VectorStream"]
 
@@ -348,17 +348,8 @@ class VectorStream:
             letter = self.link.model.axis_letter(name)
             if letter not in by_letter:
                 raise InvalidArgument(f"{what}: {name!r} is not an axis of the path")
-            axis = self.axes[by_letter[letter]]
-            label = f"{what} of {letter}"
-            if axis.scale is not None:
-                # The axis's sign reverses positions, not rates: undo it before the check.
-                counts = axis.scale.sign * axis.scale.rate_to_counts(value, power, label)
-            else:
-                counts = counts_or_plain(value, label)
-            if counts < 0:
-                raise InvalidArgument(
-                    f"{label} must not be negative, got {value!r}", model=self.link.model.name
-                )
+            scale = self.axes[by_letter[letter]].scale
+            counts = rate_magnitude_counts(scale, value, power, f"{what} of {letter}", letter)
             out[by_letter[letter]] = min(counts, float(default))
         return out
 
