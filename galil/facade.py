@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from galil.errors import GalilConnectionError, InvalidArgument
-from galil.link import Link, WireLog, check_seconds, check_timeout
+from galil.link import Link, WireLog, check_seconds
 from galil.messages import MessageCallback, MessageQueue, Messages
 from galil.models import ModelSpec
 from galil.protocol.commands import Command
@@ -74,7 +74,8 @@ class LinkFacade:
 
     @timeout.setter
     def timeout(self, seconds: float) -> None:
-        self.link.timeout = check_timeout(seconds, self.link.timeout)
+        # (None is no default here: it would silently keep the old value)
+        self.link.timeout = check_seconds(seconds, "timeout", positive=True)
 
     @property
     def wire_log(self) -> WireLog:

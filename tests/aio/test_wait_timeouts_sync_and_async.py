@@ -222,3 +222,15 @@ def test_none_waits_the_default_for_a_capture_and_for_ever_for_a_record() -> Non
                 assert await stream.get(None) is not None
 
     run(body)
+
+
+@pytest.mark.parametrize("value", [None, 0, *BAD])
+def test_the_controllers_reply_timeout_refuses_what_no_reply_can_meet(value: object) -> None:
+    # None kept the old value without a word; 0 and the wait's bad values are refused alike.
+    with simulated() as dmc:
+        before = dmc.timeout
+        with pytest.raises(galil.InvalidArgument, match="timeout must be a finite number"):
+            dmc.timeout = value  # type: ignore[assignment]
+        assert dmc.timeout == before
+        dmc.timeout = 2
+        assert dmc.timeout == 2.0
