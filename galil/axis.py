@@ -348,6 +348,10 @@ class Axis:
     def _set_param(self, cmd: str, counts: float) -> None:
         value = self.check_parameter(cmd, counts)
         command = _SETTERS[cmd](model=self._link.model, **{self.letter: value})
+        with self._tracker.lock:  # (a move another thread starts gets the change stamped)
+            self._send_param(cmd, command, value)
+
+    def _send_param(self, cmd: str, command: cmds.Command, value: float) -> None:
         handle = self._tracker.active(self.letter)
         if handle is None or cmd not in ("SP", "AC"):
             self._link.command_line([command])

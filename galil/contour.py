@@ -23,10 +23,11 @@ from galil.errors import (
     GalilTimeoutError,
     InvalidArgument,
     LimitError,
+    MotionError,
 )
 from galil.link import CommandLink, check_wait_timeout
 from galil.models import INT32_MAX
-from galil.motion import Display, GearLink, sample_of
+from galil.motion import Display, GearLink, MotionTracker, StopWatch, sample_of
 from galil.moves import check_followers, follower_limit_operands, limit_pairs
 from galil.predict import Profile
 from galil.predict.checks import check_contour
@@ -209,6 +210,7 @@ class ContourStream:
         byte_rate: float | None = None,
         limits: dict[str, tuple[float | None, float | None]] | None = None,
         followers: Mapping[str, GearLink] | None = None,
+        tracker: MotionTracker | None = None,
     ) -> None:
         if not letters or len(set(letters)) != len(letters):
             raise InvalidArgument(f"contour axes must be distinct and non-empty, got {letters!r}")
@@ -228,6 +230,12 @@ class ContourStream:
         self._limits = limits or {}
         self._followers = {f: g for f, g in (followers or {}).items() if f not in letters}
         self.profiles: dict[str, Profile] = {}
+        self._tracker = tracker
+        self._watch: StopWatch | None = None
+
+    def _held(self) -> contextlib.AbstractContextManager[Any]:
+        """The tracker's lock (:attr:`MotionTracker.lock`), if the stream has a tracker."""
+        return contextlib.nullcontext() if self._tracker is None else self._tracker.lock
 
     def commands(self) -> list[Command]:
         """The ``CD`` command of every segment, in order (built and checked at once)."""
@@ -306,14 +314,27 @@ class ContourStream:
         Raises:
             ContourUnderrunError: the buffer ran dry while streaming (TC 42).
         """
+        with self._held():
+            state = self._enter(progress)
+        return self._stream(state)
+
+    def _enter(self, progress: bool) -> _Progress:
+        """Enter contour mode (``CM``, ``DT``); watch for stops from now on."""
         link = self.link
         model = link.model
         texts = self.commands()
-        state = _Progress(low_water=model.contour_buffer, texts=texts)
-        state.bar = _bar(len(texts), self.letters) if progress else None
+        if self._tracker is not None and self._watch is None:
+            self._watch = self._tracker.watch_stops(self.letters)
         if round(link.query_operands(["_TC"])[0]) == 42:
             link.command_line([cmds.tc(0)])  # a previous stream's code; ours must be seen afresh
         link.command_line([cmds.cm(self.letters, model=model), cmds.dt(self.dt, model=model)])
+        state = _Progress(low_water=model.contour_buffer, texts=texts)
+        state.bar = _bar(len(texts), self.letters) if progress else None
+        return state
+
+    def _stream(self, state: _Progress) -> _Progress:
+        link = self.link
+        texts = state.texts
         try:
             while state.sent < len(texts):
                 self._refill(state)
@@ -362,6 +383,7 @@ class ContourStream:
         room = free - 1  # one spare: models differ in whether _CM counts the running one
         if depth <= 2:
             # A one-deep buffer: WC holds its ':' until the segment before is running.
+            self._check_stopped(state)
             line = _stamped([texts[state.sent]], state)
             replies = link.command_line([*line, cmds.wc()], timeout=seg_time * 4 + 1.0)
             _note_begin(state, replies)
@@ -369,7 +391,9 @@ class ContourStream:
             state.lines += 1
         elif room >= min(refill, len(texts) - state.sent):
             batch = texts[state.sent : state.sent + room]
-            replies = link.command_line(_stamped(batch, state))
+            with self._held():  # (no stop between the check and the line)
+                self._check_stopped(state)
+                replies = link.command_line(_stamped(batch, state))
             _note_begin(state, replies)
             state.sent += len(batch)
             state.lines += len(cmds.pack(batch, model.line_length))
@@ -379,6 +403,22 @@ class ContourStream:
             queued = (depth - free) * seg_time
             need = (refill - max(room, 0)) * seg_time
             link.pause(max(seg_time, min(need, queued / 4, 0.05)))
+
+    def _check_stopped(self, state: _Progress) -> None:
+        """Refuse to send more once a stop or an abort reached a contour axis.
+
+        Raises:
+            MotionError: ``ST`` or ``AB`` went to a contour axis (from another thread).
+        """
+        watch = self._watch
+        if watch is None or not watch.stopped_by:
+            return
+        link = self.link
+        raise link.error(
+            MotionError,
+            f"contour on {self.letters} stopped ({watch.stopped_by} sent through the library, "
+            f"from another thread) after {state.sent} of {len(state.texts)} segments",
+        )
 
     def finish(self, state: _Progress, timeout: float | None = None) -> ContourResult:
         """End contour mode (``CD 0=0``, or ``DT 0`` then ``CD 0``) and wait for the axes to stop.
@@ -392,7 +432,9 @@ class ContourStream:
         link = self.link
         ended = False
         try:
-            link.command_line(cmds.contour_end(self.letters, model=link.model))
+            with self._held():
+                self._check_stopped(state)
+                link.command_line(cmds.contour_end(self.letters, model=link.model))
             ended = True
             self._wait_stopped(timeout)
         except BaseException:
@@ -433,6 +475,13 @@ class ContourStream:
         """
         check_wait_timeout(timeout)
         self.check()
-        self.prepare()
-        state = self.feed(progress=progress)
-        return self.finish(state, timeout)
+        try:
+            with self._held():  # no other thread's motion from the state read to CM
+                self.prepare()
+                state = self._enter(progress)
+            state = self._stream(state)
+            return self.finish(state, timeout)
+        finally:
+            if self._watch is not None:
+                self._watch.close()
+                self._watch = None

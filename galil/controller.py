@@ -559,6 +559,7 @@ class Controller(CoordinatedMotion, LinkFacade):
             byte_rate=self.link.byte_rate,
             limits=_contour_limits(self.link.model, chosen, speed_limit, accel_limit),
             followers=self.tracker.followers(letters),
+            tracker=self.tracker,
         )
         with user_units({a.letter: a for a in chosen}):
             return stream.run(progress=progress, timeout=timeout)

@@ -89,6 +89,10 @@ class Gearing:
         q = _ratio(self._link, ratio)
         if q == 0:
             raise InvalidArgument("a ratio of 0 turns the gearing off: call off()")
+        with self._tracker.lock:  # (the master at rest until the ratio is sent)
+            self._set_ratio(q)
+
+    def _set_ratio(self, q: float) -> None:
         if not self.engaged:
             raise InvalidArgument(f"axis {self.follower} is not geared any more")
         _master_at_rest(self._link, self.master)
@@ -104,14 +108,17 @@ class Gearing:
 
     def off(self) -> None:
         """Turn the gearing off (``GR 0``): the follower stays where it is."""
-        if not self.engaged:
-            return
+        with self._tracker.lock:
+            if self.engaged:
+                self._off()
+
+    def _off(self) -> None:
         model = self._link.model
         replies = self._link.command_line(
             [cmds.gr(model=model, **{self.follower: 0}), cmds.time_stamp()]
         )
         self._gear.released = sample_of(replies[-1])
-        self._tracker.gears.pop(self.follower, None)
+        self._tracker.release(self._gear)
 
     def __enter__(self) -> Gearing:
         return self
@@ -158,6 +165,19 @@ def gear_to(
         master = model.axis_letter(master)
     follower = model.axis_letter(follower)
     q = _ratio(link, ratio)
+    with tracker.lock:  # (both axes at rest until the gearing is sent and known)
+        return _gear_to(link, tracker, follower, master, q, display)
+
+
+def _gear_to(
+    link: CommandLink,
+    tracker: MotionTracker,
+    follower: str,
+    master: str,
+    q: float,
+    display: Display | None,
+) -> Gearing:
+    model = link.model
     _check_pair(link, tracker, follower, master, q)
     m_name = "_AVS" if master == "S" else f"_RP{master}"
     bg, mo, f0, m0 = link.query_operands(
@@ -181,7 +201,7 @@ def gear_to(
         q, master=round(m0), position=round(f0), resolution=model.gr_resolution
     )
     gear = GearLink(follower, master, q, anchor, display, travelled=round(m0))
-    tracker.gears[follower] = gear
+    tracker.engage(gear)
     return Gearing(link, tracker, gear)
 
 

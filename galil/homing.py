@@ -140,6 +140,12 @@ class AxisHoming:
         """
         if switch is not None and not isinstance(switch, predict.HomeSwitch):
             raise InvalidArgument(f"switch must be a galil.predict.HomeSwitch, not {switch!r}")
+        with self._tracker.lock:  # no other thread's motion from the state read to the handle
+            return self._start(kind, switch, display)
+
+    def _start(
+        self, kind: str, switch: predict.HomeSwitch | None, display: Display | None
+    ) -> MoveHandle:
         self._refuse_gearing(kind)
         link, a = self._link, self.letter
         model = link.model

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import logging
 import math
 import threading
 import time
@@ -42,12 +43,15 @@ __all__ = [
     "MoveHandle",
     "MoveParams",
     "MoveResult",
+    "StopWatch",
     "Track",
     "abort_all",
     "motion_guard",
     "sample_of",
     "stop_axes",
 ]
+
+_LOG = logging.getLogger("galil.motion")
 
 # Polling faster than this only loads the link; the controller decodes a command in ~0.5 ms.
 MIN_POLL = 0.005
@@ -240,20 +244,58 @@ def predict_track(link: CommandLink, t: Track) -> predict.Profile:
 
 
 class MotionTracker:
-    """Which handle drives each axis, so stops and changes reach its prediction."""
+    """Which handle drives each axis, so stops and changes reach its prediction.
+
+    Attributes:
+        lock: held by whoever starts or changes motion from its state read to its
+            registration here (resolve -> check -> send -> :meth:`started`), and by a stop or
+            abort from its line to :meth:`notify`, so threads sharing a controller never act
+            on a state another thread has changed in between, and a stop never falls between
+            a move's line and its handle. It is never held while waiting for motion, nor
+            while a stream waits for room, so a stop waits for at most one start.
+            Lock order: this lock, then a handle's, then the link's.
+    """
 
     def __init__(self) -> None:
         self._active: dict[str, MoveHandle] = {}
         self.gears: dict[str, GearLink] = {}  # follower letter -> its gearing, while engaged
+        self.lock = threading.RLock()
+        self._watches: list[StopWatch] = []
 
     def started(self, handle: MoveHandle) -> None:
         """``handle`` now drives its axes (and the axes geared to them)."""
-        for a in handle.axes + handle.followers:
-            self._active[a] = handle
+        with self.lock:
+            for a in handle.axes + handle.followers:
+                self._active[a] = handle
 
     def followers(self, masters: str) -> dict[str, GearLink]:
         """The engaged gearings whose master is one of ``masters`` (letters, or ``"S"``)."""
-        return {f: g for f, g in self.gears.items() if g.master in masters}
+        with self.lock:
+            return {f: g for f, g in self.gears.items() if g.master in masters}
+
+    def engage(self, gear: GearLink) -> None:
+        """``gear.follower`` now follows its master."""
+        with self.lock:
+            self.gears[gear.follower] = gear
+
+    def release(self, gear: GearLink) -> None:
+        """``gear`` holds no more (if it is still the follower's gearing)."""
+        with self.lock:
+            if self.gears.get(gear.follower) is gear:
+                del self.gears[gear.follower]
+
+    def watch_stops(self, letters: str) -> StopWatch:
+        """A :class:`StopWatch` told of every stop or abort of ``letters`` sent through the
+        library from now on (for motion without a handle here: a contour); ``close()`` it."""
+        watch = StopWatch(letters, self)
+        with self.lock:
+            self._watches.append(watch)
+        return watch
+
+    def _unwatch(self, watch: StopWatch) -> None:
+        with self.lock:
+            if watch in self._watches:
+                self._watches.remove(watch)
 
     def refuse_geared(self, letter: str, what: str, model: str) -> None:
         """Refuse to move a gear follower by itself (before any byte is sent).
@@ -288,6 +330,21 @@ class MotionTracker:
         abort of a move in progress runs what the move left to undo (:meth:`MoveHandle.on_cancel`).
         """
         stopping = make is None or isinstance(make(0.0), predict.Stop)
+        with self.lock:
+            undo = self._notify_locked(letters, sample, make, stopping)
+            for watch in self._watches:
+                if stopping:
+                    watch.saw("AB" if make is None else "ST", letters)
+            for cancel in undo:  # once every handle knows of the stop
+                cancel(sample)
+
+    def _notify_locked(
+        self,
+        letters: str,
+        sample: int | None,
+        make: Callable[[float], predict.Event] | None,
+        stopping: bool,
+    ) -> list[Callable[[int | None], None]]:
         undo: list[Callable[[int | None], None]] = []
         for a in letters:
             gear = self.gears.get(a)
@@ -301,8 +358,32 @@ class MotionTracker:
                 cancel = handle.take_cancel() if stopping and a in handle.axes else None
                 if cancel is not None:
                     undo.append(cancel)
-        for cancel in undo:  # once every handle knows of the stop
-            cancel(sample)
+        return undo
+
+
+class StopWatch:
+    """Stops and aborts of some axes sent through the library (``ST``, ``AB``), from any
+    thread: :meth:`MotionTracker.watch_stops`."""
+
+    def __init__(self, letters: str, tracker: MotionTracker) -> None:
+        self.letters = letters
+        self.stopped_by = ""  # "ST" or "AB" once one reached an axis watched
+        self._tracker = tracker
+
+    def saw(self, what: str, letters: str) -> None:
+        """``what`` (``"ST"``/``"AB"``) went to ``letters``."""
+        if not self.stopped_by and set(letters) & set(self.letters):
+            self.stopped_by = what
+
+    def close(self) -> None:
+        """Watch no more."""
+        self._tracker._unwatch(self)
+
+    def __enter__(self) -> StopWatch:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 class MoveHandle:
@@ -553,9 +634,10 @@ class MoveHandle:
                 {f: end[0] for f, end in followers.items()},
                 {f: end[1] for f, end in followers.items()},
             )
-            self._release_limited_followers(self._result.follower_stop_codes)
             self._done = True
             callbacks, self._callbacks = self._callbacks, []
+        # (outside the handle's lock: the tracker's lock comes first)
+        self._release_limited_followers(self._result.follower_stop_codes)
         if self._result.worst > 1:
             warnings.warn(
                 f"move on {letters} ended {self._result.deviation} counts away from the prediction",
@@ -563,7 +645,15 @@ class MoveHandle:
                 stacklevel=4,
             )
         for cb in callbacks:
-            cb(self)
+            self._call(cb)
+
+    def _call(self, callback: Callable[[MoveHandle], None]) -> None:
+        """Run one done-callback; what it raises is logged, never lost nor passed on (the
+        other callbacks still run, and ``wait()`` still returns the move's own result)."""
+        try:
+            callback(self)
+        except Exception:
+            _LOG.exception("move callback %r on %s failed", callback, self.axes)
 
     def _release_limited_followers(self, codes: Mapping[str, int]) -> None:
         """A follower a limit stopped is geared no more (the controller turned its gearing
@@ -573,8 +663,8 @@ class MoveHandle:
         if tracker is None:
             return
         for f, code in codes.items():
-            if code in _LIMIT_CODES and tracker.gears.get(f) is self._followers[f]:
-                del tracker.gears[f]
+            if code in _LIMIT_CODES:
+                tracker.release(self._followers[f])
 
     def wait(self, timeout: float | None = None, progress: bool = False) -> MoveResult:
         """Block until the move is done, polling without holding the link between polls.
@@ -693,7 +783,7 @@ class MoveHandle:
                     )
                     self._watcher.start()
                 return
-        callback(self)
+        self._call(callback)
 
     def _watch(self) -> None:
         try:
@@ -725,18 +815,27 @@ def progress_bar(kind: str, axes: str, duration: float) -> Any:
 # ----------------------------------------------------------------------------------- stopping
 
 
+def _held(tracker: MotionTracker | None) -> contextlib.AbstractContextManager[Any]:
+    return contextlib.nullcontext() if tracker is None else tracker.lock
+
+
 def stop_axes(link: CommandLink, tracker: MotionTracker | None, letters: str = "") -> None:
-    """``ST`` on ``letters`` (default: all axes); the moves' predictions follow the stop."""
-    replies = link.command_line([cmds.st(letters, model=link.model), cmds.time_stamp()])
-    if tracker is not None:
-        tracker.notify(letters or link.model.axes, sample_of(replies[-1]), predict.Stop)
+    """``ST`` on ``letters`` (default: all axes); the moves' predictions follow the stop.
+
+    A move another thread is starting is either stopped with its handle told, or starts after
+    the stop (:attr:`MotionTracker.lock`), never between the line and its handle."""
+    with _held(tracker):
+        replies = link.command_line([cmds.st(letters, model=link.model), cmds.time_stamp()])
+        if tracker is not None:
+            tracker.notify(letters or link.model.axes, sample_of(replies[-1]), predict.Stop)
 
 
 def abort_all(link: CommandLink, tracker: MotionTracker | None) -> None:
     """``AB 1``: stop every axis at once, without deceleration; programs keep running."""
-    replies = link.command_line([cmds.ab(motion_only=True), cmds.time_stamp()])
-    if tracker is not None:
-        tracker.notify(link.model.axes, sample_of(replies[-1]), None)
+    with _held(tracker):
+        replies = link.command_line([cmds.ab(motion_only=True), cmds.time_stamp()])
+        if tracker is not None:
+            tracker.notify(link.model.axes, sample_of(replies[-1]), None)
 
 
 @contextlib.contextmanager

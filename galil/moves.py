@@ -289,7 +289,20 @@ def execute_move(
     if len(moves) > 1:
         order = link.model.axes
         moves = sorted(moves, key=lambda m: order.index(m.letter))
-        letters = "".join(m.letter for m in moves)
+    with tracker.lock:  # no other thread's motion between the state read and the handle
+        return _execute_move(link, tracker, moves, relative, dry_run, command, display)
+
+
+def _execute_move(
+    link: CommandLink,
+    tracker: MotionTracker,
+    moves: Sequence[AxisMove],
+    relative: bool,
+    dry_run: bool,
+    command: str,
+    display: Mapping[str, Display] | None,
+) -> MoveHandle:
+    letters = "".join(m.letter for m in moves)
     if not dry_run:
         for a in letters:
             tracker.refuse_geared(a, "moving it", link.model.name)
@@ -372,6 +385,17 @@ def jog(
         InvalidArgument: a position move in progress, a stopping jog, or the motor off.
         LimitError: an axis geared to ``letter`` would run beyond the model's SP maximum.
     """
+    with tracker.lock:  # (a JG for a jog another thread starts would change its speed)
+        return _jog(link, tracker, letter, velocity, display)
+
+
+def _jog(
+    link: CommandLink,
+    tracker: MotionTracker,
+    letter: str,
+    velocity: float,
+    display: Display | None,
+) -> MoveHandle:
     a = letter
     tracker.refuse_geared(a, "jogging it", link.model.name)
     rp, bg, sc, ac, dc, it, mo = link.query_operands(
@@ -421,7 +445,11 @@ def set_jog_speed(link: CommandLink, tracker: MotionTracker, letter: str, veloci
             controller takes JG only in jog mode).
         LimitError: an axis geared to ``letter`` would run beyond the model's SP maximum.
     """
-    a = letter
+    with tracker.lock:
+        _set_jog_speed(link, tracker, letter, velocity)
+
+
+def _set_jog_speed(link: CommandLink, tracker: MotionTracker, a: str, velocity: float) -> None:
     bg, sc = link.query_operands([f"_BG{a}", f"_SC{a}"])
     command = cmds.jg(model=link.model, **{a: velocity})
     if not bg:
@@ -460,7 +488,17 @@ def increment(
         LimitError: the new target (or a jog's step) beyond a soft limit or the 32-bit range,
             for the axis or one geared to it; a jog's step too large for one sample.
     """
-    a = letter
+    with tracker.lock:  # (an IP would extend a move another thread starts meanwhile)
+        return _increment(link, tracker, letter, counts, display)
+
+
+def _increment(
+    link: CommandLink,
+    tracker: MotionTracker,
+    a: str,
+    counts: int,
+    display: Display | None,
+) -> MoveHandle:
     model = link.model
     tracker.refuse_geared(a, "an increment", model.name)
     gears = tracker.followers(a)
@@ -609,8 +647,26 @@ def speed_schedule(
         LimitError: a path crossing a soft limit, or taking an axis geared to ``letter`` past
             its soft limits or beyond the model's SP maximum.
     """
-    a = letter
     cmds.xq(f"#{label}")  # the label is checked before anything is read or sent
+    # Held from the thread 0 check to the handle: another thread's schedule would install
+    # its routine over this one's, or take thread 0 in between.
+    with tracker.lock:
+        return _speed_schedule(
+            link, tracker, routines, letter, distance, changes, speed, label, display
+        )
+
+
+def _speed_schedule(
+    link: CommandLink,
+    tracker: MotionTracker,
+    routines: Routines,
+    a: str,
+    distance: int,
+    changes: Sequence[tuple[float, float]],
+    speed: float | None,
+    label: str,
+    display: Display | None,
+) -> MoveHandle:
     gears = tracker.followers(a)
     state, limits = _schedule_state(link, a, "".join(gears))
     rp, sp0, ac, dc, it, bl, fl = state

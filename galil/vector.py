@@ -197,12 +197,13 @@ class VectorHandle(MoveHandle):
     def stop(self) -> None:
         """Decelerate the sequence to a stop along its path at VD (``ST S``)."""
         link = self._link
-        replies = link.command_line([cmds.st(PLANE, model=link.model), cmds.time_stamp()])
-        sample = sample_of(replies[-1])
-        if self._tracker is not None:
-            self._tracker.notify(self.axes, sample, predict.Stop)
-        else:
-            self.add_event(self.axes[0], sample, predict.Stop)
+        if self._tracker is None:
+            replies = link.command_line([cmds.st(PLANE, model=link.model), cmds.time_stamp()])
+            self.add_event(self.axes[0], sample_of(replies[-1]), predict.Stop)
+            return
+        with self._tracker.lock:  # (between a streamed line and the next: see _feed)
+            replies = link.command_line([cmds.st(PLANE, model=link.model), cmds.time_stamp()])
+            self._tracker.notify(self.axes, sample_of(replies[-1]), predict.Stop)
 
 
 def _path_master(counts: predict.VectorProfile, gear: GearLink) -> predict.Profile:
@@ -539,8 +540,25 @@ class VectorStream:
         path that fits the buffer). Whatever goes wrong while streaming, the sequence is
         stopped (``ST S``) before the error is raised.
         """
+        held = contextlib.nullcontext() if tracker is None else tracker.lock
+        with held:  # no other thread's motion from the state read to the handle
+            handle, texts, first = self._begin(tracker)
+        if first < len(texts):
+            try:
+                self._feed(handle, texts, first, held)
+            except BaseException:
+                with contextlib.suppress(GalilError):
+                    handle.stop()
+                raise
+        return handle
+
+    def _begin(self, tracker: MotionTracker | None) -> tuple[VectorHandle, list[Command], int]:
+        """Read the state, send the setup and the first segments, ``BG S``; the handle, the
+        segments' commands and how many went out."""
         if self.profile is None or self._state is None:
             self.prepare()
+        elif tracker is not None and self._read_state() != self._state:
+            self.prepare()  # another thread moved the axes since (read under the lock)
         profile, state = self.profile, self._state
         assert profile is not None
         assert state is not None
@@ -564,14 +582,7 @@ class VectorStream:
         handle.follow(self.followers)
         if tracker is not None:
             tracker.started(handle)
-        if not ended:
-            try:
-                self._feed(handle, texts, first)
-            except BaseException:
-                with contextlib.suppress(GalilError):
-                    handle.stop()
-                raise
-        return handle
+        return handle, texts, first
 
     def _groups(self, start: int, stop: int, texts: Sequence[Command]) -> list[tuple[int, int]]:
         """Runs of segments that fit one line with ``MG TIME`` after them."""
@@ -587,7 +598,16 @@ class VectorStream:
             i = j
         return out
 
-    def _feed(self, handle: VectorHandle, texts: Sequence[Command], sent: int) -> None:
+    def _feed(
+        self,
+        handle: VectorHandle,
+        texts: Sequence[Command],
+        sent: int,
+        held: contextlib.AbstractContextManager[Any],
+    ) -> None:
+        """Stream the rest as room frees up; nothing more once a stop reached the sequence
+        (``held``, the tracker's lock, keeps a stop from falling between the check and a
+        line)."""
         link = self.link
         profile = self.profile
         assert profile is not None
@@ -599,20 +619,33 @@ class VectorStream:
         ts = link.sample_period
         while sent < len(texts):
             free, now, running = link.query_operands([f"_LM{PLANE}", "TIME", f"_BG{PLANE}"])
-            if handle.stopped or not round(running):
+            if not round(running):
                 return  # stopped (ST, AB, a limit) from wherever: stream nothing more
             room = round(free) - 1  # one spare: whether the running segment counts is unsure
+            if _stopped(handle):  # (an ST or AB through the library, while it ramps down)
+                return
             if room >= min(refill, len(texts) - sent):
                 stop = sent + min(room, len(texts) - sent)
                 for i, j in self._groups(sent, stop, texts):
-                    replies = link.command_line([*texts[i:j], cmds.time_stamp()])
-                    handle.record(sample_of(replies[-1]), "add", segs[i:j])
+                    with held:
+                        if _stopped(handle):
+                            return
+                        replies = link.command_line([*texts[i:j], cmds.time_stamp()])
+                        handle.record(sample_of(replies[-1]), "add", segs[i:j])
                 sent = stop
             else:
                 left = (deadlines[sent] - (now - begin)) * ts
                 link.pause(min(0.05, max(4 * ts, left / 4)))
-        replies = link.command_line([self._end(), cmds.time_stamp()])
-        handle.record(sample_of(replies[-1]), "end", ())
+        with held:
+            if _stopped(handle):
+                return
+            replies = link.command_line([self._end(), cmds.time_stamp()])
+            handle.record(sample_of(replies[-1]), "end", ())
+
+
+def _stopped(handle: VectorHandle) -> bool:
+    """Whether a stop reached ``handle`` (another thread may set it at any time)."""
+    return handle.stopped
 
 
 def _buffer_error(text: str, sample: int, ts: float, segment: int) -> LimitError:
