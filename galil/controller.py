@@ -19,6 +19,8 @@ import contextlib
 import logging
 import threading
 import time
+import warnings
+import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -28,7 +30,7 @@ from galil.arrays import Arrays, Variables
 from galil.axis import Axis, check_overrides, limits_by_axis, resolve_moves, user_units
 from galil.capture import Capture
 from galil.contour import ContourResult, ContourStream
-from galil.errors import GalilConnectionError, InvalidArgument
+from galil.errors import GalilConnectionError, GalilError, InvalidArgument
 from galil.facade import LinkFacade
 from galil.handshake import identify
 from galil.homing import SwitchPolarity, read_polarity, set_polarity
@@ -250,8 +252,11 @@ class Controller(CoordinatedMotion, LinkFacade):
             self._factory = None
             first = transport
         self._policy = _policy(reconnect, self._factory is not None)
-        if self._policy is not None:
-            self.link.on_dead = self._reopen_dead_link
+        if self._policy is not None:  # weakly: a controller dropped unclosed is still garbage
+            self.link.on_dead = _weakly(self._reopen_dead_link)
+        self._parts = _Parts(self.link, self.messages_room, self.records_room,
+                             self.interrupts, self._watchdogs, self._life)  # fmt: skip
+        self._finalizer: weakref.finalize[Any, Any] | None = None
         self._open(first)
 
     # -- life cycle -------------------------------------------------------------------------
@@ -279,28 +284,35 @@ class Controller(CoordinatedMotion, LinkFacade):
             self.messages_room.stop()
             raise
         self._generation += 1
+        self.messages_room.queue.reopen()
+        self.interrupts.queue.reopen()
+        if self._finalizer is None or not self._finalizer.alive:
+            self._finalizer = _close_when_collected(self, self._parts)
 
     def close(self) -> None:
-        """Restore what connect changed (``CW``, ``EO``), stop the readers, close the link.
+        """Stop the motion the library started, restore what connect changed (``CW``,
+        ``EO``), stop the readers, close the link.
 
-        Idempotent and thread-safe; never raises for a link that is already dead. No
-        background thread and no controller handle outlives it.
+        Every move, jog, homing, vector sequence or contour started through this controller
+        that it has not seen end gets its ``ST`` first (the stop is sent, not waited for):
+        no motion the library started outlives the link that could stop it (a call waiting
+        on it in another thread raises :class:`~galil.errors.GalilConnectionError`). What
+        raw commands or a program on the controller started is left as it is; so is the
+        watchdog's routine halted (leaving on purpose is not dying). A waiting
+        ``messages.get()``, ``interrupts.get()`` or record stream ``get()`` raises
+        :class:`~galil.errors.GalilConnectionError` too.
+
+        Idempotent and thread-safe; never raises for a link that is already dead (a stop
+        that could not be sent is logged at WARNING on ``galil.controller``). No background
+        thread and no controller handle outlives it.
         """
+        if self._finalizer is not None:
+            self._finalizer.detach()
         with self._life:
-            self._close_parts(keep_watchdogs=False)
-
-    def _close_parts(self, *, keep_watchdogs: bool, keep_streams: bool = False) -> None:
-        if not keep_watchdogs:
-            for dog in self._watchdogs:
-                dog.stop()  # leaving on purpose is not dying: the routine is halted
-            self._watchdogs.clear()
-        if not keep_streams:
-            self.records_room.close_all()
-            self.interrupts.disable()
-        else:
-            self.interrupts.close(keep_mask=True)
-        self.link.detach()
-        self.messages_room.stop()
+            if self.link.is_open:
+                _stop_started(self.link, self.tracker)
+            _close_parts(self._parts, keep_watchdogs=False)
+            self.tracker.end_watches()
 
     def reconnect(self) -> None:
         """Close the link and open it again (same address and options), handshake included.
@@ -322,7 +334,7 @@ class Controller(CoordinatedMotion, LinkFacade):
                 return  # another thread reconnected while this one waited
             with self.link.reopening():  # commands meanwhile wait for the new link
                 self.records_room.suspend()
-                self._close_parts(keep_watchdogs=True, keep_streams=True)
+                _close_parts(self._parts, keep_watchdogs=True, keep_streams=True)
                 self._open(None)
                 self.records_room.resume()
                 self.interrupts.reopen()
@@ -561,7 +573,7 @@ class Controller(CoordinatedMotion, LinkFacade):
             followers=self.tracker.followers(letters),
             tracker=self.tracker,
         )
-        with user_units({a.letter: a for a in chosen}):
+        with self.tracker.streaming(letters), user_units({a.letter: a for a in chosen}):
             return stream.run(progress=progress, timeout=timeout)
 
     # -- switches and flash (galil.homing, galil.tuning) -------------------------------------
@@ -653,6 +665,88 @@ class Controller(CoordinatedMotion, LinkFacade):
     Y: Axis
     Z: Axis
     W: Axis
+
+
+@dataclass(frozen=True)
+class _Parts:
+    """What closing a controller needs, without the controller (a finalizer holds it)."""
+
+    link: Link
+    messages: Messages
+    records: Records
+    interrupts: Interrupts
+    watchdogs: list[Watchdog]
+    life: threading.RLock
+
+
+def _close_parts(parts: _Parts, *, keep_watchdogs: bool, keep_streams: bool = False) -> None:
+    if not keep_watchdogs:
+        for dog in parts.watchdogs:
+            dog.stop()  # leaving on purpose is not dying: the routine is halted
+        parts.watchdogs.clear()
+    if not keep_streams:
+        parts.records.close_all()
+        parts.interrupts.disable()
+    else:
+        parts.interrupts.close(keep_mask=True)
+    parts.link.detach()
+    parts.messages.stop()
+    if not keep_streams:  # closed for good: whoever waits for a line hears so
+        parts.messages.queue.close()
+        parts.interrupts.queue.close()
+
+
+def _stop_started(link: Link, tracker: MotionTracker) -> None:
+    failed = tracker.stop_started(link)
+    if failed:
+        _LOG.warning(
+            "galil: closing the link to %s: the stop of axes %s could not be sent; they may "
+            "still be moving",
+            link.model_name,
+            ", ".join(dict.fromkeys(failed)),
+        )
+
+
+def _close_when_collected(controller: Controller, parts: _Parts) -> weakref.finalize[Any, Any]:
+    """Close ``parts`` if ``controller`` is garbage-collected unclosed, with a ResourceWarning
+    (as an unclosed socket). Not at interpreter exit: the process's end closes its sockets."""
+    finalizer = weakref.finalize(controller, _collected, parts, repr(controller))
+    finalizer.atexit = False
+    return finalizer
+
+
+def _collected(parts: _Parts, name: str) -> None:
+    warnings.warn(
+        f"{name} was never closed: call close() or use `with galil.connect(...)`; its link "
+        "is closed now (motion it started is not stopped)",
+        ResourceWarning,
+        stacklevel=1,
+    )
+    # On a thread of its own: a collection may run on a thread that holds the link's lock.
+    with contextlib.suppress(RuntimeError):  # at shutdown, the process closes the rest
+        threading.Thread(
+            target=_close_quietly, args=(parts,), name="galil-finalize", daemon=True
+        ).start()
+
+
+def _close_quietly(parts: _Parts) -> None:
+    with parts.life, contextlib.suppress(GalilError, OSError):
+        _close_parts(parts, keep_watchdogs=False)
+
+
+def _weakly(
+    method: Callable[[GalilConnectionError], None],
+) -> Callable[[GalilConnectionError], None]:
+    """``method`` called through a weak reference to its object (gone: the error is raised)."""
+    ref = weakref.WeakMethod(method)
+
+    def call(error: GalilConnectionError) -> None:
+        bound = ref()
+        if bound is None:
+            raise error
+        bound(error)
+
+    return call
 
 
 def _policy(reconnect: object, has_address: bool) -> ReconnectPolicy | None:

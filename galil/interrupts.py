@@ -158,7 +158,12 @@ class Interrupts:
         return self._subscribers.add(callback)
 
     def get(self, timeout: float | None = None) -> Interrupt:
-        """The oldest interrupt (see :class:`InterruptQueue`)."""
+        """The oldest interrupt (see :class:`InterruptQueue`).
+
+        Raises:
+            queue.Empty: none within ``timeout``.
+            GalilConnectionError: none is waiting and the controller was closed.
+        """
         return self.queue.get(timeout)
 
     @property

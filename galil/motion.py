@@ -14,7 +14,6 @@ import copy
 import logging
 import math
 import threading
-import time
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -261,6 +260,49 @@ class MotionTracker:
         self.gears: dict[str, GearLink] = {}  # follower letter -> its gearing, while engaged
         self.lock = threading.RLock()
         self._watches: list[StopWatch] = []
+        self._streams: list[str] = []  # the axes of each contour being streamed
+
+    @contextlib.contextmanager
+    def streaming(self, letters: str) -> Iterator[None]:
+        """A block in which a contour runs on ``letters`` (:meth:`stop_started` stops it)."""
+        with self.lock:
+            self._streams.append(letters)
+        try:
+            yield
+        finally:
+            with self.lock:
+                self._streams.remove(letters)
+
+    def end_watches(self) -> None:
+        """The link was closed: every move's :meth:`~MoveHandle.add_callback` watcher ends."""
+        with self.lock:
+            handles = {id(h): h for h in self._active.values()}
+        for h in handles.values():
+            h._end_watch()
+
+    def stop_started(self, link: CommandLink) -> str:
+        """``ST`` to every move the library started and has not seen done (each handle's own
+        stop: ``ST S`` for a vector sequence) and to every contour being streamed; what a
+        link about to close must not leave running. No query when nothing was started.
+
+        Returns:
+            The axes whose stop could not be sent (``""`` when every stop went out).
+        """
+        with self.lock:
+            handles = {id(h): h for h in self._active.values() if not h.finished}
+            streams = list(self._streams)
+        failed = ""
+        for h in handles.values():
+            try:
+                h.stop()
+            except GalilError:
+                failed += h.axes
+        for letters in streams:
+            try:
+                stop_axes(link, None, letters)
+            except GalilError:
+                failed += letters
+        return failed
 
     def started(self, handle: MoveHandle) -> None:
         """``handle`` now drives its axes (and the axes geared to them)."""
@@ -416,6 +458,7 @@ class MoveHandle:
         self._lock = threading.RLock()
         self._cache: dict[str, predict.Profile] = {}
         self._watcher: threading.Thread | None = None
+        self._wake = threading.Event()  # set when the link closes: the watcher looks now
         self._error: BaseException | None = None
         self._followers: dict[str, GearLink] = {}
         self._cancel: Callable[[int | None], None] | None = None
@@ -788,9 +831,17 @@ class MoveHandle:
     def _watch(self) -> None:
         try:
             while not self.done:
-                time.sleep(MAX_POLL / 2)
-        except GalilError as exc:  # the link died: record it, callers see it on wait()
+                self._wake.wait(MAX_POLL / 2)
+        except GalilError as exc:  # the link died or closed: record it, wait() raises it
             self._error = exc
+
+    def _end_watch(self) -> None:
+        """The link was closed: the :meth:`add_callback` watcher looks once more (and ends
+        on the closed link) now, not at its next poll; joined."""
+        self._wake.set()
+        watcher = self._watcher
+        if watcher is not None and watcher is not threading.current_thread():
+            watcher.join(timeout=2.0)
 
     def stop(self) -> None:
         """Decelerate the move's axes to a stop (``ST``) at their DC."""

@@ -16,7 +16,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
-from galil.errors import InvalidArgument
+from galil.errors import GalilConnectionError, InvalidArgument
 from galil.link import check_wait_timeout
 
 __all__ = ["BoundedQueue", "Subscribers"]
@@ -37,6 +37,7 @@ class BoundedQueue(Generic[T]):
         self._maxlen = maxlen
         self._what = what
         self._cond = threading.Condition(threading.Lock())
+        self._closed = ""  # why no more items will come (the controller was closed)
         self.dropped = 0
 
     def put(self, item: T) -> None:
@@ -55,12 +56,28 @@ class BoundedQueue(Generic[T]):
             InvalidArgument: a timeout that is not ``None`` or a finite number >= 0 (infinity
                 too: ``None`` waits for ever).
             queue.Empty: nothing arrived in time.
+            GalilConnectionError: nothing is waiting and none will come: the controller was
+                closed (before or during the wait).
         """
         check_wait_timeout(timeout)
         with self._cond:
-            if not self._cond.wait_for(lambda: self._items, timeout):
+            if not self._cond.wait_for(lambda: self._items or self._closed, timeout):
                 raise queue.Empty(f"no {self._what} within {timeout} s")
+            if not self._items:
+                raise GalilConnectionError(f"no {self._what} will come: {self._closed}")
             return self._items.popleft()
+
+    def close(self, why: str = "the controller is closed") -> None:
+        """No more items will come: a :meth:`get` waiting (or called later, once the items
+        left are taken) raises :class:`~galil.errors.GalilConnectionError` saying ``why``."""
+        with self._cond:
+            self._closed = why
+            self._cond.notify_all()
+
+    def reopen(self) -> None:
+        """Items come again (the link was opened again)."""
+        with self._cond:
+            self._closed = ""
 
     def get_nowait(self) -> T:
         """Return the oldest item at once; raise ``queue.Empty`` when there is none."""

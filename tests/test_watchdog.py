@@ -71,7 +71,9 @@ def test_a_clean_close_halts_the_watchdog_instead_of_firing_it() -> None:
     sim = SimController("DMC-4040")
     with galil.connect("sim://DMC-4040", controller=sim) as dmc:
         dmc.watchdog(0.3)
-        dmc.A.jog(10_000)
+        # Raw commands: close() stops the library's own motion (docs/decisions/0024), not this.
+        dmc.command("JG 10000")
+        dmc.command("BG A")
     sim.advance(1.0)
     assert sim.motion("A").moving  # leaving on purpose is not dying
 

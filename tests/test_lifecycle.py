@@ -1,0 +1,325 @@
+"""Life cycle: what a long-lived kernel sees after many connects and closes, after a close()
+from another thread, after a controller dropped unclosed, after a `with` block that raised.
+
+Every background thread and socket a controller starts ends with close(); a call waiting on
+another thread ends with GalilConnectionError; the motion the library started is stopped.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import gc
+import os
+import queue
+import threading
+import time
+import tracemalloc
+import warnings
+from collections.abc import Callable, Iterator
+
+import numpy as np
+import pytest
+
+import galil
+import galil.aio
+from galil.controller import Controller
+from galil.errors import GalilConnectionError
+from galil.sim.clock import ManualClock
+from galil.sim.controller import SimController
+from galil.sim.server import SimPtyServer, SimTcpServer
+from galil.testing import sim_of
+
+CYCLES = 20
+JOIN = 5.0  # seconds a thread waiting on a closed controller may take to end (it takes ms)
+
+
+def _fds() -> int:
+    return len(os.listdir("/proc/self/fd"))
+
+
+def _fds_back_to(fds: int) -> bool:
+    """Whether the open descriptors come back to ``fds`` (an in-process server closes its
+    side of a socket on its next tick)."""
+    deadline = time.monotonic() + JOIN
+    while _fds() > fds and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return _fds() <= fds
+
+
+def _moving(sim: SimController, axis: str) -> bool:
+    reply = sim.feed(f"MG _BG{axis}\r".encode())
+    return float(reply.split(b"\r")[0]) != 0
+
+
+def _stops_sent(sim: SimController) -> list[str]:
+    return [text for _, text in sim.command_log if text.startswith("ST")]
+
+
+Opener = tuple[str, Callable[[], Controller], SimController | None]
+
+
+@pytest.fixture(params=["sim", "tcp", "pty"])
+def opener(request: pytest.FixtureRequest) -> Iterator[Opener]:
+    """A way to connect, and how: in-process, over TCP and over a pty (manual clocks); the
+    served simulator (``None``: a new one in-process for each connect)."""
+    if request.param == "sim":
+        yield "sim", lambda: galil.connect("sim://DMC-4040"), None
+        return
+    sim = SimController("DMC-4040", ManualClock())
+    server: SimTcpServer | SimPtyServer
+    if request.param == "tcp":
+        with SimTcpServer(sim) as server:
+            url = server.url
+            yield "tcp", lambda: galil.connect(url, timeout=2.0), sim
+    else:
+        with SimPtyServer(sim) as server:
+            path = server.path
+            yield "pty", lambda: galil.connect(path, timeout=2.0), sim
+
+
+def _busy_cycle(kind: str, c: Controller, served: SimController | None) -> None:
+    """Start everything that runs in the background, then close with all of it running."""
+    c.command("SH")
+    stream = c.records(period=64, method="DR" if kind == "tcp" else "QR")
+    if kind != "tcp":
+        stream.get(timeout=0.5)
+    c.capture(["_RPA"], every=2, count=50)
+    c.A.move_by(1000).add_callback(lambda h: None)
+    c.subscribe(lambda line: None)
+    assert isinstance(c.messages, galil.MessageQueue)
+    c.watchdog(5.0)
+    c.close()
+    # Let the stop and the capture end (a new in-process simulator has none of them).
+    if served is not None:
+        served.advance(0.5)
+
+
+def test_connect_close_cycles_leave_nothing_behind(
+    opener: Opener,
+) -> None:
+    kind, connect, served = opener
+    for _ in range(3):  # imports, caches, the server's first handles
+        _busy_cycle(kind, connect(), served)
+    threads, fds = threading.active_count(), _fds()
+    tracemalloc.start()
+    try:
+        growth = []
+        for i in range(CYCLES):
+            _busy_cycle(kind, connect(), served)
+            assert threading.active_count() == threads, threading.enumerate()
+            # (an in-process server closes its side of a socket on its next tick)
+            assert _fds() <= fds + 3
+            if i in (4, CYCLES - 1):
+                gc.collect()
+                snap = tracemalloc.take_snapshot().filter_traces(
+                    [
+                        tracemalloc.Filter(False, "*/galil/sim/*"),
+                        tracemalloc.Filter(False, "*/predict/*"),
+                    ]
+                )
+                growth.append(sum(s.size for s in snap.statistics("filename")))
+    finally:
+        tracemalloc.stop()
+    assert _fds_back_to(fds)
+    per_cycle = (growth[1] - growth[0]) / (CYCLES - 5)
+    assert per_cycle < 2048, f"{per_cycle:.0f} bytes kept per connect/close cycle"
+
+
+def _in_thread(call: Callable[[], object]) -> tuple[threading.Thread, list[BaseException]]:
+    raised: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            call()
+        except BaseException as exc:
+            raised.append(exc)
+
+    t = threading.Thread(target=run, name="lifecycle-waiter")
+    t.start()
+    return t, raised
+
+
+def _close_under(c: Controller, call: Callable[[], object], ready: Callable[[], bool]) -> None:
+    """close() while ``call`` blocks on another thread: it ends promptly, typed."""
+    t, raised = _in_thread(call)
+    deadline = time.monotonic() + JOIN
+    while not ready() and time.monotonic() < deadline:
+        time.sleep(0.01)  # the other thread reaching its wait (no motion is waited for)
+    time.sleep(0.05)
+    c.close()
+    t.join(JOIN)
+    assert not t.is_alive(), "a call waiting on a closed controller did not end"
+    assert len(raised) == 1, raised
+    assert isinstance(raised[0], GalilConnectionError), raised
+
+
+@pytest.fixture
+def tcp() -> Iterator[tuple[SimController, Controller]]:
+    sim = SimController("DMC-4040", ManualClock())
+    with SimTcpServer(sim) as server:
+        c = galil.connect(server.url, timeout=2.0)
+        try:
+            yield sim, c
+        finally:
+            c.close()
+
+
+def test_close_ends_a_wait_on_a_move_and_stops_it(tcp: tuple[SimController, Controller]) -> None:
+    sim, c = tcp
+    c.command("SH")
+    move = c.A.move_by(500_000)  # the manual clock stands still: it never ends by itself
+    _close_under(c, lambda: move.wait(timeout=30), lambda: True)
+    assert _stops_sent(sim) == ["ST A"]
+    sim.advance(2.0)
+    assert not _moving(sim, "A")
+
+
+def test_close_ends_a_jog_nobody_waits_for(tcp: tuple[SimController, Controller]) -> None:
+    sim, c = tcp
+    c.command("SH")
+    c.B.jog(20_000)
+    c.close()
+    assert _stops_sent(sim) == ["ST B"]
+    sim.advance(2.0)
+    assert not _moving(sim, "B")
+
+
+def test_close_leaves_motion_the_library_did_not_start(
+    tcp: tuple[SimController, Controller],
+) -> None:
+    sim, c = tcp
+    c.command("SH")
+    c.command("JG ,,1000")
+    c.command("BG C")  # a raw command: the user's motion, not the library's
+    c.close()
+    assert _stops_sent(sim) == []
+    assert _moving(sim, "C")
+
+
+def test_close_ends_record_message_and_interrupt_waits(
+    tcp: tuple[SimController, Controller],
+) -> None:
+    _sim, c = tcp
+    stream = c.records(period=64)
+    c.interrupts.enable("A")
+    messages = c.messages
+    waits: list[Callable[[], object]] = [
+        lambda: stream.get(),
+        lambda: messages.get(),
+        lambda: c.interrupts.get(),
+    ]
+    threads = [_in_thread(w) for w in waits]
+    time.sleep(0.1)  # each thread reaching its wait
+    c.close()
+    for t, raised in threads:
+        t.join(JOIN)
+        assert not t.is_alive()
+        assert len(raised) == 1, raised
+    assert isinstance(raised[0], GalilConnectionError), raised
+    with pytest.raises(GalilConnectionError, match="closed"):
+        messages.get(timeout=0)
+
+
+def test_messages_queue_lives_again_after_a_reconnect() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    with SimTcpServer(sim) as server, galil.connect(server.url, timeout=2.0) as c:
+        c.reconnect()
+        with pytest.raises(queue.Empty):
+            c.messages.get(timeout=0)
+
+
+def test_close_ends_a_program_wait(tcp: tuple[SimController, Controller]) -> None:
+    _sim, c = tcp
+    c.programs.download("#A\nWT 10\nJP #A\nEN")
+    c.programs.run("#A")
+    _close_under(c, lambda: c.programs.wait(timeout=3600), lambda: True)
+
+
+def test_close_ends_a_contour_and_stops_it(tcp: tuple[SimController, Controller]) -> None:
+    sim, c = tcp
+    c.command("SH")
+    path = np.cumsum(np.full(3000, 20.0))  # six buffers: it streams until closed
+
+    def fed() -> bool:
+        return any(text.startswith("CD") for _, text in sim.command_log)
+
+    _close_under(c, lambda: c.contour("D", path, dt=3), fed)
+    assert "ST D" in _stops_sent(sim)
+    sim.advance(2.0)
+    assert not _moving(sim, "D")
+
+
+def test_with_block_left_by_an_exception_stops_the_move_and_closes() -> None:
+    with (  # noqa: PT012 - the block is the scan that fails
+        pytest.raises(RuntimeError, match="scan failed"),
+        galil.connect("sim://DMC-4040") as c,
+    ):
+        sim = sim_of(c)
+        c.command("SH")
+        c.A.move_by(100_000)
+        raise RuntimeError("scan failed")
+    assert c.closed
+    assert _stops_sent(sim) == ["ST A"]
+    sim.advance(2.0)
+    assert not _moving(sim, "A")
+
+
+def _forget(held: list[Controller]) -> None:
+    held.clear()
+    gc.collect()
+
+
+def test_an_unclosed_controller_warns_and_is_closed_when_collected() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    with SimTcpServer(sim) as server:
+        gc.collect()  # what earlier tests left to the collector
+        threads, fds = set(threading.enumerate()), _fds()
+        held = [galil.connect(server.url, timeout=2.0, reconnect=True)]
+        held[0].subscribe(lambda line: None)
+        held[0].records(period=64)
+        started = set(threading.enumerate()) - threads
+        assert started  # the message and record readers
+        with pytest.warns(ResourceWarning, match="never closed"):
+            _forget(held)
+        for t in set(threading.enumerate()) - threads:
+            t.join(JOIN)  # the readers, and the thread that closes them
+        assert set(threading.enumerate()) <= threads
+        assert _fds_back_to(fds)
+
+
+def test_a_closed_controller_is_collected_quietly() -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        c = galil.connect("sim://DMC-4040")
+        c.close()
+        del c
+        gc.collect()
+
+
+def test_async_close_ends_a_watch_and_stops_the_move() -> None:
+    async def main() -> tuple[list[BaseException], SimController]:
+        c = await galil.aio.connect("sim://DMC-4040")
+        sim = sim_of(c.sync)
+        await c.command("SH")
+        move = await c.A.jog(20_000)
+        raised: list[BaseException] = []
+
+        async def watch() -> None:
+            try:
+                async for _ in move.watch():
+                    pass
+            except BaseException as exc:
+                raised.append(exc)
+
+        task = asyncio.create_task(watch())
+        await asyncio.sleep(0.05)
+        await c.aclose()
+        await asyncio.wait_for(task, JOIN)
+        for t in c.worker.threads:
+            t.join(JOIN)
+        return raised, sim
+
+    raised, sim = asyncio.run(main())
+    # (the watch may also see the stop end first: its polls let simulated time pass)
+    assert all(isinstance(e, GalilConnectionError) for e in raised), raised
+    assert "ST A" in _stops_sent(sim)
