@@ -63,6 +63,7 @@ class Interrupts:
         self.mask: int | None = None
         self._handle: Transport | None = None
         self._index = 0
+        self._datagram = False  # the handle is UDP: the controller cannot see it close
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._subscribers: Subscribers[Interrupt] = Subscribers("interrupt", _LOG)
@@ -108,6 +109,7 @@ class Interrupts:
             # A controller sends interrupt packets to a UDP handle: one where the link can
             # open it, else a TCP handle (which the simulator also accepts).
             source: object = transport
+            datagram = isinstance(source, DatagramSource)
             if isinstance(source, DatagramSource):
                 handle = source.open_datagram_handle()
             else:
@@ -125,7 +127,7 @@ class Interrupts:
             if isinstance(exc, GalilError):
                 raise
             raise link.error(ProtocolError, f"MG _WH answered {exc}") from exc
-        self._handle, self._index = handle, index
+        self._handle, self._index, self._datagram = handle, index, datagram
         self._stop = threading.Event()
         self._thread = threading.Thread(
             target=self._read, args=(handle, self._stop), name="galil-interrupts", daemon=True
@@ -172,12 +174,20 @@ class Interrupts:
         return self._handle is not None
 
     def disable(self) -> None:
-        """``EI 0`` (the controller forgets the mask and its queue) and close the handle."""
+        """``EI 0`` (the controller forgets the mask and its queue) and close the handle.
+
+        A UDP handle is closed on the controller too (``IHm=>-1``): no packet tells it that
+        the host's socket is gone, and its eight handles would run out. (After a reconnect
+        the old one is left: its letter may be someone else's by then.)
+        """
         if self._handle is None:
             return
         if self.link.is_open:
+            lines = [cmds.ei(0)]
+            if self._datagram:
+                lines.append(cmds.ih_close(self._index))
             with contextlib.suppress(GalilError):
-                self.link.command_line([cmds.ei(0)])
+                self.link.command_line(lines)
         self.close()
 
     def close(self, *, keep_mask: bool = False) -> None:

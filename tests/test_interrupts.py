@@ -32,8 +32,21 @@ def test_enable_names_the_handle_it_opened_and_disable_turns_it_off(
     assert got == {"axis A done", "axis B done", "all done ($D8)"}
     with transcript(dmc) as sent:
         dmc.interrupts.disable()
-    assert sent.lines == ["EI 0"]
+    assert sent.lines == ["EI 0;IHC=>-1"]  # the UDP handle is freed on the controller too
     assert not dmc.interrupts.enabled
+    assert "IHC AVAILABLE" in server.controller.describe_handles()
+
+
+def test_interrupt_handles_do_not_run_out_over_many_connections() -> None:
+    # A UDP handle's close reaches no controller: freed with IHm=>-1, or all eight are taken
+    # after a few connections (enable() then fails with "no handle for interrupts").
+    with SimTcpServer(model="DMC-4040") as server:
+        for _ in range(8):  # each takes two TCP handles and a UDP one
+            with galil.connect(server.url, timeout=2.0) as dmc:
+                dmc.interrupts.enable(axes="A")
+                dmc.interrupts.disable()
+                dmc.interrupts.enable(axes="B")
+        assert server.controller.describe_handles().count("AVAILABLE") == 8
 
 
 def test_interrupts_come_back_after_a_reconnect() -> None:

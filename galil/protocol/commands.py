@@ -1149,6 +1149,19 @@ def time_stamp() -> Command:
     return _TIME
 
 
+def ih_close(handle: int | str) -> Command:
+    """IH: close an Ethernet handle: ``"A"``-``"H"`` (or 0-7) that handle, ``"S"`` the one the
+    command is sent on (``IHm=>-1``). The form is from driver code (gclib's HwIO and the
+    EPICS driver close handles with ``IHS=>-1`` and ``IHT=>-1``), not from a manual page."""
+    if isinstance(handle, int) and not isinstance(handle, bool):
+        letter = "ABCDEFGH"[int(_ranged(handle, 0, 7, "handle", integer=True))]
+    elif isinstance(handle, str) and len(handle) == 1 and handle.upper() in "ABCDEFGHS":
+        letter = handle.upper()
+    else:
+        raise InvalidArgument(f"an Ethernet handle is a letter A-H or S, or 0-7, not {handle!r}")
+    return Command(f"IH{letter}=>-1")
+
+
 def th() -> Command:
     """TH: Ethernet handles (several lines)."""
     return Command("TH", Expect.DATA)

@@ -182,6 +182,11 @@ class SimController:
         with self._lock:
             return self._m.ports.open(name).number
 
+    def has_port(self, port: int) -> bool:
+        """Whether handle ``port`` is open (``IH...=>-1`` closes handles from the inside)."""
+        with self._lock:
+            return port in self._m.ports.ports
+
     def close_port(self, port: int) -> None:
         """Close a handle opened with :meth:`open_port` (its pending input is dropped)."""
         with self._lock:

@@ -262,6 +262,8 @@ class SimTcpServer(_Server):
         except OSError:
             return
         entry = self._udp_peers.get(peer)
+        if entry is not None and not self.controller.has_port(entry[0]):
+            entry = None  # closed from the inside (IH...=>-1): the next datagram opens anew
         if entry is None:
             name = f"UDP PORT {self.address[1]} TO IP ADDRESS 127,0,0,1 PORT {peer[1]}"
             try:
@@ -275,6 +277,9 @@ class SimTcpServer(_Server):
     def _send_datagrams(self) -> None:
         assert self._udp is not None
         for peer, (number, box) in list(self._udp_peers.items()):
+            if not self.controller.has_port(number):
+                del self._udp_peers[peer]  # closed from the inside (IH...=>-1)
+                continue
             box.put(self.controller.poll(port=number))
             out = box.due()
             if not out:
@@ -304,7 +309,7 @@ class SimTcpServer(_Server):
     def _drop(self, sock: socket.socket) -> None:
         self._sel.unregister(sock)
         entry = self._clients.pop(sock, None)
-        if entry is not None:
+        if entry is not None and self.controller.has_port(entry[0]):
             self.controller.close_port(entry[0])
         self._msg_clients.pop(sock, None)
         sock.close()
@@ -344,8 +349,15 @@ class SimTcpServer(_Server):
                 self._drop(sock)
             elif key.data == "client":
                 number, box = self._clients[sock]
-                box.put(self.controller.feed(data, port=number))
+                if self.controller.has_port(number):
+                    box.put(self.controller.feed(data, port=number))
         for sock, (number, box) in list(self._clients.items()):
+            if not self.controller.has_port(number):
+                # Closed from the inside (IH...=>-1): the controller ends the connection.
+                self._send(sock, box)
+                if sock in self._clients:
+                    self._drop(sock)
+                continue
             box.put(self.controller.poll(port=number))
             self._send(sock, box)
         if self._udp_peers:

@@ -53,6 +53,26 @@ def test_wh_names_the_asking_handle() -> None:
     assert sim.feed(b"WH;MG _WH\r", port=handle) == b"IHA\r\n: 0.0000\r\n:"
 
 
+def test_ih_closes_a_handle_by_letter_by_itself_and_by_kind() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    tcp = sim.open_port("TCP PORT 23 TO IP ADDRESS 127,0,0,1 PORT 5000")  # A
+    udp1 = sim.open_port("UDP PORT 23 TO IP ADDRESS 127,0,0,1 PORT 5001")  # B
+    udp2 = sim.open_port("UDP PORT 23 TO IP ADDRESS 127,0,0,1 PORT 5002")  # C
+    other = sim.open_port("TCP PORT 23 TO IP ADDRESS 127,0,0,1 PORT 5003")  # D
+    assert sim.feed(b"IHB=>-1\r", port=tcp) == b":"
+    assert not sim.has_port(udp1)
+    assert sim.feed(b"IHT=>-1\r", port=tcp) == b":"  # every other UDP handle
+    assert not sim.has_port(udp2)
+    assert sim.has_port(other)
+    assert sim.feed(b"IHT=>-2\r", port=tcp) == b":"  # every other TCP handle
+    assert (sim.has_port(tcp), sim.has_port(other)) == (True, False)
+    assert sim.feed(b"IHS=>-1\r", port=tcp) == b":"  # its own
+    assert not sim.has_port(tcp)
+    assert sim.describe_handles().count("AVAILABLE") == 8
+    for bad in (b"IHB=>-1", b"IHS=>-1", b"IHA=1,2,3,4<23>1", b"IHZ=>-1", b"IH"):
+        assert sim.feed(bad + b"\r") == b"?"  # not open; not a handle; opening not simulated
+
+
 @settings(max_examples=200, deadline=None)
 @given(
     name=st.from_regex(r"_?[A-Za-z][A-Za-z0-9_]{0,8}", fullmatch=True),

@@ -1,9 +1,12 @@
-"""Handles: ``TH``, ``CF``, ``WH`` and the status byte ``TB``.
+"""Handles: ``TH``, ``CF``, ``WH``, closing one with ``IH`` and the status byte ``TB``.
 
 The handles themselves (their letters, their output, the routing of unsolicited output) are the
 core's :class:`~galil.sim.ports.Ports`; this room answers the commands about them. ``CF I``
 routes unsolicited output to the handle that sends it (how a host claims its messages), ``CF S``
-back to the main port, ``CF A``-``CF H`` to a named handle.
+back to the main port, ``CF A``-``CF H`` to a named handle. ``IHm=>-1`` closes handle ``m``
+(``S``: the one the command came on); ``IHT=>-1``, ``-2`` and ``-3`` close every other UDP
+handle, TCP handle, or handle (driver code: gclib's HwIO, the EPICS driver; opening a handle
+with ``IH`` is not simulated).
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ __all__ = ["Handles"]
 
 
 class Handles(Room):
-    """TH, CF, WH, TB."""
+    """TH, CF, WH, IH (closing), TB."""
 
     requires = (Records,)
 
@@ -42,6 +45,33 @@ class Handles(Room):
             ports.route = ports.handle(a).number
         else:
             raise Refused(6, "CF takes I, S or a handle letter A-H")
+        return ""
+
+    @handler("IH", equals=True)
+    def ih(self, args: str) -> str:
+        target, arrow, value = args.strip().upper().partition("=>")
+        if not arrow or not target:
+            raise Refused(6, "the simulator's IH only closes handles: IHm=>-1, IHT=>-1/-2/-3")
+        caller = self.machine.interp.caller
+        own = caller.number if isinstance(caller, Port) else None
+        ports = self.machine.ports
+        if target == "T" and value in ("-1", "-2", "-3"):
+            kinds = {"-1": ("UDP",), "-2": ("TCP",), "-3": ("UDP", "TCP")}[value]
+            doomed = [
+                p.number
+                for p in ports.ports.values()
+                if p.letter and p.number != own and p.name.startswith(kinds)
+            ]
+        elif value == "-1" and target == "S":
+            if own is None or not isinstance(caller, Port) or not caller.letter:
+                raise Refused(6, "IHS names the sending handle; this is not one")
+            doomed = [own]
+        elif value == "-1" and len(target) == 1 and target in HANDLES:
+            doomed = [ports.handle(target).number]
+        else:
+            raise Refused(6, "the simulator's IH only closes handles: IHm=>-1, IHT=>-1/-2/-3")
+        for number in doomed:
+            self.machine.close_port(number)
         return ""
 
     @handler("WH")
