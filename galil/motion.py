@@ -458,7 +458,9 @@ class MoveHandle:
         self._lock = threading.RLock()
         self._cache: dict[str, predict.Profile] = {}
         self._watcher: threading.Thread | None = None
-        self._wake = threading.Event()  # set when the link closes: the watcher looks now
+        # Set when the link closes: the watcher looks now (made with the watcher: an Event
+        # costs microseconds that planning, which makes a handle, should not pay).
+        self._wake: threading.Event | None = None
         self._error: BaseException | None = None
         self._followers: dict[str, GearLink] = {}
         self._cancel: Callable[[int | None], None] | None = None
@@ -821,6 +823,7 @@ class MoveHandle:
             if not self._done:
                 self._callbacks.append(callback)
                 if self._watcher is None:
+                    self._wake = threading.Event()
                     self._watcher = threading.Thread(
                         target=self._watch, name=f"galil-move-{self.axes}", daemon=True
                     )
@@ -829,16 +832,20 @@ class MoveHandle:
         self._call(callback)
 
     def _watch(self) -> None:
+        wake = self._wake
+        assert wake is not None
         try:
             while not self.done:
-                self._wake.wait(MAX_POLL / 2)
+                wake.wait(MAX_POLL / 2)
         except GalilError as exc:  # the link died or closed: record it, wait() raises it
             self._error = exc
 
     def _end_watch(self) -> None:
         """The link was closed: the :meth:`add_callback` watcher looks once more (and ends
         on the closed link) now, not at its next poll; joined."""
-        self._wake.set()
+        wake = self._wake
+        if wake is not None:
+            wake.set()
         watcher = self._watcher
         if watcher is not None and watcher is not threading.current_thread():
             watcher.join(timeout=2.0)
