@@ -256,14 +256,19 @@ class PlanSamples:
         Raises:
             InvalidArgument: the plan has no end (a jog).
         """
-        act = _Active(plan, 0)
-        if act.end_sample is None:
+        # What _Active(plan, 0) would give, without its tables (planning pays for them):
+        # its end_sample and end_value, and its first segment's constant term p_fixed[0].
+        if not math.isfinite(plan.duration):
             raise InvalidArgument("a plan without an end (a jog) cannot be sampled whole")
-        end = act.end_sample
-        # Sample 0 evaluates to the first segment's constant term, rounded as fixed() rounds
-        # it (dt = 0 makes the other terms exact zeros); a plan of no length is at its end.
-        first = act.end_value if end == 0 else (math.floor(act.p_fixed[0]) + FRACTION // 2) >> 16
-        return cls(plan, first, act.end_value, end)
+        end = max(0, math.ceil(plan.duration - 1e-9))
+        end_value = (math.floor(plan.x_end * FRACTION + 0.5) + FRACTION // 2) >> 16
+        # Sample 0 evaluates to the first segment's constant term (the plan's start), rounded
+        # as fixed() rounds it (dt = 0 makes the other terms exact zeros); a plan of no length
+        # is at its end.
+        first = (
+            end_value if end == 0 else (math.floor(plan.x0 * FRACTION + 0.5) + FRACTION // 2) >> 16
+        )
+        return cls(plan, first, end_value, end)
 
     @property
     def bounds(self) -> tuple[int, int]:
