@@ -214,13 +214,7 @@ class Controller(CoordinatedMotion, LinkFacade):
         echo: bool = False,
         reconnect: bool | ReconnectPolicy = False,
     ) -> None:
-        for flag, value in (("echo", echo), ("handshake", handshake), ("unsolicited", unsolicited)):
-            if not isinstance(value, bool):
-                raise InvalidArgument(f"{flag} must be True or False, not {value!r}")
-        if model is not None and not isinstance(model, (str, ModelSpec)):
-            raise InvalidArgument(f"model is a name such as 'DMC-4040' or a ModelSpec: {model!r}")
-        if not handshake and model is None:
-            raise InvalidArgument("handshake=False needs model= (nothing identifies it then)")
+        _check_options(echo, handshake, unsolicited, model)
         self.link = Link(timeout=timeout, history=history)
         self._keep_echo = echo
         self._given_model = get_model(model) if isinstance(model, str) else model
@@ -240,6 +234,7 @@ class Controller(CoordinatedMotion, LinkFacade):
         self.variables = Variables(self.link)
         self.interrupts = Interrupts(self.link)
         self._watchdogs: list[Watchdog] = []
+        self._captures: list[Capture] = []  # started here and not yet read back
         self.identity: Identity | None = None
         self.echo = False
         self._axes: dict[str, Axis] | None = None
@@ -298,7 +293,8 @@ class Controller(CoordinatedMotion, LinkFacade):
         no motion the library started outlives the link that could stop it (a call waiting
         on it in another thread raises :class:`~galil.errors.GalilConnectionError`). What
         raw commands or a program on the controller started is left as it is; so is the
-        watchdog's routine halted (leaving on purpose is not dying). A waiting
+        watchdog's routine halted (leaving on purpose is not dying). A capture started here
+        and not read back is stopped (``RC 0``: it would hold the recorder). A waiting
         ``messages.get()``, ``interrupts.get()`` or record stream ``get()`` raises
         :class:`~galil.errors.GalilConnectionError` too.
 
@@ -311,6 +307,7 @@ class Controller(CoordinatedMotion, LinkFacade):
         with self._life:
             if self.link.is_open:
                 _stop_started(self.link, self.tracker)
+                _stop_captures(self.link, self._captures)
             _close_parts(self._parts, keep_watchdogs=False)
             self.tracker.end_watches()
 
@@ -623,7 +620,10 @@ class Controller(CoordinatedMotion, LinkFacade):
                 values for the array space (nothing is sent), or a recording running
                 already (``_RC`` read, nothing set up).
         """
-        return Capture(self.link, sources, every=every, count=count, seconds=seconds).start()
+        capture = Capture(self.link, sources, every=every, count=count, seconds=seconds)
+        self._captures[:] = [c for c in self._captures if c.result is None]
+        self._captures.append(capture.start())
+        return capture
 
     if not TYPE_CHECKING:  # mypy knows the letters below, and nothing else
 
@@ -705,6 +705,33 @@ def _stop_started(link: Link, tracker: MotionTracker) -> None:
             link.model_name,
             ", ".join(dict.fromkeys(failed)),
         )
+
+
+def _check_options(echo: object, handshake: object, unsolicited: object, model: object) -> None:
+    """The connect options checked before anything is opened.
+
+    Raises:
+        InvalidArgument: a flag that is not a bool, a model that is neither a name nor a
+            ModelSpec, or ``handshake=False`` without a model.
+    """
+    for flag, value in (("echo", echo), ("handshake", handshake), ("unsolicited", unsolicited)):
+        if not isinstance(value, bool):
+            raise InvalidArgument(f"{flag} must be True or False, not {value!r}")
+    if model is not None and not isinstance(model, (str, ModelSpec)):
+        raise InvalidArgument(f"model is a name such as 'DMC-4040' or a ModelSpec: {model!r}")
+    if not handshake and model is None:
+        raise InvalidArgument("handshake=False needs model= (nothing identifies it then)")
+
+
+def _stop_captures(link: Link, captures: list[Capture]) -> None:
+    """``RC 0`` if a capture started here has not been read back (it may still record: the
+    next one would be refused until its count was reached); nothing sent otherwise."""
+    if not any(c.result is None for c in captures):
+        return
+    try:
+        link.command_line([cmds.rc(0)])
+    except GalilError as exc:
+        _LOG.warning("galil: closing the link to %s: RC 0 not sent (%s)", link.model_name, exc)
 
 
 def _close_when_collected(controller: Controller, parts: _Parts) -> weakref.finalize[Any, Any]:

@@ -26,8 +26,9 @@ from galil.controller import Controller
 from galil.errors import GalilConnectionError
 from galil.sim.clock import ManualClock
 from galil.sim.controller import SimController
+from galil.sim.link import SimLink
 from galil.sim.server import SimPtyServer, SimTcpServer
-from galil.testing import sim_of
+from galil.testing import sim_of, transcript
 
 CYCLES = 20
 JOIN = 5.0  # seconds a thread waiting on a closed controller may take to end (it takes ms)
@@ -182,6 +183,19 @@ def test_close_ends_a_jog_nobody_waits_for(tcp: tuple[SimController, Controller]
     assert _stops_sent(sim) == ["ST B"]
     sim.advance(2.0)
     assert not _moving(sim, "B")
+
+
+def test_close_stops_a_capture_still_recording_so_the_next_one_may_start() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    with Controller(SimLink(sim)) as c:
+        c.capture(["_RPA"], every=256, count=1000)  # about 250 s: still recording at close
+    assert sim.feed(b"MG _RC\r") == b" 0.0000\r\n:"
+    with Controller(SimLink(sim)) as c:
+        c.capture(["_RPA"], every=2, count=10).wait()  # refused while the first recorded
+    with Controller(SimLink(sim)) as c, transcript(c) as sent:
+        c.capture(["_RPA"], every=2, count=10).wait()
+        c.close()
+    assert "RC 0" not in sent.lines  # one read back: nothing to stop
 
 
 def test_close_leaves_motion_the_library_did_not_start(
