@@ -46,7 +46,9 @@ def test_interrupt_handles_do_not_run_out_over_many_connections() -> None:
                 dmc.interrupts.enable(axes="A")
                 dmc.interrupts.disable()
                 dmc.interrupts.enable(axes="B")
-        assert server.controller.describe_handles().count("AVAILABLE") == 8
+        # (the TCP handles are freed when the server sees their sockets close, a moment later;
+        # the UDP ones by the IH line, before close() returns)
+        assert "UDP" not in server.controller.describe_handles()
 
 
 def test_interrupts_come_back_after_a_reconnect() -> None:
