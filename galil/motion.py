@@ -299,7 +299,7 @@ class MotionTracker:
                 failed += h.axes
         for letters in streams:
             try:
-                stop_axes(link, None, letters)
+                stop_axes(link, self, letters)  # (the stream hears of it: no CD after the ST)
             except GalilError:
                 failed += letters
         return failed
