@@ -51,7 +51,10 @@ def assert_agrees(smoothed: predict.Profile, unsmoothed: predict.Profile, it: fl
     n = min(smoothed.position.size, end + 1)
     diff = smoothed.position[:n] - np.floor(y[:n] + 0.5).astype(np.int64)
     assert np.abs(diff).max(initial=0) <= 1
-    assert np.count_nonzero(diff) <= 3
+    # A count apart only where the reference sits on a tie (x.5 to within float error): the
+    # two evaluation orders may land either side of it (IT 0.8 makes exact ties common).
+    ties = np.abs(y[:n] - np.floor(y[:n]) - 0.5) < 1e-6
+    assert not np.any((diff != 0) & ~ties), np.flatnonzero((diff != 0) & ~ties)[:5]
     assert smoothed.end == unsmoothed.end
     # settled: nothing after the reported end moves
     assert smoothed.position[-1] == unsmoothed.end
