@@ -27,7 +27,7 @@ from galil.errors import (
 )
 from galil.link import CommandLink, check_wait_timeout
 from galil.models import INT32_MAX
-from galil.motion import Display, GearLink, MotionTracker, StopWatch, sample_of
+from galil.motion import Display, GearLink, MotionTracker, StopWatch, held, sample_of
 from galil.moves import check_followers, follower_limit_operands, limit_pairs
 from galil.predict import Profile
 from galil.predict.checks import check_contour
@@ -233,10 +233,6 @@ class ContourStream:
         self._tracker = tracker
         self._watch: StopWatch | None = None
 
-    def _held(self) -> contextlib.AbstractContextManager[Any]:
-        """The tracker's lock (:attr:`MotionTracker.lock`), if the stream has a tracker."""
-        return contextlib.nullcontext() if self._tracker is None else self._tracker.lock
-
     def commands(self) -> list[Command]:
         """The ``CD`` command of every segment, in order (built and checked at once)."""
         return cmds.cd_rows(self.increments, self.letters, model=self.link.model)
@@ -314,7 +310,7 @@ class ContourStream:
         Raises:
             ContourUnderrunError: the buffer ran dry while streaming (TC 42).
         """
-        with self._held():
+        with held(self._tracker):
             state = self._enter(progress)
         return self._stream(state)
 
@@ -391,7 +387,7 @@ class ContourStream:
             state.lines += 1
         elif room >= min(refill, len(texts) - state.sent):
             batch = texts[state.sent : state.sent + room]
-            with self._held():  # (no stop between the check and the line)
+            with held(self._tracker):  # (no stop between the check and the line)
                 self._check_stopped(state)
                 replies = link.command_line(_stamped(batch, state))
             _note_begin(state, replies)
@@ -432,7 +428,7 @@ class ContourStream:
         link = self.link
         ended = False
         try:
-            with self._held():
+            with held(self._tracker):
                 self._check_stopped(state)
                 link.command_line(cmds.contour_end(self.letters, model=link.model))
             ended = True
@@ -476,7 +472,7 @@ class ContourStream:
         check_wait_timeout(timeout)
         self.check()
         try:
-            with self._held():  # no other thread's motion from the state read to CM
+            with held(self._tracker):  # no other thread's motion from the state read to CM
                 self.prepare()
                 state = self._enter(progress)
             state = self._stream(state)

@@ -570,7 +570,7 @@ class Controller(CoordinatedMotion, LinkFacade):
             followers=self.tracker.followers(letters),
             tracker=self.tracker,
         )
-        with self.tracker.streaming(letters), user_units({a.letter: a for a in chosen}):
+        with user_units({a.letter: a for a in chosen}):
             return stream.run(progress=progress, timeout=timeout)
 
     # -- switches and flash (galil.homing, galil.tuning) -------------------------------------

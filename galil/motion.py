@@ -45,6 +45,7 @@ __all__ = [
     "StopWatch",
     "Track",
     "abort_all",
+    "held",
     "motion_guard",
     "sample_of",
     "stop_axes",
@@ -259,19 +260,7 @@ class MotionTracker:
         self._active: dict[str, MoveHandle] = {}
         self.gears: dict[str, GearLink] = {}  # follower letter -> its gearing, while engaged
         self.lock = threading.RLock()
-        self._watches: list[StopWatch] = []
-        self._streams: list[str] = []  # the axes of each contour being streamed
-
-    @contextlib.contextmanager
-    def streaming(self, letters: str) -> Iterator[None]:
-        """A block in which a contour runs on ``letters`` (:meth:`stop_started` stops it)."""
-        with self.lock:
-            self._streams.append(letters)
-        try:
-            yield
-        finally:
-            with self.lock:
-                self._streams.remove(letters)
+        self._watches: list[StopWatch] = []  # a contour's, while it runs (its letters)
 
     def end_watches(self) -> None:
         """The link was closed: every move's :meth:`~MoveHandle.add_callback` watcher ends."""
@@ -282,15 +271,16 @@ class MotionTracker:
 
     def stop_started(self, link: CommandLink) -> str:
         """``ST`` to every move the library started and has not seen done (each handle's own
-        stop: ``ST S`` for a vector sequence) and to every contour being streamed; what a
-        link about to close must not leave running. No query when nothing was started.
+        stop: ``ST S`` for a vector sequence) and to every contour running (its
+        :class:`StopWatch`); what a link about to close must not leave running. No query
+        when nothing was started.
 
         Returns:
             The axes whose stop could not be sent (``""`` when every stop went out).
         """
         with self.lock:
             handles = {id(h): h for h in self._active.values() if not h.finished}
-            streams = list(self._streams)
+            streams = [w.letters for w in self._watches]
         failed = ""
         for h in handles.values():
             try:
@@ -547,10 +537,10 @@ class MoveHandle:
 
     def _follower(self, gear: GearLink) -> predict.Profile:
         begin = next(iter(self._tracks.values())).begin
-        held = None  # gearing off (ST, AB): the follower holds where it was
+        hold = None  # gearing off (ST, AB): the follower holds where it was
         if gear.released is not None and begin is not None:
-            held = gear.released - begin
-        return gear.profile(self._master_positions(gear), hold_after=held)
+            hold = gear.released - begin
+        return gear.profile(self._master_positions(gear), hold_after=hold)
 
     @property
     def profile(self) -> predict.Profile:
@@ -668,7 +658,7 @@ class MoveHandle:
             profiles = self.profiles
             predicted: dict[str, int] = {}
             for a, t in self._tracks.items():
-                if t.exact and not t.open_jog and stop[a] not in (2, 3):
+                if t.exact and not t.open_jog and stop[a] not in _LIMIT_CODES:
                     predicted[a] = profiles[a].end
             deviation = {a: final[a] - v for a, v in predicted.items()}
             self._result = MoveResult(
@@ -873,7 +863,8 @@ def progress_bar(kind: str, axes: str, duration: float) -> Any:
 # ----------------------------------------------------------------------------------- stopping
 
 
-def _held(tracker: MotionTracker | None) -> contextlib.AbstractContextManager[Any]:
+def held(tracker: MotionTracker | None) -> contextlib.AbstractContextManager[Any]:
+    """The tracker's :attr:`~MotionTracker.lock` (nothing to hold without a tracker)."""
     return contextlib.nullcontext() if tracker is None else tracker.lock
 
 
@@ -882,7 +873,7 @@ def stop_axes(link: CommandLink, tracker: MotionTracker | None, letters: str = "
 
     A move another thread is starting is either stopped with its handle told, or starts after
     the stop (:attr:`MotionTracker.lock`), never between the line and its handle."""
-    with _held(tracker):
+    with held(tracker):
         replies = link.command_line([cmds.st(letters, model=link.model), cmds.time_stamp()])
         if tracker is not None:
             tracker.notify(letters or link.model.axes, sample_of(replies[-1]), predict.Stop)
@@ -890,7 +881,7 @@ def stop_axes(link: CommandLink, tracker: MotionTracker | None, letters: str = "
 
 def abort_all(link: CommandLink, tracker: MotionTracker | None) -> None:
     """``AB 1``: stop every axis at once, without deceleration; programs keep running."""
-    with _held(tracker):
+    with held(tracker):
         replies = link.command_line([cmds.ab(motion_only=True), cmds.time_stamp()])
         if tracker is not None:
             tracker.notify(link.model.axes, sample_of(replies[-1]), None)

@@ -29,7 +29,15 @@ import numpy as np
 from galil import predict
 from galil.errors import GalilError, InvalidArgument, LimitError
 from galil.link import CommandLink
-from galil.motion import GearLink, MotionTracker, MoveHandle, MoveParams, Track, sample_of
+from galil.motion import (
+    GearLink,
+    MotionTracker,
+    MoveHandle,
+    MoveParams,
+    Track,
+    held,
+    sample_of,
+)
 from galil.moves import check_followers, follower_limit_operands, limit_pairs
 from galil.predict.vector import SequenceEvent, replay
 from galil.protocol import commands as cmds
@@ -540,12 +548,12 @@ class VectorStream:
         path that fits the buffer). Whatever goes wrong while streaming, the sequence is
         stopped (``ST S``) before the error is raised.
         """
-        held = contextlib.nullcontext() if tracker is None else tracker.lock
-        with held:  # no other thread's motion from the state read to the handle
+        lock = held(tracker)
+        with lock:  # no other thread's motion from the state read to the handle
             handle, texts, first = self._begin(tracker)
         if first < len(texts):
             try:
-                self._feed(handle, texts, first, held)
+                self._feed(handle, texts, first, lock)
             except BaseException:
                 with contextlib.suppress(GalilError):
                     handle.stop()
