@@ -91,12 +91,18 @@ def _read_state(
     if followers:  # (the common move has none: the cached tuple as it is)
         names += follower_limit_operands(followers)
     values = link.query_operands(names)
+    return _states(letters, values), limit_pairs(followers, values[len(letters) * len(_STATE) :])
+
+
+def _states(letters: str, values: Sequence[float]) -> dict[str, _State]:
+    """Each axis's :class:`_State` from the values of ``_operand_names(letters, _STATE)``
+    (more values may follow)."""
     n = len(_STATE)
     out: dict[str, _State] = {}
     for i, a in enumerate(letters):
         rp, bg, sp, ac, dc, it, bl, fl, mo = values[i * n : (i + 1) * n]
         out[a] = _State(round(rp), bool(bg), sp, ac, dc, it, bl, fl, bool(mo))
-    return out, limit_pairs(followers, values[len(letters) * n :])
+    return out
 
 
 def limit_pairs(followers: str, values: Sequence[float]) -> dict[str, tuple[float, float]]:
@@ -669,7 +675,7 @@ def _speed_schedule(
 ) -> MoveHandle:
     gears = tracker.followers(a)
     state, limits = _schedule_state(link, a, "".join(gears))
-    rp, sp0, ac, dc, it, bl, fl = state
+    rp, sp0, ac, dc, it = state.rp, state.sp, state.ac, state.dc, state.it
     first = sp0 if speed is None else speed
     schedule = predict.speed_schedule(
         distance,
@@ -678,10 +684,12 @@ def _speed_schedule(
         ac,
         dc,
         sample_period=link.sample_period,
-        start=round(rp),
+        start=rp,
         smoothing=it,
     )
-    predict.check_soft_limits(schedule.profile, forward_limit=fl, backward_limit=bl, axis=a)
+    predict.check_soft_limits(
+        schedule.profile, forward_limit=state.fl, backward_limit=state.bl, axis=a
+    )
     if gears:
         geared = {f: g.profile(schedule.profile) for f, g in gears.items()}
         check_followers(link, gears, geared, limits)
@@ -691,7 +699,7 @@ def _speed_schedule(
     run = object()  # this schedule's hold on thread 0
     routines.start(f"#{label}", 0, owner=run)
     params = MoveParams(first, ac, dc, it)
-    track = Track("schedule", round(rp), params, None, amount=distance, fixed=schedule.profile)
+    track = Track("schedule", rp, params, None, amount=distance, fixed=schedule.profile)
     handle = MoveHandle(
         link, {a: track}, "schedule", display={a: display} if display else None, tracker=tracker
     )
@@ -703,29 +711,26 @@ def _speed_schedule(
 
 def _schedule_state(
     link: CommandLink, a: str, followers: str
-) -> tuple[tuple[float, ...], dict[str, tuple[float, float]]]:
-    """``(RP, SP, AC, DC, IT, BL, FL)`` of axis ``a`` and the followers' ``(BL, FL)``, in one
-    query that also asks whether thread 0 runs.
+) -> tuple[_State, dict[str, tuple[float, float]]]:
+    """Axis ``a``'s state and the followers' ``(BL, FL)``, in one query that also asks
+    whether thread 0 runs.
 
     Raises:
         InvalidArgument: the axis moving or its motor off, or thread 0 running (a schedule in
             progress, or the user's program).
     """
-    values = link.query_operands(
-        [f"_{op}{a}" for op in ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")]
-        + ["_XQ0", *follower_limit_operands(followers)]
-    )
-    rp, bg, sp, ac, dc, it, bl, fl, mo, xq = values[:10]
-    model = link.model.name
-    if bg or mo:
-        raise InvalidArgument(f"axis {a} is moving or its motor is off", model=model)
-    if xq >= 0:
+    names = (*_operand_names(a, _STATE), "_XQ0", *follower_limit_operands(followers))
+    values = link.query_operands(names)
+    state = _states(a, values)[a]
+    _ready(link, a, state)
+    n = len(_STATE)
+    if values[n] >= 0:
         raise InvalidArgument(
             "thread 0 runs a program (a speed schedule still in progress, or yours): wait for "
             "the schedule to end or stop it first",
-            model=model,
+            model=link.model.name,
         )
-    return (rp, sp, ac, dc, it, bl, fl), limit_pairs(followers, values[10:])
+    return state, limit_pairs(followers, values[n + 1 :])
 
 
 def _cancel_schedule(
