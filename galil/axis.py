@@ -334,7 +334,8 @@ class Axis:
             LimitError: outside the model's range.
         """
         try:
-            return predict.check_parameter(cmd, counts, self._link.model, axis=self.letter)
+            tm = round(self._link.sample_period * 1_024_000, 6)  # the TM in force: SP/AC steps
+            return predict.check_parameter(cmd, counts, self._link.model, axis=self.letter, tm=tm)
         except LimitError as exc:
             scale = self._scale
             if scale is not None and exc.value is not None and exc.limit is not None:

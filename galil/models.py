@@ -67,6 +67,14 @@ _OPTIMA_REPLY_FORMATS = {**_REPLY_FORMATS, "KI": "4.0"}
 #: its comment names only the 21x3, 41x3 and 40x0, so the vendor page is taken for the Optima.
 _OPTIMA_KI_MAX = 2047.875
 _OPTIMA_KI_RESOLUTION = 1 / 128
+#: SP, JG, AC and DC under another TM (docs/decisions/0025). The DMC-4103 command reference's
+#: TM page: "The following commands are automatically scaled to adjust for changes in sample
+#: time" (AC, DC, JG, SP among them); its SP page: "The resolution of the SP command is
+#: dependent upon the update rate setting (TM). With the default rate of TM 1000 the
+#: resolution is 2 cnts/second. ... resolution = 2*(1000/TM)" (JG: the same words); its AC and
+#: DC pages: "Resolution = Min = 1024*(1000/TM)^2" (TM 500: 4096 counts/s²). The units stay
+#: counts/s and counts/s²; only the step (and AC/DC's minimum) follows TM.
+_TM_REFERENCE = 1000.0
 #: OP's fields per model, where the sources stop (documented, not settled; see ``assumptions``).
 _OP_ASSUMPTION = (
     "OP fields: 8-bit banks (OP n0,n1: outputs 1-8, 9-16). Sourced only for outputs 1-8 (DMC-3425"
@@ -90,9 +98,11 @@ class ModelSpec:
             ``TM ?`` and ``_TM`` answer (DMC-1500: 2048, its 2 ms).
         tm_adjustable: whether TM may be changed (the DMC-1500 has a fixed 2 ms sample); see
             :attr:`sample_period_fixed`.
-        ac_min, ac_max, ac_resolution: AC/DC range in counts/s²; values round down to the
-            resolution.
-        sp_max, sp_resolution: SP/JG maximum and step in counts/s.
+        ac_min, ac_max, ac_resolution: AC/DC range in counts/s² at TM 1000; values round
+            down to the resolution. AC and DC stay in counts/s² at any TM, but their step and
+            minimum scale with it (:meth:`accel_resolution`, :meth:`accel_min`).
+        sp_max, sp_resolution: SP/JG maximum and step in counts/s at TM 1000. SP and JG stay
+            in counts/s at any TM; the step scales with it (:meth:`speed_resolution`).
         cd_max: largest |CD| increment per segment.
         dt_range: allowed DT exponents (segment = 2**n samples).
         contour_buffer: contour segments the controller can queue (``_CM`` when empty).
@@ -160,10 +170,10 @@ class ModelSpec:
             gives ``1000``: an assumption (the TM page's own default, 1000, does not fit one
             digit, so m cannot be a cap there as it is for PF/VF).
         motor_types: the MT values the model accepts (:data:`MOTOR_TYPES` says what each is).
-        kp_max, ki_max, kd_max: gain maxima; gain_resolution the step of KP and KD (KP 1/8,
-            40x0); ki_resolution KI's (1/1024: the step that makes 255.999 the largest KI
-            below 256; assumed). The Optima-era cards (DMC-1700/1800, 18x2) take KI up to
-            2047.875 in steps of 1/128 (``_OPTIMA_KI_MAX``); the DMC-1500 is assumed to.
+        kp_max, ki_max, kd_max: gain maxima; gain_resolution the step of KP and KD (1/8);
+            ki_resolution KI's (1/1024); sources at the fields. The Optima-era cards
+            (DMC-1700/1800, 18x2) take KI up to 2047.875 in steps of 1/128
+            (``_OPTIMA_KI_MAX``); the DMC-1500 is assumed to.
         ks_range: stepper smoothing KS (40x0 user manual: 0.25 ... 64).
         il_max, tl_max: integrator and torque limits in volts.
         er_max: largest position-error limit (ER) in counts.
@@ -195,7 +205,8 @@ class ModelSpec:
     qz: tuple[int, int, int, int] | None = None
     record_axis_analog: bool = True
     it_range: tuple[float, float] = IT_RANGE
-    # Sourced for the 40x0 (M40-CR p246); other adjustable families are assumed to share it.
+    # Sourced for the 40x0 (M40-CR p246) and, different, for the 41x3 (its entry); other
+    # adjustable families are assumed to share the 40x0's.
     tm_min_by_axes: tuple[float, float, float, float] = (62.5, 125.0, 156.25, 187.5)
     tm_max: float = 20000.0
     dr_range: tuple[int, int] = (2, 30000)
@@ -242,6 +253,12 @@ class ModelSpec:
     # Motor and loop settings (facts section 4).
     reply_formats: dict[str, str] = field(default_factory=lambda: dict(_REPLY_FORMATS))
     motor_types: frozenset[float] = _MT_STANDARD
+    # Gains of the Accelera-era cards (docs/decisions/0025). Galil's DMC-4103 command reference
+    # gives, in its argument tables (min, max, default, resolution), KP "0 1,023.875 6 1/8", KI
+    # "0 255.999 0 1/1,024" and KD "0 4,095.875 64 1/8". The printed DMC-40x0 reference says KP
+    # "0 to 1023.875 with a resolution of 1/8" (p.142), KD "0 to 4095.875 with a resolution of
+    # 1/8" (p.140) and KI "0 to 255 with a resolution of 0.001" (p.141): the same range in
+    # rounder words (EPICS, GalilAxis.cpp setIGain, caps KI at 255.999 on the 40x0 and 41x3).
     kp_max: float = 1023.875
     ki_max: float = 255.999
     ki_resolution: float = 1 / 1024
@@ -283,6 +300,29 @@ class ModelSpec:
         if not self.tm_adjustable:
             return self.sample_period
         return tm / 1_024_000.0
+
+    def _tm_scale(self, tm: float | None) -> float:
+        """1000 / TM for ``tm`` (default: the power-on TM); 1 where TM is fixed."""
+        if not self.tm_adjustable:
+            return 1.0
+        return _TM_REFERENCE / (self.tm_default if tm is None else tm)
+
+    def speed_resolution(self, tm: float | None = None) -> float:
+        """SP/JG step in counts/s at ``tm`` µs (default: the power-on TM).
+
+        ``sp_resolution * 1000 / TM``: 2 counts/s at TM 1000, 8 at TM 250 (the command
+        reference's "resolution = 2*(1000/TM)"). A model whose TM is fixed keeps
+        ``sp_resolution``.
+        """
+        return self.sp_resolution * self._tm_scale(tm)
+
+    def accel_resolution(self, tm: float | None = None) -> float:
+        """AC/DC step in counts/s² at ``tm`` µs: ``ac_resolution * (1000 / TM)**2``."""
+        return self.ac_resolution * self._tm_scale(tm) ** 2
+
+    def accel_min(self, tm: float | None = None) -> float:
+        """Smallest AC/DC in counts/s² at ``tm`` µs: ``ac_min * (1000 / TM)**2``."""
+        return self.ac_min * self._tm_scale(tm) ** 2
 
     @property
     def record_size(self) -> int | None:
@@ -409,6 +449,12 @@ _add(
         contour_buffer=1,
         transports=frozenset({"pci"}),
         contour_dt_suffix=False,
+        # gclib gclib_record.h, GDataRecord1802 (current revision): "The 18x2 Data record is
+        # the Same as 2103 except the following. No header bytes. Software removes it from QR.
+        # No analog in axis data." Its axis blocks are 28 bytes, the last two reserved (A at
+        # 40-67, B at 68-95 of the record without the header), 152 bytes for 4 axes; an older
+        # revision (26-byte blocks, header kept) is where the 26 of some notes comes from. The
+        # QR reply carries the 4-byte header, as on the 21x3 and 40x0 (docs/decisions/0025).
         qz=(4, 24, 16, 28),
         record_axis_analog=False,
         threads=2,
@@ -419,8 +465,8 @@ _add(
         assumptions=(
             "CD range ±32,000 from the seed manual excerpt",
             "contour buffer of 1: the seed shows WC pacing one segment at a time",
-            "QZ 4, 24, 16, 28: gclib GDataRecord1802 (the 21x3 record, the axis blocks' last "
-            "two bytes reserved); QZ itself not seen on an 18x2",
+            "QZ answers 4, 24, 16, 28: the sizes of gclib's GDataRecord1802 (28-byte axis"
+            " blocks, header on the wire); the QZ reply itself not seen from an 18x2",
             _OP_ASSUMPTION,
         ),
     ),
@@ -502,7 +548,8 @@ _add(
         assumptions=(
             "CD range ±32,000 from the 40x0 manual summary; the 18x6 page says ±32,762",
             "DR at most 30,000 samples between records: not sourced",
-            "SP maximum 22,000,000 c/s: recollection, not a primary page",
+            "SP maximum 22,000,000 c/s: BLISS's GalilDMC.set_velocity docstring (servo; 6,000,000"
+            " for steppers, not modelled), no 40x0 reference page seen",
             _OP_ASSUMPTION,
         ),
     ),
@@ -532,8 +579,21 @@ _add(
             "family": "DMC-41x3",
             "axes": "ABCD",
             "qz": (4, 52, 26, 36),
-            "dr_range": (8, 30000),
+            "dr_range": (8, 30000),  # DMC-4103 reference DR: n0 8 ... 30,000
             "vs_max": 15_000_000,  # QCoDeS dmc_41x3.py: VS 2 ... 15,000,000 step 2
+            # DMC-4103 command reference (docs/decisions/0025): SP "0 15,000,000 25,000 2 ...
+            # (Servos)", "0 3,000,000" for steppers; JG ±15,000,000. TM "125 5,000 1,000 31.25"
+            # with the minimum by axis count 125, 250, 375, 500 (1-2, 3-4, 5-6, 7-8 axes).
+            "sp_max": 15_000_000,
+            "tm_min_by_axes": (125.0, 250.0, 375.0, 500.0),
+            "tm_max": 5000.0,
+            "assumptions": (
+                "CD range ±32,000 as the 40x0 (its manual summary); the 4103 reference's CD"
+                " table says -32,768 ... 32,767, not applied yet (docs/decisions/0025)",
+                "one SP/JG maximum for every axis: the 4103 reference's 3,000,000 counts/s for"
+                " stepper axes (MT ±2, ±2.5) is not enforced",
+                _OP_ASSUMPTION,
+            ),
         }
     ),
     "DMC-41x3",
@@ -571,8 +631,9 @@ _add(
 
 #: Unconfirmed facts the families added for issue 11 share (see docs/decisions/0015).
 _LAB_ASSUMPTIONS = (
-    "KD resolution 1/8 like KP (only KP's 1/8 is sourced, M40-CR p152); KI 1/1024, read"
-    " from its largest value 255.999",
+    "KP, KI and KD ranges and steps as the DMC-40x0/41x3 (KI 0 ... 255.999 in 1/1024ths, KP"
+    " and KD in 1/8ths): Galil's KI/KP/KD pages list this family among the models they apply"
+    " to, but the tables seen are the 4103's",
     "IL and TL 0 ... 9.998 V, ER 1 ... 2**31-1 counts: no firmware range found",
     "HV 256 counts/s at power-on (the Optima stage-2 rate), HV range as SP",
     "KS resolution 1/32 and default 2: the range 0.25 ... 64 is sourced (40x0 manual)",

@@ -253,6 +253,20 @@ def test_sample_period_follows_tm() -> None:
         assert profile.sample_period == 1000 / 1_024_000
 
 
+def test_speed_and_accel_are_stored_in_the_steps_of_the_tm_in_force() -> None:
+    # SP stays in counts/s under another TM, its step becomes 2*(1000/TM); AC's 1024*(1000/TM)**2
+    # (DMC-4103 command reference; docs/decisions/0025). Host and simulator agree.
+    with simulated("DMC-4040") as dmc:
+        dmc.command("TM 250")
+        dmc.A.speed = 25_005
+        dmc.A.accel = 40_000
+        assert (dmc.A.speed, dmc.A.accel) == (25_000, 32_768)
+        assert sim_of(dmc).feed(b"MG _SPA,_ACA\r") == b" 25000.0000 32768.0000\r\n:"
+        dmc.command("TM 1000")
+        dmc.A.speed = 25_005
+        assert dmc.A.speed == 25_004
+
+
 def test_the_30010s_two_analog_outputs_and_inputs_are_driven_and_recorded() -> None:
     with simulated("DMC-30010") as dmc:
         dmc.io.analog_out[2] = -2.5 * ureg.volt

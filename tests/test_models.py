@@ -93,3 +93,41 @@ def test_the_500x0s_largest_accel_is_accepted_and_one_step_more_refused_unsent()
         assert dmc.A.accel == top
         with nothing_sent(dmc), pytest.raises(LimitError):
             dmc.A.accel = top + dmc.model.ac_resolution
+
+
+def test_the_speed_and_accel_steps_follow_tm_in_counts_per_second() -> None:
+    # DMC-4103 command reference (docs/decisions/0025), SP and JG: "resolution = 2*(1000/TM)",
+    # "With TM 250 the resolution of the SP command is 8 cnts/second"; AC and DC: "Resolution =
+    # Min = 1024*(1000/TM)^2", 4096 counts/s² at TM 500. SP stays in counts/s at any TM.
+    m = get_model("DMC-4040")
+    assert [m.speed_resolution(t) for t in (1000, 250, 500, 2000)] == [2, 8, 4, 1]
+    assert m.speed_resolution() == m.sp_resolution == 2
+    assert m.accel_resolution(500) == m.accel_min(500) == 4096
+    assert m.accel_resolution(2000) == m.accel_min(2000) == 256
+    assert m.accel_resolution() == m.ac_resolution == 1024
+    fixed = get_model("DMC-1500")  # a fixed sample: no other TM to scale to
+    assert fixed.speed_resolution(250) == fixed.sp_resolution
+    assert fixed.accel_resolution(250) == fixed.ac_resolution
+
+
+def test_the_41x3_speed_and_tm_ranges_are_its_command_references() -> None:
+    # DMC-4103 reference: SP 0 ... 15,000,000 counts/s (servo); TM 125 ... 5,000 µs, the
+    # minimum 125/250/375/500 for 1-2/3-4/5-6/7-8 axes (the 40x0's: 62.5 ... 187.5, 20,000).
+    assert get_model("DMC-4143").sp_max == 15_000_000
+    assert get_model("DMC-4143").tm_range == (250.0, 5000.0)
+    assert get_model("DMC-4123").tm_range == (125.0, 5000.0)
+    assert get_model("DMC-4183").tm_range == (500.0, 5000.0)
+    assert get_model("DMC-4040").tm_range == (125.0, 20000.0)
+    with simulated("DMC-4143") as dmc, nothing_sent(dmc), pytest.raises(LimitError):
+        dmc.A.speed = 15_000_002
+
+
+def test_the_accelera_gains_are_the_command_references() -> None:
+    # DMC-4103 reference KP "0 1,023.875 6 1/8", KI "0 255.999 0 1/1,024", KD
+    # "0 4,095.875 64 1/8"; DMC-40x0 reference pp.140-142 (KI "0 to 255 ... resolution of
+    # 0.001"). None of these is an assumption any more.
+    for name in ("DMC-4040", "DMC-4143"):
+        m = get_model(name)
+        assert (m.kp_max, m.ki_max, m.kd_max) == (1023.875, 255.999, 4095.875)
+        assert (m.gain_resolution, m.ki_resolution) == (1 / 8, 1 / 1024)
+        assert not [a for a in m.assumptions if "KI" in a or "KD" in a]

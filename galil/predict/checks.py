@@ -51,8 +51,32 @@ def resolve_model(model: str | ModelSpec) -> ModelSpec:
     return model if isinstance(model, ModelSpec) else get_model(model)
 
 
-def quantise_accel(value: float, model: str | ModelSpec = "DMC-4040", *, name: str = "AC") -> int:
+def _steps(value: float, step: float) -> float:
+    """The largest multiple of ``step`` not above ``value`` (>= 0); whole numbers as ``int``.
+
+    A multiple already (a value read back) stays itself, whatever the division rounds to.
+    """
+    n = math.floor(value / step)
+    if (n + 1) * step <= value:
+        n += 1
+    elif n * step > value:
+        n -= 1
+    out = n * step
+    return int(out) if float(out).is_integer() else float(out)
+
+
+def quantise_accel(
+    value: float,
+    model: str | ModelSpec = "DMC-4040",
+    *,
+    name: str = "AC",
+    tm: float | None = None,
+) -> float:
     """AC or DC as the controller stores it: rounded down to its resolution, at least one step.
+
+    The step and the minimum are the model's at ``tm`` µs (default: its power-on TM):
+    1024 counts/s² at TM 1000, 4096 at TM 500 (:meth:`ModelSpec.accel_resolution`). Whole
+    values come back as ``int``.
 
     Raises:
         LimitError: not positive, not finite, or above the model's maximum.
@@ -63,7 +87,7 @@ def quantise_accel(value: float, model: str | ModelSpec = "DMC-4040", *, name: s
             f"{name} must be a positive number, got {value!r}",
             name=name,
             value=value,
-            limit=spec.ac_min,
+            limit=spec.accel_min(tm),
             model=spec.name,
         )
     if value > spec.ac_max:
@@ -74,14 +98,24 @@ def quantise_accel(value: float, model: str | ModelSpec = "DMC-4040", *, name: s
             limit=spec.ac_max,
             model=spec.name,
         )
-    res = spec.ac_resolution
-    return max(spec.ac_min, int(value // res) * res)
+    low = spec.accel_min(tm)
+    stored = _steps(value, spec.accel_resolution(tm))
+    return stored if stored >= low else (int(low) if low.is_integer() else low)
 
 
 def quantise_speed(
-    value: float, model: str | ModelSpec = "DMC-4040", *, name: str = "SP", signed: bool = False
-) -> int:
+    value: float,
+    model: str | ModelSpec = "DMC-4040",
+    *,
+    name: str = "SP",
+    signed: bool = False,
+    tm: float | None = None,
+) -> float:
     """SP (or JG with ``signed=True``) as stored: magnitude rounded down to the resolution.
+
+    The resolution is the model's at ``tm`` µs (default: its power-on TM): 2 counts/s at
+    TM 1000, 8 at TM 250 (:meth:`ModelSpec.speed_resolution`). Whole values come back as
+    ``int``.
 
     Raises:
         LimitError: not finite, negative SP, or above the model's maximum.
@@ -103,17 +137,17 @@ def quantise_speed(
             limit=spec.sp_max,
             model=spec.name,
         )
-    res = spec.sp_resolution
-    return int(math.copysign(int(abs(value) // res) * res, value))
+    stored = _steps(abs(value), spec.speed_resolution(tm))
+    return -stored if value < 0 and stored else stored
 
 
 @dataclass(frozen=True)
 class Quantised:
     """The values the controller will actually use (``None`` where none was given)."""
 
-    speed: int | None
-    accel: int | None
-    decel: int | None
+    speed: float | None
+    accel: float | None
+    decel: float | None
     smoothing: float | None
     sample_period: float
 
@@ -121,17 +155,21 @@ class Quantised:
 _COMMANDS = ("SP", "JG", "AC", "DC", "IT")
 
 
-def quantise_value(command: str, value: float, model: str | ModelSpec = "DMC-4040") -> float:
+def quantise_value(
+    command: str, value: float, model: str | ModelSpec = "DMC-4040", *, tm: float | None = None
+) -> float:
     """One value as the controller stores it: ``command`` is SP, JG, AC, DC or IT.
+
+    ``tm`` (µs; default the model's power-on TM) sets the step of SP/JG and AC/DC.
 
     Raises:
         LimitError: outside the model's range. InvalidArgument: unknown command.
     """
     cmd = command.upper()
     if cmd in ("SP", "JG"):
-        return float(quantise_speed(value, model, name=cmd, signed=cmd == "JG"))
+        return float(quantise_speed(value, model, name=cmd, signed=cmd == "JG", tm=tm))
     if cmd in ("AC", "DC"):
-        return float(quantise_accel(value, model, name=cmd))
+        return float(quantise_accel(value, model, name=cmd, tm=tm))
     if cmd == "IT":
         q = quantise(model, smoothing=value).smoothing
         assert q is not None
@@ -140,11 +178,16 @@ def quantise_value(command: str, value: float, model: str | ModelSpec = "DMC-404
 
 
 def check_parameter(
-    command: str, value: float, model: str | ModelSpec = "DMC-4040", *, axis: str | None = None
+    command: str,
+    value: float,
+    model: str | ModelSpec = "DMC-4040",
+    *,
+    axis: str | None = None,
+    tm: float | None = None,
 ) -> float:
     """Quantise and range-check one SP/JG/AC/DC/IT value (the LimitError names the axis)."""
     try:
-        return quantise_value(command, value, model)
+        return quantise_value(command, value, model, tm=tm)
     except LimitError as exc:
         exc.axis = axis
         raise
@@ -183,7 +226,8 @@ def quantise(
         decel: DC, counts/s².
         smoothing: IT.
         jog: ``speed`` is a signed jog speed.
-        tm: TM in µs (default: the model's default), sets ``sample_period``.
+        tm: TM in µs (default: the model's default), sets ``sample_period`` and the steps of
+            SP/JG and AC/DC.
 
     Raises:
         LimitError: a value outside the model's range.
@@ -192,7 +236,7 @@ def quantise(
     ts = spec.sample_period if tm is None else spec.sample_period_for(tm)
     sp = None
     if speed is not None:
-        sp = quantise_speed(speed, spec, name="JG" if jog else "SP", signed=jog)
+        sp = quantise_speed(speed, spec, name="JG" if jog else "SP", signed=jog, tm=tm)
     it = None
     if smoothing is not None:
         try:
@@ -203,8 +247,8 @@ def quantise(
             ) from None
     return Quantised(
         speed=sp,
-        accel=None if accel is None else quantise_accel(accel, spec, name="AC"),
-        decel=None if decel is None else quantise_accel(decel, spec, name="DC"),
+        accel=None if accel is None else quantise_accel(accel, spec, name="AC", tm=tm),
+        decel=None if decel is None else quantise_accel(decel, spec, name="DC", tm=tm),
         smoothing=it,
         sample_period=ts,
     )

@@ -39,9 +39,9 @@ Int64Array = npt.NDArray[np.int64]
 class QuantisedVector:
     """VS, VA, VD and VT as the controller stores them (``None`` where none was given)."""
 
-    speed: int | None
-    accel: int | None
-    decel: int | None
+    speed: float | None
+    accel: float | None
+    decel: float | None
     smoothing: float | None
     sample_period: float
     model: ModelSpec

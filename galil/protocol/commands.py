@@ -480,6 +480,11 @@ def _axis_command(
 _CHECKERS: dict[tuple[object, ...], _Checker] = {}
 
 
+def _accel_floor(model: ModelSpec) -> float:
+    """The smallest AC/DC ``model`` takes at any TM it allows (its longest TM)."""
+    return model.accel_min(model.tm_range[1])
+
+
 def _checker(kind: str, model: ModelSpec | None) -> _Checker:
     key: tuple[object, ...] = (kind,)
     if model is not None:
@@ -491,7 +496,9 @@ def _checker(kind: str, model: ModelSpec | None) -> _Checker:
     if kind in ("PR", "PA", "DP", "FL", "BL", "IP"):
         found = _Checker(kind, INT32_MIN, INT32_MAX, model, integer=True)
     elif kind in ("AC", "DC"):
-        lo, hi = (1024, INT32_MAX) if model is None else (model.ac_min, model.ac_max)
+        # The smallest AC/DC falls with a longer TM (1024 * (1000/TM)**2): the range is the
+        # model's over every TM it allows; the predictor quantises for the TM in force.
+        lo, hi = (1024, INT32_MAX) if model is None else (_accel_floor(model), model.ac_max)
         found = _Checker(kind, lo, hi, model, integer=False)
     elif kind == "SP":
         found = _Checker(

@@ -28,6 +28,19 @@ def test_quantise_as_the_controller_stores_values() -> None:
     assert predict.quantise(smoothing=0.004).smoothing == 1 / 256
 
 
+def test_quantisation_follows_the_tm_in_force() -> None:
+    # SP step 2*(1000/TM) counts/s, AC/DC step and minimum 1024*(1000/TM)**2 counts/s²
+    # (DMC-4103 command reference; docs/decisions/0025): at TM 250, 8 and 16384.
+    q = predict.quantise("DMC-4040", speed=25_005, accel=40_000, decel=1_500, tm=250)
+    assert (q.speed, q.accel, q.decel) == (25_000, 32_768, 16_384)
+    assert q.sample_period == pytest.approx(250 / 1_024_000)
+    assert predict.quantise("DMC-4040", speed=-25_007, jog=True, tm=500).speed == -25_004
+    odd = predict.quantise_speed(25_005, "DMC-4040", tm=187.5)  # a step of 10.666... counts/s
+    assert odd == pytest.approx(2344 * 2000 / 187.5)
+    assert predict.quantise_speed(odd, "DMC-4040", tm=187.5) == odd  # stored values stay put
+    assert predict.check_parameter("AC", 5_000, "DMC-4040", tm=2000) == 4_864  # 256-steps
+
+
 @settings(max_examples=100, deadline=None)
 @given(value=st.floats(1, 67_107_840))
 def test_quantised_accel_is_a_multiple_of_1024_not_above_the_input(value: float) -> None:
@@ -36,6 +49,18 @@ def test_quantised_accel_is_a_multiple_of_1024_not_above_the_input(value: float)
     assert q >= 1024
     assert q <= max(value, 1024)
     assert q > value - 1024
+
+
+@settings(max_examples=200, deadline=None)
+@given(value=st.floats(0, 22_000_000), k=st.integers(2, 640))
+def test_a_tm_scaled_speed_is_the_largest_step_not_above_the_input_and_stays_put(
+    value: float, k: int
+) -> None:
+    tm = 31.25 * k  # TM's own grid, 62.5 ... 20,000 µs
+    step = 2 * 1000 / tm
+    q = predict.quantise_speed(value, "DMC-4040", tm=tm)
+    assert value - step < q <= value
+    assert predict.quantise_speed(q, "DMC-4040", tm=tm) == q
 
 
 def test_out_of_range_values_name_value_and_limit() -> None:

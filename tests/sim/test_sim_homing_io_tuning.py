@@ -276,6 +276,25 @@ def test_the_host_refuses_ki_beyond_the_models_maximum_before_sending(
             dmc.A.ki = top + 0.5
 
 
+def test_sp_and_ac_are_stored_in_the_steps_of_the_tm_in_force() -> None:
+    # DMC-4103 command reference (docs/decisions/0025): SP's step is 2*(1000/TM) counts/s,
+    # AC/DC's step and minimum 1024*(1000/TM)**2 counts/s²; the units stay per second.
+    sim = SimController("DMC-4040")
+    assert ask(sim, "TM 250;SPA=25005;ACA=40000;DCA=1500") == "::::"
+    assert ask(sim, "MG _SPA,_ACA,_DCA") == " 25000.0000 32768.0000 16384.0000\r\n:"
+    assert ask(sim, "TM 1000;SPA=25005;ACA=40000;DCA=1500") == "::::"
+    assert ask(sim, "MG _SPA,_ACA,_DCA") == " 25004.0000 39936.0000 1024.0000\r\n:"
+
+
+def test_the_41x3_takes_its_own_tm_range() -> None:
+    # DMC-4103 reference TM: 125 ... 5,000 µs, at least 250 with 3-4 axes.
+    sim = SimController("DMC-4143")
+    assert ask(sim, "TM 187.5") == "?"
+    assert ask(sim, "TM 6000") == "?"
+    assert ask(sim, "TM 250;TM 5000") == "::"
+    assert SimController("DMC-4040").feed(b"TM 187.5\r") == b":"
+
+
 def test_a_fixed_sample_period_is_what_tm_answers_and_tm_cannot_change_it() -> None:
     # The DMC-1500's 2 ms sample is fixed (models.py: tm_adjustable False, TM 2048).
     sim = SimController("DMC-1500")

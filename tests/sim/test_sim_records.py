@@ -170,3 +170,10 @@ def test_the_18x2_record_ends_each_axis_block_in_two_reserved_bytes() -> None:
     rec = record_to_dict(decode_record(data, sim.spec))
     assert rec["A"]["reserved"] == 0  # not the analog input: the 18x2 puts none there
     assert "analog_in" not in rec["A"]
+    # gclib's current GDataRecord1802 (no header: "Software removes it from QR"): axis B's
+    # block at 68-95, its reference and motor positions at 72 and 76; on the wire 4 bytes
+    # later. (The older revision's 26-byte blocks would put them at 70 and 74.)
+    assert ask(sim, "DPB=4660") == b":"
+    body = sim.record()[4:]
+    assert int.from_bytes(body[72:76], "little", signed=True) == 4660 == number(sim, "RPB")
+    assert int.from_bytes(body[76:80], "little", signed=True) == 4660 == number(sim, "TPB")

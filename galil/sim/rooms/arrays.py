@@ -11,9 +11,13 @@ beyond) and how many variables (``variables``; TC 67). Choices where the sources
   (delim 0), then CR LF and ^Z; ``QD name[],first,last`` takes values separated by commas,
   CR or CR LF up to ``\\``, and refuses too many (TC 84), too few or a bad number (TC 83);
 - ``_DM`` is the number of array elements still free;
-- ``name[-1]`` in an expression (``MG name[-1]``) is the array's size, as the user manual's
-  chapter on arrays is remembered (unconfirmed: not in the shared references);
-  assigning to it is refused (TC 56).
+- ``name[-1]`` in an expression (``MG name[-1]``) is the array's size, as Galil's command
+  reference documents it (DMC-4103 reference, DM: "Typing in array name with [-1] element
+  marked reports the number of elements for that array", with ``MG "MyArray contains",
+  MyArray[-1]," elements"`` answering ``1000.0000``; ``[,]``: "n = -1 returns the array
+  length"; docs/decisions/0025). Its example names the DMC-4000 and 30010; that the older
+  cards and the RIO (whose index table starts at 0) answer it too is assumed. Assigning to
+  it is refused (TC 56).
 """
 
 from __future__ import annotations

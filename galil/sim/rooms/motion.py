@@ -81,13 +81,14 @@ class Motion(Room):
     # ---- checks: the predictor's quantisation, so the values stored are the ones it plans
     def _accel(self, ax: Axis, value: float) -> float:
         try:
-            return float(quantise_accel(value, self.machine.spec))
+            return float(quantise_accel(value, self.machine.spec, tm=self.machine.servo.tm))
         except LimitError:
             raise Refused(6, "AC/DC out of range") from None
 
     def _speed(self, value: float) -> float:
         try:
-            return float(quantise_speed(value, self.machine.spec, signed=True))
+            spec, tm = self.machine.spec, self.machine.servo.tm
+            return float(quantise_speed(value, spec, signed=True, tm=tm))
         except LimitError:
             raise Refused(6, "speed out of range") from None
 
