@@ -60,6 +60,7 @@ from galil.contour import ContourResult, ContourStream
 from galil.controller import Controller
 from galil.errors import InvalidArgument
 from galil.link import check_seconds, check_wait_timeout
+from galil.motion import held
 from galil.predict import Profile
 from galil.units import Scale, get_registry, path_to_counts
 
@@ -474,9 +475,11 @@ class _Flight:
 def _build_stream(
     controller: Controller, letters: str, path: object, dt: int
 ) -> tuple[ContourStream, dict[str, Profile]]:
-    """Worker side: the stream ``Controller.contour`` would run, checked and predicted."""
+    """Worker side: the stream ``Controller.contour`` would run, checked and predicted, on the
+    controller's motion tracker (:func:`_fly` runs it as ``Controller.contour`` does)."""
     chosen = [controller.axis(a) for a in letters]
     counts = path_to_counts(path, [a.scale for a in chosen], letters)
+    tracker = controller.tracker
     stream = ContourStream(
         controller.link,
         letters,
@@ -484,15 +487,22 @@ def _build_stream(
         dt=dt,
         display={a.letter: a.display for a in chosen},
         byte_rate=controller.link.byte_rate,
-        followers=controller.tracker.followers(letters),
+        followers=tracker.followers(letters),
+        tracker=tracker,
     )
     stream.check()
-    stream.prepare()
+    with held(tracker):  # (a plan: the flight reads the state again before CM)
+        stream.prepare()
     return stream, dict(stream.profiles)
 
 
 def _fly(stream: ContourStream) -> ContourResult:
-    return stream.finish(stream.feed())
+    """Worker side: the flight, as ``Controller.contour`` runs a contour (decisions 0023,
+    0024): the state read again and ``CM`` under the tracker's lock, so another thread's
+    motion takes turns with it (the axes may have moved since ``prepare()``), and a
+    :class:`~galil.motion.StopWatch` open while it streams, so ``stop()``, ``abort()`` and
+    ``Controller.close()`` reach it (``ST``, and no ``CD`` after it)."""
+    return stream.run()
 
 
 class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable):
@@ -562,7 +572,13 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable):
 
     @AsyncStatus.wrap
     async def kickoff(self) -> None:
-        """Start the data records, then the contour; done once both are under way."""
+        """Start the data records, then the contour; done once both are under way.
+
+        The contour runs as ``Controller.contour`` runs one: its axes' state is read again
+        (they may have moved since ``prepare()``) and checked, and motion from other threads
+        takes turns with its start; ``stop()``, a stop through the controller and ``close()``
+        stop it.
+        """
         flight = self._flight
         if flight is None or flight.run is not None:
             raise RuntimeError(f"{self.name}: prepare() must come before kickoff()")

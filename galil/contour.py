@@ -28,7 +28,7 @@ from galil.errors import (
 from galil.link import CommandLink, check_wait_timeout
 from galil.models import INT32_MAX
 from galil.motion import Display, GearLink, MotionTracker, StopWatch, held, sample_of
-from galil.moves import check_followers, follower_limit_operands, limit_pairs
+from galil.moves import check_followers, follower_limits, follower_operands
 from galil.predict import Profile
 from galil.predict.checks import check_contour
 from galil.protocol import commands as cmds
@@ -267,13 +267,17 @@ class ContourStream:
             InvalidArgument: an axis is moving.
             LimitError: the path crosses a soft limit, or takes an axis geared to a contour
                 axis past its soft limits or beyond the model's SP maximum.
+            MotionError: a limit stopped an axis geared to a contour axis during a move
+                nobody waited for (its gearing is off: :func:`~galil.motion.refuse_dropped`).
         """
         link = self.link
         ops = ("RP", "BG", "BL", "FL")
         followers = "".join(self._followers)
         state = link.query_operands(
-            [f"_{op}{a}" for a in self.letters for op in ops]
-            + list(follower_limit_operands(followers))
+            [f"_{op}{a}" for a in self.letters for op in ops] + list(follower_operands(followers))
+        )
+        limits = follower_limits(
+            link, self._tracker, self._followers, state[len(self.letters) * len(ops) :]
         )
         counts: dict[str, Profile] = {}
         for j, a in enumerate(self.letters):
@@ -293,7 +297,7 @@ class ContourStream:
                 link,
                 self._followers,
                 {f: g.profile(counts[g.master]) for f, g in self._followers.items()},
-                limit_pairs(followers, state[len(self.letters) * len(ops) :]),
+                limits,
             )
         for a, prof in counts.items():
             show = self._display.get(a)

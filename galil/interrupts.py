@@ -26,10 +26,11 @@ from collections.abc import Callable
 from galil.errors import GalilConnectionError, GalilError, InvalidArgument, ProtocolError
 from galil.link import Link, read_reply
 from galil.protocol import commands as cmds
+from galil.protocol.handles import parse_th
 from galil.protocol.interrupts import Interrupt, InterruptParser
 from galil.protocol.numbers import parse_number
 from galil.queues import BoundedQueue, Subscribers
-from galil.transport import DatagramSource, HandleSource, Transport
+from galil.transport import DatagramSource, HandleSource, LocalAddress, Transport
 
 __all__ = ["Interrupt", "InterruptCallback", "InterruptQueue", "Interrupts"]
 
@@ -64,6 +65,10 @@ class Interrupts:
         self._handle: Transport | None = None
         self._index = 0
         self._datagram = False  # the handle is UDP: the controller cannot see it close
+        self._local: tuple[str, int] | None = None  # the UDP handle's host end (TH names it)
+        # A UDP handle a dead link left on the controller: (its letter, its host end), freed
+        # by reopen() once the new link is up, if TH still shows it ours.
+        self._stale: tuple[str, tuple[str, int]] | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._subscribers: Subscribers[Interrupt] = Subscribers("interrupt", _LOG)
@@ -128,6 +133,7 @@ class Interrupts:
                 raise
             raise link.error(ProtocolError, f"MG _WH answered {exc}") from exc
         self._handle, self._index, self._datagram = handle, index, datagram
+        self._local = handle.local_address if isinstance(handle, LocalAddress) else None
         self._stop = threading.Event()
         self._thread = threading.Thread(
             target=self._read, args=(handle, self._stop), name="galil-interrupts", daemon=True
@@ -177,8 +183,8 @@ class Interrupts:
         """``EI 0`` (the controller forgets the mask and its queue) and close the handle.
 
         A UDP handle is closed on the controller too (``IHm=>-1``): no packet tells it that
-        the host's socket is gone, and its eight handles would run out. (After a reconnect
-        the old one is left: its letter may be someone else's by then.)
+        the host's socket is gone, and its eight handles would run out. (The handle of a link
+        that died is freed by :meth:`reopen`.)
         """
         if self._handle is None:
             return
@@ -193,9 +199,12 @@ class Interrupts:
     def close(self, *, keep_mask: bool = False) -> None:
         """Stop the reader and close the handle (the link is closing); idempotent.
 
-        With ``keep_mask`` (a reconnect), :meth:`reopen` enables the same mask again.
+        With ``keep_mask`` (a reconnect), :meth:`reopen` enables the same mask again, and
+        frees the UDP handle on the controller (the link that could send ``IHm=>-1`` is gone).
         """
         self._stop.set()
+        if keep_mask and self._handle is not None and self._datagram and self._local:
+            self._stale = ("ABCDEFGH"[self._index], self._local)
         handle, self._handle = self._handle, None
         if handle is not None:
             with contextlib.suppress(GalilError, OSError):
@@ -207,9 +216,29 @@ class Interrupts:
             self.mask = None
 
     def reopen(self) -> None:
-        """After a reconnect: a new handle and the same mask again (if enabled before)."""
+        """After a reconnect: the old UDP handle freed on the controller (if it is still this
+        host's: :meth:`_free_stale`), then a new handle and the same mask again (if enabled
+        before)."""
         mask = self.mask
         self.close()
+        self._free_stale()
         if mask is not None:
             axes = "".join(c for i, c in enumerate("ABCDEFGH") if mask >> i & 1)
             self.enable(axes, all_done=bool(mask & 0x100))
+
+    def _free_stale(self) -> None:
+        """Free the UDP handle the dead link left on the controller: ``TH`` says which
+        handles are open and to whom; ``IHm=>-1`` only if its letter is still a UDP handle to
+        this host's old address and port (after a reconnect, or a controller reset, the
+        letter may be another client's). Best effort: a failure is logged (the reconnect
+        itself went well)."""
+        stale, self._stale = self._stale, None
+        if stale is None or not self.link.is_open:
+            return
+        letter, local = stale
+        try:
+            held = parse_th(self.link.command_line([cmds.th()])[0]).get(letter)
+            if held is not None and held.kind == "UDP" and held.peer == local:
+                self.link.command_line([cmds.ih_close(letter)])
+        except GalilError as exc:
+            _LOG.warning("galil: the old interrupt handle IH%s was not freed: %s", letter, exc)

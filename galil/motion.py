@@ -47,6 +47,7 @@ __all__ = [
     "abort_all",
     "held",
     "motion_guard",
+    "refuse_dropped",
     "sample_of",
     "stop_axes",
 ]
@@ -391,6 +392,45 @@ class MotionTracker:
                 if cancel is not None:
                     undo.append(cancel)
         return undo
+
+
+def refuse_dropped(
+    link: CommandLink,
+    tracker: MotionTracker | None,
+    gears: Mapping[str, GearLink],
+    stop_codes: Mapping[str, int],
+) -> None:
+    """Refuse a master's motion while a follower's ``_SC`` (read with the master's state, before
+    anything is sent) says that a limit stopped it: the controller turned its gearing off
+    during a move nobody waited for (a wait would have said so). The tracker forgets those
+    gearings, as :meth:`MoveHandle.wait` does, so the call after this one moves the master
+    without them.
+
+    Args:
+        gears: the followers read, by letter.
+        stop_codes: each follower's ``_SC``.
+
+    Raises:
+        MotionError: naming the followers, their master and their stop codes.
+    """
+    dropped = {f: c for f, c in stop_codes.items() if c in _LIMIT_CODES}
+    if not dropped:
+        return
+    if tracker is not None:
+        for f in dropped:
+            tracker.release(gears[f])
+    first = next(iter(dropped))
+    parts = [f"{f}, geared to {gears[f].master}: {codes.stop_text(c)}" for f, c in dropped.items()]
+    raise MotionError(
+        f"a limit stopped {', '.join(dropped)} during a move nobody waited for, and the "
+        f"controller turned its gearing off ({'; '.join(parts)}). Nothing was sent; the library "
+        "forgets that gearing, so the same call again moves without it (or gear it again "
+        "first: gear_to)",
+        axis=first,
+        stop_codes=dict(dropped),
+        model=link.model.name,
+        recent=link.recent,
+    )
 
 
 class StopWatch:

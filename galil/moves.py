@@ -25,6 +25,7 @@ from galil.motion import (
     MoveParams,
     Track,
     predict_track,
+    refuse_dropped,
     sample_of,
 )
 from galil.protocol import commands as cmds
@@ -35,15 +36,18 @@ __all__ = [
     "AxisMove",
     "check_followers",
     "execute_move",
-    "follower_limit_operands",
+    "follower_limits",
+    "follower_operands",
     "increment",
     "jog",
-    "limit_pairs",
     "set_jog_speed",
     "speed_schedule",
 ]
 
 _STATE = ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")
+# What a master's state query reads of each follower: its soft limits, and its stop code (a
+# limit's: the controller turned its gearing off).
+_FOLLOWER = ("BL", "FL", "SC")
 _BUILDERS = {"SP": cmds.sp, "AC": cmds.ac, "DC": cmds.dc, "PA": cmds.pa, "IP": cmds.ip}
 
 
@@ -83,15 +87,21 @@ def _operand_names(letters: str, ops: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def _read_state(
-    link: CommandLink, letters: str, followers: str = ""
+    link: CommandLink, tracker: MotionTracker, letters: str, gears: Mapping[str, GearLink]
 ) -> tuple[dict[str, _State], dict[str, tuple[float, float]]]:
     """Every axis's state and the followers' soft limits ``(BL, FL)``, in one round trip
-    (query_operands packs the MG lines together)."""
+    (query_operands packs the MG lines together).
+
+    Raises:
+        MotionError: a limit stopped a follower during a move nobody waited for
+            (:func:`~galil.motion.refuse_dropped`).
+    """
     names = _operand_names(letters, _STATE)
-    if followers:  # (the common move has none: the cached tuple as it is)
-        names += follower_limit_operands(followers)
-    values = link.query_operands(names)
-    return _states(letters, values), limit_pairs(followers, values[len(letters) * len(_STATE) :])
+    if not gears:  # (the common move: the cached tuple as it is, nothing more read)
+        return _states(letters, link.query_operands(names)), {}
+    values = link.query_operands(names + follower_operands("".join(gears)))
+    limits = follower_limits(link, tracker, gears, values[len(letters) * len(_STATE) :])
+    return _states(letters, values), limits
 
 
 def _states(letters: str, values: Sequence[float]) -> dict[str, _State]:
@@ -105,9 +115,23 @@ def _states(letters: str, values: Sequence[float]) -> dict[str, _State]:
     return out
 
 
-def limit_pairs(followers: str, values: Sequence[float]) -> dict[str, tuple[float, float]]:
-    """``(BL, FL)`` per follower from the values of :func:`follower_limit_operands`."""
-    return {f: (values[2 * i], values[2 * i + 1]) for i, f in enumerate(followers)}
+def follower_limits(
+    link: CommandLink,
+    tracker: MotionTracker | None,
+    gears: Mapping[str, GearLink],
+    values: Sequence[float],
+) -> dict[str, tuple[float, float]]:
+    """``(BL, FL)`` per follower of ``gears`` from the values of :func:`follower_operands`
+    (read in ``gears``' order), once their stop codes say that each still follows.
+
+    Raises:
+        MotionError: a limit stopped a follower during a move nobody waited for; the tracker
+            forgets its gearing (:func:`~galil.motion.refuse_dropped`).
+    """
+    n = len(_FOLLOWER)
+    rows = {f: values[i * n : (i + 1) * n] for i, f in enumerate(gears)}
+    refuse_dropped(link, tracker, gears, {f: round(r[2]) for f, r in rows.items()})
+    return {f: (r[0], r[1]) for f, r in rows.items()}
 
 
 def _follower_error(exc: LimitError, gear: GearLink) -> None:
@@ -149,10 +173,11 @@ def _check_follower_speed(link: CommandLink, gear: GearLink, speed: float) -> No
         )
 
 
-def follower_limit_operands(followers: str) -> tuple[str, ...]:
-    """The operands of the followers' soft limits, ``_BL`` and ``_FL`` per follower, in the
-    order :func:`limit_pairs` reads them back."""
-    return _operand_names(followers, ("BL", "FL"))
+def follower_operands(followers: str) -> tuple[str, ...]:
+    """What a master's state query reads of each follower: ``_BL`` and ``_FL`` (its soft
+    limits) and ``_SC`` (a limit's stop code: its gearing is off), in the order
+    :func:`follower_limits` reads them back."""
+    return _operand_names(followers, _FOLLOWER)
 
 
 def check_followers(
@@ -166,7 +191,7 @@ def check_followers(
     Args:
         gears: the followers to check, by letter.
         profiles: each follower's predicted profile (positions in counts).
-        limits: each follower's ``(BL, FL)`` (:func:`limit_pairs`).
+        limits: each follower's ``(BL, FL)`` (:func:`follower_limits`).
 
     Raises:
         LimitError: naming the follower.
@@ -288,6 +313,9 @@ def execute_move(
         InvalidArgument: no or repeated axes, an axis moving or its motor off.
         LimitError: a path crossing a soft limit or the 32-bit range, or taking an axis geared
             to one of the move's past its soft limits or beyond the model's SP maximum.
+        MotionError: a limit stopped an axis geared to one of the move's axes during a move
+            nobody waited for: its gearing is off, and forgotten
+            (:func:`~galil.motion.refuse_dropped`).
     """
     letters = "".join(m.letter for m in moves)
     if not letters or len(set(letters)) != len(letters):
@@ -313,8 +341,8 @@ def _execute_move(
         for a in letters:
             tracker.refuse_geared(a, "moving it", link.model.name)
     gears = tracker.followers(letters)
-    followers = "".join(f for f in gears if f not in letters)
-    state, limits = _read_state(link, letters, followers)
+    others = {f: g for f, g in gears.items() if f not in letters}
+    state, limits = _read_state(link, tracker, letters, others)
     tracks: dict[str, Track] = {}
     profiles: dict[str, predict.Profile] = {}
     sent: dict[str, float] = {}
@@ -390,6 +418,8 @@ def jog(
     Raises:
         InvalidArgument: a position move in progress, a stopping jog, or the motor off.
         LimitError: an axis geared to ``letter`` would run beyond the model's SP maximum.
+        MotionError: a limit stopped an axis geared to ``letter`` during a move nobody waited
+            for: its gearing is off, and forgotten (:func:`~galil.motion.refuse_dropped`).
     """
     with tracker.lock:  # (a JG for a jog another thread starts would change its speed)
         return _jog(link, tracker, letter, velocity, display)
@@ -404,9 +434,12 @@ def _jog(
 ) -> MoveHandle:
     a = letter
     tracker.refuse_geared(a, "jogging it", link.model.name)
-    rp, bg, sc, ac, dc, it, mo = link.query_operands(
+    gears = tracker.followers(a)
+    rp, bg, sc, ac, dc, it, mo, *ends = link.query_operands(
         [f"_{op}{a}" for op in ("RP", "BG", "SC", "AC", "DC", "IT", "MO")]
+        + [f"_SC{f}" for f in gears]  # (a follower a limit dropped: refuse_dropped)
     )
+    refuse_dropped(link, tracker, gears, {f: round(c) for f, c in zip(gears, ends, strict=True)})
     track = tracker.track(a)
     if bg and track is not None and track.kind == "jog":
         handle = _open_jog(tracker, a)
@@ -421,7 +454,6 @@ def _jog(
         raise InvalidArgument(
             f"axis {a} has its motor off; call controller.servo_here()", model=link.model.name
         )
-    gears = tracker.followers(a)
     _check_geared_speed(link, gears, velocity)
     params = MoveParams(abs(velocity), ac, dc, it)
     replies = link.command_line(
@@ -493,6 +525,8 @@ def increment(
         InvalidArgument: a reversal of a move in progress, or an axis stopping.
         LimitError: the new target (or a jog's step) beyond a soft limit or the 32-bit range,
             for the axis or one geared to it; a jog's step too large for one sample.
+        MotionError: a limit stopped an axis geared to ``letter`` during a move nobody waited
+            for: its gearing is off, and forgotten (:func:`~galil.motion.refuse_dropped`).
     """
     with tracker.lock:  # (an IP would extend a move another thread starts meanwhile)
         return _increment(link, tracker, letter, counts, display)
@@ -508,11 +542,11 @@ def _increment(
     model = link.model
     tracker.refuse_geared(a, "an increment", model.name)
     gears = tracker.followers(a)
-    followers = "".join(gears)
     rp, bg, pa, bl, fl, *rest = link.query_operands(
         [f"_{op}{a}" for op in ("RP", "BG", "PA", "BL", "FL")]
-        + list(follower_limit_operands(followers))
+        + list(follower_operands("".join(gears)))
     )
+    limits = follower_limits(link, tracker, gears, rest)
     shows = {a: display} if display else None
     if not bg:
         return execute_move(
@@ -533,7 +567,7 @@ def _increment(
     end = round(rp if jogging else pa) + counts
     what = "steps the jog's reference to" if jogging else "moves the target of the move to"
     _check_reach(link, a, counts, end, (bl, fl), what)
-    _check_followers_reach(link, gears, limit_pairs(followers, rest), counts, end, what)
+    _check_followers_reach(link, gears, limits, counts, end, what)
     replies = link.command_line([cmds.ip(model=model, **{a: counts}), cmds.time_stamp()])
     if handle is None or track is None:
         # Someone else's move: nothing to follow; a handle that only waits for it.
@@ -652,6 +686,8 @@ def speed_schedule(
             program running (the download would disturb it).
         LimitError: a path crossing a soft limit, or taking an axis geared to ``letter`` past
             its soft limits or beyond the model's SP maximum.
+        MotionError: a limit stopped an axis geared to ``letter`` during a move nobody waited
+            for: its gearing is off, and forgotten (:func:`~galil.motion.refuse_dropped`).
     """
     cmds.xq(f"#{label}")  # the label is checked before anything is read or sent
     # Held from the thread 0 check to the handle: another thread's schedule would install
@@ -674,7 +710,7 @@ def _speed_schedule(
     display: Display | None,
 ) -> MoveHandle:
     gears = tracker.followers(a)
-    state, limits = _schedule_state(link, a, "".join(gears))
+    state, limits = _schedule_state(link, tracker, a, gears)
     rp, sp0, ac, dc, it = state.rp, state.sp, state.ac, state.dc, state.it
     first = sp0 if speed is None else speed
     schedule = predict.speed_schedule(
@@ -710,7 +746,7 @@ def _speed_schedule(
 
 
 def _schedule_state(
-    link: CommandLink, a: str, followers: str
+    link: CommandLink, tracker: MotionTracker, a: str, gears: Mapping[str, GearLink]
 ) -> tuple[_State, dict[str, tuple[float, float]]]:
     """Axis ``a``'s state and the followers' ``(BL, FL)``, in one query that also asks
     whether thread 0 runs.
@@ -718,8 +754,9 @@ def _schedule_state(
     Raises:
         InvalidArgument: the axis moving or its motor off, or thread 0 running (a schedule in
             progress, or the user's program).
+        MotionError: a limit stopped a follower during a move nobody waited for.
     """
-    names = (*_operand_names(a, _STATE), "_XQ0", *follower_limit_operands(followers))
+    names = (*_operand_names(a, _STATE), "_XQ0", *follower_operands("".join(gears)))
     values = link.query_operands(names)
     state = _states(a, values)[a]
     _ready(link, a, state)
@@ -730,7 +767,7 @@ def _schedule_state(
             "the schedule to end or stop it first",
             model=link.model.name,
         )
-    return state, limit_pairs(followers, values[n + 1 :])
+    return state, follower_limits(link, tracker, gears, values[n + 1 :])
 
 
 def _cancel_schedule(

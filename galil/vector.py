@@ -38,7 +38,7 @@ from galil.motion import (
     held,
     sample_of,
 )
-from galil.moves import check_followers, follower_limit_operands, limit_pairs
+from galil.moves import check_followers, follower_limits, follower_operands
 from galil.predict.vector import SequenceEvent, replay
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
@@ -309,6 +309,7 @@ class VectorStream:
         self.followers = {f: g for f, g in (followers or {}).items() if f not in letters}
         self.profile: predict.VectorProfile | None = None
         self._state: _State | None = None
+        self._tracker: MotionTracker | None = None  # (forgets a follower a limit dropped)
 
     @classmethod
     def prepared(
@@ -323,6 +324,7 @@ class VectorStream:
         ``tracker``."""
         masters = "".join(a.letter for a in axes) + PLANE
         run = cls(link, axes, segments, followers=tracker.followers(masters), **options)
+        run._tracker = tracker
         run.prepare()
         return run
 
@@ -376,7 +378,8 @@ class VectorStream:
         if self.smoothing is None:
             extra.append("_VTS" if model.vt else f"_IT{letters[0]}")
         followers = "".join(self.followers)
-        values = link.query_operands(names + extra + list(follower_limit_operands(followers)))
+        of_followers = follower_operands(followers)
+        values = link.query_operands(names + extra + list(of_followers))
         n = len(_STATE)
         rows = [values[i * n : (i + 1) * n] for i in range(len(letters))]
         if values[len(letters) * n]:
@@ -390,7 +393,9 @@ class VectorStream:
                 raise InvalidArgument(
                     f"axis {a} has its motor off; call controller.servo_here()", model=model.name
                 )
-        rest = iter(values[len(letters) * n + 1 : len(values) - 2 * len(followers)])
+        tail = len(values) - len(of_followers)
+        limits = follower_limits(link, self._tracker, self.followers, values[tail:])
+        rest = iter(values[len(letters) * n + 1 : tail])
         return _State(
             start=tuple(round(r[0]) for r in rows),
             forward=[r[3] for r in rows],
@@ -398,7 +403,7 @@ class VectorStream:
             accel=self.accel if self.accel is not None else next(rest),
             decel=self.decel if self.decel is not None else next(rest),
             smoothing=self.smoothing if self.smoothing is not None else next(rest),
-            follower_limits=limit_pairs(followers, values[len(values) - 2 * len(followers) :]),
+            follower_limits=limits,
         )
 
     def prepare(self) -> predict.VectorProfile:
@@ -406,6 +411,8 @@ class VectorStream:
 
         Raises:
             InvalidArgument: an axis moving or its motor off, a sequence running.
+            MotionError: a limit stopped an axis geared to a path axis or to ``S`` during a
+                move nobody waited for (its gearing is off: :func:`~galil.motion.refuse_dropped`).
             LimitError: a check failed (named segment and sample): VS/VA/VD ranges, TC 30,
                 31, the buffer (``stream=False``, or a link too slow to keep it fed), an
                 axis's speed or acceleration along the path, a soft limit; or an axis

@@ -8,8 +8,10 @@ from collections.abc import Iterator
 import pytest
 
 import galil
+from galil.link import read_reply
 from galil.sim.server import SimTcpServer
 from galil.testing import transcript
+from galil.transport.tcp import UdpTransport
 
 
 @pytest.fixture
@@ -60,6 +62,52 @@ def test_interrupts_come_back_after_a_reconnect() -> None:
         dmc.programs.download("#U\nUI 4\nEN")
         dmc.programs.run("#U", thread=1)
         assert str(dmc.interrupts.get(timeout=5)) == "UI 4"
+
+
+def _udp_handles(server: SimTcpServer) -> list[str]:
+    """The controller's UDP handles, as TH lists them."""
+    return [line for line in server.controller.describe_handles().splitlines() if "UDP" in line]
+
+
+def test_a_reconnect_frees_the_old_interrupt_handle_on_the_controller() -> None:
+    # (the old UDP handle stayed: every reconnect took one more, and after six the eight
+    # handles were used up and the reconnect failed with "no handle for interrupts")
+    with SimTcpServer(model="DMC-4040") as server, galil.connect(server.url) as dmc:
+        dmc.interrupts.enable(axes="A")
+        (old,) = _udp_handles(server)
+        letter = old[2]
+        with transcript(dmc) as sent:
+            dmc.reconnect()
+        assert "TH" in sent.lines
+        assert f"IH{letter}=>-1" in sent.lines
+        for _ in range(6):  # (without freeing, the eight handles run out here)
+            dmc.reconnect()
+        assert len(_udp_handles(server)) == 1
+        dmc.programs.download("#U\nUI 5\nEN")
+        dmc.programs.run("#U", thread=1)
+        assert str(dmc.interrupts.get(timeout=5)) == "UI 5"
+
+
+def test_a_reconnect_leaves_the_old_handle_letter_alone_once_another_client_has_it() -> None:
+    with SimTcpServer(model="DMC-4040") as server, galil.connect(server.url) as dmc:
+        dmc.interrupts.enable(axes="A")
+        (old,) = _udp_handles(server)
+        letter = old[2]
+        dmc.command(f"IH{letter}=>-1")  # freed behind the library's back (as a reset would)
+        host, port = server.address
+        other = UdpTransport(host, port)  # another client: its first datagram takes the letter
+        try:
+            assert round(float(read_reply(other, b"MG _WH\r", 2.0))) == "ABCDEFGH".index(letter)
+            (theirs,) = _udp_handles(server)
+            assert theirs.startswith(f"IH{letter} UDP")
+            with transcript(dmc) as sent:
+                dmc.reconnect()
+            assert "TH" in sent.lines
+            assert f"IH{letter}=>-1" not in sent.lines
+            assert theirs in _udp_handles(server)  # still open: the other client's
+            assert read_reply(other, b"MG 6*7\r", 2.0).strip() == "42.0000"
+        finally:
+            other.close()
 
 
 def test_a_failing_callback_is_logged_and_the_others_still_hear(

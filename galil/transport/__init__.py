@@ -39,6 +39,7 @@ __all__ = [
     "ControllerClock",
     "DatagramSource",
     "HandleSource",
+    "LocalAddress",
     "MessagesOnly",
     "Opener",
     "Transport",
@@ -91,6 +92,7 @@ from galil.transport.capabilities import (  # noqa: E402 (they refer to Transpor
     ControllerClock,
     DatagramSource,
     HandleSource,
+    LocalAddress,
     MessagesOnly,
 )
 

@@ -10,6 +10,7 @@ offering its methods; nothing has to inherit from anything.
   unsolicited output, more for data-record streams.
 - :class:`DatagramSource`: a UDP handle to the same controller (interrupt packets).
 - :class:`MessagesOnly`: a handle that carries only unsolicited output (no ``CF`` needed).
+- :class:`LocalAddress`: a handle that knows the host's end of it (how ``TH`` names it).
 - :class:`ByteRate`: how many bytes a second the link carries, for stream planning.
 """
 
@@ -20,7 +21,14 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 if TYPE_CHECKING:
     from galil.transport import Transport
 
-__all__ = ["ByteRate", "ControllerClock", "DatagramSource", "HandleSource", "MessagesOnly"]
+__all__ = [
+    "ByteRate",
+    "ControllerClock",
+    "DatagramSource",
+    "HandleSource",
+    "LocalAddress",
+    "MessagesOnly",
+]
 
 
 @runtime_checkable
@@ -73,4 +81,15 @@ class ByteRate(Protocol):
     @property
     def byte_rate(self) -> float:
         """Bytes per second the link carries in each direction."""
+        ...
+
+
+@runtime_checkable
+class LocalAddress(Protocol):
+    """A handle that knows its host end: the address and port the controller sees it come
+    from (NAT aside), as ``TH`` lists them."""
+
+    @property
+    def local_address(self) -> tuple[str, int] | None:
+        """``(dotted address, port)`` of the host's end, ``None`` if unknown."""
         ...

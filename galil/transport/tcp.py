@@ -198,6 +198,8 @@ class UdpTransport(TransportBase[socket.socket]):
     packets only to a UDP handle. Loss is possible: use it for what may be lost (interrupts
     are also visible as ``_BG``), not for motion commands.
 
+    Capability: :class:`~galil.transport.LocalAddress` (the host's end, as ``TH`` names it).
+
     As on TCP, reads wait with the socket's timeout and a write goes out with whatever
     timeout the last read left (a poll before the first read, so no write waits for ever); a
     datagram the socket has no room for then waits for room on a selector until
@@ -229,11 +231,18 @@ class UdpTransport(TransportBase[socket.socket]):
             dotted_quad(host, "UDP host")
             sock = _udp_socket(host, port)
         sock.settimeout(0.0)  # a poll until the first read sets its timeout
+        self._local = _sockname(sock)
         self._writable = _Selector()
         self._writable.register(sock, selectors.EVENT_WRITE)
         super().__init__(
             sock, name=f"udp {host}:{port}", label=f"UDP handle to {host}:{port}", timeout=0.0
         )
+
+    @property
+    def local_address(self) -> tuple[str, int] | None:
+        """The host's end of the handle, ``(address, port)``, as ``TH`` on the controller
+        names it (``None`` if the socket could not say)."""
+        return self._local
 
     def _send(self, handle: socket.socket, data: bytes) -> None:
         # One datagram: it goes whole or not at all, so a retry sends all of it again.
@@ -269,6 +278,16 @@ class UdpTransport(TransportBase[socket.socket]):
     def _release(self, handle: socket.socket) -> None:
         self._writable.close()
         handle.close()
+
+
+def _sockname(sock: socket.socket) -> tuple[str, int] | None:
+    try:
+        name = sock.getsockname()
+    except OSError:
+        return None
+    if not isinstance(name, tuple) or len(name) < 2:
+        return None
+    return str(name[0]), int(name[1])
 
 
 def _udp_socket(host: str, port: int) -> socket.socket:

@@ -10,7 +10,8 @@ import asyncio
 import math
 import re
 import threading
-from collections.abc import Coroutine, Iterator
+import time
+from collections.abc import Callable, Coroutine, Iterator
 from typing import Any, TypeVar
 
 import numpy as np
@@ -369,3 +370,158 @@ def test_numpy_numbers_are_positions(engine: RunEngine, docs: Docs) -> None:
     assert in_loop(x.locate())["setpoint"] == 0.5
     with pytest.raises(galil.InvalidArgument):
         in_loop(move(True))
+
+
+# -- the flyer takes turns with other threads and is stopped by close() ----------------------
+class _Held:
+    """Holds the first link call of one kind on the thread that makes it (the flyer's
+    worker), until :meth:`go`; tells whether a thread has had to wait for the tracker's lock
+    meanwhile."""
+
+    def __init__(self, c: galil.Controller, monkeypatch: pytest.MonkeyPatch) -> None:
+        self.reached = threading.Event()
+        self.contended = threading.Event()
+        self._go = threading.Event()
+        real = c.tracker.lock
+        contended = self.contended
+
+        class Watched:
+            def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
+                if real.acquire(blocking=False):
+                    return True
+                contended.set()
+                return real.acquire(blocking, timeout)
+
+            def release(self) -> None:
+                real.release()
+
+            def __enter__(self) -> bool:
+                return self.acquire()
+
+            def __exit__(self, *exc: object) -> None:
+                self.release()
+
+        monkeypatch.setattr(c.tracker, "lock", Watched(), raising=False)
+        self._c = c
+        self._monkeypatch = monkeypatch
+
+    def before(self, method: str, when: Callable[[Any], bool]) -> None:
+        """Hold the first ``link.<method>(first, ...)`` call ``when(first)`` accepts, before
+        it is sent."""
+        real = getattr(self._c.link, method)
+
+        def held(first: Any, *args: Any, **kwargs: Any) -> Any:
+            if not self.reached.is_set() and when(first):
+                self.reached.set()
+                assert self._go.wait(10)
+            return real(first, *args, **kwargs)
+
+        self._monkeypatch.setattr(self._c.link, method, held)
+
+    def go(self) -> None:
+        self._go.set()
+
+
+def mock_flyer(address: str) -> GalilContourFlyer:
+    flyer = GalilContourFlyer(address, "A", name="fly")
+    in_loop(flyer.connect(mock=True))
+    return flyer
+
+
+async def _fly(flyer: GalilContourFlyer, path: Any, dt: int) -> None:
+    await flyer.prepare(ContourPath(path, dt=dt))
+    await flyer.kickoff()
+
+
+async def _completed(flyer: GalilContourFlyer) -> Exception | None:
+    """What ``complete()`` failed with (``None``: the flight ended well)."""
+    try:
+        await flyer.complete()
+    except Exception as exc:  # reported by the test
+        return exc
+    return None
+
+
+def test_close_during_a_flight_stops_the_contour_axes(
+    engine: RunEngine, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # (the flyer's stream had no StopWatch: close() sent no ST, and the queued segments ran on)
+    flyer = mock_flyer("tcp://127.0.0.1:40")
+    c = flyer.controller.sync
+    sim = sim_of(c)
+    polls = [0]
+
+    def third_poll(names: Any) -> bool:  # the stream is feeding its buffer
+        polls[0] += list(names) == ["_CM", "_TC"]
+        return polls[0] == 3
+
+    held = _Held(c, monkeypatch)
+    held.before("query_operands", third_poll)
+    in_loop(_fly(flyer, np.cumsum(np.full(3000, 20.0)), 2))  # six buffers
+    assert held.reached.wait(10)
+    in_loop(flyer.controller.aclose())  # Controller.close(), while the stream waits
+    held.go()
+    assert isinstance(in_loop(_completed(flyer)), galil.GalilError)
+    assert "ST A" in [text for _, text in sim.command_log]
+    sim.advance(2.0)
+    assert sim.feed(b"MG _BGA\r").split(b"\r")[0].strip() == b"0.0000"
+
+
+def test_a_move_on_a_contour_axis_from_another_thread_is_refused_while_it_flies(
+    engine: RunEngine, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # (the flight neither read the state again nor took turns: the move began between
+    # prepare() and CM, and the CM was refused with TC 7 while the move ran)
+    flyer = mock_flyer("tcp://127.0.0.1:41")
+    c = flyer.controller.sync
+    held = _Held(c, monkeypatch)
+    held.before("command_line", lambda parts: any(str(p).startswith("CM") for p in parts))
+    in_loop(_fly(flyer, np.linspace(20, 640, 32), 3))
+    assert held.reached.wait(10)  # the flight is about to send CM
+    got: list[BaseException | galil.MoveHandle] = []
+
+    def move() -> None:
+        try:
+            got.append(c.A.move_by(100))
+        except galil.GalilError as exc:
+            got.append(exc)
+
+    mover = threading.Thread(target=move)
+    mover.start()
+    while not held.contended.is_set() and mover.is_alive():
+        mover.join(0.001)  # until the move waits for the flight's start (or, before, ran)
+    held.go()
+    mover.join(10)
+    assert len(got) == 1
+    assert isinstance(got[0], galil.InvalidArgument), got
+    assert "already moving" in str(got[0])
+    assert in_loop(_completed(flyer)) is None
+    assert flyer.predicted["A"].end == 640
+
+
+def test_the_flyers_stop_during_a_flight_ends_its_stream(
+    engine: RunEngine, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # (the stream did not hear of the flyer's ST: it sent its next CD lines after it)
+    flyer = mock_flyer("tcp://127.0.0.1:42")
+    c = flyer.controller.sync
+    sim = sim_of(c)
+    polls = [0]
+
+    def third_poll(names: Any) -> bool:
+        polls[0] += list(names) == ["_CM", "_TC"]
+        return polls[0] == 3
+
+    held = _Held(c, monkeypatch)
+    held.before("query_operands", third_poll)
+    in_loop(_fly(flyer, np.cumsum(np.full(3000, 20.0)), 2))
+    assert held.reached.wait(10)
+    in_loop(flyer.stop())  # ST A, while the stream waits on the link
+    held.go()
+    deadline = time.monotonic() + 10
+    while "CD 0=0" not in [t for _, t in sim.command_log]:  # the stream's own end
+        assert time.monotonic() < deadline
+        threading.Event().wait(0.005)
+    sent = [t for _, t in sim.command_log]
+    after = sent[sent.index("ST A") :]
+    assert [t for t in after if t.startswith("CD")] == ["CD 0=0"]

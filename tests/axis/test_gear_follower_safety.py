@@ -14,7 +14,7 @@ import pytest
 import galil
 from galil import Line
 from galil.errors import InvalidArgument, LimitError, MotionError
-from galil.testing import nothing_sent, sim_of
+from galil.testing import nothing_sent, sim_of, transcript
 
 
 # -- vector paths ---------------------------------------------------------------------------
@@ -164,3 +164,80 @@ def test_a_follower_that_still_follows_is_not_an_error(dmc: galil.Controller) ->
     r = dmc.B.move_by(400).wait()
     assert r.follower_final == {"A": 800}
     assert r.follower_stop_codes == {"A": 0}
+
+
+# -- a follower a limit dropped during a move nobody waited for -----------------------------
+def _drop_follower_unawaited(dmc: galil.Controller, limit: str) -> galil.Gearing:
+    """A geared to B at 2; a move of B that nobody waits for takes A into a limit (a soft
+    limit tightened after the move's check, or a limit switch pressed on the way), which
+    turns A's gearing off."""
+    gearing = dmc.A.gear_to("B", 2)
+    dmc.B.move_by(1000)  # A to 2000: not waited for
+    if limit == "soft":
+        dmc.A.soft_limits = (-1000, 1000)
+    else:
+        dmc.sleep(0.01)
+        sim_of(dmc).set_limit_switch("A", "forward", True)
+    dmc.sleep(2.0)
+    assert dmc.query_operands(["_BGB", "_SCA"]) == [0, 2]
+    return gearing
+
+
+_NEXT_MOTION: dict[str, Callable[[galil.Controller], object]] = {
+    "move": lambda dmc: dmc.B.move_by(-100),
+    "plan": lambda dmc: dmc.B.plan_by(-100),
+    "jog": lambda dmc: dmc.B.jog(-1000),
+    "increment": lambda dmc: dmc.B.increment(-100),
+    "speed schedule": lambda dmc: dmc.B.speed_schedule(-1000, [(500, 10_000)], speed=20_000),
+    "vector": lambda dmc: dmc.vector_move("BC", [Line(-100, 100)], speed=5000),
+    "contour": lambda dmc: dmc.contour("B", np.linspace(0, -100, 8), dt=4),
+}
+
+
+@pytest.mark.parametrize("limit", ["soft", "switch"])
+@pytest.mark.parametrize("motion", list(_NEXT_MOTION))
+def test_the_masters_next_motion_reports_a_follower_a_limit_dropped_unawaited_and_forgets_it(
+    dmc: galil.Controller, limit: str, motion: str
+) -> None:
+    # (it planned A from where it was geared: a move refused for A's soft limit, or one that
+    # reported the old stop code as its own, A's gearing still engaged in the library)
+    gearing = _drop_follower_unawaited(dmc, limit)
+    start = dmc.B.reference_position
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(MotionError) as caught:
+        _NEXT_MOTION[motion](dmc)
+    err = caught.value
+    assert err.axis == "A"
+    assert err.stop_codes == {"A": 2}
+    assert "A, geared to B" in str(err)
+    assert "nobody waited for" in str(err)
+    assert not gearing.engaged
+    assert dmc.B.reference_position == start
+
+
+def test_after_the_report_the_master_moves_without_the_dropped_follower(
+    dmc: galil.Controller,
+) -> None:
+    _drop_follower_unawaited(dmc, "soft")
+    a_at = dmc.A.reference_position
+    with pytest.raises(MotionError, match="nobody waited for"):
+        dmc.B.move_by(-100)
+    h = dmc.B.move_by(-100)
+    assert h.followers == ""  # not predicted any more
+    r = h.wait()
+    assert r.follower_stop_codes == {}
+    assert dmc.A.reference_position == a_at
+    dmc.A.move_by(-100).wait()  # not refused as geared either
+    assert dmc.A.reference_position == a_at - 100
+
+
+def test_a_follower_that_still_follows_adds_no_exchange_and_no_error_to_the_next_move(
+    dmc: galil.Controller,
+) -> None:
+    dmc.A.gear_to("B", 2)
+    dmc.B.move_by(400)  # not waited for, no limit on the way
+    dmc.sleep(1.0)
+    with transcript(dmc) as record:
+        h = dmc.B.move_by(-400)
+    assert len(record.lines) == 2  # the state query (the followers' on it), the move's line
+    assert h.followers == "A"
+    assert h.wait().follower_final == {"A": 0}
