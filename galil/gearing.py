@@ -191,16 +191,19 @@ def _gear_to(
         )
     _master_at_rest(link, master)
     source = "S" if master == "S" else f"C{master}"
-    link.command_line(
+    replies = link.command_line(
         [
             cmds.ga(model=model, **{follower: source}),
             cmds.gr(model=model, **{follower: q}),
+            cmds.mg_operand(f"_SC{follower}"),  # (what _SC says once it follows: dropped_by)
         ]
     )
     anchor = predict.GearFollower(
         q, master=round(m0), position=round(f0), resolution=model.gr_resolution
     )
+    code = sample_of(replies[-1])
     gear = GearLink(follower, master, q, anchor, display, travelled=round(m0))
+    gear.engaged_code = 0 if code is None else code
     tracker.engage(gear)
     return Gearing(link, tracker, gear)
 

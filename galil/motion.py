@@ -154,6 +154,10 @@ class GearLink:
             (``None`` while it holds).
         travelled: for ``"S"``, the master position the next sequence starts from (the S
             distance counted since engagement; each predicted sequence adds its length).
+        engaged_code: the follower's ``_SC`` read just after ``GR`` engaged it. What a
+            controller's ``_SC`` says while it follows is not documented (the simulator
+            answers its master's, 0 while that moves); if it still showed the limit of an
+            earlier stop, that code could not tell of a new one (:meth:`dropped_by`).
     """
 
     follower: str
@@ -163,6 +167,13 @@ class GearLink:
     display: Display | None = None
     released: int | None = None
     travelled: int = 0
+    engaged_code: int = 0
+
+    def dropped_by(self, code: int) -> bool:
+        """Whether the follower's stop code ``code`` says that a limit stopped it, and so
+        turned its gearing off: a limit's code (2, 3) other than the one it showed when the
+        gearing engaged (a code kept from before is no news)."""
+        return code in _LIMIT_CODES and code != self.engaged_code
 
     def positions(self, master: npt.ArrayLike) -> npt.NDArray[np.int64]:
         """The follower at each of ``master``'s positions (the anchor is left as it is)."""
@@ -413,7 +424,7 @@ def refuse_dropped(
     Raises:
         MotionError: naming the followers, their master and their stop codes.
     """
-    dropped = {f: c for f, c in stop_codes.items() if c in _LIMIT_CODES}
+    dropped = {f: c for f, c in stop_codes.items() if gears[f].dropped_by(c)}
     if not dropped:
         return
     if tracker is not None:
@@ -738,7 +749,7 @@ class MoveHandle:
         if tracker is None:
             return
         for f, code in codes.items():
-            if code in _LIMIT_CODES:
+            if self._followers[f].dropped_by(code):
                 tracker.release(self._followers[f])
 
     def wait(self, timeout: float | None = None, progress: bool = False) -> MoveResult:
@@ -822,7 +833,9 @@ class MoveHandle:
 
     def _raise_if_limited(self, result: MoveResult) -> None:
         limited = {a: c for a, c in result.stop_codes.items() if c in _LIMIT_CODES}
-        dropped = {f: c for f, c in result.follower_stop_codes.items() if c in _LIMIT_CODES}
+        dropped = {
+            f: c for f, c in result.follower_stop_codes.items() if self._followers[f].dropped_by(c)
+        }
         if not limited and not dropped:
             return
         parts = [f"{a}: {codes.stop_text(c)}" for a, c in limited.items()]

@@ -14,6 +14,7 @@ import pytest
 import galil
 from galil import Line
 from galil.errors import InvalidArgument, LimitError, MotionError
+from galil.sim.rooms.gearing import GearFeed
 from galil.testing import nothing_sent, sim_of, transcript
 
 
@@ -241,3 +242,20 @@ def test_a_follower_that_still_follows_adds_no_exchange_and_no_error_to_the_next
     assert len(record.lines) == 2  # the state query (the followers' on it), the move's line
     assert h.followers == "A"
     assert h.wait().follower_final == {"A": 0}
+
+
+def test_a_stop_code_a_follower_already_showed_when_geared_is_not_taken_for_a_drop(
+    dmc: galil.Controller, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # What _SC says while an axis follows is not documented: a controller that still showed
+    # the forward limit of an earlier stop must not make every move of the master a "drop"
+    # (refused, and the gearing forgotten while the controller still has it)
+    monkeypatch.setattr(GearFeed, "stop_code", lambda self, index: self.code if self.off else 2)
+    gearing = dmc.A.gear_to("B", 2)
+    dmc.B.move_by(400)  # not waited for, no limit on the way
+    dmc.sleep(1.0)
+    assert dmc.query_operands(["_SCA", "_RPA"]) == [2, 800]
+    r = dmc.B.move_by(-400).wait()
+    assert gearing.engaged
+    assert r.follower_stop_codes == {"A": 2}
+    assert r.follower_final == {"A": 0}
