@@ -17,7 +17,7 @@ from __future__ import annotations
 from galil import predict
 from galil.errors import InvalidArgument, LimitError
 from galil.link import CommandLink
-from galil.motion import Display, GearLink, MotionTracker, sample_of
+from galil.motion import Display, GearLink, MotionTracker, refuse_dropped, sample_of
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import format_number
 
@@ -85,6 +85,9 @@ class Gearing:
             InvalidArgument: the gearing is off, or the master is moving (the prediction of
                 its move would not know when the ratio changed).
             LimitError: a ratio beyond the model's range.
+            MotionError: a limit stopped the follower since, unseen, and the controller
+                turned its gearing off; nothing is sent, and the gearing is forgotten
+                (:func:`~galil.motion.refuse_dropped`).
         """
         q = _ratio(self._link, ratio)
         if q == 0:
@@ -98,8 +101,12 @@ class Gearing:
         _master_at_rest(self._link, self.master)
         model = self._link.model
         name = "_AVS" if self.master == "S" else f"_RP{self.master}"
-        (now,) = self._link.query_operands([name])
         gear = self._gear
+        now, code = self._link.query_operands([name, f"_SC{self.follower}"])
+        # (a limit that dropped it unseen: GR would engage it again, from where it stopped)
+        refuse_dropped(
+            self._link, self._tracker, {self.follower: gear}, {self.follower: round(code)}
+        )
         master_now = gear.travelled if self.master == "S" else round(now)
         self._link.command_line([cmds.gr(model=model, **{self.follower: q})])
         gear.anchor.follow([master_now])  # the controller carries on from the exact follower

@@ -130,6 +130,9 @@ def plan_position(
         x0: present position, counts.
         v0: present velocity, counts/sample (signed).
         target: end position, counts.
+            ``x0`` and ``target`` are on the engine's grid of 1/65536 count (a whole count
+            for a target), so a distance left is 0 or at least that: the final ramp of a
+            state already stopping is then at most a few times ``d``.
         v: slew speed, counts/sample (> 0).
         a: acceleration, counts/sample² (> 0).
         d: deceleration, counts/sample² (> 0).

@@ -259,3 +259,19 @@ def test_a_stop_code_a_follower_already_showed_when_geared_is_not_taken_for_a_dr
     assert gearing.engaged
     assert r.follower_stop_codes == {"A": 2}
     assert r.follower_final == {"A": 0}
+
+
+def test_a_new_ratio_for_a_follower_a_limit_dropped_unseen_is_refused_and_forgets_it(
+    dmc: galil.Controller,
+) -> None:
+    # (GR would have engaged it again from where the limit stopped it, the library's anchor
+    # still where it was geared: every later prediction of it off)
+    gearing = _drop_follower_unawaited(dmc, "switch")
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(MotionError) as caught:
+        gearing.set_ratio(3)
+    assert caught.value.axis == "A"
+    assert "nobody waited for" in str(caught.value)
+    assert not gearing.engaged
+    a_at = dmc.A.reference_position
+    dmc.B.move_by(-100).wait()  # no GR was sent: A stays where the limit stopped it
+    assert dmc.A.reference_position == a_at

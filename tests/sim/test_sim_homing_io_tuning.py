@@ -156,6 +156,26 @@ def test_placed_limit_switches_stop_motion_where_they_are_and_show_in_ts() -> No
     assert number(sim, "_SCA") == 3
 
 
+def _run_into_switch(step: float, distance: int) -> tuple[float, float, float]:
+    sim = SimController("DMC-4040")
+    sim.place_limit_switches("A", forward=500, reverse=-500)
+    ask(sim, f"PRA={distance};BGA")
+    for _ in range(round(3.0 / step)):
+        sim.advance(step)
+    return number(sim, "_SCA"), number(sim, "_RPA"), number(sim, "_TPA")
+
+
+@pytest.mark.parametrize("distance", [2000, -2000])
+def test_a_placed_switch_stops_a_move_however_time_is_advanced(distance: int) -> None:
+    # (one advance past the move's end used to miss the switch: the axis was checked only
+    # at the end of the step, at rest by then, and the move ran on to its target)
+    code = 2 if distance > 0 else 3
+    one_go = _run_into_switch(3.0, distance)
+    assert one_go[0] == code
+    assert abs(one_go[1]) < abs(distance)
+    assert _run_into_switch(0.001, distance) == one_go
+
+
 def test_cn_active_high_makes_an_untripped_switch_active() -> None:
     sim = SimController("DMC-4040")
     ask(sim, "CN 1")

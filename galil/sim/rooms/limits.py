@@ -213,7 +213,20 @@ class Limits(Room):
             s = self.axes[ax.letter]
             placed = s.forward_at is not None or s.reverse_at is not None
             if placed and ax.m.moving and not ax.limit_stop and not ax.contour:
-                out.append(lambda ax=ax: self._runs_into(ax) != 0)  # type: ignore[misc]
+                start = ax.physical
+                out.append(lambda ax=ax, start=start: self._fires(ax, start))  # type: ignore[misc]
+
+    def _fires(self, ax: Axis, start: int) -> bool:
+        """Whether ``ax`` has run into a placed switch since the step began at ``start``: it
+        moves towards an active switch now, or it has entered a switch's side since (a step
+        may end where the motion does, at rest beyond the switch; the bisection then finds
+        the sample it entered, still moving)."""
+        if self._runs_into(ax):
+            return True
+        s, now = self.axes[ax.letter], ax.physical
+        if s.forward_at is not None and start < s.forward_at <= now:
+            return True
+        return s.reverse_at is not None and start > s.reverse_at >= now
 
     def _runs_into(self, ax: Axis) -> int:
         """2 or 3 when ``ax`` moves towards an active limit switch, else 0."""
