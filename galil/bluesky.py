@@ -92,6 +92,9 @@ async def _acquire(address: str, mock: bool) -> AsyncController:
     key = (loop, f"mock:{address}" if mock else address)
     entry = _shared.get(key)
     if entry is None or (entry.connecting.done() and _unusable(entry.connecting)):
+        if entry is not None and _connected(entry.connecting):
+            # (its sync side was closed directly: end its worker's threads too)
+            await entry.connecting.result().aclose()
         target = _mock_address(address) if mock else address
         entry = _Shared(loop.create_task(aio_connect(target)))
         _shared[key] = entry
@@ -105,8 +108,13 @@ async def _acquire(address: str, mock: bool) -> AsyncController:
         raise
 
 
+def _connected(task: asyncio.Task[AsyncController]) -> bool:
+    """Whether ``task`` (done) connected a controller, closed since or not."""
+    return not task.cancelled() and task.exception() is None
+
+
 def _unusable(task: asyncio.Task[AsyncController]) -> bool:
-    return task.cancelled() or task.exception() is not None or task.result().closed
+    return not _connected(task) or task.result().closed
 
 
 async def _release(controller: AsyncController) -> None:
@@ -128,7 +136,8 @@ async def release_all() -> None:
         if key[0] is not loop:
             continue
         del _shared[key]
-        if entry.connecting.done() and not _unusable(entry.connecting):
+        if entry.connecting.done() and _connected(entry.connecting):
+            # (aclose even if the sync side was closed directly: it ends the worker's threads)
             await entry.connecting.result().aclose()
 
 

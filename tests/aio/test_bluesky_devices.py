@@ -525,3 +525,20 @@ def test_the_flyers_stop_during_a_flight_ends_its_stream(
     sent = [t for _, t in sim.command_log]
     after = sent[sent.index("ST A") :]
     assert [t for t in after if t.startswith("CD")] == ["CD 0=0"]
+
+
+# -- a shared controller whose sync side was closed directly -------------------------------
+def test_a_shared_controller_closed_behind_the_devices_back_still_ends_its_worker(
+    engine: RunEngine, server: SimTcpServer
+) -> None:
+    first = motor(server.url)
+    controller = first.controller
+    controller.sync.close()  # (not aclose(): the worker's threads stay up)
+    assert not controller.worker.closed
+    second = motor(server.url, name="y")  # a new connection replaces the closed one
+    replacement = second.controller
+    assert replacement is not controller
+    assert controller.worker.closed
+    replacement.sync.close()
+    in_loop(release_all())
+    assert replacement.worker.closed
