@@ -23,7 +23,13 @@ import logging
 import threading
 from collections.abc import Callable
 
-from galil.errors import GalilConnectionError, GalilError, InvalidArgument, ProtocolError
+from galil.errors import (
+    GalilConnectionError,
+    GalilError,
+    GalilTimeoutError,
+    InvalidArgument,
+    ProtocolError,
+)
 from galil.link import Link, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.handles import parse_th
@@ -129,6 +135,14 @@ class Interrupts:
         except (GalilError, ValueError) as exc:
             with contextlib.suppress(GalilError, OSError):
                 handle.close()
+            if isinstance(exc, GalilTimeoutError):
+                # (a controller with no handle AVAILABLE ignores a UDP handle's packets)
+                raise link.error(
+                    GalilTimeoutError,
+                    f"the new handle for interrupts had no answer to MG _WH in {link.timeout:g} s:"
+                    " the controller may have no free Ethernet handle (TH lists them; close"
+                    " another connection to it, or free a stale handle with IHm=>-1)",
+                ) from exc
             if isinstance(exc, GalilError):
                 raise
             raise link.error(ProtocolError, f"MG _WH answered {exc}") from exc

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import logging
+import socket
+import time
 from collections.abc import Iterator
 
 import pytest
 
 import galil
+from galil.errors import GalilTimeoutError
 from galil.link import read_reply
 from galil.sim.server import SimTcpServer
 from galil.testing import transcript
@@ -51,6 +54,25 @@ def test_interrupt_handles_do_not_run_out_over_many_connections() -> None:
         # (the TCP handles are freed when the server sees their sockets close, a moment later;
         # the UDP ones by the IH line, before close() returns)
         assert "UDP" not in server.controller.describe_handles()
+
+
+def test_enable_with_every_handle_taken_says_so_and_leaves_the_link_working() -> None:
+    # (it said "no answer to b'MG _WH' on a secondary handle": the controller ignores the
+    # packets of a UDP peer when no handle is AVAILABLE)
+    with SimTcpServer(model="DMC-4040") as server, galil.connect(server.url, timeout=0.3) as dmc:
+        others = [socket.create_connection(server.address) for _ in range(7)]
+        try:
+            deadline = time.monotonic() + 5.0  # (until the server has accepted all seven)
+            while "AVAILABLE" in server.controller.describe_handles():
+                assert time.monotonic() < deadline
+                time.sleep(0.002)
+            with pytest.raises(GalilTimeoutError, match="no free Ethernet handle"):
+                dmc.interrupts.enable(axes="A")
+            assert not dmc.interrupts.enabled
+            assert dmc.query_operands(["_TPA"]) == [0]
+        finally:
+            for sock in others:
+                sock.close()
 
 
 def test_interrupts_come_back_after_a_reconnect() -> None:

@@ -277,6 +277,10 @@ class UdpTransport(TransportBase[socket.socket]):
 
     def _release(self, handle: socket.socket) -> None:
         self._writable.close()
+        # A thread blocked in recv() on this socket (an interrupt reader) wakes at once on
+        # Linux after a shutdown; close() alone would leave it to its timeout.
+        with contextlib.suppress(OSError):
+            handle.shutdown(socket.SHUT_RDWR)
         handle.close()
 
 

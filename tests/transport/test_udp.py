@@ -6,6 +6,7 @@ import math
 import queue
 import socket
 import threading
+import time
 
 import pytest
 
@@ -145,3 +146,35 @@ def test_a_udp_write_to_a_port_nothing_answers_raises_the_transports_error() -> 
             udp.write(b"MG 1\r")
     finally:
         udp.close()
+
+
+def test_closing_wakes_a_thread_blocked_reading() -> None:
+    # (the interrupt reader waited out its read timeout, so close() with interrupts on took
+    # a quarter of a second; here the read would wait 60 s)
+    peer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    peer.bind(("127.0.0.1", 0))
+    udp = UdpTransport(*peer.getsockname())
+    reading = threading.Event()
+    ended: queue.Queue[object] = queue.Queue()
+
+    def read() -> None:
+        reading.set()
+        try:
+            ended.put(udp.read(60.0))
+        except GalilConnectionError as exc:
+            ended.put(exc)
+
+    reader = threading.Thread(target=read)
+    reader.start()
+    try:
+        assert reading.wait(10.0)
+        time.sleep(0.05)  # (into recv: a read begun after close() fails at once anyway)
+        udp.close()
+        reader.join(timeout=10.0)
+        assert not reader.is_alive()
+        result = ended.get_nowait()
+        assert result == b"" or isinstance(result, GalilConnectionError)
+    finally:
+        udp.close()
+        reader.join()
+        peer.close()
