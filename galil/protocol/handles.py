@@ -7,9 +7,13 @@ A controller answers ``TH`` with its own address, then one line per handle::
     IHB UDP PORT 23 TO IP ADDRESS 10,0,51,81 PORT 3298
     IHC AVAILABLE
 
-(the form :mod:`galil.sim` answers with; a real controller's wording was not checked here). A
-line in any other form (a handle being opened, another firmware's wording) is left out: a
-caller that looks for a handle it knows then does not find it, and leaves it alone.
+This is the form of the DMC-4103 command reference's TH example ("IHA TCP PORT 1050 TO IP
+ADDRESS 10,51,0,89 PORT 1000", "IHG AVAILABLE"; docs/decisions/0025), and the simulator's.
+That the first port is the controller's and the last the peer's is read from the example,
+not stated there. A line in any other form (a handle being opened, another firmware's
+wording) is left out: a caller that looks for a handle it knows then does not find it, and
+leaves it alone. The reference's remark: with no handle AVAILABLE the controller accepts no
+more TCP or UDP connections.
 """
 
 from __future__ import annotations
