@@ -659,13 +659,15 @@ class Axis:
     kd = Setting("KD", cmds.kd, float)
     """``KD``: derivative gain."""
     stepper_smoothing = Setting("KS", cmds.ks, float)
-    """``KS``: smoothing of a stepper's step pulses (0.25 .. 64)."""
+    """``KS``: smoothing of a stepper's step pulses (``model.ks_range``: 0.25 .. 64 on the
+    40x0, 0.5 .. 64 on the 41x3)."""
     integrator_limit = Setting("IL", cmds.il, float)
-    """``IL``: integrator limit, volts."""
+    """``IL``: integrator limit, volts (negative on the 41x3: frozen during a move)."""
     torque_limit = Setting("TL", cmds.tl, float)
     """``TL``: torque (output) limit, volts."""
     error_limit = Setting("ER", cmds.er, whole)
-    """``ER``: position-error limit, counts."""
+    """``ER``: position-error limit, counts (on the 41x3 also 0, error output on, and -1,
+    off)."""
     off_on_error = Setting("OE", cmds.oe, whole)
     """``OE``: 0 off, 1 on position error / amplifier error / abort, 2 on limits, 3 all."""
     brush = Setting("BR", cmds.br, whole)

@@ -80,7 +80,9 @@ _OP_ASSUMPTION = (
     "OP fields: 8-bit banks (OP n0,n1: outputs 1-8, 9-16). Sourced only for outputs 1-8 (DMC-3425"
     " user manual p.180: 'OP m,a,b,c,d', m = outputs 1-8, a-d = extended I/O 17-80 in 16-bit"
     " groups) and for the RIO (IRTF notes: 'OP $00,$01' sets DO8); how a DMC with 16 general"
-    " outputs takes outputs 9-16 is not found, and extended I/O (CO) is not modelled"
+    " outputs takes outputs 9-16 is not found for this family (the DMC-4103 reference's OP"
+    " takes one 16-bit field, 'General Outputs 1-16'; its page lists other families, but"
+    " its table is the 4103's), and extended I/O (CO) is not modelled"
 )
 
 
@@ -103,7 +105,9 @@ class ModelSpec:
             minimum scale with it (:meth:`accel_resolution`, :meth:`accel_min`).
         sp_max, sp_resolution: SP/JG maximum and step in counts/s at TM 1000. SP and JG stay
             in counts/s at any TM; the step scales with it (:meth:`speed_resolution`).
-        cd_max: largest |CD| increment per segment.
+        cd_max: largest CD increment per segment.
+        cd_min: smallest (most negative) CD increment; ``None`` means ``-cd_max``. See
+            :attr:`cd_range`.
         dt_range: allowed DT exponents (segment = 2**n samples).
         contour_buffer: contour segments the controller can queue (``_CM`` when empty).
         contour_dt_suffix: ``CD`` takes a segment's own DT as ``=n`` and ``CD 0=0`` ends
@@ -160,6 +164,8 @@ class ModelSpec:
         io_first: number of the first digital input, output and analog channel: 1 on DMC
             controllers (``@IN[1]``), 0 on the RIO (``@IN[0]``) (gclib field comments; EPICS).
         digital_inputs, digital_outputs: general-purpose digital inputs and outputs.
+        op_bits: outputs one ``OP`` field sets: 8 (``OP n0,n1``, 8-bit banks) or 16 (one
+            field for outputs 1-16, as the DMC-4103 reference's ``OP n``).
         analog_inputs: analog inputs (``@AN[n]``).
         analog_outputs: analog outputs (``AO n,v``); 0 where the model has none we know of.
         analog_in_range, analog_out_range: volts at the default AQ/DQ setting.
@@ -175,8 +181,11 @@ class ModelSpec:
             (DMC-1700/1800, 18x2) take KI up to 2047.875 in steps of 1/128
             (``_OPTIMA_KI_MAX``); the DMC-1500 is assumed to.
         ks_range: stepper smoothing KS (40x0 user manual: 0.25 ... 64).
-        il_max, tl_max: integrator and torque limits in volts.
-        er_max: largest position-error limit (ER) in counts.
+        il_min, il_max: integrator limit (IL) range in volts; a negative IL freezes the
+            integrator during a move where the model takes one (4103 reference).
+        tl_max: torque limit (TL) in volts, from 0.
+        er_min, er_max: position-error limit (ER) range in counts (4103 reference: ER 0
+            turns the error output on, ER -1 off).
         hv_default: HV (homing speed) at power-on, counts/s.
         homing_stages: stages of HM on a servo axis (3: find the index last).
         burn_timeout: seconds to wait for BN/BP/BV (flash writes; EPICS waits up to 3 s).
@@ -196,6 +205,7 @@ class ModelSpec:
     sp_max: int = 22_000_000
     sp_resolution: int = 2
     cd_max: int = 32_000
+    cd_min: int | None = None
     dt_range: tuple[int, int] = (1, 8)
     contour_buffer: int = 511
     contour_dt_suffix: bool = True
@@ -209,6 +219,9 @@ class ModelSpec:
     # adjustable families are assumed to share the 40x0's.
     tm_min_by_axes: tuple[float, float, float, float] = (62.5, 125.0, 156.25, 187.5)
     tm_max: float = 20000.0
+    # gclib gclibo.c GRecordRate: "if (period_arg < 2) period_arg = 2; //lowest non-zero DR"
+    # for the DMC40, DMC500 and RIO (8 for the DMC41/DMC21, 4 for the DMC3). The 30,000 top
+    # is the 4103 reference's; for the others it is assumed.
     dr_range: tuple[int, int] = (2, 30000)
     label_length: int = 7  # "#" and up to seven characters (40x0 user manual)
     variable_length: int = 8  # up to eight characters, the first a letter
@@ -246,6 +259,7 @@ class ModelSpec:
     io_first: int = 1
     digital_inputs: int = 8
     digital_outputs: int = 8
+    op_bits: int = 8
     analog_inputs: int = 8
     analog_outputs: int = 0
     analog_in_range: tuple[float, float] = (-10.0, 10.0)
@@ -265,8 +279,10 @@ class ModelSpec:
     kd_max: float = 4095.875
     gain_resolution: float = 1 / 8
     ks_range: tuple[float, float] = (0.25, 64.0)
+    il_min: float = 0.0
     il_max: float = 9.998
     tl_max: float = 9.998
+    er_min: int = 1
     er_max: int = INT32_MAX
     hv_default: float = 256.0
     homing_stages: int = 3
@@ -284,6 +300,11 @@ class ModelSpec:
         """Smallest and largest TM (µs) for this model's axis count (normal firmware)."""
         index = min(max(len(self.axes) - 1, 0) // 2, 3)
         return self.tm_min_by_axes[index], self.tm_max
+
+    @property
+    def cd_range(self) -> tuple[int, int]:
+        """Smallest and largest CD increment per axis and segment."""
+        return (-self.cd_max if self.cd_min is None else self.cd_min), self.cd_max
 
     @property
     def sample_period(self) -> float:
@@ -546,7 +567,8 @@ _add(
         transports=_ETH_USB,
         qz=(4, 52, 26, 36),
         assumptions=(
-            "CD range ±32,000 from the 40x0 manual summary; the 18x6 page says ±32,762",
+            "CD range ±32,000 from the 40x0 manual summary; the 18x6 page says ±32,762, and the"
+            " 4103 reference's CD page (which lists the DMC4000) -32,768 ... 32,767",
             "DR at most 30,000 samples between records: not sourced",
             "SP maximum 22,000,000 c/s: BLISS's GalilDMC.set_velocity docstring (servo; 6,000,000"
             " for steppers, not modelled), no 40x0 reference page seen",
@@ -587,12 +609,27 @@ _add(
             "sp_max": 15_000_000,
             "tm_min_by_axes": (125.0, 250.0, 375.0, 500.0),
             "tm_max": 5000.0,
+            # DMC-4103 command reference, argument tables (min, max, default, resolution;
+            # docs/decisions/0025, round 2). CD: "n -32,768 32,767 0 1 Contour position
+            # segment". OP: "n 0 65,535 0 1 Decimal representation: General Outputs 1-16 / On
+            # a 1-4 axis controller, max is 255 ($FF) for outputs 1-8 only" (one field; "Set
+            # High Byte OP65280 (OP$FF00) 9-16"). KS: "n 0.5 64 2 1/32". IL: "n -9.9982
+            # 9.9982 9.9982 20/65,536 ... n< 0 (negative value) freezes the effect of the
+            # integrator during the move". TL: "n 0 9.9982 9.9982 20/65,536". ER: "n -1
+            # 2,147,483,647 16,384 1 ... n=0 enables Error output. n=-1 disables Error
+            # output". HV: "n 0 15,000,000 256 2" (servos), as SP, 256 at power-on.
+            "cd_max": 32_767,
+            "cd_min": -32_768,
+            "op_bits": 16,
+            "ks_range": (0.5, 64.0),
+            "il_min": -9.9982,
+            "il_max": 9.9982,
+            "tl_max": 9.9982,
+            "er_min": -1,
             "assumptions": (
-                "CD range ±32,000 as the 40x0 (its manual summary); the 4103 reference's CD"
-                " table says -32,768 ... 32,767, not applied yet (docs/decisions/0025)",
-                "one SP/JG maximum for every axis: the 4103 reference's 3,000,000 counts/s for"
-                " stepper axes (MT ±2, ±2.5) is not enforced",
-                _OP_ASSUMPTION,
+                "one SP/JG/HV maximum for every axis: the 4103 reference's 3,000,000 counts/s"
+                " for stepper axes (MT ±2, ±2.5) is not enforced, because the range checks"
+                " know the model, not the motor type each axis has at that moment",
             ),
         }
     ),
@@ -634,9 +671,15 @@ _LAB_ASSUMPTIONS = (
     "KP, KI and KD ranges and steps as the DMC-40x0/41x3 (KI 0 ... 255.999 in 1/1024ths, KP"
     " and KD in 1/8ths): Galil's KI/KP/KD pages list this family among the models they apply"
     " to, but the tables seen are the 4103's",
-    "IL and TL 0 ... 9.998 V, ER 1 ... 2**31-1 counts: no firmware range found",
-    "HV 256 counts/s at power-on (the Optima stage-2 rate), HV range as SP",
-    "KS resolution 1/32 and default 2: the range 0.25 ... 64 is sourced (40x0 manual)",
+    "IL and TL 0 ... 9.998 V, ER 1 ... 2**31-1 counts as the 40x0: the 4103 reference's IL,"
+    " TL and ER pages list this family, but their tables (IL ±9.9982, TL 0 ... 9.9982, ER"
+    " -1 ... 2**31-1) are the 4103's",
+    "HV 256 counts/s at power-on, HV range as SP: the 4103 reference's HV table says so"
+    " (0 ... 15,000,000, default 256) and its page lists this family, but the table is the"
+    " 4103's",
+    "KS 0.25 ... 64 (40x0 manual) in steps of 1/32, default 2: the 4103 reference's KS table"
+    " gives that step and default (and a 0.5 minimum) and its page lists this family, but"
+    " the table is the 4103's",
     "BN/BP/BV finish within 3 s (EPICS's timeout for them); real durations unknown",
     "no analog outputs on DMC motion controllers (the 40x0 command reference has no @AO)",
     _OP_ASSUMPTION,

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import pytest
 
+from galil import predict
 from galil.errors import InvalidArgument, LimitError
 from galil.models import INT32_MAX, MODELS, get_model, parse_identity
+from galil.protocol import commands as cmds
 from galil.testing import nothing_sent, simulated
 
 
@@ -131,3 +133,65 @@ def test_the_accelera_gains_are_the_command_references() -> None:
         assert (m.kp_max, m.ki_max, m.kd_max) == (1023.875, 255.999, 4095.875)
         assert (m.gain_resolution, m.ki_resolution) == (1 / 8, 1 / 1024)
         assert not [a for a in m.assumptions if "KI" in a or "KD" in a]
+
+
+def test_the_41x3_cd_range_is_its_command_references() -> None:
+    # DMC-4103 reference, CD: "n -32,768 32,767 0 1 Contour position segment" (round 2 of
+    # docs/decisions/0025); the 40x0 keeps ±32,000 and the 18x6 ±32,762. The host's builder,
+    # the simulator and the predictor all read model.cd_range.
+    m = get_model("DMC-4143")
+    assert m.cd_range == (-32_768, 32_767)
+    assert get_model("DMC-4040").cd_range == (-32_000, 32_000)
+    assert get_model("DMC-1806").cd_range == (-32_762, 32_762)
+    assert cmds.cd(A=32_767, B=-32_768, model=m).text == "CD 32767,-32768"
+    for bad in (32_768, -32_769):
+        with pytest.raises(LimitError):
+            cmds.cd(A=bad, model=m)
+    with pytest.raises(LimitError):
+        cmds.cd(A=32_767, model=get_model("DMC-4040"))
+    predict.check_contour([32_767, -32_768], 8, model="DMC-4143")
+    with pytest.raises(LimitError) as info:
+        predict.check_contour([5, -32_769], 8, model="DMC-4143")
+    assert (info.value.name, info.value.limit) == ("CD", -32_768)
+
+
+def test_the_41x3_loop_limits_are_its_command_references() -> None:
+    # DMC-4103 reference: KS "0.5 64 2 1/32"; IL "-9.9982 9.9982 9.9982" (negative freezes the
+    # integrator during a move); TL "0 9.9982 9.9982"; ER "-1 2,147,483,647 16,384" (0: error
+    # output on, -1: off).
+    m = get_model("DMC-4143")
+    assert m.ks_range == (0.5, 64.0)
+    assert (m.il_min, m.il_max, m.tl_max, m.er_min) == (-9.9982, 9.9982, 9.9982, -1)
+    assert cmds.il(A=-3, B=9.9982, model=m).text == "IL -3,9.9982"
+    assert cmds.tl(A=9.9982, model=m).text == "TLA=9.9982"
+    assert cmds.er(A=-1, B=0, model=m).text == "ER -1,0"
+    with pytest.raises(LimitError):
+        cmds.ks(A=0.25, model=m)
+    with pytest.raises(LimitError):
+        cmds.il(A=-10, model=m)
+    forty = get_model("DMC-4040")  # unchanged: no 40x0 page gives these
+    assert cmds.ks(A=0.25, model=forty).text == "KSA=0.25"
+    for build in (lambda: cmds.il(A=-3, model=forty), lambda: cmds.er(A=0, model=forty)):
+        with pytest.raises(LimitError):
+            build()
+    with simulated("DMC-4143") as dmc:
+        dmc.A.integrator_limit = -3
+        dmc.A.error_limit = -1
+        assert dmc.A.integrator_limit == -3
+        assert dmc.A.error_limit == -1
+        with nothing_sent(dmc), pytest.raises(LimitError, match="KS"):
+            dmc.A.stepper_smoothing = 0.25
+
+
+def test_the_41x3_op_takes_one_field_for_all_its_outputs() -> None:
+    # DMC-4103 reference, OP: "n 0 65,535 0 1 Decimal representation: General Outputs 1-16 /
+    # On a 1-4 axis controller, max is 255 ($FF) for outputs 1-8 only"; "Set High Byte
+    # OP65280 (OP$FF00)" sets 9-16.
+    eight = get_model("DMC-4183")
+    assert eight.op_bits == 16
+    assert cmds.op(65_280, model=eight).text == "OP 65280"
+    with pytest.raises(InvalidArgument):
+        cmds.op(0, 255, model=eight)
+    with pytest.raises(LimitError):
+        cmds.op(256, model=get_model("DMC-4143"))
+    assert cmds.op(0, 255, model=get_model("DMC-4080")).text == "OP 0,255"  # 8-bit banks

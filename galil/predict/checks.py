@@ -714,15 +714,16 @@ def _check_segment_ranges(
             segment=i,
         )
     # Not np.abs: the most negative int64 has no positive counterpart and stays negative.
-    bad = np.flatnonzero((c > spec.cd_max) | (c < -spec.cd_max))
+    cd_lo, cd_hi = spec.cd_range
+    bad = np.flatnonzero((c > cd_hi) | (c < cd_lo))
     if bad.size:
         i = int(bad[0])
         raise LimitError(
             f"CD {int(c[i])} (segment {i}, t={starts[i] * ts:.6g} s) is outside"
-            f" ±{spec.cd_max} on {spec.name}",
+            f" {cd_lo}..{cd_hi} on {spec.name}",
             name="CD",
             value=int(c[i]),
-            limit=spec.cd_max,
+            limit=cd_hi if c[i] > cd_hi else cd_lo,
             time=float(starts[i] * ts),
             sample=int(starts[i]),
             axis=axis,

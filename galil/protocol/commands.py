@@ -488,7 +488,7 @@ def _accel_floor(model: ModelSpec) -> float:
 def _checker(kind: str, model: ModelSpec | None) -> _Checker:
     key: tuple[object, ...] = (kind,)
     if model is not None:
-        key = (kind, model.name, model.ac_min, model.ac_max, model.sp_max, model.cd_max)
+        key = (kind, model.name, model.ac_min, model.ac_max, model.sp_max, *model.cd_range)
         key += (*model.it_range, model.li_max, model.gr_max)
     found = _CHECKERS.get(key)
     if found is not None:
@@ -513,8 +513,8 @@ def _checker(kind: str, model: ModelSpec | None) -> _Checker:
         it_lo, it_hi = IT_RANGE if model is None else model.it_range
         found = _Checker(kind, it_lo, it_hi, model, integer=False)
     elif kind == "CD":
-        hi = INT32_MAX if model is None else model.cd_max
-        found = _Checker(kind, -hi, hi, model, integer=True)
+        lo, hi = (-INT32_MAX, INT32_MAX) if model is None else model.cd_range
+        found = _Checker(kind, lo, hi, model, integer=True)
     elif kind == "LI":
         hi = _DEFAULT_NAMES.li_max if model is None else model.li_max
         found = _Checker(kind, -hi, hi, model, integer=True)
@@ -765,8 +765,8 @@ def cd_rows(
     if not whole:
         raise InvalidArgument("CD increments must be whole numbers")
     c = c.astype(np.int64)
-    hi = INT32_MAX if model is None else model.cd_max
-    bad = np.flatnonzero(((c > hi) | (c < -hi)).any(axis=1))
+    lo, hi = (-INT32_MAX, INT32_MAX) if model is None else model.cd_range
+    bad = np.flatnonzero(((c > hi) | (c < lo)).any(axis=1))
     if bad.size:
         row = c[int(bad[0])].tolist()
         cd(model=model, **dict(zip(letters, row, strict=True)))  # raises as cd() does
@@ -1624,15 +1624,17 @@ def kd(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
 
 
 def ks(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
-    """KS: stepper smoothing, ``model.ks_range`` (0.25 .. 64)."""
+    """KS: stepper smoothing, ``model.ks_range`` (0.25 .. 64 on the 40x0, 0.5 .. 64 on the
+    41x3)."""
     lo, hi = (model or _DEFAULT_SPEC).ks_range
     return _setting("KS", by_axis, model, _range_check("KS", lo, hi, model))
 
 
 def il(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
-    """IL: integrator limit in volts, 0 .. ``model.il_max``."""
+    """IL: integrator limit in volts, ``model.il_min`` .. ``model.il_max`` (0 .. 9.998 on the
+    40x0; ±9.9982 on the 41x3, where a negative IL freezes the integrator during a move)."""
     spec = model or _DEFAULT_SPEC
-    return _setting("IL", by_axis, model, _range_check("IL", 0, spec.il_max, model))
+    return _setting("IL", by_axis, model, _range_check("IL", spec.il_min, spec.il_max, model))
 
 
 def tl(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
@@ -1642,9 +1644,11 @@ def tl(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
 
 
 def er(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
-    """ER: position-error limit in counts, 1 .. ``model.er_max`` (whole counts)."""
+    """ER: position-error limit in counts, ``model.er_min`` .. ``model.er_max`` (whole counts;
+    from 1 on the 40x0, from -1 on the 41x3: ER 0 turns the error output on, ER -1 off)."""
     spec = model or _DEFAULT_SPEC
-    return _setting("ER", by_axis, model, _range_check("ER", 1, spec.er_max, model, integer=True))
+    check = _range_check("ER", spec.er_min, spec.er_max, model, integer=True)
+    return _setting("ER", by_axis, model, check)
 
 
 def _one_of(name: str, allowed: Iterable[float], model: ModelSpec | None) -> Callable[..., str]:
@@ -1733,16 +1737,19 @@ def cb(n: int, *, model: ModelSpec | None = None) -> Command:
 
 
 def op(*banks: int, model: ModelSpec | None = None) -> Command:
-    """OP: write the outputs as 8-bit banks (bank 0 = the first eight outputs).
+    """OP: write the outputs as banks of ``model.op_bits`` (bank 0 = the first outputs).
 
-    Sourced for the RIO and for outputs 1-8; the banks past them are an assumption (a model's
-    ``assumptions`` say so; the DMC-3425 manual gives extended I/O 16-bit fields).
+    8-bit banks are sourced for the RIO and for outputs 1-8; the banks past them are an
+    assumption (a model's ``assumptions`` say so; the DMC-3425 manual gives extended I/O
+    16-bit fields). The DMC-41x3 takes one field for all its outputs (``op_bits`` 16; the 4103
+    reference: "General Outputs 1-16", at most 255 on a 1-4 axis controller).
     """
     m = _io_counts(model)
-    nbanks = max(1, (m.digital_outputs + 7) // 8)
+    width = min(m.op_bits, max(8, m.digital_outputs))
+    nbanks = max(1, -(-m.digital_outputs // width))
     if not banks or len(banks) > nbanks:
         raise InvalidArgument(f"OP takes 1 .. {nbanks} bank values, got {len(banks)}")
-    fields = [_ranged(b, 0, 255, "OP bank", integer=True) for b in banks]
+    fields = [_ranged(b, 0, 2**width - 1, "OP bank", integer=True) for b in banks]
     return _plain("OP " + ",".join(fields))
 
 

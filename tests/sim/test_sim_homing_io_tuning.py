@@ -348,3 +348,44 @@ def test_burns_keep_the_controller_busy_for_a_while() -> None:
     assert sim.poll() == b""
     sim.advance(0.2)
     assert sim.poll() == b":"
+
+
+def test_the_41x3_simulator_follows_its_command_references_loop_limits() -> None:
+    # DMC-4103 reference (docs/decisions/0025, round 2): KS 0.5 ... 64; IL -9.9982 ... 9.9982
+    # and TL 0 ... 9.9982, both 9.9982 at power-on; ER -1 ... 2**31-1 (0: error output on,
+    # -1: off). The 40x0 keeps KS from 0.25, IL and ER from 0 and 1.
+    sim = SimController("DMC-4143")
+    assert ask(sim, "MG _ILA,_TLA,_ERA,_KSA") == " 9.9982 9.9982 16384.0000 2.0000\r\n:"
+    assert ask(sim, "KS 0.25") == "?"
+    assert ask(sim, "KS 0.5;ILA=-3;ILB=9.9982;TL 9.9982;ER -1,0") == ":::::"
+    assert ask(sim, "MG _ILA,_ERA,_ERB") == "-3.0000-1.0000 0.0000\r\n:"
+    assert ask(sim, "IL -10") == "?"
+    forty = SimController("DMC-4040")
+    assert ask(forty, "KS 0.25") == ":"
+    assert ask(forty, "IL -3") == "?"
+    assert ask(forty, "ER 0") == "?"
+
+
+def test_the_41x3_simulator_takes_cd_to_its_command_references_range() -> None:
+    # DMC-4103 reference, CD: "n -32,768 32,767" (the 40x0: ±32,000).
+    sim = SimController("DMC-4143")
+    assert ask(sim, "CMA;DT -1;CD 32767;CD -32768") == "::::"
+    assert ask(sim, "CD 32768") == "?"
+    assert ask(sim, "TC1") == " 41 Contouring record range error\r\n:"
+    forty = SimController("DMC-4040")
+    assert ask(forty, "CMA;DT -1;CD 32001") == "::?"
+
+
+def test_the_41x3_simulator_takes_op_as_one_field_for_outputs_1_to_16() -> None:
+    # DMC-4103 reference, OP: "General Outputs 1-16", "Set High Byte OP65280 (OP$FF00)" sets
+    # 9-16 and clears 1-8; at most 255 on a 1-4 axis controller.
+    sim = SimController("DMC-4183")
+    assert ask(sim, "OP 1;OP $FF00") == "::"
+    assert ask(sim, "MG @OUT[1],@OUT[8],@OUT[9],@OUT[16],_OP0") == (
+        " 0.0000 0.0000 1.0000 1.0000 65280.0000\r\n:"
+    )
+    assert ask(sim, "OP 0,255") == "?"
+    four = SimController("DMC-4143")
+    assert ask(four, "OP 255") == ":"
+    assert ask(four, "OP 256") == "?"
+    assert ask(SimController("DMC-4080"), "OP 0,255") == ":"  # 8-bit banks there (assumed)

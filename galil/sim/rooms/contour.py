@@ -161,7 +161,8 @@ class Contour(Room):
         incs: dict[str, int] = {}
         for ax, f in zip(axes.values(), fields, strict=False):
             value = i.evaluate(f) if f.strip() else 0.0
-            if abs(value) > self.machine.spec.cd_max or value != int(value):
+            lo, hi = self.machine.spec.cd_range
+            if not lo <= value <= hi or value != int(value):
                 raise Refused(41, "CD increment out of range")
             if value and not ax.contour:
                 raise Refused(41, "axis is not in contour mode")

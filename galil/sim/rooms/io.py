@@ -114,21 +114,24 @@ class IO(Room):
         self.outputs[k] = i.evaluate(fields[1]) != 0
         return ""
 
-    # OP n0,n1,...: 8-bit banks. Sourced for the RIO (IRTF notes) and for outputs 1-8 (DMC-3425
-    # manual); the banks past them are an assumption (models.py _OP_ASSUMPTION).
+    # OP n0,n1,...: banks of the model's op_bits. 8-bit banks are sourced for the RIO (IRTF
+    # notes) and for outputs 1-8 (DMC-3425 manual); the banks past them are an assumption
+    # (models.py _OP_ASSUMPTION). The DMC-41x3 takes one field for outputs 1-16, at most 255
+    # on a 1-4 axis controller (DMC-4103 command reference, OP).
     @handler("OP")
     def op(self, args: str) -> str:
         fields = split_fields(args)
         values = [None if not f.strip() else int(self.machine.interp.evaluate(f)) for f in fields]
-        if len(values) * 8 > max(8, len(self.outputs) + 7):
+        width = min(self.machine.spec.op_bits, max(8, len(self.outputs)))
+        if len(values) * width > max(width, len(self.outputs) + width - 1):
             raise Refused(50, "too many OP fields")
-        if any(v is not None and not 0 <= v <= 255 for v in values):
-            raise Refused(6, "OP bank is 0..255")
+        if any(v is not None and not 0 <= v < 2**width for v in values):
+            raise Refused(6, f"OP bank is 0..{2**width - 1}")
         for bank, v in enumerate(values):
             if v is None:
                 continue
-            for bit in range(8):
-                k = bank * 8 + bit
+            for bit in range(width):
+                k = bank * width + bit
                 if k < len(self.outputs):
                     self.outputs[k] = bool(v >> bit & 1)
         return ""

@@ -50,7 +50,9 @@ class Tuning(Room):
     """The motor type and the servo loop's settings of every axis, and the burns."""
 
     def reset(self) -> None:
-        self.axes = {letter: _Settings() for letter in self.machine.spec.axes}
+        # IL and TL start at their maxima (the DMC-4103 reference's defaults: 9.9982 both).
+        spec = self.machine.spec
+        self.axes = {letter: _Settings(il=spec.il_max, tl=spec.tl_max) for letter in spec.axes}
         #: How many times each burn ran since power-on (BN, BP, BV).
         self.burns = {"BN": 0, "BP": 0, "BV": 0}
 
@@ -133,7 +135,8 @@ class Tuning(Room):
 
     @handler("IL", Args.VALUES)
     def il(self, fields: Fields) -> str:
-        return self._setting("IL", fields, self._ranged(0, self.machine.spec.il_max, 1e-4), "1.4")
+        spec = self.machine.spec
+        return self._setting("IL", fields, self._ranged(spec.il_min, spec.il_max, 1e-4), "1.4")
 
     @handler("TL", Args.VALUES)
     def tl(self, fields: Fields) -> str:
@@ -141,7 +144,8 @@ class Tuning(Room):
 
     @handler("ER", Args.VALUES)
     def er(self, fields: Fields) -> str:
-        return self._setting("ER", fields, self._ranged(1, self.machine.spec.er_max, 1), "10.0")
+        spec = self.machine.spec
+        return self._setting("ER", fields, self._ranged(spec.er_min, spec.er_max, 1), "10.0")
 
     @handler("OE", Args.VALUES)
     def oe(self, fields: Fields) -> str:
