@@ -21,6 +21,7 @@ recomputed in ``after_step``/``service``, which run once the step is final.
 from __future__ import annotations
 
 import copy
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -135,11 +136,23 @@ class Servo:
         return self._time_base + (self.sample - self._sample_base) * self.ts
 
     def sync(self) -> None:
-        """Run the samples up to the clock's time."""
-        elapsed = self.clock.now() - self._time_base
-        target = self._sample_base + math.floor(elapsed / self.ts + 1e-9)
-        if target > self.sample:
-            self.run(target - self.sample)
+        """Run the samples up to the clock's time.
+
+        A program may change TM on the way: the run stops there, and the time left is
+        counted again in samples of the new period.
+        """
+        while True:
+            ts = self.ts
+            elapsed = self.clock.now() - self._time_base
+            target = self._sample_base + math.floor(elapsed / ts + 1e-9)
+            if target <= self.sample:
+                return
+            self.run(target - self.sample, stop=functools.partial(self._period_changed, ts))
+            if self.ts == ts:
+                return
+
+    def _period_changed(self, ts: float) -> bool:
+        return self.ts != ts
 
     def reseat(self, ax: Axis, position: int) -> None:
         """Start a fresh servo loop for ``ax`` at ``position`` (DP, SH, TM)."""

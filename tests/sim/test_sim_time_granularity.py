@@ -238,6 +238,14 @@ SCENARIOS: dict[str, Scenario] = {
             STATE,
         )
     ),
+    "TM changed by a program": Scenario(
+        (
+            program("#T", "WT 100", "TM 500", "t1=TIME", "WT 100", "t2=TIME", "EN"),
+            Cmd("XQ #T"),
+            Run(1024),
+            Cmd("MG t1,t2,TIME,_TM"),
+        )
+    ),
     # ---- limits ------------------------------------------------------------------------
     "forward switch, PR": Scenario(
         (place("A", forward=1500), Cmd("PR 3000;BG A"), Run(2000), STATE)
@@ -352,6 +360,7 @@ EXPECT: dict[str, bytes] = {
     "follower of an arc in and out of a switch": b" 2.0000",
     "jog turned back just short of a switch": b" 2.0000",
     "contour buffer runs dry": b" 42.0000",
+    "TM changed by a program": b" 500.0000",
 }
 
 
