@@ -258,6 +258,12 @@ SCENARIOS: dict[str, Scenario] = {
     ),
     "FL, PR": Scenario((Cmd("FL 1500;PR 3000;BG A"), Run(2000), STATE)),
     "BL, jog": Scenario((Cmd("BL -1500;JG -20000;BG A"), Run(2000), STATE)),
+    "FL lowered under a slow jog": Scenario(
+        (Cmd("JG 100;BG A"), Run(3000), Cmd("FL 200"), Run(300), STATE)
+    ),
+    "BL raised over a slow jog": Scenario(
+        (Cmd("JG -70;BG A"), Run(3000), Cmd("BL -100"), Run(300), STATE)
+    ),
     "gear follower into a switch": Scenario(
         (place("B", forward=1500), Cmd("GAB=A;GRB=2;PR 3000;BG A"), Run(2000), STATE)
     ),

@@ -184,7 +184,11 @@ class Limits(Room):
                 and not ax.contour
             ):
                 prof = ax.m.profiler
-                k = min(k, self._crossing(s, prof.reference, prof.preview(k)))
+                now = prof.reference
+                # Beyond a limit already (one set under the axis): moving outwards is the
+                # profiler's velocity, as after_step reads it, not the reference growing.
+                v = prof.preview_velocity(k) if not s.bl <= now <= s.fl else None
+                k = min(k, self._crossing(s, now, prof.preview(k), v))
         return k
 
     def _until_reversal(self, k: int) -> int:
@@ -209,14 +213,26 @@ class Limits(Room):
         return placed and ax.m.moving and not ax.limit_stop and not ax.contour
 
     @staticmethod
-    def _crossing(s: _AxisLimits, now: int, refs: npt.NDArray[np.int64]) -> int:
+    def _crossing(
+        s: _AxisLimits,
+        now: int,
+        refs: npt.NDArray[np.int64],
+        v: npt.NDArray[np.float64] | None = None,
+    ) -> int:
         """Samples until the path is beyond a soft limit moving outwards (large if never).
 
-        ``now`` is the reference before the first sample of ``refs``.
+        ``now`` is the reference before the first sample of ``refs``; ``v`` the profiler's
+        velocity at each sample. Without it, moving outwards is the reference growing away,
+        which it does at the first sample beyond a limit, so ``v`` is needed only when
+        ``now`` is beyond one already.
         """
         r = np.asarray(refs)
-        prev = np.concatenate(([now], r[:-1]))
-        beyond = ((r > s.fl) & (r > prev)) | ((r < s.bl) & (r < prev))
+        if v is None:
+            prev = np.concatenate(([now], r[:-1]))
+            out, back = r > prev, r < prev
+        else:
+            out, back = v > 0, v < 0
+        beyond = ((r > s.fl) & out) | ((r < s.bl) & back)
         hits = np.flatnonzero(beyond)
         return int(hits[0]) + 1 if hits.size else r.size + 1
 
