@@ -26,13 +26,16 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from galil.errors import CommandError, InvalidArgument
 from galil.models import ModelSpec
+from galil.predict.engine import AxisProfiler
 from galil.sim.clock import Clock
 from galil.sim.motion import AxisMotion
 from galil.sim.parse import Refused
 
-__all__ = ["MAX_CHUNK", "Axis", "Servo", "engine"]
+__all__ = ["MAX_CHUNK", "Axis", "Servo", "engine", "turns_back"]
 
 #: Longest run of servo samples evaluated in one vectorised step.
 MAX_CHUNK = 2048
@@ -78,6 +81,21 @@ def engine(call: Callable[[], None]) -> None:
         raise Refused(e.code or 1, e.text) from None
     except InvalidArgument as e:
         raise Refused(6, str(e)) from None
+
+
+def turns_back(prof: AxisProfiler, k: int) -> int:
+    """How many of the next ``k`` samples ``prof`` runs before it first moves against the
+    direction it sets out in (``k`` if it never does): a step that ends there keeps one
+    direction, so a watch on the position turns true at most once in it."""
+    if not prof.moving:
+        return k
+    v = prof.preview_velocity(k)
+    ahead = np.flatnonzero(v)
+    if ahead.size:
+        back = np.flatnonzero(v * v[ahead[0]] < 0)
+        if back.size:
+            return int(back[0])
+    return k
 
 
 class Servo:

@@ -186,6 +186,23 @@ SCENARIOS: dict[str, Scenario] = {
         ),
         lag=0.02,
     ),
+    "AD reached while a jog turns back": Scenario(
+        (
+            program(
+                "#M",
+                "JG 5000;BG A",
+                "WT 200",
+                "d=_RPA+20",
+                "JG -5000",
+                "AD d",
+                "t=TIME;p=_RPA",
+                "EN",
+            ),
+            Cmd("XQ #M"),
+            Run(1500),
+            Cmd("MG d,t,p"),
+        )
+    ),
     "AM S and WC in threads": Scenario(
         (
             program(

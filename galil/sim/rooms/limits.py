@@ -32,7 +32,7 @@ from galil.sim.interpreter import int32
 from galil.sim.machine import Room
 from galil.sim.parse import Refused, split_fields
 from galil.sim.registry import Args, OperandKind, handler, operand
-from galil.sim.servo import Axis
+from galil.sim.servo import Axis, turns_back
 
 __all__ = ["DEFAULT_HOME_EDGE", "DEFAULT_INDEX_PERIOD", "HomeGeometry", "Limits"]
 
@@ -196,14 +196,8 @@ class Limits(Room):
         an arc): the watch compares where the step began and ended, which holds only while
         the axis keeps one direction (it could enter a switch and leave it again unseen)."""
         for ax in self.machine.servo.axes.values():
-            if not self._watched(ax):
-                continue
-            v = ax.m.profiler.preview_velocity(k)
-            nonzero = np.flatnonzero(v)
-            if nonzero.size:
-                back = np.flatnonzero(v * v[nonzero[0]] < 0)
-                if back.size:
-                    k = min(k, int(back[0]))  # the samples before the first one going back
+            if self._watched(ax):
+                k = turns_back(ax.m.profiler, k)
         return k
 
     def _watched(self, ax: Axis) -> bool:
