@@ -307,10 +307,15 @@ class Machine:
                 return 1  # a running thread runs its commands sample by sample
             if th.wait.wake is not None:
                 k = min(k, th.wait.wake - now)
+            if th.wait.cut is not None:
+                k = th.wait.cut(k)
         for p in self.ports.ports.values():
             w = p.wait
-            if w is not None and w.wake is not None:
-                k = min(k, w.wake - now)
+            if w is not None:
+                if w.wake is not None:
+                    k = min(k, w.wake - now)
+                if w.cut is not None:
+                    k = w.cut(k)
         return k
 
     def _wait_watches(self, out: list[Watch]) -> None:

@@ -105,12 +105,16 @@ class Wait:
         then: run on release; its text is the reply (a ``CD`` that waited for room).
         exact: when true, the predicate can only change where a step ends anyway (a known
             profile end), so the loop needs no snapshot and bisection for it.
+        cut: ``cut(k)``, the longest step (of at most ``k`` samples) in which the predicate
+            turns true at most once, for one the bisection could not trust over a longer one
+            (``AD`` while an axis turns back).
     """
 
     predicate: Callable[[], bool] | None = None
     wake: int | None = None
     then: Callable[[], str] | None = None
     exact: Callable[[], bool] | None = None
+    cut: Callable[[int], int] | None = None
 
     def ready(self, sample: int) -> bool:
         """Whether the wait is over at ``sample``."""

@@ -21,17 +21,21 @@ recomputed in ``after_step``/``service``, which run once the step is final.
 from __future__ import annotations
 
 import copy
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from galil.errors import CommandError, InvalidArgument
 from galil.models import ModelSpec
+from galil.predict.engine import AxisProfiler
 from galil.sim.clock import Clock
 from galil.sim.motion import AxisMotion
 from galil.sim.parse import Refused
 
-__all__ = ["MAX_CHUNK", "Axis", "Servo", "engine"]
+__all__ = ["MAX_CHUNK", "Axis", "Servo", "engine", "turns_back"]
 
 #: Longest run of servo samples evaluated in one vectorised step.
 MAX_CHUNK = 2048
@@ -77,6 +81,21 @@ def engine(call: Callable[[], None]) -> None:
         raise Refused(e.code or 1, e.text) from None
     except InvalidArgument as e:
         raise Refused(6, str(e)) from None
+
+
+def turns_back(prof: AxisProfiler, k: int) -> int:
+    """How many of the next ``k`` samples ``prof`` runs before it first moves against the
+    direction it sets out in (``k`` if it never does): a step that ends there keeps one
+    direction, so a watch on the position turns true at most once in it."""
+    if not prof.moving:
+        return k
+    v = prof.preview_velocity(k)
+    ahead = np.flatnonzero(v)
+    if ahead.size:
+        back = np.flatnonzero(v * v[ahead[0]] < 0)
+        if back.size:
+            return int(back[0])
+    return k
 
 
 class Servo:
@@ -135,11 +154,23 @@ class Servo:
         return self._time_base + (self.sample - self._sample_base) * self.ts
 
     def sync(self) -> None:
-        """Run the samples up to the clock's time."""
-        elapsed = self.clock.now() - self._time_base
-        target = self._sample_base + math.floor(elapsed / self.ts + 1e-9)
-        if target > self.sample:
-            self.run(target - self.sample)
+        """Run the samples up to the clock's time.
+
+        A program may change TM on the way: the run stops there, and the time left is
+        counted again in samples of the new period.
+        """
+        while True:
+            ts = self.ts
+            elapsed = self.clock.now() - self._time_base
+            target = self._sample_base + math.floor(elapsed / ts + 1e-9)
+            if target <= self.sample:
+                return
+            self.run(target - self.sample, stop=functools.partial(self._period_changed, ts))
+            if self.ts == ts:
+                return
+
+    def _period_changed(self, ts: float) -> bool:
+        return self.ts != ts
 
     def reseat(self, ax: Axis, position: int) -> None:
         """Start a fresh servo loop for ``ax`` at ``position`` (DP, SH, TM)."""

@@ -10,9 +10,12 @@ test hook presses it (:meth:`Limits.set_switch`) or the motor is at or beyond th
 was placed at (:meth:`Limits.place`; none are placed by default). A tripped switch pulls its
 input low; ``CN`` field 1 says which level is *active* (-1, the default: low), so with ``CN 1``
 an untripped switch reads active, as on a real controller. ``_LFx``/``_LRx`` are 0 and the TS
-bits 3/2 are 0 while a switch is active. The home switch is a flag on one side of an edge
-(default: below -10,000 counts) that pulls the home input (TS bit 1, ``_HMx``) low; index
-pulses come every 4,000 counts from 0 (:class:`HomeGeometry`). Decision 0015.
+bits 3/2 are 0 while a switch is active. A watch ends a servo step at the sample an axis runs
+into a placed switch; while placed switches are about, a step also ends where such an axis
+turns back, so a path cannot enter a switch and leave it again inside one step unseen. The
+home switch is a flag on one side of an edge (default: below -10,000 counts) that pulls the
+home input (TS bit 1, ``_HMx``) low; index pulses come every 4,000 counts from 0
+(:class:`HomeGeometry`). Decision 0015.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ from galil.sim.interpreter import int32
 from galil.sim.machine import Room
 from galil.sim.parse import Refused, split_fields
 from galil.sim.registry import Args, OperandKind, handler, operand
-from galil.sim.servo import Axis
+from galil.sim.servo import Axis, turns_back
 
 __all__ = ["DEFAULT_HOME_EDGE", "DEFAULT_INDEX_PERIOD", "HomeGeometry", "Limits"]
 
@@ -87,6 +90,7 @@ class Limits(Room):
     def reset(self) -> None:
         self.axes = {letter: _AxisLimits() for letter in self.machine.spec.axes}
         self._switched = False  # any switch may be active: the service hook has work
+        self._placed = False  # any switch placed: the horizon hook has work
         self._soft = False  # any soft limit set: the horizon hook has work
         #: CN fields: limit polarity (-1 active low), home direction, latch edge, two more.
         self.cn = [-1.0, -1.0, -1.0, 0.0, 1.0]
@@ -121,10 +125,11 @@ class Limits(Room):
         s.home, s.home_pressed = geometry, pressed
 
     def _update_switched(self) -> None:
-        self._switched = self.cn[0] > 0 or any(
-            a.forward or a.reverse or a.forward_at is not None or a.reverse_at is not None
-            for a in self.axes.values()
+        self._placed = any(
+            a.forward_at is not None or a.reverse_at is not None for a in self.axes.values()
         )
+        pressed = any(a.forward or a.reverse for a in self.axes.values())
+        self._switched = self.cn[0] > 0 or self._placed or pressed
 
     # ---- used by other rooms -----------------------------------------------------------
     def check_start(self, ax: Axis, direction: float) -> None:
@@ -166,6 +171,8 @@ class Limits(Room):
 
     # ---- servo-loop hooks --------------------------------------------------------------
     def horizon(self, k: int) -> int:
+        if self._placed:
+            k = self._until_reversal(k)
         if not self._soft:
             return k
         for ax in self.machine.servo.axes.values():
@@ -177,18 +184,49 @@ class Limits(Room):
                 and not ax.contour
             ):
                 prof = ax.m.profiler
-                k = min(k, self._crossing(s, prof.reference, prof.preview(k)))
+                now = prof.reference
+                # Beyond a limit already (one set under the axis): moving outwards is the
+                # profiler's velocity, as after_step reads it, not the reference growing.
+                v = prof.preview_velocity(k) if not s.bl <= now <= s.fl else None
+                k = min(k, self._crossing(s, now, prof.preview(k), v))
         return k
 
+    def _until_reversal(self, k: int) -> int:
+        """End the step where an axis watched for a placed switch turns back (a jog reversed,
+        an arc): the watch compares where the step began and ended, which holds only while
+        the axis keeps one direction (it could enter a switch and leave it again unseen)."""
+        for ax in self.machine.servo.axes.values():
+            if self._watched(ax):
+                k = turns_back(ax.m.profiler, k)
+        return k
+
+    def _watched(self, ax: Axis) -> bool:
+        """Whether ``ax`` may run into a placed switch (the watch looks for it)."""
+        s = self.axes[ax.letter]
+        placed = s.forward_at is not None or s.reverse_at is not None
+        return placed and ax.m.moving and not ax.limit_stop and not ax.contour
+
     @staticmethod
-    def _crossing(s: _AxisLimits, now: int, refs: npt.NDArray[np.int64]) -> int:
+    def _crossing(
+        s: _AxisLimits,
+        now: int,
+        refs: npt.NDArray[np.int64],
+        v: npt.NDArray[np.float64] | None = None,
+    ) -> int:
         """Samples until the path is beyond a soft limit moving outwards (large if never).
 
-        ``now`` is the reference before the first sample of ``refs``.
+        ``now`` is the reference before the first sample of ``refs``; ``v`` the profiler's
+        velocity at each sample. Without it, moving outwards is the reference growing away,
+        which it does at the first sample beyond a limit, so ``v`` is needed only when
+        ``now`` is beyond one already.
         """
         r = np.asarray(refs)
-        prev = np.concatenate(([now], r[:-1]))
-        beyond = ((r > s.fl) & (r > prev)) | ((r < s.bl) & (r < prev))
+        if v is None:
+            prev = np.concatenate(([now], r[:-1]))
+            out, back = r > prev, r < prev
+        else:
+            out, back = v > 0, v < 0
+        beyond = ((r > s.fl) & out) | ((r < s.bl) & back)
         hits = np.flatnonzero(beyond)
         return int(hits[0]) + 1 if hits.size else r.size + 1
 
@@ -210,9 +248,7 @@ class Limits(Room):
         if not self._switched:
             return
         for ax in self.machine.servo.axes.values():
-            s = self.axes[ax.letter]
-            placed = s.forward_at is not None or s.reverse_at is not None
-            if placed and ax.m.moving and not ax.limit_stop and not ax.contour:
+            if self._watched(ax):
                 start = ax.physical
                 out.append(lambda ax=ax, start=start: self._fires(ax, start))  # type: ignore[misc]
 

@@ -16,7 +16,7 @@ from galil.sim.parse import Refused, split_fields
 from galil.sim.registry import Args, Wait, handler
 from galil.sim.rooms.contour import Contour
 from galil.sim.rooms.motion import Motion
-from galil.sim.servo import Axis
+from galil.sim.servo import Axis, turns_back
 
 __all__ = ["Trippoints"]
 
@@ -76,7 +76,14 @@ class Trippoints(Room):
                     return False
             return True
 
-        return Wait(reached)
+        def cut(k: int) -> int:
+            # The distance turns non-monotone where an axis turns back (a jog reversed): a
+            # step ends there, so the bisection finds the first sample it is reached.
+            for c in goal:
+                k = turns_back(all_axes[c].m.profiler, k)
+            return k
+
+        return Wait(reached, cut=cut)
 
     def _distances(self, args: str) -> dict[str, float]:
         i = self.machine.interp
