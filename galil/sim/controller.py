@@ -228,11 +228,17 @@ class SimController:
             servo = self._m.servo
             p = self._m.ports.get(port)
             servo.sync()
-            if not p.out:
-                ran = servo.run(math.floor(seconds / servo.ts + 1e-9), stop=lambda: bool(p.out))
-                # The period after the run (a program may have changed TM meanwhile).
-                clock.advance(ran * servo.ts)
-                servo.sync()
+            start = servo.now()
+            while not p.out:
+                # (a program may change TM on the way: the time left is counted again in
+                # samples of the new period)
+                ts = servo.ts
+                n = math.floor((seconds - (servo.now() - start)) / ts + 1e-9)
+                if n <= 0:
+                    break
+                servo.run(n, stop=lambda ts=ts: bool(p.out) or servo.ts != ts)  # type: ignore[misc]
+            clock.advance(servo.now() - start)
+            servo.sync()
             return p.take()
 
     # ---- test hooks --------------------------------------------------------------------

@@ -423,3 +423,16 @@ def _pieces(cuts: list[int]) -> Split:
 def test_uneven_pieces_agree_with_one_advance(name: str, cuts: list[int]) -> None:
     sc = SCENARIOS[name]
     assert play(sc, _pieces(cuts)) == play(sc, one_go)
+
+
+def test_advance_until_output_lets_the_whole_time_pass_when_a_program_changes_tm() -> None:
+    # (the samples were counted at the old period, and the clock then moved on by that many
+    # samples of the new one: half the time asked for passed at TM 500)
+    sim = SimController("DMC-4040")
+    sim.feed(program("#T", "WT 100", "TM 500", "EN").text.encode() + b"\r")
+    sim.feed(b"XQ #T\r")
+    start = sim.clock.now()
+    assert sim.advance_until_output(1.0) == b""
+    assert sim.clock.now() - start == pytest.approx(1.0, abs=0.001)
+    # ~0.1 s at TM 1000 (1024/s), the rest at TM 500 (2048/s)
+    assert sim.sample == pytest.approx(0.1 * 1024 + 0.9 * 2048, abs=8)
