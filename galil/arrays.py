@@ -23,7 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from galil.errors import InvalidArgument, LimitError, ProtocolError
-from galil.link import CommandLink
+from galil.link import CommandLink, check_flag
 from galil.models import INT32_MAX, INT32_MIN
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import parse_number
@@ -38,7 +38,7 @@ _UPLOAD_TIMEOUT = 10.0
 def _values(values: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
     try:
         data = np.asarray(values, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:  # OverflowError: 10**400
         raise InvalidArgument(f"values for {name}[] must be numbers: {exc}") from exc
     if data.ndim != 1 or data.size == 0:
         raise InvalidArgument(f"values for {name}[] must be a non-empty 1-D sequence")
@@ -108,6 +108,7 @@ class Arrays:
             InvalidArgument: a bad name, or a size outside the model's array space.
             CommandError: the controller refused (the name exists, no room left).
         """
+        check_flag(replace, "replace")
         command = cmds.dm(name, size, model=self.link.model)
         parts = [command]
         if replace and name in self.list():

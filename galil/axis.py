@@ -222,6 +222,8 @@ class Axis:
         :class:`UnitProfile`) for positions, speeds and times as Quantities; the arrays
         themselves stay in counts."""
         scale = self._scale
+        if not isinstance(profile, predict.Profile):
+            raise InvalidArgument(f"profile must be a galil.Profile, not {profile!r:.60}")
         if scale is None:
             return profile
         return profile.recast(UnitProfile, display=scale.display, scale=scale)
@@ -580,10 +582,12 @@ class Axis:
 
     def _schedule_pairs(self, changes: Any) -> list[tuple[float, float]]:
         try:
+            if isinstance(changes, (str, bytes, Mapping)):
+                raise TypeError("a string or a mapping")
             items = list(changes)
         except TypeError as exc:
             raise InvalidArgument(
-                f"changes must be a list of (at, speed), got {changes!r}"
+                f"changes must be a list of (at, speed), got {changes!r:.60}"
             ) from exc
         pairs = []
         for item in items:

@@ -36,7 +36,7 @@ from galil.handshake import identify
 from galil.homing import SwitchPolarity, read_polarity, set_polarity
 from galil.interrupts import Interrupts
 from galil.io import IO
-from galil.link import Link, check_count, check_timeout
+from galil.link import Link, check_count, check_flag, check_items, check_timeout
 from galil.messages import Messages
 from galil.models import Identity, ModelSpec, get_model
 from galil.motion import MotionTracker, MoveHandle, abort_all, motion_guard, stop_axes
@@ -114,7 +114,7 @@ class CoordinatedMotion:
         raise NotImplementedError
 
     def _prepared(self, axes: str, segments: Sequence[Segment], **options: Any) -> VectorStream:
-        chosen = [self.axis(a) for a in (list(axes) if isinstance(axes, str) else axes)]
+        chosen = [self.axis(a) for a in _axis_names(axes)]
         path_axes = [PathAxis(a.letter, a.scale, a.display) for a in chosen]
         options.setdefault("byte_rate", self.link.byte_rate)
         with user_units({a.letter: a for a in chosen}):
@@ -424,6 +424,7 @@ class Controller(CoordinatedMotion, LinkFacade):
             raise InvalidArgument(
                 f"targets must be a non-empty mapping of axis to value, got {targets!r}"
             )
+        check_flag(relative, "relative")
         axes = {name: self.axis(name) for name in targets}
         moves = resolve_moves(axes, targets, relative, overrides)
         by_letter = {a.letter: a for a in axes.values()}
@@ -555,8 +556,8 @@ class Controller(CoordinatedMotion, LinkFacade):
             LimitError: the path beyond the model's or the given limits (nothing sent).
             GalilTimeoutError: the contour not finished within ``timeout`` (axes stopped).
         """
-        names = list(axes) if isinstance(axes, str) else [str(a) for a in axes]
-        chosen = [self.axis(a) for a in names]
+        check_flag(progress, "progress")
+        chosen = [self.axis(a) for a in _axis_names(axes)]
         letters = "".join(a.letter for a in chosen)
         counts = path_to_counts(path, [a.scale for a in chosen], letters)
         stream = ContourStream(
@@ -705,6 +706,13 @@ def _stop_started(link: Link, tracker: MotionTracker) -> None:
             link.model_name,
             ", ".join(dict.fromkeys(failed)),
         )
+
+
+def _axis_names(axes: object) -> list[str]:
+    """The axes of a path or contour: a string of letters (``"AB"``) or a list of names."""
+    if isinstance(axes, str):
+        return list(axes)
+    return [str(a) for a in check_items(axes, "axes")]
 
 
 def _check_options(echo: object, handshake: object, unsolicited: object, model: object) -> None:

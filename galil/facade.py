@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from galil.errors import GalilConnectionError, InvalidArgument
-from galil.link import Link, WireLog, check_seconds
+from galil.link import Link, WireLog, check_flag, check_seconds
 from galil.messages import MessageCallback, MessageQueue, Messages
 from galil.models import ModelSpec
 from galil.protocol.commands import Command
@@ -196,7 +196,7 @@ class LinkFacade:
             names in :mod:`galil.protocol.records`), or a dict. ``galil.decode_fields(rec)``
             names its status bits, switches and stop codes.
         """
-        if as_dict:
+        if check_flag(as_dict, "as_dict"):
             return self.records_room.record_dict(axes, timeout=timeout)
         return self.records_room.record(axes, timeout=timeout)
 

@@ -74,6 +74,8 @@ class Gearing:
         Raises:
             InvalidArgument: the gearing is off.
         """
+        if not isinstance(master, predict.Profile):
+            raise InvalidArgument(f"master must be a galil.Profile, not {master!r:.60}")
         if not self.engaged:
             raise InvalidArgument(f"axis {self.follower} is not geared any more")
         return self._gear.profile(master)

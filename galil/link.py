@@ -23,9 +23,9 @@ import re
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Protocol, TypeVar
+from typing import Any, Protocol, TypeVar
 
 from galil.codes import parse_tc1
 from galil.errors import (
@@ -49,7 +49,10 @@ __all__ = [
     "Link",
     "WireCapture",
     "WireLog",
+    "check_callable",
     "check_count",
+    "check_flag",
+    "check_items",
     "check_seconds",
     "check_timeout",
     "check_wait_timeout",
@@ -100,6 +103,48 @@ def check_count(value: object, name: str) -> int:
     return value
 
 
+def check_flag(value: object, name: str) -> bool:
+    """``value`` if it is ``True`` or ``False``: a flag takes nothing else (``"no"`` is true,
+    ``None`` and ``0`` would be a guess).
+
+    Raises:
+        InvalidArgument: naming ``name``.
+    """
+    if value is not True and value is not False:
+        raise InvalidArgument(f"{name} must be True or False, not {value!r:.60}")
+    return value
+
+
+def check_items(value: object, name: str) -> list[Any]:
+    """The items of a list, tuple or other iterable given where several things are expected; a
+    string (one item, or characters?), a mapping or anything not iterable is refused.
+
+    Raises:
+        InvalidArgument: naming ``name``.
+    """
+    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, Iterable):
+        raise InvalidArgument(f"{name} must be a list, not {value!r:.60}")
+    return list(value)
+
+
+def check_callable(value: object, name: str) -> None:
+    """Refuse a callback that cannot be called (it would fail later, on another thread).
+
+    Raises:
+        InvalidArgument: naming ``name``.
+    """
+    if not callable(value):
+        raise InvalidArgument(f"{name} must be callable, not {value!r:.60}")
+
+
+def _finite(value: float) -> bool:
+    """``math.isfinite`` that says no to an int no float holds (10**400) rather than raise."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
 def check_seconds(value: object, name: str = "timeout", *, positive: bool = False) -> float:
     """The one check of every timeout, wait and pause in the public API: ``value`` must be a
     finite number of seconds >= 0 (``> 0`` with ``positive``: a reply timeout, a watchdog
@@ -115,7 +160,7 @@ def check_seconds(value: object, name: str = "timeout", *, positive: bool = Fals
     if (
         isinstance(value, bool)
         or not isinstance(value, (int, float))
-        or not math.isfinite(value)
+        or not _finite(value)
         or value < 0
         or (positive and value == 0)
     ):
@@ -203,6 +248,7 @@ class WireLog:
 
     def add(self, hook: WireHook) -> Callable[[], None]:
         """Call ``hook(direction, data)`` for each write and read; returns a remover."""
+        check_callable(hook, "hook")
         self.hooks = [*self.hooks, hook]  # copy-on-write: readers never see a half update
 
         def remove() -> None:
@@ -905,6 +951,7 @@ class Link(LinkCore):
             GalilTimeoutError: no complete reply within the timeout.
             GalilConnectionError: the link is closed or dead.
         """
+        check_flag(allow_compound, "allow_compound")
         cmd = _PARSED.get(text) if type(text) is str else None
         if cmd is None or (cmd.parts and not allow_compound):
             cmd = _one_command(text, allow_compound)
@@ -998,7 +1045,7 @@ class Link(LinkCore):
         if isinstance(parts, str):
             raise InvalidArgument("command_line takes a list of commands, not one string")
         singles: list[Command] = []
-        for p in parts:
+        for p in check_items(parts, "parts"):
             c = p if isinstance(p, Command) else _parse(p)
             if c.parts:
                 raise InvalidArgument(f"{c.text!r} is already compound; pass its parts")
@@ -1023,7 +1070,7 @@ class Link(LinkCore):
 
     def send_many(self, commands: Iterable[Command], *, timeout: float | None = None) -> list[str]:
         """Send prepared commands back to back (pipelined) and return every reply text."""
-        batch = tuple(commands)
+        batch = tuple(check_items(commands, "commands"))
         for c in batch:
             if not isinstance(c, Command):
                 raise InvalidArgument(f"send_many() takes Commands, not {type(c).__name__}")
@@ -1056,7 +1103,8 @@ class Link(LinkCore):
         The ``MG`` lines go out pipelined under one lock, so no other thread's command
         lands between them.
         """
-        names = list(names)
+        if type(names) is not list:  # (a list, as the rooms pass, costs nothing here)
+            names = check_items(names, "names")
         if not names:
             return []
         batches = cmds.mg_operand_lines(names, self._model.line_length if self._model else 80)

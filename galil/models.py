@@ -7,6 +7,8 @@ a guess; change the table, not the code, when a manual or a hardware log pins a 
 
 from __future__ import annotations
 
+import math
+import numbers
 import re
 from dataclasses import dataclass, field
 
@@ -84,6 +86,28 @@ _OP_ASSUMPTION = (
     " takes one 16-bit field, 'General Outputs 1-16'; its page lists other families, but"
     " its table is the 4103's), and extended I/O (CO) is not modelled"
 )
+
+
+def _check_tm(tm: object) -> float:
+    """A TM in microseconds: a positive, finite real number (not a bool).
+
+    Raises:
+        InvalidArgument: anything else.
+    """
+    if type(tm) is float and 0 < tm < math.inf:  # the usual case, at once (NaN fails too)
+        return tm
+    if isinstance(tm, bool) or not isinstance(tm, numbers.Real):
+        raise InvalidArgument(f"tm must be a number of microseconds, not {tm!r:.60}")
+    try:
+        value = float(tm)
+    except OverflowError:  # 10**400
+        value = math.inf
+    ok = math.isfinite(value) and value > 0
+    if not ok:
+        raise InvalidArgument(
+            f"tm must be a positive, finite number of microseconds, not {tm!r:.60}"
+        )
+    return value
 
 
 @dataclass(frozen=True)
@@ -318,12 +342,15 @@ class ModelSpec:
 
     def sample_period_for(self, tm: float) -> float:
         """Seconds per sample for a given TM (µs), honouring fixed-rate models."""
+        tm = _check_tm(tm)
         if not self.tm_adjustable:
             return self.sample_period
         return tm / 1_024_000.0
 
     def _tm_scale(self, tm: float | None) -> float:
         """1000 / TM for ``tm`` (default: the power-on TM); 1 where TM is fixed."""
+        if tm is not None:
+            tm = _check_tm(tm)
         if not self.tm_adjustable:
             return 1.0
         return _TM_REFERENCE / (self.tm_default if tm is None else tm)

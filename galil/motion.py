@@ -31,7 +31,7 @@ from galil.errors import (
     InvalidArgument,
     MotionError,
 )
-from galil.link import CommandLink, check_wait_timeout
+from galil.link import CommandLink, check_callable, check_flag, check_wait_timeout
 from galil.protocol import commands as cmds
 
 __all__ = [
@@ -772,6 +772,7 @@ class MoveHandle:
                 move's own axes are done, so nothing of the move is left moving.
         """
         check_wait_timeout(timeout)
+        check_flag(progress, "progress")
         duration = self.duration
         if timeout is None and math.isfinite(duration):
             timeout = duration * 1.5 + 2.0
@@ -862,6 +863,7 @@ class MoveHandle:
         simulator's manual clock (whoever waits does), so a callback may also run on the
         thread that calls :meth:`wait` or reads :attr:`done`.
         """
+        check_callable(callback, "callback")
         with self._lock:
             if not self._done:
                 self._callbacks.append(callback)

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from galil.errors import GalilTimeoutError, InvalidArgument
-from galil.link import CommandLink, check_seconds
+from galil.link import CommandLink, check_flag, check_seconds
 from galil.protocol import commands as cmds
 from galil.protocol.programs import check_program, program_lines
 from galil.routines import MARKER, Routines, split_program
@@ -125,6 +125,8 @@ class Programs:
             InvalidArgument: a line or the program breaks a rule of the model (nothing is
                 sent), a label of the library's routines, or a program of the user's running.
         """
+        check_flag(strip_comments, "strip_comments")
+        check_flag(pack, "pack")
         model = self.link.model
         try:
             text = _read_source(source)

@@ -46,7 +46,7 @@ from galil.protocol.records import (
 from galil.queues import Subscribers
 from galil.transport import HandleSource, Transport
 
-__all__ = ["READ_INTERVAL", "RecordCallback", "RecordStream", "Records"]
+__all__ = ["READ_INTERVAL", "TAKE_MAX", "RecordCallback", "RecordStream", "Records"]
 
 _LOG = logging.getLogger("galil.records")
 
@@ -54,6 +54,9 @@ _LOG = logging.getLogger("galil.records")
 #: reach ``get()`` and callbacks up to this late, and a fast stream costs the host one
 #: wake-up per interval rather than one per record.
 READ_INTERVAL = 0.02
+
+#: The most records :meth:`RecordStream.take` gathers into one array (12 days at 2 kHz).
+TAKE_MAX = 2**31 - 1
 
 RecordCallback = Callable[[np.void], None]
 Layout = tuple[int, int, int, int]
@@ -301,6 +304,9 @@ class RecordStream:
         ``timeout`` bounds the wait for each record.
         """
         check_count(n, "n")
+        if n > TAKE_MAX:
+            raise InvalidArgument(f"n must be at most {TAKE_MAX} records at once, not {n!r:.40}")
+        check_wait_timeout(timeout)
         first = self.get(timeout)
         out = np.empty(n, dtype=first.dtype)
         out[0] = first

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -270,6 +270,10 @@ def to_counts(
         InvalidArgument: no segments, a segment that is not a Line or Arc, a Line with the
             wrong number of components, wrong units, or an Arc on axes whose scales differ.
     """
+    if isinstance(segments, (str, bytes, Mapping)) or not isinstance(segments, Iterable):
+        raise InvalidArgument(
+            f"segments must be a list of galil.Line and galil.Arc, not {segments!r:.60}"
+        )
     segs = list(segments)
     if not segs:
         raise InvalidArgument("a path needs at least one segment")
@@ -388,16 +392,28 @@ class VectorPlan:
         out: FloatArray = self.counts.path / self.per_unit
         return out
 
+    def _profile(self, axis: str) -> predict.Profile:
+        try:
+            return self.profiles[axis]
+        except (KeyError, TypeError):  # TypeError: an unhashable key
+            raise KeyError(
+                f"{axis!r:.40} is not an axis of the path; its axes: {', '.join(self.profiles)}"
+            ) from None
+
     def position(self, axis: str) -> FloatArray:
-        """An axis's reference position at each sample, in its user unit (counts without)."""
-        p = self.profiles[axis]
+        """An axis's reference position at each sample, in its user unit (counts without).
+
+        Raises:
+            KeyError: ``axis`` is not one of the path's axes.
+        """
+        p = self._profile(axis)
         k, offset, _ = p.display if p.display is not None else (1.0, 0.0, "counts")
         out: FloatArray = offset + p.position / k
         return out
 
     def unit_of(self, axis: str) -> str:
-        """The unit :meth:`position` gives ``axis`` in."""
-        d = self.profiles[axis].display
+        """The unit :meth:`position` gives ``axis`` in (``KeyError`` as :meth:`position`)."""
+        d = self._profile(axis).display
         return "counts" if d is None else d[2]
 
     def plot(self, *, title: str | None = None) -> Figure:

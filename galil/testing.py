@@ -99,9 +99,12 @@ def transcript(controller: Controller) -> Iterator[Transcript]:
 
 
 # Lines that only read: operands, variables and array elements or sizes (MG), the program
-# (UL), array listings.
+# (UL), array listings, and the explanation of a '?' (TC1, and the quoted marker the link
+# sends behind it).
 _MG_ITEM = r"[_A-Za-z][_A-Za-z0-9]*(?:\[-?\d+\])?"
-_READ_ONLY = re.compile(rf"MG {_MG_ITEM}(?:\s*,\s*{_MG_ITEM})*|UL|LA|LV|QU [A-Za-z0-9\[\],]*|QZ")
+_READ_ONLY = re.compile(
+    rf"MG {_MG_ITEM}(?:\s*,\s*{_MG_ITEM})*|UL|LA|LV|QU [A-Za-z0-9\[\],]*|QZ|TC1|MG \"TCOK\d+\""
+)
 
 
 @contextlib.contextmanager

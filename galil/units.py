@@ -289,6 +289,10 @@ def signed_rate_counts(
 ) -> float:
     """A signed speed (power 1) or acceleration (power 2) as counts/s^power, through the
     ``scale`` of axis ``letter`` (``None``: plain counts; a Quantity is then refused)."""
+    if type(power) is not int or power not in (1, 2):
+        raise InvalidArgument(
+            f"power must be 1 (a speed) or 2 (an acceleration), not {power!r:.60}"
+        )
     if scale is not None:
         return scale.rate_to_counts(value, power, what)
     if is_quantity(value):

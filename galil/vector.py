@@ -28,7 +28,7 @@ import numpy as np
 
 from galil import predict
 from galil.errors import GalilError, InvalidArgument, LimitError
-from galil.link import CommandLink
+from galil.link import CommandLink, check_flag
 from galil.motion import (
     GearLink,
     MotionTracker,
@@ -302,7 +302,7 @@ class VectorStream:
                 model=model.name,
             )
         self.smoothing = smoothing
-        self.stream = bool(stream)
+        self.stream = check_flag(stream, "stream")
         self.speed_limits = self._limits(axis_speed, 1, "axis_speed", model.sp_max)
         self.accel_limits = self._limits(axis_accel, 2, "axis_accel", model.ac_max)
         letters = self.path.letters
@@ -353,6 +353,8 @@ class VectorStream:
         self, given: Mapping[str, object] | None, power: int, what: str, default: float
     ) -> list[float | None]:
         """Per-axis limits in counts, in the path's axis order (the model's by default)."""
+        if given is not None and not isinstance(given, Mapping):
+            raise InvalidArgument(f"{what} must be a mapping of axis to value, not {given!r:.60}")
         out: list[float | None] = [float(default)] * len(self.axes)
         by_letter = {a.letter: i for i, a in enumerate(self.axes)}
         for name, value in (given or {}).items():

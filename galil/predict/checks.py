@@ -16,7 +16,7 @@ import numpy.typing as npt
 
 from galil.errors import InvalidArgument, LimitError
 from galil.models import ETHERNET_BYTES_PER_S, ModelSpec, get_model
-from galil.predict.profile import Profile
+from galil.predict.profile import Profile, finite_number
 from galil.predict.smoothing import quantise_it
 
 __all__ = [
@@ -186,6 +186,9 @@ def check_parameter(
     tm: float | None = None,
 ) -> float:
     """Quantise and range-check one SP/JG/AC/DC/IT value (the LimitError names the axis)."""
+    if not isinstance(command, str):
+        raise InvalidArgument(f"cannot quantise {command!r:.60}; known: {', '.join(_COMMANDS)}")
+    value = finite_number(value, command)
     try:
         return quantise_value(command, value, model, tm=tm)
     except LimitError as exc:
@@ -641,7 +644,13 @@ def check_contour(
     spec = resolve_model(model)
     ts = spec.sample_period if sample_period is None else sample_period
     c = np.asarray(increments, dtype=np.int64).ravel()
-    n = np.broadcast_to(np.asarray(dt, dtype=np.int64), c.shape)
+    try:
+        n = np.broadcast_to(np.asarray(dt, dtype=np.int64), c.shape)
+    except OverflowError:  # an int no int64 holds (10**400)
+        low, high = spec.dt_range
+        raise LimitError(
+            f"DT {dt!r:.40} is outside {low}..{high}", name="DT", axis=axis, model=spec.name
+        ) from None
     lengths = np.left_shift(np.int64(1), np.clip(n, 0, 62))
     starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]) if c.size else np.zeros(0, np.int64)
     _check_segment_ranges(c, n, starts, spec, ts, axis)

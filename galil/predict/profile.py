@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import html
 import math
+import numbers
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
@@ -95,6 +96,24 @@ class _Pending:
             )
             self._arrays = {name: getattr(full, name) for name in _ARRAYS}
         return self._arrays
+
+
+def finite_number(value: object, name: str) -> float:
+    """``value`` as a float: a real number (not a bool) that is finite; an int no float holds
+    (10**400) is refused rather than overflowing.
+
+    Raises:
+        InvalidArgument: naming ``name``.
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise InvalidArgument(f"{name} must be a finite number, not {value!r:.60}")
+    try:
+        x = float(value)
+    except OverflowError:
+        x = math.inf
+    if not math.isfinite(x):
+        raise InvalidArgument(f"{name} must be a finite number, not {value!r:.60}")
+    return x
 
 
 @dataclass(frozen=True, eq=False)
@@ -277,6 +296,10 @@ class Profile:
 
     def with_units(self, counts_per_unit: float, unit: str, offset: float = 0.0) -> Profile:
         """The same profile, shown in ``unit`` (``counts = (x - offset) * counts_per_unit``)."""
+        counts_per_unit = finite_number(counts_per_unit, "counts_per_unit")
+        offset = finite_number(offset, "offset")
+        if not isinstance(unit, str):
+            raise InvalidArgument(f"unit must be a string, not {unit!r:.60}")
         if not (math.isfinite(counts_per_unit) and counts_per_unit != 0):
             raise InvalidArgument(
                 f"counts_per_unit must be finite and non-zero, not {counts_per_unit!r}"
@@ -293,8 +316,19 @@ class Profile:
         """Reference position at time(s) ``t`` (s), linearly interpolated between samples.
 
         Before 0 it is the start, after the end the final position.
+
+        Raises:
+            InvalidArgument: ``t`` is not a number of seconds (or an array of them), or is NaN.
         """
-        out = np.interp(np.asarray(t, dtype=np.float64), self.t, self.position)
+        if t is None or isinstance(t, (bool, np.bool_, str, bytes)):
+            raise InvalidArgument(f"t must be seconds, not {t!r:.60}")
+        try:
+            times = np.asarray(t, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            raise InvalidArgument(f"t must be seconds, not {t!r:.60}") from None
+        if np.isnan(times).any():
+            raise InvalidArgument(f"t must not be NaN, got {t!r:.60}")
+        out = np.interp(times, self.t, self.position)
         return float(out) if np.ndim(out) == 0 else out
 
     def plot(self, *, title: str | None = None, average: float = 0.004) -> Figure:

@@ -23,7 +23,7 @@ import enum
 import functools
 import math
 import re
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from numbers import Real
 from typing import ClassVar, NamedTuple
@@ -317,6 +317,11 @@ def _axes(model: ModelSpec | None) -> _Axes:
 def _axis_list(axes: str | Iterable[str], model: ModelSpec | None, extra: str = "") -> str:
     """Validate an axis list like ``"AC"`` (letters as given, no repeats)."""
     if not isinstance(axes, str):
+        if isinstance(axes, Mapping) or not isinstance(axes, Iterable):
+            raise InvalidArgument(f"axes must be letters such as 'AB', not {axes!r:.60}")
+        axes = list(axes)
+        if not all(isinstance(a, str) for a in axes):
+            raise InvalidArgument(f"axes must be letters such as 'AB', not {axes!r:.60}")
         axes = "".join(axes)
     table = _axes(model)
     seen: set[int | str] = set()
