@@ -193,8 +193,8 @@ class AsyncController(AsyncLinkFacade):
     plan = twin(_plan)
     vector_move = motion_twin(Controller.vector_move, AsyncVectorHandle).on_cancel(_stop_sequences)
     plan_vector = twin(_plan_vector)
-    stop = twin(Controller.stop)
-    abort = twin(Controller.abort)
+    stop = twin(Controller.stop, shield=True)  # asked for, a stop goes out even if cancelled
+    abort = twin(Controller.abort, shield=True)
     servo_here = twin(Controller.servo_here)
     motor_off = twin(Controller.motor_off)
 

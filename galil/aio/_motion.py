@@ -280,8 +280,11 @@ class AsyncMoveHandle:
         return self.wait().__await__()
 
     async def stop(self) -> None:
-        """Decelerate the move's axes to a stop (``ST``) at their DC."""
-        await self._worker.run(self.sync.stop)
+        """Decelerate the move's axes to a stop (``ST``) at their DC.
+
+        Once asked for, the stop goes out even if the awaiting task is cancelled (before the
+        call has started too)."""
+        await self._worker.run_shielded(self.sync.stop)
 
     async def stop_unless_done(self) -> None:
         """Stop the move (``ST``) unless it was seen done: for clean-up on the way out of a
