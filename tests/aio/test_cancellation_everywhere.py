@@ -296,6 +296,8 @@ OPS = [
     Op("move, handle.stop", _handle_stop, setup=_start_a, moves="A", points=2),
     Op("motion guard", _guarded, setup=_slow, moves="AB", points=5),
     Op("vector_move", _vector, setup=_slow, moves="AB"),
+    Op("vector_move long path", _long_path, moves="AB", points=2),
+    Op("contour", _contour, moves="A", points=1),
     Op("speed_schedule", _schedule, setup=_slow, moves="B"),
     Op("find_edge", _find_edge, setup=_slow, moves="A"),
     Op("programs", _program, goes_on="program", tidy=_halt, points=5),
@@ -613,5 +615,65 @@ def test_aclose_leaves_no_callback_watcher_task_on_the_loop() -> None:
         await c.aclose()
         await _all_threads_end(c, before)
         assert seen == []  # the close stopped the move; it was not seen done
+
+    run(body)
+
+
+@pytest.mark.parametrize("kind", ["contour", "long path"])
+def test_a_start_cancelled_before_its_motion_registers_is_stopped_as_it_registers(
+    kind: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The start is held inside its sync call, before its motion registers (the contour in
+    its checks, the path at its first query), until the cancellation's own call has run: that
+    stop finds nothing to stop, and the start's motion is refused when it registers."""
+    from galil.contour import ContourStream
+
+    async def body() -> None:
+        async with await sim() as c:
+            sim_of(c.sync).set_servo_lag(0.0)
+            loop = asyncio.get_running_loop()
+            holding, go_on = asyncio.Event(), threading.Event()
+
+            def hold() -> None:
+                if not go_on.is_set():
+                    loop.call_soon_threadsafe(holding.set)
+                    go_on.wait(10)
+
+            if kind == "contour":
+                check = ContourStream.check
+
+                def held_check(self: ContourStream) -> None:
+                    hold()
+                    check(self)
+
+                monkeypatch.setattr(ContourStream, "check", held_check)
+                start: Awaitable[object] = c.contour("A", np.arange(1, 801) * 50.0, dt=4)
+            else:
+                c.wire_log.add(lambda way, _: hold() if way == "out" else None)
+                start = c.vector_move("AB", ZIGZAG, speed=3000, accel=512_000, decel=512_000)
+            sent = len(commands_of(c))
+            trap = Trap(c.worker, c.sync.link)
+            task = asyncio.ensure_future(start)
+            await holding.wait()
+            began = c.sync.link.clock()
+            task.cancel()
+            await asyncio.wait({task})
+            assert task.cancelled()
+            for _ in range(2000):  # the cancellation's own call: refuse, stop what runs
+                if all(f.done() for f in trap.futures[1:]):
+                    break
+                await asyncio.sleep(0.001)
+            go_on.set()
+            await trap.settle()
+            assert c.sync.link.clock() - began < 0.5
+            log = commands_of(c)[sent:]
+            if kind == "contour":
+                assert [t for t in log if t.startswith("CD") and "=" not in t] == []
+                assert "ST A" in log
+            else:
+                begin = log.index("BG S")
+                assert log[begin + 2] == "ST S"  # after BG S's MG TIME: refused as it began
+            assert await _moving(c) == [0, 0, 0, 0]
+            assert await c.query_number("MG 1") == 1
 
     run(body)
