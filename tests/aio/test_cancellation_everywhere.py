@@ -23,6 +23,7 @@ After each cancellation:
 from __future__ import annotations
 
 import asyncio
+import queue
 import sys
 import threading
 from collections.abc import Awaitable, Callable, Iterator
@@ -427,6 +428,46 @@ def test_a_cancelled_operation_leaves_nothing_running_and_the_link_in_step(
 
 
 # -- what the table above cannot drive -------------------------------------------------------
+
+
+@pytest.mark.parametrize("room", ["messages", "interrupts"])
+def test_a_get_cancelled_as_its_item_arrives_is_cancelled_and_the_item_kept(room: str) -> None:
+    """Before Python 3.12, ``asyncio.wait_for`` returned the inner result when the cancel and
+    the item came in the same loop step: ``get`` returned the item and the cancel was lost."""
+
+    async def body() -> None:
+        async with await sim() as c:
+            box: aio.LoopQueue[Any] = c.messages if room == "messages" else c.interrupts.queue
+            for timeout in (5.0, None):
+                task = asyncio.ensure_future(box.get(timeout))
+                for _ in range(3):
+                    await asyncio.sleep(0)  # it waits for an item
+                box._put("late")  # as the reader thread's call_soon_threadsafe does
+                task.cancel()  # in the same loop step
+                await asyncio.wait({task})
+                assert task.cancelled(), f"timeout={timeout}: got {task.result()!r}"
+                assert await box.get(0) == "late"  # not lost
+            with pytest.raises(queue.Empty):
+                await box.get(0.01)
+
+    run(body)
+
+
+@pytest.mark.parametrize("how", HOW)
+def test_a_take_cancelled_part_way_keeps_its_records_for_the_next_read(how: str) -> None:
+    async def body() -> list[int]:
+        async with await sim() as c:
+            async with await c.records(64) as stream:
+                first = await stream.get()
+                # Each batch call takes what is ready; the third call is cancelled while the
+                # first two's records sit in take()'s hands.
+                trap = await _scenario_on(c, lambda: stream.take(400), 3, "running", how)
+                assert trap.fired
+                rest = await stream.take(20)
+            return [int(first["sample"]), *rest["sample"].tolist()]
+
+    samples = run(body)
+    assert np.diff(samples).tolist() == [64] * 20  # none lost, none twice
 
 
 async def _scenario_on(
