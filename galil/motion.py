@@ -273,6 +273,7 @@ class MotionTracker:
         self.gears: dict[str, GearLink] = {}  # follower letter -> its gearing, while engaged
         self.lock = threading.RLock()
         self._watches: list[StopWatch] = []  # a contour's, while it runs (its letters)
+        self._refused: set[int] = set()  # threads whose starts are cancelled (refuse_starts)
 
     def end_watches(self) -> None:
         """The link was closed: every move's :meth:`~MoveHandle.add_callback` watcher ends."""
@@ -307,10 +308,32 @@ class MotionTracker:
         return failed
 
     def started(self, handle: MoveHandle) -> None:
-        """``handle`` now drives its axes (and the axes geared to them)."""
+        """``handle`` now drives its axes (and the axes geared to them); stopped at once when
+        its thread's starts are refused (:meth:`refuse_starts`)."""
         with self.lock:
             for a in handle.axes + handle.followers:
                 self._active[a] = handle
+            if threading.get_ident() in self._refused:
+                with contextlib.suppress(GalilError):  # (whoever refused stops it again)
+                    handle.stop()
+
+    def refuse_starts(self, thread: int) -> None:
+        """Stop the motion ``thread`` starts from now on the moment it registers (a handle
+        is stopped in :meth:`started`; a :class:`StopWatch` opens already stopped, so a
+        contour sends no segment), until :meth:`allow_starts`.
+
+        For a start cancelled from another thread while it runs (``galil.aio``): a stop
+        sent before its motion registers would not reach it, and a streamed path would run
+        to its end. Take :attr:`lock` around the check of what is registered and this call:
+        the motion is then either registered already, or refused.
+        """
+        with self.lock:
+            self._refused.add(thread)
+
+    def allow_starts(self, thread: int) -> None:
+        """Undo :meth:`refuse_starts` (the cancelled start has returned)."""
+        with self.lock:
+            self._refused.discard(thread)
 
     def followers(self, masters: str) -> dict[str, GearLink]:
         """The engaged gearings whose master is one of ``masters`` (letters, or ``"S"``)."""
@@ -334,6 +357,8 @@ class MotionTracker:
         watch = StopWatch(letters, self)
         with self.lock:
             self._watches.append(watch)
+            if threading.get_ident() in self._refused:
+                watch.stopped_by = "ST"  # (refuse_starts: nothing of it may run)
         return watch
 
     def _unwatch(self, watch: StopWatch) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import contextlib
+import functools
 import itertools
 from collections.abc import AsyncIterator, Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
@@ -18,7 +19,7 @@ from galil.aio._capture import AsyncCapture, AsyncWatchdog
 from galil.aio._facade import AsyncLinkFacade
 from galil.aio._interrupts import AsyncInterrupts
 from galil.aio._io import AsyncIO
-from galil.aio._motion import AsyncVectorHandle, motion_twin
+from galil.aio._motion import AsyncVectorHandle, Starting, motion_twin
 from galil.aio._programs import AsyncArrays, AsyncPrograms, AsyncVariables
 from galil.aio._streams import AsyncMessages, LoopQueue
 from galil.aio._worker import Worker, shielded, twin
@@ -157,7 +158,8 @@ class AsyncController(AsyncLinkFacade):
         """The model's axes by letter (``c.axes["A"]``; also ``c.A``)."""
         if self._axes is None:
             self._axes = {
-                a: AsyncAxis(ax, self._worker, self._link) for a, ax in self.sync.axes.items()
+                a: AsyncAxis(ax, self._worker, self._link, self.sync.tracker)
+                for a, ax in self.sync.axes.items()
             }
         return self._axes
 
@@ -193,8 +195,8 @@ class AsyncController(AsyncLinkFacade):
     plan = twin(_plan)
     vector_move = motion_twin(Controller.vector_move, AsyncVectorHandle).on_cancel(_stop_sequences)
     plan_vector = twin(_plan_vector)
-    stop = twin(Controller.stop)
-    abort = twin(Controller.abort)
+    stop = twin(Controller.stop, shield=True)  # asked for, a stop goes out even if cancelled
+    abort = twin(Controller.abort, shield=True)
     servo_here = twin(Controller.servo_here)
     motor_off = twin(Controller.motor_off)
 
@@ -212,14 +214,16 @@ class AsyncController(AsyncLinkFacade):
         """Run a contour path on ``axes`` (see ``Controller.contour``) and return when done.
 
         Cancelling the awaiting task stops the contour's axes (``ST``) before the
-        cancellation ends; the stream then leaves contour mode on its thread.
+        cancellation ends; the stream then leaves contour mode on its thread. A contour
+        cancelled while it is still being checked sends no segment.
 
         Raises:
             InvalidArgument: a bad timeout (refused before anything is sent), and the sync
                 method's errors.
         """
         check_wait_timeout(timeout)
-        future = self._worker.submit(
+        starting = Starting(self.sync.tracker)
+        call = functools.partial(
             self.sync.contour,
             axes,
             path,
@@ -229,12 +233,16 @@ class AsyncController(AsyncLinkFacade):
             speed_limit=speed_limit,
             accel_limit=accel_limit,
         )
+        future = self._worker.submit(starting.run, call)
         try:
             return await shielded(future)
         except asyncio.CancelledError:
             if not future.cancel():
+                # Under the tracker's lock: a contour that has not entered contour mode yet
+                # never sends a segment; one that has is stopped (ST, and no CD after it).
                 with contextlib.suppress(GalilError):
-                    await self._worker.run_shielded(self.sync.stop, axes)
+                    stop = functools.partial(self.sync.stop, axes)
+                    await self._worker.run_shielded(starting.cancel, stop)
             raise
 
     @contextlib.asynccontextmanager

@@ -35,7 +35,7 @@ class AsyncLinkFacade(MotionRoom[Controller]):
         loop: asyncio.AbstractEventLoop,
         messages: AsyncMessages,
     ) -> None:
-        super().__init__(sync, worker, sync.link)
+        super().__init__(sync, worker, sync.link, sync.tracker)
         self._loop = loop
         self._messages = messages
 

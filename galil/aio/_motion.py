@@ -7,15 +7,20 @@ quarter of the predicted time left, between :data:`~galil.motion.MIN_POLL` and
 
 Cancelling a task that awaits a move stops the move (``ST``, sent before the cancellation
 completes), and cancelling a task while its move is being started stops the move as soon as
-it has started: a cancelled coroutine never leaves an axis running.
+it has started: a cancelled coroutine never leaves an axis running. A start cancelled while it
+runs has its motion refused from then on (:class:`Starting`): a streamed path or a contour
+whose motion had not registered yet is stopped as it registers, not once it has run
+(decision 0027).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import logging
 import math
+import threading
 from collections.abc import AsyncGenerator, Awaitable, Callable, Generator
 from dataclasses import dataclass
 from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
@@ -27,9 +32,11 @@ from galil.link import Link, check_wait_timeout
 from galil.motion import (
     MAX_POLL,
     MIN_POLL,
+    MotionTracker,
     MoveHandle,
     MoveParams,
     MoveResult,
+    held,
 )
 from galil.segments import VectorPlan
 from galil.vector import VectorHandle
@@ -39,6 +46,7 @@ __all__ = [
     "AsyncVectorHandle",
     "MotionRoom",
     "MoveProgress",
+    "Starting",
     "motion_twin",
     "start_motion",
 ]
@@ -48,6 +56,7 @@ _LOG = logging.getLogger("galil.aio")
 P = ParamSpec("P")
 S = TypeVar("S")
 S_co = TypeVar("S_co", covariant=True)
+R = TypeVar("R")
 H = TypeVar("H")
 M = TypeVar("M", bound=MoveHandle)
 
@@ -280,8 +289,11 @@ class AsyncMoveHandle:
         return self.wait().__await__()
 
     async def stop(self) -> None:
-        """Decelerate the move's axes to a stop (``ST``) at their DC."""
-        await self._worker.run(self.sync.stop)
+        """Decelerate the move's axes to a stop (``ST``) at their DC.
+
+        Once asked for, the stop goes out even if the awaiting task is cancelled (before the
+        call has started too)."""
+        await self._worker.run_shielded(self.sync.stop)
 
     async def stop_unless_done(self) -> None:
         """Stop the move (``ST``) unless it was seen done: for clean-up on the way out of a
@@ -381,10 +393,57 @@ def _started(start: Callable[P, M], /, *args: P.args, **kwargs: P.kwargs) -> M:
     return handle
 
 
+class _DroppedError(Exception):
+    """A start cancelled before it began its work: it never sends anything."""
+
+
+class Starting:
+    """A call that starts motion on a worker thread, which the awaiting task may cancel while
+    it runs: from :meth:`cancel` on, the motion the call registers is stopped the moment it
+    registers (:meth:`~galil.motion.MotionTracker.refuse_starts`), until the call returns.
+
+    A stop sent from another thread reaches only motion already registered; a contour or a
+    streamed path still reading the state or predicting when its task was cancelled would
+    otherwise run its whole path (only then would the call return, to be undone).
+    """
+
+    def __init__(self, tracker: MotionTracker | None) -> None:
+        self._tracker = tracker
+        self._thread: int | None = None
+        self._cancelled = False
+
+    def run(self, call: Callable[[], R]) -> R:
+        """Worker side: ``call()``, its motion refused once :meth:`cancel` has run."""
+        tracker = self._tracker
+        if tracker is None:
+            return call()
+        with tracker.lock:
+            if self._cancelled:
+                raise _DroppedError("cancelled before it began")
+            self._thread = thread = threading.get_ident()
+        try:
+            return call()
+        finally:
+            with tracker.lock:
+                tracker.allow_starts(thread)
+                self._thread = None
+
+    def cancel(self, then: Callable[[], object] | None = None) -> None:
+        """Worker side, once the awaiting task is cancelled: refuse what the call has not
+        registered yet, and run ``then()`` (stop what it has) under the same lock."""
+        with held(self._tracker):
+            self._cancelled = True
+            if self._tracker is not None and self._thread is not None:
+                self._tracker.refuse_starts(self._thread)
+            if then is not None:
+                then()
+
+
 async def start_motion(
     worker: Worker,
     link: Link,
     wrap: Callable[[M, Worker, Link], H],
+    starting: Starting,
     start: Callable[P, M],
     /,
     *args: P.args,
@@ -392,17 +451,23 @@ async def start_motion(
 ) -> H:
     """Run a sync call that starts motion and wrap the handle it returns; if the caller is
     cancelled meanwhile, the motion it started is stopped as soon as the call returns (a call
-    not yet started never runs)."""
-    handle = await worker.run_or_undo(_stop, _started, start, *args, **kwargs)
+    not yet started never runs; see :class:`Starting` for what it starts before it returns).
+    """
+    call = functools.partial(_started, start, *args, **kwargs)
+    handle = await worker.run_or_undo(_stop, starting.run, call)
     return wrap(handle, worker, link)
 
 
 class MotionRoom(Room[S_co]):
-    """A room whose methods start motion: it also knows the link (clock, pauses)."""
+    """A room whose methods start motion: it also knows the link (clock, pauses) and the
+    motion tracker (cancelled starts)."""
 
-    def __init__(self, sync: S_co, worker: Worker, link: Link) -> None:
+    def __init__(
+        self, sync: S_co, worker: Worker, link: Link, tracker: MotionTracker | None = None
+    ) -> None:
         super().__init__(sync, worker)
         self._link = link
+        self._tracker = tracker
 
 
 class motion_twin(Generic[S, P, H]):  # noqa: N801 - used like a decorator
@@ -438,7 +503,8 @@ class motion_twin(Generic[S, P, H]):  # noqa: N801 - used like a decorator
     def on_cancel(self, at_once: Callable[[S], object]) -> motion_twin[S, P, H]:
         """Also run ``at_once(sync)`` on a worker the moment the caller is cancelled, while
         the start is still running (a long path streaming on its thread is stopped then, not
-        only once every segment has been sent)."""
+        only once every segment has been sent); under the tracker's lock, with the start's
+        motion refused from then on (:class:`Starting`)."""
         self._at_once = at_once
         return self
 
@@ -457,14 +523,18 @@ class motion_twin(Generic[S, P, H]):  # noqa: N801 - used like a decorator
         sync = room.sync
         worker = room._worker
         link = room._link
+        tracker = room._tracker
 
         async def call(*args: P.args, **kwargs: P.kwargs) -> H:
+            starting = Starting(tracker)
             try:
-                started: H = await start_motion(worker, link, wrap, method, sync, *args, **kwargs)
+                started: H = await start_motion(
+                    worker, link, wrap, starting, method, sync, *args, **kwargs
+                )
             except asyncio.CancelledError:
-                if at_once is not None:
-                    with contextlib.suppress(GalilConnectionError):
-                        worker.submit(at_once, sync)
+                then = None if at_once is None else functools.partial(at_once, sync)
+                with contextlib.suppress(GalilConnectionError):
+                    worker.submit(starting.cancel, then)
                 raise
             return started
 

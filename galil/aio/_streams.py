@@ -93,10 +93,14 @@ class LoopQueue(Generic[T]):
             if left <= 0:
                 raise queue.Empty(f"no {self._what} within {timeout} s")
             self._wakeup.clear()
+            # Not asyncio.wait_for: before Python 3.12 it swallows a cancellation that comes
+            # as the item does, and returns (decision 0027). The timer only wakes the loop.
+            timer = None if math.isinf(left) else loop.call_later(left, self._wakeup.set)
             try:
-                await asyncio.wait_for(self._wakeup.wait(), None if math.isinf(left) else left)
-            except asyncio.TimeoutError:
-                continue
+                await self._wakeup.wait()
+            finally:
+                if timer is not None:
+                    timer.cancel()
         return self._items.popleft()
 
     def get_nowait(self) -> T:
@@ -234,11 +238,18 @@ class AsyncRecordStream:
         return got[0]
 
     async def take(self, n: int, timeout: float | None = None) -> np.ndarray[Any, np.dtype[Any]]:
-        """The next ``n`` records as one structured array; ``timeout`` bounds each wait."""
+        """The next ``n`` records as one structured array; ``timeout`` bounds each wait.
+
+        Cancelled or timed out part-way, the records it had taken wait for the next read.
+        """
         check_count(n, "n")
         records: list[np.void] = []
-        while len(records) < n:
-            records.extend(await self.batch(n - len(records), timeout))
+        try:
+            while len(records) < n:
+                records.extend(await self.batch(n - len(records), timeout))
+        except BaseException:  # cancelled, or timed out: the records taken wait for the next
+            self._ready.extendleft(reversed(records))
+            raise
         out = np.empty(n, dtype=records[0].dtype)
         for i, rec in enumerate(records):
             out[i] = rec

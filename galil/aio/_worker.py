@@ -198,10 +198,14 @@ class Room(Backed[S_co]):
 class twin(Generic[S, P, R]):  # noqa: N801 - used like a decorator
     """The async twin of a sync method: ``await room.name(...)`` runs ``S.name(room.sync, ...)``
     on the room's worker. Parameters, return type and docstring are the sync method's.
+
+    ``shield=True`` for a call that must happen once asked for (a stop): cancelling the
+    awaiting task, even before the call has started, leaves it to run (``run_shielded``).
     """
 
-    def __init__(self, method: Callable[Concatenate[S, P], R]) -> None:
+    def __init__(self, method: Callable[Concatenate[S, P], R], *, shield: bool = False) -> None:
         self._method = method
+        self._shield = shield
         self.__doc__ = method.__doc__
         self.__name__ = getattr(method, "__name__", "twin")
 
@@ -219,9 +223,10 @@ class twin(Generic[S, P, R]):  # noqa: N801 - used like a decorator
         method = self._method
         sync = room.sync
         worker = room._worker
+        run = worker.run_shielded if self._shield else worker.run
 
         async def call(*args: P.args, **kwargs: P.kwargs) -> R:
-            return await worker.run(method, sync, *args, **kwargs)
+            return await run(method, sync, *args, **kwargs)
 
         call.__doc__ = method.__doc__
         call.__name__ = self.__name__
