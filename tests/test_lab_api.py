@@ -267,6 +267,25 @@ def test_speed_and_accel_are_stored_in_the_steps_of_the_tm_in_force() -> None:
         assert dmc.A.speed == 25_004
 
 
+@pytest.mark.parametrize("tm", [1500, 375, 187.5])
+def test_a_jog_on_a_step_four_decimals_cannot_write_is_stored_as_predicted(tm: float) -> None:
+    # (at TM 1500 SP/JG step by 4/3 counts/s: the host planned 111325.3333... and sent
+    # "111325.3333", just short of the step, which the controller rounded down to the step
+    # below: a 10 s jog then ended 14 counts from its prediction)
+    step = 2 * 1000 / tm
+    speed = step * 83_494
+    with simulated("DMC-4040") as dmc, warnings.catch_warnings():
+        warnings.simplefilter("error")  # (a deviation from the prediction warns)
+        dmc.command(f"TM {tm}")
+        handle = dmc.A.jog(speed)
+        dmc.sleep(10.0)
+        handle.stop()
+        assert handle.wait().deviation == {"A": 0}
+        dmc.A.speed = speed  # SP too, read back at four decimals
+        assert dmc.A.speed == pytest.approx(speed, abs=1e-4)  # (as the controller writes it)
+        assert dmc.A.move_by(-5_000_000).wait().deviation == {"A": 0}
+
+
 def test_the_30010s_two_analog_outputs_and_inputs_are_driven_and_recorded() -> None:
     with simulated("DMC-30010") as dmc:
         dmc.io.analog_out[2] = -2.5 * ureg.volt

@@ -51,15 +51,24 @@ def resolve_model(model: str | ModelSpec) -> ModelSpec:
     return model if isinstance(model, ModelSpec) else get_model(model)
 
 
-def _steps(value: float, step: float) -> float:
-    """The largest multiple of ``step`` not above ``value`` (>= 0); whole numbers as ``int``.
+#: Half the last of the four decimals a number has on the wire: a value this close below a
+#: step is that step written at four decimals (``SP ?`` answers 4/3 * 83494 = 111325.3333...
+#: as ``111325.3333``), and reads back as the step itself.
+_WIRE_HALF_DIGIT = 0.5e-4 * (1 + 1e-9)
 
-    A multiple already (a value read back) stays itself, whatever the division rounds to.
+
+def _steps(value: float, step: float, ceiling: float) -> float:
+    """The largest multiple of ``step`` not above ``value`` (>= 0) nor ``ceiling`` (the
+    model's maximum); whole numbers as ``int``.
+
+    A multiple already (a value read back) stays itself, whatever the division rounds to,
+    and so does one written at four decimals just short of it (:data:`_WIRE_HALF_DIGIT`).
     """
     n = math.floor(value / step)
-    if (n + 1) * step <= value:
+    top = min(value + _WIRE_HALF_DIGIT, ceiling)
+    if (n + 1) * step <= top:
         n += 1
-    elif n * step > value:
+    elif n * step > top:
         n -= 1
     out = n * step
     return int(out) if float(out).is_integer() else float(out)
@@ -99,7 +108,7 @@ def quantise_accel(
             model=spec.name,
         )
     low = spec.accel_min(tm)
-    stored = _steps(value, spec.accel_resolution(tm))
+    stored = _steps(value, spec.accel_resolution(tm), spec.ac_max)
     return stored if stored >= low else (int(low) if low.is_integer() else low)
 
 
@@ -137,7 +146,7 @@ def quantise_speed(
             limit=spec.sp_max,
             model=spec.name,
         )
-    stored = _steps(abs(value), spec.speed_resolution(tm))
+    stored = _steps(abs(value), spec.speed_resolution(tm), spec.sp_max)
     return -stored if value < 0 and stored else stored
 
 

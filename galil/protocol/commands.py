@@ -396,25 +396,47 @@ def _ranged(
     return format_number(v)
 
 
-class _Checker:
-    """Range check for one per-axis command, bound to a model."""
+def _away(text: str, value: float) -> str:
+    """``text`` (``value`` at four decimals), one last digit further from zero if rounding
+    took it nearer: a stepped value (SP at TM 1500 is a multiple of 4/3 counts/s) then
+    reaches the controller at or just beyond its step, never just short of it, where
+    rounding down to the step would store the step below."""
+    if abs(float(text)) >= abs(value):
+        return text
+    return format_number(math.copysign(abs(float(text)) + 1e-4, value))
 
-    __slots__ = ("hi", "integer", "lo", "model_name", "name")
+
+class _Checker:
+    """Range check for one per-axis command, bound to a model (``stepped``: a value the
+    controller rounds down to its step, sent at or beyond it: :func:`_away`)."""
+
+    __slots__ = ("hi", "integer", "lo", "model_name", "name", "stepped")
 
     def __init__(
-        self, name: str, lo: float, hi: float, model: ModelSpec | None, *, integer: bool
+        self,
+        name: str,
+        lo: float,
+        hi: float,
+        model: ModelSpec | None,
+        *,
+        integer: bool,
+        stepped: bool = False,
     ) -> None:
         self.name, self.lo, self.hi, self.integer = name, lo, hi, integer
         self.model_name = model.name if model is not None else None
+        self.stepped = stepped
 
     def __call__(self, value: object, axis: str) -> str:
         if type(value) is int and self.lo <= value <= self.hi:
             return str(value)
         if self.integer and self.lo == INT32_MIN and self.hi == INT32_MAX:
             return _count(value, self.name, axis)
-        return _ranged(
+        text = _ranged(
             value, self.lo, self.hi, self.name, axis, self.model_name, integer=self.integer
         )
+        if self.stepped and isinstance(value, float):
+            return _away(text, value)
+        return text
 
 
 # Integer ranges every model accepts, for the hot path of _axis_command.
@@ -504,14 +526,13 @@ def _checker(kind: str, model: ModelSpec | None) -> _Checker:
         # The smallest AC/DC falls with a longer TM (1024 * (1000/TM)**2): the range is the
         # model's over every TM it allows; the predictor quantises for the TM in force.
         lo, hi = (1024, INT32_MAX) if model is None else (_accel_floor(model), model.ac_max)
-        found = _Checker(kind, lo, hi, model, integer=False)
+        found = _Checker(kind, lo, hi, model, integer=False, stepped=True)
     elif kind == "SP":
-        found = _Checker(
-            kind, 0, INT32_MAX if model is None else model.sp_max, model, integer=False
-        )
+        hi = INT32_MAX if model is None else model.sp_max
+        found = _Checker(kind, 0, hi, model, integer=False, stepped=True)
     elif kind == "JG":
         hi = INT32_MAX if model is None else model.sp_max
-        found = _Checker(kind, -hi, hi, model, integer=False)
+        found = _Checker(kind, -hi, hi, model, integer=False, stepped=True)
     elif kind == "AD":
         found = _Checker(kind, 0, INT32_MAX, model, integer=True)
     elif kind == "IT":

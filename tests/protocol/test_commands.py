@@ -356,3 +356,15 @@ def test_models_whose_cd_takes_no_dt_end_contour_with_dt_0_then_cd_0() -> None:
     with pytest.raises(InvalidArgument, match="DT 3"):
         c.cd(100, dt=3, model=old)
     assert c.cd(100, model=old).text == "CD 100"
+
+
+def test_a_stepped_speed_goes_out_at_or_just_beyond_its_step() -> None:
+    # (rounded to four decimals, 4/3 * 83494 = 111325.33333... went out as 111325.3333: a
+    # controller rounding down to its step stores the step below)
+    assert c.jg(A=4 / 3 * 83_494).text == "JGA=111325.3334"
+    assert c.jg(A=-4 / 3 * 83_494).text == "JGA=-111325.3334"
+    assert c.sp(A=4 / 3 * 83_494).text == "SPA=111325.3334"
+    assert c.ac(A=1024 * (1000 / 1500) ** 2 * 1001).text == "ACA=455566.2223"
+    assert c.sp(A=25_000.5).text == "SPA=25000.5"  # four decimals hold it: as it is
+    assert c.sp(A=25_000).text == "SPA=25000"
+    assert c.pr(A=1000).text == "PRA=1000"
