@@ -1625,9 +1625,11 @@ def _range_check(
 
 
 def hv(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
-    """HV: homing speed in counts/s (stages 2 and 3 of HM, the return of FI): 0 .. SP max."""
+    """HV: homing speed in counts/s (stages 2 and 3 of HM, the return of FI): 0 .. SP max.
+    Stepped as SP (sent at or just beyond its step, :func:`_away`)."""
     spec = model or _DEFAULT_SPEC
-    return _setting("HV", by_axis, model, _range_check("HV", 0, spec.sp_max, model))
+    check = _Checker("HV", 0, spec.sp_max, model, integer=False, stepped=True)
+    return _setting("HV", by_axis, model, check)
 
 
 def kp(*, model: ModelSpec | None = None, **by_axis: object) -> Command:

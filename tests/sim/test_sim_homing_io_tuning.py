@@ -52,6 +52,19 @@ def test_hm_ends_at_the_index_with_position_zero_and_stop_code_10() -> None:
     assert sim.home_switch("A") == HomeSwitch(edge=-2000, side=-1, index_period=4000)
 
 
+@pytest.mark.parametrize("tm", [1500, 250])
+def test_hv_is_stored_in_the_steps_of_the_tm_in_force(tm: int) -> None:
+    # (HV is scaled by TM and steps as SP does, 2*1000/TM counts/s; the simulator kept TM
+    # 1000's step of 2: at TM 1500 HV 2001.3334 was stored as 2000, not 1501 * 4/3)
+    sim = SimController("DMC-4040")
+    ask(sim, f"TM {tm}")
+    step = 2 * 1000 / tm
+    ask(sim, f"HVA={1501 * step + 1e-4:.4f}")
+    assert number(sim, "_HVA") == pytest.approx(1501 * step, abs=1e-4)
+    ask(sim, f"HVA={1501 * step - 0.5 * step:.4f}")
+    assert number(sim, "_HVA") == pytest.approx(1500 * step, abs=1e-4)
+
+
 @pytest.mark.parametrize("kind", ["HM", "FE", "FI"])
 def test_the_predictor_and_the_simulator_agree_sample_for_sample(kind: str) -> None:
     sim = SimController("DMC-4040", servo_lag=0.0)

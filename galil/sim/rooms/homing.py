@@ -172,7 +172,8 @@ class Homing(Room):
             if v < 0:
                 raise Refused(6, "negative speed")
             try:
-                return float(quantise_speed(v, self.machine.spec))
+                # (scaled by TM: stored in SP's step at the TM in force)
+                return float(quantise_speed(v, self.machine.spec, tm=self.machine.servo.tm))
             except LimitError:
                 raise Refused(6, "HV out of range") from None
 
