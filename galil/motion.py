@@ -657,9 +657,7 @@ class MoveHandle:
         ignored: the move was over when it arrived.
         """
         with self._lock:
-            for f, gear in self._followers.items():
-                if letter in (f, gear.master):
-                    self._cache.pop(f, None)
+            self._forget_followers(letter)
             t = self._tracks.get(letter)
             if t is None or self._done:
                 return
@@ -687,6 +685,14 @@ class MoveHandle:
                     t.events.pop()
                 t.exact = False
                 self._cache[letter] = current
+            # (``current`` above predicted the followers again from the old master: again)
+            self._forget_followers(letter)
+
+    def _forget_followers(self, letter: str) -> None:
+        """Drop the cached profiles of the followers of ``letter`` (or of ``letter`` itself)."""
+        for f, gear in self._followers.items():
+            if letter in (f, gear.master):
+                self._cache.pop(f, None)
 
     @property
     def duration(self) -> float:

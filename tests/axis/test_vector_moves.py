@@ -336,6 +336,27 @@ def test_stopping_a_follower_turns_its_gearing_off_and_the_prediction_knows(
         np.testing.assert_array_equal(trace[a][k : k + p.size], p)
 
 
+def test_a_followers_profile_follows_a_change_to_its_masters_jog(
+    dmc: galil.Controller,
+) -> None:
+    # (the follower's profile, asked for once the jog had started, was kept when the jog was
+    # stopped: it ended 4 counts out, where the master's first prediction stopped, not 245)
+    dmc.B.gear_to(dmc.A, 1)
+    sim = sim_of(dmc)
+    t0 = sim.start_trace("AB")
+    jog = dmc.A.jog(500)
+    assert jog.followers == "B"
+    dmc.sleep(0.5)
+    jog.stop()
+    result = jog.wait()
+    trace = sim.stop_trace("AB")
+    k = jog.begin["A"] - t0
+    assert jog.profiles["B"].end == result.follower_final["B"] == result.final["A"]
+    for a in "AB":
+        p = jog.profiles[a].position
+        np.testing.assert_array_equal(trace[a][k : k + p.size], p)
+
+
 def test_a_follower_of_s_rides_the_vector_distance(dmc: galil.Controller) -> None:
     dmc.C.gear_to("S", 1.25)
 
