@@ -286,6 +286,20 @@ def test_a_jog_on_a_step_four_decimals_cannot_write_is_stored_as_predicted(tm: f
         assert dmc.A.move_by(-5_000_000).wait().deviation == {"A": 0}
 
 
+@pytest.mark.parametrize(("model", "tm"), [("DMC-30010", 19875), ("DMC-41x3", 1156.25)])
+def test_a_speed_read_back_and_set_again_stays_on_its_step(model: str, tm: float) -> None:
+    # (the controller holds SP in 32.16 fixed point and prints it at four decimals: at TM
+    # 19875 the step 1038.79245... prints as 1038.7924, 5.3e-5 short of it, which the host
+    # took for the step below: `x.speed = x.speed` slowed the axis by a step)
+    with simulated(model) as dmc:
+        dmc.command(f"TM {tm}")
+        a = dmc.A
+        a.speed, a.accel, a.decel = 1038.875, 68_059, 20_044.4
+        before = dmc.query_operands(["_SPA", "_ACA", "_DCA"])
+        a.speed, a.accel, a.decel = a.speed, a.accel, a.decel
+        assert dmc.query_operands(["_SPA", "_ACA", "_DCA"]) == before
+
+
 def test_the_30010s_two_analog_outputs_and_inputs_are_driven_and_recorded() -> None:
     with simulated("DMC-30010") as dmc:
         dmc.io.analog_out[2] = -2.5 * ureg.volt

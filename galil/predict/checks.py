@@ -51,10 +51,12 @@ def resolve_model(model: str | ModelSpec) -> ModelSpec:
     return model if isinstance(model, ModelSpec) else get_model(model)
 
 
-#: Half the last of the four decimals a number has on the wire: a value this close below a
-#: step is that step written at four decimals (``SP ?`` answers 4/3 * 83494 = 111325.3333...
-#: as ``111325.3333``), and reads back as the step itself.
-_WIRE_HALF_DIGIT = 0.5e-4 * (1 + 1e-9)
+#: Half the last of the four decimals a number has on the wire, plus half the last bit of the
+#: 32.16 fixed point the controller holds it in: a value this close below a step is that step
+#: written at four decimals (``SP ?`` answers 4/3 * 83494 = 111325.3333... as
+#: ``111325.3333``; at TM 19875 the step 1038.79245... is held as 1038.792449... and printed
+#: ``1038.7924``, 5.3e-5 short), and reads back as the step itself.
+_WIRE_HALF_DIGIT = (0.5e-4 + 0.5 / 65536) * (1 + 1e-9)
 
 
 def _steps(value: float, step: float, ceiling: float) -> float:

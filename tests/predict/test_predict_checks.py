@@ -14,6 +14,7 @@ from galil import predict
 from galil.errors import InvalidArgument, LimitError
 from galil.predict.checks import contour_bytes
 from galil.protocol import commands as cmds
+from galil.protocol.numbers import format_reply
 
 
 def test_quantise_as_the_controller_stores_values() -> None:
@@ -42,7 +43,7 @@ def test_quantisation_follows_the_tm_in_force() -> None:
 
 
 #: A value this close below a step goes out on the wire as the step (four decimals).
-HALF_DIGIT = 0.5e-4
+HALF_DIGIT = 0.5e-4 + 0.5 / 65536  # (and the 32.16 the controller holds it in)
 
 
 @settings(max_examples=100, deadline=None)
@@ -63,6 +64,7 @@ def test_quantised_accel_is_the_multiple_of_1024_the_wire_value_rounds_down_to(
 @example(value=21999999.999999996, k=219)  # (q and value - step one ulp across)
 @example(value=14755993.75, k=185)  # (its step times n lands a hair above 14755993.6)
 @example(value=22_000_000.0, k=459)  # (the maximum: not a step beyond it)
+@example(value=1038.875, k=636)  # (stored 1038.79245...: in 32.16, printed 1038.7924)
 def test_a_tm_scaled_speed_is_the_largest_step_not_above_the_wire_value_and_stays_put(
     value: float, k: int
 ) -> None:
@@ -75,6 +77,10 @@ def test_a_tm_scaled_speed_is_the_largest_step_not_above_the_wire_value_and_stay
     assert predict.quantise_speed(q, "DMC-4040", tm=tm) == q
     # what SP ? answers (four decimals) reads back as the same step
     assert predict.quantise_speed(round(q, 4), "DMC-4040", tm=tm) == q
+    # and what MG _SPA prints: the 32.16 value the controller holds, at four decimals
+    # (1/65536 below the step, then rounded down: up to 5.8e-5 short of it)
+    printed = float(format_reply(float(q), "10.4"))
+    assert predict.quantise_speed(printed, "DMC-4040", tm=tm) == q
 
 
 def test_out_of_range_values_name_value_and_limit() -> None:
