@@ -233,7 +233,7 @@ def predict_track(link: CommandLink, t: Track) -> predict.Profile:
     else:
         profile = predict.move(
             round(t.amount),
-            max(p.speed, link.model.sp_resolution),
+            max(p.speed, link.model.speed_resolution(round(ts * 1_024_000, 6))),  # TM in force
             p.accel,
             p.decel,
             sample_period=ts,

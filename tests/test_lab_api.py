@@ -9,6 +9,7 @@ import pytest
 
 import galil
 from galil.models import get_model, parse_identity
+from galil.notebook import compare
 from galil.sim.controller import SimController
 from galil.sim.rooms import Tuning
 from galil.testing import nothing_sent, sim_of, simulated, transcript
@@ -298,6 +299,22 @@ def test_a_speed_read_back_and_set_again_stays_on_its_step(model: str, tm: float
         before = dmc.query_operands(["_SPA", "_ACA", "_DCA"])
         a.speed, a.accel, a.decel = a.speed, a.accel, a.decel
         assert dmc.query_operands(["_SPA", "_ACA", "_DCA"]) == before
+
+
+def test_a_move_below_tm_1000s_speed_step_is_predicted_at_its_own_speed() -> None:
+    # (at TM 4000 SP steps by 0.5 counts/s, but the move was predicted at no less than TM
+    # 1000's 2 counts/s: SP 1.5 over 6 counts ended 1 s early, the reference 2 counts ahead)
+    with simulated("DMC-4040") as dmc, warnings.catch_warnings():
+        warnings.simplefilter("error")
+        dmc.command("TM 4000")
+        a = dmc.A
+        a.speed, a.accel, a.decel = 1.5, 300.0, 300.0
+        plan = a.plan_by(6)
+        assert plan.peak_speed == pytest.approx(1.5)
+        capture = dmc.capture(["_RPA"], every=2, seconds=plan.duration + 0.5)
+        move = a.move_by(6)
+        assert move.wait().deviation == {"A": 0}
+        assert compare(move, capture.wait())["A"].worst == 0
 
 
 def test_the_30010s_two_analog_outputs_and_inputs_are_driven_and_recorded() -> None:
