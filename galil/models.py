@@ -87,6 +87,15 @@ _OP_ASSUMPTION = (
     " its table is the 4103's), and extended I/O (CO) is not modelled"
 )
 
+#: VS, VA and VD under another TM (docs/decisions/0025, "Predictions at any TM").
+_VECTOR_TM_ASSUMPTION = (
+    "VS steps by 2*(1000/TM) counts/s and VA/VD by 1024*(1000/TM)^2 counts/s² (VA/VD's"
+    " minimum too), as SP and AC do: the 4103 reference marks VS, VA and VD 'Scaled By TM'"
+    " (its TM page lists them among the scaled commands) and gives them SP's and AC's"
+    " resolution at TM 1000 (2, 1024), but states the formula only on the SP/JG and AC/DC"
+    " pages"
+)
+
 
 def _check_tm(tm: object) -> float:
     """A TM in microseconds: a positive, finite real number (not a bool).
@@ -478,6 +487,7 @@ _add(
             "data record like the 2x00 (QZ 8,24,16,28): the 1700 manual shares that layout",
             "contour buffer of 1: pre-Accelera firmware",
             "SP maximum 12,000,000 c/s: recollection, not a primary page",
+            _VECTOR_TM_ASSUMPTION,
             _OP_ASSUMPTION,
         ),
     ),
@@ -515,6 +525,7 @@ _add(
             "contour buffer of 1: the seed shows WC pacing one segment at a time",
             "QZ answers 4, 24, 16, 28: the sizes of gclib's GDataRecord1802 (28-byte axis"
             " blocks, header on the wire); the QZ reply itself not seen from an 18x2",
+            _VECTOR_TM_ASSUMPTION,
             _OP_ASSUMPTION,
         ),
     ),
@@ -541,6 +552,7 @@ _add(
             "8 threads as on the 40x0 (the 18x6 is an Accelera card like it): no 18x6 page gives"
             " the count, and EPICS (GalilController.cpp, model_[3] == '1') gives every DMC-1xxx,"
             " the 18x6 included, 2 threads",
+            _VECTOR_TM_ASSUMPTION,
             _OP_ASSUMPTION,
         ),
     ),
@@ -571,6 +583,7 @@ _add(
             " is the older range, whose Optima page gives 4.0)",
             "KI in steps of 1/1024 (the default): 2047.992 (EPICS) is 2048 - 1/128, the Optima"
             " page's step, but no 21x3 page gives the step",
+            _VECTOR_TM_ASSUMPTION,
             _OP_ASSUMPTION,
         ),
     ),
@@ -599,6 +612,7 @@ _add(
             "DR at most 30,000 samples between records: not sourced",
             "SP maximum 22,000,000 c/s: BLISS's GalilDMC.set_velocity docstring (servo; 6,000,000"
             " for steppers, not modelled), no 40x0 reference page seen",
+            _VECTOR_TM_ASSUMPTION,
             _OP_ASSUMPTION,
         ),
     ),
@@ -657,6 +671,7 @@ _add(
                 "one SP/JG/HV maximum for every axis: the 4103 reference's 3,000,000 counts/s"
                 " for stepper axes (MT ±2, ±2.5) is not enforced, because the range checks"
                 " know the model, not the motor type each axis has at that moment",
+                _VECTOR_TM_ASSUMPTION,
             ),
         }
     ),
@@ -686,6 +701,7 @@ _add(
         assumptions=(
             "contour buffer 511 as on Accelera-class firmware: not confirmed",
             "analog input 2 reads 0-5 V (EPICS); both inputs are modelled at ±10 V",
+            _VECTOR_TM_ASSUMPTION,
             _OP_ASSUMPTION,
         ),
     ),
@@ -709,6 +725,7 @@ _LAB_ASSUMPTIONS = (
     " the table is the 4103's",
     "BN/BP/BV finish within 3 s (EPICS's timeout for them); real durations unknown",
     "no analog outputs on DMC motion controllers (the 40x0 command reference has no @AO)",
+    _VECTOR_TM_ASSUMPTION,
     _OP_ASSUMPTION,
 )
 

@@ -59,7 +59,9 @@ def quantise_vector(
     """Quantise VS like SP (down to its resolution), VA/VD like AC/DC, VT like IT.
 
     Ranges come from the model: VS up to :attr:`ModelSpec.vs_max` (``sp_max`` when unset),
-    VA/VD up to :attr:`ModelSpec.va_max` (``ac_max`` when unset).
+    VA/VD up to :attr:`ModelSpec.va_max` (``ac_max`` when unset). Their steps (and VA/VD's
+    minimum) follow ``tm`` as SP's and AC's do (an assumption: docs/decisions/0025,
+    "Predictions at any TM").
 
     Raises:
         LimitError: a value outside the model's range (``name`` VS, VA, VD or VT).
@@ -70,13 +72,14 @@ def quantise_vector(
     va_spec = replace(spec, ac_max=spec.va_max if spec.va_max is not None else spec.ac_max)
     vs = None
     if speed is not None:
-        vs = quantise_speed(speed, vs_spec, name="VS")
+        vs = quantise_speed(speed, vs_spec, name="VS", tm=tm)
         if vs <= 0:
+            step = spec.speed_resolution(tm)
             raise LimitError(
-                f"VS {speed!r} counts/s is below the smallest step {spec.sp_resolution}",
+                f"VS {speed!r} counts/s is below the smallest step {step:.6g}",
                 name="VS",
                 value=speed,
-                limit=spec.sp_resolution,
+                limit=step,
                 model=spec.name,
             )
     vt = None
@@ -93,8 +96,8 @@ def quantise_vector(
             ) from None
     return QuantisedVector(
         speed=vs,
-        accel=None if accel is None else quantise_accel(accel, va_spec, name="VA"),
-        decel=None if decel is None else quantise_accel(decel, va_spec, name="VD"),
+        accel=None if accel is None else quantise_accel(accel, va_spec, name="VA", tm=tm),
+        decel=None if decel is None else quantise_accel(decel, va_spec, name="VD", tm=tm),
         smoothing=vt,
         sample_period=ts,
         model=spec,

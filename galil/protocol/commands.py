@@ -944,32 +944,40 @@ def _plane_value(
     model: str | None,
     *,
     integer: bool = False,
+    stepped: bool = False,
 ) -> Command:
     text = _ranged(value, lo, hi, mnemonic, model=model, integer=integer)
+    if stepped and isinstance(value, float):
+        text = _away(text, value)
     return Command(f"{mnemonic}{_plane(plane)}={text}")
 
 
+# VS, VA and VD are taken from their smallest step at the model's longest TM (their steps
+# follow TM as SP's and AC's do, assumed: docs/decisions/0025); the predictor quantises for
+# the TM in force. They go out at or just beyond their step (:func:`_away`).
 def vs(speed: object, plane: str = "S", *, model: ModelSpec | None = None) -> Command:
     """VS: vector speed of ``plane`` along the path, counts/s (``VSS=20000``)."""
     spec = _DEFAULT_NAMES if model is None else model
     hi = spec.vs_max if spec.vs_max is not None else spec.sp_max
-    return _plane_value(
-        "VS", speed, spec.sp_resolution, hi, plane, None if model is None else model.name
-    )
+    lo = spec.speed_resolution(spec.tm_range[1])
+    name = None if model is None else model.name
+    return _plane_value("VS", speed, lo, hi, plane, name, stepped=True)
 
 
 def va(accel: object, plane: str = "S", *, model: ModelSpec | None = None) -> Command:
     """VA: vector acceleration of ``plane``, counts/s² (``VAS=256000``)."""
     spec = _DEFAULT_NAMES if model is None else model
     hi = spec.va_max if spec.va_max is not None else spec.ac_max
-    return _plane_value("VA", accel, spec.ac_min, hi, plane, None if model is None else model.name)
+    name = None if model is None else model.name
+    return _plane_value("VA", accel, _accel_floor(spec), hi, plane, name, stepped=True)
 
 
 def vd(decel: object, plane: str = "S", *, model: ModelSpec | None = None) -> Command:
     """VD: vector deceleration of ``plane``, counts/s² (``VDS=256000``)."""
     spec = _DEFAULT_NAMES if model is None else model
     hi = spec.va_max if spec.va_max is not None else spec.ac_max
-    return _plane_value("VD", decel, spec.ac_min, hi, plane, None if model is None else model.name)
+    name = None if model is None else model.name
+    return _plane_value("VD", decel, _accel_floor(spec), hi, plane, name, stepped=True)
 
 
 def vt(smoothing: object, plane: str = "S", *, model: ModelSpec | None = None) -> Command:

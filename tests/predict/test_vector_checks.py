@@ -54,6 +54,18 @@ def test_quantise_vector_follows_the_model_ranges() -> None:
     assert quantise_vector("DMC-4040", speed=20_000_000).speed == 20_000_000
 
 
+def test_vs_va_and_vd_step_with_tm_as_sp_and_ac_do() -> None:
+    # (assumed, docs/decisions/0025 "Predictions at any TM": they kept TM 1000's steps of 2
+    # and 1024, so at TM 250 VA 20,000 was planned as 19,456, beneath AC's smallest 16,384
+    # step, and VS 80,002 as 80,002 where SP's step is 8)
+    q = quantise_vector("DMC-4040", speed=80_006, accel=40_000, decel=20_000, tm=250)
+    assert (q.speed, q.accel, q.decel) == (80_000, 32_768, 16_384)
+    q = quantise_vector("DMC-4040", speed=4 / 3 * 83_494, accel=1000, decel=500, tm=1500)
+    step = 1024 * (1000 / 1500) ** 2  # (and VA/VD's smallest, as AC's)
+    assert (q.speed, q.accel, q.decel) == pytest.approx((4 / 3 * 83_494, 2 * step, step))
+    assert quantise_vector("DMC-4040", accel=8_000, tm=250).accel == 16_384  # raised to it
+
+
 def test_mixing_li_with_vp_is_tc_33_at_the_segment_where_it_happens() -> None:
     err = refusal([Line(5000, 0), Line(0, 5000), LinearInterp((1, 1))])
     assert err.name == "TC 33"

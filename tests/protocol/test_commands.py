@@ -367,5 +367,7 @@ def test_a_stepped_speed_goes_out_at_or_just_beyond_its_step() -> None:
     assert c.ac(A=1024 * (1000 / 1500) ** 2 * 1001).text == "ACA=455566.2223"
     assert c.sp(A=25_000.5).text == "SPA=25000.5"  # four decimals hold it: as it is
     assert c.hv(A=4 / 3 * 83_494).text == "HVA=111325.3334"  # HV steps as SP does
+    assert c.vs(4 / 3 * 83_494).text == "VSS=111325.3334"  # and VS, VA, VD (assumed)
+    assert c.va(1024 * (1000 / 1500) ** 2 * 1001).text == "VAS=455566.2223"
     assert c.sp(A=25_000).text == "SPA=25000"
     assert c.pr(A=1000).text == "PRA=1000"

@@ -237,3 +237,13 @@ def test_the_two_planes_run_side_by_side(sim: SimController) -> None:
     assert numbers(ask(sim, "MG _BGS,_BGT")) == [1, 1]
     sim.advance(2)
     assert numbers(ask(sim, "MG _RPA,_RPB,_RPC,_RPD,_BGS,_BGT")) == [3000, 4000, -300, 400, 0, 0]
+
+
+def test_vs_va_and_vd_are_stored_in_the_steps_of_the_tm_in_force() -> None:
+    # (assumed as SP's and AC's, docs/decisions/0025 "Predictions at any TM")
+    sim = SimController("DMC-4040")
+    ask(sim, "TM 250")
+    ask(sim, "VSS=80006;VAS=40000;VDS=20000")
+    assert numbers(ask(sim, "MG _VSS,_VAS,_VDS")) == [80_000, 32_768, 16_384]
+    ask(sim, "VAS=8000")  # below the smallest VA at TM 250: raised to it, as AC
+    assert numbers(ask(sim, "MG _VAS")) == [16_384]
