@@ -21,7 +21,15 @@ from dataclasses import dataclass
 from galil import predict
 from galil.errors import InvalidArgument
 from galil.link import CommandLink
-from galil.motion import Display, MotionTracker, MoveHandle, MoveParams, Track, sample_of
+from galil.motion import (
+    Display,
+    MotionTracker,
+    MoveHandle,
+    MoveParams,
+    Track,
+    as_stored,
+    sample_of,
+)
 from galil.protocol import commands as cmds
 
 __all__ = [
@@ -153,11 +161,11 @@ class AxisHoming:
         rp, bg, mo, sp, ac, dc, jg, hv, ts, mt, cn_home = values
         self._refuse(kind, bool(bg), bool(mo), sp, jg, hv)
         params = predict.HomingParams(
-            speed=sp,
-            accel=ac,
-            decel=dc,
-            home_speed=hv,
-            jog_speed=jg,
+            speed=as_stored(link, "SP", sp),
+            accel=as_stored(link, "AC", ac),
+            decel=as_stored(link, "DC", dc),
+            home_speed=as_stored(link, "SP", hv),
+            jog_speed=as_stored(link, "JG", jg),
             home_direction=1 if cn_home > 0 else -1,
             stepper=abs(mt) in (2.0, 2.5),
         )

@@ -45,6 +45,7 @@ __all__ = [
     "StopWatch",
     "Track",
     "abort_all",
+    "as_stored",
     "held",
     "motion_guard",
     "refuse_dropped",
@@ -199,6 +200,17 @@ class GearLink:
             stop_code=master.stop_code,
         )
         return profile if self.display is None else self.display(profile)
+
+
+def as_stored(link: CommandLink, cmd: str, value: float) -> float:
+    """``value`` of ``cmd`` (SP, JG, AC or DC; HV as SP) read back from the controller, as the
+    step it holds: the text has four decimals of a 32.16 number, up to 5.8e-5 from the step
+    (TM 1656.25: SP 2.41509... reads ``2.4151``), and a plan must run at the step itself.
+    A whole value (every step at TM 1000) is taken as it is."""
+    if float(value).is_integer():
+        return value
+    tm = round(link.sample_period * 1_024_000, 6)
+    return predict.quantise_value(cmd, value, link.model, tm=tm)
 
 
 def sample_of(reply: str) -> int | None:

@@ -24,6 +24,7 @@ from galil.motion import (
     MoveHandle,
     MoveParams,
     Track,
+    as_stored,
     predict_track,
     refuse_dropped,
     sample_of,
@@ -98,19 +99,21 @@ def _read_state(
     """
     names = _operand_names(letters, _STATE)
     if not gears:  # (the common move: the cached tuple as it is, nothing more read)
-        return _states(letters, link.query_operands(names)), {}
+        return _states(link, letters, link.query_operands(names)), {}
     values = link.query_operands(names + follower_operands("".join(gears)))
     limits = follower_limits(link, tracker, gears, values[len(letters) * len(_STATE) :])
-    return _states(letters, values), limits
+    return _states(link, letters, values), limits
 
 
-def _states(letters: str, values: Sequence[float]) -> dict[str, _State]:
+def _states(link: CommandLink, letters: str, values: Sequence[float]) -> dict[str, _State]:
     """Each axis's :class:`_State` from the values of ``_operand_names(letters, _STATE)``
-    (more values may follow)."""
+    (more values may follow); SP, AC and DC as the steps the controller holds
+    (:func:`~galil.motion.as_stored`)."""
     n = len(_STATE)
     out: dict[str, _State] = {}
     for i, a in enumerate(letters):
         rp, bg, sp, ac, dc, it, bl, fl, mo = values[i * n : (i + 1) * n]
+        sp, ac, dc = as_stored(link, "SP", sp), as_stored(link, "AC", ac), as_stored(link, "DC", dc)
         out[a] = _State(round(rp), bool(bg), sp, ac, dc, it, bl, fl, bool(mo))
     return out
 
@@ -455,7 +458,7 @@ def _jog(
             f"axis {a} has its motor off; call controller.servo_here()", model=link.model.name
         )
     _check_geared_speed(link, gears, velocity)
-    params = MoveParams(abs(velocity), ac, dc, it)
+    params = MoveParams(abs(velocity), as_stored(link, "AC", ac), as_stored(link, "DC", dc), it)
     replies = link.command_line(
         [
             cmds.jg(model=link.model, **{a: velocity}),
@@ -758,7 +761,7 @@ def _schedule_state(
     """
     names = (*_operand_names(a, _STATE), "_XQ0", *follower_operands("".join(gears)))
     values = link.query_operands(names)
-    state = _states(a, values)[a]
+    state = _states(link, a, values)[a]
     _ready(link, a, state)
     n = len(_STATE)
     if values[n] >= 0:

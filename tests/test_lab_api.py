@@ -317,6 +317,28 @@ def test_a_move_below_tm_1000s_speed_step_is_predicted_at_its_own_speed() -> Non
         assert compare(move, capture.wait())["A"].worst == 0
 
 
+def test_motion_planned_with_read_back_values_uses_the_stored_steps() -> None:
+    # (a move, a jog, a schedule and a homing read SP/AC/DC/JG/HV back at four decimals and
+    # planned with that text: at TM 1656.25, SP 2.41509... read 2.4151 and DC 9705.58063...
+    # read 9705.5806, and the reference reached the target a sample before the controller's)
+    with simulated("DMC-4040") as dmc:
+        dmc.command("TM 1656.25")
+        a = dmc.A
+        a.speed, a.accel, a.decel = 3.0, 142_225.0, 10_000.0
+        sim = sim_of(dmc)
+        t0 = sim.start_trace("A")
+        move = a.move_by(6)
+        move.wait()
+        trace = sim.stop_trace("A")["A"]
+        k = move.begin["A"] - t0
+        p = move.profiles["A"].position
+        assert (trace[k : k + p.size] == p).all()
+        params = move._tracks["A"].params  # (what the host planned with: the stored steps)
+        step, accel_step = 2 * 1000 / 1656.25, 1024 * (1000 / 1656.25) ** 2
+        assert params.speed == pytest.approx(2 * step, abs=1e-9)
+        assert params.decel == pytest.approx(int(10_000 / accel_step) * accel_step)
+
+
 def test_the_30010s_two_analog_outputs_and_inputs_are_driven_and_recorded() -> None:
     with simulated("DMC-30010") as dmc:
         dmc.io.analog_out[2] = -2.5 * ureg.volt
