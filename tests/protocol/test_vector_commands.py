@@ -63,7 +63,7 @@ REFUSED: list[tuple[Callable[[], Command], type[Exception], str]] = [
     (lambda: c.li(1.5), InvalidArgument, "whole number"),
     (lambda: c.vs(0, model=M4040), LimitError, "VS"),
     (lambda: c.vs(30_000_000, model=M4040), LimitError, "VS"),
-    (lambda: c.va(100, model=M4040), LimitError, "VA"),
+    (lambda: c.va(2, model=M4040), LimitError, "VA"),  # (the smallest: 2.56, at TM 20000)
     (lambda: c.vd(2e9), LimitError, "VD"),
     (lambda: c.vs(1000, "X"), InvalidArgument, "S or T"),
     (lambda: c.vt(0.5, model=M4040), InvalidArgument, "no VT"),
