@@ -207,10 +207,22 @@ def as_stored(link: CommandLink, cmd: str, value: float) -> float:
     step it holds: the text has four decimals of a 32.16 number, up to 5.8e-5 from the step
     (TM 1656.25: SP 2.41509... reads ``2.4151``), and a plan must run at the step itself.
     A whole value (every step at TM 1000) is taken as it is."""
-    if float(value).is_integer():
+    if value.is_integer() if type(value) is float else float(value).is_integer():
         return value
     tm = round(link.sample_period * 1_024_000, 6)
     return predict.quantise_value(cmd, value, link.model, tm=tm)
+
+
+#: No model's SP step exceeds this (2·1000/TM at the shortest TM, 31.25 µs): a faster speed
+#: needs no look at the step (planning is a hot path).
+_LARGEST_SPEED_STEP = 64.0
+
+
+def _at_least_a_step(link: CommandLink, speed: float, ts: float) -> float:
+    """``speed``, or the SP step at the TM in force if it is slower (SP 0 plans one step)."""
+    if speed >= _LARGEST_SPEED_STEP:
+        return speed
+    return max(speed, link.model.speed_resolution(round(ts * 1_024_000, 6)))
 
 
 def sample_of(reply: str) -> int | None:
@@ -245,7 +257,7 @@ def predict_track(link: CommandLink, t: Track) -> predict.Profile:
     else:
         profile = predict.move(
             round(t.amount),
-            max(p.speed, link.model.speed_resolution(round(ts * 1_024_000, 6))),  # TM in force
+            _at_least_a_step(link, p.speed, ts),
             p.accel,
             p.decel,
             sample_period=ts,

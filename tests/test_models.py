@@ -195,3 +195,11 @@ def test_the_41x3_op_takes_one_field_for_all_its_outputs() -> None:
     with pytest.raises(LimitError):
         cmds.op(256, model=get_model("DMC-4143"))
     assert cmds.op(0, 255, model=get_model("DMC-4080")).text == "OP 0,255"  # 8-bit banks
+
+
+def test_no_models_speed_step_exceeds_the_planners_shortcut() -> None:
+    # (planning skips the step lookup for speeds at or above this bound)
+    from galil.motion import _LARGEST_SPEED_STEP
+
+    for spec in MODELS.values():
+        assert spec.speed_resolution(spec.tm_range[0]) <= _LARGEST_SPEED_STEP
