@@ -243,7 +243,6 @@ ASYNC_SKIPPED: dict[tuple[str, str], str] = {
     ("arrays", "contains"): "a membership test: anything not an array's name is not there"
     " (False), as `in` answers",
     ("variables", "contains"): "a membership test, as `in` answers",
-    ("programs", "run"): "fuzzed: the twin of Programs.run (the sync row), not Room.run",
 }
 
 
@@ -476,6 +475,7 @@ async def _fuzz(e: AEntry) -> list[str]:
 
 
 @pytest.mark.timeout(60)
+@pytest.mark.filterwarnings("ignore:move on .* away from the prediction:RuntimeWarning")  # stopped
 @pytest.mark.parametrize("entry", AENTRIES, ids=lambda e: f"{e.group}.{e.name}")
 def test_bad_values_are_refused_by_the_async_twins(entry: AEntry) -> None:
     problems = asyncio.run(asyncio.wait_for(_fuzz(entry), 50))
