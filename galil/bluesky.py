@@ -59,7 +59,7 @@ from galil.aio import connect as aio_connect
 from galil.contour import ContourResult, ContourStream
 from galil.controller import Controller
 from galil.errors import InvalidArgument
-from galil.link import check_seconds, check_wait_timeout
+from galil.link import check_count, check_flag, check_seconds, check_wait_timeout
 from galil.motion import held
 from galil.predict import Profile
 from galil.units import Scale, get_registry, path_to_counts
@@ -209,6 +209,27 @@ def _unit_and_precision(scale: Scale | None) -> tuple[str, int]:
 # ------------------------------------------------------------------------------------ motor
 
 
+def _check_name(name: object) -> None:
+    if not isinstance(name, str):
+        raise InvalidArgument(f"a device's name is a string, not {name!r:.60}")
+
+
+def _finite(value: Any) -> bool:
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # an int no float holds
+        return False
+
+
+def _distance(value: object) -> float:
+    """``in_position``: a finite number >= 0 in the axis's unit."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not _finite(value):
+        raise InvalidArgument(f"in_position must be a finite number >= 0, not {value!r:.60}")
+    if value < 0:
+        raise InvalidArgument(f"in_position must be a finite number >= 0, not {value!r:.60}")
+    return float(value)
+
+
 def _watch_timeout(timeout: object) -> float | None:
     """``set()``'s timeout as :meth:`AsyncMoveHandle.watch` takes it: ``CALCULATE_TIMEOUT``
     is the watch's own default (``None``: the predicted duration plus a margin), ``None``
@@ -260,10 +281,11 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
     ) -> None:
         if not isinstance(address, str) or not isinstance(axis, str) or not axis:
             raise InvalidArgument(f"GalilMotor takes an address and an axis letter, not {axis!r}")
+        _check_name(name)
         self._letter = axis
         self._scale = _scale_of(scale, offset, sign)
         per = 1.0 if self._scale is None else float(self._scale.counts_per.magnitude)
-        self._in_position = 1.0 if in_position is None else abs(float(in_position)) * per
+        self._in_position = 1.0 if in_position is None else _distance(in_position) * per
         self._settle_timeout = check_seconds(settle_timeout, "settle_timeout")
         self._axis: AsyncAxis | None = None
         self._stopped: bool | None = None  # success flag of a stop() during set()
@@ -321,6 +343,8 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         """``value`` as the axis takes it (any real number, numpy's included; not a bool)."""
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
             raise InvalidArgument(f"{self.name}: a position is a number, not {value!r}")
+        if not _finite(value):  # (an int no float holds, 10**400: the setpoint is a float)
+            raise InvalidArgument(f"{self.name}: a position is a finite number, not {value!r:.40}")
         number = int(value) if isinstance(value, numbers.Integral) else float(value)
         if self._scale is None:
             return number
@@ -441,7 +465,7 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
 
     async def stop(self, success: bool = True) -> None:
         """Decelerate to a stop (``ST``); with ``success=False`` a move in progress fails."""
-        self._stopped = success
+        self._stopped = check_flag(success, "success")
         await self.axis.stop()
 
 
@@ -537,8 +561,15 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable):
         *,
         scales: Mapping[str, Any] | None = None,
     ) -> None:
+        if not isinstance(address, str):
+            raise InvalidArgument(f"GalilContourFlyer takes an address, not {address!r:.60}")
         if not isinstance(axes, str) or not axes:
             raise InvalidArgument(f"axes is a string of axis letters, not {axes!r}")
+        _check_name(name)
+        if scales is not None and not isinstance(scales, Mapping):
+            raise InvalidArgument(f"scales must map axis letters to scales, not {scales!r:.60}")
+        for per in (scales or {}).values():
+            Scale(per)  # refused here, not at connect()
         self._axes_given = axes
         self._scales = dict(scales or {})
         self._letters = ""
@@ -567,6 +598,10 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable):
         """Check the path and predict it from where the axes are (one state query)."""
         if not isinstance(value, ContourPath):
             raise InvalidArgument(f"prepare takes a ContourPath, not {value!r}")
+        period = value.record_period
+        if period is not None and not 1 <= check_count(period, "record_period") <= 65535:
+            # as the records of kickoff() would refuse it, but before the path is prepared
+            raise InvalidArgument(f"record_period is a number of samples 1..65535, not {period!r}")
         c = self.controller
         stream, _ = await c.run(_build_stream, c.sync, self._letters, value.path, value.dt)
         period = value.record_period or (1 << value.dt)
@@ -680,6 +715,7 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable):
 
     async def stop(self, success: bool = True) -> None:
         """Stop the contour's axes (``ST``); the flight then fails."""
+        check_flag(success, "success")
         flight = self._flight
         if flight is not None and flight.run is not None and not flight.run.done():
             flight.run.cancel()

@@ -85,6 +85,7 @@ def plan_profile(args: argparse.Namespace) -> Any:
     from galil import predict
     from galil.errors import InvalidArgument
     from galil.models import get_model
+    from galil.moves import check_int32
     from galil.units import Scale, counts_or_plain
 
     model = get_model(args.model)
@@ -106,6 +107,7 @@ def plan_profile(args: argparse.Namespace) -> Any:
     distance = round(counts["distance"])
     if abs(distance - counts["distance"]) > 1e-6 * max(1.0, abs(distance)):
         raise InvalidArgument(f"the distance is {counts['distance']:g} counts, not a whole number")
+    check_int32("PR", distance, "the axis", model.name)  # as Axis.plan_by refuses it
     profile = predict.move(
         distance,
         predict.check_parameter("SP", counts["SP"], model),

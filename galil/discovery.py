@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from galil.errors import GalilConnectionError, GalilError, InvalidArgument, ProtocolError
-from galil.link import check_seconds
+from galil.link import check_callable, check_count, check_flag, check_items, check_seconds
 from galil.portnumber import check_port
 from galil.protocol.discovery import (
     BOOTP_SERVER_PORT,
@@ -155,6 +155,8 @@ def serial_ports(
         InvalidArgument: a bad timeout (before any port is opened).
     """
     timeout = _check_seconds(timeout, "timeout")
+    check_flag(identify, "identify")
+    check_flag(identify_bridges, "identify_bridges")
     out: list[Found] = []
     for port in _comports():
         vid = getattr(port, "vid", None)
@@ -174,7 +176,13 @@ def serial_ports(
 
 
 def usb_devices(*, backend: Any = None) -> list[Found]:
-    """USB devices with Galil's vendor id (pyusb; empty when no libusb backend is found)."""
+    """USB devices with Galil's vendor id (pyusb; empty when no libusb backend is found).
+
+    Raises:
+        InvalidArgument: ``backend`` is not a pyusb backend.
+    """
+    if backend is not None and not callable(getattr(backend, "enumerate_devices", None)):
+        raise InvalidArgument(f"backend must be a pyusb backend, not {backend!r:.60}")
     try:
         import usb.core
     except ImportError:  # pragma: no cover - pyusb is a dependency
@@ -205,6 +213,9 @@ def pci_nodes(
         InvalidArgument: a bad timeout (before any node is opened).
     """
     timeout = _check_seconds(timeout, "timeout")
+    check_flag(identify, "identify")
+    if not isinstance(pattern, str):
+        raise InvalidArgument(f"pattern must be a glob pattern, not {pattern!r:.60}")
     out = []
     for path in sorted(glob.glob(pattern)):
         ident = _identify_address(path, timeout) if identify else ""
@@ -215,14 +226,16 @@ def pci_nodes(
 # ----------------------------------------------------------------------------------- Ethernet
 
 
-def _targets(specs: Iterable[str]) -> list[tuple[str, int]]:
-    """``"10.0.0.5"``, ``"10.0.0.5:23"``, ``"10.0.0.0/24"`` -> (host, port) pairs.
+def _targets(specs: Iterable[str] | str) -> list[tuple[str, int]]:
+    """``"10.0.0.5"``, ``"10.0.0.5:23"``, ``"10.0.0.0/24"`` (one, or a list) -> (host, port)
+    pairs.
 
     Raises:
-        InvalidArgument: a spec that is none of these, or more than 1024 hosts in all.
+        InvalidArgument: a spec that is none of these, not a list of them, or more than 1024
+            hosts in all.
     """
     out: list[tuple[str, int]] = []
-    for spec in specs:
+    for spec in [specs] if isinstance(specs, str) else check_items(specs, "probe"):
         if not isinstance(spec, str) or not spec.strip():
             raise InvalidArgument(f"not an address to probe: {spec!r}")
         text = spec.strip()
@@ -334,6 +347,10 @@ def listen_bootp(
     """
     _check_endpoint(address, "bootp_address")
     timeout = _check_seconds(timeout, "timeout")
+    if on_request is not None:
+        check_callable(on_request, "on_request")
+    if count is not None:
+        check_count(count, "count")
     seen: dict[bytes, BootpRequest] = {}
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -436,8 +453,17 @@ def find(
     """
     timeout = _check_seconds(timeout, "timeout")
     bootp_timeout = _check_seconds(bootp_timeout, "bootp_timeout")
-    if isinstance(probe, str):
-        probe = [probe]
+    for name, value in (
+        ("serial", serial),
+        ("usb", usb),
+        ("pci", pci),
+        ("network", network),
+        ("bootp", bootp),
+        ("identify", identify),
+        ("identify_bridges", identify_bridges),
+    ):
+        check_flag(value, name)
+    probe = [probe] if isinstance(probe, str) else check_items(probe, "probe")
     _targets(probe)  # validate before anything goes out
     _check_endpoint(group, "group")
     _check_endpoint(bootp_address, "bootp_address")

@@ -20,6 +20,7 @@ import contextlib
 import logging
 import math
 import re
+import sys
 import threading
 import time
 from collections import deque
@@ -379,7 +380,8 @@ class LinkCore:
 
     def __init__(self, *, timeout: float = 1.0, history: int = 64) -> None:
         self.timeout = check_timeout(timeout, 1.0)
-        check_count(history, "history")
+        if check_count(history, "history") > sys.maxsize:  # more than a deque can hold
+            raise InvalidArgument(f"history must be at most {sys.maxsize}, not {history!r:.40}")
         self.transport: Transport | None = None
         self._model: ModelSpec | None = None
         self._sample_period: float | None = None

@@ -28,7 +28,7 @@ from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
 from galil import predict
 from galil.aio._worker import Room, Worker
 from galil.errors import GalilConnectionError, GalilError, GalilTimeoutError
-from galil.link import Link, check_wait_timeout
+from galil.link import Link, check_callable, check_flag, check_wait_timeout
 from galil.motion import (
     MAX_POLL,
     MIN_POLL,
@@ -253,6 +253,7 @@ class AsyncMoveHandle:
             GalilTimeoutError: not done in time (the move is NOT stopped).
         """
         check_wait_timeout(timeout)
+        check_flag(stop_on_cancel, "stop_on_cancel")
         worker, link = self._worker, self._link
         try:
             poll = await worker.run(_Poll, self.sync, link, timeout)
@@ -313,7 +314,11 @@ class AsyncMoveHandle:
         controller is closed, the connection is lost, the move outlasts its predicted
         duration plus the margin of :meth:`watch`), they are never called: the error is
         logged (logger ``galil.aio``) and they are dropped.
+
+        Raises:
+            InvalidArgument: ``callback`` cannot be called.
         """
+        check_callable(callback, "callback")
         if self.sync.finished:
             callback(self)
             return

@@ -20,9 +20,9 @@ from typing import Any, Generic, TypeVar
 import numpy as np
 
 from galil.aio._worker import Worker, shielded
-from galil.errors import GalilConnectionError
+from galil.errors import GalilConnectionError, InvalidArgument
 from galil.link import check_count, check_wait_timeout
-from galil.records import RecordStream
+from galil.records import TAKE_MAX, RecordStream
 
 __all__ = ["SLICE", "AsyncMessages", "AsyncRecordStream", "LoopQueue"]
 
@@ -241,8 +241,14 @@ class AsyncRecordStream:
         """The next ``n`` records as one structured array; ``timeout`` bounds each wait.
 
         Cancelled or timed out part-way, the records it had taken wait for the next read.
+
+        Raises:
+            InvalidArgument: ``n`` not a positive integer, or more than ``TAKE_MAX`` (as by
+                the sync stream's ``take``), or a bad timeout, before anything is read.
         """
-        check_count(n, "n")
+        if check_count(n, "n") > TAKE_MAX:
+            raise InvalidArgument(f"n must be at most {TAKE_MAX} records at once, not {n!r:.40}")
+        _wait_seconds(timeout)
         records: list[np.void] = []
         try:
             while len(records) < n:

@@ -26,7 +26,7 @@ import threading
 from collections.abc import Awaitable, Callable
 from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
 
-from galil.errors import GalilConnectionError
+from galil.errors import GalilConnectionError, InvalidArgument
 
 __all__ = ["Backed", "Room", "Worker", "same", "shielded", "twin"]
 
@@ -191,7 +191,13 @@ class Room(Backed[S_co]):
     ``programs.run``, is a :class:`Backed` only.)"""
 
     async def run(self, fn: Callable[P, R], /, *args: P.args, **kwargs: P.kwargs) -> R:
-        """Run any blocking callable on this controller's worker (a room without a twin)."""
+        """Run any blocking callable on this controller's worker (a room without a twin).
+
+        Raises:
+            InvalidArgument: ``fn`` cannot be called (refused here, not on the worker).
+        """
+        if not callable(fn):
+            raise InvalidArgument(f"fn must be callable, not {fn!r:.60}")
         return await self._worker.run(fn, *args, **kwargs)
 
 

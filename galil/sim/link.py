@@ -194,10 +194,26 @@ class SimMessageHandle:
         self._closed = True
 
 
-def _flag(value: Any) -> bool:
+def _flag(value: Any, what: str) -> bool:
+    """True or False, or their spellings in a URL query (``1``/``0``, ``yes``/``no`` ...)."""
     if isinstance(value, bool):
         return value
-    return str(value).lower() in ("1", "true", "yes", "on")
+    text = value.lower() if isinstance(value, str) else value
+    if text in (1, "1", "true", "yes", "on"):
+        return True
+    if text in (0, "0", "false", "no", "off"):
+        return False
+    raise InvalidArgument(f"{what} must be true or false, not {value!r:.60}")
+
+
+def _number(value: Any, what: str, kind: type[int] | type[float]) -> Any:
+    """An int or a float option, or its text from a URL query; anything else refused."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        raise InvalidArgument(f"{what} must be a number, not {value!r:.60}")
+    try:
+        return kind(value)
+    except (ValueError, OverflowError) as exc:  # "x", nan or inf as a seed, 10**400 as a float
+        raise InvalidArgument(f"{what} must be a number, not {value!r:.60}") from exc
 
 
 def open_transport(url: str | urllib.parse.SplitResult, **options: Any) -> SimLink:
@@ -219,12 +235,14 @@ def open_transport(url: str | urllib.parse.SplitResult, **options: Any) -> SimLi
     model = parts.netloc or parts.path.strip("/") or "DMC-4040"
     controller = opts.pop("controller", None)
     clock_opt = opts.pop("clock", "manual")
-    lag = float(opts.pop("lag", 0.003))
+    lag = _number(opts.pop("lag", 0.003), "lag", float)
     faults = opts.pop("faults", None)
+    if faults is not None and not callable(faults):
+        raise InvalidArgument(f"faults must be a FaultPlan or a hook, not {faults!r:.60}")
     seed = opts.pop("seed", None)
     if faults is None and seed is not None:
-        faults = FaultPlan(split=True, seed=int(seed))
-    auto_advance = _flag(opts.pop("auto_advance", True))
+        faults = FaultPlan(split=True, seed=_number(seed, "seed", int))
+    auto_advance = _flag(opts.pop("auto_advance", True), "auto_advance")
     messages = str(opts.pop("messages", "inline"))
     opts.pop("timeout", None)  # accepted for symmetry with other transports
     if opts:

@@ -26,7 +26,7 @@ def seconds(value: object, what: str) -> float:
     if not isinstance(value, bool):
         try:
             number = float(value) if isinstance(value, (int, float, str)) else math.nan
-        except ValueError:
+        except (ValueError, OverflowError):  # not a number; an int no float holds (10**400)
             number = math.nan
         if math.isfinite(number) and number > 0:
             return number
