@@ -103,6 +103,15 @@ def test_the_cli_refuses_bad_arguments_in_one_line(
     assert last.startswith("galil"), err  # "galil: ..." or "galil plan: error: ..."
 
 
+@pytest.mark.parametrize("limits", ["x", "1", "1,2,3", "1.5,9"])
+def test_sim_says_what_limits_takes(limits: str, capsys: pytest.CaptureFixture[str]) -> None:
+    # (it said "invalid literal for int() with base 10: 'x'")
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["sim", "--tcp", "127.0.0.1:0", "--limits", limits])
+    assert exc.value.code == 2
+    assert "--limits takes two whole numbers of counts, REV,FWD" in capsys.readouterr().err
+
+
 # -- discovery ------------------------------------------------------------------------------------
 
 LOCAL = ("127.0.0.1", 0)

@@ -10,6 +10,7 @@ import os
 import shutil
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -91,9 +92,39 @@ def test_every_script_is_covered() -> None:
     assert [p.name for p in SCRIPTS] == sorted(EXPECTED)
 
 
+@dataclass(frozen=True)
+class Ran:
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+@pytest.fixture(scope="module")
+def ran(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Ran]:
+    """Every script, run at once (each in its own process and folder, as a user runs it):
+    the suite waits for the slowest instead of for their sum."""
+    env = dict(os.environ, MPLBACKEND="Agg", PYTHONWARNINGS="error::RuntimeWarning")
+    procs = {
+        script.name: subprocess.Popen(
+            [sys.executable, str(script)],
+            cwd=tmp_path_factory.mktemp(script.stem),
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for script in SCRIPTS
+    }
+    out = {}
+    for name, proc in procs.items():
+        stdout, stderr = proc.communicate(timeout=120)
+        out[name] = Ran(proc.returncode, stdout, stderr)
+    return out
+
+
 @pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: p.name)
-def test_script_runs_on_the_simulator(script: Path, tmp_path: Path) -> None:
-    proc = _run([str(script)], tmp_path)
+def test_script_runs_on_the_simulator(script: Path, ran: dict[str, Ran]) -> None:
+    proc = ran[script.name]
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "Traceback" not in proc.stderr, proc.stderr
     for text in EXPECTED[script.name]:

@@ -92,3 +92,14 @@ def test_compare_plot_takes_data_records_and_needs_their_time(
         compare_plot(move, plain)
     with pytest.raises(galil.InvalidArgument, match="does not know the controller sample"):
         compare_plot({"A": move.profile}, records)
+
+
+@pytest.mark.parametrize("distance", [1, 10, 40])
+def test_a_move_shorter_than_the_smoothing_window_plots(distance: int) -> None:
+    # (a 13-sample move: the acceleration's 16-sample window made np.convolve return 16
+    # values for 14 times, and matplotlib refused them)
+    profile = predict.move(distance, 25_000, 256_000, 256_000)
+    fig = profile.plot()
+    for ax in fig.axes:
+        for line in ax.get_lines():
+            assert len(line.get_xdata()) == len(line.get_ydata()) == profile.samples + 1

@@ -53,8 +53,10 @@ class SampleSource(Protocol):
 
 
 def _moving_average(x: FloatArray, window: int) -> FloatArray:
-    """Centred moving average with the ends averaged over what exists."""
-    if window <= 1 or x.size == 0:
+    """Centred moving average with the ends averaged over what exists (a window longer than
+    ``x`` is cut to it: ``np.convolve``'s "same" would return the window's length)."""
+    window = min(window, x.size)
+    if window <= 1:
         return np.asarray(x, dtype=np.float64)
     kernel = np.ones(window)
     total = np.convolve(x, kernel, mode="same")

@@ -655,7 +655,13 @@ def _controller(model: str, lag: float, limits: str | None) -> SimController:
     """The served controller, its limit switches placed at ``limits`` ("REV,FWD")."""
     controller = SimController(model, RealTimeClock(), servo_lag=lag)
     if limits:
-        reverse, forward = (int(v) for v in limits.split(","))
+        try:
+            reverse, forward = (int(v) for v in limits.split(","))
+        except ValueError:
+            raise InvalidArgument(
+                f"--limits takes two whole numbers of counts, REV,FWD (e.g. -50000,50000),"
+                f" not {limits!r}"
+            ) from None
         for letter in controller.spec.axes:
             controller.place_limit_switches(letter, forward=forward, reverse=reverse)
     return controller
