@@ -21,7 +21,7 @@ from galil.errors import InvalidArgument, LimitError
 from galil.gearing import Gearing, gear_to
 from galil.homing import AxisHoming, Homed, Switches, read_switches
 from galil.link import CommandLink
-from galil.models import INT32_MAX, INT32_MIN, ModelSpec
+from galil.models import INT32_MAX, INT32_MIN, ModelSpec, tm_of
 from galil.motion import Display, MotionTracker, MoveHandle, stop_axes
 from galil.moves import AxisMove, execute_move, increment, jog, set_jog_speed, speed_schedule
 from galil.protocol import commands as cmds
@@ -336,7 +336,7 @@ class Axis:
             LimitError: outside the model's range.
         """
         try:
-            tm = round(self._link.sample_period * 1_024_000, 6)  # the TM in force: SP/AC steps
+            tm = tm_of(self._link.sample_period)  # the TM in force: SP/AC steps
             return predict.check_parameter(cmd, counts, self._link.model, axis=self.letter, tm=tm)
         except LimitError as exc:
             scale = self._scale

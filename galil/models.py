@@ -25,6 +25,7 @@ __all__ = [
     "generic_model",
     "get_model",
     "parse_identity",
+    "tm_of",
 ]
 
 _ALL_AXES = "ABCDEFGH"
@@ -887,6 +888,13 @@ def _with_axes(base: ModelSpec, name: str, n: int) -> ModelSpec:
             "digital_outputs": base.digital_outputs if n <= 4 else 2 * base.digital_outputs,
         }
     )
+
+
+def tm_of(sample_period: float) -> float:
+    """The TM (µs) of a sample period in seconds, as :meth:`ModelSpec.sample_period_for` made
+    it (TM / 1,024,000), rounded to a millionth of a µs so that TM 1500 is 1500, not
+    1499.9999999999998: the steps of SP, AC and the rest follow it."""
+    return round(sample_period * 1_024_000, 6)
 
 
 def get_model(name: str) -> ModelSpec:

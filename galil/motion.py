@@ -32,6 +32,7 @@ from galil.errors import (
     MotionError,
 )
 from galil.link import CommandLink, check_callable, check_flag, check_wait_timeout
+from galil.models import tm_of
 from galil.protocol import commands as cmds
 
 __all__ = [
@@ -209,8 +210,7 @@ def as_stored(link: CommandLink, cmd: str, value: float) -> float:
     A whole value (every step at TM 1000) is taken as it is."""
     if value.is_integer() if type(value) is float else float(value).is_integer():
         return value
-    tm = round(link.sample_period * 1_024_000, 6)
-    return predict.quantise_value(cmd, value, link.model, tm=tm)
+    return predict.quantise_value(cmd, value, link.model, tm=tm_of(link.sample_period))
 
 
 #: No model's SP step exceeds this (2·1000/TM at the shortest TM, 31.25 µs): a faster speed
@@ -222,7 +222,7 @@ def _at_least_a_step(link: CommandLink, speed: float, ts: float) -> float:
     """``speed``, or the SP step at the TM in force if it is slower (SP 0 plans one step)."""
     if speed >= _LARGEST_SPEED_STEP:
         return speed
-    return max(speed, link.model.speed_resolution(round(ts * 1_024_000, 6)))
+    return max(speed, link.model.speed_resolution(tm_of(ts)))
 
 
 def sample_of(reply: str) -> int | None:

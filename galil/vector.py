@@ -29,6 +29,7 @@ import numpy as np
 from galil import predict
 from galil.errors import GalilError, InvalidArgument, LimitError
 from galil.link import CommandLink, check_flag
+from galil.models import tm_of
 from galil.motion import (
     GearLink,
     MotionTracker,
@@ -434,7 +435,7 @@ class VectorStream:
                 model=model,
                 start=state.start,
                 smoothing=state.smoothing,
-                tm=link.sample_period * 1_024_000,
+                tm=tm_of(link.sample_period),
                 forward_limits=state.forward,
                 backward_limits=state.backward,
                 speed_limits=self.speed_limits,
