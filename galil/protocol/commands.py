@@ -396,12 +396,12 @@ def _ranged(
     return format_number(v)
 
 
-def _away(text: str, value: float) -> str:
+def _away(text: str, value: object) -> str:
     """``text`` (``value`` at four decimals), one last digit further from zero if rounding
-    took it nearer: a stepped value (SP at TM 1500 is a multiple of 4/3 counts/s) then
+    took a float nearer: a stepped value (SP at TM 1500 is a multiple of 4/3 counts/s) then
     reaches the controller at or just beyond its step, never just short of it, where
     rounding down to the step would store the step below."""
-    if abs(float(text)) >= abs(value):
+    if not isinstance(value, float) or abs(float(text)) >= abs(value):
         return text
     return format_number(math.copysign(abs(float(text)) + 1e-4, value))
 
@@ -434,9 +434,7 @@ class _Checker:
         text = _ranged(
             value, self.lo, self.hi, self.name, axis, self.model_name, integer=self.integer
         )
-        if self.stepped and isinstance(value, float):
-            return _away(text, value)
-        return text
+        return _away(text, value) if self.stepped else text
 
 
 # Integer ranges every model accepts, for the hot path of _axis_command.
@@ -947,7 +945,7 @@ def _plane_value(
     stepped: bool = False,
 ) -> Command:
     text = _ranged(value, lo, hi, mnemonic, model=model, integer=integer)
-    if stepped and isinstance(value, float):
+    if stepped:
         text = _away(text, value)
     return Command(f"{mnemonic}{_plane(plane)}={text}")
 
