@@ -655,13 +655,7 @@ def check_contour(
     spec = resolve_model(model)
     ts = spec.sample_period if sample_period is None else sample_period
     c = np.asarray(increments, dtype=np.int64).ravel()
-    try:
-        n = np.broadcast_to(np.asarray(dt, dtype=np.int64), c.shape)
-    except OverflowError:  # an int no int64 holds (10**400)
-        low, high = spec.dt_range
-        raise LimitError(
-            f"DT {dt!r:.40} is outside {low}..{high}", name="DT", axis=axis, model=spec.name
-        ) from None
+    n = _dt_exponents(dt, c.shape, spec, axis)
     lengths = np.left_shift(np.int64(1), np.clip(n, 0, 62))
     starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]) if c.size else np.zeros(0, np.int64)
     _check_segment_ranges(c, n, starts, spec, ts, axis)
@@ -688,6 +682,24 @@ def check_contour(
     return _check_stream(
         b, lengths * ts, starts, (raw_rate, utilisation, depth, preload), ts, axis, spec
     )
+
+
+def _dt_exponents(
+    dt: int | Sequence[int], shape: tuple[int, ...], spec: ModelSpec, axis: str | None
+) -> npt.NDArray[np.int64]:
+    """DT per segment (one for all, or one each) as int64 exponents; their range is checked
+    with the segments'.
+
+    Raises:
+        LimitError: an int no int64 holds (10**400).
+    """
+    try:
+        return np.broadcast_to(np.asarray(dt, dtype=np.int64), shape)
+    except OverflowError:
+        low, high = spec.dt_range
+        raise LimitError(
+            f"DT {dt!r:.40} is outside {low}..{high}", name="DT", axis=axis, model=spec.name
+        ) from None
 
 
 def _link_rate(
