@@ -18,7 +18,7 @@ import contextlib
 import inspect
 import queue
 import types
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -641,18 +641,31 @@ def _case(
         _dispose(result)
         if entry.kind == "set":
             setattr(target, entry.name, before)
+    after, broken = _afterwards(dmc, where, moving_before, raised is not None or not entry.moves)
+    problems += after
+    if broken:
+        return problems
+    group.after(dmc, target)
+    _settle(dmc)
+    return problems
+
+
+def _afterwards(
+    dmc: galil.Controller, where: str, moving_before: Sequence[str], no_motion: bool
+) -> tuple[list[str], bool]:
+    """What is wrong with the link and the axes after a case (``no_motion``: the call was
+    refused, or starts no motion), and whether the link is broken."""
     try:
+        problems = []
         if dmc.query_number("MG 1+1") != 2:
             problems.append(f"{where}: the link answers wrongly afterwards")
         moving = _moving(dmc)
     except galil.GalilError as exc:
-        return [*problems, f"{where}: the link is broken afterwards: {exc}"]
+        return [f"{where}: the link is broken afterwards: {exc}"], True
     started = sorted(set(moving) - set(moving_before))
-    if started and (raised is not None or not entry.moves):
+    if started and no_motion:
         problems.append(f"{where}: left {started} moving")
-    group.after(dmc, target)
-    _settle(dmc)
-    return problems
+    return problems, False
 
 
 def _params(entry: Entry, target: object) -> list[str]:

@@ -422,15 +422,11 @@ async def _acase(
         sync = await c.run(_sync_outcome, c, e, target, args)
         if sync != type(raised).__name__:
             problems.append(f"{where}: async raised {type(raised).__name__}, sync {sync}")
-    try:
-        if await c.query_number("MG 1+1") != 2:
-            problems.append(f"{where}: the link answers wrongly afterwards")
-        moving = sync_fuzz._moving(c.sync)
-    except galil.GalilError as exc:
-        return [*problems, f"{where}: the link is broken afterwards: {exc}"]
-    started = sorted(set(moving) - set(moving_before))
-    if started and (raised is not None or not e.moves):
-        problems.append(f"{where}: left {started} moving")
+    no_motion = raised is not None or not e.moves
+    after, broken = sync_fuzz._afterwards(c.sync, where, moving_before, no_motion)
+    problems += after
+    if broken:
+        return problems
     if group.after is not None:
         with contextlib.suppress(galil.GalilError):
             await group.after(c, target)
