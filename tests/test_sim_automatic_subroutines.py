@@ -52,7 +52,7 @@ def test_a_limit_switch_runs_limswi_and_re_1_goes_back_to_the_interrupted_am(
     sim_of(dmc).place_limit_switches("A", forward=1500)
     lines = _run(
         dmc,
-        "#M\nPR 3000;BG A\nAM A\nMG \"done\",_SCA\nEN\n#LIMSWI\nMG \"limit\",_SCA,_LFA\nRE 1",
+        '#M\nPR 3000;BG A\nAM A\nMG "done",_SCA\nEN\n#LIMSWI\nMG "limit",_SCA,_LFA\nRE 1',
     )
     assert lines == ["limit 2.0000 0.0000", "done 2.0000"]
     assert dmc.A.stop_code[0] == 2
@@ -164,9 +164,7 @@ def test_a_command_error_in_another_thread_stops_it_and_runs_cmderr_on_thread_0(
 
 def test_an_mc_that_times_out_sets_stop_code_99_and_runs_mctime(dmc: galil.Controller) -> None:
     sim_of(dmc).set_servo_lag(0.05, "A")
-    lines = _run(
-        dmc, '#M\nTW 20\nPR 1000;BG A\nMC A\nMG "mc"\nEN\n#MCTIME\nMG "late",_SCA\nEN'
-    )
+    lines = _run(dmc, '#M\nTW 20\nPR 1000;BG A\nMC A\nMG "mc"\nEN\n#MCTIME\nMG "late",_SCA\nEN')
     assert lines == ["late 99.0000", "mc"]
 
 
@@ -185,8 +183,7 @@ def test_js_calls_a_subroutine_that_returns_a_value_and_zs_leaves_it(
 ) -> None:
     lines = _run(
         dmc,
-        '#M\nJS #SQ\nMG _JS\nJS #Z\nMG "not here"\nEN\n#SQ\nEN ,,7*7\n'
-        '#Z\nZS\nMG "zeroed",_ZS0\nEN',
+        '#M\nJS #SQ\nMG _JS\nJS #Z\nMG "not here"\nEN\n#SQ\nEN ,,7*7\n#Z\nZS\nMG "zeroed",_ZS0\nEN',
     )
     assert lines == ["49.0000", "zeroed 0.0000"]
 
