@@ -563,6 +563,8 @@ def _pieces(cuts: list[int]) -> Split:
         "jog turned back just short of a switch",
         "DR through a switch stop",
         "RC round and round during an arc",
+        "#POSERR with OE 0 while the lag catches up",
+        "#ININT while an input is low, RI 1",
     ],
 )
 def test_uneven_pieces_agree_with_one_advance(name: str, cuts: list[int]) -> None:
