@@ -92,3 +92,17 @@ def test_a_capture_over_tcp_lines_up_with_the_move_it_recorded(tcp_address: str)
         inside = (k >= 0) & (k <= move.profile.samples)
         assert inside.sum() > 50
         assert np.array_equal(rec["_RPA"][inside], move.profile.position[k[inside]])
+
+
+def test_a_soft_limit_runs_the_programs_limswi_and_its_message_arrives_over_tcp(
+    tcp_address: str,
+) -> None:
+    with galil.connect(tcp_address, timeout=2.0) as dmc:
+        dmc.programs.download(
+            '#M\nFL 1500;PR 3000;BG A\nAM A\nMG "done",_SCA\nEN\n#LIMSWI\nMG "limit",_SCA\nRE 1'
+        )
+        dmc.programs.run("#M", thread=0)
+        dmc.programs.wait(0, timeout=5)
+        assert dmc.messages.get(timeout=5).strip() == "limit 2.0000"
+        assert dmc.messages.get(timeout=5).strip() == "done 2.0000"
+        assert dmc.A.stop_code[0] == 2

@@ -25,7 +25,8 @@ silent are written in the room that makes them (see ``shared/reference/galil-pro
 - ``WC`` holds until at most one contour segment (the one running) is left, i.e. the previous
   interval is complete; a ``CD`` into a full buffer holds its ``:`` until there is room; an
   emptied buffer while contouring sets the error code to 42;
-- a program command that fails halts its thread and sets the error code; nothing is printed.
+- a program command that fails halts its thread and sets the error code; nothing is printed
+  (a program with ``#CMDERR`` runs it; automatic subroutines and OE: decision 0029).
 """
 
 from __future__ import annotations

@@ -4,31 +4,61 @@
 stops every thread. Each thread runs a few commands per servo sample (the firmware runs a few
 per millisecond) until a command blocks it (a trippoint's :class:`~galil.sim.registry.Wait`),
 it reaches ``EN`` or the end, or a command fails: a failed command halts its thread and sets
-the error code; nothing is printed. ``JP`` and ``EN`` are flow control, handled here.
+the error code; nothing is printed. ``JP``, ``JS``, ``EN`` and ``ZS`` are flow control, handled
+here, as is the subroutine stack that ``JS`` and the automatic subroutines share.
+
+An automatic subroutine (``#LIMSWI``, ``#POSERR``, ``#ININT``, ``#MCTIME``, ``#CMDERR``) runs on
+thread 0 (:meth:`Programs.interrupt`): a running thread 0 is interrupted (where it was, and
+the trippoint it waited for, go on its stack), an idle one is started. One runs at a time; one
+due meanwhile waits for the running one to return. ``EN n``, ``RE n`` and ``RI n`` return,
+restoring the interrupted trippoint when ``n`` is 1 and dropping it otherwise (decision 0029).
+An error in a program runs ``#CMDERR`` when the program has it: the failing thread stops
+(thread 0 goes on after the failed command once the routine returns).
 """
 
 from __future__ import annotations
 
 import re
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 from galil.sim.parse import Refused, split_fields, split_program_line
 from galil.sim.ports import Port
 from galil.sim.registry import Collect, Download, Result, Wait
 
-__all__ = ["LINES_PER_SAMPLE", "Executor", "Programs", "Thread"]
+__all__ = ["LINES_PER_SAMPLE", "STACK_DEPTH", "Executor", "Frame", "Programs", "Thread"]
 
 #: Program commands one thread may execute per servo sample (the firmware runs a few per ms).
 LINES_PER_SAMPLE = 16
+#: How deep subroutine calls nest (JS: "can be nested, called up to 16 deep").
+STACK_DEPTH = 16
 
 _LABEL = re.compile(r"#([A-Za-z][A-Za-z0-9]*)")
 
 
 @dataclass(eq=False)
+class Frame:
+    """Where a subroutine returns to.
+
+    Attributes:
+        line: the line to go on at.
+        cmd: the command of that line.
+        wait: the trippoint an automatic subroutine interrupted (restored by ``RE 1``).
+        routine: the automatic subroutine this call runs (``"LIMSWI"``), ``None`` for ``JS``.
+        ends: the thread was started for the routine: returning ends it.
+    """
+
+    line: int
+    cmd: int
+    wait: Wait | None = None
+    routine: str | None = None
+    ends: bool = False
+
+
+@dataclass(eq=False)
 class Thread:
-    """One program thread: where it is, and what it waits for."""
+    """One program thread: where it is, what it waits for, and its subroutine stack."""
 
     number: int
     line: int = 0
@@ -36,6 +66,11 @@ class Thread:
     wait: Wait | None = None
     sample: int = -1
     ran: int = 0
+    stack: list[Frame] = field(default_factory=list)
+
+    def in_routine(self) -> bool:
+        """Whether the thread runs an automatic subroutine."""
+        return any(f.routine is not None for f in self.stack)
 
 
 class Executor(Protocol):
@@ -70,10 +105,17 @@ class Programs:
         self.program: list[str] = []
         self.labels: dict[str, int] = {}
         self.threads: dict[int, Thread] = {}
+        #: Automatic subroutines due while another one runs, in the order they came.
+        self.pending: list[str] = []
+        #: What the last subroutine returned (``EN ,,value``; ``_JS``).
+        self.returned = 0.0
+        #: The line and thread of the last error in a program (``_ED``, ``_ED1``).
+        self.error_at = (0, 0)
 
     def reset(self) -> None:
         """Stop every thread (the program stays)."""
         self.threads.clear()
+        self.pending.clear()
 
     def line_of(self, label: str) -> int:
         """The program line of ``#label``.
@@ -112,7 +154,7 @@ class Programs:
                 p.download.append(line)
 
     def _install(self, lines: list[str]) -> None:
-        self.threads.clear()
+        self.reset()
         self.program = [ln.strip() for ln in lines]
         self.labels = {}
         for i, line in enumerate(self.program):
@@ -180,12 +222,9 @@ class Programs:
         if not text or text[0] in "#'" or text.startswith(("REM", "NO")):
             return True
         try:
-            if text.startswith("EN"):
-                self.threads.pop(th.number, None)
-                return False
-            if text.startswith("JP"):
-                self._jump(th, text[2:])
-                return True
+            flow = self._flow(th, text)
+            if flow is not None:
+                return flow
             result = self._x.execute(text, th)
         except Refused as e:
             self._halt(th, e.code)
@@ -199,15 +238,117 @@ class Programs:
             self._emit(result)
         return th.number in self.threads
 
+    def _flow(self, th: Thread, text: str) -> bool | None:
+        """Run ``text`` if it is flow control (JP JS EN ZS): whether the thread goes on;
+        ``None`` for any other command."""
+        code = text[:2]
+        if code == "JP":
+            self._jump(th, text[2:])
+        elif code == "JS":
+            self._call(th, text[2:])
+        elif code == "EN":
+            return self._end(th, text[2:])
+        elif code == "ZS":
+            self._zero_stack(th, text[2:])
+        else:
+            return None
+        return True
+
     def _halt(self, th: Thread, code: int) -> None:
+        """A command of ``th`` failed: set the error code; stop the thread, or run #CMDERR."""
         self._x.tc = code
-        self.threads.pop(th.number, None)
+        self.error_at = (th.line, th.number)
+        handled = "CMDERR" in self.labels and not any(
+            f.routine == "CMDERR" for t in self.threads.values() for f in t.stack
+        )
+        if not handled or th.number != 0:
+            self.threads.pop(th.number, None)
+        if handled:
+            self.interrupt("CMDERR")
 
     def _jump(self, th: Thread, args: str) -> None:
+        line = self._target(args)
+        if line is not None:
+            th.line, th.cmd = line, 0
+
+    def _target(self, args: str) -> int | None:
+        """The line of ``#label[,condition]``; ``None`` when the condition is false."""
         fields = split_fields(args)
         line = self.line_of(fields[0])
         if len(fields) > 2:
-            raise Refused(1, "JP takes a label and one condition")
+            raise Refused(1, "a jump takes a label and one condition")
         if len(fields) == 2 and not self._x.evaluate(fields[1]):
+            return None
+        return line
+
+    def _call(self, th: Thread, args: str) -> None:
+        if "(" in split_fields(args)[0]:
+            raise Refused(1, "JS arguments are not simulated")
+        line = self._target(args)
+        if line is None:
             return
+        if len(th.stack) >= STACK_DEPTH:
+            raise Refused(1, "subroutines nested too deep")
+        th.stack.append(Frame(th.line, th.cmd))
+        th.line, th.cmd = line, 0
+
+    def _end(self, th: Thread, args: str) -> bool:
+        """``EN [restore][,,value]``: return from a subroutine, or end the thread."""
+        fields = split_fields(args) if args.strip() else []
+        restore = bool(fields) and fields[0].strip() != "" and self._x.evaluate(fields[0]) == 1
+        if len(fields) > 2 and fields[2].strip():
+            self.returned = self._x.evaluate(fields[2])
+        if th.stack:
+            self.return_from(th, restore)
+            return th.number in self.threads
+        self.threads.pop(th.number, None)
+        self._start_pending()
+        return False
+
+    def _zero_stack(self, th: Thread, args: str) -> None:
+        n = self._x.evaluate(args) if args.strip() else 0
+        if n not in (0, 1):
+            raise Refused(6, "ZS takes 0 or 1")
+        if n == 0:
+            th.stack.clear()
+        elif th.stack:
+            th.stack.pop()
+        self._start_pending()
+
+    # ---- subroutines -------------------------------------------------------------------
+    def return_from(self, th: Thread, restore: bool) -> None:
+        """Return ``th`` from its subroutine (``EN``, ``RE``, ``RI``); with ``restore``, the
+        trippoint an automatic subroutine interrupted is waited for again. With an empty
+        stack the thread ends."""
+        if not th.stack:
+            self.threads.pop(th.number, None)
+        else:
+            frame = th.stack.pop()
+            if frame.ends:
+                self.threads.pop(th.number, None)
+            else:
+                th.line, th.cmd = frame.line, frame.cmd
+                th.wait = frame.wait if restore else None
+        self._start_pending()
+
+    def interrupt(self, label: str) -> None:
+        """Run the automatic subroutine ``#label`` on thread 0 when the program has it: now,
+        or once the one running has returned."""
+        if label in self.labels and label not in self.pending:
+            self.pending.append(label)
+            self._start_pending()
+
+    def _start_pending(self) -> None:
+        th = self.threads.get(0)
+        if not self.pending or (th is not None and th.in_routine()):
+            return
+        label = self.pending.pop(0)
+        line = self.labels.get(label)
+        if line is None:
+            return
+        if th is None:
+            th = self.threads[0] = Thread(0, stack=[Frame(0, 0, routine=label, ends=True)])
+        else:
+            th.stack.append(Frame(th.line, th.cmd, th.wait, routine=label))
+            th.wait = None
         th.line, th.cmd = line, 0

@@ -9,9 +9,8 @@ data records and interrupt packets, positions, stop codes, the ``TIME`` events w
 program variables, outputs and captured arrays, and the sample the controller is at after
 each stretch.
 
-Not modelled by the simulator, so not covered: the ``AP``/``AR``/``AV`` trippoints, input
-interrupts (``II``, ``#ININT``), the automatic subroutines ``#LIMSWI``, ``#POSERR`` and
-``#MCTIME``, and off-on-error (``OE`` is kept, not acted on).
+The trippoints ``AP``/``AR``/``AV``, the automatic subroutines (``#LIMSWI``, ``#POSERR``,
+``#ININT``, ``#MCTIME``) and off-on-error are among the scenarios (decision 0029).
 """
 
 from __future__ import annotations
@@ -263,6 +262,147 @@ SCENARIOS: dict[str, Scenario] = {
             Cmd("MG t1,t2,TIME,_TM"),
         )
     ),
+    "AP on the lagging encoder, AR again and again": Scenario(
+        (
+            program(
+                "#M",
+                "JG 20000;BG A",
+                "AP 3000",
+                "t1=TIME;p1=_TPA;r1=_RPA",
+                "AR 2500",
+                "t2=TIME;r2=_RPA",
+                "AR -2500",
+                "t3=TIME;r3=_RPA",
+                "ST A",
+                "EN",
+            ),
+            Cmd("XQ #M"),
+            Run(1000),
+            Cmd("MG t1,p1,r1,t2,r2,t3,r3"),
+        ),
+        lag=0.02,
+    ),
+    "AV along a sequence": Scenario(
+        (
+            program(
+                "#V",
+                "VM AB;VP 3000,4000;CR 1000,0,90;VE;BG S",
+                "AV 1000",
+                "a=TIME;da=_AVS",
+                "AV 1500",
+                "b=TIME;db=_AVS",
+                "AV 99999",
+                "c=TIME;dc=_AVS",
+                "EN",
+            ),
+            Cmd("XQ #V"),
+            Run(1500),
+            Cmd("MG a,da,b,db,c,dc"),
+        )
+    ),
+    # ---- automatic subroutines and off-on-error -------------------------------------------
+    "#LIMSWI, RE 1 back to AM": Scenario(
+        (
+            place("A", forward=1500),
+            program(
+                "#M",
+                "PR 3000;BG A",
+                "AM A",
+                "t=TIME",
+                "EN",
+                "#LIMSWI",
+                "l=TIME;s=_SCA;p=_RPA",
+                "WT 5",
+                "RE 1",
+            ),
+            Cmd("XQ #M"),
+            Run(1500),
+            Cmd("MG t,l,s,p"),
+            STATE,
+        )
+    ),
+    "#POSERR and OE 1 at the error's first sample": Scenario(
+        (
+            program(
+                "#M",
+                "ER 40;OE 1",
+                "JG 30000;BG A",
+                "WT 300",
+                "EN",
+                "#POSERR",
+                'MG "E",TIME,_TEA,_MOA,_SCA',
+                "RE",
+            ),
+            Cmd("XQ #M"),
+            Run(600),
+            STATE,
+        )
+    ),
+    "#POSERR with OE 0 while the lag catches up": Scenario(
+        (
+            program(
+                "#M",
+                "ER 60",
+                "PR 4000;BG A",
+                "AM A",
+                "EN",
+                "#POSERR",
+                'MG "E",TIME,_TEA,_MOA',
+                "RE 1",
+            ),
+            Cmd("XQ #M"),
+            Run(800),
+            STATE,
+        ),
+        lag=0.005,
+    ),
+    "#ININT while an input is low, RI 1": Scenario(
+        (
+            program(
+                "#M",
+                "II 2,2,,0",
+                "c=0",
+                "#L",
+                "WT 7",
+                "c=c+1",
+                "JP #L,c<1000",
+                "EN",
+                "#ININT",
+                'MG "I",TIME,c',
+                "WT 20",
+                "RI 1",
+            ),
+            Cmd("XQ #M"),
+            Run(100),
+            drive_input(2, False),
+            Run(50),
+            drive_input(2, True),
+            Run(100),
+            Cmd("MG c,TIME"),
+        )
+    ),
+    "#MCTIME after TW": Scenario(
+        (
+            program(
+                "#M",
+                "TW 20",
+                "PR 1000;BG A",
+                "MC A",
+                "t=TIME",
+                "EN",
+                "#MCTIME",
+                "m=TIME;s=_SCA",
+                "EN",
+            ),
+            Cmd("XQ #M"),
+            Run(1000),
+            Cmd("MG t,m,s"),
+        ),
+        lag=0.05,
+    ),
+    "OE 2: the motor off at a limit switch": Scenario(
+        (place("A", forward=1500), Cmd("OE 2;JG 10000;BG A"), Run(1000), STATE)
+    ),
     # ---- limits ------------------------------------------------------------------------
     "forward switch, PR": Scenario(
         (place("A", forward=1500), Cmd("PR 3000;BG A"), Run(2000), STATE)
@@ -384,6 +524,11 @@ EXPECT: dict[str, bytes] = {
     "jog turned back just short of a switch": b" 2.0000",
     "contour buffer runs dry": b" 42.0000",
     "TM changed by a program": b" 500.0000",
+    "#LIMSWI, RE 1 back to AM": b" 2.0000",
+    "#POSERR and OE 1 at the error's first sample": b"E",
+    "#POSERR with OE 0 while the lag catches up": b"E",
+    "#ININT while an input is low, RI 1": b"I",
+    "#MCTIME after TW": b" 99.0000",
 }
 
 
@@ -418,6 +563,8 @@ def _pieces(cuts: list[int]) -> Split:
         "jog turned back just short of a switch",
         "DR through a switch stop",
         "RC round and round during an arc",
+        "#POSERR with OE 0 while the lag catches up",
+        "#ININT while an input is low, RI 1",
     ],
 )
 def test_uneven_pieces_agree_with_one_advance(name: str, cuts: list[int]) -> None:

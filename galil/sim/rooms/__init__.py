@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from galil.sim.machine import Room
 from galil.sim.rooms.arrays import Arrays
+from galil.sim.rooms.automatic import Automatic
 from galil.sim.rooms.capture import Capture
 from galil.sim.rooms.contour import Contour
 from galil.sim.rooms.gearing import Gearing
@@ -31,6 +32,7 @@ __all__ = [
     "IO",
     "ROOMS",
     "Arrays",
+    "Automatic",
     "Capture",
     "Contour",
     "Gearing",
@@ -69,6 +71,7 @@ ROOMS: tuple[type[Room], ...] = (
     Arrays,
     Capture,
     Interrupts,
+    Automatic,
 )
 
 

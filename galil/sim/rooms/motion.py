@@ -42,6 +42,7 @@ class Params:
     absolute: bool = False
     next_mode: str = "position"
     move_start: int = 0  # profiler position at the last BG: AD/AR measure from here
+    starts: int = 0  # moves begun with BG (AR measures from the last AD/AR of the same one)
 
 
 #: A mode another room starts with BG: ``check(ax)`` refuses (before any axis starts),
@@ -238,6 +239,7 @@ class Motion(Room):
             prof = ax.m.profiler
             ax.limit_stop = False
             p.move_start = prof.position
+            p.starts += 1
             if isinstance(goal, str):
                 self.modes[goal][1](ax)
             elif goal is None:

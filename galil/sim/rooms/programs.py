@@ -1,8 +1,11 @@
-"""Program commands: ``DL`` ``UL`` ``XQ`` ``HX``, and ``JP``/``EN``/``NO`` from the host.
+"""Program commands: ``DL`` ``UL`` ``XQ`` ``HX``, and ``JP``/``JS``/``EN``/``ZS``/``NO`` from
+the host.
 
 The program store and the threads are the core's :class:`~galil.sim.programs.Programs`;
-``JP`` and ``EN`` are flow control that only a thread runs (from a host they are refused).
-``_XQn`` is thread n's line, -1 when it is not running; ``_NO`` the running threads' bits.
+``JP``, ``JS``, ``EN`` and ``ZS`` are flow control that only a thread runs (from a host they
+are refused). ``_XQn`` is thread n's line, -1 when it is not running; ``_NO`` the running
+threads' bits; ``_ZSn`` thread n's subroutine depth; ``_JS`` what the last subroutine returned
+(``EN ,,value``); ``_ED`` the program line of the last error in a program, ``_ED1`` its thread.
 """
 
 from __future__ import annotations
@@ -73,6 +76,14 @@ class ProgramCommands(Room):
     def en(self, args: str) -> str:
         raise Refused(2, "EN only in a program")
 
+    @handler("JS")
+    def js(self, args: str) -> str:
+        raise Refused(2, "JS only in a program")
+
+    @handler("ZS")
+    def zs(self, args: str) -> str:
+        raise Refused(2, "ZS only in a program")
+
     @handler("NO")
     def no(self, args: str) -> str:
         return ""
@@ -88,3 +99,22 @@ class ProgramCommands(Room):
     @operand("NO")
     def running_threads(self) -> float:
         return float(sum(1 << n for n in self.machine.programs.threads))
+
+    @operand("ZS", kind=OperandKind.INDEX)
+    def stack_depth(self, index: str) -> float:
+        n = int(index) if index.isdigit() else 0 if not index else -1
+        if not 0 <= n < self.machine.spec.threads:
+            raise Refused(1, "bad thread")
+        th = self.machine.programs.threads.get(n)
+        return float(len(th.stack)) if th is not None else 0.0
+
+    @operand("JS")
+    def returned(self) -> float:
+        return self.machine.programs.returned
+
+    @operand("ED", kind=OperandKind.INDEX)
+    def error_line(self, index: str) -> float:
+        if index not in ("", "1"):
+            raise Refused(1, "_ED or _ED1")
+        line, thread = self.machine.programs.error_at
+        return float(thread if index == "1" else line)

@@ -11,6 +11,7 @@ from galil.errors import InvalidArgument
 from galil.protocol.numbers import parse_format
 from galil.sim.machine import Room
 from galil.sim.parse import Refused, split_fields
+from galil.sim.programs import Thread
 from galil.sim.registry import handler, operand
 
 __all__ = ["Settings"]
@@ -144,6 +145,9 @@ class Settings(Room):
         if args.strip():
             raise Refused(6, "RS takes no argument")
         self.machine.reset()
+        programs = self.machine.programs
+        if "AUTO" in programs.labels:  # the program survives RS here, as if burned (BP)
+            programs.threads[0] = Thread(0, line=programs.labels["AUTO"])
         return ""
 
     @handler("\x12\x13")

@@ -1,30 +1,62 @@
 """Trippoints: commands that hold their ``:`` (or their thread) until something happens.
 
-``AM`` (profile complete), ``MC`` (motor in position), ``AD`` (distance from the move's start),
-``WT`` (time; ``WT n,1`` in samples) and ``WC`` (the previous contour segment is done: at most
-the running one is left). Each returns a :class:`~galil.sim.registry.Wait`; the servo loop
-releases it at the exact sample its condition turns true.
+``AM`` (profile complete), ``MC`` (motor in position, or ``TW`` ms after the profile ended:
+stop code 99 and ``#MCTIME``), ``AD`` (distance from the move's start), ``AR`` (distance from
+the last ``AD``/``AR`` of the same move), ``AP`` (the encoder crosses a position), ``AV`` (path
+distance of a coordinated sequence from its start or the last ``AV``), ``WT`` (time; ``WT n,1``
+in samples) and ``WC`` (the previous contour segment is done: at most the running one is left).
+Each returns a :class:`~galil.sim.registry.Wait`; the servo loop releases it at the exact
+sample its condition turns true. Choices where the command reference is silent are in
+decision 0029: distances are magnitudes (``AR -500`` is 500 counts, as ``AD`` takes them),
+every trippoint also releases when the motion it watches is over, ``AP`` on several axes
+waits for all of them.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
-from galil.models import INT32_MAX
+from galil.models import INT32_MAX, INT32_MIN
+from galil.sim.driven import DrivenProfiler
 from galil.sim.machine import Room
 from galil.sim.parse import Refused, split_fields
-from galil.sim.registry import Args, Wait, handler
+from galil.sim.registry import Args, OperandKind, Wait, handler, operand
 from galil.sim.rooms.contour import Contour
 from galil.sim.rooms.motion import Motion
+from galil.sim.rooms.vector import Vector
 from galil.sim.servo import Axis, turns_back
 
-__all__ = ["Trippoints"]
+__all__ = ["TW_DEFAULT", "Trippoints"]
+
+#: TW's default, ms (DMC-4103 command reference: -1 .. 32,767, default 32,766).
+TW_DEFAULT = 32766.0
 
 
 class Trippoints(Room):
-    """AM, MC, AD, WT and WC."""
+    """AM, MC (and TW), AD, AR, AP, AV, WT and WC."""
 
-    requires = (Motion, Contour)
+    requires = (Motion, Contour, Vector)
+
+    def reset(self) -> None:
+        axes = self.machine.spec.axes
+        self.tw = dict.fromkeys(axes, TW_DEFAULT)
+        #: The sample each axis's profile last completed (MC's timeout counts from there).
+        self.done_at = dict.fromkeys(axes, 0)
+        self._moving = dict.fromkeys(axes, False)
+        # Per axis: (the move, by Motion's count of BGs; the distance its last AD/AR reached).
+        self._relative: dict[str, tuple[int, float]] = {}
+        # Per plane: (the sequence, by Vector's count of starts; the distance of the last AV).
+        self._vector: dict[str, tuple[int, float]] = {}
+
+    def service(self) -> None:
+        now = self.machine.servo.sample
+        moving = self._moving
+        for c, ax in self.machine.servo.axes.items():
+            still = ax.m.moving
+            if moving[c] and not still:
+                self.done_at[c] = now
+            moving[c] = still
 
     @handler("AM", Args.AXES)
     def am(self, axes: list[Axis]) -> Wait:
@@ -41,9 +73,26 @@ class Trippoints(Room):
 
         return Wait(lambda: not any(all_axes[c].m.moving for c in letters), exact=exact)
 
+    # ---- MC and its timeout ------------------------------------------------------------
+    def _tw_samples(self, letter: str) -> int | None:
+        ms = self.tw[letter]
+        return None if ms < 0 else math.ceil(ms / 1000 / self.machine.servo.ts - 1e-9)
+
+    def _late(self, letters: list[str]) -> list[str]:
+        """The axes of ``letters`` whose profile ended ``TW`` ago without reaching position."""
+        servo = self.machine.servo
+        out = []
+        for c in letters:
+            m, n = servo.axes[c].m, self._tw_samples(c)
+            due = n is not None and servo.sample >= self.done_at[c] + n
+            if due and not m.moving and not m.in_position:
+                out.append(c)
+        return out
+
     @handler("MC", Args.AXES)
     def mc(self, axes: list[Axis]) -> Wait:
-        all_axes = self.machine.servo.axes
+        servo = self.machine.servo
+        all_axes = servo.axes
         letters = [ax.letter for ax in axes]
 
         def exact() -> bool:
@@ -55,8 +104,52 @@ class Trippoints(Room):
                     return True
             return False
 
-        return Wait(lambda: all(all_axes[c].m.in_position for c in letters), exact=exact)
+        def cut(k: int) -> int:
+            # The step ends where a timeout is due (an event at a known sample).
+            for c in letters:
+                m, n = all_axes[c].m, self._tw_samples(c)
+                if n is not None and not m.moving and not m.in_position:
+                    due = self.done_at[c] + n - servo.sample
+                    if due > 0:
+                        k = min(k, due)
+            return k
 
+        def done() -> bool:
+            return all(all_axes[c].m.in_position for c in letters) or bool(self._late(letters))
+
+        return Wait(done, exact=exact, cut=cut, then=lambda: self._timed_out(letters))
+
+    def _timed_out(self, letters: list[str]) -> str:
+        """On MC's release: a timeout sets stop code 99 and runs ``#MCTIME`` (a program
+        running)."""
+        late = self._late(letters)
+        if late:
+            for c in late:
+                prof = self.machine.servo.axes[c].m.profiler
+                if not isinstance(prof, DrivenProfiler):
+                    prof.stop_code = 99
+            if self.machine.programs.threads:
+                self.machine.programs.interrupt("MCTIME")
+        return ""
+
+    @handler("TW", Args.VALUES)
+    def tw_command(self, fields: list[tuple[Axis, str]]) -> str:
+        def check(ax: Axis, v: float) -> float:
+            if v != int(v) or not -1 <= v <= 32767:
+                raise Refused(6, "TW is -1 to 32767 ms")
+            return v
+
+        def apply(ax: Axis, v: float) -> None:
+            self.tw[ax.letter] = v
+
+        i = self.machine.interp
+        return i.parameters(fields, self.timeout, check, apply, lambda v: i.num(v, "5.0"))
+
+    @operand("TW", kind=OperandKind.AXIS)
+    def timeout(self, ax: Axis) -> float:
+        return self.tw[ax.letter]
+
+    # ---- distances ---------------------------------------------------------------------
     @handler("AD")
     def ad(self, args: str) -> Wait:
         """Hold until each named axis's profile has gone the distance from the move's start.
@@ -64,28 +157,54 @@ class Trippoints(Room):
         Like the controller, AD watches the profiler (before IT smoothing); distances are
         magnitudes, and a move that ends first releases the wait.
         """
-        goal = self._distances(args)
+        goal = self._distances(args, "AD")
+        motion = self.machine.room(Motion)
+        for c, d in goal.items():
+            self._relative[c] = (motion.axes[c].starts, d)
+        return self._after_distance(goal)
+
+    @handler("AR")
+    def ar(self, args: str) -> Wait:
+        """Hold until each named axis has gone the distance from where the last AD or AR of
+        the same move was to trip (from the move's start if there was none)."""
+        step = self._distances(args, "AR")
+        motion = self.machine.room(Motion)
+        goal: dict[str, float] = {}
+        for c, d in step.items():
+            move = motion.axes[c].starts
+            last_move, reached = self._relative.get(c, (-1, 0.0))
+            goal[c] = (reached if last_move == move else 0.0) + d
+        for c, g in goal.items():
+            self._relative[c] = (motion.axes[c].starts, g)
+        return self._after_distance(goal)
+
+    def _after_distance(self, goal: dict[str, float]) -> Wait:
         all_axes = self.machine.servo.axes
         motion = self.machine.room(Motion)
 
         def reached() -> bool:
             for c, d in goal.items():
-                ax = all_axes[c]
-                prof = ax.m.profiler
+                prof = all_axes[c].m.profiler
                 if prof.moving and abs(prof.position - motion.axes[c].move_start) < d:
                     return False
             return True
 
+        return Wait(reached, cut=self._one_way(list(goal)))
+
+    def _one_way(self, letters: list[str]) -> Callable[[int], int]:
+        all_axes = self.machine.servo.axes
+
         def cut(k: int) -> int:
-            # The distance turns non-monotone where an axis turns back (a jog reversed): a
-            # step ends there, so the bisection finds the first sample it is reached.
-            for c in goal:
+            # A distance or a position turns non-monotone where an axis turns back (a jog
+            # reversed): a step ends there, so the bisection finds the first sample it trips.
+            for c in letters:
                 k = turns_back(all_axes[c].m.profiler, k)
             return k
 
-        return Wait(reached, cut=cut)
+        return cut
 
-    def _distances(self, args: str) -> dict[str, float]:
+    def _values(self, args: str, command: str) -> dict[str, float]:
+        """``n,n,...`` by axis position or ``AB=n``: axis letter -> value."""
         i = self.machine.interp
         fields = split_fields(args.partition("=")[2] if "=" in args else args)
         if "=" in args:
@@ -96,14 +215,75 @@ class Trippoints(Room):
             letters = [a for a, f in zip(axes, fields, strict=False) if f.strip()]
             values = [i.evaluate(f) for f in fields if f.strip()]
         if not letters:
-            raise Refused(4, "AD needs a distance")
-        goal: dict[str, float] = {}
-        for c, v in zip(letters, values, strict=True):
-            if not 0 <= v <= INT32_MAX:
-                raise Refused(6, "AD distance out of range")
-            goal[c] = v
+            raise Refused(4, f"{command} needs a value")
+        return dict(zip(letters, values, strict=True))
+
+    def _distances(self, args: str, command: str) -> dict[str, float]:
+        goal = self._values(args, command)
+        for c, v in goal.items():
+            if not (0 if command == "AD" else INT32_MIN) <= v <= INT32_MAX:
+                raise Refused(6, f"{command} distance out of range")
+            goal[c] = abs(v)
         return goal
 
+    # ---- AP: the encoder crosses a position --------------------------------------------
+    @handler("AP")
+    def ap(self, args: str) -> Wait:
+        """Hold until each named axis's encoder has crossed its position, its profile is
+        complete, or it moves away from the position."""
+        goal = self._values(args, "AP")
+        all_axes = self.machine.servo.axes
+        side: dict[str, int] = {}
+        for c, p in goal.items():
+            if not INT32_MIN <= p <= INT32_MAX:
+                raise Refused(6, "AP position out of range")
+            enc = all_axes[c].m.encoder
+            side[c] = (p > enc) - (p < enc)
+
+        def reached() -> bool:
+            for c, p in goal.items():
+                m = all_axes[c].m
+                s = side[c]
+                if s == 0 or not m.moving or (m.encoder - p) * s >= 0:
+                    continue
+                if m.profiler.velocity * s < 0:
+                    continue  # moving away from it
+                return False
+            return True
+
+        return Wait(reached, cut=self._one_way(list(goal)))
+
+    # ---- AV: path distance of a coordinated sequence -----------------------------------
+    @handler("AV")
+    def av(self, args: str) -> Wait:
+        vector = self.machine.room(Vector)
+        fields = split_fields(args) if args.strip() else ["0"]
+        if len(fields) > 2:
+            raise Refused(6, "AV takes S and T distances")
+        goal: dict[str, float] = {}
+        for letter, text in zip("ST", fields, strict=False):
+            if not text.strip():
+                continue
+            v = self.machine.interp.evaluate(text)
+            if not 0 <= v <= INT32_MAX:
+                raise Refused(6, "AV distance out of range")
+            starts = vector.planes[letter].starts
+            last, gone = self._vector.get(letter, (-1, 0.0))
+            goal[letter] = (gone if last == starts else 0.0) + v
+        for letter, g in goal.items():
+            self._vector[letter] = (vector.planes[letter].starts, g)
+
+        def reached() -> bool:
+            for letter, g in goal.items():
+                plane = vector.planes[letter]
+                feed = vector.feed(plane)
+                if feed is not None and vector.busy(plane) and feed.eng.distance < g:
+                    return False
+            return True
+
+        return Wait(reached)
+
+    # ---- time and contour ---------------------------------------------------------------
     @handler("WT")
     def wt(self, args: str) -> Wait:
         servo = self.machine.servo

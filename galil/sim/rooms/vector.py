@@ -141,6 +141,7 @@ class Plane:
     vt: float = 1.0
     eng: VectorProfiler | None = None  # the sequence being queued, or the last one run
     running: bool = False  # BG S was given and the sequence has not been seen to end
+    starts: int = 0  # sequences begun (AV measures from the start of the present one)
 
 
 class Vector(Room):
@@ -462,6 +463,7 @@ class Vector(Room):
             ax.m.profiler = drive(ax.m.profiler, feed, i)
         plane.eng = eng
         plane.running = True
+        plane.starts += 1
 
     @handler("ST", Args.PLANES)
     def stop(self, planes: list[str]) -> str:
