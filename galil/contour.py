@@ -19,6 +19,7 @@ import numpy.typing as npt
 from galil import predict
 from galil.errors import (
     ContourUnderrunError,
+    GalilConnectionError,
     GalilError,
     GalilTimeoutError,
     InvalidArgument,
@@ -325,9 +326,13 @@ class ContourStream:
         texts = self.commands()
         if self._tracker is not None and self._watch is None:
             self._watch = self._tracker.watch_stops(self.letters)
-        if round(link.query_operands(["_TC"])[0]) == 42:
-            link.command_line([cmds.tc(0)])  # a previous stream's code; ours must be seen afresh
-        link.command_line([cmds.cm(self.letters, model=model), cmds.dt(self.dt, model=model)])
+        try:
+            if round(link.query_operands(["_TC"])[0]) == 42:
+                link.command_line([cmds.tc(0)])  # a previous stream's code: ours must show
+            link.command_line([cmds.cm(self.letters, model=model), cmds.dt(self.dt, model=model)])
+        except BaseException:
+            self._halt(end=True)  # (CM may have gone out: contour mode is left again)
+            raise
         state = _Progress(low_water=model.contour_buffer, texts=texts)
         state.bar = _bar(len(texts), self.letters) if progress else None
         return state
@@ -355,8 +360,18 @@ class ContourStream:
         exception nothing queued may run on. Errors on the way are dropped (the exception
         that brought us here is the one to see)."""
         link = self.link
-        with contextlib.suppress(GalilError):
-            link.command_line([cmds.st(self.letters, model=link.model)])
+        reopen = None if self._tracker is None else self._tracker.reconnect
+        for attempt in range(2):  # a dead link is reopened once to send the stop
+            try:
+                link.command_line([cmds.st(self.letters, model=link.model)])
+                break
+            except GalilConnectionError:
+                if attempt or reopen is None:
+                    return
+                with contextlib.suppress(GalilError):
+                    reopen()
+            except GalilError:
+                break
         if end:
             with contextlib.suppress(GalilError):
                 link.command_line(cmds.contour_end(self.letters, model=link.model))

@@ -247,6 +247,8 @@ class Controller(CoordinatedMotion, LinkFacade):
             self._factory = None
             first = transport
         self._policy = _policy(reconnect, self._factory is not None)
+        if self._factory is not None:  # a stop after a failed start may reopen the link
+            self.tracker.reconnect = _weakly_call(self.reconnect)
         if self._policy is not None:  # weakly: a controller dropped unclosed is still garbage
             self.link.on_dead = _weakly(self._reopen_dead_link)
         self._parts = _Parts(self.link, self.messages_room, self.records_room,
@@ -780,6 +782,20 @@ def _weakly(
         if bound is None:
             raise error
         bound(error)
+
+    return call
+
+
+def _weakly_call(method: Callable[[], None]) -> Callable[[], None]:
+    """``method`` called through a weak reference to its object (the tracker must not keep
+    its controller alive: a controller dropped unclosed is closed when collected)."""
+    ref = weakref.WeakMethod(method)
+
+    def call() -> None:
+        bound = ref()
+        if bound is None:
+            raise GalilConnectionError("the controller is gone")
+        bound()
 
     return call
 

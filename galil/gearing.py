@@ -14,8 +14,10 @@ moves on the gearing; the library does not predict that, so it refuses to move a
 
 from __future__ import annotations
 
+import contextlib
+
 from galil import predict
-from galil.errors import InvalidArgument, LimitError
+from galil.errors import GalilConnectionError, GalilError, InvalidArgument, LimitError
 from galil.link import CommandLink
 from galil.motion import Display, GearLink, MotionTracker, refuse_dropped, sample_of
 from galil.protocol import commands as cmds
@@ -200,13 +202,16 @@ def _gear_to(
         )
     _master_at_rest(link, master)
     source = "S" if master == "S" else f"C{master}"
-    replies = link.command_line(
-        [
-            cmds.ga(model=model, **{follower: source}),
-            cmds.gr(model=model, **{follower: q}),
-            cmds.mg_operand(f"_SC{follower}"),  # (what _SC says once it follows: dropped_by)
-        ]
-    )
+    line = [
+        cmds.ga(model=model, **{follower: source}),
+        cmds.gr(model=model, **{follower: q}),
+        cmds.mg_operand(f"_SC{follower}"),  # (what _SC says once it follows: dropped_by)
+    ]
+    try:
+        replies = link.command_line(line)
+    except BaseException:
+        _disengage(link, tracker, follower)  # a gearing the library would not know of
+        raise
     anchor = predict.GearFollower(
         q, master=round(m0), position=round(f0), resolution=model.gr_resolution
     )
@@ -215,6 +220,27 @@ def _gear_to(
     gear.engaged_code = 0 if code is None else code
     tracker.engage(gear)
     return Gearing(link, tracker, gear)
+
+
+def _disengage(link: CommandLink, tracker: MotionTracker, follower: str) -> None:
+    """``GR 0`` on ``follower`` after its ``GA``/``GR`` line failed: it may have engaged, and
+    the tracker would not know of it (the next move of the master would drive the follower
+    unpredicted and unchecked). A dead link is reopened once for it
+    (:attr:`~galil.motion.MotionTracker.reconnect`); a failure is dropped (the exception that
+    brought us here is the one to see)."""
+    line = [cmds.gr(model=link.model, **{follower: 0})]
+    for attempt in range(2):
+        try:
+            link.command_line(line)
+            return
+        except GalilConnectionError:
+            if attempt or tracker.reconnect is None:
+                return
+            with contextlib.suppress(GalilError):
+                tracker.reconnect()
+        except GalilError:
+            if attempt:
+                return
 
 
 def _check_pair(

@@ -8,6 +8,7 @@ raises before a byte goes out. Units are converted by the axis layer before anyt
 
 from __future__ import annotations
 
+import contextlib
 import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -28,6 +29,7 @@ from galil.motion import (
     predict_track,
     refuse_dropped,
     sample_of,
+    stop_on_error,
 )
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
@@ -326,7 +328,8 @@ def execute_move(
     if len(moves) > 1:
         order = link.model.axes
         moves = sorted(moves, key=lambda m: order.index(m.letter))
-    with tracker.lock:  # no other thread's motion between the state read and the handle
+    guard = contextlib.nullcontext() if dry_run else stop_on_error(link, tracker, letters)
+    with tracker.lock, guard:  # no other thread's motion between the state read and the handle
         return _execute_move(link, tracker, moves, relative, dry_run, command, display)
 
 
@@ -424,8 +427,8 @@ def jog(
         MotionError: a limit stopped an axis geared to ``letter`` during a move nobody waited
             for: its gearing is off, and forgotten (:func:`~galil.motion.refuse_dropped`).
     """
-    with tracker.lock:  # (a JG for a jog another thread starts would change its speed)
-        return _jog(link, tracker, letter, velocity, display)
+    with tracker.lock, stop_on_error(link, tracker, letter):  # (a JG for a jog another
+        return _jog(link, tracker, letter, velocity, display)  # thread starts: its speed)
 
 
 def _jog(
@@ -486,7 +489,7 @@ def set_jog_speed(link: CommandLink, tracker: MotionTracker, letter: str, veloci
             controller takes JG only in jog mode).
         LimitError: an axis geared to ``letter`` would run beyond the model's SP maximum.
     """
-    with tracker.lock:
+    with tracker.lock, stop_on_error(link, tracker, letter):
         _set_jog_speed(link, tracker, letter, velocity)
 
 
@@ -531,8 +534,8 @@ def increment(
         MotionError: a limit stopped an axis geared to ``letter`` during a move nobody waited
             for: its gearing is off, and forgotten (:func:`~galil.motion.refuse_dropped`).
     """
-    with tracker.lock:  # (an IP would extend a move another thread starts meanwhile)
-        return _increment(link, tracker, letter, counts, display)
+    with tracker.lock, stop_on_error(link, tracker, letter):  # (an IP would extend a move
+        return _increment(link, tracker, letter, counts, display)  # another thread starts)
 
 
 def _increment(
@@ -695,7 +698,7 @@ def speed_schedule(
     cmds.xq(f"#{label}")  # the label is checked before anything is read or sent
     # Held from the thread 0 check to the handle: another thread's schedule would install
     # its routine over this one's, or take thread 0 in between.
-    with tracker.lock:
+    with tracker.lock, stop_on_error(link, tracker, letter):
         return _speed_schedule(
             link, tracker, routines, letter, distance, changes, speed, label, display
         )
