@@ -248,7 +248,7 @@ class Controller(CoordinatedMotion, LinkFacade):
             first = transport
         self._policy = _policy(reconnect, self._factory is not None)
         if self._factory is not None:  # a stop after a failed start may reopen the link
-            self.tracker.reconnect = _weakly_call(self.reconnect)
+            self.tracker.reconnect = _weakly_call(self._reopen_to_stop)
         if self._policy is not None:  # weakly: a controller dropped unclosed is still garbage
             self.link.on_dead = _weakly(self._reopen_dead_link)
         self._parts = _Parts(self.link, self.messages_room, self.records_room,
@@ -265,6 +265,7 @@ class Controller(CoordinatedMotion, LinkFacade):
             transport = self._factory()
         link = self.link
         link.attach(transport)
+        self.tracker.closed = False
         self.records_room.reset()
         try:
             if self._handshake:
@@ -310,6 +311,7 @@ class Controller(CoordinatedMotion, LinkFacade):
             if self.link.is_open:
                 _stop_started(self.link, self.tracker)
                 _stop_captures(self.link, self._captures)
+            self.tracker.closed = True
             _close_parts(self._parts, keep_watchdogs=False)
             self.tracker.end_watches()
 
@@ -337,6 +339,12 @@ class Controller(CoordinatedMotion, LinkFacade):
                 self._open(None)
                 self.records_room.resume()
                 self.interrupts.reopen()
+
+    def _reopen_to_stop(self) -> None:
+        """Reopen a link that died (not one closed on purpose) so that a stop can be sent."""
+        if not self.link.dead:
+            raise GalilConnectionError("the link is closed, not dead: it is not reopened")
+        self.reconnect()
 
     def _reopen_dead_link(self, error: GalilConnectionError) -> None:
         """The automatic reconnect (:class:`ReconnectPolicy`), called by the link."""

@@ -303,6 +303,9 @@ class MotionTracker:
         #: Reopens a dead link so that a stop can be sent (:func:`stop_on_error`); ``None``
         #: when the link cannot be reopened (a controller built on a transport object).
         self.reconnect: Callable[[], None] | None = None
+        #: Set by a controller's close(), which stops what the library started itself: a
+        #: call that then finds the link closed has nothing left to stop.
+        self.closed = False
 
     def end_watches(self) -> None:
         """The link was closed: every move's :meth:`~MoveHandle.add_callback` watcher ends."""
@@ -1048,7 +1051,7 @@ def motion_guard(
     try:
         yield
     except BaseException as exc:
-        moving = _stop_for_guard(link, letters, _stopper(link, tracker, letters), reconnect)
+        moving = _stop_for_guard(link, tracker, letters, None, reconnect)
         if moving:
             raise _not_stopped(link, exc, moving, "inside motion()") from exc
         raise
@@ -1088,15 +1091,13 @@ def stop_on_error(
     except _NOTHING_RAN:
         raise
     except BaseException as exc:
+        if tracker is not None and tracker.closed and isinstance(exc, GalilConnectionError):
+            raise  # close() stopped the motion before it closed the link
         reopen = None if tracker is None else tracker.reconnect
-        moving = _stop_for_guard(link, letters, stop or _stopper(link, tracker, letters), reopen)
+        moving = _stop_for_guard(link, tracker, letters, stop, reopen)
         if moving:
             raise _not_stopped(link, exc, moving, "while starting or changing motion") from exc
         raise
-
-
-def _stopper(link: CommandLink, tracker: MotionTracker | None, letters: str) -> Callable[[], None]:
-    return functools.partial(_send_st, link, tracker, letters)
 
 
 def _not_stopped(link: CommandLink, exc: BaseException, moving: str, where: str) -> MotionError:
@@ -1111,11 +1112,13 @@ def _not_stopped(link: CommandLink, exc: BaseException, moving: str, where: str)
 
 def _stop_for_guard(
     link: CommandLink,
+    tracker: MotionTracker | None,
     letters: str,
-    stop: Callable[[], None],
+    stop: Callable[[], None] | None,
     reconnect: Callable[[], None] | None,
 ) -> str:
-    """Stop what moves of ``letters`` (all of them if unknown); return what may still move."""
+    """Stop what moves of ``letters`` (all of them if unknown) with ``stop`` (default: ``ST``
+    on those); return what may still move."""
     try:
         moving = [round(v) for v in link.query_operands([f"_BG{a}" for a in letters])]
         busy = "".join(a for a, m in zip(letters, moving, strict=True) if m)
@@ -1123,6 +1126,8 @@ def _stop_for_guard(
         busy = letters  # unknown (a dead link among the causes): stop them all
     if not busy:
         return ""
+    if stop is None:
+        stop = functools.partial(_send_st, link, tracker, busy)
     if not _send_stop(stop, reconnect):
         return busy
     return _wait_stopped(link, busy)
