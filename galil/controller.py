@@ -247,8 +247,7 @@ class Controller(CoordinatedMotion, LinkFacade):
             self._factory = None
             first = transport
         self._policy = _policy(reconnect, self._factory is not None)
-        if self._factory is not None:  # a stop after a failed start may reopen the link
-            self.tracker.reconnect = _weakly_call(self._reopen_to_stop)
+        self.tracker.reconnect = _reopener(self) if self._factory is not None else None
         if self._policy is not None:  # weakly: a controller dropped unclosed is still garbage
             self.link.on_dead = _weakly(self._reopen_dead_link)
         self._parts = _Parts(self.link, self.messages_room, self.records_room,
@@ -308,10 +307,9 @@ class Controller(CoordinatedMotion, LinkFacade):
         if self._finalizer is not None:
             self._finalizer.detach()
         with self._life:
+            _stop_started(self.link, self.tracker)
             if self.link.is_open:
-                _stop_started(self.link, self.tracker)
                 _stop_captures(self.link, self._captures)
-            self.tracker.closed = True
             _close_parts(self._parts, keep_watchdogs=False)
             self.tracker.end_watches()
 
@@ -339,12 +337,6 @@ class Controller(CoordinatedMotion, LinkFacade):
                 self._open(None)
                 self.records_room.resume()
                 self.interrupts.reopen()
-
-    def _reopen_to_stop(self) -> None:
-        """Reopen a link that died (not one closed on purpose) so that a stop can be sent."""
-        if not self.link.dead:
-            raise GalilConnectionError("the link is closed, not dead: it is not reopened")
-        self.reconnect()
 
     def _reopen_dead_link(self, error: GalilConnectionError) -> None:
         """The automatic reconnect (:class:`ReconnectPolicy`), called by the link."""
@@ -708,6 +700,11 @@ def _close_parts(parts: _Parts, *, keep_watchdogs: bool, keep_streams: bool = Fa
 
 
 def _stop_started(link: Link, tracker: MotionTracker) -> None:
+    """Closing: stop what the library started (on a link still open); a call that finds the
+    link closed from now on has nothing left to stop (``tracker.closed``)."""
+    tracker.closed = True
+    if not link.is_open:
+        return
     failed = tracker.stop_started(link)
     if failed:
         _LOG.warning(
@@ -794,18 +791,19 @@ def _weakly(
     return call
 
 
-def _weakly_call(method: Callable[[], None]) -> Callable[[], None]:
-    """``method`` called through a weak reference to its object (the tracker must not keep
-    its controller alive: a controller dropped unclosed is closed when collected)."""
-    ref = weakref.WeakMethod(method)
+def _reopener(controller: Controller) -> Callable[[], None]:
+    """What reopens ``controller``'s link so that a stop can be sent after a failed start
+    (:func:`~galil.motion.stop_on_error`): a link that died, never one closed on purpose.
+    It holds the controller weakly (a controller dropped unclosed is closed when collected)."""
+    ref = weakref.ref(controller)
 
-    def call() -> None:
-        bound = ref()
-        if bound is None:
-            raise GalilConnectionError("the controller is gone")
-        bound()
+    def reopen() -> None:
+        c = ref()
+        if c is None or not c.link.dead:
+            raise GalilConnectionError("the link is closed, not dead: it is not reopened")
+        c.reconnect()
 
-    return call
+    return reopen
 
 
 def _policy(reconnect: object, has_address: bool) -> ReconnectPolicy | None:
