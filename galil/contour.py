@@ -8,6 +8,7 @@ segment end (no drift) and the total is exact.
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -19,7 +20,6 @@ import numpy.typing as npt
 from galil import predict
 from galil.errors import (
     ContourUnderrunError,
-    GalilConnectionError,
     GalilError,
     GalilTimeoutError,
     InvalidArgument,
@@ -28,7 +28,15 @@ from galil.errors import (
 )
 from galil.link import CommandLink, check_wait_timeout
 from galil.models import INT32_MAX
-from galil.motion import Display, GearLink, MotionTracker, StopWatch, held, sample_of
+from galil.motion import (
+    Display,
+    GearLink,
+    MotionTracker,
+    StopWatch,
+    held,
+    sample_of,
+    send_reopening,
+)
 from galil.moves import check_followers, follower_limits, follower_operands
 from galil.predict import Profile
 from galil.predict.checks import check_contour
@@ -361,17 +369,8 @@ class ContourStream:
         that brought us here is the one to see)."""
         link = self.link
         reopen = None if self._tracker is None else self._tracker.reconnect
-        for attempt in range(2):  # a dead link is reopened once to send the stop
-            try:
-                link.command_line([cmds.st(self.letters, model=link.model)])
-                break
-            except GalilConnectionError:
-                if attempt or reopen is None:
-                    return
-                with contextlib.suppress(GalilError):
-                    reopen()
-            except GalilError:
-                break
+        stop = [cmds.st(self.letters, model=link.model)]  # (a dead link reopened once for it)
+        send_reopening(functools.partial(link.command_line, stop), reopen)
         if end:
             with contextlib.suppress(GalilError):
                 link.command_line(cmds.contour_end(self.letters, model=link.model))

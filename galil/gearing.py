@@ -14,12 +14,19 @@ moves on the gearing; the library does not predict that, so it refuses to move a
 
 from __future__ import annotations
 
-import contextlib
+import functools
 
 from galil import predict
-from galil.errors import GalilConnectionError, GalilError, InvalidArgument, LimitError
+from galil.errors import InvalidArgument, LimitError
 from galil.link import CommandLink
-from galil.motion import Display, GearLink, MotionTracker, refuse_dropped, sample_of
+from galil.motion import (
+    Display,
+    GearLink,
+    MotionTracker,
+    refuse_dropped,
+    sample_of,
+    send_reopening,
+)
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import format_number
 
@@ -225,22 +232,10 @@ def _gear_to(
 def _disengage(link: CommandLink, tracker: MotionTracker, follower: str) -> None:
     """``GR 0`` on ``follower`` after its ``GA``/``GR`` line failed: it may have engaged, and
     the tracker would not know of it (the next move of the master would drive the follower
-    unpredicted and unchecked). A dead link is reopened once for it
-    (:attr:`~galil.motion.MotionTracker.reconnect`); a failure is dropped (the exception that
-    brought us here is the one to see)."""
+    unpredicted and unchecked). A dead link is reopened once for it; a failure is dropped
+    (the exception that brought us here is the one to see)."""
     line = [cmds.gr(model=link.model, **{follower: 0})]
-    for attempt in range(2):
-        try:
-            link.command_line(line)
-            return
-        except GalilConnectionError:
-            if attempt or tracker.reconnect is None:
-                return
-            with contextlib.suppress(GalilError):
-                tracker.reconnect()
-        except GalilError:
-            if attempt:
-                return
+    send_reopening(functools.partial(link.command_line, line), tracker.reconnect)
 
 
 def _check_pair(

@@ -52,6 +52,7 @@ __all__ = [
     "motion_guard",
     "refuse_dropped",
     "sample_of",
+    "send_reopening",
     "stop_axes",
     "stop_on_error",
 ]
@@ -1128,15 +1129,22 @@ def _stop_for_guard(
         return ""
     if stop is None:
         stop = functools.partial(_send_st, link, tracker, busy)
-    if not _send_stop(stop, reconnect):
+    if not send_reopening(stop, reconnect):
         return busy
     return _wait_stopped(link, busy)
 
 
-def _send_stop(stop: Callable[[], None], reconnect: Callable[[], None] | None) -> bool:
+def send_reopening(send: Callable[[], object], reconnect: Callable[[], None] | None) -> bool:
+    """Call ``send`` (a stop, or an undo after a failed start); on a dead link reopen it once
+    with ``reconnect`` and try again; another error gets one more try too. Never raises a
+    :class:`GalilError`.
+
+    Returns:
+        Whether ``send`` went through.
+    """
     for attempt in range(2):
         try:
-            stop()
+            send()
             return True
         except GalilConnectionError:
             if reconnect is None or attempt:

@@ -29,6 +29,7 @@ from galil.motion import (
     predict_track,
     refuse_dropped,
     sample_of,
+    send_reopening,
     stop_on_error,
 )
 from galil.protocol import commands as cmds
@@ -739,7 +740,13 @@ def _speed_schedule(
     routines.install(Routine(f"#{label}", tuple(program)))  # beside the user's program
     link.command_line([cmds.assign(SCHEDULE_BEGIN, -1)])
     run = object()  # this schedule's hold on thread 0
-    routines.start(f"#{label}", 0, owner=run)
+    try:
+        routines.start(f"#{label}", 0, owner=run)
+    except BaseException:
+        # XQ may have gone out: no change point may run after the stop (stop_on_error), and
+        # SP goes back, as for a schedule stopped before its end (_cancel_schedule).
+        _undo_start(link, tracker, routines, a, sp0)
+        raise
     params = MoveParams(first, ac, dc, it)
     track = Track("schedule", rp, params, None, amount=distance, fixed=schedule.profile)
     handle = MoveHandle(
@@ -774,6 +781,17 @@ def _schedule_state(
             model=link.model.name,
         )
     return state, follower_limits(link, tracker, gears, values[n + 1 :])
+
+
+def _undo_start(
+    link: CommandLink, tracker: MotionTracker, routines: Routines, a: str, speed: float
+) -> None:
+    """After a failed ``XQ`` of a schedule: halt thread 0 (checked free under the tracker's
+    lock, so only the schedule can run there) and put ``SP`` back to ``speed``; a dead link
+    is reopened once for it, and a failure dropped (the caller's exception is the one)."""
+    undo = [cmds.hx(0), cmds.sp(model=link.model, **{a: speed})]
+    if send_reopening(functools.partial(link.command_line, undo), tracker.reconnect):
+        routines.forget(0)
 
 
 def _cancel_schedule(

@@ -14,6 +14,8 @@ simulator):
   operation is documented to leave it so (a follower the library knows is geared), no thread
   runs a program (a speed schedule's routine), no axis is left in contour mode, and no
   gearing is engaged that the library does not know of;
+- what the operation would have changed for its course only (a speed schedule's speeds)
+  reads as before;
 - the link answers ``MG 1`` then ``MG 2``.
 """
 
@@ -176,6 +178,7 @@ class Op:
     setup: Callable[[Controller], Any] = lambda dmc: None
     goes_on: str = ""
     every: int = 1
+    same: tuple[str, ...] = ()  # operands that must read afterwards as they did before
 
 
 OPS = [
@@ -192,7 +195,12 @@ OPS = [
     Op("increment idle", lambda d, _: d.A.increment(LONG), _slow),
     Op("increment in a move", lambda d, _: d.A.increment(1000), _start_a),
     Op("increment while jogging", lambda d, _: d.A.increment(10), _start_jog),
-    Op("speed_schedule", lambda d, _: d.B.speed_schedule(LONG, [(LONG // 2, 10_000)]), _slow),
+    Op(
+        "speed_schedule",
+        lambda d, _: d.B.speed_schedule(LONG, [(LONG // 2, 10_000)]),
+        _slow,
+        same=("_SPB",),  # (a schedule that did not run its course leaves no speed behind)
+    ),
     Op("home", lambda d, _: d.A.home(), _homing),
     Op("find_edge", lambda d, _: d.A.find_edge(), _homing),
     Op("find_index", lambda d, _: d.A.find_index(), _homing),
@@ -241,7 +249,7 @@ def _points(op: Op, total: int) -> list[int]:
     )
 
 
-def _check(bench: Bench, op: Op, where: str) -> None:
+def _check(bench: Bench, op: Op, where: str, before: list[int]) -> None:
     dmc, sim = bench.dmc, bench.sim
     sim.advance(SETTLE)
     if op.goes_on == "program":
@@ -257,6 +265,8 @@ def _check(bench: Bench, op: Op, where: str) -> None:
     axes = sim._m.servo.axes
     contour = [a for a in letters if axes[a].contour]
     assert not contour, f"{where}: {contour} left in contour mode"
+    if op.same:
+        assert bench.ask(list(op.same)) == before, f"{where}: {op.same} changed"
     assert dmc.query_number("MG 1") == 1, where
     assert dmc.query_number("MG 2") == 2, where
 
@@ -266,6 +276,7 @@ def _raise_at(op: Op, k: int, after: bool, error: type[BaseException]) -> None:
     bench = Bench()
     with bench.dmc as dmc:
         ctx = op.setup(dmc)
+        before = bench.ask(list(op.same)) if op.same else []
         wire = bench.wire
         wire.at, wire.after, wire.error = k, after, error
         wire.armed = threading.get_ident()
@@ -282,7 +293,7 @@ def _raise_at(op: Op, k: int, after: bool, error: type[BaseException]) -> None:
             if dmc.link.dead:
                 assert "reconnect" in repr(dmc)
                 dmc.reconnect()
-        _check(bench, op, where)
+        _check(bench, op, where, before)
 
 
 @pytest.mark.parametrize("op", OPS, ids=[op.name for op in OPS])
