@@ -83,15 +83,17 @@ class Wire(SimLinkWrapper):
 class Bench:
     """A fresh simulator, a controller on it whose transport is a :class:`Wire`."""
 
-    sim: SimController = field(default_factory=lambda: SimController("DMC-4040", ManualClock()))
+    model: str = "DMC-4040"
     wires: list[Wire] = field(default_factory=list)
+    sim: SimController = field(init=False)
     dmc: Controller = field(init=False)
 
     def __post_init__(self) -> None:
+        self.sim = SimController(self.model, ManualClock())
         self.dmc = Controller(self._open, timeout=0.5)
 
     def _open(self) -> Wire:
-        wire = Wire(open_transport("sim://DMC-4040", controller=self.sim))
+        wire = Wire(open_transport(f"sim://{self.model}", controller=self.sim))
         self.wires.append(wire)
         return wire
 
@@ -229,9 +231,9 @@ OPS = [
 ]
 
 
-def _count(op: Op) -> int:
+def _count(op: Op, model: str) -> int:
     """The reads and writes of a clean run of ``op`` (on its own thread)."""
-    bench = Bench()
+    bench = Bench(model)
     with bench.dmc as dmc:
         ctx = op.setup(dmc)
         bench.wire.armed = threading.get_ident()
@@ -271,9 +273,9 @@ def _check(bench: Bench, op: Op, where: str, before: list[int]) -> None:
     assert dmc.query_number("MG 2") == 2, where
 
 
-def _raise_at(op: Op, k: int, after: bool, error: type[BaseException]) -> None:
+def _raise_at(op: Op, model: str, k: int, after: bool, error: type[BaseException]) -> None:
     where = f"{op.name}: call {k} raising {error.__name__} {'after' if after else 'before'}"
-    bench = Bench()
+    bench = Bench(model)
     with bench.dmc as dmc:
         ctx = op.setup(dmc)
         before = bench.ask(list(op.same)) if op.same else []
@@ -296,9 +298,20 @@ def _raise_at(op: Op, k: int, after: bool, error: type[BaseException]) -> None:
         _check(bench, op, where, before)
 
 
-@pytest.mark.parametrize("op", OPS, ids=[op.name for op in OPS])
-def test_an_exception_at_any_call_leaves_no_motion_running(op: Op) -> None:
-    total = _count(op)
+#: The operations also walked on a DMC-4143 (another family: its own TM, contour end, ranges).
+ON_41X3 = ["move_by", "handle.wait", "jog", "speed_schedule", "gear_to", "vector_move", "contour"]
+
+
+CASES = [(op, "DMC-4040") for op in OPS] + [(op, "DMC-4143") for op in OPS if op.name in ON_41X3]
+
+
+@pytest.mark.parametrize(
+    ("op", "model"),
+    CASES,
+    ids=[op.name if m == "DMC-4040" else f"{op.name} on a {m}" for op, m in CASES],
+)
+def test_an_exception_at_any_call_leaves_no_motion_running(op: Op, model: str) -> None:
+    total = _count(op, model)
     assert total > 0
     ways = [(after, error) for after in (False, True) for error in ERRORS]
     failures, runs = [], 0
@@ -308,7 +321,7 @@ def test_an_exception_at_any_call_leaves_no_motion_running(op: Op) -> None:
         for after, error in [ways[k % len(ways)]] if middle else ways:
             runs += 1
             try:
-                _raise_at(op, k, after, error)
+                _raise_at(op, model, k, after, error)
             except AssertionError as exc:
                 failures.append(str(exc).splitlines()[0])
     assert not failures, f"{len(failures)} of {runs}:\n" + "\n".join(failures[:30])
