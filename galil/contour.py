@@ -8,6 +8,7 @@ segment end (no drift) and the total is exact.
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -27,7 +28,15 @@ from galil.errors import (
 )
 from galil.link import CommandLink, check_wait_timeout
 from galil.models import INT32_MAX
-from galil.motion import Display, GearLink, MotionTracker, StopWatch, held, sample_of
+from galil.motion import (
+    Display,
+    GearLink,
+    MotionTracker,
+    StopWatch,
+    held,
+    sample_of,
+    send_reopening,
+)
 from galil.moves import check_followers, follower_limits, follower_operands
 from galil.predict import Profile
 from galil.predict.checks import check_contour
@@ -325,9 +334,13 @@ class ContourStream:
         texts = self.commands()
         if self._tracker is not None and self._watch is None:
             self._watch = self._tracker.watch_stops(self.letters)
-        if round(link.query_operands(["_TC"])[0]) == 42:
-            link.command_line([cmds.tc(0)])  # a previous stream's code; ours must be seen afresh
-        link.command_line([cmds.cm(self.letters, model=model), cmds.dt(self.dt, model=model)])
+        try:
+            if round(link.query_operands(["_TC"])[0]) == 42:
+                link.command_line([cmds.tc(0)])  # a previous stream's code: ours must show
+            link.command_line([cmds.cm(self.letters, model=model), cmds.dt(self.dt, model=model)])
+        except BaseException:
+            self._halt(end=True)  # (CM may have gone out: contour mode is left again)
+            raise
         state = _Progress(low_water=model.contour_buffer, texts=texts)
         state.bar = _bar(len(texts), self.letters) if progress else None
         return state
@@ -355,8 +368,9 @@ class ContourStream:
         exception nothing queued may run on. Errors on the way are dropped (the exception
         that brought us here is the one to see)."""
         link = self.link
-        with contextlib.suppress(GalilError):
-            link.command_line([cmds.st(self.letters, model=link.model)])
+        reopen = None if self._tracker is None else self._tracker.reconnect
+        stop = [cmds.st(self.letters, model=link.model)]  # (a dead link reopened once for it)
+        send_reopening(functools.partial(link.command_line, stop), reopen)
         if end:
             with contextlib.suppress(GalilError):
                 link.command_line(cmds.contour_end(self.letters, model=link.model))

@@ -247,6 +247,7 @@ class Controller(CoordinatedMotion, LinkFacade):
             self._factory = None
             first = transport
         self._policy = _policy(reconnect, self._factory is not None)
+        self.tracker.reconnect = _reopener(self) if self._factory is not None else None
         if self._policy is not None:  # weakly: a controller dropped unclosed is still garbage
             self.link.on_dead = _weakly(self._reopen_dead_link)
         self._parts = _Parts(self.link, self.messages_room, self.records_room,
@@ -263,6 +264,7 @@ class Controller(CoordinatedMotion, LinkFacade):
             transport = self._factory()
         link = self.link
         link.attach(transport)
+        self.tracker.closed = False
         self.records_room.reset()
         try:
             if self._handshake:
@@ -305,8 +307,8 @@ class Controller(CoordinatedMotion, LinkFacade):
         if self._finalizer is not None:
             self._finalizer.detach()
         with self._life:
+            _stop_started(self.link, self.tracker)
             if self.link.is_open:
-                _stop_started(self.link, self.tracker)
                 _stop_captures(self.link, self._captures)
             _close_parts(self._parts, keep_watchdogs=False)
             self.tracker.end_watches()
@@ -698,6 +700,11 @@ def _close_parts(parts: _Parts, *, keep_watchdogs: bool, keep_streams: bool = Fa
 
 
 def _stop_started(link: Link, tracker: MotionTracker) -> None:
+    """Closing: stop what the library started (on a link still open); a call that finds the
+    link closed from now on has nothing left to stop (``tracker.closed``)."""
+    tracker.closed = True
+    if not link.is_open:
+        return
     failed = tracker.stop_started(link)
     if failed:
         _LOG.warning(
@@ -782,6 +789,21 @@ def _weakly(
         bound(error)
 
     return call
+
+
+def _reopener(controller: Controller) -> Callable[[], None]:
+    """What reopens ``controller``'s link so that a stop can be sent after a failed start
+    (:func:`~galil.motion.stop_on_error`): a link that died, never one closed on purpose.
+    It holds the controller weakly (a controller dropped unclosed is closed when collected)."""
+    ref = weakref.ref(controller)
+
+    def reopen() -> None:
+        c = ref()
+        if c is None or not c.link.dead:
+            raise GalilConnectionError("the link is closed, not dead: it is not reopened")
+        c.reconnect()
+
+    return reopen
 
 
 def _policy(reconnect: object, has_address: bool) -> ReconnectPolicy | None:

@@ -14,10 +14,19 @@ moves on the gearing; the library does not predict that, so it refuses to move a
 
 from __future__ import annotations
 
+import functools
+
 from galil import predict
 from galil.errors import InvalidArgument, LimitError
 from galil.link import CommandLink
-from galil.motion import Display, GearLink, MotionTracker, refuse_dropped, sample_of
+from galil.motion import (
+    Display,
+    GearLink,
+    MotionTracker,
+    refuse_dropped,
+    sample_of,
+    send_reopening,
+)
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import format_number
 
@@ -200,13 +209,16 @@ def _gear_to(
         )
     _master_at_rest(link, master)
     source = "S" if master == "S" else f"C{master}"
-    replies = link.command_line(
-        [
-            cmds.ga(model=model, **{follower: source}),
-            cmds.gr(model=model, **{follower: q}),
-            cmds.mg_operand(f"_SC{follower}"),  # (what _SC says once it follows: dropped_by)
-        ]
-    )
+    line = [
+        cmds.ga(model=model, **{follower: source}),
+        cmds.gr(model=model, **{follower: q}),
+        cmds.mg_operand(f"_SC{follower}"),  # (what _SC says once it follows: dropped_by)
+    ]
+    try:
+        replies = link.command_line(line)
+    except BaseException:
+        _disengage(link, tracker, follower)  # a gearing the library would not know of
+        raise
     anchor = predict.GearFollower(
         q, master=round(m0), position=round(f0), resolution=model.gr_resolution
     )
@@ -215,6 +227,15 @@ def _gear_to(
     gear.engaged_code = 0 if code is None else code
     tracker.engage(gear)
     return Gearing(link, tracker, gear)
+
+
+def _disengage(link: CommandLink, tracker: MotionTracker, follower: str) -> None:
+    """``GR 0`` on ``follower`` after its ``GA``/``GR`` line failed: it may have engaged, and
+    the tracker would not know of it (the next move of the master would drive the follower
+    unpredicted and unchecked). A dead link is reopened once for it; a failure is dropped
+    (the exception that brought us here is the one to see)."""
+    line = [cmds.gr(model=link.model, **{follower: 0})]
+    send_reopening(functools.partial(link.command_line, line), tracker.reconnect)
 
 
 def _check_pair(

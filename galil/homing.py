@@ -29,6 +29,7 @@ from galil.motion import (
     Track,
     as_stored,
     sample_of,
+    stop_on_error,
 )
 from galil.protocol import commands as cmds
 
@@ -148,8 +149,9 @@ class AxisHoming:
         """
         if switch is not None and not isinstance(switch, predict.HomeSwitch):
             raise InvalidArgument(f"switch must be a galil.predict.HomeSwitch, not {switch!r}")
-        with self._tracker.lock:  # no other thread's motion from the state read to the handle
-            return self._start(kind, switch, display)
+        tracker = self._tracker
+        with tracker.lock, stop_on_error(self._link, tracker, self.letter):  # (no other
+            return self._start(kind, switch, display)  # thread's motion until the handle)
 
     def _start(
         self, kind: str, switch: predict.HomeSwitch | None, display: Display | None

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import functools
 import logging
 import math
 import threading
@@ -51,7 +52,9 @@ __all__ = [
     "motion_guard",
     "refuse_dropped",
     "sample_of",
+    "send_reopening",
     "stop_axes",
+    "stop_on_error",
 ]
 
 _LOG = logging.getLogger("galil.motion")
@@ -298,6 +301,12 @@ class MotionTracker:
         self.lock = threading.RLock()
         self._watches: list[StopWatch] = []  # a contour's, while it runs (its letters)
         self._refused: set[int] = set()  # threads whose starts are cancelled (refuse_starts)
+        #: Reopens a dead link so that a stop can be sent (:func:`stop_on_error`); ``None``
+        #: when the link cannot be reopened (a controller built on a transport object).
+        self.reconnect: Callable[[], None] | None = None
+        #: Set by a controller's close(), which stops what the library started itself: a
+        #: call that then finds the link closed has nothing left to stop.
+        self.closed = False
 
     def end_watches(self) -> None:
         """The link was closed: every move's :meth:`~MoveHandle.add_callback` watcher ends."""
@@ -825,6 +834,9 @@ class MoveHandle:
             MotionError: an axis stopped on a limit switch or soft limit, or a limit stopped
                 an axis geared to one of them (its gearing is then off); raised once the
                 move's own axes are done, so nothing of the move is left moving.
+
+        Anything else that interrupts the wait (Ctrl-C, a dead link, no reply) stops the move
+        before it propagates (:func:`stop_on_error`).
         """
         check_wait_timeout(timeout)
         check_flag(progress, "progress")
@@ -833,7 +845,14 @@ class MoveHandle:
             timeout = duration * 1.5 + 2.0
         bar = progress_bar(self.kind, self.axes, duration) if progress else None
         try:
-            self._poll_until_done(timeout, bar)
+            with stop_on_error(self._link, self._tracker, self._stop_letters, stop=self.stop):
+                done = self._poll_until_done(timeout, bar)
+            if not done:
+                raise self._link.error(
+                    GalilTimeoutError,
+                    f"move on {self.axes} not done after {timeout:.3g} s "
+                    f"(predicted {self.duration:.3g} s)",
+                )
         finally:
             if bar is not None:
                 if self._done and bar.total is not None:
@@ -846,7 +865,13 @@ class MoveHandle:
         self._raise_if_limited(self._result)
         return self._result
 
-    def _poll_until_done(self, timeout: float | None, bar: Any) -> None:
+    @property
+    def _stop_letters(self) -> str:
+        """What ``_BG`` says of this move: its axes (a sequence's handle: ``"S"``)."""
+        return self.axes
+
+    def _poll_until_done(self, timeout: float | None, bar: Any) -> bool:
+        """Poll until the move is done (``True``) or ``timeout`` has passed (``False``)."""
         link = self._link
         deadline = None if timeout is None else link.clock() + timeout
         if link.simulated_time:
@@ -854,11 +879,7 @@ class MoveHandle:
         while not self.done:
             now = link.clock()
             if deadline is not None and now >= deadline:
-                raise link.error(
-                    GalilTimeoutError,
-                    f"move on {self.axes} not done after {timeout:.3g} s "
-                    f"(predicted {self.duration:.3g} s)",
-                )
+                return False
             elapsed = now - self.started_at
             if bar is not None:
                 bar.n = elapsed if bar.total is None else min(elapsed, bar.total)
@@ -868,6 +889,7 @@ class MoveHandle:
             if deadline is not None:
                 pause = min(pause, deadline - now)
             link.pause(min(max(pause, MIN_POLL), MAX_POLL))
+        return True
 
     def _pause_to_predicted_end(self, deadline: float | None) -> None:
         """On a simulator's clock, let the predicted time pass at once (and a sample more).
@@ -982,7 +1004,15 @@ def stop_axes(link: CommandLink, tracker: MotionTracker | None, letters: str = "
     """``ST`` on ``letters`` (default: all axes); the moves' predictions follow the stop.
 
     A move another thread is starting is either stopped with its handle told, or starts after
-    the stop (:attr:`MotionTracker.lock`), never between the line and its handle."""
+    the stop (:attr:`MotionTracker.lock`), never between the line and its handle. Interrupted
+    (Ctrl-C before the line went out, a dead link, no reply), the stop is sent again
+    (:func:`stop_on_error`)."""
+    send = functools.partial(_send_st, link, tracker, letters)
+    with held(tracker), stop_on_error(link, tracker, letters or link.model.axes, stop=send):
+        send()
+
+
+def _send_st(link: CommandLink, tracker: MotionTracker | None, letters: str) -> None:
     with held(tracker):
         replies = link.command_line([cmds.st(letters, model=link.model), cmds.time_stamp()])
         if tracker is not None:
@@ -990,7 +1020,14 @@ def stop_axes(link: CommandLink, tracker: MotionTracker | None, letters: str = "
 
 
 def abort_all(link: CommandLink, tracker: MotionTracker | None) -> None:
-    """``AB 1``: stop every axis at once, without deceleration; programs keep running."""
+    """``AB 1``: stop every axis at once, without deceleration; programs keep running.
+    Interrupted, it is sent again (:func:`stop_on_error`)."""
+    send = functools.partial(_send_ab, link, tracker)
+    with held(tracker), stop_on_error(link, tracker, link.model.axes, stop=send):
+        send()
+
+
+def _send_ab(link: CommandLink, tracker: MotionTracker | None) -> None:
     with held(tracker):
         replies = link.command_line([cmds.ab(motion_only=True), cmds.time_stamp()])
         if tracker is not None:
@@ -1015,47 +1052,99 @@ def motion_guard(
     try:
         yield
     except BaseException as exc:
-        moving = _stop_for_guard(link, tracker, letters, reconnect)
+        moving = _stop_for_guard(link, tracker, letters, None, reconnect)
         if moving:
-            raise MotionError(
-                f"{type(exc).__name__} inside motion(); axes {moving} could not be stopped "
-                "and may still be moving",
-                moving=moving,
-                axis=moving[0],
-                model=link.model.name,
-                recent=link.recent,
-            ) from exc
+            raise _not_stopped(link, exc, moving, "inside motion()") from exc
         raise
+
+
+#: What an operation raises when nothing of it ran, or its motion is over: refused before
+#: the first byte (InvalidArgument, LimitError, ScheduleError), refused by the controller
+#: (CommandError: it answered '?'), or a motion that ended already (MotionError: a limit, a
+#: stop sent from elsewhere). Anything else may have come after the line went out.
+_NOTHING_RAN = (InvalidArgument, CommandError, MotionError)
+
+
+@contextlib.contextmanager
+def stop_on_error(
+    link: CommandLink,
+    tracker: MotionTracker | None,
+    letters: str,
+    *,
+    stop: Callable[[], None] | None = None,
+) -> Iterator[None]:
+    """The guard of an operation that starts or changes the motion of ``letters`` (``"S"``:
+    a vector sequence): if it raises anything that may have come once its line went out (a
+    timeout, a dead link, Ctrl-C, a bug), what moves of ``letters`` is stopped, a dead link
+    reopened once for it (:attr:`MotionTracker.reconnect`), and waited for, before the
+    exception goes on: the caller never gets an exception with the motion running. A
+    refusal (:data:`_NOTHING_RAN`) passes untouched: the motion is as it was.
+
+    Args:
+        stop: sends the stop (default: ``ST`` on ``letters`` through the tracker).
+
+    Raises:
+        MotionError: from the exception, naming the axes that may still move, when the stop
+            could not be sent or confirmed.
+    """
+    try:
+        yield
+    except _NOTHING_RAN:
+        raise
+    except BaseException as exc:
+        if tracker is not None and tracker.closed and isinstance(exc, GalilConnectionError):
+            raise  # close() stopped the motion before it closed the link
+        reopen = None if tracker is None else tracker.reconnect
+        moving = _stop_for_guard(link, tracker, letters, stop, reopen)
+        if moving:
+            raise _not_stopped(link, exc, moving, "while starting or changing motion") from exc
+        raise
+
+
+def _not_stopped(link: CommandLink, exc: BaseException, moving: str, where: str) -> MotionError:
+    return MotionError(
+        f"{type(exc).__name__} {where}; axes {moving} could not be stopped and may still be moving",
+        moving=moving,
+        axis=moving[0],
+        model=link.model.name,
+        recent=link.recent,
+    )
 
 
 def _stop_for_guard(
     link: CommandLink,
     tracker: MotionTracker | None,
     letters: str,
+    stop: Callable[[], None] | None,
     reconnect: Callable[[], None] | None,
 ) -> str:
-    """Send ``ST`` to what moves (all of ``letters`` if unknown); return what may still move."""
+    """Stop what moves of ``letters`` (all of them if unknown) with ``stop`` (default: ``ST``
+    on those); return what may still move."""
     try:
         moving = [round(v) for v in link.query_operands([f"_BG{a}" for a in letters])]
         busy = "".join(a for a, m in zip(letters, moving, strict=True) if m)
     except GalilError:
-        busy = letters  # unknown: stop them all
+        busy = letters  # unknown (a dead link among the causes): stop them all
     if not busy:
         return ""
-    if not _send_stop(link, tracker, busy, reconnect):
+    if stop is None:
+        stop = functools.partial(_send_st, link, tracker, busy)
+    if not send_reopening(stop, reconnect):
         return busy
     return _wait_stopped(link, busy)
 
 
-def _send_stop(
-    link: CommandLink,
-    tracker: MotionTracker | None,
-    busy: str,
-    reconnect: Callable[[], None] | None,
-) -> bool:
+def send_reopening(send: Callable[[], object], reconnect: Callable[[], None] | None) -> bool:
+    """Call ``send`` (a stop, or an undo after a failed start); on a dead link reopen it once
+    with ``reconnect`` and try again; another error gets one more try too. Never raises a
+    :class:`GalilError`.
+
+    Returns:
+        Whether ``send`` went through.
+    """
     for attempt in range(2):
         try:
-            stop_axes(link, tracker, busy)
+            send()
             return True
         except GalilConnectionError:
             if reconnect is None or attempt:

@@ -8,6 +8,7 @@ raises before a byte goes out. Units are converted by the axis layer before anyt
 
 from __future__ import annotations
 
+import contextlib
 import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -28,6 +29,8 @@ from galil.motion import (
     predict_track,
     refuse_dropped,
     sample_of,
+    send_reopening,
+    stop_on_error,
 )
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
@@ -326,7 +329,8 @@ def execute_move(
     if len(moves) > 1:
         order = link.model.axes
         moves = sorted(moves, key=lambda m: order.index(m.letter))
-    with tracker.lock:  # no other thread's motion between the state read and the handle
+    guard = contextlib.nullcontext() if dry_run else stop_on_error(link, tracker, letters)
+    with tracker.lock, guard:  # no other thread's motion between the state read and the handle
         return _execute_move(link, tracker, moves, relative, dry_run, command, display)
 
 
@@ -424,8 +428,8 @@ def jog(
         MotionError: a limit stopped an axis geared to ``letter`` during a move nobody waited
             for: its gearing is off, and forgotten (:func:`~galil.motion.refuse_dropped`).
     """
-    with tracker.lock:  # (a JG for a jog another thread starts would change its speed)
-        return _jog(link, tracker, letter, velocity, display)
+    with tracker.lock, stop_on_error(link, tracker, letter):  # (a JG for a jog another
+        return _jog(link, tracker, letter, velocity, display)  # thread starts: its speed)
 
 
 def _jog(
@@ -486,7 +490,7 @@ def set_jog_speed(link: CommandLink, tracker: MotionTracker, letter: str, veloci
             controller takes JG only in jog mode).
         LimitError: an axis geared to ``letter`` would run beyond the model's SP maximum.
     """
-    with tracker.lock:
+    with tracker.lock, stop_on_error(link, tracker, letter):
         _set_jog_speed(link, tracker, letter, velocity)
 
 
@@ -531,8 +535,8 @@ def increment(
         MotionError: a limit stopped an axis geared to ``letter`` during a move nobody waited
             for: its gearing is off, and forgotten (:func:`~galil.motion.refuse_dropped`).
     """
-    with tracker.lock:  # (an IP would extend a move another thread starts meanwhile)
-        return _increment(link, tracker, letter, counts, display)
+    with tracker.lock, stop_on_error(link, tracker, letter):  # (an IP would extend a move
+        return _increment(link, tracker, letter, counts, display)  # another thread starts)
 
 
 def _increment(
@@ -695,7 +699,7 @@ def speed_schedule(
     cmds.xq(f"#{label}")  # the label is checked before anything is read or sent
     # Held from the thread 0 check to the handle: another thread's schedule would install
     # its routine over this one's, or take thread 0 in between.
-    with tracker.lock:
+    with tracker.lock, stop_on_error(link, tracker, letter):
         return _speed_schedule(
             link, tracker, routines, letter, distance, changes, speed, label, display
         )
@@ -736,7 +740,13 @@ def _speed_schedule(
     routines.install(Routine(f"#{label}", tuple(program)))  # beside the user's program
     link.command_line([cmds.assign(SCHEDULE_BEGIN, -1)])
     run = object()  # this schedule's hold on thread 0
-    routines.start(f"#{label}", 0, owner=run)
+    try:
+        routines.start(f"#{label}", 0, owner=run)
+    except BaseException:
+        # XQ may have gone out: no change point may run after the stop (stop_on_error), and
+        # SP goes back, as for a schedule stopped before its end (_cancel_schedule).
+        _undo_start(link, tracker, routines, a, sp0)
+        raise
     params = MoveParams(first, ac, dc, it)
     track = Track("schedule", rp, params, None, amount=distance, fixed=schedule.profile)
     handle = MoveHandle(
@@ -771,6 +781,17 @@ def _schedule_state(
             model=link.model.name,
         )
     return state, follower_limits(link, tracker, gears, values[n + 1 :])
+
+
+def _undo_start(
+    link: CommandLink, tracker: MotionTracker, routines: Routines, a: str, speed: float
+) -> None:
+    """After a failed ``XQ`` of a schedule: halt thread 0 (checked free under the tracker's
+    lock, so only the schedule can run there) and put ``SP`` back to ``speed``; a dead link
+    is reopened once for it, and a failure dropped (the caller's exception is the one)."""
+    undo = [cmds.hx(0), cmds.sp(model=link.model, **{a: speed})]
+    if send_reopening(functools.partial(link.command_line, undo), tracker.reconnect):
+        routines.forget(0)
 
 
 def _cancel_schedule(

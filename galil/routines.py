@@ -317,6 +317,12 @@ class Routines:
             if owner is not None:
                 self._owners[thread] = owner
 
+    def forget(self, thread: int) -> None:
+        """``thread`` was halted behind :meth:`halt`'s back (after a failed start)."""
+        with self._lock:
+            self._threads.pop(thread, None)
+            self._owners.pop(thread, None)
+
     def halt(self, thread: int, *, owner: object | None = None) -> bool:
         """Halt a library thread (``HX n``); with ``owner``, only if the run started with
         that owner still holds it (a later run on the thread is left alone).

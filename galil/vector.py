@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from galil import predict
-from galil.errors import GalilError, InvalidArgument, LimitError
+from galil.errors import InvalidArgument, LimitError
 from galil.link import CommandLink, check_flag
 from galil.models import tm_of
 from galil.motion import (
@@ -38,6 +38,7 @@ from galil.motion import (
     Track,
     held,
     sample_of,
+    stop_on_error,
 )
 from galil.moves import check_followers, follower_limits, follower_operands
 from galil.predict.vector import SequenceEvent, replay
@@ -202,6 +203,10 @@ class VectorHandle(MoveHandle):
                 for t in self._tracks.values():
                     t.exact = False
             self._cache.clear()
+
+    @property
+    def _stop_letters(self) -> str:
+        return PLANE
 
     def stop(self) -> None:
         """Decelerate the sequence to a stop along its path at VD (``ST S``)."""
@@ -559,15 +564,12 @@ class VectorStream:
         stopped (``ST S``) before the error is raised.
         """
         lock = held(tracker)
-        with lock:  # no other thread's motion from the state read to the handle
-            handle, texts, first = self._begin(tracker)
+        link = self.link
+        with lock, stop_on_error(link, tracker, PLANE):  # no other thread's motion from the
+            handle, texts, first = self._begin(tracker)  # state read to the handle
         if first < len(texts):
-            try:
+            with stop_on_error(link, tracker, PLANE, stop=handle.stop):
                 self._feed(handle, texts, first, lock)
-            except BaseException:
-                with contextlib.suppress(GalilError):
-                    handle.stop()
-                raise
         return handle
 
     def _begin(self, tracker: MotionTracker | None) -> tuple[VectorHandle, list[Command], int]:
