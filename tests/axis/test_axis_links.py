@@ -82,9 +82,12 @@ def test_contour_and_schedule_over_the_link(
     link: tuple[galil.Controller, SimController],
 ) -> None:
     dmc, sim = link
-    path = np.cumsum(np.full(1200, 21.7))  # more than twice the buffer
+    # More than twice the buffer. DT 3 (8 ms a segment): the buffer holds 4 s of controller
+    # time, 0.5 s of real time, so a loaded machine (CI, parallel workers) cannot stall the
+    # stream into an underrun (TC 42); at DT 1 a stall of 128 ms did, once.
+    path = np.cumsum(np.full(1200, 21.7))
     t0 = sim.start_trace("D")
-    result = dmc.contour("D", path, dt=1)
+    result = dmc.contour("D", path, dt=3)
     trace = sim.stop_trace("D")["D"]
     assert dmc.D.reference_position == round(path[-1])
     assert_follows(trace, t0, result.profiles["D"], _sample(sim, r"CD ,,,-?\d+", t0))
