@@ -30,19 +30,33 @@ from galil.arrays import Arrays, Variables
 from galil.axis import Axis, check_overrides, limits_by_axis, resolve_moves, user_units
 from galil.capture import Capture
 from galil.contour import ContourResult, ContourStream
-from galil.errors import GalilConnectionError, GalilError, InvalidArgument
+from galil.errors import (
+    GalilConnectionError,
+    GalilError,
+    GalilTimeoutError,
+    InvalidArgument,
+    ProtocolError,
+)
 from galil.facade import LinkFacade
 from galil.handshake import identify
 from galil.homing import SwitchPolarity, read_polarity, set_polarity
 from galil.interrupts import Interrupts
 from galil.io import IO
-from galil.link import Link, check_count, check_flag, check_items, check_timeout
+from galil.link import (
+    Link,
+    check_count,
+    check_flag,
+    check_items,
+    check_timeout,
+    parse_numbers_reply,
+)
 from galil.messages import Messages
 from galil.models import Identity, ModelSpec, get_model
 from galil.motion import MotionTracker, MoveHandle, abort_all, motion_guard, stop_axes
 from galil.moves import execute_move
 from galil.programs import Programs
 from galil.protocol import commands as cmds
+from galil.protocol.commands import Command, Expect
 from galil.records import Records
 from galil.routines import Routines
 from galil.segments import PathAxis, Segment, VectorPlan, show
@@ -52,7 +66,15 @@ from galil.units import path_to_counts
 from galil.vector import VectorHandle, VectorStream
 from galil.watchdog import Watchdog, check_watchdog_args
 
-__all__ = ["CLIENT_OPTIONS", "Controller", "CoordinatedMotion", "ReconnectPolicy", "connect"]
+__all__ = [
+    "CLIENT_OPTIONS",
+    "RESET_WAIT",
+    "Controller",
+    "CoordinatedMotion",
+    "ReconnectPolicy",
+    "Resetting",
+    "connect",
+]
 
 _LOG = logging.getLogger("galil.controller")
 
@@ -168,7 +190,174 @@ class CoordinatedMotion:
         return show(run.profile, run.axes, run.path)
 
 
-class Controller(CoordinatedMotion, LinkFacade):
+#: ``RS``: its reply may be ``:`` or nothing (a controller may reset before it answers).
+_RS = Command("RS", Expect.ANY)
+#: Seconds :meth:`Controller.reset` waits by default for the controller to answer again.
+RESET_WAIT = 10.0
+
+
+class Resetting:
+    """:meth:`reset` of a :class:`Controller` (a class of its own only to keep each class
+    short; see docs/decisions/0031)."""
+
+    link: Link
+    tracker: MotionTracker
+    routines: Routines
+    messages_room: Messages
+    records_room: Records
+    interrupts: Interrupts
+    identity: Identity | None
+    echo: bool
+    _watchdogs: list[Watchdog]
+    _life: threading.RLock
+    _factory: Callable[[], Transport] | None
+    _handshake: bool
+    _unsolicited: bool
+    _given_model: ModelSpec | None
+    _keep_echo: bool
+    _axes: dict[str, Axis] | None
+
+    def reconnect(self) -> None:
+        """Close the link and open it again (the Controller's)."""
+        raise NotImplementedError
+
+    def reset(self, timeout: float | None = None) -> None:
+        """Reset the controller (``RS``) and set the link up again, as at connect.
+
+        In order: every axis is stopped (``ST``) and waited for, and the moves in progress
+        end with their results (as a stop would); the watchdogs halt; ``RS`` goes out (the
+        controller returns to its power-on state: the burned parameters and program, which
+        runs from ``#AUTO``); once it answers ``^R^V`` again the link is set up as at
+        connect (the echo, ``CW 1`` or ``CF I`` for unsolicited output, ``DR`` streams,
+        interrupts), and the library forgets what ``RS`` made false: gearing links,
+        homed flags, its routines in program memory, the sample period (``TM`` read
+        again). The watchdogs then start again. If the controller dropped the link, it is
+        reopened (from the address) within ``timeout``.
+
+        ``RS`` sent as a raw command is refused: this is the way to reset.
+
+        Args:
+            timeout: seconds to wait for the axes to stop and for the controller to answer
+                again (default 10).
+
+        Raises:
+            InvalidArgument: a bad timeout (nothing sent).
+            GalilConnectionError: the link is closed, or the controller did not answer
+                again within ``timeout``.
+        """
+        wait = check_timeout(timeout, RESET_WAIT)
+        link = self.link
+        _refuse_closed(link)
+        with self._life:
+            _stop_and_settle(link, self.tracker, wait)
+            dogs = [d for d in self._watchdogs if d.beating]
+            for dog in dogs:
+                dog.stop()
+            self.records_room.suspend()
+            self.interrupts.close(keep_mask=True)
+            try:
+                self._set_up_again(self._send_reset(), wait)
+            except GalilConnectionError:
+                if self._factory is None or not link.dead:
+                    raise
+                self._reconnect_within(wait)
+            self._forget_reset()
+            for dog in dogs:
+                dog.start()
+
+    def _send_reset(self) -> int | None:
+        """``RS``, with ``MG _CW`` and ``CW 1`` right behind it where output is marked (what
+        ``#AUTO`` prints at once is then marked already); returns ``_CW`` after ``RS``."""
+        link = self.link
+        marking = self._handshake and self._unsolicited and self.messages_room.marking
+        batch = [_RS, cmds.mg_operand("_CW"), cmds.cw(1)] if marking else [_RS]
+        with link.locked():
+            try:
+                done = link.roundtrip_locked(batch, link.timeout)
+            except (GalilTimeoutError, ProtocolError):
+                return None  # reset before it answered: the link starts afresh anyway
+        if len(done) == 3 and done[1].ok:
+            with contextlib.suppress(InvalidArgument, ProtocolError):
+                value = round(parse_numbers_reply(done[1].text)[0])
+                return value if value in (1, 2) else None
+        return None
+
+    def _set_up_again(self, previous_cw: int | None, wait: float) -> None:
+        """The handshake again on the same transport (``previous_cw``: ``_CW`` after RS)."""
+        link = self.link
+        assert link.transport is not None
+        link.attach(link.transport)  # a fresh session, nothing to restore, stale bytes gone
+        self.records_room.reset()
+        if self._handshake:
+            deadline = time.monotonic() + wait
+            while True:
+                try:
+                    self.identity, self.echo = identify(
+                        link, self._given_model, keep_echo=self._keep_echo
+                    )
+                    break
+                except GalilConnectionError:
+                    if link.dead or time.monotonic() >= deadline:
+                        raise
+            if self._unsolicited:
+                self.messages_room.after_reset(previous_cw)
+        self.records_room.resume()
+        self.interrupts.reopen()
+
+    def _reconnect_within(self, wait: float) -> None:
+        deadline = time.monotonic() + wait
+        while True:
+            try:
+                self.reconnect()
+                return
+            except GalilConnectionError:
+                if time.monotonic() >= deadline:
+                    raise
+                time.sleep(0.2)
+
+    def _forget_reset(self) -> None:
+        """What ``RS`` made false: gearing, homed flags, the library's threads, TM."""
+        tracker = self.tracker
+        with tracker.lock:
+            for gear in list(tracker.gears.values()):
+                tracker.release(gear)
+        self.routines.forget()
+        for axis in (self._axes or {}).values():
+            axis._homing.forget()
+        link = self.link
+        model = link.model
+        try:
+            tm = link.query_operands(["_TM"])[0]
+            link.sample_period = model.sample_period_for(tm)
+        except GalilError:
+            link.sample_period = model.sample_period
+
+
+def _refuse_closed(link: Link) -> None:
+    if not link.is_open or link.dead:
+        raise link.error(
+            GalilConnectionError, "the controller link is closed or dead: nothing to reset"
+        )
+
+
+def _stop_and_settle(link: Link, tracker: MotionTracker, wait: float) -> None:
+    """``ST`` to every axis, wait (up to ``wait`` s) until none moves, and let the moves in
+    progress read their ends (after ``RS`` their positions would be the power-on ones)."""
+    letters = link.model.axes
+    if not letters:
+        return
+    stop_axes(link, tracker, "")
+    names = [f"_BG{a}" for a in letters]
+    deadline = link.clock() + wait
+    while any(round(v) for v in link.query_operands(names)) and link.clock() < deadline:
+        link.pause(0.005)
+    handles = {id(h): h for a in letters if (h := tracker.active(a)) is not None}
+    for handle in handles.values():
+        with contextlib.suppress(GalilError):
+            _ = handle.done
+
+
+class Controller(CoordinatedMotion, Resetting, LinkFacade):
     """A connected controller. Build it with :func:`connect`.
 
     Args:

@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from galil.errors import GalilConnectionError, InvalidArgument
-from galil.link import Link, WireLog, check_flag, check_seconds
+from galil.link import Link, WireLog, check_flag, check_items, check_seconds, refuse_link_settings
 from galil.messages import MessageCallback, MessageQueue, Messages
 from galil.models import ModelSpec
 from galil.protocol.commands import Command
@@ -39,6 +39,13 @@ def check_sleep(seconds: object) -> float:
     if value > LONGEST_SLEEP:
         raise InvalidArgument(f"seconds must be at most {LONGEST_SLEEP:g}, not {seconds!r}")
     return value
+
+
+def _prepared(command: Command) -> Command:
+    """``command`` unless it would change the link's own settings (decision 0031)."""
+    if isinstance(command, Command):
+        refuse_link_settings(command)
+    return command  # (anything else: the link says what it takes)
 
 
 class LinkFacade:
@@ -107,8 +114,13 @@ class LinkFacade:
     ) -> str:
         """Send one raw command line and return its reply text (see :meth:`Link.command`).
 
+        Commands that would change the link's own settings or reset the controller under it
+        are refused, unsent: ``RS`` (use :meth:`reset`), ``^R^S``, ``CW``/``EO``/``CF`` with a
+        setting (``CW ?``, ``MG _CW`` pass), ``IHS=>``/``IHT=>`` (docs/raw.md).
+
         Raises:
-            InvalidArgument: the text cannot be sent (CR/LF, non-ASCII, a stray ``;``).
+            InvalidArgument: the text cannot be sent (CR/LF, non-ASCII, a stray ``;``), or it
+                is one of the commands above (the message says what to use instead).
             CommandError: the controller answered ``?`` (code and text from ``TC1``).
             ProtocolError: the link went out of step during the exchange (it may have run).
             GalilTimeoutError: no complete reply within the timeout.
@@ -135,16 +147,24 @@ class LinkFacade:
         return replies
 
     def send(self, command: Command, *, timeout: float | None = None) -> str:
-        """Send a prepared :class:`~galil.protocol.commands.Command`; return its reply text."""
-        return self.link.send(command, timeout=timeout)
+        """Send a prepared :class:`~galil.protocol.commands.Command`; return its reply text.
+
+        Raises:
+            InvalidArgument: not a Command, or one that would change the link's own
+                settings (``RS``, ``CW 1`` ...: see :meth:`command`); nothing is sent.
+        """
+        return self.link.send(_prepared(command), timeout=timeout)
 
     def exchange(self, command: Command, *, timeout: float | None = None) -> Completed:
         """Send a prepared command and return the whole reply (``record`` for QR)."""
-        return self.link.exchange(command, timeout=timeout)
+        return self.link.exchange(_prepared(command), timeout=timeout)
 
     def send_many(self, commands: Iterable[Command], *, timeout: float | None = None) -> list[str]:
         """Send prepared commands back to back (pipelined) and return every reply text."""
-        return self.link.send_many(commands, timeout=timeout)
+        batch = check_items(commands, "commands")
+        for c in batch:
+            _prepared(c)
+        return self.link.send_many(batch, timeout=timeout)
 
     def query_number(self, text: str, *, timeout: float | None = None) -> float:
         """Send a query (``"MG _TPA"``, ``"TPA"``) and return its one number."""

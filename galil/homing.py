@@ -268,6 +268,11 @@ class AxisHoming:
         note += f"; position 0 at {found.zero_at} (old counts), exact"
         return Track(mode, rp, move, None, fixed=found.profile, note=note)
 
+    def forget(self) -> None:
+        """The controller was reset (``RS``): a homing seen before defines nothing now."""
+        self._last = None
+        self._confirmed = None
+
     def homed(self) -> Homed:
         """Whether the axis is homed and how that is known (one query at most)."""
         a = self.letter

@@ -59,6 +59,7 @@ __all__ = [
     "check_wait_timeout",
     "is_query",
     "parse_numbers_reply",
+    "refuse_link_settings",
 ]
 
 _WIRE = logging.getLogger("galil.wire")
@@ -87,10 +88,24 @@ def _parse(text: str) -> Command:
     cmd = _PARSED.get(text)
     if cmd is None:
         cmd = cmds.parse_line(text)
+        refuse_link_settings(cmd)  # (once per text: a refused line is never cached)
         if len(_PARSED) >= 512:
             _PARSED.clear()
         _PARSED[text] = cmd
     return cmd
+
+
+def refuse_link_settings(command: Command) -> None:
+    """Refuse a raw command that would change the link's own settings or reset the
+    controller under it (``RS``, ``^R^S``, ``CW 1``, ``EO 0``, ``CF``, ``IHS=>``; decision 0031).
+
+    Raises:
+        InvalidArgument: saying what to use instead; nothing is sent.
+    """
+    for part in cmds.split_commands(command.text):
+        why = cmds.link_setting(part)
+        if why is not None:
+            raise InvalidArgument(f"not sent: {why}")
 
 
 def check_count(value: object, name: str) -> int:

@@ -98,6 +98,8 @@ class Messages:
         self._pump: threading.Thread | None = None
         self._reader: threading.Thread | None = None
         self._secondary: Transport | None = None
+        self._claimed = False  # the message handle was claimed with CF I (not given)
+        self.marking = False  # unsolicited output is marked with CW 1 on the command link
         self._wanted_pump = False
         link.on_messages = self._accept
 
@@ -122,6 +124,7 @@ class Messages:
         transport = link.transport
         assert transport is not None
         self._stop = threading.Event()
+        self._claimed = self.marking = False
         ready = transport.secondary
         if ready is not None:
             # The transport brought its own message handle (a simulator's, a gateway's).
@@ -155,18 +158,42 @@ class Messages:
                 secondary.close()
             raise
         self._start_reader(secondary, "the second Ethernet handle (CF I)")
+        self._claimed = True
 
-    def _mark(self) -> None:
-        """``CW 1`` on the command link (the previous setting restored at close)."""
+    def after_reset(self, previous: int | None) -> None:
+        """After ``RS`` on the same link (``Controller.reset``): route unsolicited output again
+        as at connect: ``CF I`` on a claimed message handle, ``CW 1`` where output is marked.
+
+        Args:
+            previous: ``_CW`` as read right after ``RS`` (restored at close), if it was.
+        """
+        secondary, reader = self._secondary, self._reader
+        if self._claimed and secondary is not None:
+            # The reader would take the reply: it pauses while CF I is asked on its handle.
+            self._stop.set()
+            if reader is not None and reader is not threading.current_thread():
+                reader.join(timeout=2.0)
+            self._stop = threading.Event()
+            try:
+                read_reply(secondary, b"CF I\r", self.link.timeout)
+            finally:
+                self._start_reader(secondary, "the second Ethernet handle (CF I again)")
+        elif self.marking:
+            self._mark(previous)
+
+    def _mark(self, known: int | None = None) -> None:
+        """``CW 1`` on the command link (the previous setting, or ``known``, restored at
+        close)."""
         link = self.link
-        previous = 2  # factory default: unsolicited characters unmarked
+        previous = 2 if known is None else known  # factory default: unmarked
         with link.locked():
             try:
-                done = link.roundtrip_locked([cmds.mg_operand("_CW")], link.timeout)[0]
-                if done.ok:
-                    value = round(parse_number(done.text.split(",")[0]))
-                    if value in (1, 2):
-                        previous = value
+                if known is None:
+                    done = link.roundtrip_locked([cmds.mg_operand("_CW")], link.timeout)[0]
+                    if done.ok:
+                        value = round(parse_number(done.text.split(",")[0]))
+                        if value in (1, 2):
+                            previous = value
             except (GalilError, ValueError):
                 pass  # optional: without a reading we restore the factory default
             try:
@@ -181,6 +208,7 @@ class Messages:
                 stacklevel=5,
             )
             return
+        self.marking = True
         if previous != 1:
             link.restore_on_close(cmds.cw(previous))
 

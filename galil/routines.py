@@ -338,6 +338,13 @@ class Routines:
             self._owners.pop(thread, None)
             return True
 
+    def forget(self) -> None:
+        """The controller was reset (``RS``): its threads are halted and the program in
+        memory is the burned one, so the library runs no routine any more."""
+        with self._lock:
+            self._threads.clear()
+            self._owners.clear()
+
     @property
     def threads(self) -> dict[int, str]:
         """The threads the library runs, and the label each started at (as last seen: a

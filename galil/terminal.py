@@ -4,7 +4,10 @@ Every line goes to the controller as typed, compound lines included (``PRA=1000;
 reply is printed, a ``?`` is explained with ``TC1`` and the session goes on, and unsolicited
 output (a program's ``MG``) is printed the moment it arrives. ``DL`` alone starts a program
 download: the lines typed (or pasted) after it are collected until a line holding ``\\`` and
-sent as one ``DL``. ``UL`` prints the program. Ctrl-C sends ``ST`` (and says so), Ctrl-D
+sent as one ``DL``. ``UL`` prints the program. ``RS`` alone resets the controller through
+:meth:`~galil.Controller.reset` (the link is set up again); the commands that would change the
+link's own settings (``CW 1``, ``EO 0``, ``CF``, ``^R^S``, ``RS`` in a compound line) are not
+sent, and the terminal says why. Ctrl-C sends ``ST`` (and says so), Ctrl-D
 leaves; a reply that does not come in time is reported and the next command resynchronises the
 link first.
 
@@ -124,7 +127,22 @@ class Terminal:
             self._download = []
             self.write("download: type or paste the program, then a line with \\ (Ctrl-C cancels)")
             return
+        if command == "RS":
+            self.reset()
+            return
         self._send(command)
+
+    def reset(self) -> None:
+        """``RS`` typed alone: :meth:`~galil.Controller.reset` (the raw ``RS`` is refused: it
+        would break the link's settings); print what happened."""
+        try:
+            self.controller.reset()
+        except GalilError as exc:
+            self._report(exc, "RS")
+            return
+        self.write(
+            "reset (RS): the controller restarted from its burned settings; the link is set up"
+        )
 
     def _collect(self, line: str) -> None:
         assert self._download is not None

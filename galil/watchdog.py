@@ -129,6 +129,12 @@ class Watchdog:
                 self._routines.halt(self.thread)
 
     @property
+    def beating(self) -> bool:
+        """Whether the host's heartbeat runs (started and not stopped); no query."""
+        beater = self._beater
+        return beater is not None and beater.is_alive()
+
+    @property
     def running(self) -> bool:
         """Whether the routine runs on the controller (``_XQn`` is not -1); one query."""
         return round(self._link.query_operands([f"_XQ{self.thread}"])[0]) >= 0

@@ -253,6 +253,7 @@ ENTRIES: list[Entry] = [
     ),
     E("controller", "record", {"axes": "", "as_dict": False, "timeout": None}),
     E("controller", "records", {"period": 8, "seconds": None, "method": "auto", "maxlen": 100}),
+    E("controller", "reset", {"timeout": None}),
     E("controller", "save", {"timeout": None}),
     E("controller", "save_program", {"timeout": None}),
     E("controller", "save_variables", {"timeout": None}),

@@ -180,6 +180,11 @@ class AsyncWatchdog(Room[Watchdog]):
         """The program thread the routine runs on."""
         return self.sync.thread
 
+    @property
+    def beating(self) -> bool:
+        """Whether the host's heartbeat runs (no I/O)."""
+        return self.sync.beating
+
     stop = twin(Watchdog.stop)
 
     async def running(self) -> bool:

@@ -151,6 +151,7 @@ class AsyncController(AsyncLinkFacade):
         return self._worker
 
     reconnect = twin(Controller.reconnect)
+    reset = twin(Controller.reset, shield=True)  # once RS went out, the set-up must follow
 
     # -- axes -------------------------------------------------------------------------------
     @property

@@ -89,6 +89,7 @@ __all__ = [
     "la",
     "le",
     "li",
+    "link_setting",
     "lm",
     "lv",
     "lz",
@@ -1563,6 +1564,59 @@ def parse_line(text: str) -> Command:
     if len(parts) == 1:
         return parts[0]
     return Command(text, Expect.ANY, b"", parts)
+
+
+# Raw commands that change the link's own settings or reset the controller (decision 0031):
+# the first two letters are looked at only on a line's first parse (the link caches parses).
+_LINK_SETTINGS = frozenset({"RS", "CW", "EO", "CF", "IH"})
+_COMMAND_NAME = re.compile(r"[A-Z]{2}[A-Za-z0-9]*")
+_CLOSES_OWN_HANDLE = re.compile(r"[ST]\s*=\s*>")
+_WHY_REFUSED = {
+    "RS": "RS resets the controller, and with it what the link set up at connect (CW 1 or "
+    "the message handle, EO 0, DR streams, interrupts, the library's routines): use "
+    "controller.reset(), which sets them up again and tells the library what RS undid",
+    "^R^S": "^R^S (master reset) returns the controller to its factory settings and resets "
+    "it; the library does not send it: use Galil's own tools, then controller.reconnect()",
+    "CW": "{cmd!r} changes how unsolicited output is marked, which the link chose at "
+    "connect (and restores at close); read it with MG _CW; for unmarked output, "
+    "connect(..., unsolicited=False)",
+    "EO": "{cmd!r} switches the echo the link handles (set at connect, restored at close); "
+    "read it with MG _EO; to keep the echo, connect(..., echo=True)",
+    "CF": "{cmd!r} sends unsolicited output away from where the link reads it (its "
+    "message handle, or the command link marked with CW 1); read it with MG _CF; the "
+    "library routes it at connect: read the lines from controller.messages",
+    "IH": "{cmd!r} closes the handle this link talks on (S), or every handle with it (T): "
+    "use controller.close(); to free another handle, name it (IHC=>-1)",
+}
+
+
+def link_setting(text: str) -> str | None:
+    """Why a raw command must not be sent by hand, or ``None`` (decision 0031).
+
+    Refused: ``RS`` and ``^R^S`` (they reset the controller under the link), ``CW``, ``EO``
+    and ``CF`` with a setting (the link's own: queries such as ``CW ?`` or ``EO ?`` pass), and
+    ``IHS=>``/``IHT=>`` (they close the link's own handle). A variable whose name only starts
+    like one of them (``RSVAL=1``) is not that command.
+    """
+    s = text.lstrip()
+    if s.startswith("\x12\x13"):
+        return _WHY_REFUSED["^R^S"]
+    head = s[:2]
+    if head not in _LINK_SETTINGS:
+        return None
+    found = _COMMAND_NAME.match(s)
+    name = found.group() if found is not None else head
+    suffix = name[2:]
+    if suffix and _AXIS_SUFFIX.fullmatch(suffix) is None and not (head == "CF" and suffix == "I"):
+        return None  # a variable named like the command (CF's handle may also be I)
+    args = s[2:].strip()
+    refused = (
+        head == "RS"
+        or (head == "CW" and args not in ("", "?", "0"))
+        or (head in ("EO", "CF") and args != "?")
+        or (head == "IH" and _CLOSES_OWN_HANDLE.match(args) is not None)
+    )
+    return _WHY_REFUSED[head].format(cmd=s.rstrip()) if refused else None
 
 
 def _raw_command(text: str) -> Command:

@@ -65,10 +65,12 @@ class Ports:
         self.reset()
 
     def reset(self) -> None:
-        """Power-on output settings; held replies and downloads are dropped."""
+        """Power-on output settings; held replies and downloads are dropped. ``CF`` goes
+        back to the main port (R4103: CF is not burnable, its default is S)."""
         self.echo = False
         self.cw = 2
         self.cw_mode = 0
+        self.route = None
         for port in self.ports.values():
             port.wait = None
             port.download = None

@@ -16,6 +16,7 @@ from concurrency import hammer, handles_closed
 
 import galil.controller
 from galil.errors import GalilConnectionError, GalilTimeoutError
+from galil.protocol.commands import Command
 from galil.sim.clock import ManualClock, RealTimeClock
 from galil.sim.controller import SimController
 from galil.sim.link import SimLink
@@ -162,8 +163,9 @@ def test_serial_like_ports_are_rs232() -> None:
     with galil.controller.connect(link) as c:
         assert c.command("WH") == "RS232"
         assert c.query_number("MG _WH") == -1
-        # CF I on the main port keeps output there (inline, marked with CW1).
-        c.command("CF I")
+        # CF I on the main port keeps output there (inline, marked with CW1). (Sent as a
+        # prepared command on the link: raw, CF is refused: decision 0031.)
+        c.link.exchange(Command("CF I"))
         q = c.messages
         sim.emit_message("inline")
         assert q.get(timeout=WAIT) == "inline"

@@ -88,19 +88,22 @@ class Settings(Room):
         ports = self.machine.ports
         i = self.machine.interp
         fields = split_fields(args)
-        if fields[0].strip() == "?":
-            return i.num(ports.cw, "1.0") + "\r\n"
+        first = fields[0].strip()
+        if len(fields) == 1 and first in ("", "?", "0"):
+            # R4103, CW: "n0 = 0 causes controller to return a copyright information string.
+            # Equivalent to n0 = ?" (and so when it is omitted); the text is this simulator's.
+            return f"Copyright (c) {self.machine.identity} (simulated)\r\n"
         mode = ports.cw
-        if fields[0].strip():
+        if first:
             mode = int(i.evaluate(fields[0]))
-            if mode not in (0, 1, 2):
+            if mode not in (1, 2):
                 raise Refused(6, "CW takes 1 or 2")
         pause = ports.cw_mode
         if len(fields) > 1 and fields[1].strip():
             pause = int(i.evaluate(fields[1]))
             if pause not in (0, 1):
                 raise Refused(6, "CW second field is 0 or 1")
-        ports.cw = 2 if mode == 0 else mode
+        ports.cw = mode
         ports.cw_mode = pause
         return ""
 
@@ -142,13 +145,21 @@ class Settings(Room):
     # ---- reset and identity ------------------------------------------------------------
     @handler("RS")
     def rs(self, args: str) -> str:
-        if args.strip():
-            raise Refused(6, "RS takes no argument")
+        # R4103, RS: "n = 0 performs normal reset. n = -1 performs soft master reset"
+        # (factory defaults, the EEPROM kept); the power-on state with the saved program.
+        a = args.strip()
+        if a not in ("", "0", "-1"):
+            raise Refused(6, "RS takes 0 or -1")
         self.machine.reset()
         programs = self.machine.programs
-        if "AUTO" in programs.labels:  # the program survives RS here, as if burned (BP)
-            programs.threads[0] = Thread(0, line=programs.labels["AUTO"])
+        if a != "-1" and "AUTO" in programs.labels:  # the program survives RS here, as if
+            programs.threads[0] = Thread(0, line=programs.labels["AUTO"])  # burned (BP)
         return ""
+
+    @operand("RS")
+    def reset_state(self) -> float:
+        # R4103, _RS: checksum errors found at the last power-up (bits 0-3); none here.
+        return 0.0
 
     @handler("\x12\x13")
     def master_reset(self, args: str) -> str:

@@ -1,0 +1,186 @@
+"""``Controller.reset()`` and the raw commands refused because they would break the link's own
+settings (decision 0031), from the outside: over ``sim://``, TCP loopback to a simulator server
+(the message handle claimed with ``CF I``), and a pty to a ``galil sim`` child process.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Callable, Iterator
+
+import pytest
+
+import galil
+from galil.protocol.commands import Command
+from galil.sim.clock import RealTimeClock
+from galil.sim.controller import SimController
+from galil.sim.server import SimTcpServer
+from galil.testing import nothing_sent, sim_of, simulated, transcript
+
+AUTO = '#AUTO\nMG "hello"\nEN\n'
+
+REFUSED = [
+    "RS",
+    "RS -1",
+    "RS 0",
+    "\x12\x13",
+    "CW 2",
+    "CW1",
+    "CW ,1",
+    "EO 1",
+    "EO 0",
+    "EO",
+    "CF S",
+    "CFI",
+    "IHS=>-1",
+    "IHT=>-3",
+    "MG 1;RS",
+]
+
+
+@pytest.fixture
+def dmc() -> Iterator[galil.Controller]:
+    with simulated() as c:
+        yield c
+
+
+@pytest.mark.parametrize("text", REFUSED)
+def test_a_raw_command_that_breaks_the_link_is_refused_unsent_and_says_what_to_use(
+    dmc: galil.Controller, text: str
+) -> None:
+    for send in (
+        lambda: dmc.command(text, allow_compound=True),
+        lambda: dmc.command_line(text.split(";")),
+        lambda: dmc.query_number(text),
+        lambda: dmc.send(Command(text)),
+        lambda: dmc.send_many([Command(text)]),
+        lambda: dmc.link.command(text, allow_compound=True),
+    ):
+        with (
+            nothing_sent(dmc),
+            pytest.raises(galil.InvalidArgument, match=r"not sent: .*(use|read it with)"),
+        ):
+            send()
+    assert dmc.query_number("MG _CW") == 1.0  # the link's settings are as they were
+
+
+@pytest.mark.parametrize(
+    "text", ["CW ?", "CW", "CW 0", "EO ?", "MG _CW", "MG _EO", "RSVAL=1", "IHC=>-1"]
+)
+def test_queries_of_the_link_settings_and_lookalike_names_still_go_out(
+    dmc: galil.Controller, text: str
+) -> None:
+    # (a CommandError is the simulator's own answer, no handle C: the line went out)
+    with transcript(dmc) as sent, contextlib.suppress(galil.CommandError):
+        dmc.command(text)
+    assert sent.lines[0] == text
+
+
+def test_rs_sent_raw_on_main_broke_replies_now_reset_keeps_them_in_step(
+    dmc: galil.Controller,
+) -> None:
+    dmc.programs.download(AUTO)
+    dmc.reset()
+    assert dmc.query_number("MG 0") == 0.0  # (on main: ProtocolError 'hello\r\n 0.0000')
+    assert dmc.messages.get(timeout=1) == "hello"  # a message, not a reply
+    assert dmc.query_number("MG _CW") == 1.0
+    dmc.close()
+    assert sim_of(dmc).feed(b"MG _CW\r") == b" 2.0000\r\n:"  # close restored the burned CW
+
+
+def test_reset_ends_the_moves_drops_gearing_and_forgets_homing_and_routines(
+    dmc: galil.Controller,
+) -> None:
+    gear = dmc.B.gear_to("A", 0.5)
+    assert gear.engaged
+    handle = dmc.A.jog(20_000)
+    dmc.sleep(0.1)
+    dmc.reset()
+    assert handle.finished
+    assert handle.result is not None
+    assert handle.result.stop_codes == {"A": 4}  # ended as a stop would
+    assert not gear.engaged
+    assert dmc.tracker.gears == {}
+    dmc.servo_here()
+    result = dmc.B.move_by(1000).wait()  # not refused as geared; exact
+    assert result.deviation == {"B": 0}
+    assert dmc.routines.threads == {}
+    assert not dmc.A.homed
+
+
+def test_a_move_after_reset_runs_as_predicted_at_the_burned_sample_time(
+    dmc: galil.Controller,
+) -> None:
+    dmc.command("TM 500")
+    assert dmc.sample_period == pytest.approx(500 / 1_024_000)
+    dmc.reset()
+    assert dmc.sample_period == pytest.approx(1000 / 1_024_000)  # TM read again
+    dmc.servo_here()
+    handle = dmc.A.move_by(5000)
+    assert handle.wait().deviation == {"A": 0}
+
+
+def test_the_watchdog_guards_again_after_reset(dmc: galil.Controller) -> None:
+    dog = dmc.watchdog(1.0)
+    dmc.reset()
+    assert dog.beating
+    assert dog.running
+    assert dmc.routines.threads == {dog.thread: "#GWDOG"}
+    dog.stop()
+
+
+def test_reset_refuses_a_bad_timeout_unsent(dmc: galil.Controller) -> None:
+    for bad in (-1, float("nan"), "x", True, 0):
+        with nothing_sent(dmc), pytest.raises(galil.InvalidArgument):
+            dmc.reset(timeout=bad)  # type: ignore[arg-type]
+
+
+def test_a_closed_controller_cannot_be_reset() -> None:
+    with simulated() as c:
+        pass
+    with pytest.raises(galil.GalilConnectionError):
+        c.reset()
+
+
+def test_the_terminal_resets_on_rs_and_refuses_the_link_settings(dmc: galil.Controller) -> None:
+    from galil.terminal import Terminal
+
+    out: list[str] = []
+    term = Terminal(dmc, write=out.append)
+    dmc.programs.download(AUTO)
+    term.feed("RS")
+    assert out[-1].startswith("reset (RS)")
+    term.feed("CW 2")
+    assert out[-1].startswith("not sent: ")
+    assert "MG _CW" in out[-1]
+    term.feed("MG 7")
+    assert out[-1] == " 7.0000"
+    assert dmc.messages.get(timeout=1) == "hello"
+
+
+def test_over_tcp_the_message_handle_is_claimed_again_after_reset() -> None:
+    sim = SimController("DMC-4040", RealTimeClock(speed=8.0))
+    with SimTcpServer(sim) as server, galil.connect(server.url, timeout=2.0) as c:
+        # What #AUTO prints before CF I is sent again goes to the main port (RS set CF back
+        # to S): lost on Ethernet. Printed 4 s later (0.5 s here), it reaches the handle.
+        c.programs.download('#AUTO\nWT 4000\nMG "hello"\nEN\n')
+        c.reset()
+        assert c.messages.get(timeout=5) == "hello"
+        assert c.query_number("MG 2") == 2.0
+        c.servo_here()
+        assert c.A.move_by(2000).wait(timeout=5).deviation == {"A": 0}
+
+
+def test_over_a_pty_auto_output_stays_a_message_after_reset(
+    galil_sim: Callable[..., str],
+) -> None:
+    if not hasattr(os, "openpty"):
+        pytest.skip("needs a pty")
+    with galil.connect(galil_sim("--pty"), timeout=2.0) as c:
+        c.programs.download(AUTO)
+        c.reset()
+        assert c.messages.get(timeout=5) == "hello"
+        assert c.query_number("MG 3") == 3.0
+        with pytest.raises(galil.InvalidArgument):
+            c.command("EO 1")
