@@ -317,11 +317,17 @@ class Routines:
             if owner is not None:
                 self._owners[thread] = owner
 
-    def forget(self, thread: int) -> None:
-        """``thread`` was halted behind :meth:`halt`'s back (after a failed start)."""
+    def forget(self, thread: int | None = None) -> None:
+        """``thread`` was halted behind :meth:`halt`'s back (after a failed start); with no
+        ``thread``, every one: the controller was reset (``RS``), its threads are halted and
+        the program in memory is the burned one, so the library runs no routine any more."""
         with self._lock:
-            self._threads.pop(thread, None)
-            self._owners.pop(thread, None)
+            if thread is None:
+                self._threads.clear()
+                self._owners.clear()
+            else:
+                self._threads.pop(thread, None)
+                self._owners.pop(thread, None)
 
     def halt(self, thread: int, *, owner: object | None = None) -> bool:
         """Halt a library thread (``HX n``); with ``owner``, only if the run started with
@@ -337,13 +343,6 @@ class Routines:
             self._threads.pop(thread, None)
             self._owners.pop(thread, None)
             return True
-
-    def forget(self) -> None:
-        """The controller was reset (``RS``): its threads are halted and the program in
-        memory is the burned one, so the library runs no routine any more."""
-        with self._lock:
-            self._threads.clear()
-            self._owners.clear()
 
     @property
     def threads(self) -> dict[int, str]:
