@@ -1046,9 +1046,15 @@ def connect(address: str | Transport, **options: Any) -> Controller:
         client_opts["timeout"] = check_timeout(client_opts["timeout"], 1.0)
     if isinstance(address, str):
         transport_opts = options
+        opened: list[Transport] = []
 
         def factory() -> Transport:
-            return open_transport(address, **transport_opts)
+            # A transport that can reopen itself (the in-process simulator: the same
+            # controller, not a new one) does; any other is opened from the address again.
+            again = getattr(opened[0], "reopen", None) if opened else None
+            transport = again() if callable(again) else open_transport(address, **transport_opts)
+            opened[:] = [transport]
+            return transport
 
         return Controller(factory, **client_opts)
     if options:

@@ -247,6 +247,19 @@ def test_messages_queue_lives_again_after_a_reconnect() -> None:
             c.messages.get(timeout=0)
 
 
+@pytest.mark.parametrize("address", ["sim://DMC-4040", "sim://DMC-4040?messages=separate"])
+def test_a_reconnect_on_sim_finds_the_same_controller(address: str) -> None:
+    with galil.connect(address) as c:
+        c.A.move_by(1000).wait()
+        c.command("gv=42")
+        c.programs.download("#A\nEN")
+        c.reconnect()  # as a reconnect to a real controller: positions, variables, program
+        assert c.query_operands(["_RPA", "gv"]) == [1000, 42]
+        assert "#A" in c.programs.upload()
+        c.A.move_by(-500).wait()
+        assert c.A.reference_position == 500
+
+
 def test_close_ends_a_program_wait(tcp: tuple[SimController, Controller]) -> None:
     _sim, c = tcp
     c.programs.download("#A\nWT 10\nJP #A\nEN")

@@ -54,6 +54,7 @@ class SimLink:
         self.controller = controller
         self.faults = faults
         self.auto_advance = auto_advance
+        self._messages = messages
         self._pending: deque[list[Any]] = deque()  # [delay_left_or_ready_time, bytes]
         self._closed = False
         self.secondary: SimMessageHandle | None = None
@@ -145,6 +146,17 @@ class SimLink:
             self.controller.advance(max(0.0, seconds))
         else:
             time.sleep(max(0.0, seconds))
+
+    def reopen(self) -> SimLink:
+        """A new link to the same simulated controller, as a reconnect to a real controller
+        finds it as it was (positions, variables, programs): what
+        :meth:`galil.Controller.reconnect` on a ``sim://`` address opens."""
+        return SimLink(
+            self.controller,
+            faults=self.faults,
+            auto_advance=self.auto_advance,
+            messages=self._messages,
+        )
 
     def close(self) -> None:
         """Close the link (and its message handle); later calls raise."""
