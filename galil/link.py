@@ -41,7 +41,7 @@ from galil.models import ModelSpec
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command, ReplyKind
 from galil.protocol.framing import Unsolicited
-from galil.protocol.numbers import parse_number
+from galil.protocol.numbers import parse_number, parse_read
 from galil.protocol.session import Completed, Session
 from galil.transport import ByteRate, ControllerClock, Transport
 
@@ -1130,7 +1130,7 @@ class Link(LinkCore):
         for line, d in zip(batches, done, strict=True):
             want = len(line.text.split(","))
             try:
-                values = parse_numbers_reply(d.text)
+                values = parse_read(d.text)
             except (InvalidArgument, ValueError, ProtocolError) as exc:
                 raise self.error(
                     ProtocolError, f"{line.text!r} answered {d.text!r}: {exc}"
