@@ -242,8 +242,10 @@ def test_a_follower_that_still_follows_adds_no_exchange_and_no_error_to_the_next
     *reads, move = record.lines
     # One state query with the followers' operands on it: 12 operands packed in two pipelined
     # MG lines (a separate read of the followers would be a third), then the move's line.
-    assert len(reads) == 2 and all(r.startswith("MG _") for r in reads)
-    assert "_SCA" in reads[-1] and move.startswith("PAB=")
+    assert len(reads) == 2
+    assert all(r.startswith("MG _") for r in reads)
+    assert "_SCA" in reads[-1]
+    assert move.startswith("PAB=")
     assert h.followers == "A"
     assert h.wait().follower_final == {"A": 0}
 
