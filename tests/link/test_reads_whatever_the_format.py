@@ -65,6 +65,10 @@ def _check_reads_and_a_move(dmc: galil.Controller, sim: SimController) -> None:
     assert dmc.variables["gain"] == 12345.25
     assert dmc.variables.list() == {"gain": 12345.25}
     np.testing.assert_array_equal(dmc.arrays.upload("samples"), ARRAY)
+    record = dmc.record("A", as_dict=True)  # QZ's layout, the record, its MG TIME
+    assert record["A"]["reference"] == start + 123456
+    assert record["time"] > 9999
+    assert record["time"] % SAMPLE_WRAP == record["sample"]
 
 
 @pytest.mark.parametrize("by", ["raw", "program"])
@@ -90,10 +94,6 @@ def test_reads_over_tcp_are_exact_after_a_program_set_the_format(setting: str) -
         _prepare(dmc, idle=0.3)
         _set_format(dmc, setting, "program")
         _check_reads_and_a_move(dmc, server.controller)
-        record = dmc.record("A", as_dict=True)  # QZ's layout, the record, its MG TIME
-        assert record["A"]["reference"] == dmc.A.reference_position
-        assert record["time"] > 9999
-        assert record["time"] % SAMPLE_WRAP == record["sample"]
 
 
 def test_homing_ends_at_the_index_whatever_format_is_set() -> None:
@@ -104,7 +104,10 @@ def test_homing_ends_at_the_index_whatever_format_is_set() -> None:
         _set_format(dmc, "VF 4.0", "program")
         with warnings.catch_warnings():
             warnings.simplefilter("error")
-            result = dmc.A.home(switch=sim.home_switch("A")).wait()
+            handle = dmc.A.home(switch=sim.home_switch("A"))
+            begin = [sample for sample, text in sim.command_log if text == "BG A"][-1]
+            result = handle.wait()
+        assert handle.begin == {"A": begin}  # its MG TIME read exactly
         assert result.stop_codes == {"A": 10}
         assert dmc.A.reference_position == result.final["A"] == result.predicted["A"]
 
