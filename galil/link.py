@@ -1118,7 +1118,8 @@ class Link(LinkCore):
         """Read operands or variables (``["_TPA", "_SCA", "speed"]``) in as few lines as fit.
 
         The ``MG`` lines go out pipelined under one lock, so no other thread's command
-        lands between them.
+        lands between them. Each item is asked for in ``{Z10.4}`` and each reply must be
+        numbers with four decimals, so no ``VF`` or ``LZ`` changes what is read (decision 0032).
         """
         if type(names) is not list:  # (a list, as the rooms pass, costs nothing here)
             names = check_items(names, "names")
