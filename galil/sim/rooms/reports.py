@@ -3,9 +3,9 @@
 Positions print in the PF format, ``MG`` numbers in VF, or in the ``{Fm.n}``, ``{Zm.n}`` or
 ``{$m.n}`` written in their own argument (``MG _TPA{Z10.4},_TPB{Z10.4}``: the DMC-4103 reference
 places formatters "after each argument"; one format does not carry to the next argument, an
-assumption, decision 0032); ``TC`` clears the code while ``_TC`` does not. ``TD`` reads an auxiliary encoder
-rigidly coupled to the motor (equal to ``TP``); ``TV`` is the encoder velocity averaged over a
-quarter second, as the manuals describe.
+assumption, decision 0032); ``TC`` clears the code while ``_TC`` does not. ``TD`` reads an
+auxiliary encoder rigidly coupled to the motor (equal to ``TP``); ``TV`` is the encoder velocity
+averaged over a quarter second, as the manuals describe.
 """
 
 from __future__ import annotations
