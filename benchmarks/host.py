@@ -65,7 +65,7 @@ class InstantTransport:
         for part in line.split(b";"):
             text = part.decode()
             if text.startswith("MG "):
-                names = [n.strip() for n in text[3:].split(",")]
+                names = [n.split("{")[0].strip() for n in text[3:].split(",")]
                 nums = [1000.0 if n == "TIME" else VALUES.get(n[1:3], 0.0) for n in names]
                 out.append((" " + " ".join(f"{v:.4f}" for v in nums) + "\r\n:").encode())
             else:

@@ -15,6 +15,7 @@ numbers: 32-bit with four decimals (1/65536 resolution)::
 
 from __future__ import annotations
 
+import contextlib
 import re
 from collections.abc import Iterator
 from typing import Any
@@ -22,11 +23,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from galil.errors import InvalidArgument, LimitError, ProtocolError
+from galil.errors import CommandError, GalilError, InvalidArgument, LimitError, ProtocolError
 from galil.link import CommandLink, check_flag
 from galil.models import INT32_MAX, INT32_MIN
 from galil.protocol import commands as cmds
-from galil.protocol.numbers import parse_number
+from galil.protocol.numbers import read_one
 
 __all__ = ["Arrays", "Variables"]
 
@@ -55,6 +56,35 @@ def _values(values: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
             limit=INT32_MAX if data[i] > 0 else INT32_MIN,
         )
     return data
+
+
+_READ_VF = cmds.vf(10, 4)  # what the read format {Z10.4} prints, for QU and LV
+
+
+def _in_read_format(link: CommandLink, command: cmds.Command, timeout: float | None) -> str:
+    """The reply to ``command`` (``QU``, ``LV``: printed in VF, with no format of their own)
+    with ``VF 10.4`` for it and the user's (or a program's) VF put back right after.
+
+    A VF set in between by a running program can still change the reply; the strict parse
+    of its numbers (four decimals each) refuses the forms that would misread (decision 0032).
+    """
+    try:
+        vf = round(link.query_operands(["_VF"])[0], 1)
+    except CommandError:  # a firmware without _VF: as it prints (the parse still checks)
+        vf = 10.4
+    if vf == 10.4:
+        return link.exchange(command, timeout=timeout).text
+    digits = int(vf)
+    restore = cmds.vf(digits, round(abs(vf - digits) * 10))
+    link.exchange(_READ_VF)
+    try:
+        text = link.exchange(command, timeout=timeout).text
+    except BaseException:
+        with contextlib.suppress(GalilError):
+            link.exchange(restore)
+        raise
+    link.exchange(restore)
+    return text
 
 
 class Arrays:
@@ -170,13 +200,13 @@ class Arrays:
                 model=self.link.model.name,
             )
         command = cmds.qu(name, lo, hi, delim=1)
-        text = self.link.exchange(command, timeout=_UPLOAD_TIMEOUT).text
+        text = _in_read_format(self.link, command, _UPLOAD_TIMEOUT)
         try:
             out = np.array(
-                [parse_number(x) for x in re.split(r"[,\r\n]+", text) if x.strip()],
+                [read_one(x) for x in re.split(r"[,\r\n]+", text) if x.strip()],
                 dtype=np.float64,
             )
-        except (InvalidArgument, ValueError) as exc:
+        except ProtocolError as exc:
             raise self.link.error(ProtocolError, f"{command.text!r} answered {text!r}") from exc
         if out.size != hi - lo + 1:
             raise self.link.error(
@@ -227,7 +257,7 @@ class Variables:
 
     def list(self) -> dict[str, float]:
         """Every variable and its value (``LV``)."""
-        text = self.link.exchange(cmds.lv()).text
+        text = _in_read_format(self.link, cmds.lv(), None)
         out: dict[str, float] = {}
         for line in text.splitlines():
             if not line.strip():
@@ -236,8 +266,8 @@ class Variables:
             if m is None:
                 raise self.link.error(ProtocolError, f"LV answered a line {line!r}")
             try:
-                out[m.group(1)] = parse_number(m.group(2))
-            except (InvalidArgument, ValueError) as exc:
+                out[m.group(1)] = read_one(m.group(2))
+            except ProtocolError as exc:
                 raise self.link.error(ProtocolError, f"LV answered a line {line!r}") from exc
         return out
 

@@ -22,7 +22,7 @@ from galil.gearing import Gearing, gear_to
 from galil.homing import AxisHoming, Homed, Switches, read_switches
 from galil.link import CommandLink
 from galil.models import INT32_MAX, INT32_MIN, ModelSpec, tm_of
-from galil.motion import Display, MotionTracker, MoveHandle, stop_axes
+from galil.motion import Display, MotionTracker, MoveHandle, sample_of, stop_axes
 from galil.moves import AxisMove, execute_move, increment, jog, set_jog_speed, speed_schedule
 from galil.protocol import commands as cmds
 from galil.routines import Routines
@@ -361,7 +361,7 @@ class Axis:
             return
         # A change in motion: stamp it so the move's prediction can follow it.
         replies = self._link.command_line([command, cmds.time_stamp()])
-        sample = round(float(replies[-1])) if replies[-1].strip() else None
+        sample = sample_of(replies[-1])
         track = handle.track(self.letter)
         if cmd == "SP":
             if track is not None and track.kind == "jog":

@@ -445,10 +445,12 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
     async def _settle(self) -> None:
         """Wait (briefly) for the servo to bring the encoder onto the reference."""
         c = self.controller
-        query = f"MG _TE{self.axis.letter}"
+        query = [f"_TE{self.axis.letter}"]
         loop = asyncio.get_running_loop()
         deadline = loop.time() + self._settle_timeout
-        while abs(await c.query_number(query)) > self._in_position and loop.time() < deadline:
+        while loop.time() < deadline:
+            if abs((await c.query_operands(query))[0]) <= self._in_position:
+                break
             await c.sleep(0.002)
 
     async def check_value(self, value: float) -> None:
@@ -628,7 +630,7 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable):
             raise RuntimeError(f"{self.name}: prepare() must come before kickoff()")
         c = self.controller
         flight.records = await c.records(flight.record_period)
-        flight.start_sample = round(await c.query_number("MG TIME"))
+        flight.start_sample = round((await c.query_operands(["TIME"]))[0])
         flight.start_time = time.time()
         flight.reader = asyncio.get_running_loop().create_task(self._read(flight))
         flight.run = asyncio.get_running_loop().create_task(self._run(flight))
@@ -656,7 +658,7 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable):
             raise RuntimeError(f"{self.name}: kickoff() must come before complete()")
         try:
             flight.result = await flight.run
-            end = round(await self.controller.query_number("MG TIME"))
+            end = round((await self.controller.query_operands(["TIME"]))[0])
             await self._stop_records(flight, end)
         finally:
             await self._stop_records(flight, None)

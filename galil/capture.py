@@ -30,7 +30,7 @@ from galil.arrays import Arrays
 from galil.errors import GalilError, GalilTimeoutError, InvalidArgument, ProtocolError
 from galil.link import CommandLink, check_count, check_wait_timeout
 from galil.protocol import commands as cmds
-from galil.protocol.numbers import parse_number
+from galil.protocol.numbers import read_one
 
 __all__ = ["Capture", "Recording"]
 
@@ -188,8 +188,8 @@ class Capture:
             [cmds.rc(self.every, self.count, model=model), cmds.time_stamp()]
         )
         try:
-            self.start_sample = round(parse_number(replies[-1]))
-        except (InvalidArgument, ValueError) as exc:
+            self.start_sample = round(read_one(replies[-1]))
+        except ProtocolError as exc:
             raise link.error(ProtocolError, f"MG TIME answered {replies[-1]!r}") from exc
         self._started_at = link.clock()
         return self

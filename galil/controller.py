@@ -48,7 +48,6 @@ from galil.link import (
     check_flag,
     check_items,
     check_timeout,
-    parse_numbers_reply,
 )
 from galil.messages import Messages
 from galil.models import Identity, ModelSpec, get_model
@@ -57,6 +56,7 @@ from galil.moves import execute_move
 from galil.programs import Programs
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command, Expect
+from galil.protocol.numbers import read_one
 from galil.records import Records
 from galil.routines import Routines
 from galil.segments import PathAxis, Segment, VectorPlan, show
@@ -278,7 +278,7 @@ class Resetting:
                 return None  # reset before it answered: the link starts afresh anyway
         if len(done) == 3 and done[1].ok:
             with contextlib.suppress(InvalidArgument, ProtocolError):
-                value = round(parse_numbers_reply(done[1].text)[0])
+                value = round(read_one(done[1].text))
                 return value if value in (1, 2) else None
         return None
 

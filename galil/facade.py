@@ -167,7 +167,8 @@ class LinkFacade:
         return self.link.send_many(batch, timeout=timeout)
 
     def query_number(self, text: str, *, timeout: float | None = None) -> float:
-        """Send a query (``"MG _TPA"``, ``"TPA"``) and return its one number."""
+        """Send a query (``"MG _TPA"``, ``"TPA"``) and return its one number (as the controller
+        prints it: in your ``VF``/``PF``; :meth:`query_operands` does not depend on them)."""
         return self.link.query_number(text, timeout=timeout)
 
     def query_numbers(self, text: str, *, timeout: float | None = None) -> list[float]:
@@ -175,7 +176,8 @@ class LinkFacade:
         return self.link.query_numbers(text, timeout=timeout)
 
     def query_operands(self, names: Sequence[str], *, timeout: float | None = None) -> list[float]:
-        """Read operands or variables (``["_TPA", "_SCA", "speed"]``) in as few lines as fit."""
+        """Read operands or variables (``["_TPA", "_SCA", "speed"]``) in as few lines as fit,
+        each asked for in ``{Z10.4}``: no ``VF`` or ``LZ`` changes what is read (decision 0032)."""
         return self.link.query_operands(names, timeout=timeout)
 
     def sleep(self, seconds: float) -> None:

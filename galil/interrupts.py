@@ -34,7 +34,7 @@ from galil.link import Link, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.handles import parse_th
 from galil.protocol.interrupts import Interrupt, InterruptParser
-from galil.protocol.numbers import parse_number
+from galil.protocol.numbers import read_one
 from galil.queues import BoundedQueue, Subscribers
 from galil.transport import DatagramSource, HandleSource, LocalAddress, Transport
 
@@ -128,8 +128,8 @@ class Interrupts:
         except GalilConnectionError as exc:
             raise link.error(GalilConnectionError, f"no handle for interrupts: {exc}") from exc
         try:
-            text = read_reply(handle, b"MG _WH\r", link.timeout)
-            index = round(parse_number(text))
+            text = read_reply(handle, f"MG _WH{cmds.READ_FORMAT}\r".encode(), link.timeout)
+            index = round(read_one(text))
             if not 0 <= index <= 7:
                 raise ProtocolError(f"MG _WH answered {text!r}: not a handle 0..7")
         except (GalilError, ValueError) as exc:

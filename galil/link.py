@@ -41,7 +41,7 @@ from galil.models import ModelSpec
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command, ReplyKind
 from galil.protocol.framing import Unsolicited
-from galil.protocol.numbers import parse_number
+from galil.protocol.numbers import parse_number, parse_read
 from galil.protocol.session import Completed, Session
 from galil.transport import ByteRate, ControllerClock, Transport
 
@@ -1118,7 +1118,8 @@ class Link(LinkCore):
         """Read operands or variables (``["_TPA", "_SCA", "speed"]``) in as few lines as fit.
 
         The ``MG`` lines go out pipelined under one lock, so no other thread's command
-        lands between them.
+        lands between them. Each item is asked for in ``{Z10.4}`` and each reply must be
+        numbers with four decimals, so no ``VF`` or ``LZ`` changes what is read (decision 0032).
         """
         if type(names) is not list:  # (a list, as the rooms pass, costs nothing here)
             names = check_items(names, "names")
@@ -1130,7 +1131,7 @@ class Link(LinkCore):
         for line, d in zip(batches, done, strict=True):
             want = len(line.text.split(","))
             try:
-                values = parse_numbers_reply(d.text)
+                values = parse_read(d.text)
             except (InvalidArgument, ValueError, ProtocolError) as exc:
                 raise self.error(
                     ProtocolError, f"{line.text!r} answered {d.text!r}: {exc}"

@@ -20,7 +20,7 @@ from galil.errors import GalilConnectionError, GalilError, ProtocolError
 from galil.link import Link, check_count, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.framing import FrameParser, Unsolicited
-from galil.protocol.numbers import parse_number
+from galil.protocol.numbers import read_one
 from galil.queues import BoundedQueue, Subscribers
 from galil.transport import HandleSource, MessagesOnly, Transport
 
@@ -191,7 +191,7 @@ class Messages:
                 if known is None:
                     done = link.roundtrip_locked([cmds.mg_operand("_CW")], link.timeout)[0]
                     if done.ok:
-                        value = round(parse_number(done.text.split(",")[0]))
+                        value = round(read_one(done.text))
                         if value in (1, 2):
                             previous = value
             except (GalilError, ValueError):

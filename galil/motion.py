@@ -31,10 +31,12 @@ from galil.errors import (
     GalilTimeoutError,
     InvalidArgument,
     MotionError,
+    ProtocolError,
 )
 from galil.link import CommandLink, check_callable, check_flag, check_wait_timeout
 from galil.models import tm_of
 from galil.protocol import commands as cmds
+from galil.protocol.numbers import read_one
 
 __all__ = [
     "HOMING_KINDS",
@@ -229,10 +231,11 @@ def _at_least_a_step(link: CommandLink, speed: float, ts: float) -> float:
 
 
 def sample_of(reply: str) -> int | None:
-    """The controller sample in a ``MG TIME`` reply (``None`` if it is not a number)."""
+    """The controller sample in a ``MG TIME{Z10.4}`` reply (``None`` if it is not one number
+    in that format: decision 0032)."""
     try:
-        return round(float(reply.strip()))
-    except (ValueError, OverflowError):
+        return round(read_one(reply))
+    except ProtocolError:
         return None
 
 

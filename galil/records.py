@@ -30,7 +30,7 @@ from galil.errors import (
 )
 from galil.link import Link, check_count, check_timeout, check_wait_timeout, read_reply
 from galil.protocol import commands as cmds
-from galil.protocol.numbers import parse_number
+from galil.protocol.numbers import read_one
 from galil.protocol.records import (
     SAMPLE_WRAP,
     RecordSplitter,
@@ -417,7 +417,7 @@ class Records:
             raise link.error(ProtocolError, f"{command.text!r} answered no binary record")
         try:
             rec = decode_record(done.record, layout)
-            now = round(parse_number(stamp.text))
+            now = round(read_one(stamp.text))
         except (ProtocolError, InvalidArgument, ValueError) as exc:
             raise link.error(ProtocolError, f"{command.text!r}: {exc}") from exc
         return with_time(rec, extend_sample(int(rec["sample"]), now))
@@ -520,12 +520,12 @@ class Records:
     def _which_handle(self, handle: Transport) -> int:
         # _WH on a handle names it (0..7 for A..H), which is what DR's second field wants.
         link = self.link
-        text = read_reply(handle, b"MG _WH\r", link.timeout)
+        text = read_reply(handle, _WHICH_HANDLE, link.timeout)
         if not text:
             raise CommandError(None, "MG _WH answered nothing on the record handle", "MG _WH")
         try:
-            index = round(parse_number(text))
-        except (InvalidArgument, ValueError) as exc:
+            index = round(read_one(text))
+        except ProtocolError as exc:
             raise link.error(ProtocolError, f"MG _WH answered {text!r}") from exc
         if not 0 <= index <= 7:
             raise link.error(ProtocolError, f"MG _WH answered {text!r}: not a handle 0..7")
@@ -573,13 +573,17 @@ class Records:
             s.close()
 
 
+# ``_WH`` on a new handle, in the library's read format (decision 0032).
+_WHICH_HANDLE = f"MG _WH{cmds.READ_FORMAT}\r".encode()
+
+
 def _stamp(link: Link, reply: str) -> int:
-    """The sample in a ``MG TIME`` reply.
+    """The sample in a ``MG TIME{Z10.4}`` reply.
 
     Raises:
-        ProtocolError: it is not a number.
+        ProtocolError: it is not one number in that format.
     """
     try:
-        return round(parse_number(reply))
-    except (InvalidArgument, ValueError) as exc:
+        return round(read_one(reply))
+    except ProtocolError as exc:
         raise link.error(ProtocolError, f"MG TIME answered {reply!r}") from exc

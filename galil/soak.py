@@ -79,7 +79,7 @@ def _one_thread(dmc: Controller, k: int, pairs: int, hang: float) -> SoakReport:
         _timed(report, hang, start)
         start = time.monotonic()
         try:
-            got = dmc.query_number(f"MG {name}")
+            got = dmc.query_operands([name])[0]
             if got not in known:
                 report.wrong += 1
                 report.examples.append(f"read {got} after setting {value:.0f}")
@@ -96,7 +96,7 @@ def _reset(dmc: Controller, name: str) -> None:
     for _ in range(100):
         try:
             dmc.command(f"{name}=0")
-            if dmc.query_number(f"MG {name}") == 0:
+            if dmc.query_operands([name])[0] == 0:
                 return
         except GalilError:
             continue
@@ -107,7 +107,7 @@ def _ran(dmc: Controller, name: str, value: float) -> int:
     """1 when a 'rejected' set took effect after all (read back until the link answers)."""
     for _ in range(5):
         try:
-            return int(dmc.query_number(f"MG {name}") == value)
+            return int(dmc.query_operands([name])[0] == value)
         except GalilError:
             continue
     return 0

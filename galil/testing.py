@@ -22,6 +22,7 @@ from typing import Any
 
 from galil.controller import Controller, connect
 from galil.errors import InvalidArgument
+from galil.protocol.commands import READ_FORMAT
 from galil.sim.controller import SimController
 
 __all__ = ["Transcript", "nothing_sent", "sim_of", "simulated", "transcript"]
@@ -101,7 +102,7 @@ def transcript(controller: Controller) -> Iterator[Transcript]:
 # Lines that only read: operands, variables and array elements or sizes (MG), the program
 # (UL), array listings, and the explanation of a '?' (TC1, and the quoted marker the link
 # sends behind it).
-_MG_ITEM = r"[_A-Za-z][_A-Za-z0-9]*(?:\[-?\d+\])?"
+_MG_ITEM = rf"[_A-Za-z][_A-Za-z0-9]*(?:\[-?\d+\])?(?:{re.escape(READ_FORMAT)})?"
 _READ_ONLY = re.compile(
     rf"MG {_MG_ITEM}(?:\s*,\s*{_MG_ITEM})*|UL|LA|LV|QU [A-Za-z0-9\[\],]*|QZ|TC1|MG \"TCOK\d+\""
 )

@@ -109,7 +109,8 @@ class FakeGalil:
 
     def _mg(self, args: str) -> str:
         out = []
-        for a in args.split(","):
+        for item in args.split(","):
+            a, _, fmt = item.strip().partition("{")  # (the library's reads: "_CW{Z10.4}")
             a = a.strip()
             if a.startswith('"') and a.endswith('"'):
                 out.append(a[1:-1])
@@ -117,6 +118,11 @@ class FakeGalil:
                 out.append(f"{self.cw}.0000")
             elif a in self.variables:
                 out.append(f"{self.variables[a]:.4f}")
+            elif fmt:
+                try:
+                    out.append(f"{float(a):.4f}")
+                except ValueError:
+                    out.append(a)
             else:
                 out.append(a)
         return " ".join(out)

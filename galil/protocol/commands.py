@@ -36,6 +36,7 @@ from galil.protocol.numbers import format_number
 
 __all__ = [
     "COMMAND_NAMES",
+    "READ_FORMAT",
     "Command",
     "Expect",
     "ReplyKind",
@@ -133,6 +134,7 @@ __all__ = [
     "variable_name",
     "vd",
     "ve",
+    "vf",
     "vm",
     "vp",
     "vs",
@@ -238,7 +240,13 @@ def _plain(text: str) -> Command:
     return _new(Command, (text, _ACK, b"", ()))
 
 
-_TIME = Command("MG TIME", _LINE)
+#: The format the library gives every number it reads with ``MG`` (decision 0032): ten digits
+#: and four decimals, leading zeros suppressed: what the default ``VF 10.4`` prints, but fixed
+#: whatever ``VF`` (or ``LZ``) a user or a program has set. Placed after each item, as the
+#: command reference shows (``MG "The answer is...",total{F4.2}``).
+READ_FORMAT = "{Z10.4}"
+
+_TIME = Command("MG TIME" + READ_FORMAT, _LINE)
 
 
 # Two-letter mnemonics of the firmware (40x0/18x2/2x00 command references). A variable whose
@@ -1078,13 +1086,14 @@ def mg(text: str, *, model: ModelSpec | None = None) -> Command:
 
 
 def mg_operand(*names: str) -> Command:
-    """MG of operands or variables: ``mg_operand("_TPA")`` -> ``MG _TPA`` (one line reply)."""
+    """MG of operands or variables, each in :data:`READ_FORMAT` so no ``VF`` can change what
+    is read: ``mg_operand("_TPA")`` -> ``MG _TPA{Z10.4}`` (one line reply)."""
     if not names:
         raise InvalidArgument("mg_operand needs at least one operand")
     for name in names:
         if not isinstance(name, str) or _OPERAND.fullmatch(name) is None:
             raise InvalidArgument(f"not an operand or variable name: {name!r}")
-    return Command("MG " + ",".join(names), _LINE)
+    return Command("MG " + ",".join(n + READ_FORMAT for n in names), _LINE)
 
 
 def mg_operand_lines(names: Sequence[str], line_length: int = 80) -> list[Command]:
@@ -1102,14 +1111,15 @@ def mg_operand_lines(names: Sequence[str], line_length: int = 80) -> list[Comman
 
 def _build_mg_lines(names: tuple[str, ...], line_length: int) -> tuple[Command, ...]:
     limit = line_length - 4  # "MG " and the CR
+    extra = len(READ_FORMAT) + 1  # each item's format and its comma
     batches: list[list[str]] = [[]]
     length = 0
     for n in names:
-        if batches[-1] and length + len(n) + 1 > limit:
+        if batches[-1] and length + len(n) + extra > limit:
             batches.append([])
             length = 0
         batches[-1].append(n)
-        length += len(n) + 1
+        length += len(n) + extra
     return tuple(mg_operand(*b) for b in batches if b)
 
 
@@ -1157,6 +1167,20 @@ def lz(enable: int) -> Command:
     return Command(f"LZ {enable}")
 
 
+def vf(digits: int, decimals: int) -> Command:
+    """VF: the format of variables, array elements and ``MG`` (``vf(10, 4)`` -> ``VF 10.4``,
+    the default; negative ``digits`` print hex).
+
+    Raises:
+        InvalidArgument: ``digits`` outside -8..10 or ``decimals`` outside 0..4 (the DMC-4103
+            reference's ranges).
+    """
+    for value, low, high, what in ((digits, -8, 10, "digits"), (decimals, 0, 4, "decimals")):
+        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+            raise InvalidArgument(f"VF {what} must be a whole number {low}..{high}, not {value!r}")
+    return Command(f"VF {digits}.{decimals}")
+
+
 def qz() -> Command:
     """QZ: data-record sizes (axes, general, coordinated, per-axis bytes)."""
     return Command("QZ", _LINE)
@@ -1185,7 +1209,8 @@ def dr(period: int, handle: int | None = None, *, model: ModelSpec | None = None
 
 
 def time_stamp() -> Command:
-    """``MG TIME``: the controller's sample counter, sent on the line of a motion command."""
+    """``MG TIME{Z10.4}``: the controller's sample counter, sent on the line of a motion
+    command (in :data:`READ_FORMAT`, so no ``VF`` can change it)."""
     return _TIME
 
 

@@ -26,6 +26,8 @@ __all__ = [
     "parse_format",
     "parse_number",
     "parse_numbers",
+    "parse_read",
+    "read_one",
     "to_fixed",
 ]
 
@@ -71,6 +73,37 @@ def parse_number(text: str) -> float:
             raise ProtocolError(f"hex fraction wider than 16 bits: {text!r}")
         value += int(frac, 16) / 16 ** len(frac)
     return -value if m.group("sign") else value
+
+
+# The reply to the library's own reads (``MG`` with every item in ``{Z10.4}``, decision 0032):
+# numbers with exactly four decimals, each after a blank or its sign. The four decimals mark
+# where each number ends, so the values read right even without the blank; anything else (the
+# 9s or $ of a VF the format did not override, text) is refused rather than misread.
+_READ_ITEM = re.compile(r"-?\d{0,10}\.\d{4}")
+_READ_REPLY = re.compile(r"(?: *-?\d{0,10}\.\d{4})+ *")
+
+
+def parse_read(reply: str) -> list[float]:
+    """Every number in the reply to the library's own ``MG`` (``" 12.0000-3.5000"``).
+
+    Raises:
+        ProtocolError: the reply is not numbers in the read format (``{Z10.4}``).
+    """
+    if _READ_REPLY.fullmatch(reply) is None:
+        raise ProtocolError(f"not numbers with four decimals: {reply!r}")
+    return [float(x) for x in _READ_ITEM.findall(reply)]
+
+
+def read_one(reply: str) -> float:
+    """The one number in the reply to the library's own ``MG`` of one item (``MG TIME``).
+
+    Raises:
+        ProtocolError: not exactly one number in the read format.
+    """
+    values = parse_read(reply)
+    if len(values) != 1:
+        raise ProtocolError(f"{len(values)} numbers, not one: {reply!r}")
+    return values[0]
 
 
 def parse_numbers(text: str) -> list[float]:

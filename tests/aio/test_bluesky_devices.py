@@ -136,9 +136,12 @@ def test_mv_reports_progress_from_the_prediction(server: SimTcpServer, engine: R
     assert loc["readback"] == pytest.approx(5, abs=0.001)
 
 
+@pytest.mark.parametrize("display", [None, "VF 1.0"])  # a program's VF: reads stay exact
 def test_a_fly_scan_returns_the_recorded_points_beside_the_prediction(
-    server: SimTcpServer, engine: RunEngine, docs: Docs
+    server: SimTcpServer, engine: RunEngine, docs: Docs, display: str | None
 ) -> None:
+    if display is not None:
+        server.controller.feed(display.encode() + b"\r")
     flyer = GalilContourFlyer(server.url, "A", name="fly", scales={"A": 2000 / mm})
     in_loop(flyer.connect())
     path = np.linspace(0.1, 3.2, 32) * mm  # 32 segments of 8 samples

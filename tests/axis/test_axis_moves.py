@@ -32,7 +32,7 @@ def test_move_to_follows_prediction(dmc: galil.Controller) -> None:
     t0 = sim.start_trace("A")
     with transcript(dmc) as sent:
         h = x.move_to(12.5 * mm)
-    assert sent.lines[-1] == "PAA=25000;BG A;MG TIME"  # one line: target, begin, stamp
+    assert sent.lines[-1] == "PAA=25000;BG A;MG TIME{Z10.4}"  # one line: target, begin, stamp
     assert h.kind == "position"
     assert h.axes == "A"
     assert not h.done
@@ -59,7 +59,7 @@ def test_several_axes_in_one_line_begin_in_the_same_sample(dmc: galil.Controller
     with transcript(dmc) as sent:
         h = dmc.move({"A": 3000, "D": -8000, "B": 20_000}, accel=512_000)
     moving = [line for line in sent.lines if not line.startswith("MG _")]
-    assert moving == ["AC 512000,512000,,512000;PA 3000,20000,,-8000;BG ABD;MG TIME"]
+    assert moving == ["AC 512000,512000,,512000;PA 3000,20000,,-8000;BG ABD;MG TIME{Z10.4}"]
     r = h.wait()
     traces = sim.stop_trace()
     assert h.axes == "ABD"
@@ -130,7 +130,7 @@ def test_increment_idle_is_a_relative_move(dmc: galil.Controller) -> None:
     t0 = sim.start_trace("B")
     with transcript(dmc) as sent:
         h = dmc.B.increment(7000)
-    assert sent.lines[-1] == "IPB=7000;MG TIME"
+    assert sent.lines[-1] == "IPB=7000;MG TIME{Z10.4}"
     r = h.wait()
     assert r.final == {"B": 7000}
     assert r.worst == 0

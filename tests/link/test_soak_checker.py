@@ -35,12 +35,12 @@ class BadLink:
         if fault and self.kind == "hang":
             self.clock[0] += 10.0  # ten seconds pass in this call
 
-    def query_number(self, text: str) -> float:
-        name = text.removeprefix("MG ")
+    def query_operands(self, names: list[str]) -> list[float]:
+        (name,) = names
         value = self.values[name]
         if self.kind == "wrong" and value == 3:
-            return 12345.0  # a value never set
-        return value
+            return [12345.0]  # a value never set
+        return [value]
 
 
 @pytest.mark.parametrize(

@@ -70,10 +70,10 @@ GOLDEN: list[tuple[Callable[[], Command], bytes, ReplyKind]] = [
     (lambda: c.tc(), b"TC1\r", ReplyKind.DATA),
     (lambda: c.tc(0), b"TC0\r", ReplyKind.DATA),
     (lambda: c.mg("Hello world"), b'MG "Hello world"\r', ReplyKind.DATA),
-    (lambda: c.mg_operand("_TPA"), b"MG _TPA\r", ReplyKind.DATA),
+    (lambda: c.mg_operand("_TPA"), b"MG _TPA{Z10.4}\r", ReplyKind.DATA),
     (
         lambda: c.mg_operand("_TPA", "_BGB", "var1", "arr[3]", "@IN[1]"),
-        b"MG _TPA,_BGB,var1,arr[3],@IN[1]\r",
+        b"MG _TPA{Z10.4},_BGB{Z10.4},var1{Z10.4},arr[3]{Z10.4},@IN[1]{Z10.4}\r",
         ReplyKind.DATA,
     ),
     (lambda: c.tm(1000), b"TM 1000\r", ReplyKind.ACK),

@@ -122,12 +122,12 @@ def test_multi_command_line_one_terminator_each() -> None:
     session = Session()
     line = pack([c.assign("a", 1), c.assign("b", 2), c.mg_operand("a"), c.bg("A")])[0]
     wire = session.send(line)
-    assert wire == b"a=1;b=2;MG a;BG A\r"
+    assert wire == b"a=1;b=2;MG a{Z10.4};BG A\r"
     out = session.receive_data(b":: 1.0000\r\n:?")
     assert [(e.command.text, e.ok, e.text) for e in out if isinstance(e, Completed)] == [
         ("a=1", True, ""),
         ("b=2", True, ""),
-        ("MG a", True, " 1.0000"),
+        ("MG a{Z10.4}", True, " 1.0000"),
         ("BG A", False, ""),
     ]
 

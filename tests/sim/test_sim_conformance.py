@@ -54,6 +54,20 @@ def test_query_formats(front: Front) -> None:
     assert front.ask(b"QZ") == b" 4, 52, 26, 36\r\n:"
 
 
+def test_mg_formats_override_vf_and_lz_for_their_own_argument(front: Front) -> None:
+    # DMC-4103 reference, MG: "Formatters can be placed after each argument ... to modify how
+    # it is printed"; {Fm.n} keeps leading zeros, {Zm.n} suppresses them (decision 0032).
+    assert front.ask(b"VF 4.0;LZ 0") == b"::"
+    assert front.ask(b"MG 123456.25") == b" 9999\r\n:"  # VF overflow: nines
+    assert front.ask(b"MG 123456.25{Z10.4},-7{Z10.4}") == b" 123456.2500-7.0000\r\n:"
+    assert front.ask(b"MG 4.1{F5.2}") == b" 00004.10\r\n:"  # (DMC-1700 manual)
+    assert front.ask(b"MG 999999.999{F5.2}") == b" 99999.99\r\n:"  # (DMC-1700 manual)
+    assert front.ask(b'MG "total",1234.5322{F4.2}') == b"total 1234.53\r\n:"
+    assert front.ask(b"MG 1{F3.1},2") == b" 001.0 0002\r\n:"  # the next one is in VF again
+    assert front.ask(b"VF -4.0;MG _VF{Z10.4},_PF{Z10.4}") == b":-4.0000 10.0000\r\n:"
+    assert front.ask(b"VF 10.4;LZ 1") == b"::"
+
+
 def test_variables(front: Front) -> None:
     assert front.ask(b"speed=1234.5") == b":"
     assert front.ask(b"speed=") == b" 1234.5000\r\n:"

@@ -1,9 +1,11 @@
 """Reports and queries: ``TP`` ``RP`` ``TE`` ``TD`` ``TV`` ``SC`` ``TC`` and ``MG``.
 
-Positions print in the PF format, ``MG`` numbers in VF (or a ``{Fm.n}``, ``{Zm.n}``, ``{$m.n}``
-format); ``TC`` clears the code while ``_TC`` does not. ``TD`` reads an auxiliary encoder
-rigidly coupled to the motor (equal to ``TP``); ``TV`` is the encoder velocity averaged over a
-quarter second, as the manuals describe.
+Positions print in the PF format, ``MG`` numbers in VF, or in the ``{Fm.n}``, ``{Zm.n}`` or
+``{$m.n}`` written in their own argument (``MG _TPA{Z10.4},_TPB{Z10.4}``: the DMC-4103 reference
+places formatters "after each argument"; one format does not carry to the next argument, an
+assumption, decision 0032); ``TC`` clears the code while ``_TC`` does not. ``TD`` reads an
+auxiliary encoder rigidly coupled to the motor (equal to ``TP``); ``TV`` is the encoder velocity
+averaged over a quarter second, as the manuals describe.
 """
 
 from __future__ import annotations
@@ -93,34 +95,21 @@ class Reports(Room):
     # ---- MG ----------------------------------------------------------------------------
     @handler("MG")
     def mg(self, args: str) -> str:
+        """Each comma-separated argument is a string, a number (in VF, or in the ``{Fm.n}``,
+        ``{Zm.n}``, ``{$m.n}`` written in that argument: it formats that argument only) or
+        ``{^n}`` characters; ``{N}`` leaves out the CR LF (decision 0032)."""
         if not args.strip():
             return "\r\n"
+        items, newline = _mg_plan(args)
+        i = self.machine.interp
         out: list[str] = []
-        newline = True
-        for part in split_fields(args):
-            fmt: str | None = None
-            if "{" not in part:  # the usual operand or expression: no formats to read
-                expr = part.strip()
-                if expr and expr[0] != '"':
-                    out.append(self._number(self.machine.interp.evaluate(expr), None))
-                    continue
-            for spec in _BRACES.findall(part):
-                s = spec.strip()
-                if s.upper() == "N":
-                    newline = False
-                elif s.startswith("^"):
-                    out.append(self._character(s[1:]))
-                elif s[:1].upper() in ("F", "Z", "$"):
-                    fmt = s
-                elif s[:1].upper() not in ("E", "P"):
-                    raise Refused(53, f"bad format {{{s}}}")
-            expr = _BRACES.sub("", part).strip()
-            if expr.startswith('"'):
-                if len(expr) < 2 or not expr.endswith('"') or '"' in expr[1:-1]:
-                    raise Refused(52, "missing quote")
-                out.append(expr[1:-1])
-            elif expr:
-                out.append(self._number(self.machine.interp.evaluate(expr), fmt))
+        for kind, text, fmt in items:
+            if kind == "num":
+                out.append(self._number(i.evaluate(text), fmt))
+            elif kind == "text":
+                out.append(text)
+            else:
+                out.append(self._character(text))
         return "".join(out) + ("\r\n" if newline else "")
 
     def _character(self, text: str) -> str:
@@ -140,3 +129,45 @@ class Reports(Room):
             return format_reply(value, body, kind == "Z", sign_space=True)
         except InvalidArgument:
             raise Refused(53, f"bad format {fmt}") from None
+
+
+# What an MG line's arguments are, read once per text (the library sends the same few reads
+# again and again): (kind, text, format) per item and whether the line ends with CR LF. A line
+# with a syntax error raises every time (nothing is kept); kept texts are cleared past 512.
+_Plan = tuple[tuple[tuple[str, str, "str | None"], ...], bool]
+_MG_PLANS: dict[str, _Plan] = {}
+
+
+def _mg_plan(args: str) -> _Plan:
+    plan = _MG_PLANS.get(args)
+    if plan is None:
+        plan = _build_mg_plan(args)
+        if len(_MG_PLANS) >= 512:
+            _MG_PLANS.clear()
+        _MG_PLANS[args] = plan
+    return plan
+
+
+def _build_mg_plan(args: str) -> _Plan:
+    items: list[tuple[str, str, str | None]] = []
+    newline = True
+    for part in split_fields(args):
+        fmt: str | None = None
+        for spec in _BRACES.findall(part):
+            s = spec.strip()
+            if s.upper() == "N":
+                newline = False
+            elif s.startswith("^"):
+                items.append(("char", s[1:], None))
+            elif s[:1].upper() in ("F", "Z", "$"):
+                fmt = s
+            elif s[:1].upper() not in ("E", "P"):
+                raise Refused(53, f"bad format {{{s}}}")
+        expr = _BRACES.sub("", part).strip() if "{" in part else part.strip()
+        if expr.startswith('"'):
+            if len(expr) < 2 or not expr.endswith('"') or '"' in expr[1:-1]:
+                raise Refused(52, "missing quote")
+            items.append(("text", expr[1:-1], None))
+        elif expr:
+            items.append(("num", expr, fmt))
+    return tuple(items), newline

@@ -73,6 +73,15 @@ class Settings(Room):
     def leading_zeros(self) -> float:
         return 1.0 if self.machine.interp.lz else 0.0
 
+    @operand("VF")
+    def variable_format(self) -> float:
+        """``_VF``: the format as a number (VF 10.4 -> 10.4, hex VF -4.2 -> -4.2)."""
+        return _format_value(self.machine.interp.vf)
+
+    @operand("PF")
+    def position_format(self) -> float:
+        return _format_value(self.machine.interp.pf)
+
     # ---- output ------------------------------------------------------------------------
     @handler("EO")
     def eo(self, args: str) -> str:
@@ -173,3 +182,9 @@ class Settings(Room):
     @operand("BN")
     def serial_number(self) -> float:
         return 4040.0
+
+
+def _format_value(fmt: str) -> float:
+    is_hex, m, n = parse_format(fmt)
+    value = m + n / 10
+    return -value if is_hex else value
