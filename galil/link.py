@@ -41,7 +41,7 @@ from galil.models import ModelSpec
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command, ReplyKind
 from galil.protocol.framing import Unsolicited
-from galil.protocol.numbers import parse_number, parse_read
+from galil.protocol.numbers import parse_number, parse_plain_read, parse_read
 from galil.protocol.session import Completed, Session
 from galil.transport import ByteRate, ControllerClock, Transport
 
@@ -1118,27 +1118,41 @@ class Link(LinkCore):
         """Read operands or variables (``["_TPA", "_SCA", "speed"]``) in as few lines as fit.
 
         The ``MG`` lines go out pipelined under one lock, so no other thread's command
-        lands between them. Each item is asked for in ``{Z10.4}`` and each reply must be
-        numbers with four decimals, so no ``VF`` or ``LZ`` changes what is read (decision 0032).
+        lands between them. No ``VF`` or ``LZ`` changes what is read (decision 0032): the
+        items go out plain, and a line whose reply may not be what the default ``VF 10.4``
+        prints (other decimals, hex, an overflow's nines) is asked again with each item in
+        ``{Z10.4}``, whose reply must be numbers with four decimals.
         """
         if type(names) is not list:  # (a list, as the rooms pass, costs nothing here)
             names = check_items(names, "names")
         if not names:
             return []
-        batches = cmds.mg_operand_lines(names, self._model.line_length if self._model else 80)
+        length = self._model.line_length if self._model else 80
+        batches = cmds.mg_operand_lines(names, length, formatted=False)
         done = self.transact(tuple(batches), timeout)
         out: list[float] = []
         for line, d in zip(batches, done, strict=True):
-            want = len(line.text.split(","))
+            want = line.text.count(",") + 1
+            values = parse_plain_read(d.text)
+            if values is None or len(values) != want:
+                values = self._read_formatted(line.text[3:].split(","), length, timeout)
+            out += values
+        return out
+
+    def _read_formatted(self, names: list[str], length: int, timeout: float | None) -> list[float]:
+        """``names`` read with each item in ``{Z10.4}``: the answer whatever VF is set."""
+        out: list[float] = []
+        batches = cmds.mg_operand_lines(names, length)
+        for line, d in zip(batches, self.transact(tuple(batches), timeout), strict=True):
             try:
                 values = parse_read(d.text)
             except (InvalidArgument, ValueError, ProtocolError) as exc:
                 raise self.error(
                     ProtocolError, f"{line.text!r} answered {d.text!r}: {exc}"
                 ) from exc
-            if len(values) != want:
+            if len(values) != line.text.count(",") + 1:
                 raise self.error(
-                    ProtocolError, f"{line.text!r} answered {d.text!r}: not {want} numbers"
+                    ProtocolError, f"{line.text!r} answered {d.text!r}: not the numbers asked"
                 )
             out += values
         return out

@@ -1085,19 +1085,26 @@ def mg(text: str, *, model: ModelSpec | None = None) -> Command:
     return Command(f'MG "{text}"', _LINE)
 
 
-def mg_operand(*names: str) -> Command:
+def mg_operand(*names: str, formatted: bool = True) -> Command:
     """MG of operands or variables, each in :data:`READ_FORMAT` so no ``VF`` can change what
-    is read: ``mg_operand("_TPA")`` -> ``MG _TPA{Z10.4}`` (one line reply)."""
+    is read: ``mg_operand("_TPA")`` -> ``MG _TPA{Z10.4}`` (one line reply). With
+    ``formatted=False``, the items alone (``MG _TPA``): what the default ``VF 10.4`` prints,
+    for a reader that checks the reply and asks again formatted when it may not be that
+    (:func:`~galil.protocol.numbers.parse_plain_read`)."""
     if not names:
         raise InvalidArgument("mg_operand needs at least one operand")
     for name in names:
         if not isinstance(name, str) or _OPERAND.fullmatch(name) is None:
             raise InvalidArgument(f"not an operand or variable name: {name!r}")
-    return Command("MG " + ",".join(n + READ_FORMAT for n in names), _LINE)
+    fmt = READ_FORMAT if formatted else ""
+    return Command("MG " + ",".join(n + fmt for n in names), _LINE)
 
 
-def mg_operand_lines(names: Sequence[str], line_length: int = 80) -> list[Command]:
-    """As few ``MG`` lines as hold ``names`` within ``line_length`` (one reply line each).
+def mg_operand_lines(
+    names: Sequence[str], line_length: int = 80, *, formatted: bool = True
+) -> list[Command]:
+    """As few ``MG`` lines as hold ``names`` within ``line_length`` (one reply line each),
+    each item in :data:`READ_FORMAT` unless not ``formatted`` (see :func:`mg_operand`).
 
     Each line's reply has one number per name, in order; several lines go out pipelined.
     """
@@ -1105,13 +1112,15 @@ def mg_operand_lines(names: Sequence[str], line_length: int = 80) -> list[Comman
     try:
         hash(key)
     except TypeError:  # something that is not a name: refused with the reason
-        return list(_build_mg_lines(key, line_length))
-    return list(_cached_mg_lines(key, line_length))
+        return list(_build_mg_lines(key, line_length, formatted))
+    return list(_cached_mg_lines(key, line_length, formatted))
 
 
-def _build_mg_lines(names: tuple[str, ...], line_length: int) -> tuple[Command, ...]:
+def _build_mg_lines(
+    names: tuple[str, ...], line_length: int, formatted: bool
+) -> tuple[Command, ...]:
     limit = line_length - 4  # "MG " and the CR
-    extra = len(READ_FORMAT) + 1  # each item's format and its comma
+    extra = (len(READ_FORMAT) if formatted else 0) + 1  # each item's format and its comma
     batches: list[list[str]] = [[]]
     length = 0
     for n in names:
@@ -1120,7 +1129,7 @@ def _build_mg_lines(names: tuple[str, ...], line_length: int) -> tuple[Command, 
             length = 0
         batches[-1].append(n)
         length += len(n) + extra
-    return tuple(mg_operand(*b) for b in batches if b)
+    return tuple(mg_operand(*b, formatted=formatted) for b in batches if b)
 
 
 # The same few sets of operands are read again and again (a move's state, a handle's poll):

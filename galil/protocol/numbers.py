@@ -26,6 +26,7 @@ __all__ = [
     "parse_format",
     "parse_number",
     "parse_numbers",
+    "parse_plain_read",
     "parse_read",
     "read_one",
     "to_fixed",
@@ -91,6 +92,22 @@ def parse_read(reply: str) -> list[float]:
     """
     if _READ_REPLY.fullmatch(reply) is None:
         raise ProtocolError(f"not numbers with four decimals: {reply!r}")
+    return [float(x) for x in _READ_ITEM.findall(reply)]
+
+
+# A number whose whole part is all nines may be a VF overflow ("the greatest number
+# representable": VF 4.4 prints 123456 as 9999.9999): worth asking again in the read format.
+_NINES = re.compile(r"(?<![0-9])9+\.\d{4}")
+
+
+def parse_plain_read(reply: str) -> list[float] | None:
+    """The numbers of a reply to ``MG`` items sent without a format (the library's fast read,
+    decision 0032), or ``None`` when the reply may not be what the default ``VF 10.4`` prints:
+    not numbers with four decimals (another VF: fewer decimals, hex), or a number of nines
+    that an overflow would print. ``None`` means: ask again with :data:`READ_FORMAT` on each
+    item, which no VF changes (a true 9999 then reads 9999)."""
+    if _READ_REPLY.fullmatch(reply) is None or _NINES.search(reply) is not None:
+        return None
     return [float(x) for x in _READ_ITEM.findall(reply)]
 
 

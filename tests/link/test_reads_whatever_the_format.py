@@ -17,14 +17,14 @@ import pytest
 import galil
 from galil.errors import ProtocolError
 from galil.protocol import commands as cmds
-from galil.protocol.numbers import parse_read, read_one
+from galil.protocol.numbers import parse_plain_read, parse_read, read_one
 from galil.protocol.records import SAMPLE_WRAP
 from galil.sim.clock import RealTimeClock
 from galil.sim.controller import SimController
 from galil.sim.server import SimTcpServer
-from galil.testing import sim_of, simulated
+from galil.testing import sim_of, simulated, transcript
 
-SETTINGS = ["VF 4.0", "VF 1.0", "VF -4.0", "LZ 0", "PF 2.0"]
+SETTINGS = ["VF 4.0", "VF 1.0", "VF -4.0", "VF 4.4", "VF 10.2", "LZ 0", "PF 2.0"]
 ARRAY = [1.5, -2.0, 123456.0, 0.25, -2147483648.0, 2147483647.0]
 
 
@@ -141,3 +141,40 @@ def test_a_read_reply_in_another_format_is_refused_not_misread(reply: str) -> No
         parse_read(reply)
     with pytest.raises(ProtocolError):
         read_one(reply)
+
+
+def test_reads_go_plain_and_ask_again_formatted_only_when_the_reply_may_be_another_format() -> None:
+    with simulated() as dmc:
+        dmc.A.move_by(123456).wait()
+        dmc.command("gv=9999")
+        with transcript(dmc) as wire:
+            assert dmc.query_operands(["_RPA", "_BGA"]) == [123456, 0]
+        wire.assert_sent(["MG _RPA,_BGA"])  # the default VF: one plain line, nothing more
+        with transcript(dmc) as wire:
+            assert dmc.query_operands(["gv"]) == [9999]  # a true 9999 reads 9999
+        wire.assert_sent(["MG gv", "MG gv{Z10.4}"])
+        dmc.command("VF 4.4")  # 123456 prints as 9999.9999: an overflow
+        with transcript(dmc) as wire:
+            assert dmc.query_operands(["_RPA", "_BGA"]) == [123456, 0]
+        wire.assert_sent(["MG _RPA,_BGA", "MG _RPA{Z10.4},_BGA{Z10.4}"])
+
+
+@pytest.mark.parametrize(
+    ("reply", "values"),
+    [
+        (" 12.0000-3.5000 0.0001", [12.0, -3.5, 0.0001]),
+        (" 19.0000 90.0000 0.9999", [19.0, 90.0, 0.9999]),
+        (" 0000000123.0000", [123.0]),
+        (" 9999.9999", None),  # VF 4.4's overflow (or a true 9999.9999: asked again)
+        ("-99.0000", None),
+        (" 9.5000", None),
+        (" 123", None),  # VF n.0
+        (" 1.50", None),
+        ("$FFFF", None),
+        ("", None),
+    ],
+)
+def test_a_plain_read_is_taken_only_in_the_default_format(
+    reply: str, values: list[float] | None
+) -> None:
+    assert parse_plain_read(reply) == values

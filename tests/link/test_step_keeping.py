@@ -229,20 +229,22 @@ def test_a_stray_question_mark_before_a_late_reply_cannot_shift_later_replies() 
 
 
 def test_a_400_digit_reply_is_a_protocol_error_not_an_overflow() -> None:
-    huge = {"armed": False}
+    huge = {"armed": 0}
 
     def replace(data: bytes) -> list[tuple[float, bytes]]:
         if huge["armed"]:
-            huge["armed"] = False
+            huge["armed"] -= 1
             return [(0.0, b" " + b"9" * 400 + b"\r\n:")]
         return [(0.0, data)]
 
     sim = SimController("DMC-4040", ManualClock())
     with galil.connect(SimLink(sim, faults=replace), timeout=0.5) as dmc:
-        huge["armed"] = True
+        huge["armed"] = 1
         with pytest.raises(ProtocolError, match="range"):
             dmc.query_number("MG 1")
-        huge["armed"] = True
+        huge["armed"] = 1
+        assert dmc.query_operands(["_TPA"]) == [0]  # not the default's shape: asked again
+        huge["armed"] = 2  # and the reply to the formatted read is as bad
         with pytest.raises(ProtocolError):
             dmc.query_operands(["_TPA"])
         _pairs_all_right(dmc, 5)
