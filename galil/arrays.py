@@ -112,7 +112,8 @@ class Arrays:
 
     def _size(self, name: str) -> int:
         """How many elements array ``name`` has, from the ``LA`` listing (gclib reads array
-        sizes this way; ``MG name[-1]`` is not in the references, so it is not relied on).
+        sizes this way; ``MG name[-1]`` is in the DMC-4103 reference, decision 0025, but not
+        in the older ones, so it is not relied on).
 
         Raises:
             InvalidArgument: there is no such array.
