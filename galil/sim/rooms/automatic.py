@@ -107,9 +107,21 @@ class Automatic(Room):
     def service(self) -> None:
         if self._armed:
             self._check_inputs()
+        tuning = self.machine.room(Tuning).axes
+        programs = self.machine.programs
+        poserr = bool(programs.threads) and "POSERR" in programs.labels
         for ax in self.machine.servo.axes.values():
-            self._check_limit(ax)
-            self._check_error(ax)
+            # (each check returns at once unless its event or its reset is due: skipped then,
+            # as this runs at every step of the servo loop)
+            c = ax.letter
+            if ax.limit_stop or c in self._limited:
+                self._check_limit(ax)
+            if c in self._over or (
+                (poserr or tuning[c].oe in (1, 3))
+                and ax.m.motor_on
+                and abs(ax.m.error) > tuning[c].er
+            ):
+                self._check_error(ax)
 
     def _check_inputs(self) -> None:
         assert self.ii is not None
