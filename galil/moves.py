@@ -45,7 +45,7 @@ __all__ = [
     "speed_schedule",
 ]
 
-_STATE = ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")
+_STATE = ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO", "SC")
 # What a master's state query reads of each follower: its soft limits, and its stop code (a
 # limit's: the controller turned its gearing off).
 _FOLLOWER = ("BL", "FL", "SC")
@@ -80,6 +80,7 @@ class _State:
     bl: float
     fl: float
     mo: bool
+    sc: int
 
 
 @functools.lru_cache(maxsize=256)
@@ -99,10 +100,14 @@ def _read_state(
     """
     names = _operand_names(letters, _STATE)
     if not gears:  # (the common move: the cached tuple as it is, nothing more read)
-        return _states(link, letters, link.query_operands(names)), {}
+        states = _states(link, letters, link.query_operands(names))
+        _seen_at_rest(tracker, states)
+        return states, {}
     values = link.query_operands(names + follower_operands("".join(gears)))
+    states = _states(link, letters, values)
+    _seen_at_rest(tracker, states)
     limits = follower_limits(link, tracker, gears, values[len(letters) * len(_STATE) :])
-    return _states(link, letters, values), limits
+    return states, limits
 
 
 def _states(link: CommandLink, letters: str, values: Sequence[float]) -> dict[str, _State]:
@@ -112,10 +117,17 @@ def _states(link: CommandLink, letters: str, values: Sequence[float]) -> dict[st
     n = len(_STATE)
     out: dict[str, _State] = {}
     for i, a in enumerate(letters):
-        rp, bg, sp, ac, dc, it, bl, fl, mo = values[i * n : (i + 1) * n]
+        rp, bg, sp, ac, dc, it, bl, fl, mo, sc = values[i * n : (i + 1) * n]
         sp, ac, dc = as_stored(link, "SP", sp), as_stored(link, "AC", ac), as_stored(link, "DC", dc)
-        out[a] = _State(round(rp), bool(bg), sp, ac, dc, it, bl, fl, bool(mo))
+        out[a] = _State(round(rp), bool(bg), sp, ac, dc, it, bl, fl, bool(mo), round(sc))
     return out
+
+
+def _seen_at_rest(tracker: MotionTracker, states: Mapping[str, _State]) -> None:
+    """Tell the tracker of the axes a start read at rest (:meth:`MotionTracker.ended`)."""
+    for a, state in states.items():
+        if not state.bg:
+            tracker.ended(a, state.rp, state.sc)
 
 
 def follower_limits(
@@ -442,6 +454,8 @@ def _jog(
         [f"_{op}{a}" for op in ("RP", "BG", "SC", "AC", "DC", "IT", "MO")]
         + [f"_SC{f}" for f in gears]  # (a follower a limit dropped: refuse_dropped)
     )
+    if not bg:
+        tracker.ended(a, rp, sc)
     refuse_dropped(link, tracker, gears, {f: round(c) for f, c in zip(gears, ends, strict=True)})
     track = tracker.track(a)
     if bg and track is not None and track.kind == "jog":
@@ -762,6 +776,7 @@ def _schedule_state(
     names = (*_operand_names(a, _STATE), "_XQ0", *follower_operands("".join(gears)))
     values = link.query_operands(names)
     state = _states(link, a, values)[a]
+    _seen_at_rest(tracker, {a: state})
     _ready(link, a, state)
     n = len(_STATE)
     if values[n] >= 0:
