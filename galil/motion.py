@@ -407,10 +407,10 @@ class MotionTracker:
     def ended(self, letter: str, rp: float, sc: float) -> None:
         """A start read ``letter`` at rest (``_BG`` 0), ``_RP`` ``rp`` and ``_SC`` ``sc``: the
         motion the library last started on it is over, and its handle, if nobody saw it end,
-        keeps that end (:meth:`MoveHandle.axis_ended`) rather than the next motion's."""
+        keeps that end (:meth:`MoveHandle._end_axis`) rather than the next motion's."""
         handle = self.active(letter)
         if handle is not None:
-            handle.axis_ended(letter, round(rp), round(sc))
+            handle._end_axis(letter, round(rp), round(sc))
 
     def active(self, letter: str) -> MoveHandle | None:
         """The handle of the move in progress on ``letter`` (``None`` if none or done)."""
@@ -742,7 +742,7 @@ class MoveHandle:
         """The comparison with the prediction, once the move is done."""
         return self._result
 
-    def axis_ended(self, letter: str, rp: int, sc: int) -> None:
+    def _end_axis(self, letter: str, rp: int, sc: int) -> None:
         """``letter`` was read at rest at ``rp`` with stop code ``sc`` by the start of other
         motion (:meth:`MotionTracker.ended`): its part of this move ended there, and later
         polls leave it out (they would see the other motion). A schedule whose program has

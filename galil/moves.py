@@ -539,7 +539,8 @@ def increment(
     """``IP counts`` on ``letter``: an idle move, a longer move in progress, or a jog's step.
 
     Raises:
-        InvalidArgument: a reversal of a move in progress, or an axis stopping.
+        InvalidArgument: a reversal of a move in progress, an axis stopping, or one in a
+            vector sequence (the controller: TC 29).
         LimitError: the new target (or a jog's step) beyond a soft limit or the 32-bit range,
             for the axis or one geared to it; a jog's step too large for one sample.
         MotionError: a limit stopped an axis geared to ``letter`` during a move nobody waited
@@ -571,6 +572,12 @@ def _increment(
         )
     handle = tracker.active(a)
     track = tracker.track(a)
+    if track is not None and track.kind == "vector":
+        raise InvalidArgument(
+            f"axis {a} is in a vector sequence; the controller refuses IP during a coordinated "
+            "move (TC 29)",
+            model=model.name,
+        )
     if track is not None and (track.stopped or track.aborted is not None):
         raise InvalidArgument(
             f"axis {a} is stopping; the controller refuses IP now (TC 16)", model=model.name

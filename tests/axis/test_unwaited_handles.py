@@ -11,6 +11,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable
 
+import numpy as np
 import pytest
 
 import galil
@@ -24,6 +25,7 @@ _NEXT: dict[str, Callable[[galil.Controller], object]] = {
     "home": lambda dmc: dmc.A.find_edge(switch=sim_of(dmc).home_switch("A")),
     "vector": lambda dmc: dmc.vector_move("AB", [Line(700, 300)], speed=20000),
     "gearing": lambda dmc: dmc.A.gear_to("C", 2),
+    "contour": lambda dmc: dmc.contour("A", np.linspace(0, 300, 8), dt=3),
 }
 
 
