@@ -525,8 +525,7 @@ class Axis:
         handle of the move in progress is returned, its prediction updated.
 
         Raises:
-            InvalidArgument: wrong units, a reversal, an axis stopping, in contour mode or in
-                a vector sequence.
+            InvalidArgument: wrong units, a reversal, an axis stopping, homing, contour or vector.
         """
         counts = round(self.distance_counts(n, "increment"))
         with user_units({self.letter: self}):

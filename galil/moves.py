@@ -17,6 +17,7 @@ from galil.errors import InvalidArgument, LimitError
 from galil.link import CommandLink
 from galil.models import INT32_MAX, INT32_MIN
 from galil.motion import (
+    HOMING_KINDS,
     SCHEDULE_BEGIN,
     Display,
     GearLink,
@@ -540,7 +541,7 @@ def increment(
 
     Raises:
         InvalidArgument: a reversal of a move in progress, an axis stopping, or one in a
-            vector sequence (the controller: TC 29).
+            vector sequence or homing (the controller: TC 29, TC 16).
         LimitError: the new target (or a jog's step) beyond a soft limit or the 32-bit range,
             for the axis or one geared to it; a jog's step too large for one sample.
         MotionError: a limit stopped an axis geared to ``letter`` during a move nobody waited
@@ -572,10 +573,10 @@ def _increment(
         )
     handle = tracker.active(a)
     track = tracker.track(a)
-    if track is not None and track.kind == "vector":
+    if track is not None and (track.kind == "vector" or track.kind in HOMING_KINDS):
+        why = "a coordinated move (TC 29)" if track.kind == "vector" else "homing (TC 16)"
         raise InvalidArgument(
-            f"axis {a} is in a vector sequence; the controller refuses IP during a coordinated "
-            "move (TC 29)",
+            f"axis {a} is in a {track.kind} move; the controller refuses IP during {why}",
             model=model.name,
         )
     if track is not None and (track.stopped or track.aborted is not None):
