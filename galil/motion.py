@@ -751,7 +751,7 @@ class MoveHandle:
             t = self._tracks.get(letter)
             if self._done or t is None or (t.kind == "schedule" and t.begin is None):
                 return
-            self._ended[letter] = (rp, sc)
+            self._ended.setdefault(letter, (rp, sc))  # (a later start reads later motion)
 
     @property
     def done(self) -> bool:

@@ -44,6 +44,14 @@ def test_waiting_late_for_a_move_reports_its_own_end_not_the_next_motions(
     assert result.stop_codes == {"A": 1}
 
 
+def test_a_late_wait_keeps_the_end_the_first_start_after_it_read(dmc: galil.Controller) -> None:
+    first = dmc.A.move_by(1000)
+    dmc.sleep(1.0)
+    dmc.contour("A", np.linspace(0, 300, 8), dt=3)  # (no handle of its own: first stays)
+    dmc.A.move_by(200).wait()  # (this start reads A at rest too, at 1300)
+    assert first.wait(timeout=1.0).final == {"A": 1000}
+
+
 def test_a_late_wait_keeps_the_stop_code_of_a_limit_that_ended_the_move(
     dmc: galil.Controller,
 ) -> None:
