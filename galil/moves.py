@@ -561,8 +561,8 @@ def _increment(
     model = link.model
     tracker.refuse_geared(a, "an increment", model.name)
     gears = tracker.followers(a)
-    rp, bg, pa, bl, fl, *rest = link.query_operands(
-        [f"_{op}{a}" for op in ("RP", "BG", "PA", "BL", "FL")]
+    rp, bg, pa, bl, fl, sc, *rest = link.query_operands(
+        [f"_{op}{a}" for op in ("RP", "BG", "PA", "BL", "FL", "SC")]
         + list(follower_operands("".join(gears)))
     )
     limits = follower_limits(link, tracker, gears, rest)
@@ -579,7 +579,9 @@ def _increment(
             f"axis {a} is in a {track.kind} move; the controller refuses IP during {why}",
             model=model.name,
         )
-    if track is not None and (track.stopped or track.aborted is not None):
+    # (_SC says a forced stop ramps down: ST or a limit, whoever sent it; a schedule's or a
+    # homing's track does not record the ST)
+    if sc or (track is not None and (track.stopped or track.aborted is not None)):
         raise InvalidArgument(
             f"axis {a} is stopping; the controller refuses IP now (TC 16)", model=model.name
         )

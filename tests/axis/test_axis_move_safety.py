@@ -174,3 +174,23 @@ def test_a_master_jog_driving_a_follower_too_fast_is_refused(dmc: galil.Controll
     with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as caught:
         dmc.B.jog(500_000)
     assert caught.value.axis == "A"
+
+
+@pytest.mark.parametrize("how", ["stop", "raw ST"])
+def test_increment_while_a_stopped_schedule_ramps_down_is_refused(
+    dmc: galil.Controller, how: str
+) -> None:
+    # (a schedule's track does not record the ST: the IP went out for TC 16)
+    schedule = dmc.B.speed_schedule(12000, [(4000, 8000)], speed=15000)
+    dmc.sleep(0.3)
+    if how == "stop":
+        dmc.stop()
+    else:
+        dmc.command("ST B")
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="stopping"):
+        dmc.B.increment(5)
+    if how == "stop":
+        schedule.wait()
+    else:  # (an ST behind the library's back: the end is not the prediction)
+        with pytest.warns(RuntimeWarning, match="away from the prediction"):
+            schedule.wait()
