@@ -46,7 +46,7 @@ __all__ = [
     "speed_schedule",
 ]
 
-_STATE = ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO", "SC")
+_STATE = ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO", "SC", "TS")
 # What a master's state query reads of each follower: its soft limits, and its stop code (a
 # limit's: the controller turned its gearing off).
 _FOLLOWER = ("BL", "FL", "SC")
@@ -82,6 +82,7 @@ class _State:
     fl: float
     mo: bool
     sc: int
+    ts: int
 
 
 @functools.lru_cache(maxsize=256)
@@ -118,9 +119,9 @@ def _states(link: CommandLink, letters: str, values: Sequence[float]) -> dict[st
     n = len(_STATE)
     out: dict[str, _State] = {}
     for i, a in enumerate(letters):
-        rp, bg, sp, ac, dc, it, bl, fl, mo, sc = values[i * n : (i + 1) * n]
+        rp, bg, sp, ac, dc, it, bl, fl, mo, sc, ts = values[i * n : (i + 1) * n]
         sp, ac, dc = as_stored(link, "SP", sp), as_stored(link, "AC", ac), as_stored(link, "DC", dc)
-        out[a] = _State(round(rp), bool(bg), sp, ac, dc, it, bl, fl, bool(mo), round(sc))
+        out[a] = _State(round(rp), bool(bg), sp, ac, dc, it, bl, fl, bool(mo), round(sc), round(ts))
     return out
 
 
@@ -241,6 +242,45 @@ def check_int32(name: str, value: float, axis: str, model: str) -> None:
         )
 
 
+def _refuse_blocked(
+    link: CommandLink,
+    a: str,
+    direction: float,
+    ts: int,
+    limits: tuple[int, float, float] | None,
+) -> None:
+    """Refuse a start in ``direction`` towards an active limit switch (``_TS``), or, given
+    ``limits`` ``(RP, BL, FL)``, on past a soft limit the axis is beyond already: the
+    controller refuses its ``BG`` with TC 22, after the rest of the line went out (a JG, a PA).
+
+    Raises:
+        InvalidArgument: the switch. LimitError: the soft limit.
+    """
+    if not direction:
+        return
+    side, bit = ("forward", 0x08) if direction > 0 else ("reverse", 0x04)
+    if not ts & bit:
+        raise InvalidArgument(
+            f"axis {a} would start towards its active {side} limit switch (the controller "
+            "refuses it with TC 22); move off the switch first",
+            model=link.model.name,
+        )
+    if limits is None:
+        return
+    rp, bl, fl = limits
+    name, limit = ("FL", fl) if direction > 0 else ("BL", bl)
+    if (rp > fl) if direction > 0 else (rp < bl):
+        raise LimitError(
+            f"axis {a} is at {rp:g}, beyond {name} {limit:g}: a jog on past it is refused "
+            "(the controller: TC 22); move it back inside first",
+            name=name,
+            value=rp,
+            limit=limit,
+            axis=a,
+            model=link.model.name,
+        )
+
+
 def _ready(link: CommandLink, a: str, state: _State) -> None:
     if state.bg:
         raise InvalidArgument(
@@ -277,6 +317,7 @@ def _plan_axis(
         state.dc if move.decel is None else move.decel,
         state.it,
     )
+    _refuse_blocked(link, a, distance, state.ts, None)  # (beyond a limit: the path check)
     track = Track("position", state.rp, params, None, amount=distance)
     profile = predict_track(link, track)
     try:
@@ -451,8 +492,8 @@ def _jog(
     a = letter
     tracker.refuse_geared(a, "jogging it", link.model.name)
     gears = tracker.followers(a)
-    rp, bg, sc, ac, dc, it, mo, *ends = link.query_operands(
-        [f"_{op}{a}" for op in ("RP", "BG", "SC", "AC", "DC", "IT", "MO")]
+    rp, bg, sc, ac, dc, it, mo, ts, bl, fl, *ends = link.query_operands(
+        [f"_{op}{a}" for op in ("RP", "BG", "SC", "AC", "DC", "IT", "MO", "TS", "BL", "FL")]
         + [f"_SC{f}" for f in gears]  # (a follower a limit dropped: refuse_dropped)
     )
     if not bg:
@@ -472,6 +513,7 @@ def _jog(
         raise InvalidArgument(
             f"axis {a} has its motor off; call controller.servo_here()", model=link.model.name
         )
+    _refuse_blocked(link, a, velocity, round(ts), (round(rp), bl, fl))
     _check_geared_speed(link, gears, velocity)
     params = MoveParams(abs(velocity), as_stored(link, "AC", ac), as_stored(link, "DC", dc), it)
     replies = link.command_line(
