@@ -245,11 +245,15 @@ def predict_track(link: CommandLink, t: Track) -> predict.Profile:
             [t.start], sample_period=ts, shape="unknown", peak_speed=p.speed
         )
     elif t.kind == "jog":
+        events = t.events
+        if t.aborted is not None and t.begin is not None and not t.stopped:
+            # (an open jog's profile ends once at speed: run it to the AB, cut below)
+            events = [*events, predict.Stop((t.aborted - t.begin) * ts)]
         profile = predict.jog(
             t.amount,
             p.accel,
             p.decel,
-            events=t.events,
+            events=events,
             sample_period=ts,
             smoothing=p.smoothing,
             start=t.start,

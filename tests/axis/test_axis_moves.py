@@ -268,3 +268,14 @@ def test_an_increment_during_homing_is_refused_before_sending(
     with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="TC 16"):
         dmc.A.increment(5)
     homing.wait()
+
+
+def test_a_jog_aborted_after_its_ramp_is_predicted_to_the_abort(dmc: galil.Controller) -> None:
+    # (the jog's profile ended once at speed; the abort cut it there, not at the AB's sample)
+    jog = dmc.A.jog(-30000)
+    dmc.sleep(0.2)  # at speed after 0.12 s
+    dmc.abort()
+    result = jog.wait(timeout=1.0)
+    assert result.stop_codes == {"A": 7}
+    assert result.deviation == {"A": 0}
+    assert result.final["A"] < -3000
