@@ -525,7 +525,7 @@ class Axis:
         handle of the move in progress is returned, its prediction updated.
 
         Raises:
-            InvalidArgument: wrong units, a reversal, an axis stopping or in contour mode.
+            InvalidArgument: wrong units, a reversal, an axis stopping, homing, contour or vector.
         """
         counts = round(self.distance_counts(n, "increment"))
         with user_units({self.letter: self}):

@@ -280,7 +280,7 @@ class ContourStream:
                 nobody waited for (its gearing is off: :func:`~galil.motion.refuse_dropped`).
         """
         link = self.link
-        ops = ("RP", "BG", "BL", "FL")
+        ops = ("RP", "BG", "BL", "FL", "SC")
         followers = "".join(self._followers)
         state = link.query_operands(
             [f"_{op}{a}" for a in self.letters for op in ops] + list(follower_operands(followers))
@@ -290,7 +290,9 @@ class ContourStream:
         )
         counts: dict[str, Profile] = {}
         for j, a in enumerate(self.letters):
-            rp, bg, bl, fl = state[j * len(ops) : (j + 1) * len(ops)]
+            rp, bg, bl, fl, sc = state[j * len(ops) : (j + 1) * len(ops)]
+            if not bg and self._tracker is not None:  # (a move nobody saw end ends here)
+                self._tracker.ended(a, rp, sc)
             if bg:
                 raise InvalidArgument(
                     f"axis {a} is moving; stop it before a contour", model=link.model.name

@@ -198,9 +198,11 @@ def _gear_to(
     model = link.model
     _check_pair(link, tracker, follower, master, q)
     m_name = "_AVS" if master == "S" else f"_RP{master}"
-    bg, mo, f0, m0 = link.query_operands(
-        [f"_BG{follower}", f"_MO{follower}", f"_RP{follower}", m_name]
+    bg, mo, f0, m0, sc = link.query_operands(
+        [f"_BG{follower}", f"_MO{follower}", f"_RP{follower}", m_name, f"_SC{follower}"]
     )
+    if not bg:  # (a move of the follower nobody saw end ends here, not in the gearing)
+        tracker.ended(follower, f0, sc)
     if bg:
         raise InvalidArgument(f"axis {follower} is moving; stop it first", model=model.name)
     if mo:

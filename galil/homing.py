@@ -44,7 +44,7 @@ __all__ = [
 ]
 
 _KINDS = {"HM": ("home", cmds.hm), "FE": ("edge", cmds.fe), "FI": ("index", cmds.fi)}
-_STATE = ("RP", "BG", "MO", "SP", "AC", "DC", "JG", "HV", "TS", "MT")
+_STATE = ("RP", "BG", "MO", "SP", "AC", "DC", "JG", "HV", "TS", "MT", "SC")
 
 
 @dataclass(frozen=True)
@@ -160,7 +160,9 @@ class AxisHoming:
         link, a = self._link, self.letter
         model = link.model
         values = link.query_operands([f"_{op}{a}" for op in _STATE] + ["_CN1"])
-        rp, bg, mo, sp, ac, dc, jg, hv, ts, mt, cn_home = values
+        rp, bg, mo, sp, ac, dc, jg, hv, ts, mt, sc, cn_home = values
+        if not bg:
+            self._tracker.ended(a, rp, sc)
         self._refuse(kind, bool(bg), bool(mo), sp, jg, hv)
         params = predict.HomingParams(
             speed=as_stored(link, "SP", sp),

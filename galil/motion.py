@@ -251,11 +251,15 @@ def predict_track(link: CommandLink, t: Track) -> predict.Profile:
             [t.start], sample_period=ts, shape="unknown", peak_speed=p.speed
         )
     elif t.kind == "jog":
+        events = t.events
+        if t.aborted is not None and t.begin is not None and not t.stopped:
+            # (an open jog's profile ends once at speed: run it to the AB, cut below)
+            events = [*events, predict.Stop((t.aborted - t.begin) * ts)]
         profile = predict.jog(
             t.amount,
             p.accel,
             p.decel,
-            events=t.events,
+            events=events,
             sample_period=ts,
             smoothing=p.smoothing,
             start=t.start,
@@ -416,6 +420,14 @@ class MotionTracker:
                 model=model,
             )
 
+    def ended(self, letter: str, rp: float, sc: float) -> None:
+        """A start read ``letter`` at rest (``_BG`` 0), ``_RP`` ``rp`` and ``_SC`` ``sc``: the
+        motion the library last started on it is over, and its handle, if nobody saw it end,
+        keeps that end (:meth:`MoveHandle._end_axis`) rather than the next motion's."""
+        handle = self.active(letter)
+        if handle is not None:
+            handle._end_axis(letter, round(rp), round(sc))
+
     def active(self, letter: str) -> MoveHandle | None:
         """The handle of the move in progress on ``letter`` (``None`` if none or done)."""
         h = self._active.get(letter)
@@ -566,6 +578,7 @@ class MoveHandle:
         self._error: BaseException | None = None
         self._followers: dict[str, GearLink] = {}
         self._cancel: Callable[[int | None], None] | None = None
+        self._ended: dict[str, tuple[int, int]] = {}  # axis -> (RP, SC) seen at rest since
 
     # -- predictions -------------------------------------------------------------------------
     @property
@@ -745,22 +758,37 @@ class MoveHandle:
         """The comparison with the prediction, once the move is done."""
         return self._result
 
+    def _end_axis(self, letter: str, rp: int, sc: int) -> None:
+        """``letter`` was read at rest at ``rp`` with stop code ``sc`` by the start of other
+        motion (:meth:`MotionTracker.ended`): its part of this move ended there, and later
+        polls leave it out (they would see the other motion). A schedule whose program has
+        not yet begun its move is not over."""
+        with self._lock:
+            t = self._tracks.get(letter)
+            if self._done or t is None or (t.kind == "schedule" and t.begin is None):
+                return
+            self._ended.setdefault(letter, (rp, sc))  # (a later start reads later motion)
+
     @property
     def done(self) -> bool:
         """True once every axis's profile is complete (``_BG`` is 0); one query per call
         (the followers' ``_RP`` and ``_SC`` ride on it)."""
         if self._done:
             return True
-        letters = self.axes
+        ended = dict(self._ended)
+        letters = "".join(a for a in self.axes if a not in ended)
         followers = self.followers
         names = [f"_{op}{a}" for op in ("BG", "RP", "SC") for a in letters]
         names += [f"_{op}{f}" for op in ("RP", "SC") for f in followers]
-        values = [round(v) for v in self._link.query_operands(names)]
+        values = [round(v) for v in self._link.query_operands(names)] if names else []
         n, m = len(letters), len(followers)
         if not any(values[:n]):
             rest = values[3 * n :]
             ends = dict(zip(followers, zip(rest[:m], rest[m:], strict=True), strict=True))
-            self._finish(values[n : 2 * n], values[2 * n : 3 * n], ends)
+            now = zip(values[n : 2 * n], values[2 * n : 3 * n], strict=True)
+            ended.update(zip(letters, now, strict=True))
+            rp_sc = [ended[a] for a in self.axes]
+            self._finish([e[0] for e in rp_sc], [e[1] for e in rp_sc], ends)
         return self._done
 
     def _finish(

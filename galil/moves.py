@@ -18,6 +18,7 @@ from galil.errors import InvalidArgument, LimitError
 from galil.link import CommandLink
 from galil.models import INT32_MAX, INT32_MIN
 from galil.motion import (
+    HOMING_KINDS,
     SCHEDULE_BEGIN,
     Display,
     GearLink,
@@ -48,7 +49,7 @@ __all__ = [
     "speed_schedule",
 ]
 
-_STATE = ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")
+_STATE = ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO", "SC", "TS")
 # What a master's state query reads of each follower: its soft limits, and its stop code (a
 # limit's: the controller turned its gearing off).
 _FOLLOWER = ("BL", "FL", "SC")
@@ -83,6 +84,8 @@ class _State:
     bl: float
     fl: float
     mo: bool
+    sc: int
+    ts: int
 
 
 @functools.lru_cache(maxsize=256)
@@ -102,10 +105,14 @@ def _read_state(
     """
     names = _operand_names(letters, _STATE)
     if not gears:  # (the common move: the cached tuple as it is, nothing more read)
-        return _states(link, letters, link.query_operands(names)), {}
+        states = _states(link, letters, link.query_operands(names))
+        _seen_at_rest(tracker, states)
+        return states, {}
     values = link.query_operands(names + follower_operands("".join(gears)))
+    states = _states(link, letters, values)
+    _seen_at_rest(tracker, states)
     limits = follower_limits(link, tracker, gears, values[len(letters) * len(_STATE) :])
-    return _states(link, letters, values), limits
+    return states, limits
 
 
 def _states(link: CommandLink, letters: str, values: Sequence[float]) -> dict[str, _State]:
@@ -115,10 +122,17 @@ def _states(link: CommandLink, letters: str, values: Sequence[float]) -> dict[st
     n = len(_STATE)
     out: dict[str, _State] = {}
     for i, a in enumerate(letters):
-        rp, bg, sp, ac, dc, it, bl, fl, mo = values[i * n : (i + 1) * n]
+        rp, bg, sp, ac, dc, it, bl, fl, mo, sc, ts = values[i * n : (i + 1) * n]
         sp, ac, dc = as_stored(link, "SP", sp), as_stored(link, "AC", ac), as_stored(link, "DC", dc)
-        out[a] = _State(round(rp), bool(bg), sp, ac, dc, it, bl, fl, bool(mo))
+        out[a] = _State(round(rp), bool(bg), sp, ac, dc, it, bl, fl, bool(mo), round(sc), round(ts))
     return out
+
+
+def _seen_at_rest(tracker: MotionTracker, states: Mapping[str, _State]) -> None:
+    """Tell the tracker of the axes a start read at rest (:meth:`MotionTracker.ended`)."""
+    for a, state in states.items():
+        if not state.bg:
+            tracker.ended(a, state.rp, state.sc)
 
 
 def follower_limits(
@@ -231,6 +245,45 @@ def check_int32(name: str, value: float, axis: str, model: str) -> None:
         )
 
 
+def _refuse_blocked(
+    link: CommandLink,
+    a: str,
+    direction: float,
+    ts: int,
+    limits: tuple[int, float, float] | None,
+) -> None:
+    """Refuse a start in ``direction`` towards an active limit switch (``_TS``), or, given
+    ``limits`` ``(RP, BL, FL)``, on past a soft limit the axis is beyond already: the
+    controller refuses its ``BG`` with TC 22, after the rest of the line went out (a JG, a PA).
+
+    Raises:
+        InvalidArgument: the switch. LimitError: the soft limit.
+    """
+    if not direction:
+        return
+    side, bit = ("forward", 0x08) if direction > 0 else ("reverse", 0x04)
+    if not ts & bit:
+        raise InvalidArgument(
+            f"axis {a} would start towards its active {side} limit switch (the controller "
+            "refuses it with TC 22); move off the switch first",
+            model=link.model.name,
+        )
+    if limits is None:
+        return
+    rp, bl, fl = limits
+    name, limit = ("FL", fl) if direction > 0 else ("BL", bl)
+    if (rp > fl) if direction > 0 else (rp < bl):
+        raise LimitError(
+            f"axis {a} is at {rp:g}, beyond {name} {limit:g}: a jog on past it is refused "
+            "(the controller: TC 22); move it back inside first",
+            name=name,
+            value=rp,
+            limit=limit,
+            axis=a,
+            model=link.model.name,
+        )
+
+
 def _ready(link: CommandLink, a: str, state: _State) -> None:
     if state.bg:
         raise InvalidArgument(
@@ -267,6 +320,7 @@ def _plan_axis(
         state.dc if move.decel is None else move.decel,
         state.it,
     )
+    _refuse_blocked(link, a, distance, state.ts, None)  # (beyond a limit: the path check)
     track = Track("position", state.rp, params, None, amount=distance)
     profile = predict_track(link, track)
     try:
@@ -442,10 +496,12 @@ def _jog(
     a = letter
     tracker.refuse_geared(a, "jogging it", link.model.name)
     gears = tracker.followers(a)
-    rp, bg, sc, ac, dc, it, mo, *ends = link.query_operands(
-        [f"_{op}{a}" for op in ("RP", "BG", "SC", "AC", "DC", "IT", "MO")]
+    rp, bg, sc, ac, dc, it, mo, ts, bl, fl, *ends = link.query_operands(
+        [f"_{op}{a}" for op in ("RP", "BG", "SC", "AC", "DC", "IT", "MO", "TS", "BL", "FL")]
         + [f"_SC{f}" for f in gears]  # (a follower a limit dropped: refuse_dropped)
     )
+    if not bg:
+        tracker.ended(a, rp, sc)
     refuse_dropped(link, tracker, gears, {f: round(c) for f, c in zip(gears, ends, strict=True)})
     track = tracker.track(a)
     if bg and track is not None and track.kind == "jog":
@@ -461,6 +517,7 @@ def _jog(
         raise InvalidArgument(
             f"axis {a} has its motor off; call controller.servo_here()", model=link.model.name
         )
+    _refuse_blocked(link, a, velocity, round(ts), (round(rp), bl, fl))
     _check_geared_speed(link, gears, velocity)
     params = MoveParams(abs(velocity), as_stored(link, "AC", ac), as_stored(link, "DC", dc), it)
     replies = link.command_line(
@@ -529,7 +586,8 @@ def increment(
     """``IP counts`` on ``letter``: an idle move, a longer move in progress, or a jog's step.
 
     Raises:
-        InvalidArgument: a reversal of a move in progress, or an axis stopping.
+        InvalidArgument: a reversal of a move in progress, an axis stopping, or one in a
+            vector sequence or homing (the controller: TC 29, TC 16).
         LimitError: the new target (or a jog's step) beyond a soft limit or the 32-bit range,
             for the axis or one geared to it; a jog's step too large for one sample.
         MotionError: a limit stopped an axis geared to ``letter`` during a move nobody waited
@@ -549,8 +607,8 @@ def _increment(
     model = link.model
     tracker.refuse_geared(a, "an increment", model.name)
     gears = tracker.followers(a)
-    rp, bg, pa, bl, fl, *rest = link.query_operands(
-        [f"_{op}{a}" for op in ("RP", "BG", "PA", "BL", "FL")]
+    rp, bg, pa, bl, fl, sc, *rest = link.query_operands(
+        [f"_{op}{a}" for op in ("RP", "BG", "PA", "BL", "FL", "SC")]
         + list(follower_operands("".join(gears)))
     )
     limits = follower_limits(link, tracker, gears, rest)
@@ -561,7 +619,15 @@ def _increment(
         )
     handle = tracker.active(a)
     track = tracker.track(a)
-    if track is not None and (track.stopped or track.aborted is not None):
+    if track is not None and (track.kind == "vector" or track.kind in HOMING_KINDS):
+        why = "a coordinated move (TC 29)" if track.kind == "vector" else "homing (TC 16)"
+        raise InvalidArgument(
+            f"axis {a} is in a {track.kind} move; the controller refuses IP during {why}",
+            model=model.name,
+        )
+    # (_SC says a forced stop ramps down: ST or a limit, whoever sent it; a schedule's or a
+    # homing's track does not record the ST)
+    if sc or (track is not None and (track.stopped or track.aborted is not None)):
         raise InvalidArgument(
             f"axis {a} is stopping; the controller refuses IP now (TC 16)", model=model.name
         )
@@ -772,6 +838,7 @@ def _schedule_state(
     names = (*_operand_names(a, _STATE), "_XQ0", *follower_operands("".join(gears)))
     values = link.query_operands(names)
     state = _states(link, a, values)[a]
+    _seen_at_rest(tracker, {a: state})
     _ready(link, a, state)
     n = len(_STATE)
     if values[n] >= 0:

@@ -232,7 +232,7 @@ def _path_master(counts: predict.VectorProfile, gear: GearLink) -> predict.Profi
     )
 
 
-_STATE = ("RP", "BG", "MO", "FL", "BL")
+_STATE = ("RP", "BG", "MO", "FL", "BL", "SC")
 #: What a line of streamed segments ends with: the sample it ran in.
 _STAMP_SIZE = len(cmds.time_stamp().text) + 1
 
@@ -394,7 +394,9 @@ class VectorStream:
             raise InvalidArgument(
                 "a sequence is running on S; wait for it or stop it", model=model.name
             )
-        for a, (_, bg, mo, _, _) in zip(letters, rows, strict=True):
+        for a, (rp, bg, mo, _, _, sc) in zip(letters, rows, strict=True):
+            if not bg and self._tracker is not None:
+                self._tracker.ended(a, rp, sc)
             if bg:
                 raise InvalidArgument(f"axis {a} is moving; stop it or wait", model=model.name)
             if mo:

@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import asyncio
 import re
+from collections.abc import Callable
 
 import pytest
 
 import galil
 import galil.aio as aio
 from galil.errors import InvalidArgument, LimitError
-from galil.testing import nothing_sent, transcript
+from galil.testing import nothing_sent, sim_of, transcript
 
 
 def _begins(lines: list[str]) -> list[str]:
@@ -174,3 +175,51 @@ def test_a_master_jog_driving_a_follower_too_fast_is_refused(dmc: galil.Controll
     with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as caught:
         dmc.B.jog(500_000)
     assert caught.value.axis == "A"
+
+
+@pytest.mark.parametrize("how", ["stop", "raw ST"])
+def test_increment_while_a_stopped_schedule_ramps_down_is_refused(
+    dmc: galil.Controller, how: str
+) -> None:
+    # (a schedule's track does not record the ST: the IP went out for TC 16)
+    schedule = dmc.B.speed_schedule(12000, [(4000, 8000)], speed=15000)
+    dmc.sleep(0.3)
+    if how == "stop":
+        dmc.stop()
+    else:
+        dmc.command("ST B")
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="stopping"):
+        dmc.B.increment(5)
+    if how == "stop":
+        schedule.wait()
+    else:  # (an ST behind the library's back: the end is not the prediction)
+        with pytest.warns(RuntimeWarning, match="away from the prediction"):
+            schedule.wait()
+
+
+@pytest.mark.parametrize(
+    "start", [lambda ax: ax.move_by(1000), lambda ax: ax.jog(1000), lambda ax: ax.increment(10)]
+)
+def test_a_start_towards_an_active_limit_switch_is_refused_before_sending(
+    dmc: galil.Controller, start: Callable[[galil.Axis], object]
+) -> None:
+    # (the controller refuses the BG with TC 22: the PA or JG had gone out, and a
+    # CommandError came back)
+    sim_of(dmc).place_limit_switches("A", forward=500)
+    with pytest.raises(galil.MotionError):
+        dmc.A.move_by(3000).wait()
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="TC 22"):
+        start(dmc.A)
+    dmc.A.move_by(-1000).wait()  # away from it: allowed
+
+
+def test_a_jog_on_past_a_soft_limit_the_axis_is_beyond_is_refused_before_sending(
+    dmc: galil.Controller,
+) -> None:
+    dmc.A.move_to(-12000).wait()
+    dmc.A.soft_limits = (-5000, None)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError, match="TC 22"):
+        dmc.A.jog(-3000)
+    jog = dmc.A.jog(3000)  # back inside: allowed
+    jog.stop()
+    jog.wait()

@@ -255,3 +255,27 @@ def test_a_stop_the_library_did_not_send_shows_as_a_deviation_and_a_warning() ->
         assert result.deviation == {"A": final - 20_000}
         assert result.worst == 20_000 - final > 10_000
         assert result.stop_codes == {"A": 4}
+
+
+@pytest.mark.parametrize("start", ["home", "find_edge", "find_index"])
+def test_an_increment_during_homing_is_refused_before_sending(
+    dmc: galil.Controller, start: str
+) -> None:
+    # (the controller refuses IP during HM/FE/FI, TC 16: it went out and came back as a
+    # CommandError)
+    dmc.A.home_speed = 2000
+    homing = getattr(dmc.A, start)(switch=sim_of(dmc).home_switch("A"))
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="TC 16"):
+        dmc.A.increment(5)
+    homing.wait()
+
+
+def test_a_jog_aborted_after_its_ramp_is_predicted_to_the_abort(dmc: galil.Controller) -> None:
+    # (the jog's profile ended once at speed; the abort cut it there, not at the AB's sample)
+    jog = dmc.A.jog(-30000)
+    dmc.sleep(0.2)  # at speed after 0.12 s
+    dmc.abort()
+    result = jog.wait(timeout=1.0)
+    assert result.stop_codes == {"A": 7}
+    assert result.deviation == {"A": 0}
+    assert result.final["A"] < -3000

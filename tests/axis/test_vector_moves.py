@@ -430,3 +430,15 @@ def test_a_stop_from_another_thread_ends_a_streamed_path() -> None:
         handle.wait()
         assert dmc.query_operands(["_BGS"]) == [0]
         assert dmc.query_operands(["_RPA"])[0] < 37 * 1400
+
+
+def test_an_increment_during_a_vector_sequence_is_refused_before_sending(
+    dmc: galil.Controller,
+) -> None:
+    # (the controller refuses IP during a coordinated move, TC 29: it went out and came back
+    # as a CommandError)
+    path = dmc.vector_move("CD", [Line(0, 4000)], speed=5000)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="TC 29"):
+        dmc.C.increment(-2000)
+    path.wait()
+    assert dmc.query_operands(["_RPC", "_RPD"]) == [0, 4000]

@@ -84,6 +84,16 @@ def test_stop_or_gr_0_disengages_where_the_follower_is(sim: SimController) -> No
     assert ask(sim, "PRB=10;BG B;ST A") == b":::"
 
 
+@pytest.mark.parametrize("release", ["ST C", "AB 1"])
+def test_a_master_whose_follower_was_just_released_may_follow_at_once(
+    sim: SimController, release: str
+) -> None:
+    # (in the same sample as the ST or AB, GR still counted C as A's follower: TC 46)
+    ask(sim, "GA ,,CA;GR ,,2")
+    assert ask(sim, f"{release};GA S;GR 1") == b":::"
+    assert numbers(ask(sim, "GR ?")) == [1]
+
+
 def test_gearing_refusals_have_their_codes(sim: SimController) -> None:
     for line, code in (
         ("GR ,1", 6),  # no master yet

@@ -176,6 +176,7 @@ class Gearing(Room):
     @handler("GR", Args.VALUES)
     def gr(self, fields: Fields) -> str:
         i = self.machine.interp
+        self.after_step()  # (a follower ST or AB released since the last sample is no more)
         queries = [ax for ax, t in fields if t.strip() == "?"]
         changes: list[tuple[Axis, float]] = []
         for ax, text in fields:

@@ -1,0 +1,64 @@
+"""A handle nobody waited for keeps its own move's end when other motion starts on its axes.
+
+Found by the sequence fuzz (tests/test_operation_sequences.py): the start of the next motion
+reads the axis at rest, so the earlier move is over there; a later ``wait()`` on its handle
+reported the next motion's end instead (and warned of a deviation it never had), or, once the
+axis followed a master, never ended at all.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+import galil
+from galil import Line
+from galil.testing import sim_of
+
+_NEXT: dict[str, Callable[[galil.Controller], object]] = {
+    "move": lambda dmc: dmc.A.move_by(500),
+    "jog": lambda dmc: dmc.A.jog(3000),
+    "schedule": lambda dmc: dmc.A.speed_schedule(4000, [(2000, 5000)], speed=10000),
+    "home": lambda dmc: dmc.A.find_edge(switch=sim_of(dmc).home_switch("A")),
+    "vector": lambda dmc: dmc.vector_move("AB", [Line(700, 300)], speed=20000),
+    "gearing": lambda dmc: dmc.A.gear_to("C", 2),
+    "contour": lambda dmc: dmc.contour("A", np.linspace(0, 300, 8), dt=3),
+}
+
+
+@pytest.mark.parametrize("following", list(_NEXT))
+def test_waiting_late_for_a_move_reports_its_own_end_not_the_next_motions(
+    dmc: galil.Controller, following: str
+) -> None:
+    first = dmc.A.move_by(1000)
+    dmc.sleep(1.0)  # over, but nobody looked
+    _NEXT[following](dmc)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (no deviation warning either)
+        result = first.wait(timeout=1.0)
+    assert result.final == {"A": 1000}
+    assert result.deviation == {"A": 0}
+    assert result.stop_codes == {"A": 1}
+
+
+def test_a_late_wait_keeps_the_end_the_first_start_after_it_read(dmc: galil.Controller) -> None:
+    first = dmc.A.move_by(1000)
+    dmc.sleep(1.0)
+    dmc.contour("A", np.linspace(0, 300, 8), dt=3)  # (no handle of its own: first stays)
+    dmc.A.move_by(200).wait()  # (this start reads A at rest too, at 1300)
+    assert first.wait(timeout=1.0).final == {"A": 1000}
+
+
+def test_a_late_wait_keeps_the_stop_code_of_a_limit_that_ended_the_move(
+    dmc: galil.Controller,
+) -> None:
+    sim_of(dmc).place_limit_switches("A", forward=600)
+    first = dmc.A.move_by(1000)
+    dmc.sleep(1.0)
+    dmc.A.move_by(-200)  # away from the switch
+    with pytest.raises(galil.MotionError) as caught:
+        first.wait(timeout=1.0)
+    assert caught.value.stop_codes == {"A": 2}
