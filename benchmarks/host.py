@@ -43,6 +43,7 @@ VALUES = {
     "FL": 2147483647.0,
     "MO": 0.0,
     "SC": 1.0,
+    "TS": 15.0,  # (bits 3 and 2 set: neither limit switch active, as the simulator reads)
 }
 
 
