@@ -31,6 +31,7 @@ def _representatives() -> list[ModelSpec]:
 
 FAMILIES = _representatives()
 MOTION = [s for s in FAMILIES if s.has_axes]
+EVERY_NAME = list({s.name: s for s in MODELS.values()}.values())  # each table entry once
 EVERY = pytest.mark.parametrize("spec", FAMILIES, ids=lambda s: s.name)
 MOVING = pytest.mark.parametrize("spec", MOTION, ids=lambda s: s.name)
 
@@ -304,7 +305,7 @@ def test_the_watchdog_stops_motion_and_a_rio_has_none_to_stop(
     assert dmc.A.stop_code[0] == 4
 
 
-@pytest.mark.parametrize("spec", list({s.name: s for s in MODELS.values()}.values()), ids=str)
+@pytest.mark.parametrize("spec", EVERY_NAME, ids=lambda s: s.name)
 def test_the_watchdog_routine_fits_every_models_lines_and_messages(spec: ModelSpec) -> None:
     if not spec.has_axes:
         return  # refused there
