@@ -153,18 +153,24 @@ class LinkFacade:
             InvalidArgument: not a Command, or one that would change the link's own
                 settings (``RS``, ``CW 1`` ...: see :meth:`command`); nothing is sent.
         """
-        return self.link.send(_prepared(command), timeout=timeout)
+        reply = self.link.send(_prepared(command), timeout=timeout)
+        self._follow_tm([command])
+        return reply
 
     def exchange(self, command: Command, *, timeout: float | None = None) -> Completed:
         """Send a prepared command and return the whole reply (``record`` for QR)."""
-        return self.link.exchange(_prepared(command), timeout=timeout)
+        done = self.link.exchange(_prepared(command), timeout=timeout)
+        self._follow_tm([command])
+        return done
 
     def send_many(self, commands: Iterable[Command], *, timeout: float | None = None) -> list[str]:
         """Send prepared commands back to back (pipelined) and return every reply text."""
         batch = check_items(commands, "commands")
         for c in batch:
             _prepared(c)
-        return self.link.send_many(batch, timeout=timeout)
+        replies = self.link.send_many(batch, timeout=timeout)
+        self._follow_tm(batch)
+        return replies
 
     def query_number(self, text: str, *, timeout: float | None = None) -> float:
         """Send a query (``"MG _TPA"``, ``"TPA"``) and return its one number (as the controller

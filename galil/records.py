@@ -387,6 +387,11 @@ class Records:
         """
         if self._layout is None:
             model = self.link.model
+            if model.qz is None and not model.generic:  # the table says so: QZ would be refused
+                raise InvalidArgument(
+                    f"{model.name} has no binary data record (QR, DR); read operands instead",
+                    model=model.name,
+                )
             try:
                 self._layout = parse_qz(self.link.send(cmds.qz()))
             except CommandError as exc:

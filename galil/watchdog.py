@@ -46,7 +46,7 @@ def watchdog_routine(axes: str) -> Routine:
         f"JP {_LOOP},(TIME-{BEAT})<{LIMIT}",
         cmds.st(axes).text,
         f"{FIRED}=1",
-        'MG "galil watchdog: no heartbeat, motion stopped"',
+        'MG "galil watchdog: motion stopped"',  # within every model's MG text and line
         "EN",
     )
     return Routine(LABEL, lines)
@@ -168,10 +168,16 @@ def check_watchdog_args(
 
     Raises:
         InvalidArgument: a timeout that is not a positive finite number, a thread that does
-            not exist, an interval not shorter than the timeout.
+            not exist, an interval not shorter than the timeout, a model with no axes.
     """
     seconds = check_seconds(timeout, "watchdog timeout", positive=True)  # a period, not a wait
     model = link.model
+    if not model.has_axes:
+        raise InvalidArgument(
+            f"{model.name} is an I/O controller with no axes: the watchdog stops motion, and "
+            "there is none to stop",
+            model=model.name,
+        )
     chosen = model.threads - 1 if thread is None else thread
     if isinstance(chosen, bool) or not isinstance(chosen, int) or not 0 <= chosen < model.threads:
         raise InvalidArgument(

@@ -24,7 +24,7 @@ import numpy.typing as npt
 from galil.codes import tc_text
 from galil.errors import CommandError, InvalidArgument
 from galil.predict.contour_queue import ContourQueue
-from galil.predict.smoothing import IT_MAX, IT_MIN, SmoothCache
+from galil.predict.smoothing import IT_MAX, IT_STORED_MIN, SmoothCache
 
 __all__ = [
     "FRACTION",
@@ -570,11 +570,12 @@ class AxisProfiler:
     def _check_smoothing(self, smoothing: float | None) -> float:
         if smoothing is None:
             return 1.0
-        if not (IT_MIN <= smoothing <= IT_MAX):
+        if not (IT_STORED_MIN <= smoothing <= IT_MAX):
             raise InvalidArgument(
-                f"smoothing (IT) must be in [{IT_MIN}, {IT_MAX}], got {smoothing!r}"
+                f"smoothing (IT) must be in [{IT_STORED_MIN}, {IT_MAX}], got {smoothing!r}"
             )
-        return float(smoothing)
+        # IT 0.004 is held as 1/256 (read back as 0.0039): the smallest step filters with it.
+        return max(float(smoothing), 1 / 256)
 
     # ---- commands ----------------------------------------------------------------------
     def begin_move(

@@ -22,6 +22,7 @@ __all__ = [
     "END_LOOKAHEAD",
     "IT_MAX",
     "IT_MIN",
+    "IT_STORED_MIN",
     "PAGE",
     "SmoothCache",
     "quantise_it",
@@ -30,6 +31,10 @@ __all__ = [
 ]
 
 IT_MIN, IT_MAX = IT_RANGE
+#: The smallest IT a controller holds: IT 0.004 (the command's minimum) is stored as one step
+#: of 1/256, which ``MG _ITA`` prints as 0.0039. A profiler takes IT from this value up, and a
+#: value between it and the step (a 4-decimal reading) as that step.
+IT_STORED_MIN = 0.0039
 #: Samples per smoothing page. 256 keeps the matrix small (512 KiB) and c**256 well above
 #: underflow even at IT = 1/256.
 PAGE = 256

@@ -600,9 +600,21 @@ def ip(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Co
     return _plain(_axis_command("IP", values, by_axis, model))
 
 
+def _least_it(value: object, model: ModelSpec | None) -> object:
+    """IT's smallest step, 1/256 (``MG _ITA`` prints 0.0039), goes out as the 0.004 that sets
+    it: the command takes 0.004 .. 1 and the controller holds IT in 1/256ths."""
+    low = IT_RANGE[0] if model is None else model.it_range[0]
+    if type(value) is float and 1 / 256 - 1e-4 < value < low:
+        return low
+    return value
+
+
 def it(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
-    """IT: independent time constant (smoothing), 0.004 .. 1."""
-    return _plain(_axis_command("IT", values, by_axis, model))
+    """IT: independent time constant (smoothing), 0.004 .. 1 (1/256, what IT 0.004 sets, as
+    0.004)."""
+    fields = tuple(_least_it(v, model) for v in values)
+    named = {k: _least_it(v, model) for k, v in by_axis.items()}
+    return _plain(_axis_command("IT", fields, named, model))
 
 
 def dp(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
@@ -995,7 +1007,8 @@ def vt(smoothing: object, plane: str = "S", *, model: ModelSpec | None = None) -
             f"{model.name} has no VT; its sequences are smoothed by the axes' IT", model=model.name
         )
     lo, hi = IT_RANGE if model is None else model.it_range
-    return _plane_value("VT", smoothing, lo, hi, plane, None if model is None else model.name)
+    value = _least_it(smoothing, model)
+    return _plane_value("VT", value, lo, hi, plane, None if model is None else model.name)
 
 
 def ga(*masters: str | None, model: ModelSpec | None = None, **by_axis: str) -> Command:
