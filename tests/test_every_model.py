@@ -146,6 +146,9 @@ def test_limit_switches_stop_a_jog_and_soft_limits_refuse_outward_moves(
         jog.wait(timeout=5)
     assert a.stop_code[0] == 2
     assert a.switches.forward_limit
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(galil.InvalidArgument):
+        a.jog(10_000)  # on into the active switch: refused, not sent to meet TC 22
+    a.jog(-10_000).stop()  # off it: fine
 
 
 @MOVING
