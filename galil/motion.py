@@ -1103,6 +1103,7 @@ def stop_on_error(
     letters: str,
     *,
     stop: Callable[[], None] | None = None,
+    running: bool = False,
 ) -> Iterator[None]:
     """The guard of an operation that starts or changes the motion of ``letters`` (``"S"``:
     a vector sequence): if it raises anything that may have come once its line went out (a
@@ -1113,6 +1114,9 @@ def stop_on_error(
 
     Args:
         stop: sends the stop (default: ``ST`` on ``letters`` through the tracker).
+        running: the motion runs already and the block sends the rest of it (a streamed
+            path's later segments): a refusal of one of those stops it too (what follows it
+            would never be sent); only a :class:`MotionError` (the motion is over) passes.
 
     Raises:
         MotionError: from the exception, naming the axes that may still move, when the stop
@@ -1120,9 +1124,9 @@ def stop_on_error(
     """
     try:
         yield
-    except _NOTHING_RAN:
-        raise
     except BaseException as exc:
+        if isinstance(exc, MotionError if running else _NOTHING_RAN):
+            raise
         if tracker is not None and tracker.closed and isinstance(exc, GalilConnectionError):
             raise  # close() stopped the motion before it closed the link
         reopen = None if tracker is None else tracker.reconnect

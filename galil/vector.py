@@ -570,7 +570,7 @@ class VectorStream:
         with lock, stop_on_error(link, tracker, PLANE):  # no other thread's motion from the
             handle, texts, first = self._begin(tracker)  # state read to the handle
         if first < len(texts):
-            with stop_on_error(link, tracker, PLANE, stop=handle.stop):
+            with stop_on_error(link, tracker, PLANE, stop=handle.stop, running=True):
                 self._feed(handle, texts, first, lock)
         return handle
 

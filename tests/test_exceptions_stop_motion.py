@@ -33,7 +33,7 @@ from client_fakes import SimLinkWrapper
 
 from galil import Line
 from galil.controller import Controller
-from galil.errors import GalilConnectionError, GalilError
+from galil.errors import CommandError, GalilConnectionError, GalilError
 from galil.sim.clock import ManualClock
 from galil.sim.controller import SimController
 from galil.sim.link import open_transport
@@ -325,3 +325,29 @@ def test_an_exception_at_any_call_leaves_no_motion_running(op: Op, model: str) -
             except AssertionError as exc:
                 failures.append(str(exc).splitlines()[0])
     assert not failures, f"{len(failures)} of {runs}:\n" + "\n".join(failures[:30])
+
+
+@dataclass
+class RefuseThirdFeed(SimLinkWrapper):
+    """The simulator's link, whose third streamed write of a path starts with a segment the
+    controller refuses (``VP`` out of range: ``?``, TC 6), the sequence already running."""
+
+    feeds: int = 0
+
+    def write(self, data: bytes) -> None:
+        if data.startswith(b"VP"):
+            self.feeds += 1
+            if self.feeds == 3:
+                data = b"VP 99999999999,0" + data[data.index(b";") :]
+        self.inner.write(data)
+
+
+def test_a_segment_refused_while_streaming_stops_the_running_sequence() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    wire = RefuseThirdFeed(open_transport("sim://DMC-4040", controller=sim))
+    with Controller(lambda: wire, timeout=0.5) as dmc:
+        with pytest.raises(CommandError):
+            dmc.vector_move("AB", ZIGZAG, speed=3000, accel=512_000, decel=512_000)
+        assert wire.feeds >= 3
+        sim.advance(SETTLE)
+        assert dmc.query_operands(["_BGS", "_BGA", "_BGB"]) == [0, 0, 0]
