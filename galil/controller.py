@@ -983,14 +983,23 @@ def _weakly(
 def _reopener(controller: Controller) -> Callable[[], None]:
     """What reopens ``controller``'s link so that a stop can be sent after a failed start
     (:func:`~galil.motion.stop_on_error`): a link that died, never one closed on purpose.
-    It holds the controller weakly (a controller dropped unclosed is closed when collected)."""
+    It holds the controller weakly (a controller dropped unclosed is closed when collected).
+
+    Its caller holds the tracker's lock, which ``reset()`` and ``close()`` take inside the
+    life lock: it waits for the life lock no longer than the link's timeout (for ever would
+    be a deadlock with a reset in another thread), then gives up as a failed reopen would."""
     ref = weakref.ref(controller)
 
     def reopen() -> None:
         c = ref()
         if c is None or not c.link.dead:
             raise GalilConnectionError("the link is closed, not dead: it is not reopened")
-        c.reconnect()
+        if not c._life.acquire(timeout=c.link.timeout):
+            raise GalilConnectionError("another thread is closing, resetting or reopening the link")
+        try:
+            c.reconnect()
+        finally:
+            c._life.release()
 
     return reopen
 

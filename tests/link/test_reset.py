@@ -7,14 +7,20 @@ from __future__ import annotations
 
 import contextlib
 import os
+import threading
+import time
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 
 import pytest
+from client_fakes import SimLinkWrapper
 
 import galil
+from galil.errors import GalilConnectionError, GalilError
 from galil.protocol.commands import Command
-from galil.sim.clock import RealTimeClock
+from galil.sim.clock import ManualClock, RealTimeClock
 from galil.sim.controller import SimController
+from galil.sim.link import open_transport
 from galil.sim.server import SimTcpServer
 from galil.testing import nothing_sent, sim_of, simulated, transcript
 
@@ -184,3 +190,59 @@ def test_over_a_pty_auto_output_stays_a_message_after_reset(
         assert c.query_number("MG 3") == 3.0
         with pytest.raises(galil.InvalidArgument):
             c.command("EO 1")
+
+
+@dataclass
+class _DiesAtBegin(SimLinkWrapper):
+    """The simulator's link; at the first ``BG`` written it calls ``on_death`` (once), then
+    fails as a pulled cable does."""
+
+    on_death: Callable[[], None] | None = None
+
+    def write(self, data: bytes) -> None:
+        if b"BG" in data and self.on_death is not None:
+            hook, self.on_death = self.on_death, None
+            hook()
+            raise GalilConnectionError("the cable was pulled")
+        self.inner.write(data)
+
+
+def test_a_reset_while_another_threads_start_loses_the_link_does_not_deadlock() -> None:
+    # The start holds the tracker's lock and wants the life lock to reopen the link for its
+    # stop; reset() holds the life lock and wants the tracker's for its ST.
+    sim = SimController("DMC-4040", ManualClock())
+    wires: list[_DiesAtBegin] = []
+
+    def opener() -> _DiesAtBegin:
+        wires.append(_DiesAtBegin(open_transport("sim://DMC-4040", controller=sim)))
+        return wires[-1]
+
+    dmc = galil.Controller(opener, timeout=0.2, reconnect=False)
+    resetter = threading.Thread(target=lambda: _quietly(dmc.reset), daemon=True)
+
+    def reset_meanwhile() -> None:
+        resetter.start()
+        while dmc._life.acquire(blocking=False):  # until reset() holds the life lock
+            dmc._life.release()
+            time.sleep(0.001)
+
+    wires[-1].on_death = reset_meanwhile
+    caught: list[BaseException] = []
+    mover = threading.Thread(target=lambda: _quietly(lambda: dmc.A.move_by(1000), caught))
+    mover.daemon = True
+    mover.start()
+    mover.join(5)
+    resetter.join(5)
+    assert not mover.is_alive(), "deadlocked"
+    assert not resetter.is_alive(), "deadlocked"
+    assert len(caught) == 1
+    assert isinstance(caught[0], GalilError)
+    dmc.close()
+
+
+def _quietly(call: Callable[[], object], caught: list[BaseException] | None = None) -> None:
+    try:
+        call()
+    except GalilError as exc:
+        if caught is not None:
+            caught.append(exc)
