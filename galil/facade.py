@@ -182,8 +182,9 @@ class LinkFacade:
         return self.link.query_numbers(text, timeout=timeout)
 
     def query_operands(self, names: Sequence[str], *, timeout: float | None = None) -> list[float]:
-        """Read operands or variables (``["_TPA", "_SCA", "speed"]``) in as few lines as fit,
-        each asked for in ``{Z10.4}``: no ``VF`` or ``LZ`` changes what is read (decision 0032)."""
+        """Read operands or variables (``["_TPA", "_SCA", "speed"]``) in as few lines as fit:
+        no ``VF`` or ``LZ`` changes what is read (plain ``MG``, asked again with each item in
+        ``{Z10.4}`` when the reply may be another format: decision 0032)."""
         return self.link.query_operands(names, timeout=timeout)
 
     def sleep(self, seconds: float) -> None:
