@@ -70,6 +70,12 @@ SCHEDULE_BEGIN = "gsbegin"
 _GUARD_WAIT = 30.0
 # Stop codes of a forward and a reverse limit (switch or soft limit).
 _LIMIT_CODES = (2, 3)
+#: Stop codes of a fault that ended a move early, the motor often off: the abort input (6),
+#: off-on-error (8), a selective abort input (11), an encoder failure (12), an amplifier fault
+#: (15), a stepper's position maintenance error (16), EtherCAT (70, 71). Like a limit's, a
+#: fault's end is not the prediction's, and ``wait()`` raises (not a stop the host commanded).
+_FAULT_CODES = (6, 8, 11, 12, 15, 16, 70, 71)
+_EARLY_CODES = frozenset(_LIMIT_CODES + _FAULT_CODES)
 
 #: Track kinds of HM, FE and FI (:mod:`galil.homing`).
 HOMING_KINDS = frozenset({"home", "edge", "index"})
@@ -804,7 +810,7 @@ class MoveHandle:
             profiles = self.profiles
             predicted: dict[str, int] = {}
             for a, t in self._tracks.items():
-                if t.exact and not t.open_jog and stop[a] not in _LIMIT_CODES:
+                if t.exact and not t.open_jog and stop[a] not in _EARLY_CODES:
                     predicted[a] = profiles[a].end
             deviation = {a: final[a] - v for a, v in predicted.items()}
             self._result = MoveResult(
@@ -862,9 +868,11 @@ class MoveHandle:
             InvalidArgument: a timeout that is not ``None`` or a finite number of seconds
                 >= 0 (:func:`~galil.link.check_wait_timeout`), before anything is sent.
             GalilTimeoutError: the move did not finish in time (it is NOT stopped).
-            MotionError: an axis stopped on a limit switch or soft limit, or a limit stopped
-                an axis geared to one of them (its gearing is then off); raised once the
-                move's own axes are done, so nothing of the move is left moving.
+            MotionError: an axis stopped on a limit switch or soft limit, or on a fault
+                (off-on-error, an abort input, an amplifier or encoder fault: stop codes 6,
+                8, 11, 12, 15, 16, 70, 71), or a limit stopped an axis geared to one of them
+                (its gearing is then off); raised once the move's own axes are done, so
+                nothing of the move is left moving.
 
         Anything else that interrupts the wait (Ctrl-C, a dead link, no reply) stops the move
         before it propagates (:func:`stop_on_error`).
@@ -941,7 +949,7 @@ class MoveHandle:
             link.pause(pause)
 
     def _raise_if_limited(self, result: MoveResult) -> None:
-        limited = {a: c for a, c in result.stop_codes.items() if c in _LIMIT_CODES}
+        limited = {a: c for a, c in result.stop_codes.items() if c in _EARLY_CODES}
         dropped = {
             f: c for f, c in result.follower_stop_codes.items() if self._followers[f].dropped_by(c)
         }

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import re
+import warnings
 from collections.abc import Callable
 
 import pytest
@@ -13,7 +14,7 @@ import pytest
 import galil
 import galil.aio as aio
 from galil.errors import InvalidArgument, LimitError
-from galil.testing import nothing_sent, sim_of, transcript
+from galil.testing import nothing_sent, sim_of, simulated, transcript
 
 
 def _begins(lines: list[str]) -> list[str]:
@@ -223,3 +224,18 @@ def test_a_jog_on_past_a_soft_limit_the_axis_is_beyond_is_refused_before_sending
     jog = dmc.A.jog(3000)  # back inside: allowed
     jog.stop()
     jog.wait()
+
+
+def test_a_move_that_off_on_error_ends_raises_in_wait_not_a_deviation_warning() -> None:
+    with simulated() as dmc:
+        dmc.command("OE 1,1,1,1")
+        dmc.A.error_limit = 5  # the servo lag's error passes 5 counts at once
+        handle = dmc.A.move_by(200_000)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # no "ended ... counts away" warning
+            with pytest.raises(galil.MotionError, match="Off on Error") as info:
+                handle.wait()
+        assert info.value.stop_codes == {"A": 8}
+        assert handle.result.stop_codes == {"A": 8}
+        assert handle.result.predicted == {}  # a fault's end is not the prediction's
+        assert dmc.query_operands(["_MOA", "_BGA"]) == [1, 0]  # the motor is off, at rest
