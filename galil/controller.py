@@ -248,7 +248,9 @@ class Resetting:
         wait = check_timeout(timeout, RESET_WAIT)
         link = self.link
         _refuse_closed(link)
-        with self._life:
+        # The tracker's lock from the stop to the end: no other thread's start can come
+        # between the stop and RS (RS would end it unseen) or meet a link half set up.
+        with self._life, self.tracker.lock:
             _stop_and_settle(link, self.tracker, wait)
             dogs = [d for d in self._watchdogs if d.beating]
             for dog in dogs:

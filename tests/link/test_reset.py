@@ -9,6 +9,7 @@ import contextlib
 import os
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
@@ -246,3 +247,26 @@ def _quietly(call: Callable[[], object], caught: list[BaseException] | None = No
     except GalilError as exc:
         if caught is not None:
             caught.append(exc)
+
+
+def test_a_start_from_another_thread_during_reset_runs_after_it_not_killed_by_rs(
+    dmc: galil.Controller,
+) -> None:
+    handles: list[galil.MoveHandle] = []
+    mover = threading.Thread(target=lambda: handles.append(dmc.B.move_by(1000)))
+    suspend = dmc.records_room.suspend
+
+    def start_a_move_meanwhile() -> None:  # (between reset()'s stop and its RS)
+        mover.start()
+        mover.join(0.5)  # long enough for the start to go out, unless it has to wait
+        suspend()
+
+    dmc.records_room.suspend = start_a_move_meanwhile  # type: ignore[method-assign]
+    dmc.reset()
+    mover.join(5)
+    assert not mover.is_alive()
+    (handle,) = handles
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a move RS ended would end away from its prediction
+        result = handle.wait()
+    assert result.final == result.predicted == {"B": 1000}
