@@ -518,8 +518,17 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
                 "this Controller was given a transport object; reconnect needs an address "
                 "(use galil.connect(address))"
             )
+        self._reconnect(None)
+
+    def _reconnect(self, life_timeout: float | None) -> None:
+        """:meth:`reconnect`, waiting for the life lock at most ``life_timeout`` s (``None``:
+        for ever). A reopen from inside a start holds the tracker's lock, which ``close()`` and
+        ``reset()`` take inside the life lock: it must not wait for ever (a deadlock with them
+        in another thread), so it gives up as a failed reopen does."""
         seen = self._generation
-        with self._life:
+        if not self._life.acquire(timeout=-1 if life_timeout is None else life_timeout):
+            raise GalilConnectionError("another thread is closing, resetting or reopening the link")
+        try:
             if self._generation != seen and self.link.is_open and not self.link.dead:
                 return  # another thread reconnected while this one waited
             with self.link.reopening():  # commands meanwhile wait for the new link
@@ -528,6 +537,8 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
                 self._open(None)
                 self.records_room.resume()
                 self.interrupts.reopen()
+        finally:
+            self._life.release()
 
     def _reopen_dead_link(self, error: GalilConnectionError) -> None:
         """The automatic reconnect (:class:`ReconnectPolicy`), called by the link."""
@@ -536,7 +547,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         delay = policy.delay
         for attempt in range(1, policy.attempts + 1):
             try:
-                self.reconnect()
+                self._reconnect(self.link.timeout)  # (maybe inside a start: see _reconnect)
             except GalilConnectionError as exc:
                 _LOG.warning(
                     "galil: reconnect %d/%d to %s failed: %s",
@@ -996,12 +1007,7 @@ def _reopener(controller: Controller) -> Callable[[], None]:
         c = ref()
         if c is None or not c.link.dead:
             raise GalilConnectionError("the link is closed, not dead: it is not reopened")
-        if not c._life.acquire(timeout=c.link.timeout):
-            raise GalilConnectionError("another thread is closing, resetting or reopening the link")
-        try:
-            c.reconnect()
-        finally:
-            c._life.release()
+        c._reconnect(c.link.timeout)
 
     return reopen
 

@@ -270,3 +270,36 @@ def test_a_start_from_another_thread_during_reset_runs_after_it_not_killed_by_rs
         warnings.simplefilter("error")  # a move RS ended would end away from its prediction
         result = handle.wait()
     assert result.final == result.predicted == {"B": 1000}
+
+
+@pytest.mark.parametrize("other", ["close", "reset"])
+def test_the_automatic_reconnect_inside_a_start_does_not_deadlock_a_close_or_reset(
+    other: str,
+) -> None:
+    # The start holds the tracker's lock and its link's automatic reconnect wants the life
+    # lock; close() or reset() in another thread holds the life lock and wants the tracker's.
+    sim = SimController("DMC-4040", ManualClock())
+    wires: list[_DiesAtBegin] = []
+
+    def opener() -> _DiesAtBegin:
+        wires.append(_DiesAtBegin(open_transport("sim://DMC-4040", controller=sim)))
+        return wires[-1]
+
+    policy = galil.ReconnectPolicy(attempts=2, delay=0.01)
+    dmc = galil.Controller(opener, timeout=0.2, reconnect=policy)
+    closer = threading.Thread(target=lambda: _quietly(getattr(dmc, other)), daemon=True)
+
+    def close_meanwhile() -> None:
+        closer.start()
+        while dmc._life.acquire(blocking=False):  # until the other thread holds the life lock
+            dmc._life.release()
+            time.sleep(0.001)
+
+    wires[-1].on_death = close_meanwhile
+    mover = threading.Thread(target=lambda: _quietly(lambda: dmc.A.move_by(1000)), daemon=True)
+    mover.start()
+    mover.join(10)
+    closer.join(10)
+    assert not mover.is_alive(), "deadlocked"
+    assert not closer.is_alive(), "deadlocked"
+    dmc.close()
