@@ -314,6 +314,7 @@ class MotionTracker:
         #: Set by a controller's close(), which stops what the library started itself: a
         #: call that then finds the link closed has nothing left to stop.
         self.closed = False
+        self._schedule: MoveHandle | None = None  # the last speed schedule started
 
     def end_watches(self) -> None:
         """The link was closed: every move's :meth:`~MoveHandle.add_callback` watcher ends."""
@@ -353,9 +354,20 @@ class MotionTracker:
         with self.lock:
             for a in handle.axes + handle.followers:
                 self._active[a] = handle
+            if handle.kind == "schedule":
+                self._schedule = handle
             if threading.get_ident() in self._refused:
                 with contextlib.suppress(GalilError):  # (whoever refused stops it again)
                     handle.stop()
+
+    def schedule_starting(self) -> None:
+        """A speed schedule is about to reset the variable its program stamps its begin in
+        (:data:`SCHEDULE_BEGIN`): the last schedule's begin, if nobody read it yet, is read
+        now (one query), or its handle would later read the new schedule's."""
+        with self.lock:
+            earlier = self._schedule
+            if earlier is not None:
+                earlier.begin_known()
 
     def refuse_starts(self, thread: int) -> None:
         """Stop the motion ``thread`` starts from now on the moment it registers (a handle
@@ -613,12 +625,15 @@ class MoveHandle:
         ``profile.position[k]`` is the predicted reference at sample ``begin + k``; use it to
         line recorded data up with the prediction.
         """
-        out: dict[str, int | None] = {}
-        for a, t in self._tracks.items():
+        self.begin_known()
+        return {a: t.begin for a, t in self._tracks.items()}
+
+    def begin_known(self) -> None:
+        """Read the begin of a speed schedule's program if it is not known yet (one query;
+        none for other moves)."""
+        for t in self._tracks.values():
             if t.begin is None and t.kind == "schedule":
                 self._schedule_begin(t)
-            out[a] = t.begin
-        return out
 
     def _schedule_begin(self, track: Track) -> None:
         # The downloaded program stores TIME right after its BG; -1 until it has run.
@@ -761,12 +776,17 @@ class MoveHandle:
     def _end_axis(self, letter: str, rp: int, sc: int) -> None:
         """``letter`` was read at rest at ``rp`` with stop code ``sc`` by the start of other
         motion (:meth:`MotionTracker.ended`): its part of this move ended there, and later
-        polls leave it out (they would see the other motion). A schedule whose program has
-        not yet begun its move is not over."""
+        polls leave it out (they would see the other motion). A schedule whose begin nobody
+        read reads it now (one query); one whose program has not yet begun its move is not
+        over."""
         with self._lock:
             t = self._tracks.get(letter)
-            if self._done or t is None or (t.kind == "schedule" and t.begin is None):
+            if self._done or t is None:
                 return
+            if t.kind == "schedule" and t.begin is None:
+                self._schedule_begin(t)
+                if t.begin is None:
+                    return
             self._ended.setdefault(letter, (rp, sc))  # (a later start reads later motion)
 
     @property

@@ -804,6 +804,7 @@ def _speed_schedule(
         check_followers(link, gears, geared, limits)
     program = _schedule_program(link, a, label, first, distance, schedule)
     routines.install(Routine(f"#{label}", tuple(program)))  # beside the user's program
+    tracker.schedule_starting()  # (the line below resets the begin it may not have read)
     link.command_line([cmds.assign(SCHEDULE_BEGIN, -1)])
     run = object()  # this schedule's hold on thread 0
     try:

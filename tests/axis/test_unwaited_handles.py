@@ -62,3 +62,37 @@ def test_a_late_wait_keeps_the_stop_code_of_a_limit_that_ended_the_move(
     with pytest.raises(galil.MotionError) as caught:
         first.wait(timeout=1.0)
     assert caught.value.stop_codes == {"A": 2}
+
+
+def _schedule(axis: galil.Axis) -> galil.MoveHandle:
+    return axis.speed_schedule(-12_000, [(4000, 8000), (8000, 3000)], speed=15_000)
+
+
+def _time(dmc: galil.Controller) -> int:
+    return round(dmc.query_operands(["TIME"])[0])
+
+
+@pytest.mark.parametrize("following", ["move", "jog"])
+def test_a_late_wait_on_a_speed_schedule_reports_its_own_end_when_nobody_read_its_begin(
+    dmc: galil.Controller, following: str
+) -> None:
+    first = _schedule(dmc.A)
+    dmc.sleep(3.0)  # over, but nobody looked (nor read its begin)
+    _NEXT[following](dmc)
+    result = first.wait(timeout=1.0)
+    assert result.final == {"A": -12_000}
+    assert result.stop_codes == {"A": 1}
+
+
+def test_a_speed_schedules_begin_stays_its_own_after_the_next_schedule_starts(
+    dmc: galil.Controller,
+) -> None:
+    before_a = _time(dmc)
+    first = _schedule(dmc.A)
+    first.wait()
+    before_b = _time(dmc)
+    second = _schedule(dmc.B)
+    second.wait()
+    begin_a, begin_b = first.begin["A"], second.begin["B"]
+    assert begin_a is not None and begin_b is not None
+    assert before_a <= begin_a < before_b <= begin_b
