@@ -209,15 +209,21 @@ class VectorHandle(MoveHandle):
         return PLANE
 
     def stop(self) -> None:
-        """Decelerate the sequence to a stop along its path at VD (``ST S``)."""
+        """Decelerate the sequence to a stop along its path at VD (``ST S``).
+
+        ``ST S`` reaches the sequence only: once it is over (seen done, or an axis of it read
+        at rest by a later start), what now runs on its axes (a gearing, a jog, a contour)
+        is not told of a stop it never gets."""
         link = self._link
         if self._tracker is None:
             replies = link.command_line([cmds.st(PLANE, model=link.model), cmds.time_stamp()])
             self.add_event(self.axes[0], sample_of(replies[-1]), predict.Stop)
             return
         with self._tracker.lock:  # (between a streamed line and the next: see _feed)
+            over = self._done or bool(self._ended)
             replies = link.command_line([cmds.st(PLANE, model=link.model), cmds.time_stamp()])
-            self._tracker.notify(self.axes, sample_of(replies[-1]), predict.Stop)
+            if not over:
+                self._tracker.notify(self.axes, sample_of(replies[-1]), predict.Stop)
 
 
 def _path_master(counts: predict.VectorProfile, gear: GearLink) -> predict.Profile:

@@ -8,6 +8,7 @@ axis followed a master, never ended at all.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Callable
 
@@ -72,7 +73,7 @@ def _time(dmc: galil.Controller) -> int:
     return round(dmc.query_operands(["TIME"])[0])
 
 
-@pytest.mark.parametrize("following", ["move", "jog"])
+@pytest.mark.parametrize("following", list(_NEXT))
 def test_a_late_wait_on_a_speed_schedule_reports_its_own_end_when_nobody_read_its_begin(
     dmc: galil.Controller, following: str
 ) -> None:
@@ -96,3 +97,29 @@ def test_a_speed_schedules_begin_stays_its_own_after_the_next_schedule_starts(
     begin_a, begin_b = first.begin["A"], second.begin["B"]
     assert begin_a is not None and begin_b is not None
     assert before_a <= begin_a < before_b <= begin_b
+
+
+def test_a_late_stop_of_a_vector_sequence_leaves_the_gearing_on_its_axis_engaged(
+    dmc: galil.Controller,
+) -> None:
+    sequence = dmc.vector_move("CD", [Line(0, 1)], speed=20000)
+    dmc.sleep(1.0)  # over, but nobody looked
+    dmc.C.gear_to("A", -1.5)
+    sequence.stop()  # (ST S: the sequence is over, the gearing runs on)
+    master = dmc.A.move_by(1000)
+    assert master.followers == "C"
+    assert master.wait().follower_final == {"C": -1500}
+
+
+def test_a_late_stop_of_a_vector_sequence_leaves_a_jog_on_its_axis_running(
+    dmc: galil.Controller,
+) -> None:
+    sequence = dmc.vector_move("CD", [Line(0, 1)], speed=20000)
+    dmc.sleep(1.0)
+    jog = dmc.C.jog(3000)
+    sequence.stop()
+    dmc.sleep(0.5)
+    assert math.isinf(jog.duration)
+    assert dmc.query_operands(["_BGC"]) == [1.0]
+    jog.stop()
+    assert jog.wait().stop_codes == {"C": 4}
