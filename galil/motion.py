@@ -52,6 +52,7 @@ __all__ = [
     "as_stored",
     "held",
     "motion_guard",
+    "motors_off",
     "refuse_dropped",
     "sample_of",
     "send_reopening",
@@ -1068,6 +1069,28 @@ def _send_st(link: CommandLink, tracker: MotionTracker | None, letters: str) -> 
         replies = link.command_line([cmds.st(letters, model=link.model), cmds.time_stamp()])
         if tracker is not None:
             tracker.notify(letters or link.model.axes, sample_of(replies[-1]), predict.Stop)
+
+
+def motors_off(link: CommandLink, letters: str) -> None:
+    """``MO`` on ``letters`` (``""``: every axis), refused before it is sent while one of them
+    moves (``_BG`` 1: a move, a jog, a sequence, a gear follower, a program's motion): the
+    controller refuses MO in motion (TC 7; the DMC-4103 reference: "Not Valid while in
+    motion"). One query before the line.
+
+    Raises:
+        InvalidArgument: an axis moving (stop it and wait first); only the query went out.
+    """
+    command = cmds.mo(letters, model=link.model)
+    read = letters or link.model.axes
+    moving = link.query_operands([f"_BG{a}" for a in read])
+    busy = "".join(a for a, v in zip(read, moving, strict=True) if round(v))
+    if busy:
+        raise InvalidArgument(
+            f"motor off refused: {busy} moving, and the controller refuses MO in motion "
+            "(TC 7); stop the motion and wait for it first",
+            model=link.model.name,
+        )
+    link.command_line([command])
 
 
 def abort_all(link: CommandLink, tracker: MotionTracker | None) -> None:
