@@ -247,11 +247,12 @@ def test_motor_off_on_a_moving_axis_is_refused_before_mo_goes_out(
     dmc: galil.Controller, axes: str
 ) -> None:
     jog = dmc.B.jog(3000)
-    with nothing_sent(dmc, allow_queries=True) as sent:
-        with pytest.raises(InvalidArgument, match=r"B moving.*MO in motion \(TC 7\).*stop"):
-            dmc.motor_off(axes)
+    refused = pytest.raises(InvalidArgument, match=r"B moving.*MO in motion \(TC 7\).*stop")
+    with nothing_sent(dmc, allow_queries=True) as sent, refused:
+        dmc.motor_off(axes)
     assert len(sent.lines) == 1  # the one state query
-    assert dmc.A.motor_on and dmc.B.motor_on
+    assert dmc.A.motor_on
+    assert dmc.B.motor_on
     jog.stop()
     jog.wait()
     dmc.motor_off(axes)  # at rest: it goes out

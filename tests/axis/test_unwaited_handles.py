@@ -95,7 +95,8 @@ def test_a_speed_schedules_begin_stays_its_own_after_the_next_schedule_starts(
     second = _schedule(dmc.B)
     second.wait()
     begin_a, begin_b = first.begin["A"], second.begin["B"]
-    assert begin_a is not None and begin_b is not None
+    assert begin_a is not None
+    assert begin_b is not None
     assert before_a <= begin_a < before_b <= begin_b
 
 
