@@ -240,9 +240,12 @@ def sample_of(reply: str) -> int | None:
         return None
 
 
-def predict_track(link: CommandLink, t: Track) -> predict.Profile:
-    """Predict one axis's motion from its start and every change recorded since."""
-    ts = link.sample_period
+def predict_track(
+    link: CommandLink, t: Track, *, sample_period: float | None = None
+) -> predict.Profile:
+    """Predict one axis's motion from its start and every change recorded since, at
+    ``sample_period`` (default: the link's, the TM in force now)."""
+    ts = link.sample_period if sample_period is None else sample_period
     p = t.params
     if t.fixed is not None:
         profile = t.fixed
@@ -579,6 +582,8 @@ class MoveHandle:
         self._tracker = tracker
         self.kind = kind
         self.started_at = link.clock()
+        # The TM the move ran at: a TM sent once it is over (unseen) must not re-predict it.
+        self._sample_period = link.sample_period
         self._done = False
         self._result: MoveResult | None = None
         self._callbacks: list[Callable[[MoveHandle], None]] = []
@@ -689,7 +694,7 @@ class MoveHandle:
         return next(iter(self.profiles.values()))
 
     def _predict(self, letter: str, t: Track) -> predict.Profile:
-        profile = predict_track(self._link, t)
+        profile = predict_track(self._link, t, sample_period=self._sample_period)
         show = self._display.get(letter)
         return profile if show is None else show(profile)
 
@@ -718,8 +723,8 @@ class MoveHandle:
     ) -> None:
         """Record a change sent at controller ``sample`` (``make`` builds it from its time).
 
-        ``make=None`` is an abort. A change after the predicted end of a position move is
-        ignored: the move was over when it arrived.
+        ``make=None`` is an abort. A change after the predicted end of a position move (or
+        of a stopped jog) is ignored: the move was over when it arrived.
         """
         with self._lock:
             self._forget_followers(letter)
@@ -732,12 +737,12 @@ class MoveHandle:
                 return
             k = sample - t.begin
             current = self.profiles[letter]
-            if t.kind == "position" and k > current.samples:
-                return
+            if (t.kind == "position" or t.stopped) and k > current.samples:
+                return  # (over by then: a stopped jog's end is known)
             if make is None:
                 t.aborted = sample
             else:
-                event = make(k * self._link.sample_period)
+                event = make(k * self._sample_period)
                 t.events.append(event)
                 if isinstance(event, predict.Stop):
                     t.stopped = True

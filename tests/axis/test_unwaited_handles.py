@@ -124,3 +124,33 @@ def test_a_late_stop_of_a_vector_sequence_leaves_a_jog_on_its_axis_running(
     assert dmc.query_operands(["_BGC"]) == [1.0]
     jog.stop()
     assert jog.wait().stop_codes == {"C": 4}
+
+
+def test_a_change_after_a_tm_change_leaves_an_unseen_stopped_jog_predicted_at_its_own_tm(
+    dmc: galil.Controller,
+) -> None:
+    dmc.command("TM 250")
+    jog = dmc.C.jog(-30000)
+    ran_at = jog.profile.sample_period
+    dmc.sleep(0.02)
+    dmc.stop("C")
+    dmc.sleep(1.0)  # over, but nobody looked
+    dmc.command("TM 500")
+    dmc.C.accel = 20480  # (re-predicts the jog: at the TM it ran at)
+    assert jog.profile.sample_period == ran_at
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert jog.wait().deviation == {"C": 0}
+
+
+def test_a_change_after_a_stopped_jogs_end_leaves_its_prediction_as_it_was(
+    dmc: galil.Controller,
+) -> None:
+    jog = dmc.C.jog(-30000)
+    dmc.sleep(0.02)
+    dmc.stop("C")
+    before = jog.profile
+    dmc.sleep(1.0)  # over, but nobody looked
+    dmc.C.accel = 20480
+    assert jog.profile.samples == before.samples
+    assert jog.duration == before.duration < 0.1
