@@ -621,6 +621,7 @@ class Axis:
 
         Raises:
             InvalidArgument: moving, motor off, SP or HV 0, or into an active limit switch.
+            LimitError: on past a soft limit it is beyond already (FE and FI too).
         """
         return self._homing.start("HM", switch, display=self._display)
 

@@ -223,3 +223,20 @@ def test_a_jog_on_past_a_soft_limit_the_axis_is_beyond_is_refused_before_sending
     jog = dmc.A.jog(3000)  # back inside: allowed
     jog.stop()
     jog.wait()
+
+
+@pytest.mark.parametrize("start", ["home", "find_edge", "find_index"])
+def test_homing_on_past_a_soft_limit_the_axis_is_beyond_is_refused_before_sending(
+    dmc: galil.Controller, start: str
+) -> None:
+    dmc.A.move_to(9000).wait()
+    dmc.A.soft_limits = (None, 5000)
+    dmc.A.jog_speed = 25000  # (FI's direction: forward)
+    dmc.A.home_speed = 2000
+    sim_of(dmc).set_home_switch("A", edge=20000, index_period=2000)  # ahead: HM, FE go forward
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError, match="TC 22"):
+        getattr(dmc.A, start)()
+    dmc.A.soft_limits = (None, None)
+    homing = getattr(dmc.A, start)()  # inside again: allowed
+    homing.stop()
+    homing.wait()
