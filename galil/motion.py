@@ -371,7 +371,7 @@ class MotionTracker:
         with self.lock:
             earlier = self._schedule
             if earlier is not None:
-                earlier.begin_known()
+                earlier._read_begin()
 
     def refuse_starts(self, thread: int) -> None:
         """Stop the motion ``thread`` starts from now on the moment it registers (a handle
@@ -631,10 +631,10 @@ class MoveHandle:
         ``profile.position[k]`` is the predicted reference at sample ``begin + k``; use it to
         line recorded data up with the prediction.
         """
-        self.begin_known()
+        self._read_begin()
         return {a: t.begin for a, t in self._tracks.items()}
 
-    def begin_known(self) -> None:
+    def _read_begin(self) -> None:
         """Read the begin of a speed schedule's program if it is not known yet (one query;
         none for other moves)."""
         for t in self._tracks.values():
