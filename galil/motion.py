@@ -319,6 +319,7 @@ class MotionTracker:
         #: call that then finds the link closed has nothing left to stop.
         self.closed = False
         self._schedule: MoveHandle | None = None  # the last speed schedule started
+        self._sequence: MoveHandle | None = None  # the last vector sequence started
 
     def end_watches(self) -> None:
         """The link was closed: every move's :meth:`~MoveHandle.add_callback` watcher ends."""
@@ -360,9 +361,17 @@ class MotionTracker:
                 self._active[a] = handle
             if handle.kind == "schedule":
                 self._schedule = handle
+            elif handle.kind == "vector":
+                self._sequence = handle
             if threading.get_ident() in self._refused:
                 with contextlib.suppress(GalilError):  # (whoever refused stops it again)
                     handle.stop()
+
+    def last_sequence(self) -> MoveHandle | None:
+        """The vector sequence the library started last (one runs on S at a time: an earlier
+        one is over), whether it still runs or not."""
+        with self.lock:
+            return self._sequence
 
     def schedule_starting(self) -> None:
         """A speed schedule is about to reset the variable its program stamps its begin in

@@ -154,3 +154,20 @@ def test_a_change_after_a_stopped_jogs_end_leaves_its_prediction_as_it_was(
     dmc.C.accel = 20480
     assert jog.profile.samples == before.samples
     assert jog.duration == before.duration < 0.1
+
+
+@pytest.mark.parametrize("plane", ["AB", "CD"])
+def test_a_late_stop_of_a_vector_sequence_stops_the_sequence_running_since_as_predicted(
+    dmc: galil.Controller, plane: str
+) -> None:
+    first = dmc.vector_move("AB", [Line(0, 1)], speed=20000)
+    dmc.sleep(1.0)  # over, but nobody looked
+    second = dmc.vector_move(plane, [Line(20000, 0)], speed=20000)
+    dmc.sleep(0.1)
+    first.stop()  # (ST S: it reaches the sequence on S now)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = second.wait()
+    assert set(result.stop_codes.values()) == {4}
+    assert result.worst == 0
+    assert first.wait().stop_codes == {"A": 101, "B": 101}
