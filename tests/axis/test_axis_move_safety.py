@@ -240,3 +240,16 @@ def test_homing_on_past_a_soft_limit_the_axis_is_beyond_is_refused_before_sendin
     homing = getattr(dmc.A, start)()  # inside again: allowed
     homing.stop()
     homing.wait()
+
+
+def test_a_speed_schedule_towards_an_active_limit_switch_is_refused_before_sending(
+    dmc: galil.Controller,
+) -> None:
+    # (its program's BG would fail with TC 22 on the controller, and the handle wait for a
+    # move that never began)
+    sim_of(dmc).place_limit_switches("C", reverse=-500)
+    dmc.C.move_to(-500).wait()
+    dmc.sleep(0.1)  # (the motor settles onto the switch)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="TC 22"):
+        dmc.C.speed_schedule(-12_000, [(4000, 8000)], speed=15_000)
+    assert dmc.C.speed_schedule(2000, [(1000, 3000)], speed=5000).wait().final == {"C": 1500}
