@@ -620,7 +620,7 @@ class Axis:
         position 0; stop code 10. ``switch`` (positions in counts) makes a prediction.
 
         Raises:
-            InvalidArgument: moving, motor off, SP or HV 0, or into an active limit switch.
+            InvalidArgument: moving, motor off, SP or HV 0, into an active switch or past FL/BL.
         """
         return self._homing.start("HM", switch, display=self._display)
 

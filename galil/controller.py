@@ -51,7 +51,14 @@ from galil.link import (
 )
 from galil.messages import Messages
 from galil.models import Identity, ModelSpec, get_model
-from galil.motion import MotionTracker, MoveHandle, abort_all, motion_guard, stop_axes
+from galil.motion import (
+    MotionTracker,
+    MoveHandle,
+    abort_all,
+    motion_guard,
+    motors_off,
+    stop_axes,
+)
 from galil.moves import execute_move
 from galil.programs import Programs
 from galil.protocol import commands as cmds
@@ -680,8 +687,8 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         self.link.command_line([cmds.sh(self._letters(axes), model=self.model)])
 
     def motor_off(self, axes: str = "") -> None:
-        """Turn the motors of axes (default: all) off (``MO``)."""
-        self.link.command_line([cmds.mo(self._letters(axes), model=self.model)])
+        """Turn the motors of axes (default: all) off (``MO``); refused while one moves."""
+        motors_off(self.link, self._letters(axes))  # (InvalidArgument: galil.motion)
 
     def motion(self, axes: str | None = None) -> contextlib.AbstractContextManager[None]:
         """A context in which an exception or Ctrl-C stops the guarded axes and waits for them.

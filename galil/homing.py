@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from galil import predict
-from galil.errors import InvalidArgument
+from galil.errors import InvalidArgument, LimitError
 from galil.link import CommandLink
 from galil.motion import (
     Display,
@@ -44,7 +44,7 @@ __all__ = [
 ]
 
 _KINDS = {"HM": ("home", cmds.hm), "FE": ("edge", cmds.fe), "FI": ("index", cmds.fi)}
-_STATE = ("RP", "BG", "MO", "SP", "AC", "DC", "JG", "HV", "TS", "MT", "SC")
+_STATE = ("RP", "BG", "MO", "SP", "AC", "DC", "JG", "HV", "TS", "MT", "SC", "BL", "FL")
 
 
 @dataclass(frozen=True)
@@ -146,6 +146,7 @@ class AxisHoming:
             InvalidArgument: the axis moves or its motor is off, a speed it needs is 0, it
                 would start into an active limit switch, it is geared to another axis, or
                 another axis is geared to it (see :meth:`_refuse_gearing`).
+            LimitError: it would start on past a soft limit it is beyond already (TC 22).
         """
         if switch is not None and not isinstance(switch, predict.HomeSwitch):
             raise InvalidArgument(f"switch must be a galil.predict.HomeSwitch, not {switch!r}")
@@ -160,7 +161,7 @@ class AxisHoming:
         link, a = self._link, self.letter
         model = link.model
         values = link.query_operands([f"_{op}{a}" for op in _STATE] + ["_CN1"])
-        rp, bg, mo, sp, ac, dc, jg, hv, ts, mt, sc, cn_home = values
+        rp, bg, mo, sp, ac, dc, jg, hv, ts, mt, sc, bl, fl, cn_home = values
         if not bg:
             self._tracker.ended(a, rp, sc)
         self._refuse(kind, bool(bg), bool(mo), sp, jg, hv)
@@ -173,7 +174,7 @@ class AxisHoming:
             home_direction=1 if cn_home > 0 else -1,
             stepper=abs(mt) in (2.0, 2.5),
         )
-        self._refuse_limit(kind, round(ts), params)
+        self._refuse_limit(kind, round(ts), params, (round(rp), bl, fl))
         track = self._track(kind, round(rp), params, switch)
         mode, build = _KINDS[kind]
         replies = link.command_line(
@@ -234,7 +235,20 @@ class AxisHoming:
                 model=name,
             )
 
-    def _refuse_limit(self, kind: str, ts: int, params: predict.HomingParams) -> None:
+    def _refuse_limit(
+        self,
+        kind: str,
+        ts: int,
+        params: predict.HomingParams,
+        limits: tuple[int, float, float],
+    ) -> None:
+        """Refuse a start towards an active limit switch, or on past a soft limit the axis is
+        beyond already (``limits``: RP, BL, FL): the controller refuses its BG with TC 22,
+        after the HM, FE or FI went out.
+
+        Raises:
+            InvalidArgument: the switch. LimitError: the soft limit.
+        """
         # The direction of HM/FE comes from the home input (TS bit 1) and CN field 2.
         if kind == "FI":
             direction = 1 if params.jog_speed > 0 else -1
@@ -242,11 +256,23 @@ class AxisHoming:
             high = bool(ts & 0x02)
             direction = 1 if high == (params.home_direction > 0) else -1
         blocked = not ts & 0x08 if direction > 0 else not ts & 0x04
+        side = "forward" if direction > 0 else "reverse"
         if blocked:
-            side = "forward" if direction > 0 else "reverse"
             raise InvalidArgument(
                 f"{kind} on {self.letter} would start towards its active {side} limit switch "
                 "(the controller refuses it with TC 22); move off the switch first",
+                model=self._link.model.name,
+            )
+        rp, bl, fl = limits
+        name, limit = ("FL", fl) if direction > 0 else ("BL", bl)
+        if (rp > fl) if direction > 0 else (rp < bl):
+            raise LimitError(
+                f"{kind} on {self.letter} would start {side} from {rp:g}, beyond {name} "
+                f"{limit:g} (the controller refuses it with TC 22); move it back inside first",
+                name=name,
+                value=rp,
+                limit=limit,
+                axis=self.letter,
                 model=self._link.model.name,
             )
 

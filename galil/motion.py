@@ -52,6 +52,7 @@ __all__ = [
     "as_stored",
     "held",
     "motion_guard",
+    "motors_off",
     "refuse_dropped",
     "sample_of",
     "send_reopening",
@@ -245,9 +246,12 @@ def sample_of(reply: str) -> int | None:
         return None
 
 
-def predict_track(link: CommandLink, t: Track) -> predict.Profile:
-    """Predict one axis's motion from its start and every change recorded since."""
-    ts = link.sample_period
+def predict_track(
+    link: CommandLink, t: Track, *, sample_period: float | None = None
+) -> predict.Profile:
+    """Predict one axis's motion from its start and every change recorded since, at
+    ``sample_period`` (default: the link's, the TM in force now)."""
+    ts = link.sample_period if sample_period is None else sample_period
     p = t.params
     if t.fixed is not None:
         profile = t.fixed
@@ -320,6 +324,8 @@ class MotionTracker:
         #: Set by a controller's close(), which stops what the library started itself: a
         #: call that then finds the link closed has nothing left to stop.
         self.closed = False
+        self._schedule: MoveHandle | None = None  # the last speed schedule started
+        self._sequence: MoveHandle | None = None  # the last vector sequence started
 
     def end_watches(self) -> None:
         """The link was closed: every move's :meth:`~MoveHandle.add_callback` watcher ends."""
@@ -359,9 +365,28 @@ class MotionTracker:
         with self.lock:
             for a in handle.axes + handle.followers:
                 self._active[a] = handle
+            if handle.kind == "schedule":
+                self._schedule = handle
+            elif handle.kind == "vector":
+                self._sequence = handle
             if threading.get_ident() in self._refused:
                 with contextlib.suppress(GalilError):  # (whoever refused stops it again)
                     handle.stop()
+
+    def last_sequence(self) -> MoveHandle | None:
+        """The vector sequence the library started last (one runs on S at a time: an earlier
+        one is over), whether it still runs or not."""
+        with self.lock:
+            return self._sequence
+
+    def schedule_starting(self) -> None:
+        """A speed schedule is about to reset the variable its program stamps its begin in
+        (:data:`SCHEDULE_BEGIN`): the last schedule's begin, if nobody read it yet, is read
+        now (one query), or its handle would later read the new schedule's."""
+        with self.lock:
+            earlier = self._schedule
+            if earlier is not None:
+                earlier._read_begin()
 
     def refuse_starts(self, thread: int) -> None:
         """Stop the motion ``thread`` starts from now on the moment it registers (a handle
@@ -572,6 +597,8 @@ class MoveHandle:
         self._tracker = tracker
         self.kind = kind
         self.started_at = link.clock()
+        # The TM the move ran at: a TM sent once it is over (unseen) must not re-predict it.
+        self._sample_period = link.sample_period
         self._done = False
         self._result: MoveResult | None = None
         self._callbacks: list[Callable[[MoveHandle], None]] = []
@@ -619,12 +646,15 @@ class MoveHandle:
         ``profile.position[k]`` is the predicted reference at sample ``begin + k``; use it to
         line recorded data up with the prediction.
         """
-        out: dict[str, int | None] = {}
-        for a, t in self._tracks.items():
+        self._read_begin()
+        return {a: t.begin for a, t in self._tracks.items()}
+
+    def _read_begin(self) -> None:
+        """Read the begin of a speed schedule's program if it is not known yet (one query;
+        none for other moves)."""
+        for t in self._tracks.values():
             if t.begin is None and t.kind == "schedule":
                 self._schedule_begin(t)
-            out[a] = t.begin
-        return out
 
     def _schedule_begin(self, track: Track) -> None:
         # The downloaded program stores TIME right after its BG; -1 until it has run.
@@ -679,7 +709,7 @@ class MoveHandle:
         return next(iter(self.profiles.values()))
 
     def _predict(self, letter: str, t: Track) -> predict.Profile:
-        profile = predict_track(self._link, t)
+        profile = predict_track(self._link, t, sample_period=self._sample_period)
         show = self._display.get(letter)
         return profile if show is None else show(profile)
 
@@ -708,8 +738,8 @@ class MoveHandle:
     ) -> None:
         """Record a change sent at controller ``sample`` (``make`` builds it from its time).
 
-        ``make=None`` is an abort. A change after the predicted end of a position move is
-        ignored: the move was over when it arrived.
+        ``make=None`` is an abort. A change after the predicted end of a position move (or
+        of a stopped jog) is ignored: the move was over when it arrived.
         """
         with self._lock:
             self._forget_followers(letter)
@@ -722,12 +752,12 @@ class MoveHandle:
                 return
             k = sample - t.begin
             current = self.profiles[letter]
-            if t.kind == "position" and k > current.samples:
-                return
+            if (t.kind == "position" or t.stopped) and k > current.samples:
+                return  # (over by then: a stopped jog's end is known)
             if make is None:
                 t.aborted = sample
             else:
-                event = make(k * self._link.sample_period)
+                event = make(k * self._sample_period)
                 t.events.append(event)
                 if isinstance(event, predict.Stop):
                     t.stopped = True
@@ -767,12 +797,17 @@ class MoveHandle:
     def _end_axis(self, letter: str, rp: int, sc: int) -> None:
         """``letter`` was read at rest at ``rp`` with stop code ``sc`` by the start of other
         motion (:meth:`MotionTracker.ended`): its part of this move ended there, and later
-        polls leave it out (they would see the other motion). A schedule whose program has
-        not yet begun its move is not over."""
+        polls leave it out (they would see the other motion). A schedule whose begin nobody
+        read reads it now (one query); one whose program has not yet begun its move is not
+        over."""
         with self._lock:
             t = self._tracks.get(letter)
-            if self._done or t is None or (t.kind == "schedule" and t.begin is None):
+            if self._done or t is None:
                 return
+            if t.kind == "schedule" and t.begin is None:
+                self._schedule_begin(t)
+                if t.begin is None:
+                    return
             self._ended.setdefault(letter, (rp, sc))  # (a later start reads later motion)
 
     @property
@@ -1056,6 +1091,28 @@ def _send_st(link: CommandLink, tracker: MotionTracker | None, letters: str) -> 
         replies = link.command_line([cmds.st(letters, model=link.model), cmds.time_stamp()])
         if tracker is not None:
             tracker.notify(letters or link.model.axes, sample_of(replies[-1]), predict.Stop)
+
+
+def motors_off(link: CommandLink, letters: str) -> None:
+    """``MO`` on ``letters`` (``""``: every axis), refused before it is sent while one of them
+    moves (``_BG`` 1: a move, a jog, a sequence, a gear follower, a program's motion): the
+    controller refuses MO in motion (TC 7; the DMC-4103 reference: "Not Valid while in
+    motion"). One query before the line.
+
+    Raises:
+        InvalidArgument: an axis moving (stop it and wait first); only the query went out.
+    """
+    command = cmds.mo(letters, model=link.model)
+    read = letters or link.model.axes
+    moving = link.query_operands([f"_BG{a}" for a in read])
+    busy = "".join(a for a, v in zip(read, moving, strict=True) if round(v))
+    if busy:
+        raise InvalidArgument(
+            f"motor off refused: {busy} moving, and the controller refuses MO in motion "
+            "(TC 7); stop the motion and wait for it first",
+            model=link.model.name,
+        )
+    link.command_line([command])
 
 
 def abort_all(link: CommandLink, tracker: MotionTracker | None) -> None:

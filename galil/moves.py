@@ -754,9 +754,10 @@ def speed_schedule(
 
     Raises:
         ScheduleError: a change point the profiler cannot honour.
-        InvalidArgument: a bad label, the axis busy or its motor off, thread 0 running (a
-            schedule in progress, or a program), a label the user's program uses, or a user
-            program running (the download would disturb it).
+        InvalidArgument: a bad label, the axis busy or its motor off, a start towards an
+            active limit switch, thread 0 running (a schedule in progress, or a program), a
+            label the user's program uses, or a user program running (the download would
+            disturb it).
         LimitError: a path crossing a soft limit, or taking an axis geared to ``letter`` past
             its soft limits or beyond the model's SP maximum.
         MotionError: a limit stopped an axis geared to ``letter`` during a move nobody waited
@@ -785,6 +786,7 @@ def _speed_schedule(
     gears = tracker.followers(a)
     state, limits = _schedule_state(link, tracker, a, gears)
     rp, sp0, ac, dc, it = state.rp, state.sp, state.ac, state.dc, state.it
+    _refuse_blocked(link, a, distance, state.ts, None)  # (the program's BG would fail: TC 22)
     first = sp0 if speed is None else speed
     schedule = predict.speed_schedule(
         distance,
@@ -804,6 +806,7 @@ def _speed_schedule(
         check_followers(link, gears, geared, limits)
     program = _schedule_program(link, a, label, first, distance, schedule)
     routines.install(Routine(f"#{label}", tuple(program)))  # beside the user's program
+    tracker.schedule_starting()  # (the line below resets the begin it may not have read)
     link.command_line([cmds.assign(SCHEDULE_BEGIN, -1)])
     run = object()  # this schedule's hold on thread 0
     try:

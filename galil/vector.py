@@ -209,15 +209,32 @@ class VectorHandle(MoveHandle):
         return PLANE
 
     def stop(self) -> None:
-        """Decelerate the sequence to a stop along its path at VD (``ST S``)."""
+        """Decelerate the sequence to a stop along its path at VD (``ST S``).
+
+        ``ST S`` reaches the sequence that runs on S now, and nothing else: once this one is
+        over (seen done, an axis of it read at rest by a later start, or a sequence started
+        since), the stop is told to the sequence started since, if it runs, and not to what
+        now runs on this one's axes (a gearing, a jog, a contour), which never gets it."""
         link = self._link
         if self._tracker is None:
             replies = link.command_line([cmds.st(PLANE, model=link.model), cmds.time_stamp()])
             self.add_event(self.axes[0], sample_of(replies[-1]), predict.Stop)
             return
         with self._tracker.lock:  # (between a streamed line and the next: see _feed)
+            reached = self._on_plane()
             replies = link.command_line([cmds.st(PLANE, model=link.model), cmds.time_stamp()])
-            self._tracker.notify(self.axes, sample_of(replies[-1]), predict.Stop)
+            if reached:
+                self._tracker.notify(reached, sample_of(replies[-1]), predict.Stop)
+
+    def _on_plane(self) -> str:
+        """The axes of the sequence on S that an ``ST S`` reaches now: the last one the library
+        started, unless it is over (seen done, or an axis of it read at rest by a later
+        start: decision 0030); ``""`` when none runs."""
+        assert self._tracker is not None
+        last = self._tracker.last_sequence()
+        if not isinstance(last, VectorHandle) or last._done or last._ended:
+            return ""
+        return last.axes
 
 
 def _path_master(counts: predict.VectorProfile, gear: GearLink) -> predict.Profile:

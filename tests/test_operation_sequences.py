@@ -56,8 +56,10 @@ EXAMPLES = int(os.environ.get("GALIL_SEQ_EXAMPLES", "40"))
 STEPS = int(os.environ.get("GALIL_SEQ_STEPS", "30"))
 
 axis_st = st.sampled_from(AXES)
+# An operand, a variable or an array element, in its number format or not (decision 0032).
+_NAME = r"[_A-Za-z][_A-Za-z0-9]*(?:\[-?\d+\])?(?:\{[A-Z$]\d+(?:\.\d+)?\})?"
 _READ_ONLY = re.compile(
-    r"MG [_A-Za-z][_A-Za-z0-9]*(?:\[-?\d+\])?(?:\s*,\s*[_A-Za-z][_A-Za-z0-9]*(?:\[-?\d+\])?)*"
+    rf"MG {_NAME}(?:\s*,\s*{_NAME})*"
     r"|UL|LA|LV|QU [A-Za-z0-9\[\],]*|QZ|TC1|MG \"TCOK\d+\""
 )
 # What must not change when a call is refused.
@@ -362,8 +364,9 @@ class OperationSequences(RuleBasedStateMachine):
         if on:
             self.dmc.servo_here(a)
             self.interfere(a, unpredictable=True)
-        elif self.idle(a):  # (the controller refuses MO in motion: TC 7; see the report)
-            self.dmc.motor_off(a)
+        else:
+            with self.refusable(InvalidArgument):  # (in motion: the controller refuses MO)
+                self.dmc.motor_off(a)
 
     @rule(seconds=st.sampled_from([0.01, 0.1, 0.5, 2.0]))
     def sleep(self, seconds: float) -> None:

@@ -239,3 +239,33 @@ def test_a_move_that_off_on_error_ends_raises_in_wait_not_a_deviation_warning() 
         assert handle.result.stop_codes == {"A": 8}
         assert handle.result.predicted == {}  # a fault's end is not the prediction's
         assert dmc.query_operands(["_MOA", "_BGA"]) == [1, 0]  # the motor is off, at rest
+
+
+@pytest.mark.parametrize("start", ["home", "find_edge", "find_index"])
+def test_homing_on_past_a_soft_limit_the_axis_is_beyond_is_refused_before_sending(
+    dmc: galil.Controller, start: str
+) -> None:
+    dmc.A.move_to(9000).wait()
+    dmc.A.soft_limits = (None, 5000)
+    dmc.A.jog_speed = 25000  # (FI's direction: forward)
+    dmc.A.home_speed = 2000
+    sim_of(dmc).set_home_switch("A", edge=20000, index_period=2000)  # ahead: HM, FE go forward
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError, match="TC 22"):
+        getattr(dmc.A, start)()
+    dmc.A.soft_limits = (None, None)
+    homing = getattr(dmc.A, start)()  # inside again: allowed
+    homing.stop()
+    homing.wait()
+
+
+def test_a_speed_schedule_towards_an_active_limit_switch_is_refused_before_sending(
+    dmc: galil.Controller,
+) -> None:
+    # (its program's BG would fail with TC 22 on the controller, and the handle wait for a
+    # move that never began)
+    sim_of(dmc).place_limit_switches("C", reverse=-500)
+    dmc.C.move_to(-500).wait()
+    dmc.sleep(0.1)  # (the motor settles onto the switch)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="TC 22"):
+        dmc.C.speed_schedule(-12_000, [(4000, 8000)], speed=15_000)
+    assert dmc.C.speed_schedule(2000, [(1000, 3000)], speed=5000).wait().final == {"C": 1500}

@@ -242,6 +242,23 @@ def test_motor_off_refused(dmc: galil.Controller) -> None:
         dmc.B.jog(100)
 
 
+@pytest.mark.parametrize("axes", ["B", "", "AB"])
+def test_motor_off_on_a_moving_axis_is_refused_before_mo_goes_out(
+    dmc: galil.Controller, axes: str
+) -> None:
+    jog = dmc.B.jog(3000)
+    refused = pytest.raises(InvalidArgument, match=r"B moving.*MO in motion \(TC 7\).*stop")
+    with nothing_sent(dmc, allow_queries=True) as sent, refused:
+        dmc.motor_off(axes)
+    assert len(sent.lines) == 1  # the one state query
+    assert dmc.A.motor_on
+    assert dmc.B.motor_on
+    jog.stop()
+    jog.wait()
+    dmc.motor_off(axes)  # at rest: it goes out
+    assert not dmc.B.motor_on
+
+
 def test_a_stop_the_library_did_not_send_shows_as_a_deviation_and_a_warning() -> None:
     with simulated("DMC-4040") as dmc:
         handle = dmc.A.move_by(20_000)

@@ -8,6 +8,7 @@ axis followed a master, never ended at all.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Callable
 
@@ -62,3 +63,111 @@ def test_a_late_wait_keeps_the_stop_code_of_a_limit_that_ended_the_move(
     with pytest.raises(galil.MotionError) as caught:
         first.wait(timeout=1.0)
     assert caught.value.stop_codes == {"A": 2}
+
+
+def _schedule(axis: galil.Axis) -> galil.MoveHandle:
+    return axis.speed_schedule(-12_000, [(4000, 8000), (8000, 3000)], speed=15_000)
+
+
+def _time(dmc: galil.Controller) -> int:
+    return round(dmc.query_operands(["TIME"])[0])
+
+
+@pytest.mark.parametrize("following", list(_NEXT))
+def test_a_late_wait_on_a_speed_schedule_reports_its_own_end_when_nobody_read_its_begin(
+    dmc: galil.Controller, following: str
+) -> None:
+    first = _schedule(dmc.A)
+    dmc.sleep(3.0)  # over, but nobody looked (nor read its begin)
+    _NEXT[following](dmc)
+    result = first.wait(timeout=1.0)
+    assert result.final == {"A": -12_000}
+    assert result.stop_codes == {"A": 1}
+
+
+def test_a_speed_schedules_begin_stays_its_own_after_the_next_schedule_starts(
+    dmc: galil.Controller,
+) -> None:
+    before_a = _time(dmc)
+    first = _schedule(dmc.A)
+    first.wait()
+    before_b = _time(dmc)
+    second = _schedule(dmc.B)
+    second.wait()
+    begin_a, begin_b = first.begin["A"], second.begin["B"]
+    assert begin_a is not None
+    assert begin_b is not None
+    assert before_a <= begin_a < before_b <= begin_b
+
+
+def test_a_late_stop_of_a_vector_sequence_leaves_the_gearing_on_its_axis_engaged(
+    dmc: galil.Controller,
+) -> None:
+    sequence = dmc.vector_move("CD", [Line(0, 1)], speed=20000)
+    dmc.sleep(1.0)  # over, but nobody looked
+    dmc.C.gear_to("A", -1.5)
+    sequence.stop()  # (ST S: the sequence is over, the gearing runs on)
+    master = dmc.A.move_by(1000)
+    assert master.followers == "C"
+    assert master.wait().follower_final == {"C": -1500}
+
+
+def test_a_late_stop_of_a_vector_sequence_leaves_a_jog_on_its_axis_running(
+    dmc: galil.Controller,
+) -> None:
+    sequence = dmc.vector_move("CD", [Line(0, 1)], speed=20000)
+    dmc.sleep(1.0)
+    jog = dmc.C.jog(3000)
+    sequence.stop()
+    dmc.sleep(0.5)
+    assert math.isinf(jog.duration)
+    assert dmc.query_operands(["_BGC"]) == [1.0]
+    jog.stop()
+    assert jog.wait().stop_codes == {"C": 4}
+
+
+def test_a_change_after_a_tm_change_leaves_an_unseen_stopped_jog_predicted_at_its_own_tm(
+    dmc: galil.Controller,
+) -> None:
+    dmc.command("TM 250")
+    jog = dmc.C.jog(-30000)
+    ran_at = jog.profile.sample_period
+    dmc.sleep(0.02)
+    dmc.stop("C")
+    dmc.sleep(1.0)  # over, but nobody looked
+    dmc.command("TM 500")
+    dmc.C.accel = 20480  # (re-predicts the jog: at the TM it ran at)
+    assert jog.profile.sample_period == ran_at
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert jog.wait().deviation == {"C": 0}
+
+
+def test_a_change_after_a_stopped_jogs_end_leaves_its_prediction_as_it_was(
+    dmc: galil.Controller,
+) -> None:
+    jog = dmc.C.jog(-30000)
+    dmc.sleep(0.02)
+    dmc.stop("C")
+    before = jog.profile
+    dmc.sleep(1.0)  # over, but nobody looked
+    dmc.C.accel = 20480
+    assert jog.profile.samples == before.samples
+    assert jog.duration == before.duration < 0.1
+
+
+@pytest.mark.parametrize("plane", ["AB", "CD"])
+def test_a_late_stop_of_a_vector_sequence_stops_the_sequence_running_since_as_predicted(
+    dmc: galil.Controller, plane: str
+) -> None:
+    first = dmc.vector_move("AB", [Line(0, 1)], speed=20000)
+    dmc.sleep(1.0)  # over, but nobody looked
+    second = dmc.vector_move(plane, [Line(20000, 0)], speed=20000)
+    dmc.sleep(0.1)
+    first.stop()  # (ST S: it reaches the sequence on S now)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = second.wait()
+    assert set(result.stop_codes.values()) == {4}
+    assert result.worst == 0
+    assert first.wait().stop_codes == {"A": 101, "B": 101}
