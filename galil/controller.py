@@ -549,32 +549,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
 
     def _reopen_dead_link(self, error: GalilConnectionError) -> None:
         """The automatic reconnect (:class:`ReconnectPolicy`), called by the link."""
-        policy = self._policy
-        assert policy is not None
-        delay = policy.delay
-        for attempt in range(1, policy.attempts + 1):
-            try:
-                self._reconnect(self.link.timeout)  # (maybe inside a start: see _reconnect)
-            except GalilConnectionError as exc:
-                _LOG.warning(
-                    "galil: reconnect %d/%d to %s failed: %s",
-                    attempt,
-                    policy.attempts,
-                    self.link.model_name,
-                    str(exc).splitlines()[0],
-                )
-                if attempt == policy.attempts:
-                    raise exc from error
-                time.sleep(delay)
-                delay = min(delay * policy.backoff, policy.max_delay)
-            else:
-                _LOG.warning(
-                    "galil: link to %s died (%s); reconnected (attempt %d)",
-                    self.link.model_name,
-                    str(error).splitlines()[0],
-                    attempt,
-                )
-                return
+        _reopen_with_policy(self, error)
 
     @property
     def closed(self) -> bool:
@@ -983,6 +958,37 @@ def _collected(parts: _Parts, name: str) -> None:
 def _close_quietly(parts: _Parts) -> None:
     with parts.life, contextlib.suppress(GalilError, OSError):
         _close_parts(parts, keep_watchdogs=False)
+
+
+def _reopen_with_policy(controller: Controller, error: GalilConnectionError) -> None:
+    """Reconnect ``controller`` by its :class:`ReconnectPolicy`: its attempts, delays and backoff;
+    each failure logged, the last one raised from ``error``."""
+    policy = controller._policy
+    assert policy is not None
+    delay = policy.delay
+    for attempt in range(1, policy.attempts + 1):
+        try:
+            controller._reconnect(controller.link.timeout)  # (maybe inside a start: see _reconnect)
+        except GalilConnectionError as exc:
+            _LOG.warning(
+                "galil: reconnect %d/%d to %s failed: %s",
+                attempt,
+                policy.attempts,
+                controller.link.model_name,
+                str(exc).splitlines()[0],
+            )
+            if attempt == policy.attempts:
+                raise exc from error
+            time.sleep(delay)
+            delay = min(delay * policy.backoff, policy.max_delay)
+        else:
+            _LOG.warning(
+                "galil: link to %s died (%s); reconnected (attempt %d)",
+                controller.link.model_name,
+                str(error).splitlines()[0],
+                attempt,
+            )
+            return
 
 
 def _weakly(
