@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from client_fakes import SimLinkWrapper
+from client_fakes import SimLinkWrapper, Tripwire
 
 from galil import Line
 from galil.controller import Controller
@@ -45,38 +45,16 @@ ERRORS: list[type[BaseException]] = [KeyboardInterrupt, GalilConnectionError]
 
 
 @dataclass
-class Wire(SimLinkWrapper):
+class Wire(Tripwire):
     """The simulator's link, raising at the ``at``-th read or write of the armed thread."""
 
-    at: int = -1
-    after: bool = False
     error: type[BaseException] = KeyboardInterrupt
     armed: int | None = None  # the thread whose calls count
-    calls: int = 0
 
     def _trip(self) -> bool:
         if threading.get_ident() != self.armed:
             return False  # (the message poller's reads are not the operation's)
-        hit = self.calls == self.at
-        self.calls += 1
-        return hit
-
-    def write(self, data: bytes) -> None:
-        hit = self._trip()
-        if hit and not self.after:
-            raise self.error("raised before the write")
-        self.inner.write(data)
-        if hit:
-            raise self.error("raised after the write")
-
-    def read(self, timeout: float) -> bytes:
-        hit = self._trip()
-        if hit and not self.after:
-            raise self.error("raised before the read")
-        data = self.inner.read(timeout)
-        if hit:
-            raise self.error("raised after the read (its bytes are lost)")
-        return data
+        return super()._trip()
 
 
 @dataclass

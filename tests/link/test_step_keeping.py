@@ -7,10 +7,10 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import pytest
-from client_fakes import SimLinkWrapper
+from client_fakes import Interrupt, Tripwire
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -21,44 +21,6 @@ from galil.sim.controller import SimController
 from galil.sim.link import SimLink
 from galil.sim.proxy import FaultProxy
 from galil.sim.server import SimTcpServer
-
-
-class Interrupt(BaseException):
-    """Stands for Ctrl-C (a BaseException, like KeyboardInterrupt)."""
-
-
-@dataclass
-class Tripwire(SimLinkWrapper):
-    """A transport around the simulator's link that raises at the n-th read or write."""
-
-    at: int = -1  # which call raises (-1: none)
-    after: bool = False  # raise after the call did its work (bytes written / read and lost)
-    error: type[BaseException] = Interrupt
-    calls: int = 0
-    log: list[str] = field(default_factory=list)
-
-    def _trip(self) -> bool:
-        hit = self.calls == self.at
-        self.calls += 1
-        return hit
-
-    def write(self, data: bytes) -> None:
-        hit = self._trip()
-        if hit and not self.after:
-            raise self.error("interrupted before the write")
-        self.inner.write(data)
-        self.log.append(data.decode("latin-1"))
-        if hit:
-            raise self.error("interrupted after the write")
-
-    def read(self, timeout: float) -> bytes:
-        hit = self._trip()
-        if hit and not self.after:
-            raise self.error("interrupted before the read")
-        data = self.inner.read(timeout)
-        if hit:
-            raise self.error("interrupted after the read (its bytes are lost)")
-        return data
 
 
 @pytest.fixture
