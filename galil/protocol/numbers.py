@@ -81,7 +81,15 @@ def parse_number(text: str) -> float:
 # where each number ends, so the values read right even without the blank; anything else (the
 # 9s or $ of a VF the format did not override, text) is refused rather than misread.
 _READ_ITEM = re.compile(r"-?\d{0,10}\.\d{4}")
-_READ_REPLY = re.compile(r"(?: *-?\d{0,10}\.\d{4})+ *")
+
+
+def _read_items(reply: str) -> list[str] | None:
+    """The numbers of ``reply`` as text, or ``None`` if it holds anything besides such numbers
+    and blanks (one scan and a length check: cheaper than a full match of the whole reply)."""
+    items = _READ_ITEM.findall(reply)
+    if not items or sum(map(len, items)) + reply.count(" ") != len(reply):
+        return None
+    return items
 
 
 def parse_read(reply: str) -> list[float]:
@@ -90,9 +98,10 @@ def parse_read(reply: str) -> list[float]:
     Raises:
         ProtocolError: the reply is not numbers in the read format (``{Z10.4}``).
     """
-    if _READ_REPLY.fullmatch(reply) is None:
+    items = _read_items(reply)
+    if items is None:
         raise ProtocolError(f"not numbers with four decimals: {reply!r}")
-    return [float(x) for x in _READ_ITEM.findall(reply)]
+    return list(map(float, items))
 
 
 # A number whose whole part is all nines may be a VF overflow ("the greatest number
@@ -106,10 +115,8 @@ def parse_plain_read(reply: str) -> list[float] | None:
     not numbers with four decimals (another VF: fewer decimals, hex), or a number of nines
     that an overflow would print. ``None`` means: ask again with :data:`READ_FORMAT` on each
     item, which no VF changes (a true 9999 then reads 9999)."""
-    items = _READ_ITEM.findall(reply)
-    if not items or sum(map(len, items)) + reply.count(" ") != len(reply):
-        return None  # something besides such numbers and blanks
-    if "9." in reply and _NINES.search(reply) is not None:
+    items = _read_items(reply)
+    if items is None or ("9." in reply and _NINES.search(reply) is not None):
         return None
     return list(map(float, items))
 
