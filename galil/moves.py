@@ -94,10 +94,15 @@ def _operand_names(letters: str, ops: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def _read_state(
-    link: CommandLink, tracker: MotionTracker, letters: str, gears: Mapping[str, GearLink]
+    link: CommandLink,
+    tracker: MotionTracker,
+    letters: str,
+    gears: Mapping[str, GearLink],
+    start: bool = True,
 ) -> tuple[dict[str, _State], dict[str, tuple[float, float]]]:
     """Every axis's state and the followers' soft limits ``(BL, FL)``, in one round trip
-    (query_operands packs the MG lines together).
+    (query_operands packs the MG lines together). For a ``start`` (not a plan), the axes read
+    at rest end the handles nobody waited for (:func:`_seen_at_rest`).
 
     Raises:
         MotionError: a limit stopped a follower during a move nobody waited for
@@ -106,11 +111,13 @@ def _read_state(
     names = _operand_names(letters, _STATE)
     if not gears:  # (the common move: the cached tuple as it is, nothing more read)
         states = _states(link, letters, link.query_operands(names))
-        _seen_at_rest(tracker, states)
+        if start:
+            _seen_at_rest(tracker, states)
         return states, {}
     values = link.query_operands(names + follower_operands("".join(gears)))
     states = _states(link, letters, values)
-    _seen_at_rest(tracker, states)
+    if start:
+        _seen_at_rest(tracker, states)
     limits = follower_limits(link, tracker, gears, values[len(letters) * len(_STATE) :])
     return states, limits
 
@@ -403,7 +410,7 @@ def _execute_move(
             tracker.refuse_geared(a, "moving it", link.model.name)
     gears = tracker.followers(letters)
     others = {f: g for f, g in gears.items() if f not in letters}
-    state, limits = _read_state(link, tracker, letters, others)
+    state, limits = _read_state(link, tracker, letters, others, start=not dry_run)
     tracks: dict[str, Track] = {}
     profiles: dict[str, predict.Profile] = {}
     sent: dict[str, float] = {}
