@@ -60,6 +60,7 @@ class InstantTransport:
     def __init__(self) -> None:
         self._out = b""
         self._replies: dict[bytes, bytes] = {}
+        self.last = b""  # the last line written
 
     def _reply(self, line: bytes) -> bytes:
         out = []
@@ -76,6 +77,7 @@ class InstantTransport:
     def write(self, data: bytes) -> None:
         replies = self._replies
         for line in data.split(b"\r")[:-1]:
+            self.last = line
             reply = replies.get(line)
             if reply is None:
                 reply = replies[line] = self._reply(line)
@@ -98,11 +100,24 @@ def _per_call(fn: Callable[[], object], number: int, cpu: bool = False) -> Calla
     return run
 
 
+def state_query(c: Controller) -> list[str]:
+    """The operands of the one state query a plan on axis A sends (the anchor is that very
+    query, read off the wire, so it follows whatever the library asks)."""
+    transport = InstantTransport()
+    probe = galil.connect(transport, handshake=False, model=c.link.model.name)
+    probe.A.plan_by(1000)
+    line = transport.last.decode()
+    probe.close()
+    if not line.startswith("MG ") or ";" in line:
+        raise RuntimeError(f"a plan's state query is not one MG line: {line!r}")
+    return [n.split("{")[0].strip() for n in line[3:].split(",")]
+
+
 def planning(quick: bool) -> list[Figure]:
     """plan_by and plan_to against the state query, over the instant transport."""
     c = galil.connect(InstantTransport(), handshake=False, model="DMC-4040")
     link = c.link
-    names = [f"_{op}A" for op in ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")]
+    names = state_query(c)
     number, pairs = (300, 7) if quick else (1000, 15)
     distances = itertools.cycle(range(1000, 2000, 7))
     axis = c.A
@@ -180,7 +195,7 @@ def moving(quick: bool) -> list[Figure]:
     """move_by + wait on sim:// against one state query on the same link, and by hand."""
     c = galil.connect("sim://DMC-4040")
     link = c.link
-    names = [f"_{op}A" for op in ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO")]
+    names = state_query(c)
     number, pairs = (30, 7) if quick else (100, 15)
     sign = itertools.cycle((1, -1))
 
