@@ -172,24 +172,34 @@ def _bar(total: int, letters: str) -> Any:
 
 @dataclass
 class _Progress:
+    """How far a stream got.
+
+    ``start`` is the ``DT`` that starts a pre-loaded stream (``None``: the stream was entered
+    with its own ``DT``, and its first ``CD`` starts it).
+    """
+
     sent: int = 0
     lines: int = 0
     low_water: int = 0
     bar: Any = None
     texts: list[Command] = field(default_factory=list)
     begin: int | None = None
+    start: Command | None = None
 
 
 def _stamped(batch: list[Command], state: _Progress) -> list[Command]:
-    """The first batch gets ``MG TIME`` right after its first ``CD``: the contour's start."""
+    """The first batch gets ``MG TIME`` where the contour starts: right after its first
+    ``CD``, or, pre-loaded under ``DT -1``, after the batch and the ``DT`` that starts it."""
     if state.sent:
         return batch
+    if state.start is not None:
+        return [*batch, state.start, cmds.time_stamp()]
     return [batch[0], cmds.time_stamp(), *batch[1:]]
 
 
 def _note_begin(state: _Progress, replies: list[str]) -> None:
     if state.sent == 0:
-        state.begin = sample_of(replies[1])
+        state.begin = sample_of(replies[-1] if state.start is not None else replies[1])
 
 
 class ContourStream:
@@ -206,6 +216,10 @@ class ContourStream:
         display: per-axis display of the predictions in user units.
         followers: the axes geared to contour axes (``MotionTracker.followers``): their
             paths are checked too.
+        preload: where the model can (:attr:`~galil.models.ModelSpec.contour_preload`),
+            fill the buffer under ``DT -1`` before the contour starts, so the stream begins
+            with a whole buffer in hand; ``False`` starts it with its first segment (sooner
+            on a slow link, with no margin at first).
     """
 
     def __init__(
@@ -220,6 +234,7 @@ class ContourStream:
         limits: dict[str, tuple[float | None, float | None]] | None = None,
         followers: Mapping[str, GearLink] | None = None,
         tracker: MotionTracker | None = None,
+        preload: bool = True,
     ) -> None:
         if not letters or len(set(letters)) != len(letters):
             raise InvalidArgument(f"contour axes must be distinct and non-empty, got {letters!r}")
@@ -241,6 +256,9 @@ class ContourStream:
         self.profiles: dict[str, Profile] = {}
         self._tracker = tracker
         self._watch: StopWatch | None = None
+        if not isinstance(preload, bool):
+            raise InvalidArgument(f"preload must be True or False, got {preload!r}")
+        self._preload = preload and link.model.contour_preload
 
     def commands(self) -> list[Command]:
         """The ``CD`` command of every segment, in order (built and checked at once)."""
@@ -336,14 +354,18 @@ class ContourStream:
         texts = self.commands()
         if self._tracker is not None and self._watch is None:
             self._watch = self._tracker.watch_stops(self.letters)
+        # Where DT -1 pre-loads, the buffer is filled before the contour starts: the link's
+        # slack then only has to keep it full, not build it up while it runs (decision 0038).
+        start = cmds.dt(self.dt, model=model) if self._preload else None
         try:
             if round(link.query_operands(["_TC"])[0]) == 42:
                 link.command_line([cmds.tc(0)])  # a previous stream's code: ours must show
-            link.command_line([cmds.cm(self.letters, model=model), cmds.dt(self.dt, model=model)])
+            first = cmds.dt(-1 if start is not None else self.dt, model=model)
+            link.command_line([cmds.cm(self.letters, model=model), first])
         except BaseException:
             self._halt(end=True)  # (CM may have gone out: contour mode is left again)
             raise
-        state = _Progress(low_water=model.contour_buffer, texts=texts)
+        state = _Progress(low_water=model.contour_buffer, texts=texts, start=start)
         state.bar = _bar(len(texts), self.letters) if progress else None
         return state
 
@@ -375,7 +397,20 @@ class ContourStream:
         send_reopening(functools.partial(link.command_line, stop), reopen)
         if end:
             with contextlib.suppress(GalilError):
+                if self._preload:
+                    self._drop_held()
                 link.command_line(cmds.contour_end(self.letters, model=link.model))
+
+    def _drop_held(self) -> None:
+        """Drop segments a stream pre-loaded under ``DT -1`` and did not start, so that the
+        end of contour mode is not held behind them: ``CM`` clears a buffer that is not
+        running (DMC-4103 reference, CM); only once ``_CM`` reads it empty does a positive
+        ``DT`` go out (a ``DT`` with segments still held would start them)."""
+        link = self.link
+        model = link.model
+        link.command_line([cmds.cm(self.letters, model=model)])
+        if round(link.query_operands(["_CM"])[0]) >= model.contour_buffer:
+            link.command_line([cmds.dt(self.dt, model=model)])
 
     def _refill(self, state: _Progress) -> None:
         link = self.link

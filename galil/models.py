@@ -341,6 +341,15 @@ class ModelSpec:
         return (-self.cd_max if self.cd_min is None else self.cd_min), self.cd_max
 
     @property
+    def contour_preload(self) -> bool:
+        """``DT -1`` holds ``CD`` segments in the contour buffer until a positive ``DT``
+        starts them: a stream can fill the buffer before it moves. The buffered models
+        (DMC-4103 reference, DT: "n = -1 allows a pre-load of the contour buffer ... A
+        positive DT will resume contour mode"; the models with a one-deep buffer have no
+        ``DT -1``)."""
+        return self.contour_buffer > 1
+
+    @property
     def sample_period(self) -> float:
         """Seconds per servo sample at the default TM."""
         return self.tm_default / 1_024_000.0

@@ -857,7 +857,7 @@ def contour_end(axes: str = "A", *, model: ModelSpec | None = None) -> list[Comm
 def dt(n: int, *, model: ModelSpec | None = None) -> Command:
     """DT: contour segment time, 2**n samples (0 ends, -1 pauses on buffered models)."""
     lo, hi = (-1, 8) if model is None else model.dt_range
-    if model is not None and model.contour_buffer > 1:
+    if model is not None and model.contour_preload:
         lo = -1
     allowed = _ranged(
         n, min(lo, 0), hi, "DT", model=None if model is None else model.name, integer=True

@@ -37,9 +37,10 @@ def test_long_contour_keeps_the_buffer_fed(
     log = [text for k, text in sim.command_log if k >= t0]
     cds = [text for text in log if text.startswith("CD ") and text != "CD 0=0"]
     at = log.index("MG _TC")  # after the state read: the error code, then contour mode
-    assert log[at : at + 3] == ["MG _TC", "CM A", "DT 1"]
-    assert "CM A" in log
-    assert "DT 1" in log
+    assert log[at : at + 3] == ["MG _TC", "CM A", "DT -1"]  # held until the buffer is full
+    start = log.index("DT 1")
+    assert log[at + 3 : start] == ["MG _CM,_TC", *cds[:510]]  # pre-loaded: full, one spare
+    assert log[start + 1].startswith("MG TIME")  # the stream's begin: the DT that starts it
     assert len(cds) == 2000
     assert log[-1].startswith("MG")
     assert "CD 0=0" in log
@@ -50,8 +51,9 @@ def test_long_contour_keeps_the_buffer_fed(
     assert 0 < result.low_water < 511  # filled, never overfilled (a CD never waited for room)
     assert result.low_water == min(_free_places(wire))  # the fewest any _CM reply gave
     assert result.lines < 2000 / 4  # several segments per line
-    first_cd = min(k for k, text in sim.command_log if k >= t0 and text.startswith("CD "))
-    assert_follows(trace, t0, result.profiles["A"], first_cd)
+    started = min(k for k, text in sim.command_log if k >= t0 and text == "DT 1")
+    assert result.begin == started
+    assert_follows(trace, t0, result.profiles["A"], started)
     assert dmc.A.stop_code[0] == 51
     assert "contour A" in capsys.readouterr().err
     assert result.duration == pytest.approx(2000 * 2 * dmc.sample_period)
@@ -250,3 +252,48 @@ def test_contour_that_times_out_stops_the_axes(dmc: galil.Controller) -> None:
 def test_contour_bad_timeout_sends_nothing(dmc: galil.Controller, timeout: object) -> None:
     with nothing_sent(dmc), pytest.raises(InvalidArgument, match="timeout"):
         dmc.contour("A", [1, 2], dt=1, timeout=timeout)  # type: ignore[arg-type]
+
+
+def test_a_preload_cut_before_its_start_never_moves_and_leaves_contour_mode(
+    dmc: galil.Controller, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The pre-load goes out, then a Ctrl-C comes before the DT that would start it: the held
+    # segments are dropped (CM clears a buffer that is not running), and no positive DT goes
+    # out while any is held.
+    real = dmc.link.command_line
+
+    def cut(commands: list[galil.protocol.commands.Command], **kw: object) -> list[str]:
+        texts = [c.text for c in commands]
+        if "DT 1" in texts and any(t.startswith("CD ") for t in texts):
+            real(commands[: texts.index("DT 1")], **kw)  # type: ignore[arg-type]
+            raise KeyboardInterrupt
+        return real(commands, **kw)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(dmc.link, "command_line", cut)
+    before = dmc.A.position
+    with transcript(dmc) as wire, pytest.raises(KeyboardInterrupt):
+        dmc.contour("A", _ramp(2000), dt=1)
+    monkeypatch.undo()
+    sent = [part for line in wire.lines for part in line.split(";")]
+    cleanup = sent[sent.index("ST A") :]
+    assert cleanup[:3] == ["ST A", "CM A", "MG _CM"]
+    assert cleanup.index("DT 1") > cleanup.index("MG _CM")  # only once the buffer read empty
+    assert cleanup[-1] == "CD 0=0"
+    dmc.sleep(1.0)
+    assert dmc.A.position == before  # nothing of the pre-load ever ran
+    assert dmc.query_operands(["_CM"]) == [511]
+    dmc.A.move_by(100).wait()  # out of contour mode: an ordinary move runs
+    dmc.contour("A", _ramp(600), dt=1)  # and a new stream starts from an empty buffer
+
+
+def test_cm_drops_segments_held_under_dt_minus_one(dmc: galil.Controller) -> None:
+    for line in ("CM A", "DT -1", "CD 100", "CD 100"):
+        dmc.command(line)
+    assert dmc.query_operands(["_CM"]) == [509]
+    dmc.command("CM A")  # not running: the buffer is cleared
+    assert dmc.query_operands(["_CM"]) == [511]
+    dmc.command("DT 1")
+    dmc.sleep(0.1)
+    assert dmc.A.position == 0
+    dmc.command("CD 0=0")
+    dmc.A.move_by(100).wait()

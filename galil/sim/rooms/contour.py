@@ -76,6 +76,10 @@ class Contour(Room):
         for ax in axes:
             if ax.m.moving and not ax.contour:
                 raise Refused(7, "CM while moving")
+        if not any(ax.m.profiler.queued_segments for ax in self.axes()):
+            # "Issuing the CM command will clear the contour buffer when contour mode is not
+            # running" (DMC-4103 reference, CM): segments held under DT -1 are dropped.
+            self.held.clear()
         for ax in axes:
             if not ax.contour:
                 engine(ax.m.profiler.begin_contour)
@@ -92,7 +96,7 @@ class Contour(Room):
         value = i.evaluate(a)
         spec = self.machine.spec
         low, high = spec.dt_range
-        held = value == -1 and spec.contour_buffer > 1
+        held = value == -1 and spec.contour_preload
         if (value != 0 and not held and not low <= value <= high) or value != int(value):
             raise Refused(6, "DT out of range")
         self.exponent = int(value)
