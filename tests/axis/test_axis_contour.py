@@ -10,7 +10,7 @@ import pytest
 from axis_helpers import assert_follows
 
 import galil
-from galil.contour import sample_path
+from galil.contour import ContourStream, sample_path
 from galil.errors import InvalidArgument, LimitError
 from galil.sim.controller import SimController
 from galil.sim.faults import FaultPlan
@@ -297,3 +297,24 @@ def test_cm_drops_segments_held_under_dt_minus_one(dmc: galil.Controller) -> Non
     assert dmc.A.position == 0
     dmc.command("CD 0=0")
     dmc.A.move_by(100).wait()
+
+
+@pytest.mark.parametrize("preload", ["yes", 1, None])
+def test_contour_stream_preload_must_be_a_bool(dmc: galil.Controller, preload: object) -> None:
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="preload"):
+        ContourStream(dmc.link, "A", _ramp(10), dt=1, preload=preload)  # type: ignore[arg-type]
+
+
+def test_a_stream_without_preload_starts_with_its_first_segment(dmc: galil.Controller) -> None:
+    sim = sim_of(dmc)
+    t0 = sim.start_trace("A")
+    stream = ContourStream(dmc.link, "A", _ramp(700), dt=1, preload=False)
+    stream.prepare()
+    result = stream.finish(stream.feed())
+    trace = sim.stop_trace("A")["A"]
+    log = [text for k, text in sim.command_log if k >= t0]
+    assert "DT -1" not in log
+    assert log[log.index("CM A") + 1] == "DT 1"
+    first_cd = min(k for k, text in sim.command_log if k >= t0 and text.startswith("CD "))
+    assert result.begin == first_cd
+    assert_follows(trace, t0, result.profiles["A"], first_cd)
