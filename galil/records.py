@@ -571,6 +571,13 @@ class Records:
                 raise
             s._resume(handle, layout)
 
+    def abandon(self, error: GalilError) -> None:
+        """Suspended pushed streams end with ``error`` (what their readers then raise)."""
+        with self._lock:
+            streams = [s for s in self._streams if s.method == "DR" and s._suspended]
+        for s in streams:
+            s._fail(error)
+
     def forget(self, stream: RecordStream) -> None:
         """A stream closed itself."""
         with self._lock:
