@@ -1055,6 +1055,30 @@ class MoveHandle:
         return f"<MoveHandle {self.kind} {self.axes} {state}, predicted {self.duration:.4g} s>"
 
 
+def refuse_in_motion(link: CommandLink, tracker: MotionTracker, letter: str, name: str) -> None:
+    """Refuse ``name`` (a command the controller takes only at rest, TC 7 otherwise: ``DC``
+    in a position move, ``MT``, ``BR``) on an axis the library itself knows is moving: a
+    motion it started, not seen over, and by its prediction not over yet. No query: a
+    motion started elsewhere (a program) still gets the controller's refusal.
+
+    Raises:
+        InvalidArgument: the axis moves.
+    """
+    handle = tracker.active(letter)
+    track = None if handle is None else handle.track(letter)
+    if handle is None or track is None or letter in handle._ended:
+        return
+    if name == "DC" and track.kind == "jog":
+        return  # "DC may be changed during a move in Jog mode, but not in a PA or PR move"
+    if not track.open_jog and link.clock() >= handle.started_at + handle.duration:
+        return  # over by its prediction, unseen: the controller decides
+    raise InvalidArgument(
+        f"{name} is not valid while axis {letter} moves (its {handle.kind} move is in "
+        "progress): wait for the move or stop it first",
+        model=link.model.name,
+    )
+
+
 def progress_bar(kind: str, axes: str, duration: float) -> Any:
     """A ``tqdm.auto`` bar over a predicted duration (``None`` without tqdm)."""
     try:
