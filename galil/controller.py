@@ -57,6 +57,7 @@ from galil.motion import (
     abort_all,
     motion_guard,
     motors_off,
+    servo_here,
     stop_axes,
 )
 from galil.moves import execute_move
@@ -688,7 +689,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
 
     def servo_here(self, axes: str = "") -> None:
         """Enable the servo on axes (default: all) at their present position (``SH``)."""
-        self.link.command_line([cmds.sh(self._letters(axes), model=self.model)])
+        servo_here(self.link, self.tracker, self._letters(axes))  # (ends unwaited moves)
 
     def motor_off(self, axes: str = "") -> None:
         """Turn the motors of axes (default: all) off (``MO``); refused while one moves."""

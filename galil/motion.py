@@ -1139,6 +1139,29 @@ def motors_off(link: CommandLink, letters: str) -> None:
     link.command_line([command])
 
 
+def servo_here(link: CommandLink, tracker: MotionTracker, letters: str) -> None:
+    """``SH`` on ``letters`` (``""``: every axis).
+
+    ``SH`` puts a motor-off axis's reference where its encoder is: whatever the library
+    predicted for the motion it last started there is over (an abort, a limit or a position
+    error that turned the motor off). Where such a motion's handle was not seen done, the
+    axes' ``_BG``, ``_RP`` and ``_SC`` are read first (one query, only then), and a handle
+    whose axis is at rest keeps that end (:meth:`MotionTracker.ended`, decision 0030): a
+    later ``wait()`` reports where and how the move ended, not the position ``SH`` took.
+    """
+    command = cmds.sh(letters, model=link.model)
+    with tracker.lock:  # (no start in another thread between the read and SH)
+        open_ = [a for a in letters or link.model.axes if tracker.active(a) is not None]
+        if open_:
+            names = [f"_{k}{a}" for a in open_ for k in ("BG", "RP", "SC")]
+            values = link.query_operands(names)
+            for i, a in enumerate(open_):
+                bg, rp, sc = values[3 * i : 3 * i + 3]
+                if not round(bg):
+                    tracker.ended(a, rp, sc)
+        link.command_line([command])
+
+
 def abort_all(link: CommandLink, tracker: MotionTracker | None) -> None:
     """``AB 1``: stop every axis at once, without deceleration; programs keep running.
     Interrupted, it is sent again (:func:`stop_on_error`)."""
