@@ -22,7 +22,14 @@ from galil.gearing import Gearing, gear_to
 from galil.homing import AxisHoming, Homed, Switches, read_switches
 from galil.link import CommandLink
 from galil.models import INT32_MAX, INT32_MIN, ModelSpec, tm_of
-from galil.motion import Display, MotionTracker, MoveHandle, sample_of, stop_axes
+from galil.motion import (
+    Display,
+    MotionTracker,
+    MoveHandle,
+    refuse_in_motion,
+    sample_of,
+    stop_axes,
+)
 from galil.moves import AxisMove, execute_move, increment, jog, set_jog_speed, speed_schedule
 from galil.protocol import commands as cmds
 from galil.routines import Routines
@@ -352,6 +359,8 @@ class Axis:
         value = self.check_parameter(cmd, counts)
         command = _SETTERS[cmd](model=self._link.model, **{self.letter: value})
         with self._tracker.lock:  # (a move another thread starts gets the change stamped)
+            if cmd == "DC":
+                refuse_in_motion(self._link, self._tracker, self.letter, cmd)
             self._send_param(cmd, command, value)
 
     def _send_param(self, cmd: str, command: cmds.Command, value: float) -> None:
@@ -390,7 +399,8 @@ class Axis:
 
     @property
     def decel(self) -> Any:
-        """Deceleration ``DC`` (the controller refuses a change in motion)."""
+        """Deceleration ``DC``: not in a PA/PR move (refused while the library's runs), but
+        in a jog (the command reference)."""
         return self._out_rate(self._operand("DC"), 2)
 
     @decel.setter
@@ -430,29 +440,7 @@ class Axis:
 
     @soft_limits.setter
     def soft_limits(self, limits: tuple[Any, Any]) -> None:
-        try:
-            low, high = limits
-        except (TypeError, ValueError) as exc:
-            raise InvalidArgument(f"soft_limits takes (low, high), got {limits!r}") from exc
-        bl = INT32_MIN if low is None else round(self.position_counts(low, "reverse soft limit"))
-        fl = INT32_MAX if high is None else round(self.position_counts(high, "forward soft limit"))
-        if self._scale is not None and self._scale.sign < 0:
-            bl, fl = fl, bl  # a negative scale sign swaps the ends
-            bl = INT32_MIN if high is None else bl
-            fl = INT32_MAX if low is None else fl
-        if bl > fl:
-            raise InvalidArgument(
-                f"soft limits ({_show(low)}, {_show(high)}): low is above high (takes (low, high))"
-            )
-        for name, v in (("BL", bl), ("FL", fl)):
-            if not INT32_MIN <= v <= INT32_MAX:
-                raise LimitError(
-                    f"{name} {v} outside the 32-bit position range",
-                    name=name,
-                    value=v,
-                    limit=INT32_MAX if v > 0 else INT32_MIN,
-                    axis=self.letter,
-                )
+        bl, fl = _soft_limit_counts(self, limits)
         model = self._link.model
         a = self.letter
         self._link.command_line([cmds.bl(model=model, **{a: bl}), cmds.fl(model=model, **{a: fl})])
@@ -654,7 +642,7 @@ class Axis:
         self._link.command_line([cmds.hv(model=self._link.model, **{self.letter: counts})])
 
     # -- motor and loop settings (galil.tuning; ranges per model) --------------------------
-    motor_type = Setting("MT", cmds.mt, motor_type)
+    motor_type = Setting("MT", cmds.mt, motor_type, still=True)
     """``MT``: a :class:`~galil.tuning.MotorType` (servo, stepper variants ...)."""
     kp = Setting("KP", cmds.kp, float)
     """``KP``: proportional gain."""
@@ -674,12 +662,46 @@ class Axis:
     off)."""
     off_on_error = Setting("OE", cmds.oe, whole)
     """``OE``: 0 off, 1 on position error / amplifier error / abort, 2 on limits, 3 all."""
-    brush = Setting("BR", cmds.br, whole)
+    brush = Setting("BR", cmds.br, whole, still=True)
     """``BR``: -1 external drive, 0 brushless, 1 brush."""
 
     def __repr__(self) -> str:
         unit = f" in {self._scale.unit:~}" if self._scale is not None else " in counts"
         return f"<Axis {self.letter}{unit} of {self._link.model.name}>"
+
+
+def _soft_limit_counts(axis: Axis, limits: tuple[Any, Any]) -> tuple[int, int]:
+    """``BL`` and ``FL`` in counts for ``soft_limits = (low, high)`` (``None``: no limit).
+
+    Raises:
+        InvalidArgument: not a pair, wrong units, low above high.
+        LimitError: outside the 32-bit position range.
+    """
+    try:
+        low, high = limits
+    except (TypeError, ValueError) as exc:
+        raise InvalidArgument(f"soft_limits takes (low, high), got {limits!r}") from exc
+    bl = INT32_MIN if low is None else round(axis.position_counts(low, "reverse soft limit"))
+    fl = INT32_MAX if high is None else round(axis.position_counts(high, "forward soft limit"))
+    scale = axis._scale
+    if scale is not None and scale.sign < 0:
+        bl, fl = fl, bl  # a negative scale sign swaps the ends
+        bl = INT32_MIN if high is None else bl
+        fl = INT32_MAX if low is None else fl
+    if bl > fl:
+        raise InvalidArgument(
+            f"soft limits ({_show(low)}, {_show(high)}): low is above high (takes (low, high))"
+        )
+    for name, v in (("BL", bl), ("FL", fl)):
+        if not INT32_MIN <= v <= INT32_MAX:
+            raise LimitError(
+                f"{name} {v} outside the 32-bit position range",
+                name=name,
+                value=v,
+                limit=INT32_MAX if v > 0 else INT32_MIN,
+                axis=axis.letter,
+            )
+    return bl, fl
 
 
 def resolve_moves(

@@ -57,6 +57,7 @@ from galil.motion import (
     abort_all,
     motion_guard,
     motors_off,
+    servo_here,
     stop_axes,
 )
 from galil.moves import execute_move
@@ -265,14 +266,43 @@ class Resetting:
             self.records_room.suspend()
             self.interrupts.close(keep_mask=True)
             try:
-                self._set_up_again(self._send_reset(), wait)
-            except GalilConnectionError:
-                if self._factory is None or not link.dead:
-                    raise
-                self._reconnect_within(wait)
+                try:
+                    self._set_up_again(self._send_reset(), wait)
+                except GalilConnectionError:
+                    if self._factory is None or not link.dead:
+                        raise
+                    self._reconnect_within(wait)
+            except BaseException:
+                self._after_failed_reset(dogs, wait)
+                raise
             self._forget_reset()
             for dog in dogs:
                 dog.start()
+
+    def _after_failed_reset(self, dogs: list[Watchdog], wait: float) -> None:
+        """A reset that failed (Ctrl-C, no answer, a refusal) on a link that still works:
+        the link is set up again as at connect, the streams, interrupts and watchdogs go on.
+        If even that fails, the streams end with an error saying so and interrupts are
+        closed (``reconnect()`` brings both back). On a dead link ``reconnect()`` does it
+        all (the error says to call it)."""
+        link = self.link
+        if not link.is_open or link.dead:
+            return
+        try:
+            self.records_room.suspend()  # (those the failed reset resumed already)
+            self.interrupts.close(keep_mask=True)
+            self._set_up_again(None, wait)
+            for dog in dogs:
+                dog.start()
+        except BaseException as exc:  # the reset's own error is raised
+            self.records_room.abandon(
+                link.error(
+                    GalilConnectionError,
+                    f"a reset failed and the link could not be set up again ({exc!r}): the "
+                    "record stream ended; call reconnect()",
+                )
+            )
+            self.interrupts.close(keep_mask=True)
 
     def _send_reset(self) -> int | None:
         """``RS``, with ``MG _CW`` and ``CW 1`` right behind it where output is marked (what
@@ -659,7 +689,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
 
     def servo_here(self, axes: str = "") -> None:
         """Enable the servo on axes (default: all) at their present position (``SH``)."""
-        self.link.command_line([cmds.sh(self._letters(axes), model=self.model)])
+        servo_here(self.link, self.tracker, self._letters(axes))  # (ends unwaited moves)
 
     def motor_off(self, axes: str = "") -> None:
         """Turn the motors of axes (default: all) off (``MO``); refused while one moves."""

@@ -103,7 +103,7 @@ class Interrupts:
         mask = self._mask(axes, all_done)
         link = self.link
         transport: object = link.transport
-        if not isinstance(transport, HandleSource) or "ethernet" not in link.model.transports:
+        if not isinstance(transport, HandleSource) or not link.model.has_ethernet:
             raise InvalidArgument(
                 f"interrupts come on an Ethernet handle of their own; {transport!r} has none "
                 "(poll _BG, or watch program output with controller.messages)",

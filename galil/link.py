@@ -552,8 +552,13 @@ class LinkCore:
             clock = self._clock_source
             sim_start = clock.controller_time() if clock is not None else 0.0
             start = _monotonic()
-            transport.write(data)
-            chunk = transport.read(t)  # the timeout as given, so transports can cache it
+            try:
+                transport.write(data)
+                chunk = transport.read(t)  # the timeout as given, so transports can cache it
+            except OSError as exc:
+                if _own_or_timeout(exc):
+                    raise
+                raise _broken(exc, transport) from exc
         except BaseException as exc:
             session.abandon()
             if isinstance(exc, GalilConnectionError):
@@ -621,8 +626,10 @@ class LinkCore:
                 )
             try:
                 chunk = transport.read(wait)
-            except GalilConnectionError as exc:
-                raise self._link_failed(exc) from exc
+            except OSError as exc:
+                if _own_or_timeout(exc) and not isinstance(exc, GalilConnectionError):
+                    raise
+                raise self._link_failed(_broken(exc, transport)) from exc
             events = self._take(chunk, watch)
 
     def _take(self, chunk: bytes, watch: bool) -> list[Completed | Unsolicited]:
@@ -677,8 +684,10 @@ class LinkCore:
         assert self.transport is not None
         try:
             self.transport.write(data)
-        except GalilConnectionError as exc:
-            raise self._link_failed(exc) from exc
+        except OSError as exc:
+            if _own_or_timeout(exc) and not isinstance(exc, GalilConnectionError):
+                raise
+            raise self._link_failed(_broken(exc, self.transport)) from exc
         self.bytes_sent += len(data)
         if self.wire_log.hooks or _WIRE.isEnabledFor(_DEBUG):
             self._observe("out", data)
@@ -687,8 +696,10 @@ class LinkCore:
         assert self.transport is not None
         try:
             data = self.transport.read(timeout)
-        except GalilConnectionError as exc:
-            raise self._link_failed(exc) from exc
+        except OSError as exc:
+            if _own_or_timeout(exc) and not isinstance(exc, GalilConnectionError):
+                raise
+            raise self._link_failed(_broken(exc, self.transport)) from exc
         if data:
             self.bytes_received += len(data)
             if self.wire_log.hooks or _WIRE.isEnabledFor(_DEBUG):
@@ -1028,8 +1039,13 @@ class Link(LinkCore):
         transport = self.transport
         assert transport is not None
         try:
-            transport.write(data)
-            chunk = transport.read(t)
+            try:
+                transport.write(data)
+                chunk = transport.read(t)
+            except OSError as exc:
+                if _own_or_timeout(exc):
+                    raise
+                raise _broken(exc, transport) from exc
         except BaseException as exc:
             # The bytes may be out: whatever their reply does, it must not be the next one's.
             if not queued:
@@ -1167,6 +1183,25 @@ def _one_command(text: str, allow_compound: bool) -> Command:
             "allow_compound=True, or use command_line([...])"
         )
     return cmd
+
+
+def _own_or_timeout(exc: OSError) -> bool:
+    """Whether a transport's ``OSError`` is one of the library's own, or a timeout."""
+    return isinstance(exc, (GalilError, TimeoutError))
+
+
+def _broken(exc: OSError, transport: Transport) -> GalilConnectionError:
+    """A transport's ``OSError`` as the dead link it means (a timeout excepted: see the caller).
+
+    The built-in transports raise :class:`GalilConnectionError` for a dead link; a plug-in
+    transport may let a bare ``OSError`` out (a broken pipe, a reset connection, ``EIO``).
+    That is a dead link all the same, and becomes the same error, as
+    :class:`~galil.transport.base.TransportBase` makes it for the built-in ones.
+    """
+    if isinstance(exc, GalilConnectionError):
+        return exc
+    name = type(transport).__name__
+    return GalilConnectionError(f"the {name} link failed: {type(exc).__name__}: {exc}")
 
 
 class _ReopeningError(GalilConnectionError):

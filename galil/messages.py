@@ -130,7 +130,7 @@ class Messages:
             # The transport brought its own message handle (a simulator's, a gateway's).
             self._start_reader(ready, "the transport's message handle")
             return
-        if isinstance(transport, HandleSource) and "ethernet" in link.model.transports:
+        if isinstance(transport, HandleSource) and link.model.has_ethernet:
             try:
                 secondary = transport.open_secondary()
                 if isinstance(secondary, MessagesOnly) and secondary.messages_only:

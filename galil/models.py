@@ -330,6 +330,13 @@ class ModelSpec:
         return bool(self.axes)
 
     @property
+    def has_ethernet(self) -> bool:
+        """Whether the model has an Ethernet port: the only way to the second handles that
+        ``DR`` records, interrupts and unsolicited messages come on (the one place that says
+        so; a serial or PCI model reached over TCP, through a device server, has none)."""
+        return "ethernet" in self.transports
+
+    @property
     def tm_range(self) -> tuple[float, float]:
         """Smallest and largest TM (µs) for this model's axis count (normal firmware)."""
         index = min(max(len(self.axes) - 1, 0) // 2, 3)

@@ -1055,6 +1055,30 @@ class MoveHandle:
         return f"<MoveHandle {self.kind} {self.axes} {state}, predicted {self.duration:.4g} s>"
 
 
+def refuse_in_motion(link: CommandLink, tracker: MotionTracker, letter: str, name: str) -> None:
+    """Refuse ``name`` (a command the controller takes only at rest, TC 7 otherwise: ``DC``
+    in a position move, ``MT``, ``BR``) on an axis the library itself knows is moving: a
+    motion it started, not seen over, and by its prediction not over yet. No query: a
+    motion started elsewhere (a program) still gets the controller's refusal.
+
+    Raises:
+        InvalidArgument: the axis moves.
+    """
+    handle = tracker.active(letter)
+    track = None if handle is None else handle.track(letter)
+    if handle is None or track is None or letter in handle._ended:
+        return
+    if name == "DC" and track.kind == "jog":
+        return  # "DC may be changed during a move in Jog mode, but not in a PA or PR move"
+    if not track.open_jog and link.clock() >= handle.started_at + handle.duration:
+        return  # over by its prediction, unseen: the controller decides
+    raise InvalidArgument(
+        f"{name} is not valid while axis {letter} moves (its {handle.kind} move is in "
+        "progress): wait for the move or stop it first",
+        model=link.model.name,
+    )
+
+
 def progress_bar(kind: str, axes: str, duration: float) -> Any:
     """A ``tqdm.auto`` bar over a predicted duration (``None`` without tqdm)."""
     try:
@@ -1113,6 +1137,29 @@ def motors_off(link: CommandLink, letters: str) -> None:
             model=link.model.name,
         )
     link.command_line([command])
+
+
+def servo_here(link: CommandLink, tracker: MotionTracker, letters: str) -> None:
+    """``SH`` on ``letters`` (``""``: every axis).
+
+    ``SH`` puts a motor-off axis's reference where its encoder is: whatever the library
+    predicted for the motion it last started there is over (an abort, a limit or a position
+    error that turned the motor off). Where such a motion's handle was not seen done, the
+    axes' ``_BG``, ``_RP`` and ``_SC`` are read first (one query, only then), and a handle
+    whose axis is at rest keeps that end (:meth:`MotionTracker.ended`, decision 0030): a
+    later ``wait()`` reports where and how the move ended, not the position ``SH`` took.
+    """
+    command = cmds.sh(letters, model=link.model)
+    with tracker.lock:  # (no start in another thread between the read and SH)
+        open_ = [a for a in letters or link.model.axes if tracker.active(a) is not None]
+        if open_:
+            names = [f"_{k}{a}" for a in open_ for k in ("BG", "RP", "SC")]
+            values = link.query_operands(names)
+            for i, a in enumerate(open_):
+                bg, rp, sc = values[3 * i : 3 * i + 3]
+                if not round(bg):
+                    tracker.ended(a, rp, sc)
+        link.command_line([command])
 
 
 def abort_all(link: CommandLink, tracker: MotionTracker | None) -> None:

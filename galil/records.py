@@ -484,7 +484,13 @@ class Records:
             raise InvalidArgument(f"method is 'auto', 'DR' or 'QR', not {method!r}")
         check_count(maxlen, "maxlen")
         transport: object = self.link.transport
-        pusher = transport if isinstance(transport, HandleSource) else None
+        model = self.link.model
+        if method == "DR" and not model.has_ethernet:
+            raise InvalidArgument(
+                f"DR needs a second Ethernet handle; {model.name} has no Ethernet (use 'QR')",
+                model=model.name,
+            )
+        pusher = transport if isinstance(transport, HandleSource) and model.has_ethernet else None
         if method == "DR" and pusher is None:
             raise InvalidArgument(
                 f"DR needs a second Ethernet handle; {transport!r} has none (use 'QR')"
@@ -564,6 +570,13 @@ class Records:
                     handle.close()
                 raise
             s._resume(handle, layout)
+
+    def abandon(self, error: GalilError) -> None:
+        """Suspended pushed streams end with ``error`` (what their readers then raise)."""
+        with self._lock:
+            streams = [s for s in self._streams if s.method == "DR" and s._suspended]
+        for s in streams:
+            s._fail(error)
 
     def forget(self, stream: RecordStream) -> None:
         """A stream closed itself."""

@@ -22,6 +22,7 @@ from typing import Generic, Protocol, TypeVar, overload
 from galil.errors import InvalidArgument
 from galil.link import CommandLink
 from galil.models import MOTOR_TYPES, ModelSpec
+from galil.motion import MotionTracker, refuse_in_motion
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
 
@@ -59,6 +60,7 @@ class MotorType(float, enum.Enum):
 class _HasLink(Protocol):
     letter: str
     _link: CommandLink
+    _tracker: MotionTracker
 
 
 Builder = Callable[..., Command]
@@ -85,12 +87,17 @@ class Setting(Generic[T]):
         mnemonic: the two letters (``"KP"``).
         builder: the builder in :mod:`galil.protocol.commands` (range-checks per model).
         convert: turns the number read back into the setting's type.
+        still: the controller takes it only at rest ("Not Valid while in motion"): refused
+            on an axis the library knows is moving (:func:`~galil.motion.refuse_in_motion`).
     """
 
-    def __init__(self, mnemonic: str, builder: Builder, convert: Callable[[float], T]) -> None:
+    def __init__(
+        self, mnemonic: str, builder: Builder, convert: Callable[[float], T], *, still: bool = False
+    ) -> None:
         self.mnemonic = mnemonic
         self.builder = builder
         self.convert = convert
+        self.still = still
         self.name = mnemonic.lower()
 
     def __set_name__(self, owner: type, name: str) -> None:
@@ -111,6 +118,8 @@ class Setting(Generic[T]):
         number = float(value.value) if isinstance(value, MotorType) else value
         link = obj._link
         command = self.builder(model=link.model, **{obj.letter: number})
+        if self.still:
+            refuse_in_motion(link, obj._tracker, obj.letter, self.mnemonic)
         link.command_line([command])
 
 

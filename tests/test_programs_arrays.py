@@ -222,3 +222,21 @@ def test_waiting_for_a_thread_refuses_a_bad_timeout_before_asking(
 ) -> None:
     with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match="timeout"):
         dmc.programs.wait(0, timeout=bad)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("model", "limit"),
+    [("DMC-1500", 31), ("DMC-4040", 72)],
+    # DMC-1500: a compound line, its label, a text with a ';', a format; DMC-4040: the text
+    # alone (with more, the line would be over 80 characters).
+)
+def test_a_program_whose_mg_text_is_longer_than_the_model_prints_is_refused_naming_the_line(
+    model: str, limit: int
+) -> None:
+    longest, over = "m" * limit, "o" * (limit + 1)
+    third = f'#B;MG "a;b", x;MG{{N}} "{over}"' if limit < 40 else f'MG "{over}"'
+    with simulated(model) as dmc:
+        with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match="line 3: MG text"):
+            dmc.programs.download(f'#A\nMG "a;b", x\n{third}\nEN')
+        # The longest text, and a longer one in a comment, are no refusal.
+        assert dmc.programs.download(f'#A\nMG "{longest}"\n\' MG "{over}"\nEN').sent

@@ -15,6 +15,7 @@ called (``close``, ``reconnect``, ``abort`` ...).
 from __future__ import annotations
 
 import contextlib
+import functools
 import inspect
 import queue
 import types
@@ -614,8 +615,10 @@ def _case(
     moving_before = _moving(dmc)  # a handle's or a gearing's own motion
     problems: list[str] = []
     raised: BaseException | None = None
+    sent: AssertionError | None = None
     result: object = None
     may_send = param in entry.raw and isinstance(bad, str)
+    accepted = functools.partial(_accepted, entry, param, target)
     try:
         with nothing_sent(dmc, allow_queries=True):
             try:
@@ -631,14 +634,10 @@ def _case(
             except Exception as exc:
                 raised = exc
                 problems.append(f"{where}: bare {type(exc).__name__}: {str(exc)[:120]}")
-    except AssertionError as sent:
-        if raised is not None and not may_send:
-            problems.append(f"{where}: refused after sending: {str(sent)[:160]}")
-    if valid and raised is not None:
-        problems.append(f"{where}: the valid call failed: {raised!r:.300}")
+    except AssertionError as exc:
+        sent = exc
+    problems += verdict(where, raised, sent, may_send, valid, lambda: label in accepted())
     if raised is None:
-        if not valid and label not in _accepted(entry, param, target):
-            problems.append(f"{where}: taken, not refused")
         _dispose(result)
         if entry.kind == "set":
             setattr(target, entry.name, before)
@@ -648,6 +647,27 @@ def _case(
         return problems
     group.after(dmc, target)
     _settle(dmc)
+    return problems
+
+
+def verdict(
+    where: str,
+    raised: BaseException | None,
+    sent: AssertionError | None,
+    may_send: bool,
+    valid: bool,
+    accepted: Callable[[], bool],
+) -> list[str]:
+    """What is wrong with one call (sync or async): refused after something was sent (unless
+    the value is a raw text only the controller judges), a valid call that failed, a bad
+    value taken that is not ``accepted()`` on purpose. ``sent``: what ``nothing_sent`` said."""
+    problems = []
+    if sent is not None and raised is not None and not may_send:
+        problems.append(f"{where}: refused after sending: {str(sent)[:160]}")
+    if valid and raised is not None:
+        problems.append(f"{where}: the valid call failed: {raised!r:.300}")
+    if raised is None and not valid and not accepted():
+        problems.append(f"{where}: taken, not refused")
     return problems
 
 

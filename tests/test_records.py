@@ -166,6 +166,19 @@ def test_econo_model_records_over_tcp() -> None:
         assert stream.missed == 0
 
 
+def test_dr_on_a_model_without_ethernet_is_refused_before_a_byte_even_over_tcp() -> None:
+    # A PCI (or serial) model reached over TCP (a device server) offers the transport's
+    # second handles, but the controller has no Ethernet port to push records to one.
+    sim = SimController("DMC-18x2", ManualClock())
+    with SimTcpServer(sim) as srv, galil.controller.connect(srv.url, timeout=2.0) as c:
+        handles = sim.describe_handles()
+        with nothing_sent(c), pytest.raises(InvalidArgument, match="DMC-18x2 has no Ethernet"):
+            c.records(8, method="DR")
+        assert sim.describe_handles() == handles  # no record handle was opened
+        with c.records(8) as stream:
+            assert stream.method == "QR"  # "auto" polls
+
+
 def test_qr_polling_where_there_is_no_second_handle() -> None:
     sim = SimController("DMC-4040", ManualClock())
     with Controller(SimLink(sim)) as c:

@@ -192,6 +192,33 @@ def _check_line(line: ProgramLine, model: ModelSpec) -> None:
     code = line.text[:c] if (c := _comment_start(line.text)) >= 0 else line.text
     if code.count('"') % 2:
         raise InvalidArgument(f"{where}: a string is not closed (odd number of quotes)")
+    for text in _mg_texts(code):
+        if len(text) > model.mg_max:
+            raise InvalidArgument(
+                f"{where}: MG text {text!r} is {len(text)} characters; {model.name} prints "
+                f"{model.mg_max} at most",
+                model=model.name,
+            )
+
+
+_QUOTED = re.compile(r'"([^"]*)"')
+_COMMANDS = re.compile(r'(?:[^;"]|"[^"]*")+')
+_MG = re.compile(r"\s*MG(?![A-Za-z0-9_])")
+
+
+def _mg_texts(code: str) -> list[str]:
+    """The quoted texts of the ``MG`` commands in ``code`` (a line without its comment, its
+    quotes closed)."""
+    label = _LABEL_START.match(code)
+    rest = code[label.end() :] if label is not None else code
+    if '"' not in rest:
+        return []
+    return [
+        text
+        for command in _COMMANDS.findall(rest)
+        if _MG.match(command)
+        for text in _QUOTED.findall(command)
+    ]
 
 
 def check_program(lines: Sequence[ProgramLine], model: ModelSpec, *, reserve: int = 0) -> None:

@@ -66,7 +66,10 @@ class Transport(Protocol):
     secondary: Transport | None
 
     def write(self, data: bytes) -> None:
-        """Send all of ``data``; raise :class:`GalilConnectionError` when the link is dead."""
+        """Send all of ``data``; raise :class:`GalilConnectionError` when the link is dead.
+
+        (The link takes any other ``OSError`` but a timeout for a dead link too.)
+        """
         ...
 
     def read(self, timeout: float) -> bytes:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import inspect
 import queue
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterator, Mapping
@@ -394,6 +395,7 @@ async def _acase(
     moving_before = sync_fuzz._moving(c.sync)
     problems: list[str] = []
     raised: BaseException | None = None
+    sent: AssertionError | None = None
     result: object = None
     may_send = param in e.raw and isinstance(bad, str)
     try:
@@ -407,14 +409,11 @@ async def _acase(
             except Exception as exc:
                 raised = exc
                 problems.append(f"{where}: bare {type(exc).__name__}: {str(exc)[:120]}")
-    except AssertionError as sent:
-        if raised is not None and not may_send:
-            problems.append(f"{where}: refused after sending: {str(sent)[:160]}")
-    if valid and raised is not None:
-        problems.append(f"{where}: the valid call failed: {raised!r:.300}")
+    except AssertionError as exc:
+        sent = exc
+    accepted = functools.partial(_accepted, e, param)
+    problems += sync_fuzz.verdict(where, raised, sent, may_send, valid, lambda: label in accepted())
     if raised is None:
-        if not valid and label not in _accepted(e, param):
-            problems.append(f"{where}: taken, not refused")
         await _adispose(result)
         if e.kind == "set":
             setattr(target, e.name, before)

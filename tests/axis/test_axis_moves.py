@@ -6,6 +6,7 @@ sample: the handle stamps each command with the controller's TIME, so the two mu
 
 from __future__ import annotations
 
+import contextlib
 import re
 import threading
 
@@ -296,3 +297,40 @@ def test_a_jog_aborted_after_its_ramp_is_predicted_to_the_abort(dmc: galil.Contr
     assert result.stop_codes == {"A": 7}
     assert result.deviation == {"A": 0}
     assert result.final["A"] < -3000
+
+
+def test_settings_not_valid_in_motion_are_refused_unsent_while_the_librarys_move_runs(
+    dmc: galil.Controller,
+) -> None:
+    a = dmc.A
+    a.speed, a.accel, a.decel = 20_000, 1_024_000, 1_024_000
+    move = a.move_by(100_000)  # 5 s
+    for setting, value in (("decel", 512_000), ("motor_type", 1), ("brush", 1)):
+        with (
+            nothing_sent(dmc),
+            pytest.raises(InvalidArgument, match=r"(DC|MT|BR) is not valid while axis A moves"),
+        ):
+            setattr(a, setting, value)
+    # What the reference allows in motion still goes out (and the move follows SP and AC).
+    a.speed, a.accel, a.smoothing, a.kp = 30_000, 2_048_000, 1, 6
+    a.soft_limits = (None, None)
+    assert move.wait().deviation == {"A": 0}
+    a.decel = 512_000  # at rest: it goes out
+    assert a.decel == 512_000
+
+
+def test_a_decel_change_goes_out_in_a_jog_and_once_a_move_is_over_by_its_prediction(
+    dmc: galil.Controller,
+) -> None:
+    a = dmc.A
+    move = a.move_by(1000)
+    dmc.sleep(1.0)  # over, unwaited: the library does not know, its prediction does
+    a.decel = 512_000
+    assert move.wait().deviation == {"A": 0}
+    jog = a.jog(5000)
+    # The reference allows DC in a jog: it goes out (the simulator refuses it still: TC 7).
+    with transcript(dmc) as sent, contextlib.suppress(galil.CommandError):
+        a.decel = 256_000
+    assert sent.lines[0].startswith("DC")
+    jog.stop()
+    jog.wait()

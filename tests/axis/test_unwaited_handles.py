@@ -171,3 +171,30 @@ def test_a_late_stop_of_a_vector_sequence_stops_the_sequence_running_since_as_pr
     assert set(result.stop_codes.values()) == {4}
     assert result.worst == 0
     assert first.wait().stop_codes == {"A": 101, "B": 101}
+
+
+@pytest.mark.parametrize("jog", [False, True])
+def test_servo_here_after_an_abort_turned_the_motor_off_leaves_the_handle_its_own_end(
+    dmc: galil.Controller, jog: bool
+) -> None:
+    # SH puts the reference where the encoder is (behind it after the abort): a late wait
+    # reported that as where the move ended, and warned of a deviation it never had.
+    a = dmc.A
+    a.off_on_error = 1
+    a.speed = 20_000
+    sim_of(dmc).set_servo_lag(0.01, "A")
+    handle = a.jog(20_000) if jog else a.move_by(100_000)
+    dmc.sleep(0.5)
+    dmc.abort()
+    dmc.sleep(0.1)
+    assert not a.motor_on
+    end = round(dmc.query_operands(["_RPA"])[0])
+    dmc.servo_here("A")
+    assert a.motor_on
+    assert round(dmc.query_operands(["_RPA"])[0]) != end  # SH moved the reference
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no deviation warning
+        result = handle.wait(timeout=1.0)
+    assert result.final == {"A": end}
+    assert result.deviation == {"A": 0}
+    assert result.stop_codes == {"A": 7}  # the abort's

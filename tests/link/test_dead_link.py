@@ -2,9 +2,18 @@
 
 from __future__ import annotations
 
+import errno
+import re
+from dataclasses import dataclass, field
+
 import pytest
+from client_fakes import SimLinkWrapper
 
 import galil
+from galil.controller import Controller
+from galil.sim.clock import ManualClock
+from galil.sim.controller import SimController
+from galil.sim.link import open_transport
 from galil.sim.server import SimTcpServer
 
 
@@ -53,5 +62,61 @@ def test_reconnect_after_the_server_returns() -> None:
         finally:
             dmc.close()
             revived.stop()
+    finally:
+        dmc.close()
+
+
+@dataclass
+class _Breaks(SimLinkWrapper):
+    """A plug-in transport (no galil base class) whose link breaks after the first ``BG``
+    went out: that write and every later call raise the bare ``OSError`` given."""
+
+    error: OSError = field(default_factory=lambda: OSError(errno.EIO, "I/O error"))
+    armed: bool = True
+    broken: bool = False
+
+    def write(self, data: bytes) -> None:
+        if self.broken:
+            raise self.error
+        self.inner.write(data)
+        if self.armed and re.search(rb"(^|;)BG", data):
+            self.broken = True
+            raise self.error
+
+    def read(self, timeout: float) -> bytes:
+        if self.broken:
+            raise self.error
+        return self.inner.read(timeout)
+
+
+@pytest.mark.parametrize(
+    "error",
+    [BrokenPipeError(errno.EPIPE, "Broken pipe"), ConnectionResetError(), OSError(errno.EIO, "")],
+    ids=["broken-pipe", "reset", "eio"],
+)
+def test_a_plug_in_transports_bare_os_error_is_a_dead_link_and_the_move_is_stopped(
+    error: OSError,
+) -> None:
+    clock = ManualClock()
+    sim = SimController("DMC-4040", clock)
+    links: list[_Breaks] = []
+
+    def factory() -> _Breaks:
+        link = open_transport("sim://DMC-4040", controller=sim)
+        links.append(_Breaks(link, error=error, armed=not links))
+        return links[-1]
+
+    dmc = Controller(factory, timeout=0.5)
+    try:
+        dmc.command("SP 20000;AC 1000000;DC 1000000", allow_compound=True)
+        with pytest.raises(galil.GalilConnectionError, match=type(error).__name__) as info:
+            dmc.A.move_by(200_000)  # 10 s of motion, started before the link broke
+        causes = [info.value.__cause__, getattr(info.value.__cause__, "__cause__", None)]
+        assert error in causes
+        # The link was taken for dead, so the guard opened it again to stop the move.
+        assert len(links) == 2
+        clock.advance(0.25)
+        assert not sim.motion("A").moving
+        assert dmc.query_operands(["_BGA"]) == [0]
     finally:
         dmc.close()

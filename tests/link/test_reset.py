@@ -303,3 +303,40 @@ def test_the_automatic_reconnect_inside_a_start_does_not_deadlock_a_close_or_res
     assert not mover.is_alive(), "deadlocked"
     assert not closer.is_alive(), "deadlocked"
     dmc.close()
+
+
+@pytest.mark.parametrize("failures", [1, 2])
+def test_a_reset_interrupted_half_way_leaves_streams_interrupts_and_the_link_working(
+    monkeypatch: pytest.MonkeyPatch, failures: int
+) -> None:
+    # Ctrl-C at the handshake after RS; with 2, again at the handshake that sets the link up
+    # after the failure: the stream then ends saying so, rather than waiting for ever.
+    sim = SimController("DMC-4040", ManualClock())
+    with SimTcpServer(sim) as srv, galil.connect(srv.url, timeout=2.0) as c:
+        stream = c.records(8)
+        c.interrupts.enable("A")
+        transport = c.link.transport
+        assert transport is not None
+        write = transport.write
+        hits: list[bytes] = []
+
+        def ctrl_c_at_the_handshake(data: bytes) -> None:
+            if data.startswith(b"\x12\x16") and len(hits) < failures:  # ^R^V
+                hits.append(data)
+                raise KeyboardInterrupt
+            write(data)
+
+        monkeypatch.setattr(transport, "write", ctrl_c_at_the_handshake)
+        with pytest.raises(KeyboardInterrupt):
+            c.reset()
+        assert len(hits) == failures
+        if failures == 2:
+            with pytest.raises(GalilConnectionError, match="a reset failed"):
+                stream.get(timeout=2.0)
+            assert not c.interrupts.enabled
+            c.reconnect()
+        assert c.query_number("MG 2") == 2.0
+        srv.advance(0.05)
+        assert len(stream.take(3, timeout=2.0)) == 3
+        assert c.interrupts.enabled
+        assert "open" in repr(c)
