@@ -122,6 +122,7 @@ FROM_HOST = {
     "AI": "AI 1",
     "AP": "AP 100",
     "AR": "AR 100",
+    "AT": "AT 100",
     "AV": "AV 100",
     "EN": "EN",
     "JP": "JP #M",
@@ -168,6 +169,7 @@ AV 1000
 tv=TIME-t0
 AM S
 AI 1
+AT 0;AT 10,1
 ZS
 MG ta,tb,_TPA>=3000,tv>0,_TC
 EN
@@ -188,6 +190,56 @@ def test_am_mc_and_wt_are_still_answered_from_the_host(dmc: galil.Controller) ->
     # The reference marks them "Not Valid in terminal" too; the library sends them (0037).
     dmc.command_line(["PR 1000", "BG A", "AM A", "MC A", "WT 10"])
     assert dmc.query_number("MG _TPA") == 1000
+
+
+# ---- AT ---------------------------------------------------------------------------------
+def test_at_waits_from_its_reference_and_at_minus_n_moves_the_reference_on(
+    dmc: galil.Controller,
+) -> None:
+    # The reference's own sequence: AT 0; AT 50; AT 100; AT -150; AT 80 (230 after the start),
+    # in samples and in ms (a sample is 1/1024 s at TM 1000: 50 ms is 52 samples, rounded up).
+    program = """#M
+WT 7,1
+t0=TIME
+AT 0
+AT 50,1;a=TIME-t0
+AT 100,1;b=TIME-t0
+AT -150,1;c=TIME-t0
+AT 80,1;d=TIME-t0
+AT 0;t0=TIME
+AT 50;e=TIME-t0
+AT 100;f=TIME-t0
+AT -150;g=TIME-t0
+AT 80;h=TIME-t0
+MG a,b,c,d
+MG e,f,g,h
+EN
+"""
+    assert _run(dmc, program) == [
+        "50.0000 100.0000 150.0000 230.0000",
+        "52.0000 103.0000 154.0000 236.0000",
+    ]
+
+
+def test_at_in_the_past_goes_on_at_once_and_at_minus_n_keeps_the_pace(
+    dmc: galil.Controller,
+) -> None:
+    # Late by 100 samples, AT -20,1 five times goes on at once; the reference moves on by 20
+    # each time, so the next wait ends 120 samples after AT 0.
+    program = """#M
+AT 0;t0=TIME
+WT 100,1
+i=0
+#L
+AT -20,1
+i=i+1
+JP #L,(i<5)
+late=TIME-t0
+AT -20,1
+MG late>=100,TIME-t0
+EN
+"""
+    assert _run(dmc, program) == ["1.0000 120.0000"]
 
 
 # ---- TS bit 6 -----------------------------------------------------------------------------

@@ -53,7 +53,7 @@ _BRANCH = re.compile(r"(?:(IF)(?=[\s(])|(ELSE|ENDIF)\s*$)")
 #: terminal" (its usage line), in one place: from a host port each answers ``?`` with TC 2
 #: ("Command only valid from program"); a thread runs them (decision 0037).
 PROGRAM_ONLY = frozenset(
-    {"AD", "AI", "AP", "AR", "AV", "EN", "JP", "JS", "RE", "RI", "ZS", "IF", "ELSE", "ENDIF"}
+    {"AD", "AI", "AP", "AR", "AT", "AV", "EN", "JP", "JS", "RE", "RI", "ZS", "IF", "ELSE", "ENDIF"}
 )
 #: Marked "Not Valid in terminal" by the same reference, yet answered from a host with the
 #: ``:`` held until they clear, as the simulator has always done: the library itself sends
@@ -102,6 +102,8 @@ class Thread:
     stack: list[Frame] = field(default_factory=list)
     #: IFs entered and not yet left by their ENDIF.
     ifs: int = 0
+    #: The reference sample of ``AT`` (``AT 0`` sets it; 0, the last reset, until then).
+    at: int = 0
 
     def in_routine(self) -> bool:
         """Whether the thread runs an automatic subroutine."""
