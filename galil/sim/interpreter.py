@@ -18,7 +18,7 @@ from galil.models import INT32_MAX, INT32_MIN, ModelSpec
 from galil.protocol.numbers import format_reply, parse_format
 from galil.sim.parse import FUNCTIONS, Refused, evaluate, split_fields
 from galil.sim.ports import Port
-from galil.sim.programs import Thread
+from galil.sim.programs import PROGRAM_ONLY, Thread, program_only
 from galil.sim.registry import Args, HandlerSpec, Result
 from galil.sim.servo import Axis, Servo
 
@@ -123,6 +123,10 @@ class Interpreter:
             if control is None:
                 raise Refused(1, "unknown control command")
             return control.run("")
+        word = program_only(s)
+        if word is not None:
+            self._from_program(word)
+            raise Refused(1, f"{word} is run by a program thread")
         eq = _find_eq(s)
         if eq > 0 and s[eq - 1] == "]" and self.store_element is not None:
             target = _ELEMENT.fullmatch(s[:eq].strip())
@@ -140,6 +144,7 @@ class Interpreter:
                 name = s[:eq].strip()
                 if not self._is_axis_spec(s[2:eq].strip()) and self._variable.fullmatch(name):
                     return self.assign(name, s[eq + 1 :])
+            self._from_program(s[:2])
             args = s[2:]
             kind = command.spec.args
             if kind is Args.TEXT:
@@ -150,6 +155,16 @@ class Interpreter:
         if eq > 0:
             return self.assign(s[:eq].strip(), s[eq + 1 :])
         raise Refused(1, f"unrecognised command {s!r}")
+
+    def _from_program(self, name: str) -> None:
+        """Refuse a program-only command (:data:`~galil.sim.programs.PROGRAM_ONLY`) that a
+        host port sent.
+
+        Raises:
+            Refused: TC 2, "Command only valid from program".
+        """
+        if name in PROGRAM_ONLY and not isinstance(self.caller, Thread):
+            raise Refused(2, f"{name} only in a program")
 
     def _planes(self, s: str) -> list[str] | None:
         """The planes a plane command names (``BG ST``), or ``None`` if it is not one."""

@@ -27,7 +27,17 @@ from galil.sim.parse import Refused, split_fields, split_program_line
 from galil.sim.ports import Port
 from galil.sim.registry import Collect, Download, Result, Wait
 
-__all__ = ["LINES_PER_SAMPLE", "STACK_DEPTH", "Executor", "Frame", "Programs", "Thread"]
+__all__ = [
+    "HELD_FOR_HOST",
+    "LINES_PER_SAMPLE",
+    "PROGRAM_ONLY",
+    "STACK_DEPTH",
+    "Executor",
+    "Frame",
+    "Programs",
+    "Thread",
+    "program_only",
+]
 
 #: Program commands one thread may execute per servo sample (the firmware runs a few per ms).
 LINES_PER_SAMPLE = 16
@@ -35,6 +45,29 @@ LINES_PER_SAMPLE = 16
 STACK_DEPTH = 16
 
 _LABEL = re.compile(r"#([A-Za-z][A-Za-z0-9]*)")
+#: ``IF (condition)``, ``ELSE``, ``ENDIF``: the words of a conditional (``IFa=1`` is an
+#: assignment, so IF needs a blank or a parenthesis after it).
+_BRANCH = re.compile(r"(?:(IF)(?=[\s(])|(ELSE|ENDIF)\s*$)")
+
+#: The commands the simulator runs that the DMC-4103 command reference marks "Not Valid in
+#: terminal" (its usage line), in one place: from a host port each answers ``?`` with TC 2
+#: ("Command only valid from program"); a thread runs them (decision 0037).
+PROGRAM_ONLY = frozenset(
+    {"AD", "AI", "AP", "AR", "AT", "AV", "EN", "JP", "JS", "RE", "RI", "ZS", "IF", "ELSE", "ENDIF"}
+)
+#: Marked "Not Valid in terminal" by the same reference, yet answered from a host with the
+#: ``:`` held until they clear, as the simulator has always done: the library itself sends
+#: them from the host (``commands.am``, ``commands.mc``; ``WT`` to test timeouts), so
+#: refusing them would change its contract. Decision 0037 leaves this for the lead.
+HELD_FOR_HOST = frozenset({"AM", "MC", "WT"})
+
+
+def program_only(text: str) -> str | None:
+    """The program-only command ``text`` starts with (see :data:`PROGRAM_ONLY`): ``"IF"``,
+    ``"ELSE"``, ``"ENDIF"``, or ``None`` for any other text. Two-letter commands are found by
+    the interpreter once it knows the text is not an assignment."""
+    m = _BRANCH.match(text)
+    return None if m is None else m.group(m.lastindex or 0)
 
 
 @dataclass(eq=False)
@@ -67,6 +100,10 @@ class Thread:
     sample: int = -1
     ran: int = 0
     stack: list[Frame] = field(default_factory=list)
+    #: IFs entered and not yet left by their ENDIF.
+    ifs: int = 0
+    #: The reference sample of ``AT`` (``AT 0`` sets it; 0, the last reset, until then).
+    at: int = 0
 
     def in_routine(self) -> bool:
         """Whether the thread runs an automatic subroutine."""
@@ -239,10 +276,13 @@ class Programs:
         return th.number in self.threads
 
     def _flow(self, th: Thread, text: str) -> bool | None:
-        """Run ``text`` if it is flow control (JP JS EN ZS): whether the thread goes on;
-        ``None`` for any other command."""
+        """Run ``text`` if it is flow control (JP JS EN ZS IF ELSE ENDIF): whether the thread
+        goes on; ``None`` for any other command."""
+        word = program_only(text)
         code = text[:2]
-        if code == "JP":
+        if word is not None:
+            self._branch(th, word, text)
+        elif code == "JP":
             self._jump(th, text[2:])
         elif code == "JS":
             self._call(th, text[2:])
@@ -277,9 +317,58 @@ class Programs:
         line = self.line_of(fields[0])
         if len(fields) > 2:
             raise Refused(1, "a jump takes a label and one condition")
-        if len(fields) == 2 and not self._x.evaluate(fields[1]):
+        if len(fields) == 2 and not self._condition(fields[1]):
             return None
         return line
+
+    def _condition(self, text: str) -> bool:
+        """A condition of JP, JS or IF: true when its expression is not zero (``&`` and
+        ``|`` combine conditions bitwise, left to right, as in any expression)."""
+        return self._x.evaluate(text) != 0
+
+    # ---- IF / ELSE / ENDIF -------------------------------------------------------------
+    def _branch(self, th: Thread, word: str, text: str) -> None:
+        """``IF (condition)``: go on, or skip to its ELSE or ENDIF; ``ELSE`` reached from
+        the true part: skip to the ENDIF; ``ENDIF``: leave the IF.
+
+        Raises:
+            Refused: TC 63 for an IF without ENDIF, or an ELSE/ENDIF without an IF.
+        """
+        if word == "IF":
+            # (true: in its first part; false: in its ELSE part, or past its ENDIF)
+            if self._condition(text[2:]) or self._skip(th, to_else=True):
+                th.ifs += 1
+        elif th.ifs == 0:
+            raise Refused(63, f"{word} without IF")
+        elif word == "ELSE":
+            self._skip(th, to_else=False)
+            th.ifs -= 1
+        else:
+            th.ifs -= 1
+
+    def _skip(self, th: Thread, to_else: bool) -> bool:
+        """Move ``th`` past the ENDIF (or, with ``to_else``, the ELSE) that belongs to the
+        IF it is in, skipping nested IFs; True if it stopped after an ELSE.
+
+        Raises:
+            Refused: TC 63, the program ends first (``th`` has not moved).
+        """
+        depth = 0
+        line, cmd = th.line, th.cmd
+        while line < len(self.program):
+            cmds = split_program_line(self.program[line])
+            while cmd < len(cmds):
+                word = program_only(cmds[cmd].strip())
+                cmd += 1
+                if word == "IF":
+                    depth += 1
+                elif word == "ENDIF" and depth > 0:
+                    depth -= 1
+                elif word == "ENDIF" or (word == "ELSE" and depth == 0 and to_else):
+                    th.line, th.cmd = line, cmd
+                    return word == "ELSE"
+            line, cmd = line + 1, 0
+        raise Refused(63, "IF without ENDIF")
 
     def _call(self, th: Thread, args: str) -> None:
         if "(" in split_fields(args)[0]:

@@ -93,7 +93,7 @@ def test_refused_command_changes_nothing(front: Front) -> None:
 
 
 def test_an_unknown_axis_is_refused_with_tc_4(front: Front) -> None:
-    for line in (b"TP Q", b"BG AQ", b"AD Q=5", b"MG _TPQ"):
+    for line in (b"TP Q", b"BG AQ", b"SP Q=5", b"MG _TPQ"):
         assert front.ask(line) == b"?"
         assert tc1(front) == b" 4 Operand error\r\n:"
 

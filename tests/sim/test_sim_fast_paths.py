@@ -68,12 +68,13 @@ def test_a_trippoint_firing_on_the_last_sample_of_a_step_releases_there() -> Non
     prof.begin_jog(10000, 1024000, 1024000)
     r = prof.advance(2048)
     assert r[-2] < r[-1]
+    # (AD is program-only: a thread waits on it, and prints the sample it went on at.)
     sim = SimController("DMC-4040", ManualClock(), servo_lag=0.0)
-    line = f"JG 10000;AC 1024000;DC 1024000;BG A;AD {r[-1]}\r"
-    assert sim.feed(line.encode()) == b"::::"
-    assert sim.advance_until_output(3.0) == b":"
+    program = f"DL\r#T\rJG 10000;AC 1024000;DC 1024000;BG A\rAD {r[-1]}\rMG TIME,_RPA\rEN\r\\"
+    assert sim.feed(program.encode()) == b"::"
+    assert sim.feed(b"XQ #T\r") == b":"
+    assert sim.advance_until_output(3.0) == f" 2048.0000 {r[-1]:.4f}\r\n".encode()
     assert sim.sample == 2048
-    assert sim.feed(b"RPA\r") == f" {r[-1]}\r\n:".encode()
 
 
 @settings(max_examples=30, deadline=None)

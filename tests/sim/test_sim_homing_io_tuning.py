@@ -243,13 +243,16 @@ def test_op_sets_outputs_as_the_sourced_examples_show() -> None:
     assert ask(dmc, "MG @OUT[1],@OUT[2],@OUT[8]") == " 1.0000 0.0000 1.0000\r\n:"
 
 
-def test_ai_holds_the_reply_until_the_input_changes() -> None:
+def test_ai_holds_its_thread_until_the_input_changes() -> None:
+    # AI is program-only: a thread waits on it.
     sim = SimController("DMC-4040")
-    assert ask(sim, "AI -5") == ""
+    assert ask(sim, 'DL\r#W\rAI -5\rMG "low"\rEN\r\\') == "::"
+    assert ask(sim, "XQ #W") == ":"
     sim.advance(0.2)
     assert sim.poll() == b""
     sim.set_input(5, False)
-    assert sim.poll() == b":"
+    sim.advance(0.002)
+    assert sim.poll() == b"low\r\n"
 
 
 def test_loop_settings_are_stored_quantised_and_range_checked() -> None:

@@ -10,7 +10,8 @@ program variables, outputs and captured arrays, and the sample the controller is
 each stretch.
 
 The trippoints ``AP``/``AR``/``AV``, the automatic subroutines (``#LIMSWI``, ``#POSERR``,
-``#ININT``, ``#MCTIME``) and off-on-error are among the scenarios (decision 0029).
+``#ININT``, ``#MCTIME``) and off-on-error are among the scenarios (decision 0029), as are
+``AT``, ``IF``/``ELSE``/``ENDIF`` and ``TS`` bit 6 (decision 0037).
 """
 
 from __future__ import annotations
@@ -514,6 +515,35 @@ SCENARIOS: dict[str, Scenario] = {
     "LM sequence ends": Scenario(
         (Cmd("LM AB;LI 3000,1000;LI 1000,-500;LE;BG S"), Run(2000), Cmd("MG _CSS,_AVS"), STATE)
     ),
+    # ---- decision 0037: AT pacing a loop, IF/ELSE on TS bit 6 while the error grows --------
+    "AT -n paces IF/ELSE on TS bit 6": Scenario(
+        (
+            program(
+                "#P",
+                "AT 0",
+                "n=0",
+                "#L",
+                "AT -37",
+                "IF ((_TSA&64)=64)",
+                ' MG "E",TIME,_TEA',
+                "ELSE",
+                ' IF (n=0);MG "first",TIME;ENDIF',
+                "ENDIF",
+                "n=n+1",
+                "JP #L,(n<6)",
+                "AT 20,1",
+                'MG "end",TIME',
+                "EN",
+                "#J",
+                "ER 40;JG 30000;BG A",
+                "EN",
+            ),
+            Cmd("XQ #J,1"),
+            Cmd("XQ #P"),
+            Run(400),
+            STATE,
+        )
+    ),
 }
 
 #: What a scenario must show (so both runs cannot agree on a wrong answer unnoticed).
@@ -529,6 +559,7 @@ EXPECT: dict[str, bytes] = {
     "#POSERR with OE 0 while the lag catches up": b"E",
     "#ININT while an input is low, RI 1": b"I",
     "#MCTIME after TW": b" 99.0000",
+    "AT -n paces IF/ELSE on TS bit 6": b"E",
 }
 
 
@@ -565,6 +596,7 @@ def _pieces(cuts: list[int]) -> Split:
         "RC round and round during an arc",
         "#POSERR with OE 0 while the lag catches up",
         "#ININT while an input is low, RI 1",
+        "AT -n paces IF/ELSE on TS bit 6",
     ],
 )
 def test_uneven_pieces_agree_with_one_advance(name: str, cuts: list[int]) -> None:

@@ -32,6 +32,7 @@ from galil.sim.interpreter import int32
 from galil.sim.machine import Room
 from galil.sim.parse import Refused, split_fields
 from galil.sim.registry import Args, OperandKind, handler, operand
+from galil.sim.rooms.tuning import Tuning
 from galil.sim.servo import Axis, turns_back
 
 __all__ = ["DEFAULT_HOME_EDGE", "DEFAULT_INDEX_PERIOD", "HomeGeometry", "Limits"]
@@ -86,6 +87,8 @@ class _AxisLimits:
 
 class Limits(Room):
     """Soft limits, limit switches and what stops an axis at them."""
+
+    requires = (Tuning,)
 
     def reset(self) -> None:
         self.axes = {letter: _AxisLimits() for letter in self.machine.spec.axes}
@@ -364,11 +367,20 @@ class Limits(Room):
 
     @operand("TS", kind=OperandKind.AXIS)
     def status_byte(self, ax: Axis) -> float:
-        """``TS``: moving, motor off, the limit bits, home input high, latch not armed."""
+        """``TS``: moving, error beyond ER, motor off, the limit bits, home input high, latch
+        not armed.
+
+        Bit 6, "Position error exceeds error limit" (DMC-4103 reference, TS): ``|TE| > ER``,
+        the comparison #POSERR makes (decision 0029); ER -1 "disables Error output", so
+        never then (decision 0037).
+        """
         m = ax.m
         value = 0x01 | self.switch_bits(ax)
         if m.moving:
             value |= 0x80
+        er = self.machine.room(Tuning).axes[ax.letter].er
+        if er >= 0 and abs(m.error) > er:
+            value |= 0x40
         if not m.motor_on:
             value |= 0x20
         return value

@@ -1,11 +1,13 @@
-"""Program commands: ``DL`` ``UL`` ``XQ`` ``HX``, and ``JP``/``JS``/``EN``/``ZS``/``NO`` from
-the host.
+"""Program commands: ``DL`` ``UL`` ``XQ`` ``HX`` ``NO``, and the registration of ``JP``/``JS``/
+``EN``/``ZS``.
 
 The program store and the threads are the core's :class:`~galil.sim.programs.Programs`;
-``JP``, ``JS``, ``EN`` and ``ZS`` are flow control that only a thread runs (from a host they
-are refused). ``_XQn`` is thread n's line, -1 when it is not running; ``_NO`` the running
-threads' bits; ``_ZSn`` thread n's subroutine depth; ``_JS`` what the last subroutine returned
-(``EN ,,value``); ``_ED`` the program line of the last error in a program, ``_ED1`` its thread.
+``JP``, ``JS``, ``EN``, ``ZS`` and ``IF``/``ELSE``/``ENDIF`` are flow control that only a
+thread runs (from a host they are refused, as every command of
+:data:`~galil.sim.programs.PROGRAM_ONLY` is). ``_XQn`` is thread n's line, -1 when it is not
+running; ``_NO`` the running threads' bits; ``_ZSn`` thread n's subroutine depth; ``_JS``
+what the last subroutine returned (``EN ,,value``); ``_ED`` the program line of the last error
+in a program, ``_ED1`` its thread.
 """
 
 from __future__ import annotations
@@ -69,20 +71,13 @@ class ProgramCommands(Room):
         return n
 
     @handler("JP")
-    def jp(self, args: str) -> str:
-        raise Refused(2, "JP only in a program")
-
-    @handler("EN")
-    def en(self, args: str) -> str:
-        raise Refused(2, "EN only in a program")
-
     @handler("JS")
-    def js(self, args: str) -> str:
-        raise Refused(2, "JS only in a program")
-
+    @handler("EN")
     @handler("ZS")
-    def zs(self, args: str) -> str:
-        raise Refused(2, "ZS only in a program")
+    def flow(self, args: str) -> str:
+        """Flow control, which a thread runs (:meth:`~galil.sim.programs.Programs.run`); the
+        interpreter refuses it from a host before it gets here (``PROGRAM_ONLY``)."""
+        raise Refused(2, "flow control only in a program")
 
     @handler("NO")
     def no(self, args: str) -> str:

@@ -4,7 +4,8 @@
 stop code 99 and ``#MCTIME``), ``AD`` (distance from the move's start), ``AR`` (distance from
 the last ``AD``/``AR`` of the same move), ``AP`` (the encoder crosses a position), ``AV`` (path
 distance of a coordinated sequence from its start or the last ``AV``), ``WT`` (time; ``WT n,1``
-in samples) and ``WC`` (the previous contour segment is done: at most the running one is left).
+in samples), ``AT`` (time from the thread's reference; decision 0037) and ``WC`` (the
+previous contour segment is done: at most the running one is left).
 Each returns a :class:`~galil.sim.registry.Wait`; the servo loop releases it at the exact
 sample its condition turns true. Choices where the command reference is silent are in
 decision 0029: distances are magnitudes (``AR -500`` is 500 counts, as ``AD`` takes them),
@@ -21,6 +22,7 @@ from galil.models import INT32_MAX, INT32_MIN
 from galil.sim.driven import DrivenProfiler
 from galil.sim.machine import Room
 from galil.sim.parse import Refused, split_fields
+from galil.sim.programs import Thread
 from galil.sim.registry import Args, OperandKind, Wait, handler, operand
 from galil.sim.rooms.contour import Contour
 from galil.sim.rooms.motion import Motion
@@ -34,7 +36,7 @@ TW_DEFAULT = 32766.0
 
 
 class Trippoints(Room):
-    """AM, MC (and TW), AD, AR, AP, AV, WT and WC."""
+    """AM, MC (and TW), AD, AR, AP, AV, WT, AT and WC."""
 
     requires = (Motion, Contour, Vector)
 
@@ -294,6 +296,33 @@ class Trippoints(Room):
         samples = len(fields) > 1 and fields[1].strip() == "1"
         n = round(ms) if samples else math.ceil(ms / 1000 / servo.ts - 1e-9)
         return Wait(wake=servo.sample + n)
+
+    @handler("AT")
+    def at(self, args: str) -> Wait | str:
+        """``AT n[,1]``: hold the thread until n ms (samples with ``,1``) after its reference
+        time. ``AT 0`` sets the reference to now; ``AT -n`` waits for ``|n|`` and, once that
+        has passed, moves the reference on by ``|n|`` (a loop paced by it does not drift)."""
+        th = self.machine.interp.caller
+        if not isinstance(th, Thread):
+            raise Refused(2, "AT only in a program")
+        servo = self.machine.servo
+        i = self.machine.interp
+        fields = split_fields(args)
+        n = i.evaluate(fields[0]) if fields[0].strip() else 0.0
+        unit = i.evaluate(fields[1]) if len(fields) > 1 and fields[1].strip() else 0.0
+        if len(fields) > 2 or unit not in (0, 1) or not INT32_MIN <= n <= INT32_MAX:
+            raise Refused(6, "AT n0 (ms or samples), n1 0 or 1")
+        if n == 0:
+            th.at = servo.sample
+            return ""
+        k = round(abs(n)) if unit else math.ceil(abs(n) / 1000 / servo.ts - 1e-9)
+        due = th.at + k
+
+        def moved() -> str:
+            th.at = due
+            return ""
+
+        return Wait(wake=due, then=moved if n < 0 else None)
 
     @handler("WC")
     def wc(self, args: str) -> Wait:
