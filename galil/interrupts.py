@@ -30,7 +30,7 @@ from galil.errors import (
     InvalidArgument,
     ProtocolError,
 )
-from galil.link import Link, read_reply
+from galil.link import Link, read_handle, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.handles import parse_th
 from galil.protocol.interrupts import Interrupt, InterruptParser
@@ -158,7 +158,7 @@ class Interrupts:
         parser = InterruptParser()
         while not stop.is_set():
             try:
-                chunk = handle.read(0.25)
+                chunk = read_handle(handle, 0.25)
             except GalilConnectionError:
                 return
             if not chunk:

@@ -1185,6 +1185,27 @@ def _one_command(text: str, allow_compound: bool) -> Command:
     return cmd
 
 
+def read_handle(handle: Transport, timeout: float) -> bytes:
+    """Read a secondary handle (messages, records, interrupts) for a reader thread.
+
+    A plug-in transport's bare ``OSError`` is the dead link it means
+    (:class:`GalilConnectionError`, as on the command link, decision 0036), so a reader ends
+    as it does on a built-in transport instead of dying with a traceback; a bare
+    ``TimeoutError`` is "nothing arrived" (the transport contract returns ``b""``).
+
+    Raises:
+        GalilConnectionError: the handle is closed or dead.
+    """
+    try:
+        return handle.read(timeout)
+    except OSError as exc:
+        if isinstance(exc, GalilConnectionError):
+            raise
+        if isinstance(exc, TimeoutError) and not isinstance(exc, GalilError):
+            return b""
+        raise _broken(exc, handle) from exc
+
+
 def _own_or_timeout(exc: OSError) -> bool:
     """Whether a transport's ``OSError`` is one of the library's own, or a timeout."""
     return isinstance(exc, (GalilError, TimeoutError))

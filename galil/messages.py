@@ -17,7 +17,7 @@ from collections import deque
 from collections.abc import Callable
 
 from galil.errors import GalilConnectionError, GalilError, ProtocolError
-from galil.link import Link, check_count, read_reply
+from galil.link import Link, check_count, read_handle, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.framing import FrameParser, Unsolicited
 from galil.protocol.numbers import read_one
@@ -246,7 +246,7 @@ class Messages:
         parser = FrameParser(unsolicited_only=True)
         while not stop.is_set():
             try:
-                chunk = secondary.read(0.25)
+                chunk = read_handle(secondary, 0.25)
             except GalilConnectionError:
                 return
             if not chunk:

@@ -28,7 +28,7 @@ from galil.errors import (
     InvalidArgument,
     ProtocolError,
 )
-from galil.link import Link, check_count, check_timeout, check_wait_timeout, read_reply
+from galil.link import Link, check_count, check_timeout, check_wait_timeout, read_handle, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import read_one
 from galil.protocol.records import (
@@ -202,7 +202,7 @@ class RecordStream:
         splitter = RecordSplitter(layout)
         while not self._closed and not self._suspended:
             try:
-                chunk = handle.read(0.25)
+                chunk = read_handle(handle, 0.25)
                 whole = splitter.feed_block(chunk)
                 records = self._timed(decode_records(whole, layout)) if whole else None
             except ProtocolError as exc:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import errno
 import re
+import threading
 from dataclasses import dataclass, field
 
 import pytest
@@ -120,3 +121,45 @@ def test_a_plug_in_transports_bare_os_error_is_a_dead_link_and_the_move_is_stopp
         assert dmc.query_operands(["_BGA"]) == [0]
     finally:
         dmc.close()
+
+
+class _DeadHandle:
+    """A plug-in transport's own message handle whose reads fail with a bare ``OSError``."""
+
+    def __init__(self, error: BaseException) -> None:
+        self.error = error
+        self.tried = threading.Event()
+
+    def write(self, data: bytes) -> None:
+        raise BrokenPipeError(errno.EPIPE, "Broken pipe")
+
+    def read(self, timeout: float) -> bytes:
+        self.tried.set()
+        raise self.error
+
+    def close(self) -> None:
+        pass
+
+
+@dataclass
+class _WithHandle(SimLinkWrapper):
+    """A plug-in transport that brings its own message handle."""
+
+    handle: _DeadHandle | None = None
+
+    def __post_init__(self) -> None:
+        self.secondary = self.handle  # type: ignore[assignment]
+
+
+@pytest.mark.parametrize("error", [BrokenPipeError(errno.EPIPE, "Broken pipe"), TimeoutError()])
+def test_a_message_handle_raising_a_bare_os_error_ends_its_reader_quietly(
+    error: OSError, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    crashed: list[threading.ExceptHookArgs] = []
+    monkeypatch.setattr(threading, "excepthook", crashed.append)
+    handle = _DeadHandle(error)
+    link = _WithHandle(open_transport("sim://DMC-4040"), handle=handle)
+    with Controller(link, timeout=0.5) as dmc:
+        assert handle.tried.wait(5.0)  # the reader thread has read (and failed) at least once
+        assert dmc.query_operands(["_BGA"]) == [0]  # the command link is untouched
+    assert crashed == []  # no reader thread died with a traceback
