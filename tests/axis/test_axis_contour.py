@@ -318,3 +318,22 @@ def test_a_stream_without_preload_starts_with_its_first_segment(dmc: galil.Contr
     first_cd = min(k for k, text in sim.command_log if k >= t0 and text.startswith("CD "))
     assert result.begin == first_cd
     assert_follows(trace, t0, result.profiles["A"], first_cd)
+
+
+def test_cd_with_minus_one_pauses_the_buffer_until_a_positive_dt(dmc: galil.Controller) -> None:
+    # DMC-4103 reference, CD: "t = -1: Pauses contour buffer at the segment with t=-1.
+    # Reissue DT to re-engage contour mode", shown as CD 0,0,0=-1 between segments.
+    for line in ("CM A", "DT 2", "CD 100", "CD 0=-1", "CD 300", "CD 500"):
+        dmc.command(line)
+    dmc.sleep(1.0)
+    assert dmc.A.position == 100  # the first segment ran; the ones behind the pause wait
+    assert dmc.query_operands(["_CM"]) == [509]
+    dmc.command("DT 2")  # re-engaged
+    dmc.command("CD 0=0")
+    dmc.sleep(1.0)
+    assert dmc.A.position == 900
+    assert dmc.A.moving is False
+    dmc.command("CM A")
+    with pytest.raises(galil.CommandError) as info:
+        dmc.command("CD 5=-1")  # a pause that moves: not in the reference
+    assert info.value.code == 41

@@ -126,7 +126,15 @@ class Contour(Room):
         if n not in (0, -1) and not low <= n <= high:
             raise Refused(41, "DT out of range")
         if n == -1 and dt_text.strip():
-            raise Refused(41, "CD =-1")
+            # "t = -1: Pauses contour buffer at the segment with t=-1. Reissue DT to re-engage
+            # contour mode" (DMC-4103 reference, CD; its example sends CD 0,0,0=-1). Taken as
+            # DT -1 at that place in the stream; a pause that also moves is refused (the
+            # reference shows only zeros: this simulator's assumption).
+            if any(incs.values()):
+                raise Refused(41, "CD =-1 with an increment")
+            self.exponent = -1
+            self.fed.clear()
+            return ""
         held = self.exponent == -1
         # Under DT -1 every segment (and the end) waits until a positive DT; one without its
         # own DT takes that DT then.
