@@ -365,7 +365,7 @@ class Axis:
 
     def _send_param(self, cmd: str, command: cmds.Command, value: float) -> None:
         handle = self._tracker.active(self.letter)
-        if handle is None or cmd not in ("SP", "AC"):
+        if handle is None or cmd not in ("SP", "AC", "DC"):
             self._link.command_line([command])
             return
         # A change in motion: stamp it so the move's prediction can follow it.
@@ -376,8 +376,10 @@ class Axis:
             if track is not None and track.kind == "jog":
                 return  # SP does not touch a jog
             handle.add_event(self.letter, sample, lambda t: predict.SetSpeed(t, value))
-        else:
+        elif cmd == "AC":
             handle.add_event(self.letter, sample, lambda t: predict.SetAccel(t, value))
+        else:  # DC: a jog, or a stop ramping down (refuse_in_motion let it out)
+            handle.add_event(self.letter, sample, lambda t: predict.SetDecel(t, value))
 
     @property
     def speed(self) -> Any:
@@ -400,7 +402,8 @@ class Axis:
     @property
     def decel(self) -> Any:
         """Deceleration ``DC``: not in a PA/PR move (refused while the library's runs), but
-        in a jog (the command reference)."""
+        in a jog, or while an ``ST`` ramps down (the command reference); the motion's
+        prediction follows it from the next sample."""
         return self._out_rate(self._operand("DC"), 2)
 
     @decel.setter

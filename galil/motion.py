@@ -1057,9 +1057,10 @@ class MoveHandle:
 
 def refuse_in_motion(link: CommandLink, tracker: MotionTracker, letter: str, name: str) -> None:
     """Refuse ``name`` (a command the controller takes only at rest, TC 7 otherwise: ``DC``
-    in a position move, ``MT``, ``BR``) on an axis the library itself knows is moving: a
-    motion it started, not seen over, and by its prediction not over yet. No query: a
-    motion started elsewhere (a program) still gets the controller's refusal.
+    in a position move not stopped by an ``ST``, ``MT``, ``BR``) on an axis the library
+    itself knows is moving: a motion it started, not seen over, and by its prediction not
+    over yet. No query: a motion started elsewhere (a program) still gets the controller's
+    refusal.
 
     Raises:
         InvalidArgument: the axis moves.
@@ -1068,8 +1069,10 @@ def refuse_in_motion(link: CommandLink, tracker: MotionTracker, letter: str, nam
     track = None if handle is None else handle.track(letter)
     if handle is None or track is None or letter in handle._ended:
         return
-    if name == "DC" and track.kind == "jog":
-        return  # "DC may be changed during a move in Jog mode, but not in a PA or PR move"
+    if name == "DC" and (track.kind == "jog" or (track.kind == "position" and track.stopped)):
+        # "DC may be changed during a move in Jog mode, but not in a PA or PR move", and
+        # "directly following an axis stop (i.e. ST m ...)" while it still decelerates.
+        return
     if not track.open_jog and link.clock() >= handle.started_at + handle.duration:
         return  # over by its prediction, unseen: the controller decides
     raise InvalidArgument(

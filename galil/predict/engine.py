@@ -485,6 +485,28 @@ class _Active:
         return math.floor(x) / FRACTION, self.v0[i] + self.a[i] * dt
 
 
+def _per_sample(ts: float, speed: float, accel: float, decel: float) -> tuple[float, float, float]:
+    """Speed, AC and DC (per second) in counts per sample (``ts`` seconds), checked."""
+    for name, value in (("speed", speed), ("accel", accel), ("decel", decel)):
+        if not math.isfinite(value):
+            raise InvalidArgument(f"{name} must be finite, got {value!r}")
+    if accel <= 0 or decel <= 0:
+        raise InvalidArgument(f"accel and decel must be > 0, got {accel!r}, {decel!r}")
+    return speed * ts, accel * ts * ts, decel * ts * ts
+
+
+def _checked_smoothing(smoothing: float | None) -> float:
+    """IT as the engine filters with it (``None``: 1, none)."""
+    if smoothing is None:
+        return 1.0
+    if not (IT_STORED_MIN <= smoothing <= IT_MAX):
+        raise InvalidArgument(
+            f"smoothing (IT) must be in [{IT_STORED_MIN}, {IT_MAX}], got {smoothing!r}"
+        )
+    # IT 0.004 is held as 1/256 (read back as 0.0039): the smallest step filters with it.
+    return max(float(smoothing), 1 / 256)
+
+
 class AxisProfiler:
     """The profiler of one axis, stepped sample by sample (see the interface in ADR 0001).
 
@@ -540,15 +562,6 @@ class AxisProfiler:
         return new
 
     # ---- helpers -----------------------------------------------------------------------
-    def _per_sample(self, speed: float, accel: float, decel: float) -> tuple[float, float, float]:
-        ts = self.sample_period
-        for name, value in (("speed", speed), ("accel", accel), ("decel", decel)):
-            if not math.isfinite(value):
-                raise InvalidArgument(f"{name} must be finite, got {value!r}")
-        if accel <= 0 or decel <= 0:
-            raise InvalidArgument(f"accel and decel must be > 0, got {accel!r}, {decel!r}")
-        return speed * ts, accel * ts * ts, decel * ts * ts
-
     def _state(self) -> tuple[float, float]:
         if self._active is None:
             return float(self.position), 0.0
@@ -566,16 +579,6 @@ class AxisProfiler:
 
     def _invalidate(self) -> None:
         self._sc = SmoothCache(self.sample)
-
-    def _check_smoothing(self, smoothing: float | None) -> float:
-        if smoothing is None:
-            return 1.0
-        if not (IT_STORED_MIN <= smoothing <= IT_MAX):
-            raise InvalidArgument(
-                f"smoothing (IT) must be in [{IT_STORED_MIN}, {IT_MAX}], got {smoothing!r}"
-            )
-        # IT 0.004 is held as 1/256 (read back as 0.0039): the smallest step filters with it.
-        return max(float(smoothing), 1 / 256)
 
     # ---- commands ----------------------------------------------------------------------
     def begin_move(
@@ -595,8 +598,8 @@ class AxisProfiler:
         """
         if self.moving:
             raise _refuse(21, "BG")
-        it = self._check_smoothing(smoothing)
-        v, a, d = self._per_sample(abs(speed), accel, decel)
+        it = _checked_smoothing(smoothing)
+        v, a, d = _per_sample(self.sample_period, abs(speed), accel, decel)
         if v <= 0:
             raise InvalidArgument(f"speed must be > 0, got {speed!r}")
         self.smoothing = it
@@ -615,8 +618,8 @@ class AxisProfiler:
         """
         if self.moving:
             raise _refuse(21, "BG")
-        it = self._check_smoothing(smoothing)
-        v, a, d = self._per_sample(speed, accel, decel)
+        it = _checked_smoothing(smoothing)
+        v, a, d = _per_sample(self.sample_period, speed, accel, decel)
         self.smoothing = it
         self._v, self._a, self._d = v, a, d
         self.mode = "jog"
@@ -636,8 +639,8 @@ class AxisProfiler:
         """
         if self.moving:
             raise _refuse(21, "BG")
-        it = self._check_smoothing(smoothing)
-        v, a, d = self._per_sample(speed, accel, decel)
+        it = _checked_smoothing(smoothing)
+        v, a, d = _per_sample(self.sample_period, speed, accel, decel)
         if not math.isfinite(velocity):
             raise InvalidArgument(f"velocity must be finite, got {velocity!r}")
         self.smoothing = it
@@ -677,6 +680,27 @@ class AxisProfiler:
         else:
             self._set_plan(plan_position(x, v0, float(self.target), self._v, self._a, self._d))
 
+    @property
+    def takes_decel(self) -> bool:
+        """Whether DC may change now: at rest, in a jog, or while ST or a limit ramps down
+        (not in a position move nor while contouring: TC 7)."""
+        return not self.moving or self._stopping or self.mode == "jog"
+
+    def set_decel(self, decel: float) -> None:
+        """DC: a jog or a forced stop's ramp re-plans from the present state at the new rate
+        (as AC does); at rest it is kept. CommandError TC 7 unless :attr:`takes_decel`."""
+        if not (math.isfinite(decel) and decel > 0):
+            raise InvalidArgument(f"decel must be > 0, got {decel!r}")
+        if not self.takes_decel:
+            raise _refuse(7, "DC")
+        self._d = decel * self.sample_period**2
+        if self._stopping:
+            x, v0 = self._state()
+            self._set_plan(plan_stop(x, v0, self._d), stopping=True, code=self._end_code)
+        elif self.moving:
+            x, v0 = self._state()
+            self._set_plan(plan_jog(x, v0, self._v, self._a, self._d))
+
     def increment(
         self,
         n: int,
@@ -711,7 +735,7 @@ class AxisProfiler:
         direction = self.target - x if v0 == 0 else v0
         if direction != 0 and (n > 0) != (direction > 0):
             raise _refuse(16, "IP")
-        v, a, d = self._per_sample(abs(speed), accel, decel)
+        v, a, d = _per_sample(self.sample_period, abs(speed), accel, decel)
         if v > 0:
             self._v = v
         self._a, self._d = a, d

@@ -44,7 +44,8 @@ def jog(
         duration: predict this many seconds. Without ``stop_at`` or ``duration`` the
             prediction runs until the last ramp has reached its speed.
         events: further changes in motion (:class:`~galil.predict.move.SetAccel`,
-            :class:`~galil.predict.move.Increment`, ...).
+            :class:`~galil.predict.move.SetDecel`, :class:`~galil.predict.move.Increment`,
+            ...).
         sample_period: seconds per sample.
         smoothing: IT (1 or ``None``: none).
         start: position at sample 0.

@@ -27,6 +27,7 @@ __all__ = [
     "MovePlan",
     "ScheduleError",
     "SetAccel",
+    "SetDecel",
     "SetSpeed",
     "SpeedSchedule",
     "Stop",
@@ -61,6 +62,15 @@ class SetAccel:
 
 
 @dataclass(frozen=True)
+class SetDecel:
+    """DC at ``time`` seconds, counts/s²: in a jog, or while a stop (ST) ramps down, the ramp
+    re-plans at the new rate; in a position move the controller refuses it (TC 7)."""
+
+    time: float
+    decel: float
+
+
+@dataclass(frozen=True)
 class Increment:
     """IP ``distance`` counts at ``time`` seconds."""
 
@@ -75,7 +85,7 @@ class Stop:
     time: float
 
 
-Event = SetSpeed | SetAccel | Increment | Stop
+Event = SetSpeed | SetAccel | SetDecel | Increment | Stop
 
 
 @dataclass(frozen=True)
@@ -229,7 +239,7 @@ def run(
     """
     ts = eng.sample_period
     out = _Run([], [], abs(eng.velocity))
-    sp, ac = speed, accel
+    sp, ac, dc = speed, accel, decel
     base = eng.sample
     for ev in sorted(events, key=lambda e: e.time):
         k = base + _sample_of(ev.time, ts)
@@ -240,8 +250,11 @@ def run(
         elif isinstance(ev, SetAccel):
             ac = ev.accel
             eng.set_accel(ev.accel)
+        elif isinstance(ev, SetDecel):
+            eng.set_decel(ev.decel)
+            dc = ev.decel
         elif isinstance(ev, Increment):
-            eng.increment(ev.distance, abs(sp), ac, decel)
+            eng.increment(ev.distance, abs(sp), ac, dc)
         else:
             eng.stop()
     if until is not None:
@@ -287,7 +300,7 @@ def move(
         smoothing: IT (1 or ``None`` = none).
         start: position at sample 0.
         events: changes in motion (:class:`SetSpeed`, :class:`SetAccel`, :class:`Increment`,
-            :class:`Stop`) at given times.
+            :class:`Stop`; :class:`SetDecel` only after a stop) at given times.
         model: when given, SP/AC/DC/IT are first quantised as that model stores them (and
             range-checked), and its sample period is used.
 

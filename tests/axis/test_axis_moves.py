@@ -6,7 +6,6 @@ sample: the handle stamps each command with the controller's TIME, so the two mu
 
 from __future__ import annotations
 
-import contextlib
 import re
 import threading
 
@@ -328,9 +327,63 @@ def test_a_decel_change_goes_out_in_a_jog_and_once_a_move_is_over_by_its_predict
     a.decel = 512_000
     assert move.wait().deviation == {"A": 0}
     jog = a.jog(5000)
-    # The reference allows DC in a jog: it goes out (the simulator refuses it still: TC 7).
-    with transcript(dmc) as sent, contextlib.suppress(galil.CommandError):
+    # The reference allows DC in a jog: it goes out, stamped, and the controller takes it.
+    with transcript(dmc) as sent:
         a.decel = 256_000
-    assert sent.lines[0].startswith("DC")
+    assert sent.lines == ["DCA=256000;MG TIME{Z10.4}"]
+    assert a.decel == 256_000
     jog.stop()
-    jog.wait()
+    assert jog.wait().deviation == {"A": 0}
+
+
+def test_a_jogs_ramps_down_follow_a_decel_changed_in_motion(dmc: galil.Controller) -> None:
+    a, sim = dmc.A, sim_of(dmc)
+    a.accel, a.decel = 512_000, 512_000
+    t0 = sim.start_trace("A")
+    jog = a.jog(40_000)
+    dmc.sleep(0.2)
+    a.decel = 102_400  # the ramp down to the lower speed takes 0.29 s, not 0.06 s
+    a.jog_speed = 10_000
+    dmc.sleep(0.1)  # mid-ramp: a new DC re-plans the rest of it
+    a.decel = 20_480
+    dmc.sleep(0.3)
+    a.decel = 1_024_000  # the stop's rate
+    jog.stop()
+    result = jog.wait()
+    assert result.stop_codes == {"A": 4}
+    assert result.deviation == {"A": 0}
+    assert_follows(sim.stop_trace("A")["A"], t0, jog.profile, jog.begin["A"])
+    # (at DC 512,000 it would be at 10,000 counts/s from 0.26 s on)
+    assert jog.profile.velocity[round(0.55 * 1024)] > 20_000
+
+
+def test_a_decel_change_while_an_st_ramps_a_move_down_re_plans_the_stop(
+    dmc: galil.Controller,
+) -> None:
+    a, sim = dmc.B, sim_of(dmc)
+    a.speed, a.accel, a.decel = 50_000, 512_000, 51_200
+    t0 = sim.start_trace("B")
+    move = a.move_by(200_000)
+    dmc.sleep(0.3)
+    move.stop()  # a 1 s ramp at DC 51200
+    dmc.sleep(0.1)
+    with transcript(dmc) as sent:
+        a.decel = 512_000  # "directly following an axis stop ... while still decelerating"
+    assert sent.lines == ["DCB=512000;MG TIME{Z10.4}"]
+    result = move.wait()
+    assert result.stop_codes == {"B": 4}
+    assert result.deviation == {"B": 0}
+    assert move.duration < 0.6
+    assert_follows(sim.stop_trace("B")["B"], t0, move.profile, move.begin["B"])
+
+
+def test_a_decel_change_in_a_position_move_is_refused_unsent_and_by_the_controller(
+    dmc: galil.Controller,
+) -> None:
+    move = dmc.C.move_by(50_000)
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="DC is not valid"):
+        dmc.C.decel = 512_000
+    with pytest.raises(galil.CommandError) as refused:
+        dmc.command("DCC=512000")  # (the library's refusal is the controller's)
+    assert refused.value.code == 7
+    assert move.wait().deviation == {"C": 0}

@@ -241,6 +241,65 @@ def test_a_move_slowed_by_sp_ramps_at_dc_closed_form() -> None:
     assert p.end == 60_000
 
 
+def test_a_decel_changed_in_a_jog_sets_the_rate_of_its_later_ramp_down_closed_form() -> None:
+    # The same slow-down as above, with DC 204,800 given at 0.5 s and changed to 51,200 at
+    # 0.9 s: the ramp at 1 s runs at the last DC.
+    p = predict.jog(
+        20_480,
+        204_800,
+        204_800,
+        changes=[(1.0, 10_240)],
+        events=[predict.SetDecel(0.5, 409_600), predict.SetDecel(0.9, 51_200)],
+        duration=1.5,
+    )
+    assert p.at(1.2) == pytest.approx(SLOWED_AT_1_2, abs=25)
+    assert p.at(1.5) == pytest.approx(SLOWED_AT_1_2 + 10_240 * 0.3, abs=25)
+
+
+def test_a_decel_changed_mid_ramp_and_mid_stop_re_plans_from_the_present_state() -> None:
+    # 20,480 counts/s, then JG 0 at 1 s (DC 51,200: 0.4 s), DC 204,800 at 1.1 s: 15,360
+    # counts/s left, gone in 0.075 s.
+    ramp = predict.jog(
+        20_480,
+        204_800,
+        51_200,
+        changes=[(1.0, 0)],
+        events=[predict.SetDecel(1.1, 204_800)],
+        duration=1.5,
+    )
+    assert np.all(ramp.velocity[round(1.18 * 1024) :] == 0)
+    assert ramp.velocity[round(1.17 * 1024)] != 0
+    # The same with ST: the stop's ramp re-plans too, and it ends with stop code 4.
+    stop = predict.jog(
+        20_480, 204_800, 51_200, stop_at=1.0, events=[predict.SetDecel(1.1, 204_800)]
+    )
+    assert stop.stop_code == 4
+    assert stop.duration == pytest.approx(1.175, abs=2 / 1024)
+    assert stop.end == ramp.position[-1]
+    moved = predict.move(
+        100_000, 20_480, 204_800, 51_200, events=[predict.Stop(1.0), predict.SetDecel(1.1, 204_800)]
+    )
+    assert moved.duration == pytest.approx(1.175, abs=2 / 1024)
+    assert moved.stop_code == 4
+
+
+def test_a_decel_change_in_a_position_move_is_refused_as_the_controller_does() -> None:
+    with pytest.raises(CommandError) as info:
+        predict.move(100_000, 20_480, 204_800, 51_200, events=[predict.SetDecel(0.5, 102_400)])
+    assert info.value.code == 7
+    # At rest (after the move) it is kept for what comes next: the IP's move ramps up for
+    # 0.1 s, cruises 15,360 counts, ramps down 4,096 counts in 0.4 s (at DC 204,800 the
+    # cruise would be 0.9 s and the ramp down 0.1 s: 1.7 s).
+    later = predict.move(
+        1_000,
+        20_480,
+        204_800,
+        204_800,
+        events=[predict.SetDecel(0.5, 51_200), predict.Increment(0.6, 20_480)],
+    )
+    assert later.duration == pytest.approx(0.6 + 0.1 + 0.75 + 0.4, abs=2 / 1024)
+
+
 def test_jog_without_end_runs_until_the_ramp_settles_then_stop() -> None:
     p = predict.jog(-20_480, 204_800, 102_400)
     assert p.samples == pytest.approx(0.1 * 1024, abs=2)

@@ -113,6 +113,43 @@ def test_ip_sp_ac_changes_and_st_match_engine() -> None:
     assert sim.feed(b"SC A\r") == b" 4\r\n:"
 
 
+def test_dc_in_a_jog_and_in_a_stop_ramp_matches_engine() -> None:
+    sim = new_sim()
+    ok(sim, "JG 30000;AC 204800;DC 204800;BG A")
+    prof = AxisProfiler(sample_period=TS)
+    prof.begin_jog(30000, 204800, 204800)
+    steps = [
+        (150, "DC 20480", lambda: prof.set_decel(20480)),
+        (150, "JG 5000", lambda: prof.set_speed(5000)),
+        (150, "DC 102400", lambda: prof.set_decel(102400)),  # mid-ramp (1.25 s at DC 20480)
+        (150, "JG 20000", lambda: prof.set_speed(20000)),
+        (150, "ST A", prof.stop),
+        (30, "DC 10240", lambda: prof.set_decel(10240)),  # while ST ramps down (0.2 s at 102400)
+    ]
+    for n, line, call in steps:
+        np.testing.assert_array_equal(sample_rp(sim, n), prof.advance(n))
+        ok(sim, line)
+        call()
+    np.testing.assert_array_equal(sample_rp(sim, 1600), prof.advance(1600))
+    assert sim.motion("A").moving  # (the new DC made the stop's ramp longer)
+    np.testing.assert_array_equal(sample_rp(sim, 200), prof.advance(200))
+    assert not prof.moving
+    assert sim.feed(b"SC A;MG _DCA\r") == b" 4\r\n: 10240.0000\r\n:"
+
+
+def test_dc_is_refused_in_a_position_move_and_in_homing_but_not_after_st() -> None:
+    sim = new_sim()
+    ok(sim, "PR 50000;SP 20000;BG A")
+    assert sim.feed(b"DC 51200\r") == b"?"
+    assert sim.feed(b"TC 1\r").startswith(b" 7 ")
+    ok(sim, "ST A")
+    ok(sim, "DC 51200")  # "directly following an axis stop ... still decelerating"
+    sim.set_home_switch("B", edge=-30000)
+    ok(sim, "HV ,2000;HM B;BG B")  # (its phases are jogs on the engine)
+    assert sim.feed(b"DC ,51200\r") == b"?"
+    assert sim.feed(b"MG _DCB\r") == b" 256000.0000\r\n:"
+
+
 def test_it_smoothing_matches_engine() -> None:
     sim = new_sim()
     ok(sim, "IT 0.25;PR 4000;SP 40000;BG A")

@@ -445,6 +445,24 @@ SCENARIOS: dict[str, Scenario] = {
     "jog turned back just short of a switch": Scenario(
         (Cmd("JG 5000;BG A"), Run(200), Cmd("JG -5000"), place_ahead("A", 20), Run(1000), STATE)
     ),
+    # ---- DC in motion: a jog's ramps and a stop's ramp re-planned (decision 0039) ---------
+    "DC in a jog, mid-ramp, in its stop and in a PR's stop": Scenario(
+        (
+            Cmd("JG 30000;AC 204800;DC 204800;PR ,50000;SP ,20000;BG AB"),
+            Run(150),
+            Cmd("DC 20480;JG 5000"),
+            Run(150),
+            Cmd("DC 102400;ST B"),
+            Run(20),
+            Cmd("DC ,10240"),
+            Run(80),
+            Cmd("ST A"),
+            Run(30),
+            Cmd("DC 10240"),
+            Run(2000),
+            STATE,
+        )
+    ),
     # ---- interrupts, record streams, captures --------------------------------------------
     "EI and UI": Scenario(
         (
@@ -592,6 +610,7 @@ def _pieces(cuts: list[int]) -> Split:
         "AD AM MC WT AI",
         "arc in and out of a switch",
         "jog turned back just short of a switch",
+        "DC in a jog, mid-ramp, in its stop and in a PR's stop",
         "DR through a switch stop",
         "RC round and round during an arc",
         "#POSERR with OE 0 while the lag catches up",

@@ -41,6 +41,7 @@ class Params:
     pa: int = 0
     absolute: bool = False
     next_mode: str = "position"
+    began: str = "position"  # the mode the last BG (or an IP at rest) began
     move_start: int = 0  # profiler position at the last BG: AD/AR measure from here
     starts: int = 0  # moves begun with BG (AR measures from the last AD/AR of the same one)
 
@@ -169,10 +170,21 @@ class Motion(Room):
 
     @handler("DC", Args.VALUES)
     def dc(self, fields: Fields) -> str:
+        # "DC may be changed during a move in Jog mode, but not in a PA or PR move", nor
+        # after an ST or a limit while the axis "is still decelerating": the engine re-plans.
+        def check(ax: Axis, v: float) -> float:
+            p, prof = self.axes[ax.letter], ax.m.profiler
+            if ax.m.moving and (p.began not in ("jog", "position") or not prof.takes_decel):
+                raise Refused(7, "DC while moving")
+            return self._accel(ax, v)
+
         def apply(ax: Axis, v: float) -> None:
             self.axes[ax.letter].dc = v
+            prof = ax.m.profiler
+            if prof.moving:
+                engine(lambda: prof.set_decel(v))
 
-        return self._set(fields, self.decel, self._still("DC", self._accel), apply, "10.0")
+        return self._set(fields, self.decel, check, apply, "10.0")
 
     @handler("JG", Args.VALUES)
     def jg(self, fields: Fields) -> str:
@@ -240,6 +252,7 @@ class Motion(Room):
             ax.limit_stop = False
             p.move_start = prof.position
             p.starts += 1
+            p.began = goal if isinstance(goal, str) else "jog" if goal is None else "position"
             if isinstance(goal, str):
                 self.modes[goal][1](ax)
             elif goal is None:
@@ -267,6 +280,7 @@ class Motion(Room):
             prof = ax.m.profiler
             if not prof.moving:
                 p.pr, p.absolute, p.next_mode, ax.limit_stop = n, False, "position", False
+                p.began = "position"
             engine(functools.partial(prof.increment, n, p.sp, p.ac, p.dc, p.it))
             p.pa = prof.target
         return ""
