@@ -237,8 +237,11 @@ class AxisMotion:
         """Forget the chunks the TV window has left behind (called now and then, once more
         than four windows' samples wait: not at every chunk)."""
         keep = self._window + 1
-        while self._unexpanded_n - len(self._unexpanded[0][2]) >= keep:
-            self._unexpanded_n -= len(self._unexpanded.popleft()[2])
+        chunks = self._unexpanded
+        left = self._unexpanded_n
+        while left - len(chunks[0][2]) >= keep:
+            left -= len(chunks.popleft()[2])
+        self._unexpanded_n = left
 
     def _expand(self) -> None:
         """Put the encoder values of the chunks not yet expanded into the TV history, oldest
