@@ -10,6 +10,7 @@ both runs; a horizon skipped would put it late in the one advance only).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 from galil.sim.controller import SimController
@@ -20,9 +21,9 @@ TS = 1 / 1024
 Script = Sequence[str | int]  # command lines to feed, or servo samples to let pass
 
 
-def play(script: Script, per_sample: bool) -> bytes:
+def play(script: Script, per_sample: bool, lag: float = 0.003) -> bytes:
     """Run ``script`` on a fresh DMC-4040; every byte the main port sent back."""
-    sim = SimController("DMC-4040")
+    sim = SimController("DMC-4040", servo_lag=lag)
     out = b""
     for step in script:
         if isinstance(step, str):
@@ -34,10 +35,10 @@ def play(script: Script, per_sample: bool) -> bytes:
     return out
 
 
-def one_go_and_per_sample(script: Script) -> bytes:
-    coarse = play(script, per_sample=False)
+def one_go_and_per_sample(script: Script, lag: float = 0.003) -> bytes:
+    coarse = play(script, per_sample=False, lag=lag)
     assert b"?" not in coarse
-    assert play(script, per_sample=True) == coarse
+    assert play(script, per_sample=True, lag=lag) == coarse
     return coarse
 
 
@@ -101,3 +102,33 @@ def test_a_second_limit_stop_runs_limswi_again() -> None:
         ]
     )
     assert out.count(b"L ") == 2
+
+
+def test_mc_times_out_tw_after_the_profile_ended_while_another_axis_jogs() -> None:
+    # Trippoints' service notes the sample each profile ends (MC's timeout counts from it)
+    # by comparing the axes' moving flags at every step: B jogs throughout, A's move ends.
+    out = one_go_and_per_sample(
+        [
+            download(
+                "#M",
+                "TW 20",
+                "PR 1000;BG A",
+                "AM A",
+                "a=TIME",
+                "MC A",
+                "EN",
+                "#MCTIME",
+                "t=TIME;s=_SCA",
+                "EN",
+            ),
+            "JG ,3000;BG B",
+            50,
+            "XQ #M",
+            1000,
+            "MG a,t,s,_BGB",
+        ],
+        lag=0.05,  # the motor is still 20 ms behind when the profile ends
+    )
+    ended, timed_out, stop_code, b_moving = (float(v) for v in last_reply(out))
+    assert timed_out - ended == math.ceil(0.020 * 1024)  # TW 20 in samples of TM 1000
+    assert (stop_code, b_moving) == (99, 1)
