@@ -425,12 +425,25 @@ class _Active:
         """:meth:`rounded`, and the velocity at the last of those samples (as :meth:`state`)."""
         k = start - self.k0
         stop = k + n
-        run = stop if self.end_sample is None else max(k, min(stop, self.end_sample - self.k0))
-        out: list[int] = []
+        end = self.end_sample
         floor = math.floor
         half = FRACTION // 2
         t0 = self.t0
         last = len(t0) - 1
+        if k < stop and t0[last] <= k and (end is None or stop <= end - self.k0):
+            # Every sample in the last segment, none past the end (a jog's cruise polled):
+            # what the loop below does for that one segment.
+            h, v, t, p = self.h_fixed[last], self.v_fixed[last], t0[last], self.p_fixed[last]
+            if h == 0.0:
+                values = [(floor(v * (tau - t) + p) + half) >> 16 for tau in range(k, stop)]
+            else:
+                values = [
+                    (floor((h * (dt := tau - t) + v) * dt + p) + half) >> 16
+                    for tau in range(k, stop)
+                ]
+            return values, self.v0[last] + self.a[last] * (float(stop - 1) - t)
+        run = stop if end is None else max(k, min(stop, end - self.k0))
+        out: list[int] = []
         i = self._segment(float(k)) if k < run else last
         velocity = 0.0
         while k < run:

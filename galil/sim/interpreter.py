@@ -351,7 +351,7 @@ class Interpreter:
         self, axes: Iterable[Axis], get: Callable[[Axis], float], fmt: Callable[[float], str]
     ) -> str:
         """One value per axis, comma separated, as a reply line."""
-        return ",".join(fmt(get(ax)) for ax in axes) + "\r\n"
+        return ",".join([fmt(get(ax)) for ax in axes]) + "\r\n"
 
 
 def _find_eq(s: str) -> int:

@@ -319,14 +319,16 @@ class Machine:
         return k
 
     def _wait_watches(self, out: list[Watch]) -> None:
-        waits = [p.wait for p in self.ports.ports.values() if p.wait is not None]
-        if self.programs.threads:
-            waits += [t.wait for t in self.programs.threads.values() if t.wait is not None]
-        for w in waits:
-            if w.predicate is not None:
-                if w.exact is not None and w.exact():
-                    continue
+        # The ports' waits, then the threads' (at every step: no lists built on the way).
+        for p in self.ports.ports.values():
+            w = p.wait
+            if w is not None and w.predicate is not None and not (w.exact and w.exact()):
                 out.append(w.predicate)
+        if self.programs.threads:
+            for t in self.programs.threads.values():
+                w = t.wait
+                if w is not None and w.predicate is not None and not (w.exact and w.exact()):
+                    out.append(w.predicate)
 
 
 def _marks(cls: type[Room], attr: str) -> tuple[Mark, ...]:

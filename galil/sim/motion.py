@@ -187,7 +187,8 @@ class AxisMotion:
             if self._unexpanded:  # after chunks TV has not read yet: one more of them
                 self._unexpanded.append((self.actual, 1.0, still))
                 self._unexpanded_n += len(still)
-                self._forget_old_chunks()
+                if self._unexpanded_n > 4 * self._window:
+                    self._forget_old_chunks()
             else:
                 self._history.extend(still)
             return
@@ -208,7 +209,8 @@ class AxisMotion:
             self.actual = carry * y0 + sum(map(operator.mul, weights, refs))
         self._unexpanded.append((y0, alpha, refs))
         self._unexpanded_n += len(refs)
-        self._forget_old_chunks()
+        if self._unexpanded_n > 4 * self._window:
+            self._forget_old_chunks()
 
     def _follow_long(self, refs: npt.NDArray[np.int64]) -> None:
         # A long chunk: the lag's closed form over the samples whose weight is not lost in
@@ -228,14 +230,18 @@ class AxisMotion:
             self.actual = carry * y0 + float(np.dot(weights[:k], tail))
         self._unexpanded.append((y0, alpha, refs))
         self._unexpanded_n += refs.size
-        self._forget_old_chunks()
+        if self._unexpanded_n > 4 * self._window:
+            self._forget_old_chunks()
 
     def _forget_old_chunks(self) -> None:
-        if self._unexpanded_n > 4 * self._window:
-            # Forget the chunks the TV window has left behind (now and then, not every call).
-            keep = self._window + 1
-            while self._unexpanded_n - len(self._unexpanded[0][2]) >= keep:
-                self._unexpanded_n -= len(self._unexpanded.popleft()[2])
+        """Forget the chunks the TV window has left behind (called now and then, once more
+        than four windows' samples wait: not at every chunk)."""
+        keep = self._window + 1
+        chunks = self._unexpanded
+        left = self._unexpanded_n
+        while left - len(chunks[0][2]) >= keep:
+            left -= len(chunks.popleft()[2])
+        self._unexpanded_n = left
 
     def _expand(self) -> None:
         """Put the encoder values of the chunks not yet expanded into the TV history, oldest

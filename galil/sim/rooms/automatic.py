@@ -49,6 +49,9 @@ class Automatic(Room):
         self._armed = False
         self._limited: set[str] = set()  # axes seen stopped by a limit
         self._over: set[str] = set()  # axes seen beyond ER
+        self._stops_seen = -1  # Limits.stops when service last looked at the axes
+        self._limits = self.machine.room(Limits)
+        self._tuning = self.machine.room(Tuning)
 
     # ---- commands ----------------------------------------------------------------------
     @handler("II")
@@ -104,12 +107,29 @@ class Automatic(Room):
         return ""
 
     # ---- events ------------------------------------------------------------------------
+    def _poserr(self) -> bool:
+        """Whether a program runs that has a ``#POSERR`` to run."""
+        programs = self.machine.programs
+        return bool(programs.threads) and "POSERR" in programs.labels
+
     def service(self) -> None:
         if self._armed:
             self._check_inputs()
-        tuning = self.machine.room(Tuning).axes
-        programs = self.machine.programs
-        poserr = bool(programs.threads) and "POSERR" in programs.labels
+        # This runs at every step of the servo loop: the axes are looked at only while an
+        # event or its reset may be due (a limit stop since the last look, an axis stopped
+        # or beyond ER before, or an error that matters); each check below is a no-op else.
+        stops = self._limits.stops
+        poserr = self._poserr()
+        if not (
+            self._limited
+            or self._over
+            or stops != self._stops_seen
+            or poserr
+            or self._tuning.off_on_error
+        ):
+            return
+        self._stops_seen = stops
+        tuning = self._tuning.axes
         for ax in self.machine.servo.axes.values():
             # (each check returns at once unless its event or its reset is due: skipped then,
             # as this runs at every step of the servo loop)
@@ -154,10 +174,8 @@ class Automatic(Room):
         c = ax.letter
         if not ax.m.motor_on or c in self._over:
             return None
-        watched = self._oe(c) in (1, 3) or (
-            "POSERR" in self.machine.programs.labels and bool(self.machine.programs.threads)
-        )
-        return self.machine.room(Tuning).axes[c].er if watched else None
+        watched = self._oe(c) in (1, 3) or self._poserr()
+        return self._tuning.axes[c].er if watched else None
 
     def _check_error(self, ax: Axis) -> None:
         c = ax.letter
@@ -176,6 +194,8 @@ class Automatic(Room):
 
     def horizon(self, k: int) -> int:
         """End the step at the first sample an axis's error exceeds ER (a preview)."""
+        if not (self._tuning.off_on_error or self._poserr()):
+            return k  # no error matters (what _error_limit says of every axis)
         for ax in self.machine.servo.axes.values():
             if not ax.m.moving:
                 continue

@@ -142,6 +142,8 @@ class Gearing(Room):
 
     def after_step(self) -> None:
         # A follower that ST, a limit or AB disengaged (or DP or SH reseated) follows no more.
+        if not self.ratios:
+            return  # none geared (at every step: nothing to look at)
         gone = [c for c in self.ratios if self.geared(self.machine.servo.axes[c]) is None]
         for c in gone:
             del self.ratios[c]

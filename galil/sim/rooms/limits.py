@@ -95,6 +95,9 @@ class Limits(Room):
         self._switched = False  # any switch may be active: the service hook has work
         self._placed = False  # any switch placed: the horizon hook has work
         self._soft = False  # any soft limit set: the horizon hook has work
+        #: How many times a limit has stopped an axis (set its ``limit_stop``): a room that
+        #: reacts to those stops looks at the axes only when this has changed.
+        self.stops = 0
         #: CN fields: limit polarity (-1 active low), home direction, latch edge, two more.
         self.cn = [-1.0, -1.0, -1.0, 0.0, 1.0]
 
@@ -242,9 +245,11 @@ class Limits(Room):
             v = prof.velocity
             if v > 0 and prof.reference > s.fl:
                 ax.limit_stop = True
+                self.stops += 1
                 prof.limit_stop(2)
             elif v < 0 and prof.reference < s.bl:
                 ax.limit_stop = True
+                self.stops += 1
                 prof.limit_stop(3)
 
     def watches(self, out: list[Callable[[], bool]]) -> None:
@@ -288,6 +293,7 @@ class Limits(Room):
         code = self._runs_into(ax)
         if code:
             ax.limit_stop = True
+            self.stops += 1
             m.profiler.limit_stop(code)
 
     # ---- commands and operands ---------------------------------------------------------

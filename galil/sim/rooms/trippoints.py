@@ -45,20 +45,22 @@ class Trippoints(Room):
         self.tw = dict.fromkeys(axes, TW_DEFAULT)
         #: The sample each axis's profile last completed (MC's timeout counts from there).
         self.done_at = dict.fromkeys(axes, 0)
-        self._moving = dict.fromkeys(axes, False)
+        self._moving = [False] * len(axes)  # each axis's profiler moving, at the last look
         # Per axis: (the move, by Motion's count of BGs; the distance its last AD/AR reached).
         self._relative: dict[str, tuple[int, float]] = {}
         # Per plane: (the sequence, by Vector's count of starts; the distance of the last AV).
         self._vector: dict[str, tuple[int, float]] = {}
 
     def service(self) -> None:
-        now = self.machine.servo.sample
-        moving = self._moving
-        for c, ax in self.machine.servo.axes.items():
-            still = ax.m.moving
-            if moving[c] and not still:
-                self.done_at[c] = now
-            moving[c] = still
+        # At every step of the servo loop: one pass over the flags, more only on a change.
+        axes = self.machine.servo.axes
+        moving = [ax.m.profiler.moving for ax in axes.values()]
+        if moving != self._moving:
+            now = self.machine.servo.sample
+            for c, was, still in zip(axes, self._moving, moving, strict=True):
+                if was and not still:
+                    self.done_at[c] = now
+            self._moving = moving
 
     @handler("AM", Args.AXES)
     def am(self, axes: list[Axis]) -> Wait:

@@ -55,6 +55,8 @@ class Tuning(Room):
         self.axes = {letter: _Settings(il=spec.il_max, tl=spec.tl_max) for letter in spec.axes}
         #: How many times each burn ran since power-on (BN, BP, BV).
         self.burns = {"BN": 0, "BP": 0, "BV": 0}
+        #: The axes whose OE is 1 or 3 (their error beyond ER turns the motor off).
+        self.off_on_error: frozenset[str] = frozenset()
 
     def stepper(self, ax: Axis) -> bool:
         """Whether the axis is configured as a stepper (MT ±2, ±2.5)."""
@@ -149,7 +151,9 @@ class Tuning(Room):
 
     @handler("OE", Args.VALUES)
     def oe(self, fields: Fields) -> str:
-        return self._setting("OE", fields, self._choice((0.0, 1.0, 2.0, 3.0)), "1.0")
+        reply = self._setting("OE", fields, self._choice((0.0, 1.0, 2.0, 3.0)), "1.0")
+        self.off_on_error = frozenset(c for c, s in self.axes.items() if s.oe in (1, 3))
+        return reply
 
     @handler("BR", Args.VALUES)
     def br(self, fields: Fields) -> str:

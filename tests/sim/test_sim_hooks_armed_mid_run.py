@@ -1,0 +1,134 @@
+"""The servo loop's hooks look at the axes only while something is armed: arming it mid-run.
+
+A room's per-step hook returns at once while nothing it watches is armed (no ``OE`` 1/3 axis,
+no program with ``#POSERR``, no limit stop since it last looked). Each test here arms the thing
+between two stretches of time, while the axes move, and checks that the event still comes at
+its exact sample: the same run with its time in one advance and one servo sample at a time
+gives the same bytes, and the event did happen (a hook skipped for good would lose it in
+both runs; a horizon skipped would put it late in the one advance only).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from galil.sim.controller import SimController
+
+#: Seconds per servo sample at the default TM 1000.
+TS = 1 / 1024
+
+Script = Sequence[str | int]  # command lines to feed, or servo samples to let pass
+
+
+def play(script: Script, per_sample: bool, lag: float = 0.003) -> bytes:
+    """Run ``script`` on a fresh DMC-4040; every byte the main port sent back."""
+    sim = SimController("DMC-4040", servo_lag=lag)
+    out = b""
+    for step in script:
+        if isinstance(step, str):
+            out += sim.feed(step.encode() + b"\r")
+        else:
+            for n in [1] * step if per_sample else [step]:
+                sim.advance(n * TS)
+        out += sim.poll()
+    return out
+
+
+def one_go_and_per_sample(script: Script, lag: float = 0.003) -> bytes:
+    coarse = play(script, per_sample=False, lag=lag)
+    assert b"?" not in coarse
+    assert play(script, per_sample=True, lag=lag) == coarse
+    return coarse
+
+
+def last_reply(out: bytes) -> list[bytes]:
+    """The fields of the last reply in ``out`` (before its ``:``)."""
+    return out.rstrip(b":").rsplit(b":", 1)[-1].split()
+
+
+def download(*lines: str) -> str:
+    return "DL\r" + "\r".join(lines) + "\r\\"
+
+
+STATE = "MG _MOA,_SCA,_TPA,_RPA,TIME"
+
+
+def test_oe_1_set_mid_jog_turns_the_motor_off_at_the_sample_the_error_passes_er() -> None:
+    # A slow jog keeps the servo lag's error under ER; OE 1 comes while it runs, then a
+    # faster jog makes the error pass ER inside the next stretch.
+    out = one_go_and_per_sample(["ER 40;JG 2000;BG A", 300, "OE 1", 100, "JG 40000", 600, STATE])
+    assert last_reply(out)[:2] == [b"1.0000", b"8.0000"]  # _MOA, _SCA
+
+
+def test_a_program_with_poserr_started_mid_jog_runs_it_at_its_first_sample() -> None:
+    # The error is beyond ER before any program runs (nothing to do then); XQ arms #POSERR.
+    out = one_go_and_per_sample(
+        [
+            "ER 40;JG 40000;BG A",
+            download("#M", "WT 500", "EN", "#POSERR", 'MG "E",TIME,_TEA', "RE"),
+            300,
+            "XQ #M",
+            400,
+            STATE,
+        ]
+    )
+    assert out.count(b"E ") == 1
+
+
+def test_a_second_limit_stop_runs_limswi_again() -> None:
+    # The first stop is seen and the axis leaves the limit; the second must be seen too.
+    out = one_go_and_per_sample(
+        [
+            download(
+                "#M",
+                "n=0;FL 1500",
+                "JG 8000;BG A",
+                "AM A",
+                "PA 0;BG A",
+                "AM A",
+                "JG 8000;BG A",
+                "AM A",
+                "EN",
+                "#LIMSWI",
+                "n=n+1;t=TIME",
+                'MG "L",n,t',
+                "RE 1",
+            ),
+            "XQ #M",
+            2000,
+            "MG n",
+            STATE,
+        ]
+    )
+    assert out.count(b"L ") == 2
+
+
+def test_mc_times_out_tw_after_the_profile_ended_while_another_axis_jogs() -> None:
+    # Trippoints' service notes the sample each profile ends (MC's timeout counts from it)
+    # by comparing the axes' moving flags at every step: B jogs throughout, A's move ends.
+    out = one_go_and_per_sample(
+        [
+            download(
+                "#M",
+                "TW 20",
+                "PR 1000;BG A",
+                "AM A",
+                "a=TIME",
+                "MC A",
+                "EN",
+                "#MCTIME",
+                "t=TIME;s=_SCA",
+                "EN",
+            ),
+            "JG ,3000;BG B",
+            50,
+            "XQ #M",
+            1000,
+            "MG a,t,s,_BGB",
+        ],
+        lag=0.05,  # the motor is still 20 ms behind when the profile ends
+    )
+    ended, timed_out, stop_code, b_moving = (float(v) for v in last_reply(out))
+    assert timed_out - ended == math.ceil(0.020 * 1024)  # TW 20 in samples of TM 1000
+    assert (stop_code, b_moving) == (99, 1)
