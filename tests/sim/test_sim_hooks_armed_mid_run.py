@@ -132,3 +132,23 @@ def test_mc_times_out_tw_after_the_profile_ended_while_another_axis_jogs() -> No
     ended, timed_out, stop_code, b_moving = (float(v) for v in last_reply(out))
     assert timed_out - ended == math.ceil(0.020 * 1024)  # TW 20 in samples of TM 1000
     assert (stop_code, b_moving) == (99, 1)
+
+
+def test_er_minus_one_disables_poserr_and_off_on_error() -> None:
+    # DMC-41x3 reference, ER: "n=-1 disables Error output": with ER -1 no error is beyond
+    # ER, so neither #POSERR nor OE 1 acts, however large the servo lag's error.
+    sim = SimController("DMC-4143", servo_lag=0.003)
+    out = b""
+    for line in (
+        "OE 1;ER -1;JG 40000;BG A",
+        download("#M", "WT 500", "EN", "#POSERR", 'MG "E",TIME,_TEA', "RE"),
+        "XQ #M",
+    ):
+        out += sim.feed(line.encode() + b"\r")
+    sim.advance(400 * TS)
+    out += sim.feed(b"MG _MOA,_SCA,_TEA,_TSA\r") + sim.poll()
+    assert b"E " not in out
+    mo, sc, te, ts = (float(v) for v in last_reply(out))
+    assert (mo, sc) == (0.0, 0.0)  # the motor on, the jog running
+    assert abs(te) > 0  # a real position error, beyond any ER >= 0
+    assert not int(ts) & 64  # TS bit 6 (error beyond ER) never set with ER -1

@@ -139,7 +139,7 @@ class Automatic(Room):
             if c in self._over or (
                 (poserr or tuning[c].oe in (1, 3))
                 and ax.m.motor_on
-                and abs(ax.m.error) > tuning[c].er
+                and 0 <= tuning[c].er < abs(ax.m.error)
             ):
                 self._check_error(ax)
 
@@ -175,7 +175,9 @@ class Automatic(Room):
         if not ax.m.motor_on or c in self._over:
             return None
         watched = self._oe(c) in (1, 3) or self._poserr()
-        return self._tuning.axes[c].er if watched else None
+        er = self._tuning.axes[c].er
+        # ER -1 (the DMC-41x3) "disables Error output": no error is beyond it.
+        return er if watched and er >= 0 else None
 
     def _check_error(self, ax: Axis) -> None:
         c = ax.letter
