@@ -291,13 +291,16 @@ class ContourStream:
         """Read where the axes are (one round trip), predict, check the soft limits.
 
         Raises:
-            InvalidArgument: an axis is moving.
+            InvalidArgument: an axis is moving, or the library has it geared to another axis.
             LimitError: the path crosses a soft limit, or takes an axis geared to a contour
                 axis past its soft limits or beyond the model's SP maximum.
             MotionError: a limit stopped an axis geared to a contour axis during a move
                 nobody waited for (its gearing is off: :func:`~galil.motion.refuse_dropped`).
         """
         link = self.link
+        if self._tracker is not None:
+            for a in self.letters:  # (before any byte, as a move of a follower is refused)
+                self._tracker.refuse_geared(a, "a contour on it", link.model.name)
         ops = ("RP", "BG", "BL", "FL", "SC")
         followers = "".join(self._followers)
         state = link.query_operands(
