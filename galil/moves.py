@@ -790,6 +790,7 @@ def _speed_schedule(
     label: str,
     display: Display | None,
 ) -> MoveHandle:
+    tracker.refuse_geared(a, "a speed schedule on it", link.model.name)
     gears = tracker.followers(a)
     state, limits = _schedule_state(link, tracker, a, gears)
     rp, sp0, ac, dc, it = state.rp, state.sp, state.ac, state.dc, state.it

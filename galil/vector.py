@@ -345,6 +345,8 @@ class VectorStream:
     ) -> VectorStream:
         """A stream for ``axes``, already prepared (:meth:`prepare`), its followers from
         ``tracker``."""
+        for ax in axes:  # (before any byte, as a move of a follower is refused)
+            tracker.refuse_geared(ax.letter, "a path on it", link.model.name)
         masters = "".join(a.letter for a in axes) + PLANE
         run = cls(link, axes, segments, followers=tracker.followers(masters), **options)
         run._tracker = tracker

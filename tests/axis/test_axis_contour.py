@@ -337,21 +337,3 @@ def test_cd_with_minus_one_pauses_the_buffer_until_a_positive_dt(dmc: galil.Cont
     with pytest.raises(galil.CommandError) as info:
         dmc.command("CD 5=-1")  # a pause that moves: not in the reference
     assert info.value.code == 41
-
-
-def test_a_contour_on_a_follower_the_limit_stopped_is_refused_unsent(
-    dmc: galil.Controller,
-) -> None:
-    # C geared to A; a limit stops C (the controller turns its gearing off), nobody waits.
-    # A contour on C must be refused as a move of C is: the library still has it geared.
-    # (Found by the operation-sequence fuzz: the contour ran, and the library went on
-    # counting on a gearing the controller had dropped, with C's stop code then 51.)
-    sim_of(dmc).place_limit_switches("C", reverse=-500)
-    dmc.C.gear_to("A", 0.5)
-    dmc.A.jog(-20_000)
-    dmc.sleep(1.0)
-    assert dmc.query_operands(["_SCC"]) == [3]  # the reverse limit stopped C
-    dmc.A.stop()
-    dmc.sleep(0.5)
-    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="geared to A"):
-        dmc.contour("BC", np.zeros((10, 2)), dt=1)
