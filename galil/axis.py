@@ -451,7 +451,7 @@ class Axis:
     # -- moves ------------------------------------------------------------------------------
     def _move(self, value: Any, relative: bool, dry_run: bool, **overrides: Any) -> MoveHandle:
         a = self.letter
-        moves = resolve_moves({a: self}, {a: value}, relative, overrides)
+        moves = [resolve_move(self, value, relative, overrides)]  # (resolve_moves of one axis)
         try:
             return execute_move(
                 self._link,
@@ -728,29 +728,38 @@ def resolve_moves(
         if axes[name].letter in seen:
             raise InvalidArgument(f"axis {axes[name].letter} given twice")
         seen.add(axes[name].letter)
-    out: list[AxisMove] = []
-    for name, value in targets.items():
-        axis = axes[name]
-        given: dict[str, float] = {}
+    return [resolve_move(axes[name], value, relative, overrides) for name, value in targets.items()]
+
+
+def resolve_move(axis: Axis, value: Any, relative: bool, overrides: Mapping[str, Any]) -> AxisMove:
+    """One axis's target (or distance) and overrides in counts (:func:`resolve_moves`).
+
+    Raises:
+        InvalidArgument: wrong units.
+        LimitError: a value outside the model's range or the 32-bit position range.
+    """
+    given: dict[str, float] = {}
+    if overrides:
         for key, cmd in OVERRIDES.items():
             if overrides.get(key) is not None:
                 counts = axis.rate_counts(overrides[key], _POWER[cmd], key)
                 given[key] = axis.check_parameter(cmd, counts)
-        if relative:
-            amount = round(axis.distance_counts(value, "distance"))
-        else:
-            amount = round(axis.position_counts(value, "target"))
-        if not INT32_MIN <= amount <= INT32_MAX:
-            raise LimitError(
-                f"{'PR' if relative else 'PA'} {amount} on {axis.letter} is outside the "
-                "32-bit position range",
-                name="PR" if relative else "PA",
-                value=amount,
-                limit=INT32_MAX if amount > 0 else INT32_MIN,
-                axis=axis.letter,
-            )
-        out.append(AxisMove(axis.letter, amount, **given))
-    return out
+    if relative:
+        amount = round(axis.distance_counts(value, "distance"))
+    else:
+        amount = round(axis.position_counts(value, "target"))
+    if not INT32_MIN <= amount <= INT32_MAX:
+        raise LimitError(
+            f"{'PR' if relative else 'PA'} {amount} on {axis.letter} is outside the "
+            "32-bit position range",
+            name="PR" if relative else "PA",
+            value=amount,
+            limit=INT32_MAX if amount > 0 else INT32_MIN,
+            axis=axis.letter,
+        )
+    if given:
+        return AxisMove(axis.letter, amount, **given)
+    return AxisMove(axis.letter, amount)
 
 
 @contextlib.contextmanager

@@ -1139,7 +1139,7 @@ class Link(LinkCore):
         prints (other decimals, hex, an overflow's nines) is asked again with each item in
         ``{Z10.4}``, whose reply must be numbers with four decimals.
         """
-        if type(names) is not list:  # (a list, as the rooms pass, costs nothing here)
+        if type(names) is not list and type(names) is not tuple:  # (costs nothing for those)
             names = check_items(names, "names")
         if not names:
             return []

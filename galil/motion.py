@@ -18,7 +18,7 @@ import threading
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -369,7 +369,7 @@ class MotionTracker:
                 self._schedule = handle
             elif handle.kind == "vector":
                 self._sequence = handle
-            if threading.get_ident() in self._refused:
+            if self._refused and threading.get_ident() in self._refused:
                 with contextlib.suppress(GalilError):  # (whoever refused stops it again)
                     handle.stop()
 
@@ -573,6 +573,15 @@ class StopWatch:
         self.close()
 
 
+@functools.lru_cache(maxsize=256)
+def _poll_names(letters: str, followers: str) -> tuple[str, ...]:
+    """What :attr:`MoveHandle.done` reads: ``_BG``, ``_RP``, ``_SC`` of ``letters``, then
+    ``_RP`` and ``_SC`` of ``followers`` (built once per set: a poll is a hot path)."""
+    names = [f"_{op}{a}" for op in ("BG", "RP", "SC") for a in letters]
+    names += [f"_{op}{f}" for op in ("RP", "SC") for f in followers]
+    return tuple(names)
+
+
 class MoveHandle:
     """A move in progress on one or more axes.
 
@@ -668,13 +677,20 @@ class MoveHandle:
         """Predicted profile per axis letter, including every change sent since the start,
         and the profile of every axis geared to one of them (see :meth:`follow`)."""
         with self._lock:
+            return dict(self._filled())
+
+    def _filled(self) -> dict[str, predict.Profile]:
+        """The cache of :attr:`profiles`, every axis and follower in it (lock held by the
+        caller; the dict itself, not a copy: read it, never change it)."""
+        cache = self._cache
+        if len(cache) != len(self._tracks) + len(self._followers):  # (not all there yet)
             for a, t in self._tracks.items():
-                if a not in self._cache:
-                    self._cache[a] = self._predict(a, t)
+                if a not in cache:
+                    cache[a] = self._predict(a, t)
             for f, gear in self._followers.items():
-                if f not in self._cache:
-                    self._cache[f] = self._follower(gear)
-            return dict(self._cache)
+                if f not in cache:
+                    cache[f] = self._follower(gear)
+        return cache
 
     @property
     def followers(self) -> str:
@@ -706,7 +722,8 @@ class MoveHandle:
     @property
     def profile(self) -> predict.Profile:
         """The predicted profile of the (first) axis."""
-        return next(iter(self.profiles.values()))
+        with self._lock:
+            return next(iter(self._filled().values()))
 
     def _predict(self, letter: str, t: Track) -> predict.Profile:
         profile = predict_track(self._link, t, sample_period=self._sample_period)
@@ -782,11 +799,14 @@ class MoveHandle:
     @property
     def duration(self) -> float:
         """Predicted duration in seconds (``inf`` for a jog that has not been stopped)."""
-        if any(t.open_jog for t in self._tracks.values()):
-            return math.inf
-        if not self._tracks:
+        tracks = self._tracks
+        for t in tracks.values():
+            if t.open_jog:
+                return math.inf
+        if not tracks:
             return 0.0
-        return max(p.duration for p in self.profiles.values())
+        with self._lock:
+            return max([p.duration for p in self._filled().values()])
 
     # -- completion --------------------------------------------------------------------------
     @property
@@ -816,19 +836,27 @@ class MoveHandle:
         (the followers' ``_RP`` and ``_SC`` ride on it)."""
         if self._done:
             return True
+        if len(self._tracks) == 1 and not self._ended and not self._followers:
+            # The usual handle: one axis, nothing geared to it, not seen at rest by a later
+            # start (what the general case below reads and finds, without its bookkeeping).
+            (a,) = self._tracks
+            bg, rp, sc = self._link.query_operands(list(_poll_names(a, "")))
+            if not round(bg):
+                self._finish([round(rp)], [round(sc)], {})
+            return self._done
         ended = dict(self._ended)
-        letters = "".join(a for a in self.axes if a not in ended)
-        followers = self.followers
-        names = [f"_{op}{a}" for op in ("BG", "RP", "SC") for a in letters]
-        names += [f"_{op}{f}" for op in ("RP", "SC") for f in followers]
-        values = [round(v) for v in self._link.query_operands(names)] if names else []
+        axes = self.axes
+        letters = "".join([a for a in axes if a not in ended]) if ended else axes
+        followers = "".join(self._followers)
+        names = _poll_names(letters, followers)
+        values = [round(v) for v in self._link.query_operands(list(names))] if names else []
         n, m = len(letters), len(followers)
         if not any(values[:n]):
             rest = values[3 * n :]
             ends = dict(zip(followers, zip(rest[:m], rest[m:], strict=True), strict=True))
             now = zip(values[n : 2 * n], values[2 * n : 3 * n], strict=True)
             ended.update(zip(letters, now, strict=True))
-            rp_sc = [ended[a] for a in self.axes]
+            rp_sc = [ended[a] for a in axes]
             self._finish([e[0] for e in rp_sc], [e[1] for e in rp_sc], ends)
         return self._done
 
@@ -842,7 +870,7 @@ class MoveHandle:
             letters = self.axes
             final = dict(zip(letters, rp, strict=True))
             stop = dict(zip(letters, sc, strict=True))
-            profiles = self.profiles
+            profiles = self._filled()
             predicted: dict[str, int] = {}
             for a, t in self._tracks.items():
                 if t.exact and not t.open_jog and stop[a] not in _EARLY_CODES:
@@ -853,13 +881,14 @@ class MoveHandle:
                 predicted,
                 deviation,
                 stop,
-                {f: end[0] for f, end in followers.items()},
-                {f: end[1] for f, end in followers.items()},
+                {f: end[0] for f, end in followers.items()} if followers else {},
+                {f: end[1] for f, end in followers.items()} if followers else {},
             )
             self._done = True
             callbacks, self._callbacks = self._callbacks, []
         # (outside the handle's lock: the tracker's lock comes first)
-        self._release_limited_followers(self._result.follower_stop_codes)
+        if followers:
+            self._release_limited_followers(self._result.follower_stop_codes)
         if self._result.worst > 1:
             warnings.warn(
                 f"move on {letters} ended {self._result.deviation} counts away from the prediction",
@@ -936,7 +965,7 @@ class MoveHandle:
         if self._error is not None:
             raise self._error
         assert self._result is not None
-        self._raise_if_limited(self._result)
+        _raise_if_limited(self._link, self._followers, self._result)
         return self._result
 
     @property
@@ -982,30 +1011,6 @@ class MoveHandle:
             pause = min(pause, deadline - now)
         if pause > 0:
             link.pause(pause)
-
-    def _raise_if_limited(self, result: MoveResult) -> None:
-        limited = {a: c for a, c in result.stop_codes.items() if c in _EARLY_CODES}
-        dropped = {
-            f: c for f, c in result.follower_stop_codes.items() if self._followers[f].dropped_by(c)
-        }
-        if not limited and not dropped:
-            return
-        parts = [f"{a}: {codes.stop_text(c)}" for a, c in limited.items()]
-        parts += [
-            f"{f}, geared to {self._followers[f].master}: {codes.stop_text(c)}; its gearing is off"
-            for f, c in dropped.items()
-        ]
-        first = next(iter(limited or dropped))
-        final = {**result.final, **result.follower_final}
-        what = "move stopped early" if limited else "a follower stopped early"
-        raise MotionError(
-            f"{what} ({', '.join(parts)})",
-            axis=first,
-            stop_codes={**result.stop_codes, **result.follower_stop_codes},
-            position=final[first],
-            model=self._link.model.name,
-            recent=self._link.recent,
-        )
 
     def add_callback(self, callback: Callable[[MoveHandle], None]) -> None:
         """Call ``callback(handle)`` once the move is done (at once if it already is).
@@ -1053,6 +1058,35 @@ class MoveHandle:
     def __repr__(self) -> str:
         state = "done" if self._done else "moving"
         return f"<MoveHandle {self.kind} {self.axes} {state}, predicted {self.duration:.4g} s>"
+
+
+def _raise_if_limited(
+    link: CommandLink, followers: Mapping[str, GearLink], result: MoveResult
+) -> None:
+    """Raise what :meth:`MoveHandle.wait` raises for a move a limit or a fault ended early,
+    or a follower a limit stopped (nothing for the usual end)."""
+    if _EARLY_CODES.isdisjoint(result.stop_codes.values()) and not result.follower_stop_codes:
+        return  # (the usual end: what the general case below finds, without its dicts)
+    limited = {a: c for a, c in result.stop_codes.items() if c in _EARLY_CODES}
+    dropped = {f: c for f, c in result.follower_stop_codes.items() if followers[f].dropped_by(c)}
+    if not limited and not dropped:
+        return
+    parts = [f"{a}: {codes.stop_text(c)}" for a, c in limited.items()]
+    parts += [
+        f"{f}, geared to {followers[f].master}: {codes.stop_text(c)}; its gearing is off"
+        for f, c in dropped.items()
+    ]
+    first = next(iter(limited or dropped))
+    final = {**result.final, **result.follower_final}
+    what = "move stopped early" if limited else "a follower stopped early"
+    raise MotionError(
+        f"{what} ({', '.join(parts)})",
+        axis=first,
+        stop_codes={**result.stop_codes, **result.follower_stop_codes},
+        position=final[first],
+        model=link.model.name,
+        recent=link.recent,
+    )
 
 
 def refuse_in_motion(link: CommandLink, tracker: MotionTracker, letter: str, name: str) -> None:
@@ -1211,7 +1245,6 @@ def motion_guard(
 _NOTHING_RAN = (InvalidArgument, CommandError, MotionError)
 
 
-@contextlib.contextmanager
 def stop_on_error(
     link: CommandLink,
     tracker: MotionTracker | None,
@@ -1219,7 +1252,7 @@ def stop_on_error(
     *,
     stop: Callable[[], None] | None = None,
     running: bool = False,
-) -> Iterator[None]:
+) -> contextlib.AbstractContextManager[None]:
     """The guard of an operation that starts or changes the motion of ``letters`` (``"S"``:
     a vector sequence): if it raises anything that may have come once its line went out (a
     timeout, a dead link, Ctrl-C, a bug), what moves of ``letters`` is stopped, a dead link
@@ -1237,18 +1270,43 @@ def stop_on_error(
         MotionError: from the exception, naming the axes that may still move, when the stop
             could not be sent or confirmed.
     """
-    try:
-        yield
-    except BaseException as exc:
-        if isinstance(exc, MotionError if running else _NOTHING_RAN):
-            raise
+    return _StopOnError(link, tracker, letters, stop, running)
+
+
+class _StopOnError:
+    """:func:`stop_on_error`'s guard: a class, not a generator (it guards every start and
+    every wait, a hot path; entering and leaving it costs next to nothing)."""
+
+    __slots__ = ("_letters", "_link", "_running", "_stop", "_tracker")
+
+    def __init__(
+        self,
+        link: CommandLink,
+        tracker: MotionTracker | None,
+        letters: str,
+        stop: Callable[[], None] | None,
+        running: bool,
+    ) -> None:
+        self._link = link
+        self._tracker = tracker
+        self._letters = letters
+        self._stop = stop
+        self._running = running
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, kind: object, exc: BaseException | None, tb: object) -> Literal[False]:
+        if exc is None or isinstance(exc, MotionError if self._running else _NOTHING_RAN):
+            return False
+        link, tracker = self._link, self._tracker
         if tracker is not None and tracker.closed and isinstance(exc, GalilConnectionError):
-            raise  # close() stopped the motion before it closed the link
+            return False  # close() stopped the motion before it closed the link
         reopen = None if tracker is None else tracker.reconnect
-        moving = _stop_for_guard(link, tracker, letters, stop, reopen)
+        moving = _stop_for_guard(link, tracker, self._letters, self._stop, reopen)
         if moving:
             raise _not_stopped(link, exc, moving, "while starting or changing motion") from exc
-        raise
+        return False
 
 
 def _not_stopped(link: CommandLink, exc: BaseException, moving: str, where: str) -> MotionError:

@@ -12,6 +12,7 @@ import contextlib
 import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from galil import predict
 from galil.errors import InvalidArgument, LimitError
@@ -53,7 +54,7 @@ _STATE = ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO", "SC", "TS")
 # What a master's state query reads of each follower: its soft limits, and its stop code (a
 # limit's: the controller turned its gearing off).
 _FOLLOWER = ("BL", "FL", "SC")
-_BUILDERS = {"SP": cmds.sp, "AC": cmds.ac, "DC": cmds.dc, "PA": cmds.pa, "IP": cmds.ip}
+_BUILDERS = {"SP": cmds.sp, "AC": cmds.ac, "DC": cmds.dc}
 
 
 @dataclass(frozen=True)
@@ -73,8 +74,9 @@ class AxisMove:
     decel: float | None = None
 
 
-@dataclass(frozen=True)
-class _State:
+class _State(NamedTuple):
+    """One axis's state as a start reads it (a named tuple: built on every move)."""
+
     rp: int
     bg: bool
     sp: float
@@ -130,7 +132,13 @@ def _states(link: CommandLink, letters: str, values: Sequence[float]) -> dict[st
     out: dict[str, _State] = {}
     for i, a in enumerate(letters):
         rp, bg, sp, ac, dc, it, bl, fl, mo, sc, ts = values[i * n : (i + 1) * n]
-        sp, ac, dc = as_stored(link, "SP", sp), as_stored(link, "AC", ac), as_stored(link, "DC", dc)
+        # (a whole value is the step itself: as_stored's own first look, without the call)
+        if not (type(sp) is float and sp.is_integer()):
+            sp = as_stored(link, "SP", sp)
+        if not (type(ac) is float and ac.is_integer()):
+            ac = as_stored(link, "AC", ac)
+        if not (type(dc) is float and dc.is_integer()):
+            dc = as_stored(link, "DC", dc)
         out[a] = _State(round(rp), bool(bg), sp, ac, dc, it, bl, fl, bool(mo), round(sc), round(ts))
     return out
 
@@ -347,14 +355,18 @@ def _move_line(
 ) -> list[Command]:
     """The move's one line: any SP/AC/DC given, the targets (PA or IP), BG, ``MG TIME``."""
     parts: list[Command] = []
-    for name in ("SP", "AC", "DC"):
-        values = {m.letter: getattr(m, _FIELD[name]) for m in moves}
-        given = {a: v for a, v in values.items() if v is not None}
-        if given:
-            parts.append(_axis_values(name, given, link))
-    parts.append(_axis_values("IP" if command == "IP" else "PA", sent, link))
-    if command != "IP":
-        parts.append(cmds.bg("".join(m.letter for m in moves), model=link.model))
+    model = link.model
+    if any([m.speed is not None or m.accel is not None or m.decel is not None for m in moves]):
+        for name in ("SP", "AC", "DC"):
+            values = {m.letter: getattr(m, _FIELD[name]) for m in moves}
+            given = {a: v for a, v in values.items() if v is not None}
+            if given:
+                parts.append(_axis_values(name, given, link))
+    if command == "IP":
+        parts.append(cmds.ip(model=model, **sent))
+    else:
+        parts.append(cmds.pa(model=model, **sent))
+        parts.append(cmds.bg("".join([m.letter for m in moves]), model=model))
     parts.append(cmds.time_stamp())
     return parts
 
@@ -384,31 +396,33 @@ def execute_move(
             nobody waited for: its gearing is off, and forgotten
             (:func:`~galil.motion.refuse_dropped`).
     """
-    letters = "".join(m.letter for m in moves)
+    letters = moves[0].letter if len(moves) == 1 else "".join([m.letter for m in moves])
     if not letters or len(set(letters)) != len(letters):
         raise InvalidArgument(f"a move needs distinct axes, got {letters!r}")
     if len(moves) > 1:
         order = link.model.axes
         moves = sorted(moves, key=lambda m: order.index(m.letter))
+        letters = "".join([m.letter for m in moves])
     guard = contextlib.nullcontext() if dry_run else stop_on_error(link, tracker, letters)
     with tracker.lock, guard:  # no other thread's motion between the state read and the handle
-        return _execute_move(link, tracker, moves, relative, dry_run, command, display)
+        return _execute_move(link, tracker, moves, letters, relative, dry_run, command, display)
 
 
 def _execute_move(
     link: CommandLink,
     tracker: MotionTracker,
     moves: Sequence[AxisMove],
+    letters: str,
     relative: bool,
     dry_run: bool,
     command: str,
     display: Mapping[str, Display] | None,
 ) -> MoveHandle:
-    letters = "".join(m.letter for m in moves)
-    if not dry_run:
+    geared = bool(tracker.gears)  # (the tracker's lock is held: no gearing changes now)
+    if geared and not dry_run:
         for a in letters:
             tracker.refuse_geared(a, "moving it", link.model.name)
-    gears = tracker.followers(letters)
+    gears = tracker.followers(letters) if geared else {}
     others = {f: g for f, g in gears.items() if f not in letters}
     state, limits = _read_state(link, tracker, letters, others, start=not dry_run)
     tracks: dict[str, Track] = {}
@@ -425,9 +439,10 @@ def _execute_move(
         sent[m.letter] = track.amount if command == "IP" else target
     handle = MoveHandle(link, tracks, "position", display=display, tracker=tracker)
     handle.preset(profiles)
-    handle.follow(gears)  # (an axis of the move is skipped)
-    if handle.followers:
-        check_followers(link, {f: gears[f] for f in handle.followers}, handle.profiles, limits)
+    if gears:
+        handle.follow(gears)  # (an axis of the move is skipped)
+        if handle.followers:
+            check_followers(link, {f: gears[f] for f in handle.followers}, handle.profiles, limits)
     if dry_run:
         return handle
     replies = link.command_line(_move_line(link, moves, sent, command))

@@ -463,6 +463,8 @@ _DEFAULT_INT_RANGES: dict[str, tuple[int, int]] = {
 
 _DEFAULT_LETTERS = frozenset(_DEFAULT_AXES.index)
 _NO_RANGE = (1, 0)
+# Commands whose range (32-bit counts) is the same on every model (:func:`_checker`).
+_POSITION_MNEMONICS = frozenset({"PR", "PA", "DP", "FL", "BL", "IP"})
 
 
 def _axis_command(
@@ -481,6 +483,18 @@ def _axis_command(
             lo, hi = _DEFAULT_INT_RANGES.get(mnemonic, _NO_RANGE)
             if lo <= value <= hi:
                 return f"{mnemonic}{letter}={value}{suffix}"
+    elif not values and model is not None and len(by_axis) == 1 and mnemonic in _POSITION_MNEMONICS:
+        # hot path with a model: one axis of its own letters, a count in the 32-bit range
+        # every model takes for these (a move's PA, its IP)
+        letter, value = by_axis.popitem()
+        by_axis[letter] = value
+        if (
+            type(value) is int
+            and INT32_MIN <= value <= INT32_MAX
+            and len(letter) == 1
+            and letter in model.axes
+        ):
+            return f"{mnemonic}{letter}={value}{suffix}"
     table = _axes(model)
     check = _checker(mnemonic, model)
     if not values and len(by_axis) == 1:
@@ -650,6 +664,8 @@ def _list_command(
             if len(_LIST_CACHE) < 4096:
                 _LIST_CACHE[key] = text
         return text
+    if type(axes) is str and len(axes) == 1 and model is not None and axes in model.axes:
+        return f"{mnemonic} {axes}"  # (hot path: one of the model's own letters)
     letters = _axis_list(axes, model, extra)
     return f"{mnemonic} {letters}" if letters else mnemonic
 
