@@ -506,7 +506,10 @@ class LinkCore:
         """Seconds per servo sample (the model's, or what ``TM`` was last read as)."""
         if self._sample_period is not None:
             return self._sample_period
-        return self.model.sample_period
+        model = self._model  # (self.model, without the property's call: a hot path)
+        if model is None:
+            return self.model.sample_period  # (raises: not identified)
+        return model.sample_period
 
     @sample_period.setter
     def sample_period(self, seconds: float) -> None:

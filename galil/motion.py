@@ -148,8 +148,10 @@ class Track:
     @property
     def open_jog(self) -> bool:
         """A jog (or a homing sequence nobody predicted) has no known end until stopped."""
-        unknown = self.kind in HOMING_KINDS and self.fixed is None
-        return (self.kind == "jog" or unknown) and not self.stopped and self.aborted is None
+        kind = self.kind
+        if kind == "jog" or (kind in HOMING_KINDS and self.fixed is None):
+            return not self.stopped and self.aborted is None
+        return False
 
 
 @dataclass
@@ -363,7 +365,9 @@ class MotionTracker:
         """``handle`` now drives its axes (and the axes geared to them); stopped at once when
         its thread's starts are refused (:meth:`refuse_starts`)."""
         with self.lock:
-            for a in handle.axes + handle.followers:
+            for a in handle._tracks:  # (handle.axes, then handle.followers)
+                self._active[a] = handle
+            for a in handle._followers:
                 self._active[a] = handle
             if handle.kind == "schedule":
                 self._schedule = handle
@@ -608,19 +612,21 @@ class MoveHandle:
         self.started_at = link.clock()
         # The TM the move ran at: a TM sent once it is over (unseen) must not re-predict it.
         self._sample_period = link.sample_period
-        self._done = False
-        self._result: MoveResult | None = None
         self._callbacks: list[Callable[[MoveHandle], None]] = []
         self._lock = threading.RLock()
         self._cache: dict[str, predict.Profile] = {}
-        self._watcher: threading.Thread | None = None
-        # Set when the link closes: the watcher looks now (made with the watcher: an Event
-        # costs microseconds that planning, which makes a handle, should not pay).
-        self._wake: threading.Event | None = None
-        self._error: BaseException | None = None
         self._followers: dict[str, GearLink] = {}
-        self._cancel: Callable[[int | None], None] | None = None
         self._ended: dict[str, tuple[int, int]] = {}  # axis -> (RP, SC) seen at rest since
+
+    # Until set on the handle itself, the class's values (a handle is made on every plan).
+    _done = False
+    _result: MoveResult | None = None
+    _watcher: threading.Thread | None = None
+    # Set when the link closes: the watcher looks now (made with the watcher: an Event
+    # costs microseconds that planning, which makes a handle, should not pay).
+    _wake: threading.Event | None = None
+    _error: BaseException | None = None
+    _cancel: Callable[[int | None], None] | None = None
 
     # -- predictions -------------------------------------------------------------------------
     @property
@@ -872,10 +878,13 @@ class MoveHandle:
             stop = dict(zip(letters, sc, strict=True))
             profiles = self._filled()
             predicted: dict[str, int] = {}
+            deviation: dict[str, int] = {}
+            worst = 0  # (MoveResult.worst, known here)
             for a, t in self._tracks.items():
                 if t.exact and not t.open_jog and stop[a] not in _EARLY_CODES:
-                    predicted[a] = profiles[a].end
-            deviation = {a: final[a] - v for a, v in predicted.items()}
+                    end = predicted[a] = profiles[a].end
+                    off = deviation[a] = final[a] - end
+                    worst = max(worst, abs(off))
             self._result = MoveResult(
                 final,
                 predicted,
@@ -889,7 +898,7 @@ class MoveHandle:
         # (outside the handle's lock: the tracker's lock comes first)
         if followers:
             self._release_limited_followers(self._result.follower_stop_codes)
-        if self._result.worst > 1:
+        if worst > 1:
             warnings.warn(
                 f"move on {letters} ended {self._result.deviation} counts away from the prediction",
                 RuntimeWarning,
@@ -941,8 +950,10 @@ class MoveHandle:
         Anything else that interrupts the wait (Ctrl-C, a dead link, no reply) stops the move
         before it propagates (:func:`stop_on_error`).
         """
-        check_wait_timeout(timeout)
-        check_flag(progress, "progress")
+        if timeout is not None:
+            check_wait_timeout(timeout)
+        if progress is not False:
+            check_flag(progress, "progress")
         duration = self.duration
         if timeout is None and math.isfinite(duration):
             timeout = duration * 1.5 + 2.0

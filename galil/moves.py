@@ -314,13 +314,14 @@ def _plan_axis(
     link: CommandLink, move: AxisMove, state: _State, relative: bool
 ) -> tuple[Track, predict.Profile, int]:
     """Predict and check one axis: its track, its profile (counts) and the value to send."""
-    model = link.model
     a = move.letter
     distance = move.value if relative else move.value - state.rp
     target = state.rp + distance
-    check_int32("PA", target, a, model.name)
+    if not INT32_MIN <= target <= INT32_MAX:
+        check_int32("PA", target, a, link.model.name)
     speed = state.sp if move.speed is None else move.speed
     if speed <= 0 and distance:
+        model = link.model
         raise LimitError(
             f"axis {a} has SP 0: set a speed first",
             name="SP",
@@ -397,7 +398,7 @@ def execute_move(
             (:func:`~galil.motion.refuse_dropped`).
     """
     letters = moves[0].letter if len(moves) == 1 else "".join([m.letter for m in moves])
-    if not letters or len(set(letters)) != len(letters):
+    if not letters or (len(letters) > 1 and len(set(letters)) != len(letters)):
         raise InvalidArgument(f"a move needs distinct axes, got {letters!r}")
     if len(moves) > 1:
         order = link.model.axes
@@ -423,20 +424,20 @@ def _execute_move(
         for a in letters:
             tracker.refuse_geared(a, "moving it", link.model.name)
     gears = tracker.followers(letters) if geared else {}
-    others = {f: g for f, g in gears.items() if f not in letters}
+    others = {f: g for f, g in gears.items() if f not in letters} if gears else gears
     state, limits = _read_state(link, tracker, letters, others, start=not dry_run)
     tracks: dict[str, Track] = {}
     profiles: dict[str, predict.Profile] = {}
     sent: dict[str, float] = {}
-    shows = display or {}
     for m in moves:
+        a = m.letter
         if not dry_run:
-            _ready(link, m.letter, state[m.letter])
-        track, profile, target = _plan_axis(link, m, state[m.letter], relative)
-        tracks[m.letter] = track
-        show = shows.get(m.letter)
-        profiles[m.letter] = profile if show is None else show(profile)
-        sent[m.letter] = track.amount if command == "IP" else target
+            _ready(link, a, state[a])
+        track, profile, target = _plan_axis(link, m, state[a], relative)
+        tracks[a] = track
+        show = None if display is None else display.get(a)
+        profiles[a] = profile if show is None else show(profile)
+        sent[a] = track.amount if command == "IP" else target
     handle = MoveHandle(link, tracks, "position", display=display, tracker=tracker)
     handle.preset(profiles)
     if gears:

@@ -32,11 +32,14 @@ __all__ = [
     "KinematicPlan",
     "PlanSamples",
     "Segment",
+    "plan_from_rest",
     "plan_jog",
     "plan_position",
     "plan_stop",
     "sample_plan",
 ]
+
+_new = object.__new__
 
 #: The controller carries position with 16 fractional bits.
 FRACTION = 65536
@@ -204,6 +207,48 @@ def _accelerate_cruise_stop(
     return up, shape
 
 
+def plan_from_rest(x0: float, target: float, v: float, a: float, d: float) -> KinematicPlan:
+    """``plan_position(x0, 0.0, target, v, a, d)``: a move from rest, the predictor's usual
+    case (a hot path). The same operations in the same order, without the branches a start
+    from rest never takes (moving away, overshoot, slowing from above ``v``) nor the calls."""
+    dist = target - x0
+    s = 1.0 if dist > 0 or dist == 0 else -1.0
+    dd = s * dist
+    u0 = s * 0.0
+    stop_dist = u0 * u0 / (2 * d)
+    if stop_dist > dd + _EPS or stop_dist >= dd or u0 > v:  # (never from rest but dd == 0)
+        return plan_position(x0, 0.0, target, v, a, d)
+    # _accelerate_cruise_stop, its _ramp()s written out
+    up_sq = (2 * dd * a * d + u0 * u0 * d) / (a + d)
+    if up_sq >= v * v:
+        up, shape = v, "trapezoid"
+    else:
+        up, shape = max(math.sqrt(up_sq), u0), "triangle"
+    d1 = (up * up - u0 * u0) / (2 * a)
+    d3 = up * up / (2 * d)
+    segs: list[Segment] = []
+    if up > u0:
+        dv = s * up - s * u0
+        segs.append(Segment(abs(dv) / a, s * u0, math.copysign(a, dv)))
+    cruise = dd - d1 - d3
+    if cruise > 0 and up > 0:
+        segs.append(Segment(cruise / up, s * up, 0.0))
+    if up > 0:
+        dv = 0.0 - s * up
+        segs.append(Segment(abs(dv) / d, s * up, math.copysign(d, dv)))
+    total = sum(x.duration for x in segs)
+    plan = _new(KinematicPlan)  # (a frozen dataclass built without its __init__'s setattrs)
+    plan.__dict__.update(
+        x0=x0,
+        segments=tuple(segs),
+        x_end=float(target),
+        duration=total,
+        peak=max(0.0, up),
+        shape=shape,
+    )
+    return plan
+
+
 def plan_jog(x0: float, v0: float, speed: float, a: float, d: float) -> KinematicPlan:
     """Plan a jog from (``x0``, ``v0``) towards the signed ``speed`` (all per sample).
 
@@ -271,7 +316,9 @@ class PlanSamples:
         first = (
             end_value if end == 0 else (math.floor(plan.x0 * FRACTION + 0.5) + FRACTION // 2) >> 16
         )
-        return cls(plan, first, end_value, end)
+        new = _new(cls)  # (frozen: built without its __init__'s setattrs, a hot path)
+        new.__dict__.update(plan=plan, start=first, end=end_value, samples=end)
+        return new
 
     @property
     def bounds(self) -> tuple[int, int]:

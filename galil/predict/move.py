@@ -16,7 +16,13 @@ import numpy.typing as npt
 
 from galil.errors import InvalidArgument, LimitError, ScheduleError
 from galil.models import ModelSpec
-from galil.predict.engine import AxisProfiler, KinematicPlan, PlanSamples, plan_position
+from galil.predict.engine import (
+    AxisProfiler,
+    KinematicPlan,
+    PlanSamples,
+    plan_from_rest,
+    plan_position,
+)
 from galil.predict.profile import Profile
 from galil.predict.smoothing import END_LOOKAHEAD
 
@@ -114,6 +120,18 @@ class MovePlan:
 
 
 def _validate(speed: float, accel: float, decel: float, sample_period: float) -> None:
+    isfinite = math.isfinite
+    if (
+        isfinite(speed)
+        and speed > 0
+        and isfinite(accel)
+        and accel > 0
+        and isfinite(decel)
+        and decel > 0
+        and isfinite(sample_period)
+        and sample_period > 0
+    ):
+        return  # (the usual case: the loop below, without it)
     for name, value in (("speed", speed), ("accel", accel), ("decel", decel)):
         if not (math.isfinite(value) and value > 0):
             raise InvalidArgument(f"{name} must be a positive number, got {value!r}")
@@ -312,9 +330,10 @@ def move(
         CommandError: an event the controller would refuse.
     """
     _validate(speed, accel, decel, sample_period)
-    speed, accel, decel, smoothing, sample_period = _resolve(
-        speed, accel, decel, smoothing, sample_period, model
-    )
+    if model is not None or smoothing is None:  # (else _resolve returns them as they are)
+        speed, accel, decel, smoothing, sample_period = _resolve(
+            speed, accel, decel, smoothing, sample_period, model
+        )
     if not events and smoothing == 1.0:
         # The usual case: one plan from rest, unsmoothed, evaluated at samples 0..N in one go
         # (sample 0 is the start) as the engine evaluates it, without stepping an engine, and
@@ -325,7 +344,7 @@ def move(
             raise InvalidArgument(f"speed must be > 0, got {speed!r}")
         x0 = float(int(start))
         target = float(int(start) + int(distance))
-        plan = plan_position(x0, 0.0, target, v, accel * ts * ts, decel * ts * ts)
+        plan = plan_from_rest(x0, target, v, accel * ts * ts, decel * ts * ts)
         return Profile.planned(
             PlanSamples.of(plan),
             sample_period=ts,
