@@ -135,6 +135,8 @@ def check_overrides(where: str, overrides: Mapping[str, object]) -> None:
     Raises:
         TypeError: an unknown keyword, as Python itself would raise it.
     """
+    if not overrides:
+        return
     unknown = sorted(set(overrides) - set(OVERRIDES))
     if unknown:
         raise TypeError(

@@ -61,6 +61,7 @@ __all__ = [
 ]
 
 _LOG = logging.getLogger("galil.motion")
+_new = object.__new__
 
 # Polling faster than this only loads the link; the controller decodes a command in ~0.5 ms.
 MIN_POLL = 0.005
@@ -873,26 +874,29 @@ class MoveHandle:
         with self._lock:
             if self._done:
                 return
-            letters = self.axes
-            final = dict(zip(letters, rp, strict=True))
-            stop = dict(zip(letters, sc, strict=True))
+            tracks = self._tracks  # (its keys: the axes)
+            final = dict(zip(tracks, rp, strict=True))
+            stop = dict(zip(tracks, sc, strict=True))
             profiles = self._filled()
             predicted: dict[str, int] = {}
             deviation: dict[str, int] = {}
             worst = 0  # (MoveResult.worst, known here)
-            for a, t in self._tracks.items():
-                if t.exact and not t.open_jog and stop[a] not in _EARLY_CODES:
+            for a, t in tracks.items():
+                open_jog = t.kind != "position" and t.open_jog  # (never a position move's)
+                if t.exact and not open_jog and stop[a] not in _EARLY_CODES:
                     end = predicted[a] = profiles[a].end
                     off = deviation[a] = final[a] - end
                     worst = max(worst, abs(off))
-            self._result = MoveResult(
-                final,
-                predicted,
-                deviation,
-                stop,
-                {f: end[0] for f, end in followers.items()} if followers else {},
-                {f: end[1] for f, end in followers.items()} if followers else {},
+            result = _new(MoveResult)  # (a frozen dataclass, built without its setattrs)
+            result.__dict__.update(
+                final=final,
+                predicted=predicted,
+                deviation=deviation,
+                stop_codes=stop,
+                follower_final={f: e[0] for f, e in followers.items()} if followers else {},
+                follower_stop_codes={f: e[1] for f, e in followers.items()} if followers else {},
             )
+            self._result = result
             self._done = True
             callbacks, self._callbacks = self._callbacks, []
         # (outside the handle's lock: the tracker's lock comes first)
@@ -900,7 +904,7 @@ class MoveHandle:
             self._release_limited_followers(self._result.follower_stop_codes)
         if worst > 1:
             warnings.warn(
-                f"move on {letters} ended {self._result.deviation} counts away from the prediction",
+                f"move on {''.join(tracks)} ended {deviation} counts away from the prediction",
                 RuntimeWarning,
                 stacklevel=4,
             )

@@ -8,7 +8,6 @@ raises before a byte goes out. Units are converted by the axis layer before anyt
 
 from __future__ import annotations
 
-import contextlib
 import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -404,9 +403,12 @@ def execute_move(
         order = link.model.axes
         moves = sorted(moves, key=lambda m: order.index(m.letter))
         letters = "".join([m.letter for m in moves])
-    guard = contextlib.nullcontext() if dry_run else stop_on_error(link, tracker, letters)
-    with tracker.lock, guard:  # no other thread's motion between the state read and the handle
-        return _execute_move(link, tracker, moves, letters, relative, dry_run, command, display)
+    # No other thread's motion between the state read and the handle (the tracker's lock).
+    if dry_run:  # (nothing is sent: nothing to guard)
+        with tracker.lock:
+            return _execute_move(link, tracker, moves, letters, relative, True, command, display)
+    with tracker.lock, stop_on_error(link, tracker, letters):
+        return _execute_move(link, tracker, moves, letters, relative, False, command, display)
 
 
 def _execute_move(

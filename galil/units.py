@@ -107,7 +107,7 @@ def _finite(value: float, what: str) -> float:
     return value
 
 
-def _real(value: numbers.Real, what: str) -> float:
+def _real(value: numbers.Real | float, what: str) -> float:
     """``float(value)``, a typed error for a number no float holds (an int of 400 digits)."""
     try:
         return _finite(float(value), what)
@@ -116,6 +116,8 @@ def _real(value: numbers.Real, what: str) -> float:
 
 
 def _plain_number(value: object, what: str) -> float:
+    if type(value) is int or type(value) is float:  # (the usual case: no ABC check)
+        return _real(value, what)
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise InvalidArgument(f"{what} must be a number or a pint Quantity, got {value!r}")
     return _real(value, what)
@@ -124,6 +126,8 @@ def _plain_number(value: object, what: str) -> float:
 def _magnitude(q: Any, what: str) -> float:
     """The magnitude of a scalar, real Quantity (arrays and complex values are refused)."""
     m = q.magnitude
+    if type(m) is float:  # (the usual case: a plain float, nothing to look at)
+        return _finite(m, what)
     if getattr(m, "ndim", 0) == 0 and hasattr(m, "item"):
         m = m.item()
     if isinstance(m, bool) or not isinstance(m, numbers.Real):
@@ -239,6 +243,11 @@ class Scale:
 
     def position_to_counts(self, value: Any, what: str = "position") -> float:
         """A position Quantity to (unrounded) counts."""
+        if is_quantity(value):
+            q = _ours(value)
+            if getattr(q, "_units", None) == getattr(self.unit, "_units", False):
+                # The usual case (_convert's own): its magnitude looked at once, not twice.
+                return self.sign * (_magnitude(q, what) - self._offset) * self._k
         q = self._convert(value, self.unit, what)
         # q and the offset are in the axis's unit (a length or an angle, never an offset unit
         # such as degC): subtracting magnitudes is what pint's subtraction does.
