@@ -1081,7 +1081,7 @@ class Link(LinkCore):
         if isinstance(parts, str):
             raise InvalidArgument("command_line takes a list of commands, not one string")
         singles: list[Command] = []
-        for p in check_items(parts, "parts"):
+        for p in parts if type(parts) is list else check_items(parts, "parts"):
             c = p if isinstance(p, Command) else _parse(p)
             if c.parts:
                 raise InvalidArgument(f"{c.text!r} is already compound; pass its parts")

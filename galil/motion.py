@@ -808,7 +808,7 @@ class MoveHandle:
         """Predicted duration in seconds (``inf`` for a jog that has not been stopped)."""
         tracks = self._tracks
         for t in tracks.values():
-            if t.open_jog:
+            if t.kind != "position" and t.open_jog:  # (never a position move's)
                 return math.inf
         if not tracks:
             return 0.0

@@ -53,6 +53,7 @@ _STATE = ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO", "SC", "TS")
 # What a master's state query reads of each follower: its soft limits, and its stop code (a
 # limit's: the controller turned its gearing off).
 _FOLLOWER = ("BL", "FL", "SC")
+_new = object.__new__
 _BUILDERS = {"SP": cmds.sp, "AC": cmds.ac, "DC": cmds.dc}
 
 
@@ -329,11 +330,12 @@ def _plan_axis(
             axis=a,
             model=model.name,
         )
-    params = MoveParams(
-        speed,
-        state.ac if move.accel is None else move.accel,
-        state.dc if move.decel is None else move.decel,
-        state.it,
+    params = _new(MoveParams)  # (a frozen dataclass, built without its setattrs: a hot path)
+    params.__dict__.update(
+        speed=speed,
+        accel=state.ac if move.accel is None else move.accel,
+        decel=state.dc if move.decel is None else move.decel,
+        smoothing=state.it,
     )
     _refuse_blocked(link, a, distance, state.ts, None)  # (beyond a limit: the path check)
     track = Track("position", state.rp, params, None, amount=distance)
