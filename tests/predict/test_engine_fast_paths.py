@@ -190,3 +190,30 @@ def test_a_planned_move_knows_its_ends_and_bounds_without_sampling(
     low, high = known.bounds
     assert low <= sampled.min()
     assert sampled.max() <= high
+
+
+def _plan_fields(plan: engine.KinematicPlan) -> tuple[object, ...]:
+    # repr() keeps signed zeros and every bit of the floats apart
+    return tuple(
+        repr(v)
+        for v in (plan.x0, plan.x_end, plan.duration, plan.peak, plan.shape, plan.segments)
+    )
+
+
+@settings(max_examples=400, deadline=None)
+@given(
+    x0=st.integers(-(2**31), 2**31 - 1),
+    distance=st.integers(-(2**31), 2**31 - 1),
+    speed=st.floats(1e-3, 3e4),
+    accel=st.floats(1e-6, 70.0),
+    decel=st.floats(1e-6, 70.0),
+)
+def test_plan_from_rest_is_plan_position_from_rest_bit_for_bit(
+    x0: int, distance: int, speed: float, accel: float, decel: float
+) -> None:
+    # The planner's hot path written out: the same operations in the same order, so every
+    # field of the plan (floats by their bits, signed zeros too) must be the general one's.
+    target = float(x0 + distance)
+    fast = engine.plan_from_rest(float(x0), target, speed, accel, decel)
+    general = engine.plan_position(float(x0), 0.0, target, speed, accel, decel)
+    assert _plan_fields(fast) == _plan_fields(general)
