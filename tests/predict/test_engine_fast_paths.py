@@ -195,8 +195,7 @@ def test_a_planned_move_knows_its_ends_and_bounds_without_sampling(
 def _plan_fields(plan: engine.KinematicPlan) -> tuple[object, ...]:
     # repr() keeps signed zeros and every bit of the floats apart
     return tuple(
-        repr(v)
-        for v in (plan.x0, plan.x_end, plan.duration, plan.peak, plan.shape, plan.segments)
+        repr(v) for v in (plan.x0, plan.x_end, plan.duration, plan.peak, plan.shape, plan.segments)
     )
 
 
