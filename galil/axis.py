@@ -30,7 +30,15 @@ from galil.motion import (
     sample_of,
     stop_axes,
 )
-from galil.moves import AxisMove, execute_move, increment, jog, set_jog_speed, speed_schedule
+from galil.moves import (
+    AxisMove,
+    check_int32,
+    execute_move,
+    increment,
+    jog,
+    set_jog_speed,
+    speed_schedule,
+)
 from galil.protocol import commands as cmds
 from galil.routines import Routines
 from galil.tuning import Setting, motor_type, whole
@@ -698,14 +706,7 @@ def _soft_limit_counts(axis: Axis, limits: tuple[Any, Any]) -> tuple[int, int]:
             f"soft limits ({_show(low)}, {_show(high)}): low is above high (takes (low, high))"
         )
     for name, v in (("BL", bl), ("FL", fl)):
-        if not INT32_MIN <= v <= INT32_MAX:
-            raise LimitError(
-                f"{name} {v} outside the 32-bit position range",
-                name=name,
-                value=v,
-                limit=INT32_MAX if v > 0 else INT32_MIN,
-                axis=axis.letter,
-            )
+        check_int32(name, v, axis.letter, axis._link.model.name)
     return bl, fl
 
 

@@ -8,10 +8,10 @@ test hook (``galil.testing.sim_of``) only places switches and drives inputs.
 
 from __future__ import annotations
 
-import queue
 from collections.abc import Iterator
 
 import pytest
+from program_helpers import drain_messages, run_program
 
 import galil
 from galil.sim.controller import SimController
@@ -24,33 +24,11 @@ def dmc() -> Iterator[galil.Controller]:
         yield controller
 
 
-def _run(dmc: galil.Controller, program: str, label: str = "#M") -> list[str]:
-    """Download ``program``, run ``label`` on thread 0 until no thread runs; its messages."""
-    dmc.programs.download(program)
-    dmc.programs.run(label, thread=0)
-    for _ in range(50):
-        if not dmc.programs.threads:
-            break
-        dmc.sleep(0.1)
-    assert not dmc.programs.threads
-    return _drain(dmc)
-
-
-def _drain(dmc: galil.Controller) -> list[str]:
-    """The messages that have arrived, stripped."""
-    lines = []
-    while True:
-        try:
-            lines.append(dmc.messages.get(timeout=0).strip())
-        except queue.Empty:
-            return lines
-
-
 def test_a_limit_switch_runs_limswi_and_re_1_goes_back_to_the_interrupted_am(
     dmc: galil.Controller,
 ) -> None:
     sim_of(dmc).place_limit_switches("A", forward=1500)
-    lines = _run(
+    lines = run_program(
         dmc,
         '#M\nPR 3000;BG A\nAM A\nMG "done",_SCA\nEN\n#LIMSWI\nMG "limit",_SCA,_LFA\nRE 1',
     )
@@ -61,7 +39,7 @@ def test_a_limit_switch_runs_limswi_and_re_1_goes_back_to_the_interrupted_am(
 def test_a_soft_limit_runs_limswi_too_and_re_0_drops_the_trippoint(
     dmc: galil.Controller,
 ) -> None:
-    lines = _run(
+    lines = run_program(
         dmc,
         '#M\nFL 1500;JG 5000;BG A\nWT 5000\nMG "after",_BGA\nEN\n#LIMSWI\nMG "soft"\nRE 0',
     )
@@ -76,7 +54,7 @@ def test_without_a_running_program_a_limit_runs_no_routine(dmc: galil.Controller
         dmc.A.move_by(3000).wait()
     assert dmc.A.stop_code[0] == 2
     assert dmc.programs.threads == {}
-    assert _drain(dmc) == []
+    assert drain_messages(dmc) == []
 
 
 def test_a_position_error_beyond_er_with_oe_1_turns_the_motor_off_and_runs_poserr(
@@ -85,7 +63,7 @@ def test_a_position_error_beyond_er_with_oe_1_turns_the_motor_off_and_runs_poser
     a = dmc.A
     a.error_limit = 40
     a.off_on_error = 1
-    lines = _run(
+    lines = run_program(
         dmc,
         '#M\nJG 30000;BG A\nWT 300\nEN\n#POSERR\nMG "poserr",_MOA,_SCA\nRE',
     )
@@ -99,7 +77,7 @@ def test_with_oe_0_a_position_error_runs_poserr_and_the_motor_stays_on(
     dmc: galil.Controller,
 ) -> None:
     dmc.A.error_limit = 40
-    lines = _run(dmc, '#M\nJG 30000;BG A\nWT 300\nST A;AM A\nEN\n#POSERR\nMG "E"\nRE 1')
+    lines = run_program(dmc, '#M\nJG 30000;BG A\nWT 300\nST A;AM A\nEN\n#POSERR\nMG "E"\nRE 1')
     assert lines == ["E"]
     assert dmc.A.motor_on
     assert dmc.A.stop_code[0] == 4
@@ -139,13 +117,13 @@ def test_an_input_interrupt_runs_inint_and_ri_1_goes_back_to_the_wait(
     dmc.sleep(0.05)
     sim_of(dmc).set_input(1, True)
     dmc.programs.wait(0)
-    assert _drain(dmc) == ["in 0.0000", "main"]
+    assert drain_messages(dmc) == ["in 0.0000", "main"]
 
 
 def test_a_command_error_runs_cmderr_and_thread_0_goes_on_after_the_command(
     dmc: galil.Controller,
 ) -> None:
-    lines = _run(
+    lines = run_program(
         dmc,
         '#M\nMG "a"\nPR 9999999999\nMG "b"\nEN\n#CMDERR\nMG "error",_TC,_ED\nEN',
     )
@@ -159,17 +137,19 @@ def test_a_command_error_in_another_thread_stops_it_and_runs_cmderr_on_thread_0(
     dmc.programs.run("#T", thread=2)
     dmc.programs.wait(2)
     dmc.programs.wait(0)
-    assert _drain(dmc) == ["error 2.0000"]
+    assert drain_messages(dmc) == ["error 2.0000"]
 
 
 def test_an_mc_that_times_out_sets_stop_code_99_and_runs_mctime(dmc: galil.Controller) -> None:
     sim_of(dmc).set_servo_lag(0.05, "A")
-    lines = _run(dmc, '#M\nTW 20\nPR 1000;BG A\nMC A\nMG "mc"\nEN\n#MCTIME\nMG "late",_SCA\nEN')
+    lines = run_program(
+        dmc, '#M\nTW 20\nPR 1000;BG A\nMC A\nMG "mc"\nEN\n#MCTIME\nMG "late",_SCA\nEN'
+    )
     assert lines == ["late 99.0000", "mc"]
 
 
 def test_ap_ar_and_av_release_where_the_reference_says(dmc: galil.Controller) -> None:
-    lines = _run(
+    lines = run_program(
         dmc,
         "#M\nJG 20000;BG A\nAD 2000\nAR 1000\nAR 1000\nr=_RPA\nAP 6000\np=_TPA\nST A;AM A\n"
         "VM BC;VP 3000,4000;VE;BG S\nAV 2000\nv=_AVS\nAM S\n"
@@ -181,7 +161,7 @@ def test_ap_ar_and_av_release_where_the_reference_says(dmc: galil.Controller) ->
 def test_js_calls_a_subroutine_that_returns_a_value_and_zs_leaves_it(
     dmc: galil.Controller,
 ) -> None:
-    lines = _run(
+    lines = run_program(
         dmc,
         '#M\nJS #SQ\nMG _JS\nJS #Z\nMG "not here"\nEN\n#SQ\nEN ,,7*7\n#Z\nZS\nMG "zeroed",_ZS0\nEN',
     )

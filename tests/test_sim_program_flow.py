@@ -6,10 +6,10 @@ the test waits (``dmc.sleep``), so a ``TIME`` a program records is the exact ser
 
 from __future__ import annotations
 
-import queue
 from collections.abc import Iterator
 
 import pytest
+from program_helpers import drain_messages, run_program
 
 import galil
 from galil.errors import CommandError
@@ -21,27 +21,6 @@ from galil.testing import simulated
 def dmc() -> Iterator[galil.Controller]:
     with simulated() as controller:
         yield controller
-
-
-def _run(dmc: galil.Controller, program: str, label: str = "#M") -> list[str]:
-    """Download ``program``, run ``label`` until no thread runs; its messages, stripped."""
-    dmc.programs.download(program)
-    dmc.programs.run(label, thread=0)
-    for _ in range(50):
-        if not dmc.programs.threads:
-            break
-        dmc.sleep(0.1)
-    assert not dmc.programs.threads
-    return _drain(dmc)
-
-
-def _drain(dmc: galil.Controller) -> list[str]:
-    lines = []
-    while True:
-        try:
-            lines.append(dmc.messages.get(timeout=0).strip())
-        except queue.Empty:
-            return lines
 
 
 # ---- IF / ELSE / ENDIF --------------------------------------------------------------------
@@ -71,7 +50,7 @@ EN
 def test_nested_if_else_endif_run_the_branches_their_conditions_choose(
     dmc: galil.Controller,
 ) -> None:
-    assert _run(dmc, NESTED) == [
+    assert run_program(dmc, NESTED) == [
         "b or none 0.0000",
         "a only 1.0000",
         "b or none 2.0000",
@@ -86,14 +65,14 @@ def test_a_false_if_skips_its_lines_within_one_command(dmc: galil.Controller) ->
     # they cost the IF only: the ENDIF is reached in the same sample.
     skipped = "\n".join(f"x{k}=1" for k in range(40))
     program = f"#M\nWT 10,1\nt0=TIME\nIF (0)\n{skipped}\nENDIF\nMG TIME-t0,_XQ0\nEN\n"
-    assert _run(dmc, program) == ["0.0000 45.0000"]
+    assert run_program(dmc, program) == ["0.0000 45.0000"]
 
 
 def test_an_if_waits_on_a_trippoint_inside_it_at_the_exact_sample(
     dmc: galil.Controller,
 ) -> None:
     program = "#M\nt0=TIME\nIF (1)\n WT 100,1\n t=TIME-t0\nELSE\n t=-1\nENDIF\nMG t\nEN\n"
-    assert _run(dmc, program) == ["100.0000"]
+    assert run_program(dmc, program) == ["100.0000"]
 
 
 @pytest.mark.parametrize(
@@ -109,7 +88,7 @@ def test_an_if_waits_on_a_trippoint_inside_it_at_the_exact_sample(
 def test_unpaired_if_else_endif_halt_the_thread_with_tc_63(
     dmc: galil.Controller, program: str, line: int
 ) -> None:
-    lines = _run(dmc, program)
+    lines = run_program(dmc, program)
     assert "after" not in lines
     assert "out" not in lines
     assert dmc.query_numbers("MG _TC,_ED") == [63.0, float(line)]
@@ -178,7 +157,7 @@ RE 1
 #I
 RI 0
 """
-    lines = _run(dmc, program)
+    lines = run_program(dmc, program)
     # AD/AR watch the profile: 1000 and 2000 counts at 10000 counts/s after the ramp.
     assert len(lines) == 1
     ta, tb, ap, av, tc = (float(v) for v in lines[0].split())
@@ -215,7 +194,7 @@ MG a,b,c,d
 MG e,f,g,h
 EN
 """
-    assert _run(dmc, program) == [
+    assert run_program(dmc, program) == [
         "50.0000 100.0000 150.0000 230.0000",
         "52.0000 103.0000 154.0000 236.0000",
     ]
@@ -239,7 +218,7 @@ AT -20,1
 MG late>=100,TIME-t0
 EN
 """
-    assert _run(dmc, program) == ["1.0000 120.0000"]
+    assert run_program(dmc, program) == ["1.0000 120.0000"]
 
 
 # ---- TS bit 6 -----------------------------------------------------------------------------
@@ -267,4 +246,4 @@ EN
         dmc.programs.run("#M", thread=0)
         dmc.sleep(1.0)
         assert not dmc.programs.threads
-        assert _drain(dmc) == ["0.0000 1.0000 1.0000 0.0000", "0.0000"]
+        assert drain_messages(dmc) == ["0.0000 1.0000 1.0000 0.0000", "0.0000"]
