@@ -270,6 +270,21 @@ def test_loop_settings_are_stored_quantised_and_range_checked() -> None:
     assert ask(sim, "KP ?,?") == " 10.25, 6.00\r\n:"
 
 
+def test_mt_and_br_are_refused_with_tc_7_while_the_axis_moves() -> None:
+    # DMC-4103 command reference: MT and BR are both "Not Valid while in motion".
+    sim = SimController("DMC-4040")
+    assert ask(sim, "JGA=5000;BGA") == "::"
+    for command in ("MTA=-1", "BRA=1", "BR 1"):
+        assert ask(sim, command) == "?", command
+        assert number(sim, "_TC") == 7
+    assert number(sim, "_MTA") == 1
+    assert number(sim, "_BRA") == 0
+    assert ask(sim, "BRB=1") == ":"  # (B is at rest)
+    assert ask(sim, "STA") == ":"
+    run_until_idle(sim)
+    assert ask(sim, "BRA=1;MTA=-1") == "::"
+
+
 @pytest.mark.parametrize(
     ("model", "ki_reply"),
     [("DMC-4040", " 0.5000"), ("DMC-1806", " 0.5000"), ("DMC-18x2", " 1")],
