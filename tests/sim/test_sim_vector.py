@@ -140,6 +140,22 @@ def test_st_on_one_axis_stops_the_whole_sequence_and_ab_stops_at_once(sim: SimCo
     assert numbers(ask(sim, "MG _RPA,_RPB,_SCA,_SCB,_BGS,_BGA")) == [*at, 7, 7, 0, 0]
 
 
+def test_st_on_one_axis_shows_every_axis_of_the_sequence_stopped_together(
+    sim: SimController,
+) -> None:
+    # ST of one axis at the sample the sequence begins (no speed yet: nothing to ramp down):
+    # the sequence is over for both axes at once, not for B now and A a sample later.
+    setup(sim)
+    ask(sim, "VP -195,-87;VE")
+    assert numbers(ask(sim, "BG S;ST B;MG _BGA,_BGB,_BGS,_SCA,_SCB")) == [0, 0, 0, 4, 4]
+    setup(sim)
+    ask(sim, "VP 50000,50000;VE")
+    ask(sim, "BG S")
+    sim.advance(0.3)
+    # In motion both ramp down along the path, together, "decelerating by ST" (code 4).
+    assert numbers(ask(sim, "ST A;MG _BGA,_BGB,_BGS,_SCA,_SCB")) == [1, 1, 1, 4, 4]
+
+
 def test_a_running_sequence_owns_its_axes(sim: SimController) -> None:
     setup(sim)
     ask(sim, "VP 20000,0;VE;BG S")

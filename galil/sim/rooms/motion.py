@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from galil.errors import InvalidArgument, LimitError
 from galil.predict.checks import quantise_accel, quantise_speed
 from galil.predict.smoothing import quantise_it
+from galil.sim.driven import DrivenProfiler
 from galil.sim.interpreter import int32
 from galil.sim.machine import Machine, Room
 from galil.sim.parse import Refused
@@ -287,8 +288,15 @@ class Motion(Room):
 
     @handler("ST", Args.AXES)
     def st(self, axes: list[Axis]) -> str:
+        sequences = [p.source for ax in axes if (p := _in_sequence(ax)) is not None]
         for ax in axes:
             ax.m.profiler.stop()
+        # ST of one axis of a sequence stops the sequence: every axis of it shows that at
+        # once (its BG and stop code), as after ST S, not from its own next sample.
+        for ax in self.machine.servo.axes.values():
+            p = _in_sequence(ax)
+            if p is not None and any(p.source is s for s in sequences):
+                p.sync()
         return ""
 
     @handler("AB")
@@ -360,3 +368,11 @@ class Motion(Room):
 
 def _position(ax: Axis, value: float) -> float:
     return int32(value)
+
+
+def _in_sequence(ax: Axis) -> DrivenProfiler | None:
+    """The profiler of ``ax`` if a coordinated sequence drives it."""
+    p = ax.m.profiler
+    if isinstance(p, DrivenProfiler) and p.driven and p.mode == "vector":
+        return p
+    return None
