@@ -1,12 +1,18 @@
 """Random sequences of valid operations against the simulator, checked after every step.
 
 A hypothesis state machine drives a ``sim://DMC-4040`` through moves (waited or not), jogs and
-their speed changes, increments, speed schedules, homing, gearing, vector moves, contours,
-soft limits, limit switches, stops, aborts, motors off and on, TM changes, a program that
-moves an axis, the ``motion()`` guard and the passing of time. After each step:
+their speed changes, increments, speed schedules, homing, gearing, vector moves, contours
+(and contours a Ctrl-C interrupts at any exchange), soft limits, limit switches, stops,
+aborts, motors off and on (``SH`` with handles nobody waited for), AC/DC in motion and in a
+stop's ramp, MT/BR, TM changes, programs that move an axis (one with IF/ELSE/ENDIF and AT),
+the ``motion()`` guard and the passing of time. After each step:
 
 - a call raises nothing but the library's documented errors; a refusal sent nothing but
-  queries and changed none of the axes' settings;
+  queries and changed none of the axes' settings; a setting "Not Valid while in motion" is
+  refused unsent while the library's own motion runs and by the controller (TC 7) only where
+  the library cannot know (decisions 0036, 0039), and taken only at rest;
+- an interrupted contour leaves no axis moving or in contour mode, no segment held, and the
+  next contour ends where it should (decision 0038);
 - a waited move ended where its handle predicted, to the count, with the stop code the docs
   give its kind when nothing interfered with it;
 - the library's view agrees with the simulator's: every axis the controller moves is driven
@@ -18,7 +24,8 @@ At the end ``close()`` leaves nothing moving and no thread running.
 
 Deterministic in CI (``derandomize``, no database); run it long with e.g.
 ``GALIL_SEQ_EXAMPLES=2000 pytest --timeout=0 tests/test_operation_sequences.py`` (and
-``GALIL_SEQ_STEPS`` for longer sequences).
+``GALIL_SEQ_STEPS`` for longer sequences, ``GALIL_SEQ_RANDOM=1`` for other sequences than
+CI's).
 """
 
 from __future__ import annotations
@@ -29,7 +36,7 @@ import os
 import re
 import threading
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,13 +54,15 @@ from galil.errors import (
     MotionError,
 )
 from galil.gearing import Gearing
-from galil.motion import MoveHandle, MoveResult
+from galil.motion import MoveHandle, MoveResult, Track
+from galil.sim.rooms.contour import Contour as SimContour
 from galil.sim.rooms.gearing import Gearing as SimGearing
 from galil.testing import sim_of, transcript
 
 AXES = "ABCD"
 EXAMPLES = int(os.environ.get("GALIL_SEQ_EXAMPLES", "40"))
 STEPS = int(os.environ.get("GALIL_SEQ_STEPS", "30"))
+RANDOM = os.environ.get("GALIL_SEQ_RANDOM", "") not in ("", "0")
 
 axis_st = st.sampled_from(AXES)
 # An operand, a variable or an array element, in its number format or not (decision 0032).
@@ -63,11 +72,24 @@ _READ_ONLY = re.compile(
     r"|UL|LA|LV|QU [A-Za-z0-9\[\],]*|QZ|TC1|MG \"TCOK\d+\""
 )
 # What must not change when a call is refused.
-_SETTINGS = ("SP", "AC", "DC", "IT", "BL", "FL", "MO", "JG", "HV")
+_SETTINGS = ("SP", "AC", "DC", "IT", "BL", "FL", "MO", "JG", "HV", "MT", "BR")
+_VALUES: dict[str, list[float]] = {
+    "speed": [2000, 10000, 25000, 60000],
+    "accel": [20480, 102400, 256000, 1024000],
+    "decel": [20480, 102400, 256000, 1024000],
+    "smoothing": [1.0, 0.5, 0.25, 0.0625],
+}
+# The settings the controller takes only at rest (DC: not in a position move).
+_STILL = ("decel", "motor_type", "brush")
 # The stop code a move of each kind ends with when nothing interferes (docs/homing.md, a
 # position move's normal end).
 _END_CODE = {"position": 1, "schedule": 1, "home": 10, "edge": 9, "index": 10, "vector": 101}
-PROGRAM = "#SEQMOVE\nPRD=700\nBGD\nAMD\nEN"
+# Two routines that move D behind the library: a plain one, and one that picks its direction
+# with IF/ELSE/ENDIF and paces its start with AT (decision 0037).
+PROGRAM = (
+    "#SEQMOVE\nPRD=700\nBGD\nAMD\nEN\n"
+    "#SEQIF\nAT 0\nIF (_RPD < 0)\nPRD=700\nELSE\nPRD=-700\nENDIF\nAT 20\nBGD\nAMD\nEN"
+)
 
 
 @dataclass
@@ -80,6 +102,35 @@ class Running:
     # where the (lagging) motor is: its end is not the prediction's business.
     unpredictable: bool = False
     superseded: bool = False  # other motion started on its axes since (its end is older)
+
+
+@contextlib.contextmanager
+def _interrupted(link: object, at: int, *, after: bool) -> Iterator[None]:
+    """Raise ``KeyboardInterrupt`` at the ``at``-th exchange or pause on ``link`` (counting
+    from 0): before it goes out, or once it is done."""
+    calls = 0
+
+    def interrupting(method: Callable[..., object]) -> Callable[..., object]:
+        def call(*args: object, **kwargs: object) -> object:
+            nonlocal calls
+            calls += 1
+            if calls == at + 1 and not after:
+                raise KeyboardInterrupt
+            out = method(*args, **kwargs)
+            if calls == at + 1 and after:
+                raise KeyboardInterrupt
+            return out
+
+        return call
+
+    names = ("transact", "pause")
+    for name in names:
+        setattr(link, name, interrupting(getattr(link, name)))
+    try:
+        yield
+    finally:
+        for name in names:
+            delattr(link, name)
 
 
 def _queries_only(lines: list[str]) -> list[str]:
@@ -105,19 +156,21 @@ class OperationSequences(RuleBasedStateMachine):
         return self.dmc.query_operands([f"_{op}{a}" for a in AXES for op in _SETTINGS])
 
     @contextlib.contextmanager
-    def refusable(self, *allowed: type[GalilError]) -> Iterator[None]:
+    def refusable(self, *allowed: type[GalilError]) -> Iterator[list[GalilError]]:
         """Run a call that may be refused with one of ``allowed``: then it sent nothing but
-        queries and the axes' settings are as they were."""
+        queries and the axes' settings are as they were. Yields a list that then holds the
+        refusal."""
         before = self._settings()
         gears = dict(self.dmc.tracker.gears)
-        refused: GalilError | None = None
+        caught: list[GalilError] = []
         with transcript(self.dmc) as sent:
             try:
-                yield
+                yield caught
             except allowed as exc:
-                refused = exc
-        if refused is None:
+                caught.append(exc)
+        if not caught:
             return
+        refused = caught[0]
         others = _queries_only(sent.lines)
         assert not others, f"{type(refused).__name__} ({refused}) after sending {others!r}"
         assert self._settings() == before, f"settings changed by a refusal: {refused}"
@@ -182,6 +235,9 @@ class OperationSequences(RuleBasedStateMachine):
 
     def started(self, handle: MoveHandle, wait: bool) -> None:
         run = Running(handle)
+        if "D" in handle.axes + handle.followers and not self.program_axis_free:
+            # The test's program may still begin its move on D (#SEQIF waits with AT first).
+            run.interfered = run.unpredictable = True
         self.running = [r for r in self.running if r.handle is not handle]
         self.supersede(handle.axes + handle.followers)
         self.running.append(run)
@@ -202,21 +258,89 @@ class OperationSequences(RuleBasedStateMachine):
         i=st.integers(0, 3),
     )
     def set_parameter(self, a: str, what: str, i: int) -> None:
-        values = {
-            "speed": [2000, 10000, 25000, 60000],
-            "accel": [20480, 102400, 256000, 1024000],
-            "decel": [20480, 102400, 256000, 1024000],
-            "smoothing": [1.0, 0.5, 0.25, 0.0625],
-        }
-        refused: CommandError | None = None
+        self.set_setting(a, what, _VALUES[what][i])
+
+    @rule(
+        data=st.data(),
+        what=st.sampled_from(["accel", "decel"]),
+        i=st.integers(0, 3),
+        order=st.sampled_from(["set", "stop, set", "set, stop"]),
+        wait=st.booleans(),
+    )
+    def ramp_in_motion(
+        self, data: st.DataObject, what: str, i: int, order: str, wait: bool
+    ) -> None:
+        """AC or DC on an axis the library moves: in a jog, in a position move (DC refused
+        unsent), in the ramp down after an ST (DC taken: decision 0039); the handle's
+        prediction follows (checked when it is waited for)."""
+        if not self.running:
+            return
+        run = data.draw(st.sampled_from(self.running))
+        a = data.draw(st.sampled_from(run.handle.axes))
+        if order == "stop, set":
+            self.dmc.stop(a)
+            self.interfere(a)
+        self.set_setting(a, what, _VALUES[what][i])
+        if order == "set, stop":
+            self.dmc.stop(a)
+            self.interfere(a)
+        if wait and run in self.running:
+            self.wait(run)
+
+    @rule(
+        data=st.data(),
+        what=st.sampled_from(["motor_type", "brush"]),
+        i=st.integers(0, 1),
+    )
+    def motor_setting(self, data: st.DataObject, what: str, i: int) -> None:
+        """MT and BR, "Not Valid while in motion": refused unsent while the library's own
+        motion runs (decision 0036), by the controller (TC 7) otherwise."""
+        moving = [a for r in self.running for a in r.handle.axes + r.handle.followers]
+        a = data.draw(st.sampled_from(sorted(set(moving)) or list(AXES)))
+        self.set_setting(a, what, {"motor_type": [1, -1], "brush": [0, 1]}[what][i])
+
+    def set_setting(self, a: str, what: str, value: float) -> None:
+        """Set ``what`` on ``a``: only a setting "Not Valid while in motion" may be refused,
+        unsent where the library knows the axis moves, by the controller (TC 7) only where
+        the library cannot know."""
+        handle = self.dmc.tracker.active(a)
+        track = self.dmc.tracker.track(a)
+        followed = self._followed(a)
+        over = handle is not None and self.dmc.link.clock() >= handle.started_at + handle.duration
+        by_controller: CommandError | None = None
         try:
-            with self.refusable(InvalidArgument):
-                setattr(self.dmc.axes[a], what, values[what][i])
-        except CommandError as exc:  # documented on decel: the controller refuses DC in motion
-            refused = exc
-        if refused is not None:
-            assert what == "decel", refused
-            assert refused.code == 7, refused
+            with self.refusable(InvalidArgument) as refused:
+                setattr(self.dmc.axes[a], what, value)
+        except CommandError as exc:
+            by_controller = exc
+        if refused:
+            assert what in _STILL, (a, what, refused)
+            assert track is not None, (a, what, refused)
+            jog_or_stop = track.kind == "jog" or (track.kind == "position" and track.stopped)
+            assert what != "decel" or not jog_or_stop, (a, track, refused)
+        if by_controller is not None:
+            assert what in _STILL, by_controller
+            assert by_controller.code == 7, by_controller
+            if followed is not None:
+                # Sent because its prediction had the motion over: the controller may still
+                # see its last samples, not more.
+                assert over, (a, followed, by_controller)
+                self.dmc.sleep(0.01)
+                assert not self.dmc.query_operands([f"_BG{a}"])[0], (a, followed, by_controller)
+        elif not refused and what in _STILL and what != "decel":
+            # Taken: then the axis was at rest (or began only since: a program).
+            moving = self.dmc.query_operands([f"_BG{a}"])[0]
+            assert not moving or not self._free(a), f"{what} taken while {a} moves"
+
+    def _followed(self, a: str) -> Track | None:
+        """The library's track of the motion on ``a`` when it predicts it to the count (a
+        free axis, nothing behind its back)."""
+        handle = self.dmc.tracker.active(a)
+        track = None if handle is None else handle.track(a)
+        if track is None or not track.exact or not self._free(a):
+            return None
+        run = next((r for r in self.running if r.handle is handle), None)
+        return None if run is not None and run.unpredictable else track
 
     @rule(
         a=axis_st,
@@ -341,6 +465,41 @@ class OperationSequences(RuleBasedStateMachine):
             after = self.dmc.query_operands([f"_RP{a}" for a in axes])
             assert after == list(np.add(before, path[-1])), (before, after)
 
+    @rule(
+        axes=st.sampled_from(["A", "BC", "AD"]),
+        reach=st.integers(-3000, 3000),
+        at=st.integers(0, 12),
+        after=st.booleans(),
+    )
+    def interrupted_contour(self, axes: str, reach: int, at: int, after: bool) -> None:
+        """Ctrl-C at the contour's ``at``-th exchange with the controller (before it went out
+        or once it did), before or after the pre-loaded segments start (decision 0038):
+        nothing runs on, no axis stays in contour mode, and the next contour works."""
+        if not all(map(self._free, axes)) or not self.idle(axes):
+            return  # (the contour is refused: the plain rule has that)
+        path = np.outer(np.linspace(0, 1, 12), np.arange(1, len(axes) + 1) * reach).round()
+        self.supersede(axes)  # (even if refused: harmless)
+        interrupted = False
+        with self.refusable(InvalidArgument, MotionError):
+            try:
+                with _interrupted(self.dmc.link, at, after=after):
+                    self.dmc.contour(axes, path, dt=3)
+            except KeyboardInterrupt:
+                interrupted = True
+        if not interrupted:
+            return
+        self.interfere(axes + "".join(self.dmc.tracker.followers(axes)))
+        contour = self.sim.room(SimContour)
+        assert not contour.axes(), f"left in contour mode: {contour.axes()}"
+        assert not contour.held, f"segments held: {contour.held}"
+        self.dmc.sleep(0.5)  # (the ST's ramp down, at the smallest DC)
+        names = [f"_{op}{a}" for a in axes for op in ("BG", "RP")]
+        before = self.dmc.query_operands(names)
+        self.dmc.sleep(0.5)
+        assert before == self.dmc.query_operands(names), "a contour axis moves on"
+        assert not any(before[0::2]), "a contour axis moves on"
+        self.contour(axes, reach)
+
     # -- stops, motors, time ----------------------------------------------------------------
     @rule(axes=st.sampled_from(["", "A", "B", "C", "D", "AC"]))
     def stop(self, axes: str) -> None:
@@ -362,8 +521,13 @@ class OperationSequences(RuleBasedStateMachine):
     @rule(a=axis_st, on=st.booleans())
     def motor(self, a: str, on: bool) -> None:
         if on:
+            # SH puts a motor-off axis's reference at its (lagging) encoder: a handle not seen
+            # done keeps the end it had (decision 0036), so only the position now may differ.
+            if not self.dmc.query_operands([f"_MO{a}"])[0]:
+                self.dmc.servo_here(a)
+                return
             self.dmc.servo_here(a)
-            self.interfere(a, unpredictable=True)
+            self.supersede(a)
         else:
             with self.refusable(InvalidArgument):  # (in motion: the controller refuses MO)
                 self.dmc.motor_off(a)
@@ -377,11 +541,11 @@ class OperationSequences(RuleBasedStateMachine):
         if self.running:
             self.wait(data.draw(st.sampled_from(self.running)))
 
-    @rule()
-    def run_program(self) -> None:
+    @rule(label=st.sampled_from(["#SEQMOVE", "#SEQIF"]))
+    def run_program(self, label: str) -> None:
         with self.refusable(InvalidArgument):
             self.dmc.programs.download(PROGRAM)
-            self.dmc.programs.run("#SEQMOVE", thread=1)
+            self.dmc.programs.run(label, thread=1)
             self.program_axis_free = False
             self.interfere("D", unpredictable=True)
 
@@ -443,7 +607,7 @@ class OperationSequences(RuleBasedStateMachine):
 OperationSequences.TestCase.settings = settings(
     max_examples=EXAMPLES,
     stateful_step_count=STEPS,
-    derandomize=True,
+    derandomize=not RANDOM,
     database=None,
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow],
