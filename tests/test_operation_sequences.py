@@ -511,7 +511,10 @@ class OperationSequences(RuleBasedStateMachine):
         if self.running:
             run = data.draw(st.sampled_from(self.running))
             run.handle.stop()
-            self.interfere(run.handle.axes)
+            axes = run.handle.axes
+            if run.handle.kind == "vector":  # ST S: the sequence running now (decision 0034)
+                axes += "".join(r.handle.axes for r in self.running if r.handle.kind == "vector")
+            self.interfere(axes)
 
     @rule()
     def abort(self) -> None:
