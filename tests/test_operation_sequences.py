@@ -518,8 +518,13 @@ class OperationSequences(RuleBasedStateMachine):
 
     @rule()
     def abort(self) -> None:
+        # An AB in a limit's ramp down replaces its stop code (7): the handle cannot know
+        # of the limit any more, and predicts the abort of the move the limit cut short.
+        codes = self.dmc.query_operands([f"_SC{a}" for a in AXES])
+        limited = "".join(a for a, c in zip(AXES, codes, strict=True) if c in (2, 3))
         self.dmc.abort()
         self.interfere()
+        self.interfere(limited, unpredictable=True)
 
     @rule(a=axis_st, on=st.booleans())
     def motor(self, a: str, on: bool) -> None:
