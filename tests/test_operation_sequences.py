@@ -54,7 +54,7 @@ from galil.errors import (
     MotionError,
 )
 from galil.gearing import Gearing
-from galil.motion import MoveHandle, MoveResult, Track
+from galil.motion import HOMING_KINDS, MoveHandle, MoveResult, Track
 from galil.sim.rooms.contour import Contour as SimContour
 from galil.sim.rooms.gearing import Gearing as SimGearing
 from galil.testing import sim_of, transcript
@@ -334,10 +334,11 @@ class OperationSequences(RuleBasedStateMachine):
 
     def _followed(self, a: str) -> Track | None:
         """The library's track of the motion on ``a`` when it predicts it to the count (a
-        free axis, nothing behind its back)."""
+        free axis, nothing behind its back; not homing, whose switches it does not know: its
+        prediction is only the start, so "over by its prediction" says nothing)."""
         handle = self.dmc.tracker.active(a)
         track = None if handle is None else handle.track(a)
-        if track is None or not track.exact or not self._free(a):
+        if track is None or not track.exact or track.kind in HOMING_KINDS or not self._free(a):
             return None
         run = next((r for r in self.running if r.handle is handle), None)
         return None if run is not None and run.unpredictable else track
