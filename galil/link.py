@@ -559,9 +559,10 @@ class LinkCore:
                 transport.write(data)
                 chunk = transport.read(t)  # the timeout as given, so transports can cache it
             except OSError as exc:
-                if _own_or_timeout(exc):
+                dead = _dead_link(exc, transport)
+                if dead is None or dead is exc:
                     raise
-                raise _broken(exc, transport) from exc
+                raise dead from exc
         except BaseException as exc:
             session.abandon()
             if isinstance(exc, GalilConnectionError):
@@ -630,9 +631,10 @@ class LinkCore:
             try:
                 chunk = transport.read(wait)
             except OSError as exc:
-                if _own_or_timeout(exc) and not isinstance(exc, GalilConnectionError):
+                dead = _dead_link(exc, transport)
+                if dead is None:
                     raise
-                raise self._link_failed(_broken(exc, transport)) from exc
+                raise self._link_failed(dead) from exc
             events = self._take(chunk, watch)
 
     def _take(self, chunk: bytes, watch: bool) -> list[Completed | Unsolicited]:
@@ -688,9 +690,10 @@ class LinkCore:
         try:
             self.transport.write(data)
         except OSError as exc:
-            if _own_or_timeout(exc) and not isinstance(exc, GalilConnectionError):
+            dead = _dead_link(exc, self.transport)
+            if dead is None:
                 raise
-            raise self._link_failed(_broken(exc, self.transport)) from exc
+            raise self._link_failed(dead) from exc
         self.bytes_sent += len(data)
         if self.wire_log.hooks or _WIRE.isEnabledFor(_DEBUG):
             self._observe("out", data)
@@ -700,9 +703,10 @@ class LinkCore:
         try:
             data = self.transport.read(timeout)
         except OSError as exc:
-            if _own_or_timeout(exc) and not isinstance(exc, GalilConnectionError):
+            dead = _dead_link(exc, self.transport)
+            if dead is None:
                 raise
-            raise self._link_failed(_broken(exc, self.transport)) from exc
+            raise self._link_failed(dead) from exc
         if data:
             self.bytes_received += len(data)
             if self.wire_log.hooks or _WIRE.isEnabledFor(_DEBUG):
@@ -1046,9 +1050,10 @@ class Link(LinkCore):
                 transport.write(data)
                 chunk = transport.read(t)
             except OSError as exc:
-                if _own_or_timeout(exc):
+                dead = _dead_link(exc, transport)
+                if dead is None or dead is exc:
                     raise
-                raise _broken(exc, transport) from exc
+                raise dead from exc
         except BaseException as exc:
             # The bytes may be out: whatever their reply does, it must not be the next one's.
             if not queued:
@@ -1209,9 +1214,13 @@ def read_handle(handle: Transport, timeout: float) -> bytes:
         raise _broken(exc, handle) from exc
 
 
-def _own_or_timeout(exc: OSError) -> bool:
-    """Whether a transport's ``OSError`` is one of the library's own, or a timeout."""
-    return isinstance(exc, (GalilError, TimeoutError))
+def _dead_link(exc: OSError, transport: Transport) -> GalilConnectionError | None:
+    """What a transport's ``OSError`` means for the command link: the dead link it is
+    (:func:`_broken`), or ``None`` for one of the library's own errors other than a dead link,
+    or a timeout (the caller lets those through as they are)."""
+    if isinstance(exc, (GalilError, TimeoutError)) and not isinstance(exc, GalilConnectionError):
+        return None
+    return _broken(exc, transport)
 
 
 def _broken(exc: OSError, transport: Transport) -> GalilConnectionError:
