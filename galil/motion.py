@@ -1203,12 +1203,11 @@ def servo_here(link: CommandLink, tracker: MotionTracker, letters: str) -> None:
     """
     command = cmds.sh(letters, model=link.model)
     with tracker.lock:  # (no start in another thread between the read and SH)
-        open_ = [a for a in letters or link.model.axes if tracker.active(a) is not None]
+        open_ = "".join([a for a in letters or link.model.axes if tracker.active(a) is not None])
         if open_:
-            names = [f"_{k}{a}" for a in open_ for k in ("BG", "RP", "SC")]
-            values = link.query_operands(names)
-            for i, a in enumerate(open_):
-                bg, rp, sc = values[3 * i : 3 * i + 3]
+            values = link.query_operands(list(_poll_names(open_, "")))  # (a handle's poll)
+            n = len(open_)
+            for a, bg, rp, sc in zip(open_, values, values[n:], values[2 * n :], strict=False):
                 if not round(bg):
                     tracker.ended(a, rp, sc)
         link.command_line([command])
