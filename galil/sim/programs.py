@@ -28,7 +28,6 @@ from galil.sim.ports import Port
 from galil.sim.registry import Collect, Download, Result, Wait
 
 __all__ = [
-    "HELD_FOR_HOST",
     "LINES_PER_SAMPLE",
     "PROGRAM_ONLY",
     "STACK_DEPTH",
@@ -55,11 +54,10 @@ _BRANCH = re.compile(r"(?:(IF)(?=[\s(])|(ELSE|ENDIF)\s*$)")
 PROGRAM_ONLY = frozenset(
     {"AD", "AI", "AP", "AR", "AT", "AV", "EN", "JP", "JS", "RE", "RI", "ZS", "IF", "ELSE", "ENDIF"}
 )
-#: Marked "Not Valid in terminal" by the same reference, yet answered from a host with the
-#: ``:`` held until they clear, as the simulator has always done: the library itself sends
-#: them from the host (``commands.am``, ``commands.mc``; ``WT`` to test timeouts), so
-#: refusing them would change its contract. Decision 0037 leaves this for the lead.
-HELD_FOR_HOST = frozenset({"AM", "MC", "WT"})
+# AM, MC and WT are marked "Not Valid in terminal" by the same reference, yet answered from
+# a host with the ``:`` held until they clear, as the simulator has always done: the library
+# itself sends them from the host (``commands.am``, ``commands.mc``; ``WT`` to test
+# timeouts), so refusing them would change its contract (decision 0037).
 
 
 def program_only(text: str) -> str | None:

@@ -83,12 +83,20 @@ class ProgramCommands(Room):
     def no(self, args: str) -> str:
         return ""
 
-    @operand("XQ", kind=OperandKind.INDEX)
-    def thread_line(self, index: str) -> float:
+    def _running(self, index: str) -> Thread | None:
+        """The thread an operand's index names (none: thread 0), ``None`` if it is not running.
+
+        Raises:
+            Refused: TC 1, not a thread of the model.
+        """
         n = int(index) if index.isdigit() else 0 if not index else -1
         if not 0 <= n < self.machine.spec.threads:
             raise Refused(1, "bad thread")
-        th = self.machine.programs.threads.get(n)
+        return self.machine.programs.threads.get(n)
+
+    @operand("XQ", kind=OperandKind.INDEX)
+    def thread_line(self, index: str) -> float:
+        th = self._running(index)
         return float(th.line) if th is not None else -1.0
 
     @operand("NO")
@@ -97,10 +105,7 @@ class ProgramCommands(Room):
 
     @operand("ZS", kind=OperandKind.INDEX)
     def stack_depth(self, index: str) -> float:
-        n = int(index) if index.isdigit() else 0 if not index else -1
-        if not 0 <= n < self.machine.spec.threads:
-            raise Refused(1, "bad thread")
-        th = self.machine.programs.threads.get(n)
+        th = self._running(index)
         return float(len(th.stack)) if th is not None else 0.0
 
     @operand("JS")
