@@ -35,7 +35,7 @@ from galil.sim.clock import Clock
 from galil.sim.motion import AxisMotion
 from galil.sim.parse import Refused
 
-__all__ = ["MAX_CHUNK", "Axis", "Servo", "engine", "turns_back"]
+__all__ = ["MAX_CHUNK", "Axis", "Servo", "at_rest", "engine", "turns_back"]
 
 #: Longest run of servo samples evaluated in one vectorised step.
 MAX_CHUNK = 2048
@@ -81,6 +81,19 @@ def engine(call: Callable[[], None]) -> None:
         raise Refused(e.code or 1, e.text) from None
     except InvalidArgument as e:
         raise Refused(6, str(e)) from None
+
+
+def at_rest(command: str, then: Callable[[Axis, float], float]) -> Callable[[Axis, float], float]:
+    """A value check for ``command`` that refuses it while the axis moves (TC 7, the
+    reference's "Not Valid while in motion": PA, PR, DP, MT, BR ...), then checks with
+    ``then``."""
+
+    def check(ax: Axis, v: float) -> float:
+        if ax.m.moving:
+            raise Refused(7, f"{command} while moving")
+        return then(ax, v)
+
+    return check
 
 
 def turns_back(prof: AxisProfiler, k: int) -> int:

@@ -21,7 +21,7 @@ from galil.sim.machine import Machine, Room
 from galil.sim.parse import Refused
 from galil.sim.registry import Args, OperandKind, handler, operand
 from galil.sim.rooms.limits import Limits
-from galil.sim.servo import Axis, engine
+from galil.sim.servo import Axis, at_rest, engine
 
 __all__ = ["Motion"]
 
@@ -95,17 +95,6 @@ class Motion(Room):
         except LimitError:
             raise Refused(6, "speed out of range") from None
 
-    @staticmethod
-    def _still(command: str, then: Check) -> Check:
-        """A check that refuses ``command`` while the axis moves (TC 7), then ``then``."""
-
-        def check(ax: Axis, v: float) -> float:
-            if ax.m.moving:
-                raise Refused(7, f"{command} while moving")
-            return then(ax, v)
-
-        return check
-
     def _set(
         self,
         fields: Fields,
@@ -125,7 +114,7 @@ class Motion(Room):
             p = self.axes[ax.letter]
             p.pr, p.absolute, p.next_mode = int(v), False, "position"
 
-        return self._set(fields, self.relative, self._still("PR", _position), apply)
+        return self._set(fields, self.relative, at_rest("PR", _position), apply)
 
     @handler("PA", Args.VALUES)
     def pa(self, fields: Fields) -> str:
@@ -133,7 +122,7 @@ class Motion(Room):
             p = self.axes[ax.letter]
             p.pa, p.absolute, p.next_mode = int(v), True, "position"
 
-        return self._set(fields, self.absolute, self._still("PA", _position), apply)
+        return self._set(fields, self.absolute, at_rest("PA", _position), apply)
 
     @handler("DP", Args.VALUES)
     def dp(self, fields: Fields) -> str:
@@ -141,7 +130,7 @@ class Motion(Room):
             self.machine.servo.reseat(ax, int(v))
             self.axes[ax.letter].pa = int(v)
 
-        return self._set(fields, lambda ax: ax.m.encoder, self._still("DP", _position), apply)
+        return self._set(fields, lambda ax: ax.m.encoder, at_rest("DP", _position), apply)
 
     # ---- speeds, accelerations, smoothing ----------------------------------------------
     @handler("SP", Args.VALUES)

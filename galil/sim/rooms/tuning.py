@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from galil.sim.machine import Room
 from galil.sim.parse import Refused
 from galil.sim.registry import Args, OperandKind, Wait, handler, operand
-from galil.sim.servo import Axis
+from galil.sim.servo import Axis, at_rest
 
 __all__ = ["BURN_SECONDS", "Tuning"]
 
@@ -98,20 +98,9 @@ class Tuning(Room):
         return check
 
     # ---- commands ----------------------------------------------------------------------
-    def _still(self, name: str, check: Callable[[Axis, float], float]) -> Callable[..., float]:
-        """``check`` for a setting the DMC-4103 reference marks "Not Valid while in motion"
-        (MT, BR): TC 7 while the axis moves."""
-
-        def still(ax: Axis, v: float) -> float:
-            if ax.m.moving:
-                raise Refused(7, f"{name} while moving")
-            return check(ax, v)
-
-        return still
-
     @handler("MT", Args.VALUES)
     def mt(self, fields: Fields) -> str:
-        check = self._still("MT", self._choice(self.machine.spec.motor_types))
+        check = at_rest("MT", self._choice(self.machine.spec.motor_types))
         return self._setting("MT", fields, check, "2.1")
 
     @handler("KS", Args.VALUES)
@@ -162,7 +151,7 @@ class Tuning(Room):
 
     @handler("BR", Args.VALUES)
     def br(self, fields: Fields) -> str:
-        return self._setting("BR", fields, self._still("BR", self._choice((-1.0, 0.0, 1.0))), "2.0")
+        return self._setting("BR", fields, at_rest("BR", self._choice((-1.0, 0.0, 1.0))), "2.0")
 
     # ---- operands ----------------------------------------------------------------------
     @operand("MT", kind=OperandKind.AXIS)
