@@ -77,10 +77,15 @@ class Trippoints(Room):
 
         return Wait(lambda: not any(all_axes[c].m.moving for c in letters), exact=exact)
 
+    def _samples(self, ms: float) -> int:
+        """The whole servo samples ``ms`` milliseconds take at the TM in force (rounded up:
+        TW, WT and AT hold at least that long)."""
+        return math.ceil(ms / 1000 / self.machine.servo.ts - 1e-9)
+
     # ---- MC and its timeout ------------------------------------------------------------
     def _tw_samples(self, letter: str) -> int | None:
         ms = self.tw[letter]
-        return None if ms < 0 else math.ceil(ms / 1000 / self.machine.servo.ts - 1e-9)
+        return None if ms < 0 else self._samples(ms)
 
     def _late(self, letters: list[str]) -> list[str]:
         """The axes of ``letters`` whose profile ended ``TW`` ago without reaching position."""
@@ -296,7 +301,7 @@ class Trippoints(Room):
         if not 0 <= ms <= INT32_MAX:
             raise Refused(6, "WT out of range")
         samples = len(fields) > 1 and fields[1].strip() == "1"
-        n = round(ms) if samples else math.ceil(ms / 1000 / servo.ts - 1e-9)
+        n = round(ms) if samples else self._samples(ms)
         return Wait(wake=servo.sample + n)
 
     @handler("AT")
@@ -317,7 +322,7 @@ class Trippoints(Room):
         if n == 0:
             th.at = servo.sample
             return ""
-        k = round(abs(n)) if unit else math.ceil(abs(n) / 1000 / servo.ts - 1e-9)
+        k = round(abs(n)) if unit else self._samples(abs(n))
         due = th.at + k
 
         def moved() -> str:
