@@ -4,8 +4,8 @@ A hypothesis state machine drives a ``sim://DMC-4040`` through moves (waited or 
 their speed changes, increments, speed schedules, homing, gearing, vector moves, contours
 (and contours a Ctrl-C interrupts at any exchange), soft limits, limit switches, stops,
 aborts, motors off and on (``SH`` with handles nobody waited for), AC/DC in motion and in a
-stop's ramp, MT/BR, TM changes, programs that move an axis (one with IF/ELSE/ENDIF and AT),
-the ``motion()`` guard and the passing of time. After each step:
+stop's ramp, MT/BR, TM changes, programs that move an axis (one with IF/ELSE/ENDIF and AT, one
+with AS and MF/MR), the ``motion()`` guard and the passing of time. After each step:
 
 - a call raises nothing but the library's documented errors; a refusal sent nothing but
   queries and changed none of the axes' settings; a setting "Not Valid while in motion" is
@@ -88,7 +88,9 @@ _END_CODE = {"position": 1, "schedule": 1, "home": 10, "edge": 9, "index": 10, "
 # with IF/ELSE/ENDIF and paces its start with AT (decision 0037).
 PROGRAM = (
     "#SEQMOVE\nPRD=700\nBGD\nAMD\nEN\n"
-    "#SEQIF\nAT 0\nIF (_RPD < 0)\nPRD=700\nELSE\nPRD=-700\nENDIF\nAT 20\nBGD\nAMD\nEN"
+    "#SEQIF\nAT 0\nIF (_RPD < 0)\nPRD=700\nELSE\nPRD=-700\nENDIF\nAT 20\nBGD\nAMD\nEN\n"
+    "#SEQTRIP\np=_TPD\nIF (_RPD < 0)\nPRD=700;BGD\nASD\nMFD=p+350\nELSE\nPRD=-700;BGD\nASD\n"
+    "MRD=p-350\nENDIF\nAMD\nEN"
 )
 
 
@@ -550,7 +552,7 @@ class OperationSequences(RuleBasedStateMachine):
         if self.running:
             self.wait(data.draw(st.sampled_from(self.running)))
 
-    @rule(label=st.sampled_from(["#SEQMOVE", "#SEQIF"]))
+    @rule(label=st.sampled_from(["#SEQMOVE", "#SEQIF", "#SEQTRIP"]))
     def run_program(self, label: str) -> None:
         with self.refusable(InvalidArgument):
             self.dmc.programs.download(PROGRAM)

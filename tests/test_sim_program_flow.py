@@ -101,11 +101,14 @@ FROM_HOST = {
     "AI": "AI 1",
     "AP": "AP 100",
     "AR": "AR 100",
+    "AS": "AS A",
     "AT": "AT 100",
     "AV": "AV 100",
     "EN": "EN",
     "JP": "JP #M",
     "JS": "JS #M",
+    "MF": "MF 100",
+    "MR": "MRB=-100",
     "RE": "RE 1",
     "RI": "RI 1",
     "ZS": "ZS",
@@ -135,15 +138,18 @@ def test_the_program_only_commands_run_in_a_program(dmc: galil.Controller) -> No
     program = """#M
 t0=TIME
 JG 10000;BG A
+AS A
 AD 1000
 ta=TIME-t0
 AR 1000
 tb=TIME-t0
+MF 2500
 AP 3000
 IF (1);JS #R;ELSE;MG "no";ENDIF
 JS #I
 ST A;AM A
-VM BC;VP 2000,0;VE;BG S
+VM BC;VP -2000,0;VE;BG S
+MRB=-500
 AV 1000
 tv=TIME-t0
 AM S

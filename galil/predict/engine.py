@@ -36,6 +36,7 @@ __all__ = [
     "plan_jog",
     "plan_position",
     "plan_stop",
+    "ramping",
     "sample_plan",
 ]
 
@@ -529,6 +530,15 @@ class _Active:
         if self.end_sample is not None:
             v[tau >= self.end_sample - self.k0] = 0.0
         return v
+
+    def ramp(self, k: int) -> tuple[float, float]:
+        """Velocity (counts/sample) and acceleration (counts/sample²) at sample k: those of
+        the segment sample k falls in (0 and 0 from the plan's end on)."""
+        if self.end_sample is not None and k >= self.end_sample:
+            return 0.0, 0.0
+        tau = float(k - self.k0)
+        i = self._segment(tau)
+        return self.v0[i] + self.a[i] * (tau - self.t0[i]), self.a[i]
 
     def state(self, k: int) -> tuple[float, float]:
         """Position (counts, quantised to 1/65536) and velocity (counts/sample) at sample k."""
@@ -1067,3 +1077,23 @@ class AxisProfiler:
     def plan(self) -> KinematicPlan | None:
         """The kinematic plan in force (``None`` when idle or contouring)."""
         return None if self._active is None else self._active.plan
+
+
+def ramping(prof: AxisProfiler) -> bool:
+    """Whether ``prof`` changes speed towards its slew speed at its present sample.
+
+    The slew speed is SP in a position move (signed towards the target) and the signed JG
+    speed in a jog. True while a ramp approaches it, from below or from above (after a lower
+    SP or JG); false at rest, at the slew speed, while the speed moves away from it (a
+    triangle's ramp down), during ST or a limit's stop and in contour mode. What ``AS`` waits
+    out; the profile before IT smoothing.
+    """
+    act = prof._active
+    if act is None or prof._stopping or prof.mode not in ("position", "jog"):
+        return False
+    v, a = act.ramp(prof.sample)
+    slew = prof._v
+    if prof.mode == "position":
+        x = act.state(prof.sample)[0]
+        slew = math.copysign(slew, prof.target - x if prof.target != x else v)
+    return a * (slew - v) > 0

@@ -27,7 +27,7 @@ import numpy.typing as npt
 from galil.codes import tc_text
 from galil.errors import CommandError, InvalidArgument, LimitError
 from galil.models import ModelSpec
-from galil.predict.engine import AxisProfiler
+from galil.predict.engine import AxisProfiler, ramping
 from galil.predict.path import (
     ANGLE_RESOLUTION,
     Arc,
@@ -131,6 +131,12 @@ class VectorProfiler:
     def velocity(self) -> float:
         """Speed along the path at the last sample (profiler, before rounding), counts/s."""
         return self._path.velocity
+
+    @property
+    def ramping(self) -> bool:
+        """Whether the path speed changes towards VS at the present sample (see
+        :func:`galil.predict.engine.ramping`): what ``AS S`` waits out."""
+        return self.moving and ramping(self._path)
 
     @property
     def length(self) -> int:

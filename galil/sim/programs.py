@@ -52,7 +52,10 @@ _BRANCH = re.compile(r"(?:(IF)(?=[\s(])|(ELSE|ENDIF)\s*$)")
 #: terminal" (its usage line), in one place: from a host port each answers ``?`` with TC 2
 #: ("Command only valid from program"); a thread runs them (decision 0037).
 PROGRAM_ONLY = frozenset(
-    {"AD", "AI", "AP", "AR", "AT", "AV", "EN", "JP", "JS", "RE", "RI", "ZS", "IF", "ELSE", "ENDIF"}
+    {
+        *("AD", "AI", "AP", "AR", "AS", "AT", "AV", "EN", "JP", "JS", "MF", "MR", "RE", "RI"),
+        *("ZS", "IF", "ELSE", "ENDIF"),
+    }
 )
 # AM, MC and WT are marked "Not Valid in terminal" by the same reference, yet answered from
 # a host with the ``:`` held until they clear, as the simulator has always done: the library

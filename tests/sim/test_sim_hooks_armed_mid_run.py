@@ -10,7 +10,6 @@ both runs; a horizon skipped would put it late in the one advance only).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 from galil.sim.controller import SimController
@@ -130,7 +129,7 @@ def test_mc_times_out_tw_after_the_profile_ended_while_another_axis_jogs() -> No
         lag=0.05,  # the motor is still 20 ms behind when the profile ends
     )
     ended, timed_out, stop_code, b_moving = (float(v) for v in last_reply(out))
-    assert timed_out - ended == math.ceil(0.020 * 1024)  # TW 20 in samples of TM 1000
+    assert timed_out - ended == 20  # TW 20: 20 samples, TW is not scaled by TM (0042)
     assert (stop_code, b_moving) == (99, 1)
 
 

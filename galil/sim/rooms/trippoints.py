@@ -1,8 +1,10 @@
 """Trippoints: commands that hold their ``:`` (or their thread) until something happens.
 
-``AM`` (profile complete), ``MC`` (motor in position, or ``TW`` ms after the profile ended:
-stop code 99 and ``#MCTIME``), ``AD`` (distance from the move's start), ``AR`` (distance from
-the last ``AD``/``AR`` of the same move), ``AP`` (the encoder crosses a position), ``AV`` (path
+``AM`` (profile complete), ``MC`` (motor in position, or ``TW`` samples after the profile
+ended: stop code 99 and ``#MCTIME``), ``AD`` (distance from the move's start), ``AR``
+(distance from the last ``AD``/``AR`` of the same move), ``AP`` (the encoder crosses a
+position), ``AS`` (the profile is at its slew speed, or its speed moves away from it), ``MF``
+and ``MR`` (the encoder crosses a position forwards, backwards; decision 0042), ``AV`` (path
 distance of a coordinated sequence from its start or the last ``AV``), ``WT`` (time; ``WT n,1``
 in samples), ``AT`` (time from the thread's reference; decision 0037) and ``WC`` (the
 previous contour segment is done: at most the running one is left).
@@ -10,15 +12,20 @@ Each returns a :class:`~galil.sim.registry.Wait`; the servo loop releases it at 
 sample its condition turns true. Choices where the command reference is silent are in
 decision 0029: distances are magnitudes (``AR -500`` is 500 counts, as ``AD`` takes them),
 every trippoint also releases when the motion it watches is over, ``AP`` on several axes
-waits for all of them.
+waits for all of them. ``MF``/``MR`` are the exception the reference makes: they watch the
+encoder alone, release on the first of their axes to cross, and never for a move's end.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
 
 from galil.models import INT32_MAX, INT32_MIN
+from galil.predict.engine import ramping
 from galil.sim.driven import DrivenProfiler
 from galil.sim.machine import Room
 from galil.sim.parse import Refused, split_fields
@@ -27,16 +34,57 @@ from galil.sim.registry import Args, OperandKind, Wait, handler, operand
 from galil.sim.rooms.contour import Contour
 from galil.sim.rooms.motion import Motion
 from galil.sim.rooms.vector import Vector
-from galil.sim.servo import Axis, turns_back
+from galil.sim.servo import Axis, Servo, turns_back
 
 __all__ = ["TW_DEFAULT", "Trippoints"]
 
-#: TW's default, ms (DMC-4103 command reference: -1 .. 32,767, default 32,766).
+#: TW's default (DMC-4103 command reference: -1 .. 32,767, default 32,766). Counted in servo
+#: samples: TM's "NOT automatically scaled" list names TW (decision 0042).
 TW_DEFAULT = 32766.0
 
 
+@dataclass(eq=False)
+class _Crossing:
+    """What ``MF`` (``direction`` 1) or ``MR`` (-1) waits for: the encoder of one of the axes
+    of ``goal`` crossing its position in that direction.
+
+    An axis is armed once its encoder has been on the near side of its position (below it for
+    ``MF``) at a step boundary since the command; an armed axis at or past its position
+    releases the wait. The arming happens only where a step is final (:meth:`arm`, from the
+    room's ``service`` and the step's ``cut``), never inside a bisection's probe.
+    """
+
+    servo: Servo
+    goal: dict[str, float]
+    direction: int
+    armed: set[str] = field(default_factory=set)
+
+    def arm(self) -> None:
+        for c, p in self.goal.items():
+            if (self.servo.axes[c].m.encoder - p) * self.direction < 0:
+                self.armed.add(c)
+
+    def crossed(self) -> bool:
+        axes = self.servo.axes
+        return any((axes[c].m.encoder - self.goal[c]) * self.direction >= 0 for c in self.armed)
+
+    def cut(self, k: int) -> int:
+        """End the step at the first sample an axis arms or an armed one gets to its position
+        (the encoder's preview): the watch turns true at most once in a step."""
+        self.arm()
+        for c, p in self.goal.items():
+            m = self.servo.axes[c].m
+            if not m.motor_on or (not m.moving and m.actual == m.profiler.position):
+                continue  # the encoder stays where it is
+            past = (m.preview_encoder(k) - p) * self.direction >= 0
+            hits = np.flatnonzero(past if c in self.armed else ~past)
+            if hits.size:
+                k = min(k, int(hits[0]) + 1)
+        return k
+
+
 class Trippoints(Room):
-    """AM, MC (and TW), AD, AR, AP, AV, WT, AT and WC."""
+    """AM, MC (and TW), AD, AR, AP, AS, MF, MR, AV, WT, AT and WC."""
 
     requires = (Motion, Contour, Vector)
 
@@ -50,8 +98,12 @@ class Trippoints(Room):
         self._relative: dict[str, tuple[int, float]] = {}
         # Per plane: (the sequence, by Vector's count of starts; the distance of the last AV).
         self._vector: dict[str, tuple[int, float]] = {}
+        # MF/MR waits a thread holds (or has put on its stack), and the waits themselves.
+        self._crossings: list[tuple[Wait, _Crossing]] = []
 
     def service(self) -> None:
+        if self._crossings:
+            self._arm_crossings()
         # At every step of the servo loop: one pass over the flags, more only on a change.
         axes = self.machine.servo.axes
         moving = [ax.m.profiler.moving for ax in axes.values()]
@@ -79,13 +131,15 @@ class Trippoints(Room):
 
     def _samples(self, ms: float) -> int:
         """The whole servo samples ``ms`` milliseconds take at the TM in force (rounded up:
-        TW, WT and AT hold at least that long)."""
+        WT and AT hold at least that long). WT and AT are "Scaled By TM": ms of real time, a
+        sample being TM / 1,024,000 s (decision 0042)."""
         return math.ceil(ms / 1000 / self.machine.servo.ts - 1e-9)
 
     # ---- MC and its timeout ------------------------------------------------------------
     def _tw_samples(self, letter: str) -> int | None:
-        ms = self.tw[letter]
-        return None if ms < 0 else self._samples(ms)
+        # TW is not scaled by TM (TM's list; decision 0042): TW n is n servo samples.
+        n = self.tw[letter]
+        return None if n < 0 else int(n)
 
     def _late(self, letters: list[str]) -> list[str]:
         """The axes of ``letters`` whose profile ended ``TW`` ago without reaching position."""
@@ -240,12 +294,10 @@ class Trippoints(Room):
     def ap(self, args: str) -> Wait:
         """Hold until each named axis's encoder has crossed its position, its profile is
         complete, or it moves away from the position."""
-        goal = self._values(args, "AP")
+        goal = self._positions(args, "AP")
         all_axes = self.machine.servo.axes
         side: dict[str, int] = {}
         for c, p in goal.items():
-            if not INT32_MIN <= p <= INT32_MAX:
-                raise Refused(6, "AP position out of range")
             enc = all_axes[c].m.encoder
             side[c] = (p > enc) - (p < enc)
 
@@ -261,6 +313,68 @@ class Trippoints(Room):
             return True
 
         return Wait(reached, cut=self._one_way(list(goal)))
+
+    def _positions(self, args: str, command: str) -> dict[str, float]:
+        goal = self._values(args, command)
+        if not all(INT32_MIN <= p <= INT32_MAX for p in goal.values()):
+            raise Refused(6, f"{command} position out of range")
+        return goal
+
+    # ---- MF, MR: the encoder crosses a position forwards, backwards --------------------
+    @handler("MF")
+    def mf(self, args: str) -> Wait:
+        """Hold until one of the named axes' encoders moves forward across its position."""
+        return self._crossing(self._positions(args, "MF"), 1)
+
+    @handler("MR")
+    def mr(self, args: str) -> Wait:
+        """Hold until one of the named axes' encoders moves backward across its position."""
+        return self._crossing(self._positions(args, "MR"), -1)
+
+    def _crossing(self, goal: dict[str, float], direction: int) -> Wait:
+        crossing = _Crossing(self.machine.servo, goal, direction)
+        crossing.arm()
+        wait = Wait(crossing.crossed, cut=crossing.cut)
+        self._crossings.append((wait, crossing))
+        return wait
+
+    def _arm_crossings(self) -> None:
+        """Arm the MF/MR waits at a step boundary; forget those no thread holds any more."""
+        held: set[int] = set()
+        for th in self.machine.programs.threads.values():
+            held.add(id(th.wait))
+            held.update(id(f.wait) for f in th.stack)
+        self._crossings = [(w, x) for w, x in self._crossings if id(w) in held]
+        for _, crossing in self._crossings:
+            crossing.arm()
+
+    # ---- AS: at slew speed ----------------------------------------------------------------
+    @handler("AS")
+    def at_speed(self, args: str) -> Wait:
+        """Hold until each named axis's profile (each plane's path, ``S``/``T``) has reached
+        its slew speed, or its speed has begun to move away from it (a triangle's peak, a
+        stop); an axis at rest or driven by a sequence or a master does not hold it."""
+        letters = args.replace(" ", "").replace(",", "")
+        axes: list[str] = []
+        planes: list[str] = []
+        for c in letters or self.machine.servo.axes:
+            if c in "ST":
+                planes.append(c)
+            else:
+                axes.append(self.machine.interp.axis(c).letter)
+        all_axes = self.machine.servo.axes
+        vector = self.machine.room(Vector)
+
+        def reached() -> bool:
+            if any(ramping(all_axes[c].m.profiler) for c in axes):
+                return False
+            for p in planes:
+                feed = vector.feed(vector.planes[p])
+                if feed is not None and feed.eng.ramping:
+                    return False
+            return True
+
+        return Wait(reached)
 
     # ---- AV: path distance of a coordinated sequence -----------------------------------
     @handler("AV")
