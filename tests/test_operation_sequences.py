@@ -240,6 +240,12 @@ class OperationSequences(RuleBasedStateMachine):
         if "D" in handle.axes + handle.followers and not self.program_axis_free:
             # The test's program may still begin its move on D (#SEQIF waits with AT first).
             run.interfered = run.unpredictable = True
+        for old in self.running:
+            if old.handle is handle:
+                # An increment hands back the move in progress's own handle: what happened to
+                # that move before (a stop of some of its axes) still shows in its end codes.
+                run.interfered |= old.interfered
+                run.unpredictable |= old.unpredictable
         self.running = [r for r in self.running if r.handle is not handle]
         self.supersede(handle.axes + handle.followers)
         self.running.append(run)
