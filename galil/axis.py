@@ -375,8 +375,8 @@ class Axis:
 
     def _send_param(self, cmd: str, command: cmds.Command, value: float) -> None:
         handle = self._tracker.active(self.letter)
-        if handle is None or cmd not in ("SP", "AC", "DC"):
-            self._link.command_line([command])
+        if handle is None or cmd not in ("SP", "AC", "DC") or self.letter in handle._ended:
+            self._link.command_line([command])  # (at rest, or seen at rest: nothing to follow)
             return
         # A change in motion: stamp it so the move's prediction can follow it.
         replies = self._link.command_line([command, cmds.time_stamp()])
@@ -388,7 +388,9 @@ class Axis:
             handle.add_event(self.letter, sample, lambda t: predict.SetSpeed(t, value))
         elif cmd == "AC":
             handle.add_event(self.letter, sample, lambda t: predict.SetAccel(t, value))
-        else:  # DC: a jog, or a stop ramping down (refuse_in_motion let it out)
+        else:  # DC: a jog, a stop ramping down, or (unseen by the handle, whose prediction
+            # then refuses it and stops claiming to be exact) a limit's stop: refuse_in_motion
+            # let it out
             handle.add_event(self.letter, sample, lambda t: predict.SetDecel(t, value))
 
     @property
@@ -655,8 +657,9 @@ class Axis:
         self._link.command_line([cmds.hv(model=self._link.model, **{self.letter: counts})])
 
     # -- motor and loop settings (galil.tuning; ranges per model) --------------------------
-    motor_type = Setting("MT", cmds.mt, motor_type, still=True)
-    """``MT``: a :class:`~galil.tuning.MotorType` (servo, stepper variants ...)."""
+    motor_type = Setting("MT", cmds.mt, motor_type, still=True, motor_off=True)
+    """``MT``: a :class:`~galil.tuning.MotorType` (servo, stepper variants ...); only with the
+    motor off (:meth:`~galil.Controller.motor_off`) and the axis at rest."""
     kp = Setting("KP", cmds.kp, float)
     """``KP``: proportional gain."""
     ki = Setting("KI", cmds.ki, float)

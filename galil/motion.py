@@ -78,6 +78,9 @@ _LIMIT_CODES = (2, 3)
 #: fault's end is not the prediction's, and ``wait()`` raises (not a stop the host commanded).
 _FAULT_CODES = (6, 8, 11, 12, 15, 16, 70, 71)
 _EARLY_CODES = frozenset(_LIMIT_CODES + _FAULT_CODES)
+#: Stop codes of an axis still moving that is being stopped: a limit (2, 3) or an ``ST``
+#: (4) the library did not send. The controller takes ``DC`` then (decision 0039).
+_STOPPING_CODES = frozenset((*_LIMIT_CODES, 4))
 
 #: Track kinds of HM, FE and FI (:mod:`galil.homing`).
 HOMING_KINDS = frozenset({"home", "edge", "index"})
@@ -1108,8 +1111,10 @@ def refuse_in_motion(link: CommandLink, tracker: MotionTracker, letter: str, nam
     """Refuse ``name`` (a command the controller takes only at rest, TC 7 otherwise: ``DC``
     in a position move not stopped by an ``ST``, ``MT``, ``BR``) on an axis the library
     itself knows is moving: a motion it started, not seen over, and by its prediction not
-    over yet. No query: a motion started elsewhere (a program) still gets the controller's
-    refusal.
+    over yet. Only then is the axis read once (``_BG``, ``_RP``, ``_SC``), before refusing:
+    a limit or a fault may have ended the move, or (for ``DC``) a limit's stop may be ramping
+    it down, which the library learns at its next poll only. No query otherwise: a motion
+    started elsewhere (a program) still gets the controller's refusal.
 
     Raises:
         InvalidArgument: the axis moves.
@@ -1124,6 +1129,12 @@ def refuse_in_motion(link: CommandLink, tracker: MotionTracker, letter: str, nam
         return
     if not track.open_jog and link.clock() >= handle.started_at + handle.duration:
         return  # over by its prediction, unseen: the controller decides
+    bg, rp, sc = link.query_operands(list(_poll_names(letter, "")))
+    if not round(bg):
+        tracker.ended(letter, rp, sc)  # (its handle reports this end, a limit's or a fault's)
+        return
+    if name == "DC" and round(sc) in _STOPPING_CODES:
+        return  # "directly following an axis stop (i.e. ST m or a limit switch)"
     raise InvalidArgument(
         f"{name} is not valid while axis {letter} moves (its {handle.kind} move is in "
         "progress): wait for the move or stop it first",

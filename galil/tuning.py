@@ -4,6 +4,7 @@ Settings are typed, range-checked per model, and sent through the builders of
 :mod:`galil.protocol.commands`; an :class:`~galil.axis.Axis` declares each as one
 :class:`Setting` descriptor (``axis.kp = 10`` sends ``KPA=10``; ``axis.kp`` reads ``_KPA``)::
 
+    dmc.motor_off("A")  # MT only with the motor off
     dmc.A.motor_type = MotorType.STEPPER_ACTIVE_LOW
     dmc.A.kp, dmc.A.ki, dmc.A.kd = 10, 0.5, 80
     dmc.save()          # BN: the parameters survive a power cycle
@@ -89,15 +90,25 @@ class Setting(Generic[T]):
         convert: turns the number read back into the setting's type.
         still: the controller takes it only at rest ("Not Valid while in motion"): refused
             on an axis the library knows is moving (:func:`~galil.motion.refuse_in_motion`).
+        motor_off: the controller takes it only with the axis's motor off (``MT``: "The axis
+            must be in the motor off state (MO) before setting MT", TC 135 otherwise): the
+            setter reads ``_MO`` first (one query) and refuses it with the motor on.
     """
 
     def __init__(
-        self, mnemonic: str, builder: Builder, convert: Callable[[float], T], *, still: bool = False
+        self,
+        mnemonic: str,
+        builder: Builder,
+        convert: Callable[[float], T],
+        *,
+        still: bool = False,
+        motor_off: bool = False,
     ) -> None:
         self.mnemonic = mnemonic
         self.builder = builder
         self.convert = convert
         self.still = still
+        self.motor_off = motor_off
         self.name = mnemonic.lower()
 
     def __set_name__(self, owner: type, name: str) -> None:
@@ -120,6 +131,13 @@ class Setting(Generic[T]):
         command = self.builder(model=link.model, **{obj.letter: number})
         if self.still:
             refuse_in_motion(link, obj._tracker, obj.letter, self.mnemonic)
+        if self.motor_off and not round(link.query_operands([f"_MO{obj.letter}"])[0]):
+            raise InvalidArgument(
+                f"{self.mnemonic} needs axis {obj.letter}'s motor off (the command reference: "
+                f'"The axis must be in the motor off state (MO) before setting MT"): call '
+                f'controller.motor_off("{obj.letter}") first (and servo_here() after)',
+                model=link.model.name,
+            )
         link.command_line([command])
 
 

@@ -226,6 +226,7 @@ def test_gains_and_motor_types_within_the_models_ranges(
         spec.tl_max,
         spec.er_min,
     )
+    dmc.motor_off("A")  # MT only with the motor off
     for mt in sorted(spec.motor_types):
         a.motor_type = MotorType(mt)
         assert a.motor_type == MotorType(mt)

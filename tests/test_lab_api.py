@@ -217,6 +217,7 @@ def test_wait_for_input_returns_when_the_input_changes() -> None:
 def test_settings_are_typed_and_refused_before_sending() -> None:
     with simulated("DMC-4040") as dmc:
         a = dmc.A
+        dmc.motor_off("A")  # MT only with the motor off
         a.motor_type = galil.MotorType.STEPPER_ACTIVE_HIGH_REVERSED
         assert a.motor_type is galil.MotorType.STEPPER_ACTIVE_HIGH_REVERSED
         assert a.motor_type.stepper

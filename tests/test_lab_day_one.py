@@ -57,9 +57,11 @@ def _day_one_on_an_axis(dmc: galil.Controller) -> None:
     # gains and motor type, read back as the controller stores them
     a.kp, a.ki, a.kd = 12.3, 0.5, 80
     assert (a.kp, a.ki, a.kd) == (12.25, 0.5, 80.0)
+    dmc.motor_off("A")  # MT only with the motor off
     a.motor_type = galil.MotorType.SERVO_REVERSED
     assert a.motor_type is galil.MotorType.SERVO_REVERSED
     a.motor_type = galil.MotorType.SERVO
+    dmc.servo_here("A")
     a.torque_limit, a.error_limit, a.off_on_error = 5.0, 2000, 1
     assert (a.torque_limit, a.error_limit, a.off_on_error) == (5.0, 2000, 1)
     # every bad value is refused before a byte is sent

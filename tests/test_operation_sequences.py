@@ -10,7 +10,8 @@ with AS and MF/MR), the ``motion()`` guard and the passing of time. After each s
 - a call raises nothing but the library's documented errors; a refusal sent nothing but
   queries and changed none of the axes' settings; a setting "Not Valid while in motion" is
   refused unsent while the library's own motion runs and by the controller (TC 7) only where
-  the library cannot know (decisions 0036, 0039), and taken only at rest;
+  the library cannot know (decisions 0036, 0039), and taken only at rest; MT is refused
+  unsent with the motor on (decision 0043);
 - an interrupted contour leaves no axis moving or in contour mode, no segment held, and the
   next contour ends where it should (decision 0038);
 - a waited move ended where its handle predicted, to the count, with the stop code the docs
@@ -302,7 +303,8 @@ class OperationSequences(RuleBasedStateMachine):
     )
     def motor_setting(self, data: st.DataObject, what: str, i: int) -> None:
         """MT and BR, "Not Valid while in motion": refused unsent while the library's own
-        motion runs (decision 0036), by the controller (TC 7) otherwise."""
+        motion runs (decision 0036), by the controller (TC 7) otherwise; MT also with the
+        motor on, after reading ``_MO`` (decision 0043)."""
         moving = [a for r in self.running for a in r.handle.axes + r.handle.followers]
         a = data.draw(st.sampled_from(sorted(set(moving)) or list(AXES)))
         self.set_setting(a, what, {"motor_type": [1, -1], "brush": [0, 1]}[what][i])
@@ -310,7 +312,9 @@ class OperationSequences(RuleBasedStateMachine):
     def set_setting(self, a: str, what: str, value: float) -> None:
         """Set ``what`` on ``a``: only a setting "Not Valid while in motion" may be refused,
         unsent where the library knows the axis moves, by the controller (TC 7) only where
-        the library cannot know."""
+        the library cannot know; MT is refused unsent with the motor on, taken only with it
+        off (decision 0043)."""
+        motor_on = what == "motor_type" and not self.dmc.query_operands([f"_MO{a}"])[0]
         handle = self.dmc.tracker.active(a)
         track = self.dmc.tracker.track(a)
         followed = self._followed(a)
@@ -321,7 +325,9 @@ class OperationSequences(RuleBasedStateMachine):
                 setattr(self.dmc.axes[a], what, value)
         except CommandError as exc:
             by_controller = exc
-        if refused:
+        if refused and motor_on and "motor off" in str(refused[0]):
+            pass  # MT with the motor on: the reference's "must be in the motor off state"
+        elif refused:
             assert what in _STILL, (a, what, refused)
             assert track is not None, (a, what, refused)
             jog_or_stop = track.kind == "jog" or (track.kind == "position" and track.stopped)
@@ -336,7 +342,9 @@ class OperationSequences(RuleBasedStateMachine):
                 self.dmc.sleep(0.01)
                 assert not self.dmc.query_operands([f"_BG{a}"])[0], (a, followed, by_controller)
         elif not refused and what in _STILL and what != "decel":
-            # Taken: then the axis was at rest (or began only since: a program).
+            # Taken: then the axis was at rest (or began only since: a program), and MT
+            # found the motor off.
+            assert not motor_on, f"{what} taken with {a}'s motor on"
             moving = self.dmc.query_operands([f"_BG{a}"])[0]
             assert not moving or not self._free(a), f"{what} taken while {a} moves"
 

@@ -198,6 +198,11 @@ def _quiet(*args: object) -> None:
     pass
 
 
+def _servo_with_the_motor_off(dmc: galil.Controller) -> MotorType:
+    dmc.motor_off("A")  # (MT only with the motor off: decision 0043)
+    return MotorType.SERVO
+
+
 mm = ureg.mm
 OFF = {"speed": 10_000, "accel": 256_000, "decel": 256_000}  # move overrides, valid
 SETTINGS = {
@@ -207,7 +212,7 @@ SETTINGS = {
     "kd": 64,
     "ki": 0,
     "kp": 6,
-    "motor_type": MotorType.SERVO,
+    "motor_type": Lazy(_servo_with_the_motor_off),
     "off_on_error": 0,
     "stepper_smoothing": 1,
     "torque_limit": 9.998,

@@ -377,6 +377,7 @@ def test_tuning_settings_are_typed_and_refused_before_sending() -> None:
     async def body() -> None:
         async with await sim() as c:
             a = c.A
+            await c.motor_off("A")  # MT only with the motor off
             await a.set_motor_type(galil.MotorType.STEPPER_ACTIVE_HIGH_REVERSED)
             assert await a.motor_type() is galil.MotorType.STEPPER_ACTIVE_HIGH_REVERSED
             await a.set_kp(10)

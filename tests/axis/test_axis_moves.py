@@ -306,10 +306,11 @@ def test_settings_not_valid_in_motion_are_refused_unsent_while_the_librarys_move
     move = a.move_by(100_000)  # 5 s
     for setting, value in (("decel", 512_000), ("motor_type", 1), ("brush", 1)):
         with (
-            nothing_sent(dmc),
+            nothing_sent(dmc, allow_queries=True) as sent,
             pytest.raises(InvalidArgument, match=r"(DC|MT|BR) is not valid while axis A moves"),
         ):
             setattr(a, setting, value)
+        assert sent.lines == ["MG _BGA,_RPA,_SCA"]  # (one read: no limit ended it)
     # What the reference allows in motion still goes out (and the move follows SP and AC).
     a.speed, a.accel, a.smoothing, a.kp = 30_000, 2_048_000, 1, 6
     a.soft_limits = (None, None)
@@ -381,9 +382,69 @@ def test_a_decel_change_in_a_position_move_is_refused_unsent_and_by_the_controll
     dmc: galil.Controller,
 ) -> None:
     move = dmc.C.move_by(50_000)
-    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="DC is not valid"):
+    with (
+        nothing_sent(dmc, allow_queries=True),
+        pytest.raises(InvalidArgument, match="DC is not valid"),
+    ):
         dmc.C.decel = 512_000
     with pytest.raises(galil.CommandError) as refused:
         dmc.command("DCC=512000")  # (the library's refusal is the controller's)
     assert refused.value.code == 7
     assert move.wait().deviation == {"C": 0}
+
+
+def test_a_decel_change_goes_out_while_a_limit_the_library_has_not_seen_stops_its_move(
+    dmc: galil.Controller,
+) -> None:
+    # DMC-4103 reference, DC: "directly following an axis stop (i.e. ST m or a limit switch),
+    # the DC value of a PA or PR move may be changed while the axis is still decelerating".
+    a, sim = dmc.A, sim_of(dmc)
+    a.speed, a.accel, a.decel = 50_000, 1_024_000, 102_400  # a limit's stop takes ~0.5 s
+    move = a.move_by(1_000_000)  # 20 s by its prediction
+    dmc.sleep(0.5)
+    sim.set_limit_switch("A", "forward", True)  # (no poll since: the handle does not know)
+    dmc.sleep(0.1)
+    with transcript(dmc) as sent:
+        a.decel = 1_024_000  # the rest of the ramp at the new rate
+    assert sent.lines[0] == "MG _BGA,_RPA,_SCA"  # one read, as the refusal would have made
+    assert sent.lines[1].startswith("DCA=1024000")
+    dmc.sleep(0.1)  # (at 102400 counts/s² the ramp would last another 0.4 s)
+    assert not a.moving
+    with pytest.raises(galil.MotionError, match="FWD limit") as info:
+        move.wait()
+    assert info.value.stop_codes == {"A": 2}
+    assert a.decel == 1_024_000
+
+
+def test_a_decel_change_goes_out_once_a_limit_the_library_has_not_seen_ended_its_move(
+    dmc: galil.Controller,
+) -> None:
+    a, sim = dmc.A, sim_of(dmc)
+    move = a.move_by(-1_000_000)
+    dmc.sleep(0.2)
+    sim.set_limit_switch("A", "reverse", True)
+    dmc.sleep(0.5)  # at rest on the switch; the prediction still has it moving
+    with transcript(dmc) as sent:
+        a.decel = 512_000
+    assert sent.lines == ["MG _BGA,_RPA,_SCA", "DCA=512000"]
+    assert a.decel == 512_000
+    with pytest.raises(galil.MotionError, match="REV limit") as info:
+        move.wait()  # (the end that read saw: the handle reports it)
+    assert info.value.stop_codes == {"A": 3}
+
+
+def test_motor_type_is_refused_unsent_while_the_motor_is_on(dmc: galil.Controller) -> None:
+    # DMC-4103 reference, MT: "The axis must be in the motor off state (MO) before setting MT".
+    a = dmc.A
+    with (
+        nothing_sent(dmc, allow_queries=True) as sent,
+        pytest.raises(InvalidArgument, match=r"MT needs axis A's motor off"),
+    ):
+        a.motor_type = galil.MotorType.STEPPER_ACTIVE_LOW
+    assert sent.lines == ["MG _MOA"]
+    assert a.motor_type is galil.MotorType.SERVO
+    dmc.motor_off("A")
+    a.motor_type = galil.MotorType.STEPPER_ACTIVE_LOW
+    assert a.motor_type is galil.MotorType.STEPPER_ACTIVE_LOW
+    dmc.servo_here("A")
+    assert a.motor_on

@@ -118,7 +118,7 @@ def test_hm_finds_the_same_index_wherever_it_starts(
 
 def test_a_stepper_homes_in_two_stages_and_zero_is_the_edge() -> None:
     sim = SimController("DMC-4040", servo_lag=0.0)
-    ask(sim, "MTA=-2;HVA=4000")
+    ask(sim, "MOA;MTA=-2;SHA;HVA=4000")
     ask(sim, "HMA;BGA")
     run_until_idle(sim)
     assert number(sim, "_SCA") == 10
@@ -261,8 +261,8 @@ def test_loop_settings_are_stored_quantised_and_range_checked() -> None:
     assert number(sim, "_KPA") == 10.25
     assert number(sim, "_KDB") == 100.0
     assert ask(sim, "KPA=1024") == "?"
-    assert ask(sim, "MTA=10;MTB=-2.5") == "::"  # EtherCAT types exist on the 500x0
-    assert ask(SimController("DMC-4040"), "MTA=10") == "?"
+    assert ask(sim, "MO AB;MTA=10;MTB=-2.5") == ":::"  # EtherCAT types exist on the 500x0
+    assert ask(SimController("DMC-4040"), "MOA;MTA=10") == ":?"
     assert ask(sim, "KS 0.1") == "?"
     assert ask(sim, "KS 4") == ":"
     assert ask(sim, "OE 1,2,3,0;BR -1") == "::"
@@ -282,7 +282,51 @@ def test_mt_and_br_are_refused_with_tc_7_while_the_axis_moves() -> None:
     assert ask(sim, "BRB=1") == ":"  # (B is at rest)
     assert ask(sim, "STA") == ":"
     run_until_idle(sim)
-    assert ask(sim, "BRA=1;MTA=-1") == "::"
+    assert ask(sim, "BRA=1;MOA;MTA=-1") == ":::"
+
+
+def test_mt_is_refused_with_tc_135_while_the_motor_is_on() -> None:
+    # DMC-4103 command reference, MT: "The axis must be in the motor off state (MO) before
+    # setting MT"; TC 135 "Motor must be in MO" (its TC list) is the code that says so.
+    sim = SimController("DMC-4040")
+    assert ask(sim, "MTA=-2") == "?"
+    assert number(sim, "_TC") == 135
+    assert ask(sim, "MOB;MT ,-2") == "::"  # (B's motor is off)
+    assert ask(sim, "MT -2,1") == "?"  # (nothing of a refused line changes)
+    assert (number(sim, "_MTA"), number(sim, "_MTB")) == (1, -2)
+    assert ask(sim, "MOA;MTA=-2;SHA;MT ?") == ":::-2.0\r\n:"
+
+
+def test_ce_is_a_command_kept_per_axis_and_refused_with_tc_7_while_the_axis_moves() -> None:
+    # DMC-4103 command reference, CE: 0 .. 15, "Not Valid while in motion"; the motor may be
+    # on. ``CEA=5`` is the command, not a variable named CEA.
+    sim = SimController("DMC-4040")
+    assert ask(sim, "CEA=5;CE ,10") == "::"
+    assert (number(sim, "_CEA"), number(sim, "_CEB")) == (5, 10)
+    assert ask(sim, "CE ?,?") == " 5, 10\r\n:"
+    assert ask(sim, "LV") == ":"  # (no variable CEA)
+    assert ask(sim, "CEA=16") == "?"
+    assert number(sim, "_TC") == 6
+    assert ask(sim, "JGA=5000;BGA") == "::"
+    assert ask(sim, "CEA=2") == "?"
+    assert number(sim, "_TC") == 7
+    assert ask(sim, "CEB=2;STA") == "::"  # (B is at rest)
+    run_until_idle(sim)
+    assert ask(sim, "CEA=2") == ":"
+    assert (number(sim, "_CEA"), number(sim, "_CEB")) == (2, 2)
+
+
+_VALID_IN_MOTION = ("ERA=1000", "OEA=1", "TLA=5", "HVA=1000", "FLA=900000", "BLA=-900000")
+
+
+@pytest.mark.parametrize("command", [*_VALID_IN_MOTION, "KPA=10", "KDA=70", "KIA=1"])
+def test_settings_valid_in_motion_are_taken_moving_and_with_the_motor_off(command: str) -> None:
+    # DMC-4103 command reference: ER, OE, TL, HV, FL, BL, KP, KD, KI are all "Valid while in
+    # motion", none needs the motor off (decision 0043).
+    sim = SimController("DMC-4040")
+    assert ask(sim, "JGA=5000;BGA;" + command) == ":::"
+    assert ask(sim, "STA;PRB=50000;BGB;" + command.replace("A=", "B=")) == "::::"
+    assert ask(sim, "MOC;" + command.replace("A=", "C=")) == "::"
 
 
 @pytest.mark.parametrize(

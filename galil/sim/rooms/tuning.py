@@ -1,4 +1,4 @@
-"""Motor and loop settings: MT KS KP KI KD IL TL ER OE BR, and the flash burns BN BP BV.
+"""Motor and loop settings: MT KS KP KI KD IL TL ER OE BR CE, and the flash burns BN BP BV.
 
 Each setting is stored per axis with the model's range (:class:`~galil.models.ModelSpec`) and
 read back quantised as the controller stores it (gains to ``gain_resolution``, KS to 1/32).
@@ -40,6 +40,21 @@ class _Settings:
     er: float = 16384.0
     oe: float = 0.0
     br: float = 0.0
+    ce: float = 0.0
+
+
+def motor_off(command: str, then: Callable[[Axis, float], float]) -> Callable[[Axis, float], float]:
+    """A value check for ``command`` that refuses it while the axis's motor is on, then checks
+    with ``then``. The DMC-4103 command reference's MT remark: "The axis must be in the motor
+    off state (MO) before setting MT"; it gives no code: TC 135 "Motor must be in MO" is the
+    one of its TC list that says so (decision 0043)."""
+
+    def check(ax: Axis, v: float) -> float:
+        if ax.m.motor_on:
+            raise Refused(135, f"{command} with the motor on")
+        return then(ax, v)
+
+    return check
 
 
 def _floor(value: float, step: float) -> float:
@@ -100,7 +115,7 @@ class Tuning(Room):
     # ---- commands ----------------------------------------------------------------------
     @handler("MT", Args.VALUES)
     def mt(self, fields: Fields) -> str:
-        check = at_rest("MT", self._choice(self.machine.spec.motor_types))
+        check = at_rest("MT", motor_off("MT", self._choice(self.machine.spec.motor_types)))
         return self._setting("MT", fields, check, "2.1")
 
     @handler("KS", Args.VALUES)
@@ -153,6 +168,14 @@ class Tuning(Room):
     def br(self, fields: Fields) -> str:
         return self._setting("BR", fields, at_rest("BR", self._choice((-1.0, 0.0, 1.0))), "2.0")
 
+    @handler("CE", Args.VALUES)
+    def ce(self, fields: Fields) -> str:
+        # "Not Valid while in motion" (DMC-4103 reference); 0 .. 15, the main encoder's type
+        # plus the auxiliary's (0, 4, 8, 12). Kept and reported, not modelled: the simulated
+        # encoder counts as if quadrature, whatever its polarity.
+        choices = tuple(float(n) for n in range(16))
+        return self._setting("CE", fields, at_rest("CE", self._choice(choices)), "2.0")
+
     # ---- operands ----------------------------------------------------------------------
     @operand("MT", kind=OperandKind.AXIS)
     def _mt_value(self, ax: Axis) -> float:
@@ -193,6 +216,10 @@ class Tuning(Room):
     @operand("BR", kind=OperandKind.AXIS)
     def _br_value(self, ax: Axis) -> float:
         return self.axes[ax.letter].br
+
+    @operand("CE", kind=OperandKind.AXIS)
+    def _ce_value(self, ax: Axis) -> float:
+        return self.axes[ax.letter].ce
 
     # ---- burns -------------------------------------------------------------------------
     def _burn(self, name: str, args: str) -> Wait:
