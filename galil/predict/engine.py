@@ -1038,9 +1038,11 @@ class AxisProfiler:
     def preview_velocity(self, n: int) -> FloatArray:
         """Profiler velocity (counts/s, before rounding) over the next ``n`` samples."""
         n = self._count(n)
-        if self.mode == "contour" or self._active is None:
-            rate = self._cq.rate if self.mode == "contour" else 0.0
-            return np.full(n, rate / self.sample_period)
+        if self.mode == "contour":
+            by_segment: FloatArray = self._cq.rates(n) / self.sample_period
+            return by_segment
+        if self._active is None:
+            return np.zeros(n)
         out: FloatArray = self._active.velocities(self.sample + 1, n) / self.sample_period
         return out
 
