@@ -51,7 +51,7 @@ __all__ = ["ContourResult", "ContourStream", "ContourUnderrunError", "increments
 _RUNNING, _ENDED = 50, 51
 
 
-class _ContourOver(Exception):
+class _ContourOverError(Exception):
     """The controller stopped the contour itself (a limit, decision 0041): ``error`` is what
     to raise; nothing is left to stop."""
 
@@ -395,8 +395,8 @@ class ContourStream:
                     state.bar.update(state.sent - state.bar.n)
             # How full the buffer got: the last batch is the fullest moment of a short path.
             state.low_water = min(state.low_water, round(link.query_operands(["_CM"])[0]))
-        except _ContourOver as over:
-            raise over.error from None
+        except _ContourOverError as done:
+            raise done.error from None
         except BaseException as exc:
             # A CD refused because a limit ended the contour since the last look (decision
             # 0041) is that stop; anything else stops the axes and leaves contour mode.
@@ -499,7 +499,7 @@ class ContourStream:
             f"from another thread) after {state.sent} of {len(state.texts)} segments",
         )
 
-    def _controller_stop(self, state: _Progress, expected: int) -> _ContourOver | None:
+    def _controller_stop(self, state: _Progress, expected: int) -> _ContourOverError | None:
         """The contour the controller stopped itself, once an axis's ``_SC`` reads other
         than ``expected`` (a limit switch or soft limit stops a contour as a whole: 2 or 3
         on that axis, decision 0041). One query; an axis still moving gets ``ST`` and
@@ -529,7 +529,7 @@ class ContourStream:
             model=link.model.name,
             recent=link.recent,
         )
-        return _ContourOver(error)
+        return _ContourOverError(error)
 
     def finish(self, state: _Progress, timeout: float | None = None) -> ContourResult:
         """End contour mode (``CD 0=0``, or ``DT 0`` then ``CD 0``) and wait for the axes to stop.
@@ -548,8 +548,8 @@ class ContourStream:
                 link.command_line(cmds.contour_end(self.letters, model=link.model))
             ended = True
             self._wait_stopped(state, timeout)
-        except _ContourOver as over:
-            raise over.error from None
+        except _ContourOverError as done:
+            raise done.error from None
         except BaseException as exc:
             # (CD 0=0 refused: a limit ended the contour first, decision 0041)
             stopped = isinstance(exc, CommandError) and not ended
@@ -570,7 +570,7 @@ class ContourStream:
 
     def _wait_stopped(self, state: _Progress, timeout: float | None) -> None:
         """Wait for the axes to stop; their stop codes then say whether the contour ended as
-        asked (51) or a limit stopped it first (:class:`_ContourOver`)."""
+        asked (51) or a limit stopped it first (:class:`_ContourOverError`)."""
         link = self.link
         seg_time = (1 << self.dt) * link.sample_period
         wait = (

@@ -109,7 +109,8 @@ def test_a_contour_that_enters_a_switch_and_leaves_it_within_one_step_is_stopped
     sc_a, _, _, _, rp_a, *_ = state(
         ["CM AB;DT 3", segments(80, 0, 4), segments(-80, 0, 4), 200], place(forward=200)
     )
-    assert sc_a == 2 and 200 <= rp_a <= 320
+    assert sc_a == 2
+    assert 200 <= rp_a <= 320
 
 
 def test_after_a_limit_stop_a_cd_is_refused_and_a_new_contour_runs_and_can_stop_again() -> None:
@@ -134,14 +135,15 @@ def test_after_a_limit_stop_a_cd_is_refused_and_a_new_contour_runs_and_can_stop_
     )
     assert out.count(b"?") == 1  # the CD after the stop, nothing else
     away, again = [numbers(line) for line in out.split(b"\r\n") if numbers(line)]
-    assert away[0] == 51 and away[1] < 1000
+    assert away[0] == 51
+    assert away[1] < 1000
     assert again == [2]
 
 
 def test_a_contour_limit_stop_runs_limswi() -> None:
     out = play(
         [
-            "DL\r#M\rWT 2000\rEN\r#LIMSWI\rMG \"L\",_SCA\rRE\r\\",
+            'DL\r#M\rWT 2000\rEN\r#LIMSWI\rMG "L",_SCA\rRE\r\\',
             "XQ #M",
             "CM A;DT 3",
             segments(100, 0, 40),
