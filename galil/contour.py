@@ -17,8 +17,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from galil import predict
+from galil import codes, predict
 from galil.errors import (
+    CommandError,
     ContourUnderrunError,
     GalilError,
     GalilTimeoutError,
@@ -45,6 +46,18 @@ from galil.protocol.commands import Command
 from galil.units import PathSamples, sampled_values
 
 __all__ = ["ContourResult", "ContourStream", "ContourUnderrunError", "increments", "sample_path"]
+
+#: ``_SC`` of a contour axis while its contour runs, and once it ended as asked (``CD 0=0``).
+_RUNNING, _ENDED = 50, 51
+
+
+class _ContourOverError(Exception):
+    """The controller stopped the contour itself (a limit, decision 0041): ``error`` is what
+    to raise; nothing is left to stop."""
+
+    def __init__(self, error: MotionError) -> None:
+        super().__init__(str(error))
+        self.error = error
 
 
 def _round(x: npt.NDArray[np.float64]) -> npt.NDArray[np.int64]:
@@ -382,9 +395,16 @@ class ContourStream:
                     state.bar.update(state.sent - state.bar.n)
             # How full the buffer got: the last batch is the fullest moment of a short path.
             state.low_water = min(state.low_water, round(link.query_operands(["_CM"])[0]))
-        except BaseException:
-            self._halt(end=True)
-            raise
+        except _ContourOverError as done:
+            raise done.error from None
+        except BaseException as exc:
+            # A CD refused because a limit ended the contour since the last look (decision
+            # 0041) is that stop; anything else stops the axes and leaves contour mode.
+            over = self._controller_stop(state, _RUNNING) if isinstance(exc, CommandError) else None
+            if over is None:
+                self._halt(end=True)
+                raise
+            raise over.error from exc
         finally:
             if state.bar is not None:
                 state.bar.close()
@@ -424,7 +444,7 @@ class ContourStream:
         # still queued (a quarter of 511 segments is 0.25 s even at DT 1).
         refill = max(1, depth // 4)
         texts = state.texts
-        free_f, tc = link.query_operands(["_CM", "_TC"])
+        free_f, tc, *sc = link.query_operands(["_CM", "_TC", *(f"_SC{a}" for a in self.letters)])
         free = round(free_f)
         if state.sent and round(tc) == 42:
             raise ContourUnderrunError(
@@ -433,6 +453,11 @@ class ContourStream:
                 segment=state.sent,
                 model=model.name,
             )
+        if any(round(c) != _RUNNING for c in sc):  # (stopped: not one more CD goes out)
+            self._check_stopped(state)  # (an ST or AB the library sent says so itself)
+            over = self._controller_stop(state, _RUNNING)
+            if over is not None:
+                raise over
         state.low_water = min(state.low_water, free)
         room = free - 1  # one spare: models differ in whether _CM counts the running one
         if depth <= 2:
@@ -474,6 +499,38 @@ class ContourStream:
             f"from another thread) after {state.sent} of {len(state.texts)} segments",
         )
 
+    def _controller_stop(self, state: _Progress, expected: int) -> _ContourOverError | None:
+        """The contour the controller stopped itself, once an axis's ``_SC`` reads other
+        than ``expected`` (a limit switch or soft limit stops a contour as a whole: 2 or 3
+        on that axis, decision 0041). One query; an axis still moving gets ``ST`` and
+        contour mode is left, as after any exception. ``None`` while all read ``expected``
+        (or the query fails: the caller's own handling stands)."""
+        link = self.link
+        n = len(self.letters)
+        names = [f"_{op}{a}" for op in ("SC", "BG", "RP") for a in self.letters]
+        try:
+            values = link.query_operands(names)
+        except GalilError:
+            return None
+        stop = {a: round(v) for a, v in zip(self.letters, values[:n], strict=True)}
+        if all(c == expected for c in stop.values()):
+            return None
+        if any(round(v) for v in values[n : 2 * n]):
+            self._halt(end=True)
+        limited = [a for a, c in stop.items() if c in (2, 3)]
+        first = (limited or [a for a, c in stop.items() if c != expected])[0]
+        parts = "; ".join(f"{a}: {codes.stop_text(c)}" for a, c in stop.items())
+        error = MotionError(
+            f"contour on {self.letters} stopped by the controller after {state.sent} of "
+            f"{len(state.texts)} segments were sent ({parts})",
+            axis=first,
+            stop_codes=stop,
+            position=values[2 * n + self.letters.index(first)],
+            model=link.model.name,
+            recent=link.recent,
+        )
+        return _ContourOverError(error)
+
     def finish(self, state: _Progress, timeout: float | None = None) -> ContourResult:
         """End contour mode (``CD 0=0``, or ``DT 0`` then ``CD 0``) and wait for the axes to stop.
 
@@ -490,10 +547,17 @@ class ContourStream:
                 self._check_stopped(state)
                 link.command_line(cmds.contour_end(self.letters, model=link.model))
             ended = True
-            self._wait_stopped(timeout)
-        except BaseException:
-            self._halt(end=not ended)
-            raise
+            self._wait_stopped(state, timeout)
+        except _ContourOverError as done:
+            raise done.error from None
+        except BaseException as exc:
+            # (CD 0=0 refused: a limit ended the contour first, decision 0041)
+            stopped = isinstance(exc, CommandError) and not ended
+            over = self._controller_stop(state, _RUNNING) if stopped else None
+            if over is None:
+                self._halt(end=not ended)
+                raise
+            raise over.error from exc
         return ContourResult(
             self.letters,
             self.increments,
@@ -504,7 +568,9 @@ class ContourStream:
             state.begin,
         )
 
-    def _wait_stopped(self, timeout: float | None) -> None:
+    def _wait_stopped(self, state: _Progress, timeout: float | None) -> None:
+        """Wait for the axes to stop; their stop codes then say whether the contour ended as
+        asked (51) or a limit stopped it first (:class:`_ContourOverError`)."""
         link = self.link
         seg_time = (1 << self.dt) * link.sample_period
         wait = (
@@ -513,7 +579,16 @@ class ContourStream:
             else max(p.duration for p in self.profiles.values()) + 2.0
         )
         deadline = link.clock() + wait
-        while any(round(v) for v in link.query_operands([f"_BG{a}" for a in self.letters])):
+        n = len(self.letters)
+        names = [f"_{op}{a}" for op in ("BG", "SC") for a in self.letters]
+        while True:
+            values = link.query_operands(names)
+            if not any(round(v) for v in values[:n]):
+                if any(round(c) != _ENDED for c in values[n:]):
+                    over = self._controller_stop(state, _ENDED)
+                    if over is not None:
+                        raise over
+                return
             now = link.clock()
             if now > deadline:
                 raise link.error(

@@ -13,7 +13,8 @@ with AS and MF/MR), the ``motion()`` guard and the passing of time. After each s
   the library cannot know (decisions 0036, 0039), and taken only at rest; MT is refused
   unsent with the motor on (decision 0043);
 - an interrupted contour leaves no axis moving or in contour mode, no segment held, and the
-  next contour ends where it should (decision 0038);
+  next contour ends where it should (decision 0038); a contour a placed switch stops is over
+  as a whole, out of contour mode, the axis on its switch (decision 0041);
 - a waited move ended where its handle predicted, to the count, with the stop code the docs
   give its kind when nothing interfered with it;
 - the library's view agrees with the simulator's: every axis the controller moves is driven
@@ -134,6 +135,18 @@ def _interrupted(link: object, at: int, *, after: bool) -> Iterator[None]:
     finally:
         for name in names:
             delattr(link, name)
+
+
+@contextlib.contextmanager
+def _limit_stopped(into: list[MotionError]) -> Iterator[None]:
+    """Keep the ``MotionError`` of a contour a limit stopped (stop code 2 or 3) in ``into``
+    instead of raising it (it sent the contour: not a refusal)."""
+    try:
+        yield
+    except MotionError as exc:
+        if not {2, 3} & set(exc.stop_codes.values()):
+            raise
+        into.append(exc)
 
 
 def _queries_only(lines: list[str]) -> list[str]:
@@ -477,10 +490,25 @@ class OperationSequences(RuleBasedStateMachine):
         path = np.outer(np.linspace(0, 1, 12), np.arange(1, len(axes) + 1) * reach).round()
         before = self.dmc.query_operands([f"_RP{a}" for a in axes])
         self.supersede(axes)  # (even if refused: harmless)
-        with self.refusable(InvalidArgument, MotionError):
+        stopped: list[MotionError] = []
+        with self.refusable(InvalidArgument, MotionError), _limit_stopped(stopped):
             self.dmc.contour(axes, path, dt=3)
             after = self.dmc.query_operands([f"_RP{a}" for a in axes])
             assert after == list(np.add(before, path[-1])), (before, after)
+        if stopped:
+            self.contour_stopped_at_a_switch(axes, stopped[0])
+
+    def contour_stopped_at_a_switch(self, axes: str, exc: MotionError) -> None:
+        """A placed switch stopped the contour (decision 0041): the whole contour is over,
+        out of contour mode, and the axis that ran into it is on it."""
+        assert not self.sim.room(SimContour).axes(), exc
+        assert not any(self.dmc.query_operands([f"_BG{a}" for a in axes])), exc
+        codes = exc.stop_codes
+        for a in axes:
+            if codes[a] in (2, 3):
+                assert self.dmc.query_operands([f"_L{'F' if codes[a] == 2 else 'R'}{a}"]) == [0]
+            else:
+                assert codes[a] == 51, exc
 
     @rule(
         axes=st.sampled_from(["A", "BC", "AD"]),
@@ -497,12 +525,15 @@ class OperationSequences(RuleBasedStateMachine):
         path = np.outer(np.linspace(0, 1, 12), np.arange(1, len(axes) + 1) * reach).round()
         self.supersede(axes)  # (even if refused: harmless)
         interrupted = False
+        stopped: list[MotionError] = []
         with self.refusable(InvalidArgument, MotionError):
             try:
-                with _interrupted(self.dmc.link, at, after=after):
+                with _limit_stopped(stopped), _interrupted(self.dmc.link, at, after=after):
                     self.dmc.contour(axes, path, dt=3)
             except KeyboardInterrupt:
                 interrupted = True
+        if stopped:
+            self.contour_stopped_at_a_switch(axes, stopped[0])
         if not interrupted:
             return
         self.interfere(axes + "".join(self.dmc.tracker.followers(axes)))

@@ -88,6 +88,20 @@ class ContourQueue:
         rate = float(c[last]) / float(length[last]) if last < m else 0.0
         return out.astype(np.int64), done, elapsed, base, rate
 
+    def rates(self, n: int) -> npt.NDArray[np.float64]:
+        """The speed (counts/sample) of the segment each of the next ``n`` samples is in, as
+        :attr:`rate` reads once that sample has run (0 beyond the last segment queued)."""
+        h = self._head
+        m = min(len(self._c) - h, n // 2 + 2)  # (as in window: enough to cover n samples)
+        if m == 0:
+            return np.zeros(n)
+        length = np.left_shift(1, np.array(self._n[h : h + m], dtype=np.int64))
+        ends = np.cumsum(length) - self.elapsed
+        idx = np.searchsorted(ends, np.arange(1, n + 1, dtype=np.int64), side="left")
+        speed = np.append(np.array(self._c[h : h + m], dtype=np.float64) / length, 0.0)
+        out: npt.NDArray[np.float64] = speed[idx]
+        return out
+
     def step(self, n: int) -> Int64Array:
         """Run ``n`` samples: return their positions and drop the finished segments."""
         r, done, elapsed, base, rate = self.window(n)

@@ -1048,9 +1048,9 @@ class AxisProfiler:
     def preview_velocity(self, n: int) -> FloatArray:
         """Profiler velocity (counts/s, before rounding) over the next ``n`` samples."""
         n = self._count(n)
-        if self.mode == "contour" or self._active is None:
-            rate = self._cq.rate if self.mode == "contour" else 0.0
-            return np.full(n, rate / self.sample_period)
+        if self.mode == "contour" or self._active is None:  # (contour: each sample's segment)
+            rates = self._cq.rates(n) if self.mode == "contour" else np.zeros(n)
+            return rates / self.sample_period
         out: FloatArray = self._active.velocities(self.sample + 1, n) / self.sample_period
         return out
 

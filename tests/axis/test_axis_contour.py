@@ -39,7 +39,7 @@ def test_long_contour_keeps_the_buffer_fed(
     at = log.index("MG _TC")  # after the state read: the error code, then contour mode
     assert log[at : at + 3] == ["MG _TC", "CM A", "DT -1"]  # held until the buffer is full
     start = log.index("DT 1")
-    assert log[at + 3 : start] == ["MG _CM,_TC", *cds[:510]]  # pre-loaded: full, one spare
+    assert log[at + 3 : start] == ["MG _CM,_TC,_SCA", *cds[:510]]  # pre-loaded: full, one spare
     assert log[start + 1].startswith("MG TIME")  # the stream's begin: the DT that starts it
     assert len(cds) == 2000
     assert log[-1].startswith("MG")

@@ -84,6 +84,7 @@ class Contour(Room):
             if not ax.contour:
                 engine(ax.m.profiler.begin_contour)
                 ax.contour = self._active = True
+                ax.limit_stop = False  # (a new start: the limits watch it again)
                 self.fed.discard(ax.letter)
         return ""
 
@@ -141,6 +142,9 @@ class Contour(Room):
         own = None if n == -1 else n
 
         def take() -> str:
+            if not held and not self.axes():
+                # A limit (or ST) ended the contour while this waited for room (decision 0041).
+                raise Refused(8, "not in contour mode")
             if held:
                 self.held.append((incs, own))
             else:

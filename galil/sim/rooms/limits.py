@@ -16,10 +16,17 @@ turns back, so a path cannot enter a switch and leave it again inside one step u
 home switch is a flag on one side of an edge (default: below -10,000 counts) that pulls the
 home input (TS bit 1, ``_HMx``) low; index pulses come every 4,000 counts from 0
 (:class:`HomeGeometry`). Decision 0015.
+
+Contour axes are stopped by switches and soft limits on the same rules (the reference's
+#LIMSWI: a limit event is "Motion profiling in the direction of the given limit. I.E. RPm
+increasing for forward switch"). Such a stop ends the whole contour at once, at the sample the
+path reaches the limit: that axis reports 2 or 3, the other contour axes 51, and contour mode
+is left with its buffer dropped (decision 0041).
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -177,23 +184,21 @@ class Limits(Room):
 
     # ---- servo-loop hooks --------------------------------------------------------------
     def horizon(self, k: int) -> int:
-        if self._placed:
+        if self._switched:
             k = self._until_reversal(k)
         if not self._soft:
             return k
         for ax in self.machine.servo.axes.values():
             s = self.axes[ax.letter]
-            if (
-                (s.fl < INT32_MAX or s.bl > INT32_MIN)
-                and ax.m.moving
-                and not ax.limit_stop
-                and not ax.contour
-            ):
+            if (s.fl < INT32_MAX or s.bl > INT32_MIN) and ax.m.moving and not ax.limit_stop:
                 prof = ax.m.profiler
                 now = prof.reference
                 # Beyond a limit already (one set under the axis): moving outwards is the
-                # profiler's velocity, as after_step reads it, not the reference growing.
-                v = prof.preview_velocity(k) if not s.bl <= now <= s.fl else None
+                # profiler's velocity, as after_step reads it, not the reference growing. A
+                # contour's samples may stand still inside a moving segment (its floor
+                # rounding), where after_step reads that segment's speed: always so there.
+                outside = ax.contour or not s.bl <= now <= s.fl
+                v = prof.preview_velocity(k) if outside else None
                 k = min(k, self._crossing(s, now, prof.preview(k), v))
         return k
 
@@ -207,10 +212,15 @@ class Limits(Room):
         return k
 
     def _watched(self, ax: Axis) -> bool:
-        """Whether ``ax`` may run into a placed switch (the watch looks for it)."""
+        """Whether ``ax`` may run into a placed switch (the watch looks for it), or, in contour
+        mode, into a switch active already (nothing refused its start: ``CM`` does not move,
+        and its segments come later)."""
+        if not ax.m.moving or ax.limit_stop:
+            return False
         s = self.axes[ax.letter]
-        placed = s.forward_at is not None or s.reverse_at is not None
-        return placed and ax.m.moving and not ax.limit_stop and not ax.contour
+        if s.forward_at is not None or s.reverse_at is not None:
+            return True
+        return ax.contour and (self.active(ax, "forward") or self.active(ax, "reverse"))
 
     @staticmethod
     def _crossing(
@@ -239,38 +249,55 @@ class Limits(Room):
     def after_step(self) -> None:
         for ax in self.machine.servo.axes.values():
             prof = ax.m.profiler
-            if not prof.moving or ax.limit_stop or ax.contour:
+            if not prof.moving or ax.limit_stop:
                 continue
             s = self.axes[ax.letter]
             v = prof.velocity
             if v > 0 and prof.reference > s.fl:
-                ax.limit_stop = True
-                self.stops += 1
-                prof.limit_stop(2)
+                self._stop(ax, 2)
             elif v < 0 and prof.reference < s.bl:
-                ax.limit_stop = True
-                self.stops += 1
-                prof.limit_stop(3)
+                self._stop(ax, 3)
+
+    def _stop(self, ax: Axis, code: int) -> None:
+        """A limit stops ``ax`` (stop code ``code``, 2 or 3). In contour mode the whole
+        contour stops at once, the other contour axes as by ``ST`` (51), and leaves contour
+        mode with its buffer dropped (decision 0041)."""
+        ax.limit_stop = True
+        self.stops += 1
+        ax.m.profiler.limit_stop(code)
+        if ax.contour:
+            for other in self.machine.servo.axes.values():
+                if other.contour and other is not ax:
+                    other.m.profiler.stop()
 
     def watches(self, out: list[Callable[[], bool]]) -> None:
         if not self._switched:
             return
         for ax in self.machine.servo.axes.values():
             if self._watched(ax):
-                start = ax.physical
-                out.append(lambda ax=ax, start=start: self._fires(ax, start))  # type: ignore[misc]
+                start, ref = ax.physical, ax.m.reference
+                out.append(functools.partial(self._fires, ax, start, ref))
 
-    def _fires(self, ax: Axis, start: int) -> bool:
-        """Whether ``ax`` has run into a placed switch since the step began at ``start``: it
-        moves towards an active switch now, or it has entered a switch's side since (a step
-        may end where the motion does, at rest beyond the switch; the bisection then finds
-        the sample it entered, still moving)."""
+    def _fires(self, ax: Axis, start: int, ref: int) -> bool:
+        """Whether ``ax`` has run into a switch since the step began at ``start`` (fixed
+        frame) and ``ref`` (its reference): it moves towards an active switch now, or it has
+        entered a placed switch's side since (a step may end where the motion does, at rest
+        beyond the switch; the bisection then finds the sample it entered, still moving), or,
+        contouring, its reference moved towards an active switch since (a contour's segments
+        may stand still at the step's end)."""
         if self._runs_into(ax):
             return True
         s, now = self.axes[ax.letter], ax.physical
         if s.forward_at is not None and start < s.forward_at <= now:
             return True
-        return s.reverse_at is not None and start > s.reverse_at >= now
+        if s.reverse_at is not None and start > s.reverse_at >= now:
+            return True
+        if not ax.contour:
+            return False
+        moved = ax.m.reference - ref
+        return (moved > 0 and self.active(ax, "forward")) or (
+            moved < 0 and self.active(ax, "reverse")
+        )
 
     def _runs_into(self, ax: Axis) -> int:
         """2 or 3 when ``ax`` moves towards an active limit switch, else 0."""
@@ -287,14 +314,11 @@ class Limits(Room):
                 self._check_switch(ax)
 
     def _check_switch(self, ax: Axis) -> None:
-        m = ax.m
-        if not m.moving or ax.limit_stop or ax.contour:
+        if not ax.m.moving or ax.limit_stop:
             return
         code = self._runs_into(ax)
         if code:
-            ax.limit_stop = True
-            self.stops += 1
-            m.profiler.limit_stop(code)
+            self._stop(ax, code)
 
     # ---- commands and operands ---------------------------------------------------------
     @handler("FL", Args.VALUES)
