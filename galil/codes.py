@@ -13,7 +13,16 @@ import re
 
 from galil.errors import ProtocolError
 
-__all__ = ["STOP_CODES", "TC_CODES", "parse_tc1", "stop_text", "tc_text"]
+__all__ = [
+    "FAULT_STOPS",
+    "HALT_STOPS",
+    "LIMIT_STOPS",
+    "STOP_CODES",
+    "TC_CODES",
+    "parse_tc1",
+    "stop_text",
+    "tc_text",
+]
 
 TC_CODES: dict[int, str] = {
     1: "Unrecognized command",
@@ -151,6 +160,16 @@ STOP_CODES: dict[int, str] = {
     100: "Motors are running, vector sequence",
     101: "Motors stopped at commanded vector",
 }
+
+#: Stop codes of a forward and a reverse limit (switch or soft limit).
+LIMIT_STOPS = frozenset({2, 3})
+#: Stop codes of a fault that ended a motion early, the motor often off: the abort input (6),
+#: off-on-error (8), a selective abort input (11), an encoder failure (12), an amplifier fault
+#: (15), a stepper's position maintenance error (16), EtherCAT (70, 71).
+FAULT_STOPS = frozenset({6, 8, 11, 12, 15, 16, 70, 71})
+#: Stop codes of a motion stopped before its end by anything but its own course: a limit, a
+#: fault, ``ST`` (4) or ``AB`` (7). Never a normal end (1, 51, 101) nor a running code.
+HALT_STOPS = LIMIT_STOPS | FAULT_STOPS | {4, 7}
 
 _TC1 = re.compile(r"\s*(\d{1,3})(?:\s+(\S.*?))?\s*")
 

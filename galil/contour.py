@@ -47,8 +47,8 @@ from galil.units import PathSamples, sampled_values
 
 __all__ = ["ContourResult", "ContourStream", "ContourUnderrunError", "increments", "sample_path"]
 
-#: ``_SC`` of a contour axis while its contour runs, and once it ended as asked (``CD 0=0``).
-_RUNNING, _ENDED = 50, 51
+#: ``_SC`` of a contour axis while its contour runs ("Contour running").
+_RUNNING = 50
 
 
 class _ContourOverError(Exception):
@@ -58,6 +58,19 @@ class _ContourOverError(Exception):
     def __init__(self, error: MotionError) -> None:
         super().__init__(str(error))
         self.error = error
+
+
+def _halted(letters: str, stop_codes: list[float], live: set[str]) -> bool:
+    """Whether an axis of ``letters`` seen running (in ``live``) reads a stop code of a
+    halt; the axes reading 50 ("Contour running") join ``live`` on the way."""
+    halted = False
+    for a, c in zip(letters, stop_codes, strict=True):
+        code = round(c)
+        if code == _RUNNING:
+            live.add(a)
+        elif code in codes.HALT_STOPS and a in live:
+            halted = True
+    return halted
 
 
 def _round(x: npt.NDArray[np.float64]) -> npt.NDArray[np.int64]:
@@ -198,6 +211,10 @@ class _Progress:
     texts: list[Command] = field(default_factory=list)
     begin: int | None = None
     start: Command | None = None
+    #: Axes whose ``_SC`` has read 50 in this stream: only on them is a stop code a stop of
+    #: this contour (a controller that kept an older code until the contour ran is not
+    #: misread; decision 0041).
+    live: set[str] = field(default_factory=set)
 
 
 def _stamped(batch: list[Command], state: _Progress) -> list[Command]:
@@ -400,7 +417,7 @@ class ContourStream:
         except BaseException as exc:
             # A CD refused because a limit ended the contour since the last look (decision
             # 0041) is that stop; anything else stops the axes and leaves contour mode.
-            over = self._controller_stop(state, _RUNNING) if isinstance(exc, CommandError) else None
+            over = self._controller_stop(state) if isinstance(exc, CommandError) else None
             if over is None:
                 self._halt(end=True)
                 raise
@@ -453,9 +470,9 @@ class ContourStream:
                 segment=state.sent,
                 model=model.name,
             )
-        if any(round(c) != _RUNNING for c in sc):  # (stopped: not one more CD goes out)
+        if _halted(self.letters, sc, state.live):  # (stopped: not one more CD goes out)
             self._check_stopped(state)  # (an ST or AB the library sent says so itself)
-            over = self._controller_stop(state, _RUNNING)
+            over = self._controller_stop(state)
             if over is not None:
                 raise over
         state.low_water = min(state.low_water, free)
@@ -499,12 +516,13 @@ class ContourStream:
             f"from another thread) after {state.sent} of {len(state.texts)} segments",
         )
 
-    def _controller_stop(self, state: _Progress, expected: int) -> _ContourOverError | None:
-        """The contour the controller stopped itself, once an axis's ``_SC`` reads other
-        than ``expected`` (a limit switch or soft limit stops a contour as a whole: 2 or 3
-        on that axis, decision 0041). One query; an axis still moving gets ``ST`` and
-        contour mode is left, as after any exception. ``None`` while all read ``expected``
-        (or the query fails: the caller's own handling stands)."""
+    def _controller_stop(self, state: _Progress) -> _ContourOverError | None:
+        """The contour the controller stopped itself, once the ``_SC`` of an axis seen
+        running (:attr:`_Progress.live`) reads a stop (:data:`galil.codes.HALT_STOPS`: a limit
+        switch or soft limit stops a contour as a whole, 2 or 3 on that axis, decision 0041).
+        One query; an axis still moving gets ``ST`` and contour mode is left, as after any
+        exception. ``None`` when no such axis reads a stop (or the query fails: the caller's
+        own handling stands)."""
         link = self.link
         n = len(self.letters)
         names = [f"_{op}{a}" for op in ("SC", "BG", "RP") for a in self.letters]
@@ -513,12 +531,12 @@ class ContourStream:
         except GalilError:
             return None
         stop = {a: round(v) for a, v in zip(self.letters, values[:n], strict=True)}
-        if all(c == expected for c in stop.values()):
+        if not _halted(self.letters, values[:n], state.live):
             return None
         if any(round(v) for v in values[n : 2 * n]):
             self._halt(end=True)
-        limited = [a for a, c in stop.items() if c in (2, 3)]
-        first = (limited or [a for a, c in stop.items() if c != expected])[0]
+        halted = [a for a, c in stop.items() if c in codes.HALT_STOPS and a in state.live]
+        first = ([a for a in halted if stop[a] in codes.LIMIT_STOPS] or halted)[0]
         parts = "; ".join(f"{a}: {codes.stop_text(c)}" for a, c in stop.items())
         error = MotionError(
             f"contour on {self.letters} stopped by the controller after {state.sent} of "
@@ -553,7 +571,7 @@ class ContourStream:
         except BaseException as exc:
             # (CD 0=0 refused: a limit ended the contour first, decision 0041)
             stopped = isinstance(exc, CommandError) and not ended
-            over = self._controller_stop(state, _RUNNING) if stopped else None
+            over = self._controller_stop(state) if stopped else None
             if over is None:
                 self._halt(end=not ended)
                 raise
@@ -570,7 +588,7 @@ class ContourStream:
 
     def _wait_stopped(self, state: _Progress, timeout: float | None) -> None:
         """Wait for the axes to stop; their stop codes then say whether the contour ended as
-        asked (51) or a limit stopped it first (:class:`_ContourOverError`)."""
+        asked or a limit stopped it first (:class:`_ContourOverError`)."""
         link = self.link
         seg_time = (1 << self.dt) * link.sample_period
         wait = (
@@ -584,8 +602,8 @@ class ContourStream:
         while True:
             values = link.query_operands(names)
             if not any(round(v) for v in values[:n]):
-                if any(round(c) != _ENDED for c in values[n:]):
-                    over = self._controller_stop(state, _ENDED)
+                if _halted(self.letters, values[n:], state.live):
+                    over = self._controller_stop(state)
                     if over is not None:
                         raise over
                 return

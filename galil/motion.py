@@ -70,17 +70,13 @@ MAX_POLL = 0.1
 SCHEDULE_BEGIN = "gsbegin"
 # How long the guard waits for stopped axes to come to rest before giving up.
 _GUARD_WAIT = 30.0
-# Stop codes of a forward and a reverse limit (switch or soft limit).
-_LIMIT_CODES = (2, 3)
-#: Stop codes of a fault that ended a move early, the motor often off: the abort input (6),
-#: off-on-error (8), a selective abort input (11), an encoder failure (12), an amplifier fault
-#: (15), a stepper's position maintenance error (16), EtherCAT (70, 71). Like a limit's, a
-#: fault's end is not the prediction's, and ``wait()`` raises (not a stop the host commanded).
-_FAULT_CODES = (6, 8, 11, 12, 15, 16, 70, 71)
-_EARLY_CODES = frozenset(_LIMIT_CODES + _FAULT_CODES)
+_LIMIT_CODES = codes.LIMIT_STOPS
+#: Like a limit's, a fault's end (:data:`galil.codes.FAULT_STOPS`) is not the prediction's,
+#: and ``wait()`` raises (not a stop the host commanded).
+_EARLY_CODES = codes.LIMIT_STOPS | codes.FAULT_STOPS
 #: Stop codes of an axis still moving that is being stopped: a limit (2, 3) or an ``ST``
 #: (4) the library did not send. The controller takes ``DC`` then (decision 0039).
-_STOPPING_CODES = frozenset((*_LIMIT_CODES, 4))
+_STOPPING_CODES = _LIMIT_CODES | {4}
 
 #: Track kinds of HM, FE and FI (:mod:`galil.homing`).
 HOMING_KINDS = frozenset({"home", "edge", "index"})

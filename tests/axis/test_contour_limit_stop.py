@@ -82,3 +82,21 @@ def test_a_contour_into_a_switch_over_tcp_raises_and_stops_feeding(
     dmc, sim = tcp
     sim.place_limit_switches("A", forward=12_000)
     check_stopped_at_switch(dmc, sim, ramp(40_000, 1500), 12_000)
+
+
+@pytest.mark.parametrize("stale", [1, 2])
+def test_a_stop_code_left_from_before_the_contour_is_not_read_as_its_stop(
+    monkeypatch: pytest.MonkeyPatch, stale: int
+) -> None:
+    # Whether a controller sets _SC to 50 at CM is not sourced: one that kept the code of
+    # the motion before (a move's 1, a limit's 2) all through the contour must not make a
+    # contour that ran to its end look stopped. Only on an axis seen reading 50 is a stop
+    # code the contour's stop (decision 0041).
+    with simulated() as dmc:
+        sim = sim_of(dmc)
+        operands = sim._m.interp.axis_operands  # (the simulator's own _SC, the lowest layer)
+        real = operands["SC"]
+        monkeypatch.setitem(operands, "SC", lambda ax: stale if real(ax) in (50, 51) else real(ax))
+        result = dmc.contour("AB", ramp(4000, 200), dt=1)
+        assert result.increments.shape == (200, 2)
+        assert dmc.query_operands(["_RPA", "_RPB"]) == [4000, 2000]
