@@ -44,11 +44,13 @@ def jog(seconds: float) -> float:
 def moves(seconds: float) -> float:
     sim = SimController("DMC-4040", ManualClock())
     sim.feed(b"SP 50000,60000,70000,80000;AC 512000,512000,512000,512000\r")
+    sim.feed(b"DL\r#W\rAM\rMG 1\rEN\r\\\r")  # AM waits in a program (decision 0044)
     t0 = time.perf_counter()
     start = sim.time
     sign = 1
     while sim.time - start < seconds:
-        sim.feed(f"PR {sign * 20000},{sign * 25000},{sign * 30000},{sign * 35000};BG;AM\r".encode())
+        pr = f"PR {sign * 20000},{sign * 25000},{sign * 30000},{sign * 35000}"
+        sim.feed(f"{pr};BG;XQ #W\r".encode())
         sim.advance_until_output(10.0)
         sign = -sign
     return (sim.time - start) / (time.perf_counter() - t0)

@@ -677,7 +677,7 @@ class LinkCore:
                 raise self.error(
                     GalilConnectionError,
                     f"the link is out of step and did not resynchronise within {limit:g} s:"
-                    " a command the controller still holds (AM, MC, WT ...) delays its"
+                    " a command the controller still holds (a burn: BN, BP, BV) delays its"
                     " answers, so try again once it is done; if the controller does not"
                     " answer at all, call reconnect()",
                 )

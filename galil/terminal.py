@@ -19,7 +19,6 @@ script.
 from __future__ import annotations
 
 import os
-import re
 import signal
 import sys
 from collections.abc import Callable, Iterable
@@ -43,7 +42,12 @@ PROMPT = ":"
 DOWNLOAD_PROMPT = "DL> "
 # A download, and a burn, may take the controller a while (EPICS allows 10 s for a DL).
 DOWNLOAD_TIMEOUT = 10.0
-_WT = re.compile(r"^\s*WT\s*(\d+)", re.IGNORECASE)
+# What TC 2 means at a terminal (AM, MC, WT and the other trippoints are "Not Valid in
+# terminal" in the DMC-4103 command reference; decision 0044).
+_PROGRAM_ONLY_HINT = (
+    "  (program only: put it in a program (DL) and run that (XQ);"
+    " from here, wait for a move by polling MG _BGA until it is 0)"
+)
 
 
 def program_lines(text: str) -> list[str]:
@@ -82,8 +86,8 @@ class Terminal:
     Args:
         controller: the connected controller.
         write: prints one line of output (``print`` by default).
-        timeout: seconds to wait for a reply (a ``WT n`` gets ``n`` ms more): a finite
-            number > 0 (:func:`~galil.link.check_seconds`).
+        timeout: seconds to wait for a reply: a finite number > 0
+            (:func:`~galil.link.check_seconds`).
 
     Raises:
         InvalidArgument: a bad timeout.
@@ -176,16 +180,9 @@ class Terminal:
             self._download = None
             self.write("download cancelled")
 
-    def _timeout_for(self, command: str) -> float:
-        # WT n holds the reply for n ms (in the controller's time): wait that long as well.
-        extra = sum(int(m.group(1)) for p in cmds.split_commands(command) if (m := _WT.match(p)))
-        return self.timeout + extra / 1000.0
-
     def _send(self, command: str) -> None:
         try:
-            reply = self.controller.command(
-                command, timeout=self._timeout_for(command), allow_compound=True
-            )
+            reply = self.controller.command(command, timeout=self.timeout, allow_compound=True)
         except GalilError as exc:
             self._report(exc, command)
             return
@@ -202,6 +199,8 @@ class Terminal:
                 self.write(f"  (Galil commands{hint[2]}")
             elif exc.command != command:
                 self.write(f"  (refused: {exc.command!r})")
+            if exc.code == 2:
+                self.write(_PROGRAM_ONLY_HINT)
         elif isinstance(exc, GalilTimeoutError):
             self.write(f"timeout: {message}; the controller may still be busy (Ctrl-C sends ST)")
         elif isinstance(exc, InvalidArgument):
@@ -209,8 +208,8 @@ class Terminal:
         elif isinstance(exc, GalilConnectionError):
             if self.controller.link.dead or self.controller.closed:
                 raise exc
-            # Out of step and not back yet: an earlier AM, MC or WT still holds the line.
-            self.write(f"not sent: {message} (an earlier AM, MC or WT may still be waiting)")
+            # Out of step and not back yet: the controller still holds an earlier reply.
+            self.write(f"not sent: {message} (an earlier reply may still be due, e.g. a burn's)")
         else:
             self.write(f"error: {message}")
 

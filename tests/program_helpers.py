@@ -1,10 +1,12 @@
-"""Running a downloaded program on the simulator to its end, and reading what it printed."""
+"""Running a downloaded program on the simulator to its end, and reading what it printed;
+waiting for motion from the host."""
 
 from __future__ import annotations
 
 import queue
 
 import galil
+from galil.motion import MIN_POLL
 
 
 def run_program(dmc: galil.Controller, program: str, label: str = "#M") -> list[str]:
@@ -27,3 +29,19 @@ def drain_messages(dmc: galil.Controller) -> list[str]:
             lines.append(dmc.messages.get(timeout=0).strip())
         except queue.Empty:
             return lines
+
+
+def wait_for_motion(dmc: galil.Controller, axes: str = "A", timeout: float = 30.0) -> None:
+    """Poll ``_BGm`` of each of ``axes`` until none of them moves, as a host waits for a move
+    (AM and MC are program commands: the controller refuses them from a host, decision 0044).
+
+    Between polls the link's ``pause`` lets :data:`~galil.motion.MIN_POLL` pass, the
+    simulator's clock on ``sim://``, as :meth:`galil.motion.MoveHandle.wait` does;
+    ``timeout`` is in the controller's time.
+    """
+    query = "MG " + ",".join(f"_BG{a}" for a in axes)
+    link = dmc.link
+    deadline = link.clock() + timeout
+    while any(dmc.query_numbers(query)):
+        assert link.clock() < deadline, f"{axes} still moving after {timeout} s"
+        link.pause(MIN_POLL)

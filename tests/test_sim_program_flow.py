@@ -99,6 +99,7 @@ def test_unpaired_if_else_endif_halt_the_thread_with_tc_63(
 FROM_HOST = {
     "AD": "AD 100",
     "AI": "AI 1",
+    "AM": "AM A",
     "AP": "AP 100",
     "AR": "AR 100",
     "AS": "AS A",
@@ -107,10 +108,12 @@ FROM_HOST = {
     "EN": "EN",
     "JP": "JP #M",
     "JS": "JS #M",
+    "MC": "MC A",
     "MF": "MF 100",
     "MR": "MRB=-100",
     "RE": "RE 1",
     "RI": "RI 1",
+    "WT": "WT 10",
     "ZS": "ZS",
     "IF": "IF (1)",
     "ELSE": "ELSE",
@@ -171,10 +174,20 @@ RI 0
     assert 1000 / 10000 * 1024 < ta < tb < 2300 / 10000 * 1024
 
 
-def test_am_mc_and_wt_are_still_answered_from_the_host(dmc: galil.Controller) -> None:
-    # The reference marks them "Not Valid in terminal" too; the library sends them (0037).
-    dmc.command_line(["PR 1000", "BG A", "AM A", "MC A", "WT 10"])
-    assert dmc.query_number("MG _TPA") == 1000
+def test_am_mc_and_wt_hold_a_program_thread(dmc: galil.Controller) -> None:
+    # From the host they are refused (decision 0044); in a program they wait as they did.
+    program = """#M
+PR 1000;BG A
+AM A
+b=_BGA;r=_RPA
+MC A
+p=_TPA
+t0=TIME;WT 10;w=TIME-t0
+MG b,r,p,w
+EN
+"""
+    # WT 10: 10 ms is 11 samples of 1/1024 s, rounded up.
+    assert run_program(dmc, program) == ["0.0000 1000.0000 1000.0000 11.0000"]
 
 
 # ---- AT ---------------------------------------------------------------------------------

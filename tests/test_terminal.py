@@ -13,13 +13,14 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from program_helpers import wait_for_motion
 
 import galil
 from galil import cli
 from galil.errors import InvalidArgument
 from galil.sim.clock import RealTimeClock
 from galil.sim.server import SimPtyServer, SimTcpServer
-from galil.terminal import Terminal, program_lines
+from galil.terminal import _PROGRAM_ONLY_HINT, Terminal, program_lines
 from galil.testing import nothing_sent, simulated
 
 Spawn = Callable[..., subprocess.Popen[str]]
@@ -40,7 +41,8 @@ def term() -> Iterator[tuple[Terminal, list[str]]]:
 
 def test_compound_lines_pass_through_and_replies_print(term: tuple[Terminal, list[str]]) -> None:
     t, out = term
-    t.feed("PRA=1000;BGA;AMA")
+    t.feed("PRA=1000;BGA")
+    wait_for_motion(t.controller)
     t.feed("MG _RPA;MG 6*7")
     assert out == [" 1000.0000", " 42.0000"]
 
@@ -82,10 +84,10 @@ def test_a_typed_download_is_sent_as_one_dl_and_its_program_runs(
 
 def test_a_timeout_says_so_and_the_next_command_works(term: tuple[Terminal, list[str]]) -> None:
     t, out = term
-    t.timeout = 0.05
-    t.feed("PRA=3000;BGA;AMA")  # AM answers when the move ends, after the timeout
+    t.timeout = 0.1
+    t.feed("BV")  # BV answers when the burn ends (0.25 s), after the timeout
     assert out[-1].startswith("timeout: ")
-    t.feed("MG 1")  # resynchronises first (once AM has answered), then sends
+    t.feed("MG 1")  # resynchronises first (once BV has answered), then sends
     assert out[-1] == " 1.0000"
     t.feed("JGA=1000;BGA")
     t.interrupt()
@@ -95,10 +97,18 @@ def test_a_timeout_says_so_and_the_next_command_works(term: tuple[Terminal, list
     assert out[-1] == " 0.0000"
 
 
-def test_wt_waits_as_long_as_it_asks(term: tuple[Terminal, list[str]]) -> None:
+def test_a_program_only_command_is_refused_with_a_hint(term: tuple[Terminal, list[str]]) -> None:
+    # AM, MC and WT are "Not Valid in terminal" (DMC-4103 command reference; decision 0044).
     t, out = term
-    t.feed("WT 2000;MG 5")  # longer than the 1 s timeout
-    assert out == [" 5.0000"]
+    t.feed("AMA")
+    t.feed("PRA=5;WT 2000")
+    assert out == [
+        "? 2 Command only valid from program",
+        _PROGRAM_ONLY_HINT,
+        "? 2 Command only valid from program",
+        "  (refused: 'WT 2000')",
+        _PROGRAM_ONLY_HINT,
+    ]
 
 
 def test_ctrl_c_cancels_a_download_being_typed(term: tuple[Terminal, list[str]]) -> None:
@@ -233,15 +243,44 @@ def _ctty() -> None:
     fcntl.ioctl(0, termios.TIOCSCTTY, 0)
 
 
+class HoldNextReply:
+    """A fault hook for the simulator's servers (:mod:`galil.sim.faults`): once armed, the
+    next reply's terminator and what follows it come ``seconds`` late, as if the controller
+    held the ``:`` (what a host's AM did before decision 0044)."""
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+
+    def __call__(self, data: bytes) -> list[tuple[float, bytes]]:
+        ends = [i for i in (data.find(b":"), data.find(b"?")) if i >= 0]
+        if not self.seconds or not ends:
+            return [(0.0, data)]
+        seconds, self.seconds = self.seconds, 0.0
+        return [(0.0, data[: min(ends)]), (seconds, data[min(ends) :])]
+
+
+def until_still(screen: PtyScreen) -> None:
+    """Poll ``MG _BGA`` at the terminal until the A axis stands still (real time passes)."""
+    for _ in range(500):
+        screen.send("MG _BGA\r")
+        if screen.expect(r" ([01])\.0000\n").group(1) == "0":
+            return
+    raise AssertionError("the A axis never stopped")
+
+
 @pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pseudo-terminal")
 def test_a_session_against_a_serial_simulator_through_a_real_pty(
     pty_terminal: Callable[..., PtyScreen],
 ) -> None:
-    with SimPtyServer(model="DMC-4040") as sim:
+    hold = HoldNextReply()
+    with SimPtyServer(model="DMC-4040", faults=hold) as sim:
         screen = pty_terminal(sim.path, "--timeout", "1")
         screen.expect(r"Ctrl-D leaves")
         screen.send("PRA=1000;BGA\r")
-        screen.send("AMA;MG _RPA\r")
+        screen.send("AMA\r")  # "Not Valid in terminal" (decision 0044): refused, with a hint
+        screen.expect(r"\? 2 Command only valid from program\n *\(program only: ")
+        until_still(screen)
+        screen.send("MG _RPA\r")
         screen.expect(r" 1000\.0000")
         screen.send("bg\r")
         screen.expect(r"\? 1 Unrecognized command")
@@ -262,16 +301,16 @@ def test_a_session_against_a_serial_simulator_through_a_real_pty(
         screen.expect(r" 1\.0000")
         screen.send("\x03")  # Ctrl-C
         screen.expect(r"Ctrl-C: sent ST")
-        screen.send("AMA;MG _BGA\r")
-        screen.expect(r" 0\.0000")
-        screen.send("PRA=35000;BGA;AMA\r")  # 1.5 s of motion: a timeout, the session goes on
+        until_still(screen)
+        hold.seconds = 1.5  # the next ':' comes 1.5 s late: a timeout, the session goes on
+        screen.send("a=1\r")
         screen.expect(r"timeout: ")
-        for _ in range(5):  # once AM has answered (on a loaded machine, after a retry or two)
+        for _ in range(5):  # once the ':' has come (on a loaded machine, after a retry or two)
             screen.send("MG 7\r")
-            if screen.expect(r" 7\.0000\n:|not sent: [^\n]*AM[^\n]*\n:").group(0)[0] == " ":
+            if screen.expect(r" 7\.0000\n:|not sent: [^\n]*\n:").group(0)[0] == " ":
                 break
         else:
-            raise AssertionError("MG 7 never answered after the AM's timeout")
+            raise AssertionError("MG 7 never answered after the held reply's timeout")
         screen.send("\x04")  # Ctrl-D, at the prompt, leaves
         screen.wait_closed()
 
@@ -283,8 +322,12 @@ def test_a_session_on_the_in_process_simulator_runs_in_real_time(
     screen = pty_terminal("sim://DMC-4040")
     screen.expect(r"Ctrl-D leaves")
     screen.send("JGA=1000;BGA\r")
-    screen.send("WT 200;MG _TPA>100\r")  # the clock runs while nobody waits on a reply
-    screen.expect(r" 1\.0000")
+    for _ in range(500):  # the clock runs while nobody waits on a reply
+        screen.send("MG _TPA>100\r")
+        if screen.expect(r" ([01])\.0000\n").group(1) == "1":
+            break
+    else:
+        raise AssertionError("the jog never passed 100 counts")
     screen.send("\x03")
     screen.expect(r"sent ST.*\n:")
     screen.send("\x04")

@@ -681,12 +681,23 @@ def st(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Com
 
 
 def am(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
-    """AM: trippoint, the ``:`` comes when the profiler of ``axes`` has finished."""
+    """AM: trippoint for program text; it holds the thread until the profiler of ``axes`` has
+    finished.
+
+    A controller refuses it from a host with TC 2, "Command only valid from program" (the
+    DMC-4103 command reference marks AM "Not Valid in terminal"; decision 0044): put its
+    ``text`` in a program line. A host waits for a move by polling ``_BGm``, as
+    ``MoveHandle.wait`` does.
+    """
     return _plain(_list_command("AM", axes, model, "ST"))
 
 
 def mc(axes: str | Iterable[str] = "", *, model: ModelSpec | None = None) -> Command:
-    """MC: trippoint, the ``:`` comes when ``axes`` are in position."""
+    """MC: trippoint for program text; it holds the thread until ``axes`` are in position.
+
+    A controller refuses it from a host with TC 2, as :func:`am` (MC is "Not Valid in
+    terminal" too; decision 0044): put its ``text`` in a program line.
+    """
     return _plain(_list_command("MC", axes, model))
 
 

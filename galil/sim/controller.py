@@ -2,8 +2,9 @@
 
 :class:`SimController` behaves like a controller of the chosen model on its command port: it
 answers ``:`` or ``?`` for every command, prints queries in the PF/VF/LZ formats, keeps the TC
-error code, holds the ``:`` of a trippoint (``AM``, ``MC``, ``WC``, ``WT``) until it is
-satisfied, runs downloaded programs (``MG``, ``WT``, ``JP`` and any command) in threads, and
+error code, holds the ``:`` of a command that takes time (``WC``, a burn) until it is done,
+refuses program-only commands from a host (``AM``, ``MC``, ``WT``, ``JP`` ...: TC 2), runs
+downloaded programs (``MG``, ``WT``, ``JP`` and any command) in threads, and
 sends their output as unsolicited messages. Motion runs in a servo loop, sample by sample, on
 the one motion engine shared with the predictor (:class:`galil.predict.engine.AxisProfiler`),
 in vectorised chunks between events.

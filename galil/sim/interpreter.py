@@ -138,6 +138,7 @@ class Interpreter:
         if self.plane_commands:
             planes = self._planes(s)
             if planes is not None:
+                self._from_program(s[:2])  # AM S as AM A
                 return self.plane_commands[s[:2]].run(planes)
         if command is not None:
             if eq > 0 and not command.spec.equals:

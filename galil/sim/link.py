@@ -7,8 +7,8 @@ Registered as the ``sim`` scheme of the ``galil.transports`` entry point, so
 
 With the default manual clock, time passes only while the host waits: ``read(timeout)`` runs the
 servo loop for up to ``timeout`` simulated seconds and returns as soon as the controller says
-something, so a client's ``AM`` completes in simulated time without anyone sleeping. The
-controller is reachable as ``transport.controller`` for tests.
+something, so a client's wait for a held reply completes in simulated time without anyone
+sleeping. The controller is reachable as ``transport.controller`` for tests.
 """
 
 from __future__ import annotations

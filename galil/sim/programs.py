@@ -51,16 +51,13 @@ _BRANCH = re.compile(r"(?:(IF)(?=[\s(])|(ELSE|ENDIF)\s*$)")
 #: The commands the simulator runs that the DMC-4103 command reference marks "Not Valid in
 #: terminal" (its usage line), in one place: from a host port each answers ``?`` with TC 2
 #: ("Command only valid from program"); a thread runs them (decision 0037).
+#: AM, MC and WT are among them (decision 0044): a host waits for motion by polling ``_BGm``.
 PROGRAM_ONLY = frozenset(
     {
-        *("AD", "AI", "AP", "AR", "AS", "AT", "AV", "EN", "JP", "JS", "MF", "MR", "RE", "RI"),
-        *("ZS", "IF", "ELSE", "ENDIF"),
+        *("AD", "AI", "AM", "AP", "AR", "AS", "AT", "AV", "EN", "JP", "JS", "MC", "MF", "MR"),
+        *("RE", "RI", "WT", "ZS", "IF", "ELSE", "ENDIF"),
     }
 )
-# AM, MC and WT are marked "Not Valid in terminal" by the same reference, yet answered from
-# a host with the ``:`` held until they clear, as the simulator has always done: the library
-# itself sends them from the host (``commands.am``, ``commands.mc``; ``WT`` to test
-# timeouts), so refusing them would change its contract (decision 0037).
 
 
 def program_only(text: str) -> str | None:

@@ -172,10 +172,11 @@ def test_a_far_end_is_unknown_until_within_the_lookahead() -> None:
 def test_the_simulator_completes_a_smoothed_move_on_the_predicted_sample() -> None:
     sim = SimController("DMC-4040", ManualClock())
     sim.feed(b"IT 0.1;PR 20;SP 25000;AC 256000;DC 256000\r")
-    assert sim.feed(b"BG A;AM A;MG TIME\r") == b":"  # AM holds the rest
+    assert sim.feed(b"DL\r#W\rAM A;MG TIME\rEN\r\\\r") == b"::"  # AM holds the thread
+    assert sim.feed(b"BG A;XQ #W\r") == b"::"
     done = sim.advance_until_output(5.0)
     predicted = predict.move(20, 25_000, 256_000, 256_000, smoothing=0.1, model="DMC-4040")
-    assert done == f": {predicted.samples}.0000\r\n:".encode()
+    assert done == f" {predicted.samples}.0000\r\n".encode()
 
 
 def test_smoothing_none_means_no_smoothing_everywhere() -> None:

@@ -7,7 +7,7 @@ simulator's manual clock.
 from __future__ import annotations
 
 from engine_expect import in_position_after, lagged, move, references, soft_limit_stop
-from sim_fronts import Front
+from sim_fronts import WAIT, Front
 
 from galil.models import get_model
 from galil.predict.checks import quantise_accel
@@ -115,32 +115,51 @@ def test_motion_codes(front: Front) -> None:
     assert front.ask(b"MG _BGA;SC A") == b" 0.0000\r\n: 4\r\n:"
 
 
-def test_am_holds_the_colon_until_the_profile_is_done(front: Front) -> None:
+def unsolicited(front: Front, expected: bytes) -> bytes:
+    """Read a program's messages (the message handle on TCP) until ``expected``'s length."""
+    got = b""
+    while len(got) < len(expected):
+        chunk = front.messages(WAIT)
+        assert chunk, got
+        got += chunk
+    return got
+
+
+def test_am_mc_and_wt_from_the_host_are_refused_with_tc_2(front: Front) -> None:
+    # DMC-4103 reference: AM, MC and WT are "Not Valid in terminal" (decision 0044).
     assert front.ask(b"PR 1000;SP 10000;BG A") == b":::"
-    front.write(b"AM A\r")
-    front.write(b"MG 42\r")  # queued behind the trippoint
-    assert front.quiet() == b""
+    for line in (b"AM A", b"AM", b"MC A", b"WT 100", b"AM S"):
+        assert front.ask(line) == b"?"
+        assert tc1(front) == b" 2 Command only valid from program\r\n:"
+    assert front.ask(b"MG _BGA") == b" 1.0000\r\n:"  # refused at once, the move goes on
+
+
+def test_am_holds_a_program_thread_until_the_profile_is_done(front: Front) -> None:
+    assert front.ask(b"PR 1000;SP 10000;BG A") == b":::"
+    front.write(b"DL\r#W\rAM A\rMG 42\rEN\r\\")
+    assert front.read_terminators(2) == b"::"
+    assert front.ask(b"XQ #W") == b":"
     front.advance(0.05)
-    assert front.quiet() == b""
+    assert front.messages(0.05) == b""  # MG 42 waits behind the trippoint
     front.advance(1.0)
-    assert front.read_terminators(2) == b": 42.0000\r\n:"
+    assert unsolicited(front, b" 42.0000\r\n") == b" 42.0000\r\n"
     assert front.ask(b"RPA;MG _BGA") == b" 1000\r\n: 0.0000\r\n:"
 
 
 def test_mc_waits_for_the_motor_after_am(front: Front) -> None:
     front.controller.set_servo_lag(0.05)
-    assert front.ask(b"PR 2000;SP 20000;AC 1000000;DC 1000000;BG A") == b":::::"
-    front.write(b"AM A;MG TIME;TE A;MC A;MG TIME\r")
-    assert front.quiet() == b""
+    front.write(b"DL\r#W\rAM A;MG TIME;MG _TEA;MC A;MG TIME\rEN\r\\")
+    assert front.read_terminators(2) == b"::"
+    assert front.ask(b"PR 2000;SP 20000;AC 1000000;DC 1000000;BG A;XQ #W") == b"::::::"
+    assert front.messages(0.05) == b""
     front.advance(1.0)
     accel = quantise_accel(1000000, get_model("DMC-4040"))  # AC/DC as the controller stores them
     refs = references(move(2000, 20000, accel, accel))
     te = refs[-1] - lagged(refs, 0.05)[-1]  # the motor lags the reference when AM releases
     t_mc = in_position_after(refs, 0.05)
     assert te > 0
-    assert front.read_terminators(5) == (
-        f": {len(refs)}.0000\r\n: {te}\r\n:: {t_mc}.0000\r\n:".encode()
-    )
+    expected = f" {len(refs)}.0000\r\n {te}.0000\r\n {t_mc}.0000\r\n".encode()
+    assert unsolicited(front, expected) == expected
     assert front.ask(b"TEA;TPA") == b" 0\r\n: 2000\r\n:"
 
 

@@ -43,7 +43,9 @@ def test_a_follower_is_the_ratio_times_the_master_motion_at_every_sample(
     ask(sim, f"GA{follower}=C{master};GR{follower}=-0.3")
     assert numbers(ask(sim, f"MG _BG{follower},_SC{follower}")) == [1, 0]
     sim.start_trace(follower + master)
-    ask(sim, f"SP{master}=40000;PR{master}=12345;BG {master};AM {master}")  # AM: bisected steps
+    assert ask(sim, f"DL\r#W\rAM {master}\rEN\r\\") == b"::"
+    # A thread waiting on AM (a program command, decision 0044) makes the loop bisect steps.
+    ask(sim, f"SP{master}=40000;PR{master}=12345;BG {master};XQ #W")
     for _ in range(round(1 / chunk)):
         sim.advance(chunk)
     trace = sim.stop_trace(follower + master)

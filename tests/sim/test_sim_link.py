@@ -7,6 +7,7 @@ import signal
 import socket
 import subprocess
 import sys
+import time
 import urllib.parse
 from collections.abc import Callable
 
@@ -45,14 +46,16 @@ def test_url_as_split_result_and_bad_options() -> None:
         open_transport("sim://NOT-A-MODEL")
 
 
-def test_reading_lets_simulated_time_pass_until_the_reply() -> None:
+def test_reading_lets_simulated_time_pass_until_the_controller_says_something() -> None:
     t = open_transport("sim://DMC-4040")
-    t.write(b"PR 5000;SP 10000;BG A;AM A\r")
-    assert t.read(0.01) == b":::"
+    t.write(b'DL\r#W\rAM A\rMG "done"\rEN\r\\\r')  # AM is a program command (0044)
+    assert t.read(0.01) == b"::"
+    t.write(b"PR 5000;SP 10000;BG A;XQ #W\r")
+    assert t.read(0.01) == b"::::"
     assert t.read(0.1) == b""  # 0.1 s of simulated time: still moving
-    assert t.read(5.0) == b":"
+    assert t.read(5.0) == b"done\r\n"
     sim = t.controller
-    # time stopped at the reply (the sample the profile ended), not at the timeout
+    # time stopped at the message (the sample the profile ended), not at the timeout
     assert sim.sample == len(references(move(5000, 10000)))
 
 
@@ -103,7 +106,7 @@ def test_tcp_handles_are_listed_and_independent() -> None:
     with SimTcpServer(sim) as srv:
         a = socket.create_connection(srv.address, timeout=5)
         b = socket.create_connection(srv.address, timeout=5)
-        a.sendall(b"PR 10;BG A;AM A\r")
+        a.sendall(b"PR 10;BG A;BV\r")  # the controller holds BV's ':' while it burns
         b.sendall(b"TH\r")
         th = b""
         while not th.endswith(b":"):
@@ -124,13 +127,22 @@ def test_tcp_handles_are_listed_and_independent() -> None:
 def test_real_time_server_moves_by_itself() -> None:
     with SimTcpServer(SimController("DMC-4040", RealTimeClock(speed=50.0))) as srv:
         s = socket.create_connection(srv.address, timeout=10)
-        s.sendall(b"PR 1000;BG A;AM A;RPA\r")
-        got = b""
-        while got.count(b":") < 4:
-            chunk = s.recv(4096)
-            assert chunk
-            got += chunk
-        assert got == b"::: 1000\r\n:"
+
+        def ask(line: bytes) -> bytes:
+            s.sendall(line + b"\r")
+            got = b""
+            while got.count(b":") < line.count(b";") + 1:
+                chunk = s.recv(4096)
+                assert chunk
+                got += chunk
+            return got
+
+        assert ask(b"PR 1000;BG A;MG _BGA") == b":: 1.0000\r\n:"
+        # Nobody advances the clock: the move ends by itself (polled, as a host waits).
+        deadline = time.monotonic() + 10
+        while ask(b"MG _BGA") != b" 0.0000\r\n:":
+            assert time.monotonic() < deadline
+        assert ask(b"RPA") == b" 1000\r\n:"
         s.close()
 
 

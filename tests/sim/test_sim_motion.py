@@ -213,16 +213,15 @@ def test_servo_lag_is_first_order() -> None:
 
 def test_mc_releases_where_the_lagging_motor_reaches_the_target() -> None:
     sim = new_sim(lag=0.05)
-    ok(sim, "PR 2000;SP 20000;BG A")
+    # AM and MC are program commands (decision 0044): a thread prints TE as each releases.
+    assert sim.feed(b"DL\r#W\rAM A\rMG _TEA\rMC A\rMG _TEA\rEN\r\\\r") == b"::"
+    ok(sim, "PR 2000;SP 20000;BG A;XQ #W")
     refs = references(move(2000, 20000))
-    assert sim.feed(b"AM A\r") == b""
-    assert sim.advance_until_output(5.0) == b":"
+    te = refs[-1] - lagged(refs, 0.05)[-1]
+    assert sim.advance_until_output(5.0) == f" {te}.0000\r\n".encode()
     assert sim.sample == len(refs)
-    assert sim.feed(b"TEA\r") == f" {refs[-1] - lagged(refs, 0.05)[-1]}\r\n:".encode()
-    assert sim.feed(b"MC A\r") == b""
-    assert sim.advance_until_output(5.0) == b":"
+    assert sim.advance_until_output(5.0) == b" 0.0000\r\n"
     assert sim.sample == in_position_after(refs, 0.05)
-    assert sim.feed(b"TEA\r") == b" 0\r\n:"
 
 
 @settings(max_examples=30, deadline=None)

@@ -81,14 +81,15 @@ def test_a_rounded_square_runs_as_the_predictor_says_at_every_sample(sim: SimCon
 
 @pytest.mark.parametrize("chunk", [TS, 7 * TS, 0.3])
 def test_the_sequence_is_the_same_however_time_is_chunked(sim: SimController, chunk: float) -> None:
+    assert ask(sim, "DL\r#W\rAM S;MG TIME\rEN\r\\") == b"::"  # AM: a program command (0044)
     setup(sim)
     for text, _ in ROUNDED_SQUARE:
         ask(sim, text)
     ask(sim, "VE")
     t0 = sim.start_trace("AB")
     begin = stamp(ask(sim, "BG S;MG TIME"))
-    held = ask(sim, "AM S;MG TIME")  # a trippoint makes the loop bisect its steps
-    assert held == b""
+    held = ask(sim, "XQ #W")  # a thread held by a trippoint makes the loop bisect its steps
+    assert held == b":"
     for _ in range(round(3.5 / chunk)):
         sim.advance(chunk)
         held += sim.poll()
