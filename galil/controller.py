@@ -688,7 +688,8 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         abort_all(self.link, self.tracker)
 
     def servo_here(self, axes: str = "") -> None:
-        """Enable the servo on axes (default: all) at their present position (``SH``)."""
+        """Enable the servo on axes (default: all) at their present position (``SH``);
+        refused while one moves."""
         servo_here(self.link, self.tracker, self._letters(axes))  # (ends unwaited moves)
 
     def motor_off(self, axes: str = "") -> None:

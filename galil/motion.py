@@ -1199,24 +1199,36 @@ def motors_off(link: CommandLink, letters: str) -> None:
 
 
 def servo_here(link: CommandLink, tracker: MotionTracker, letters: str) -> None:
-    """``SH`` on ``letters`` (``""``: every axis).
+    """``SH`` on ``letters`` (``""``: every axis), refused before it is sent while one of them
+    moves: the controller refuses SH in motion (TC 7; the DMC-4103 reference: "Not Valid
+    while in motion"). One query before the line (``_BG``, and ``_RP``, ``_SC`` below).
 
     ``SH`` puts a motor-off axis's reference where its encoder is: whatever the library
     predicted for the motion it last started there is over (an abort, a limit or a position
     error that turned the motor off). Where such a motion's handle was not seen done, the
-    axes' ``_BG``, ``_RP`` and ``_SC`` are read first (one query, only then), and a handle
-    whose axis is at rest keeps that end (:meth:`MotionTracker.ended`, decision 0030): a
-    later ``wait()`` reports where and how the move ended, not the position ``SH`` took.
+    same query reads the axes' ``_RP`` and ``_SC``, and the handle keeps that end
+    (:meth:`MotionTracker.ended`, decision 0030): a later ``wait()`` reports where and how
+    the move ended, not the position ``SH`` took.
+
+    Raises:
+        InvalidArgument: an axis moving (stop it and wait first); only the query went out.
     """
     command = cmds.sh(letters, model=link.model)
+    read = letters or link.model.axes
     with tracker.lock:  # (no start in another thread between the read and SH)
-        open_ = "".join([a for a in letters or link.model.axes if tracker.active(a) is not None])
-        if open_:
-            values = link.query_operands(list(_poll_names(open_, "")))  # (a handle's poll)
-            n = len(open_)
-            for a, bg, rp, sc in zip(open_, values, values[n:], values[2 * n :], strict=False):
-                if not round(bg):
-                    tracker.ended(a, rp, sc)
+        open_ = "".join([a for a in read if tracker.active(a) is not None])
+        names = [f"_BG{a}" for a in read] + [f"_{op}{a}" for op in ("RP", "SC") for a in open_]
+        values = link.query_operands(names)
+        n, k = len(read), len(open_)
+        busy = "".join(a for a, v in zip(read, values[:n], strict=True) if round(v))
+        if busy:
+            raise InvalidArgument(
+                f"servo here refused: {busy} moving, and the controller refuses SH in motion "
+                "(TC 7); stop the motion and wait for it first",
+                model=link.model.name,
+            )
+        for a, rp, sc in zip(open_, values[n : n + k], values[n + k :], strict=True):
+            tracker.ended(a, rp, sc)
         link.command_line([command])
 
 

@@ -580,7 +580,8 @@ class OperationSequences(RuleBasedStateMachine):
             # SH puts a motor-off axis's reference at its (lagging) encoder: a handle not seen
             # done keeps the end it had (decision 0036), so only the position now may differ.
             if not self.dmc.query_operands([f"_MO{a}"])[0]:
-                self.dmc.servo_here(a)
+                with self.refusable(InvalidArgument):  # (in motion: the controller refuses SH)
+                    self.dmc.servo_here(a)
                 return
             self.dmc.servo_here(a)
             self.supersede(a)

@@ -264,3 +264,14 @@ def test_vs_va_and_vd_are_stored_in_the_steps_of_the_tm_in_force() -> None:
     assert numbers(ask(sim, "MG _VSS,_VAS,_VDS")) == [80_000, 32_768, 16_384]
     ask(sim, "VAS=8000")  # below the smallest VA at TM 250: raised to it, as AC
     assert numbers(ask(sim, "MG _VAS")) == [16_384]
+
+
+@pytest.mark.parametrize("command", ["VS", "VA", "VD"])
+def test_a_refused_vector_parameter_line_changes_neither_plane(
+    sim: SimController, command: str
+) -> None:
+    # (the S field was set before the T field was refused out of range)
+    before = ask(sim, f"{command} ?,?")
+    assert ask(sim, f"{command} 2048,2147483647") == b"?"
+    assert ask(sim, f"{command} ?,?") == before
+    assert ask(sim, f"{command}S=2048;{command}T=4096") == b"::"

@@ -303,6 +303,9 @@ class Motion(Room):
 
     @handler("SH", Args.AXES)
     def sh(self, axes: list[Axis]) -> str:
+        # DMC-4103 command reference, SH: "Not Valid while in motion" (TC 7, as MO).
+        if any(ax.m.moving for ax in axes):
+            raise Refused(7, "SH while moving")
         for ax in axes:
             if not ax.m.motor_on:
                 ax.m.motor_on = True

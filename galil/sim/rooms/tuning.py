@@ -228,6 +228,9 @@ class Tuning(Room):
         if name != "BV" and self.machine.programs.threads:
             raise Refused(17, "BN and BP not valid while a program runs")
         servo = self.machine.servo
+        # DMC-4103 command reference: BP "Not Valid while in motion" (BN, BV are valid).
+        if name == "BP" and any(ax.m.moving for ax in servo.axes.values()):
+            raise Refused(7, "BP while moving")
         wake = servo.sample + max(1, round(BURN_SECONDS / servo.ts))
 
         def done() -> str:

@@ -383,11 +383,18 @@ class Vector(Room):
                     (self.planes[p], f.strip()) for p, f in zip(_PLANES, fields, strict=True)
                 ]
         out = []
+        values: list[tuple[Plane, float]] = []  # (checked all before any is set)
         for plane, text in assigns:
             if text == "?":
                 out.append(self.machine.interp.num(getattr(plane, name), "10.0"))
             elif text:
-                setattr(plane, name, self._quantised(name, self.machine.interp.evaluate(text)))
+                value = self._quantised(name, self.machine.interp.evaluate(text))
+                # DMC-4103 command reference: VD "Not Valid while in motion" (VS, VA are).
+                if name == "vd" and self.busy(plane):
+                    raise Refused(7, "VD while the sequence runs")
+                values.append((plane, value))
+        for plane, value in values:
+            setattr(plane, name, value)
         return ",".join(out) + "\r\n" if out else ""
 
     def _quantised(self, name: str, value: float) -> float:
