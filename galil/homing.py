@@ -145,8 +145,8 @@ class AxisHoming:
 
         Raises:
             InvalidArgument: the axis moves or its motor is off, a speed it needs is 0, it
-                would start into an active limit switch, it is geared to another axis, or
-                another axis is geared to it (see :meth:`_refuse_gearing`).
+                would start into an active limit switch that LD leaves on, it is geared to
+                another axis, or another axis is geared to it (see :meth:`_refuse_gearing`).
             LimitError: it would start on past a soft limit it is beyond already (TC 22).
         """
         if switch is not None and not isinstance(switch, predict.HomeSwitch):
