@@ -41,7 +41,7 @@ from galil.moves import (
 )
 from galil.protocol import commands as cmds
 from galil.routines import Routines
-from galil.tuning import Setting, motor_type, whole
+from galil.tuning import Setting, limit_disable_of, motor_type, whole
 from galil.units import (
     Scale,
     counts_or_plain,
@@ -680,6 +680,12 @@ class Axis:
     """``OE``: 0 off, 1 on position error / amplifier error / abort, 2 on limits, 3 all."""
     brush = Setting("BR", cmds.br, whole, still=True)
     """``BR``: -1 external drive, 0 brushless, 1 brush."""
+    limit_disable = Setting("LD", cmds.ld, limit_disable_of, available=cmds.require_limit_disable)
+    """``LD``: a :class:`~galil.tuning.LimitDisable`, the limit switches that no longer stop
+    motion (NONE, FORWARD, REVERSE, BOTH); for a stage with a switch missing or unwired. The
+    soft limits stay, and the switches' inputs still read (``axis.switches``). Refused,
+    before anything is sent, on a model without LD (``model.has_limit_disable``; decision
+    0046)."""
 
     def __repr__(self) -> str:
         unit = f" in {self._scale.unit:~}" if self._scale is not None else " in counts"

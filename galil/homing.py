@@ -30,6 +30,7 @@ from galil.motion import (
     as_stored,
     sample_of,
     stop_on_error,
+    switch_blocks,
 )
 from galil.protocol import commands as cmds
 
@@ -144,8 +145,8 @@ class AxisHoming:
 
         Raises:
             InvalidArgument: the axis moves or its motor is off, a speed it needs is 0, it
-                would start into an active limit switch, it is geared to another axis, or
-                another axis is geared to it (see :meth:`_refuse_gearing`).
+                would start into an active limit switch that LD leaves on, it is geared to
+                another axis, or another axis is geared to it (see :meth:`_refuse_gearing`).
             LimitError: it would start on past a soft limit it is beyond already (TC 22).
         """
         if switch is not None and not isinstance(switch, predict.HomeSwitch):
@@ -242,7 +243,8 @@ class AxisHoming:
         params: predict.HomingParams,
         limits: tuple[int, float, float],
     ) -> None:
-        """Refuse a start towards an active limit switch, or on past a soft limit the axis is
+        """Refuse a start towards an active limit switch ``LD`` does not disable
+        (:func:`~galil.motion.switch_blocks`), or on past a soft limit the axis is
         beyond already (``limits``: RP, BL, FL): the controller refuses its BG with TC 22,
         after the HM, FE or FI went out.
 
@@ -255,9 +257,8 @@ class AxisHoming:
         else:
             high = bool(ts & 0x02)
             direction = 1 if high == (params.home_direction > 0) else -1
-        blocked = not ts & 0x08 if direction > 0 else not ts & 0x04
         side = "forward" if direction > 0 else "reverse"
-        if blocked:
+        if switch_blocks(self._link, self.letter, direction, ts):
             raise InvalidArgument(
                 f"{kind} on {self.letter} would start towards its active {side} limit switch "
                 "(the controller refuses it with TC 22); move off the switch first",

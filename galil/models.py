@@ -222,6 +222,11 @@ class ModelSpec:
             turns the error output on, ER -1 off).
         hv_default: HV (homing speed) at power-on, counts/s.
         homing_stages: stages of HM on a servo axis (3: find the index last).
+        has_limit_disable: the model has ``LD`` (limit disable, per axis: 0 both switches
+            on, 1 the forward one off, 2 the reverse one off, 3 both off). The DMC-4103
+            command reference: "LD applies to DMC4000,DMC4200,DMC4103,DMC1806,DMC30010,
+            DMC50000,DMC52000,EDD37010"; not the DMC-18x2, 21x3, 1500 or 1700/1800, nor a
+            RIO (no axes) or a generic model (decision 0046).
         burn_timeout: seconds to wait for BN/BP/BV (flash writes; EPICS waits up to 3 s).
         generic: the spec was made for an identity no table entry matches (conservative).
         assumptions: plain-language list of values that are guesses, and why.
@@ -320,6 +325,7 @@ class ModelSpec:
     er_max: int = INT32_MAX
     hv_default: float = 256.0
     homing_stages: int = 3
+    has_limit_disable: bool = False
     burn_timeout: float = 3.0
     generic: bool = False
     assumptions: tuple[str, ...] = ()
@@ -563,6 +569,7 @@ _add(
         contour_buffer=511,
         transports=frozenset({"pci"}),
         qz=(8, 52, 26, 36),
+        has_limit_disable=True,  # the LD page lists the DMC1806 (EPICS: no LD on any 1xxx)
         assumptions=(
             "CD range ±32,762 as printed on the 18x6 CD page (sic)",
             "record laid out like the 40x0 one (gclib GDataRecord1806); sizes assumed equal",
@@ -623,6 +630,7 @@ _add(
         contour_buffer=511,
         transports=_ETH_USB,
         qz=(4, 52, 26, 36),
+        has_limit_disable=True,  # and so the 41x3, 42x0 and 500x0 built on it
         assumptions=(
             "CD range ±32,000 from the 40x0 manual summary; the 18x6 page says ±32,762, and the"
             " 4103 reference's CD page (which lists the DMC4000) -32,768 ... 32,767",
@@ -711,6 +719,7 @@ _add(
         qz=(1, 18, 16, 36),
         dr_range=(4, 30000),  # gclib GRecordRate: 4 on the 30010/31010
         threads=6,
+        has_limit_disable=True,
         # gclib GDataRecord30000: analog input 1 in the axis block, input 2 and outputs 1-2
         # in the general block; EPICS drives AO ±10 V (3276.8 counts/V) on the 30010.
         analog_inputs=2,

@@ -58,6 +58,7 @@ __all__ = [
     "send_reopening",
     "stop_axes",
     "stop_on_error",
+    "switch_blocks",
 ]
 
 _LOG = logging.getLogger("galil.motion")
@@ -1101,6 +1102,21 @@ def _raise_if_limited(
         model=link.model.name,
         recent=link.recent,
     )
+
+
+def switch_blocks(link: CommandLink, letter: str, direction: float, ts: int) -> bool:
+    """Whether the limit switch ``direction`` points to blocks a start: active (its ``TS``
+    bit clear: 3 forward, 2 reverse) and not disabled by ``LD``. The input of a disabled
+    switch still reads active, so ``_LD`` is read (one query) only then, and only on a model
+    with LD; a start towards such a switch is taken (decision 0046).
+    """
+    forward = direction > 0
+    if ts & (0x08 if forward else 0x04):
+        return False
+    if not link.model.has_limit_disable:
+        return True
+    ld = round(link.query_operands([f"_LD{letter}"])[0])
+    return not ld & (1 if forward else 2)
 
 
 def refuse_in_motion(link: CommandLink, tracker: MotionTracker, letter: str, name: str) -> None:

@@ -32,6 +32,7 @@ from galil.motion import (
     sample_of,
     send_reopening,
     stop_on_error,
+    switch_blocks,
 )
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
@@ -267,7 +268,8 @@ def _refuse_blocked(
     ts: int,
     limits: tuple[int, float, float] | None,
 ) -> None:
-    """Refuse a start in ``direction`` towards an active limit switch (``_TS``), or, given
+    """Refuse a start in ``direction`` towards an active limit switch (``_TS``) that ``LD``
+    does not disable (:func:`~galil.motion.switch_blocks`), or, given
     ``limits`` ``(RP, BL, FL)``, on past a soft limit the axis is beyond already: the
     controller refuses its ``BG`` with TC 22, after the rest of the line went out (a JG, a PA).
 
@@ -276,8 +278,8 @@ def _refuse_blocked(
     """
     if not direction:
         return
-    side, bit = ("forward", 0x08) if direction > 0 else ("reverse", 0x04)
-    if not ts & bit:
+    side = "forward" if direction > 0 else "reverse"
+    if switch_blocks(link, a, direction, ts):
         raise InvalidArgument(
             f"axis {a} would start towards its active {side} limit switch (the controller "
             "refuses it with TC 22); move off the switch first",

@@ -27,7 +27,16 @@ from galil.motion import MotionTracker, refuse_in_motion
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
 
-__all__ = ["MotorType", "Setting", "burn", "follow_tm", "motor_type", "whole"]
+__all__ = [
+    "LimitDisable",
+    "MotorType",
+    "Setting",
+    "burn",
+    "follow_tm",
+    "limit_disable_of",
+    "motor_type",
+    "whole",
+]
 
 
 class MotorType(float, enum.Enum):
@@ -56,6 +65,36 @@ class MotorType(float, enum.Enum):
     def description(self) -> str:
         """What the controller does with it."""
         return MOTOR_TYPES[self.value]
+
+
+class LimitDisable(enum.IntEnum):
+    """``LD``: which limit switches no longer stop motion (decision 0046).
+
+    A disabled switch neither stops motion towards it nor refuses a start towards it, and runs
+    no ``#LIMSWI``; its input still reads (``_LF``/``_LR``, ``TS``, ``axis.switches``). The
+    soft limits ``FL``/``BL`` stay: "LD does not disable software limits set by BL and FL"
+    (DMC-4103 command reference, LD).
+    """
+
+    NONE = 0
+    FORWARD = 1
+    REVERSE = 2
+    BOTH = 3
+
+    @property
+    def forward(self) -> bool:
+        """Whether the forward switch is disabled."""
+        return bool(self & 1)
+
+    @property
+    def reverse(self) -> bool:
+        """Whether the reverse switch is disabled."""
+        return bool(self & 2)
+
+
+def limit_disable_of(value: float) -> LimitDisable:
+    """The :class:`LimitDisable` of an ``_LD`` value."""
+    return LimitDisable(round(value))
 
 
 class _HasLink(Protocol):
@@ -93,6 +132,8 @@ class Setting(Generic[T]):
         motor_off: the controller takes it only with the axis's motor off (``MT``: "The axis
             must be in the motor off state (MO) before setting MT", TC 135 otherwise): the
             setter reads ``_MO`` first (one query) and refuses it with the motor on.
+        available: raises :class:`~galil.errors.InvalidArgument` for a model without the
+            command, before reading or writing it (``LD``).
     """
 
     def __init__(
@@ -103,8 +144,10 @@ class Setting(Generic[T]):
         *,
         still: bool = False,
         motor_off: bool = False,
+        available: Callable[[ModelSpec], None] | None = None,
     ) -> None:
         self.mnemonic = mnemonic
+        self.available = available
         self.builder = builder
         self.convert = convert
         self.still = still
@@ -121,6 +164,8 @@ class Setting(Generic[T]):
     def __get__(self, obj: _HasLink | None, owner: type) -> Setting[T] | T:
         if obj is None:
             return self
+        if self.available is not None:
+            self.available(obj._link.model)
         return self.convert(obj._link.query_operands([f"_{self.mnemonic}{obj.letter}"])[0])
 
     def __set__(self, obj: _HasLink, value: float) -> None:

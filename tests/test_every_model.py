@@ -152,6 +152,25 @@ def test_limit_switches_stop_a_jog_and_soft_limits_refuse_outward_moves(
 
 
 @MOVING
+def test_limit_disable_where_the_model_has_it_and_refused_unsent_where_not(
+    spec: ModelSpec, dmc: galil.Controller
+) -> None:
+    a = dmc.A
+    sim_of(dmc).set_limit_switch("A", "forward", True)
+    if not spec.has_limit_disable:
+        with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match="has no LD"):
+            a.limit_disable = galil.LimitDisable.FORWARD
+        return
+    a.limit_disable = galil.LimitDisable.FORWARD
+    assert a.limit_disable is galil.LimitDisable.FORWARD
+    jog = a.jog(10_000)  # towards the active switch, which no longer stops it
+    dmc.sleep(0.1)
+    a.stop()
+    assert jog.wait().stop_codes == {"A": 4}
+    assert a.switches.forward_limit
+
+
+@MOVING
 def test_a_contour_ends_where_its_path_does(spec: ModelSpec, dmc: galil.Controller) -> None:
     path = np.round(2000 * (1 - np.cos(np.linspace(0, np.pi, 20))) / 2)
     result = dmc.contour("A", path, dt=2)

@@ -203,3 +203,12 @@ def test_no_models_speed_step_exceeds_the_planners_shortcut() -> None:
 
     for spec in MODELS.values():
         assert spec.speed_resolution(spec.tm_range[0]) <= _LARGEST_SPEED_STEP
+
+
+def test_limit_disable_is_on_the_models_the_ld_page_lists_only() -> None:
+    # DMC-4103 reference: "LD applies to DMC4000,DMC4200,DMC4103,DMC1806,DMC30010,DMC50000,
+    # DMC52000,EDD37010": not the 18x2, 21x3 (nor the older 1500, 1700/1800), nor a RIO.
+    having = {s.family for s in MODELS.values() if s.has_limit_disable}
+    assert having == {"DMC-40x0", "DMC-41x3", "DMC-42x0", "DMC-18x6", "DMC-30010", "DMC-500x0"}
+    assert get_model("DMC52040").has_limit_disable
+    assert not parse_identity("DMC9940 Rev 1.0a").model.has_limit_disable  # generic

@@ -212,6 +212,7 @@ SETTINGS = {
     "kd": 64,
     "ki": 0,
     "kp": 6,
+    "limit_disable": 0,
     "motor_type": Lazy(_servo_with_the_motor_off),
     "off_on_error": 0,
     "stepper_smoothing": 1,

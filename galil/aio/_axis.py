@@ -294,6 +294,8 @@ class AsyncAxis(MotionRoom[Axis]):
     set_off_on_error = write_setting(Axis.off_on_error)
     brush = read_setting(Axis.brush)
     set_brush = write_setting(Axis.brush)
+    limit_disable = read_setting(Axis.limit_disable)
+    set_limit_disable = write_setting(Axis.limit_disable)
 
     # -- motion -------------------------------------------------------------------------------
     move_to = motion_twin(_move_to)

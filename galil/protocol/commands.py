@@ -88,6 +88,7 @@ __all__ = [
     "kp",
     "ks",
     "la",
+    "ld",
     "le",
     "li",
     "link_setting",
@@ -113,6 +114,7 @@ __all__ = [
     "rc",
     "rd",
     "record_source",
+    "require_limit_disable",
     "rp",
     "sb",
     "sc",
@@ -1839,6 +1841,29 @@ def mt(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
 def oe(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
     """OE: off-on-error, 0 off, 1 position/amplifier error or abort input, 2 limits, 3 all."""
     return _setting("OE", by_axis, model, _one_of("OE", (0, 1, 2, 3), model))
+
+
+def require_limit_disable(model: ModelSpec | None) -> None:
+    """Refuse ``LD`` (and ``_LDa``) on a model without it (:attr:`ModelSpec.has_limit_disable`;
+    ``None``, no model known, passes).
+
+    Raises:
+        InvalidArgument: naming the model.
+    """
+    if model is not None and not model.has_limit_disable:
+        raise InvalidArgument(
+            f"{model.name} has no LD (limit disable): the command reference lists it for the "
+            "DMC-40x0, 41x3, 42x0, 18x6, 30010 and 500x0 only; its limit switches always stop "
+            "motion towards them",
+            model=model.name,
+        )
+
+
+def ld(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """LD: limit disable, 0 both switches stop motion, 1 the forward switch disabled, 2 the
+    reverse one, 3 both (``FL``/``BL`` soft limits stay). Refused on a model without LD."""
+    require_limit_disable(model)
+    return _setting("LD", by_axis, model, _one_of("LD", (0, 1, 2, 3), model))
 
 
 def br(*, model: ModelSpec | None = None, **by_axis: object) -> Command:

@@ -33,6 +33,7 @@ OPERANDS: dict[str, tuple[str, str]] = {
     "MO": ("flag", "motor off"),
     "LF": ("flag", "forward limit switch state"),
     "LR": ("flag", "reverse limit switch state"),
+    "LD": ("code", "limit disable: 1 forward switch off, 2 reverse, 3 both"),
     "SC": ("code", "stop code"),
     "TS": ("code", "switch status byte"),
     "TC": ("code", "last error code"),

@@ -10,14 +10,15 @@ both runs; a horizon skipped would put it late in the one advance only).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from galil.sim.controller import SimController
 
 #: Seconds per servo sample at the default TM 1000.
 TS = 1 / 1024
 
-Script = Sequence[str | int]  # command lines to feed, or servo samples to let pass
+#: Command lines to feed, servo samples to let pass, or a test hook to call (switches).
+Script = Sequence[str | int | Callable[[SimController], None]]
 
 
 def play(script: Script, per_sample: bool, lag: float = 0.003) -> bytes:
@@ -27,6 +28,8 @@ def play(script: Script, per_sample: bool, lag: float = 0.003) -> bytes:
     for step in script:
         if isinstance(step, str):
             out += sim.feed(step.encode() + b"\r")
+        elif callable(step):
+            step(sim)
         else:
             for n in [1] * step if per_sample else [step]:
                 sim.advance(n * TS)
@@ -151,3 +154,38 @@ def test_er_minus_one_disables_poserr_and_off_on_error() -> None:
     assert (mo, sc) == (0.0, 0.0)  # the motor on, the jog running
     assert abs(te) > 0  # a real position error, beyond any ER >= 0
     assert not int(ts) & 64  # TS bit 6 (error beyond ER) never set with ER -1
+
+
+def _switches(forward: int, reverse: int) -> Callable[[SimController], None]:
+    return lambda sim: sim.place_limit_switches("A", forward=forward, reverse=reverse)
+
+
+def test_ld_2_leaves_the_forward_switch_watched_and_a_jog_stops_at_its_sample() -> None:
+    # Only the reverse switch is disabled: the forward one must still end a step at the
+    # sample the axis enters it, in one advance as sample by sample.
+    out = one_go_and_per_sample(
+        [_switches(3000, -3000), "LDA=2;JG 20000;BG A", 400, "MG _SCA,_RPA,TIME"]
+    )
+    assert last_reply(out)[0] == b"2.0000"
+
+
+def test_ld_1_runs_through_a_placed_switch_to_the_soft_limit_at_its_sample() -> None:
+    # The disabled forward switch is passed by (no watch ends a step there); FL, which LD
+    # leaves on, stops the jog at its sample; LD 0 set mid-run then watches the switch again
+    # for the jog back out and in.
+    out = one_go_and_per_sample(
+        [
+            _switches(3000, -3000),
+            "LDA=1;FLA=9000;JG 20000;BG A",
+            700,
+            "MG _SCA,_RPA,TIME",
+            "LDA=0;PAA=0;BG A",
+            700,
+            "JG 20000;BG A",
+            700,
+            STATE,
+        ]
+    )
+    assert b" 2.0000 " in out  # the soft limit's stop
+    assert last_reply(out)[1] == b"2.0000"  # _SCA: the switch, enabled again, stopped it
+    assert float(last_reply(out)[2]) < 9000

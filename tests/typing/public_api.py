@@ -43,6 +43,8 @@ def check(dmc: galil.Controller) -> None:
     assert_type(dmc.A.kp, float)
     assert_type(dmc.A.error_limit, int)
     assert_type(dmc.A.motor_type, galil.MotorType | float)
+    assert_type(dmc.A.limit_disable, galil.LimitDisable)
+    dmc.A.limit_disable = galil.LimitDisable.FORWARD
     # issue 12: programs, arrays, variables, interrupts, capture; issue 17: begin
     assert_type(dmc.capture(["_RPA"], every=2, count=10), galil.Capture)
     assert_type(dmc.capture(["_RPA"], seconds=1.0).wait(), galil.Recording)

@@ -167,7 +167,7 @@ class Automatic(Room):
 
     def _on_switch(self, ax: Axis, code: int) -> bool:
         limits = self.machine.room(Limits)
-        return limits.active(ax, "forward" if code == 2 else "reverse")
+        return limits.halts(ax, "forward" if code == 2 else "reverse")
 
     def _error_limit(self, ax: Axis) -> float | None:
         """ER when the error matters (a #POSERR to run or OE 1/3), else None."""

@@ -17,6 +17,15 @@ home switch is a flag on one side of an edge (default: below -10,000 counts) tha
 home input (TS bit 1, ``_HMx``) low; index pulses come every 4,000 counts from 0
 (:class:`HomeGeometry`). Decision 0015.
 
+``LD`` disables a limit switch per axis (1 forward, 2 reverse, 3 both; decision 0046): a
+disabled switch neither stops motion towards it nor refuses a start towards it, so no
+#LIMSWI runs for it ("LD can be used to disable the limit operation", #LIMSWI), and the
+watches and horizon pass it by. Its input still reads: ``_LFx``/``_LRx`` (the reference's LD
+example reads ``_LFA`` as an input after ``LDA=1``), ``TS`` and the data record's switch bits
+(unsourced for TS; EPICS: "The controller still reports the limit switch status"). The soft
+limits stay ("LD does not disable software limits set by BL and FL"). A model without LD
+refuses the command and ``_LDx`` with TC 1, as any command it does not know.
+
 Contour axes are stopped by switches and soft limits on the same rules (the reference's
 #LIMSWI: a limit event is "Motion profiling in the direction of the given limit. I.E. RPm
 increasing for forward switch"). Such a stop ends the whole contour at once, at the sample the
@@ -90,6 +99,7 @@ class _AxisLimits:
     reverse_at: int | None = None
     home: HomeGeometry = field(default_factory=HomeGeometry)
     home_pressed: bool | None = None  # the test hook holds the home switch (None: geometry)
+    ld: int = 0  # LD: 1 the forward switch disabled, 2 the reverse one, 3 both
 
 
 class Limits(Room):
@@ -120,6 +130,11 @@ class Limits(Room):
         """Whether the controller sees the switch active (tripped pulls low; CN picks the level)."""
         return self.tripped(ax, which) != (self.cn[0] > 0)
 
+    def halts(self, ax: Axis, which: str) -> bool:
+        """Whether the switch stops motion towards it: active, and not disabled by ``LD``."""
+        bit = 1 if which == "forward" else 2
+        return not self.axes[ax.letter].ld & bit and self.active(ax, which)
+
     def home_level(self, ax: Axis) -> int:
         """The home input: 0 (low) while the home switch is tripped, 1 otherwise."""
         s = self.axes[ax.letter]
@@ -146,16 +161,16 @@ class Limits(Room):
 
     # ---- used by other rooms -----------------------------------------------------------
     def check_start(self, ax: Axis, direction: float) -> None:
-        """Refuse a start towards an active switch or beyond a soft limit.
+        """Refuse a start towards an active switch (not disabled by LD) or beyond a soft limit.
 
         Raises:
             Refused: TC 22.
         """
         s = self.axes[ax.letter]
         ref = ax.m.reference
-        if direction > 0 and (self.active(ax, "forward") or ref > s.fl):
+        if direction > 0 and (self.halts(ax, "forward") or ref > s.fl):
             raise Refused(22, "forward limit")
-        if direction < 0 and (self.active(ax, "reverse") or ref < s.bl):
+        if direction < 0 and (self.halts(ax, "reverse") or ref < s.bl):
             raise Refused(22, "reverse limit")
 
     def switch_bits(self, ax: Axis) -> int:
@@ -212,15 +227,17 @@ class Limits(Room):
         return k
 
     def _watched(self, ax: Axis) -> bool:
-        """Whether ``ax`` may run into a placed switch (the watch looks for it), or, in contour
-        mode, into a switch active already (nothing refused its start: ``CM`` does not move,
-        and its segments come later)."""
+        """Whether ``ax`` may run into a placed switch LD leaves on (the watch looks for it),
+        or, in contour mode, into a switch active already (nothing refused its start: ``CM``
+        does not move, and its segments come later)."""
         if not ax.m.moving or ax.limit_stop:
             return False
         s = self.axes[ax.letter]
-        if s.forward_at is not None or s.reverse_at is not None:
+        if (s.forward_at is not None and not s.ld & 1) or (
+            s.reverse_at is not None and not s.ld & 2
+        ):
             return True
-        return ax.contour and (self.active(ax, "forward") or self.active(ax, "reverse"))
+        return ax.contour and (self.halts(ax, "forward") or self.halts(ax, "reverse"))
 
     @staticmethod
     def _crossing(
@@ -288,23 +305,23 @@ class Limits(Room):
         if self._runs_into(ax):
             return True
         s, now = self.axes[ax.letter], ax.physical
-        if s.forward_at is not None and start < s.forward_at <= now:
+        if s.forward_at is not None and not s.ld & 1 and start < s.forward_at <= now:
             return True
-        if s.reverse_at is not None and start > s.reverse_at >= now:
+        if s.reverse_at is not None and not s.ld & 2 and start > s.reverse_at >= now:
             return True
         if not ax.contour:
             return False
         moved = ax.m.reference - ref
-        return (moved > 0 and self.active(ax, "forward")) or (
-            moved < 0 and self.active(ax, "reverse")
+        return (moved > 0 and self.halts(ax, "forward")) or (
+            moved < 0 and self.halts(ax, "reverse")
         )
 
     def _runs_into(self, ax: Axis) -> int:
-        """2 or 3 when ``ax`` moves towards an active limit switch, else 0."""
+        """2 or 3 when ``ax`` moves towards an active limit switch LD leaves on, else 0."""
         v = ax.m.profiler.velocity
-        if v > 0 and self.active(ax, "forward"):
+        if v > 0 and self.halts(ax, "forward"):
             return 2
-        if v < 0 and self.active(ax, "reverse"):
+        if v < 0 and self.halts(ax, "reverse"):
             return 3
         return 0
 
@@ -341,6 +358,33 @@ class Limits(Room):
 
     def _soft_limits_changed(self) -> None:
         self._soft = any(a.fl < INT32_MAX or a.bl > INT32_MIN for a in self.axes.values())
+
+    @handler("LD", Args.VALUES)
+    def ld(self, fields: list[tuple[Axis, str]]) -> str:
+        """LD: limit disable per axis, 0 .. 3 (DMC-4103 reference: "Valid while in motion";
+        a switch enabled again under an axis moving into it stops it at once)."""
+        self._has_ld()
+
+        def check(ax: Axis, v: float) -> float:
+            if v not in (0, 1, 2, 3):
+                raise Refused(6, "LD is 0, 1, 2 or 3")
+            return v
+
+        def apply(ax: Axis, v: float) -> None:
+            self.axes[ax.letter].ld = int(v)
+            self._check_switch(ax)
+
+        i = self.machine.interp
+        return i.parameters(fields, self.limit_disable, check, apply, lambda v: i.num(v, "1.0"))
+
+    def _has_ld(self) -> None:
+        if not self.machine.spec.has_limit_disable:
+            raise Refused(1, f"no LD on {self.machine.spec.name}")
+
+    @operand("LD", kind=OperandKind.AXIS)
+    def limit_disable(self, ax: Axis) -> float:
+        self._has_ld()
+        return self.axes[ax.letter].ld
 
     @handler("TS", Args.AXES)
     def ts(self, axes: list[Axis]) -> str:
