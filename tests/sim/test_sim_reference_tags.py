@@ -163,6 +163,7 @@ TAGS: dict[str, Tag] = {
     "KP": _valid("KPA=6"),
     "KS": _valid("KSA=2"),
     "LA": _valid("LA"),
+    "LD": _valid("LDA=0"),
     "LE": _valid("LE", LSEQ, rest="LMBC;LI ,100,0;LE;CSS"),
     "LI": _valid("LI ,100000,0", LSEQ, rest="LMBC;LI ,100,0;CSS"),
     "LM": _valid("LMBC", SEQ, code=29, kept=_LM_KEPT, sim_motion=False),
