@@ -1145,8 +1145,10 @@ def refuse_in_motion(link: CommandLink, tracker: MotionTracker, letter: str, nam
     if not round(bg):
         tracker.ended(letter, rp, sc)  # (its handle reports this end, a limit's or a fault's)
         return
-    if name == "DC" and round(sc) in _STOPPING_CODES:
-        return  # "directly following an axis stop (i.e. ST m or a limit switch)"
+    if name == "DC" and track.kind == "position" and round(sc) in _STOPPING_CODES:
+        # "directly following an axis stop (i.e. ST m or a limit switch), the DC value of a
+        # PA or PR move may be changed": a PA/PR move only (a sequence's ramp is VD's)
+        return
     raise InvalidArgument(
         f"{name} is not valid while axis {letter} moves (its {handle.kind} move is in "
         "progress): wait for the move or stop it first",

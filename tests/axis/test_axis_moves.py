@@ -433,6 +433,24 @@ def test_a_decel_change_goes_out_once_a_limit_the_library_has_not_seen_ended_its
     assert info.value.stop_codes == {"A": 3}
 
 
+def test_a_decel_change_is_refused_unsent_while_a_stop_ramps_a_vector_sequence_down(
+    dmc: galil.Controller,
+) -> None:
+    # DC may change in a stop's ramp of a PA or PR move only: a sequence ramps down at VD, and
+    # the controller answers DC on its axes with TC 7 until it is over (decision 0043). A
+    # random operation sequence found the library letting it out on the stop code 4 alone.
+    run = dmc.vector_move("AB", [galil.Line(50_000, 0)], speed=20_000)
+    dmc.sleep(0.5)
+    dmc.stop("")
+    with transcript(dmc) as sent, pytest.raises(galil.InvalidArgument, match="DC"):
+        dmc.A.decel = 20_480
+    assert sent.lines == ["MG _BGA,_RPA,_SCA"]  # (the one read; it still moves, code 4)
+    run.wait()
+    with transcript(dmc) as sent:
+        dmc.A.decel = 20_480  # at rest: taken, nothing read first
+    assert sent.lines == ["DCA=20480"]
+
+
 def test_motor_type_is_refused_unsent_while_the_motor_is_on(dmc: galil.Controller) -> None:
     # DMC-4103 reference, MT: "The axis must be in the motor off state (MO) before setting MT".
     a = dmc.A
