@@ -8,15 +8,11 @@ nor at the end (``CD 0=0``), nor while it waits for the last segments.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
 import numpy as np
 import pytest
 
 import galil
-from galil.sim.clock import RealTimeClock
 from galil.sim.controller import SimController
-from galil.sim.server import SimTcpServer
 from galil.testing import sim_of, simulated
 
 
@@ -64,16 +60,6 @@ def test_a_short_contour_sent_whole_into_a_switch_raises_at_its_end() -> None:
         sim = sim_of(dmc)
         sim.place_limit_switches("A", forward=1000)
         check_stopped_at_switch(dmc, sim, ramp(4000, 200), 1000)
-
-
-@pytest.fixture
-def tcp() -> Iterator[tuple[galil.Controller, SimController]]:
-    sim = SimController("DMC-4040", RealTimeClock(speed=8.0))
-    with (
-        SimTcpServer(sim) as server,
-        galil.connect(server.url, message_port=server.message_address[1], timeout=2.0) as dmc,
-    ):
-        yield dmc, sim
 
 
 def test_a_contour_into_a_switch_over_tcp_raises_and_stops_feeding(

@@ -7,7 +7,6 @@ exact because every line that starts or changes motion is stamped with the contr
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -15,24 +14,11 @@ import pytest
 import galil
 from galil import Arc, Line
 from galil.errors import LimitError
-from galil.sim.clock import RealTimeClock
 from galil.sim.controller import SimController
-from galil.sim.server import SimTcpServer
 from galil.testing import nothing_sent
 from galil.units import ureg
 
 mm, s = ureg.mm, ureg.s
-
-
-@pytest.fixture
-def tcp() -> Iterator[tuple[galil.Controller, SimController]]:
-    sim = SimController("DMC-4040", RealTimeClock(speed=8.0))
-    with (
-        SimTcpServer(sim) as server,
-        galil.connect(server.url, message_port=server.message_address[1], timeout=2.0) as dmc,
-    ):
-        assert dmc.transport.kind == "ethernet"
-        yield dmc, sim
 
 
 def traced(
