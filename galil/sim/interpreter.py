@@ -174,11 +174,17 @@ class Interpreter:
             raise Refused(3, f"{name!r} not valid in a program")
 
     def _planes(self, s: str) -> list[str] | None:
-        """The planes a plane command names (``BG ST``), or ``None`` if it is not one."""
-        if s[:2] not in self.plane_commands:
+        """The planes a plane command names (``BG ST``), with the axes where it takes them
+        too (``BG SA``: :attr:`~galil.sim.registry.Args.PLANES_AND_AXES`), or ``None`` if it
+        is not one."""
+        command = self.plane_commands.get(s[:2])
+        if command is None:
             return None
         letters = s[2:].replace(" ", "").replace(",", "")
-        if not letters or any(c not in _PLANES for c in letters):
+        axes = self._letters if command.spec.args is Args.PLANES_AND_AXES else frozenset()
+        if not any(c in _PLANES for c in letters):
+            return None
+        if any(c not in _PLANES and c not in axes for c in letters):
             return None
         return list(dict.fromkeys(letters))
 
