@@ -28,12 +28,13 @@ import pytest
 
 import galil.sim.rooms
 from galil.axis import Axis
-from galil.errors import InvalidArgument
+from galil.errors import CommandError, InvalidArgument
 from galil.sim.controller import SimController
 from galil.sim.machine import Room
 from galil.sim.programs import NOT_IN_PROGRAM, PROGRAM_ONLY
 from galil.sim.registry import HandlerSpec, marks
-from galil.testing import nothing_sent, simulated
+from galil.sim.rooms.tuning import Tuning
+from galil.testing import nothing_sent, sim_of, simulated
 from galil.tuning import Setting
 
 #: The motion a form meets (each is accepted on a fresh DMC-4040).
@@ -419,3 +420,30 @@ def test_servo_here_is_refused_unsent_while_an_axis_moves_and_sent_at_rest() -> 
         jog.stop()
         jog.wait()
         dmc.servo_here()
+
+
+def test_burning_the_program_is_refused_unsent_while_the_librarys_own_jog_runs() -> None:
+    # BP: "Not Valid while in motion" (TC 7; decisions 0045, 0047)
+    with simulated() as dmc:
+        burns = sim_of(dmc).room(Tuning).burns
+        jog = dmc.A.jog(5000)
+        for burn in (dmc.programs.burn, dmc.save_program):
+            with (
+                nothing_sent(dmc, allow_queries=True),
+                pytest.raises(InvalidArgument, match="BP is not valid while axis A moves"),
+            ):
+                burn()
+        jog.stop()
+        jog.wait()
+        dmc.programs.burn()  # (at rest it goes out)
+        assert burns["BP"] == 1
+
+
+def test_burning_the_program_in_motion_the_library_did_not_start_is_the_controllers_tc_7() -> None:
+    with simulated() as dmc:
+        dmc.command("JGA=5000;BGA", allow_compound=True)  # (a raw BG: the library knows nothing)
+        with pytest.raises(CommandError) as refused:
+            dmc.programs.burn()
+        assert refused.value.code == 7
+        assert sim_of(dmc).room(Tuning).burns["BP"] == 0
+        dmc.command("STA")
