@@ -379,7 +379,7 @@ def test_commands_valid_in_a_program_run_in_a_thread_and_the_others_stop_it_with
 
 
 def test_a_thread_runs_up_to_a_command_not_valid_in_a_program_and_stops_there() -> None:
-    sim = in_a_thread("x=1\rWH;x=2\rx=3")
+    sim = in_a_thread("y=1\rx=1;WH;x=2\rx=3")
     assert (error_code(sim), number(sim, "_ED"), number(sim, "x")) == (3, 2, 1)
     assert ask(sim, "TC 1") == " 3 Command not valid in program\r\n:"
     assert ask(sim, "WH") == "RS232\r\n:"  # (from a host it answers)
