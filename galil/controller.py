@@ -457,7 +457,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         self.tracker = MotionTracker()
         self.routines = Routines(self.link)
         self.io = IO(self.link, self.messages_room, self.routines)
-        self.programs = Programs(self.link, self.routines)
+        self.programs = Programs(self.link, self.routines, self.tracker)
         self.arrays = Arrays(self.link)
         self.variables = Variables(self.link)
         self.interrupts = Interrupts(self.link)
@@ -807,8 +807,9 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         burn(self.link, "BN", timeout)
 
     def save_program(self, timeout: float | None = None) -> None:
-        """Burn the program to flash (``BP``)."""
-        burn(self.link, "BP", timeout)
+        """Burn the program to flash (``BP``); refused while an axis moves (see
+        :meth:`Programs.burn <galil.programs.Programs.burn>`)."""
+        burn(self.link, "BP", timeout, self.tracker)
 
     def save_variables(self, timeout: float | None = None) -> None:
         """Burn the variables and arrays to flash (``BV``)."""

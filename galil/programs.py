@@ -31,6 +31,7 @@ from pathlib import Path
 
 from galil.errors import GalilTimeoutError, InvalidArgument
 from galil.link import CommandLink, check_flag, check_seconds
+from galil.motion import MotionTracker
 from galil.protocol import commands as cmds
 from galil.protocol.programs import check_program, program_lines
 from galil.routines import MARKER, Routines, split_program
@@ -92,11 +93,15 @@ class Programs:
     Args:
         link: the command link.
         routines: the library's routines (their block is kept by every download).
+        tracker: the motion the library started (``burn`` is refused unsent during it).
     """
 
-    def __init__(self, link: CommandLink, routines: Routines) -> None:
+    def __init__(
+        self, link: CommandLink, routines: Routines, tracker: MotionTracker | None = None
+    ) -> None:
         self.link = link
         self.routines = routines
+        self._tracker = tracker
 
     def __repr__(self) -> str:
         m = self.link.model
@@ -225,5 +230,6 @@ class Programs:
         """Burn the program into flash (``BP``), the library's routines with it; it then
         survives a power cycle. Slow: the model's ``burn_timeout`` is allowed. The same as
         ``controller.save_program()``; refused while a program runs (TC 17), the watchdog's
-        included."""
-        burn(self.link, "BP", timeout)
+        included, and while an axis moves (the controller's TC 7; unsent, as
+        :class:`~galil.errors.InvalidArgument`, while a motion the library started runs)."""
+        burn(self.link, "BP", timeout, self._tracker)

@@ -21,7 +21,7 @@ from collections.abc import Callable
 from typing import Generic, Protocol, TypeVar, overload
 
 from galil.errors import InvalidArgument
-from galil.link import CommandLink
+from galil.link import CommandLink, check_timeout
 from galil.models import MOTOR_TYPES, ModelSpec
 from galil.motion import MotionTracker, refuse_in_motion
 from galil.protocol import commands as cmds
@@ -186,15 +186,34 @@ class Setting(Generic[T]):
         link.command_line([command])
 
 
-def burn(link: CommandLink, what: str, timeout: float | None = None) -> None:
+def burn(
+    link: CommandLink,
+    what: str,
+    timeout: float | None = None,
+    tracker: MotionTracker | None = None,
+) -> None:
     """``BN``/``BP``/``BV`` with a timeout that fits a flash write (``model.burn_timeout``).
 
+    ``BP`` is "Not Valid while in motion" (the DMC-4103 reference; TC 7): with ``tracker``,
+    it is refused unsent while an axis moves that the library itself started and has not
+    seen end (:func:`~galil.motion.refuse_in_motion`: one query of that axis, none
+    otherwise). Motion started elsewhere (a program, a raw ``BG``) gets the controller's
+    refusal.
+
     Raises:
-        InvalidArgument: ``what`` is not BN, BP or BV.
-        CommandError: the controller refused (a program running: TC 17).
+        InvalidArgument: ``what`` is not BN, BP or BV; a bad ``timeout``; ``BP`` while the
+            library's own motion runs.
+        CommandError: the controller refused (a program running: TC 17; motion: TC 7).
     """
     command = cmds.burn(what)
-    link.command_line([command], timeout=link.model.burn_timeout if timeout is None else timeout)
+    wait = check_timeout(timeout, link.model.burn_timeout)
+    if tracker is None or command.text != "BP":
+        link.command_line([command], timeout=wait)
+        return
+    with tracker.lock:  # (no start in another thread between the check and BP)
+        for letter in link.model.axes:
+            refuse_in_motion(link, tracker, letter, "BP")
+        link.command_line([command], timeout=wait)
 
 
 _TM = re.compile(r"^\s*TM\s*([0-9]+(?:\.[0-9]*)?)\s*$", re.IGNORECASE)

@@ -10,6 +10,8 @@ import pytest
 import galil
 from galil.protocol import commands as cmds
 from galil.routines import MARKER, Routine
+from galil.sim.parse import split_program_line
+from galil.sim.programs import NOT_IN_PROGRAM
 from galil.testing import nothing_sent, simulated
 
 
@@ -125,3 +127,20 @@ def test_waiting_for_an_input_refuses_a_bad_timeout_before_anything_is_sent(
 ) -> None:
     with simulated() as dmc, nothing_sent(dmc), pytest.raises(galil.InvalidArgument):
         dmc.io.wait_for_input(2, timeout=timeout)  # type: ignore[arg-type]
+
+
+def test_the_librarys_routines_hold_no_command_a_program_may_not_run() -> None:
+    # (the reference's "Not Valid in program" commands stop a thread with TC 3: decision 0047)
+    with simulated() as dmc:
+        dog = dmc.watchdog(0.5, thread=6)
+        with pytest.raises(galil.GalilTimeoutError):
+            dmc.io.wait_for_input(2, high=False, timeout=0.1)
+        dmc.A.speed_schedule(40_000, [(10_000, 5000)]).wait()
+        program = dmc.routines.upload()
+        dog.stop()
+    library = program[program.index(MARKER) + 1 :]
+    labels = [line for line in library if line.startswith("#")]
+    assert labels == ["#GWDOG", "#GWDOGL", "#GINWAIT", "#GINLOOP", "#GSCHED"]
+    words = [c.strip()[:2] for line in library for c in split_program_line(line)]
+    assert {"WT", "AD"} <= set(words)
+    assert not NOT_IN_PROGRAM & set(words)

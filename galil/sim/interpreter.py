@@ -18,7 +18,7 @@ from galil.models import INT32_MAX, INT32_MIN, ModelSpec
 from galil.protocol.numbers import format_reply, parse_format
 from galil.sim.parse import FUNCTIONS, Refused, evaluate, split_fields
 from galil.sim.ports import Port
-from galil.sim.programs import PROGRAM_ONLY, Thread, program_only
+from galil.sim.programs import NOT_IN_PROGRAM, PROGRAM_ONLY, Thread, program_only
 from galil.sim.registry import Args, HandlerSpec, Result
 from galil.sim.servo import Axis, Servo
 
@@ -122,10 +122,11 @@ class Interpreter:
             control = self.commands.get(s)
             if control is None:
                 raise Refused(1, "unknown control command")
+            self._check_caller(s)
             return control.run("")
         word = program_only(s)
         if word is not None:
-            self._from_program(word)
+            self._check_caller(word)
             raise Refused(1, f"{word} is run by a program thread")
         eq = _find_eq(s)
         if eq > 0 and s[eq - 1] == "]" and self.store_element is not None:
@@ -138,14 +139,14 @@ class Interpreter:
         if self.plane_commands:
             planes = self._planes(s)
             if planes is not None:
-                self._from_program(s[:2])  # AM S as AM A
+                self._check_caller(s[:2])  # AM S as AM A
                 return self.plane_commands[s[:2]].run(planes)
         if command is not None:
             if eq > 0 and not command.spec.equals:
                 name = s[:eq].strip()
                 if not self._is_axis_spec(s[2:eq].strip()) and self._variable.fullmatch(name):
                     return self.assign(name, s[eq + 1 :])
-            self._from_program(s[:2])
+            self._check_caller(s[:2])
             args = s[2:]
             kind = command.spec.args
             if kind is Args.TEXT:
@@ -157,22 +158,33 @@ class Interpreter:
             return self.assign(s[:eq].strip(), s[eq + 1 :])
         raise Refused(1, f"unrecognised command {s!r}")
 
-    def _from_program(self, name: str) -> None:
+    def _check_caller(self, name: str) -> None:
         """Refuse a program-only command (:data:`~galil.sim.programs.PROGRAM_ONLY`) that a
-        host port sent.
+        host port sent, and a host-only one (:data:`~galil.sim.programs.NOT_IN_PROGRAM`)
+        that a program thread reached.
 
         Raises:
-            Refused: TC 2, "Command only valid from program".
+            Refused: TC 2, "Command only valid from program"; TC 3, "Command not valid in
+                program".
         """
-        if name in PROGRAM_ONLY and not isinstance(self.caller, Thread):
-            raise Refused(2, f"{name} only in a program")
+        if not isinstance(self.caller, Thread):
+            if name in PROGRAM_ONLY:
+                raise Refused(2, f"{name} only in a program")
+        elif name in NOT_IN_PROGRAM:
+            raise Refused(3, f"{name!r} not valid in a program")
 
     def _planes(self, s: str) -> list[str] | None:
-        """The planes a plane command names (``BG ST``), or ``None`` if it is not one."""
-        if s[:2] not in self.plane_commands:
+        """The planes a plane command names (``BG ST``), with the axes where it takes them
+        too (``BG SA``: :attr:`~galil.sim.registry.Args.PLANES_AND_AXES`), or ``None`` if it
+        is not one."""
+        command = self.plane_commands.get(s[:2])
+        if command is None:
             return None
         letters = s[2:].replace(" ", "").replace(",", "")
-        if not letters or any(c not in _PLANES for c in letters):
+        axes = self._letters if command.spec.args is Args.PLANES_AND_AXES else frozenset()
+        if not any(c in _PLANES for c in letters):
+            return None
+        if any(c not in _PLANES and c not in axes for c in letters):
             return None
         return list(dict.fromkeys(letters))
 

@@ -29,6 +29,7 @@ from galil.sim.registry import Collect, Download, Result, Wait
 
 __all__ = [
     "LINES_PER_SAMPLE",
+    "NOT_IN_PROGRAM",
     "PROGRAM_ONLY",
     "STACK_DEPTH",
     "Executor",
@@ -58,6 +59,12 @@ PROGRAM_ONLY = frozenset(
         *("RE", "RI", "WT", "ZS", "IF", "ELSE", "ENDIF"),
     }
 )
+#: The commands the simulator runs that the same reference marks "Not Valid in program", in
+#: one place: a program thread that reaches one stops with TC 3 ("Command not valid in
+#: program"), ``_ED`` its line, as for any program error; from a host they run. A download
+#: stores such a line as any other (DL: "Instructions in the file will be accepted as a data
+#: stream"); the refusal comes when a thread reaches it (decision 0047).
+NOT_IN_PROGRAM = frozenset({"DL", "QD", "RS", "UL", "WH", "\x12\x13", "\x12\x16"})
 
 
 def program_only(text: str) -> str | None:
@@ -264,11 +271,10 @@ class Programs:
         except Refused as e:
             self._halt(th, e.code)
             return False
+        # (DL and QD, which switch a port to collecting, never run here: NOT_IN_PROGRAM)
+        assert not isinstance(result, (Download, Collect)), text
         if isinstance(result, Wait):
             th.wait = result
-        elif isinstance(result, (Download, Collect)):
-            self._halt(th, 3)
-            return False
         elif result:
             self._emit(result)
         return th.number in self.threads

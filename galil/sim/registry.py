@@ -48,6 +48,11 @@ class Args(enum.Enum):
     #: handler answers a command another room answers for axes (``BG A``); the interpreter
     #: calls it when every letter named is a plane.
     PLANES = "planes"
+    #: Coordinate systems, or coordinate systems and axes together (``BG S``, ``BG SA``):
+    #: ``list[str]`` of the letters named (axis letters as written). A plane command like
+    #: :attr:`PLANES`, but the interpreter also calls it when a plane is named and every
+    #: other letter is an axis.
+    PLANES_AND_AXES = "planes and axes"
 
 
 class OperandKind(enum.Enum):

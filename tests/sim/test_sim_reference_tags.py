@@ -12,7 +12,10 @@ behaviour on purpose, the row says why (decision 0045). The tests check a DMC-40
   motion" is taken and one "Not Valid while in motion" is refused (``?``, TC 7 unless the row
   gives another code); a program-only command is checked in a program thread instead;
 - in the terminal: at rest, from a host, a command "Valid in terminal" is taken, one "Not
-  Valid in terminal" is refused with TC 2 ("Command only valid from program").
+  Valid in terminal" is refused with TC 2 ("Command only valid from program");
+- in a program: at rest, in a program thread, a command "Valid in program" runs, and one "Not
+  Valid in program" stops the thread with TC 3 ("Command not valid in program"), the download
+  of its program having been taken (decision 0047).
 """
 
 from __future__ import annotations
@@ -25,12 +28,13 @@ import pytest
 
 import galil.sim.rooms
 from galil.axis import Axis
-from galil.errors import InvalidArgument
+from galil.errors import CommandError, InvalidArgument
 from galil.sim.controller import SimController
 from galil.sim.machine import Room
-from galil.sim.programs import PROGRAM_ONLY
+from galil.sim.programs import NOT_IN_PROGRAM, PROGRAM_ONLY
 from galil.sim.registry import HandlerSpec, marks
-from galil.testing import nothing_sent, simulated
+from galil.sim.rooms.tuning import Tuning
+from galil.testing import nothing_sent, sim_of, simulated
 from galil.tuning import Setting
 
 #: The motion a form meets (each is accepted on a fresh DMC-4040).
@@ -56,6 +60,11 @@ class Tag:
         sim_motion: what the simulator does in motion where ``kept`` says so.
         always: the TC every form gets on the DMC-4040 (nothing there to take): the test
             then checks that neither motion nor the host port changes the answer.
+        program: "Valid in program" (``False``: "Not Valid in program").
+        in_program: the form a program runs, where the host's cannot be one (a ``\\``
+            would end the download; ``CF I`` names the sender, which a thread is not).
+        sim_program: the TC the simulator stops a thread with where ``kept`` says why it
+            departs from "Valid in program".
     """
 
     motion: bool
@@ -67,6 +76,9 @@ class Tag:
     kept: str = ""
     sim_motion: bool | None = None
     always: int | None = None
+    program: bool = True
+    in_program: str | None = None
+    sim_program: int | None = None
 
 
 def _valid(form: str, scenario: str = JOG, **kw: object) -> Tag:
@@ -91,6 +103,10 @@ _WT_KEPT = (
     "motion as it always has"
 )
 _PLANE_KEPT = "TC 29 'Not valid during coordinated move' (the TC list) while its plane runs"
+_BURN_KEPT = (
+    "TC 17 'ED, BN and DL not valid while program running' (the TC list), and so in a "
+    "thread; the simulator has refused BP with BN from the start (decision 0047)"
+)
 _LM_KEPT = (
     "taken while other axes move; refused (TC 29) while its own plane runs, as VM: a running "
     "sequence's mode is not changed"
@@ -98,8 +114,8 @@ _LM_KEPT = (
 
 #: DMC-4103 command reference tags (file 61423517454) of every command the simulator runs.
 TAGS: dict[str, Tag] = {
-    "\x12\x13": _valid("\x12\x13"),  # ^R^S
-    "\x12\x16": _valid("\x12\x16"),  # ^R^V
+    "\x12\x13": _valid("\x12\x13", program=False),  # ^R^S
+    "\x12\x16": _valid("\x12\x16", program=False),  # ^R^V
     "AB": _valid("AB 1"),
     "AC": _valid("ACA=256000"),
     "AD": _program("AD 0"),
@@ -114,15 +130,15 @@ TAGS: dict[str, Tag] = {
     "AV": _program("AV 0", scenario=SEQ),
     "BG": _still("BGA", code=21),  # (TC 21 "Begin not valid while running")
     "BL": _valid("BLA=-2147483648"),
-    "BN": _valid("BN"),
-    "BP": _still("BP"),
+    "BN": _valid("BN", kept=_BURN_KEPT, sim_program=17),
+    "BP": _still("BP", kept=_BURN_KEPT, sim_program=17),
     "BR": _still("BRA=0"),
     "BV": _valid("BV"),
     "CA": _valid("CAS"),
     "CB": _valid("CB 1"),
     "CD": _valid("CD 100", CONTOUR, rest="CMD;CD 0=0"),
     "CE": _still("CEA=0"),
-    "CF": _valid("CF I"),
+    "CF": _valid("CF I", in_program="CF S"),
     "CM": _valid("CMD"),
     "CN": _valid("CN -1"),
     "CR": _valid("CR 1000,0,90", SEQ, rest="VMBC;CR 1000,0,90;CSS"),
@@ -130,7 +146,7 @@ TAGS: dict[str, Tag] = {
     "CW": _valid("CW 2"),
     "DA": _valid("DM xx[2];DA xx[]"),
     "DC": _still("DCA=256000", MOVE, kept=_DC_KEPT),
-    "DL": _valid("DL\r#T\rEN\r\\"),
+    "DL": _valid("DL\r#T\rEN\r\\", program=False, in_program="DL"),
     "DM": _valid("DM xx[2]"),
     "DP": _still("DPA=0"),
     "DR": _valid("DR 0"),
@@ -182,7 +198,7 @@ TAGS: dict[str, Tag] = {
     "PA": _still("PAA=0"),
     "PF": _valid("PF 10.0"),
     "PR": _still("PRA=0"),
-    "QD": _valid("DM qq[2];QD qq[]\r1,2\\"),
+    "QD": _valid("DM qq[2];QD qq[]\r1,2\\", program=False, in_program="DM qq[2];QD qq[]"),
     "QR": _valid("QR"),
     "QU": _valid("DM qq[2];QU qq[],0,1,1"),
     "QZ": _valid("QZ"),
@@ -192,7 +208,7 @@ TAGS: dict[str, Tag] = {
     "RE": _program("RE"),
     "RI": _program("RI"),
     "RP": _valid("RP"),
-    "RS": _valid("RS"),
+    "RS": _valid("RS", program=False),
     "SB": _valid("SB 1"),
     "SC": _valid("SC"),
     "SH": _still("SHA"),
@@ -210,7 +226,7 @@ TAGS: dict[str, Tag] = {
     "TV": _valid("TV"),
     "TW": _valid("TWA=32766"),
     "UI": _valid("UI 1"),
-    "UL": _valid("UL"),
+    "UL": _valid("UL", program=False),
     "VA": _valid("VA 256000", SEQ),
     "VD": _still("VD 256000", SEQ),
     "VE": _valid("VE", SEQ, rest="VMBC;VP 100,0;VE;CSS"),
@@ -221,9 +237,9 @@ TAGS: dict[str, Tag] = {
     # VT and WC have no entry in this reference; the DMC-4040 has no VT (TC 1).
     "VT": _valid("VT 1", SEQ, always=1),
     "WC": _valid("WC", CONTOUR),
-    "WH": _valid("WH"),
+    "WH": _valid("WH", program=False),
     "WT": _program("WT 2", motion=False, kept=_WT_KEPT, sim_motion=True),
-    "XQ": _valid("DL\r#T\rEN\r\\\rXQ #T,1"),
+    "XQ": _valid("DL\r#T\rEN\r\\\rXQ #T,1", in_program="XQ #S,2"),
     "ZS": _program("ZS"),
     "=": _valid("x=1"),  # (the assignment operator)
 }
@@ -295,6 +311,7 @@ def test_every_row_where_the_simulator_departs_from_the_tag_says_why() -> None:
     for name, tag in TAGS.items():
         departs = tag.sim_motion is not None and tag.sim_motion != tag.motion
         assert not departs or tag.kept, name
+        assert tag.sim_program is None or tag.kept, name
 
 
 @pytest.mark.parametrize("name", sorted(n for n, t in TAGS.items() if t.terminal))
@@ -323,6 +340,49 @@ def test_commands_valid_in_the_terminal_are_answered_from_a_host_and_the_others_
         check(sim, form, True, 0, tag.always)
     else:
         check(sim, form, False, 2, None)
+
+
+def test_the_rows_not_valid_in_a_program_are_the_simulators_set() -> None:
+    # (one set, NOT_IN_PROGRAM, is what a program thread refuses: its rows here say so)
+    assert {n for n, t in TAGS.items() if not t.program} == NOT_IN_PROGRAM
+
+
+def number(sim: SimController, expression: str) -> float:
+    return float(sim.feed(f"MG {expression}\r".encode()).decode()[:-3])
+
+
+def in_a_thread(form: str) -> SimController:
+    """A DMC-4040 at rest that ran ``form`` (line 1 of its program) in thread 1 for a few
+    samples, its output kept apart from the replies."""
+    sim = SimController("DMC-4040")
+    sim.separate_messages = True
+    assert ask(sim, f"DL\r#P\r{form}\rEN\r#S\rEN\r\\") == "::"  # (any line is stored)
+    assert ask(sim, "XQ #P,1") == ":"
+    sim.advance(0.02)
+    return sim
+
+
+@pytest.mark.parametrize("name", sorted(TAGS))
+def test_commands_valid_in_a_program_run_in_a_thread_and_the_others_stop_it_with_tc_3(
+    name: str,
+) -> None:
+    tag = TAGS[name]
+    sim = in_a_thread(tag.in_program or tag.rest or tag.form)
+    code = error_code(sim)
+    if tag.always is not None or tag.sim_program is not None:
+        assert code == (tag.always or tag.sim_program)
+    elif tag.program:
+        assert code == 0
+    else:
+        assert code == 3
+        assert (number(sim, "_ED"), number(sim, "_ED1"), number(sim, "_XQ1")) == (1, 1, -1)
+
+
+def test_a_thread_runs_up_to_a_command_not_valid_in_a_program_and_stops_there() -> None:
+    sim = in_a_thread("y=1\rx=1;WH;x=2\rx=3")
+    assert (error_code(sim), number(sim, "_ED"), number(sim, "x")) == (3, 2, 1)
+    assert ask(sim, "TC 1") == " 3 Command not valid in program\r\n:"
+    assert ask(sim, "WH") == "RS232\r\n:"  # (from a host it answers)
 
 
 _STILL_SETTINGS = sorted(
@@ -360,3 +420,30 @@ def test_servo_here_is_refused_unsent_while_an_axis_moves_and_sent_at_rest() -> 
         jog.stop()
         jog.wait()
         dmc.servo_here()
+
+
+def test_burning_the_program_is_refused_unsent_while_the_librarys_own_jog_runs() -> None:
+    # BP: "Not Valid while in motion" (TC 7; decisions 0045, 0047)
+    with simulated() as dmc:
+        burns = sim_of(dmc).room(Tuning).burns
+        jog = dmc.A.jog(5000)
+        for burn in (dmc.programs.burn, dmc.save_program):
+            with (
+                nothing_sent(dmc, allow_queries=True),
+                pytest.raises(InvalidArgument, match="BP is not valid while axis A moves"),
+            ):
+                burn()
+        jog.stop()
+        jog.wait()
+        dmc.programs.burn()  # (at rest it goes out)
+        assert burns["BP"] == 1
+
+
+def test_burning_the_program_in_motion_the_library_did_not_start_is_the_controllers_tc_7() -> None:
+    with simulated() as dmc:
+        dmc.command("JGA=5000;BGA", allow_compound=True)  # (a raw BG: the library knows nothing)
+        with pytest.raises(CommandError) as refused:
+            dmc.programs.burn()
+        assert refused.value.code == 7
+        assert sim_of(dmc).room(Tuning).burns["BP"] == 0
+        dmc.command("STA")

@@ -275,3 +275,47 @@ def test_a_refused_vector_parameter_line_changes_neither_plane(
     assert ask(sim, f"{command} 2048,2147483647") == b"?"
     assert ask(sim, f"{command} ?,?") == before
     assert ask(sim, f"{command}S=2048;{command}T=4096") == b"::"
+
+
+def _plane_and_move(sim: SimController) -> None:
+    """A sequence ready on S (B, C) and a position move set up on A (the twin of each)."""
+    setup(sim, "BC")
+    assert ask(sim, "VP 20000,5000;VE;PRA=12000;SPA=20000") == b":" * 4
+
+
+@pytest.mark.parametrize("line", ["BG SA", "BG A,S", "BGS A"])
+def test_bg_of_a_plane_and_an_axis_starts_both_on_one_sample(line: str) -> None:
+    # R4103, BG: "Any combination of Axes, Vector Planes, and Virtual Axes may be mixed to
+    # begin motion"; the twin begins them one after the other on the same line.
+    mixed, twin = SimController("DMC-4040", ManualClock()), SimController("DMC-4040", ManualClock())
+    for s in (mixed, twin):
+        _plane_and_move(s)
+    assert stamp(ask(mixed, f"{line};MG TIME")) == stamp(ask(twin, "BGS;BGA;MG TIME"))
+    read = "MG _RPA,_RPB,_RPC,_BGA,_BGS"
+    assert numbers(ask(mixed, read))[3:] == [1, 1]
+    for seconds in (0.05, 0.4, 2.0):
+        mixed.advance(seconds)
+        twin.advance(seconds)
+        assert numbers(ask(mixed, read)) == numbers(ask(twin, read))
+    assert numbers(ask(mixed, read)) == [12000, 20000, 5000, 0, 0]
+
+
+@pytest.mark.parametrize(
+    ("before", "line", "code"),
+    [
+        ("CS S", "BG SA", 24),  # (S's buffer cleared: "no sequence defined")
+        ("MO A", "BG SA", 20),  # A's motor off
+        ("", "BG SB", 21),  # B is S's own axis: as BG S;BG B
+        ("", "BG TA", 24),  # T has no sequence
+    ],
+)
+def test_bg_of_a_plane_and_an_axis_starts_neither_when_one_is_refused(
+    sim: SimController, before: str, line: str, code: int
+) -> None:
+    _plane_and_move(sim)
+    if before:
+        assert ask(sim, before) == b":"
+    assert ask(sim, line) == b"?"
+    assert numbers(ask(sim, "TC"))[0] == code
+    sim.advance(0.1)
+    assert numbers(ask(sim, "MG _BGA,_BGB,_BGS,_RPA,_RPB")) == [0, 0, 0, 0, 0]

@@ -28,7 +28,6 @@ import re
 from galil.models import INT32_MAX, INT32_MIN
 from galil.sim.machine import Machine, Room
 from galil.sim.parse import Refused, split_fields
-from galil.sim.programs import Thread
 from galil.sim.registry import Collect, handler, operand
 
 __all__ = ["Arrays", "fixed"]
@@ -188,8 +187,6 @@ class Arrays(Room):
 
     @handler("QD")
     def qd(self, args: str) -> Collect:
-        if isinstance(self.machine.interp.caller, Thread):
-            raise Refused(3, "QD not valid in a program")
         name, rest = self._target(args)
         values = self._array(name)
         first, last = self._range(rest, values)

@@ -26,6 +26,8 @@ from galil.sim.servo import Axis, at_rest, engine
 __all__ = ["Motion"]
 
 Fields = list[tuple[Axis, str]]
+#: What ``BG`` starts on an axis: a mode's name, ``None`` for a jog, a position move's target.
+Begin = tuple[Axis, int | str | None]
 Check = Callable[[Axis, float], float]
 
 
@@ -218,7 +220,17 @@ class Motion(Room):
 
     @handler("BG", Args.AXES)
     def bg(self, axes: list[Axis]) -> str:
-        plans: list[tuple[Axis, int | str | None]] = []
+        self.begin(self.plan_begin(axes))
+        return ""
+
+    def plan_begin(self, axes: list[Axis]) -> list[Begin]:
+        """What ``BG`` of ``axes`` starts on each, every check made (nothing changed yet):
+        the mode's name, ``None`` for a jog, or the target of a position move.
+
+        Raises:
+            Refused: an axis may not begin (TC 18, 20, 21, 22, 6 ...).
+        """
+        plans: list[Begin] = []
         for ax in axes:
             p = self.axes[ax.letter]
             if p.next_mode in self.modes:
@@ -236,6 +248,10 @@ class Motion(Room):
                 if p.sp <= 0:
                     raise Refused(6, "SP is 0")
                 plans.append((ax, target))
+        return plans
+
+    def begin(self, plans: list[Begin]) -> None:
+        """Start what :meth:`plan_begin` checked."""
         for ax, goal in plans:
             p = self.axes[ax.letter]
             prof = ax.m.profiler
@@ -250,7 +266,6 @@ class Motion(Room):
             else:
                 p.pa = goal
                 engine(functools.partial(prof.begin_move, goal, p.sp, p.ac, p.dc, p.it))
-        return ""
 
     @handler("IP", Args.VALUES)
     def ip(self, fields: Fields) -> str:

@@ -25,16 +25,13 @@ class ProgramCommands(Room):
 
     @handler("DL")
     def dl(self, args: str) -> Download:
-        if isinstance(self.machine.interp.caller, Thread):
-            raise Refused(3, "DL not valid in a program")
+        # (a thread that reaches DL, UL is refused before: NOT_IN_PROGRAM)
         if self.machine.programs.threads:
             raise Refused(17, "DL while a program runs")
         return DOWNLOAD
 
     @handler("UL")
     def ul(self, args: str) -> str:
-        if isinstance(self.machine.interp.caller, Thread):
-            raise Refused(3, "UL not valid in a program")
         return "".join(line + "\r\n" for line in self.machine.programs.program) + "\x1a"
 
     @handler("XQ")

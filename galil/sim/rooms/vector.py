@@ -427,13 +427,25 @@ class Vector(Room):
         return self._parameter(args, "vt")
 
     # ---- running -----------------------------------------------------------------------
-    @handler("BG", Args.PLANES)
-    def begin(self, planes: list[str]) -> str:
-        chosen = [self.planes[p] for p in planes]
+    @handler("BG", Args.PLANES_AND_AXES)
+    def begin(self, letters: list[str]) -> str:
+        """``BG S``, ``BG ST``, and planes with axes (``BG SA``; the BG entry: "Any
+        combination of Axes, Vector Planes, and Virtual Axes may be mixed to begin
+        motion"): every plane and axis is checked before any starts, then all start on this
+        sample. An axis named beside a plane it belongs to is refused as ``BG S;BG A``
+        would refuse it (TC 21, "Begin not valid while running")."""
+        chosen = [self.planes[c] for c in letters if c in self.planes]
+        named = "".join(c for c in letters if c not in self.planes)
+        axes = self.machine.interp.axis_list(named) if named else []
         for plane in chosen:
             self._check_begin(plane)
+        if any(ax.letter in plane.axes for ax in axes for plane in chosen):
+            raise Refused(21, "an axis named beside its plane")
+        motion = self.machine.room(Motion)
+        plans = motion.plan_begin(axes)
         for plane in chosen:
             self._begin(plane)
+        motion.begin(plans)
         return ""
 
     def _check_begin(self, plane: Plane) -> None:
