@@ -177,6 +177,11 @@ class VectorHandle(MoveHandle):
         with self._lock:
             if self._done:
                 return
+            if letter not in self._tracks:
+                # A follower's ST: its gearing is off (the tracker marks it released), and the
+                # sequence it followed runs on; only the follower's prediction changes.
+                self._forget_followers(letter)
+                return
             if make is None:
                 kind = "abort"
             elif isinstance(make(0.0), predict.Stop):

@@ -160,6 +160,27 @@ def test_wait_reports_a_follower_of_a_vector_path_stopped_by_a_limit(
     assert caught.value.stop_codes == {"A": 101, "B": 101, "C": 2}
 
 
+@pytest.mark.parametrize("master", ["A", "S"])
+def test_stopping_a_follower_leaves_the_vector_path_it_followed_running_as_predicted(
+    dmc: galil.Controller, master: str
+) -> None:
+    # ST C turns C's gearing off and nothing else: the sequence runs to its end (101). The
+    # handle took the follower's stop for a stop of the sequence and predicted it over at
+    # once (0 s, no motion), then reported its whole path as a deviation (a random operation
+    # sequence found it through an old handle of C whose stop() sent the ST).
+    dmc.C.gear_to(master, -1.5)
+    h = dmc.vector_move("AB", [Line(0, 3400), Line(-3400, 0)], speed=20_000)
+    duration = h.duration
+    dmc.sleep(0.1)
+    dmc.stop("C")
+    assert h.duration == duration
+    r = h.wait()
+    assert r.stop_codes == {"A": 101, "B": 101}
+    assert r.deviation == {"A": 0, "B": 0}
+    assert r.follower_stop_codes == {"C": 4}
+    assert r.follower_final["C"] == round(h.profiles["C"].position[-1])
+
+
 def test_a_follower_that_still_follows_is_not_an_error(dmc: galil.Controller) -> None:
     dmc.A.gear_to("B", 2)
     r = dmc.B.move_by(400).wait()
