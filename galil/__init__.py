@@ -31,7 +31,7 @@ from galil.protocol.interrupts import Interrupt
 from galil.protocol.records import RecordFields, decode_fields
 from galil.records import RecordStream
 from galil.segments import Arc, Line, VectorPlan
-from galil.tuning import LimitDisable, MotorType
+from galil.tuning import EncoderConfig, EncoderType, LimitDisable, MotorType
 from galil.vector import VectorHandle
 
 __version__ = "0.1.0.dev0"
@@ -45,6 +45,8 @@ __all__ = [
     "ContourResult",
     "ContourUnderrunError",
     "Controller",
+    "EncoderConfig",
+    "EncoderType",
     "Found",
     "GalilConnectionError",
     "GalilError",

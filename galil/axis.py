@@ -41,7 +41,7 @@ from galil.moves import (
 )
 from galil.protocol import commands as cmds
 from galil.routines import Routines
-from galil.tuning import Setting, limit_disable_of, motor_type, whole
+from galil.tuning import EncoderConfig, Setting, limit_disable_of, motor_type, whole
 from galil.units import (
     Scale,
     counts_or_plain,
@@ -680,6 +680,11 @@ class Axis:
     """``OE``: 0 off, 1 on position error / amplifier error / abort, 2 on limits, 3 all."""
     brush = Setting("BR", cmds.br, whole, still=True)
     """``BR``: -1 external drive, 0 brushless, 1 brush."""
+    encoder_config = Setting("CE", cmds.ce, EncoderConfig.of, still=True)
+    """``CE``: a :class:`~galil.tuning.EncoderConfig` (main and auxiliary encoder types); at
+    rest only. "When using a servo motor, changing the CE type can cause the motor to run
+    away" (the command reference): change it with the motor off (not required: decision
+    0048) and check the count's direction before ``servo_here()``."""
     limit_disable = Setting("LD", cmds.ld, limit_disable_of, available=cmds.require_limit_disable)
     """``LD``: a :class:`~galil.tuning.LimitDisable`, the limit switches that no longer stop
     motion (NONE, FORWARD, REVERSE, BOTH); for a stage with a switch missing or unwired. The

@@ -28,6 +28,8 @@ from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
 
 __all__ = [
+    "EncoderConfig",
+    "EncoderType",
     "LimitDisable",
     "MotorType",
     "Setting",
@@ -90,6 +92,86 @@ class LimitDisable(enum.IntEnum):
     def reverse(self) -> bool:
         """Whether the reverse switch is disabled."""
         return bool(self & 2)
+
+
+class EncoderType(enum.IntEnum):
+    """One encoder's type in ``CE`` (the DMC-4103 command reference's CE table)."""
+
+    QUADRATURE = 0
+    PULSE_DIRECTION = 1
+    QUADRATURE_REVERSED = 2
+    PULSE_DIRECTION_REVERSED = 3
+
+    @property
+    def reversed(self) -> bool:
+        """Whether the encoder's direction is reversed."""
+        return self >= 2
+
+    @property
+    def pulse_direction(self) -> bool:
+        """Whether it is a pulse and direction input (pulse on CHA, direction on CHB)."""
+        return bool(self & 1)
+
+
+def _encoder_type(value: object, which: str) -> EncoderType:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise InvalidArgument(f"EncoderConfig {which} takes an EncoderType, not {value!r}")
+    try:
+        return EncoderType(value)
+    except ValueError:
+        raise InvalidArgument(
+            f"EncoderConfig {which} is an EncoderType (0 .. 3), not {value!r}"
+        ) from None
+
+
+class EncoderConfig(int):
+    """``CE``: the main and the auxiliary encoder's types of one axis (decision 0048).
+
+    The value is an ``int``, the number ``CE`` takes: the main encoder's
+    :class:`EncoderType` plus four times the auxiliary encoder's, 0 .. 15 (``CE 10`` is
+    both reversed quadrature)::
+
+        EncoderConfig(main=EncoderType.QUADRATURE_REVERSED)  # 2
+        int(EncoderConfig(aux=EncoderType.PULSE_DIRECTION))  # 4
+        EncoderConfig.of(10).aux                             # QUADRATURE_REVERSED
+
+    Raises:
+        InvalidArgument: a type that is not an :class:`EncoderType` (0 .. 3).
+    """
+
+    def __new__(
+        cls, main: int = EncoderType.QUADRATURE, aux: int = EncoderType.QUADRATURE
+    ) -> EncoderConfig:
+        return super().__new__(cls, _encoder_type(main, "main") + 4 * _encoder_type(aux, "aux"))
+
+    @classmethod
+    def of(cls, value: float) -> EncoderConfig:
+        """The configuration of a ``CE`` value (``_CEA``), 0 .. 15.
+
+        Raises:
+            InvalidArgument: not a whole number in 0 .. 15.
+        """
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise InvalidArgument(f"CE is a number 0 .. 15, not {value!r}")
+        if value not in range(16):
+            raise InvalidArgument(f"CE is a whole number 0 .. 15, not {value!r}")
+        n = int(value)
+        return cls(n % 4, n // 4)
+
+    @property
+    def main(self) -> EncoderType:
+        """The main encoder's type."""
+        return EncoderType(int(self) % 4)
+
+    @property
+    def aux(self) -> EncoderType:
+        """The auxiliary encoder's type."""
+        return EncoderType(int(self) // 4)
+
+    def __repr__(self) -> str:
+        return f"EncoderConfig(main={self.main.name}, aux={self.aux.name})"
+
+    __str__ = int.__repr__
 
 
 def limit_disable_of(value: float) -> LimitDisable:

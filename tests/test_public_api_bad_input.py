@@ -207,6 +207,7 @@ mm = ureg.mm
 OFF = {"speed": 10_000, "accel": 256_000, "decel": 256_000}  # move overrides, valid
 SETTINGS = {
     "brush": 0,
+    "encoder_config": 0,
     "error_limit": 16_384,
     "integrator_limit": 9.998,
     "kd": 64,

@@ -294,6 +294,8 @@ class AsyncAxis(MotionRoom[Axis]):
     set_off_on_error = write_setting(Axis.off_on_error)
     brush = read_setting(Axis.brush)
     set_brush = write_setting(Axis.brush)
+    encoder_config = read_setting(Axis.encoder_config)
+    set_encoder_config = write_setting(Axis.encoder_config)
     limit_disable = read_setting(Axis.limit_disable)
     set_limit_disable = write_setting(Axis.limit_disable)
 

@@ -55,6 +55,7 @@ __all__ = [
     "cd",
     "cd_end",
     "cd_rows",
+    "ce",
     "cm",
     "cn",
     "contour_end",
@@ -1864,6 +1865,13 @@ def ld(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
     reverse one, 3 both (``FL``/``BL`` soft limits stay). Refused on a model without LD."""
     require_limit_disable(model)
     return _setting("LD", by_axis, model, _one_of("LD", (0, 1, 2, 3), model))
+
+
+def ce(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """CE: encoder configuration, 0 .. 15, the main encoder's type plus four times the
+    auxiliary encoder's (0 normal quadrature, 1 normal pulse and direction, 2 reversed
+    quadrature, 3 reversed pulse and direction; :class:`galil.EncoderConfig`)."""
+    return _setting("CE", by_axis, model, _one_of("CE", range(16), model))
 
 
 def br(*, model: ModelSpec | None = None, **by_axis: object) -> Command:

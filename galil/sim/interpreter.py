@@ -153,7 +153,7 @@ class Interpreter:
                 return command.run(args)
             if kind is Args.AXES:
                 return command.run(self.axis_list(args))
-            return command.run(self.axis_fields(args))
+            return command.run(self.axis_fields(args, every=command.spec.every))
         if eq > 0:
             return self.assign(s[:eq].strip(), s[eq + 1 :])
         raise Refused(1, f"unrecognised command {s!r}")
@@ -295,8 +295,9 @@ class Interpreter:
                 out.append(ax)
         return out
 
-    def axis_fields(self, args: str) -> list[tuple[Axis, str]]:
+    def axis_fields(self, args: str, *, every: bool = False) -> list[tuple[Axis, str]]:
         """Per-axis fields: ``"1,,3"`` by position, ``"AB=5"`` by name; empty fields skipped.
+        With ``every``, ``"*=5"`` (``KP*=5``, ``LD*=?``) names every axis of the model.
 
         Raises:
             Refused: a missing value, more fields than axes, an unknown axis.
@@ -309,7 +310,10 @@ class Interpreter:
             value = a[eq + 1 :].strip()
             if not value:
                 raise Refused(1, "missing value")
-            return [(ax, value) for ax in self.axis_list(a[:eq])] if a[:eq].strip() else []
+            named = a[:eq].strip()
+            if every and named == "*":
+                return [(ax, value) for ax in self.servo.axes.values()]
+            return [(ax, value) for ax in self.axis_list(named)] if named else []
         fields = split_fields(a)
         axes = list(self.servo.axes.values())
         if len(fields) > len(axes):

@@ -74,11 +74,15 @@ class HandlerSpec:
         args: how the arguments are parsed before the handler sees them.
         equals: an ``=`` in the arguments belongs to the command (``CD 48=4``), so ``CDX=1``
             is never read as a variable assignment.
+        every: ``*`` names every axis of the model (``KP*=0``, ``LD*=?``), for the per-axis
+            commands (:attr:`Args.VALUES`) whose entry in the command reference shows it
+            (decision 0048); elsewhere ``*`` is no axis (TC 4).
     """
 
     name: str
     args: Args = Args.TEXT
     equals: bool = False
+    every: bool = False
 
 
 @dataclass(frozen=True)
@@ -151,7 +155,9 @@ _F = TypeVar("_F", bound=Callable[..., object])
 _MARK = "_galil_sim_marks"
 
 
-def handler(name: str, args: Args = Args.TEXT, *, equals: bool = False) -> Callable[[_F], _F]:
+def handler(
+    name: str, args: Args = Args.TEXT, *, equals: bool = False, every: bool = False
+) -> Callable[[_F], _F]:
     """Mark a room method as the handler of command ``name``.
 
     The method is called with the parsed arguments (see :class:`Args`) and returns a
@@ -162,7 +168,7 @@ def handler(name: str, args: Args = Args.TEXT, *, equals: bool = False) -> Calla
     """
     if not (len(name) == 2 and name.isalpha() and name.isupper()) and not name.startswith("\x12"):
         raise ValueError(f"a command is two upper-case letters or a control command: {name!r}")
-    return _mark(HandlerSpec(name, args, equals))
+    return _mark(HandlerSpec(name, args, equals, every))
 
 
 def operand(*names: str, kind: OperandKind = OperandKind.PLAIN) -> Callable[[_F], _F]:

@@ -396,7 +396,7 @@ def test_typed_settings_of_commands_not_valid_in_motion_are_marked_still() -> No
     for name, value in vars(Axis).items():
         if isinstance(value, Setting):
             assert value.still == (not TAGS[value.mnemonic].motion), name
-    assert _STILL_SETTINGS == ["brush", "motor_type"]
+    assert _STILL_SETTINGS == ["brush", "encoder_config", "motor_type"]
 
 
 @pytest.mark.parametrize("name", _STILL_SETTINGS)

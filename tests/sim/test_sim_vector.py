@@ -319,3 +319,55 @@ def test_bg_of_a_plane_and_an_axis_starts_neither_when_one_is_refused(
     assert numbers(ask(sim, "TC"))[0] == code
     sim.advance(0.1)
     assert numbers(ask(sim, "MG _BGA,_BGB,_BGS,_RPA,_RPB")) == [0, 0, 0, 0, 0]
+
+
+@pytest.mark.parametrize("line", ["ST SA", "ST A,S", "STS A"])
+def test_st_of_a_plane_and_an_axis_stops_both_on_one_sample(line: str) -> None:
+    # R4103, ST: mask A .. ABCDEFGHMNST, and "ST SCD;' Stop coordinate plane S, as well as
+    # axes C and D"; the twin stops them one after the other on the same line.
+    mixed, twin = SimController("DMC-4040", ManualClock()), SimController("DMC-4040", ManualClock())
+    for s in (mixed, twin):
+        _plane_and_move(s)
+        assert ask(s, "BGS;BGA") == b"::"
+        s.advance(0.3)
+    assert stamp(ask(mixed, f"{line};MG TIME")) == stamp(ask(twin, "STS;STA;MG TIME"))
+    read = "MG _RPA,_RPB,_RPC,_SCA,_SCB"
+    assert numbers(ask(mixed, read)) == numbers(ask(twin, read))
+    for seconds in (0.01, 0.05, 1.0):
+        mixed.advance(seconds)
+        twin.advance(seconds)
+        assert numbers(ask(mixed, read)) == numbers(ask(twin, read))
+    final = numbers(ask(mixed, "MG _BGA,_BGS,_SCA,_RPA"))
+    assert final[:3] == [0, 0, 4]
+    assert 0 < final[3] < 12000  # stopped short of its target
+
+
+def _after_motion(mask: str, short_a: bool) -> float:
+    """The TIME a program's ``AM <mask>`` released, after ``BGS;BGA`` of _plane_and_move."""
+    sim = SimController("DMC-4040", ManualClock())
+    _plane_and_move(sim)
+    if short_a:
+        assert ask(sim, "PRA=100") == b":"
+    program = ["#W", "BGS;BGA", f"AM {mask}", "t=TIME", "EN"]
+    assert b"?" not in ask(sim, "DL\r" + "\r".join(program) + "\r\\")
+    ask(sim, "XQ #W")
+    sim.advance(5.0)
+    assert numbers(ask(sim, "MG _BGA,_BGS,_XQ0")) == [0, 0, -1]
+    return numbers(ask(sim, "MG t"))[0]
+
+
+@pytest.mark.parametrize("short_a", [False, True])
+@pytest.mark.parametrize("mask", ["SA", "A,S", "AS"])
+def test_am_of_a_plane_and_an_axis_waits_for_the_later_of_the_two(mask: str, short_a: bool) -> None:
+    # R4103, AM: "Any combination of axes or a motion sequence may be specified"; mask
+    # A .. ABCDEFGH and S, T. AM runs only in a program (decision 0044).
+    alone = {c: _after_motion(c, short_a) for c in "AS"}
+    assert alone["A"] != alone["S"]
+    assert _after_motion(mask, short_a) == max(alone.values())
+
+
+def test_st_and_am_of_a_plane_with_a_letter_that_is_no_axis_are_refused(sim: SimController) -> None:
+    _plane_and_move(sim)
+    assert ask(sim, "BGS;ST SX") == b":?"  # X: no axis of the DMC-4040
+    assert numbers(ask(sim, "TC"))[0] == 4
+    assert numbers(ask(sim, "MG _BGS"))[0] == 1

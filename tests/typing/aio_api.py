@@ -80,6 +80,8 @@ async def check_motion(c: aio.AsyncController) -> None:
     assert_type(await c.A.motor_type(), galil.MotorType | float)
     assert_type(await c.A.limit_disable(), galil.LimitDisable)
     await c.A.set_limit_disable(galil.LimitDisable.BOTH)
+    assert_type(await c.A.encoder_config(), galil.EncoderConfig)
+    await c.A.set_encoder_config(galil.EncoderConfig(main=galil.EncoderType.QUADRATURE_REVERSED))
     assert_type(await c.A.set_kp(10), None)
     gearing = await c.B.gear_to(c.A, 0.5)
     assert_type(gearing, aio.AsyncGearing)

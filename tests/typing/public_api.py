@@ -45,6 +45,8 @@ def check(dmc: galil.Controller) -> None:
     assert_type(dmc.A.motor_type, galil.MotorType | float)
     assert_type(dmc.A.limit_disable, galil.LimitDisable)
     dmc.A.limit_disable = galil.LimitDisable.FORWARD
+    assert_type(dmc.A.encoder_config, galil.EncoderConfig)
+    dmc.A.encoder_config = galil.EncoderConfig(aux=galil.EncoderType.PULSE_DIRECTION)
     # issue 12: programs, arrays, variables, interrupts, capture; issue 17: begin
     assert_type(dmc.capture(["_RPA"], every=2, count=10), galil.Capture)
     assert_type(dmc.capture(["_RPA"], seconds=1.0).wait(), galil.Recording)

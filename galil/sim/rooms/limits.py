@@ -359,7 +359,7 @@ class Limits(Room):
     def _soft_limits_changed(self) -> None:
         self._soft = any(a.fl < INT32_MAX or a.bl > INT32_MIN for a in self.axes.values())
 
-    @handler("LD", Args.VALUES)
+    @handler("LD", Args.VALUES, every=True)
     def ld(self, fields: list[tuple[Axis, str]]) -> str:
         """LD: limit disable per axis, 0 .. 3 (DMC-4103 reference: "Valid while in motion";
         a switch enabled again under an axis moving into it stops it at once)."""

@@ -178,7 +178,7 @@ class Motion(Room):
 
         return self._set(fields, self.decel, check, apply, "10.0")
 
-    @handler("JG", Args.VALUES)
+    @handler("JG", Args.VALUES, every=True)
     def jg(self, fields: Fields) -> str:
         def check(ax: Axis, v: float) -> float:
             prof = ax.m.profiler

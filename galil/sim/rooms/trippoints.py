@@ -129,6 +129,24 @@ class Trippoints(Room):
 
         return Wait(lambda: not any(all_axes[c].m.moving for c in letters), exact=exact)
 
+    @handler("AM", Args.PLANES_AND_AXES)
+    def am_planes(self, letters: list[str]) -> Wait:
+        """``AM S``, ``AM ST``, and planes with axes (``AM SA``; the AM entry: "Any
+        combination of axes or a motion sequence may be specified", its mask the axes and
+        S, T): released when every sequence named and every axis named is done (decision
+        0048)."""
+        vector = self.machine.room(Vector)
+        chosen = [vector.planes[c] for c in letters if c in vector.planes]
+        named = "".join(c for c in letters if c not in vector.planes)
+        axes = self.am(self.machine.interp.axis_list(named)) if named else None
+
+        def done() -> bool:
+            if any(vector.busy(plane) for plane in chosen):
+                return False
+            return axes is None or axes.predicate is None or axes.predicate()
+
+        return Wait(done)
+
     def _samples(self, ms: float) -> int:
         """The whole servo samples ``ms`` milliseconds take at the TM in force (rounded up:
         WT and AT hold at least that long). WT and AT are "Scaled By TM": ms of real time, a

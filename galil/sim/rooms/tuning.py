@@ -129,17 +129,17 @@ class Tuning(Room):
         spec = self.machine.spec
         return self._setting(name, fields, self._ranged(0, high, step), spec.reply_formats[name])
 
-    @handler("KP", Args.VALUES)
+    @handler("KP", Args.VALUES, every=True)
     def kp(self, fields: Fields) -> str:
         spec = self.machine.spec
         return self._gain("KP", fields, spec.kp_max, spec.gain_resolution)
 
-    @handler("KI", Args.VALUES)
+    @handler("KI", Args.VALUES, every=True)
     def ki(self, fields: Fields) -> str:
         spec = self.machine.spec
         return self._gain("KI", fields, spec.ki_max, spec.ki_resolution)
 
-    @handler("KD", Args.VALUES)
+    @handler("KD", Args.VALUES, every=True)
     def kd(self, fields: Fields) -> str:
         spec = self.machine.spec
         return self._gain("KD", fields, spec.kd_max, spec.gain_resolution)
@@ -158,7 +158,7 @@ class Tuning(Room):
         spec = self.machine.spec
         return self._setting("ER", fields, self._ranged(spec.er_min, spec.er_max, 1), "10.0")
 
-    @handler("OE", Args.VALUES)
+    @handler("OE", Args.VALUES, every=True)
     def oe(self, fields: Fields) -> str:
         reply = self._setting("OE", fields, self._choice((0.0, 1.0, 2.0, 3.0)), "1.0")
         self.off_on_error = frozenset(c for c, s in self.axes.items() if s.oe in (1, 3))

@@ -35,7 +35,7 @@ from galil.predict.vector_checks import quantise_vector
 from galil.sim.driven import DrivenProfiler, drive
 from galil.sim.machine import Room
 from galil.sim.parse import Refused, split_fields
-from galil.sim.registry import Args, OperandKind, Wait, handler, operand
+from galil.sim.registry import Args, OperandKind, handler, operand
 from galil.sim.rooms.motion import Motion
 from galil.sim.servo import Axis
 
@@ -484,9 +484,15 @@ class Vector(Room):
         plane.running = True
         plane.starts += 1
 
-    @handler("ST", Args.PLANES)
-    def stop(self, planes: list[str]) -> str:
-        for p in planes:
+    @handler("ST", Args.PLANES_AND_AXES)
+    def stop(self, letters: list[str]) -> str:
+        """``ST S``, ``ST ST``, and planes with axes (``ST SCD``: the ST entry's example "Stop
+        coordinate plane S, as well as axes C and D"; its mask runs A .. ABCDEFGHMNST): the
+        planes, then the axes, as ``ST S;ST CD`` on one line, on this sample (decision
+        0048)."""
+        named = "".join(c for c in letters if c not in self.planes)
+        axes = self.machine.interp.axis_list(named) if named else []
+        for p in (c for c in letters if c in self.planes):
             plane = self.planes[p]
             found = self.feed(plane) if plane.running else None
             if found is not None:
@@ -495,12 +501,9 @@ class Vector(Room):
                     prof = self.machine.servo.axes[c].m.profiler
                     if isinstance(prof, DrivenProfiler) and prof.driven:
                         prof.sync()
+        if axes:
+            self.machine.room(Motion).st(axes)
         return ""
-
-    @handler("AM", Args.PLANES)
-    def after_motion(self, planes: list[str]) -> Wait:
-        chosen = [self.planes[p] for p in planes]
-        return Wait(lambda: not any(self.busy(plane) for plane in chosen))
 
     # ---- operands ----------------------------------------------------------------------
     @operand("BG", kind=OperandKind.PLANE)
