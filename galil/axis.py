@@ -434,7 +434,9 @@ class Axis:
     @property
     def jog_speed(self) -> Any:
         """Jog speed ``JG`` (signed). Setting it never starts a jog: while the controller runs
-        one it changes the speed in motion, otherwise it is kept for the next jog."""
+        one it changes the speed in motion, otherwise it is kept for the next jog. (``JG``
+        also selects jog mode: a program's ``BG`` after it, with no ``PR``/``PA`` between,
+        jogs.)"""
         v = self._operand("JG")
         return v if self._scale is None else self._scale.counts_to_rate(v, 1)
 

@@ -522,9 +522,11 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         that it has not seen end gets its ``ST`` first (the stop is sent, not waited for):
         no motion the library started outlives the link that could stop it (a call waiting
         on it in another thread raises :class:`~galil.errors.GalilConnectionError`). What
-        raw commands or a program on the controller started is left as it is; so is the
-        watchdog's routine halted (leaving on purpose is not dying). A capture started here
-        and not read back is stopped (``RC 0``: it would hold the recorder). A waiting
+        raw commands or a program on the controller started is left as it is, and so is
+        gearing (``GA``): an axis geared to one that a program or a handwheel moves goes on
+        following it. The watchdog's routine is halted (leaving on purpose is not dying). A
+        capture started here and not read back is stopped (``RC 0``: it would hold the
+        recorder). A waiting
         ``messages.get()``, ``interrupts.get()`` or record stream ``get()`` raises
         :class:`~galil.errors.GalilConnectionError` too.
 

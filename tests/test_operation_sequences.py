@@ -650,6 +650,13 @@ class OperationSequences(RuleBasedStateMachine):
 
     def teardown(self) -> None:
         dmc, sim = self.dmc, self.sim
+        # The test's program may move D on after the close (for ever: a host JG before its BG
+        # turns that BG into a jog), and gearing stays engaged: what is geared to D, or to
+        # those, follows it (a random run found B geared to the program's D moving on).
+        carried = {"D"}
+        gears = {f: g.master for f, g in dmc.tracker.gears.items()}
+        while grown := {f for f, m in gears.items() if m in carried} - carried:
+            carried |= grown
         dmc.close()
         sim.advance(30.0)
         before = [sim.motion(a).reference for a in AXES]
@@ -658,7 +665,7 @@ class OperationSequences(RuleBasedStateMachine):
         moved = [a for a, x, y in zip(AXES, before, after, strict=True) if x != y]
         left = [t for t in threading.enumerate() if t not in self.threads_before and t.is_alive()]
         assert not left, left
-        assert not moved or (moved == ["D"] and not self.program_axis_free), moved
+        assert not moved or (set(moved) <= carried and not self.program_axis_free), moved
 
 
 OperationSequences.TestCase.settings = settings(
