@@ -526,9 +526,8 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         gearing (``GA``): an axis geared to one that a program or a handwheel moves goes on
         following it. The watchdog's routine is halted (leaving on purpose is not dying). A
         capture started here and not read back is stopped (``RC 0``: it would hold the
-        recorder). A waiting
-        ``messages.get()``, ``interrupts.get()`` or record stream ``get()`` raises
-        :class:`~galil.errors.GalilConnectionError` too.
+        recorder). A waiting ``messages.get()``, ``interrupts.get()`` or record stream
+        ``get()`` raises :class:`~galil.errors.GalilConnectionError` too.
 
         Idempotent and thread-safe; never raises for a link that is already dead (a stop
         that could not be sent is logged at WARNING on ``galil.controller``). No background
