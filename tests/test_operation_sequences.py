@@ -140,11 +140,12 @@ def _interrupted(link: object, at: int, *, after: bool) -> Iterator[None]:
 @contextlib.contextmanager
 def _limit_stopped(into: list[MotionError]) -> Iterator[None]:
     """Keep the ``MotionError`` of a contour a limit stopped (stop code 2 or 3) in ``into``
-    instead of raising it (it sent the contour: not a refusal)."""
+    instead of raising it (it sent the contour: not a refusal). A follower a limit dropped
+    unseen, reported when its master starts, is a refusal before any byte: raised."""
     try:
         yield
     except MotionError as exc:
-        if not {2, 3} & set(exc.stop_codes.values()):
+        if "stopped by the controller" not in str(exc) or not {2, 3} & set(exc.stop_codes.values()):
             raise
         into.append(exc)
 
