@@ -59,6 +59,7 @@ from galil.gearing import Gearing
 from galil.motion import HOMING_KINDS, MoveHandle, MoveResult, Track
 from galil.sim.rooms.contour import Contour as SimContour
 from galil.sim.rooms.gearing import Gearing as SimGearing
+from galil.sim.rooms.tuning import Tuning as SimTuning
 from galil.testing import sim_of, transcript
 
 AXES = "ABCD"
@@ -74,7 +75,7 @@ _READ_ONLY = re.compile(
     r"|UL|LA|LV|QU [A-Za-z0-9\[\],]*|QZ|TC1|MG \"TCOK\d+\""
 )
 # What must not change when a call is refused.
-_SETTINGS = ("SP", "AC", "DC", "IT", "BL", "FL", "MO", "JG", "HV", "MT", "BR")
+_SETTINGS = ("SP", "AC", "DC", "IT", "BL", "FL", "MO", "JG", "HV", "MT", "BR", "CE", "LD")
 _VALUES: dict[str, list[float]] = {
     "speed": [2000, 10000, 25000, 60000],
     "accel": [20480, 102400, 256000, 1024000],
@@ -82,16 +83,23 @@ _VALUES: dict[str, list[float]] = {
     "smoothing": [1.0, 0.5, 0.25, 0.0625],
 }
 # The settings the controller takes only at rest (DC: not in a position move).
-_STILL = ("decel", "motor_type", "brush")
+_STILL = ("decel", "motor_type", "brush", "encoder_config")
+# A start refused for a limit switch (galil.moves, galil.homing): which axis, which switch.
+_SWITCH_REFUSAL = re.compile(
+    r"(?:axis|on) ([A-H]) would start towards its active (forward|reverse) limit switch"
+)
 # The stop code a move of each kind ends with when nothing interferes (docs/homing.md, a
 # position move's normal end).
 _END_CODE = {"position": 1, "schedule": 1, "home": 10, "edge": 9, "index": 10, "vector": 101}
-# Two routines that move D behind the library: a plain one, and one that picks its direction
-# with IF/ELSE/ENDIF and paces its start with AT (decision 0037).
+# Three routines that move D behind the library: a plain one, one that picks its direction
+# with IF/ELSE/ENDIF and paces its start with AT (decision 0037), and one that waits for D to
+# be at rest (AM: its PR is not refused with TC 7 in the library's move), moves it 700 counts
+# (forwards below 0, else backwards), waits with AS, then with MF or MR for D to cross the
+# middle of its move (decision 0042).
 PROGRAM = (
     "#SEQMOVE\nPRD=700\nBGD\nAMD\nEN\n"
     "#SEQIF\nAT 0\nIF (_RPD < 0)\nPRD=700\nELSE\nPRD=-700\nENDIF\nAT 20\nBGD\nAMD\nEN\n"
-    "#SEQTRIP\np=_TPD\nIF (_RPD < 0)\nPRD=700;BGD\nASD\nMFD=p+350\nELSE\nPRD=-700;BGD\nASD\n"
+    "#SEQTRIP\nAMD\np=_TPD\nIF (_RPD < 0)\nPRD=700;BGD\nASD\nMFD=p+350\nELSE\nPRD=-700;BGD\nASD\n"
     "MRD=p-350\nENDIF\nAMD\nEN"
 )
 
@@ -106,6 +114,9 @@ class Running:
     # where the (lagging) motor is: its end is not the prediction's business.
     unpredictable: bool = False
     superseded: bool = False  # other motion started on its axes since (its end is older)
+    # A switch was placed or LD changed on its axes since it started: which switch may have
+    # stopped it is not known (a limit's end is not checked against LD).
+    switches_changed: bool = False
 
 
 @contextlib.contextmanager
@@ -190,6 +201,13 @@ class OperationSequences(RuleBasedStateMachine):
         others = _queries_only(sent.lines)
         assert not others, f"{type(refused).__name__} ({refused}) after sending {others!r}"
         assert self._settings() == before, f"settings changed by a refusal: {refused}"
+        if (found := _SWITCH_REFUSAL.search(str(refused))) is not None:
+            # A start refused for a switch: it is active and LD does not disable it (a start
+            # towards a disabled switch is taken: decision 0046).
+            a, side = found.groups()
+            active, ld = self.dmc.query_operands([f"_L{side[0].upper()}{a}", f"_LD{a}"])
+            assert not active, f"{refused}: the switch is not active"
+            assert not round(ld) & (1 if side == "forward" else 2), f"{refused}: LD {ld:g}"
         if not isinstance(refused, MotionError):  # (refuse_dropped forgets the gearing)
             assert self.dmc.tracker.gears == gears, f"gearing changed by a refusal: {refused}"
 
@@ -199,6 +217,11 @@ class OperationSequences(RuleBasedStateMachine):
             if touched & set(letters):
                 run.interfered = True
                 run.unpredictable = run.unpredictable or unpredictable
+
+    def switches_changed(self, letters: str) -> None:
+        for run in self.running:
+            if set(run.handle.axes + run.handle.followers) & set(letters):
+                run.switches_changed = True
 
     def idle(self, letters: str = AXES) -> bool:
         *bg, xq = self.dmc.query_operands([f"_BG{a}" for a in letters] + ["_XQ1"])
@@ -236,6 +259,8 @@ class OperationSequences(RuleBasedStateMachine):
             assert set(limited.stop_codes.values()) & {2, 3}, limited
             if run in self.running:
                 self.running.remove(run)
+            if not run.interfered and not run.switches_changed:
+                self.limit_stop_explained(limited)
             return
         if result is None:
             assert math.isinf(h.duration) or run.interfered, h
@@ -243,6 +268,22 @@ class OperationSequences(RuleBasedStateMachine):
         if run in self.running:
             self.running.remove(run)
         self.check_result(run, result)
+
+    def limit_stop_explained(self, exc: MotionError) -> None:
+        """A limit ended a move no switch was placed for and no LD changed for since it began:
+        each axis with SC 2 (3) is beyond its forward (reverse) soft limit or on its active
+        forward (reverse) switch, one LD does not disable (decision 0046)."""
+        for a, code in exc.stop_codes.items():
+            if code not in (2, 3):
+                continue
+            side = "F" if code == 2 else "R"
+            rp, soft, switch, ld = self.dmc.query_operands(
+                [f"_RP{a}", f"_{side}L{a}" if side == "F" else f"_BL{a}", f"_L{side}{a}", f"_LD{a}"]
+            )
+            if (rp >= soft) if code == 2 else (rp <= soft):
+                continue  # (a soft limit: LD leaves FL and BL on)
+            assert not switch, (a, code, exc)
+            assert not round(ld) & (1 if code == 2 else 2), (a, code, ld, exc)
 
     def supersede(self, letters: str) -> None:
         for run in self.running:
@@ -311,16 +352,17 @@ class OperationSequences(RuleBasedStateMachine):
 
     @rule(
         data=st.data(),
-        what=st.sampled_from(["motor_type", "brush"]),
+        what=st.sampled_from(["motor_type", "brush", "encoder_config"]),
         i=st.integers(0, 1),
     )
     def motor_setting(self, data: st.DataObject, what: str, i: int) -> None:
-        """MT and BR, "Not Valid while in motion": refused unsent while the library's own
-        motion runs (decision 0036), by the controller (TC 7) otherwise; MT also with the
-        motor on, after reading ``_MO`` (decision 0043)."""
+        """MT, BR and CE, "Not Valid while in motion": refused unsent while the library's own
+        motion runs (decisions 0036, 0048), by the controller (TC 7) otherwise; MT also with
+        the motor on, after reading ``_MO`` (decision 0043). Taken, each reads back."""
         moving = [a for r in self.running for a in r.handle.axes + r.handle.followers]
         a = data.draw(st.sampled_from(sorted(set(moving)) or list(AXES)))
-        self.set_setting(a, what, {"motor_type": [1, -1], "brush": [0, 1]}[what][i])
+        values = {"motor_type": [1, -1], "brush": [0, 1], "encoder_config": [10, 0]}
+        self.set_setting(a, what, values[what][i])
 
     def set_setting(self, a: str, what: str, value: float) -> None:
         """Set ``what`` on ``a``: only a setting "Not Valid while in motion" may be refused,
@@ -356,10 +398,11 @@ class OperationSequences(RuleBasedStateMachine):
                 assert not self.dmc.query_operands([f"_BG{a}"])[0], (a, followed, by_controller)
         elif not refused and what in _STILL and what != "decel":
             # Taken: then the axis was at rest (or began only since: a program), and MT
-            # found the motor off.
+            # found the motor off; it reads back.
             assert not motor_on, f"{what} taken with {a}'s motor on"
             moving = self.dmc.query_operands([f"_BG{a}"])[0]
             assert not moving or not self._free(a), f"{what} taken while {a} moves"
+            assert getattr(self.dmc.axes[a], what) == value, (a, what, value)
 
     def _followed(self, a: str) -> Track | None:
         """The library's track of the motion on ``a`` when it predicts it to the count (a
@@ -390,6 +433,21 @@ class OperationSequences(RuleBasedStateMachine):
         pos = None if where is None else here + (where if which == "forward" else -where)
         self.sim.place_limit_switches(a, **{which: pos})
         self.interfere(a)
+        self.switches_changed(a)
+
+    @rule(a=axis_st, ld=st.sampled_from(list(galil.LimitDisable)))
+    def limit_disable(self, a: str, ld: galil.LimitDisable) -> None:
+        """``LD``, valid in motion (decision 0046): a disabled switch stops nothing and refuses
+        no start (the refusals and the limit ends are checked against ``_LD``); a switch
+        enabled under an axis moving into it stops it at once (interference). A move that only
+        lost a switch since it started still ends as predicted."""
+        before = galil.LimitDisable(round(self.dmc.query_operands([f"_LD{a}"])[0]))
+        self.dmc.axes[a].limit_disable = ld
+        assert self.dmc.axes[a].limit_disable == ld
+        self.switches_changed(a)
+        enabled = (before.forward and not ld.forward) or (before.reverse and not ld.reverse)
+        if enabled:
+            self.interfere(a)
 
     @rule(tm=st.sampled_from([500, 1000, 250]))
     def change_tm(self, tm: int) -> None:
@@ -580,14 +638,48 @@ class OperationSequences(RuleBasedStateMachine):
             # SH puts a motor-off axis's reference at its (lagging) encoder: a handle not seen
             # done keeps the end it had (decision 0036), so only the position now may differ.
             if not self.dmc.query_operands([f"_MO{a}"])[0]:
-                with self.refusable(InvalidArgument):  # (in motion: the controller refuses SH)
+                # In motion (whoever moves it) refused unsent, not TC 7 (decision 0045).
+                with self.refusable(InvalidArgument) as refused:
                     self.dmc.servo_here(a)
+                if refused:  # (no time passes between the library's _BG and this one)
+                    assert self.dmc.query_operands([f"_BG{a}"]) == [1], refused
                 return
             self.dmc.servo_here(a)
             self.supersede(a)
         else:
             with self.refusable(InvalidArgument):  # (in motion: the controller refuses MO)
                 self.dmc.motor_off(a)
+
+    @rule(often=st.integers(0, 3))
+    def burn(self, often: int) -> None:
+        """``BP`` (rarely: it holds the link for the burn's time): refused unsent while the
+        library's own motion runs; the controller's TC 7 only for motion the library did not
+        start (a program, a follower), its TC 17 while a program thread runs (decision 0047);
+        burned only then."""
+        if often:
+            return
+        tuning = self.sim.room(SimTuning)
+        burns = tuning.burns["BP"]
+        by_controller: CommandError | None = None
+        try:
+            with self.refusable(InvalidArgument) as refused:
+                self.dmc.programs.burn()
+        except CommandError as exc:
+            by_controller = exc
+        if refused:
+            assert any(self.dmc.tracker.active(a) for a in AXES), refused
+            assert any(self.dmc.query_operands([f"_BG{a}" for a in AXES])), refused
+        elif by_controller is not None:
+            *bg, xq0, xq1 = self.dmc.query_operands([f"_BG{a}" for a in AXES] + ["_XQ0", "_XQ1"])
+            if by_controller.code == 17:
+                assert max(xq0, xq1) >= 0, by_controller
+            else:
+                assert by_controller.code == 7, by_controller
+                moving = [a for a, b in zip(AXES, bg, strict=True) if b]
+                assert moving, by_controller
+                known = [a for a in moving if self._free(a) and self._followed(a) is not None]
+                assert not known, (known, by_controller)
+        assert tuning.burns["BP"] == burns + (not refused and by_controller is None)
 
     @rule(seconds=st.sampled_from([0.01, 0.1, 0.5, 2.0]))
     def sleep(self, seconds: float) -> None:
