@@ -114,9 +114,9 @@ class Running:
     # where the (lagging) motor is: its end is not the prediction's business.
     unpredictable: bool = False
     superseded: bool = False  # other motion started on its axes since (its end is older)
-    # A switch was placed or LD changed on its axes since it started: which switch may have
-    # stopped it is not known (a limit's end is not checked against LD).
-    switches_changed: bool = False
+    # A switch was placed, LD or a soft limit changed on its axes since it started: what
+    # stopped it is not known (a limit's end is not checked against the limits now).
+    limits_changed: bool = False
 
 
 @contextlib.contextmanager
@@ -176,6 +176,8 @@ class OperationSequences(RuleBasedStateMachine):
         self.running: list[Running] = []
         self.gearings: dict[str, Gearing] = {}
         self.program_axis_free = True
+        # The sides of each axis with a switch placed (2 forward, 3 reverse: its stop code).
+        self.placed: dict[str, set[int]] = {a: set() for a in AXES}
         self.threads_before = set(threading.enumerate())
 
     # -- helpers ----------------------------------------------------------------------------
@@ -218,10 +220,10 @@ class OperationSequences(RuleBasedStateMachine):
                 run.interfered = True
                 run.unpredictable = run.unpredictable or unpredictable
 
-    def switches_changed(self, letters: str) -> None:
+    def limits_changed(self, letters: str) -> None:
         for run in self.running:
             if set(run.handle.axes + run.handle.followers) & set(letters):
-                run.switches_changed = True
+                run.limits_changed = True
 
     def idle(self, letters: str = AXES) -> bool:
         *bg, xq = self.dmc.query_operands([f"_BG{a}" for a in letters] + ["_XQ1"])
@@ -259,8 +261,8 @@ class OperationSequences(RuleBasedStateMachine):
             assert set(limited.stop_codes.values()) & {2, 3}, limited
             if run in self.running:
                 self.running.remove(run)
-            if not run.interfered and not run.switches_changed:
-                self.limit_stop_explained(limited)
+            if not (run.interfered or run.limits_changed or run.superseded):
+                self.limit_stop_explained(h, limited)
             return
         if result is None:
             assert math.isinf(h.duration) or run.interfered, h
@@ -269,21 +271,32 @@ class OperationSequences(RuleBasedStateMachine):
             self.running.remove(run)
         self.check_result(run, result)
 
-    def limit_stop_explained(self, exc: MotionError) -> None:
-        """A limit ended a move no switch was placed for and no LD changed for since it began:
-        each axis with SC 2 (3) is beyond its forward (reverse) soft limit or on its active
-        forward (reverse) switch, one LD does not disable (decision 0046)."""
-        for a, code in exc.stop_codes.items():
-            if code not in (2, 3):
-                continue
-            side = "F" if code == 2 else "R"
-            rp, soft, switch, ld = self.dmc.query_operands(
-                [f"_RP{a}", f"_{side}L{a}" if side == "F" else f"_BL{a}", f"_L{side}{a}", f"_LD{a}"]
-            )
-            if (rp >= soft) if code == 2 else (rp <= soft):
-                continue  # (a soft limit: LD leaves FL and BL on)
-            assert not switch, (a, code, exc)
-            assert not round(ld) & (1 if code == 2 else 2), (a, code, ld, exc)
+    def limit_stop_explained(self, h: MoveHandle, exc: MotionError) -> None:
+        """A limit ended a move no limit changed for since it began (nor other motion on its
+        axes, which would have moved them since): each axis with SC 2 (3) is beyond its
+        forward (reverse) soft limit or on its active forward (reverse) switch, one LD does
+        not disable (decision 0046). A sequence (or a gearing) stops as a whole with the code
+        of the axis that ran into the limit, and its ramp down follows the path, which may
+        take that axis back off its switch: one of its axes has such a soft limit, or such a
+        switch placed that LD does not disable."""
+        limited = {a: c for a, c in exc.stop_codes.items() if c in (2, 3)}
+        names = [f"_{op}{a}" for a in limited for op in ("RP", "FL", "BL", "LF", "LR", "LD")]
+        values = dict(zip(names, self.dmc.query_operands(names), strict=True))
+
+        def explains(a: str, code: int, *, whole: bool) -> bool:
+            rp, ld = values[f"_RP{a}"], round(values[f"_LD{a}"])
+            enabled = not ld & (1 if code == 2 else 2)
+            if whole:
+                soft = values[f"_FL{a}"] < 2**31 - 1 if code == 2 else values[f"_BL{a}"] > -(2**31)
+                return soft or (code in self.placed[a] and enabled)
+            if code == 2:  # (LD leaves the soft limits on)
+                return rp >= values[f"_FL{a}"] or (not values[f"_LF{a}"] and enabled)
+            return rp <= values[f"_BL{a}"] or (not values[f"_LR{a}"] and enabled)
+
+        whole = h.kind == "vector" or bool(h.followers)
+        for a, code in limited.items():
+            by = limited if whole else [a]
+            assert any(explains(x, code, whole=whole) for x in by), (a, code, values, exc)
 
     def supersede(self, letters: str) -> None:
         for run in self.running:
@@ -422,18 +435,26 @@ class OperationSequences(RuleBasedStateMachine):
     )
     def soft_limits(self, a: str, low: int | None, high: int | None) -> None:
         self.dmc.axes[a].soft_limits = (low, high)
+        self.limits_changed(a)
 
     @rule(
         a=axis_st,
         which=st.sampled_from(["forward", "reverse"]),
-        where=st.sampled_from([None, 500, 3000, 15000]),
+        where=st.sampled_from([None, -500, 500, 3000, 15000]),
     )
     def place_limit_switch(self, a: str, which: str, where: int | None) -> None:
+        """A switch ``where`` counts ahead of ``a`` in the ``which`` direction, or behind it
+        (negative: ``a`` is on it at once, and a start that way needs ``LD``)."""
         here = self.sim.machine_position(a)
         pos = None if where is None else here + (where if which == "forward" else -where)
         self.sim.place_limit_switches(a, **{which: pos})
+        code = 2 if which == "forward" else 3
+        if pos is None:
+            self.placed[a].discard(code)
+        else:
+            self.placed[a].add(code)
         self.interfere(a)
-        self.switches_changed(a)
+        self.limits_changed(a)
 
     @rule(a=axis_st, ld=st.sampled_from(list(galil.LimitDisable)))
     def limit_disable(self, a: str, ld: galil.LimitDisable) -> None:
@@ -444,7 +465,7 @@ class OperationSequences(RuleBasedStateMachine):
         before = galil.LimitDisable(round(self.dmc.query_operands([f"_LD{a}"])[0]))
         self.dmc.axes[a].limit_disable = ld
         assert self.dmc.axes[a].limit_disable == ld
-        self.switches_changed(a)
+        self.limits_changed(a)
         enabled = (before.forward and not ld.forward) or (before.reverse and not ld.reverse)
         if enabled:
             self.interfere(a)
