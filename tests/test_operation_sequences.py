@@ -149,13 +149,14 @@ def _interrupted(link: object, at: int, *, after: bool) -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def _limit_stopped(into: list[MotionError]) -> Iterator[None]:
-    """Keep the ``MotionError`` of a contour a limit stopped (stop code 2 or 3) in ``into``
-    instead of raising it (it sent the contour: not a refusal)."""
+def _limit_stopped(axes: str, into: list[MotionError]) -> Iterator[None]:
+    """Keep the ``MotionError`` of a contour on ``axes`` a limit stopped (stop code 2 or 3 on
+    one of them) in ``into`` instead of raising it (it sent the contour: not a refusal). One
+    naming only followers refused the contour unsent: a limit had dropped their gearing."""
     try:
         yield
     except MotionError as exc:
-        if not {2, 3} & set(exc.stop_codes.values()):
+        if not {2, 3} & {exc.stop_codes.get(a) for a in axes}:
             raise
         into.append(exc)
 
@@ -456,6 +457,23 @@ class OperationSequences(RuleBasedStateMachine):
         self.interfere(a)
         self.limits_changed(a)
 
+    @rule(
+        a=axis_st,
+        which=st.sampled_from(["forward", "reverse"]),
+        where=st.sampled_from([-500, 500]),
+        disabled=st.booleans(),
+    )
+    def through_switch(self, a: str, which: str, where: int, disabled: bool) -> None:
+        """A switch placed ``where`` counts ahead (behind: ``a`` is on it), disabled by LD or
+        not, and a waited move of 3000 counts that way: through a disabled switch it ends as
+        predicted, a start on one is taken (decision 0046); an enabled one stops it, or the
+        start is refused unsent (``wait`` and ``refusable`` check which)."""
+        self.place_limit_switch(a, which, where)
+        bit = galil.LimitDisable.FORWARD if which == "forward" else galil.LimitDisable.REVERSE
+        ld = galil.LimitDisable(round(self.dmc.query_operands([f"_LD{a}"])[0]))
+        self.limit_disable(a, galil.LimitDisable(ld | bit if disabled else ld & ~bit))
+        self.move(a, True, 3000 if which == "forward" else -3000, True)
+
     @rule(a=axis_st, ld=st.sampled_from(list(galil.LimitDisable)))
     def limit_disable(self, a: str, ld: galil.LimitDisable) -> None:
         """``LD``, valid in motion (decision 0046): a disabled switch stops nothing and refuses
@@ -570,7 +588,7 @@ class OperationSequences(RuleBasedStateMachine):
         before = self.dmc.query_operands([f"_RP{a}" for a in axes])
         self.supersede(axes)  # (even if refused: harmless)
         stopped: list[MotionError] = []
-        with self.refusable(InvalidArgument, MotionError), _limit_stopped(stopped):
+        with self.refusable(InvalidArgument, MotionError), _limit_stopped(axes, stopped):
             self.dmc.contour(axes, path, dt=3)
             after = self.dmc.query_operands([f"_RP{a}" for a in axes])
             assert after == list(np.add(before, path[-1])), (before, after)
@@ -607,7 +625,7 @@ class OperationSequences(RuleBasedStateMachine):
         stopped: list[MotionError] = []
         with self.refusable(InvalidArgument, MotionError):
             try:
-                with _limit_stopped(stopped), _interrupted(self.dmc.link, at, after=after):
+                with _limit_stopped(axes, stopped), _interrupted(self.dmc.link, at, after=after):
                     self.dmc.contour(axes, path, dt=3)
             except KeyboardInterrupt:
                 interrupted = True
