@@ -4,8 +4,9 @@ A hypothesis state machine drives a ``sim://DMC-4040`` through moves (waited or 
 their speed changes, increments, speed schedules, homing, gearing, vector moves, contours
 (and contours a Ctrl-C interrupts at any exchange), soft limits, limit switches, stops,
 aborts, motors off and on (``SH`` with handles nobody waited for), AC/DC in motion and in a
-stop's ramp, MT/BR, TM changes, programs that move an axis (one with IF/ELSE/ENDIF and AT, one
-with AS and MF/MR), the ``motion()`` guard and the passing of time. After each step:
+stop's ramp, MT/BR/CE, LD (and moves through or off a switch it disables), BP, TM changes,
+programs that move an axis (one with IF/ELSE/ENDIF and AT, one with AS and MF/MR), the
+``motion()`` guard and the passing of time. After each step:
 
 - a call raises nothing but the library's documented errors; a refusal sent nothing but
   queries and changed none of the axes' settings; a setting "Not Valid while in motion" is
@@ -689,7 +690,7 @@ class OperationSequences(RuleBasedStateMachine):
             with self.refusable(InvalidArgument):  # (in motion: the controller refuses MO)
                 self.dmc.motor_off(a)
 
-    @rule(often=st.integers(0, 3))
+    @rule(often=st.integers(0, 1))
     def burn(self, often: int) -> None:
         """``BP`` (rarely: it holds the link for the burn's time): refused unsent while the
         library's own motion runs; the controller's TC 7 only for motion the library did not
