@@ -4,8 +4,9 @@ A hypothesis state machine drives a ``sim://DMC-4040`` through moves (waited or 
 their speed changes, increments, speed schedules, homing, gearing, vector moves, contours
 (and contours a Ctrl-C interrupts at any exchange), soft limits, limit switches, stops,
 aborts, motors off and on (``SH`` with handles nobody waited for), AC/DC in motion and in a
-stop's ramp, MT/BR, TM changes, programs that move an axis (one with IF/ELSE/ENDIF and AT, one
-with AS and MF/MR), the ``motion()`` guard and the passing of time. After each step:
+stop's ramp, MT/BR/CE, LD (and moves through or off a switch it disables), BP, TM changes,
+programs that move an axis (one with IF/ELSE/ENDIF and AT, one with AS and MF/MR), the
+``motion()`` guard and the passing of time. After each step:
 
 - a call raises nothing but the library's documented errors; a refusal sent nothing but
   queries and changed none of the axes' settings; a setting "Not Valid while in motion" is
@@ -59,6 +60,7 @@ from galil.gearing import Gearing
 from galil.motion import HOMING_KINDS, MoveHandle, MoveResult, Track
 from galil.sim.rooms.contour import Contour as SimContour
 from galil.sim.rooms.gearing import Gearing as SimGearing
+from galil.sim.rooms.tuning import Tuning as SimTuning
 from galil.testing import sim_of, transcript
 
 AXES = "ABCD"
@@ -74,7 +76,7 @@ _READ_ONLY = re.compile(
     r"|UL|LA|LV|QU [A-Za-z0-9\[\],]*|QZ|TC1|MG \"TCOK\d+\""
 )
 # What must not change when a call is refused.
-_SETTINGS = ("SP", "AC", "DC", "IT", "BL", "FL", "MO", "JG", "HV", "MT", "BR")
+_SETTINGS = ("SP", "AC", "DC", "IT", "BL", "FL", "MO", "JG", "HV", "MT", "BR", "CE", "LD")
 _VALUES: dict[str, list[float]] = {
     "speed": [2000, 10000, 25000, 60000],
     "accel": [20480, 102400, 256000, 1024000],
@@ -82,16 +84,23 @@ _VALUES: dict[str, list[float]] = {
     "smoothing": [1.0, 0.5, 0.25, 0.0625],
 }
 # The settings the controller takes only at rest (DC: not in a position move).
-_STILL = ("decel", "motor_type", "brush")
+_STILL = ("decel", "motor_type", "brush", "encoder_config")
+# A start refused for a limit switch (galil.moves, galil.homing): which axis, which switch.
+_SWITCH_REFUSAL = re.compile(
+    r"(?:axis|on) ([A-H]) would start towards its active (forward|reverse) limit switch"
+)
 # The stop code a move of each kind ends with when nothing interferes (docs/homing.md, a
 # position move's normal end).
 _END_CODE = {"position": 1, "schedule": 1, "home": 10, "edge": 9, "index": 10, "vector": 101}
-# Two routines that move D behind the library: a plain one, and one that picks its direction
-# with IF/ELSE/ENDIF and paces its start with AT (decision 0037).
+# Three routines that move D behind the library: a plain one, one that picks its direction
+# with IF/ELSE/ENDIF and paces its start with AT (decision 0037), and one that waits for D to
+# be at rest (AM: its PR is not refused with TC 7 in the library's move), moves it 700 counts
+# (forwards below 0, else backwards), waits with AS, then with MF or MR for D to cross the
+# middle of its move (decision 0042).
 PROGRAM = (
     "#SEQMOVE\nPRD=700\nBGD\nAMD\nEN\n"
     "#SEQIF\nAT 0\nIF (_RPD < 0)\nPRD=700\nELSE\nPRD=-700\nENDIF\nAT 20\nBGD\nAMD\nEN\n"
-    "#SEQTRIP\np=_TPD\nIF (_RPD < 0)\nPRD=700;BGD\nASD\nMFD=p+350\nELSE\nPRD=-700;BGD\nASD\n"
+    "#SEQTRIP\nAMD\np=_TPD\nIF (_RPD < 0)\nPRD=700;BGD\nASD\nMFD=p+350\nELSE\nPRD=-700;BGD\nASD\n"
     "MRD=p-350\nENDIF\nAMD\nEN"
 )
 
@@ -106,6 +115,9 @@ class Running:
     # where the (lagging) motor is: its end is not the prediction's business.
     unpredictable: bool = False
     superseded: bool = False  # other motion started on its axes since (its end is older)
+    # A switch was placed, LD or a soft limit changed on its axes since it started: what
+    # stopped it is not known (a limit's end is not checked against the limits now).
+    limits_changed: bool = False
 
 
 @contextlib.contextmanager
@@ -138,14 +150,16 @@ def _interrupted(link: object, at: int, *, after: bool) -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def _limit_stopped(into: list[MotionError]) -> Iterator[None]:
-    """Keep the ``MotionError`` of a contour a limit stopped (stop code 2 or 3) in ``into``
-    instead of raising it (it sent the contour: not a refusal). A follower a limit dropped
-    unseen, reported when its master starts, is a refusal before any byte: raised."""
+def _limit_stopped(axes: str, into: list[MotionError]) -> Iterator[None]:
+    """Keep the ``MotionError`` of a contour on ``axes`` a limit stopped (stop code 2 or 3 on
+    one of them) in ``into`` instead of raising it (it sent the contour: not a refusal). One
+    naming only followers refused the contour unsent: a limit had dropped their gearing (so
+    does any error but the contour's own "stopped by the controller")."""
     try:
         yield
     except MotionError as exc:
-        if "stopped by the controller" not in str(exc) or not {2, 3} & set(exc.stop_codes.values()):
+        own = {exc.stop_codes.get(a) for a in axes}
+        if "stopped by the controller" not in str(exc) or not {2, 3} & own:
             raise
         into.append(exc)
 
@@ -166,6 +180,8 @@ class OperationSequences(RuleBasedStateMachine):
         self.running: list[Running] = []
         self.gearings: dict[str, Gearing] = {}
         self.program_axis_free = True
+        # The sides of each axis with a switch placed (2 forward, 3 reverse: its stop code).
+        self.placed: dict[str, set[int]] = {a: set() for a in AXES}
         self.threads_before = set(threading.enumerate())
 
     # -- helpers ----------------------------------------------------------------------------
@@ -191,6 +207,13 @@ class OperationSequences(RuleBasedStateMachine):
         others = _queries_only(sent.lines)
         assert not others, f"{type(refused).__name__} ({refused}) after sending {others!r}"
         assert self._settings() == before, f"settings changed by a refusal: {refused}"
+        if (found := _SWITCH_REFUSAL.search(str(refused))) is not None:
+            # A start refused for a switch: it is active and LD does not disable it (a start
+            # towards a disabled switch is taken: decision 0046).
+            a, side = found.groups()
+            active, ld = self.dmc.query_operands([f"_L{side[0].upper()}{a}", f"_LD{a}"])
+            assert not active, f"{refused}: the switch is not active"
+            assert not round(ld) & (1 if side == "forward" else 2), f"{refused}: LD {ld:g}"
         if not isinstance(refused, MotionError):  # (refuse_dropped forgets the gearing)
             assert self.dmc.tracker.gears == gears, f"gearing changed by a refusal: {refused}"
 
@@ -200,6 +223,11 @@ class OperationSequences(RuleBasedStateMachine):
             if touched & set(letters):
                 run.interfered = True
                 run.unpredictable = run.unpredictable or unpredictable
+
+    def limits_changed(self, letters: str) -> None:
+        for run in self.running:
+            if set(run.handle.axes + run.handle.followers) & set(letters):
+                run.limits_changed = True
 
     def idle(self, letters: str = AXES) -> bool:
         *bg, xq = self.dmc.query_operands([f"_BG{a}" for a in letters] + ["_XQ1"])
@@ -237,6 +265,8 @@ class OperationSequences(RuleBasedStateMachine):
             assert set(limited.stop_codes.values()) & {2, 3}, limited
             if run in self.running:
                 self.running.remove(run)
+            if not (run.interfered or run.limits_changed or run.superseded):
+                self.limit_stop_explained(h, limited)
             return
         if result is None:
             assert math.isinf(h.duration) or run.interfered, h
@@ -244,6 +274,33 @@ class OperationSequences(RuleBasedStateMachine):
         if run in self.running:
             self.running.remove(run)
         self.check_result(run, result)
+
+    def limit_stop_explained(self, h: MoveHandle, exc: MotionError) -> None:
+        """A limit ended a move no limit changed for since it began (nor other motion on its
+        axes, which would have moved them since): each axis with SC 2 (3) is beyond its
+        forward (reverse) soft limit or on its active forward (reverse) switch, one LD does
+        not disable (decision 0046). A sequence (or a gearing) stops as a whole with the code
+        of the axis that ran into the limit, and its ramp down follows the path, which may
+        take that axis back off its switch: one of its axes has such a soft limit, or such a
+        switch placed that LD does not disable."""
+        limited = {a: c for a, c in exc.stop_codes.items() if c in (2, 3)}
+        names = [f"_{op}{a}" for a in limited for op in ("RP", "FL", "BL", "LF", "LR", "LD")]
+        values = dict(zip(names, self.dmc.query_operands(names), strict=True))
+
+        def explains(a: str, code: int, *, whole: bool) -> bool:
+            rp, ld = values[f"_RP{a}"], round(values[f"_LD{a}"])
+            enabled = not ld & (1 if code == 2 else 2)
+            if whole:
+                soft = values[f"_FL{a}"] < 2**31 - 1 if code == 2 else values[f"_BL{a}"] > -(2**31)
+                return soft or (code in self.placed[a] and enabled)
+            if code == 2:  # (LD leaves the soft limits on)
+                return rp >= values[f"_FL{a}"] or (not values[f"_LF{a}"] and enabled)
+            return rp <= values[f"_BL{a}"] or (not values[f"_LR{a}"] and enabled)
+
+        whole = h.kind == "vector" or bool(h.followers)
+        for a, code in limited.items():
+            by = limited if whole else [a]
+            assert any(explains(x, code, whole=whole) for x in by), (a, code, values, exc)
 
     def supersede(self, letters: str) -> None:
         for run in self.running:
@@ -312,16 +369,17 @@ class OperationSequences(RuleBasedStateMachine):
 
     @rule(
         data=st.data(),
-        what=st.sampled_from(["motor_type", "brush"]),
+        what=st.sampled_from(["motor_type", "brush", "encoder_config"]),
         i=st.integers(0, 1),
     )
     def motor_setting(self, data: st.DataObject, what: str, i: int) -> None:
-        """MT and BR, "Not Valid while in motion": refused unsent while the library's own
-        motion runs (decision 0036), by the controller (TC 7) otherwise; MT also with the
-        motor on, after reading ``_MO`` (decision 0043)."""
+        """MT, BR and CE, "Not Valid while in motion": refused unsent while the library's own
+        motion runs (decisions 0036, 0048), by the controller (TC 7) otherwise; MT also with
+        the motor on, after reading ``_MO`` (decision 0043). Taken, each reads back."""
         moving = [a for r in self.running for a in r.handle.axes + r.handle.followers]
         a = data.draw(st.sampled_from(sorted(set(moving)) or list(AXES)))
-        self.set_setting(a, what, {"motor_type": [1, -1], "brush": [0, 1]}[what][i])
+        values = {"motor_type": [1, -1], "brush": [0, 1], "encoder_config": [10, 0]}
+        self.set_setting(a, what, values[what][i])
 
     def set_setting(self, a: str, what: str, value: float) -> None:
         """Set ``what`` on ``a``: only a setting "Not Valid while in motion" may be refused,
@@ -357,10 +415,11 @@ class OperationSequences(RuleBasedStateMachine):
                 assert not self.dmc.query_operands([f"_BG{a}"])[0], (a, followed, by_controller)
         elif not refused and what in _STILL and what != "decel":
             # Taken: then the axis was at rest (or began only since: a program), and MT
-            # found the motor off.
+            # found the motor off; it reads back.
             assert not motor_on, f"{what} taken with {a}'s motor on"
             moving = self.dmc.query_operands([f"_BG{a}"])[0]
             assert not moving or not self._free(a), f"{what} taken while {a} moves"
+            assert getattr(self.dmc.axes[a], what) == value, (a, what, value)
 
     def _followed(self, a: str) -> Track | None:
         """The library's track of the motion on ``a`` when it predicts it to the count (a
@@ -380,17 +439,57 @@ class OperationSequences(RuleBasedStateMachine):
     )
     def soft_limits(self, a: str, low: int | None, high: int | None) -> None:
         self.dmc.axes[a].soft_limits = (low, high)
+        self.limits_changed(a)
 
     @rule(
         a=axis_st,
         which=st.sampled_from(["forward", "reverse"]),
-        where=st.sampled_from([None, 500, 3000, 15000]),
+        where=st.sampled_from([None, -500, 500, 3000, 15000]),
     )
     def place_limit_switch(self, a: str, which: str, where: int | None) -> None:
+        """A switch ``where`` counts ahead of ``a`` in the ``which`` direction, or behind it
+        (negative: ``a`` is on it at once, and a start that way needs ``LD``)."""
         here = self.sim.machine_position(a)
         pos = None if where is None else here + (where if which == "forward" else -where)
         self.sim.place_limit_switches(a, **{which: pos})
+        code = 2 if which == "forward" else 3
+        if pos is None:
+            self.placed[a].discard(code)
+        else:
+            self.placed[a].add(code)
         self.interfere(a)
+        self.limits_changed(a)
+
+    @rule(
+        a=axis_st,
+        which=st.sampled_from(["forward", "reverse"]),
+        where=st.sampled_from([-500, 500]),
+        disabled=st.booleans(),
+    )
+    def through_switch(self, a: str, which: str, where: int, disabled: bool) -> None:
+        """A switch placed ``where`` counts ahead (behind: ``a`` is on it), disabled by LD or
+        not, and a waited move of 3000 counts that way: through a disabled switch it ends as
+        predicted, a start on one is taken (decision 0046); an enabled one stops it, or the
+        start is refused unsent (``wait`` and ``refusable`` check which)."""
+        self.place_limit_switch(a, which, where)
+        bit = galil.LimitDisable.FORWARD if which == "forward" else galil.LimitDisable.REVERSE
+        ld = galil.LimitDisable(round(self.dmc.query_operands([f"_LD{a}"])[0]))
+        self.limit_disable(a, galil.LimitDisable(ld | bit if disabled else ld & ~bit))
+        self.move(a, True, 3000 if which == "forward" else -3000, True)
+
+    @rule(a=axis_st, ld=st.sampled_from(list(galil.LimitDisable)))
+    def limit_disable(self, a: str, ld: galil.LimitDisable) -> None:
+        """``LD``, valid in motion (decision 0046): a disabled switch stops nothing and refuses
+        no start (the refusals and the limit ends are checked against ``_LD``); a switch
+        enabled under an axis moving into it stops it at once (interference). A move that only
+        lost a switch since it started still ends as predicted."""
+        before = galil.LimitDisable(round(self.dmc.query_operands([f"_LD{a}"])[0]))
+        self.dmc.axes[a].limit_disable = ld
+        assert self.dmc.axes[a].limit_disable == ld
+        self.limits_changed(a)
+        enabled = (before.forward and not ld.forward) or (before.reverse and not ld.reverse)
+        if enabled:
+            self.interfere(a)
 
     @rule(tm=st.sampled_from([500, 1000, 250]))
     def change_tm(self, tm: int) -> None:
@@ -492,7 +591,7 @@ class OperationSequences(RuleBasedStateMachine):
         before = self.dmc.query_operands([f"_RP{a}" for a in axes])
         self.supersede(axes)  # (even if refused: harmless)
         stopped: list[MotionError] = []
-        with self.refusable(InvalidArgument, MotionError), _limit_stopped(stopped):
+        with self.refusable(InvalidArgument, MotionError), _limit_stopped(axes, stopped):
             self.dmc.contour(axes, path, dt=3)
             after = self.dmc.query_operands([f"_RP{a}" for a in axes])
             assert after == list(np.add(before, path[-1])), (before, after)
@@ -529,7 +628,7 @@ class OperationSequences(RuleBasedStateMachine):
         stopped: list[MotionError] = []
         with self.refusable(InvalidArgument, MotionError):
             try:
-                with _limit_stopped(stopped), _interrupted(self.dmc.link, at, after=after):
+                with _limit_stopped(axes, stopped), _interrupted(self.dmc.link, at, after=after):
                     self.dmc.contour(axes, path, dt=3)
             except KeyboardInterrupt:
                 interrupted = True
@@ -581,14 +680,48 @@ class OperationSequences(RuleBasedStateMachine):
             # SH puts a motor-off axis's reference at its (lagging) encoder: a handle not seen
             # done keeps the end it had (decision 0036), so only the position now may differ.
             if not self.dmc.query_operands([f"_MO{a}"])[0]:
-                with self.refusable(InvalidArgument):  # (in motion: the controller refuses SH)
+                # In motion (whoever moves it) refused unsent, not TC 7 (decision 0045).
+                with self.refusable(InvalidArgument) as refused:
                     self.dmc.servo_here(a)
+                if refused:  # (no time passes between the library's _BG and this one)
+                    assert self.dmc.query_operands([f"_BG{a}"]) == [1], refused
                 return
             self.dmc.servo_here(a)
             self.supersede(a)
         else:
             with self.refusable(InvalidArgument):  # (in motion: the controller refuses MO)
                 self.dmc.motor_off(a)
+
+    @rule(often=st.integers(0, 1))
+    def burn(self, often: int) -> None:
+        """``BP`` (rarely: it holds the link for the burn's time): refused unsent while the
+        library's own motion runs; the controller's TC 7 only for motion the library did not
+        start (a program, a follower), its TC 17 while a program thread runs (decision 0047);
+        burned only then."""
+        if often:
+            return
+        tuning = self.sim.room(SimTuning)
+        burns = tuning.burns["BP"]
+        by_controller: CommandError | None = None
+        try:
+            with self.refusable(InvalidArgument) as refused:
+                self.dmc.programs.burn()
+        except CommandError as exc:
+            by_controller = exc
+        if refused:
+            assert any(self.dmc.tracker.active(a) for a in AXES), refused
+            assert any(self.dmc.query_operands([f"_BG{a}" for a in AXES])), refused
+        elif by_controller is not None:
+            *bg, xq0, xq1 = self.dmc.query_operands([f"_BG{a}" for a in AXES] + ["_XQ0", "_XQ1"])
+            if by_controller.code == 17:
+                assert max(xq0, xq1) >= 0, by_controller
+            else:
+                assert by_controller.code == 7, by_controller
+                moving = [a for a, b in zip(AXES, bg, strict=True) if b]
+                assert moving, by_controller
+                known = [a for a in moving if self._free(a) and self._followed(a) is not None]
+                assert not known, (known, by_controller)
+        assert tuning.burns["BP"] == burns + (not refused and by_controller is None)
 
     @rule(seconds=st.sampled_from([0.01, 0.1, 0.5, 2.0]))
     def sleep(self, seconds: float) -> None:
