@@ -289,6 +289,9 @@ class ContourStream:
         if not isinstance(preload, bool):
             raise InvalidArgument(f"preload must be True or False, got {preload!r}")
         self._preload = preload and link.model.contour_preload
+        # Segments may be held under DT -1, not started: from the pre-load's CM until the
+        # line with the start's DT came back (only then does a stop need _drop_held).
+        self._holding = False
 
     def commands(self) -> list[Command]:
         """The ``CD`` command of every segment, in order (built and checked at once)."""
@@ -394,6 +397,7 @@ class ContourStream:
             if round(link.query_operands(["_TC"])[0]) == 42:
                 link.command_line([cmds.tc(0)])  # a previous stream's code: ours must show
             first = cmds.dt(-1 if start is not None else self.dt, model=model)
+            self._holding = start is not None
             link.command_line([cmds.cm(self.letters, model=model), first])
         except BaseException:
             self._halt(end=True)  # (CM may have gone out: contour mode is left again)
@@ -437,7 +441,9 @@ class ContourStream:
         send_reopening(functools.partial(link.command_line, stop), reopen)
         if end:
             with contextlib.suppress(GalilError):
-                if self._preload:
+                if self._holding:
+                    # (once started, nothing is held: a CM now would only enter contour mode
+                    # again, left so if the link closes before the end goes out)
                     self._drop_held()
                 link.command_line(cmds.contour_end(self.letters, model=link.model))
 
@@ -482,6 +488,7 @@ class ContourStream:
             self._check_stopped(state)
             line = _stamped([texts[state.sent]], state)
             replies = link.command_line([*line, cmds.wc()], timeout=seg_time * 4 + 1.0)
+            self._holding = False
             _note_begin(state, replies)
             state.sent += 1
             state.lines += 1
@@ -490,6 +497,7 @@ class ContourStream:
             with held(self._tracker):  # (no stop between the check and the line)
                 self._check_stopped(state)
                 replies = link.command_line(_stamped(batch, state))
+            self._holding = False  # (the first batch carries the start's DT)
             _note_begin(state, replies)
             state.sent += len(batch)
             state.lines += len(cmds.pack(batch, model.line_length))

@@ -283,6 +283,37 @@ def test_close_ends_a_contour_and_stops_it(tcp: tuple[SimController, Controller]
     assert not _moving(sim, "D")
 
 
+def test_a_stop_of_a_started_contour_does_not_enter_contour_mode_again(
+    tcp: tuple[SimController, Controller],
+) -> None:
+    # A pre-loaded stream drops its held segments with CM when it is stopped, but once the
+    # contour has started nothing is held: a CM after the ST only entered contour mode
+    # again, and a close() between it and the end left the axis there (_BG 1 for good: the
+    # close test above failed so, now and then).
+    sim, c = tcp
+    c.command("SH")
+    path = np.cumsum(np.full(3000, 20.0))  # six buffers: it streams until stopped
+
+    def fed() -> bool:
+        return any(text.startswith("CD") for _, text in sim.command_log)
+
+    t, raised = _in_thread(lambda: c.contour("D", path, dt=3))
+    deadline = time.monotonic() + JOIN
+    while not fed() and time.monotonic() < deadline:
+        time.sleep(0.01)  # the stream feeding (its start went out with the first batch)
+    time.sleep(0.05)
+    c.stop("D")
+    t.join(JOIN)
+    assert not t.is_alive()
+    assert len(raised) == 1, raised
+    assert isinstance(raised[0], MotionError), raised
+    log = [text for _, text in sim.command_log]
+    stop = next(i for i, text in enumerate(log) if text.startswith("ST"))
+    assert not [text for text in log[stop:] if text.startswith("CM")]
+    sim.advance(2.0)
+    assert not _moving(sim, "D")
+
+
 def test_with_block_left_by_an_exception_stops_the_move_and_closes() -> None:
     with (  # noqa: PT012 - the block is the scan that fails
         pytest.raises(RuntimeError, match="scan failed"),
