@@ -60,16 +60,16 @@ class _ContourOverError(Exception):
         self.error = error
 
 
-def _halted(letters: str, stop_codes: list[float], live: set[str]) -> bool:
-    """Whether an axis of ``letters`` seen running (in ``live``) reads a stop code of a
-    halt; the axes reading 50 ("Contour running") join ``live`` on the way."""
-    halted = False
+def _halted(letters: str, stop_codes: list[float], live: set[str]) -> list[str]:
+    """The axes of ``letters`` seen running (in ``live``) that read a stop code of a halt
+    (empty: none); the axes reading 50 ("Contour running") join ``live`` on the way."""
+    halted = []
     for a, c in zip(letters, stop_codes, strict=True):
         code = round(c)
         if code == _RUNNING:
             live.add(a)
         elif code in codes.HALT_STOPS and a in live:
-            halted = True
+            halted.append(a)
     return halted
 
 
@@ -539,11 +539,11 @@ class ContourStream:
         except GalilError:
             return None
         stop = {a: round(v) for a, v in zip(self.letters, values[:n], strict=True)}
-        if not _halted(self.letters, values[:n], state.live):
+        halted = _halted(self.letters, values[:n], state.live)
+        if not halted:
             return None
         if any(round(v) for v in values[n : 2 * n]):
             self._halt(end=True)
-        halted = [a for a, c in stop.items() if c in codes.HALT_STOPS and a in state.live]
         first = ([a for a in halted if stop[a] in codes.LIMIT_STOPS] or halted)[0]
         parts = "; ".join(f"{a}: {codes.stop_text(c)}" for a, c in stop.items())
         error = MotionError(
