@@ -1205,15 +1205,26 @@ def motors_off(link: CommandLink, letters: str) -> None:
     """
     command = cmds.mo(letters, model=link.model)
     read = letters or link.model.axes
-    moving = link.query_operands([f"_BG{a}" for a in read])
-    busy = "".join(a for a, v in zip(read, moving, strict=True) if round(v))
+    _refuse_moving(link, read, link.query_operands([f"_BG{a}" for a in read]), "motor off", "MO")
+    link.command_line([command])
+
+
+def _refuse_moving(
+    link: CommandLink, letters: str, bg: Sequence[float], what: str, mnemonic: str
+) -> None:
+    """Refuse ``what`` (``mnemonic``, "Not Valid while in motion") when one of ``letters``
+    reads ``_BG`` 1 in ``bg``.
+
+    Raises:
+        InvalidArgument: an axis moving (nothing sent but the read).
+    """
+    busy = "".join(a for a, v in zip(letters, bg, strict=True) if round(v))
     if busy:
         raise InvalidArgument(
-            f"motor off refused: {busy} moving, and the controller refuses MO in motion "
+            f"{what} refused: {busy} moving, and the controller refuses {mnemonic} in motion "
             "(TC 7); stop the motion and wait for it first",
             model=link.model.name,
         )
-    link.command_line([command])
 
 
 def servo_here(link: CommandLink, tracker: MotionTracker, letters: str) -> None:
@@ -1238,13 +1249,7 @@ def servo_here(link: CommandLink, tracker: MotionTracker, letters: str) -> None:
         names = [f"_BG{a}" for a in read] + [f"_{op}{a}" for op in ("RP", "SC") for a in open_]
         values = link.query_operands(names)
         n, k = len(read), len(open_)
-        busy = "".join(a for a, v in zip(read, values[:n], strict=True) if round(v))
-        if busy:
-            raise InvalidArgument(
-                f"servo here refused: {busy} moving, and the controller refuses SH in motion "
-                "(TC 7); stop the motion and wait for it first",
-                model=link.model.name,
-            )
+        _refuse_moving(link, read, values[:n], "servo here", "SH")
         for a, rp, sc in zip(open_, values[n : n + k], values[n + k :], strict=True):
             tracker.ended(a, rp, sc)
         link.command_line([command])
