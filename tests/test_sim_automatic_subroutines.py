@@ -172,5 +172,6 @@ def test_rs_starts_the_auto_label() -> None:
     # Through the simulator's own port: RS sets CW back, so a link would read the message as
     # a reply (as it would from a controller).
     sim = SimController("DMC-4040")
-    sim.feed(b'DL\r#AUTO\rMG "auto"\rEN\r\\')
+    sim.feed(b'DL\r#AUTO\rMG "auto"\rEN\r\\BP\r')
+    assert sim.advance_until_output(1.0) == b":"  # (the burn holds its ':' a while)
     assert sim.feed(b"RS\r") == b":auto\r\n"

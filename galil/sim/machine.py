@@ -19,6 +19,7 @@ stays as it is.
 
 from __future__ import annotations
 
+import copy
 from collections import deque
 from collections.abc import Callable, Sequence
 from typing import ClassVar, TypeVar
@@ -63,7 +64,17 @@ class Room:
         self.machine = machine
 
     def reset(self) -> None:
-        """Power-on state (at start, ``RS`` and ``^R^S``); the axes are new already."""
+        """Factory power-on state (at start, ``RS`` and ``^R^S``); the axes are new already.
+        What was burned is put back afterwards with :meth:`restore`."""
+
+    def burn(self, name: str) -> object | None:
+        """``BN``, ``BP`` or ``BV`` (``name``): what of this room's state that burn saves (the
+        machine copies it), or None for nothing."""
+        return None
+
+    def restore(self, name: str, saved: object) -> None:
+        """``RS``: put back what :meth:`burn` returned for ``name`` (a copy), after
+        :meth:`reset`."""
 
     def abort(self) -> None:
         """``AB``: every axis was stopped at once; drop motion state."""
@@ -129,6 +140,9 @@ class Machine:
             missing = [r.__name__ for r in cls.requires if r not in self._rooms]
             if missing:
                 raise ValueError(f"room {cls.__name__} needs {', '.join(missing)}")
+        #: The non-volatile memory: for each burn (``BN``, ``BP``, ``BV``) that ran, what each
+        #: room saved (by its place in the list). ``^R^S`` erases it; a new machine has none.
+        self.flash: dict[str, dict[int, object]] = {}
         self._wire()
         self.reset()
 
@@ -188,13 +202,31 @@ class Machine:
 
     # ---- state -------------------------------------------------------------------------
     def reset(self) -> None:
-        """Power-on defaults (also ``RS`` and ``^R^S``); time keeps running."""
+        """Factory power-on defaults (also ``^R^S``; ``RS`` then restores what was burned,
+        :meth:`power_on`): no program, no variables; time keeps running."""
         self.servo.reset()
         self.interp.reset()
         self.ports.reset()
         self.programs.reset()
+        self.programs.install([])
         for hook in self._reset_hooks:
             hook()
+
+    def burn(self, name: str) -> None:
+        """``BN``, ``BP`` or ``BV`` has finished: what each room saves replaces what that burn
+        saved before."""
+        saved = {i: room.burn(name) for i, room in enumerate(self._list)}
+        self.flash[name] = {i: copy.deepcopy(s) for i, s in saved.items() if s is not None}
+
+    def power_on(self, *, parameters: bool = True) -> None:
+        """``RS``: factory defaults, then what was burned; ``parameters=False`` (``RS -1``,
+        the soft master reset) leaves the parameters at their factory defaults."""
+        self.reset()
+        for name, saved in self.flash.items():
+            if name == "BN" and not parameters:
+                continue
+            for i, state in saved.items():
+                self._list[i].restore(name, copy.deepcopy(state))
 
     def abort(self) -> None:
         """Tell every room that ``AB`` stopped the axes."""

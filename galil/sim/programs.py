@@ -182,7 +182,7 @@ class Programs:
                 if head.strip():
                     p.download.append(head)
                 p.inbuf = p.inbuf[slash + 1 :]
-                self._install(p.download)
+                self.install(p.download)
                 p.download = None
                 p.swallow_cr = True
                 p.out += b"::"
@@ -195,7 +195,9 @@ class Programs:
             if line.strip():
                 p.download.append(line)
 
-    def _install(self, lines: list[str]) -> None:
+    def install(self, lines: list[str]) -> None:
+        """Make ``lines`` the program (the threads stop): a download, or the burned program
+        at ``RS``."""
         self.reset()
         self.program = [ln.strip() for ln in lines]
         self.labels = {}

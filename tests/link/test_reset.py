@@ -88,6 +88,7 @@ def test_rs_sent_raw_on_main_broke_replies_now_reset_keeps_them_in_step(
     dmc: galil.Controller,
 ) -> None:
     dmc.programs.download(AUTO)
+    dmc.programs.burn()  # RS brings back the burned program only
     dmc.reset()
     assert dmc.query_number("MG 0") == 0.0  # (on main: ProtocolError 'hello\r\n 0.0000')
     assert dmc.messages.get(timeout=1) == "hello"  # a message, not a reply
@@ -156,6 +157,7 @@ def test_the_terminal_resets_on_rs_and_refuses_the_link_settings(dmc: galil.Cont
     out: list[str] = []
     term = Terminal(dmc, write=out.append)
     dmc.programs.download(AUTO)
+    dmc.programs.burn()  # RS brings back the burned program only
     term.feed("RS")
     assert out[-1].startswith("reset (RS)")
     term.feed("CW 2")
@@ -172,6 +174,7 @@ def test_over_tcp_the_message_handle_is_claimed_again_after_reset() -> None:
         # What #AUTO prints before CF I is sent again goes to the main port (RS set CF back
         # to S): lost on Ethernet. Printed 4 s later (0.5 s here), it reaches the handle.
         c.programs.download('#AUTO\nWT 4000\nMG "hello"\nEN\n')
+        c.programs.burn()
         c.reset()
         assert c.messages.get(timeout=5) == "hello"
         assert c.query_number("MG 2") == 2.0
@@ -186,6 +189,7 @@ def test_over_a_pty_auto_output_stays_a_message_after_reset(
         pytest.skip("needs a pty")
     with galil.connect(galil_sim("--pty"), timeout=2.0) as c:
         c.programs.download(AUTO)
+        c.programs.burn()
         c.reset()
         assert c.messages.get(timeout=5) == "hello"
         assert c.query_number("MG 3") == 3.0

@@ -60,6 +60,14 @@ class Arrays(Room):
     def reset(self) -> None:
         self.arrays = {}
 
+    def burn(self, name: str) -> object | None:
+        # BV: "saves the controller variables and arrays" (DMC-4103 reference).
+        return (self.machine.interp.variables, self.arrays) if name == "BV" else None
+
+    def restore(self, name: str, saved: object) -> None:
+        assert isinstance(saved, tuple)
+        self.machine.interp.variables, self.arrays = saved
+
     # ---- elements in expressions -------------------------------------------------------
     def _array(self, name: str) -> list[float]:
         found = self.arrays.get(name)

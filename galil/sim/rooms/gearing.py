@@ -105,6 +105,19 @@ class Gearing(Room):
         self.masters: dict[str, str] = {}  # follower letter -> master (GA): "A", "CA", "S"
         self.ratios: dict[str, float] = {}  # follower letter -> ratio, while geared
 
+    def burn(self, name: str) -> object | None:
+        # The BN table lists GA and GR: the masters, and the ratios of the axes geared now.
+        self.after_step()
+        return (dict(self.masters), dict(self.ratios)) if name == "BN" else None
+
+    def restore(self, name: str, saved: object) -> None:
+        """A burned ratio gears its axis again at power-on (the axes are at rest, at 0)."""
+        assert isinstance(saved, tuple)
+        self.masters, ratios = saved
+        for c, ratio in ratios.items():
+            self._apply(self.machine.servo.axes[c], ratio)
+        self.machine.servo.step_first(list(self.ratios))
+
     # ---- where the master's positions come from ----------------------------------------
     def _reader(self, spec: str) -> Callable[[int, GearFeed], Int64Array]:
         servo = self.machine.servo

@@ -53,6 +53,13 @@ class Homing(Room):
                 functools.partial(self._start, kind),
             )
 
+    def burn(self, name: str) -> object | None:
+        return self.hv if name == "BN" else None  # (HV is in the BN table)
+
+    def restore(self, name: str, saved: object) -> None:
+        assert isinstance(saved, dict)
+        self.hv = saved
+
     def abort(self) -> None:
         self.runs.clear()
 

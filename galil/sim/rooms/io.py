@@ -33,6 +33,14 @@ class IO(Room):
         self.analog_out = [0.0] * spec.analog_outputs
         self.aq = [2.0] * spec.analog_inputs
 
+    def burn(self, name: str) -> object | None:
+        # The BN table: SB CB OP (the outputs) and AQ; the inputs are the outside world's.
+        return (list(self.outputs), list(self.aq)) if name == "BN" else None
+
+    def restore(self, name: str, saved: object) -> None:
+        assert isinstance(saved, tuple)
+        self.outputs, self.aq = saved
+
     # ---- channels ------------------------------------------------------------------------
     def channel(self, n: float, count: int) -> int:
         """The list index of channel ``n`` among ``count`` (TC 6 if there is none)."""

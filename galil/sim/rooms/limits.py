@@ -118,6 +118,21 @@ class Limits(Room):
         #: CN fields: limit polarity (-1 active low), home direction, latch edge, two more.
         self.cn = [-1.0, -1.0, -1.0, 0.0, 1.0]
 
+    def burn(self, name: str) -> object | None:
+        # The BN table: FL BL LD CN (the switches themselves are the machine's, not burned).
+        if name != "BN":
+            return None
+        return {c: (a.fl, a.bl, a.ld) for c, a in self.axes.items()}, list(self.cn)
+
+    def restore(self, name: str, saved: object) -> None:
+        assert isinstance(saved, tuple)
+        axes, self.cn = saved
+        for c, (fl, bl, ld) in axes.items():
+            a = self.axes[c]
+            a.fl, a.bl, a.ld = fl, bl, ld
+        self._soft_limits_changed()
+        self._switched = True  # (a switch may be active and now enabled: look again)
+
     # ---- switch states -----------------------------------------------------------------
     def tripped(self, ax: Axis, which: str) -> bool:
         """Whether the forward or reverse limit switch is physically tripped."""

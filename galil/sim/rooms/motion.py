@@ -79,6 +79,22 @@ class Motion(Room):
             for letter in spec.axes
         }
 
+    def burn(self, name: str) -> object | None:
+        # The BN table: AC DC SP IT, and MO (which axes are off). JG, PR, PA are not in it.
+        if name != "BN":
+            return None
+        servo = self.machine.servo
+        return {
+            c: (p.sp, p.ac, p.dc, p.it, servo.axes[c].m.motor_on) for c, p in self.axes.items()
+        }
+
+    def restore(self, name: str, saved: object) -> None:
+        assert isinstance(saved, dict)
+        for c, (sp, ac, dc, it, on) in saved.items():
+            p = self.axes[c]
+            p.sp, p.ac, p.dc, p.it = sp, ac, dc, it
+            self.machine.servo.axes[c].m.motor_on = on
+
     def params(self, ax: Axis) -> Params:
         """The motion parameters of ``ax``."""
         return self.axes[ax.letter]

@@ -23,6 +23,13 @@ __all__ = ["ProgramCommands"]
 class ProgramCommands(Room):
     """DL, UL, XQ, HX, JP, EN, NO."""
 
+    def burn(self, name: str) -> object | None:
+        return list(self.machine.programs.program) if name == "BP" else None
+
+    def restore(self, name: str, saved: object) -> None:
+        assert isinstance(saved, list)
+        self.machine.programs.install(saved)
+
     @handler("DL")
     def dl(self, args: str) -> Download:
         # (a thread that reaches DL, UL is refused before: NOT_IN_PROGRAM)

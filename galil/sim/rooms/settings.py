@@ -43,6 +43,22 @@ class Settings(Room):
             raise Refused(6, "bad format") from None
         return f"{'$' if is_hex else ''}{m}.{n}"
 
+    def burn(self, name: str) -> object | None:
+        # The BN table: LZ PF VF (the interpreter's), EO CW (the ports'), TM (the servo's).
+        if name != "BN":
+            return None
+        i, ports = self.machine.interp, self.machine.ports
+        return i.lz, i.pf, i.vf, ports.echo, ports.cw, ports.cw_mode, self.machine.servo.tm
+
+    def restore(self, name: str, saved: object) -> None:
+        assert isinstance(saved, tuple)
+        i, ports, servo = self.machine.interp, self.machine.ports, self.machine.servo
+        i.lz, i.pf, i.vf, ports.echo, ports.cw, ports.cw_mode, tm = saved
+        if tm != servo.tm:
+            servo.set_tm(tm)
+            for ax in servo.axes.values():
+                servo.reseat(ax, ax.m.reference)
+
     # ---- formats -----------------------------------------------------------------------
     @handler("LZ")
     def lz(self, args: str) -> str:
@@ -154,15 +170,19 @@ class Settings(Room):
     # ---- reset and identity ------------------------------------------------------------
     @handler("RS")
     def rs(self, args: str) -> str:
-        # R4103, RS: "n = 0 performs normal reset. n = -1 performs soft master reset"
-        # (factory defaults, the EEPROM kept); the power-on state with the saved program.
+        # R4103, RS: "resets the state of the processor to its power-on condition. The
+        # previously saved state of the hardware, along with parameter values and saved
+        # program, are restored." "n = 0 performs normal reset. n = -1 performs soft master
+        # reset": "restores factory default settings without erasing the EEPROM". What BN,
+        # BP and BV burned comes back (after RS -1 the parameters stay at their defaults, the
+        # program and variables come back: decision 0052); #AUTO runs after RS and RS 0.
         a = args.strip()
         if a not in ("", "0", "-1"):
             raise Refused(6, "RS takes 0 or -1")
-        self.machine.reset()
+        self.machine.power_on(parameters=a != "-1")
         programs = self.machine.programs
-        if a != "-1" and "AUTO" in programs.labels:  # the program survives RS here, as if
-            programs.threads[0] = Thread(0, line=programs.labels["AUTO"])  # burned (BP)
+        if a != "-1" and "AUTO" in programs.labels:
+            programs.threads[0] = Thread(0, line=programs.labels["AUTO"])
         return ""
 
     @operand("RS")
@@ -172,6 +192,11 @@ class Settings(Room):
 
     @handler("\x12\x13")
     def master_reset(self, args: str) -> str:
+        # ^R^S, the master reset: factory defaults, and the burned parameters, program and
+        # variables erased (R4103, BN: "All parameters which have been burned into memory can
+        # be restored to their factory defaults through a master reset"; the program and the
+        # variables erased too is this simulator's reading: decision 0052).
+        self.machine.flash.clear()
         self.machine.reset()
         return ""
 

@@ -73,6 +73,15 @@ class Tuning(Room):
         #: The axes whose OE is 1 or 3 (their error beyond ER turns the motor off).
         self.off_on_error: frozenset[str] = frozenset()
 
+    def burn(self, name: str) -> object | None:
+        # The DMC-4103 reference's BN table lists all of them: MT KS KP KI KD IL TL ER OE BR CE.
+        return self.axes if name == "BN" else None
+
+    def restore(self, name: str, saved: object) -> None:
+        assert isinstance(saved, dict)
+        self.axes = saved
+        self.off_on_error = frozenset(c for c, s in self.axes.items() if s.oe in (1, 3))
+
     def stepper(self, ax: Axis) -> bool:
         """Whether the axis is configured as a stepper (MT ±2, ±2.5)."""
         return abs(self.axes[ax.letter].mt) in (2.0, 2.5)
@@ -235,6 +244,7 @@ class Tuning(Room):
 
         def done() -> str:
             self.burns[name] += 1
+            self.machine.burn(name)
             return ""
 
         return Wait(wake=wake, then=done)

@@ -153,6 +153,18 @@ class Vector(Room):
         self.planes = {p: Plane(p) for p in _PLANES}
         self.selected = "S"
 
+    def burn(self, name: str) -> object | None:
+        # The BN table: VS VA VD (not VT), of each coordinate system.
+        if name != "BN":
+            return None
+        return {p.letter: (p.vs, p.va, p.vd) for p in self.planes.values()}
+
+    def restore(self, name: str, saved: object) -> None:
+        assert isinstance(saved, dict)
+        for letter, (vs, va, vd) in saved.items():
+            plane = self.planes[letter]
+            plane.vs, plane.va, plane.vd = vs, va, vd
+
     # ---- the sequence of a plane -------------------------------------------------------
     def feed(self, plane: Plane) -> PlaneFeed | None:
         """The feed of ``plane``'s running sequence, found through its axes."""
