@@ -234,13 +234,14 @@ class Resetting:
 
         In order: every axis is stopped (``ST``) and waited for, and the moves in progress
         end with their results (as a stop would); the watchdogs halt; ``RS`` goes out (the
-        controller returns to its power-on state: the burned parameters and program, which
-        runs from ``#AUTO``); once it answers ``^R^V`` again the link is set up as at
-        connect (the echo, ``CW 1`` or ``CF I`` for unsolicited output, ``DR`` streams,
-        interrupts), and the library forgets what ``RS`` made false: gearing links,
-        homed flags, its routines in program memory, the sample period (``TM`` read
-        again). The watchdogs then start again. If the controller dropped the link, it is
-        reopened (from the address) within ``timeout``.
+        controller returns to its power-on state: the burned parameters, variables and
+        program, which runs from ``#AUTO``; what was not burned is gone: decision 0052);
+        once it answers ``^R^V`` again the link is set up as at connect (the echo, ``CW 1``
+        or ``CF I`` for unsolicited output, ``DR`` streams, interrupts), and the library
+        forgets what ``RS`` made false: gearing links (one a burned ``GA``/``GR`` brings
+        back is unknown to it, as at connect), homed flags, its routines in program memory,
+        the sample period (``TM`` read again). The watchdogs then start again. If the
+        controller dropped the link, it is reopened (from the address) within ``timeout``.
 
         ``RS`` sent as a raw command is refused: this is the way to reset.
 

@@ -84,9 +84,7 @@ class Motion(Room):
         if name != "BN":
             return None
         servo = self.machine.servo
-        return {
-            c: (p.sp, p.ac, p.dc, p.it, servo.axes[c].m.motor_on) for c, p in self.axes.items()
-        }
+        return {c: (p.sp, p.ac, p.dc, p.it, servo.axes[c].m.motor_on) for c, p in self.axes.items()}
 
     def restore(self, name: str, saved: object) -> None:
         assert isinstance(saved, dict)
