@@ -126,6 +126,8 @@ class Interpreter:
                 raise Refused(1, "unknown control command")
             self._check_caller(s)
             return control.run("")
+        if s[0] == "'":
+            return ""  # a comment: "Valid in terminal ... Valid in program" (its entry)
         if _REMARK.match(s):
             # REM "is NOT a controller command": Galil's PC software strips REM lines before a
             # download. Its entry reads "Not Valid in terminal ... Not Valid in program".

@@ -66,6 +66,7 @@ def test_rem_from_a_host_is_refused_and_comments_that_are_commands_run() -> None
     sim = SimController("DMC-4040")
     assert ask(sim, "REM a remark") == "?"
     assert error_code(sim) == 2  # "Not Valid in terminal"
+    assert ask(sim, "'a comment;NO another;MG 1;' and after") == ":: 1.0000\r\n::"
     sim = SimController("DMC-4040")
     assert run(sim, "NO a comment", "' another", "a=1;' after a command", "REMOTE=3") == (0, 0)
     assert ask(sim, "MG a,REMOTE") == " 1.0000 3.0000\r\n:"  # (REMOTE is a variable)
