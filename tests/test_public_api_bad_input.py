@@ -73,7 +73,7 @@ class Group:
 
 
 def _program(dmc: galil.Controller) -> galil.Controller:
-    dmc.programs.download("#A\nWT 1\nEN\n")
+    dmc.programs.download("#A\nWT 2\nEN\n")
     return dmc
 
 

@@ -29,6 +29,8 @@ Caller = Port | Thread | None
 
 _RESERVED = frozenset({"TIME"})
 _ELEMENT = re.compile(r"([A-Za-z][A-Za-z0-9]*)\[(.+)\]")
+#: A remark line (``REM text``): the host's software strips it; no command (decision 0051).
+_REMARK = re.compile(r"REM(?:\s|$)")
 #: The coordinate systems (vector planes).
 _PLANES = ("S", "T")
 
@@ -124,6 +126,12 @@ class Interpreter:
                 raise Refused(1, "unknown control command")
             self._check_caller(s)
             return control.run("")
+        if s[0] == "'":
+            return ""  # a comment: "Valid in terminal ... Valid in program" (its entry)
+        if _REMARK.match(s):
+            # REM "is NOT a controller command": Galil's PC software strips REM lines before a
+            # download. Its entry reads "Not Valid in terminal ... Not Valid in program".
+            raise Refused(3 if isinstance(self.caller, Thread) else 2, "REM is no command")
         word = program_only(s)
         if word is not None:
             self._check_caller(word)
@@ -174,17 +182,15 @@ class Interpreter:
             raise Refused(3, f"{name!r} not valid in a program")
 
     def _planes(self, s: str) -> list[str] | None:
-        """The planes a plane command names (``BG ST``), with the axes where it takes them
-        too (``BG SA``: :attr:`~galil.sim.registry.Args.PLANES_AND_AXES`), or ``None`` if it
-        is not one."""
-        command = self.plane_commands.get(s[:2])
-        if command is None:
+        """The planes a plane command names (``BG ST``), with the axes named beside them
+        (``BG SA``: :attr:`~galil.sim.registry.Args.PLANES_AND_AXES`), or ``None`` if it is
+        not one."""
+        if s[:2] not in self.plane_commands:
             return None
         letters = s[2:].replace(" ", "").replace(",", "")
-        axes = self._letters if command.spec.args is Args.PLANES_AND_AXES else frozenset()
         if not any(c in _PLANES for c in letters):
             return None
-        if any(c not in _PLANES and c not in axes for c in letters):
+        if any(c not in _PLANES and c not in self._letters for c in letters):
             return None
         return list(dict.fromkeys(letters))
 

@@ -47,8 +47,6 @@ __all__ = ["Machine", "Room"]
 
 _R = TypeVar("_R", bound="Room")
 _V = TypeVar("_V")
-#: The handlers' argument kinds that make a plane command (``BG S``).
-_PLANE_ARGS = (Args.PLANES, Args.PLANES_AND_AXES)
 
 
 class Room:
@@ -185,7 +183,7 @@ class Machine:
         for attr in dir(type(room)):
             for spec in _marks(type(room), attr):
                 fn = getattr(room, attr)
-                if isinstance(spec, HandlerSpec) and spec.args in _PLANE_ARGS:
+                if isinstance(spec, HandlerSpec) and spec.args is Args.PLANES_AND_AXES:
                     _claim(interp.plane_commands, spec.name, Command(spec, fn), "plane command")
                 elif isinstance(spec, HandlerSpec):
                     _claim(interp.commands, spec.name, Command(spec, fn), "command")

@@ -64,7 +64,7 @@ PROGRAM_ONLY = frozenset(
 #: program"), ``_ED`` its line, as for any program error; from a host they run. A download
 #: stores such a line as any other (DL: "Instructions in the file will be accepted as a data
 #: stream"); the refusal comes when a thread reaches it (decision 0047).
-NOT_IN_PROGRAM = frozenset({"DL", "QD", "RS", "UL", "WH", "\x12\x13", "\x12\x16"})
+NOT_IN_PROGRAM = frozenset({"DL", "LS", "QD", "RS", "UL", "WH", "\x12\x13", "\x12\x16"})
 
 
 def program_only(text: str) -> str | None:
@@ -263,7 +263,7 @@ class Programs:
 
     def _command(self, th: Thread, text: str) -> bool:
         """Run one program command; return False when the thread stopped."""
-        if not text or text[0] in "#'" or text.startswith(("REM", "NO")):
+        if not text or text[0] in "#'" or text.startswith("NO"):
             return True
         try:
             flow = self._flow(th, text)

@@ -44,14 +44,11 @@ class Args(enum.Enum):
     AXES = "axes"
     #: Per-axis fields (``PR 1,,3``, ``PRB=5``, ``SP ?``): ``list[tuple[Axis, str]]``.
     VALUES = "values"
-    #: Coordinate systems (``BG S``, ``ST ST``): ``list[str]`` of plane letters. Such a
-    #: handler answers a command another room answers for axes (``BG A``); the interpreter
-    #: calls it when every letter named is a plane.
-    PLANES = "planes"
     #: Coordinate systems, or coordinate systems and axes together (``BG S``, ``BG SA``):
-    #: ``list[str]`` of the letters named (axis letters as written). A plane command like
-    #: :attr:`PLANES`, but the interpreter also calls it when a plane is named and every
-    #: other letter is an axis.
+    #: ``list[str]`` of the letters named (axis letters as written). Such a handler answers a
+    #: command another room answers for axes alone (``BG A``); the interpreter calls it when
+    #: a plane is named and every other letter is an axis. (A planes-only kind went with
+    #: decision 0051: every plane command of the reference's masks also takes axes.)
     PLANES_AND_AXES = "planes and axes"
 
 

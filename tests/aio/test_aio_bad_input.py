@@ -51,7 +51,7 @@ async def _now(obj: Any) -> Any:
 
 
 async def _programs(c: aio.AsyncController) -> Any:
-    await c.programs.download("#A\nWT 1\nEN\n")
+    await c.programs.download("#A\nWT 2\nEN\n")
     return c.programs
 
 

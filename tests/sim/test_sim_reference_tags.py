@@ -183,6 +183,7 @@ TAGS: dict[str, Tag] = {
     "LE": _valid("LE", LSEQ, rest="LMBC;LI ,100,0;LE;CSS"),
     "LI": _valid("LI ,100000,0", LSEQ, rest="LMBC;LI ,100,0;CSS"),
     "LM": _valid("LMBC", SEQ, code=29, kept=_LM_KEPT, sim_motion=False),
+    "LS": _valid("LS", program=False),
     "LV": _valid("LV"),
     "LZ": _valid("LZ 1"),
     "MC": _program("MCB"),

@@ -137,13 +137,17 @@ class Arrays(Room):
         arrays: list[str] = []
         plain: list[str] = []
         for field in split_fields(args):
+            # An array is written ``name[]`` or, as in DA's own examples (``DA*[0]``,
+            # ``DA Cars[0],Total``), ``name[0]``; ``*`` is every variable, ``*[]`` every array.
             f = field.strip()
-            if f == "*[]":
+            is_array = f.endswith(("[]", "[0]"))
+            base = f[: f.rindex("[")].strip() if is_array else f
+            if base == "*" and is_array:
                 arrays += list(self.arrays)
-            elif f == "*":
+            elif base == "*":
                 plain += list(variables)
-            elif f.endswith("[]"):
-                name = self._name(f[:-2])
+            elif is_array:
+                name = self._name(base)
                 if name not in self.arrays:
                     raise Refused(82, f"undefined array {name!r}")
                 arrays.append(name)

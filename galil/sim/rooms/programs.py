@@ -1,5 +1,5 @@
-"""Program commands: ``DL`` ``UL`` ``XQ`` ``HX`` ``NO``, and the registration of ``JP``/``JS``/
-``EN``/``ZS``.
+"""Program commands: ``DL`` ``UL`` ``LS`` ``XQ`` ``HX`` ``NO``, and the registration of
+``JP``/``JS``/``EN``/``ZS``.
 
 The program store and the threads are the core's :class:`~galil.sim.programs.Programs`;
 ``JP``, ``JS``, ``EN``, ``ZS`` and ``IF``/``ELSE``/``ENDIF`` are flow control that only a
@@ -21,7 +21,7 @@ __all__ = ["ProgramCommands"]
 
 
 class ProgramCommands(Room):
-    """DL, UL, XQ, HX, JP, EN, NO."""
+    """DL, UL, LS, XQ, HX, JP, EN, NO."""
 
     def burn(self, name: str) -> object | None:
         return list(self.machine.programs.program) if name == "BP" else None
@@ -40,6 +40,38 @@ class ProgramCommands(Room):
     @handler("UL")
     def ul(self, args: str) -> str:
         return "".join(line + "\r\n" for line in self.machine.programs.program) + "\x1a"
+
+    @handler("LS")
+    def ls(self, args: str) -> str:
+        """``LS [n0][,n1]``: the program's lines n0 .. n1, each as ``line text``, up to and
+        including the empty line after the last (the TR entry's ``LS`` shows ``3`` after a
+        program of lines 0 .. 2). n0 (0 .. lines - 2, or a label) must be below n1 (1 ..
+        lines - 1); a host command only (decision 0051)."""
+        programs = self.machine.programs
+        last = self.machine.spec.program_lines - 1
+        fields = split_fields(args)
+        if len(fields) > 2:
+            raise Refused(6, "LS n0,n1")
+        first = self._line_arg(fields[0], 0)
+        end = self._line_arg(fields[1], last) if len(fields) > 1 else last
+        if not 0 <= first < end <= last:
+            raise Refused(6, f"LS n0 < n1, both 0 .. {last}")
+        text = programs.program
+        return "".join(
+            f"{n} {text[n] if n < len(text) else ''}\r\n"
+            for n in range(first, min(end, len(text)) + 1)
+        )
+
+    def _line_arg(self, field: str, default: int) -> int:
+        f = field.strip()
+        if not f:
+            return default
+        if f.startswith("#"):
+            return self.machine.programs.line_of(f)
+        n = self.machine.interp.evaluate(f)
+        if n != int(n):
+            raise Refused(6, "LS takes line numbers")
+        return int(n)
 
     @handler("XQ")
     def xq(self, args: str) -> str:

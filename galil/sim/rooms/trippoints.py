@@ -41,6 +41,8 @@ __all__ = ["TW_DEFAULT", "Trippoints"]
 #: TW's default (DMC-4103 command reference: -1 .. 32,767, default 32,766). Counted in servo
 #: samples: TM's "NOT automatically scaled" list names TW (decision 0042).
 TW_DEFAULT = 32766.0
+#: WT's n0 ("WT   Wait": Min 2, Max 2,147,483,646, resolution 2).
+WT_MIN, WT_MAX = 2, INT32_MAX - 1
 
 
 @dataclass(eq=False)
@@ -427,14 +429,17 @@ class Trippoints(Room):
     # ---- time and contour ---------------------------------------------------------------
     @handler("WT")
     def wt(self, args: str) -> Wait:
-        servo = self.machine.servo
+        """``WT n0[,n1]``: hold the thread n0 ms (n1 = 1: n0 samples). The reference gives n0
+        as 2 .. 2,147,483,646 and n1 as 0 or 1; anything else is TC 6 (decision 0051). Its
+        resolution of 2 is not enforced: an odd n0 waits n0 ms, rounded up to samples."""
+        i = self.machine.interp
         fields = split_fields(args)
-        ms = self.machine.interp.evaluate(fields[0]) if fields[0].strip() else -1
-        if not 0 <= ms <= INT32_MAX:
-            raise Refused(6, "WT out of range")
-        samples = len(fields) > 1 and fields[1].strip() == "1"
-        n = round(ms) if samples else self._samples(ms)
-        return Wait(wake=servo.sample + n)
+        ms = i.evaluate(fields[0]) if fields[0].strip() else 0.0
+        unit = i.evaluate(fields[1]) if len(fields) > 1 and fields[1].strip() else 0.0
+        if len(fields) > 2 or unit not in (0, 1) or not WT_MIN <= ms <= WT_MAX:
+            raise Refused(6, f"WT n0 is {WT_MIN} .. {WT_MAX}, n1 0 (ms) or 1 (samples)")
+        n = round(ms) if unit else self._samples(ms)
+        return Wait(wake=self.machine.servo.sample + n)
 
     @handler("AT")
     def at(self, args: str) -> Wait | str:
