@@ -256,9 +256,11 @@ def _path_master(counts: predict.VectorProfile, gear: GearLink) -> predict.Profi
     )
 
 
-_STATE = ("RP", "BG", "MO", "FL", "BL", "SC", "TS")
-#: The TS bits of the limit switches (3 forward, 2 reverse: set while inactive).
+#: ``TS`` in place of ``_MO``: its bit 5 is "motor off", and its bits 3 and 2 the limit
+#: switches (set while inactive), with one operand per axis (the state query stays one line).
+_STATE = ("RP", "BG", "TS", "FL", "BL", "SC")
 _SWITCH_BITS = 0x0C
+_MOTOR_OFF_BIT = 0x20
 #: What a line of streamed segments ends with: the sample it ran in.
 _STAMP_SIZE = len(cmds.time_stamp().text) + 1
 
@@ -423,12 +425,12 @@ class VectorStream:
             raise InvalidArgument(
                 "a sequence is running on S; wait for it or stop it", model=model.name
             )
-        for a, (rp, bg, mo, _, _, sc, _) in zip(letters, rows, strict=True):
+        for a, (rp, bg, ts, _, _, sc) in zip(letters, rows, strict=True):
             if not bg and self._tracker is not None:
                 self._tracker.ended(a, rp, sc)
             if bg:
                 raise InvalidArgument(f"axis {a} is moving; stop it or wait", model=model.name)
-            if mo:
+            if round(ts) & _MOTOR_OFF_BIT:
                 raise InvalidArgument(
                     f"axis {a} has its motor off; call controller.servo_here()", model=model.name
                 )
@@ -443,7 +445,7 @@ class VectorStream:
             decel=self.decel if self.decel is not None else next(rest),
             smoothing=self.smoothing if self.smoothing is not None else next(rest),
             follower_limits=limits,
-            switches=tuple(round(r[6]) & _SWITCH_BITS for r in rows),
+            switches=tuple(round(r[2]) & _SWITCH_BITS for r in rows),
         )
 
     def prepare(self) -> predict.VectorProfile:

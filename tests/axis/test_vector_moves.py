@@ -336,6 +336,13 @@ def test_a_moving_axis_or_a_running_sequence_is_refused(dmc: galil.Controller) -
     _refused(dmc, InvalidArgument, "sequence is running")
 
 
+def test_an_axis_with_its_motor_off_is_refused_from_its_ts(dmc: galil.Controller) -> None:
+    dmc.motor_off("B")  # (the state query reads TS, whose bit 5 is "motor off")
+    _refused(dmc, InvalidArgument, "axis B has its motor off")
+    dmc.servo_here("B")
+    assert dmc.vector_move("AB", [Line(1000, 0)], speed=20_000).wait().final == {"A": 1000, "B": 0}
+
+
 def test_a_follower_is_predicted_with_its_master_sample_by_sample(dmc: galil.Controller) -> None:
     scaled(dmc, "AB")
     gearing = dmc.B.gear_to(dmc.A, 0.5)
