@@ -696,7 +696,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
 
     def motor_off(self, axes: str = "") -> None:
         """Turn the motors of axes (default: all) off (``MO``); refused while one moves."""
-        motors_off(self.link, self._letters(axes))  # (InvalidArgument: galil.motion)
+        motors_off(self.link, self._letters(axes), self.tracker)  # (refusal: galil.motion)
 
     def motion(self, axes: str | None = None) -> contextlib.AbstractContextManager[None]:
         """A context in which an exception or Ctrl-C stops the guarded axes and waits for them.

@@ -1194,19 +1194,22 @@ def _send_st(link: CommandLink, tracker: MotionTracker | None, letters: str) -> 
             tracker.notify(letters or link.model.axes, sample_of(replies[-1]), predict.Stop)
 
 
-def motors_off(link: CommandLink, letters: str) -> None:
+def motors_off(link: CommandLink, letters: str, tracker: MotionTracker | None = None) -> None:
     """``MO`` on ``letters`` (``""``: every axis), refused before it is sent while one of them
     moves (``_BG`` 1: a move, a jog, a sequence, a gear follower, a program's motion): the
     controller refuses MO in motion (TC 7; the DMC-4103 reference: "Not Valid while in
-    motion"). One query before the line.
+    motion"). One query before the line; with ``tracker``, the query and the line under its
+    lock (no start from another thread between them).
 
     Raises:
         InvalidArgument: an axis moving (stop it and wait first); only the query went out.
     """
     command = cmds.mo(letters, model=link.model)
     read = letters or link.model.axes
-    _refuse_moving(link, read, link.query_operands([f"_BG{a}" for a in read]), "motor off", "MO")
-    link.command_line([command])
+    with held(tracker):
+        bg = link.query_operands([f"_BG{a}" for a in read])
+        _refuse_moving(link, read, bg, "motor off", "MO")
+        link.command_line([command])
 
 
 def _refuse_moving(

@@ -210,10 +210,13 @@ class Setting(Generic[T]):
         builder: the builder in :mod:`galil.protocol.commands` (range-checks per model).
         convert: turns the number read back into the setting's type.
         still: the controller takes it only at rest ("Not Valid while in motion"): refused
-            on an axis the library knows is moving (:func:`~galil.motion.refuse_in_motion`).
+            on an axis the library knows is moving (:func:`~galil.motion.refuse_in_motion`),
+            the check and the line under the tracker's lock (no start, ``SH`` or ``MO`` of
+            the library's from another thread in between).
         motor_off: the controller takes it only with the axis's motor off (``MT``: "The axis
             must be in the motor off state (MO) before setting MT", TC 135 otherwise): the
-            setter reads ``_MO`` first (one query) and refuses it with the motor on.
+            setter reads ``_MO`` first (one query, under the tracker's lock with the line)
+            and refuses it with the motor on.
         available: raises :class:`~galil.errors.InvalidArgument` for a model without the
             command, before reading or writing it (``LD``).
     """
@@ -256,16 +259,23 @@ class Setting(Generic[T]):
         number = float(value.value) if isinstance(value, MotorType) else value
         link = obj._link
         command = self.builder(model=link.model, **{obj.letter: number})
-        if self.still:
-            refuse_in_motion(link, obj._tracker, obj.letter, self.mnemonic)
-        if self.motor_off and not round(link.query_operands([f"_MO{obj.letter}"])[0]):
-            raise InvalidArgument(
-                f"{self.mnemonic} needs axis {obj.letter}'s motor off (the command reference: "
-                f'"The axis must be in the motor off state (MO) before setting MT"): call '
-                f'controller.motor_off("{obj.letter}") first (and servo_here() after)',
-                model=link.model.name,
-            )
-        link.command_line([command])
+        if not (self.still or self.motor_off):
+            link.command_line([command])
+            return
+        # The checks and the line under the tracker's lock: no start, SH nor MO from another
+        # thread between them (the library's own; a program's motion is the controller's).
+        with obj._tracker.lock:
+            if self.still:
+                refuse_in_motion(link, obj._tracker, obj.letter, self.mnemonic)
+            if self.motor_off and not round(link.query_operands([f"_MO{obj.letter}"])[0]):
+                raise InvalidArgument(
+                    f"{self.mnemonic} needs axis {obj.letter}'s motor off (the command "
+                    'reference: "The axis must be in the motor off state (MO) before setting '
+                    f'MT"): call controller.motor_off("{obj.letter}") first (and '
+                    "servo_here() after)",
+                    model=link.model.name,
+                )
+            link.command_line([command])
 
 
 def burn(

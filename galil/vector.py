@@ -39,8 +39,10 @@ from galil.motion import (
     held,
     sample_of,
     stop_on_error,
+    switch_blocks,
 )
 from galil.moves import check_followers, follower_limits, follower_operands
+from galil.predict.path import first_directions
 from galil.predict.vector import SequenceEvent, replay
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
@@ -254,7 +256,11 @@ def _path_master(counts: predict.VectorProfile, gear: GearLink) -> predict.Profi
     )
 
 
-_STATE = ("RP", "BG", "MO", "FL", "BL", "SC")
+#: ``TS`` in place of ``_MO``: its bit 5 is "motor off", and its bits 3 and 2 the limit
+#: switches (set while inactive), with one operand per axis (the state query stays one line).
+_STATE = ("RP", "BG", "TS", "FL", "BL", "SC")
+_SWITCH_BITS = 0x0C
+_MOTOR_OFF_BIT = 0x20
 #: What a line of streamed segments ends with: the sample it ran in.
 _STAMP_SIZE = len(cmds.time_stamp().text) + 1
 
@@ -268,6 +274,7 @@ class _State:
     decel: float
     smoothing: float
     follower_limits: dict[str, tuple[float, float]]
+    switches: tuple[int, ...]  # each axis's TS limit bits (a change: prepared again)
 
 
 class VectorStream:
@@ -418,12 +425,12 @@ class VectorStream:
             raise InvalidArgument(
                 "a sequence is running on S; wait for it or stop it", model=model.name
             )
-        for a, (rp, bg, mo, _, _, sc) in zip(letters, rows, strict=True):
+        for a, (rp, bg, ts, _, _, sc) in zip(letters, rows, strict=True):
             if not bg and self._tracker is not None:
                 self._tracker.ended(a, rp, sc)
             if bg:
                 raise InvalidArgument(f"axis {a} is moving; stop it or wait", model=model.name)
-            if mo:
+            if round(ts) & _MOTOR_OFF_BIT:
                 raise InvalidArgument(
                     f"axis {a} has its motor off; call controller.servo_here()", model=model.name
                 )
@@ -438,13 +445,15 @@ class VectorStream:
             decel=self.decel if self.decel is not None else next(rest),
             smoothing=self.smoothing if self.smoothing is not None else next(rest),
             follower_limits=limits,
+            switches=tuple(round(r[2]) & _SWITCH_BITS for r in rows),
         )
 
     def prepare(self) -> predict.VectorProfile:
         """Read where the axes are (one query), predict, and check everything.
 
         Raises:
-            InvalidArgument: an axis moving or its motor off, a sequence running.
+            InvalidArgument: an axis moving or its motor off, a sequence running, an axis
+                whose first motion on the path heads into its active limit switch (TC 22).
             MotionError: a limit stopped an axis geared to a path axis or to ``S`` during a
                 move nobody waited for (its gearing is off: :func:`~galil.motion.refuse_dropped`).
             LimitError: a check failed (named segment and sample): VS/VA/VD ranges, TC 30,
@@ -457,6 +466,7 @@ class VectorStream:
         model = link.model
         state = self._read_state()
         segs = self.path.segments
+        self._refuse_blocked(state.switches)
         with self._in_user_units():
             profile = predict.check_vector(
                 segs,
@@ -480,6 +490,24 @@ class VectorStream:
         self.profile = profile
         self._state = state
         return profile
+
+    def _refuse_blocked(self, switches: Sequence[int]) -> None:
+        """Refuse a path on which an axis first moves towards its active limit switch (one
+        ``LD`` leaves on: :func:`~galil.motion.switch_blocks`): ``BG S`` would be refused
+        with TC 22 once the setup and the segments had gone out (decision 0050). Only the
+        first direction counts: a switch active now stops later motion towards it anyway."""
+        link = self.link
+        path = self.path
+        res = link.model.cr_angle_resolution
+        directions = first_directions(path.segments, len(path.letters), res)
+        for a, direction, ts in zip(path.letters, directions, switches, strict=True):
+            if direction and switch_blocks(link, a, direction, ts):
+                side = "forward" if direction > 0 else "reverse"
+                raise InvalidArgument(
+                    f"axis {a} would start towards its active {side} limit switch on this "
+                    "path (the controller refuses BG S with TC 22); move off the switch first",
+                    model=link.model.name,
+                )
 
     def _check_followers(
         self, profile: predict.VectorProfile, limits: Mapping[str, tuple[float, float]]

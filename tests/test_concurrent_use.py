@@ -55,9 +55,10 @@ class _WatchedLock:
 class Interleaving:
     """Thread ``first`` runs until just after a chosen link call; ``second`` runs meanwhile.
 
-    ``pause_after(method, when)`` wraps ``controller.link.<method>``: the first call that
-    ``when(args)`` accepts, made on the ``first`` thread, returns its result only once the
-    ``second`` thread has finished or waits for the tracker's lock.
+    ``pause_after(method, when)`` wraps ``controller.link.<method>`` (``on``'s method, given
+    ``on``): the first call that ``when(args)`` accepts, made on the ``first`` thread,
+    returns its result only once the ``second`` thread has finished or waits for the
+    tracker's lock.
     """
 
     def __init__(self, c: galil.Controller, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -76,8 +77,11 @@ class Interleaving:
         if direction == "out" and who in self.lines:
             self.lines[who] += [p for p in data.decode("latin-1").split("\r") if p]
 
-    def pause_after(self, method: str, when: Callable[[tuple[Any, ...]], bool]) -> None:
-        real = getattr(self.c.link, method)
+    def pause_after(
+        self, method: str, when: Callable[[tuple[Any, ...]], bool], on: object = None
+    ) -> None:
+        target = self.c.link if on is None else on  # (or the tracker, say)
+        real = getattr(target, method)
 
         def paused(*args: Any, **kwargs: Any) -> Any:
             out = real(*args, **kwargs)
@@ -87,7 +91,7 @@ class Interleaving:
                 assert self._go.wait(SETTLE)
             return out
 
-        self._monkeypatch.setattr(self.c.link, method, paused)
+        self._monkeypatch.setattr(target, method, paused)
 
     def run(self, first: Callable[[], Any], second: Callable[[], Any]) -> dict[str, Any]:
         """Run both; return what each returned or raised, by name."""
@@ -367,6 +371,59 @@ def test_a_stop_from_another_thread_ends_a_streamed_vector_path(
     assert not any(line.startswith(("LI", "VE", "LE")) for line in after), run.lines["first"]
     handle.wait(10)
     assert c.query_number("MG 12345") == 12345
+
+
+# ------------------------------------------- a check at rest or motor off, and its setting's line
+
+
+def test_a_servo_here_from_another_thread_waits_for_a_motor_type_set_with_the_motor_off(
+    c: galil.Controller, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Before: ``SH`` fell between the ``_MOA`` read that found the motor off and the ``MT``
+    line, which the controller refused (TC 135, a plain ``CommandError``). Now ``SH`` waits
+    for the line: both go through."""
+    c.motor_off("A")
+    run = Interleaving(c, monkeypatch)
+    run.pause_after("query_operands", lambda args: "_MOA" in _names(args))
+    stepper = galil.MotorType.STEPPER_ACTIVE_LOW
+    got = run.run(lambda: setattr(c.A, "motor_type", stepper), lambda: c.servo_here("A"))
+    assert got == {"first": None, "second": None}, got
+    assert c.A.motor_type is stepper
+    assert c.query_number("MG _MOA") == 0
+
+
+@pytest.mark.parametrize(
+    ("name", "value"), [("brush", 1), ("encoder_config", galil.EncoderConfig(main=2))]
+)
+def test_a_move_from_another_thread_waits_for_a_setting_checked_at_rest(
+    c: galil.Controller, monkeypatch: pytest.MonkeyPatch, name: str, value: object
+) -> None:
+    """Before: a move started between the check that found A at rest and the ``BR``/``CE``
+    line, which the controller refused (TC 7, a plain ``CommandError``, the setting lost).
+    Now the move waits for the line: both go through."""
+    run = Interleaving(c, monkeypatch)
+    run.pause_after("active", lambda args: args == ("A",), on=c.tracker)
+    got = run.run(lambda: setattr(c.A, name, value), lambda: c.A.move_by(1000))
+    assert got["first"] is None, got
+    assert isinstance(got["second"], galil.MoveHandle), got
+    assert getattr(c.A, name) == value
+    assert _result_of(got["second"]).final == {"A": 1000}
+
+
+def test_a_move_from_another_thread_waits_for_a_motor_off_checked_at_rest(
+    c: galil.Controller, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Before: a move started between ``MO``'s ``_BGA`` read and its line, which the
+    controller refused (TC 7, a plain ``CommandError``) and A kept moving. Now the move waits
+    and is refused unsent: the motor is off."""
+    run = Interleaving(c, monkeypatch)
+    run.pause_after("query_operands", lambda args: _names(args) == ["_BGA"])
+    got = run.run(lambda: c.motor_off("A"), lambda: c.A.move_by(1000))
+    assert got["first"] is None, got
+    assert isinstance(got["second"], InvalidArgument), got
+    assert "motor off" in str(got["second"])
+    assert all(line.startswith("MG _") for line in run.lines["second"]), run.lines
+    assert c.query_number("MG _MOA") == 1
 
 
 # ------------------------------------------------------------- three threads, two axes at once

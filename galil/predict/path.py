@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -47,6 +48,7 @@ __all__ = [
     "PathLayout",
     "PathSegment",
     "VectorPath",
+    "first_directions",
     "path_kind",
 ]
 
@@ -188,6 +190,35 @@ def _cos_sin(degrees: float) -> tuple[float, float]:
         return ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))[int(rest // 90.0) % 4]
     rad = math.radians(rest)
     return math.cos(rad), math.sin(rad)
+
+
+def first_directions(
+    segments: Iterable[PathSegment], axes: int, angle_resolution: float = ANGLE_RESOLUTION
+) -> tuple[int, ...]:
+    """The direction (+1, -1, or 0 for none) each axis of a path first moves in: the sign of
+    its component in the first segment that moves it (a line's or an ``LI``'s; a line of
+    ``dx = 0`` never changes the axis by a whole count). An arc moves both its axes: along
+    its tangent at the start (``CR`` angles rounded as the controller stores them), or, where
+    the tangent's component is 0 (a start angle a multiple of 90 degrees), the way the circle
+    bends. What a switch or a soft limit active at ``BG S`` meets first (decision 0050)."""
+    out = [0] * axes
+    for seg in segments:
+        if all(out):
+            break
+        if isinstance(seg, Arc):
+            c, s = _cos_sin(quantise_angle(seg.start, angle_resolution))
+            turn = 1.0 if quantise_angle(seg.sweep, angle_resolution) > 0 else -1.0
+            # d/du (cos, sin)(θ + u·turn) at u = 0: turn·(-sin, cos); where 0, the second
+            # derivative -(cos, sin) says which way the axis leaves its extreme.
+            step: Sequence[float] = (-turn * s or -c, turn * c or -s)
+        elif isinstance(seg, LinearInterp):
+            step = seg.increments
+        else:
+            step = (seg.dx, seg.dy)
+        for i, v in enumerate(step[:axes]):
+            if not out[i] and v:
+                out[i] = 1 if v > 0 else -1
+    return tuple(out)
 
 
 def _round_half_up(x: float) -> int:
@@ -474,6 +505,11 @@ class PathLayout:
         if self.size == 0:
             return 0
         return int(_segment_index(self._tables(), np.array([s], dtype=np.int64))[0])
+
+    def first_directions(self) -> tuple[int, ...]:
+        """The direction each axis first moves in along the path laid out so far
+        (:func:`first_directions`)."""
+        return first_directions(self._segments, self.axes, self.angle_resolution)
 
     def completed(self, s: int) -> int:
         """Segments whose end the path position ``s`` has reached."""

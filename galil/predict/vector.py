@@ -194,6 +194,12 @@ class VectorProfiler:
             return None
         return self._path.end_sample
 
+    def first_directions(self) -> tuple[int, ...]:
+        """The direction (+1, -1, 0) each axis first moves in along the segments queued so
+        far (:func:`~galil.predict.path.first_directions`): what ``BG S`` checks the limit
+        switches and soft limits against."""
+        return self._layout.first_directions()
+
     def path(self) -> VectorPath:
         """The path of this sequence laid out so far.
 

@@ -289,6 +289,44 @@ def test_bad_paths_and_values_are_refused_before_a_byte(dmc: galil.Controller) -
         Arc(1, 0, 0)
 
 
+@pytest.mark.parametrize(
+    "path",
+    [[Line(1000, 500)], [Line(1000, 0), Line(0, 500)], [Arc(1000, 270, 90)]],
+    ids=["at-once", "after-a-segment", "arc-bending-forward"],
+)
+def test_a_path_whose_axis_first_heads_into_its_active_switch_is_refused_before_sending(
+    dmc: galil.Controller, path: list[Line | Arc]
+) -> None:
+    """Before: the setup and the segments went out and the sequence ran through the switch
+    (the simulator took ``BG S``; a controller refuses it: TC 22). Now nothing but the state
+    read goes out (decision 0050)."""
+    sim_of(dmc).set_limit_switch("B", "forward", True)
+    with (
+        nothing_sent(dmc, allow_queries=True),
+        pytest.raises(InvalidArgument, match=r"axis B .*active forward limit switch.*TC 22"),
+    ):
+        dmc.vector_move("AB", path, speed=20_000)
+    away = dmc.vector_move("AB", [Arc(1000, 90, 90)], speed=20_000)  # B bends back first
+    assert away.wait().final == {"A": -1000, "B": -1000}
+    dmc.B.limit_disable = galil.LimitDisable.FORWARD  # the switch no longer stops B: taken
+    assert dmc.vector_move("AB", path, speed=20_000).wait().stop_codes == {"A": 101, "B": 101}
+
+
+def test_the_switch_a_path_heads_into_is_the_one_its_counts_meet_on_a_reversed_axis(
+    dmc: galil.Controller,
+) -> None:
+    scaled(dmc)
+    dmc.B.set_scale(counts_per=2000 / mm, sign=-1)  # +B in millimetres: reverse in counts
+    sim_of(dmc).set_limit_switch("B", "reverse", True)
+    with (
+        nothing_sent(dmc, allow_queries=True),
+        pytest.raises(InvalidArgument, match="active reverse limit switch"),
+    ):
+        dmc.vector_move("AB", [Line(1 * mm, 1 * mm)], speed=SPEED)
+    done = dmc.vector_move("AB", [Line(1 * mm, -1 * mm)], speed=SPEED).wait()
+    assert done.final == {"A": 2000, "B": 2000}
+
+
 def test_a_moving_axis_or_a_running_sequence_is_refused(dmc: galil.Controller) -> None:
     dmc.A.jog(1000)
     _refused(dmc, InvalidArgument, "axis A is moving")
@@ -296,6 +334,13 @@ def test_a_moving_axis_or_a_running_sequence_is_refused(dmc: galil.Controller) -
     dmc.sleep(0.5)
     dmc.vector_move("AB", [Line(100_000, 0)], speed=20_000, accel=256_000)
     _refused(dmc, InvalidArgument, "sequence is running")
+
+
+def test_an_axis_with_its_motor_off_is_refused_from_its_ts(dmc: galil.Controller) -> None:
+    dmc.motor_off("B")  # (the state query reads TS, whose bit 5 is "motor off")
+    _refused(dmc, InvalidArgument, "axis B has its motor off")
+    dmc.servo_here("B")
+    assert dmc.vector_move("AB", [Line(1000, 0)], speed=20_000).wait().final == {"A": 1000, "B": 0}
 
 
 def test_a_follower_is_predicted_with_its_master_sample_by_sample(dmc: galil.Controller) -> None:

@@ -13,7 +13,7 @@ import pytest
 
 import galil
 from galil import Arc, Line
-from galil.errors import LimitError
+from galil.errors import CommandError, InvalidArgument, LimitError
 from galil.sim.controller import SimController
 from galil.testing import nothing_sent
 from galil.units import ureg
@@ -145,3 +145,24 @@ def test_a_follower_is_ratio_times_master_motion_sample_by_sample(
     np.testing.assert_array_equal(got["C"], h.profiles["C"].position)
     np.testing.assert_array_equal(got["C"], galil.predict.gear(got["A"], gearing.ratio))
     gearing.off()
+
+
+def test_a_path_into_an_active_switch_is_refused_unsent_and_bg_s_gets_tc_22(
+    tcp: tuple[galil.Controller, SimController],
+) -> None:
+    """The library refuses it before sending (decision 0050); the same sequence sent raw
+    meets the simulator's TC 22 at ``BG S``, as an independent ``BG`` does."""
+    dmc, sim = tcp
+    sim.set_limit_switch("A", "reverse", True)
+    with (
+        nothing_sent(dmc, allow_queries=True),
+        pytest.raises(InvalidArgument, match=r"axis A .*active reverse limit switch.*TC 22"),
+    ):
+        dmc.vector_move("AB", [Line(-1000, 200)], speed=20_000)
+    dmc.command("CA S;VM AB;VP -1000,200;VE", allow_compound=True)
+    with pytest.raises(CommandError) as err:
+        dmc.command("BG S")
+    assert err.value.code == 22
+    assert dmc.query_operands(["_BGS", "_RPA", "_RPB"]) == [0, 0, 0]
+    done = dmc.vector_move("AB", [Line(1000, 200)], speed=20_000).wait()  # away: taken
+    assert done.final == {"A": 1000, "B": 200}

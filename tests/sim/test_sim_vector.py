@@ -371,3 +371,51 @@ def test_st_and_am_of_a_plane_with_a_letter_that_is_no_axis_are_refused(sim: Sim
     assert ask(sim, "BGS;ST SX") == b":?"  # X: no axis of the DMC-4040
     assert numbers(ask(sim, "TC"))[0] == 4
     assert numbers(ask(sim, "MG _BGS"))[0] == 1
+
+
+@pytest.mark.parametrize(
+    ("path", "refused"),
+    [
+        ("VM AB;VP 1000,500", True),  # B forward at once
+        ("VM AB;VP 1000,-500", False),  # B away from its switch
+        ("VM AB;VP 1000,0;VP 1000,500", True),  # B still, then forward: its first motion
+        ("VM AB;CR 1000,0,90", True),  # B's tangent: forward
+        ("VM AB;CR 1000,0,-90", False),  # reverse
+        ("VM AB;CR 1000,270,90", True),  # tangent 0 for B: the circle bends it forward
+        ("VM AB;CR 1000,90,90", False),  # bends it back
+        ("LM AB;LI 300,-200", False),
+        ("LM AB;LI 300,0;LI 0,200", True),
+    ],
+)
+def test_bg_s_with_an_axis_heading_into_its_active_switch_is_refused_with_tc_22(
+    sim: SimController, path: str, refused: bool
+) -> None:
+    """Before: the sequence began and ran through the active switch (SC 101 at its end).
+    Now ``BG S`` is refused as an independent ``BG`` towards the switch is (decision 0050)."""
+    sim.set_limit_switch("B", "forward", True)
+    assert b"?" not in ask(sim, f"CA S;VSS={VS};VAS={VA};VDS={VD};{path}")
+    end = "VE" if path.startswith("VM") else "LE"
+    if refused:
+        assert ask(sim, f"{end};BG S") == b":?"
+        assert numbers(ask(sim, "MG _TC")) == [22]
+        assert numbers(ask(sim, "MG _BGS,_RPA,_RPB")) == [0, 0, 0]
+        assert ask(sim, "LDB=1;BG S") == b"::"  # the switch disabled: taken
+    else:
+        assert ask(sim, f"{end};BG S") == b"::"
+    sim.advance(1)
+    assert numbers(ask(sim, "MG _BGS,_SCA,_SCB")) == [0, 101, 101]
+
+
+def test_a_sequence_axis_turning_towards_a_switch_active_at_its_start_is_stopped(
+    sim: SimController,
+) -> None:
+    """Before: ``BG S`` checked B's first direction (away) and nothing watched the pressed
+    switch after it: B turned and ran through it (SC 101). Now the sequence stops at VD as
+    soon as B heads into it (SC 2), as a contour does."""
+    setup(sim)
+    sim.set_limit_switch("B", "forward", True)
+    assert ask(sim, "VP 0,-500;VP 0,500;VE;BG S") == b"::::"
+    sim.advance(1)
+    rpb, sca, scb, bgs = numbers(ask(sim, "MG _RPB,_SCA,_SCB,_BGS"))
+    assert (sca, scb, bgs) == (2, 2, 0)
+    assert -500 < rpb < 0  # turned, and stopped on the way back, short of the switch side

@@ -241,10 +241,16 @@ class Limits(Room):
                 k = turns_back(ax.m.profiler, k)
         return k
 
+    @staticmethod
+    def _on_a_path(ax: Axis) -> bool:
+        """Whether ``ax`` follows a path that may turn towards a switch active at its start:
+        a contour's (``CM`` does not move, its segments come later) or a sequence's (``BG S``
+        checked only each axis's first direction: decision 0050)."""
+        return ax.contour or ax.m.profiler.mode == "vector"
+
     def _watched(self, ax: Axis) -> bool:
         """Whether ``ax`` may run into a placed switch LD leaves on (the watch looks for it),
-        or, in contour mode, into a switch active already (nothing refused its start: ``CM``
-        does not move, and its segments come later)."""
+        or, on a contour's or a sequence's path, into a switch active already."""
         if not ax.m.moving or ax.limit_stop:
             return False
         s = self.axes[ax.letter]
@@ -252,7 +258,7 @@ class Limits(Room):
             s.reverse_at is not None and not s.ld & 2
         ):
             return True
-        return ax.contour and (self.halts(ax, "forward") or self.halts(ax, "reverse"))
+        return self._on_a_path(ax) and (self.halts(ax, "forward") or self.halts(ax, "reverse"))
 
     @staticmethod
     def _crossing(
@@ -308,15 +314,16 @@ class Limits(Room):
         for ax in self.machine.servo.axes.values():
             if self._watched(ax):
                 start, ref = ax.physical, ax.m.reference
-                out.append(functools.partial(self._fires, ax, start, ref))
+                path = self._on_a_path(ax)  # (a sequence's end within the step releases it)
+                out.append(functools.partial(self._fires, ax, start, ref, path))
 
-    def _fires(self, ax: Axis, start: int, ref: int) -> bool:
+    def _fires(self, ax: Axis, start: int, ref: int, path: bool) -> bool:
         """Whether ``ax`` has run into a switch since the step began at ``start`` (fixed
         frame) and ``ref`` (its reference): it moves towards an active switch now, or it has
         entered a placed switch's side since (a step may end where the motion does, at rest
         beyond the switch; the bisection then finds the sample it entered, still moving), or,
-        contouring, its reference moved towards an active switch since (a contour's segments
-        may stand still at the step's end)."""
+        on a contour's or a sequence's path, its reference moved towards an active switch
+        since (a contour's segments may stand still at the step's end)."""
         if self._runs_into(ax):
             return True
         s, now = self.axes[ax.letter], ax.physical
@@ -324,7 +331,7 @@ class Limits(Room):
             return True
         if s.reverse_at is not None and not s.ld & 2 and start > s.reverse_at >= now:
             return True
-        if not ax.contour:
+        if not path:
             return False
         moved = ax.m.reference - ref
         return (moved > 0 and self.halts(ax, "forward")) or (

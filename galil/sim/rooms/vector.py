@@ -17,7 +17,10 @@ while it runs and 101 once it completes. Where the manuals are silent (assumptio
 - a segment into a full buffer is refused (TC 32), as are ``VP``/``CR`` mixed with ``LI``
   (TC 33), a segment shorter than the model's minimum (TC 30), a path beyond two billion
   counts (TC 31), ``VM``/``LM``/``CS`` during a sequence (TC 29) and ``BG S`` without segments
-  (TC 24); per-segment speeds (``VP x,y < n``) are not simulated (TC 6).
+  (TC 24); per-segment speeds (``VP x,y < n``) are not simulated (TC 6);
+- ``BG S`` is refused (TC 22) when an axis's first motion along the queued segments heads
+  into its active limit switch (one ``LD`` leaves on) or on past a soft limit it is beyond,
+  as an independent ``BG`` is (the reference says so of soft limits only: decision 0050).
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from galil.sim.driven import DrivenProfiler, drive
 from galil.sim.machine import Room
 from galil.sim.parse import Refused, split_fields
 from galil.sim.registry import Args, OperandKind, handler, operand
+from galil.sim.rooms.limits import Limits
 from galil.sim.rooms.motion import Motion
 from galil.sim.servo import Axis
 
@@ -476,6 +480,12 @@ class Vector(Room):
                 raise Refused(20, "motor off")
             if ax.m.moving:
                 raise Refused(21, "axis moving")
+        # An axis whose first motion heads into its active switch (LD leaves it on) or on
+        # past a soft limit it is beyond: TC 22, as an independent BG (decision 0050).
+        limits = self.machine.room(Limits)
+        for c, direction in zip(plane.axes, eng.first_directions(), strict=True):
+            if direction:
+                limits.check_start(self.machine.servo.axes[c], direction)
 
     def _begin(self, plane: Plane) -> None:
         eng = self.engine(plane)
