@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,8 +33,12 @@ from galil.motion import (
     Display,
     GearLink,
     MotionTracker,
+    MoveResult,
     StopWatch,
+    dropped_parts,
+    forget_dropped,
     held,
+    raise_if_limited,
     sample_of,
     send_reopening,
 )
@@ -535,7 +539,7 @@ class ContourStream:
         n = len(self.letters)
         names = [f"_{op}{a}" for op in ("SC", "BG", "RP") for a in self.letters]
         try:
-            values = link.query_operands(names)
+            values = link.query_operands(names + self._follower_names())
         except GalilError:
             return None
         stop = {a: round(v) for a, v in zip(self.letters, values[:n], strict=True)}
@@ -545,17 +549,54 @@ class ContourStream:
         if any(round(v) for v in values[n : 2 * n]):
             self._halt(end=True)
         first = ([a for a in halted if stop[a] in codes.LIMIT_STOPS] or halted)[0]
-        parts = "; ".join(f"{a}: {codes.stop_text(c)}" for a, c in stop.items())
+        # (a follower a limit stopped on the way is named too, and forgotten: decision 0049)
+        ends = self._follower_codes(values[3 * n :])
+        dropped = forget_dropped(self._tracker, self._followers, ends)
+        parts = [f"{a}: {codes.stop_text(c)}" for a, c in stop.items()]
+        parts += dropped_parts(self._followers, dropped)
         error = MotionError(
             f"contour on {self.letters} stopped by the controller after {state.sent} of "
-            f"{len(state.texts)} segments were sent ({parts})",
+            f"{len(state.texts)} segments were sent ({'; '.join(parts)})",
             axis=first,
-            stop_codes=stop,
+            stop_codes={**stop, **ends},
             position=values[2 * n + self.letters.index(first)],
             model=link.model.name,
             recent=link.recent,
         )
         return _ContourOverError(error)
+
+    def _follower_names(self) -> list[str]:
+        """``_RP`` then ``_SC`` of the followers (none without followers): read with the
+        contour axes' state at its end, they tell of a follower a limit stopped."""
+        return [f"_{op}{f}" for op in ("RP", "SC") for f in self._followers]
+
+    def _follower_codes(self, values: Sequence[float]) -> dict[str, int]:
+        """Each follower's ``_SC`` from the values of :meth:`_follower_names`."""
+        m = len(self._followers)
+        return {f: round(c) for f, c in zip(self._followers, values[m:], strict=True)}
+
+    def _report_followers(self, stop_codes: Sequence[float], values: Sequence[float]) -> None:
+        """At the contour's usual end (its axes' ``stop_codes``, the followers' ``values``
+        of :meth:`_follower_names`): what :meth:`~galil.motion.MoveHandle.wait` does for a
+        follower a limit stopped, the tracker forgetting its gearing and the same
+        :class:`~galil.errors.MotionError` raised (decision 0049); nothing otherwise.
+
+        Raises:
+            MotionError: a limit stopped a follower, and its gearing is off.
+        """
+        ends = self._follower_codes(values)
+        if not forget_dropped(self._tracker, self._followers, ends):
+            return
+        at = [round(v) for v in values[: len(ends)]]  # (the followers' _RP)
+        result = MoveResult(
+            final={},
+            predicted={},
+            deviation={},
+            stop_codes={a: round(c) for a, c in zip(self.letters, stop_codes, strict=True)},
+            follower_final=dict(zip(self._followers, at, strict=True)),
+            follower_stop_codes=ends,
+        )
+        raise_if_limited(self.link, self._followers, result)
 
     def finish(self, state: _Progress, timeout: float | None = None) -> ContourResult:
         """End contour mode (``CD 0=0``, or ``DT 0`` then ``CD 0``) and wait for the axes to stop.
@@ -607,13 +648,15 @@ class ContourStream:
         deadline = link.clock() + wait
         n = len(self.letters)
         names = [f"_{op}{a}" for op in ("BG", "SC") for a in self.letters]
+        names += self._follower_names()  # (on the same polls: no exchange more)
         while True:
             values = link.query_operands(names)
             if not any(round(v) for v in values[:n]):
-                if _halted(self.letters, values[n:], state.live):
+                if _halted(self.letters, values[n : 2 * n], state.live):
                     over = self._controller_stop(state)
                     if over is not None:
                         raise over
+                self._report_followers(values[n : 2 * n], values[2 * n :])
                 return
             now = link.clock()
             if now > deadline:

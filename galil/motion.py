@@ -50,9 +50,12 @@ __all__ = [
     "Track",
     "abort_all",
     "as_stored",
+    "dropped_parts",
+    "forget_dropped",
     "held",
     "motion_guard",
     "motors_off",
+    "raise_if_limited",
     "refuse_dropped",
     "sample_of",
     "send_reopening",
@@ -533,12 +536,9 @@ def refuse_dropped(
     Raises:
         MotionError: naming the followers, their master and their stop codes.
     """
-    dropped = {f: c for f, c in stop_codes.items() if gears[f].dropped_by(c)}
+    dropped = forget_dropped(tracker, gears, stop_codes)
     if not dropped:
         return
-    if tracker is not None:
-        for f in dropped:
-            tracker.release(gears[f])
     first = next(iter(dropped))
     parts = [f"{f}, geared to {gears[f].master}: {codes.stop_text(c)}" for f, c in dropped.items()]
     raise MotionError(
@@ -923,12 +923,7 @@ class MoveHandle:
         """A follower a limit stopped is geared no more (the controller turned its gearing
         off, outside gantry mode): the tracker forgets the gearing, as it does after an
         ``ST`` or ``AB`` the library sent (the sample is unknown: the prediction is kept)."""
-        tracker = self._tracker
-        if tracker is None:
-            return
-        for f, code in codes.items():
-            if self._followers[f].dropped_by(code):
-                tracker.release(self._followers[f])
+        forget_dropped(self._tracker, self._followers, codes)
 
     def wait(self, timeout: float | None = None, progress: bool = False) -> MoveResult:
         """Block until the move is done, polling without holding the link between polls.
@@ -980,7 +975,7 @@ class MoveHandle:
         if self._error is not None:
             raise self._error
         assert self._result is not None
-        _raise_if_limited(self._link, self._followers, self._result)
+        raise_if_limited(self._link, self._followers, self._result)
         return self._result
 
     @property
@@ -1075,11 +1070,33 @@ class MoveHandle:
         return f"<MoveHandle {self.kind} {self.axes} {state}, predicted {self.duration:.4g} s>"
 
 
-def _raise_if_limited(
+def forget_dropped(
+    tracker: MotionTracker | None, followers: Mapping[str, GearLink], stop_codes: Mapping[str, int]
+) -> dict[str, int]:
+    """The followers whose stop code (read once their master's motion is over) says that a
+    limit stopped them (:meth:`GearLink.dropped_by`), by letter: the controller turned their
+    gearing off, and ``tracker`` forgets it here."""
+    dropped = {f: c for f, c in stop_codes.items() if followers[f].dropped_by(c)}
+    if tracker is not None:
+        for f in dropped:
+            tracker.release(followers[f])
+    return dropped
+
+
+def dropped_parts(followers: Mapping[str, GearLink], dropped: Mapping[str, int]) -> list[str]:
+    """How a motion's error names each follower a limit stopped (``dropped``: its stop code)."""
+    return [
+        f"{f}, geared to {followers[f].master}: {codes.stop_text(c)}; its gearing is off"
+        for f, c in dropped.items()
+    ]
+
+
+def raise_if_limited(
     link: CommandLink, followers: Mapping[str, GearLink], result: MoveResult
 ) -> None:
     """Raise what :meth:`MoveHandle.wait` raises for a move a limit or a fault ended early,
-    or a follower a limit stopped (nothing for the usual end)."""
+    or a follower a limit stopped (nothing for the usual end); a contour's end raises the
+    same for its followers (decision 0049)."""
     if _EARLY_CODES.isdisjoint(result.stop_codes.values()) and not result.follower_stop_codes:
         return  # (the usual end: what the general case below finds, without its dicts)
     limited = {a: c for a, c in result.stop_codes.items() if c in _EARLY_CODES}
@@ -1087,10 +1104,7 @@ def _raise_if_limited(
     if not limited and not dropped:
         return
     parts = [f"{a}: {codes.stop_text(c)}" for a, c in limited.items()]
-    parts += [
-        f"{f}, geared to {followers[f].master}: {codes.stop_text(c)}; its gearing is off"
-        for f, c in dropped.items()
-    ]
+    parts += dropped_parts(followers, dropped)
     first = next(iter(limited or dropped))
     final = {**result.final, **result.follower_final}
     what = "move stopped early" if limited else "a follower stopped early"

@@ -152,14 +152,17 @@ def _interrupted(link: object, at: int, *, after: bool) -> Iterator[None]:
 @contextlib.contextmanager
 def _limit_stopped(axes: str, into: list[MotionError]) -> Iterator[None]:
     """Keep the ``MotionError`` of a contour on ``axes`` a limit stopped (stop code 2 or 3 on
-    one of them) in ``into`` instead of raising it (it sent the contour: not a refusal). One
-    naming only followers refused the contour unsent: a limit had dropped their gearing (so
-    does any error but the contour's own "stopped by the controller")."""
+    one of them), or of one that ran to its end and a limit stopped a follower of on the way
+    ("a follower stopped early", decision 0049), in ``into`` instead of raising it (it sent
+    the contour: not a refusal). One naming only followers that a limit had dropped before
+    ("nobody waited for") refused the contour unsent (so does any other error)."""
     try:
         yield
     except MotionError as exc:
         own = {exc.stop_codes.get(a) for a in axes}
-        if "stopped by the controller" not in str(exc) or not {2, 3} & own:
+        text = exc.args[0]
+        follower = text.startswith("a follower stopped early") and exc.axis not in axes
+        if not follower and ("stopped by the controller" not in text or not {2, 3} & own):
             raise
         into.append(exc)
 
@@ -591,24 +594,49 @@ class OperationSequences(RuleBasedStateMachine):
         before = self.dmc.query_operands([f"_RP{a}" for a in axes])
         self.supersede(axes)  # (even if refused: harmless)
         stopped: list[MotionError] = []
-        with self.refusable(InvalidArgument, MotionError), _limit_stopped(axes, stopped):
+        with (
+            self.refusable(InvalidArgument, MotionError) as refused,
+            _limit_stopped(axes, stopped),
+        ):
             self.dmc.contour(axes, path, dt=3)
+        if refused:
+            return
+        if not stopped or stopped[0].args[0].startswith("a follower stopped early"):
             after = self.dmc.query_operands([f"_RP{a}" for a in axes])
-            assert after == list(np.add(before, path[-1])), (before, after)
+            assert after == list(np.add(before, path[-1])), (before, after, stopped)
         if stopped:
             self.contour_stopped_at_a_switch(axes, stopped[0])
 
     def contour_stopped_at_a_switch(self, axes: str, exc: MotionError) -> None:
         """A placed switch stopped the contour (decision 0041): the whole contour is over,
-        out of contour mode, and the axis that ran into it is on it."""
+        out of contour mode, and the axis that ran into it is on it. Or the contour ran to
+        its end (51) and a limit stopped a follower of it on the way: the error names it, the
+        follower is beyond that soft limit or on that switch, and the library forgot its
+        gearing (decision 0049)."""
         assert not self.sim.room(SimContour).axes(), exc
         assert not any(self.dmc.query_operands([f"_BG{a}" for a in axes])), exc
         codes = exc.stop_codes
         for a in axes:
-            if codes[a] in (2, 3):
+            if codes[a] in (2, 3) and not exc.args[0].startswith("a follower stopped early"):
                 assert self.dmc.query_operands([f"_L{'F' if codes[a] == 2 else 'R'}{a}"]) == [0]
             else:
                 assert codes[a] == 51, exc
+        for f in set(codes) - set(axes):  # (the followers read at the contour's end)
+            if f"{f}, geared to " in exc.args[0]:
+                assert codes[f] in (2, 3), exc
+                assert f not in self.dmc.tracker.gears, exc
+                self.follower_limit_explained(f, codes[f], exc)
+
+    def follower_limit_explained(self, f: str, code: int, exc: MotionError) -> None:
+        """A follower a limit stopped (SC 2, 3) is beyond its forward (reverse) soft limit, or
+        on its active forward (reverse) switch, one LD does not disable (decision 0046)."""
+        ops = ("RP", "FL", "BL", "LF", "LR", "LD")
+        rp, fl, bl, lf, lr, ld = self.dmc.query_operands([f"_{op}{f}" for op in ops])
+        enabled = not round(ld) & (1 if code == 2 else 2)
+        if code == 2:
+            assert rp >= fl or (not lf and enabled), (f, rp, fl, lf, ld, exc)
+        else:
+            assert rp <= bl or (not lr and enabled), (f, rp, bl, lr, ld, exc)
 
     @rule(
         axes=st.sampled_from(["A", "BC", "AD"]),
