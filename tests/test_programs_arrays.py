@@ -202,6 +202,17 @@ def test_the_watchdog_keeps_running_and_the_download_says_it_was_restarted(
     dog.stop()
 
 
+def test_a_program_with_rem_lines_runs_to_its_end(dmc: galil.Controller) -> None:
+    # The controller has no REM command (a thread reaching one stops: TC 3); the library
+    # drops REM lines before the download, as Galil's software does.
+    result = dmc.programs.download("#R\nREM set n\nn=1\nREM and again\nn=n+1\nEN")
+    assert result.lines == 4
+    dmc.programs.run("#R", thread=1)
+    dmc.programs.wait(1)
+    assert dmc.variables["n"] == 2
+    assert dmc.programs.upload() == "#R\nn=1\nn=n+1\nEN"
+
+
 def test_burn_sends_bp(dmc: galil.Controller) -> None:
     with transcript(dmc) as sent:
         dmc.programs.burn()

@@ -10,7 +10,9 @@ naming the line (1-based, in the text as given) and the rule::
     check_program(lines, model)
 
 Lines are stored without surrounding blanks (Galil's own tools remove them too), so the text
-uploaded afterwards can be compared with what was sent.
+uploaded afterwards can be compared with what was sent. ``REM`` lines are never sent: the
+DMC-4103 command reference calls ``REM`` "NOT a controller command" that Galil's PC software
+strips before a download; a ``'`` comment is a command and stays unless ``strip_comments``.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ __all__ = ["ProgramLine", "check_program", "labels_of", "pack_lines", "program_l
 
 _LABEL_START = re.compile(r"#([A-Za-z0-9_]*)")
 _BAD_CHAR = re.compile(r"[^\x20-\x7e]|\\")
+#: ``REM`` as a word (``REMAIN=5`` is an assignment, not a remark).
+_REMARK = re.compile(r"REM(?:\s|$)")
 
 
 @dataclass(frozen=True)
@@ -50,7 +54,7 @@ def _comment_start(line: str) -> int:
         elif not quoted:
             if command_start and ch == " ":
                 pass
-            elif command_start and (ch == "'" or line.startswith("REM", i)):
+            elif command_start and (ch == "'" or _REMARK.match(line, i)):
                 return i
             elif ch == ";":
                 command_start = True
@@ -71,10 +75,13 @@ def _without_comment(line: str) -> str:
 def program_lines(
     text: str | Sequence[str], *, strip_comments: bool = False, pack: int | None = None
 ) -> list[ProgramLine]:
-    """The lines of a program, each without surrounding blanks.
+    """The lines of a program, each without surrounding blanks and without ``REM`` lines.
 
     Blank lines at the start and end of ``text`` are dropped. A blank line inside is kept
-    (and refused by :func:`check_program`) unless ``strip_comments`` removes it.
+    (and refused by :func:`check_program`) unless ``strip_comments`` removes it. A line that
+    begins with ``REM`` is always dropped, as Galil's software does ("REM is NOT a controller
+    command": the DMC-4103 command reference); a ``REM`` anywhere else is refused by
+    :func:`check_program` unless ``strip_comments`` removes it.
 
     Args:
         text: the program (a string, or its lines).
@@ -93,6 +100,7 @@ def program_lines(
     else:
         raise InvalidArgument(f"a program is a string or a list of lines, not {text!r}")
     out = [ProgramLine(line.strip(), i) for i, line in enumerate(raw, 1)]
+    out = [p for p in out if not _REMARK.match(p.text)]
     while out and not out[0].text:
         out.pop(0)
     while out and not out[-1].text:
@@ -189,7 +197,15 @@ def _check_line(line: ProgramLine, model: ModelSpec) -> None:
             "(pass pack=False and split it, or strip_comments=True)",
             model=model.name,
         )
-    code = line.text[:c] if (c := _comment_start(line.text)) >= 0 else line.text
+    c = _comment_start(line.text)
+    if c >= 0 and _REMARK.match(line.text, c):
+        raise InvalidArgument(
+            f"{where}: REM after a label or a command; REM is no controller command, only a "
+            "line of its own beginning with REM is a remark (dropped before the download): "
+            "write ' for a comment after a command, or pass strip_comments=True",
+            model=model.name,
+        )
+    code = line.text if c < 0 else line.text[:c]
     if code.count('"') % 2:
         raise InvalidArgument(f"{where}: a string is not closed (odd number of quotes)")
     for text in _mg_texts(code):

@@ -123,3 +123,25 @@ def test_a_forty_character_controller_takes_forty_character_lines() -> None:
 def test_not_a_program_is_refused() -> None:
     with pytest.raises(InvalidArgument):
         program_lines(42)  # type: ignore[arg-type]
+
+
+def test_rem_lines_are_never_downloaded_and_the_others_keep_their_source_lines() -> None:
+    # "REM is NOT a controller command": Galil's PC software strips REM lines (DMC-4103).
+    lines = program_lines("#A\nREM a remark\nPR 1000\n  REM\n' a comment\nEN")
+    assert texts(lines) == ["#A", "PR 1000", "' a comment", "EN"]
+    assert [p.source for p in lines] == [1, 3, 5, 6]
+
+
+def test_a_word_beginning_with_rem_is_code_not_a_remark() -> None:
+    lines = program_lines("#A\nREMAIN=5\nPR REMAIN;' the rest\nEN", strip_comments=True)
+    assert texts(lines) == ["#A", "REMAIN=5", "PR REMAIN", "EN"]
+    check_program(lines, MODEL)
+
+
+@pytest.mark.parametrize("line", ["PR 1000;REM the rest", "#B REM after a label"])
+def test_rem_after_a_command_or_a_label_is_refused_unless_comments_are_stripped(
+    line: str,
+) -> None:
+    with pytest.raises(InvalidArgument, match="line 2: REM after a label or a command"):
+        check_program(program_lines(f"#A\n{line}\nEN"), MODEL)
+    check_program(program_lines(f"#A\n{line}\nEN", strip_comments=True), MODEL)
