@@ -185,9 +185,9 @@ class OperationSequences(RuleBasedStateMachine):
         self.program_axis_free = True
         # The sides of each axis with a switch placed (2 forward, 3 reverse: its stop code).
         self.placed: dict[str, set[int]] = {a: set() for a in AXES}
-        # Gearings of the program's axis D in place when the program was started: once a
-        # limit drops one, the program may move D (#SEQTRIP waits with AMD), so D's stop code
-        # no longer tells of the drop, which the library learns at the master's next start.
+        # Gearings of the program's axis D in place while the program ran: once a limit drops
+        # one, the program may move D (#SEQTRIP waits with AMD), so D's stop code no longer
+        # tells of the drop, which the library learns at the master's next start.
         self.program_gears: list[GearLink] = []
         self.threads_before = set(threading.enumerate())
 
@@ -802,6 +802,10 @@ class OperationSequences(RuleBasedStateMachine):
         values = [round(v) for v in dmc.query_operands(names)]
         bg = dict(zip(AXES, values[0:8:2], strict=True))
         sc = dict(zip(AXES, values[1:8:2], strict=True))
+        gear = tracker.gears.get("D")
+        running = not self.program_axis_free
+        if running and gear is not None and not any(k is gear for k in self.program_gears):
+            self.program_gears.append(gear)  # (geared while the program runs: it may move D)
         if values[-1] < 0 and not bg["D"]:
             self.program_axis_free = True
         sim_gears = self.sim.room(SimGearing)
