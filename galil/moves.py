@@ -13,6 +13,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import numpy as np
+
 from galil import predict
 from galil.errors import InvalidArgument, LimitError
 from galil.link import CommandLink
@@ -51,9 +53,10 @@ __all__ = [
 ]
 
 _STATE = ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO", "SC", "TS")
-# What a master's state query reads of each follower: its soft limits, and its stop code (a
-# limit's: the controller turned its gearing off).
-_FOLLOWER = ("BL", "FL", "SC")
+# What a master's state query reads of each follower: its soft limits, its stop code (a
+# limit's: the controller turned its gearing off), and its limit switches (TS bits 3, 2).
+_FOLLOWER = ("BL", "FL", "SC", "TS")
+_SWITCH_BITS = 0x0C
 _new = object.__new__
 _BUILDERS = {"SP": cmds.sp, "AC": cmds.ac, "DC": cmds.dc}
 
@@ -102,8 +105,8 @@ def _read_state(
     letters: str,
     gears: Mapping[str, GearLink],
     start: bool = True,
-) -> tuple[dict[str, _State], dict[str, tuple[float, float]]]:
-    """Every axis's state and the followers' soft limits ``(BL, FL)``, in one round trip
+) -> tuple[dict[str, _State], dict[str, tuple[float, float, int]]]:
+    """Every axis's state and the followers' ``(BL, FL, TS)``, in one round trip
     (query_operands packs the MG lines together). For a ``start`` (not a plan), the axes read
     at rest end the handles nobody waited for (:func:`_seen_at_rest`).
 
@@ -156,9 +159,10 @@ def follower_limits(
     tracker: MotionTracker | None,
     gears: Mapping[str, GearLink],
     values: Sequence[float],
-) -> dict[str, tuple[float, float]]:
-    """``(BL, FL)`` per follower of ``gears`` from the values of :func:`follower_operands`
-    (read in ``gears``' order), once their stop codes say that each still follows.
+) -> dict[str, tuple[float, float, int]]:
+    """``(BL, FL, TS)`` per follower of ``gears`` from the values of
+    :func:`follower_operands` (read in ``gears``' order; of ``TS`` its limit switch bits), once
+    their stop codes say that each still follows.
 
     Raises:
         MotionError: a limit stopped a follower during a move nobody waited for; the tracker
@@ -167,7 +171,7 @@ def follower_limits(
     n = len(_FOLLOWER)
     rows = {f: values[i * n : (i + 1) * n] for i, f in enumerate(gears)}
     refuse_dropped(link, tracker, gears, {f: round(r[2]) for f, r in rows.items()})
-    return {f: (r[0], r[1]) for f, r in rows.items()}
+    return {f: (r[0], r[1], round(r[3]) & _SWITCH_BITS) for f, r in rows.items()}
 
 
 def _follower_error(exc: LimitError, gear: GearLink) -> None:
@@ -211,30 +215,64 @@ def _check_follower_speed(link: CommandLink, gear: GearLink, speed: float) -> No
 
 def follower_operands(followers: str) -> tuple[str, ...]:
     """What a master's state query reads of each follower: ``_BL`` and ``_FL`` (its soft
-    limits) and ``_SC`` (a limit's stop code: its gearing is off), in the order
-    :func:`follower_limits` reads them back."""
+    limits), ``_SC`` (a limit's stop code: its gearing is off) and ``_TS`` (its limit
+    switches), in the order :func:`follower_limits` reads them back."""
     return _operand_names(followers, _FOLLOWER)
+
+
+def _refuse_follower_blocked(link: CommandLink, gear: GearLink, direction: float, ts: int) -> None:
+    """Refuse a start of ``gear``'s master that drives the follower (first) in ``direction``
+    towards its active limit switch that ``LD`` leaves on (``ts``: its ``_TS``;
+    :func:`~galil.motion.switch_blocks`): the controller would stop the follower there and
+    turn its gearing off while the master runs on (decision 0053).
+
+    Raises:
+        InvalidArgument: naming the follower, its master and the switch.
+    """
+    f = gear.follower
+    if direction and switch_blocks(link, f, direction, ts):
+        side = "forward" if direction > 0 else "reverse"
+        # (the distance along S only grows: no other way to move it)
+        other = "" if gear.master == "S" else f", or move {gear.master} the other way"
+        raise InvalidArgument(
+            f"axis {f} is geared to {gear.master} at {gear.ratio:g}: it would start towards "
+            f"its active {side} limit switch (the controller stops it there and turns its "
+            f"gearing off); turn the gearing off and move {f} off the switch first{other}",
+            model=link.model.name,
+        )
+
+
+def _first_direction(profile: predict.Profile) -> int:
+    """+1 or -1: the way ``profile`` first leaves its start position; 0: it never does."""
+    position = profile.position
+    moved = np.flatnonzero(position != position[0])
+    return 0 if not moved.size else (1 if position[moved[0]] > position[0] else -1)
 
 
 def check_followers(
     link: CommandLink,
     gears: Mapping[str, GearLink],
     profiles: Mapping[str, predict.Profile],
-    limits: Mapping[str, tuple[float, float]],
+    limits: Mapping[str, tuple[float, float, int]],
 ) -> None:
-    """The followers' predicted profiles against their soft limits and the model's SP maximum.
+    """The followers' predicted profiles against their limit switches (the first direction
+    each moves in: :func:`_refuse_follower_blocked`), their soft limits and the model's SP
+    maximum.
 
     Args:
         gears: the followers to check, by letter.
         profiles: each follower's predicted profile (positions in counts).
-        limits: each follower's ``(BL, FL)`` (:func:`follower_limits`).
+        limits: each follower's ``(BL, FL, TS)`` (:func:`follower_limits`).
 
     Raises:
+        InvalidArgument: a follower would start towards its active limit switch.
         LimitError: naming the follower.
     """
     for f, gear in gears.items():
         profile = profiles[f]
-        bl, fl = limits[f]
+        bl, fl, ts = limits[f]
+        if ts != _SWITCH_BITS:  # (a switch active: which way does the follower go?)
+            _refuse_follower_blocked(link, gear, _first_direction(profile), ts)
         try:
             predict.check_soft_limits(profile, forward_limit=fl, backward_limit=bl, axis=f)
         except LimitError as exc:
@@ -527,11 +565,12 @@ def _jog(
     gears = tracker.followers(a)
     rp, bg, sc, ac, dc, it, mo, ts, bl, fl, *ends = link.query_operands(
         [f"_{op}{a}" for op in ("RP", "BG", "SC", "AC", "DC", "IT", "MO", "TS", "BL", "FL")]
-        + [f"_SC{f}" for f in gears]  # (a follower a limit dropped: refuse_dropped)
+        # (a follower a limit dropped: refuse_dropped; one on its switch: a start refused)
+        + [f"_{op}{f}" for f in gears for op in ("SC", "TS")]
     )
     if not bg:
         tracker.ended(a, rp, sc)
-    refuse_dropped(link, tracker, gears, {f: round(c) for f, c in zip(gears, ends, strict=True)})
+    refuse_dropped(link, tracker, gears, {f: round(ends[2 * i]) for i, f in enumerate(gears)})
     track = tracker.track(a)
     if bg and track is not None and track.kind == "jog":
         handle = _open_jog(tracker, a)
@@ -547,6 +586,8 @@ def _jog(
             f"axis {a} has its motor off; call controller.servo_here()", model=link.model.name
         )
     _refuse_blocked(link, a, velocity, round(ts), (round(rp), bl, fl))
+    for i, gear in enumerate(gears.values()):
+        _refuse_follower_blocked(link, gear, gear.ratio * velocity, round(ends[2 * i + 1]))
     _check_geared_speed(link, gears, velocity)
     params = MoveParams(abs(velocity), as_stored(link, "AC", ac), as_stored(link, "DC", dc), it)
     replies = link.command_line(
@@ -685,7 +726,7 @@ def _increment(
 def _check_followers_reach(
     link: CommandLink,
     gears: Mapping[str, GearLink],
-    limits: Mapping[str, tuple[float, float]],
+    limits: Mapping[str, tuple[float, float, int]],
     step: int,
     end: int,
     what: str,
@@ -695,7 +736,7 @@ def _check_followers_reach(
     for f, gear in gears.items():
         f_end = int(gear.positions([end])[-1])
         try:
-            _check_reach(link, f, round(step * gear.ratio), f_end, limits[f], what)
+            _check_reach(link, f, round(step * gear.ratio), f_end, limits[f][:2], what)
         except LimitError as exc:
             _follower_error(exc, gear)
             raise
@@ -859,7 +900,7 @@ def _speed_schedule(
 
 def _schedule_state(
     link: CommandLink, tracker: MotionTracker, a: str, gears: Mapping[str, GearLink]
-) -> tuple[_State, dict[str, tuple[float, float]]]:
+) -> tuple[_State, dict[str, tuple[float, float, int]]]:
     """Axis ``a``'s state and the followers' ``(BL, FL)``, in one query that also asks
     whether thread 0 runs.
 

@@ -273,7 +273,7 @@ class _State:
     accel: float
     decel: float
     smoothing: float
-    follower_limits: dict[str, tuple[float, float]]
+    follower_limits: dict[str, tuple[float, float, int]]  # (BL, FL, TS switch bits)
     switches: tuple[int, ...]  # each axis's TS limit bits (a change: prepared again)
 
 
@@ -510,7 +510,7 @@ class VectorStream:
                 )
 
     def _check_followers(
-        self, profile: predict.VectorProfile, limits: Mapping[str, tuple[float, float]]
+        self, profile: predict.VectorProfile, limits: Mapping[str, tuple[float, float, int]]
     ) -> None:
         """The axes geared to a path axis or to ``S``, over the whole path, against their soft
         limits and the model's SP maximum (as for a position move of their master).
