@@ -328,7 +328,9 @@ class ContourStream:
         """Read where the axes are (one round trip), predict, check the soft limits.
 
         Raises:
-            InvalidArgument: an axis is moving, or the library has it geared to another axis.
+            InvalidArgument: an axis is moving, or the library has it geared to another axis;
+                an axis geared to a contour axis would first move towards its active limit
+                switch (decision 0053).
             LimitError: the path crosses a soft limit, or takes an axis geared to a contour
                 axis past its soft limits or beyond the model's SP maximum.
             MotionError: a limit stopped an axis geared to a contour axis during a move

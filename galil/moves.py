@@ -431,7 +431,9 @@ def execute_move(
     (``IP`` = ``PR`` + ``BG``).
 
     Raises:
-        InvalidArgument: no or repeated axes, an axis moving or its motor off.
+        InvalidArgument: no or repeated axes, an axis moving or its motor off, a start towards
+            an active limit switch, the axis's own or (first) an axis geared to one of the
+            move's (decision 0053).
         LimitError: a path crossing a soft limit or the 32-bit range, or taking an axis geared
             to one of the move's past its soft limits or beyond the model's SP maximum.
         MotionError: a limit stopped an axis geared to one of the move's axes during a move
@@ -544,7 +546,9 @@ def jog(
     handle is returned, its prediction now including the change.
 
     Raises:
-        InvalidArgument: a position move in progress, a stopping jog, or the motor off.
+        InvalidArgument: a position move in progress, a stopping jog, the motor off, or a
+            start towards an active limit switch, the axis's own or that of an axis geared to
+            ``letter`` (decision 0053).
         LimitError: an axis geared to ``letter`` would run beyond the model's SP maximum.
         MotionError: a limit stopped an axis geared to ``letter`` during a move nobody waited
             for: its gearing is off, and forgotten (:func:`~galil.motion.refuse_dropped`).
@@ -825,8 +829,9 @@ def speed_schedule(
     Raises:
         ScheduleError: a change point the profiler cannot honour.
         InvalidArgument: a bad label, the axis busy or its motor off, a start towards an
-            active limit switch, thread 0 running (a schedule in progress, or a program), a
-            label the user's program uses, or a user program running (the download would
+            active limit switch (of the axis, or first of one geared to it), thread 0
+            running (a schedule in progress, or a program), a label the user's program
+            uses, or a user program running (the download would
             disturb it).
         LimitError: a path crossing a soft limit, or taking an axis geared to ``letter`` past
             its soft limits or beyond the model's SP maximum.

@@ -453,7 +453,8 @@ class VectorStream:
 
         Raises:
             InvalidArgument: an axis moving or its motor off, a sequence running, an axis
-                whose first motion on the path heads into its active limit switch (TC 22).
+                whose first motion on the path heads into its active limit switch (TC 22), or
+                an axis geared to a path axis or to ``S`` whose first motion does (0053).
             MotionError: a limit stopped an axis geared to a path axis or to ``S`` during a
                 move nobody waited for (its gearing is off: :func:`~galil.motion.refuse_dropped`).
             LimitError: a check failed (named segment and sample): VS/VA/VD ranges, TC 30,

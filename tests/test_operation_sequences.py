@@ -85,9 +85,11 @@ _VALUES: dict[str, list[float]] = {
 }
 # The settings the controller takes only at rest (DC: not in a position move).
 _STILL = ("decel", "motor_type", "brush", "encoder_config")
-# A start refused for a limit switch (galil.moves, galil.homing): which axis, which switch.
+# A start refused for a limit switch (galil.moves, galil.homing): which axis, which switch;
+# a follower's too (a start of its master: decision 0053).
 _SWITCH_REFUSAL = re.compile(
-    r"(?:axis|on) ([A-H]) would start towards its active (forward|reverse) limit switch"
+    r"(?:axis|on) ([A-H]) (?:is geared to [A-HS] at \S+: it )?would start towards its active "
+    r"(forward|reverse) limit switch"
 )
 # The stop code a move of each kind ends with when nothing interferes (docs/homing.md, a
 # position move's normal end).
