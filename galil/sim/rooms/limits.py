@@ -241,16 +241,12 @@ class Limits(Room):
                 k = turns_back(ax.m.profiler, k)
         return k
 
-    @staticmethod
-    def _on_a_path(ax: Axis) -> bool:
-        """Whether ``ax`` follows a path that may turn towards a switch active at its start:
-        a contour's (``CM`` does not move, its segments come later) or a sequence's (``BG S``
-        checked only each axis's first direction: decision 0050)."""
-        return ax.contour or ax.m.profiler.mode == "vector"
-
     def _watched(self, ax: Axis) -> bool:
         """Whether ``ax`` may run into a placed switch LD leaves on (the watch looks for it),
-        or, on a contour's or a sequence's path, into a switch active already."""
+        or into a switch active already (pressed, or placed and reached): a jog reversed
+        towards it, a follower whose master turns, a contour's or a sequence's path that turns
+        (``CM`` does not move; ``BG S`` checked only each axis's first direction: decision
+        0050). Its step then ends at the sample it starts towards it (decision 0054)."""
         if not ax.m.moving or ax.limit_stop:
             return False
         s = self.axes[ax.letter]
@@ -258,7 +254,7 @@ class Limits(Room):
             s.reverse_at is not None and not s.ld & 2
         ):
             return True
-        return self._on_a_path(ax) and (self.halts(ax, "forward") or self.halts(ax, "reverse"))
+        return self.halts(ax, "forward") or self.halts(ax, "reverse")
 
     @staticmethod
     def _crossing(
@@ -313,17 +309,15 @@ class Limits(Room):
             return
         for ax in self.machine.servo.axes.values():
             if self._watched(ax):
-                start, ref = ax.physical, ax.m.reference
-                path = self._on_a_path(ax)  # (a sequence's end within the step releases it)
-                out.append(functools.partial(self._fires, ax, start, ref, path))
+                out.append(functools.partial(self._fires, ax, ax.physical, ax.m.reference))
 
-    def _fires(self, ax: Axis, start: int, ref: int, path: bool) -> bool:
+    def _fires(self, ax: Axis, start: int, ref: int) -> bool:
         """Whether ``ax`` has run into a switch since the step began at ``start`` (fixed
         frame) and ``ref`` (its reference): it moves towards an active switch now, or it has
         entered a placed switch's side since (a step may end where the motion does, at rest
-        beyond the switch; the bisection then finds the sample it entered, still moving), or,
-        on a contour's or a sequence's path, its reference moved towards an active switch
-        since (a contour's segments may stand still at the step's end)."""
+        beyond the switch; the bisection then finds the sample it entered, still moving), or
+        its reference moved towards an active switch since (a contour's segments may stand
+        still at the step's end, a follower's master may have come to rest)."""
         if self._runs_into(ax):
             return True
         s, now = self.axes[ax.letter], ax.physical
@@ -331,8 +325,6 @@ class Limits(Room):
             return True
         if s.reverse_at is not None and not s.ld & 2 and start > s.reverse_at >= now:
             return True
-        if not path:
-            return False
         moved = ax.m.reference - ref
         return (moved > 0 and self.halts(ax, "forward")) or (
             moved < 0 and self.halts(ax, "reverse")
