@@ -10,12 +10,18 @@ test hook presses it (:meth:`Limits.set_switch`) or the motor is at or beyond th
 was placed at (:meth:`Limits.place`; none are placed by default). A tripped switch pulls its
 input low; ``CN`` field 1 says which level is *active* (-1, the default: low), so with ``CN 1``
 an untripped switch reads active, as on a real controller. ``_LFx``/``_LRx`` are 0 and the TS
-bits 3/2 are 0 while a switch is active. A watch ends a servo step at the sample an axis runs
-into a placed switch; while placed switches are about, a step also ends where such an axis
-turns back, so a path cannot enter a switch and leave it again inside one step unseen. The
-home switch is a flag on one side of an edge (default: below -10,000 counts) that pulls the
-home input (TS bit 1, ``_HMx``) low; index pulses come every 4,000 counts from 0
-(:class:`HomeGeometry`). Decision 0015.
+bits 3/2 are 0 while a switch is active. An active switch stops an axis in motion whose
+profiler's velocity points at it, at the first sample both hold, however the axis moves (a
+move, a jog, a contour, a sequence, a gear): a motion that has ended when its motor reaches a
+placed switch (the servo lag) is not stopped; the switch reads active and the next motion
+towards it is refused or stopped at its first sample (decision 0054). A watch ends a servo
+step at the sample an axis runs into a placed switch; while placed switches are about, a step
+also ends where such an axis turns back, so a path cannot enter a switch and leave it again
+inside one step unseen; and a step ends at the sample an axis starts towards a switch active
+already (a jog reversed, a follower's master or a path turning), so one long advance stops it
+where stepping sample by sample does. The home switch is a flag on one side of an edge
+(default: below -10,000 counts) that pulls the home input (TS bit 1, ``_HMx``) low; index
+pulses come every 4,000 counts from 0 (:class:`HomeGeometry`). Decision 0015.
 
 ``LD`` disables a limit switch per axis (1 forward, 2 reverse, 3 both; decision 0046): a
 disabled switch neither stops motion towards it nor refuses a start towards it, so no
@@ -36,6 +42,7 @@ is left with its buffer dropped (decision 0041).
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -44,6 +51,7 @@ import numpy.typing as npt
 
 from galil.errors import InvalidArgument
 from galil.models import INT32_MAX, INT32_MIN
+from galil.predict.engine import KinematicPlan
 from galil.sim.interpreter import int32
 from galil.sim.machine import Room
 from galil.sim.parse import Refused, split_fields
@@ -215,7 +223,7 @@ class Limits(Room):
     # ---- servo-loop hooks --------------------------------------------------------------
     def horizon(self, k: int) -> int:
         if self._switched:
-            k = self._until_reversal(k)
+            k = self._towards_active(self._until_reversal(k))
         if not self._soft:
             return k
         for ax in self.machine.servo.axes.values():
@@ -241,24 +249,35 @@ class Limits(Room):
                 k = turns_back(ax.m.profiler, k)
         return k
 
-    @staticmethod
-    def _on_a_path(ax: Axis) -> bool:
-        """Whether ``ax`` follows a path that may turn towards a switch active at its start:
-        a contour's (``CM`` does not move, its segments come later) or a sequence's (``BG S``
-        checked only each axis's first direction: decision 0050)."""
-        return ax.contour or ax.m.profiler.mode == "vector"
+    def _towards_active(self, k: int) -> int:
+        """End the step at the first sample where an axis moves towards a switch active
+        already (pressed, or placed and reached) that LD leaves on: a jog reversed, a follower
+        whose master turns, a contour's or a sequence's path that turns (``CM`` moves
+        nothing; ``BG S`` checked only each axis's first direction: decision 0050). The
+        service then stops it there, as it would sample by sample (decision 0054)."""
+        for ax in self.machine.servo.axes.values():
+            if not ax.m.moving or ax.limit_stop:
+                continue
+            forward, reverse = self.halts(ax, "forward"), self.halts(ax, "reverse")
+            if not (forward or reverse):
+                continue
+            prof = ax.m.profiler
+            plan = prof.plan  # (None on a contour's or a driven axis's path)
+            if plan is None or _heads(plan, forward, reverse):
+                v = prof.preview_velocity(k)
+                hits = np.flatnonzero((v > 0) & forward | (v < 0) & reverse)
+                if hits.size:
+                    k = min(k, int(hits[0]) + 1)
+        return k
 
     def _watched(self, ax: Axis) -> bool:
-        """Whether ``ax`` may run into a placed switch LD leaves on (the watch looks for it),
-        or, on a contour's or a sequence's path, into a switch active already."""
+        """Whether ``ax`` may run into a placed switch LD leaves on (the watch looks for it)."""
         if not ax.m.moving or ax.limit_stop:
             return False
         s = self.axes[ax.letter]
-        if (s.forward_at is not None and not s.ld & 1) or (
+        return (s.forward_at is not None and not s.ld & 1) or (
             s.reverse_at is not None and not s.ld & 2
-        ):
-            return True
-        return self._on_a_path(ax) and (self.halts(ax, "forward") or self.halts(ax, "reverse"))
+        )
 
     @staticmethod
     def _crossing(
@@ -313,30 +332,19 @@ class Limits(Room):
             return
         for ax in self.machine.servo.axes.values():
             if self._watched(ax):
-                start, ref = ax.physical, ax.m.reference
-                path = self._on_a_path(ax)  # (a sequence's end within the step releases it)
-                out.append(functools.partial(self._fires, ax, start, ref, path))
+                out.append(functools.partial(self._fires, ax, ax.physical))
 
-    def _fires(self, ax: Axis, start: int, ref: int, path: bool) -> bool:
+    def _fires(self, ax: Axis, start: int) -> bool:
         """Whether ``ax`` has run into a switch since the step began at ``start`` (fixed
-        frame) and ``ref`` (its reference): it moves towards an active switch now, or it has
-        entered a placed switch's side since (a step may end where the motion does, at rest
-        beyond the switch; the bisection then finds the sample it entered, still moving), or,
-        on a contour's or a sequence's path, its reference moved towards an active switch
-        since (a contour's segments may stand still at the step's end)."""
+        frame): it moves towards an active switch now, or it has entered a placed switch's
+        side since (a step may end where the motion does, at rest beyond the switch; the
+        bisection then finds the sample it entered, still moving)."""
         if self._runs_into(ax):
             return True
         s, now = self.axes[ax.letter], ax.physical
         if s.forward_at is not None and not s.ld & 1 and start < s.forward_at <= now:
             return True
-        if s.reverse_at is not None and not s.ld & 2 and start > s.reverse_at >= now:
-            return True
-        if not path:
-            return False
-        moved = ax.m.reference - ref
-        return (moved > 0 and self.halts(ax, "forward")) or (
-            moved < 0 and self.halts(ax, "reverse")
-        )
+        return s.reverse_at is not None and not s.ld & 2 and start > s.reverse_at >= now
 
     def _runs_into(self, ax: Axis) -> int:
         """2 or 3 when ``ax`` moves towards an active limit switch LD leaves on, else 0."""
@@ -480,3 +488,18 @@ class Limits(Room):
         if not m.motor_on:
             value |= 0x20
         return value
+
+
+def _heads(plan: KinematicPlan, forward: bool, reverse: bool) -> bool:
+    """Whether ``plan`` moves forward (``forward``) or in reverse (``reverse``) anywhere: its
+    velocity is linear in each segment, so at a segment's ends if at all (a cheap look that
+    spares the preview of a jog running away from its active switch, at every step)."""
+    for seg in plan.segments:
+        if math.isfinite(seg.duration):
+            end = seg.velocity + seg.accel * seg.duration
+        else:  # (a jog's open-ended cruise)
+            end = seg.velocity if seg.accel == 0 else math.copysign(math.inf, seg.accel)
+        for v in (seg.velocity, end):
+            if (forward and v > 0) or (reverse and v < 0):
+                return True
+    return False
