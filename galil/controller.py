@@ -239,8 +239,9 @@ class Resetting:
         program, which runs from ``#AUTO``; what was not burned is gone: decision 0052);
         once it answers ``^R^V`` again the link is set up as at connect (the echo, ``CW 1``
         or ``CF I`` for unsolicited output, ``DR`` streams, interrupts), and the library
-        forgets what ``RS`` made false: gearing links (one a burned ``GA``/``GR`` brings
-        back is unknown to it, as at connect), homed flags, its routines in program memory,
+        forgets what ``RS`` made false: gearing links (the ratios are read again: an axis a
+        burned ``GA``/``GR`` geared again is found, as at connect, and its own motion refused
+        until ``gear_off()``: decision 0055), homed flags, its routines in program memory,
         the sample period (``TM`` read again). The watchdogs then start again. If the
         controller dropped the link, it is reopened (from the address) within ``timeout``.
 
