@@ -467,9 +467,13 @@ class MotionTracker:
 
     def found_geared(self, ratios: Mapping[str, float]) -> None:
         """The ratios just read from the controller (``_GR``, by letter): the followers the
-        library did not gear itself, with a ratio other than 0, are :attr:`found`."""
-        with self.lock:
-            self.found = {a: r for a, r in ratios.items() if r != 0 and a not in self.gears}
+        library did not gear itself, with a ratio other than 0, are :attr:`found`.
+
+        Takes no lock: a reopen of the link runs this while the controller's life lock is held,
+        and a start that reopens holds :attr:`lock` and then waits for that one (the copy of
+        the gearings and the assignment are each atomic)."""
+        own = self.gears.copy()
+        self.found = {a: r for a, r in ratios.items() if r != 0 and a not in own}
 
     def ended(self, letter: str, rp: float, sc: float) -> None:
         """A start read ``letter`` at rest (``_BG`` 0), ``_RP`` ``rp`` and ``_SC`` ``sc``: the

@@ -3,11 +3,13 @@ one read of the ratios (``_GR``), its follower's own motion refused until ``gear
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Callable
 
 import pytest
 
 import galil
+import galil.aio
 from galil.sim import SimController
 from galil.testing import nothing_sent, sim_of, simulated, transcript
 
@@ -119,3 +121,16 @@ def test_the_simulator_reads_each_ratio_as_an_operand() -> None:
         sim.feed(b"ST C\r")  # (ST turns a follower's gearing off: 0, as GR ? says)
         assert [dmc.query_number(f"MG _GR{a}") for a in "BC"] == [0.5, 0]
         assert dmc.command("GR ,?,?") == " 0.5000, 0.0000"
+
+
+def test_the_async_twin_frees_an_axis_found_geared() -> None:
+    async def body() -> None:
+        sim = _geared_elsewhere()
+        async with await galil.aio.connect("sim://DMC-4040", controller=sim) as c:
+            with pytest.raises(galil.InvalidArgument, match=r"\(ratio 2\)"):
+                await c.C.move_by(100)
+            await c.C.gear_off()
+            move = await c.C.move_by(100)
+            assert (await move).deviation == {"C": 0}
+
+    asyncio.run(body())
