@@ -18,7 +18,7 @@ import numpy as np
 
 from galil import codes, predict
 from galil.errors import InvalidArgument, LimitError
-from galil.gearing import Gearing, gear_to
+from galil.gearing import Gearing, gear_off, gear_to
 from galil.homing import AxisHoming, Homed, Switches, read_switches
 from galil.link import CommandLink
 from galil.models import INT32_MAX, INT32_MIN, ModelSpec, tm_of
@@ -197,7 +197,34 @@ def _smoothing_value(value: object, model: ModelSpec) -> float:
         raise InvalidArgument(f"smoothing must be in [{low}, {high}], got {value!r:.40}") from None
 
 
-class Axis:
+class AxisGearing:
+    """Electronic gearing of an :class:`Axis` (a class of its own only to keep each class
+    short): :meth:`gear_to` and :meth:`gear_off` (see :mod:`galil.gearing`)."""
+
+    letter: str
+    _link: CommandLink
+    _tracker: MotionTracker
+
+    @property
+    def _display(self) -> Display | None:
+        raise NotImplementedError
+
+    def gear_to(self, master: Axis | str, ratio: float) -> Gearing:
+        """Follow ``master`` (an axis, or ``"S"``: the S sequences' path) at ``ratio`` (``GA``
+        its commanded position, ``GR``); its moves then predict this axis too. See
+        :mod:`galil.gearing`."""
+        name = master.letter if isinstance(master, Axis) else master
+        return gear_to(self._link, self._tracker, self.letter, name, ratio, display=self._display)
+
+    def gear_off(self) -> None:
+        """Turn off this axis's gearing (``GR 0``; it stays where it is), whoever set it up:
+        the library (as :meth:`Gearing.off <galil.gearing.Gearing.off>`), or something else,
+        found geared at connect or after a reset, whose own motion the library refuses until
+        then (decision 0055). Sent even when the library knows of no gearing."""
+        gear_off(self._link, self._tracker, self.letter)
+
+
+class Axis(AxisGearing):
     """One axis of a controller.
 
     Properties read the controller's operands (``_TP``, ``_SP``, ...) and return Quantities when
@@ -607,13 +634,6 @@ class Axis:
                 )
             )
         return pairs
-
-    def gear_to(self, master: Axis | str, ratio: float) -> Gearing:
-        """Follow ``master`` (an axis, or ``"S"``: the S sequences' path) at ``ratio`` (``GA``
-        its commanded position, ``GR``); its moves then predict this axis too. See
-        :mod:`galil.gearing`."""
-        name = master.letter if isinstance(master, Axis) else master
-        return gear_to(self._link, self._tracker, self.letter, name, ratio, display=self._display)
 
     def stop(self) -> None:
         """Decelerate to a stop (``ST``) at DC."""

@@ -38,6 +38,7 @@ from galil.errors import (
     ProtocolError,
 )
 from galil.facade import LinkFacade
+from galil.gearing import read_found
 from galil.handshake import identify
 from galil.homing import SwitchPolarity, read_polarity, set_polarity
 from galil.interrupts import Interrupts
@@ -238,8 +239,9 @@ class Resetting:
         program, which runs from ``#AUTO``; what was not burned is gone: decision 0052);
         once it answers ``^R^V`` again the link is set up as at connect (the echo, ``CW 1``
         or ``CF I`` for unsolicited output, ``DR`` streams, interrupts), and the library
-        forgets what ``RS`` made false: gearing links (one a burned ``GA``/``GR`` brings
-        back is unknown to it, as at connect), homed flags, its routines in program memory,
+        forgets what ``RS`` made false: gearing links (the ratios are read again: an axis a
+        burned ``GA``/``GR`` geared again is found, as at connect, and its own motion refused
+        until ``gear_off()``: decision 0055), homed flags, its routines in program memory,
         the sample period (``TM`` read again). The watchdogs then start again. If the
         controller dropped the link, it is reopened (from the address) within ``timeout``.
 
@@ -356,21 +358,30 @@ class Resetting:
                 time.sleep(0.2)
 
     def _forget_reset(self) -> None:
-        """What ``RS`` made false: gearing, homed flags, the library's threads, TM."""
+        """What ``RS`` made false: gearing, homed flags, the library's threads, TM; the
+        ratios a burned ``GR`` restored are read with ``_TM`` (decision 0055)."""
         tracker = self.tracker
         with tracker.lock:
             for gear in list(tracker.gears.values()):
                 tracker.release(gear)
+            tracker.found_geared({})
         self.routines.forget()
         for axis in (self._axes or {}).values():
             axis._homing.forget()
         link = self.link
         model = link.model
+        axes = model.axes if self._handshake else ""
         try:
-            tm = link.query_operands(["_TM"])[0]
+            tm, *ratios = link.query_operands(["_TM", *(f"_GR{a}" for a in axes)])
             link.sample_period = model.sample_period_for(tm)
-        except GalilError:
-            link.sample_period = model.sample_period
+            tracker.found_geared(dict(zip(axes, ratios, strict=True)))
+        except GalilError:  # (one refused operand: TM, and the ratios, read apart)
+            try:
+                link.sample_period = model.sample_period_for(link.query_operands(["_TM"])[0])
+            except GalilError:
+                link.sample_period = model.sample_period
+            if axes:
+                read_found(link, tracker)
 
 
 def _refuse_closed(link: Link) -> None:
@@ -502,6 +513,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
                 )
                 if self._unsolicited:
                     self.messages_room.restart()
+                read_found(link, self.tracker)  # gearing set up elsewhere (decision 0055)
             else:
                 assert self._given_model is not None
                 link.model = self._given_model

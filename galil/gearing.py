@@ -10,6 +10,12 @@ distance along the sequences of coordinate system S (``GA S``).
 Outside gantry mode an ``ST``, a limit or ``AB`` on the follower turns its gearing off (the
 manuals); the predictions follow that too. The controller superimposes a geared axis's own
 moves on the gearing; the library does not predict that, so it refuses to move a geared axis.
+
+A gearing the library did not set up (another program or host, or a burned ``GA``/``GR`` that
+power-on or ``RS`` restored) is found at connect and after ``Controller.reset()`` by one read of
+every axis's ratio (``_GR``: :func:`read_found`). ``GA`` has no operand and the reply of
+``GA ?`` is not documented, so its master is not known: the library refuses the axis's own
+motion until :func:`gear_off` (``axis.gear_off()``) turns it off (decision 0055).
 """
 
 from __future__ import annotations
@@ -17,12 +23,13 @@ from __future__ import annotations
 import functools
 
 from galil import predict
-from galil.errors import InvalidArgument, LimitError
+from galil.errors import CommandError, InvalidArgument, LimitError
 from galil.link import CommandLink
 from galil.motion import (
     Display,
     GearLink,
     MotionTracker,
+    found_text,
     refuse_dropped,
     sample_of,
     send_reopening,
@@ -30,7 +37,7 @@ from galil.motion import (
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import format_number
 
-__all__ = ["Gearing", "gear_to"]
+__all__ = ["Gearing", "gear_off", "gear_to", "read_found"]
 
 
 def _ratio(link: CommandLink, ratio: object) -> float:
@@ -149,6 +156,39 @@ class Gearing:
         return f"<Gearing {self.follower} = {self.ratio:g} x {self.master} {state}>"
 
 
+def read_found(link: CommandLink, tracker: MotionTracker) -> None:
+    """Read every axis's gear ratio (``_GR``, one line) and keep, as the tracker's
+    :attr:`~galil.motion.MotionTracker.found`, the followers the library did not gear.
+
+    Nothing is read on a model without axes. A generic model (tables unknown) that refuses
+    ``_GR`` has no gearing found (a refusal only: a dead link raises).
+    """
+    axes = link.model.axes
+    if not axes:
+        return
+    try:
+        ratios = link.query_operands([f"_GR{a}" for a in axes])
+    except CommandError:
+        if not link.model.generic:
+            raise
+        ratios = [0.0] * len(axes)
+    tracker.found_geared(dict(zip(axes, ratios, strict=True)))
+
+
+def gear_off(link: CommandLink, tracker: MotionTracker, follower: str) -> None:
+    """Turn off any gearing of ``follower`` (``GR 0``; it stays where it is): one the library
+    set up (as :meth:`Gearing.off`), one found on the controller (:func:`read_found`), or one
+    nobody told the library of. Sent even when the library knows of none."""
+    follower = link.model.axis_letter(follower)
+    with tracker.lock:
+        gear = tracker.gears.get(follower)
+        if gear is not None:
+            Gearing(link, tracker, gear)._off()
+        else:
+            link.command_line([cmds.gr(model=link.model, **{follower: 0})])
+        tracker.found.pop(follower, None)
+
+
 def _master_at_rest(link: CommandLink, master: str) -> None:
     name = "_BGS" if master == "S" else f"_BG{master}"
     if link.query_operands([name])[0]:
@@ -250,6 +290,15 @@ def _check_pair(
     if ratio == 0:
         raise LimitError(
             "a gear ratio of 0 is no gearing", name="GR", value=0.0, limit=model.gr_resolution
+        )
+    found = tracker.found
+    if follower in found:
+        raise InvalidArgument(found_text(follower, found[follower], "gearing it"), model=model.name)
+    if master in found:
+        raise InvalidArgument(
+            f"axis {master} is geared on the controller (ratio {found[master]:g}) and would be"
+            " a master and a follower (TC 46): turn its gearing off first (gear_off)",
+            model=model.name,
         )
     gears = tracker.gears
     if follower in gears:

@@ -321,6 +321,9 @@ class MotionTracker:
     def __init__(self) -> None:
         self._active: dict[str, MoveHandle] = {}
         self.gears: dict[str, GearLink] = {}  # follower letter -> its gearing, while engaged
+        #: Followers geared on the controller by something else (found at connect or after a
+        #: reset, decision 0055): letter -> ratio. Their master is unknown.
+        self.found: dict[str, float] = {}
         self.lock = threading.RLock()
         self._watches: list[StopWatch] = []  # a contour's, while it runs (its letters)
         self._refused: set[int] = set()  # threads whose starts are cancelled (refuse_starts)
@@ -446,7 +449,8 @@ class MotionTracker:
                 self._watches.remove(watch)
 
     def refuse_geared(self, letter: str, what: str, model: str) -> None:
-        """Refuse to move a gear follower by itself (before any byte is sent).
+        """Refuse to move a gear follower by itself (before any byte is sent): one the
+        library geared, or one found geared on the controller (:attr:`found`).
 
         Raises:
             InvalidArgument: ``letter`` follows another axis (``what``: the refused action).
@@ -458,6 +462,18 @@ class MotionTracker:
                 " (its own motion on top of the gearing is not predicted)",
                 model=model,
             )
+        if letter in self.found:
+            raise InvalidArgument(found_text(letter, self.found[letter], what), model=model)
+
+    def found_geared(self, ratios: Mapping[str, float]) -> None:
+        """The ratios just read from the controller (``_GR``, by letter): the followers the
+        library did not gear itself, with a ratio other than 0, are :attr:`found`.
+
+        Takes no lock: a reopen of the link runs this while the controller's life lock is held,
+        and a start that reopens holds :attr:`lock` and then waits for that one (the copy of
+        the gearings and the assignment are each atomic)."""
+        own = self.gears.copy()
+        self.found = {a: r for a, r in ratios.items() if r != 0 and a not in own}
 
     def ended(self, letter: str, rp: float, sc: float) -> None:
         """A start read ``letter`` at rest (``_BG`` 0), ``_RP`` ``rp`` and ``_SC`` ``sc``: the
@@ -515,6 +531,16 @@ class MotionTracker:
                 if cancel is not None:
                     undo.append(cancel)
         return undo
+
+
+def found_text(letter: str, ratio: float, what: str) -> str:
+    """Why ``what`` is refused on ``letter``, found geared on the controller at ``ratio``."""
+    return (
+        f"axis {letter} is geared on the controller (ratio {ratio:g}), not through this "
+        "library, to a master it cannot read: its own motion would add to the gearing's, "
+        f"unpredicted. Turn that gearing off (controller.axis('{letter}').gear_off(), GR 0) "
+        f"before {what}; gearing set up through the library (gear_to) is predicted"
+    )
 
 
 def refuse_dropped(

@@ -465,7 +465,8 @@ def _execute_move(
     command: str,
     display: Mapping[str, Display] | None,
 ) -> MoveHandle:
-    geared = bool(tracker.gears)  # (the tracker's lock is held: no gearing changes now)
+    # (the tracker's lock is held: no gearing changes now)
+    geared = bool(tracker.gears) or bool(tracker.found)
     if geared and not dry_run:
         for a in letters:
             tracker.refuse_geared(a, "moving it", link.model.name)

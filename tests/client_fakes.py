@@ -154,6 +154,8 @@ class FakeGalil:
                 out.append(a[1:-1])
             elif a == "_CW":
                 out.append(f"{self.cw}.0000")
+            elif a.startswith("_GR") and a not in self.variables:
+                out.append("0.0000")  # (no axis geared: the read at connect, decision 0055)
             elif a in self.variables:
                 out.append(f"{self.variables[a]:.4f}")
             elif fmt:

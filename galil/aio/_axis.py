@@ -317,6 +317,8 @@ class AsyncAxis(MotionRoom[Axis]):
         gearing = await self._worker.run(self.sync.gear_to, chosen, ratio)
         return AsyncGearing(gearing, self._worker)
 
+    gear_off = twin(Axis.gear_off)
+
     # -- homing and switches (galil.homing) ------------------------------------------------
     home = motion_twin(Axis.home)
     find_edge = motion_twin(Axis.find_edge)

@@ -21,9 +21,10 @@ def test_connect_identifies_and_marks_unsolicited(c: Controller, peer: FakeGalil
     assert c.model.name == "DMC-4040"
     assert c.identity is not None
     assert c.identity.firmware == "1.2f"
-    assert peer.log[:3] == ["\x12\x16", "MG _CW{Z10.4}", "CW 1"]
+    # (then every axis's gear ratio, read once: decision 0055)
+    assert peer.log[:4] == ["\x12\x16", "MG _CW{Z10.4}", "CW 1", "MG _GRA,_GRB,_GRC,_GRD"]
     assert peer.cw == 1
-    assert c.bytes_sent == len(b"\x12\x16\rMG _CW{Z10.4}\rCW 1\r")
+    assert c.bytes_sent == len(b"\x12\x16\rMG _CW{Z10.4}\rCW 1\rMG _GRA,_GRB,_GRC,_GRD\r")
     assert c.transport.kind == "serial"
     assert "DMC-4040" in repr(c)
 

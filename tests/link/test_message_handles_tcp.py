@@ -99,7 +99,7 @@ def test_refused_cf_falls_back_to_marking() -> None:
     try:
         with pytest.warns(RuntimeWarning, match="no second Ethernet handle"):
             c = galil.controller.connect(f"tcp://127.0.0.1:{srv.port}", timeout=1.0)
-        assert srv.galil.log[-1] == "CW 1"
+        assert srv.galil.log[-2:] == ["CW 1", "MG _GRA,_GRB,_GRC,_GRD"]
         assert c.transport.secondary is None
         assert c.command("MG 2") == " 2"
         c.close()
@@ -113,5 +113,6 @@ def test_unsolicited_off_leaves_the_controller_alone(handle_server: HandleServer
         f"tcp://127.0.0.1:{handle_server.port}", timeout=1.0, unsolicited=False
     ) as c:
         assert c.command("MG 1") == " 1"
-    assert handle_server.galil.log == ["\x12\x16", "MG 1"]
+    # (a read of the gear ratios, decision 0055: nothing changed)
+    assert handle_server.galil.log == ["\x12\x16", "MG _GRA,_GRB,_GRC,_GRD", "MG 1"]
     assert not handle_server.claimed.is_set()

@@ -31,7 +31,7 @@ from galil.predict.gearing import GearFollower, quantise_ratio
 from galil.sim.driven import DrivenProfiler, drive
 from galil.sim.machine import Room
 from galil.sim.parse import Refused
-from galil.sim.registry import Args, handler
+from galil.sim.registry import Args, OperandKind, handler, operand
 from galil.sim.rooms.vector import Vector
 from galil.sim.servo import Axis
 
@@ -209,6 +209,13 @@ class Gearing(Room):
         if not queries:
             return ""
         return ",".join(i.num(self.ratios.get(ax.letter, 0.0), "3.4") for ax in queries) + "\r\n"
+
+    @operand("GR", kind=OperandKind.AXIS)
+    def ratio(self, ax: Axis) -> float:
+        """``_GRm``: "Operand holds the value last set by the command" (DMC-4103 reference);
+        0 once ``ST``, a limit or ``AB`` turned the gearing off, as ``GR ?`` (assumption)."""
+        self.after_step()
+        return self.ratios.get(ax.letter, 0.0)
 
     def _check(self, ax: Axis, ratio: float) -> None:
         if ratio == 0 or self.geared(ax) is not None:
