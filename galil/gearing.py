@@ -21,6 +21,7 @@ motion until :func:`gear_off` (``axis.gear_off()``) turns it off (decision 0055)
 from __future__ import annotations
 
 import functools
+import logging
 
 from galil import predict
 from galil.errors import CommandError, InvalidArgument, LimitError
@@ -38,6 +39,8 @@ from galil.protocol import commands as cmds
 from galil.protocol.numbers import format_number
 
 __all__ = ["Gearing", "gear_off", "gear_to", "read_found"]
+
+_LOG = logging.getLogger("galil.gearing")
 
 
 def _ratio(link: CommandLink, ratio: object) -> float:
@@ -160,17 +163,23 @@ def read_found(link: CommandLink, tracker: MotionTracker) -> None:
     """Read every axis's gear ratio (``_GR``, one line) and keep, as the tracker's
     :attr:`~galil.motion.MotionTracker.found`, the followers the library did not gear.
 
-    Nothing is read on a model without axes. A generic model (tables unknown) that refuses
-    ``_GR`` has no gearing found (a refusal only: a dead link raises).
+    Nothing is read on a model without axes. A controller that refuses ``_GR`` (a generic
+    model, or firmware without the operand: only the DMC-4103 reference lists it) has no
+    gearing found, and a warning says so on ``galil.gearing``; only a refusal is taken so, a
+    dead link raises.
     """
     axes = link.model.axes
     if not axes:
         return
     try:
         ratios = link.query_operands([f"_GR{a}" for a in axes])
-    except CommandError:
-        if not link.model.generic:
-            raise
+    except CommandError as exc:
+        _LOG.warning(
+            "galil: %s refused the gear ratios (%s): gearing set up elsewhere is not looked "
+            "for on this link",
+            link.model.name,
+            exc,
+        )
         ratios = [0.0] * len(axes)
     tracker.found_geared(dict(zip(axes, ratios, strict=True)))
 

@@ -134,3 +134,17 @@ def test_the_async_twin_frees_an_axis_found_geared() -> None:
             assert (await move).deviation == {"C": 0}
 
     asyncio.run(body())
+
+
+def test_a_controller_without_the_ratio_operand_connects_and_says_gearing_is_not_looked_for(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # Only the DMC-4103 reference lists _GR: firmware that refuses it must still connect.
+    sim = SimController("DMC-4040")
+    del sim._m.interp.axis_operands["GR"]
+    with (
+        caplog.at_level("WARNING", logger="galil.gearing"),
+        galil.connect("sim://DMC-4040", controller=sim) as dmc,
+    ):
+        assert dmc.C.move_by(100).wait().deviation == {"C": 0}
+    assert "gearing set up elsewhere is not looked for" in caplog.text
