@@ -10,31 +10,11 @@ both runs; a horizon skipped would put it late in the one advance only).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
+
+from sim_scripts import TS, Script, play
 
 from galil.sim.controller import SimController
-
-#: Seconds per servo sample at the default TM 1000.
-TS = 1 / 1024
-
-#: Command lines to feed, servo samples to let pass, or a test hook to call (switches).
-Script = Sequence[str | int | Callable[[SimController], None]]
-
-
-def play(script: Script, per_sample: bool, lag: float = 0.003) -> bytes:
-    """Run ``script`` on a fresh DMC-4040; every byte the main port sent back."""
-    sim = SimController("DMC-4040", servo_lag=lag)
-    out = b""
-    for step in script:
-        if isinstance(step, str):
-            out += sim.feed(step.encode() + b"\r")
-        elif callable(step):
-            step(sim)
-        else:
-            for n in [1] * step if per_sample else [step]:
-                sim.advance(n * TS)
-        out += sim.poll()
-    return out
 
 
 def one_go_and_per_sample(script: Script, lag: float = 0.003) -> bytes:

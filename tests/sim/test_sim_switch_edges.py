@@ -11,29 +11,9 @@ import re
 from collections.abc import Callable, Sequence
 
 import pytest
+from sim_scripts import Script, play
 
 from galil.sim.controller import SimController
-
-#: Seconds per servo sample at the default TM 1000.
-TS = 1 / 1024
-
-Script = Sequence[str | int | Callable[[SimController], None]]
-
-
-def play(script: Script, per_sample: bool) -> bytes:
-    """Run ``script`` on a fresh DMC-4040 (servo lag 3 ms); every byte the main port sent."""
-    sim = SimController("DMC-4040", servo_lag=0.003)
-    out = b""
-    for step in script:
-        if isinstance(step, str):
-            out += sim.feed(step.encode() + b"\r")
-        elif callable(step):
-            step(sim)
-        else:
-            for n in [1] * step if per_sample else [step]:
-                sim.advance(n * TS)
-        out += sim.poll()
-    return out
 
 
 def one_go_and_per_sample(script: Script) -> list[float]:
