@@ -1179,8 +1179,11 @@ def refuse_in_motion(link: CommandLink, tracker: MotionTracker, letter: str, nam
         # "DC may be changed during a move in Jog mode, but not in a PA or PR move", and
         # "directly following an axis stop (i.e. ST m ...)" while it still decelerates.
         return
-    if not track.open_jog and link.clock() >= handle.started_at + handle.duration:
-        return  # over by its prediction, unseen: the controller decides
+    if not track.open_jog and link.clock() > handle.started_at + handle.duration:
+        # Over by its prediction, unseen: the controller decides. (Not at the very instant of
+        # its end: a move of no length predicts 0 s, and the controller holds _BG 1 until its
+        # next sample, so a check in the same instant asks.)
+        return
     bg, rp, sc = link.query_operands(list(_poll_names(letter, "")))
     if not round(bg):
         tracker.ended(letter, rp, sc)  # (its handle reports this end, a limit's or a fault's)

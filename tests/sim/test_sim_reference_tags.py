@@ -440,6 +440,22 @@ def test_burning_the_program_is_refused_unsent_while_the_librarys_own_jog_runs()
         assert burns["BP"] == 1
 
 
+def test_burning_the_program_right_after_a_move_of_no_length_is_refused_unsent() -> None:
+    # A move to where the axis is predicts 0 s; the controller's _BG reads 1 until its next
+    # sample, so BP in the same instant would be its TC 7 (a random operation run found it).
+    with simulated() as dmc:
+        burns = sim_of(dmc).room(Tuning).burns
+        move = dmc.A.move_to(0)
+        with (
+            nothing_sent(dmc, allow_queries=True),
+            pytest.raises(InvalidArgument, match="BP is not valid while axis A moves"),
+        ):
+            dmc.programs.burn()
+        move.wait()
+        dmc.programs.burn()
+        assert burns["BP"] == 1
+
+
 def test_burning_the_program_in_motion_the_library_did_not_start_is_the_controllers_tc_7() -> None:
     with simulated() as dmc:
         dmc.command("JGA=5000;BGA", allow_compound=True)  # (a raw BG: the library knows nothing)
