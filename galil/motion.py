@@ -40,6 +40,7 @@ from galil.protocol.numbers import read_one
 
 __all__ = [
     "HOMING_KINDS",
+    "SWITCH_BITS",
     "Display",
     "GearLink",
     "MotionTracker",
@@ -1142,6 +1143,11 @@ def raise_if_limited(
         model=link.model.name,
         recent=link.recent,
     )
+
+
+#: ``TS`` bits 3 and 2: set while the forward and the reverse limit switch are inactive (both
+#: set: no switch active, nothing for :func:`switch_blocks` to look at).
+SWITCH_BITS = 0x0C
 
 
 def switch_blocks(link: CommandLink, letter: str, direction: float, ts: int) -> bool:

@@ -22,6 +22,7 @@ from galil.models import INT32_MAX, INT32_MIN
 from galil.motion import (
     HOMING_KINDS,
     SCHEDULE_BEGIN,
+    SWITCH_BITS,
     Display,
     GearLink,
     MotionTracker,
@@ -56,7 +57,6 @@ _STATE = ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO", "SC", "TS")
 # What a master's state query reads of each follower: its soft limits, its stop code (a
 # limit's: the controller turned its gearing off), and its limit switches (TS bits 3, 2).
 _FOLLOWER = ("BL", "FL", "SC", "TS")
-_SWITCH_BITS = 0x0C
 _new = object.__new__
 _BUILDERS = {"SP": cmds.sp, "AC": cmds.ac, "DC": cmds.dc}
 
@@ -171,7 +171,7 @@ def follower_limits(
     n = len(_FOLLOWER)
     rows = {f: values[i * n : (i + 1) * n] for i, f in enumerate(gears)}
     refuse_dropped(link, tracker, gears, {f: round(r[2]) for f, r in rows.items()})
-    return {f: (r[0], r[1], round(r[3]) & _SWITCH_BITS) for f, r in rows.items()}
+    return {f: (r[0], r[1], round(r[3]) & SWITCH_BITS) for f, r in rows.items()}
 
 
 def _follower_error(exc: LimitError, gear: GearLink) -> None:
@@ -271,7 +271,7 @@ def check_followers(
     for f, gear in gears.items():
         profile = profiles[f]
         bl, fl, ts = limits[f]
-        if ts != _SWITCH_BITS:  # (a switch active: which way does the follower go?)
+        if ts != SWITCH_BITS:  # (a switch active: which way does the follower go?)
             _refuse_follower_blocked(link, gear, _first_direction(profile), ts)
         try:
             predict.check_soft_limits(profile, forward_limit=fl, backward_limit=bl, axis=f)

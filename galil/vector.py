@@ -31,6 +31,7 @@ from galil.errors import InvalidArgument, LimitError
 from galil.link import CommandLink, check_flag
 from galil.models import tm_of
 from galil.motion import (
+    SWITCH_BITS,
     GearLink,
     MotionTracker,
     MoveHandle,
@@ -259,7 +260,6 @@ def _path_master(counts: predict.VectorProfile, gear: GearLink) -> predict.Profi
 #: ``TS`` in place of ``_MO``: its bit 5 is "motor off", and its bits 3 and 2 the limit
 #: switches (set while inactive), with one operand per axis (the state query stays one line).
 _STATE = ("RP", "BG", "TS", "FL", "BL", "SC")
-_SWITCH_BITS = 0x0C
 _MOTOR_OFF_BIT = 0x20
 #: What a line of streamed segments ends with: the sample it ran in.
 _STAMP_SIZE = len(cmds.time_stamp().text) + 1
@@ -445,7 +445,7 @@ class VectorStream:
             decel=self.decel if self.decel is not None else next(rest),
             smoothing=self.smoothing if self.smoothing is not None else next(rest),
             follower_limits=limits,
-            switches=tuple(round(r[2]) & _SWITCH_BITS for r in rows),
+            switches=tuple(round(r[2]) & SWITCH_BITS for r in rows),
         )
 
     def prepare(self) -> predict.VectorProfile:
@@ -497,6 +497,8 @@ class VectorStream:
         ``LD`` leaves on: :func:`~galil.motion.switch_blocks`): ``BG S`` would be refused
         with TC 22 once the setup and the segments had gone out (decision 0050). Only the
         first direction counts: a switch active now stops later motion towards it anyway."""
+        if all(ts == SWITCH_BITS for ts in switches):
+            return  # (no switch active: the path's directions are not needed)
         link = self.link
         path = self.path
         res = link.model.cr_angle_resolution
