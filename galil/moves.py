@@ -711,7 +711,8 @@ def _increment(
         _check_step(link, a, counts)
         _check_geared_speed(link, gears, counts / link.sample_period)
     else:
-        _check_same_direction(link, a, counts, round(pa) - round(rp))
+        heading = 0.0 if track is None else track.amount
+        _check_same_direction(link, a, counts, round(pa) - round(rp), heading)
     end = round(rp if jogging else pa) + counts
     what = "steps the jog's reference to" if jogging else "moves the target of the move to"
     _check_reach(link, a, counts, end, (bl, fl), what)
@@ -747,12 +748,22 @@ def _check_followers_reach(
             raise
 
 
-def _check_same_direction(link: CommandLink, a: str, counts: int, remaining: int) -> None:
-    """Refuse an IP against the direction of the move in progress (the controller: TC 16)."""
-    if counts and remaining and (counts > 0) != (remaining > 0):
+def _check_same_direction(
+    link: CommandLink, a: str, counts: int, remaining: int, heading: float
+) -> None:
+    """Refuse an IP against the direction of the move in progress (the controller: TC 16).
+
+    ``remaining`` is ``_PA - _RP``; in a move's last samples ``_RP`` reads the target already
+    while the profile still moves (its fraction), and the controller still refuses the
+    other sign: then the direction is the one the library sent (``heading``, the move's
+    distance; 0 for a move it did not start, left to the controller).
+    """
+    way = remaining or heading
+    if counts and way and (counts > 0) != (way > 0):
+        to_go = f"{remaining:+d} counts to go" if remaining else "ending"
         raise InvalidArgument(
             f"IP {counts} would reverse the move in progress on {a} "
-            f"({remaining:+d} counts to go); the controller refuses it (TC 16)",
+            f"({to_go}); the controller refuses it (TC 16): wait for the move to end",
             model=link.model.name,
         )
 

@@ -151,6 +151,24 @@ def test_increment_during_a_move_extends_it(dmc: galil.Controller) -> None:
     assert_follows(sim.stop_trace("A")["A"], t0, h.profile, h.begin["A"])
 
 
+def test_increment_against_a_move_in_its_last_samples_is_refused_unsent(
+    dmc: galil.Controller,
+) -> None:
+    # In a move's last samples _RP reads the target already (the profile's fraction is
+    # still moving); the controller still takes IP's sign against the move's (TC 16).
+    h = dmc.A.move_by(-4953)
+    for _ in range(400):
+        dmc.sleep(dmc.link.sample_period)
+        rp, pa, bg = dmc.link.query_operands(["_RPA", "_PAA", "_BGA"])
+        if rp == pa:
+            break
+    assert (rp, pa, bg) == (-4953, -4953, 1)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="ending"):
+        dmc.A.increment(5)
+    assert dmc.A.increment(-5) is h  # the move's own way is taken
+    assert h.wait().final == {"A": -4958}
+
+
 def test_increment_while_jogging_and_while_stopping(dmc: galil.Controller) -> None:
     sim = sim_of(dmc)
     t0 = sim.start_trace("D")
