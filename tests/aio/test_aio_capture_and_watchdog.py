@@ -5,6 +5,8 @@ fails at the end of a block, a capture on a real-time link, what they report abo
 from __future__ import annotations
 
 import asyncio
+import threading
+import time
 
 import pytest
 from aio_helpers import run, sim
@@ -138,3 +140,39 @@ def test_an_async_watchdog_reports_its_heartbeat() -> None:
             assert "stopped" in repr(dog)
 
     run(body)
+
+
+def test_a_loop_watch_times_only_its_own_thread_and_refuses_a_second_watch() -> None:
+    original = asyncio.Handle._run
+    other_steps: list[int] = []
+
+    def other_loop() -> None:
+        async def steps() -> None:
+            await asyncio.sleep(0)
+            time.sleep(0.2)  # one slow step of the other loop: not this watch's
+            other_steps.append(1)
+
+        asyncio.run(steps())
+
+    async def body() -> aio.LoopWatch:
+        with aio.watch_loop() as watch:
+            assert watch.percentile(50) == 0.0  # nothing timed yet
+            with pytest.raises(RuntimeError, match="already watched"), aio.watch_loop():
+                pass
+            worker = threading.Thread(target=other_loop)
+            worker.start()
+            while worker.is_alive():
+                await asyncio.sleep(0.001)
+            worker.join()
+        return watch
+
+    watch = run(body)
+    assert asyncio.Handle._run is original  # unwrapped once no loop is watched
+    assert other_steps == [1]
+    assert watch.steps > 0
+    assert watch.max_wall < 0.2  # this loop's steps only
+    assert 0 < watch.percentile(50) <= watch.percentile(100) == watch.max_wall
+    assert watch.percentile(50, cpu=True) <= watch.max_cpu
+    summary = watch.summary()
+    assert summary.startswith(f"{watch.steps} loop steps: wall p50 ")
+    assert f"max {watch.max_wall * 1e6:.0f} us" in summary
