@@ -44,8 +44,8 @@ class _CapturePoll:
             GalilTimeoutError: past the deadline (the recording goes on).
         """
         now = self.link.clock()
-        if now < self.ends:
-            return min(max((self.ends - now), MIN_POLL), MAX_POLL)
+        if now < min(self.ends, self.deadline):  # a timeout may come before the last value
+            return min(max(min(self.ends, self.deadline) - now, MIN_POLL), MAX_POLL)
         if self.capture.done:
             return None
         if now >= self.deadline:

@@ -101,7 +101,8 @@ class VectorProfiler:
             raise InvalidArgument(f"sample period must be positive, got {sample_period!r}")
         if int(buffer) < 1:
             raise InvalidArgument(f"segment buffer must hold at least 1 segment, got {buffer!r}")
-        self.axes = int(axes)
+        layout = PathLayout(axes, angle_resolution=angle_resolution)  # 1 to 8 axes
+        self.axes = layout.axes
         self.sample_period = float(sample_period)
         self.buffer = int(buffer)
         self.angle_resolution = float(angle_resolution)
@@ -112,7 +113,7 @@ class VectorProfiler:
         self.sample = 0
         self.moving = False
         self.stop_code: int | None = None
-        self._layout = PathLayout(self.axes, angle_resolution=self.angle_resolution)
+        self._layout = layout
         self._origin = np.array(pos, dtype=np.int64)
         self._path = AxisProfiler(sample_period=self.sample_period)
         self._begun = False

@@ -358,3 +358,57 @@ def test_path_length_is_conserved_from_segments_to_samples(segs: list[Line | Arc
     assert (np.diff(p.path) >= 0).all()
     assert p.end == tuple(int(v) for v in np.floor(lay.end[-1] + 0.5))
     assert distance_from_ideal(p).max() <= 1.0
+
+
+@pytest.mark.parametrize(
+    ("args", "kwargs", "message"),
+    [
+        ((-1,), {}, "a path has 1 to 8 axes, got -1"),  # was "position has 0 values for -1 axes"
+        ((9,), {}, "a path has 1 to 8 axes"),
+        ((2,), {"sample_period": math.nan}, "sample period must be positive"),
+        ((2,), {"buffer": 0}, "segment buffer must hold at least 1"),
+        ((2,), {"position": (1, 2, 3)}, "position has 3 values for 2 axes"),
+    ],
+)
+def test_a_vector_profiler_refuses_a_bad_plane_with_a_message_naming_it(
+    args: tuple[int], kwargs: dict[str, object], message: str
+) -> None:
+    with pytest.raises(InvalidArgument, match=message):
+        VectorProfiler(*args, **kwargs)  # type: ignore[arg-type]
+
+
+def test_a_running_vector_sequence_refuses_what_the_controller_would() -> None:
+    eng = VectorProfiler(2)
+    assert (eng.segment, eng.kind) == (0, None)
+    eng.add(Line(1000, 0))
+    with pytest.raises(InvalidArgument, match="vector speed must be > 0"):
+        eng.begin(0, 100_000, 100_000)
+    assert not eng.moving
+    eng.begin(10_000, 100_000, 100_000)
+    assert eng.kind == "vector"
+    with pytest.raises(InvalidArgument, match="origin of a running sequence"):
+        eng.set_position((0, 0))
+    with pytest.raises(InvalidArgument, match="clear the sequence while it runs"):
+        eng.clear()
+    with pytest.raises(InvalidArgument, match="sample count must be >= 0"):
+        eng.advance(-1)
+    eng.advance(50)
+    eng.stop()
+    with pytest.raises(InvalidArgument, match="stopping"):
+        eng.add(Line(10, 0))
+    assert eng.moving  # the stop runs on, undisturbed
+    eng.advance(2000)
+    assert (eng.moving, eng.stop_code) == (False, 4)
+    eng.clear()
+    assert eng.segments == 0
+
+
+def test_a_vector_profile_refuses_an_axis_it_does_not_have() -> None:
+    prof = vector([Line(1000, 0)], 10_000, 100_000, 100_000)
+    for i in (-1, 2):
+        with pytest.raises(InvalidArgument, match=r"outside 0\.\.1"):
+            prof.axis(i)
+    assert prof.samples_of(5) == (-1, -1)
+    assert prof.samples_of(0) == (0, prof.samples)
+    with pytest.raises(InvalidArgument, match="sample_period must be positive"):
+        vector([Line(10, 0)], 1000, 1000, 1000, sample_period=0)

@@ -1,0 +1,257 @@
+"""``galil terminal`` in this process: what its pty tests do in a child (which coverage does not
+see), plus the failures a person meets: a blank line, an empty or refused download, a failed
+reset, a Ctrl-C that cannot reach the controller, piped and line-edited input.
+"""
+
+from __future__ import annotations
+
+import io
+import signal
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from prompt_toolkit.application import create_app_session
+from prompt_toolkit.input import create_pipe_input
+from prompt_toolkit.output.plain_text import PlainTextOutput
+
+import galil
+from galil.sim.server import SimTcpServer
+from galil.terminal import Terminal, default_history_path, run_terminal
+from galil.testing import nothing_sent, sim_of
+
+
+class Faults:
+    """A fault hook for ``sim://``: drops every reply while ``drop``; raises SIGINT (Ctrl-C)
+    when a reply holds ``interrupt_on``."""
+
+    def __init__(self) -> None:
+        self.drop = False
+        self.interrupt_on: bytes | None = None
+
+    def __call__(self, data: bytes) -> list[tuple[float, bytes]]:
+        if self.interrupt_on is not None and self.interrupt_on in data:
+            self.interrupt_on = None
+            signal.raise_signal(signal.SIGINT)
+        return [] if self.drop else [(0.0, data)]
+
+
+@pytest.fixture
+def faults() -> Faults:
+    return Faults()
+
+
+@pytest.fixture
+def dmc(faults: Faults) -> Iterator[galil.Controller]:
+    with galil.connect("sim://DMC-4040", faults=faults) as controller:
+        yield controller
+
+
+@pytest.fixture
+def out() -> list[str]:
+    return []
+
+
+@pytest.fixture
+def term(dmc: galil.Controller, out: list[str]) -> Terminal:
+    return Terminal(dmc, write=out.append, timeout=1.0)
+
+
+def test_a_blank_line_sends_nothing_and_prints_nothing(
+    dmc: galil.Controller, term: Terminal, out: list[str]
+) -> None:
+    with nothing_sent(dmc):
+        term.feed("")
+        term.feed("   \t")
+    assert out == []
+
+
+def test_a_download_with_no_lines_is_cancelled_without_sending(
+    dmc: galil.Controller, term: Terminal, out: list[str]
+) -> None:
+    term.feed("DL")
+    with nothing_sent(dmc):
+        term.feed("")
+        term.feed("\\")
+    assert out[-1] == "download cancelled: no program lines"
+    assert not term.downloading
+    assert term.prompt == ":"
+
+
+def test_a_program_line_the_controller_cannot_take_is_not_sent(
+    dmc: galil.Controller, term: Terminal, out: list[str]
+) -> None:
+    with nothing_sent(dmc):
+        assert not term.download(["#A", "MG " + "1+" * 60 + "1", "EN"])
+    assert out[-1].startswith("not sent: DL line 2: ")
+    assert "the limit is" in out[-1]
+
+
+def test_a_failed_reset_is_reported_and_the_session_goes_on(
+    faults: Faults, term: Terminal, out: list[str]
+) -> None:
+    faults.drop = True  # the controller falls silent: ST (before RS) is never answered
+    term.feed("RS")
+    assert out[-1].startswith("error: ")
+    assert "could not be stopped" in out[-1]
+    faults.drop = False
+    term.feed("MG 1")
+    assert out[-1] == " 1.0000"
+    term.feed("RS")
+    assert out[-1].startswith("reset (RS): the controller restarted")
+
+
+def test_ctrl_c_that_cannot_send_st_says_so(faults: Faults, term: Terminal, out: list[str]) -> None:
+    faults.drop = True
+    term.interrupt()
+    assert out[-1].startswith("Ctrl-C: ST not sent: ")
+    faults.drop = False
+    term.feed("MG 2")
+    assert out[-1] == " 2.0000"
+
+
+def test_a_dead_link_ends_the_terminal_rather_than_being_reported(
+    dmc: galil.Controller, term: Terminal, out: list[str]
+) -> None:
+    dmc.transport.close()
+    with pytest.raises(galil.GalilConnectionError, match="link is closed"):
+        term.feed("MG 1")
+    assert out == []
+
+
+def test_piped_input_runs_as_a_script_and_prints_program_output(
+    dmc: galil.Controller, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    script = 'MG 1+2\nbg\nDL\n#A\nMG "hello"\nEN\n\\\nXQ #A\nMG 4\n'
+    monkeypatch.setattr(sys, "stdin", io.StringIO(script))
+    assert run_terminal(dmc) == 0  # stdin is no terminal: read line by line
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[:2] == [" 3.0000", "? 1 Unrecognized command"]
+    assert "downloaded 3 lines" in lines
+    assert lines.index("hello") > lines.index("downloaded 3 lines")
+    assert lines[-1] == " 4.0000"
+    dmc.command("MG 5")  # the terminal no longer listens once it has ended
+    assert capsys.readouterr().out == ""
+
+
+class HoldReply:
+    """A fault hook for the simulator's servers: the next reply holding ``b"7777"`` comes
+    ``seconds`` late."""
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+
+    def __call__(self, data: bytes) -> list[tuple[float, bytes]]:
+        if self.seconds and b"7777" in data:
+            seconds, self.seconds = self.seconds, 0.0
+            return [(seconds, data)]
+        return [(0.0, data)]
+
+
+def test_a_command_while_a_late_reply_is_due_is_not_sent_and_says_why() -> None:
+    hold = HoldReply()
+    with SimTcpServer(model="DMC-4040", faults=hold) as srv, galil.connect(srv.url) as dmc:
+        out: list[str] = []
+        term = Terminal(dmc, write=out.append, timeout=0.05)
+        hold.seconds = 0.3
+        term.feed("MG 7777")
+        assert out[-1].startswith("timeout: no reply to 'MG 7777'")
+        term.feed("MG 1")  # the link cannot resynchronise while 7777 is still due
+        assert out[-1].startswith("not sent: the link is out of step")
+        assert out[-1].endswith("(an earlier reply may still be due, e.g. a burn's)")
+        for _ in range(100):  # once the late reply has come, the session goes on
+            term.feed("MG 2")
+            if out[-1] == " 2.0000":
+                break
+        else:
+            raise AssertionError(f"MG 2 never answered: {out[-3:]}")
+
+
+class CtrlCOnce(io.StringIO):
+    """Piped input whose second read is interrupted by Ctrl-C."""
+
+    def __init__(self, text: str) -> None:
+        super().__init__(text)
+        self.reads = 0
+
+    def readline(self, size: int = -1) -> str:  # type: ignore[override]
+        self.reads += 1
+        if self.reads == 2:
+            raise KeyboardInterrupt
+        return super().readline(size)
+
+
+def test_ctrl_c_while_reading_piped_input_sends_st_and_reading_goes_on(
+    dmc: galil.Controller, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(sys, "stdin", CtrlCOnce("JGA=1000;BGA\nMG 6\n"))
+    assert run_terminal(dmc, interactive=False) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("Ctrl-C: sent ST")
+    assert lines[-1] == " 6.0000"
+    assert "ST" in [text for _, text in sim_of(dmc).command_log]
+
+
+def _session(dmc: galil.Controller, keys: str, history: Path | None) -> str:
+    """Type ``keys`` at the line-edited terminal; what it showed (prompts included)."""
+    screen = io.StringIO()
+    before = signal.getsignal(signal.SIGINT)
+    with create_pipe_input() as typed:
+        typed.send_text(keys)
+        with create_app_session(input=typed, output=PlainTextOutput(screen)):
+            assert run_terminal(dmc, interactive=True, history=history) == 0
+    assert signal.getsignal(signal.SIGINT) is before  # put back as it was
+    return screen.getvalue()
+
+
+def test_a_line_edited_session_sends_lines_keeps_history_and_handles_ctrl_c_and_ctrl_d(
+    dmc: galil.Controller, tmp_path: Path
+) -> None:
+    history = tmp_path / "state" / "galil" / "terminal-history"
+    keys = (
+        "MG 1+2\r"
+        "DL\r#A\r\x04"  # Ctrl-D while a program is typed: the download is cancelled
+        "\x03"  # Ctrl-C at the prompt: ST
+        "MG 4\r"
+        "\x04"  # Ctrl-D at the prompt leaves
+    )
+    shown = _session(dmc, keys, history)
+    events = [
+        " 3.0000",
+        "download cancelled",
+        "Ctrl-C: sent ST",
+        " 4.0000",
+    ]
+    at = 0
+    for event in events:
+        at = shown.index(event, at) + len(event)
+    kept = [line for line in history.read_text().splitlines() if line.startswith("+")]
+    assert kept == ["+MG 1+2", "+DL", "+#A", "+MG 4"]
+
+
+def test_ctrl_c_during_a_command_sends_st_and_the_session_goes_on(
+    dmc: galil.Controller, faults: Faults
+) -> None:
+    faults.interrupt_on = b"7777"  # Ctrl-C while the reply to MG 7777 comes in
+    shown = _session(dmc, "JGA=1000;BGA\rMG 7777\rMG 8\r\x04", None)
+    assert shown.index("Ctrl-C: sent ST") < shown.index(" 8.0000")
+    log = [text for _, text in sim_of(dmc).command_log]
+    assert log.index("ST") > log.index("MG 7777")
+
+
+def test_an_unwritable_history_keeps_it_for_the_session_only(
+    dmc: galil.Controller, tmp_path: Path
+) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    shown = _session(dmc, "MG 9\r\x04", blocker / "galil" / "terminal-history")
+    assert " 9.0000" in shown
+
+
+def test_the_history_lives_in_the_xdg_state_directory(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("XDG_STATE_HOME", "/var/state")
+    assert default_history_path() == Path("/var/state/galil/terminal-history")
+    monkeypatch.delenv("XDG_STATE_HOME")
+    monkeypatch.setenv("HOME", "/home/someone")
+    assert default_history_path() == Path("/home/someone/.local/state/galil/terminal-history")
