@@ -70,7 +70,7 @@ from galil.records import Records
 from galil.routines import Routines
 from galil.segments import PathAxis, Segment, VectorPlan, show
 from galil.transport import Transport, open_transport
-from galil.tuning import burn
+from galil.tuning import burn, burn_parameters
 from galil.units import path_to_counts
 from galil.vector import VectorHandle, VectorStream
 from galil.watchdog import Watchdog, check_watchdog_args
@@ -817,8 +817,17 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         set_polarity(self.link, polarity)
 
     def save(self, timeout: float | None = None) -> None:
-        """Burn the parameters to flash (``BN``), waiting as long as a flash write takes."""
-        burn(self.link, "BN", timeout)
+        """Burn the parameters to flash (``BN``), waiting as long as a flash write takes.
+
+        The controller's own ``CW`` and ``EO`` (those :meth:`close` restores) are burned,
+        not the link's ``CW 1``/``EO 0``: put back for the burn, set again after (decision
+        0057). Refused while a program thread runs (the controller refuses ``BN``: TC 17).
+
+        Raises:
+            InvalidArgument: a bad ``timeout``; a program thread runs (nothing is burned).
+            CommandError: the controller refused ``BN``.
+        """
+        burn_parameters(self.link, timeout)
 
     def save_program(self, timeout: float | None = None) -> None:
         """Burn the program to flash (``BP``); refused while an axis moves (see

@@ -116,7 +116,8 @@ class LinkFacade:
 
         Commands that would change the link's own settings or reset the controller under it
         are refused, unsent: ``RS`` (use :meth:`reset`), ``^R^S``, ``CW``/``EO``/``CF`` with a
-        setting (``CW ?``, ``MG _CW`` pass), ``IHS=>``/``IHT=>`` (docs/raw.md).
+        setting (``CW ?``, ``MG _CW`` pass), ``IHS=>``/``IHT=>``, ``BN`` (use
+        :meth:`~galil.Controller.save`; docs/raw.md).
 
         Raises:
             InvalidArgument: the text cannot be sent (CR/LF, non-ASCII, a stray ``;``), or it

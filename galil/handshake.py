@@ -113,7 +113,7 @@ def _handle_echo(link: Link, given: ModelSpec | None, keep_echo: bool) -> bool:
         done = Completed(cmds.eo(0), False)  # the session resynchronises before the next
     if done.ok:
         link.set_echo(False)
-        link.restore_on_close(cmds.eo(1))
+        link.restore_on_close(cmds.eo(1), own=cmds.eo(0))
         return False
     name = given.name if given is not None else "the controller"
     warnings.warn(

@@ -97,7 +97,8 @@ def _parse(text: str) -> Command:
 
 def refuse_link_settings(command: Command) -> None:
     """Refuse a raw command that would change the link's own settings or reset the
-    controller under it (``RS``, ``^R^S``, ``CW 1``, ``EO 0``, ``CF``, ``IHS=>``; decision 0031).
+    controller under it (``RS``, ``^R^S``, ``CW 1``, ``EO 0``, ``CF``, ``IHS=>``; decision 0031),
+    or burn the link's own settings (``BN``; decision 0057).
 
     Raises:
         InvalidArgument: saying what to use instead; nothing is sent.
@@ -412,7 +413,8 @@ class LinkCore:
         self._clock_source: ControllerClock | None = None
         self._inbox: list[str] = []
         self.on_messages: Callable[[list[str]], None] | None = None
-        self._restore: list[Command] = []
+        # What close() sends back, each with the link's own setting it undoes (if one).
+        self._restore: list[tuple[Command, Command | None]] = []
         self._keepalive: tuple[Command, float] | None = None
         self._reopened = threading.Event()  # cleared while a reconnect is under way
         self._reopened.set()
@@ -442,7 +444,7 @@ class LinkCore:
         with self._lock:
             if not self._open:
                 return
-            for command in reversed(self._restore):
+            for command, _ in reversed(self._restore):
                 if self._dead:
                     break
                 with contextlib.suppress(GalilError):
@@ -467,9 +469,18 @@ class LinkCore:
                 GalilConnectionError, f"the link was being reopened and was not back within {t:g} s"
             )
 
-    def restore_on_close(self, command: Command) -> None:
-        """Send ``command`` when the link closes (undo what connecting changed); last in, first."""
-        self._restore.append(command)
+    def restore_on_close(self, command: Command, *, own: Command | None = None) -> None:
+        """Send ``command`` when the link closes (undo what connecting changed); last in, first.
+
+        ``own`` is the setting of the link's that ``command`` undoes (``CW 1`` for ``CW 2``),
+        when the controller may keep it: see :meth:`own_settings`.
+        """
+        self._restore.append((command, own))
+
+    def own_settings(self) -> list[tuple[Command, Command]]:
+        """The controller settings the link changed for itself at connect, in the order it
+        changed them: each as (the controller's own value, restored at close; the link's)."""
+        return [(command, own) for command, own in self._restore if own is not None]
 
     @property
     def is_open(self) -> bool:
@@ -652,10 +663,10 @@ class LinkCore:
                 ProtocolError, f"{exc}; the command may have executed (the link resynchronises)"
             ) from exc
 
-    def _resync(self, t: float) -> None:
+    def _resync(self, t: float, before: bytes = b"") -> None:
         session = self._session
         self.note("link out of step: resynchronising")
-        self._write(session.resync())
+        self._write(before + session.resync())
         limit = max(t, 0.2)
         clock = self._clock_source
         sim_deadline = clock.controller_time() + limit if clock is not None else 0.0
@@ -962,6 +973,28 @@ class Link(LinkCore):
         if hint is not None:
             error.args = (f"{error.args[0]} ({hint})",)
         return error
+
+    @property
+    def echo(self) -> bool:
+        """Whether the session strips an echo from replies (the controller echoes)."""
+        return self._session.echo
+
+    def settle_locked(self, batch: Sequence[Command], timeout: float, *, echo: bool) -> None:
+        """Send ``batch`` unanswered, then resynchronise, for a caller that holds
+        :meth:`locked`: after a failure that may have left the echo on or off and replies
+        still due, the lines run whatever the state, and the marker behind them brings the
+        link back in step, stripping an echo from then on if ``echo``.
+
+        Raises:
+            GalilConnectionError: no answer to the marker within ``timeout`` (the session
+                stays out of step: the next exchange resynchronises first).
+        """
+        self._session = Session(echo=echo)
+        self._resync(timeout, b"".join(c.text.encode("latin-1") + b"\r" for c in batch))
+
+    def explain_locked(self, rejected: Completed, timeout: float) -> GalilError:
+        """The error for a ``?`` (``TC1`` asked), for a caller that holds :meth:`locked`."""
+        return self._explain(rejected, timeout)
 
     def _doubt(self, command: str, why: str) -> ProtocolError:
         self._session.abandon()  # whatever is still on its way must not pass for a reply

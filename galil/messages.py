@@ -210,7 +210,7 @@ class Messages:
             return
         self.marking = True
         if previous != 1:
-            link.restore_on_close(cmds.cw(previous))
+            link.restore_on_close(cmds.cw(previous), own=cmds.cw(1))
 
     def _start_reader(self, secondary: Transport, where: str) -> None:
         self.link.note(f"unsolicited output comes on {where}")

@@ -5,9 +5,10 @@ reply is printed, a ``?`` is explained with ``TC1`` and the session goes on, and
 output (a program's ``MG``) is printed the moment it arrives. ``DL`` alone starts a program
 download: the lines typed (or pasted) after it are collected until a line holding ``\\`` and
 sent as one ``DL``. ``UL`` prints the program. ``RS`` alone resets the controller through
-:meth:`~galil.Controller.reset` (the link is set up again); the commands that would change the
-link's own settings (``CW 1``, ``EO 0``, ``CF``, ``^R^S``, ``RS`` in a compound line) are not
-sent, and the terminal says why. Ctrl-C sends ``ST`` (and says so), Ctrl-D
+:meth:`~galil.Controller.reset` (the link is set up again), ``BN`` alone burns through
+:meth:`~galil.Controller.save`; the commands that would change the link's own settings
+(``CW 1``, ``EO 0``, ``CF``, ``^R^S``, ``RS`` or ``BN`` in a compound line) are not sent, and
+the terminal says why. Ctrl-C sends ``ST`` (and says so), Ctrl-D
 leaves; a reply that does not come in time is reported and the next command resynchronises the
 link first.
 
@@ -134,6 +135,9 @@ class Terminal:
         if command == "RS":
             self.reset()
             return
+        if command == "BN":
+            self.save()
+            return
         self._send(command)
 
     def reset(self) -> None:
@@ -147,6 +151,16 @@ class Terminal:
         self.write(
             "reset (RS): the controller restarted from its burned settings; the link is set up"
         )
+
+    def save(self) -> None:
+        """``BN`` typed alone: :meth:`~galil.Controller.save` (the raw ``BN`` is refused: it
+        would burn the link's own ``CW 1``/``EO 0``); print what happened."""
+        try:
+            self.controller.save()
+        except GalilError as exc:
+            self._report(exc, "BN")
+            return
+        self.write("saved (BN): the parameters are burned, with the controller's own CW and EO")
 
     def _collect(self, line: str) -> None:
         assert self._download is not None

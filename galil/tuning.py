@@ -15,17 +15,20 @@ model's ``burn_timeout`` (3 s, as EPICS allows) rather than the link's default.
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import re
 from collections.abc import Callable
 from typing import Generic, Protocol, TypeVar, overload
 
-from galil.errors import InvalidArgument
-from galil.link import CommandLink, check_timeout
+from galil.errors import CommandError, GalilError, InvalidArgument
+from galil.link import CommandLink, Link, check_timeout
 from galil.models import MOTOR_TYPES, ModelSpec
 from galil.motion import MotionTracker, refuse_in_motion
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
+from galil.protocol.numbers import read_one
+from galil.protocol.session import Completed
 
 __all__ = [
     "EncoderConfig",
@@ -34,6 +37,7 @@ __all__ = [
     "MotorType",
     "Setting",
     "burn",
+    "burn_parameters",
     "follow_tm",
     "limit_disable_of",
     "motor_type",
@@ -306,6 +310,92 @@ def burn(
         for letter in link.model.axes:
             refuse_in_motion(link, tracker, letter, "BP")
         link.command_line([command], timeout=wait)
+
+
+_BN = cmds.burn("BN")
+_ECHO_ON = cmds.eo(1).text
+
+
+def burn_parameters(link: Link, timeout: float | None = None) -> None:
+    """``BN``, burning the controller's own ``CW`` and ``EO`` rather than the link's
+    (decision 0057).
+
+    At connect the link set ``CW 1`` (unsolicited output marked) and ``EO 0`` (no echo) for
+    itself where it needed them; ``BN`` saves both. They go back to the values :meth:`close
+    <galil.controller.Controller.close>` restores for the burn and the link's right after,
+    under the link's lock: ``CW 2`` + ``BN`` + ``CW 1`` as separate lines in one write (each
+    runs even if ``BN`` is refused); with the echo, ``EO 1`` first, then ``BN`` + ``EO 0``
+    stripped of their echo. Refused unsent while a program thread runs: the controller
+    refuses ``BN`` then (TC 17), and the thread's output would be unmarked in between.
+    Anything raised in between sends the link's settings again and resynchronises.
+
+    Raises:
+        InvalidArgument: a bad ``timeout``; a program thread runs (nothing is burned).
+        CommandError: the controller refused a part.
+    """
+    wait = check_timeout(timeout, link.model.burn_timeout)
+    own = link.own_settings()
+    echo = link.echo
+    theirs = [c for c, _ in reversed(own) if c.text != _ECHO_ON]
+    ours = [m for c, m in own if c.text != _ECHO_ON]
+    to_echo = [m for c, m in own if c.text == _ECHO_ON]  # [EO 0] when the link turned it off
+    with link.locked():
+        _refuse_while_threads_run(link)
+        try:
+            if not to_echo:
+                done = link.roundtrip_locked([*theirs, _BN, *ours], wait)
+            else:
+                done = _burn_with_echo(link, theirs, [*to_echo, *ours], wait, echo)
+        except BaseException:
+            if own:
+                with contextlib.suppress(GalilError):
+                    link.settle_locked([*to_echo, *ours], wait + link.timeout, echo=echo)
+            raise
+        _explain_first(link, done, wait)
+
+
+def _burn_with_echo(
+    link: Link, theirs: list[Command], ours: list[Command], wait: float, echo: bool
+) -> list[Completed]:
+    """``EO 1`` (and ``theirs``), then ``BN`` and ``EO 0`` echoed, then the rest of ``ours``
+    (``ours[0]`` is ``EO 0``). No line goes out behind a change of the echo in the same
+    write: whether the controller echoes such a line is not known."""
+    first = link.roundtrip_locked([*theirs, cmds.eo(1)], link.timeout)
+    refused = [reply.command.text for reply in first if not reply.ok]
+    if refused:  # the echo may be on or off: what TC1 would say cannot be told apart
+        raise CommandError(
+            None,
+            "refused while the controller's own settings were put back for BN; nothing was burned",
+            refused[0],
+            model=link.model.name,
+            recent=link.recent,
+        )
+    link.set_echo(True)
+    done = link.roundtrip_locked([_BN, ours[0]], wait)
+    link.set_echo(echo)
+    return done + (link.roundtrip_locked(ours[1:], link.timeout) if ours[1:] else [])
+
+
+def _explain_first(link: Link, done: list[Completed], timeout: float) -> None:
+    for reply in done:
+        if not reply.ok:
+            raise link.explain_locked(reply, timeout)
+
+
+def _refuse_while_threads_run(link: Link) -> None:
+    """``BN`` is refused while a program runs (the TC list: 17 "ED, BN and DL not valid while
+    program running"): say so before anything changes (lock held)."""
+    asks = [cmds.mg_operand(f"_XQ{t}") for t in range(link.model.threads)]
+    done = link.roundtrip_locked(asks, link.timeout) if asks else []
+    _explain_first(link, done, link.timeout)
+    running = [t for t, reply in enumerate(done) if round(read_one(reply.text)) >= 0]
+    if running:
+        raise link.error(
+            InvalidArgument,
+            f"BN is not valid while a program runs (thread {', '.join(map(str, running))}): "
+            "the controller refuses it (TC 17); nothing was sent. Stop the threads first "
+            "(controller.programs.halt(); a watchdog with its stop())",
+        )
 
 
 _TM = re.compile(r"^\s*TM\s*([0-9]+(?:\.[0-9]*)?)\s*$", re.IGNORECASE)

@@ -1645,7 +1645,7 @@ def parse_line(text: str) -> Command:
 
 # Raw commands that change the link's own settings or reset the controller (decision 0031):
 # the first two letters are looked at only on a line's first parse (the link caches parses).
-_LINK_SETTINGS = frozenset({"RS", "CW", "EO", "CF", "IH"})
+_LINK_SETTINGS = frozenset({"RS", "CW", "EO", "CF", "IH", "BN"})
 _COMMAND_NAME = re.compile(r"[A-Z]{2}[A-Za-z0-9]*")
 _CLOSES_OWN_HANDLE = re.compile(r"[ST]\s*=\s*>")
 _WHY_REFUSED = {
@@ -1664,6 +1664,8 @@ _WHY_REFUSED = {
     "library routes it at connect: read the lines from controller.messages",
     "IH": "{cmd!r} closes the handle this link talks on (S), or every handle with it (T): "
     "use controller.close(); to free another handle, name it (IHC=>-1)",
+    "BN": "{cmd!r} would burn the link's own CW 1 and EO 0 with the parameters: use "
+    "controller.save(), which burns the controller's own (decision 0057)",
 }
 
 
@@ -1672,7 +1674,8 @@ def link_setting(text: str) -> str | None:
 
     Refused: ``RS`` and ``^R^S`` (they reset the controller under the link), ``CW``, ``EO``
     and ``CF`` with a setting (the link's own: queries such as ``CW ?`` or ``EO ?`` pass), and
-    ``IHS=>``/``IHT=>`` (they close the link's own handle). A variable whose name only starts
+    ``IHS=>``/``IHT=>`` (they close the link's own handle), ``BN`` (it would burn the link's
+    settings: decision 0057). A variable whose name only starts
     like one of them (``RSVAL=1``) is not that command.
     """
     s = text.lstrip()
@@ -1688,7 +1691,7 @@ def link_setting(text: str) -> str | None:
         return None  # a variable named like the command (CF's handle may also be I)
     args = s[2:].strip()
     refused = (
-        head == "RS"
+        head in ("RS", "BN")
         or (head == "CW" and args not in ("", "?", "0"))
         or (head in ("EO", "CF") and args != "?")
         or (head == "IH" and _CLOSES_OWN_HANDLE.match(args) is not None)
