@@ -172,6 +172,11 @@ class Scale:
         if not math.isfinite(magnitude) or magnitude <= 0:
             raise InvalidArgument(
                 f"counts_per must be positive and finite, got {self.counts_per!r}"
+                + (
+                    " (an axis whose positive direction is the motor's negative one: sign=-1)"
+                    if magnitude < 0
+                    else ""
+                )
             )
         object.__setattr__(self, "counts_per", cp)
         if isinstance(self.sign, bool) or self.sign not in (1, -1):
