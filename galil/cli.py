@@ -282,6 +282,7 @@ def _add_connection_commands(sub: Any) -> None:
 def _add_list_command(sub: Any) -> None:
     p = sub.add_parser(
         "list",
+        aliases=["find"],  # as galil.find() in Python
         help="find controllers: serial ports, USB, PCI, and Ethernet when asked",
         description="Lists serial ports whose USB IDs are Galil's or a USB-serial bridge's, "
         "Galil USB devices, Galil PCI nodes, and Ethernet controllers when asked.",
