@@ -377,10 +377,25 @@ def sampled_values(values: object, what: str) -> PathSamples:
     return _real_array(values, what)
 
 
+def _holds_quantities(values: object) -> bool:
+    """Whether a list (or a list of rows) holds a pint Quantity."""
+    if not isinstance(values, (list, tuple)):
+        return False
+    return any(
+        is_quantity(v) or (isinstance(v, (list, tuple)) and any(map(is_quantity, v)))
+        for v in values
+    )
+
+
 def _real_array(values: object, what: str) -> npt.NDArray[np.float64]:
     try:
         array = np.asarray(values)
     except (TypeError, ValueError) as exc:
+        if _holds_quantities(values):  # [1 * mm, 2 * mm]: numpy cannot make one array of it
+            raise InvalidArgument(
+                f"{what} is a list of Quantities; give one Quantity array instead, such as "
+                "np.array([1, 2]) * ureg.mm or ureg.Quantity([1, 2], 'mm')"
+            ) from exc
         raise InvalidArgument(f"{what} must be an array of numbers: {exc}") from exc
     if array.dtype.kind not in "iuf":
         raise InvalidArgument(

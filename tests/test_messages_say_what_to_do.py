@@ -10,11 +10,12 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Iterator
 
+import numpy as np
 import pytest
 
 import galil
 import galil.aio
-from galil.testing import simulated
+from galil.testing import nothing_sent, simulated
 from galil.units import ureg
 
 mm, s = ureg.mm, ureg.s
@@ -99,3 +100,19 @@ def test_an_output_the_model_has_none_of_says_so(dmc: galil.Controller) -> None:
     with pytest.raises(galil.InvalidArgument) as info:
         dmc.io.analog_out[1] = 2.0
     assert "analog output 1 does not exist: DMC-4040 has no analog outputs" in str(info.value)
+
+
+@pytest.mark.parametrize("path", [[1 * mm, 2 * mm], [[1 * mm, 0 * mm], [2 * mm, 1 * mm]]])
+def test_a_contour_path_given_as_a_list_of_quantities_says_how_to_make_one_array(
+    dmc: galil.Controller, path: list[object]
+) -> None:
+    dmc.A.set_scale(counts_per=2000 / mm)
+    dmc.B.set_scale(counts_per=2000 / mm)
+    axes = "AB" if isinstance(path[0], list) else "A"
+    with nothing_sent(dmc), pytest.raises(galil.InvalidArgument) as info:
+        dmc.contour(axes, path, dt=4)
+    assert "contour path is a list of Quantities; give one Quantity array instead" in str(
+        info.value
+    )
+    result = dmc.contour("A", np.array([1, 2]) * mm, dt=4)  # what it says works
+    assert result.increments.tolist() == [[2000], [2000]]
