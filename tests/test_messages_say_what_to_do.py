@@ -116,3 +116,15 @@ def test_a_contour_path_given_as_a_list_of_quantities_says_how_to_make_one_array
     )
     result = dmc.contour("A", np.array([1, 2]) * mm, dt=4)  # what it says works
     assert result.increments.tolist() == [[2000], [2000]]
+
+
+def test_running_a_label_without_its_hash_suggests_the_label(dmc: galil.Controller) -> None:
+    dmc.programs.download("#SQUARES\nEN")
+    with nothing_sent(dmc), pytest.raises(galil.InvalidArgument) as info:
+        dmc.programs.run("SQUARES")
+    assert "(did you mean '#SQUARES'?)" in str(info.value)
+    with pytest.raises(galil.InvalidArgument) as info:
+        dmc.programs.run("#TOOLONGLABEL")  # no label with a '#' in front either: no guess
+    assert "did you mean" not in str(info.value)
+    dmc.programs.run("#SQUARES")  # what it suggests runs
+    dmc.programs.wait()
