@@ -240,10 +240,21 @@ class Variables:
 
         Raises:
             InvalidArgument: a bad name.
-            CommandError: there is no such variable.
+            CommandError: there is no such variable (TC 1).
         """
         cmds.variable_name(name)
-        return self.link.query_operands([name])[0]
+        try:
+            return self.link.query_operands([name])[0]
+        except CommandError as exc:
+            if exc.code != 1:
+                raise
+            # The link's hint (commands are upper case) misleads here: a variable's name is
+            # the user's, in any case.
+            exc.args = (
+                f"there is no variable {name!r} on the controller (TC 1: {exc.text}); "
+                f"variables.list() names those there, variables.write({name!r}, value) makes it",
+            )
+            raise
 
     def write(self, name: str, value: float) -> None:
         """Set variable ``name`` (it is created if needed).

@@ -342,7 +342,11 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
     def _target(self, value: object) -> Any:
         """``value`` as the axis takes it (any real number, numpy's included; not a bool)."""
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-            raise InvalidArgument(f"{self.name}: a position is a number, not {value!r}")
+            unit = "counts" if self._scale is None else f"{self._scale.unit:~}"
+            raise InvalidArgument(
+                f"{self.name}: a position is a number (in {unit}, the motor's unit), not "
+                f"{value!r:.60}"
+            )
         if not _finite(value):  # (an int no float holds, 10**400: the setpoint is a float)
             raise InvalidArgument(f"{self.name}: a position is a finite number, not {value!r:.40}")
         number = int(value) if isinstance(value, numbers.Integral) else float(value)

@@ -89,13 +89,21 @@ def plan_profile(args: argparse.Namespace) -> Any:
     from galil.units import Scale, counts_or_plain
 
     model = get_model(args.model)
-    values = {
-        "distance": _quantity(args.distance, "distance"),
-        "SP": _quantity(args.speed, "--speed"),
-        "AC": _quantity(args.accel, "--accel"),
-        "DC": _quantity(args.decel if args.decel else args.accel, "--decel"),
+    given = {  # what was typed, under the option's name
+        "distance": ("the distance", args.distance),
+        "SP": ("--speed", args.speed),
+        "AC": ("--accel", args.accel),
+        "DC": ("--decel", args.decel if args.decel else args.accel),
     }
+    values = {name: _quantity(text, option) for name, (option, text) in given.items()}
     scale = Scale(counts_per=_quantity(args.scale, "--scale")) if args.scale else None
+    for name, value in values.items():
+        if scale is None and not isinstance(value, float):
+            option, text = given[name]
+            raise InvalidArgument(
+                f"{option} {text} has units but there is no --scale: give one (counts per "
+                "unit, e.g. --scale 2000/mm), or plain counts"
+            )
     counts: dict[str, float] = {}
     for name, value in values.items():
         if scale is None or isinstance(value, float):
@@ -106,7 +114,14 @@ def plan_profile(args: argparse.Namespace) -> Any:
             counts[name] = abs(scale.rate_to_counts(value, 1 if name == "SP" else 2, name))
     distance = round(counts["distance"])
     if abs(distance - counts["distance"]) > 1e-6 * max(1.0, abs(distance)):
-        raise InvalidArgument(f"the distance is {counts['distance']:g} counts, not a whole number")
+        unit = (
+            ""
+            if scale is None
+            else f" (plain numbers are counts: write {args.distance}{scale.unit:~})"
+        )
+        raise InvalidArgument(
+            f"the distance is {counts['distance']:g} counts, not a whole number{unit}"
+        )
     check_int32("PR", distance, "the axis", model.name)  # as Axis.plan_by refuses it
     profile = predict.move(
         distance,
@@ -267,6 +282,7 @@ def _add_connection_commands(sub: Any) -> None:
 def _add_list_command(sub: Any) -> None:
     p = sub.add_parser(
         "list",
+        aliases=["find"],  # as galil.find() in Python
         help="find controllers: serial ports, USB, PCI, and Ethernet when asked",
         description="Lists serial ports whose USB IDs are Galil's or a USB-serial bridge's, "
         "Galil USB devices, Galil PCI nodes, and Ethernet controllers when asked.",

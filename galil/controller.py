@@ -83,6 +83,7 @@ __all__ = [
     "ReconnectPolicy",
     "Resetting",
     "connect",
+    "no_axis_attribute",
 ]
 
 _LOG = logging.getLogger("galil.controller")
@@ -881,18 +882,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
                 return self.axes[model.axis_letter(name)]
             except InvalidArgument:
                 pass
-        if len(name) == 1 and name.isalpha() and model is not None and not model.axes:
-            raise AttributeError(
-                f"{type(self).__name__!s} has no attribute {name!r}: {model.name} is an I/O "
-                "controller with no axes (controller.io)"
-            )
-        if len(name) == 1 and name.isalpha() and model is not None:
-            # Most likely an axis letter: a typo, a lower-case letter, or one the model lacks.
-            raise AttributeError(
-                f"{type(self).__name__!s} has no attribute {name!r}: {model.name} has axes "
-                f"{', '.join(model.axes)} (controller.A, or controller.axes['A'])"
-            )
-        raise AttributeError(f"{type(self).__name__!s} has no attribute {name!r}")
+        raise no_axis_attribute(type(self).__name__, name, model)
 
     # Typed axis attributes: mypy sees ``connect(...).A`` as an Axis.
     A: Axis
@@ -1108,6 +1098,22 @@ def _contour_limits(
         )
         for a in chosen
     }
+
+
+def no_axis_attribute(owner: str, name: str, model: ModelSpec | None) -> AttributeError:
+    """The error for ``controller.<name>`` that is no attribute; a single letter is most
+    likely an axis letter (a typo, lower case, one the model lacks): it names the axes."""
+    if len(name) == 1 and name.isalpha() and model is not None and not model.axes:
+        return AttributeError(
+            f"{owner} has no attribute {name!r}: {model.name} is an I/O controller with no "
+            "axes (controller.io)"
+        )
+    if len(name) == 1 and name.isalpha() and model is not None:
+        return AttributeError(
+            f"{owner} has no attribute {name!r}: {model.name} has axes "
+            f"{', '.join(model.axes)} (controller.A, or controller.axes['A'])"
+        )
+    return AttributeError(f"{owner} has no attribute {name!r}")
 
 
 def connect(address: str | Transport, **options: Any) -> Controller:

@@ -97,9 +97,12 @@ class _Channels:
         if isinstance(n, bool) or not isinstance(n, int):
             raise InvalidArgument(f"{self.kind} number must be an integer, not {n!r}")
         if not self.first <= n < self.first + self.count:
-            span = f"{self.first} .. {self.first + self.count - 1}" if self.count else "none"
+            name = self._link.model.name
+            span = f"{self.first} .. {self.first + self.count - 1}"
             raise InvalidArgument(
-                f"{self.kind} {n} does not exist on {self._link.model.name} ({span})",
+                f"{self.kind} {n} does not exist on {name} ({span})"
+                if self.count
+                else f"{self.kind} {n} does not exist: {name} has no {self.kind}s",
                 model=self._link.model.name,
             )
         return n

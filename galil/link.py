@@ -747,7 +747,11 @@ class LinkCore:
                 GalilConnectionError,
                 f"the controller link died ({self._dead}); call reconnect() to open it again",
             )
-        return self.error(GalilConnectionError, "the controller link is closed")
+        return self.error(
+            GalilConnectionError,
+            "the controller link is closed (close(), or the end of its with block); "
+            "galil.connect() opens a new one",
+        )
 
     def error(self, kind: type[_E], message: str) -> _E:
         """An error of ``kind`` carrying the model name and the recent exchanges."""

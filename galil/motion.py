@@ -991,7 +991,8 @@ class MoveHandle:
                 raise self._link.error(
                     GalilTimeoutError,
                     f"move on {self.axes} not done after {timeout:.3g} s "
-                    f"(predicted {self.duration:.3g} s)",
+                    f"(predicted {self.duration:.3g} s); it goes on: wait again, "
+                    "or stop it",
                 )
         finally:
             if bar is not None:

@@ -342,7 +342,9 @@ def _refuse_blocked(
 def _ready(link: CommandLink, a: str, state: _State) -> None:
     if state.bg:
         raise InvalidArgument(
-            f"axis {a} is already moving; stop it or wait first", model=link.model.name
+            f"axis {a} is already moving; wait for its move (handle.wait()) or stop it "
+            "(axis.stop()) first",
+            model=link.model.name,
         )
     if state.mo:
         raise InvalidArgument(
@@ -506,7 +508,9 @@ _FIELD = {"SP": "speed", "AC": "accel", "DC": "decel"}
 
 def _stopping(link: CommandLink, a: str, what: str) -> InvalidArgument:
     return InvalidArgument(
-        f"axis {a} is stopping; wait for it before {what}", model=link.model.name
+        f"axis {a} is stopping; wait for it before {what} (the move's handle.wait(), or "
+        "until axis.moving is False)",
+        model=link.model.name,
     )
 
 

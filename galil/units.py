@@ -172,6 +172,11 @@ class Scale:
         if not math.isfinite(magnitude) or magnitude <= 0:
             raise InvalidArgument(
                 f"counts_per must be positive and finite, got {self.counts_per!r}"
+                + (
+                    " (an axis whose positive direction is the motor's negative one: sign=-1)"
+                    if magnitude < 0
+                    else ""
+                )
             )
         object.__setattr__(self, "counts_per", cp)
         if isinstance(self.sign, bool) or self.sign not in (1, -1):
@@ -372,10 +377,25 @@ def sampled_values(values: object, what: str) -> PathSamples:
     return _real_array(values, what)
 
 
+def _holds_quantities(values: object) -> bool:
+    """Whether a list (or a list of rows) holds a pint Quantity."""
+    if not isinstance(values, (list, tuple)):
+        return False
+    return any(
+        is_quantity(v) or (isinstance(v, (list, tuple)) and any(map(is_quantity, v)))
+        for v in values
+    )
+
+
 def _real_array(values: object, what: str) -> npt.NDArray[np.float64]:
     try:
         array = np.asarray(values)
     except (TypeError, ValueError) as exc:
+        if _holds_quantities(values):  # [1 * mm, 2 * mm]: numpy cannot make one array of it
+            raise InvalidArgument(
+                f"{what} is a list of Quantities; give one Quantity array instead, such as "
+                "np.array([1, 2]) * ureg.mm or ureg.Quantity([1, 2], 'mm')"
+            ) from exc
         raise InvalidArgument(f"{what} must be an array of numbers: {exc}") from exc
     if array.dtype.kind not in "iuf":
         raise InvalidArgument(

@@ -169,6 +169,25 @@ def test_plan_refuses_units_without_a_scale(capsys: pytest.CaptureFixture[str]) 
 
 
 @pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (["12.5mm"], "the distance 12.5mm has units but there is no --scale"),
+        (["100", "--speed", "20mm/s"], "--speed 20mm/s has units but there is no --scale"),
+        (["100", "--decel", "2mm/s^2"], "--decel 2mm/s^2 has units but there is no --scale"),
+        (["1.5", "--scale", "2000/mm"], "(plain numbers are counts: write 1.5mm)"),
+    ],
+)
+def test_plan_says_which_option_to_give_not_a_python_call(
+    argv: list[str], says: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A person at a shell has no axis to call set_scale on: the message names --scale.
+    assert cli.main(["plan", *argv]) == 2
+    err = capsys.readouterr().err
+    assert says in err, err
+    assert "set_scale" not in err
+
+
+@pytest.mark.parametrize(
     "argv",
     [
         ["sim", "--tcp", "127.0.0.1:70000"],

@@ -92,11 +92,12 @@ def test_galil_list_finds_a_pty_posing_as_galil_usb_and_a_controller_over_loopba
     assert any(f"tcp://{host}:{port}" in line and "DMC30010" in line for line in lines), out
 
 
+@pytest.mark.parametrize("command", ["list", "find"])  # find: as galil.find() is named
 def test_galil_list_says_when_nothing_is_found(
-    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+    command: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     monkeypatch.setattr(list_ports, "comports", lambda: [])
-    assert cli.main(["list", "--no-usb", "--no-pci"]) == 1
+    assert cli.main([command, "--no-usb", "--no-pci"]) == 1
     err = capsys.readouterr().err
     assert "no controller found" in err
     assert "Ethernet not searched" in err

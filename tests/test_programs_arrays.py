@@ -160,6 +160,22 @@ def test_arrays_and_variables_round_trip(dmc: galil.Controller) -> None:
     assert len(dmc.variables) == 2
 
 
+def test_reading_a_missing_variable_says_it_is_missing_not_that_case_is_wrong(
+    dmc: galil.Controller,
+) -> None:
+    # A variable's name is the user's own, lower case included: the link's hint that
+    # commands are upper case ("did you mean 'MG NOTHERE'?") would send them the wrong way.
+    with pytest.raises(galil.CommandError) as info:
+        dmc.variables["nothere"]
+    assert info.value.code == 1
+    message = info.value.args[0]
+    assert message.startswith("there is no variable 'nothere' on the controller"), message
+    assert "variables.write('nothere', value)" in message
+    assert "upper case" not in message
+    with pytest.raises(galil.CommandError, match="upper case"):  # a raw command keeps its hint
+        dmc.command("MG nothere")
+
+
 def test_a_users_running_program_is_never_replaced(dmc: galil.Controller) -> None:
     dmc.programs.download("#W\nWT 10000\nEN")
     dmc.programs.run("#W")

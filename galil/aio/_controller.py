@@ -25,7 +25,7 @@ from galil.aio._streams import AsyncMessages, LoopQueue
 from galil.aio._worker import Worker, shielded, twin
 from galil.capture import Capture
 from galil.contour import ContourResult
-from galil.controller import Controller, CoordinatedMotion
+from galil.controller import Controller, CoordinatedMotion, no_axis_attribute
 from galil.controller import connect as connect_sync
 from galil.errors import GalilError, InvalidArgument
 from galil.homing import SwitchPolarity
@@ -171,12 +171,13 @@ class AsyncController(AsyncLinkFacade):
     if not TYPE_CHECKING:
 
         def __getattr__(self, name: str) -> AsyncAxis:
-            if len(name) == 1 and name.isupper():
-                sync = self.__dict__.get("_sync")
-                if sync is not None:
-                    with contextlib.suppress(InvalidArgument):
-                        return self.axis(name)
-            raise AttributeError(f"{type(self).__name__} has no attribute {name!r}")
+            sync = self.__dict__.get("_sync")
+            if len(name) == 1 and name.isupper() and sync is not None:
+                with contextlib.suppress(InvalidArgument):
+                    return self.axis(name)
+            # As the sync controller says it: the axes the model has, or that it has none.
+            model = None if sync is None else sync.link._model
+            raise no_axis_attribute(type(self).__name__, name, model)
 
     A: AsyncAxis
     B: AsyncAxis

@@ -141,7 +141,8 @@ class _Poll:
             raise link.error(
                 GalilTimeoutError,
                 f"move on {handle.axes} not done after {self.timeout:.3g} s "
-                f"(predicted {handle.duration:.3g} s)",
+                f"(predicted {handle.duration:.3g} s); it goes on: wait again, "
+                "or stop it",
             )
         progress = progress_of(handle, now)
         remaining = progress.duration - progress.elapsed

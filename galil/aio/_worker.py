@@ -103,7 +103,10 @@ class Worker:
             GalilConnectionError: the worker was closed.
         """
         if self._closed:
-            raise GalilConnectionError("the async controller is closed")
+            raise GalilConnectionError(
+                "the async controller is closed (aclose(), or the end of its async with "
+                "block); galil.aio.connect() opens a new one"
+            )
         future: concurrent.futures.Future[R] = concurrent.futures.Future()
         self._jobs.put((future, functools.partial(fn, *args, **kwargs)))
         return future

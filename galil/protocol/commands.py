@@ -1327,9 +1327,12 @@ def stamp(name: str) -> Command:
 
 def _label(label: str) -> str:
     if not isinstance(label, str) or _LABEL.fullmatch(label) is None:
+        hint = ""
+        if isinstance(label, str) and _LABEL.fullmatch(f"#{label}") is not None:
+            hint = f" (did you mean '#{label}'?)"  # the program's own text has the '#'
         raise InvalidArgument(
             f"label {label!r}: '#', a letter, then up to "
-            f"{_DEFAULT_NAMES.label_length - 1} letters or digits"
+            f"{_DEFAULT_NAMES.label_length - 1} letters or digits{hint}"
         )
     return label
 

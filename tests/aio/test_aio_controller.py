@@ -41,6 +41,28 @@ def test_commands_and_queries_are_awaited() -> None:
     run(body)
 
 
+@pytest.mark.parametrize(
+    ("model", "name", "says"),
+    [
+        ("DMC-4040", "E", "DMC-4040 has axes A, B, C, D"),
+        ("DMC-4040", "a", "DMC-4040 has axes A, B, C, D"),
+        ("RIO-47120", "A", "RIO-47120 is an I/O controller with no axes"),
+    ],
+)
+def test_a_wrong_axis_attribute_lists_the_axes_as_the_sync_controller_does(
+    model: str, name: str, says: str
+) -> None:
+    async def body() -> None:
+        async with await sim(model) as c:
+            with pytest.raises(AttributeError, match=says):
+                getattr(c, name)
+            with pytest.raises(AttributeError, match=says):
+                getattr(c.sync, name)
+            assert not hasattr(c, "nothing_of_that_name")
+
+    run(body)
+
+
 def test_a_twin_keeps_the_sync_methods_documentation() -> None:
     assert aio.AsyncController.command.__doc__ == Controller.command.__doc__
     assert aio.AsyncAxis.move_to.__doc__ == galil.Axis.move_to.__doc__

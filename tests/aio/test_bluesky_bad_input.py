@@ -135,3 +135,22 @@ def test_methods_refuse_bad_values_before_anything_is_sent(
         return problems
 
     assert not _run(body)
+
+
+def test_a_quantity_for_a_position_is_refused_naming_the_motors_unit() -> None:
+    # bluesky plans carry plain numbers; a scientist's first try is often 10 * ureg.mm.
+    async def body() -> list[str]:
+        motor = GalilMotor("sim://DMC-4040", "A", name="m", scale=2000 / ureg.mm)
+        counts = GalilMotor("sim://DMC-4040", "B", name="n")
+        await motor.connect(mock=True)
+        await counts.connect(mock=True)
+        said = []
+        for device in (motor, counts):
+            with pytest.raises(galil.InvalidArgument) as info:
+                await device.set(10 * ureg.mm)
+            said.append(str(info.value))
+        return said
+
+    in_mm, in_counts = _run(body)
+    assert "m: a position is a number (in mm, the motor's unit), not" in in_mm
+    assert "n: a position is a number (in counts, the motor's unit), not" in in_counts
