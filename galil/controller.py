@@ -934,7 +934,16 @@ def _stop_started(link: Link, tracker: MotionTracker) -> None:
     tracker.closed = True
     if not link.is_open:
         return
+    running = _moving(link, tracker.still_running(link.clock()))
     failed = tracker.stop_started(link)
+    if running:  # (a script that left its with block without wait(): "nothing happened")
+        _LOG.warning(
+            "galil: closing the link to %s stopped axes %s mid-motion (started here, not "
+            "waited for: call wait() on a move's handle before closing or leaving the with "
+            "block)",
+            link.model_name,
+            ", ".join(running),
+        )
     if failed:
         _LOG.warning(
             "galil: closing the link to %s: the stop of axes %s could not be sent; they may "
@@ -942,6 +951,18 @@ def _stop_started(link: Link, tracker: MotionTracker) -> None:
             link.model_name,
             ", ".join(dict.fromkeys(failed)),
         )
+
+
+def _moving(link: Link, letters: str) -> str:
+    """Those of ``letters`` that read ``_BG`` 1 (one query; none for ``""``; ``""`` when
+    the query fails: closing goes on)."""
+    if not letters:
+        return ""
+    try:
+        bg = link.query_operands([f"_BG{a}" for a in letters])
+    except GalilError:
+        return ""
+    return "".join(a for a, v in zip(letters, bg, strict=True) if round(v))
 
 
 def _axis_names(axes: object) -> list[str]:

@@ -369,6 +369,19 @@ class MotionTracker:
                 failed += letters
         return failed
 
+    def still_running(self, now: float) -> str:
+        """The axes of the motion the library started, has not seen end and, by its
+        prediction at controller time ``now``, still runs (an open jog always; a contour
+        streaming): what closing the link now stops mid-way. No query."""
+        with self.lock:
+            handles = {id(h): h for h in self._active.values() if not h.finished}
+            letters = "".join(w.letters for w in self._watches)
+        for h in handles.values():
+            open_jog = any(t.open_jog for t in h._tracks.values())
+            if open_jog or now <= h.started_at + h.duration:
+                letters += h.axes
+        return "".join(dict.fromkeys(letters))
+
     def started(self, handle: MoveHandle) -> None:
         """``handle`` now drives its axes (and the axes geared to them); stopped at once when
         its thread's starts are refused (:meth:`refuse_starts`)."""

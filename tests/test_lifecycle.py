@@ -388,3 +388,41 @@ def test_async_close_ends_a_watch_and_stops_the_move() -> None:
     # (the watch may also see the stop end first: its polls let simulated time pass)
     assert all(isinstance(e, GalilConnectionError) for e in raised), raised
     assert "ST A" in _stops_sent(sim)
+
+
+def test_closing_on_motion_nobody_waited_for_warns_naming_the_axes(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # A script that leaves its with block without wait() sees its stage barely move: the
+    # stop close() sends is said, once, at WARNING.
+    with caplog.at_level("WARNING", logger="galil.controller"):
+        with galil.connect("sim://DMC-4040") as c:
+            c.A.move_by(10_000)
+            c.C.jog(1000)
+            sim = sim_of(c)
+        assert sorted(_stops_sent(sim)) == ["ST A", "ST C"]
+    (record,) = [r for r in caplog.records if "mid-motion" in r.getMessage()]
+    assert record.levelname == "WARNING"
+    assert "axes A, C mid-motion" in record.getMessage()
+    assert "wait()" in record.getMessage()
+
+
+@pytest.mark.parametrize("how", ["waited", "over by its prediction", "a jog a limit stopped"])
+def test_closing_after_the_motion_is_over_says_nothing(
+    how: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    with (
+        caplog.at_level("WARNING", logger="galil.controller"),
+        galil.connect("sim://DMC-4040") as c,
+    ):
+        if how == "a jog a limit stopped":  # (a jog has no predicted end: _BG is read)
+            c.A.soft_limits = (-100_000, 500)
+            c.A.jog(20_000)
+            c.sleep(1.0)
+        else:
+            h = c.A.move_by(1000)
+            if how == "waited":
+                h.wait()
+            else:
+                c.sleep(h.duration + 0.01)
+    assert not [r for r in caplog.records if "mid-motion" in r.getMessage()]
