@@ -47,13 +47,13 @@ def main() -> int:
             print(f"after 1 s: {x.position:~.3f}, velocity {x.velocity:~.2f}")
 
             # A second jog() while jogging changes speed in motion (here through zero).
+            # (it returns the same handle: the jog, its prediction now with the new ramp)
             x.jog(-5 * mm / s)
             dmc.sleep(1.0)
             print(f"reversed: {x.position:~.3f}, velocity {x.velocity:~.2f}")
 
             x.stop()  # decelerates at DC
-            while x.moving:
-                dmc.sleep(0.02)
+            jog.wait()  # until the ramp down is over
 
         code, text = x.stop_code
         print(f"stopped at {x.position:~.3f}: stop code {code} ({text})")

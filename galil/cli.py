@@ -7,6 +7,7 @@ Errors from the library are reported as one line (``galil: ...``) with exit stat
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -384,6 +385,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args))
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # `galil info ... | head`: the reader has gone, quietly
+        _quiet_stdout()
+        return 141  # (128 + SIGPIPE, as a shell reports a command its pipe ended)
     except Exception as exc:  # the CLI reports errors as one line, not a traceback
         from galil.errors import GalilError
 
@@ -394,6 +398,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"galil: {exc}", file=sys.stderr)
             return 2
         raise
+
+
+def _quiet_stdout() -> None:
+    """Point stdout at the null device: Python's own flush at exit would meet the broken
+    pipe again and print a second error."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):  # (a stdout with no file descriptor: nothing to flush)
+        pass
 
 
 if __name__ == "__main__":

@@ -49,6 +49,24 @@ def test_info_describes_a_simulated_controller(capsys: pytest.CaptureFixture[str
     assert "axes: A, B, C, D" in out
 
 
+def test_output_into_a_closed_pipe_ends_quietly_with_the_shells_status() -> None:
+    # `galil info ... | head -1`: the reader has gone before the output is written.
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    try:
+        run = subprocess.run(
+            [*GALIL, "info", "sim://DMC-4040"],
+            stdout=write_end,
+            stderr=subprocess.PIPE,
+            text=True,
+            timeout=60,
+        )
+    finally:
+        os.close(write_end)
+    assert run.returncode == 141
+    assert run.stderr == ""
+
+
 def test_terminal_sends_lines_and_explains_rejections() -> None:
     run = subprocess.run(
         [*GALIL, "terminal", "sim://DMC-4040"],
