@@ -224,7 +224,55 @@ class AxisGearing:
         gear_off(self._link, self._tracker, self.letter)
 
 
-class Axis(AxisGearing):
+class AxisPosition:
+    """Defining the position of an :class:`Axis` (a class of its own only to keep each class
+    short): :meth:`define_position` (``DP``)."""
+
+    letter: str
+    _link: CommandLink
+    _homing: AxisHoming
+
+    def position_counts(self, value: object, what: str = "position") -> float:
+        raise NotImplementedError
+
+    def define_position(self, position: Any = 0, *, shift_limits: bool = True) -> None:
+        """Call the present position ``position`` (``DP``): in the axis's units, like
+        :meth:`~Axis.move_to` (counts without a scale; a plain 0, the default, is 0 in any
+        unit; a scale's offset stays as it is, so ``axis.position`` then reads ``position``).
+        Nothing moves: the encoder (``TP``) and the reference (``RP``) both read ``position``
+        after it (on a stepper, whose ``DP`` sets its step count, ``DE`` sets the encoder too:
+        the library counts a stepper's encoder in its steps). Not burned: a power cycle
+        starts again at 0.
+
+        The soft limits stay where they are on the machine: ``BL`` and ``FL`` move by the same
+        amount (a limit that is off stays off), so ``soft_limits`` reads new numbers. With
+        ``shift_limits=False`` they keep their numbers, and so move on the machine; the call
+        is then refused if the axis would be beyond one of them.
+
+        ``axis.homed`` stays true after a home or index (the coordinate is moved by a known
+        amount), its reason saying 0 was redefined; a move started after it is predicted in
+        the new counts, and a move nobody waited for ends in the old ones.
+
+        Raises:
+            InvalidArgument: not a position, wrong units; the axis moves (the controller takes
+                DP only at rest), it is geared to a master, or an axis is geared to it (a
+                follower would jump with it: turn the gearing off first).
+            LimitError: beyond the 32-bit position range, or a soft limit shifted beyond it;
+                with ``shift_limits=False``, the axis beyond a soft limit.
+        """
+        if not isinstance(shift_limits, (bool, np.bool_)):
+            raise InvalidArgument(f"shift_limits must be True or False, not {shift_limits!r:.40}")
+        assert isinstance(self, Axis)
+        scale = self._scale
+        if scale is not None and type(position) is int and position == 0:
+            position = 0 * scale.unit  # (the default: 0 in the axis's units)
+        counts = round(self.position_counts(position, "position"))
+        check_int32("DP", counts, self.letter, self._link.model.name)
+        with user_units({self.letter: self}):
+            self._homing.define(counts, bool(shift_limits))
+
+
+class Axis(AxisGearing, AxisPosition):
     """One axis of a controller.
 
     Properties read the controller's operands (``_TP``, ``_SP``, ...) and return Quantities when

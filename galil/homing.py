@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from galil import predict
 from galil.errors import InvalidArgument, LimitError
 from galil.link import CommandLink
+from galil.models import INT32_MAX, INT32_MIN
 from galil.motion import (
     Display,
     MotionTracker,
@@ -133,6 +134,7 @@ class AxisHoming:
         self._tracker = tracker
         self._last: MoveHandle | None = None
         self._confirmed: str | None = None
+        self._redefined: str | None = None  # how define_position changed the coordinate
 
     def start(
         self,
@@ -189,6 +191,7 @@ class AxisHoming:
         self._last = handle
         if kind != "FE":
             self._confirmed = None
+            self._redefined = None
         return handle
 
     def _refuse_gearing(self, kind: str) -> None:
@@ -301,9 +304,107 @@ class AxisHoming:
         """The controller was reset (``RS``): a homing seen before defines nothing now."""
         self._last = None
         self._confirmed = None
+        self._redefined = None
+
+    # -- defining the position (DP) ---------------------------------------------------------
+    def define(self, counts: int, shift_limits: bool) -> None:
+        """``DP counts`` (a stepper's ``DE counts`` too), the axis at rest and no follower of
+        it engaged; ``BL``/``FL`` shifted with the coordinate, or (``shift_limits`` False) kept,
+        the present position then inside them (decision 0058).
+
+        Raises:
+            InvalidArgument: the axis moves, is a gear follower, or has followers.
+            LimitError: a shifted limit outside the 32-bit range, or (kept) the present
+                position beyond one.
+        """
+        link, a, tracker = self._link, self.letter, self._tracker
+        model = link.model
+        with tracker.lock:  # (no other thread's motion between the read and the DP)
+            tracker.refuse_geared(a, "define_position", model.name)
+            followers = tracker.followers(a)
+            if followers:
+                who = ", ".join(f"{f} (GR {g.ratio:g})" for f, g in followers.items())
+                raise InvalidArgument(
+                    f"axis {a} is the gear master of {who}: DP changes {a}'s position at once, "
+                    "and a follower would take that jump times its ratio; turn the gearing off "
+                    "(gearing.off()) and gear again after define_position",
+                    model=model.name,
+                )
+            rp, bg, sc, mt, bl, fl = link.query_operands(
+                [f"_{op}{a}" for op in ("RP", "BG", "SC", "MT", "BL", "FL")]
+            )
+            if bg:
+                raise InvalidArgument(
+                    f"define_position (DP) is not valid while axis {a} moves: wait for its "
+                    "motion or stop it first",
+                    model=model.name,
+                )
+            tracker.ended(a, rp, sc)  # (a handle nobody waited for ends in the old counts)
+            parts = [cmds.dp(model=model, **{a: counts})]
+            if abs(mt) in (2.0, 2.5):  # a stepper's DP leaves its encoder (TP): DE sets it
+                parts.append(cmds.de(model=model, **{a: counts}))
+            parts += self._limits(counts, round(rp), (round(bl), round(fl)), shift_limits)
+            link.command_line(parts)
+            self._redefined = (
+                f"its position was redefined since (define_position: DP {counts} where RP was "
+                f"{rp:g}), so 0 is no longer where the home or index set it"
+            )
+
+    def _limits(
+        self, counts: int, rp: int, limits: tuple[int, int], shift: bool
+    ) -> list[cmds.Command]:
+        """The ``BL``/``FL`` commands that keep the soft limits where they are on the machine
+        (a limit that is off, at the 32-bit end, stays off), or none, the present position
+        checked against them (``shift`` False).
+
+        Raises:
+            LimitError: a shifted limit outside the 32-bit range (or onto the value that
+                turns it off), or the new position beyond a kept one.
+        """
+        a, model = self.letter, self._link.model
+        ends = (("BL", limits[0], INT32_MIN, cmds.bl), ("FL", limits[1], INT32_MAX, cmds.fl))
+        parts = []
+        for name, limit, off, build in ends:
+            if not shift:
+                if (counts < limit) if name == "BL" else (counts > limit):
+                    raise LimitError(
+                        f"define_position({counts}) on {a} would put the axis beyond {name} "
+                        f"{limit}, which keeps its number (shift_limits=False); give a position "
+                        "inside the soft limits, or let them shift with it",
+                        name=name,
+                        value=counts,
+                        limit=limit,
+                        axis=a,
+                        model=model.name,
+                    )
+                continue
+            moved = limit + counts - rp
+            if limit == off or moved == limit:
+                continue
+            if not INT32_MIN < moved < INT32_MAX:
+                raise LimitError(
+                    f"define_position({counts}) on {a} shifts {name} {limit} to {moved}, "
+                    "beyond the 32-bit position range (or onto the value that turns it off); "
+                    "set the soft limits first (soft_limits), or pass shift_limits=False",
+                    name=name,
+                    value=moved,
+                    limit=INT32_MAX if moved > 0 else INT32_MIN,
+                    axis=a,
+                    model=model.name,
+                )
+            parts.append(build(model=model, **{a: moved}))
+        return parts
 
     def homed(self) -> Homed:
-        """Whether the axis is homed and how that is known (one query at most)."""
+        """Whether the axis is homed and how that is known (one query at most); after a
+        :meth:`define` the reason says so (the axis stays referenced: DP at rest shifts the
+        coordinate by a known amount)."""
+        found = self._homed()
+        if found.homed and self._redefined is not None:
+            return Homed(True, f"{found.how}; {self._redefined}")
+        return found
+
+    def _homed(self) -> Homed:
         a = self.letter
         last = self._last
         pending = last is not None and last.kind in ("home", "index") and self._confirmed is None

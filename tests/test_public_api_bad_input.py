@@ -294,6 +294,7 @@ ENTRIES: list[Entry] = [
     # axis
     E("axis", "check_parameter", {"cmd": "SP", "counts": 1000}),
     E("axis", "display", {"profile": Lazy(_profile)}),
+    E("axis", "define_position", {"position": 100, "shift_limits": True}),
     E("axis", "distance_counts", {"value": 100, "what": "distance"}),
     E("axis", "position_counts", {"value": 100, "what": "position"}),
     E("axis", "rate_counts", {"value": 100, "power": 1, "what": "speed"}),
@@ -458,6 +459,7 @@ ACCEPTS: dict[tuple[str, str, str], set[str]] = {
             ("jog", "speed"),
             ("move_by", "distance"),
             ("move_to", "position"),
+            ("define_position", "position"),
             ("plan_by", "distance"),
             ("plan_to", "position"),
             ("set_scale", "sign"),

@@ -323,6 +323,7 @@ class AsyncAxis(MotionRoom[Axis]):
     home = motion_twin(Axis.home)
     find_edge = motion_twin(Axis.find_edge)
     find_index = motion_twin(Axis.find_index)
+    define_position = twin(Axis.define_position)
 
     async def homed(self) -> Homed:
         """Whether the axis is homed, and how the library knows (``bool(await

@@ -64,6 +64,7 @@ __all__ = [
     "cw",
     "da",
     "dc",
+    "de",
     "dl",
     "dm",
     "dp",
@@ -454,6 +455,7 @@ _DEFAULT_INT_RANGES: dict[str, tuple[int, int]] = {
     "PR": (INT32_MIN, INT32_MAX),
     "PA": (INT32_MIN, INT32_MAX),
     "DP": (INT32_MIN, INT32_MAX),
+    "DE": (INT32_MIN, INT32_MAX),
     "FL": (INT32_MIN, INT32_MAX),
     "BL": (INT32_MIN, INT32_MAX),
     "IP": (INT32_MIN, INT32_MAX),
@@ -467,7 +469,7 @@ _DEFAULT_INT_RANGES: dict[str, tuple[int, int]] = {
 _DEFAULT_LETTERS = frozenset(_DEFAULT_AXES.index)
 _NO_RANGE = (1, 0)
 # Commands whose range (32-bit counts) is the same on every model (:func:`_checker`).
-_POSITION_MNEMONICS = frozenset({"PR", "PA", "DP", "FL", "BL", "IP"})
+_POSITION_MNEMONICS = frozenset({"PR", "PA", "DP", "DE", "FL", "BL", "IP"})
 
 
 def _axis_command(
@@ -544,7 +546,7 @@ def _checker(kind: str, model: ModelSpec | None) -> _Checker:
     found = _CHECKERS.get(key)
     if found is not None:
         return found
-    if kind in ("PR", "PA", "DP", "FL", "BL", "IP"):
+    if kind in ("PR", "PA", "DP", "DE", "FL", "BL", "IP"):
         found = _Checker(kind, INT32_MIN, INT32_MAX, model, integer=True)
     elif kind in ("AC", "DC"):
         # The smallest AC/DC falls with a longer TM (1024 * (1000/TM)**2): the range is the
@@ -637,6 +639,11 @@ def it(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Co
 def dp(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
     """DP: define the current position, counts."""
     return _plain(_axis_command("DP", values, by_axis, model))
+
+
+def de(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:
+    """DE: define the auxiliary encoder's position (a stepper's main encoder), counts."""
+    return _plain(_axis_command("DE", values, by_axis, model))
 
 
 def fl(*values: object, model: ModelSpec | None = None, **by_axis: object) -> Command:

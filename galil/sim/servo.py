@@ -55,6 +55,10 @@ class Axis:
         limit_stop: a limit (switch or soft limit) is stopping the axis; a new start clears it.
         origin: where encoder count 0 is in the machine's fixed frame (the frame switches are
             placed in); defining a position (DP, the end of HM/FI) moves it, motion does not.
+        aux: a servo's auxiliary encoder (``TD``) minus its main encoder: ``DE`` sets it, and
+            a redefinition of the main position (DP, HM, FI) keeps ``TD`` as it was.
+        shift: a stepper's encoder (``TP``) minus its step count: its ``DP`` "will not effect
+            the TP register value" (the DMC-4103 reference), its ``DE`` sets the encoder.
     """
 
     letter: str
@@ -62,6 +66,8 @@ class Axis:
     contour: bool = False
     limit_stop: bool = False
     origin: int = 0
+    aux: int = 0
+    shift: int = 0
 
     @property
     def physical(self) -> int:
@@ -189,6 +195,7 @@ class Servo:
         """Start a fresh servo loop for ``ax`` at ``position`` (DP, SH, TM)."""
         old = ax.m
         ax.origin += old.encoder - int(position)  # the motor stays where it is
+        ax.aux += old.encoder - int(position)  # (and so does a servo's auxiliary encoder)
         ax.m = AxisMotion(self.ts, position, old.lag)
         ax.m.keep_trace(old)
         ax.m.motor_on = old.motor_on

@@ -146,6 +146,7 @@ TAGS: dict[str, Tag] = {
     "CW": _valid("CW 2"),
     "DA": _valid("DM xx[2];DA xx[]"),
     "DC": _still("DCA=256000", MOVE, kept=_DC_KEPT),
+    "DE": _valid("DEA=0"),
     "DL": _valid("DL\r#T\rEN\r\\", program=False, in_program="DL"),
     "DM": _valid("DM xx[2]"),
     "DP": _still("DPA=0"),

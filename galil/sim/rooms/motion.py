@@ -1,4 +1,4 @@
-"""Motion: independent moves and jogs (PR PA DP SP AC DC JG IT BG IP ST AB SH MO).
+"""Motion: independent moves and jogs (PR PA DP DE SP AC DC JG IT BG IP ST AB SH MO).
 
 The values stored are the ones the predictor plans with (its quantisation), and every change in
 motion is a call on the axis's :class:`~galil.predict.engine.AxisProfiler`: this room holds no
@@ -21,6 +21,8 @@ from galil.sim.machine import Machine, Room
 from galil.sim.parse import Refused
 from galil.sim.registry import Args, OperandKind, handler, operand
 from galil.sim.rooms.limits import Limits
+from galil.sim.rooms.reports import Reports
+from galil.sim.rooms.tuning import Tuning
 from galil.sim.servo import Axis, at_rest, engine
 
 __all__ = ["Motion"]
@@ -142,11 +144,32 @@ class Motion(Room):
 
     @handler("DP", Args.VALUES)
     def dp(self, fields: Fields) -> str:
+        """DP sets ``TP`` and ``RP``; a stepper's ``RP`` and ``TD`` (its step count), "but
+        will not effect the TP register value" (the DMC-4103 reference). Not in motion."""
+        reports = self.machine.room(Reports)
+
         def apply(ax: Axis, v: float) -> None:
+            before = ax.m.encoder
             self.machine.servo.reseat(ax, int(v))
             self.axes[ax.letter].pa = int(v)
+            if self.machine.room(Tuning).stepper(ax):
+                ax.shift += before - int(v)  # (its encoder reads on as it did)
 
-        return self._set(fields, lambda ax: ax.m.encoder, at_rest("DP", _position), apply)
+        return self._set(fields, reports.position, at_rest("DP", _position), apply)
+
+    @handler("DE", Args.VALUES)
+    def de(self, fields: Fields) -> str:
+        """DE defines a servo's auxiliary encoder (``TD``), a stepper's main encoder (``TP``);
+        "Valid while in motion". ``DE ?`` answers ``TD``."""
+        reports = self.machine.room(Reports)
+
+        def apply(ax: Axis, v: float) -> None:
+            if self.machine.room(Tuning).stepper(ax):
+                ax.shift = int(v) - ax.m.encoder
+            else:
+                ax.aux = int(v) - ax.m.encoder
+
+        return self._set(fields, reports.auxiliary, _position, apply)
 
     # ---- speeds, accelerations, smoothing ----------------------------------------------
     @handler("SP", Args.VALUES)

@@ -27,6 +27,7 @@ from galil.sim.rooms.homing import Homing
 from galil.sim.rooms.io import IO
 from galil.sim.rooms.limits import Limits
 from galil.sim.rooms.motion import Motion
+from galil.sim.rooms.reports import Reports
 from galil.sim.servo import Axis
 
 __all__ = ["Records"]
@@ -116,8 +117,9 @@ class Records(Room):
             layout = self._layouts[letters] = _Layout(dtype, mask, letters)
         layout.general[0] = self._general(layout.general_names)
         if layout.axes is not None:
-            motion, limits = self.machine.room(Motion), self.machine.room(Limits)
-            layout.axes[:] = [self._axis(ax, motion, limits) for ax in present]
+            m = self.machine
+            motion, limits, reports = m.room(Motion), m.room(Limits), m.room(Reports)
+            layout.axes[:] = [self._axis(ax, motion, limits, reports) for ax in present]
         for fill in self._fillers():
             fill(layout.buf, letters)
         return layout.buf.tobytes()
@@ -149,7 +151,7 @@ class Records(Room):
         return tuple(values[n] for n in names)
 
     @staticmethod
-    def _axis(ax: Axis, motion: Motion, limits: Limits) -> tuple[int, ...]:
+    def _axis(ax: Axis, motion: Motion, limits: Limits, reports: Reports) -> tuple[int, ...]:
         m = ax.m
         prof = m.profiler
         status = 0
@@ -165,15 +167,14 @@ class Records(Room):
             status |= 0x0040
         if not m.motor_on:
             status |= 0x0001
-        encoder = _clamp32(m.encoder)
         return (
             status,
             limits.switch_bits(ax),
             int(prof.stop_code) & 0xFF,
             _clamp32(m.reference),
-            encoder,
+            _clamp32(round(reports.position(ax))),
             _clamp32(m.error),
-            encoder,
+            _clamp32(round(reports.auxiliary(ax))),
             _clamp32(round(64 * m.velocity)),
         )
 

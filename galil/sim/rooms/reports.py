@@ -4,8 +4,10 @@ Positions print in the PF format, ``MG`` numbers in VF, or in the ``{Fm.n}``, ``
 ``{$m.n}`` written in their own argument (``MG _TPA{Z10.4},_TPB{Z10.4}``: the DMC-4103 reference
 places formatters "after each argument"; one format does not carry to the next argument, an
 assumption, decision 0032); ``TC`` clears the code while ``_TC`` does not. ``TD`` reads an
-auxiliary encoder rigidly coupled to the motor (equal to ``TP``); ``TV`` is the encoder velocity
-averaged over a quarter second, as the manuals describe.
+auxiliary encoder rigidly coupled to the motor (``TP`` plus what ``DE`` set; a stepper's ``TD``
+is its step count, its ``TP`` an encoder that counts its steps, plus what its ``DE`` set, which
+only ``TP`` and the data record show: trippoints and gearing read the step count); ``TV`` is
+the encoder velocity averaged over a quarter second, as the manuals describe.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from galil.protocol.numbers import format_reply
 from galil.sim.machine import Room
 from galil.sim.parse import Refused, split_fields
 from galil.sim.registry import Args, OperandKind, handler, operand
+from galil.sim.rooms.tuning import Tuning
 from galil.sim.servo import Axis
 
 __all__ = ["Reports"]
@@ -35,7 +38,7 @@ class Reports(Room):
 
     @handler("TD", Args.AXES)
     def td(self, axes: list[Axis]) -> str:
-        return self.machine.interp.report(axes, self.position, self.machine.interp.pnum)
+        return self.machine.interp.report(axes, self.auxiliary, self.machine.interp.pnum)
 
     @handler("RP", Args.AXES)
     def rp(self, axes: list[Axis]) -> str:
@@ -55,9 +58,15 @@ class Reports(Room):
         i = self.machine.interp
         return i.report(axes, self.stop_code, lambda v: i.num(v, "3.0"))
 
-    @operand("TP", "TD", kind=OperandKind.AXIS)
+    @operand("TP", "DP", kind=OperandKind.AXIS)
     def position(self, ax: Axis) -> float:
-        return ax.m.encoder
+        """``_TP`` (and ``_DP``, "the current main encoder position")."""
+        return ax.m.encoder + (ax.shift if self.machine.room(Tuning).stepper(ax) else 0)
+
+    @operand("TD", "DE", kind=OperandKind.AXIS)
+    def auxiliary(self, ax: Axis) -> float:
+        """``_TD`` (and ``_DE``): a servo's auxiliary encoder, a stepper's step count."""
+        return ax.m.encoder + (0 if self.machine.room(Tuning).stepper(ax) else ax.aux)
 
     @operand("RP", kind=OperandKind.AXIS)
     def reference(self, ax: Axis) -> float:
