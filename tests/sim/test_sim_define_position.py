@@ -54,6 +54,7 @@ def test_stepper_dp_sets_rp_and_td_and_de_sets_its_encoder() -> None:
 
 def test_reset_forgets_what_de_defined() -> None:
     sim = SimController()
-    _ok(sim, "DEA=123")
+    _ok(sim, "DEA=123")  # (DE, not a variable named DEA)
+    assert _read(sim, "_TPA,_TDA") == [0, 123]
     _ok(sim, "RS")
     assert _read(sim, "_TPA,_TDA") == [0, 0]
