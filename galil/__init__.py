@@ -17,6 +17,7 @@ from galil.errors import (
     InvalidArgument,
     LimitError,
     MotionError,
+    ProgramError,
     ProtocolError,
     ScheduleError,
 )
@@ -66,6 +67,7 @@ __all__ = [
     "MoveResult",
     "MultiProfile",
     "Profile",
+    "ProgramError",
     "ProtocolError",
     "ReconnectPolicy",
     "RecordFields",

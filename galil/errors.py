@@ -5,6 +5,7 @@ mixes in the stdlib type a caller would naturally catch::
 
     GalilError
     ├── CommandError          the controller answered '?'; carries code, text, command
+    │   └── ProgramError      a program thread stopped on an error (code, line, its text)
     ├── ProtocolError         the peer sent bytes we cannot make sense of
     ├── GalilTimeoutError     (also TimeoutError) no reply in time
     ├── GalilConnectionError  (also ConnectionError) the link is closed or dead
@@ -33,6 +34,7 @@ __all__ = [
     "InvalidArgument",
     "LimitError",
     "MotionError",
+    "ProgramError",
     "ProtocolError",
     "ScheduleError",
 ]
@@ -99,6 +101,50 @@ class CommandError(GalilError):
             tail = "\n  ".join(self.recent[-8:])
             text = f"{text}\n recent exchanges (oldest first):\n  {tail}"
         return text
+
+
+class ProgramError(CommandError):
+    """A thread of the controller's program stopped on an error instead of at ``EN``
+    (``programs.wait``; decision 0059): ``_ED`` and ``_ED1`` moved to a new line and thread
+    since ``programs.run``. Without ``#CMDERR`` such an error stops every thread, so the
+    thread waited for may be another than the one that failed.
+
+    Attributes:
+        code: the TC error code (``None`` when a later refusal overwrote it).
+        text: the TC code's explanation.
+        command: the text of the program line that failed (``""`` when unknown).
+        line: the program line that failed (``_ED``; 0 is the first line).
+        thread: the thread that failed (``_ED1``).
+        waited: the thread that was waited for.
+    """
+
+    def __init__(
+        self,
+        code: int | None,
+        text: str,
+        command: str,
+        *,
+        line: int,
+        thread: int,
+        waited: int,
+        model: str | None = None,
+        recent: Sequence[str] = (),
+    ) -> None:
+        who = f"thread {thread}"
+        if thread != waited:
+            who = f"thread {waited} stopped because {who}"
+        where = f" on {model}" if model else ""
+        shown = f" ({command})" if command else ""
+        told = f"TC {code} {text}" if code is not None else "TC unknown (a later '?' took it)"
+        message = f"{who} failed{where} at program line {line}{shown}: {told}"
+        GalilError.__init__(self, message.rstrip(), recent=recent)
+        self.model = model
+        self.code = code
+        self.text = text
+        self.command = command
+        self.line = line
+        self.thread = thread
+        self.waited = waited
 
 
 class ProtocolError(GalilError):

@@ -26,10 +26,13 @@ from __future__ import annotations
 
 import logging
 import os
+import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from galil.errors import GalilTimeoutError, InvalidArgument
+from galil.codes import tc_text
+from galil.errors import CommandError, GalilTimeoutError, InvalidArgument, ProgramError
 from galil.link import CommandLink, check_flag, check_seconds
 from galil.motion import MotionTracker
 from galil.protocol import commands as cmds
@@ -59,6 +62,35 @@ class Download:
 
     def __bool__(self) -> bool:
         return self.sent
+
+
+#: Read with the threads at ``run`` and at every poll of ``wait``: the line and thread of the
+#: last error in a program, and the error code (the operand: reading it clears nothing).
+_ERROR_OPERANDS = ("_ED", "_ED1", "_TC")
+_CMDERR = re.compile(r"#CMDERR(?![A-Za-z0-9])")
+
+
+@dataclass(frozen=True)
+class _Mark:
+    """``_ED``, ``_ED1`` and ``_TC`` at one moment."""
+
+    line: int
+    thread: int
+    code: int
+
+    @classmethod
+    def of(cls, values: Sequence[float]) -> _Mark:
+        return cls(round(values[0]), round(values[1]), round(values[2]))
+
+    def failed_since(self, before: _Mark) -> bool:
+        """Whether a program error came between ``before`` and now: ``_ED``/``_ED1`` moved
+        to another line or thread, or, at the same one, the code cleared at ``before`` is set
+        (a host's ``?`` is explained and cleared at once by the link's ``TC1``). A reset puts
+        ``_ED1`` back to -1: no error."""
+        if self.thread < 0:
+            return False
+        moved = (self.line, self.thread) != (before.line, before.thread)
+        return moved or (before.code == 0 and self.code != 0)
 
 
 def check_thread_timeout(timeout: object) -> float:
@@ -102,6 +134,8 @@ class Programs:
         self.link = link
         self.routines = routines
         self._tracker = tracker
+        #: ``_ED``/``_ED1``/``_TC`` as each thread's run began (decision 0059).
+        self._marks: dict[int, _Mark] = {}
 
     def __repr__(self) -> str:
         m = self.link.model
@@ -178,7 +212,10 @@ class Programs:
         return thread
 
     def run(self, label: str = "#A", thread: int = 0) -> None:
-        """Run the program from ``label`` on ``thread`` (``XQ``).
+        """Run the program from ``label`` on ``thread`` (``XQ``). Where the last program
+        error was (``_ED``, ``_ED1``) is read with the threads, so that :meth:`wait` can tell
+        an end on an error from one at ``EN``; an error code no one has read (``_TC``) is
+        cleared (``TC0``) on the same line as the ``XQ`` (decision 0059).
 
         Raises:
             InvalidArgument: a bad label or thread, a thread that runs a program already or
@@ -186,22 +223,29 @@ class Programs:
             CommandError: the controller refused (TC 10: no such label).
         """
         command = cmds.xq(label, self._thread(thread))
-        if thread in self.threads:
+        running, values = self.routines.running_and(_ERROR_OPERANDS)
+        if thread in running and thread not in self.routines.threads:
             raise InvalidArgument(
                 f"thread {thread} runs a program already; halt it first or pick another",
                 model=self.link.model.name,
             )
-        self.link.command_line([command])
+        mark = _Mark.of(values)
+        self._marks.pop(thread, None)
+        self.link.command_line([cmds.tc(0), command] if mark.code else [command])
+        self._marks[thread] = _Mark(mark.line, mark.thread, 0)
 
     def halt(self, thread: int | None = None) -> None:
         """Halt ``thread`` (``HX n``), or every thread of the user's (``None``); the library's
         own threads (the watchdog) keep running."""
         if thread is not None:
             self.link.command_line([cmds.hx(self._thread(thread))])
+            self._marks.pop(thread, None)
             return
         busy = sorted(self.threads)
         if busy:
             self.link.command_line([cmds.hx(t) for t in busy])
+        for t in busy:
+            self._marks.pop(t, None)
 
     @property
     def threads(self) -> dict[int, int]:
@@ -211,20 +255,64 @@ class Programs:
         return {t: line for t, line in running.items() if t not in self.routines.threads}
 
     def wait(self, thread: int = 0, timeout: float = 10.0) -> None:
-        """Wait until ``thread`` has finished (its ``_XQn`` reads -1), in controller time.
+        """Wait until ``thread`` has finished (its ``_XQn`` reads -1), in controller time,
+        and say whether it ended on an error (decision 0059).
+
+        An error is seen when ``_ED``/``_ED1`` (the line and thread of the last program
+        error) moved since :meth:`run` started the thread (since this wait began, for a
+        thread started otherwise), or the error code cleared at :meth:`run` is set again.
+        An end at ``EN``, a halt (``HX``, :meth:`halt`, ``AB``) and a reset are no error; a
+        program with ``#CMDERR`` handles its errors itself, and its threads never raise.
+        The error is said once: a second wait on the thread returns.
 
         Raises:
             InvalidArgument: a bad thread or timeout.
             GalilTimeoutError: it still runs after ``timeout`` seconds (it is not halted).
+            ProgramError: it stopped on an error: of its own, or of another thread (which
+                stops every thread); code, line, and the line's text (``UL``). Motion the
+                program started is left as the controller leaves it.
         """
         n = self._thread(thread)
         timeout = check_thread_timeout(timeout)
         link = self.link
         deadline = link.clock() + timeout
-        while round(link.query_operands([f"_XQ{n}"])[0]) >= 0:
+        names = [f"_XQ{n}", *_ERROR_OPERANDS]
+        while True:
+            values = link.query_operands(names)
+            if round(values[0]) < 0:
+                break
+            self._marks.setdefault(n, _Mark.of(values[1:]))
             if link.clock() >= deadline:
                 raise link.error(GalilTimeoutError, f"thread {n} still runs after {timeout} s")
             link.pause(0.01)
+        before = self._marks.pop(n, None)
+        now = _Mark.of(values[1:])
+        if before is not None and now.failed_since(before):
+            error = self._error(n, now)
+            if error is not None:
+                raise error
+
+    def _error(self, waited: int, now: _Mark) -> ProgramError | None:
+        """The error of a program that stopped at ``now``'s line; ``None`` when the program
+        has ``#CMDERR`` (it handled the error). One ``UL`` for the line's text."""
+        try:
+            program = self.routines.upload()
+        except CommandError:  # (a locked program: TC 106)
+            program = []
+        if any(_CMDERR.match(line.strip()) for line in program):
+            return None
+        text = program[now.line].strip() if 0 <= now.line < len(program) else ""
+        code = now.code or None
+        return ProgramError(
+            code,
+            tc_text(code) if code is not None else "",
+            text,
+            line=now.line,
+            thread=now.thread,
+            waited=waited,
+            model=self.link.model.name,
+            recent=self.link.recent,
+        )
 
     def burn(self, timeout: float | None = None) -> None:
         """Burn the program into flash (``BP``), the library's routines with it; it then

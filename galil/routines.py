@@ -163,14 +163,18 @@ class Routines:
         A one-shot run of the library's (a speed schedule) whose thread no longer runs has
         ended: the library holds that thread no more.
         """
+        return self.running_and(())[0]
+
+    def running_and(self, names: Sequence[str]) -> tuple[dict[int, int], list[float]]:
+        """:meth:`running`, and the operands ``names`` read in the same round trip."""
         n = self.link.model.threads
-        values = self.link.query_operands([f"_XQ{t}" for t in range(n)])
-        running = {t: round(v) for t, v in enumerate(values) if round(v) >= 0}
+        values = self.link.query_operands([*(f"_XQ{t}" for t in range(n)), *names])
+        running = {t: round(v) for t, v in enumerate(values[:n]) if round(v) >= 0}
         with self._lock:
             for t in [t for t in self._owners if t not in running]:
                 del self._owners[t]
                 self._threads.pop(t, None)
-        return running
+        return running, values[n:]
 
     def holder(self, thread: int) -> str | None:
         """The label of the library's routine on ``thread``, or ``None`` when the library does

@@ -55,6 +55,7 @@ class AsyncPrograms(Backed[Programs]):
         Raises:
             InvalidArgument: a bad thread or timeout.
             GalilTimeoutError: it still runs after ``timeout`` seconds (it is not halted).
+            ProgramError: it stopped on an error, its own or another thread's (decision 0059).
         """
         total = check_thread_timeout(timeout)  # as the sync wait: None and inf refused
         programs = self.sync

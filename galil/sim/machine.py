@@ -29,7 +29,7 @@ from galil.sim.clock import Clock
 from galil.sim.interpreter import Command, Interpreter
 from galil.sim.parse import Refused, next_command
 from galil.sim.ports import Port, Ports
-from galil.sim.programs import Programs
+from galil.sim.programs import NO_ERROR, Programs
 from galil.sim.registry import (
     Args,
     Collect,
@@ -207,6 +207,7 @@ class Machine:
         self.ports.reset()
         self.programs.reset()
         self.programs.install([])
+        self.programs.error_at = NO_ERROR
         for hook in self._reset_hooks:
             hook()
 

@@ -13,7 +13,8 @@ the trippoint it waited for, go on its stack), an idle one is started. One runs 
 due meanwhile waits for the running one to return. ``EN n``, ``RE n`` and ``RI n`` return,
 restoring the interrupted trippoint when ``n`` is 1 and dropping it otherwise (decision 0029).
 An error in a program runs ``#CMDERR`` when the program has it: the failing thread stops
-(thread 0 goes on after the failed command once the routine returns).
+(thread 0 goes on after the failed command once the routine returns); without it, every
+thread stops (decision 0059). ``_ED``/``_ED1`` keep the line and thread of the last error.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from galil.sim.registry import Collect, Download, Result, Wait
 __all__ = [
     "LINES_PER_SAMPLE",
     "NOT_IN_PROGRAM",
+    "NO_ERROR",
     "PROGRAM_ONLY",
     "STACK_DEPTH",
     "Executor",
@@ -39,6 +41,8 @@ __all__ = [
     "program_only",
 ]
 
+#: ``_ED`` and ``_ED1`` before any error in a program (and after a reset).
+NO_ERROR = (0, -1)
 #: Program commands one thread may execute per servo sample (the firmware runs a few per ms).
 LINES_PER_SAMPLE = 16
 #: How deep subroutine calls nest (JS: "can be nested, called up to 16 deep").
@@ -151,8 +155,9 @@ class Programs:
         self.pending: list[str] = []
         #: What the last subroutine returned (``EN ,,value``; ``_JS``).
         self.returned = 0.0
-        #: The line and thread of the last error in a program (``_ED``, ``_ED1``).
-        self.error_at = (0, 0)
+        #: The line and thread of the last error in a program (``_ED``, ``_ED1``); ED: "_ED0
+        #: returns 0 if no error has occurred", "_ED1 returns -1 if no error has occurred".
+        self.error_at = NO_ERROR
 
     def reset(self) -> None:
         """Stop every thread (the program stays)."""
@@ -301,13 +306,17 @@ class Programs:
         return True
 
     def _halt(self, th: Thread, code: int) -> None:
-        """A command of ``th`` failed: set the error code; stop the thread, or run #CMDERR."""
+        """A command of ``th`` failed: set the error code and ``_ED``; run #CMDERR (the
+        failing thread stops, thread 0 goes on after it), or, without one, stop every thread
+        (#CMDERR: "Without #CMDERR defined, if an error ... occurs in an application program
+        ..., the program (and all threads) will stop")."""
         self._x.tc = code
         self.error_at = (th.line, th.number)
-        handled = "CMDERR" in self.labels and not any(
-            f.routine == "CMDERR" for t in self.threads.values() for f in t.stack
-        )
-        if not handled or th.number != 0:
+        if "CMDERR" not in self.labels:
+            self.reset()
+            return
+        handled = not any(f.routine == "CMDERR" for t in self.threads.values() for f in t.stack)
+        if not handled or th.number != 0:  # (an error in #CMDERR stops its thread only)
             self.threads.pop(th.number, None)
         if handled:
             self.interrupt("CMDERR")

@@ -465,3 +465,31 @@ def test_burning_the_program_in_motion_the_library_did_not_start_is_the_controll
         assert refused.value.code == 7
         assert sim_of(dmc).room(Tuning).burns["BP"] == 0
         dmc.command("STA")
+
+
+def test_ed_reads_no_error_until_a_program_fails_and_again_after_a_reset() -> None:
+    # ED: "_ED0 returns 0 if no error has occurred. _ED1 returns -1 if no error has occurred."
+    sim = SimController("DMC-4040")
+    assert (number(sim, "_ED"), number(sim, "_ED1")) == (0, -1)
+    sim = in_a_thread("KPA=-1")
+    assert (number(sim, "_ED"), number(sim, "_ED1"), error_code(sim)) == (1, 1, 6)
+    assert ask(sim, "RS") == ":"
+    sim.advance(0.02)
+    assert (number(sim, "_ED"), number(sim, "_ED1")) == (0, -1)
+
+
+@pytest.mark.parametrize("cmderr", [False, True])
+def test_an_error_without_cmderr_stops_every_thread_and_with_it_only_its_own(
+    cmderr: bool,
+) -> None:
+    # #CMDERR: "Without #CMDERR defined, if an error (see TC command) occurs in an application
+    # program ..., the program (and all threads) will stop"; "the thread that has an error will
+    # be halted ... Thread 0 will be interrupted to run the #CMDERR routine but other threads
+    # will continue to run".
+    sim = SimController("DMC-4040")
+    routine = "\r#CMDERR\rEN 1" if cmderr else ""  # (EN 1: thread 0 waits on)
+    assert ask(sim, f"DL\r#W\rWT 1000\rEN\r#F\rKPA=-1\rEN{routine}\r\\") == "::"
+    assert ask(sim, "XQ #W,0;XQ #W,1;XQ #F,2") == ":::"
+    sim.advance(0.02)
+    assert [number(sim, f"_XQ{t}") for t in range(3)] == ([1, 1, -1] if cmderr else [-1] * 3)
+    assert (number(sim, "_ED"), number(sim, "_ED1")) == (4, 2)
