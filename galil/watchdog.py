@@ -23,6 +23,7 @@ from galil.errors import GalilConnectionError, GalilError, InvalidArgument
 from galil.link import CommandLink, Link, check_seconds
 from galil.models import INT32_MAX
 from galil.protocol import commands as cmds
+from galil.protocol.numbers import read_one
 from galil.routines import Routine, Routines
 
 __all__ = ["LABEL", "Watchdog", "watchdog_routine"]
@@ -73,6 +74,8 @@ class Watchdog:
         self._stop = threading.Event()
         self._beater: threading.Thread | None = None
         self._beat = cmds.stamp(BEAT)
+        self._ask = cmds.mg_operand(f"_XQ{thread}")  # (on the beat's line: the routine runs?)
+        self._lost = False
 
     def start(self) -> Watchdog:
         """Install the routine, stamp the first heartbeat, run it, and keep beating.
@@ -110,12 +113,32 @@ class Watchdog:
     def _run(self) -> None:
         while not self._stop.wait(self.interval):
             try:
-                self._link.command_line([self._beat])
+                replies = self._link.command_line([self._beat, self._ask])
             except GalilConnectionError:
                 if not self._link.is_open:
                     return  # closed for good
             except GalilError as exc:  # a timeout or a refusal: the next beat tries again
                 _LOG.debug("watchdog heartbeat failed: %s", exc)
+            else:
+                self._check_running(replies[-1])
+
+    def _check_running(self, xq: str) -> None:
+        """Say once, at WARNING, that the routine no longer runs while the host still beats:
+        a program error without ``#CMDERR`` stops every thread, and so do an ``HX`` or ``AB``
+        sent raw or by another host; nothing guards the motion then."""
+        try:
+            running = round(read_one(xq)) >= 0
+        except GalilError:
+            return
+        if not running and not self._lost and not self._stop.is_set():
+            _LOG.warning(
+                "galil watchdog: the routine %s no longer runs on thread %d (a program error "
+                "stops every thread; an HX or AB too): motion is not guarded; start a new "
+                "watchdog (controller.watchdog(...)) to guard it again",
+                LABEL,
+                self.thread,
+            )
+        self._lost = not running
 
     def stop(self) -> None:
         """Stop beating and halt the routine (the axes are left as they are); idempotent."""

@@ -116,3 +116,25 @@ def test_killing_the_host_mid_jog_stops_the_axis_within_the_timeout(
         assert observer.A.stop_code[0] == 4
         assert observer.query_number("MG gwfire") == 1
     assert stopped <= timeout + decel + 0.15
+
+
+def test_a_program_error_that_stops_the_routine_is_said_while_the_host_beats_on(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # Without #CMDERR a program error stops every thread, the watchdog's too: the host's
+    # heartbeat would go on guarding nothing, unsaid.
+    with caplog.at_level("WARNING", logger="galil.watchdog"), simulated() as dmc:
+        dmc.programs.download("#BAD\nWT 5\nKPA=-1\nEN\n")
+        dog = dmc.watchdog(0.5)
+        dmc.programs.run("#BAD")
+        with pytest.raises(galil.ProgramError):
+            dmc.programs.wait()
+        assert not dog.running
+        deadline = time.monotonic() + 10.0  # (the heartbeat thread runs in real time)
+        while time.monotonic() < deadline and not caplog.records:
+            time.sleep(0.01)
+        (record,) = [r for r in caplog.records if "no longer runs" in r.getMessage()]
+        assert "thread 7" in record.getMessage()
+        time.sleep(dog.interval * 3)  # more beats: said once
+        assert len([r for r in caplog.records if "no longer runs" in r.getMessage()]) == 1
+        assert dmc.watchdog(0.5).running  # a new one guards again
