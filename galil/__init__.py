@@ -19,6 +19,7 @@ from galil.errors import (
     MotionError,
     ProtocolError,
     ScheduleError,
+    UnknownVariableError,
 )
 from galil.homing import Homed, Switches, SwitchPolarity
 from galil.io import IO
@@ -74,6 +75,7 @@ __all__ = [
     "ScheduleError",
     "SwitchPolarity",
     "Switches",
+    "UnknownVariableError",
     "VectorHandle",
     "VectorPlan",
     "__version__",

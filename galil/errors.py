@@ -5,6 +5,7 @@ mixes in the stdlib type a caller would naturally catch::
 
     GalilError
     ├── CommandError          the controller answered '?'; carries code, text, command
+    │   └── UnknownVariableError  (also KeyError) no variable of that name on the controller
     ├── ProtocolError         the peer sent bytes we cannot make sense of
     ├── GalilTimeoutError     (also TimeoutError) no reply in time
     ├── GalilConnectionError  (also ConnectionError) the link is closed or dead
@@ -35,6 +36,7 @@ __all__ = [
     "MotionError",
     "ProtocolError",
     "ScheduleError",
+    "UnknownVariableError",
 ]
 
 
@@ -99,6 +101,31 @@ class CommandError(GalilError):
             tail = "\n  ".join(self.recent[-8:])
             text = f"{text}\n recent exchanges (oldest first):\n  {tail}"
         return text
+
+
+class UnknownVariableError(CommandError, KeyError):
+    """The controller has no variable of that name (reading it was TC 1, "Unrecognized
+    command"); also a :class:`KeyError`, so ``controller.variables`` is a mapping
+    (``variables.get("x")``, ``variables.pop("x", None)``).
+
+    Attributes:
+        name: the variable's name.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        name: str,
+        code: int | None,
+        text: str,
+        command: str,
+        model: str | None = None,
+        recent: Sequence[str] = (),
+    ) -> None:
+        super().__init__(code, text, command, model=model, recent=recent)
+        self.args = (message,)
+        self.name = name
 
 
 class ProtocolError(GalilError):
