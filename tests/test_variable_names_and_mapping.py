@@ -164,6 +164,8 @@ def test_async_names_and_deletion_agree_with_the_sync_ones() -> None:
                 await c.variables["data"]
             with pytest.raises(galil.UnknownVariableError):
                 await c.variables.delete("data")
+            await c.variables.clear()
+            assert await c.variables.list() == {}
 
     asyncio.run(asyncio.wait_for(body(), 30))
 

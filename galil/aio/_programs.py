@@ -96,6 +96,7 @@ class AsyncVariables(Room[Variables]):
     read = twin(Variables.read)
     write = twin(Variables.write)
     delete = twin(Variables.delete)
+    clear = twin(Variables.clear)
     list = twin(Variables.list)
 
     def __getitem__(self, name: str) -> Awaitable[float]:
