@@ -20,6 +20,7 @@ from galil.errors import (
     ProgramError,
     ProtocolError,
     ScheduleError,
+    UnknownVariableError,
 )
 from galil.homing import Homed, Switches, SwitchPolarity
 from galil.io import IO
@@ -76,6 +77,7 @@ __all__ = [
     "ScheduleError",
     "SwitchPolarity",
     "Switches",
+    "UnknownVariableError",
     "VectorHandle",
     "VectorPlan",
     "__version__",

@@ -2,8 +2,9 @@
 
 Arrays are dimensioned with ``DM``, filled from the host with ``QD``, read back with ``QU``
 (as numpy arrays), listed with ``LA`` and freed with ``DA``; variables are read with ``MG``,
-written with an assignment and listed with ``LV``. Names follow the controller's rules (a
-letter, then up to seven letters or digits, never a command such as ``CD0``) and sizes the
+written with an assignment, listed with ``LV`` and freed with ``DA``. Names follow the
+controller's rules (a letter, then up to seven letters or digits, case-sensitive; never an
+upper-case command such as ``CD0``, while ``data`` is a name: decision 0060) and sizes the
 model's array space; both are checked before a byte is sent. Values are the controller's
 numbers: 32-bit with four decimals (1/65536 resolution)::
 
@@ -11,29 +12,41 @@ numbers: 32-bit with four decimals (1/65536 resolution)::
     dmc.arrays.download("speeds", [1000, 2000, 4000, 8000])
     dmc.arrays.upload("speeds")          # array([1000., 2000., 4000., 8000.])
     dmc.variables["gain"] = 2.5
+    dmc.variables.get("offset", 0.0)     # a MutableMapping: get, pop, in, del, dict(...)
 """
 
 from __future__ import annotations
 
 import contextlib
 import re
-from collections.abc import Iterator
-from typing import Any
+from collections.abc import ItemsView, Iterator, KeysView, MutableMapping, ValuesView
 
 import numpy as np
 import numpy.typing as npt
 
-from galil.errors import CommandError, GalilError, InvalidArgument, LimitError, ProtocolError
+from galil.errors import (
+    CommandError,
+    GalilError,
+    InvalidArgument,
+    LimitError,
+    ProtocolError,
+    UnknownVariableError,
+)
 from galil.link import CommandLink, check_flag
 from galil.models import INT32_MAX, INT32_MIN
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import read_one
 
-__all__ = ["Arrays", "Variables"]
+__all__ = ["LIBRARY_VARIABLES", "Arrays", "Variables"]
 
 _LA_LINE = re.compile(r"\s*([A-Za-z][A-Za-z0-9]*)\s*\[\s*(\d+)\s*\]")
 _LV_LINE = re.compile(r"\s*([A-Za-z][A-Za-z0-9]*)\s*=\s*(\S+)")
 _UPLOAD_TIMEOUT = 10.0
+#: The variables the library's own routines read while they run (the watchdog's, a speed
+#: schedule's, ``io.wait_for_input``'s): freeing one would stop such a routine with an error
+#: (a watchdog would stop guarding, silently), so ``del`` refuses them and ``clear`` keeps them.
+LIBRARY_VARIABLES = frozenset({"gwbeat", "gwlimit", "gwfire", "gsbegin", "ginput", "ginlevel"})
+_DA_NAMES = 6  # names per DA line: 6 of 8 letters and commas stay within 80 characters
 
 
 def _values(values: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
@@ -222,11 +235,17 @@ class Arrays:
         return f"<Arrays of {self.link.model.name}>"
 
 
-class Variables:
-    """The controller's variables, like a dict: ``variables["x"]``, ``variables["x"] = 2``.
+class Variables(MutableMapping[str, float]):
+    """The controller's variables, a mapping of name to value: ``variables["x"]`` reads one
+    (``MG x``), ``variables["x"] = 2`` sets it, ``del variables["x"]`` frees it (``DA x``);
+    ``get``, ``pop``, ``in``, ``keys()``, ``items()`` and ``dict(variables)`` work as on a
+    dict. A name the controller does not have raises :class:`~galil.errors.UnknownVariableError`
+    (a ``CommandError`` and a ``KeyError``).
 
-    Reading the whole mapping (iteration, ``len``) lists them with ``LV``; one item is one
-    ``MG``.
+    Every access asks the controller: iteration, ``len``, ``in``, ``keys()``, ``items()`` and
+    ``values()`` list them with one ``LV`` (``items()`` and ``values()`` are that listing, not
+    live views); ``dict(variables)`` lists the names, then reads each with ``MG``:
+    :meth:`list` reads them all in one round trip.
 
     Args:
         link: the command link.
@@ -240,7 +259,7 @@ class Variables:
 
         Raises:
             InvalidArgument: a bad name.
-            CommandError: there is no such variable (TC 1).
+            UnknownVariableError: there is no such variable (TC 1); also a ``KeyError``.
         """
         cmds.variable_name(name)
         try:
@@ -250,11 +269,16 @@ class Variables:
                 raise
             # The link's hint (commands are upper case) misleads here: a variable's name is
             # the user's, in any case.
-            exc.args = (
+            raise UnknownVariableError(
                 f"there is no variable {name!r} on the controller (TC 1: {exc.text}); "
                 f"variables.list() names those there, variables.write({name!r}, value) makes it",
-            )
-            raise
+                name=name,
+                code=exc.code,
+                text=exc.text,
+                command=exc.command,
+                model=exc.model,
+                recent=exc.recent,
+            ) from None
 
     def write(self, name: str, value: float) -> None:
         """Set variable ``name`` (it is created if needed).
@@ -265,6 +289,23 @@ class Variables:
         """
         command = cmds.assign(name, value)
         _values([value], name)
+        self.link.command_line([command])
+
+    def delete(self, name: str) -> None:
+        """Free variable ``name`` (``DA name``); it is read first (``MG``), so a name the
+        controller does not have is said, not passed over.
+
+        Raises:
+            InvalidArgument: a bad name.
+            UnknownVariableError: there is no such variable; also a ``KeyError``.
+        """
+        command = cmds.da_variables(name)
+        if name in LIBRARY_VARIABLES:
+            raise InvalidArgument(
+                f"{name!r} is the library's own variable (its routines read it while they run: "
+                "the watchdog, a speed schedule, io.wait_for_input); it is not freed"
+            )
+        self.read(name)
         self.link.command_line([command])
 
     def list(self) -> dict[str, float]:
@@ -289,14 +330,36 @@ class Variables:
     def __setitem__(self, name: str, value: float) -> None:
         self.write(name, value)
 
+    def __delitem__(self, name: str) -> None:
+        self.delete(name)
+
     def __iter__(self) -> Iterator[str]:
         return iter(self.list())
 
     def __len__(self) -> int:
         return len(self.list())
 
-    def __contains__(self, name: Any) -> bool:
+    def __contains__(self, name: object) -> bool:
         return isinstance(name, str) and name in self.list()
+
+    def keys(self) -> KeysView[str]:
+        """The names, from one ``LV``."""
+        return self.list().keys()
+
+    def items(self) -> ItemsView[str, float]:
+        """The names and values, from one ``LV`` (not a live view)."""
+        return self.list().items()
+
+    def values(self) -> ValuesView[float]:
+        """The values, from one ``LV`` (not a live view)."""
+        return self.list().values()
+
+    def clear(self) -> None:
+        """Free every variable but the library's own (:data:`LIBRARY_VARIABLES`), listed with
+        ``LV``, with ``DA`` (a few names a line)."""
+        names = [n for n in self.list() if n not in LIBRARY_VARIABLES]
+        for i in range(0, len(names), _DA_NAMES):
+            self.link.command_line([cmds.da_variables(*names[i : i + _DA_NAMES])])
 
     def __repr__(self) -> str:
         return f"<Variables of {self.link.model.name}>"

@@ -5,7 +5,8 @@ mixes in the stdlib type a caller would naturally catch::
 
     GalilError
     ├── CommandError          the controller answered '?'; carries code, text, command
-    │   └── ProgramError      a program thread stopped on an error (code, line, its text)
+    │   ├── ProgramError      a program thread stopped on an error (code, line, its text)
+    │   └── UnknownVariableError  (also KeyError) no variable of that name on the controller
     ├── ProtocolError         the peer sent bytes we cannot make sense of
     ├── GalilTimeoutError     (also TimeoutError) no reply in time
     ├── GalilConnectionError  (also ConnectionError) the link is closed or dead
@@ -37,6 +38,7 @@ __all__ = [
     "ProgramError",
     "ProtocolError",
     "ScheduleError",
+    "UnknownVariableError",
 ]
 
 
@@ -145,6 +147,31 @@ class ProgramError(CommandError):
         self.line = line
         self.thread = thread
         self.waited = waited
+
+
+class UnknownVariableError(CommandError, KeyError):
+    """The controller has no variable of that name (reading it was TC 1, "Unrecognized
+    command"); also a :class:`KeyError`, so ``controller.variables`` is a mapping
+    (``variables.get("x")``, ``variables.pop("x", None)``).
+
+    Attributes:
+        name: the variable's name.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        name: str,
+        code: int | None,
+        text: str,
+        command: str,
+        model: str | None = None,
+        recent: Sequence[str] = (),
+    ) -> None:
+        super().__init__(code, text, command, model=model, recent=recent)
+        self.args = (message,)
+        self.name = name
 
 
 class ProtocolError(GalilError):

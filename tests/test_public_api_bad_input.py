@@ -350,6 +350,7 @@ ENTRIES: list[Entry] = [
     E("arrays", "upload", {"name": "arr", "first": None, "last": None}),
     E("variables", "read", {"name": "v"}),
     E("variables", "write", {"name": "v", "value": 2.0}),
+    E("variables", "delete", {"name": "v"}),
     E("variables", "__getitem__", {"key": "v"}, kind="getitem"),
     E("variables", "__setitem__", {"key": "v", "value": 2.0}, kind="setitem"),
     E("interrupts", "enable", {"axes": "", "all_done": False}, tcp=True),
@@ -397,6 +398,13 @@ SKIPPED: dict[tuple[str, str], str] = {
     ("profile", "planned"): "a constructor of the predictor (pure; no link)",
     ("profile", "recast"): "a constructor of the predictor (pure; no link)",
     ("multi profile", "get"): "Mapping.get: any key is a legitimate lookup",
+    **{
+        ("variables", n): f"MutableMapping.{n}: the name goes through __getitem__ (fuzzed), and"
+        " __delitem__ / __setitem__ (delete, write: fuzzed)"
+        for n in ("get", "pop", "setdefault")
+    },
+    ("variables", "update"): "MutableMapping.update: each item goes through __setitem__ (fuzzed);"
+    " what is not a mapping or pairs is refused as dict.update refuses it",
 }
 
 

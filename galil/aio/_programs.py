@@ -89,10 +89,15 @@ class AsyncArrays(Room[Arrays]):
 
 class AsyncVariables(Room[Variables]):
     """The controller's variables, awaited: ``await variables["x"]`` reads one (``MG x``),
-    ``await variables.write("x", 2)`` sets it (sync: ``variables["x"] = 2``)."""
+    ``await variables.write("x", 2)`` sets it (sync: ``variables["x"] = 2``),
+    ``await variables.delete("x")`` frees it (sync: ``del variables["x"]``). A missing name
+    raises :class:`~galil.errors.UnknownVariableError` (a ``KeyError`` too). Not a mapping:
+    its reads are awaited; ``await variables.list()`` is the dict."""
 
     read = twin(Variables.read)
     write = twin(Variables.write)
+    delete = twin(Variables.delete)
+    clear = twin(Variables.clear)
     list = twin(Variables.list)
 
     def __getitem__(self, name: str) -> Awaitable[float]:

@@ -63,6 +63,7 @@ __all__ = [
     "cs",
     "cw",
     "da",
+    "da_variables",
     "dc",
     "de",
     "dl",
@@ -254,8 +255,9 @@ _TIME = Command("MG TIME" + READ_FORMAT, _LINE)
 
 
 # Two-letter mnemonics of the firmware (40x0/18x2/2x00 command references). A variable whose
-# name starts with one of these followed only by digits or axis letters (``CD0``, ``SPA``)
-# would be parsed as that command, so such names are refused.
+# name starts with one of these, in upper case, followed only by digits or axis letters
+# (``CD0``, ``SPA``) would be parsed as that command, so such names are refused. Commands are
+# upper case and names case-sensitive, so ``data`` or ``ta0`` is no command (decision 0060).
 _MNEMONICS = """
     AB AC AD AE AF AG AI AL AM AO AP AQ AR AS AT AU AV AW AZ BA BB BC BD BG BI BK BL BM BN BO
     BP BQ BR BS BV BW BX BZ CA CB CC CD CE CF CI CM CN CO CR CS CW DA DC DE DF DH DL DM DP DR DS
@@ -1305,19 +1307,23 @@ def _variable_name(name: str, what: str = "variable") -> str:
             f"{what} name {name!r}: a letter then up to "
             f"{_DEFAULT_NAMES.variable_length - 1} letters or digits"
         )
-    upper = name.upper()
-    rest = upper[2:]
     # "SPA" or "CD0" would parse as a command; "SPEEDZ" repeats letters, so it cannot be an
-    # axis list and the firmware reads it as a name.
+    # axis list and the firmware reads it as a name. A command is two upper-case letters
+    # ("data", "Data" are names), what follows it is compared in any case ("SPa" is refused:
+    # whether the firmware takes a lower-case axis letter is not documented).
+    head, rest = name[:2], name[2:].upper()
     looks_like_args = (
         not rest
         or rest.isdigit()
         or (_AXIS_SUFFIX.fullmatch(rest) is not None and len(set(rest)) == len(rest))
     )
-    if upper in _KEYWORDS or (upper[:2] in COMMAND_NAMES and looks_like_args):
+    if name in _KEYWORDS:
+        raise InvalidArgument(f"{what} name {name!r} is the controller's keyword {name}")
+    if head in COMMAND_NAMES and looks_like_args:
         raise InvalidArgument(
-            f"{what} name {name!r} clashes with the command {upper[:2]} "
-            f"(the controller would read {name}= as that command)"
+            f"{what} name {name!r} clashes with the command {head} "
+            f"(the controller would read {name}= as that command; "
+            f"a lower-case name such as {name.lower()!r} is not one)"
         )
     return name
 
@@ -1427,7 +1433,8 @@ def qd(name: str, values: Sequence[float], first: int | None = None) -> Command:
 
 def variable_name(name: str) -> str:
     """``name`` if it is a valid variable name (letter, up to 7 more letters or digits, no
-    clash with a command such as ``CD0``), else :class:`InvalidArgument`."""
+    clash with an upper-case command such as ``CD0``: ``data`` is a name, ``DA`` is not),
+    else :class:`InvalidArgument`."""
     return _variable_name(name)
 
 
@@ -1456,6 +1463,14 @@ def da(*names: str) -> Command:
     if not names:
         raise InvalidArgument("DA needs at least one array name")
     return Command("DA " + ",".join(f"{_variable_name(n, 'array')}[]" for n in names))
+
+
+def da_variables(*names: str) -> Command:
+    """DA: deallocate variables (``da_variables("gain")`` -> ``DA gain``; the DMC-4103
+    reference: "str - Defined variable name")."""
+    if not names:
+        raise InvalidArgument("DA needs at least one variable name")
+    return Command("DA " + ",".join(_variable_name(n) for n in names))
 
 
 def la() -> Command:

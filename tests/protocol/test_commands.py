@@ -103,6 +103,11 @@ GOLDEN: list[tuple[Callable[[], Command], bytes, ReplyKind]] = [
     (lambda: c.assign("speed2", 1.5), b"speed2=1.5\r", ReplyKind.ACK),
     (lambda: c.assign("SPEEDZ", -3), b"SPEEDZ=-3\r", ReplyKind.ACK),
     (lambda: c.assign("posx", 0), b"posx=0\r", ReplyKind.ACK),
+    # lower case is never a command (decision 0060): the reference's own "date", "ta0"
+    (lambda: c.assign("date", 8), b"date=8\r", ReplyKind.ACK),
+    (lambda: c.assign("ta0", 0), b"ta0=0\r", ReplyKind.ACK),
+    (lambda: c.assign("pr", 1), b"pr=1\r", ReplyKind.ACK),
+    (lambda: c.da_variables("gain", "data"), b"DA gain,data\r", ReplyKind.ACK),
 ]
 
 
@@ -195,7 +200,10 @@ REFUSALS: list[tuple[Callable[[], object], type[Exception]]] = [
     (lambda: c.assign("_TPA", 1), InvalidArgument),
     (lambda: c.assign("CD0", 1), InvalidArgument),
     (lambda: c.assign("SPA", 1), InvalidArgument),
-    (lambda: c.assign("pr", 1), InvalidArgument),
+    (lambda: c.assign("PR", 1), InvalidArgument),
+    (lambda: c.assign("DATA", 1), InvalidArgument),
+    (lambda: c.da_variables(), InvalidArgument),
+    (lambda: c.da_variables("CD0"), InvalidArgument),
     (lambda: c.assign("BGAB", 1), InvalidArgument),
     (lambda: c.assign("ELSE", 1), InvalidArgument),
     (lambda: c.assign("vär", 1), InvalidArgument),
