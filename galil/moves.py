@@ -663,6 +663,8 @@ def increment(
     Raises:
         InvalidArgument: a reversal of a move in progress, an axis stopping, or one in a
             vector sequence or homing (the controller: TC 29, TC 16).
+        CommandError: TC 16, a reversal of a move the library did not start, at its target in
+            its last samples (nothing the library reads shows its direction then).
         LimitError: the new target (or a jog's step) beyond a soft limit or the 32-bit range,
             for the axis or one geared to it; a jog's step too large for one sample.
         MotionError: a limit stopped an axis geared to ``letter`` during a move nobody waited
@@ -711,7 +713,7 @@ def _increment(
         _check_step(link, a, counts)
         _check_geared_speed(link, gears, counts / link.sample_period)
     else:
-        _check_same_direction(link, a, counts, round(pa) - round(rp))
+        _check_same_direction(link, a, counts, round(pa), round(rp), track)
     end = round(rp if jogging else pa) + counts
     what = "steps the jog's reference to" if jogging else "moves the target of the move to"
     _check_reach(link, a, counts, end, (bl, fl), what)
@@ -747,12 +749,22 @@ def _check_followers_reach(
             raise
 
 
-def _check_same_direction(link: CommandLink, a: str, counts: int, remaining: int) -> None:
-    """Refuse an IP against the direction of the move in progress (the controller: TC 16)."""
-    if counts and remaining and (counts > 0) != (remaining > 0):
+def _check_same_direction(
+    link: CommandLink, a: str, counts: int, pa: int, rp: int, track: Track | None
+) -> None:
+    """Refuse an IP against the direction of the move in progress (the controller: TC 16).
+
+    At its target the move still runs for its last samples (``_BG`` 1, ``_RP`` = ``_PA``)
+    and the controller still refuses a reversal (its profiler's velocity says which way):
+    the library's own move heads from its start to its target. (A move it did not start
+    shows no direction then: the controller's TC 16 is the answer.)"""
+    remaining = pa - rp
+    heading = pa - track.start if not remaining and track is not None else remaining
+    if counts and heading and (counts > 0) != (heading > 0):
+        left = f"{remaining:+d} counts to go" if remaining else "at its target, ending"
         raise InvalidArgument(
-            f"IP {counts} would reverse the move in progress on {a} "
-            f"({remaining:+d} counts to go); the controller refuses it (TC 16)",
+            f"IP {counts} would reverse the move in progress on {a} ({left}); the controller "
+            "refuses it (TC 16)",
             model=link.model.name,
         )
 

@@ -270,6 +270,14 @@ class OperationSequences(RuleBasedStateMachine):
             limited = exc
         except GalilTimeoutError:
             result = None
+        self.judge_wait(run, result, limited)
+
+    def judge_wait(
+        self, run: Running, result: MoveResult | None, limited: MotionError | None
+    ) -> None:
+        """What a wait for ``run`` came to: its result, the ``MotionError`` of a limit, or
+        neither (it timed out)."""
+        h = run.handle
         if limited is not None:
             assert set(limited.stop_codes.values()) & {2, 3}, limited
             if run in self.running:
@@ -403,7 +411,7 @@ class OperationSequences(RuleBasedStateMachine):
         by_controller: CommandError | None = None
         try:
             with self.refusable(InvalidArgument) as refused:
-                setattr(self.dmc.axes[a], what, value)
+                self.write_setting(a, what, value)
         except CommandError as exc:
             by_controller = exc
         if refused and motor_on and "motor off" in str(refused[0]):
@@ -429,6 +437,9 @@ class OperationSequences(RuleBasedStateMachine):
             moving = self.dmc.query_operands([f"_BG{a}"])[0]
             assert not moving or not self._free(a), f"{what} taken while {a} moves"
             assert getattr(self.dmc.axes[a], what) == value, (a, what, value)
+
+    def write_setting(self, a: str, what: str, value: float) -> None:
+        setattr(self.dmc.axes[a], what, value)
 
     def _followed(self, a: str) -> Track | None:
         """The library's track of the motion on ``a`` when it predicts it to the count (a
