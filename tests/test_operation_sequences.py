@@ -554,8 +554,15 @@ class OperationSequences(RuleBasedStateMachine):
 
     @rule(a=axis_st, n=st.sampled_from([-2000, -3, 5, 1500]))
     def increment(self, a: str, n: int) -> None:
-        with self.refusable(InvalidArgument, MotionError):
-            self.started(self.dmc.axes[a].increment(n), False)
+        refused: CommandError | None = None
+        try:
+            with self.refusable(InvalidArgument, MotionError):
+                self.started(self.dmc.axes[a].increment(n), False)
+        except CommandError as exc:  # documented: a reversal of the program's move (TC 16)
+            refused = exc
+        if refused is not None:
+            assert not self._free(a), refused
+            assert refused.code == 16, refused
 
     @rule(a=axis_st, sign=st.sampled_from([-1, 1]), wait=st.booleans())
     def speed_schedule(self, a: str, sign: int, wait: bool) -> None:
