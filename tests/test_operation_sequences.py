@@ -261,6 +261,7 @@ class OperationSequences(RuleBasedStateMachine):
         h = run.handle
         timeout = 5.0 if math.isinf(h.duration) else None
         limited: MotionError | None = None
+        result: MoveResult | None = None
         try:
             with warnings.catch_warnings():
                 if run.unpredictable:  # (not the library's doing)
@@ -269,7 +270,7 @@ class OperationSequences(RuleBasedStateMachine):
         except MotionError as exc:  # a limit stopped it (or a follower of it)
             limited = exc
         except GalilTimeoutError:
-            result = None
+            pass
         self.judge_wait(run, result, limited)
 
     def judge_wait(

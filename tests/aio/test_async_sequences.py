@@ -71,7 +71,7 @@ from galil.errors import (
 )
 from galil.motion import MoveHandle, MoveResult
 from galil.sim.rooms.contour import Contour as SimContour
-from galil.testing import sim_of
+from galil.testing import sim_of, transcript
 
 T = TypeVar("T")
 
@@ -168,9 +168,10 @@ class AsyncSequences(RuleBasedStateMachine):
         before = {a: self.dmc.tracker.active(a) for a in AXES}
         self.owned, self.outcomes = [], []
         try:
-            return self.run(self._act(body, how, n))
+            with transcript(self.dmc) as sent:
+                return self.run(self._act(body, how, n))
         except _CancelledError:
-            self.after_cancel(before)
+            self.after_cancel(before, f"{how} at {n}, sent {sent.lines}")
             raise
         finally:
             outcomes, self.outcomes = self.outcomes, []
@@ -217,7 +218,7 @@ class AsyncSequences(RuleBasedStateMachine):
             assert task.cancelled(), (how, n, task.exception() or task.result())
         raise _CancelledError
 
-    def after_cancel(self, before: dict[str, MoveHandle | None]) -> None:
+    def after_cancel(self, before: dict[str, MoveHandle | None], step: str) -> None:
         """A cancelled awaitable stopped every motion it started or awaited: each of its
         axes is at rest or stopping now, and is to be at rest by ``STOP_TIME``."""
         owned = {id(h): h for h in self.owned}
@@ -239,7 +240,9 @@ class AsyncSequences(RuleBasedStateMachine):
                 continue
             values = self.dmc.query_operands([f"_{op}{a}" for a in axes for op in ("BG", "SC")])
             for a, bg, sc in zip(axes, values[0::2], values[1::2], strict=True):
-                assert not bg or round(sc) not in _RUNNING_CODES, f"{h} runs on: {a} SC {sc:g}"
+                assert not bg or round(sc) not in _RUNNING_CODES, (
+                    f"{h} runs on: {a} SC {sc:g}; {step}"
+                )
             self.stopping.append((axes, h, now + STOP_TIME))
 
     def record(self, handle: aio.AsyncMoveHandle) -> Running:
