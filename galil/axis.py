@@ -606,6 +606,8 @@ class Axis(AxisGearing, AxisPosition):
 
         Raises:
             InvalidArgument: wrong units, a reversal, an axis stopping, homing, contour or vector.
+            CommandError: TC 16, a reversal of a move the library did not start (a program's)
+                in its last samples, at its target: nothing shows its direction then.
         """
         counts = round(self.distance_counts(n, "increment"))
         with user_units({self.letter: self}):

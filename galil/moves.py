@@ -667,6 +667,8 @@ def increment(
     Raises:
         InvalidArgument: a reversal of a move in progress, an axis stopping, or one in a
             vector sequence or homing (the controller: TC 29, TC 16).
+        CommandError: TC 16, a reversal of a move the library did not start, at its target in
+            its last samples (nothing the library reads shows its direction then).
         LimitError: the new target (or a jog's step) beyond a soft limit or the 32-bit range,
             for the axis or one geared to it; a jog's step too large for one sample.
         MotionError: a limit stopped an axis geared to ``letter`` during a move nobody waited

@@ -261,6 +261,7 @@ class OperationSequences(RuleBasedStateMachine):
         h = run.handle
         timeout = 5.0 if math.isinf(h.duration) else None
         limited: MotionError | None = None
+        result: MoveResult | None = None
         try:
             with warnings.catch_warnings():
                 if run.unpredictable:  # (not the library's doing)
@@ -269,7 +270,15 @@ class OperationSequences(RuleBasedStateMachine):
         except MotionError as exc:  # a limit stopped it (or a follower of it)
             limited = exc
         except GalilTimeoutError:
-            result = None
+            pass
+        self.judge_wait(run, result, limited)
+
+    def judge_wait(
+        self, run: Running, result: MoveResult | None, limited: MotionError | None
+    ) -> None:
+        """What a wait for ``run`` came to: its result, the ``MotionError`` of a limit, or
+        neither (it timed out)."""
+        h = run.handle
         if limited is not None:
             assert set(limited.stop_codes.values()) & {2, 3}, limited
             if run in self.running:
@@ -403,7 +412,7 @@ class OperationSequences(RuleBasedStateMachine):
         by_controller: CommandError | None = None
         try:
             with self.refusable(InvalidArgument) as refused:
-                setattr(self.dmc.axes[a], what, value)
+                self.write_setting(a, what, value)
         except CommandError as exc:
             by_controller = exc
         if refused and motor_on and "motor off" in str(refused[0]):
@@ -429,6 +438,9 @@ class OperationSequences(RuleBasedStateMachine):
             moving = self.dmc.query_operands([f"_BG{a}"])[0]
             assert not moving or not self._free(a), f"{what} taken while {a} moves"
             assert getattr(self.dmc.axes[a], what) == value, (a, what, value)
+
+    def write_setting(self, a: str, what: str, value: float) -> None:
+        setattr(self.dmc.axes[a], what, value)
 
     def _followed(self, a: str) -> Track | None:
         """The library's track of the motion on ``a`` when it predicts it to the count (a
@@ -543,8 +555,15 @@ class OperationSequences(RuleBasedStateMachine):
 
     @rule(a=axis_st, n=st.sampled_from([-2000, -3, 5, 1500]))
     def increment(self, a: str, n: int) -> None:
-        with self.refusable(InvalidArgument, MotionError):
-            self.started(self.dmc.axes[a].increment(n), False)
+        refused: CommandError | None = None
+        try:
+            with self.refusable(InvalidArgument, MotionError):
+                self.started(self.dmc.axes[a].increment(n), False)
+        except CommandError as exc:  # documented: a reversal of the program's move (TC 16)
+            refused = exc
+        if refused is not None:
+            assert not self._free(a), refused
+            assert refused.code == 16, refused
 
     @rule(a=axis_st, sign=st.sampled_from([-1, 1]), wait=st.booleans())
     def speed_schedule(self, a: str, sign: int, wait: bool) -> None:

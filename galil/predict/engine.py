@@ -825,11 +825,11 @@ class AxisProfiler:
             return
         if self.mode == "contour":
             self._finish_contour(51 if code == 4 else code)
-            return
-        if self._stopping:
-            return
-        x, v0 = self._state()
-        self._set_plan(plan_stop(x, v0, self._d), stopping=True, code=code)
+        elif not self._stopping:
+            x, v0 = self._state()
+            self._set_plan(plan_stop(x, v0, self._d), stopping=True, code=code)
+        elif self.stop_code == 0:  # a homing's own ramp down (it runs on): ST or a limit ends it
+            self.stop_code = self._end_code = code
 
     def abort(self) -> None:
         """AB: stop at once where the reference is now (stop code 7); smoothing is dropped."""

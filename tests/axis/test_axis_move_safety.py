@@ -269,3 +269,22 @@ def test_a_speed_schedule_towards_an_active_limit_switch_is_refused_before_sendi
     with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="TC 22"):
         dmc.C.speed_schedule(-12_000, [(4000, 8000)], speed=15_000)
     assert dmc.C.speed_schedule(2000, [(1000, 3000)], speed=5000).wait().final == {"C": 1500}
+
+
+def test_a_reversing_increment_in_a_moves_last_samples_is_refused_before_sending(
+    dmc: galil.Controller,
+) -> None:
+    """At its target (``_RP`` = ``_PA``) a move still runs for a sample or two (``_BG`` 1) and
+    the controller still refuses an IP against its direction (TC 16); one the same way is
+    taken. (The remaining distance, 0 then, showed no direction: the IP went out.)"""
+    handle = dmc.D.move_by(700)
+    while True:
+        pa, rp, bg = dmc.query_operands(["_PAD", "_RPD", "_BGD"])
+        if pa == rp:
+            break
+        dmc.sleep(0.001)
+    assert bg == 1
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="ending"):
+        dmc.D.increment(-2000)
+    assert dmc.D.increment(300) is handle
+    assert handle.wait().final == {"D": 1000}

@@ -145,6 +145,29 @@ def test_st_ends_a_homing_sequence_with_stop_code_4() -> None:
     assert not sim.room(Homing).runs
 
 
+@pytest.mark.parametrize("stop", ["STA", "limit"])
+def test_st_or_a_limit_in_the_ramp_down_past_the_home_switch_ends_the_sequence(stop: str) -> None:
+    """HM's first stage ramps down past the switch's edge (``_SC`` 0: the sequence runs on);
+    an ST, or a limit switch, then took no effect (the ramp was already a stop) and the next
+    stage began: the axis turned back at HV and homed (SC 10)."""
+    sim = SimController("DMC-4040", servo_lag=0.0)
+    sim.set_home_switch("A", edge=-3000, index_period=2000)
+    ask(sim, "HMA;BGA")
+    while number(sim, "_RPA") > -3000:  # the first stage runs to the edge
+        sim.advance(0.005)
+    assert (number(sim, "_BGA"), number(sim, "_SCA")) == (1, 0)  # ramping down, running on
+    if stop == "STA":
+        ask(sim, "STA")
+    else:
+        sim.place_limit_switches("A", reverse=sim.machine_position("A") + 10)
+    assert number(sim, "_SCA") == (4 if stop == "STA" else 3)
+    past = number(sim, "_RPA")
+    run_until_idle(sim)
+    assert number(sim, "_SCA") == (4 if stop == "STA" else 3)
+    assert number(sim, "_RPA") < past  # it never turned back
+    assert not sim.room(Homing).runs
+
+
 def test_refusals_change_nothing() -> None:
     sim = SimController("DMC-4040")
     assert ask(sim, "HVA=0;HMA;BGA") == "::?"
