@@ -49,6 +49,7 @@ from galil.units import (
     is_quantity,
     rate_magnitude_counts,
     signed_rate_counts,
+    state_in_units,
 )
 
 __all__ = [
@@ -204,6 +205,7 @@ class AxisGearing:
     letter: str
     _link: CommandLink
     _tracker: MotionTracker
+    _scale: Scale | None
 
     @property
     def _display(self) -> Display | None:
@@ -214,7 +216,10 @@ class AxisGearing:
         its commanded position, ``GR``); its moves then predict this axis too. See
         :mod:`galil.gearing`."""
         name = master.letter if isinstance(master, Axis) else master
-        return gear_to(self._link, self._tracker, self.letter, name, ratio, display=self._display)
+        return gear_to(
+            self._link, self._tracker, self.letter, name, ratio,
+            display=self._display, scale=self._scale,
+        )  # fmt: skip
 
     def gear_off(self) -> None:
         """Turn off this axis's gearing (``GR 0``; it stays where it is), whoever set it up:
@@ -267,8 +272,8 @@ class AxisPosition:
         if scale is not None and type(position) is int and position == 0:
             position = 0 * scale.unit  # (the default: 0 in the axis's units)
         counts = round(self.position_counts(position, "position"))
-        check_int32("DP", counts, self.letter, self._link.model.name)
         with user_units({self.letter: self}):
+            check_int32("DP", counts, self.letter, self._link.model.name)
             self._homing.define(counts, bool(shift_limits))
 
 
@@ -328,13 +333,13 @@ class Axis(AxisGearing, AxisPosition):
         """A position in this axis's units (or counts) as counts."""
         if self._scale is not None:
             return self._scale.position_to_counts(value, what)
-        return counts_or_plain(value, what)
+        return counts_or_plain(value, what, self.letter)
 
     def distance_counts(self, value: object, what: str = "distance") -> float:
         """A distance in this axis's units (or counts) as counts."""
         if self._scale is not None:
             return self._scale.distance_to_counts(value, what)
-        return counts_or_plain(value, what)
+        return counts_or_plain(value, what, self.letter)
 
     def rate_counts(self, value: object, power: int, what: str) -> float:
         """A speed (power 1) or acceleration (power 2) magnitude as counts/s^power.
@@ -431,13 +436,7 @@ class Axis(AxisGearing, AxisPosition):
             tm = tm_of(self._link.sample_period)  # the TM in force: SP/AC steps
             return predict.check_parameter(cmd, counts, self._link.model, axis=self.letter, tm=tm)
         except LimitError as exc:
-            scale = self._scale
-            if scale is not None and exc.value is not None and exc.limit is not None:
-                power = _POWER.get(cmd, 1)
-                value = abs(scale.counts_to_rate(exc.value, power))
-                limit = abs(scale.counts_to_rate(exc.limit, power))
-                exc.value_in_units, exc.limit_in_units = value, limit
-                exc.args = (f"{exc.args[0]} (in user units: {value:~.6g}, limit {limit:~.6g})",)
+            state_in_units(exc, self._scale, _KIND[_POWER.get(cmd, 1)])
             raise
 
     def _set_param(self, cmd: str, counts: float) -> None:
@@ -594,7 +593,8 @@ class Axis(AxisGearing, AxisPosition):
             LimitError: a speed beyond the model's range.
         """
         v = self.check_parameter("JG", self.signed_rate_counts(speed, 1, "jog speed"))
-        return jog(self._link, self._tracker, self.letter, v, display=self._display)
+        with user_units({self.letter: self}):  # (a start beyond FL/BL: in its unit)
+            return jog(self._link, self._tracker, self.letter, v, display=self._display)
 
     def increment(self, n: Any) -> MoveHandle:
         """Increment the position by ``n`` (``IP``).
@@ -697,16 +697,20 @@ class Axis(AxisGearing, AxisPosition):
         Raises:
             InvalidArgument: moving, motor off, SP or HV 0, into an active switch or past FL/BL.
         """
-        return self._homing.start("HM", switch, display=self._display)
+        return self._home("HM", switch)
 
     def find_edge(self, *, switch: predict.HomeSwitch | None = None) -> MoveHandle:
         """Move at SP to the home switch's edge (``FE``); stop code 9, no position defined."""
-        return self._homing.start("FE", switch, display=self._display)
+        return self._home("FE", switch)
 
     def find_index(self, *, switch: predict.HomeSwitch | None = None) -> MoveHandle:
         """Move at the jog speed (its sign is the direction) to the next index pulse (``FI``),
         which becomes position 0; stop code 10."""
-        return self._homing.start("FI", switch, display=self._display)
+        return self._home("FI", switch)
+
+    def _home(self, kind: str, switch: predict.HomeSwitch | None) -> MoveHandle:
+        with user_units({self.letter: self}):  # (a start beyond FL/BL: in its unit)
+            return self._homing.start(kind, switch, display=self._display)
 
     @property
     def homed(self) -> Homed:
@@ -791,8 +795,9 @@ def _soft_limit_counts(axis: Axis, limits: tuple[Any, Any]) -> tuple[int, int]:
         raise InvalidArgument(
             f"soft limits ({_show(low)}, {_show(high)}): low is above high (takes (low, high))"
         )
-    for name, v in (("BL", bl), ("FL", fl)):
-        check_int32(name, v, axis.letter, axis._link.model.name)
+    with user_units({axis.letter: axis}):
+        for name, v in (("BL", bl), ("FL", fl)):
+            check_int32(name, v, axis.letter, axis._link.model.name)
     return bl, fl
 
 
@@ -838,14 +843,8 @@ def resolve_move(axis: Axis, value: Any, relative: bool, overrides: Mapping[str,
     else:
         amount = round(axis.position_counts(value, "target"))
     if not INT32_MIN <= amount <= INT32_MAX:
-        raise LimitError(
-            f"{'PR' if relative else 'PA'} {amount} on {axis.letter} is outside the "
-            "32-bit position range",
-            name="PR" if relative else "PA",
-            value=amount,
-            limit=INT32_MAX if amount > 0 else INT32_MIN,
-            axis=axis.letter,
-        )
+        with user_units({axis.letter: axis}):
+            check_int32("PR" if relative else "PA", amount, axis.letter, axis._link.model.name)
     if given:
         return AxisMove(axis.letter, amount, **given)
     return AxisMove(axis.letter, amount)
@@ -865,30 +864,8 @@ def user_units(axes: Mapping[str, Axis]) -> Iterator[None]:
 def in_user_units(exc: LimitError, axes: Mapping[str, Axis]) -> None:
     """Add the user's units to ``exc`` (raised in counts) when its axis has a scale."""
     axis = axes.get(exc.axis) if exc.axis else None
-    scale = None if axis is None else axis.scale
-    if scale is not None and exc.value is not None and exc.limit is not None:
-        _in_units(exc, scale)
+    if axis is not None:
+        state_in_units(exc, axis.scale)
 
 
-_RATE_POWER = {"speed": 1, "acceleration": 2, "SP": 1, "JG": 1, "AC": 2, "DC": 2}
-
-
-def _in_units(exc: LimitError, scale: Scale) -> None:
-    assert exc.value is not None
-    assert exc.limit is not None
-    power = _RATE_POWER.get(exc.name)
-    if power is not None:
-        value = abs(scale.counts_to_rate(exc.value, power))
-        limit = abs(scale.counts_to_rate(exc.limit, power))
-        points = [("needs", value), ("limit", limit)]
-    elif exc.name in ("FL", "BL", "PA", "PR", "position range", "position"):
-        value = scale.counts_to_position(exc.value)
-        limit = scale.counts_to_position(exc.limit)
-        points = [("reaches", value), ("limit", limit)]
-        if exc.end is not None:
-            points.append(("end", scale.counts_to_position(exc.end)))
-    else:
-        return
-    exc.value_in_units, exc.limit_in_units = value, limit
-    text = ", ".join(f"{label} {v:~.6g}" for label, v in points)
-    exc.args = (f"{exc.args[0]} (in user units: {text})", *exc.args[1:])
+_KIND = {1: "speed", 2: "acceleration"}

@@ -84,10 +84,10 @@ def _quantity(text: str, what: str) -> Any:
 def plan_profile(args: argparse.Namespace) -> Any:
     """The profile ``galil plan`` prints: counts, or the units of ``--scale``."""
     from galil import predict
-    from galil.errors import InvalidArgument
+    from galil.errors import InvalidArgument, LimitError
     from galil.models import get_model
     from galil.moves import check_int32
-    from galil.units import Scale, counts_or_plain
+    from galil.units import Scale, counts_or_plain, state_in_units
 
     model = get_model(args.model)
     given = {  # what was typed, under the option's name
@@ -123,12 +123,17 @@ def plan_profile(args: argparse.Namespace) -> Any:
         raise InvalidArgument(
             f"the distance is {counts['distance']:g} counts, not a whole number{unit}"
         )
-    check_int32("PR", distance, "the axis", model.name)  # as Axis.plan_by refuses it
+    try:  # (refused as Axis.plan_by refuses it: in counts, and in the scale's unit)
+        check_int32("PR", distance, "the axis", model.name)
+        sp, ac, dc = (predict.check_parameter(n, counts[n], model) for n in ("SP", "AC", "DC"))
+    except LimitError as exc:
+        state_in_units(exc, scale)
+        raise
     profile = predict.move(
         distance,
-        predict.check_parameter("SP", counts["SP"], model),
-        predict.check_parameter("AC", counts["AC"], model),
-        predict.check_parameter("DC", counts["DC"], model),
+        sp,
+        ac,
+        dc,
         sample_period=model.sample_period,
         smoothing=predict.check_parameter("IT", args.smoothing, model),  # stored in 1/256ths
     )

@@ -83,18 +83,22 @@ def _round(x: npt.NDArray[np.float64]) -> npt.NDArray[np.int64]:
     return out
 
 
-def increments(path: npt.ArrayLike, *, start: int = 0) -> npt.NDArray[np.int64]:
+def increments(
+    path: npt.ArrayLike, *, start: int = 0, axis: str | None = None
+) -> npt.NDArray[np.int64]:
     """Integer CD increments that follow ``path`` (ideal absolute positions at segment ends).
 
     Args:
         path: ideal positions in counts at the end of each segment (floats allowed).
         start: the (integer) position before the first segment.
+        axis: the axis the path is for (named in a refusal).
 
     Returns:
         int64 increments; ``start + cumsum(increments) == round(path)`` element by element.
 
     Raises:
         InvalidArgument: the path is not 1-D and finite, or ``start`` is not a whole count.
+        LimitError: a point beyond the 32-bit position range (name ``"path point"``).
     """
     x = np.asarray(path, dtype=np.float64)
     if x.ndim != 1:
@@ -103,12 +107,14 @@ def increments(path: npt.ArrayLike, *, start: int = 0) -> npt.NDArray[np.int64]:
         raise InvalidArgument("path holds NaN or infinity")
     if x.size and float(np.max(np.abs(x))) > INT32_MAX:
         i = int(np.argmax(np.abs(x)))
+        on = "" if axis is None else f" on {axis}"
         raise LimitError(
-            f"path point {i} ({x[i]:.6g} counts) is outside the 32-bit position range",
-            name="position",
+            f"path point {i}{on} ({x[i]:.6g} counts) is outside the 32-bit position range",
+            name="path point",
             value=float(x[i]),
-            limit=INT32_MAX,
+            limit=INT32_MAX if x[i] > 0 else -INT32_MAX,
             sample=i,
+            axis=axis,
         )
     if int(start) != start:
         raise InvalidArgument(f"start must be a whole count, got {start!r}")
@@ -282,7 +288,9 @@ class ContourStream:
         self.link = link
         self.letters = letters
         self.dt = dt
-        self.increments = np.stack([increments(ideal[:, j]) for j in range(len(letters))], axis=1)
+        self.increments = np.stack(
+            [increments(ideal[:, j], axis=a) for j, a in enumerate(letters)], axis=1
+        )
         self._display = display or {}
         self._byte_rate = byte_rate
         self._limits = limits or {}

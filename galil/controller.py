@@ -792,18 +792,18 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         chosen = [self.axis(a) for a in _axis_names(axes)]
         letters = "".join(a.letter for a in chosen)
         counts = path_to_counts(path, [a.scale for a in chosen], letters)
-        stream = ContourStream(
-            self.link,
-            letters,
-            counts,
-            dt=dt,
-            display={a.letter: a.display for a in chosen},
-            byte_rate=self.link.byte_rate,
-            limits=_contour_limits(self.link.model, chosen, speed_limit, accel_limit),
-            followers=self.tracker.followers(letters),
-            tracker=self.tracker,
-        )
         with user_units({a.letter: a for a in chosen}):
+            stream = ContourStream(
+                self.link,
+                letters,
+                counts,
+                dt=dt,
+                display={a.letter: a.display for a in chosen},
+                byte_rate=self.link.byte_rate,
+                limits=_contour_limits(self.link.model, chosen, speed_limit, accel_limit),
+                followers=self.tracker.followers(letters),
+                tracker=self.tracker,
+            )
             return stream.run(progress=progress, timeout=timeout)
 
     # -- switches and flash (galil.homing, galil.tuning) -------------------------------------

@@ -37,6 +37,7 @@ from galil.motion import (
 )
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import format_number
+from galil.units import Scale
 
 __all__ = ["Gearing", "gear_off", "gear_to", "read_found"]
 
@@ -216,10 +217,12 @@ def gear_to(
     ratio: object,
     *,
     display: Display | None = None,
+    scale: Scale | None = None,
 ) -> Gearing:
     """Gear ``follower`` to ``master`` (an axis letter, or ``"S"``) at ``ratio``.
 
     Sends ``GA`` (commanded position ``C<master>``, or ``S``) and ``GR`` on one line.
+    ``display`` and ``scale`` are the follower's (its predictions and refusals in its unit).
 
     Raises:
         InvalidArgument: an axis geared to itself, a master that is a follower or a follower
@@ -233,7 +236,7 @@ def gear_to(
     follower = model.axis_letter(follower)
     q = _ratio(link, ratio)
     with tracker.lock:  # (both axes at rest until the gearing is sent and known)
-        return _gear_to(link, tracker, follower, master, q, display)
+        return _gear_to(link, tracker, follower, master, q, (display, scale))
 
 
 def _gear_to(
@@ -242,7 +245,7 @@ def _gear_to(
     follower: str,
     master: str,
     q: float,
-    display: Display | None,
+    shown: tuple[Display | None, Scale | None],
 ) -> Gearing:
     model = link.model
     _check_pair(link, tracker, follower, master, q)
@@ -274,7 +277,7 @@ def _gear_to(
         q, master=round(m0), position=round(f0), resolution=model.gr_resolution
     )
     code = sample_of(replies[-1])
-    gear = GearLink(follower, master, q, anchor, display, travelled=round(m0))
+    gear = GearLink(follower, master, q, anchor, shown[0], travelled=round(m0), scale=shown[1])
     gear.engaged_code = 0 if code is None else code
     tracker.engage(gear)
     return Gearing(link, tracker, gear)

@@ -37,6 +37,7 @@ from galil.link import CommandLink, check_callable, check_flag, check_wait_timeo
 from galil.models import tm_of
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import read_one
+from galil.units import Scale
 
 __all__ = [
     "HOMING_KINDS",
@@ -171,6 +172,7 @@ class GearLink:
         anchor: the follower's fixed-point state since the gearing engaged (or its ratio last
             changed): the follower at any later master position, fraction included.
         display: shows the follower's profiles in its unit.
+        scale: the follower's scale (its refusals in its unit), if it has one.
         released: controller sample at which ``ST``, ``AB`` or a limit turned the gearing off
             (``None`` while it holds).
         travelled: for ``"S"``, the master position the next sequence starts from (the S
@@ -189,6 +191,7 @@ class GearLink:
     released: int | None = None
     travelled: int = 0
     engaged_code: int = 0
+    scale: Scale | None = None
 
     def dropped_by(self, code: int) -> bool:
         """Whether the follower's stop code ``code`` says that a limit stopped it, and so

@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from galil import predict
-from galil.errors import InvalidArgument, LimitError
+from galil.errors import InvalidArgument, LimitError, ScheduleError
 from galil.link import CommandLink
 from galil.models import INT32_MAX, INT32_MIN
 from galil.motion import (
@@ -40,6 +40,7 @@ from galil.motion import (
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
 from galil.routines import Routine, Routines
+from galil.units import state_in_units
 
 __all__ = [
     "AxisMove",
@@ -202,7 +203,7 @@ def _check_follower_speed(link: CommandLink, gear: GearLink, speed: float) -> No
     """
     model = link.model
     if speed > model.sp_max:
-        raise LimitError(
+        exc = LimitError(
             f"axis {gear.follower} is geared to {gear.master} at {gear.ratio:g}: it would run "
             f"at {speed:.6g} counts/s, beyond the {model.name} maximum {model.sp_max}",
             name="speed",
@@ -211,6 +212,8 @@ def _check_follower_speed(link: CommandLink, gear: GearLink, speed: float) -> No
             axis=gear.follower,
             model=model.name,
         )
+        state_in_units(exc, gear.scale)
+        raise exc
 
 
 def follower_operands(followers: str) -> tuple[str, ...]:
@@ -278,6 +281,7 @@ def check_followers(
         except LimitError as exc:
             exc.end = profile.end
             _follower_error(exc, gear)
+            state_in_units(exc, gear.scale)
             raise
         _check_follower_speed(link, gear, profile.peak_speed)
 
@@ -882,16 +886,21 @@ def _speed_schedule(
     rp, sp0, ac, dc, it = state.rp, state.sp, state.ac, state.dc, state.it
     _refuse_blocked(link, a, distance, state.ts, None)  # (the program's BG would fail: TC 22)
     first = sp0 if speed is None else speed
-    schedule = predict.speed_schedule(
-        distance,
-        first,
-        list(changes),
-        ac,
-        dc,
-        sample_period=link.sample_period,
-        start=rp,
-        smoothing=it,
-    )
+    try:
+        schedule = predict.speed_schedule(
+            distance,
+            first,
+            list(changes),
+            ac,
+            dc,
+            sample_period=link.sample_period,
+            start=rp,
+            smoothing=it,
+        )
+    except ScheduleError as exc:  # (the predictor knows no axes: name it)
+        exc.axis = a
+        exc.args = (f"axis {a}: {exc.args[0]}", *exc.args[1:])
+        raise
     predict.check_soft_limits(
         schedule.profile, forward_limit=state.fl, backward_limit=state.bl, axis=a
     )

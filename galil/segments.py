@@ -208,7 +208,7 @@ def _distance(axis: PathAxis, value: object, what: str) -> float:
         return 0.0  # no move needs no unit: Line(10 * mm, 0)
     if axis.scale is not None:
         return axis.scale.distance_to_counts(value, what)
-    return counts_or_plain(value, what)
+    return counts_or_plain(value, what, axis.letter)
 
 
 def _arc_in_counts(i: int, arc: Arc, axes: Sequence[PathAxis], resolution: float) -> predict.Arc:

@@ -18,9 +18,10 @@ import numpy as np
 import numpy.typing as npt
 import pint
 
-from galil.errors import InvalidArgument
+from galil.errors import InvalidArgument, LimitError
 
 __all__ = [
+    "UNIT_KINDS",
     "PathSamples",
     "Scale",
     "counts_or_plain",
@@ -28,6 +29,7 @@ __all__ = [
     "is_quantity",
     "path_to_counts",
     "sampled_values",
+    "state_in_units",
     "ureg",
 ]
 
@@ -285,15 +287,26 @@ class Scale:
         return get_registry().Quantity(counts * self.sign / self._k, unit)
 
 
-def counts_or_plain(value: object, what: str) -> float:
-    """For an axis without a scale: a plain number, or a Quantity in counts."""
+def _no_scale(what: str, value: object, letter: str) -> InvalidArgument:
+    """The refusal of a value with units on an axis without a scale (one wording for all)."""
+    axis = "the axis has"
+    if len(letter) == 1:
+        axis = f"axis {letter} has"
+    elif letter:  # (the axes of a path)
+        axis = f"axes {', '.join(letter)} have"
+    return InvalidArgument(
+        f"{what}: {value} has units but {axis} no scale; "
+        "call axis.set_scale(counts_per=...) or pass counts"
+    )
+
+
+def counts_or_plain(value: object, what: str, letter: str = "") -> float:
+    """For an axis (``letter``, if known; several letters: the axes of a path) without a
+    scale: a plain number, or a Quantity in counts."""
     if is_quantity(value):
         q = _ours(value)
         if not q.dimensionless or dict(q.unit_items()).keys() - {"count"}:
-            raise InvalidArgument(
-                f"{what}: {value} has units but the axis has no scale; call "
-                "axis.set_scale(counts_per=...) or pass counts"
-            )
+            raise _no_scale(what, value, letter)
         return _magnitude(q.to("count"), what)
     return _plain_number(value, what)
 
@@ -310,11 +323,8 @@ def signed_rate_counts(
     if scale is not None:
         return scale.rate_to_counts(value, power, what)
     if is_quantity(value):
-        raise InvalidArgument(
-            f"{what}: {value} has units but axis {letter} has no scale; "
-            "call axis.set_scale(counts_per=...) or pass counts"
-        )
-    return counts_or_plain(value, what)
+        raise _no_scale(what, value, letter)
+    return counts_or_plain(value, what, letter)
 
 
 def rate_magnitude_counts(
@@ -354,10 +364,52 @@ def path_to_counts(
     for j, (a, scale) in enumerate(zip(letters, scales, strict=True)):
         what = f"contour path on {a}"
         if scale is None:
-            out[:, j] = columns[:, j] * counts_or_plain(1.0 * unit_of, what)
+            out[:, j] = columns[:, j] * counts_or_plain(1.0 * unit_of, what, a)
         else:
             out[:, j] = columns[:, j] * scale.distance_to_counts(1.0 * unit_of, what)
     return out.ravel() if magnitude.ndim == 1 else out
+
+
+#: What a :class:`~galil.errors.LimitError`'s value and limit measure, by its ``name``: a
+#: position (the scale's offset and sign apply), a signed distance, a length (a magnitude:
+#: along a path, a trigger distance), a speed or an acceleration (magnitudes).
+UNIT_KINDS: dict[str, str] = {
+    **dict.fromkeys(("FL", "BL", "PA", "DP", "position range"), "position"),
+    **dict.fromkeys(("PR", "CD", "path point"), "distance"),
+    **dict.fromkeys(("TC 30", "TC 31", "VP range", "CR radius", "speed schedule"), "length"),
+    **dict.fromkeys(("SP", "JG", "VS", "speed", "axis speed"), "speed"),
+    **dict.fromkeys(("AC", "DC", "VA", "VD", "acceleration", "axis acceleration"), "acceleration"),
+}
+
+
+def _in_unit(scale: Scale, counts: float, kind: str) -> Any:
+    if kind == "position":
+        return scale.counts_to_position(counts)
+    if kind in ("distance", "length"):
+        q = scale.counts_to_distance(counts)
+        return q if kind == "distance" else abs(q)
+    return abs(scale.counts_to_rate(counts, 1 if kind == "speed" else 2))
+
+
+def state_in_units(exc: LimitError, scale: Scale | None, kind: str | None = None) -> None:
+    """Add to ``exc`` (raised in counts) its value and limit in ``scale``'s unit: the message
+    gains `` (in user units: 25.1 mm / s, limit 25 mm / s)`` (a position ``reaches`` its limit,
+    and says where the motion would ``end``), and ``value_in_units``/``limit_in_units`` are
+    set. ``kind`` is ``"position"``, ``"distance"``, ``"length"``, ``"speed"`` or
+    ``"acceleration"`` (default: :data:`UNIT_KINDS` by ``exc.name``). Nothing changes without a
+    scale, without a value or a limit, for a name of no known kind, or when it was done."""
+    kind = UNIT_KINDS.get(exc.name) if kind is None else kind
+    value, limit = exc.value, exc.limit
+    if scale is None or kind is None or value is None or limit is None:
+        return
+    if exc.value_in_units is not None:
+        return  # (stated once already, by an inner handler)
+    shown, top = _in_unit(scale, value, kind), _in_unit(scale, limit, kind)
+    exc.value_in_units, exc.limit_in_units = shown, top
+    text = f"{'reaches ' if kind == 'position' else ''}{shown:~.6g}, limit {top:~.6g}"
+    if kind == "position" and exc.end is not None:
+        text += f", end {scale.counts_to_position(exc.end):~.6g}"
+    exc.args = (f"{exc.args[0]} (in user units: {text})", *exc.args[1:])
 
 
 PathSamples: TypeAlias = "npt.NDArray[np.float64] | pint.Quantity[npt.NDArray[np.float64]]"

@@ -56,7 +56,7 @@ from galil.segments import (
     show,
     to_counts,
 )
-from galil.units import counts_or_plain, is_quantity, rate_magnitude_counts
+from galil.units import counts_or_plain, is_quantity, rate_magnitude_counts, state_in_units
 
 __all__ = ["VectorHandle", "VectorStream"]
 
@@ -381,7 +381,7 @@ class VectorStream:
                 f" such as 10 * ureg.{self.path.unit}/s" + ("²" if power == 2 else "")
             )
         else:
-            counts = counts_or_plain(value, what)
+            counts = counts_or_plain(value, what, self.path.letters)
         if not counts > 0:
             raise InvalidArgument(f"{what} along the path must be positive, got {value!r}")
         return counts
@@ -536,18 +536,16 @@ class VectorStream:
 
     @contextlib.contextmanager
     def _in_user_units(self) -> Iterator[None]:
-        """Add the axis's unit to a refusal of its speed or acceleration along the path."""
+        """Add the unit to a refusal in counts: an axis's own (its speed or acceleration along
+        the path), or the path's (VS, VA, VD, lengths) when every axis has the same scale."""
         try:
             yield
         except LimitError as exc:
-            power = {"axis speed": 1, "axis acceleration": 2}.get(str(exc.name))
             axis = next((a for a in self.axes if a.letter == exc.axis), None)
-            scale = None if axis is None else axis.scale
-            if power and scale is not None and exc.value is not None and exc.limit is not None:
-                value = abs(scale.counts_to_rate(exc.value, power))
-                limit = abs(scale.counts_to_rate(exc.limit, power))
-                note = f" (in user units: {value:~.6g}, limit {limit:~.6g})"
-                exc.args = (f"{exc.args[0]}{note}", *exc.args[1:])
+            if axis is not None:
+                state_in_units(exc, axis.scale)
+            elif exc.axis is None and self.path.per_unit is not None:
+                state_in_units(exc, self.axes[0].scale)  # (None without scales: counts)
             raise
 
     def _check_link_rate(self, profile: predict.VectorProfile) -> None:

@@ -751,7 +751,8 @@ def _check_segment_ranges(
     if bad.size:
         i = int(bad[0])
         raise LimitError(
-            f"CD {int(c[i])} (segment {i}, t={starts[i] * ts:.6g} s) is outside"
+            f"CD {int(c[i])}{'' if axis is None else f' on {axis}'} (segment {i},"
+            f" t={starts[i] * ts:.6g} s) is outside"
             f" {cd_lo}..{cd_hi} on {spec.name}",
             name="CD",
             value=int(c[i]),
