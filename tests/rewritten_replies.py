@@ -6,8 +6,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-import galil
 from client_fakes import SimLinkWrapper
+
+import galil
 from galil.sim.clock import ManualClock
 from galil.sim.controller import SimController
 from galil.sim.link import SimLink
@@ -41,7 +42,7 @@ class Rewrite(SimLinkWrapper):
         for i, (mark, change) in enumerate(self.rules):
             if mark in data:
                 del self.rules[i]
-                self.inner.faults = lambda answer: [(0.0, change(answer))]
+                self.inner.faults = lambda answer, change=change: [(0.0, change(answer))]
                 try:
                     self.inner.write(data)
                 finally:

@@ -6,7 +6,6 @@ from __future__ import annotations
 import pytest
 from rewritten_replies import Change, lost, rewritten
 
-import galil
 from galil.capture import Capture
 from galil.errors import GalilTimeoutError, InvalidArgument, ProtocolError
 from galil.testing import nothing_sent, simulated

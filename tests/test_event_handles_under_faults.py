@@ -43,4 +43,3 @@ def test_a_handle_whose_number_is_answered_badly_is_freed_and_the_link_stays_in_
             assert dmc.query_number("MG 1") == 1
             assert not dmc.interrupts.enabled
         OPEN[what](dmc)  # and the controller still has handles for the next one
-
