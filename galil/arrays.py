@@ -89,8 +89,9 @@ def _in_read_format(link: CommandLink, command: cmds.Command, timeout: float | N
         return link.exchange(command, timeout=timeout).text
     digits = int(vf)
     restore = cmds.vf(digits, round(abs(vf - digits) * 10))
-    link.exchange(_READ_VF)
     try:
+        # (inside: a VF 10.4 whose reply is lost may still have been taken)
+        link.exchange(_READ_VF)
         text = link.exchange(command, timeout=timeout).text
     except BaseException:
         with contextlib.suppress(GalilError):

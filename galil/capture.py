@@ -19,6 +19,7 @@ simulator whose clock waits for the host), never a wrong answer. See ``docs/deci
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -184,13 +185,20 @@ class Capture:
         setup += [cmds.dm(a, self.count, model=model) for a in self.arrays]
         setup += [cmds.ra(*self.arrays, model=model), self._rd]
         link.command_line(setup)
-        replies = link.command_line(
-            [cmds.rc(self.every, self.count, model=model), cmds.time_stamp()]
-        )
         try:
-            self.start_sample = round(read_one(replies[-1]))
-        except ProtocolError as exc:
-            raise link.error(ProtocolError, f"MG TIME answered {replies[-1]!r}") from exc
+            replies = link.command_line(
+                [cmds.rc(self.every, self.count, model=model), cmds.time_stamp()]
+            )
+            try:
+                start = round(read_one(replies[-1]))
+            except ProtocolError as exc:
+                raise link.error(ProtocolError, f"MG TIME answered {replies[-1]!r}") from exc
+        except BaseException:
+            # RC may have started (a lost or malformed reply): no recording outlives start()
+            with contextlib.suppress(GalilError):
+                link.command_line([cmds.rc(0)])
+            raise
+        self.start_sample = start
         self._started_at = link.clock()
         return self
 

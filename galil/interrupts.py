@@ -133,8 +133,12 @@ class Interrupts:
             if not 0 <= index <= 7:
                 raise ProtocolError(f"MG _WH answered {text!r}: not a handle 0..7")
         except (GalilError, ValueError) as exc:
+            local = handle.local_address if isinstance(handle, LocalAddress) else None
             with contextlib.suppress(GalilError, OSError):
                 handle.close()
+            if datagram and local is not None:
+                # the controller cannot see a UDP handle close: free it (its eight run out)
+                self._free_udp(None, local)
             if isinstance(exc, GalilTimeoutError):
                 # (a controller with no handle AVAILABLE ignores a UDP handle's packets)
                 raise link.error(
@@ -247,12 +251,17 @@ class Interrupts:
         letter may be another client's). Best effort: a failure is logged (the reconnect
         itself went well)."""
         stale, self._stale = self._stale, None
-        if stale is None or not self.link.is_open:
+        if stale is not None:
+            self._free_udp(*stale)
+
+    def _free_udp(self, letter: str | None, local: tuple[str, int]) -> None:
+        """``IHm=>-1`` for the UDP handle(s) to ``local`` that ``TH`` lists (only ``letter``
+        if given). Best effort: a failure is logged."""
+        if not self.link.is_open:
             return
-        letter, local = stale
         try:
-            held = parse_th(self.link.command_line([cmds.th()])[0]).get(letter)
-            if held is not None and held.kind == "UDP" and held.peer == local:
-                self.link.command_line([cmds.ih_close(letter)])
+            for held in parse_th(self.link.command_line([cmds.th()])[0]).values():
+                if held.kind == "UDP" and held.peer == local and letter in (None, held.letter):
+                    self.link.command_line([cmds.ih_close(held.letter)])
         except GalilError as exc:
-            _LOG.warning("galil: the old interrupt handle IH%s was not freed: %s", letter, exc)
+            _LOG.warning("galil: the interrupt handle IH%s was not freed: %s", letter or "?", exc)
