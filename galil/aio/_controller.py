@@ -35,7 +35,6 @@ from galil.predict import MultiProfile
 from galil.protocol.interrupts import Interrupt
 from galil.segments import Segment, VectorPlan
 from galil.transport import Transport
-from galil.vector import VectorHandle
 
 __all__ = ["AsyncController", "connect"]
 
@@ -90,17 +89,13 @@ def _stop_capture(started: tuple[Capture, float]) -> None:
     started[0].stop()
 
 
-def _stop_sequences(controller: CoordinatedMotion) -> None:
-    """Stop every sequence in progress (``ST S``), even one still streaming on its thread."""
-    if not isinstance(controller, Controller):
-        return
-    seen: set[int] = set()
-    for letter in controller.model.axes:
-        handle = controller.tracker.active(letter)
-        if isinstance(handle, VectorHandle) and id(handle) not in seen:
-            seen.add(id(handle))
-            with contextlib.suppress(GalilError):
-                handle.stop()
+def _stop_sequence_started(controller: CoordinatedMotion, starting: Starting) -> None:
+    """Stop (``ST S``) the sequence a cancelled ``vector_move`` has started, even one still
+    streaming on its thread; never one that ran before it (decision 0061)."""
+    handle = starting.sequence_started()
+    if handle is not None:
+        with contextlib.suppress(GalilError):
+            handle.stop()
 
 
 class AsyncController(AsyncLinkFacade):
@@ -195,7 +190,9 @@ class AsyncController(AsyncLinkFacade):
     # -- motion ---------------------------------------------------------------------------
     move = motion_twin(_move)
     plan = twin(_plan)
-    vector_move = motion_twin(Controller.vector_move, AsyncVectorHandle).on_cancel(_stop_sequences)
+    vector_move = motion_twin(Controller.vector_move, AsyncVectorHandle).on_cancel(
+        _stop_sequence_started
+    )
     plan_vector = twin(_plan_vector)
     stop = twin(Controller.stop, shield=True)  # asked for, a stop goes out even if cancelled
     abort = twin(Controller.abort, shield=True)

@@ -372,9 +372,10 @@ class AsyncSequences(RuleBasedStateMachine):
     )
     def gathered(self, moves: list[tuple[str, int]], group: bool, how: str, n: int) -> None:
         """Moves of several axes started with ``asyncio.gather`` (each may be refused on its
-        own: documented errors only), then awaited together: ``gather``-ed (each wait to its
-        own end), or in a ``TaskGroup`` (a limit's ``MotionError`` cancels the other waits,
-        which stops their moves)."""
+        own: documented errors only), then their ``wait()`` coroutines awaited together:
+        ``gather``-ed (each wait to its own end), or in a ``TaskGroup`` (a limit's
+        ``MotionError`` cancels the other waits, which stops their moves). Cancelled, even
+        before a wait has begun, every move stops (decision 0061)."""
 
         async def body() -> None:
             starts = [self.c.axes[a].move_by(d) for a, d in moves]
@@ -385,32 +386,44 @@ class AsyncSequences(RuleBasedStateMachine):
                     assert isinstance(got, (InvalidArgument, MotionError)), repr(got)
                 else:
                     runs.append(self.record(got))
-            if not group:
-                await asyncio.gather(*(self.wait_for_run(r) for r in runs))
-                return
-            try:
-                async with asyncio.TaskGroup() as tg:  # type: ignore[attr-defined]
-                    for r in runs:
-                        tg.create_task(self.raising_wait(r))
-            except BaseExceptionGroup as eg:  # noqa: F821 - 3.11+
-                errors = eg.exceptions
-            else:
-                return
-            assert all(isinstance(e, MotionError) for e in errors), errors
-            self.stopped_siblings(runs)
+            self.owned.extend(r.handle for r in runs)
+            with warnings.catch_warnings():
+                if any(r.unpredictable for r in runs):  # (not the library's doing)
+                    warnings.simplefilter("ignore", RuntimeWarning)
+                await self.waits_together(runs, group)
 
         with contextlib.suppress(_CancelledError):
             self.act(body, how, n)
 
-    async def raising_wait(self, run: Running) -> None:
-        """Await ``run`` and let a limit's ``MotionError`` out (judged after the step)."""
-        self.owned.append(run.handle)
+    async def waits_together(self, runs: list[Running], group: bool) -> None:
+        """The library's own wait coroutines of ``runs``, gathered or in a ``TaskGroup``;
+        the outcomes of those that ended are judged after the step."""
+        waits = [self.handles[id(r.handle)].wait() for r in runs]
+        tasks: list[asyncio.Future[MoveResult]] = []
+        errors: tuple[BaseException, ...] = ()
         try:
-            result = await self.handles[id(run.handle)].wait()
-        except MotionError as exc:
-            self.outcomes.append((run, None, exc))
-            raise
-        self.outcomes.append((run, result, None))
+            if not group:
+                tasks = [asyncio.ensure_future(w) for w in waits]
+                await asyncio.gather(*tasks, return_exceptions=True)
+            else:
+                async with asyncio.TaskGroup() as tg:  # type: ignore[attr-defined]
+                    tasks = [tg.create_task(w) for w in waits]
+        except BaseExceptionGroup as eg:  # noqa: F821 - 3.11+
+            errors = eg.exceptions
+        finally:
+            for run, task in zip(runs, tasks, strict=True):
+                if task.done() and not task.cancelled():
+                    error = task.exception()
+                    if error is None:
+                        self.outcomes.append((run, task.result(), None))
+                    elif isinstance(error, MotionError):  # a limit stopped it (or a follower)
+                        self.outcomes.append((run, None, error))
+        assert all(isinstance(e, MotionError) for e in errors), errors
+        for task in tasks:
+            if task.done() and not task.cancelled():
+                assert isinstance(task.exception(), (type(None), MotionError, GalilTimeoutError))
+        if errors:
+            self.stopped_siblings(runs)
 
     def stopped_siblings(self, runs: list[Running]) -> None:
         """A TaskGroup's MotionError cancelled the other waits: their moves were stopped."""
