@@ -19,7 +19,7 @@ from galil.aio._capture import AsyncCapture, AsyncWatchdog
 from galil.aio._facade import AsyncLinkFacade
 from galil.aio._interrupts import AsyncInterrupts
 from galil.aio._io import AsyncIO
-from galil.aio._motion import AsyncVectorHandle, Starting, motion_twin
+from galil.aio._motion import AsyncVectorHandle, Starting, motion_twin, settle_abandoned
 from galil.aio._programs import AsyncArrays, AsyncPrograms, AsyncVariables
 from galil.aio._streams import AsyncMessages, LoopQueue
 from galil.aio._worker import Worker, shielded, twin
@@ -30,7 +30,7 @@ from galil.controller import connect as connect_sync
 from galil.errors import GalilError, InvalidArgument
 from galil.homing import SwitchPolarity
 from galil.link import check_count, check_wait_timeout
-from galil.motion import MoveHandle
+from galil.motion import MotionTracker, MoveHandle
 from galil.predict import MultiProfile
 from galil.protocol.interrupts import Interrupt
 from galil.segments import Segment, VectorPlan
@@ -96,6 +96,15 @@ def _stop_sequence_started(controller: CoordinatedMotion, starting: Starting) ->
     if handle is not None:
         with contextlib.suppress(GalilError):
             handle.stop()
+
+
+def _guard_exit(
+    tracker: MotionTracker, guard: contextlib.AbstractContextManager[None], exc: BaseException
+) -> None:
+    """The ``motion()`` guard's exit on an exception: after the starts it cancelled (decision
+    0061), so that their motion is stopped and waited for too."""
+    settle_abandoned(tracker)
+    guard.__exit__(type(exc), exc, exc.__traceback__)
 
 
 class AsyncController(AsyncLinkFacade):
@@ -253,8 +262,9 @@ class AsyncController(AsyncLinkFacade):
         try:
             yield
         except BaseException as exc:
-            # The sync guard stops, waits and re-raises (or raises MotionError from exc).
-            await self._worker.run_shielded(guard.__exit__, type(exc), exc, exc.__traceback__)
+            # A start the exception cancelled still running on its thread ends first, then
+            # the sync guard stops, waits and re-raises (or raises MotionError from exc).
+            await self._worker.run_shielded(_guard_exit, self.sync.tracker, guard, exc)
             raise
         else:
             guard.__exit__(None, None, None)

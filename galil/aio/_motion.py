@@ -22,6 +22,7 @@ import logging
 import math
 import threading
 import warnings
+import weakref
 from collections.abc import AsyncGenerator, Awaitable, Callable, Coroutine, Generator
 from dataclasses import dataclass
 from types import TracebackType
@@ -51,6 +52,7 @@ __all__ = [
     "MoveWait",
     "Starting",
     "motion_twin",
+    "settle_abandoned",
     "start_motion",
 ]
 
@@ -418,7 +420,7 @@ class MoveWait(Coroutine[object, None, MoveResult]):
             self._inner = self._handle._wait(self._timeout)
         return self._inner.send(value)
 
-    def throw(  # type: ignore[override]
+    def throw(
         self,
         typ: type[BaseException] | BaseException,
         val: BaseException | object = None,
@@ -441,15 +443,8 @@ class MoveWait(Coroutine[object, None, MoveResult]):
         if self._inner is not None:
             self._inner.close()
 
-    def __next__(self) -> object:
-        return self.send(None)
-
-    def __iter__(self) -> MoveWait:
-        return self
-
     def __await__(self) -> Generator[object, None, MoveResult]:
-        result: MoveResult = yield from self  # type: ignore[misc]
-        return result
+        return _Awaiting(self)
 
     async def _abandoned(self, exc: BaseException) -> MoveResult:
         await self._handle.stop_unless_done()
@@ -461,6 +456,30 @@ class MoveWait(Coroutine[object, None, MoveResult]):
 
     def __repr__(self) -> str:
         return f"<MoveWait of {self._handle.sync!r}>"
+
+
+class _Awaiting(Generator[object, None, MoveResult]):
+    """``MoveWait.__await__()``: the iterator ``await`` drives, every call passed on (the
+    wait itself is no iterator: typing tools would then take it for a generator)."""
+
+    __slots__ = ("_wait",)
+
+    def __init__(self, wait: MoveWait) -> None:
+        self._wait = wait
+
+    def send(self, value: None) -> object:
+        return self._wait.send(value)
+
+    def throw(
+        self,
+        typ: type[BaseException] | BaseException,
+        val: BaseException | object = None,
+        tb: TracebackType | None = None,
+    ) -> object:
+        return self._wait.throw(typ, val, tb)
+
+    def close(self) -> None:
+        self._wait.close()
 
 
 def _thrown(
@@ -516,6 +535,7 @@ class Starting:
         self._cancelled = False
         self._began = False
         self._sequence_before: MoveHandle | None = None  # the last sequence as it began
+        self._over = threading.Event()  # set once the call has returned (or was dropped)
 
     def run(self, call: Callable[[], R]) -> R:
         """Worker side: ``call()``, its motion refused once :meth:`cancel` has run."""
@@ -524,6 +544,7 @@ class Starting:
             return call()
         with tracker.lock:
             if self._cancelled:
+                self._ended(tracker)
                 raise _DroppedError("cancelled before it began")
             self._thread = thread = threading.get_ident()
             self._began = True
@@ -534,6 +555,21 @@ class Starting:
             with tracker.lock:
                 tracker.allow_starts(thread)
                 self._thread = None
+            self._ended(tracker)
+
+    def _ended(self, tracker: MotionTracker) -> None:
+        with _ABANDONED_LOCK:
+            _ABANDONED.get(tracker, set()).discard(self)
+            self._over.set()
+
+    def abandon(self) -> None:
+        """Loop side, as the awaiting task is cancelled (before :meth:`cancel` is submitted):
+        until the call is over, :func:`settle_abandoned` finds it."""
+        if self._tracker is None:
+            return
+        with _ABANDONED_LOCK:
+            if not self._over.is_set():
+                _ABANDONED.setdefault(self._tracker, set()).add(self)
 
     def sequence_started(self) -> MoveHandle | None:
         """The vector sequence registered since the call began (by it: one sequence runs on
@@ -554,6 +590,25 @@ class Starting:
                 self._tracker.refuse_starts(self._thread)
             if then is not None:
                 then()
+
+
+_ABANDONED: weakref.WeakKeyDictionary[MotionTracker, set[Starting]] = weakref.WeakKeyDictionary()
+_ABANDONED_LOCK = threading.Lock()  # (never held while anything else is)
+
+
+def settle_abandoned(tracker: MotionTracker, timeout: float = 30.0) -> None:
+    """Worker side: let every start whose awaiting task was cancelled end before going on.
+    A start that has not begun never will (it is cancelled here, under the tracker's lock);
+    one that runs is refused what it has not registered yet and waited for (at most
+    ``timeout`` seconds each), so that the motion it has registered can be seen (``_BG``)
+    and stopped by whoever calls this next: the ``motion()`` guard (decision 0061)."""
+    with _ABANDONED_LOCK:
+        pending = list(_ABANDONED.get(tracker, ()))
+    for starting in pending:
+        starting.cancel()  # (idempotent: the cancelled caller has submitted its own too)
+    for starting in pending:
+        if starting._began:  # (final once cancel() has run: a start begins under the lock)
+            starting._over.wait(timeout)
 
 
 async def start_motion(
@@ -650,6 +705,7 @@ class motion_twin(Generic[S, P, H]):  # noqa: N801 - used like a decorator
                     worker, link, wrap, starting, method, sync, *args, **kwargs
                 )
             except asyncio.CancelledError:
+                starting.abandon()
                 then = None if at_once is None else functools.partial(at_once, sync, starting)
                 with contextlib.suppress(GalilConnectionError):
                     worker.submit(starting.cancel, then)

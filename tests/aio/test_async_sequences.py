@@ -153,6 +153,7 @@ class AsyncSequences(RuleBasedStateMachine):
         self.capture: aio.AsyncCapture | None = None
         # What the step's awaitable awaited (handles), and the waits it saw to an end.
         self.owned: list[MoveHandle] = []
+        self.unawaited: list[MoveHandle] = []  # started in the step, never awaited by it
         self.outcomes: list[tuple[Running, MoveResult | None, MotionError | None]] = []
         # Motion a cancellation stopped: (axes, the handle, controller time it must be over).
         self.stopping: list[tuple[str, MoveHandle, float]] = []
@@ -166,7 +167,7 @@ class AsyncSequences(RuleBasedStateMachine):
         check what the cancellation left and raise :class:`_CancelledError`. The waits it saw to
         an end are judged either way (after the loop: the judging queries block)."""
         before = {a: self.dmc.tracker.active(a) for a in AXES}
-        self.owned, self.outcomes = [], []
+        self.owned, self.outcomes, self.unawaited = [], [], []
         try:
             with transcript(self.dmc) as sent:
                 return self.run(self._act(body, how, n))
@@ -226,6 +227,8 @@ class AsyncSequences(RuleBasedStateMachine):
             h = self.dmc.tracker.active(a)
             if h is not None and h is not before[a]:
                 owned[id(h)] = h
+        for h in self.unawaited:
+            owned.pop(id(h), None)
         now = self.dmc.link.clock()
         for h in owned.values():
             self.interfere(h.axes)
@@ -378,8 +381,16 @@ class AsyncSequences(RuleBasedStateMachine):
         before a wait has begun, every move stops (decision 0061)."""
 
         async def body() -> None:
-            starts = [self.c.axes[a].move_by(d) for a, d in moves]
-            out = await asyncio.gather(*starts, return_exceptions=True)
+            starts = [asyncio.ensure_future(self.c.axes[a].move_by(d)) for a, d in moves]
+            try:
+                out = await asyncio.gather(*starts, return_exceptions=True)
+            except asyncio.CancelledError:
+                # A start that had returned is not cancelled (gather drops its handle): its
+                # move goes on, nothing of the library awaits it.
+                for t in starts:
+                    if t.done() and not t.cancelled() and t.exception() is None:
+                        self.unawaited.append(self.record(t.result()).handle)
+                raise
             runs = []
             for got in out:
                 if isinstance(got, BaseException):
