@@ -68,6 +68,7 @@ from galil.errors import (
     GalilTimeoutError,
     InvalidArgument,
     MotionError,
+    ProgramError,
 )
 from galil.motion import MoveHandle, MoveResult
 from galil.sim.rooms.contour import Contour as SimContour
@@ -654,9 +655,17 @@ class AsyncSequences(RuleBasedStateMachine):
     @rule(timeout=st.sampled_from([0.2, 3.0]), how=how_st, n=call_st)
     def program_wait(self, timeout: float, how: str, n: int) -> None:
         """Await the test's thread (in slices of controller time): it ends, or still runs
-        after ``timeout`` (documented: it is not halted)."""
-        with contextlib.suppress(_CancelledError, GalilTimeoutError):
-            self.act(lambda: self.c.programs.wait(1, timeout=timeout), how, n)
+        after ``timeout`` (documented: it is not halted), or its ``BGD`` failed because the
+        test moves D behind it (a gearing, a move, a stop: documented, decision 0059)."""
+        failed: ProgramError | None = None
+        try:
+            with contextlib.suppress(_CancelledError, GalilTimeoutError):
+                self.act(lambda: self.c.programs.wait(1, timeout=timeout), how, n)
+        except ProgramError as exc:
+            failed = exc
+        if failed is not None:
+            assert failed.thread == 1, failed
+            assert failed.command.replace(" ", "").endswith("BGD"), failed
 
     @rule(
         kind=st.sampled_from(["output", "inputs", "analog", "wait same", "wait other"]),
