@@ -100,11 +100,18 @@ HOWS = [
 ]
 how_st = st.sampled_from(HOWS)
 call_st = st.integers(1, 16)
+# Which of the handles (or axes) running a rule takes: an index drawn whatever the state, so
+# that a replay draws the same data when the worker threads' pacing changed what runs.
+pick_st = st.integers(0, 63)
 # Codes of an axis whose motion runs on (not stopping): independent, contour, vector.
 _RUNNING_CODES = (0, 50, 100)
 # Controller seconds within which every stop is over: the slowest ramp down here is SP
 # 60 000 at DC 20 480 (2.9 s), plus IT smoothing.
 STOP_TIME = 3.5
+
+
+def _picked(items: list[T], pick: int) -> T:
+    return items[pick % len(items)]
 
 
 class _CancelledError(Exception):
@@ -298,13 +305,13 @@ class AsyncSequences(RuleBasedStateMachine):
         self.set_setting(a, what, _VALUES[what][i])
 
     @rule(
-        data=st.data(),
+        pick=pick_st,
         what=st.sampled_from(["motor_type", "brush", "encoder_config"]),
         i=st.integers(0, 1),
     )
-    def motor_setting(self, data: st.DataObject, what: str, i: int) -> None:
+    def motor_setting(self, pick: int, what: str, i: int) -> None:
         moving = [a for r in self.running for a in r.handle.axes + r.handle.followers]
-        a = data.draw(st.sampled_from(sorted(set(moving)) or list(AXES)))
+        a = _picked(sorted(set(moving)) or list(AXES), pick)
         values = {"motor_type": [1, -1], "brush": [0, 1], "encoder_config": [10, 0]}
         self.set_setting(a, what, values[what][i])
 
@@ -506,11 +513,11 @@ class AsyncSequences(RuleBasedStateMachine):
         path = [Line(dx, dy), Line(-dy, dx)]
         self.start(lambda: self.c.vector_move(axes, path, speed=20000), wait, how, n)
 
-    @rule(data=st.data(), how=how_st, n=call_st, watch=st.booleans())
-    def wait_one(self, data: st.DataObject, how: str, n: int, watch: bool) -> None:
+    @rule(pick=pick_st, how=how_st, n=call_st, watch=st.booleans())
+    def wait_one(self, pick: int, how: str, n: int, watch: bool) -> None:
         """Await a handle started before (through ``watch()`` first, or not)."""
         if self.running:
-            run = data.draw(st.sampled_from(self.running))
+            run = _picked(self.running, pick)
             with contextlib.suppress(_CancelledError):
                 self.act(lambda: self.wait_for_run(run, watch=watch), how, n)
 
@@ -582,10 +589,10 @@ class AsyncSequences(RuleBasedStateMachine):
         self.run(self.c.stop(axes))
         self.interfere(axes or AXES)
 
-    @rule(data=st.data())
-    def stop_handle(self, data: st.DataObject) -> None:
+    @rule(pick=pick_st)
+    def stop_handle(self, pick: int) -> None:
         if self.running:
-            run = data.draw(st.sampled_from(self.running))
+            run = _picked(self.running, pick)
             self.run(self.handles[id(run.handle)].stop())
             axes = run.handle.axes
             if run.handle.kind == "vector":  # ST S: the sequence running now (decision 0034)
