@@ -36,7 +36,13 @@ from galil.aio._io import (
     AsyncDigitalOutputs,
     AsyncIO,
 )
-from galil.aio._motion import AsyncMoveHandle, AsyncVectorHandle, MoveProgress, motion_twin
+from galil.aio._motion import (
+    AsyncMoveHandle,
+    AsyncVectorHandle,
+    MoveProgress,
+    MoveWait,
+    motion_twin,
+)
 from galil.aio._programs import AsyncArrays, AsyncPrograms, AsyncVariables
 from galil.aio._streams import AsyncMessages, AsyncRecordStream, LoopQueue
 from galil.aio._waits import WAIT_SLICE
@@ -67,6 +73,7 @@ __all__ = [
     "LoopQueue",
     "LoopWatch",
     "MoveProgress",
+    "MoveWait",
     "Room",
     "Worker",
     "connect",

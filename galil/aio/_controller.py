@@ -19,7 +19,7 @@ from galil.aio._capture import AsyncCapture, AsyncWatchdog
 from galil.aio._facade import AsyncLinkFacade
 from galil.aio._interrupts import AsyncInterrupts
 from galil.aio._io import AsyncIO
-from galil.aio._motion import AsyncVectorHandle, Starting, motion_twin
+from galil.aio._motion import AsyncVectorHandle, Starting, motion_twin, settle_abandoned
 from galil.aio._programs import AsyncArrays, AsyncPrograms, AsyncVariables
 from galil.aio._streams import AsyncMessages, LoopQueue
 from galil.aio._worker import Worker, shielded, twin
@@ -30,12 +30,11 @@ from galil.controller import connect as connect_sync
 from galil.errors import GalilError, InvalidArgument
 from galil.homing import SwitchPolarity
 from galil.link import check_count, check_wait_timeout
-from galil.motion import MoveHandle
+from galil.motion import MotionTracker, MoveHandle
 from galil.predict import MultiProfile
 from galil.protocol.interrupts import Interrupt
 from galil.segments import Segment, VectorPlan
 from galil.transport import Transport
-from galil.vector import VectorHandle
 
 __all__ = ["AsyncController", "connect"]
 
@@ -90,17 +89,22 @@ def _stop_capture(started: tuple[Capture, float]) -> None:
     started[0].stop()
 
 
-def _stop_sequences(controller: CoordinatedMotion) -> None:
-    """Stop every sequence in progress (``ST S``), even one still streaming on its thread."""
-    if not isinstance(controller, Controller):
-        return
-    seen: set[int] = set()
-    for letter in controller.model.axes:
-        handle = controller.tracker.active(letter)
-        if isinstance(handle, VectorHandle) and id(handle) not in seen:
-            seen.add(id(handle))
-            with contextlib.suppress(GalilError):
-                handle.stop()
+def _stop_sequence_started(controller: CoordinatedMotion, starting: Starting) -> None:
+    """Stop (``ST S``) the sequence a cancelled ``vector_move`` has started, even one still
+    streaming on its thread; never one that ran before it (decision 0061)."""
+    handle = starting.sequence_started()
+    if handle is not None:
+        with contextlib.suppress(GalilError):
+            handle.stop()
+
+
+def _guard_exit(
+    tracker: MotionTracker, guard: contextlib.AbstractContextManager[None], exc: BaseException
+) -> None:
+    """The ``motion()`` guard's exit on an exception: after the starts it cancelled (decision
+    0061), so that their motion is stopped and waited for too."""
+    settle_abandoned(tracker)
+    guard.__exit__(type(exc), exc, exc.__traceback__)
 
 
 class AsyncController(AsyncLinkFacade):
@@ -195,7 +199,9 @@ class AsyncController(AsyncLinkFacade):
     # -- motion ---------------------------------------------------------------------------
     move = motion_twin(_move)
     plan = twin(_plan)
-    vector_move = motion_twin(Controller.vector_move, AsyncVectorHandle).on_cancel(_stop_sequences)
+    vector_move = motion_twin(Controller.vector_move, AsyncVectorHandle).on_cancel(
+        _stop_sequence_started
+    )
     plan_vector = twin(_plan_vector)
     stop = twin(Controller.stop, shield=True)  # asked for, a stop goes out even if cancelled
     abort = twin(Controller.abort, shield=True)
@@ -250,14 +256,17 @@ class AsyncController(AsyncLinkFacade):
     @contextlib.asynccontextmanager
     async def motion(self, axes: str | None = None) -> AsyncIterator[None]:
         """A block in which an exception (cancellation included) stops the guarded axes
-        (default all) and waits for them, as ``Controller.motion`` does."""
+        (default all) and waits for them, as ``Controller.motion`` does; a start in the block
+        that the cancellation left running on its worker thread is let end first, so its
+        motion is stopped and waited for too (decision 0061)."""
         guard = self.sync.motion(axes)
         guard.__enter__()
         try:
             yield
         except BaseException as exc:
-            # The sync guard stops, waits and re-raises (or raises MotionError from exc).
-            await self._worker.run_shielded(guard.__exit__, type(exc), exc, exc.__traceback__)
+            # A start the exception cancelled still running on its thread ends first, then
+            # the sync guard stops, waits and re-raises (or raises MotionError from exc).
+            await self._worker.run_shielded(_guard_exit, self.sync.tracker, guard, exc)
             raise
         else:
             guard.__exit__(None, None, None)

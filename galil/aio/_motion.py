@@ -21,8 +21,11 @@ import functools
 import logging
 import math
 import threading
-from collections.abc import AsyncGenerator, Awaitable, Callable, Generator
+import warnings
+import weakref
+from collections.abc import AsyncGenerator, Awaitable, Callable, Coroutine, Generator
 from dataclasses import dataclass
+from types import TracebackType
 from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
 
 from galil import predict
@@ -46,8 +49,10 @@ __all__ = [
     "AsyncVectorHandle",
     "MotionRoom",
     "MoveProgress",
+    "MoveWait",
     "Starting",
     "motion_twin",
+    "settle_abandoned",
     "start_motion",
 ]
 
@@ -271,10 +276,15 @@ class AsyncMoveHandle:
                 await self.stop_unless_done()
             raise
 
-    async def wait(self, timeout: float | None = None) -> MoveResult:
+    def wait(self, timeout: float | None = None) -> MoveWait:
         """Wait until the move is done and compare its end with the prediction.
 
-        Cancelling the waiting task stops the move (``ST``) before the cancellation ends.
+        Cancelling the waiting task stops the move (``ST``) before the cancellation ends,
+        also when the task is cancelled before the wait has begun: the coroutine returned is
+        a :class:`MoveWait`, which stops the move when a cancellation is thrown into it
+        before its first step (``asyncio.gather(h1.wait(), h2.wait())`` cancelled at once,
+        a ``TaskGroup`` cancelling tasks not yet started, ``asyncio.wait_for(h.wait(), 0)``;
+        decision 0061). A wait closed or dropped without ever being awaited stops nothing.
 
         Raises:
             InvalidArgument: a bad timeout (see :meth:`watch`), before anything is sent.
@@ -282,12 +292,15 @@ class AsyncMoveHandle:
             MotionError: an axis stopped on a limit switch or soft limit, or a limit stopped
                 an axis geared to one of them (see ``MoveHandle.wait``).
         """
+        return MoveWait(self, timeout)
+
+    async def _wait(self, timeout: float | None) -> MoveResult:
         async for _ in self.watch(timeout):
             pass
         # Done: the sync handle's own wait returns at once with the result (or raises).
         return await self._worker.run(self.sync.wait, 0)
 
-    def __await__(self) -> Generator[Any, None, MoveResult]:
+    def __await__(self) -> Generator[object, None, MoveResult]:
         return self.wait().__await__()
 
     async def stop(self) -> None:
@@ -379,6 +392,109 @@ class AsyncVectorHandle(AsyncMoveHandle):
         return f"<AsyncVectorHandle of {self.sync!r}>"
 
 
+class MoveWait(Coroutine[object, None, MoveResult]):
+    """The coroutine :meth:`AsyncMoveHandle.wait` returns: ``await`` it, or hand it to
+    ``asyncio.gather``, ``create_task``, a ``TaskGroup`` or ``wait_for`` as any coroutine.
+
+    Unlike a native coroutine, it stops the move (``ST``, awaited, then the cancellation goes
+    on) when a :class:`asyncio.CancelledError` is thrown into it before its first step: a
+    task cancelled before it ever ran its wait still stops the move it was to wait for, as a
+    task cancelled while waiting does (decision 0061). Closed or garbage-collected without
+    ever being started, it stops nothing (a wait never awaited, like no wait at all) and, as a
+    native coroutine, warns (:class:`RuntimeWarning`) only when it is dropped unclosed.
+    """
+
+    __slots__ = ("_closed", "_handle", "_inner", "_timeout")
+
+    def __init__(self, handle: AsyncMoveHandle, timeout: float | None) -> None:
+        self._handle = handle
+        self._timeout = timeout
+        self._inner: Coroutine[object, None, MoveResult] | None = None
+        self._closed = False
+
+    def send(self, value: None) -> object:
+        """Run the wait to its next suspension (it begins at the first call)."""
+        if self._inner is None:
+            if self._closed:
+                raise RuntimeError("cannot reuse already awaited coroutine")
+            self._inner = self._handle._wait(self._timeout)
+        return self._inner.send(value)
+
+    def throw(
+        self,
+        typ: type[BaseException] | BaseException,
+        val: BaseException | object = None,
+        tb: TracebackType | None = None,
+    ) -> object:
+        """Raise an exception in the wait; a cancellation before it began stops the move."""
+        exc = _thrown(typ, val, tb)
+        if self._inner is None and not self._closed:
+            self._closed = True  # (begun now: never to be warned about)
+            if isinstance(exc, asyncio.CancelledError):
+                self._inner = self._abandoned(exc)
+                return self._inner.send(None)
+        if self._inner is None:
+            raise exc
+        return self._inner.throw(exc)
+
+    def close(self) -> None:
+        """Close the wait (a wait never begun stops nothing)."""
+        self._closed = True
+        if self._inner is not None:
+            self._inner.close()
+
+    def __await__(self) -> Generator[object, None, MoveResult]:
+        return _Awaiting(self)
+
+    async def _abandoned(self, exc: BaseException) -> MoveResult:
+        await self._handle.stop_unless_done()
+        raise exc
+
+    def __del__(self) -> None:
+        if self._inner is None and not self._closed:
+            warnings.warn(f"{self!r} was never awaited", RuntimeWarning, stacklevel=2)
+
+    def __repr__(self) -> str:
+        return f"<MoveWait of {self._handle.sync!r}>"
+
+
+class _Awaiting(Generator[object, None, MoveResult]):
+    """``MoveWait.__await__()``: the iterator ``await`` drives, every call passed on (the
+    wait itself is no iterator: typing tools would then take it for a generator)."""
+
+    __slots__ = ("_wait",)
+
+    def __init__(self, wait: MoveWait) -> None:
+        self._wait = wait
+
+    def send(self, value: None) -> object:
+        return self._wait.send(value)
+
+    def throw(
+        self,
+        typ: type[BaseException] | BaseException,
+        val: BaseException | object = None,
+        tb: TracebackType | None = None,
+    ) -> object:
+        return self._wait.throw(typ, val, tb)
+
+    def close(self) -> None:
+        self._wait.close()
+
+
+def _thrown(
+    typ: type[BaseException] | BaseException, val: object, tb: TracebackType | None
+) -> BaseException:
+    """The exception of a ``throw(typ[, val[, tb]])`` call (the generator protocol's forms)."""
+    if isinstance(typ, BaseException):
+        exc = typ
+    elif isinstance(val, BaseException):
+        exc = val
+    else:
+        exc = typ() if val is None else typ(val)
+    return exc if tb is None else exc.with_traceback(tb)
+
+
 def _is_done(handle: MoveHandle) -> bool:
     return handle.done
 
@@ -417,6 +533,9 @@ class Starting:
         self._tracker = tracker
         self._thread: int | None = None
         self._cancelled = False
+        self._began = False
+        self._sequence_before: MoveHandle | None = None  # the last sequence as it began
+        self._over = threading.Event()  # set once the call has returned (or was dropped)
 
     def run(self, call: Callable[[], R]) -> R:
         """Worker side: ``call()``, its motion refused once :meth:`cancel` has run."""
@@ -425,14 +544,42 @@ class Starting:
             return call()
         with tracker.lock:
             if self._cancelled:
+                self._ended(tracker)
                 raise _DroppedError("cancelled before it began")
             self._thread = thread = threading.get_ident()
+            self._began = True
+            self._sequence_before = tracker.last_sequence()
         try:
             return call()
         finally:
             with tracker.lock:
                 tracker.allow_starts(thread)
                 self._thread = None
+            self._ended(tracker)
+
+    def _ended(self, tracker: MotionTracker) -> None:
+        with _ABANDONED_LOCK:
+            _ABANDONED.get(tracker, set()).discard(self)
+            self._over.set()
+
+    def abandon(self) -> None:
+        """Loop side, as the awaiting task is cancelled (before :meth:`cancel` is submitted):
+        until the call is over, :func:`settle_abandoned` finds it."""
+        if self._tracker is None:
+            return
+        with _ABANDONED_LOCK:
+            if not self._over.is_set():
+                _ABANDONED.setdefault(self._tracker, set()).add(self)
+
+    def sequence_started(self) -> MoveHandle | None:
+        """The vector sequence registered since the call began (by it: one sequence runs on
+        S at a time, and a start finding one running is refused), ``None`` when the call has
+        not begun or has registered none: what a cancelled ``vector_move`` is to stop, and
+        never a sequence that was running before it."""
+        if self._tracker is None or not self._began:
+            return None
+        last = self._tracker.last_sequence()
+        return None if last is self._sequence_before else last
 
     def cancel(self, then: Callable[[], object] | None = None) -> None:
         """Worker side, once the awaiting task is cancelled: refuse what the call has not
@@ -443,6 +590,25 @@ class Starting:
                 self._tracker.refuse_starts(self._thread)
             if then is not None:
                 then()
+
+
+_ABANDONED: weakref.WeakKeyDictionary[MotionTracker, set[Starting]] = weakref.WeakKeyDictionary()
+_ABANDONED_LOCK = threading.Lock()  # (never held while anything else is)
+
+
+def settle_abandoned(tracker: MotionTracker, timeout: float = 30.0) -> None:
+    """Worker side: let every start whose awaiting task was cancelled end before going on.
+    A start that has not begun never will (it is cancelled here, under the tracker's lock);
+    one that runs is refused what it has not registered yet and waited for (at most
+    ``timeout`` seconds each), so that the motion it has registered can be seen (``_BG``)
+    and stopped by whoever calls this next: the ``motion()`` guard (decision 0061)."""
+    with _ABANDONED_LOCK:
+        pending = list(_ABANDONED.get(tracker, ()))
+    for starting in pending:
+        starting.cancel()  # (idempotent: the cancelled caller has submitted its own too)
+    for starting in pending:
+        if starting._began:  # (final once cancel() has run: a start begins under the lock)
+            starting._over.wait(timeout)
 
 
 async def start_motion(
@@ -502,15 +668,16 @@ class motion_twin(Generic[S, P, H]):  # noqa: N801 - used like a decorator
     ) -> None:
         self._method = method
         self._wrap = wrap
-        self._at_once: Callable[[Any], object] | None = None
+        self._at_once: Callable[[Any, Starting], object] | None = None
         self.__doc__ = method.__doc__
         self.__name__ = getattr(method, "__name__", "motion_twin")
 
-    def on_cancel(self, at_once: Callable[[S], object]) -> motion_twin[S, P, H]:
-        """Also run ``at_once(sync)`` on a worker the moment the caller is cancelled, while
-        the start is still running (a long path streaming on its thread is stopped then, not
-        only once every segment has been sent); under the tracker's lock, with the start's
-        motion refused from then on (:class:`Starting`)."""
+    def on_cancel(self, at_once: Callable[[S, Starting], object]) -> motion_twin[S, P, H]:
+        """Also run ``at_once(sync, starting)`` on a worker the moment the caller is
+        cancelled, while the start is still running (a long path streaming on its thread is
+        stopped then, not only once every segment has been sent); under the tracker's lock,
+        with the start's motion refused from then on. ``starting`` (:class:`Starting`) tells
+        what the start has registered so far: only that is to be stopped."""
         self._at_once = at_once
         return self
 
@@ -538,7 +705,8 @@ class motion_twin(Generic[S, P, H]):  # noqa: N801 - used like a decorator
                     worker, link, wrap, starting, method, sync, *args, **kwargs
                 )
             except asyncio.CancelledError:
-                then = None if at_once is None else functools.partial(at_once, sync)
+                starting.abandon()
+                then = None if at_once is None else functools.partial(at_once, sync, starting)
                 with contextlib.suppress(GalilConnectionError):
                     worker.submit(starting.cancel, then)
                 raise

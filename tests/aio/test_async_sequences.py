@@ -68,6 +68,7 @@ from galil.errors import (
     GalilTimeoutError,
     InvalidArgument,
     MotionError,
+    ProgramError,
 )
 from galil.motion import MoveHandle, MoveResult
 from galil.sim.rooms.contour import Contour as SimContour
@@ -99,11 +100,18 @@ HOWS = [
 ]
 how_st = st.sampled_from(HOWS)
 call_st = st.integers(1, 16)
+# Which of the handles (or axes) running a rule takes: an index drawn whatever the state, so
+# that a replay draws the same data when the worker threads' pacing changed what runs.
+pick_st = st.integers(0, 63)
 # Codes of an axis whose motion runs on (not stopping): independent, contour, vector.
 _RUNNING_CODES = (0, 50, 100)
 # Controller seconds within which every stop is over: the slowest ramp down here is SP
 # 60 000 at DC 20 480 (2.9 s), plus IT smoothing.
 STOP_TIME = 3.5
+
+
+def _picked(items: list[T], pick: int) -> T:
+    return items[pick % len(items)]
 
 
 class _CancelledError(Exception):
@@ -153,6 +161,7 @@ class AsyncSequences(RuleBasedStateMachine):
         self.capture: aio.AsyncCapture | None = None
         # What the step's awaitable awaited (handles), and the waits it saw to an end.
         self.owned: list[MoveHandle] = []
+        self.unawaited: list[MoveHandle] = []  # started in the step, never awaited by it
         self.outcomes: list[tuple[Running, MoveResult | None, MotionError | None]] = []
         # Motion a cancellation stopped: (axes, the handle, controller time it must be over).
         self.stopping: list[tuple[str, MoveHandle, float]] = []
@@ -166,7 +175,7 @@ class AsyncSequences(RuleBasedStateMachine):
         check what the cancellation left and raise :class:`_CancelledError`. The waits it saw to
         an end are judged either way (after the loop: the judging queries block)."""
         before = {a: self.dmc.tracker.active(a) for a in AXES}
-        self.owned, self.outcomes = [], []
+        self.owned, self.outcomes, self.unawaited = [], [], []
         try:
             with transcript(self.dmc) as sent:
                 return self.run(self._act(body, how, n))
@@ -226,6 +235,8 @@ class AsyncSequences(RuleBasedStateMachine):
             h = self.dmc.tracker.active(a)
             if h is not None and h is not before[a]:
                 owned[id(h)] = h
+        for h in self.unawaited:
+            owned.pop(id(h), None)
         now = self.dmc.link.clock()
         for h in owned.values():
             self.interfere(h.axes)
@@ -294,13 +305,13 @@ class AsyncSequences(RuleBasedStateMachine):
         self.set_setting(a, what, _VALUES[what][i])
 
     @rule(
-        data=st.data(),
+        pick=pick_st,
         what=st.sampled_from(["motor_type", "brush", "encoder_config"]),
         i=st.integers(0, 1),
     )
-    def motor_setting(self, data: st.DataObject, what: str, i: int) -> None:
+    def motor_setting(self, pick: int, what: str, i: int) -> None:
         moving = [a for r in self.running for a in r.handle.axes + r.handle.followers]
-        a = data.draw(st.sampled_from(sorted(set(moving)) or list(AXES)))
+        a = _picked(sorted(set(moving)) or list(AXES), pick)
         values = {"motor_type": [1, -1], "brush": [0, 1], "encoder_config": [10, 0]}
         self.set_setting(a, what, values[what][i])
 
@@ -372,45 +383,66 @@ class AsyncSequences(RuleBasedStateMachine):
     )
     def gathered(self, moves: list[tuple[str, int]], group: bool, how: str, n: int) -> None:
         """Moves of several axes started with ``asyncio.gather`` (each may be refused on its
-        own: documented errors only), then awaited together: ``gather``-ed (each wait to its
-        own end), or in a ``TaskGroup`` (a limit's ``MotionError`` cancels the other waits,
-        which stops their moves)."""
+        own: documented errors only), then their ``wait()`` coroutines awaited together:
+        ``gather``-ed (each wait to its own end), or in a ``TaskGroup`` (a limit's
+        ``MotionError`` cancels the other waits, which stops their moves). Cancelled, even
+        before a wait has begun, every move stops (decision 0061)."""
 
         async def body() -> None:
-            starts = [self.c.axes[a].move_by(d) for a, d in moves]
-            out = await asyncio.gather(*starts, return_exceptions=True)
+            starts = [asyncio.ensure_future(self.c.axes[a].move_by(d)) for a, d in moves]
+            try:
+                out = await asyncio.gather(*starts, return_exceptions=True)
+            except asyncio.CancelledError:
+                # A start that had returned is not cancelled (gather drops its handle): its
+                # move goes on, nothing of the library awaits it.
+                for t in starts:
+                    if t.done() and not t.cancelled() and t.exception() is None:
+                        self.unawaited.append(self.record(t.result()).handle)
+                raise
             runs = []
             for got in out:
                 if isinstance(got, BaseException):
                     assert isinstance(got, (InvalidArgument, MotionError)), repr(got)
                 else:
                     runs.append(self.record(got))
-            if not group:
-                await asyncio.gather(*(self.wait_for_run(r) for r in runs))
-                return
-            try:
-                async with asyncio.TaskGroup() as tg:  # type: ignore[attr-defined]
-                    for r in runs:
-                        tg.create_task(self.raising_wait(r))
-            except BaseExceptionGroup as eg:  # noqa: F821 - 3.11+
-                errors = eg.exceptions
-            else:
-                return
-            assert all(isinstance(e, MotionError) for e in errors), errors
-            self.stopped_siblings(runs)
+            self.owned.extend(r.handle for r in runs)
+            with warnings.catch_warnings():
+                if any(r.unpredictable for r in runs):  # (not the library's doing)
+                    warnings.simplefilter("ignore", RuntimeWarning)
+                await self.waits_together(runs, group)
 
         with contextlib.suppress(_CancelledError):
             self.act(body, how, n)
 
-    async def raising_wait(self, run: Running) -> None:
-        """Await ``run`` and let a limit's ``MotionError`` out (judged after the step)."""
-        self.owned.append(run.handle)
+    async def waits_together(self, runs: list[Running], group: bool) -> None:
+        """The library's own wait coroutines of ``runs``, gathered or in a ``TaskGroup``;
+        the outcomes of those that ended are judged after the step."""
+        waits = [self.handles[id(r.handle)].wait() for r in runs]
+        tasks: list[asyncio.Future[MoveResult]] = []
+        errors: tuple[BaseException, ...] = ()
         try:
-            result = await self.handles[id(run.handle)].wait()
-        except MotionError as exc:
-            self.outcomes.append((run, None, exc))
-            raise
-        self.outcomes.append((run, result, None))
+            if not group:
+                tasks = [asyncio.ensure_future(w) for w in waits]
+                await asyncio.gather(*tasks, return_exceptions=True)
+            else:
+                async with asyncio.TaskGroup() as tg:  # type: ignore[attr-defined]
+                    tasks = [tg.create_task(w) for w in waits]
+        except BaseExceptionGroup as eg:  # noqa: F821 - 3.11+
+            errors = eg.exceptions
+        finally:
+            for run, task in zip(runs, tasks, strict=True):
+                if task.done() and not task.cancelled():
+                    error = task.exception()
+                    if error is None:
+                        self.outcomes.append((run, task.result(), None))
+                    elif isinstance(error, MotionError):  # a limit stopped it (or a follower)
+                        self.outcomes.append((run, None, error))
+        assert all(isinstance(e, MotionError) for e in errors), errors
+        for task in tasks:
+            if task.done() and not task.cancelled():
+                assert isinstance(task.exception(), (type(None), MotionError, GalilTimeoutError))
+        if errors:
+            self.stopped_siblings(runs)
 
     def stopped_siblings(self, runs: list[Running]) -> None:
         """A TaskGroup's MotionError cancelled the other waits: their moves were stopped."""
@@ -481,11 +513,11 @@ class AsyncSequences(RuleBasedStateMachine):
         path = [Line(dx, dy), Line(-dy, dx)]
         self.start(lambda: self.c.vector_move(axes, path, speed=20000), wait, how, n)
 
-    @rule(data=st.data(), how=how_st, n=call_st, watch=st.booleans())
-    def wait_one(self, data: st.DataObject, how: str, n: int, watch: bool) -> None:
+    @rule(pick=pick_st, how=how_st, n=call_st, watch=st.booleans())
+    def wait_one(self, pick: int, how: str, n: int, watch: bool) -> None:
         """Await a handle started before (through ``watch()`` first, or not)."""
         if self.running:
-            run = data.draw(st.sampled_from(self.running))
+            run = _picked(self.running, pick)
             with contextlib.suppress(_CancelledError):
                 self.act(lambda: self.wait_for_run(run, watch=watch), how, n)
 
@@ -557,10 +589,10 @@ class AsyncSequences(RuleBasedStateMachine):
         self.run(self.c.stop(axes))
         self.interfere(axes or AXES)
 
-    @rule(data=st.data())
-    def stop_handle(self, data: st.DataObject) -> None:
+    @rule(pick=pick_st)
+    def stop_handle(self, pick: int) -> None:
         if self.running:
-            run = data.draw(st.sampled_from(self.running))
+            run = _picked(self.running, pick)
             self.run(self.handles[id(run.handle)].stop())
             axes = run.handle.axes
             if run.handle.kind == "vector":  # ST S: the sequence running now (decision 0034)
@@ -630,9 +662,18 @@ class AsyncSequences(RuleBasedStateMachine):
     @rule(timeout=st.sampled_from([0.2, 3.0]), how=how_st, n=call_st)
     def program_wait(self, timeout: float, how: str, n: int) -> None:
         """Await the test's thread (in slices of controller time): it ends, or still runs
-        after ``timeout`` (documented: it is not halted)."""
-        with contextlib.suppress(_CancelledError, GalilTimeoutError):
-            self.act(lambda: self.c.programs.wait(1, timeout=timeout), how, n)
+        after ``timeout`` (documented: it is not halted), or a line of its moves of D failed
+        because the test moves D behind it (a gearing, a move: documented, decision 0059)."""
+        failed: ProgramError | None = None
+        try:
+            with contextlib.suppress(_CancelledError, GalilTimeoutError):
+                self.act(lambda: self.c.programs.wait(1, timeout=timeout), how, n)
+        except ProgramError as exc:
+            failed = exc
+        if failed is not None:
+            assert failed.thread == 1, failed
+            line = failed.command.replace(" ", "")
+            assert line.startswith(("PRD", "BGD", "MFD", "MRD")), failed  # its moves of D
 
     @rule(
         kind=st.sampled_from(["output", "inputs", "analog", "wait same", "wait other"]),

@@ -6,6 +6,8 @@ check when mypy infers anything else, e.g. ``Any``).
 
 from __future__ import annotations
 
+import asyncio
+
 import numpy as np
 import numpy.typing as npt
 from typing_extensions import assert_type
@@ -28,6 +30,9 @@ async def check(c: aio.AsyncController) -> None:
     assert_type(await c.A.plan_to(10), Profile)
     assert_type(await c.plan({"A": 1}), MultiProfile)
     assert_type(await (await c.A.move_to(10)), galil.MoveResult)
+    assert_type(await (await c.A.move_to(10)).wait(), galil.MoveResult)
+    assert_type(await asyncio.gather((await c.A.move_to(10)).wait()), tuple[galil.MoveResult])
+    assert_type(await asyncio.create_task((await c.A.move_to(10)).wait()), galil.MoveResult)
     assert_type(await c.contour("A", [1.0], dt=2), ContourResult)
     assert_type(await c.records(8), aio.AsyncRecordStream)
     assert_type(await c.messages.get(), str)
