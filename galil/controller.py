@@ -58,6 +58,7 @@ from galil.motion import (
     abort_all,
     motion_guard,
     motors_off,
+    moving_axes,
     servo_here,
     stop_axes,
 )
@@ -399,9 +400,8 @@ def _stop_and_settle(link: Link, tracker: MotionTracker, wait: float) -> None:
     if not letters:
         return
     stop_axes(link, tracker, "")
-    names = [f"_BG{a}" for a in letters]
     deadline = link.clock() + wait
-    while any(round(v) for v in link.query_operands(names)) and link.clock() < deadline:
+    while moving_axes(link, letters) and link.clock() < deadline:
         link.pause(0.005)
     handles = {id(h): h for a in letters if (h := tracker.active(a)) is not None}
     for handle in handles.values():
@@ -954,15 +954,11 @@ def _stop_started(link: Link, tracker: MotionTracker) -> None:
 
 
 def _moving(link: Link, letters: str) -> str:
-    """Those of ``letters`` that read ``_BG`` 1 (one query; none for ``""``; ``""`` when
-    the query fails: closing goes on)."""
-    if not letters:
-        return ""
+    """:func:`~galil.motion.moving_axes`, ``""`` when the query fails: closing goes on."""
     try:
-        bg = link.query_operands([f"_BG{a}" for a in letters])
+        return moving_axes(link, letters)
     except GalilError:
         return ""
-    return "".join(a for a, v in zip(letters, bg, strict=True) if round(v))
 
 
 def _axis_names(axes: object) -> list[str]:

@@ -139,11 +139,8 @@ class ProgramError(CommandError):
         shown = f" ({command})" if command else ""
         told = f"TC {code} {text}" if code is not None else "TC unknown (a later '?' took it)"
         message = f"{who} failed{where} at program line {line}{shown}: {told}"
-        GalilError.__init__(self, message.rstrip(), recent=recent)
-        self.model = model
-        self.code = code
-        self.text = text
-        self.command = command
+        super().__init__(code, text, command, model=model, recent=recent)
+        self.args = (message.rstrip(),)
         self.line = line
         self.thread = thread
         self.waited = waited

@@ -57,6 +57,7 @@ __all__ = [
     "held",
     "motion_guard",
     "motors_off",
+    "moving_axes",
     "raise_if_limited",
     "refuse_dropped",
     "sample_of",
@@ -1454,8 +1455,7 @@ def _stop_for_guard(
     """Stop what moves of ``letters`` (all of them if unknown) with ``stop`` (default: ``ST``
     on those); return what may still move."""
     try:
-        moving = [round(v) for v in link.query_operands([f"_BG{a}" for a in letters])]
-        busy = "".join(a for a, m in zip(letters, moving, strict=True) if m)
+        busy = moving_axes(link, letters)
     except GalilError:
         busy = letters  # unknown (a dead link among the causes): stop them all
     if not busy:
@@ -1465,6 +1465,12 @@ def _stop_for_guard(
     if not send_reopening(stop, reconnect):
         return busy
     return _wait_stopped(link, busy)
+
+
+def moving_axes(link: CommandLink, letters: str) -> str:
+    """Those of ``letters`` that read ``_BG`` 1 (one query; none for ``""``)."""
+    values = link.query_operands([f"_BG{a}" for a in letters])
+    return "".join(a for a, v in zip(letters, values, strict=True) if round(v))
 
 
 def send_reopening(send: Callable[[], object], reconnect: Callable[[], None] | None) -> bool:
@@ -1496,8 +1502,7 @@ def _wait_stopped(link: CommandLink, busy: str) -> str:
     deadline = link.clock() + _GUARD_WAIT
     try:
         while True:
-            values = link.query_operands([f"_BG{a}" for a in busy])
-            still = "".join(a for a, v in zip(busy, values, strict=True) if round(v))
+            still = moving_axes(link, busy)
             if not still:
                 return ""
             if link.clock() > deadline:
