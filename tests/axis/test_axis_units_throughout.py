@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from axis_helpers import in_unit, scale_in_mm
 
 import galil
 from galil.contour import sample_path
@@ -14,17 +15,10 @@ from galil.units import ureg
 mm, s = ureg.mm, ureg.s
 
 
-def _in(q: object, unit: str) -> float:
-    return float(q.to(unit).magnitude)  # type: ignore[attr-defined]
-
-
 @pytest.fixture
 def dmc() -> galil.Controller:
     with simulated() as controller:
-        for letter in "AB":
-            axis = controller.axes[letter].set_scale(counts_per=2000 / mm)
-            axis.speed = 20 * mm / s
-            axis.accel = axis.decel = 200 * mm / s**2
+        scale_in_mm(controller)
         yield controller
 
 
@@ -32,15 +26,15 @@ def test_a_plan_on_a_scaled_axis_reads_in_its_units(dmc: galil.Controller) -> No
     plan = dmc.A.plan_to(12.5 * mm)
     assert plan.peak_speed == 40_000  # the arrays and figures stay counts...
     q = plan.q  # ...and the same motion reads in mm
-    assert _in(q.peak_speed, "mm/s") == pytest.approx(20)
-    assert _in(q.end, "mm") == pytest.approx(12.5)
-    assert _in(q.distance, "mm") == pytest.approx(12.5)
+    assert in_unit(q.peak_speed, "mm/s") == pytest.approx(20)
+    assert in_unit(q.end, "mm") == pytest.approx(12.5)
+    assert in_unit(q.distance, "mm") == pytest.approx(12.5)
     assert q.duration.to("s").magnitude == pytest.approx(plan.duration)
-    assert _in(q.position[-1], "mm") == pytest.approx(12.5)
+    assert in_unit(q.position[-1], "mm") == pytest.approx(12.5)
     one_count = 1024 / 2000  # a sample's velocity may be one count over SP (mm/s)
-    assert _in(np.max(np.abs(q.velocity)), "mm/s") <= 20 + one_count
+    assert in_unit(np.max(np.abs(q.velocity)), "mm/s") <= 20 + one_count
     handle = dmc.A.move_to(12.5 * mm)
-    assert _in(handle.profile.q.end, "mm") == pytest.approx(12.5)
+    assert in_unit(handle.profile.q.end, "mm") == pytest.approx(12.5)
 
 
 def test_refusals_carry_the_users_units_and_the_counts(dmc: galil.Controller) -> None:
@@ -50,11 +44,11 @@ def test_refusals_carry_the_users_units_and_the_counts(dmc: galil.Controller) ->
         x.plan_to(12.5 * mm)
     err = info.value
     assert err.limit == 20_000  # counts, as the controller sees them
-    assert _in(err.limit_in_units, "mm") == pytest.approx(10)
-    assert _in(err.value_in_units, "mm") > 10
+    assert in_unit(err.limit_in_units, "mm") == pytest.approx(10)
+    assert in_unit(err.value_in_units, "mm") > 10
     with pytest.raises(galil.LimitError) as info:
         x.speed = 20_000 * mm / s
-    assert _in(info.value.value_in_units, "mm/s") == pytest.approx(20_000)
+    assert in_unit(info.value.value_in_units, "mm/s") == pytest.approx(20_000)
 
 
 def test_a_contour_step_beyond_the_models_acceleration_is_refused_before_sending(
@@ -68,7 +62,7 @@ def test_a_contour_step_beyond_the_models_acceleration_is_refused_before_sending
     assert err.segment == 1
     assert err.value > dmc.model.ac_max
     assert "sample 2" in str(err)
-    assert _in(err.value_in_units, "mm/s**2") == pytest.approx(err.value / 2000)
+    assert in_unit(err.value_in_units, "mm/s**2") == pytest.approx(err.value / 2000)
 
 
 def test_a_contour_within_the_users_own_limits_or_refused(dmc: galil.Controller) -> None:
@@ -82,12 +76,12 @@ def test_a_contour_within_the_users_own_limits_or_refused(dmc: galil.Controller)
     with nothing_sent(dmc, allow_queries=True), pytest.raises(galil.LimitError) as info:
         dmc.contour("A", path, dt=3, accel_limit=50 * mm / s**2)
     assert info.value.name == "acceleration"
-    assert _in(info.value.limit_in_units, "mm/s**2") == pytest.approx(50)
+    assert in_unit(info.value.limit_in_units, "mm/s**2") == pytest.approx(50)
     with nothing_sent(dmc, allow_queries=True), pytest.raises(galil.LimitError) as info:
         dmc.contour("A", path, dt=3, speed_limit={"A": 15 * mm / s})
     assert info.value.name == "speed"
     result = dmc.contour("A", path, dt=3, accel_limit=200 * mm / s**2, speed_limit=25 * mm / s)
-    assert _in(result.profiles["A"].q.end, "mm") == pytest.approx(travel, abs=0.001)
+    assert in_unit(result.profiles["A"].q.end, "mm") == pytest.approx(travel, abs=0.001)
 
 
 def test_sample_path_takes_several_axes_and_keeps_quantities(dmc: galil.Controller) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from axis_helpers import in_unit, scale_in_mm
 
 import galil
 from galil import Line
@@ -20,18 +21,11 @@ TOP_MM, TOP_DEG = 1.07374e06, 524288
 @pytest.fixture
 def dmc() -> galil.Controller:
     with simulated() as controller:
-        for letter in "AB":
-            axis = controller.axes[letter].set_scale(counts_per=2000 / mm)
-            axis.speed = 20 * mm / s
-            axis.accel = axis.decel = 200 * mm / s**2
+        scale_in_mm(controller)
         c = controller.C.set_scale(counts_per=4096 / deg, sign=-1)
         c.speed = 20 * deg / s
         c.accel = c.decel = 200 * deg / s**2
         yield controller
-
-
-def _in(q: object, unit: str) -> float:
-    return float(q.to(unit).magnitude)  # type: ignore[attr-defined]
 
 
 def test_a_path_speed_or_acceleration_beyond_the_model_states_it_in_the_paths_unit(
@@ -45,7 +39,7 @@ def test_a_path_speed_or_acceleration_beyond_the_model_states_it_in_the_paths_un
     with pytest.raises(galil.LimitError) as info:
         dmc.plan_vector("AB", square, speed=20 * mm / s, accel=1e6 * mm / s**2)
     assert info.value.name == "VA"
-    assert _in(info.value.limit_in_units, "mm/s**2") == pytest.approx(536870.4)
+    assert in_unit(info.value.limit_in_units, "mm/s**2") == pytest.approx(536870.4)
     with pytest.raises(galil.LimitError) as info:  # the path's length (TC 31)
         dmc.plan_vector("AB", [Line(2e6 * mm, 0)], speed=20 * mm / s)
     assert "(in user units: 2e+06 mm, limit 1e+06 mm)" in str(info.value)
@@ -67,7 +61,7 @@ def test_a_position_beyond_the_32_bit_range_states_it_in_the_axis_unit(
         assert f"(in user units: reaches 1e+06 deg, limit {TOP_DEG} deg)" in str(info.value)
         with pytest.raises(galil.LimitError, match=r"FL .* on C") as info:
             c.soft_limits = (-1e6 * deg, 5 * deg)  # the low end is C's FL
-        assert _in(info.value.value_in_units, "deg") == pytest.approx(-1e6)
+        assert in_unit(info.value.value_in_units, "deg") == pytest.approx(-1e6)
 
 
 def test_a_contour_point_or_step_beyond_range_states_it_in_the_axis_unit(
