@@ -46,6 +46,7 @@ from galil.protocol.session import Completed, Session
 from galil.transport import ByteRate, ControllerClock, Transport
 
 __all__ = [
+    "RECONNECT_ADVICE",
     "CommandLink",
     "Link",
     "WireCapture",
@@ -61,6 +62,9 @@ __all__ = [
     "parse_numbers_reply",
     "refuse_link_settings",
 ]
+
+#: What a dead link's error ends with: the way to open it again.
+RECONNECT_ADVICE = "; call reconnect() to open it again"
 
 _WIRE = logging.getLogger("galil.wire")
 # The logger's own cache of isEnabledFor() answers (cleared in place when levels change): one
@@ -737,7 +741,7 @@ class LinkCore:
         if self.transport is not None:  # a broken socket or port is no use; reconnect() opens anew
             with contextlib.suppress(GalilError, OSError):
                 self.transport.close()
-        return self.error(GalilConnectionError, f"{exc}; call reconnect() to open it again")
+        return self.error(GalilConnectionError, f"{exc}{RECONNECT_ADVICE}")
 
     def _closed_error(self) -> GalilConnectionError:
         if not self._reopened.is_set():
@@ -745,7 +749,7 @@ class LinkCore:
         if self._dead:
             return self.error(
                 GalilConnectionError,
-                f"the controller link died ({self._dead}); call reconnect() to open it again",
+                f"the controller link died ({self._dead}){RECONNECT_ADVICE}",
             )
         return self.error(
             GalilConnectionError,

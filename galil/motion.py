@@ -18,7 +18,7 @@ import threading
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -33,7 +33,13 @@ from galil.errors import (
     MotionError,
     ProtocolError,
 )
-from galil.link import CommandLink, check_callable, check_flag, check_wait_timeout
+from galil.link import (
+    RECONNECT_ADVICE,
+    CommandLink,
+    check_callable,
+    check_flag,
+    check_wait_timeout,
+)
 from galil.models import tm_of
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import read_one
@@ -1250,7 +1256,8 @@ def stop_axes(link: CommandLink, tracker: MotionTracker | None, letters: str = "
     (Ctrl-C before the line went out, a dead link, no reply), the stop is sent again
     (:func:`stop_on_error`)."""
     send = functools.partial(_send_st, link, tracker, letters)
-    with held(tracker), stop_on_error(link, tracker, letters or link.model.axes, stop=send):
+    guard = stop_on_error(link, tracker, letters or link.model.axes, stop=send, is_stop=True)
+    with held(tracker), guard:
         send()
 
 
@@ -1329,7 +1336,7 @@ def abort_all(link: CommandLink, tracker: MotionTracker | None) -> None:
     """``AB 1``: stop every axis at once, without deceleration; programs keep running.
     Interrupted, it is sent again (:func:`stop_on_error`)."""
     send = functools.partial(_send_ab, link, tracker)
-    with held(tracker), stop_on_error(link, tracker, link.model.axes, stop=send):
+    with held(tracker), stop_on_error(link, tracker, link.model.axes, stop=send, is_stop=True):
         send()
 
 
@@ -1358,9 +1365,12 @@ def motion_guard(
     try:
         yield
     except BaseException as exc:
-        moving = _stop_for_guard(link, tracker, letters, None, reconnect)
+        reopen = _Reopen(reconnect)
+        moving = _stop_for_guard(link, tracker, letters, None, reopen.or_none())
         if moving:
             raise _not_stopped(link, exc, moving, "inside motion()") from exc
+        if reopen.done and isinstance(exc, GalilConnectionError):
+            raise _reopened(link, exc, letters, "the block") from exc
         raise
 
 
@@ -1378,6 +1388,7 @@ def stop_on_error(
     *,
     stop: Callable[[], None] | None = None,
     running: bool = False,
+    is_stop: bool = False,
 ) -> contextlib.AbstractContextManager[None]:
     """The guard of an operation that starts or changes the motion of ``letters`` (``"S"``:
     a vector sequence): if it raises anything that may have come once its line went out (a
@@ -1391,19 +1402,24 @@ def stop_on_error(
         running: the motion runs already and the block sends the rest of it (a streamed
             path's later segments): a refusal of one of those stops it too (what follows it
             would never be sent); only a :class:`MotionError` (the motion is over) passes.
+        is_stop: the block is itself a stop (``ST``, ``AB``): when its link died and the guard
+            got the stop through on the reopened link, the block has done its job, and the
+            dead link's error is logged (WARNING on ``galil.motion``) rather than raised.
 
     Raises:
         MotionError: from the exception, naming the axes that may still move, when the stop
             could not be sent or confirmed.
+        GalilConnectionError: from a dead link's error, once the guard reopened the link and
+            stopped the axes (saying so: the link works again).
     """
-    return _StopOnError(link, tracker, letters, stop, running)
+    return _StopOnError(link, tracker, letters, stop, running, is_stop)
 
 
 class _StopOnError:
     """:func:`stop_on_error`'s guard: a class, not a generator (it guards every start and
     every wait, a hot path; entering and leaving it costs next to nothing)."""
 
-    __slots__ = ("_letters", "_link", "_running", "_stop", "_tracker")
+    __slots__ = ("_is_stop", "_letters", "_link", "_running", "_stop", "_tracker")
 
     def __init__(
         self,
@@ -1412,27 +1428,76 @@ class _StopOnError:
         letters: str,
         stop: Callable[[], None] | None,
         running: bool,
+        is_stop: bool,
     ) -> None:
         self._link = link
         self._tracker = tracker
         self._letters = letters
         self._stop = stop
         self._running = running
+        self._is_stop = is_stop
 
     def __enter__(self) -> None:
         return None
 
-    def __exit__(self, kind: object, exc: BaseException | None, tb: object) -> Literal[False]:
+    def __exit__(self, kind: object, exc: BaseException | None, tb: object) -> bool:
         if exc is None or isinstance(exc, MotionError if self._running else _NOTHING_RAN):
             return False
         link, tracker = self._link, self._tracker
         if tracker is not None and tracker.closed and isinstance(exc, GalilConnectionError):
             return False  # close() stopped the motion before it closed the link
-        reopen = None if tracker is None else tracker.reconnect
-        moving = _stop_for_guard(link, tracker, self._letters, self._stop, reopen)
+        reopen = _Reopen(None if tracker is None else tracker.reconnect)
+        moving = _stop_for_guard(link, tracker, self._letters, self._stop, reopen.or_none())
         if moving:
             raise _not_stopped(link, exc, moving, "while starting or changing motion") from exc
+        if reopen.done and isinstance(exc, GalilConnectionError):
+            if self._is_stop:
+                # The block was the stop itself, and it went out on the reopened link: done.
+                _LOG.warning(
+                    "the link died while stopping %s (%s); it was reopened and they are stopped",
+                    self._letters,
+                    _died_of(exc),
+                )
+                return True
+            raise _reopened(link, exc, self._letters, "the operation") from exc
         return False
+
+
+class _Reopen:
+    """A guard's reconnect, noting whether it was called (the link was reopened)."""
+
+    __slots__ = ("_reconnect", "done")
+
+    def __init__(self, reconnect: Callable[[], None] | None) -> None:
+        self._reconnect = reconnect
+        self.done = False
+
+    def or_none(self) -> Callable[[], None] | None:
+        return None if self._reconnect is None else self
+
+    def __call__(self) -> None:
+        assert self._reconnect is not None
+        self._reconnect()
+        self.done = True
+
+
+def _died_of(exc: GalilConnectionError) -> str:
+    """Why the link died, without the advice to reopen it (it is open again)."""
+    text = str(exc.args[0] if exc.args else exc).removesuffix(RECONNECT_ADVICE)
+    dead = "the controller link died ("
+    return text[len(dead) : -1] if text.startswith(dead) and text.endswith(")") else text
+
+
+def _reopened(
+    link: CommandLink, exc: GalilConnectionError, letters: str, what: str
+) -> GalilConnectionError:
+    """The error a guard raises once it reopened a dead link and stopped ``letters``: the link
+    works again, so the old advice to call reconnect() would mislead."""
+    return link.error(
+        GalilConnectionError,
+        f"the link died ({_died_of(exc)}); it was reopened and {letters} stopped, so the link"
+        f" works again, but {what} was cut short and may or may not have taken effect",
+    )
 
 
 def _not_stopped(link: CommandLink, exc: BaseException, moving: str, where: str) -> MotionError:

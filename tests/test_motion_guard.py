@@ -115,3 +115,78 @@ def test_the_guard_names_the_axes_it_could_not_stop() -> None:
         assert sim.motion("A").moving  # nothing could reach it
     finally:
         dmc.close()
+
+
+@dataclass
+class DiesAfter(SimLinkWrapper):
+    """A transport around the simulator's link that dies once a line with ``mark`` went out
+    (the controller got it; its reply is lost with the link)."""
+
+    mark: bytes = b"BG"
+
+    def write(self, data: bytes) -> None:
+        self.inner.write(data)
+        if self.mark in data:
+            self.inner.close()
+
+
+def _reopening(sim: SimController, mark: bytes) -> galil.Controller:
+    """A controller whose first link dies after the line with ``mark``; later links work."""
+    from galil.controller import Controller
+
+    links: list[SimLink] = []
+
+    def factory() -> SimLink:
+        inner = SimLink(sim)
+        links.append(inner)
+        return DiesAfter(inner, mark=mark) if len(links) == 1 else inner  # type: ignore[return-value]
+
+    return Controller(factory, timeout=0.2)
+
+
+def test_a_stop_whose_link_dies_goes_out_on_the_reopened_link_and_returns(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    dmc = _reopening(sim, b"ST")
+    try:
+        dmc.A.jog(50_000)
+        with caplog.at_level("WARNING", logger="galil.motion"):
+            dmc.A.stop()  # the first ST dies with the link: it is sent again, and that is all
+        assert not sim.motion("A").moving
+        assert dmc.query_operands(["_BGA", "_SCA"]) == [0, 4]  # the link works
+        assert "it was reopened and they are stopped" in caplog.text
+        assert [line for _, line in sim.command_log].count("ST A") == 2
+    finally:
+        dmc.close()
+
+
+def test_a_start_cut_short_by_a_dead_link_says_the_link_works_again() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    dmc = _reopening(sim, b"BG")
+    try:
+        with pytest.raises(galil.GalilConnectionError) as info:
+            dmc.A.move_by(200_000)  # the line goes out, the link dies before its reply
+        text = str(info.value)
+        assert "reconnect()" not in text
+        assert "it was reopened and A stopped, so the link works again" in text
+        assert "may or may not have taken effect" in text
+        assert isinstance(info.value.__cause__, galil.GalilConnectionError)
+        assert not sim.motion("A").moving
+        assert dmc.query_operands(["_BGA"]) == [0]
+    finally:
+        dmc.close()
+
+
+def test_a_motion_block_whose_link_died_says_the_link_works_again() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    dmc = _reopening(sim, b"MG 7")
+    try:
+        dmc.B.jog(20_000)
+        with pytest.raises(galil.GalilConnectionError) as info, dmc.motion("AB"):
+            dmc.command("MG 7")  # the link dies under the block
+        assert "reconnect()" not in str(info.value)
+        assert "it was reopened and AB stopped" in str(info.value)
+        assert not sim.motion("B").moving
+    finally:
+        dmc.close()
