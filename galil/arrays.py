@@ -41,7 +41,6 @@ __all__ = ["LIBRARY_VARIABLES", "Arrays", "Variables"]
 
 _LA_LINE = re.compile(r"\s*([A-Za-z][A-Za-z0-9]*)\s*\[\s*(\d+)\s*\]")
 _LV_LINE = re.compile(r"\s*([A-Za-z][A-Za-z0-9]*)\s*=\s*(\S+)")
-_UPLOAD_TIMEOUT = 10.0
 #: The variables the library's own routines read while they run (the watchdog's, a speed
 #: schedule's, ``io.wait_for_input``'s): freeing one would stop such a routine with an error
 #: (a watchdog would stop guarding, silently), so ``del`` refuses them and ``clear`` keeps them.
@@ -71,7 +70,25 @@ def _values(values: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
     return data
 
 
-_READ_VF = cmds.vf(10, 4)  # what the read format {Z10.4} prints, for QU and LV
+_DIGITS, _DECIMALS = 10, 4
+_READ_VF = cmds.vf(_DIGITS, _DECIMALS)  # what the read format {Z10.4} prints, for QU and LV
+#: The most bytes a number takes in the read format (the widest VF prints no wider): its
+#: sign or a space, ten digits, the point, four decimals.
+_NUMBER_BYTES = 1 + _DIGITS + 1 + _DECIMALS
+#: After the last value of a ``QU`` (CR LF, ^Z, ``:``) and around ``LV``'s reply.
+_END_BYTES = 4
+
+
+def _qu_reply_bytes(elements: int) -> int:
+    """The most bytes ``QU``'s reply of ``elements`` values can hold (a comma after each)."""
+    return (_NUMBER_BYTES + 1) * elements + _END_BYTES
+
+
+def _lv_reply_bytes(link: CommandLink) -> int:
+    """The most bytes ``LV``'s reply can hold: every variable the model has, a line each
+    (its name, `` = ``, a number, CR LF)."""
+    model = link.model
+    return (model.variable_length + 3 + _NUMBER_BYTES + 2) * model.variables + _END_BYTES
 
 
 def _in_read_format(link: CommandLink, command: cmds.Command, timeout: float | None) -> str:
@@ -173,7 +190,8 @@ class Arrays:
         """Write ``values`` into array ``name`` from element ``first`` (``QD``).
 
         The array's size is read first (``LA``), so values that would not fit are
-        refused before any of them is sent.
+        refused before any of them is sent. The reply timeout covers the values' bytes at the
+        link's byte rate (decision 0064): a large download over a slow serial line has time.
 
         Raises:
             InvalidArgument: a bad name or index, values that are not finite numbers, no such
@@ -190,7 +208,8 @@ class Arrays:
                 f"{data.size} values from {name}[{first}] do not fit {name}[] of {size}",
                 model=self.link.model.name,
             )
-        self.link.exchange(cmds.qd(name, data.tolist(), first), timeout=_UPLOAD_TIMEOUT)
+        command = cmds.qd(name, data.tolist(), first)
+        self.link.exchange(command, timeout=self.link.transfer_timeout(command))
 
     def upload(
         self, name: str, first: int | None = None, last: int | None = None
@@ -198,7 +217,8 @@ class Arrays:
         """Read array ``name`` (elements ``first`` to ``last``, default all) with ``QU``.
 
         The array's size is read first (``LA``), so a range outside the array is
-        refused before the upload is sent.
+        refused before the upload is sent. The reply timeout covers the most bytes the range
+        can take at the link's byte rate (decision 0064).
 
         Raises:
             InvalidArgument: a bad name or range, a range outside the array, or no such array.
@@ -215,7 +235,8 @@ class Arrays:
                 model=self.link.model.name,
             )
         command = cmds.qu(name, lo, hi, delim=1)
-        text = _in_read_format(self.link, command, _UPLOAD_TIMEOUT)
+        wait = self.link.transfer_timeout(command, _qu_reply_bytes(hi - lo + 1))
+        text = _in_read_format(self.link, command, wait)
         try:
             out = np.array(
                 [read_one(x) for x in re.split(r"[,\r\n]+", text) if x.strip()],
@@ -311,7 +332,9 @@ class Variables(MutableMapping[str, float]):
 
     def list(self) -> dict[str, float]:
         """Every variable and its value (``LV``)."""
-        text = _in_read_format(self.link, cmds.lv(), None)
+        command = cmds.lv()
+        wait = self.link.transfer_timeout(command, _lv_reply_bytes(self.link))
+        text = _in_read_format(self.link, command, wait)
         out: dict[str, float] = {}
         for line in text.splitlines():
             if not line.strip():

@@ -199,9 +199,12 @@ def _cmd_dl(args: argparse.Namespace) -> int:
 
 def _cmd_ul(args: argparse.Namespace) -> int:
     from galil.protocol import commands as cmds
+    from galil.routines import ul_reply_bytes
 
+    command = cmds.ul()
     with _connect(args.address, args.timeout) as dmc:
-        text = dmc.send(cmds.ul(), timeout=max(args.timeout, 10.0))
+        wait = dmc.link.transfer_timeout(command, ul_reply_bytes(dmc.model))
+        text = dmc.send(command, timeout=wait)
     program = "\n".join(text.splitlines()) + "\n"
     if args.file:
         Path(args.file).write_text(program, encoding="ascii")

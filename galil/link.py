@@ -47,6 +47,8 @@ from galil.transport import ByteRate, ControllerClock, Transport
 
 __all__ = [
     "RECONNECT_ADVICE",
+    "TRANSFER_MARGIN",
+    "TRANSFER_TIMEOUT",
     "CommandLink",
     "Link",
     "WireCapture",
@@ -65,6 +67,13 @@ __all__ = [
 
 #: What a dead link's error ends with: the way to open it again.
 RECONNECT_ADVICE = "; call reconnect() to open it again"
+#: The least reply timeout a bulk transfer (``QU``, ``QD``, ``DL``, ``UL``, ``LV``) gets: what
+#: every transfer had before its size counted (EPICS allows 10 s for a download); the link's
+#: own timeout when that is longer (decision 0064).
+TRANSFER_TIMEOUT = 10.0
+#: A transfer's time on the line, this many times over, comes on top: generous, since a
+#: controller may print more slowly than its line carries and the host may be late to read.
+TRANSFER_MARGIN = 2.0
 
 _WIRE = logging.getLogger("galil.wire")
 # The logger's own cache of isEnabledFor() answers (cleared in place when levels change): one
@@ -322,6 +331,10 @@ class CommandLink(Protocol):
 
     def query_operands(self, names: Sequence[str], *, timeout: float | None = None) -> list[float]:
         """Read operands or variables in as few lines as fit."""
+        ...
+
+    def transfer_timeout(self, command: Command, reply_bytes: int = 0) -> float:
+        """A bulk transfer's reply timeout, from its size (:meth:`Link.transfer_timeout`)."""
         ...
 
     def clock(self) -> float:
@@ -1136,6 +1149,25 @@ class Link(LinkCore):
             return []
         lines = cmds.pack(singles, self._model.line_length if self._model else 80)
         return [d.text for d in self.transact(tuple(lines), timeout)]
+
+    def transfer_timeout(self, command: Command, reply_bytes: int = 0) -> float:
+        """The reply timeout of a bulk transfer whose size is known before it goes out: the
+        link's own timeout (at least :data:`TRANSFER_TIMEOUT`) plus :data:`TRANSFER_MARGIN`
+        times what ``command``'s bytes and ``reply_bytes`` more take at :attr:`byte_rate`
+        (the reply comes after the command, so the two add up). A transport that does not
+        say its rate (USB, PCI, the simulator without ``baud``) is taken to be fast: the
+        least alone. Always finite (decision 0022); counted, as every reply timeout, in the
+        controller's time on a simulator (decision 0064).
+
+        Args:
+            command: the command as it goes out (its payload included: ``QD``, ``DL``).
+            reply_bytes: the most bytes its reply can hold.
+        """
+        least = max(self.timeout, TRANSFER_TIMEOUT)
+        rate = self.byte_rate
+        if rate is None or not rate > 0:  # (NaN from a plug-in: no rate either)
+            return least
+        return least + TRANSFER_MARGIN * (len(command.wire) + reply_bytes) / rate
 
     def send(self, command: Command, *, timeout: float | None = None) -> str:
         """Send a prepared :class:`~galil.protocol.commands.Command`; return its reply text."""

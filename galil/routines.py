@@ -28,15 +28,21 @@ from dataclasses import dataclass
 
 from galil.errors import InvalidArgument
 from galil.link import CommandLink
+from galil.models import ModelSpec
 from galil.protocol import commands as cmds
 
-__all__ = ["MARKER", "Routine", "Routines", "split_program"]
+__all__ = ["MARKER", "Routine", "Routines", "split_program", "ul_reply_bytes"]
 
 #: The line that separates the user's program (above) from the library's routines (below).
 MARKER = "'galil library"
 _LABEL = re.compile(r"#([A-Za-z][A-Za-z0-9]*)")
 _END = re.compile(r"EN\b")
-_DOWNLOAD_TIMEOUT = 10.0  # EPICS allows 10 s for a download
+
+
+def ul_reply_bytes(model: ModelSpec) -> int:
+    """The most bytes ``UL``'s reply can hold: a full program memory (the model's program
+    lines, each as long as a line can be, with CR LF), then ^Z and ``:``."""
+    return model.program_lines * (model.line_length + 2) + 2
 
 
 def _label_of(line: str) -> str | None:
@@ -153,8 +159,14 @@ class Routines:
         self._lock = threading.RLock()
 
     def upload(self) -> list[str]:
-        """The program in memory, one string per line (``UL``)."""
-        text = self.link.exchange(cmds.ul(), timeout=_DOWNLOAD_TIMEOUT).text
+        """The program in memory, one string per line (``UL``).
+
+        Its size is not known before it comes, so the reply timeout covers the most the
+        model's program memory holds (decision 0064).
+        """
+        command = cmds.ul()
+        wait = self.link.transfer_timeout(command, ul_reply_bytes(self.link.model))
+        text = self.link.exchange(command, timeout=wait).text
         return [line for line in text.replace("\r\n", "\n").split("\n") if line.strip()]
 
     def running(self) -> dict[int, int]:
@@ -250,7 +262,7 @@ class Routines:
         restart = {t: label for t, label in self._threads.items() if t in running}
         for t in restart:
             self.link.command_line([cmds.hx(t)])
-        self.link.exchange(download, timeout=_DOWNLOAD_TIMEOUT)
+        self.link.exchange(download, timeout=self.link.transfer_timeout(download))
         for t, label in restart.items():
             self.link.command_line([cmds.xq(label, t)])
         return tuple(sorted(restart))

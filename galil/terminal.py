@@ -41,8 +41,6 @@ __all__ = ["Terminal", "default_history_path", "program_lines", "run_terminal"]
 
 PROMPT = ":"
 DOWNLOAD_PROMPT = "DL> "
-# A download, and a burn, may take the controller a while (EPICS allows 10 s for a DL).
-DOWNLOAD_TIMEOUT = 10.0
 # What TC 2 means at a terminal (AM, MC, WT and the other trippoints are "Not Valid in
 # terminal" in the DMC-4103 command reference; decision 0044).
 _PROGRAM_ONLY_HINT = (
@@ -180,7 +178,8 @@ class Terminal:
         """Send a program with ``DL``; print what happened. Returns whether it was accepted."""
         try:
             command = cmds.dl(list(lines), model=self.controller.model)
-            self.controller.send(command, timeout=max(self.timeout, DOWNLOAD_TIMEOUT))
+            wait = max(self.timeout, self.controller.link.transfer_timeout(command))
+            self.controller.send(command, timeout=wait)
         except GalilError as exc:
             self._report(exc, "DL")
             return False

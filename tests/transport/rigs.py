@@ -3,7 +3,8 @@
 A rig is an open transport, what its peer answers to ``MG n``, how to make the peer go away,
 and the capabilities the transport must offer. Peers: a loopback TCP server thread, a pty
 (pyserial and the PCI transport open its slave end; a thread answers on the master), pyserial's
-``loop://``, pyusb's real code on a fake backend, and the simulator's in-process link.
+``loop://``, pyusb's real code on a fake backend, and the simulator's in-process link (also as
+a serial line of 9600 baud in simulated time).
 """
 
 from __future__ import annotations
@@ -130,6 +131,13 @@ def sim_rig() -> Iterator[Rig]:
     t.close()
 
 
+@contextlib.contextmanager
+def sim_serial_rig() -> Iterator[Rig]:
+    t = galil.sim.link.open_transport("sim://DMC-4040?baud=9600")
+    yield Rig(t, "sim", _sim_answer, frozenset({ControllerClock, ByteRate}))
+    t.close()
+
+
 RIGS: dict[str, Callable[[], contextlib.AbstractContextManager[Rig]]] = {
     "tcp": tcp_rig,
     "serial-pty": serial_pty_rig,
@@ -137,4 +145,5 @@ RIGS: dict[str, Callable[[], contextlib.AbstractContextManager[Rig]]] = {
     "usb": usb_rig,
     "pci": pci_rig,
     "sim": sim_rig,
+    "sim-serial": sim_serial_rig,
 }

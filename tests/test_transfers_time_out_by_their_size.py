@@ -1,0 +1,189 @@
+"""Bulk transfers (``QU``, ``QD``, ``DL``, ``UL``, ``LV``) get a reply timeout that covers
+their bytes at the link's byte rate (decision 0064): on a slow serial line they succeed where a
+fixed 10 s failed, and a reply that never comes still times out, at the computed bound.
+
+Over the simulator as a serial line in simulated time (``sim://DMC-4040?baud=...``), so a
+transfer of a minute on the line takes milliseconds here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+import galil
+from galil.errors import GalilTimeoutError
+from galil.protocol import commands as cmds
+from galil.sim.faults import FaultHook
+from galil.terminal import Terminal
+
+OLD_LIMIT = 10.0  # the fixed reply timeout every transfer had
+
+
+def _slow(baud: int, faults: FaultHook | None = None) -> galil.Controller:
+    return galil.connect(f"sim://DMC-4040?baud={baud}", faults=faults)
+
+
+@pytest.fixture
+def line_9600() -> Iterator[galil.Controller]:
+    with _slow(9600) as c:
+        yield c
+
+
+@pytest.fixture
+def line_19200() -> Iterator[galil.Controller]:
+    with _slow(19200) as c:
+        yield c
+
+
+def _program(lines: int) -> str:
+    """A program of ``lines`` lines of about 70 characters each."""
+    body = [f"v{i % 100}={i}*2+{'1' * 40};' filler line {i:04d}" for i in range(lines)]
+    return "\n".join(["#MANY", *body[: lines - 2], "EN"])
+
+
+def test_an_upload_of_1500_elements_at_9600_baud_takes_as_long_as_it_takes(
+    line_9600: galil.Controller,
+) -> None:
+    c = line_9600
+    values = -2_000_000_000 + np.arange(1500) * 7.25  # the widest numbers QU prints
+    c.arrays.define("big", 1500)
+    c.arrays.download("big", values)
+    began = c.link.clock()
+    got = c.arrays.upload("big")
+    spent = c.link.clock() - began
+    np.testing.assert_array_equal(got, values)
+    assert spent > 2 * OLD_LIMIT  # 25 kB back at 960 B/s
+
+
+def test_a_download_of_a_large_array_at_19200_baud_takes_as_long_as_it_takes(
+    line_19200: galil.Controller,
+) -> None:
+    c = line_19200
+    values = 1_234_567.5 + np.arange(3000)
+    c.arrays.define("big", 3000)
+    began = c.link.clock()
+    c.arrays.download("big", values)
+    assert c.link.clock() - began > OLD_LIMIT  # 30 kB out at 1,920 B/s
+    np.testing.assert_array_equal(c.arrays.upload("big", 2990, 2999), values[2990:])
+
+
+def test_a_program_of_hundreds_of_lines_goes_down_and_comes_back_at_19200_baud(
+    line_19200: galil.Controller,
+) -> None:
+    c = line_19200
+    program = _program(400)
+    began = c.link.clock()
+    assert c.programs.download(program).sent
+    assert c.link.clock() - began > OLD_LIMIT
+    began = c.link.clock()
+    assert c.programs.upload() == program
+    assert c.link.clock() - began > OLD_LIMIT
+    assert not c.programs.download(program).sent  # read back (UL), found there already
+
+
+def test_the_terminal_downloads_a_program_of_hundreds_of_lines_at_19200_baud(
+    line_19200: galil.Controller,
+) -> None:
+    c = line_19200
+    out: list[str] = []
+    assert Terminal(c, write=out.append).download(_program(400).splitlines())
+    assert out == ["downloaded 400 lines"]
+
+
+def test_a_capture_of_thousands_of_samples_on_four_axes_uploads_at_19200_baud(
+    line_19200: galil.Controller,
+) -> None:
+    c = line_19200
+    sources = ["_RPA", "_RPB", "_RPC", "_RPD"]
+    cap = c.capture(sources, every=2, count=3000)
+    moves = [getattr(c, a).move_by(20_000 * (i + 1)) for i, a in enumerate("ABCD")]
+    began = c.link.clock()
+    rec = cap.wait()
+    assert c.link.clock() - began > 4 * OLD_LIMIT  # ~6 s recording, ~18 s a source back
+    assert len(rec) == 3000
+    for i, (move, source) in enumerate(zip(moves, sources, strict=True)):
+        move.wait()
+        assert rec[source][-1] == 20_000 * (i + 1)
+
+
+def test_a_list_of_hundreds_of_variables_at_9600_baud_comes_whole(
+    line_9600: galil.Controller,
+) -> None:
+    c = line_9600
+    for first in range(0, 300, 4):
+        c.command(";".join(f"var{i}={i}.5" for i in range(first, first + 4)), allow_compound=True)
+    began = c.link.clock()
+    listed = c.variables.list()
+    assert c.link.clock() - began > 5.0  # 300 lines of about 16 bytes at 960 B/s
+    assert listed == {f"var{i}": i + 0.5 for i in range(300)}
+
+
+class _Silence:
+    """A fault hook that passes replies through until armed, then keeps ``keep`` bytes of
+    what follows (0: the controller falls silent; more: a reply cut off)."""
+
+    def __init__(self, keep: int = 0) -> None:
+        self.armed = False
+        self.keep = keep
+
+    def __call__(self, data: bytes) -> list[tuple[float, bytes]]:
+        if not self.armed:
+            return [(0.0, data)]
+        piece, self.keep = data[: self.keep], max(0, self.keep - len(data))
+        return [(0.0, piece)] if piece else []
+
+
+@pytest.mark.parametrize("keep", [0, 5000], ids=["no-reply", "reply-cut-off"])
+def test_an_upload_whose_reply_stops_times_out_at_its_computed_bound(keep: int) -> None:
+    silence = _Silence(keep)
+    with _slow(9600, silence) as c:
+        c.arrays.define("big", 1500)
+        c.command("MG _VF")  # (the upload's VF check comes first: answered)
+        bound = c.link.transfer_timeout(cmds.qu("big", 0, 1499, delim=1), 17 * 1500 + 4)
+        assert 2 * OLD_LIMIT < bound < 70.0  # 10 s, and twice 25 kB at 960 B/s
+        silence.keep = keep
+
+        sent: list[float] = []
+
+        def arm(direction: str, data: bytes) -> None:
+            if direction == "out" and data.startswith(b"QU"):
+                silence.armed = True
+                sent.append(c.link.clock())
+
+        c.wire_log.add(arm)
+        with pytest.raises(GalilTimeoutError, match=f"within {bound:g} s"):
+            c.arrays.upload("big")
+        assert c.link.clock() - sent[0] == pytest.approx(bound, abs=1e-6)
+
+
+def test_a_download_that_is_never_answered_times_out_at_its_computed_bound() -> None:
+    silence = _Silence()
+    with _slow(19200, silence) as c:
+        program = _program(400)
+        download = cmds.dl(program, model=c.model)
+        bound = c.link.transfer_timeout(download)
+        assert OLD_LIMIT < bound < 50.0
+
+        sent: list[float] = []
+
+        def arm(direction: str, data: bytes) -> None:
+            if direction == "out" and data.startswith(b"DL"):
+                silence.armed = True
+                sent.append(c.link.clock())
+
+        c.wire_log.add(arm)
+        with pytest.raises(GalilTimeoutError, match="'DL'"):
+            c.programs.download(program)
+        assert c.link.clock() - sent[0] == pytest.approx(bound, abs=1e-6)
+
+
+def test_a_fast_link_keeps_the_least_transfer_timeout() -> None:
+    with galil.connect("sim://DMC-4040") as c:  # the simulator without baud says no rate
+        assert c.link.byte_rate is None
+        assert c.link.transfer_timeout(cmds.ul(), 10**6) == OLD_LIMIT
+    with galil.connect("sim://DMC-4040?baud=115200", timeout=30.0) as c:
+        big = c.link.transfer_timeout(cmds.ul(), 11_520)
+        assert big == pytest.approx(30.0 + 2 * (3 + 11_520) / 11_520)  # the link's own, on top
