@@ -58,6 +58,8 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         argv += ["--tcp", args.tcp]
     if args.pty:
         argv += ["--pty"]
+    if args.baud is not None:
+        argv += ["--baud", args.baud]
     if args.message_port is not None:
         argv += ["--message-port", str(args.message_port)]
     argv += ["--lag", str(args.lag)]
@@ -337,6 +339,10 @@ def _add_offline_commands(sub: Any) -> None:
     p.add_argument("--model", default="DMC-4040", help="simulated model (default DMC-4040)")
     p.add_argument("--tcp", metavar="HOST:PORT", help="e.g. 127.0.0.1:0 (0 picks a free port)")
     p.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal")
+    p.add_argument(
+        "--baud",
+        help="with --pty: carry bytes no faster than a serial line of this rate (e.g. 115200)",
+    )
     p.add_argument(
         "--message-port",
         type=int,

@@ -52,6 +52,8 @@ CLI_CASES = [
     ["sim", "--tcp", "x"],
     ["sim", "--tcp", "127.0.0.1:99999"],
     ["sim", "--lag", "x"],
+    ["sim", "--tcp", "127.0.0.1:0", "--baud", "9600"],
+    *(["sim", "--pty", "--baud", b] for b in ("0", "-9600", "x", "nan", "inf")),
     *(
         ["sim", "--tcp", "127.0.0.1:0", *opt]
         for opt in (

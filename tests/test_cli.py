@@ -132,6 +132,43 @@ def test_sim_serves_a_pty_until_interrupted(spawn: Spawn) -> None:
         proc.wait(timeout=20)
 
 
+@pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pty")
+def test_sim_on_a_pty_at_a_baud_rate_carries_bytes_no_faster_than_that_line(
+    spawn: Spawn,
+) -> None:
+    import time
+
+    import serial
+
+    proc = spawn(
+        [*GALIL, "sim", "--pty", "--baud", "9600"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stdout is not None
+        match = re.search(r"(/dev/\S+)", proc.stdout.readline())
+        assert match
+        port = serial.Serial(match.group(1), timeout=10)
+        try:
+            port.write(b"MG 1\r")  # the line is up
+            assert port.read_until(b":").strip().endswith(b":")
+            lines = b"MG 2\r" * 20  # 100 bytes out, 20 replies of 10 bytes back
+            start = time.monotonic()
+            port.write(lines)
+            replies = b"".join(port.read_until(b":") for _ in range(20))
+            took = time.monotonic() - start
+        finally:
+            port.close()
+        assert replies.count(b"2.0000") == 20
+        # 9600 baud is 960 bytes a second each way (full duplex): the replies alone take that
+        assert took >= 0.9 * len(replies) / 960
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=20)
+
+
 def test_sim_stops_cleanly_on_sigterm(spawn: Spawn) -> None:
     proc = spawn(
         [*GALIL, "sim", "--tcp", "127.0.0.1:0"],

@@ -217,7 +217,7 @@ class SimSerialLink(SimLink):
             raise InvalidArgument(
                 "baud paces the simulator's manual clock (a real clock would have to sleep); "
                 "for a serial line in real time serve SimPtyServer(baud=...) "
-                "(python -m galil.sim.server --pty --baud 9600) and connect to its pty"
+                "(galil sim --pty --baud 9600) and connect to its pty"
             )
         super().__init__(controller, faults=faults, auto_advance=auto_advance)
         self._rate = self.baud / 10.0

@@ -569,12 +569,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         host, port = check_ports(args.tcp, args.message_port)
+        baud = _baud(args.baud, args.pty)
         controller = _controller(args.model, args.lag, args.limits)
     except (InvalidArgument, ValueError) as e:
         parser.error(str(e))
     server: _Server
     if args.pty:
-        server = SimPtyServer(controller, baud=args.baud)
+        server = SimPtyServer(controller, baud=baud)
     else:
         try:
             server = SimTcpServer(
@@ -640,7 +641,9 @@ def _parser() -> argparse.ArgumentParser:
         help="TCP port for unsolicited messages (0: any free one; -1: none, use CF I)",
     )
     parser.add_argument(
-        "--baud", type=float, help="with --pty: pace the line at this rate (default: no limit)"
+        "--baud",
+        help="with --pty: carry bytes no faster than a serial line of this rate (8N1: baud/10"
+        " bytes a second; default: as fast as the pty goes)",
     )
     parser.add_argument("--lag", type=float, default=0.003, help="servo lag time constant, s")
     parser.add_argument(
@@ -649,6 +652,21 @@ def _parser() -> argparse.ArgumentParser:
         help="put every axis's limit switches at these positions in counts (default: none)",
     )
     return parser
+
+
+def _baud(text: str | None, pty: bool) -> float | None:
+    """``--baud``: a positive, finite line rate, and only for a pty (a serial line)."""
+    if text is None:
+        return None
+    if not pty:
+        raise InvalidArgument("--baud paces a serial line: it goes with --pty")
+    try:
+        baud = float(text)
+    except ValueError:
+        baud = math.nan
+    if not (math.isfinite(baud) and baud > 0):
+        raise InvalidArgument(f"--baud takes a positive line rate (e.g. 115200), not {text!r}")
+    return baud
 
 
 def _controller(model: str, lag: float, limits: str | None) -> SimController:
