@@ -535,7 +535,9 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         Every move, jog, homing, vector sequence or contour started through this controller
         that it has not seen end gets its ``ST`` first (the stop is sent, not waited for):
         no motion the library started outlives the link that could stop it (a call waiting
-        on it in another thread raises :class:`~galil.errors.GalilConnectionError`). What
+        on it in another thread raises :class:`~galil.errors.GalilConnectionError`, and the
+        move's ``add_callback`` callbacks are never called: a move not seen done when close()
+        begins is never seen done, even by a poll that finds it stopped meanwhile). What
         raw commands or a program on the controller started is left as it is, and so is
         gearing (``GA``): an axis geared to one that a program or a handwheel moves goes on
         following it. The watchdog's routine is halted (leaving on purpose is not dying). A

@@ -341,8 +341,9 @@ class MotionTracker:
         #: Reopens a dead link so that a stop can be sent (:func:`stop_on_error`); ``None``
         #: when the link cannot be reopened (a controller built on a transport object).
         self.reconnect: Callable[[], None] | None = None
-        #: Set by a controller's close(), which stops what the library started itself: a
-        #: call that then finds the link closed has nothing left to stop.
+        #: Set by a controller's close(), before it stops what the library started itself: a
+        #: call that then finds the link closed has nothing left to stop, and a move not
+        #: seen done by then is never seen done (:attr:`MoveHandle.done` raises).
         self.closed = False
         self._schedule: MoveHandle | None = None  # the last speed schedule started
         self._sequence: MoveHandle | None = None  # the last vector sequence started
@@ -890,7 +891,12 @@ class MoveHandle:
     @property
     def done(self) -> bool:
         """True once every axis's profile is complete (``_BG`` is 0); one query per call
-        (the followers' ``_RP`` and ``_SC`` ride on it)."""
+        (the followers' ``_RP`` and ``_SC`` ride on it).
+
+        Raises:
+            GalilConnectionError: the controller is closed, or closing: a move not seen done
+                when ``close()`` began is never seen done (its stop would end it).
+        """
         if self._done:
             return True
         if len(self._tracks) == 1 and not self._ended and not self._followers:
@@ -898,6 +904,7 @@ class MoveHandle:
             # start (what the general case below reads and finds, without its bookkeeping).
             (a,) = self._tracks
             bg, rp, sc = self._link.query_operands(list(_poll_names(a, "")))
+            _refuse_if_closed(self)
             if not round(bg):
                 self._finish([round(rp)], [round(sc)], {})
             return self._done
@@ -907,6 +914,7 @@ class MoveHandle:
         followers = "".join(self._followers)
         names = _poll_names(letters, followers)
         values = [round(v) for v in self._link.query_operands(list(names))] if names else []
+        _refuse_if_closed(self)
         n, m = len(letters), len(followers)
         if not any(values[:n]):
             rest = values[3 * n :]
@@ -1079,6 +1087,10 @@ class MoveHandle:
         A background thread polls ``_BG`` every 50 ms of real time; it never advances a
         simulator's manual clock (whoever waits does), so a callback may also run on the
         thread that calls :meth:`wait` or reads :attr:`done`.
+
+        The callbacks run only for a move seen done. A move not seen done when the
+        controller's ``close()`` begins is stopped by it and never seen done: its callbacks
+        are never called (nor is a poll that finds it at rest meanwhile taken as its end).
         """
         check_callable(callback, "callback")
         with self._lock:
@@ -1119,6 +1131,26 @@ class MoveHandle:
     def __repr__(self) -> str:
         state = "done" if self._done else "moving"
         return f"<MoveHandle {self.kind} {self.axes} {state}, predicted {self.duration:.4g} s>"
+
+
+def _refuse_if_closed(handle: MoveHandle) -> None:
+    """Raise once ``close()`` has begun (:attr:`MotionTracker.closed`), after a poll's reply
+    and before it is taken: close() stops every move not seen done and closes the link, and a
+    poll that got in between would see close's own stop end the move (then "done", its
+    callbacks called, or not, by the threads' timing). Checked after the reply: ``closed`` is
+    set before close() sends a stop, so a poll that passes here was answered before any of
+    close()'s stops went out.
+
+    Raises:
+        GalilConnectionError: close() has begun.
+    """
+    tracker = handle._tracker
+    if tracker is not None and tracker.closed:
+        raise handle._link.error(
+            GalilConnectionError,
+            f"the controller was closed (close(), or the end of its with block) before the "
+            f"move on {handle.axes} was seen done: close() stopped it",
+        )
 
 
 def forget_dropped(

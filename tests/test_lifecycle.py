@@ -24,6 +24,7 @@ import galil
 import galil.aio
 from galil.controller import Controller
 from galil.errors import GalilConnectionError, MotionError
+from galil.link import Link
 from galil.sim.clock import ManualClock
 from galil.sim.controller import SimController
 from galil.sim.link import SimLink
@@ -385,9 +386,73 @@ def test_async_close_ends_a_watch_and_stops_the_move() -> None:
         return raised, sim
 
     raised, sim = asyncio.run(main())
-    # (the watch may also see the stop end first: its polls let simulated time pass)
-    assert all(isinstance(e, GalilConnectionError) for e in raised), raised
+    # (its polls let simulated time pass, but one that finds the stop over once close() has
+    # begun is not taken as the jog's end)
+    assert len(raised) == 1, raised
+    assert isinstance(raised[0], GalilConnectionError), raised
     assert "ST A" in _stops_sent(sim)
+
+
+def _close_waits_for_the_watcher(
+    monkeypatch: pytest.MonkeyPatch, c: Controller, watcher_over: Callable[[], bool]
+) -> None:
+    """Force the interleaving in which a move's watcher polls it between close()'s stop and
+    the link closing: close() sends its stops, lets them take effect (simulated time passes,
+    as real time would on hardware) and closes the link only once the watcher has ended: its
+    polls from then on find the move at rest, and it ends when one is taken as the move's end
+    (the race lost) or refused (close() has begun)."""
+    stop_started = c.tracker.stop_started
+
+    def stop_then_let_the_watcher_poll(on: Link) -> str:
+        failed = stop_started(on)
+        c.link.pause(0.5)
+        assert watcher_over(), "the move's watcher did not end"
+        return failed
+
+    monkeypatch.setattr(c.tracker, "stop_started", stop_then_let_the_watcher_poll)
+
+
+def test_close_drops_the_callbacks_of_a_move_it_stops_even_if_its_watcher_sees_it_end_first(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    c = galil.connect("sim://DMC-4040")
+    move = c.A.move_to(200_000)
+    called: list[object] = []
+    move.add_callback(called.append)
+    watcher = move._watcher
+    assert watcher is not None
+
+    def watcher_over() -> bool:
+        assert watcher is not None
+        watcher.join(JOIN)  # (it polls every 50 ms of real time)
+        return not watcher.is_alive()
+
+    _close_waits_for_the_watcher(monkeypatch, c, watcher_over)
+    c.close()
+    assert called == []
+    assert not move.finished
+    with pytest.raises(GalilConnectionError):
+        move.wait()
+
+
+def test_async_close_drops_the_callbacks_of_a_move_it_stops_even_if_its_watcher_sees_it_end_first(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    async def main() -> tuple[bool, list[object]]:
+        c = await galil.aio.connect("sim://DMC-4040")
+        move = await c.A.move_to(200_000)
+        called: list[object] = []
+        move.add_callback(called.append)
+        watcher = move._watcher
+        assert watcher is not None
+        ended = threading.Event()
+        watcher.add_done_callback(lambda _: ended.set())
+        _close_waits_for_the_watcher(monkeypatch, c.sync, lambda: ended.wait(JOIN))
+        await c.aclose()
+        await watcher
+        return move.finished, called
+
+    assert asyncio.run(main()) == (False, [])
 
 
 def test_closing_on_motion_nobody_waited_for_warns_naming_the_axes(

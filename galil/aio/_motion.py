@@ -327,7 +327,9 @@ class AsyncMoveHandle:
         The callbacks run only for a move seen done. If watching it fails first (the
         controller is closed, the connection is lost, the move outlasts its predicted
         duration plus the margin of :meth:`watch`), they are never called: the error is
-        logged (logger ``galil.aio``) and they are dropped.
+        logged (logger ``galil.aio``) and they are dropped. A move not seen done when
+        :meth:`~galil.aio.AsyncController.aclose` begins is never seen done, though the stop
+        ``aclose()`` sends ends it and the watcher polls meanwhile.
 
         Raises:
             InvalidArgument: ``callback`` cannot be called.
