@@ -354,9 +354,13 @@ def _prompt_loop(
                 continue
             signal.signal(signal.SIGINT, signal.default_int_handler)
             try:
-                term.feed(line)
+                try:
+                    term.feed(line)
+                finally:
+                    # Noted again before the loop goes round: a Ctrl-C just after the reply
+                    # (shown before feed returns) would raise where nothing catches it.
+                    signal.signal(signal.SIGINT, note)
             except KeyboardInterrupt:
-                signal.signal(signal.SIGINT, note)
                 term.interrupt()
 
 

@@ -13,6 +13,8 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from types import FrameType
+from typing import Any
 
 import pytest
 from prompt_toolkit import PromptSession
@@ -22,6 +24,7 @@ from prompt_toolkit.output.plain_text import PlainTextOutput
 from prompt_toolkit.patch_stdout import StdoutProxy
 
 import galil
+from galil import terminal
 from galil.sim.server import SimTcpServer
 from galil.terminal import Terminal, _Screen, default_history_path, run_terminal
 from galil.testing import nothing_sent, sim_of
@@ -299,6 +302,60 @@ def test_ctrl_c_during_a_command_sends_st_and_the_session_goes_on(
     assert shown.index("Ctrl-C: sent ST") < shown.index(" 8.0000")
     log = [text for _, text in sim_of(dmc).command_log]
     assert log.index("ST") > log.index("MG 7777")
+
+
+class CtrlCAfterAReply:
+    """A tracer for the terminal's thread: a SIGINT, as a Ctrl-C typed between two prompts
+    raises (the tty is then in cooked mode), at the ``at``-th line the prompt loop runs once
+    the first typed line has been handled (``Terminal.feed`` returned, its reply shown).
+    ``lines`` counts the loop's lines from there to the next prompt."""
+
+    def __init__(self, at: int | None) -> None:
+        self.at = at
+        self.fed = False
+        self.prompted = False
+        self.lines = 0
+
+    def __call__(self, frame: FrameType, event: str, arg: object) -> Any:
+        if frame.f_code is Terminal.feed.__code__:
+            return self._feed
+        if frame.f_code is terminal._prompt_loop.__code__:
+            return self._loop
+        if frame.f_code is PromptSession.prompt.__code__ and self.fed:
+            self.prompted = True
+        return None
+
+    def _feed(self, frame: FrameType, event: str, arg: object) -> Any:
+        if event == "return":
+            self.fed = True
+        return self._feed
+
+    def _loop(self, frame: FrameType, event: str, arg: object) -> Any:
+        if event == "line" and self.fed and not self.prompted:
+            self.lines += 1
+            if self.lines == self.at:
+                signal.raise_signal(signal.SIGINT)
+        return self._loop
+
+
+def test_a_ctrl_c_anywhere_between_a_reply_and_the_next_prompt_sends_st(
+    dmc: galil.Controller,
+) -> None:
+    def session(tracer: CtrlCAfterAReply) -> str:
+        sys.settrace(tracer)
+        try:
+            return _session(dmc, "MG 1\rMG 8\r\x04", None)
+        except KeyboardInterrupt:
+            raise AssertionError(f"a Ctrl-C at loop line {tracer.at} ended it") from None
+        finally:
+            sys.settrace(None)
+
+    count = CtrlCAfterAReply(None)
+    session(count)
+    assert count.lines > 3
+    for at in range(1, count.lines + 1):
+        shown = session(CtrlCAfterAReply(at))
+        assert shown.index(" 1.0000") < shown.index("Ctrl-C: sent ST") < shown.index(" 8.0000")
 
 
 def test_an_unwritable_history_keeps_it_for_the_session_only(
