@@ -342,13 +342,14 @@ def test_a_ctrl_c_anywhere_between_a_reply_and_the_next_prompt_sends_st(
     dmc: galil.Controller,
 ) -> None:
     def session(tracer: CtrlCAfterAReply) -> str:
+        previous = sys.gettrace()
         sys.settrace(tracer)
         try:
             return _session(dmc, "MG 1\rMG 8\r\x04", None)
         except KeyboardInterrupt:
             raise AssertionError(f"a Ctrl-C at loop line {tracer.at} ended it") from None
         finally:
-            sys.settrace(None)
+            sys.settrace(previous)
 
     count = CtrlCAfterAReply(None)
     session(count)
