@@ -19,9 +19,13 @@ script.
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
+import contextvars
 import os
 import signal
 import sys
+import threading
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
@@ -258,13 +262,14 @@ def run_terminal(
         history: file that keeps the typed lines between sessions (``None``: memory only).
         interactive: use the line editor; default: when stdin and stdout are terminals.
     """
-    term = Terminal(controller, timeout=timeout)
+    if interactive is None:
+        interactive = sys.stdin.isatty() and sys.stdout.isatty()
+    screen = _Screen() if interactive else None
+    term = Terminal(controller, timeout=timeout, write=screen.write if screen else None)
     unsubscribe = controller.subscribe(term.write)
     try:
-        if interactive is None:
-            interactive = sys.stdin.isatty() and sys.stdout.isatty()
-        if interactive:
-            _interactive(term, history)
+        if screen is not None:
+            _interactive(term, screen, history)
         else:
             _piped(term)
     finally:
@@ -283,7 +288,7 @@ def _piped(term: Terminal) -> None:
             term.interrupt()
 
 
-def _interactive(term: Terminal, history_file: Path | None) -> None:
+def _interactive(term: Terminal, screen: _Screen, history_file: Path | None) -> None:
     from prompt_toolkit import PromptSession
     from prompt_toolkit.history import FileHistory, History, InMemoryHistory
 
@@ -304,15 +309,19 @@ def _interactive(term: Terminal, history_file: Path | None) -> None:
 
     previous = signal.getsignal(signal.SIGINT)
     try:
-        _prompt_loop(term, session, note, state)
+        _prompt_loop(term, screen, session, note, state)
     finally:
         signal.signal(signal.SIGINT, previous)
 
 
 def _prompt_loop(
-    term: Terminal, session: Any, note: Callable[[int, Any], None], state: dict[str, bool]
+    term: Terminal,
+    screen: _Screen,
+    session: Any,
+    note: Callable[[int, Any], None],
+    state: dict[str, bool],
 ) -> None:
-    # Output printed while the prompt is shown (messages from the poll thread) goes above it.
+    # Anything else printed while the prompt is shown (a warning, say) goes above it too.
     from prompt_toolkit.patch_stdout import patch_stdout
 
     with patch_stdout(raw=True):
@@ -320,19 +329,22 @@ def _prompt_loop(
             signal.signal(signal.SIGINT, note)
             line: str | None = None
 
-            def check(app: Any = session.app) -> None:
+            def start(app: Any = session.app) -> None:
+                screen.prompt_shown(app)
                 # A Ctrl-C that came while the prompt was being set up: act on it now.
                 if state["interrupted"]:
                     app.exit(exception=KeyboardInterrupt())
 
             try:
-                line = session.prompt(term.prompt, pre_run=check)
+                line = session.prompt(term.prompt, pre_run=start)
             except KeyboardInterrupt:
                 state["interrupted"] = True
             except EOFError:
                 if not term.downloading:
                     return
                 term.cancel()
+            finally:
+                screen.prompt_gone()
             if state["interrupted"]:
                 state["interrupted"] = False
                 term.interrupt()
@@ -341,7 +353,83 @@ def _prompt_loop(
                 continue
             signal.signal(signal.SIGINT, signal.default_int_handler)
             try:
-                term.feed(line)
+                try:
+                    term.feed(line)
+                finally:
+                    # Noted again before the loop goes round: a Ctrl-C just after the reply
+                    # (shown before feed returns) would raise where nothing catches it.
+                    signal.signal(signal.SIGINT, note)
             except KeyboardInterrupt:
-                signal.signal(signal.SIGINT, note)
                 term.interrupt()
+
+
+class _Screen:
+    """Prints the line-edited terminal's lines, from any thread, losing none while prompts come
+    and go.
+
+    Between prompts a line is written at once. While a prompt is shown, a line (a program's
+    ``MG`` from the poll thread) is handed to the prompt's event loop and printed above the
+    prompt (``run_in_terminal``). A line is kept until it has been written: once the prompt
+    has its answer, its loop is about to be closed and may never run what it was handed, so
+    lines wait and are written when the prompt has returned. (prompt-toolkit's ``patch_stdout``
+    proxy hands a line to a prompt's loop just so; when that prompt ends first, the line is
+    lost, and once the loop is closed, the proxy's thread dies and every later line with it.)
+    """
+
+    def __init__(self) -> None:
+        from prompt_toolkit.application import get_app_session
+
+        self._output = get_app_session().output  # the terminal's, before patch_stdout
+        self._lock = threading.Lock()
+        self._pending: list[str] = []  # lines not written yet
+        self._held = False  # a prompt is shown or ending: lines wait in _pending
+        self._loop: asyncio.AbstractEventLoop | None = None  # the shown prompt's loop
+        self._context = contextvars.Context()  # the prompt's (run_in_terminal finds it there)
+
+    def write(self, text: str) -> None:
+        """Print one line (any thread)."""
+        with self._lock:
+            if not self._held:
+                self._put([text])
+                return
+            self._pending.append(text)
+            if self._loop is None or len(self._pending) > 1:
+                return  # the prompt is ending, or the lines before are already on their way
+            with contextlib.suppress(RuntimeError):  # closed: prompt_gone() writes them
+                self._loop.call_soon_threadsafe(self._show_pending, context=self._context)
+
+    def prompt_shown(self, app: Any) -> None:
+        """The prompt ``app`` is shown (called on its loop): lines go above it until it has
+        its answer."""
+        with self._lock:
+            self._held = True
+            self._loop = asyncio.get_running_loop()
+            self._context = contextvars.copy_context()
+        app.future.add_done_callback(self._prompt_answered)
+
+    def _prompt_answered(self, _: object) -> None:
+        with self._lock:
+            self._loop = None  # about to end: hand it nothing more
+
+    def prompt_gone(self) -> None:
+        """The prompt has returned (its loop is closed): write what it did not."""
+        with self._lock:
+            self._held = False
+            self._loop = None
+            lines, self._pending = self._pending, []
+            self._put(lines)
+
+    def _show_pending(self) -> None:
+        from prompt_toolkit.application import run_in_terminal
+
+        run_in_terminal(self._write_pending)
+
+    def _write_pending(self) -> None:
+        with self._lock:
+            lines, self._pending = self._pending, []
+            self._put(lines)
+
+    def _put(self, lines: list[str]) -> None:
+        if lines:
+            self._output.write_raw("".join(f"{text}\n" for text in lines))
+            self._output.flush()

@@ -5,20 +5,28 @@ reset, a Ctrl-C that cannot reach the controller, piped and line-edited input.
 
 from __future__ import annotations
 
+import asyncio
 import io
 import signal
 import sys
+import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
+from types import FrameType
+from typing import Any
 
 import pytest
+from prompt_toolkit import PromptSession
 from prompt_toolkit.application import create_app_session
 from prompt_toolkit.input import create_pipe_input
 from prompt_toolkit.output.plain_text import PlainTextOutput
+from prompt_toolkit.patch_stdout import StdoutProxy
 
 import galil
+from galil import terminal
 from galil.sim.server import SimTcpServer
-from galil.terminal import Terminal, default_history_path, run_terminal
+from galil.terminal import Terminal, _Screen, default_history_path, run_terminal
 from galil.testing import nothing_sent, sim_of
 
 
@@ -230,6 +238,62 @@ def test_a_line_edited_session_sends_lines_keeps_history_and_handles_ctrl_c_and_
     assert kept == ["+MG 1+2", "+DL", "+#A", "+MG 4"]
 
 
+def test_lines_printed_while_the_next_prompt_comes_and_goes_are_all_shown(
+    dmc: galil.Controller, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # prompt-toolkit's patch_stdout proxy hands a printed line to the running prompt's event
+    # loop from its own thread. Here that thread is always late (as a busy machine may make
+    # it): it looks for a prompt when the next one is already shown and hands the line over
+    # only once that prompt has ended. The terminal's lines must not depend on it.
+    original = StdoutProxy._get_app_loop
+
+    def late(proxy: StdoutProxy) -> asyncio.AbstractEventLoop | None:
+        deadline = time.monotonic() + 5.0
+        while proxy.app_session.app is None and time.monotonic() < deadline:
+            time.sleep(0.001)
+        loop = original(proxy)
+        while loop is not None and not loop.is_closed() and time.monotonic() < deadline:
+            time.sleep(0.001)
+        return loop
+
+    monkeypatch.setattr(StdoutProxy, "_get_app_loop", late)
+    shown = _session(dmc, "MG 1+2\rMG 4\r\x04", None)
+    assert shown.index(" 3.0000") < shown.index(" 4.0000")
+
+
+def test_lines_from_another_thread_are_shown_above_the_prompt_or_after_it_ends() -> None:
+    screen = io.StringIO()
+    with create_pipe_input() as typed, create_app_session(typed, PlainTextOutput(screen)):
+        lines = _Screen()
+        session: PromptSession[str] = PromptSession()
+
+        def from_a_thread(text: str) -> None:
+            thread = threading.Thread(target=lines.write, args=(text,))
+            thread.start()
+            thread.join()
+
+        def start() -> None:
+            lines.prompt_shown(session.app)
+            # while the prompt is shown; the line is typed only then
+            from_a_thread("above the prompt")
+            typed.send_text("typed\r")
+            # once the prompt has its answer, while its event loop ends
+            answered = session.app.future
+            assert answered is not None
+            answered.add_done_callback(lambda _: from_a_thread("as it ends"))
+
+        lines.write("before")
+        try:
+            assert session.prompt(":", pre_run=start) == "typed"
+        finally:
+            lines.prompt_gone()
+        lines.write("after")
+    text = screen.getvalue()
+    at = 0
+    for line in ["before", "above the prompt", "typed", "as it ends", "after"]:
+        at = text.index(line, at) + len(line)
+
+
 def test_ctrl_c_during_a_command_sends_st_and_the_session_goes_on(
     dmc: galil.Controller, faults: Faults
 ) -> None:
@@ -238,6 +302,61 @@ def test_ctrl_c_during_a_command_sends_st_and_the_session_goes_on(
     assert shown.index("Ctrl-C: sent ST") < shown.index(" 8.0000")
     log = [text for _, text in sim_of(dmc).command_log]
     assert log.index("ST") > log.index("MG 7777")
+
+
+class CtrlCAfterAReply:
+    """A tracer for the terminal's thread: a SIGINT, as a Ctrl-C typed between two prompts
+    raises (the tty is then in cooked mode), at the ``at``-th line the prompt loop runs once
+    the first typed line has been handled (``Terminal.feed`` returned, its reply shown).
+    ``lines`` counts the loop's lines from there to the next prompt."""
+
+    def __init__(self, at: int | None) -> None:
+        self.at = at
+        self.fed = False
+        self.prompted = False
+        self.lines = 0
+
+    def __call__(self, frame: FrameType, event: str, arg: object) -> Any:
+        if frame.f_code is Terminal.feed.__code__:
+            return self._feed
+        if frame.f_code is terminal._prompt_loop.__code__:
+            return self._loop
+        if frame.f_code is PromptSession.prompt.__code__ and self.fed:
+            self.prompted = True
+        return None
+
+    def _feed(self, frame: FrameType, event: str, arg: object) -> Any:
+        if event == "return":
+            self.fed = True
+        return self._feed
+
+    def _loop(self, frame: FrameType, event: str, arg: object) -> Any:
+        if event == "line" and self.fed and not self.prompted:
+            self.lines += 1
+            if self.lines == self.at:
+                signal.raise_signal(signal.SIGINT)
+        return self._loop
+
+
+def test_a_ctrl_c_anywhere_between_a_reply_and_the_next_prompt_sends_st(
+    dmc: galil.Controller,
+) -> None:
+    def session(tracer: CtrlCAfterAReply) -> str:
+        previous = sys.gettrace()
+        sys.settrace(tracer)
+        try:
+            return _session(dmc, "MG 1\rMG 8\r\x04", None)
+        except KeyboardInterrupt:
+            raise AssertionError(f"a Ctrl-C at loop line {tracer.at} ended it") from None
+        finally:
+            sys.settrace(previous)
+
+    count = CtrlCAfterAReply(None)
+    session(count)
+    assert count.lines > 3
+    for at in range(1, count.lines + 1):
+        shown = session(CtrlCAfterAReply(at))
+        assert shown.index(" 1.0000") < shown.index("Ctrl-C: sent ST") < shown.index(" 8.0000")
 
 
 def test_an_unwritable_history_keeps_it_for_the_session_only(

@@ -14,6 +14,7 @@ import queue
 import re
 import threading
 import time
+import types
 from typing import Any
 
 import numpy as np
@@ -22,6 +23,7 @@ from aio_helpers import commands_of, run, sim
 
 import galil
 import galil.aio as aio
+from galil.aio import probe
 from galil.controller import Controller
 from galil.testing import sim_of
 from galil.units import ureg
@@ -329,6 +331,29 @@ def test_the_loop_watch_sees_a_blocking_callback() -> None:
     assert watch.max_own_cpu < 0.004  # sleeping is not work
     assert watch.over(0.004) == 1
     assert "body" in watch.slowest
+
+
+def test_the_loop_watch_reads_a_callbacks_cpu_time_inside_its_wall_time(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Clocks that move only between readings, one tick per reading: what happens between the
+    # last readings (on a shared machine the CPU clock's own system call, or an interrupt,
+    # once more than the callback's whole wall time) must not count as the callback's CPU.
+    ticks = itertools.count()
+    clocks = types.SimpleNamespace(
+        perf_counter=lambda: float(next(ticks)), thread_time=lambda: float(next(ticks))
+    )
+    monkeypatch.setattr(probe, "time", clocks)
+
+    async def body() -> aio.LoopWatch:
+        with aio.watch_loop() as watch:
+            for _ in range(3):
+                await asyncio.sleep(0)
+        return watch
+
+    watch = run(body)
+    assert watch.steps >= 3
+    assert all(cpu < wall for cpu, wall in zip(watch.cpu, watch.wall, strict=True))
 
 
 def test_the_loop_watch_tells_garbage_collection_from_a_callbacks_work() -> None:
