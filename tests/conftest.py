@@ -23,8 +23,10 @@ from hypothesis import settings
 # Property tests are deterministic in `make test` (CI must not turn red by the draw of a
 # seed; decision 0056): the same examples every run, no example database. For a run that
 # explores new examples and keeps what fails, set GALIL_HYPOTHESIS=explore (the long operation
-# runs have their own knobs: tests/test_operation_sequences.py).
-settings.register_profile("deterministic", derandomize=True, database=None)
+# runs have their own knobs: tests/test_operation_sequences.py). No deadline in `make test`:
+# speed is checked in benchmarks/, not in unit tests, and hypothesis's 200 ms per example
+# failed a property test on a loaded machine (288 ms); exploring keeps it, to find slow cases.
+settings.register_profile("deterministic", derandomize=True, database=None, deadline=None)
 settings.register_profile("explore", derandomize=False)
 settings.load_profile(
     "explore" if os.environ.get("GALIL_HYPOTHESIS") == "explore" else "deterministic"
