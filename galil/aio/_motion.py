@@ -529,12 +529,17 @@ class Starting:
     A stop sent from another thread reaches only motion already registered; a contour or a
     streamed path still reading the state or predicting when its task was cancelled would
     otherwise run its whole path (only then would the call return, to be undone).
+
+    A call that has not begun when its task is cancelled never begins: :meth:`abandon`, on
+    the loop as the cancellation arrives, already refuses it, whichever of the call's thread
+    and the thread that runs :meth:`cancel` gets to the tracker's lock first.
     """
 
     def __init__(self, tracker: MotionTracker | None) -> None:
         self._tracker = tracker
         self._thread: int | None = None
         self._cancelled = False
+        self._abandoned = False  # (set on the loop, read under the tracker's lock)
         self._began = False
         self._sequence_before: MoveHandle | None = None  # the last sequence as it began
         self._over = threading.Event()  # set once the call has returned (or was dropped)
@@ -545,7 +550,7 @@ class Starting:
         if tracker is None:
             return call()
         with tracker.lock:
-            if self._cancelled:
+            if self._cancelled or self._abandoned:
                 self._ended(tracker)
                 raise _DroppedError("cancelled before it began")
             self._thread = thread = threading.get_ident()
@@ -566,7 +571,10 @@ class Starting:
 
     def abandon(self) -> None:
         """Loop side, as the awaiting task is cancelled (before :meth:`cancel` is submitted):
-        until the call is over, :func:`settle_abandoned` finds it."""
+        a call that has not begun never will (without waiting for :meth:`cancel` to run on
+        another thread: a start let begin first ran a streamed path to its end); until the
+        call is over, :func:`settle_abandoned` finds it."""
+        self._abandoned = True  # (no lock on the loop: a call that began already is cancel()'s)
         if self._tracker is None:
             return
         with _ABANDONED_LOCK:

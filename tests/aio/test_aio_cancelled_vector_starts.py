@@ -1,5 +1,6 @@
 """A cancelled ``vector_move`` stops the sequence it started, and no other (decision 0061):
-the sequence already running on S, which the start would have been refused for, goes on.
+the sequence already running on S, which the start would have been refused for, goes on; a
+start cancelled before it began never begins.
 In-process simulators on a manual clock: nothing sleeps for motion.
 """
 
@@ -7,6 +8,8 @@ from __future__ import annotations
 
 import asyncio
 import threading
+from collections.abc import Callable
+from typing import Any
 
 import pytest
 from aio_helpers import commands_of, run, sim
@@ -14,6 +17,7 @@ from aio_helpers import commands_of, run, sim
 import galil
 import galil.aio as aio
 from galil import Line
+from galil.aio._motion import Starting
 
 
 async def _worker_idle(c: aio.AsyncController) -> None:
@@ -64,5 +68,55 @@ def test_a_vector_start_cancelled_while_it_streams_stops_its_own_sequence() -> N
             sequence = c.sync.tracker.last_sequence()
             assert sequence is not None
             assert sequence.stopped
+
+    run(body)
+
+
+def test_a_vector_start_cancelled_before_it_began_never_begins_if_its_cancel_runs_late() -> None:
+    """Before: a start learnt of its cancellation only from ``Starting.cancel``, a second
+    worker call. When the start's own thread got to it first, it began, and a path longer
+    than the buffer streamed to its end before anything stopped it (2.65 s of controller time:
+    the "vector_move long path" cancelled "running" in test_cancellation_everywhere, 1 run in
+    ~300 under CPU load)."""
+
+    async def body() -> None:
+        async with await sim() as c:
+            loop = asyncio.get_running_loop()
+            task_over, start_over = threading.Event(), threading.Event()
+            real = c.worker.submit
+
+            def submit(fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Any:
+                if not isinstance(getattr(fn, "__self__", None), Starting):
+                    return real(fn, *args, **kwargs)
+                if fn.__name__ == "run":
+
+                    def held() -> Any:  # on its thread, before its work: cancelled, then on
+                        loop.call_soon_threadsafe(task.cancel)
+                        task_over.wait(10)
+                        try:
+                            return fn(*args, **kwargs)
+                        finally:
+                            start_over.set()
+
+                    return real(held)
+
+                def late() -> Any:  # the cancel's own call: its thread comes last
+                    start_over.wait(10)
+                    return fn(*args, **kwargs)
+
+                return real(late)
+
+            c.worker.submit = submit  # type: ignore[method-assign]
+            before = len(commands_of(c))
+            path = [Line(37, 19 * (-1) ** k) for k in range(700)]  # more than the buffer holds
+            task = asyncio.ensure_future(c.vector_move("AB", path, speed=3000))
+            task.add_done_callback(lambda _: task_over.set())
+            with pytest.raises(asyncio.CancelledError):
+                await task
+            await _worker_idle(c)
+            del c.worker.submit
+            assert start_over.is_set()  # (the start's call did run, after its task ended)
+            assert commands_of(c)[before:] == []  # and sent nothing
+            assert await c.query_operands(["_BGS", "_RPA", "_RPB"]) == [0, 0, 0]
 
     run(body)
