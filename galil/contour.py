@@ -47,6 +47,7 @@ from galil.predict import Profile
 from galil.predict.checks import check_contour
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
+from galil.protocol.numbers import read_one
 from galil.units import PathSamples, sampled_values
 
 __all__ = ["ContourResult", "ContourStream", "ContourUnderrunError", "increments", "sample_path"]
@@ -240,6 +241,29 @@ def _stamped(batch: list[Command], state: _Progress) -> list[Command]:
 def _note_begin(state: _Progress, replies: list[str]) -> None:
     if state.sent == 0:
         state.begin = sample_of(replies[-1] if state.start is not None else replies[1])
+
+
+#: Read on the line of every batch, after its last ``CD``: the buffer may run dry after the
+#: ``_TC`` read before a batch and before the batch is in (a host late with its last batch
+#: left nothing after it to read the 42: the path paused and the stream ended as if on time).
+_ERROR_CODE = cmds.mg_operand("_TC")
+
+
+def _raise_if_ran_dry(link: CommandLink, state: _Progress, reply: str, batch: int) -> None:
+    """Raise if the controller's error code, read right after a batch's last ``CD``, says
+    the buffer ran dry (TC 42) before the batch was in: the path paused on its way.
+
+    Raises:
+        ContourUnderrunError: TC 42.
+    """
+    if round(read_one(reply)) != 42:
+        return
+    raise ContourUnderrunError(
+        f"contour buffer ran dry before segments {state.sent}..{state.sent + batch - 1} of "
+        f"{len(state.texts)} were in (TC 42: contour data sent too slowly)",
+        segment=state.sent,
+        model=link.model.name,
+    )
 
 
 class ContourStream:
@@ -501,18 +525,20 @@ class ContourStream:
             # A one-deep buffer: WC holds its ':' until the segment before is running.
             self._check_stopped(state)
             line = _stamped([texts[state.sent]], state)
-            replies = link.command_line([*line, cmds.wc()], timeout=seg_time * 4 + 1.0)
+            replies = link.command_line([*line, cmds.wc(), _ERROR_CODE], timeout=seg_time * 4 + 1.0)
             self._holding = False
-            _note_begin(state, replies)
+            _note_begin(state, replies[:-1])
+            _raise_if_ran_dry(link, state, replies[-1], 1)
             state.sent += 1
             state.lines += 1
         elif room >= min(refill, len(texts) - state.sent):
             batch = texts[state.sent : state.sent + room]
             with held(self._tracker):  # (no stop between the check and the line)
                 self._check_stopped(state)
-                replies = link.command_line(_stamped(batch, state))
+                replies = link.command_line([*_stamped(batch, state), _ERROR_CODE])
             self._holding = False  # (the first batch carries the start's DT)
-            _note_begin(state, replies)
+            _note_begin(state, replies[:-1])
+            _raise_if_ran_dry(link, state, replies[-1], len(batch))
             state.sent += len(batch)
             state.lines += len(cmds.pack(batch, model.line_length))
         else:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import signal
 import subprocess
 import sys
@@ -9,6 +10,7 @@ import textwrap
 import time
 from collections.abc import Callable
 
+import numpy as np
 import pytest
 
 import galil
@@ -18,6 +20,7 @@ from galil.sim.clock import RealTimeClock
 from galil.sim.controller import SimController
 from galil.sim.server import SimTcpServer
 from galil.testing import nothing_sent, sim_of, simulated
+from galil.watchdog import BEAT, FIRED, LIMIT
 
 
 def test_heartbeats_keep_motion_going_and_silence_stops_it() -> None:
@@ -94,8 +97,14 @@ _CHILD = textwrap.dedent(
 def test_killing_the_host_mid_jog_stops_the_axis_within_the_timeout(
     spawn: Callable[..., subprocess.Popen[str]],
 ) -> None:
+    # Measured in the controller's own time (servo samples, what TIME counts): the property
+    # is the controller's, "at rest within the timeout (and the deceleration) of the last
+    # heartbeat it received". The real-time simulator's server thread may run late on a
+    # loaded machine and then catch up sample by sample, so a wall-clock bound measured the
+    # machine's scheduling, not the watchdog.
     timeout, speed = 0.3, 20_000
     sim = SimController("DMC-4040", RealTimeClock())
+    ts = sim.sample_period
     with SimTcpServer(sim) as server, galil.connect(server.url, timeout=2.0) as observer:
         child = spawn(
             [sys.executable, "-c", _CHILD.format(timeout=timeout, speed=speed), server.url],
@@ -104,18 +113,38 @@ def test_killing_the_host_mid_jog_stops_the_axis_within_the_timeout(
         )
         assert child.stdout is not None
         assert child.stdout.readline().strip() == "jogging"
+        limit = round(observer.query_number(f"MG {LIMIT}"))
+        assert limit == round(timeout / ts)
+        # The child's heartbeat runs (gwbeat, the TIME of the last beat received, moves on
+        # twice), not only the stamp the watchdog's start wrote: the kill silences it.
+        beats = {_last_beat(observer)}
+        waited = time.monotonic()
+        while len(beats) < 3:
+            assert time.monotonic() - waited < 10.0, "the child's heartbeat does not beat"
+            time.sleep(0.005)
+            beats.add(_last_beat(observer))
         decel = speed / observer.query_number("MG _DCA")
+        t0 = sim.start_trace("A")
         assert observer.A.moving
         child.send_signal(signal.SIGKILL)
         killed = time.monotonic()
-        while observer.A.moving:
+        while observer.A.moving:  # (a guard against a hang: the bound is checked below)
             assert time.monotonic() - killed < timeout + decel + 2.0, "the axis kept moving"
             time.sleep(0.005)
-        stopped = time.monotonic() - killed
         child.wait(10)
+        trace = sim.stop_trace("A")["A"]
+        last_beat = _last_beat(observer)
         assert observer.A.stop_code[0] == 4
-        assert observer.query_number("MG gwfire") == 1
-    assert stopped <= timeout + decel + 0.15
+        assert observer.query_number(f"MG {FIRED}") == 1
+    # The last sample in which the reference moved (trace[i] is its position at sample t0 + i).
+    rest = t0 + int(np.flatnonzero(np.diff(trace))[-1]) + 1
+    poll = math.ceil(0.002 / ts) + 1  # the routine looks every WT 2 (2 ms), then runs its JP
+    assert limit < rest - last_beat <= limit + poll + math.ceil(decel / ts)
+
+
+def _last_beat(controller: galil.Controller) -> int:
+    """The sample of the last heartbeat the controller received (``gwbeat=TIME``)."""
+    return round(controller.query_number(f"MG {BEAT}"))
 
 
 def test_a_program_error_that_stops_the_routine_is_said_while_the_host_beats_on(

@@ -7,8 +7,11 @@ In-process simulators on a manual clock: nothing sleeps for motion.
 from __future__ import annotations
 
 import asyncio
+import functools
 import sys
 import warnings
+from collections.abc import Sequence
+from typing import Any
 
 import pytest
 from aio_helpers import commands_of, run, sim
@@ -28,15 +31,43 @@ async def _running(c: aio.AsyncController, axes: str) -> list[bool]:
     return [round(code) == 0 for code in codes]
 
 
+def _note_stop_sent_as_each_ends(
+    c: aio.AsyncController, waits: Sequence[asyncio.Future[Any]], axes: str, sent: dict[str, bool]
+) -> None:
+    """Per axis, in ``sent`` as its wait's task ends: whether its ``ST`` had reached the
+    simulator by then (a cancelled wait stops its move before its cancellation ends)."""
+
+    def note(axis: str, _: object) -> None:
+        sent[axis] = f"ST {axis}" in commands_of(c)
+
+    for task, axis in zip(waits, axes, strict=True):
+        task.add_done_callback(functools.partial(note, axis))
+
+
+async def _each_stopped_its_move(
+    c: aio.AsyncController, waits: Sequence[asyncio.Future[Any]], axes: str, sent: dict[str, bool]
+) -> None:
+    """Once every wait has ended (a cancelled ``gather`` raises as its FIRST child ends
+    cancelled, while the others may still be sending their stops): each ended cancelled,
+    after its stop, and no axis runs on."""
+    await asyncio.wait(waits)
+    assert [t.cancelled() for t in waits] == [True] * len(axes)
+    assert sent == dict.fromkeys(axes, True)
+    assert await _running(c, axes) == [False] * len(axes)
+
+
 def test_a_gather_of_waits_cancelled_before_any_began_stops_every_move() -> None:
     async def body() -> None:
         async with await sim() as c:
             moves = await _moves(c, "DCA")
-            gathered = asyncio.gather(*(m.wait() for m in moves))
+            waits = [asyncio.ensure_future(m.wait()) for m in moves]  # (none has run a step)
+            sent: dict[str, bool] = {}
+            _note_stop_sent_as_each_ends(c, waits, "DCA", sent)
+            gathered = asyncio.gather(*waits)
             gathered.cancel()  # every child task is cancelled before its first step
             with pytest.raises(asyncio.CancelledError):
                 await gathered
-            assert await _running(c, "DCA") == [False] * 3
+            await _each_stopped_its_move(c, waits, "DCA", sent)
 
     run(body)
 
@@ -51,15 +82,20 @@ def test_a_gather_cancelled_while_its_first_wait_begins_stops_the_other_moves_to
                 outer[0].cancel()  # lands while the other children have not run yet
                 return await first.wait()
 
-            async def waits() -> None:
-                await asyncio.gather(cancel_then_wait(), *(m.wait() for m in others))
+            waits: list[asyncio.Future[Any]] = []
+            sent: dict[str, bool] = {}
 
-            task = asyncio.ensure_future(waits())
+            async def gather_waits() -> None:
+                waits.append(asyncio.ensure_future(cancel_then_wait()))
+                waits.extend(asyncio.ensure_future(m.wait()) for m in others)
+                _note_stop_sent_as_each_ends(c, waits, "DCA", sent)
+                await asyncio.gather(*waits)
+
+            task = asyncio.ensure_future(gather_waits())
             outer.append(task)
             with pytest.raises(asyncio.CancelledError):
                 await task
-            assert await _running(c, "DCA") == [False] * 3
-            assert {t for t in commands_of(c) if t.startswith("ST")} >= {"ST D", "ST C", "ST A"}
+            await _each_stopped_its_move(c, waits, "DCA", sent)
 
     run(body)
 

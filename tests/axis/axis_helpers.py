@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import threading
+import time
+
 import numpy as np
 import numpy.typing as npt
 
@@ -41,3 +44,34 @@ def assert_follows(
     assert begin is not None
     got = recorded(trace, trace_start, begin, profile.position.size)
     np.testing.assert_array_equal(got, profile.position)
+
+
+class RunningClock:
+    """A simulator's real-time clock, sped up ``speed`` times, that counts only the time this
+    process runs: a gap of more than :attr:`MAX_GAP` seconds between two readings counts as
+    :attr:`MAX_GAP`.
+
+    A served simulator's thread reads its clock at every tick (every 2 ms at most, its select
+    timeout), so a longer gap is a pause of that thread, on a loaded machine of the whole
+    process (the host's thread with it). A :class:`~galil.sim.clock.RealTimeClock` counts the
+    pause as controller time: the simulator catches it up before it reads the bytes the host
+    wrote before the pause, and a contour buffer (4 s of controller time at DT 3, 0.5 s of
+    real time at 8x) ran dry although the host had kept it fed. What the host's own thread
+    does late while the simulator runs is still counted.
+    """
+
+    MAX_GAP = 0.05
+
+    def __init__(self, speed: float) -> None:
+        self.speed = speed
+        self._lock = threading.Lock()
+        self._last = time.monotonic()
+        self._now = 0.0
+
+    def now(self) -> float:
+        """Simulated seconds since the clock was made, pauses of this process left out."""
+        with self._lock:
+            wall = time.monotonic()
+            self._now += min(wall - self._last, self.MAX_GAP) * self.speed
+            self._last = wall
+            return self._now

@@ -103,6 +103,36 @@ def test_underrun_raises(dmc: galil.Controller) -> None:
         slow.A.move_by(100).wait()
 
 
+def test_a_buffer_that_ran_dry_before_the_last_batch_was_in_raises(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The host is late with its LAST batch: the _TC read before that batch found the buffer
+    # fed, and the buffer ran dry before the batch was in. Before, nothing read the 42 after
+    # it: the path paused on its way and contour() returned as if it had run on time.
+    sim = SimController("DMC-4040")
+    path = _ramp(1200)
+    fed = [0]
+    feed = sim.feed
+
+    def late_last_batch(data: bytes, port: int = 0) -> bytes:
+        segments = data.count(b"CD ")
+        if 0 < fed[0] < len(path) <= fed[0] + segments:
+            sim.advance(2.0)  # the host stalled: the 511 queued segments (1 s) ran out
+        fed[0] += segments
+        return feed(data, port)
+
+    monkeypatch.setattr(sim, "feed", late_last_batch)
+    with galil.connect("sim://DMC-4040", controller=sim) as dmc:
+        with pytest.raises(galil.ContourUnderrunError) as info:
+            dmc.contour("A", path, dt=1)
+        assert info.value.code == 42
+        assert len(path) - 511 < info.value.segment < len(path)  # (the last batch's first)
+        assert "too slowly" in str(info.value)
+        dmc.sleep(2.0)  # the stream ended contour mode; the axis moves again once drained
+        assert dmc.A.moving is False
+        dmc.A.move_by(100).wait()
+
+
 def test_fast_enough_link_does_not_underrun() -> None:
     sim, hook = _slow_link(0.002)
     with galil.connect("sim://DMC-4040", controller=sim, faults=hook) as dmc:
