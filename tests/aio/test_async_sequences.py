@@ -240,12 +240,15 @@ class AsyncSequences(RuleBasedStateMachine):
         now = self.dmc.link.clock()
         for h in owned.values():
             self.interfere(h.axes)
-            # (not the axes newer motion drives: a superseded handle's wait stops nothing)
+            # (not the axes newer motion drives: a superseded handle's wait stops nothing,
+            # also where a gearing made the axis a follower since)
             tracker = self.dmc.tracker
             axes = "".join(
                 a
                 for a in h.axes
-                if (a != "D" or self.program_axis_free) and tracker.active(a) in (None, h)
+                if (a != "D" or self.program_axis_free)
+                and tracker.active(a) in (None, h)
+                and a not in tracker.gears
             )
             if not axes:
                 continue
