@@ -16,6 +16,7 @@ level CN field 1 calls active (low by default), an assumption recorded in decisi
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from galil import predict
@@ -288,17 +289,24 @@ class AxisHoming:
         if switch is None:
             note = "no switch positions given: duration and path unknown; the end is read back"
             return Track(mode, rp, move, None, exact=False, note=note)
-        found = predict.homing(
-            kind, params, switch, start=rp, sample_period=self._link.sample_period
-        )
+        ts = self._link.sample_period
+        found = predict.homing(kind, params, switch, start=rp, sample_period=ts)
+
+        def replan(events: Sequence[predict.Event]) -> predict.Profile:
+            # (an AC while it runs: the phase in progress re-plans; decision 0066)
+            again = predict.homing(kind, params, switch, start=rp, sample_period=ts, events=events)
+            return again.profile
+
         note = "predicted from the given switch positions, on the reference position"
         if found.zero_at is None:
             # FE ends where the motor met the edge: later than the reference by the servo lag
             # (speed x lag counts), which the predictor does not model.
             note += "; the end is approximate (the edge is met by the lagging motor)"
-            return Track(mode, rp, move, None, fixed=found.profile, note=note, exact=False)
+            return Track(
+                mode, rp, move, None, fixed=found.profile, note=note, exact=False, replan=replan
+            )
         note += f"; position 0 at {found.zero_at} (old counts), exact"
-        return Track(mode, rp, move, None, fixed=found.profile, note=note)
+        return Track(mode, rp, move, None, fixed=found.profile, note=note, replan=replan)
 
     def forget(self) -> None:
         """The controller was reset (``RS``): a homing seen before defines nothing now."""

@@ -157,6 +157,8 @@ class Track:
     exact: bool = True  # False once something happened that the predictor cannot follow
     fixed: predict.Profile | None = None  # a prediction made elsewhere (schedule, homing)
     note: str = ""  # what is known of the prediction, in words (homing says it here)
+    # ``fixed`` made again with the AC changes in ``events`` (a homing with its switches)
+    replan: Callable[[Sequence[predict.Event]], predict.Profile] | None = None
 
     @property
     def open_jog(self) -> bool:
@@ -271,7 +273,7 @@ def predict_track(
     ts = link.sample_period if sample_period is None else sample_period
     p = t.params
     if t.fixed is not None:
-        profile = t.fixed
+        profile = t.fixed if t.replan is None or not t.events else t.replan(t.events)
     elif t.kind in HOMING_KINDS:
         # Nothing known of the switches: only the start (the handle's note says so).
         profile = predict.Profile.from_samples(
@@ -821,18 +823,22 @@ class MoveHandle:
             t = self._tracks.get(letter)
             if t is None or self._done:
                 return
-            fixed_plan = t.kind == "schedule" or t.kind in HOMING_KINDS
-            if sample is None or t.begin is None or fixed_plan or t.aborted is not None:
+            if sample is None or t.begin is None or t.aborted is not None:
                 t.exact = False
                 return
             k = sample - t.begin
+            event = None if make is None else make(k * self._sample_period)
+            fixed_plan = t.kind == "schedule" or t.kind in HOMING_KINDS
+            # (a homing with its switches follows AC, as the simulator does: decision 0066)
+            if fixed_plan and (t.replan is None or not isinstance(event, predict.SetAccel)):
+                t.exact = False
+                return
             current = self.profiles[letter]
-            if (t.kind == "position" or t.stopped) and k > current.samples:
+            if (t.kind == "position" or t.stopped or fixed_plan) and k > current.samples:
                 return  # (over by then: a stopped jog's end is known)
-            if make is None:
+            if event is None:
                 t.aborted = sample
             else:
-                event = make(k * self._sample_period)
                 t.events.append(event)
                 if isinstance(event, predict.Stop):
                     t.stopped = True

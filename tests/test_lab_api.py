@@ -118,6 +118,30 @@ def test_home_predicts_from_the_simulators_switch_and_ends_at_zero() -> None:
         assert dmc.A.homed.homed
 
 
+@pytest.mark.parametrize("start", ["home", "find_index"])
+def test_an_accel_change_while_homing_is_followed_by_the_prediction(start: str) -> None:
+    # (an AC in a homing left the prediction of BG's: a wait gave up at 1.5x it + 2 s)
+    with simulated("DMC-4040") as dmc:
+        sim = sim_of(dmc)
+        sim.set_servo_lag(0.0)
+        a = dmc.A
+        a.speed, a.accel, a.decel, a.home_speed, a.jog_speed = 25_000, 20_480, 256_000, 256, 25_000
+        began = dmc.link.clock()
+        handle = getattr(a, start)(switch=sim.home_switch("A"))
+        before = handle.duration
+        dmc.sleep(0.05)
+        a.accel = 1_024_000  # at speed sooner: further past the edge or index, back at HV
+        assert handle.duration > before + 0.5
+        if start == "find_index":  # (beyond the wait's default timeout for the old one)
+            assert handle.duration > 1.5 * before + 2
+        assert "exact" in handle.notes["A"]
+        result = handle.wait()
+        assert handle.duration <= dmc.link.clock() - began < handle.duration + 0.1
+        assert result.stop_codes == {"A": 10}
+        assert result.deviation == {"A": 0}
+        assert a.position == 0
+
+
 def test_homed_says_how_it_knows() -> None:
     with simulated("DMC-4040") as dmc:
         assert not dmc.A.homed

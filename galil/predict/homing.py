@@ -30,6 +30,7 @@ exact form on current firmware is an assumption.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +38,7 @@ import numpy.typing as npt
 
 from galil.errors import InvalidArgument
 from galil.predict.engine import AxisProfiler
+from galil.predict.move import Event, SetAccel
 from galil.predict.profile import Profile
 from galil.predict.smoothing import smooth
 
@@ -310,33 +312,45 @@ def homing(
     start: int = 0,
     sample_period: float = 1 / 1024,
     max_samples: int = MAX_SAMPLES,
+    events: Sequence[Event] = (),
 ) -> HomingPrediction:
     """Predict HM, FE or FI from ``start`` with the switch and index positions of ``switch``.
 
+    ``events``: ``AC`` changes while the sequence runs (:class:`~galil.predict.SetAccel`, at
+    their time from ``BG``). As on the simulator, each re-plans the phase in progress from the
+    next sample (the engine's ``set_accel``; not a deceleration already begun), and the later
+    phases start with the settings in force at ``BG`` (:class:`HomingSequence`).
+
     Raises:
         InvalidArgument: the sequence does not end within ``max_samples`` (the switch is not
-            in the direction of travel, a speed is 0 ...).
+            in the direction of travel, a speed is 0 ...); an event other than ``AC``, or at a
+            time before ``BG``.
     """
+    changes = _accel_changes(events, sample_period)
     prof = AxisProfiler(sample_period=sample_period, position=int(start))
     seq = HomingSequence(kind, prof, params, switch)
     chunks: list[npt.NDArray[np.int64]] = [np.array([int(start)], np.int64)]
     seq.start(int(start))
     run = 0
     while not seq.done:
+        while changes and changes[-1][0] <= prof.sample:
+            prof.set_accel(changes.pop()[1])
+        # (no step goes past the next change: it takes effect from the sample after it)
+        room = changes[-1][0] - prof.sample if changes else _CHUNK
         cross = seq.watch()
         if cross is None:
             end = prof.end_sample
-            n = max(1, (end - prof.sample) if end is not None else _CHUNK)
+            n = max(1, min((end - prof.sample) if end is not None else _CHUNK, room))
             chunks.append(prof.advance(n))
             run += n
             if not prof.moving:
                 seq.settle()
         else:
-            ahead = prof.preview(_CHUNK)
+            ahead = prof.preview(min(_CHUNK, room))
             k = cross.first(ahead)
             if k is None:
-                chunks.append(prof.advance(_CHUNK))
-                run += _CHUNK
+                chunks.append(prof.advance(len(ahead)))
+                run += len(ahead)
                 if not prof.moving:  # stopped before reaching the switch
                     raise InvalidArgument(f"{kind} never reaches its switch or index")
             else:
@@ -362,6 +376,21 @@ def homing(
         stop_code=seq.code,
     )
     return HomingPrediction(profile, zero, seq.code)
+
+
+def _accel_changes(events: Sequence[Event], sample_period: float) -> list[tuple[int, float]]:
+    """``(sample, AC)`` of each change, the latest first (the predictor pops from the end)."""
+    changes: list[tuple[int, float]] = []
+    for ev in events:
+        if not isinstance(ev, SetAccel):
+            raise InvalidArgument(
+                f"a homing prediction follows AC changes only, not {type(ev).__name__}"
+            )
+        if not (math.isfinite(ev.time) and ev.time >= 0):
+            raise InvalidArgument(f"event time must be >= 0, got {ev.time!r}")
+        changes.append((round(ev.time / sample_period), ev.accel))
+    changes.sort(key=lambda c: c[0])  # (stable: of two at one sample, the later wins)
+    return changes[::-1]
 
 
 def stepper_output(

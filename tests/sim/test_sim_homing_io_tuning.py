@@ -7,8 +7,9 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from galil.errors import CommandError, LimitError
+from galil.errors import CommandError, InvalidArgument, LimitError
 from galil.predict.homing import HomeSwitch, HomingParams, homing
+from galil.predict.move import SetAccel, SetDecel, SetSpeed, Stop
 from galil.protocol.numbers import parse_number, parse_numbers
 from galil.protocol.records import decode_record
 from galil.sim.controller import SimController
@@ -79,6 +80,71 @@ def test_the_predictor_and_the_simulator_agree_sample_for_sample(kind: str) -> N
     after = 0 if expected.zero_at is not None else predicted[-1]  # 0 once it is defined
     assert np.all(got[predicted.size :] == after)
     assert number(sim, "_SCA") == expected.stop_code
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    kind=st.sampled_from(["HM", "FI"]),
+    changes=st.lists(
+        st.tuples(st.integers(0, 3000), st.sampled_from([20480, 102400, 512000, 4096000])),
+        min_size=1,
+        max_size=3,
+    ),
+)
+def test_an_ac_while_homing_re_plans_its_phase_as_the_predictor_does(
+    kind: str, changes: list[tuple[int, int]]
+) -> None:
+    # AC re-plans the phase in progress (not a deceleration begun); the later phases start
+    # with the settings of BG (decision 0066). Each AC's sample is read from the controller.
+    sim = SimController("DMC-4040", servo_lag=0.0)
+    sim.set_home_switch("A", edge=9000, side=-1, index_period=4000)
+    ask(sim, "SPA=40000;ACA=256000;DCA=512000;HVA=2000;JGA=30000;CN ,-1")
+    params = HomingParams(40000, 256000, 512000, 2000, jog_speed=30000)
+    switch = sim.home_switch("A")  # (in the frame before the homing defines 0)
+    sim.start_trace("A")
+    begin = round(parse_number(ask(sim, f"{kind}A;BGA;MG TIME")[2:-3]))
+    events = []
+    for wait, accel in sorted(changes):
+        sim.advance(wait / 1024)
+        at = round(parse_number(ask(sim, f"ACA={accel};MG TIME")[1:-3]))
+        events.append(SetAccel((at - begin) / 1024, accel))
+    run_until_idle(sim)
+    got = sim.stop_trace("A")["A"]
+    expected = homing(kind, params, switch, start=0, events=events)
+    assert expected.zero_at is not None
+    predicted = expected.profile.position + expected.zero_at
+    assert np.array_equal(got[: predicted.size], predicted)
+    assert np.all(got[predicted.size :] == 0)
+    assert number(sim, "_SCA") == 10
+
+
+@pytest.mark.parametrize("kind", ["HM", "FI"])
+def test_an_sp_while_homing_leaves_the_sequence_as_it_was(kind: str) -> None:
+    # (the return to the index is a position phase at HV: an SP re-planned it at SP)
+    traces = []
+    for sp in (None, 100):
+        sim = SimController("DMC-4040", servo_lag=0.0)
+        ask(sim, "SPA=40000;ACA=256000;DCA=512000;HVA=2000;JGA=30000;CN ,-1")
+        sim.start_trace("A")
+        ask(sim, f"{kind}A;BGA")
+        for _ in range(300):
+            sim.advance(0.01)
+            if sp is not None:
+                ask(sim, f"SPA={sp}")
+        assert not number(sim, "_BGA")
+        assert number(sim, "_SCA") == 10
+        traces.append(sim.stop_trace("A")["A"])
+    assert np.array_equal(*traces)
+
+
+def test_a_homing_prediction_follows_ac_changes_only() -> None:
+    params = HomingParams(40000, 256000, 512000, 2000, jog_speed=30000)
+    switch = HomeSwitch(edge=9000, side=-1, index_period=4000)
+    for event in (SetSpeed(0.1, 1000), SetDecel(0.1, 1000), Stop(0.1), SetAccel(-1, 1000)):
+        with pytest.raises(InvalidArgument):
+            homing("FI", params, switch, events=[event])
+    slower = homing("FI", params, switch, events=[SetAccel(0.0, 20480)]).profile
+    assert slower.duration > homing("FI", params, switch).profile.duration
 
 
 @settings(max_examples=100, deadline=None)

@@ -180,9 +180,11 @@ class Motion(Room):
             return self._speed(v)
 
         def apply(ax: Axis, v: float) -> None:
-            self.axes[ax.letter].sp = v
+            p = self.axes[ax.letter]
+            p.sp = v
             prof = ax.m.profiler
-            if prof.moving and prof.mode == "position" and v > 0:
+            # (a PA/PR move's, not a homing's return to its index: that runs at HV)
+            if prof.moving and prof.mode == "position" and p.began == "position" and v > 0:
                 engine(lambda: prof.set_speed(v))
 
         return self._set(fields, self.speed, check, apply, "10.0")
