@@ -91,9 +91,10 @@ def _lv_reply_bytes(link: CommandLink) -> int:
     return (model.variable_length + 3 + _NUMBER_BYTES + 2) * model.variables + _END_BYTES
 
 
-def _in_read_format(link: CommandLink, command: cmds.Command, timeout: float | None) -> str:
-    """The reply to ``command`` (``QU``, ``LV``: printed in VF, with no format of their own)
-    with ``VF 10.4`` for it and the user's (or a program's) VF put back right after.
+def _in_read_format(link: CommandLink, command: cmds.Command, reply_bytes: int) -> str:
+    """The reply to ``command`` (``QU``, ``LV``: printed in VF, with no format of their own;
+    a transfer of at most ``reply_bytes``) with ``VF 10.4`` for it and the user's (or a
+    program's) VF put back right after.
 
     A VF set in between by a running program can still change the reply; the strict parse
     of its numbers (four decimals each) refuses the forms that would misread (decision 0032).
@@ -103,13 +104,13 @@ def _in_read_format(link: CommandLink, command: cmds.Command, timeout: float | N
     except CommandError:  # a firmware without _VF: as it prints (the parse still checks)
         vf = 10.4
     if vf == 10.4:
-        return link.exchange(command, timeout=timeout).text
+        return link.transfer(command, reply_bytes).text
     digits = int(vf)
     restore = cmds.vf(digits, round(abs(vf - digits) * 10))
     try:
         # (inside: a VF 10.4 whose reply is lost may still have been taken)
         link.exchange(_READ_VF)
-        text = link.exchange(command, timeout=timeout).text
+        text = link.transfer(command, reply_bytes).text
     except BaseException:
         with contextlib.suppress(GalilError):
             link.exchange(restore)
@@ -209,7 +210,7 @@ class Arrays:
                 model=self.link.model.name,
             )
         command = cmds.qd(name, data.tolist(), first)
-        self.link.exchange(command, timeout=self.link.transfer_timeout(command))
+        self.link.transfer(command)
 
     def upload(
         self, name: str, first: int | None = None, last: int | None = None
@@ -235,8 +236,7 @@ class Arrays:
                 model=self.link.model.name,
             )
         command = cmds.qu(name, lo, hi, delim=1)
-        wait = self.link.transfer_timeout(command, _qu_reply_bytes(hi - lo + 1))
-        text = _in_read_format(self.link, command, wait)
+        text = _in_read_format(self.link, command, _qu_reply_bytes(hi - lo + 1))
         try:
             out = np.array(
                 [read_one(x) for x in re.split(r"[,\r\n]+", text) if x.strip()],
@@ -333,8 +333,7 @@ class Variables(MutableMapping[str, float]):
     def list(self) -> dict[str, float]:
         """Every variable and its value (``LV``)."""
         command = cmds.lv()
-        wait = self.link.transfer_timeout(command, _lv_reply_bytes(self.link))
-        text = _in_read_format(self.link, command, wait)
+        text = _in_read_format(self.link, command, _lv_reply_bytes(self.link))
         out: dict[str, float] = {}
         for line in text.splitlines():
             if not line.strip():

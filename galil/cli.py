@@ -205,8 +205,7 @@ def _cmd_ul(args: argparse.Namespace) -> int:
 
     command = cmds.ul()
     with _connect(args.address, args.timeout) as dmc:
-        wait = dmc.link.transfer_timeout(command, ul_reply_bytes(dmc.model))
-        text = dmc.send(command, timeout=wait)
+        text = dmc.link.transfer(command, ul_reply_bytes(dmc.model)).text
     program = "\n".join(text.splitlines()) + "\n"
     if args.file:
         Path(args.file).write_text(program, encoding="ascii")

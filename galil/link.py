@@ -325,8 +325,10 @@ class CommandLink(Protocol):
         """Send several commands as compound lines, return one reply per part."""
         ...
 
-    def exchange(self, command: Command, *, timeout: float | None = None) -> Completed:
-        """Send a prepared command, return its whole reply."""
+    def exchange(
+        self, command: Command, *, timeout: float | None = None, stall: float | None = None
+    ) -> Completed:
+        """Send a prepared command, return its whole reply (``stall``: :meth:`Link.exchange`)."""
         ...
 
     def query_operands(self, names: Sequence[str], *, timeout: float | None = None) -> list[float]:
@@ -335,6 +337,15 @@ class CommandLink(Protocol):
 
     def transfer_timeout(self, command: Command, reply_bytes: int = 0) -> float:
         """A bulk transfer's reply timeout, from its size (:meth:`Link.transfer_timeout`)."""
+        ...
+
+    @property
+    def transfer_stall(self) -> float:
+        """The longest a transfer's reply may stay silent (:attr:`Link.transfer_stall`)."""
+        ...
+
+    def transfer(self, command: Command, reply_bytes: int = 0) -> Completed:
+        """Exchange a bulk transfer, bounded by its size and silences (:meth:`Link.transfer`)."""
         ...
 
     def clock(self) -> float:
@@ -555,8 +566,14 @@ class LinkCore:
 
     # -- the exchange -----------------------------------------------------------------------
 
-    def _roundtrip(self, batch: Sequence[Command], t: float) -> list[Completed]:
+    def _roundtrip(
+        self, batch: Sequence[Command], t: float, stall: float | None = None
+    ) -> list[Completed]:
         """Write ``batch`` and read until every reply is complete (lock held).
+
+        ``stall``: a transfer's reply must begin within that many seconds of its bytes being
+        on the line (at :attr:`byte_rate`, :data:`TRANSFER_MARGIN` times) and never pause
+        longer (decision 0067); ``t`` bounds the whole.
 
         Whatever is raised once the bytes may be out leaves the session out of step, so the
         next exchange resynchronises before anything else goes out.
@@ -582,10 +599,11 @@ class LinkCore:
                 self._observe("out", data)
             clock = self._clock_source
             sim_start = clock.controller_time() if clock is not None else 0.0
+            first = t if stall is None else min(t, stall + self._line_time(len(data)))
             start = _monotonic()
             try:
                 transport.write(data)
-                chunk = transport.read(t)  # the timeout as given, so transports can cache it
+                chunk = transport.read(first)  # (the timeout as given: transports cache it)
             except OSError as exc:
                 dead = _dead_link(exc, transport)
                 if dead is None or dead is exc:
@@ -596,7 +614,20 @@ class LinkCore:
             if isinstance(exc, GalilConnectionError):
                 raise self._link_failed(exc) from exc
             raise
-        return self._guarded_collect(batch, t, start, sim_start, chunk, watch)
+        if stall is None:
+            return self._guarded_collect(batch, t, start, sim_start, chunk, watch)
+        quiet = _Quiet(stall, start + first, sim_start + first)
+        if chunk:
+            quiet.heard(clock)
+        return self._guarded_collect(batch, t, start, sim_start, chunk, watch, quiet)
+
+    def _line_time(self, size: int) -> float:
+        """Seconds ``size`` bytes take on the line, :data:`TRANSFER_MARGIN` times over (0 on
+        a link that does not say its rate)."""
+        rate = self.byte_rate
+        if rate is None or not rate > 0:  # (NaN from a plug-in: no rate either)
+            return 0.0
+        return TRANSFER_MARGIN * size / rate
 
     def _guarded_collect(
         self,
@@ -606,13 +637,14 @@ class LinkCore:
         sim_start: float,
         chunk: bytes,
         watch: bool,
+        quiet: _Quiet | None = None,
     ) -> list[Completed]:
         try:
             events = self._take(chunk, watch)
             if len(events) == 1 and not self._session.pending and type(events[0]) is Completed:
                 self._recent.append(events[0])  # the common case: the whole reply in one read
                 return events  # type: ignore[return-value]
-            return self._collect(batch, t, start, sim_start, events, watch)
+            return self._collect(batch, t, start, sim_start, events, watch, quiet)
         except BaseException:
             if self._session.pending:
                 self._session.abandon()
@@ -626,8 +658,10 @@ class LinkCore:
         sim_start: float,
         events: list[Completed | Unsolicited],
         watch: bool,
+        quiet: _Quiet | None = None,
     ) -> list[Completed]:
-        """Take ``events`` (from the first read), then read until ``batch`` is answered."""
+        """Take ``events`` (from the first read), then read until ``batch`` is answered (and,
+        with ``quiet``, until the reply pauses too long)."""
         session = self._session
         transport = self.transport
         assert transport is not None
@@ -647,14 +681,21 @@ class LinkCore:
             if clock is not None:
                 # A simulator's reads let simulated time pass: the timeout counts in it too.
                 wait = min(wait, sim_start + t - clock.controller_time())
+            # (a transfer's silence may run out first: decision 0067)
+            silent = quiet if quiet is not None and (pause := quiet.left(clock)) < wait else None
+            if silent is not None:
+                wait = pause
             if wait <= 0:
                 lost = session.abandon()
                 for c in lost:
                     recent.append(("t", c.text))
+                text = lost[0].text if lost else batch[-1].text
+                what = (
+                    f"no reply to {text!r} within {t:g} s" if silent is None else silent.what(text)
+                )
                 raise self.error(
                     GalilTimeoutError,
-                    f"no reply to {lost[0].text if lost else batch[-1].text!r} within {t:g} s "
-                    "(the link will resynchronise before the next command)",
+                    f"{what} (the link will resynchronise before the next command)",
                 )
             try:
                 chunk = transport.read(wait)
@@ -663,6 +704,8 @@ class LinkCore:
                 if dead is None:
                     raise
                 raise self._link_failed(dead) from exc
+            if chunk and quiet is not None:
+                quiet.heard(clock)
             events = self._take(chunk, watch)
 
     def _take(self, chunk: bytes, watch: bool) -> list[Completed | Unsolicited]:
@@ -901,17 +944,20 @@ class Link(LinkCore):
 
     # -- the exchange -----------------------------------------------------------------------
 
-    def transact(self, batch: Sequence[Command], timeout: float | None) -> list[Completed]:
+    def transact(
+        self, batch: Sequence[Command], timeout: float | None, stall: float | None = None
+    ) -> list[Completed]:
         """Send ``batch`` (pipelined) under the lock; raise for the first rejected command.
 
         While a reconnect is under way it waits for it (up to the timeout) instead of failing.
+        ``stall``: see :meth:`exchange`.
         """
         t = self.timeout if timeout is None else check_timeout(timeout, self.timeout)
         try:
-            return self._transact(batch, t)
+            return self._transact(batch, t, stall)
         except _ReopeningError:
             self._await_reopen(t)
-            return self._transact(batch, t)
+            return self._transact(batch, t, stall)
         except GalilConnectionError as exc:
             if not self._recover(exc):
                 raise
@@ -942,12 +988,14 @@ class Link(LinkCore):
             "(it may or may not have run)",
         ) from exc
 
-    def _transact(self, batch: Sequence[Command], t: float) -> list[Completed]:
+    def _transact(
+        self, batch: Sequence[Command], t: float, stall: float | None = None
+    ) -> list[Completed]:
         try:
             with self._lock:
                 if not self._open or self._dead:
                     raise self._closed_error()
-                done = self._roundtrip(batch, t)
+                done = self._roundtrip(batch, t, stall)
                 for d in done:
                     if not d.ok:
                         raise self._explain(d, t)
@@ -1163,24 +1211,47 @@ class Link(LinkCore):
             command: the command as it goes out (its payload included: ``QD``, ``DL``).
             reply_bytes: the most bytes its reply can hold.
         """
-        least = max(self.timeout, TRANSFER_TIMEOUT)
-        rate = self.byte_rate
-        if rate is None or not rate > 0:  # (NaN from a plug-in: no rate either)
-            return least
-        return least + TRANSFER_MARGIN * (len(command.wire) + reply_bytes) / rate
+        return self.transfer_stall + self._line_time(len(command.wire) + reply_bytes)
+
+    @property
+    def transfer_stall(self) -> float:
+        """The longest a bulk transfer's reply may stay silent: before it begins (once the
+        command's bytes are on the line) and between its pieces. The link's own timeout, at
+        least :data:`TRANSFER_TIMEOUT` (decision 0067)."""
+        return max(self.timeout, TRANSFER_TIMEOUT)
+
+    def transfer(self, command: Command, reply_bytes: int = 0) -> Completed:
+        """Exchange a bulk transfer (``QU``, ``QD``, ``DL``, ``UL``, ``LV``): its whole reply
+        within :meth:`transfer_timeout`, and no silence longer than :attr:`transfer_stall`
+        (a controller that stops answering is found out in seconds, not after the bound of
+        the most the transfer could carry).
+
+        Args:
+            command: the command as it goes out (its payload included: ``QD``, ``DL``).
+            reply_bytes: the most bytes its reply can hold.
+        """
+        wait = self.transfer_timeout(command, reply_bytes)
+        return self.exchange(command, timeout=wait, stall=self.transfer_stall)
 
     def send(self, command: Command, *, timeout: float | None = None) -> str:
         """Send a prepared :class:`~galil.protocol.commands.Command`; return its reply text."""
         return self.exchange(command, timeout=timeout).text
 
-    def exchange(self, command: Command, *, timeout: float | None = None) -> Completed:
+    def exchange(
+        self, command: Command, *, timeout: float | None = None, stall: float | None = None
+    ) -> Completed:
         """Send a prepared command and return the whole :class:`Completed` (``record`` for QR).
 
         A compound command (from ``protocol.commands.pack``) returns its last part's reply.
+        ``stall``: the reply must begin within that many seconds of the command's bytes
+        being on the line (at :attr:`byte_rate`) and never pause longer, or the exchange
+        fails (``GalilTimeoutError``) before ``timeout``; ``None``: only ``timeout`` counts.
         """
         if not isinstance(command, Command):
             raise InvalidArgument(f"exchange() takes a Command, not {type(command).__name__}")
-        return self.transact((command,), timeout)[-1]
+        if stall is not None:
+            stall = check_timeout(stall, self.timeout, "stall")
+        return self.transact((command,), timeout, stall)[-1]
 
     def send_many(self, commands: Iterable[Command], *, timeout: float | None = None) -> list[str]:
         """Send prepared commands back to back (pipelined) and return every reply text."""
@@ -1308,6 +1379,40 @@ def _broken(exc: OSError, transport: Transport) -> GalilConnectionError:
         return exc
     name = type(transport).__name__
     return GalilConnectionError(f"the {name} link failed: {type(exc).__name__}: {exc}")
+
+
+class _Quiet:
+    """How long a transfer's reply may stay silent: until it begins (``wall``, ``sim``: the
+    deadlines, on the host's clock and the controller's), then ``stall`` seconds after each
+    chunk (decision 0067)."""
+
+    __slots__ = ("begun", "sim", "stall", "wall")
+
+    def __init__(self, stall: float, wall: float, sim: float) -> None:
+        self.stall = stall
+        self.wall = wall
+        self.sim = sim
+        self.begun = False
+
+    def heard(self, clock: ControllerClock | None) -> None:
+        """A chunk came now: the silence counts again from here."""
+        self.begun = True
+        self.wall = _monotonic() + self.stall
+        if clock is not None:
+            self.sim = clock.controller_time() + self.stall
+
+    def left(self, clock: ControllerClock | None) -> float:
+        """Seconds of silence still allowed."""
+        left = self.wall - _monotonic()
+        if clock is not None:
+            left = min(left, self.sim - clock.controller_time())
+        return left
+
+    def what(self, text: str) -> str:
+        """What the silence was, for the timeout's message about command ``text``."""
+        if self.begun:
+            return f"the reply to {text!r} stopped part way: nothing for {self.stall:g} s"
+        return f"no reply to {text!r} within {self.stall:g} s of its bytes being on the line"
 
 
 class _ReopeningError(GalilConnectionError):

@@ -162,11 +162,10 @@ class Routines:
         """The program in memory, one string per line (``UL``).
 
         Its size is not known before it comes, so the reply timeout covers the most the
-        model's program memory holds (decision 0064).
+        model's program memory holds (decision 0064); a controller that stops answering is
+        found out once its reply has been silent for the link's transfer stall (decision 0067).
         """
-        command = cmds.ul()
-        wait = self.link.transfer_timeout(command, ul_reply_bytes(self.link.model))
-        text = self.link.exchange(command, timeout=wait).text
+        text = self.link.transfer(cmds.ul(), ul_reply_bytes(self.link.model)).text
         return [line for line in text.replace("\r\n", "\n").split("\n") if line.strip()]
 
     def running(self) -> dict[int, int]:
@@ -262,7 +261,7 @@ class Routines:
         restart = {t: label for t, label in self._threads.items() if t in running}
         for t in restart:
             self.link.command_line([cmds.hx(t)])
-        self.link.exchange(download, timeout=self.link.transfer_timeout(download))
+        self.link.transfer(download)
         for t, label in restart.items():
             self.link.command_line([cmds.xq(label, t)])
         return tuple(sorted(restart))

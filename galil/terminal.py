@@ -182,8 +182,9 @@ class Terminal:
         """Send a program with ``DL``; print what happened. Returns whether it was accepted."""
         try:
             command = cmds.dl(list(lines), model=self.controller.model)
-            wait = max(self.timeout, self.controller.link.transfer_timeout(command))
-            self.controller.send(command, timeout=wait)
+            link = self.controller.link
+            wait = max(self.timeout, link.transfer_timeout(command))
+            link.exchange(command, timeout=wait, stall=max(self.timeout, link.transfer_stall))
         except GalilError as exc:
             self._report(exc, "DL")
             return False

@@ -16,6 +16,7 @@ import pytest
 import galil
 from galil.errors import GalilTimeoutError
 from galil.protocol import commands as cmds
+from galil.routines import ul_reply_bytes
 from galil.sim.faults import FaultHook
 from galil.terminal import Terminal
 
@@ -136,24 +137,84 @@ class _Silence:
         return [(0.0, piece)] if piece else []
 
 
-@pytest.mark.parametrize("keep", [0, 5000], ids=["no-reply", "reply-cut-off"])
-def test_an_upload_whose_reply_stops_times_out_at_its_computed_bound(keep: int) -> None:
-    silence = _Silence(keep)
+def _armed_on(c: galil.Controller, silence: _Silence | _Trickle, prefix: bytes) -> list[float]:
+    """Arm ``silence`` when a command beginning with ``prefix`` first goes out; [its time]."""
+    sent: list[float] = []
+
+    def arm(direction: str, data: bytes) -> None:
+        if direction == "out" and data.startswith(prefix) and not sent:
+            silence.armed = True
+            sent.append(c.link.clock())
+
+    c.wire_log.add(arm)
+    return sent
+
+
+def test_an_upload_never_answered_times_out_after_the_transfer_stall() -> None:
+    # (not after its bound of 63 s: a transfer's reply begins as soon as its command is in)
+    silence = _Silence()
+    with _slow(9600, silence) as c:
+        c.arrays.define("big", 1500)
+        command = cmds.qu("big", 0, 1499, delim=1)
+        bound = c.link.transfer_timeout(command, 17 * 1500 + 4)
+        assert 2 * OLD_LIMIT < bound < 70.0  # 10 s, and twice 25 kB at 960 B/s
+        assert c.link.transfer_stall == OLD_LIMIT
+        sent = _armed_on(c, silence, b"QU")
+        with pytest.raises(GalilTimeoutError, match="within 10 s of its bytes being on the"):
+            c.arrays.upload("big")
+        on_the_line = 2 * len(command.wire) / 960
+        assert c.link.clock() - sent[0] == pytest.approx(OLD_LIMIT + on_the_line, abs=1e-6)
+        silence.armed = False
+        assert c.arrays.upload("big").size == 1500  # the link resynchronised
+
+
+def test_an_upload_whose_reply_stops_part_way_times_out_after_the_transfer_stall() -> None:
+    silence = _Silence(keep=5000)
     with _slow(9600, silence) as c:
         c.arrays.define("big", 1500)
         c.command("MG _VF")  # (the upload's VF check comes first: answered)
-        bound = c.link.transfer_timeout(cmds.qu("big", 0, 1499, delim=1), 17 * 1500 + 4)
-        assert 2 * OLD_LIMIT < bound < 70.0  # 10 s, and twice 25 kB at 960 B/s
-        silence.keep = keep
+        sent = _armed_on(c, silence, b"QU")
+        with pytest.raises(GalilTimeoutError, match="stopped part way: nothing for 10 s"):
+            c.arrays.upload("big")
+        # the 5,000 bytes take 5.2 s at 960 B/s; then 10 s of silence
+        spent = c.link.clock() - sent[0]
+        assert 5000 / 960 + OLD_LIMIT <= spent < 5000 / 960 + OLD_LIMIT + 0.1
 
-        sent: list[float] = []
 
-        def arm(direction: str, data: bytes) -> None:
-            if direction == "out" and data.startswith(b"QU"):
-                silence.armed = True
-                sent.append(c.link.clock())
+def test_a_dead_controller_is_found_out_in_seconds_during_a_program_upload() -> None:
+    # (UL's bound covers the whole program memory: about three minutes at 19200 baud)
+    silence = _Silence()
+    with _slow(19200, silence) as c:
+        assert c.link.transfer_timeout(cmds.ul(), ul_reply_bytes(c.model)) > 100
+        sent = _armed_on(c, silence, b"UL")
+        with pytest.raises(GalilTimeoutError, match="'UL' within 10 s"):
+            c.programs.upload()
+        assert c.link.clock() - sent[0] < OLD_LIMIT + 0.1
 
-        c.wire_log.add(arm)
+
+class _Trickle:
+    """A fault hook that, once armed, hands each reply out ``size`` bytes every ``every`` s:
+    never silent for long, never done in time."""
+
+    def __init__(self, size: int, every: float) -> None:
+        self.armed = False
+        self.size, self.every = size, every
+
+    def __call__(self, data: bytes) -> list[tuple[float, bytes]]:
+        if not self.armed:
+            return [(0.0, data)]
+        cuts = range(0, len(data), self.size)
+        return [((k + 1) * self.every, data[i : i + self.size]) for k, i in enumerate(cuts)]
+
+
+def test_an_upload_that_trickles_times_out_at_its_computed_bound() -> None:
+    trickle = _Trickle(size=200, every=5.0)  # 40 B/s, where the line carries 960
+    with _slow(9600, trickle) as c:
+        c.arrays.define("big", 1500)
+        c.arrays.download("big", np.full(1500, -1e9))
+        command = cmds.qu("big", 0, 1499, delim=1)
+        bound = c.link.transfer_timeout(command, 17 * 1500 + 4)
+        sent = _armed_on(c, trickle, b"QU")
         with pytest.raises(GalilTimeoutError, match=f"within {bound:g} s"):
             c.arrays.upload("big")
         assert c.link.clock() - sent[0] == pytest.approx(bound, abs=1e-6)
