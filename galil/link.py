@@ -599,7 +599,7 @@ class LinkCore:
                 self._observe("out", data)
             clock = self._clock_source
             sim_start = clock.controller_time() if clock is not None else 0.0
-            first = t if stall is None else min(t, stall + self._line_time(len(data)))
+            first = t if stall is None else min(t, stall + _line_time(self.byte_rate, len(data)))
             start = _monotonic()
             try:
                 transport.write(data)
@@ -620,14 +620,6 @@ class LinkCore:
         if chunk:
             quiet.heard(clock)
         return self._guarded_collect(batch, t, start, sim_start, chunk, watch, quiet)
-
-    def _line_time(self, size: int) -> float:
-        """Seconds ``size`` bytes take on the line, :data:`TRANSFER_MARGIN` times over (0 on
-        a link that does not say its rate)."""
-        rate = self.byte_rate
-        if rate is None or not rate > 0:  # (NaN from a plug-in: no rate either)
-            return 0.0
-        return TRANSFER_MARGIN * size / rate
 
     def _guarded_collect(
         self,
@@ -873,6 +865,26 @@ class LinkCore:
             self._flush()
         return True
 
+    @contextlib.contextmanager
+    def locked(self) -> Iterator[None]:
+        """Hold the link's lock (for setup steps that must not interleave)."""
+        with self._lock:
+            yield
+        if self._inbox:
+            self._flush()
+
+    def roundtrip_locked(self, batch: Sequence[Command], timeout: float) -> list[Completed]:
+        """A round trip for a caller that holds :meth:`locked`; no ``?`` explanation."""
+        return self._roundtrip(batch, timeout)
+
+    def __repr__(self) -> str:
+        state = "open" if self._open else ("dead" if self._dead else "closed")
+        return f"<Link {self.model_name or '?'} on {self.transport!r} {state}>"
+
+
+class Link(LinkCore):
+    """The command link: :class:`LinkCore` plus the commands the rooms above send."""
+
     # -- time -------------------------------------------------------------------------------
 
     def clock(self) -> float:
@@ -921,26 +933,6 @@ class LinkCore:
     def simulated_time(self) -> bool:
         """Whether the controller runs on a clock of its own (a simulator link)."""
         return self._clock_source is not None
-
-    @contextlib.contextmanager
-    def locked(self) -> Iterator[None]:
-        """Hold the link's lock (for setup steps that must not interleave)."""
-        with self._lock:
-            yield
-        if self._inbox:
-            self._flush()
-
-    def roundtrip_locked(self, batch: Sequence[Command], timeout: float) -> list[Completed]:
-        """A round trip for a caller that holds :meth:`locked`; no ``?`` explanation."""
-        return self._roundtrip(batch, timeout)
-
-    def __repr__(self) -> str:
-        state = "open" if self._open else ("dead" if self._dead else "closed")
-        return f"<Link {self.model_name or '?'} on {self.transport!r} {state}>"
-
-
-class Link(LinkCore):
-    """The command link: :class:`LinkCore` plus the commands the rooms above send."""
 
     # -- the exchange -----------------------------------------------------------------------
 
@@ -1211,7 +1203,7 @@ class Link(LinkCore):
             command: the command as it goes out (its payload included: ``QD``, ``DL``).
             reply_bytes: the most bytes its reply can hold.
         """
-        return self.transfer_stall + self._line_time(len(command.wire) + reply_bytes)
+        return self.transfer_stall + _line_time(self.byte_rate, len(command.wire) + reply_bytes)
 
     @property
     def transfer_stall(self) -> float:
@@ -1379,6 +1371,14 @@ def _broken(exc: OSError, transport: Transport) -> GalilConnectionError:
         return exc
     name = type(transport).__name__
     return GalilConnectionError(f"the {name} link failed: {type(exc).__name__}: {exc}")
+
+
+def _line_time(rate: float | None, size: int) -> float:
+    """Seconds ``size`` bytes take on a line of ``rate`` bytes/s, :data:`TRANSFER_MARGIN` times
+    over (0 on a link that does not say its rate)."""
+    if rate is None or not rate > 0:  # (NaN from a plug-in: no rate either)
+        return 0.0
+    return TRANSFER_MARGIN * size / rate
 
 
 class _Quiet:
