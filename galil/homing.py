@@ -20,7 +20,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from galil import predict
-from galil.errors import InvalidArgument, LimitError
+from galil.errors import CommandError, InvalidArgument, LimitError
 from galil.link import CommandLink
 from galil.models import INT32_MAX, INT32_MIN
 from galil.motion import (
@@ -347,6 +347,7 @@ class AxisHoming:
                     "motion or stop it first",
                     model=model.name,
                 )
+            self._refuse_unknown_followers()
             tracker.ended(a, rp, sc)  # (a handle nobody waited for ends in the old counts)
             parts = [cmds.dp(model=model, **{a: counts})]
             if abs(mt) in (2.0, 2.5):  # a stepper's DP leaves its encoder (TP): DE sets it
@@ -356,6 +357,32 @@ class AxisHoming:
             self._redefined = (
                 f"its position was redefined since (define_position: DP {counts} where RP was "
                 f"{rp:g}), so 0 is no longer where the home or index set it"
+            )
+
+    def _refuse_unknown_followers(self) -> None:
+        """Refuse ``DP`` while another axis follows a master the library does not know: a
+        gearing found at connect, or set up since by a program or another host (``_GR`` read
+        now; ``GA`` has no operand, so its master may be this axis, which would jump).
+
+        Raises:
+            InvalidArgument: naming the followers and how to turn them off.
+        """
+        link, a, tracker = self._link, self.letter, self._tracker
+        others = [x for x in link.model.axes if x != a and x not in tracker.gears]
+        if not others:
+            return
+        try:
+            ratios = link.query_operands([f"_GR{x}" for x in others])
+        except CommandError:
+            return  # (no _GR on this firmware: no gearing is looked for, as at connect)
+        unknown = [f"{x} (GR {r:g})" for x, r in zip(others, ratios, strict=True) if r != 0]
+        if unknown:
+            raise InvalidArgument(
+                f"axis {a} may be the gear master of {', '.join(unknown)}, geared outside this "
+                f"Controller (GA has no operand: the master is not known): DP would make a "
+                f"follower of {a} jump with it; turn that gearing off first "
+                "(axis.gear_off() on the follower)",
+                model=link.model.name,
             )
 
     def _limits(

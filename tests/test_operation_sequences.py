@@ -54,6 +54,7 @@ from galil.errors import (
     GalilError,
     GalilTimeoutError,
     InvalidArgument,
+    LimitError,
     MotionError,
 )
 from galil.gearing import Gearing
@@ -511,6 +512,33 @@ class OperationSequences(RuleBasedStateMachine):
         enabled = (before.forward and not ld.forward) or (before.reverse and not ld.reverse)
         if enabled:
             self.interfere(a)
+
+    @rule(a=axis_st, position=st.sampled_from([0, -7000, 12000]), shift=st.booleans())
+    def define_position(self, a: str, position: int, shift: bool) -> None:
+        """DP (decision 0058): refused unsent while the axis moves, follows a gearing, may
+        lead one, or (limits kept) would be beyond a soft limit; taken, RP reads
+        ``position``, the motor stays where it is, and a move nobody waited for ends in the
+        old counts (so its final position is not today's RP)."""
+        tracker = self.dmc.tracker
+        before = self.sim.machine_position(a)
+        with self.refusable(InvalidArgument, LimitError) as refused:
+            self.dmc.axes[a].define_position(position, shift_limits=shift)
+        if refused:
+            text = str(refused[0])
+            if isinstance(refused[0], LimitError) or f"axis {a} moves" in text:
+                return
+            if "may be the gear master" in text:  # (a program's gearing of D)
+                assert "D (GR" in text, text
+                assert "D" not in tracker.gears, text
+            elif "is the gear master" in text:
+                assert tracker.followers(a), text
+            else:
+                assert a in tracker.gears or a in tracker.found, text
+            return
+        self.supersede(a)
+        self.limits_changed(a)
+        assert self.dmc.query_operands([f"_RP{a}"])[0] == position
+        assert self.sim.machine_position(a) == before
 
     @rule(tm=st.sampled_from([500, 1000, 250]))
     def change_tm(self, tm: int) -> None:

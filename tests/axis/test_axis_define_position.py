@@ -158,6 +158,25 @@ def test_gear_master_and_follower_are_refused_unsent(dmc: galil.Controller) -> N
     assert (dmc.B.position, sim.machine_position("B")) == (0, 0)  # B did not jump
 
 
+def test_a_gearing_set_up_elsewhere_refuses_define_position_on_any_other_axis(
+    dmc: galil.Controller,
+) -> None:
+    # (GA has no operand: B's master may be A, and DP on A would make B jump with it)
+    sim = sim_of(dmc)
+    assert sim.feed(b"GA ,CA;GR ,0.5\r") == b"::"  # a program's or another host's gearing
+    for a in "AC":
+        with (
+            pytest.raises(galil.InvalidArgument, match=r"may be the gear master of B \(GR 0\.5\)"),
+            nothing_sent(dmc, allow_queries=True),
+        ):
+            dmc.axes[a].define_position(1000)
+    dmc.B.gear_off()
+    dmc.A.define_position(1000)
+    dmc.sleep(0.05)
+    assert dmc.A.position == 1000
+    assert (dmc.B.position, sim.machine_position("B")) == (0, 0)  # B did not jump
+
+
 def test_homed_stays_true_and_says_that_zero_moved(dmc: galil.Controller) -> None:
     a = dmc.A
     a.home().wait()
