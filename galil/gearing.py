@@ -24,7 +24,7 @@ import functools
 import logging
 
 from galil import predict
-from galil.errors import CommandError, InvalidArgument, LimitError
+from galil.errors import CommandError, InvalidArgument, LimitError, MotionError
 from galil.link import CommandLink
 from galil.motion import (
     Display,
@@ -108,8 +108,9 @@ class Gearing:
                 its move would not know when the ratio changed).
             LimitError: a ratio beyond the model's range.
             MotionError: a limit stopped the follower since, unseen, and the controller
-                turned its gearing off; nothing is sent, and the gearing is forgotten
-                (:func:`~galil.motion.refuse_dropped`).
+                turned its gearing off (:func:`~galil.motion.refuse_dropped`), or its ratio
+                reads 0 on the controller (turned off by a limit, ``ST`` or ``AB`` whose stop
+                code a later move overwrote); nothing is sent, and the gearing is forgotten.
         """
         q = _ratio(self._link, ratio)
         if q == 0:
@@ -129,6 +130,19 @@ class Gearing:
         refuse_dropped(
             self._link, self._tracker, {self.follower: gear}, {self.follower: round(code)}
         )
+        if _ratio_read(self._link, self.follower) == 0:
+            # Turned off unseen, its stop code since overwritten (a program moved the
+            # follower): GR would engage it again from wherever it is now.
+            self._tracker.release(gear)
+            raise MotionError(
+                f"the controller turned off the gearing of {self.follower} to {self.master} "
+                f"since (its ratio reads 0; a limit, ST or AB, perhaps from a program). "
+                "Nothing was sent; the library forgets that gearing (gear it again: gear_to)",
+                axis=self.follower,
+                stop_codes={self.follower: round(code)},
+                model=model.name,
+                recent=self._link.recent,
+            )
         master_now = gear.travelled if self.master == "S" else round(now)
         self._link.command_line([cmds.gr(model=model, **{self.follower: q})])
         gear.anchor.follow([master_now])  # the controller carries on from the exact follower
@@ -197,6 +211,15 @@ def gear_off(link: CommandLink, tracker: MotionTracker, follower: str) -> None:
         else:
             link.command_line([cmds.gr(model=link.model, **{follower: 0})])
         tracker.found.pop(follower, None)
+
+
+def _ratio_read(link: CommandLink, follower: str) -> float | None:
+    """``follower``'s ratio on the controller (``_GR``: 0 once its gearing was turned off, in
+    the simulator, an assumption); ``None`` on a firmware that refuses the operand."""
+    try:
+        return link.query_operands([f"_GR{follower}"])[0]
+    except CommandError:
+        return None
 
 
 def _master_at_rest(link: CommandLink, master: str) -> None:

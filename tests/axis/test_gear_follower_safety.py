@@ -296,3 +296,23 @@ def test_a_new_ratio_for_a_follower_a_limit_dropped_unseen_is_refused_and_forget
     a_at = dmc.A.reference_position
     dmc.B.move_by(-100).wait()  # no GR was sent: A stays where the limit stopped it
     assert dmc.A.reference_position == a_at
+
+
+def test_a_new_ratio_for_a_follower_dropped_unseen_whose_stop_code_a_program_overwrote_is_refused(
+    dmc: galil.Controller,
+) -> None:
+    # (a program moved A after the limit dropped its gearing: _SCA reads 1, no news of the
+    # drop, and GR engaged A again from where the program left it)
+    gearing = _drop_follower_unawaited(dmc, "switch")
+    sim = sim_of(dmc)
+    assert sim.feed(b"PRA=-50;BGA\r") == b"::"  # behind the library's back
+    dmc.sleep(0.5)
+    assert dmc.query_operands(["_BGA", "_SCA", "_GRA"]) == [0, 1, 0]
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(MotionError) as caught:
+        gearing.set_ratio(3)
+    assert caught.value.axis == "A"
+    assert "ratio reads 0" in str(caught.value)
+    assert not gearing.engaged
+    a_at = dmc.A.reference_position
+    dmc.B.move_by(-100).wait()  # no GR was sent: A stays where the program left it
+    assert dmc.A.reference_position == a_at
