@@ -515,14 +515,19 @@ class OperationSequences(RuleBasedStateMachine):
 
     @rule(a=axis_st, position=st.sampled_from([0, -7000, 12000]), shift=st.booleans())
     def define_position(self, a: str, position: int, shift: bool) -> None:
-        """DP (decision 0058): refused unsent while the axis moves, follows a gearing, may
-        lead one, or (limits kept) would be beyond a soft limit; taken, RP reads
+        self.judge_define(
+            a, position, lambda: self.dmc.axes[a].define_position(position, shift_limits=shift)
+        )
+
+    def judge_define(self, a: str, position: int, define: Callable[[], object]) -> None:
+        """DP (decision 0058) by ``define``: refused unsent while the axis moves, follows a
+        gearing, may lead one, or (limits kept) would be beyond a soft limit; taken, RP reads
         ``position``, the motor stays where it is, and a move nobody waited for ends in the
         old counts (so its final position is not today's RP)."""
         tracker = self.dmc.tracker
         before = self.sim.machine_position(a)
         with self.refusable(InvalidArgument, LimitError) as refused:
-            self.dmc.axes[a].define_position(position, shift_limits=shift)
+            define()
         if refused:
             text = str(refused[0])
             if isinstance(refused[0], LimitError) or f"axis {a} moves" in text:

@@ -142,6 +142,7 @@ class AsyncSequences(RuleBasedStateMachine):
     follower_limit_explained = OperationSequences.follower_limit_explained
     # A rule and an invariant, as they are (the simulator only; the library's view).
     place_limit_switch = OperationSequences.place_limit_switch
+    judge_define = OperationSequences.judge_define
     library_agrees_with_simulator = OperationSequences.library_agrees_with_simulator
 
     def __init__(self) -> None:
@@ -523,6 +524,13 @@ class AsyncSequences(RuleBasedStateMachine):
             run = _picked(self.running, pick)
             with contextlib.suppress(_CancelledError):
                 self.act(lambda: self.wait_for_run(run, watch=watch), how, n)
+
+    @rule(a=axis_st, position=st.sampled_from([0, -7000, 12000]), shift=st.booleans())
+    def define_position(self, a: str, position: int, shift: bool) -> None:
+        axis = self.c.axes[a]
+        self.judge_define(
+            a, position, lambda: self.run(axis.define_position(position, shift_limits=shift))
+        )
 
     # -- gearing ----------------------------------------------------------------------------
     @rule(
