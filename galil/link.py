@@ -1221,7 +1221,15 @@ class Link(LinkCore):
         Args:
             command: the command as it goes out (its payload included: ``QD``, ``DL``).
             reply_bytes: the most bytes its reply can hold.
+
+        Raises:
+            InvalidArgument: not a Command, or ``reply_bytes`` not a whole number >= 0;
+                nothing is sent.
         """
+        if not isinstance(command, Command):
+            raise InvalidArgument(f"transfer() takes a Command, not {type(command).__name__}")
+        if isinstance(reply_bytes, bool) or not isinstance(reply_bytes, int) or reply_bytes < 0:
+            raise InvalidArgument(f"reply_bytes must be a whole number >= 0, not {reply_bytes!r}")
         wait = self.transfer_timeout(command, reply_bytes)
         return self.exchange(command, timeout=wait, stall=self.transfer_stall)
 

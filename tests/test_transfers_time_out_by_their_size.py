@@ -8,7 +8,7 @@ transfer of a minute on the line takes milliseconds here.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import pytest
@@ -19,6 +19,7 @@ from galil.protocol import commands as cmds
 from galil.routines import ul_reply_bytes
 from galil.sim.faults import FaultHook
 from galil.terminal import Terminal
+from galil.testing import nothing_sent
 
 OLD_LIMIT = 10.0  # the fixed reply timeout every transfer had
 
@@ -248,3 +249,26 @@ def test_a_fast_link_keeps_the_least_transfer_timeout() -> None:
     with galil.connect("sim://DMC-4040?baud=115200", timeout=30.0) as c:
         big = c.link.transfer_timeout(cmds.ul(), 11_520)
         assert big == pytest.approx(30.0 + 2 * (3 + 11_520) / 11_520)  # the link's own, on top
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda c: c.link.transfer("UL"),
+        lambda c: c.link.transfer(cmds.ul(), -1),
+        lambda c: c.link.transfer(cmds.ul(), 2.5),
+        lambda c: c.link.transfer(cmds.ul(), True),
+        lambda c: c.link.exchange(cmds.ul(), stall=0),
+        lambda c: c.link.exchange(cmds.ul(), stall=float("nan")),
+        lambda c: c.link.exchange(cmds.ul(), stall="10"),
+    ],
+)
+def test_bad_transfer_arguments_are_refused_unsent(
+    call: Callable[[galil.Controller], object],
+) -> None:
+    with (
+        galil.connect("sim://DMC-4040") as c,
+        nothing_sent(c),
+        pytest.raises(galil.InvalidArgument),
+    ):
+        call(c)
