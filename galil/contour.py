@@ -375,7 +375,8 @@ class ContourStream:
         ops = ("RP", "BG", "BL", "FL", "SC")
         followers = "".join(self._followers)
         state = link.query_operands(
-            [f"_{op}{a}" for a in self.letters for op in ops] + list(follower_operands(followers))
+            [f"_{op}{a}" for a in self.letters for op in ops]
+            + list(follower_operands(followers, self._tracker))
         )
         limits = follower_limits(
             link, self._tracker, self._followers, state[len(self.letters) * len(ops) :]

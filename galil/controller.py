@@ -376,7 +376,7 @@ class Resetting:
         try:
             tm, *ratios = link.query_operands(["_TM", *(f"_GR{a}" for a in axes)])
             link.sample_period = model.sample_period_for(tm)
-            tracker.found_geared(dict(zip(axes, ratios, strict=True)))
+            tracker.found_geared(dict(zip(axes, ratios, strict=True)), readable=bool(axes))
         except GalilError:  # (one refused operand: TM, and the ratios, read apart)
             try:
                 link.sample_period = model.sample_period_for(link.query_operands(["_TM"])[0])

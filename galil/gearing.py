@@ -24,7 +24,7 @@ import functools
 import logging
 
 from galil import predict
-from galil.errors import CommandError, InvalidArgument, LimitError, MotionError
+from galil.errors import CommandError, InvalidArgument, LimitError
 from galil.link import CommandLink
 from galil.motion import (
     Display,
@@ -125,24 +125,16 @@ class Gearing:
         model = self._link.model
         name = "_AVS" if self.master == "S" else f"_RP{self.master}"
         gear = self._gear
-        now, code = self._link.query_operands([name, f"_SC{self.follower}"])
-        # (a limit that dropped it unseen: GR would engage it again, from where it stopped)
-        refuse_dropped(
-            self._link, self._tracker, {self.follower: gear}, {self.follower: round(code)}
+        f = self.follower
+        reads_ratios = self._tracker.reads_ratios
+        now, code, *ratio = self._link.query_operands(
+            [name, f"_SC{f}", *((f"_GR{f}",) if reads_ratios else ())]
         )
-        if _ratio_read(self._link, self.follower) == 0:
-            # Turned off unseen, its stop code since overwritten (a program moved the
-            # follower): GR would engage it again from wherever it is now.
-            self._tracker.release(gear)
-            raise MotionError(
-                f"the controller turned off the gearing of {self.follower} to {self.master} "
-                f"since (its ratio reads 0; a limit, ST or AB, perhaps from a program). "
-                "Nothing was sent; the library forgets that gearing (gear it again: gear_to)",
-                axis=self.follower,
-                stop_codes={self.follower: round(code)},
-                model=model.name,
-                recent=self._link.recent,
-            )
+        # (a limit that dropped it unseen: GR would engage it again, from where it stopped;
+        # a ratio of 0: the same, its stop code since overwritten by a program's move)
+        refuse_dropped(
+            self._link, self._tracker, {f: gear}, {f: round(code)}, {f: ratio[0]} if ratio else None
+        )
         master_now = gear.travelled if self.master == "S" else round(now)
         self._link.command_line([cmds.gr(model=model, **{self.follower: q})])
         gear.anchor.follow([master_now])  # the controller carries on from the exact follower
@@ -195,7 +187,8 @@ def read_found(link: CommandLink, tracker: MotionTracker) -> None:
             link.model.name,
             exc,
         )
-        ratios = [0.0] * len(axes)
+        tracker.found_geared(dict.fromkeys(axes, 0.0), readable=False)
+        return
     tracker.found_geared(dict(zip(axes, ratios, strict=True)))
 
 
@@ -211,15 +204,6 @@ def gear_off(link: CommandLink, tracker: MotionTracker, follower: str) -> None:
         else:
             link.command_line([cmds.gr(model=link.model, **{follower: 0})])
         tracker.found.pop(follower, None)
-
-
-def _ratio_read(link: CommandLink, follower: str) -> float | None:
-    """``follower``'s ratio on the controller (``_GR``: 0 once its gearing was turned off, in
-    the simulator, an assumption); ``None`` on a firmware that refuses the operand."""
-    try:
-        return link.query_operands([f"_GR{follower}"])[0]
-    except CommandError:
-        return None
 
 
 def _master_at_rest(link: CommandLink, master: str) -> None:

@@ -337,6 +337,9 @@ class MotionTracker:
         #: Followers geared on the controller by something else (found at connect or after a
         #: reset, decision 0055): letter -> ratio. Their master is unknown.
         self.found: dict[str, float] = {}
+        #: Whether the controller answers ``_GR`` (read at connect): a master's start then
+        #: reads its followers' ratios too, 0 telling of a gearing turned off unseen.
+        self.reads_ratios = False
         self.lock = threading.RLock()
         self._watches: list[StopWatch] = []  # a contour's, while it runs (its letters)
         self._refused: set[int] = set()  # threads whose starts are cancelled (refuse_starts)
@@ -492,15 +495,17 @@ class MotionTracker:
         if letter in self.found:
             raise InvalidArgument(found_text(letter, self.found[letter], what), model=model)
 
-    def found_geared(self, ratios: Mapping[str, float]) -> None:
+    def found_geared(self, ratios: Mapping[str, float], readable: bool = True) -> None:
         """The ratios just read from the controller (``_GR``, by letter): the followers the
-        library did not gear itself, with a ratio other than 0, are :attr:`found`.
+        library did not gear itself, with a ratio other than 0, are :attr:`found`
+        (``readable`` False: the controller refused ``_GR``, and none is found).
 
         Takes no lock: a reopen of the link runs this while the controller's life lock is held,
         and a start that reopens holds :attr:`lock` and then waits for that one (the copy of
         the gearings and the assignment are each atomic)."""
         own = self.gears.copy()
         self.found = {a: r for a, r in ratios.items() if r != 0 and a not in own}
+        self.reads_ratios = readable
 
     def ended(self, letter: str, rp: float, sc: float) -> None:
         """A start read ``letter`` at rest (``_BG`` 0), ``_RP`` ``rp`` and ``_SC`` ``sc``: the
@@ -575,30 +580,36 @@ def refuse_dropped(
     tracker: MotionTracker | None,
     gears: Mapping[str, GearLink],
     stop_codes: Mapping[str, int],
+    ratios: Mapping[str, float] | None = None,
 ) -> None:
     """Refuse a master's motion while a follower's ``_SC`` (read with the master's state, before
     anything is sent) says that a limit stopped it: the controller turned its gearing off
-    during a move nobody waited for (a wait would have said so). The tracker forgets those
-    gearings, as :meth:`MoveHandle.wait` does, so the call after this one moves the master
-    without them.
+    during a move nobody waited for (a wait would have said so); or while its ``_GR`` reads 0
+    (turned off unseen, its stop code since overwritten by a move: a program's). The tracker
+    forgets those gearings, as :meth:`MoveHandle.wait` does, so the call after this one moves
+    the master without them.
 
     Args:
         gears: the followers read, by letter.
         stop_codes: each follower's ``_SC``.
+        ratios: each follower's ``_GR``, where the controller answers it.
 
     Raises:
         MotionError: naming the followers, their master and their stop codes.
     """
-    dropped = forget_dropped(tracker, gears, stop_codes)
+    dropped = forget_dropped(tracker, gears, stop_codes, ratios)
     if not dropped:
         return
     first = next(iter(dropped))
     parts = [f"{f}, geared to {gears[f].master}: {codes.stop_text(c)}" for f, c in dropped.items()]
+    if all(gears[f].dropped_by(c) for f, c in dropped.items()):
+        what = f"a limit stopped {', '.join(dropped)} during a move nobody waited for, and the "
+    else:  # (a ratio of 0: by a limit, ST or AB whose stop code a later move overwrote)
+        what = f"{', '.join(dropped)} no longer follow(s): its ratio reads 0, so the "
     raise MotionError(
-        f"a limit stopped {', '.join(dropped)} during a move nobody waited for, and the "
-        f"controller turned its gearing off ({'; '.join(parts)}). Nothing was sent; the library "
-        "forgets that gearing, so the same call again moves without it (or gear it again "
-        "first: gear_to)",
+        f"{what}controller turned its gearing off ({'; '.join(parts)}). Nothing was sent; the "
+        "library forgets that gearing, so the same call again moves without it (or gear it "
+        "again first: gear_to)",
         axis=first,
         stop_codes=dict(dropped),
         model=link.model.name,
@@ -1160,12 +1171,19 @@ def _refuse_if_closed(handle: MoveHandle) -> None:
 
 
 def forget_dropped(
-    tracker: MotionTracker | None, followers: Mapping[str, GearLink], stop_codes: Mapping[str, int]
+    tracker: MotionTracker | None,
+    followers: Mapping[str, GearLink],
+    stop_codes: Mapping[str, int],
+    ratios: Mapping[str, float] | None = None,
 ) -> dict[str, int]:
     """The followers whose stop code (read once their master's motion is over) says that a
-    limit stopped them (:meth:`GearLink.dropped_by`), by letter: the controller turned their
-    gearing off, and ``tracker`` forgets it here."""
-    dropped = {f: c for f, c in stop_codes.items() if followers[f].dropped_by(c)}
+    limit stopped them (:meth:`GearLink.dropped_by`), or whose ratio (``ratios``, where read)
+    is 0, by letter: the controller turned their gearing off, and ``tracker`` forgets it here."""
+    dropped = {
+        f: c
+        for f, c in stop_codes.items()
+        if followers[f].dropped_by(c) or (ratios is not None and ratios.get(f) == 0)
+    }
     if tracker is not None:
         for f in dropped:
             tracker.release(followers[f])

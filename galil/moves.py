@@ -58,6 +58,7 @@ _STATE = ("RP", "BG", "SP", "AC", "DC", "IT", "BL", "FL", "MO", "SC", "TS")
 # What a master's state query reads of each follower: its soft limits, its stop code (a
 # limit's: the controller turned its gearing off), and its limit switches (TS bits 3, 2).
 _FOLLOWER = ("BL", "FL", "SC", "TS")
+_FOLLOWER_GR = (*_FOLLOWER, "GR")
 _new = object.__new__
 _BUILDERS = {"SP": cmds.sp, "AC": cmds.ac, "DC": cmds.dc}
 
@@ -121,7 +122,7 @@ def _read_state(
         if start:
             _seen_at_rest(tracker, states)
         return states, {}
-    values = link.query_operands(names + follower_operands("".join(gears)))
+    values = link.query_operands(names + follower_operands("".join(gears), tracker))
     states = _states(link, letters, values)
     if start:
         _seen_at_rest(tracker, states)
@@ -169,9 +170,10 @@ def follower_limits(
         MotionError: a limit stopped a follower during a move nobody waited for; the tracker
             forgets its gearing (:func:`~galil.motion.refuse_dropped`).
     """
-    n = len(_FOLLOWER)
+    n = len(_follower_ops(tracker))
     rows = {f: values[i * n : (i + 1) * n] for i, f in enumerate(gears)}
-    refuse_dropped(link, tracker, gears, {f: round(r[2]) for f, r in rows.items()})
+    ratios = {f: r[4] for f, r in rows.items()} if n > len(_FOLLOWER) else None
+    refuse_dropped(link, tracker, gears, {f: round(r[2]) for f, r in rows.items()}, ratios)
     return {f: (r[0], r[1], round(r[3]) & SWITCH_BITS) for f, r in rows.items()}
 
 
@@ -216,11 +218,16 @@ def _check_follower_speed(link: CommandLink, gear: GearLink, speed: float) -> No
         raise exc
 
 
-def follower_operands(followers: str) -> tuple[str, ...]:
+def follower_operands(followers: str, tracker: MotionTracker | None) -> tuple[str, ...]:
     """What a master's state query reads of each follower: ``_BL`` and ``_FL`` (its soft
-    limits), ``_SC`` (a limit's stop code: its gearing is off) and ``_TS`` (its limit
-    switches), in the order :func:`follower_limits` reads them back."""
-    return _operand_names(followers, _FOLLOWER)
+    limits), ``_SC`` (a limit's stop code: its gearing is off), ``_TS`` (its limit switches)
+    and, where the controller answers it, ``_GR`` (0: its gearing was turned off unseen), in
+    the order :func:`follower_limits` reads them back (with the same ``tracker``)."""
+    return _operand_names(followers, _follower_ops(tracker)) if followers else ()
+
+
+def _follower_ops(tracker: MotionTracker | None) -> tuple[str, ...]:
+    return _FOLLOWER_GR if tracker is not None and tracker.reads_ratios else _FOLLOWER
 
 
 def _refuse_follower_blocked(link: CommandLink, gear: GearLink, direction: float, ts: int) -> None:
@@ -576,14 +583,18 @@ def _jog(
     a = letter
     tracker.refuse_geared(a, "jogging it", link.model.name)
     gears = tracker.followers(a)
+    of_followers = ("SC", "TS", "GR") if tracker.reads_ratios else ("SC", "TS")
     rp, bg, sc, ac, dc, it, mo, ts, bl, fl, *ends = link.query_operands(
         [f"_{op}{a}" for op in ("RP", "BG", "SC", "AC", "DC", "IT", "MO", "TS", "BL", "FL")]
         # (a follower a limit dropped: refuse_dropped; one on its switch: a start refused)
-        + [f"_{op}{f}" for f in gears for op in ("SC", "TS")]
+        + [f"_{op}{f}" for f in gears for op in of_followers]
     )
     if not bg:
         tracker.ended(a, rp, sc)
-    refuse_dropped(link, tracker, gears, {f: round(ends[2 * i]) for i, f in enumerate(gears)})
+    n = len(of_followers)
+    rows = {f: ends[i * n : (i + 1) * n] for i, f in enumerate(gears)}
+    ratios = {f: r[2] for f, r in rows.items()} if n == 3 else None
+    refuse_dropped(link, tracker, gears, {f: round(r[0]) for f, r in rows.items()}, ratios)
     track = tracker.track(a)
     if bg and track is not None and track.kind == "jog":
         handle = _open_jog(tracker, a)
@@ -599,8 +610,8 @@ def _jog(
             f"axis {a} has its motor off; call controller.servo_here()", model=link.model.name
         )
     _refuse_blocked(link, a, velocity, round(ts), (round(rp), bl, fl))
-    for i, gear in enumerate(gears.values()):
-        _refuse_follower_blocked(link, gear, gear.ratio * velocity, round(ends[2 * i + 1]))
+    for f, gear in gears.items():
+        _refuse_follower_blocked(link, gear, gear.ratio * velocity, round(rows[f][1]))
     _check_geared_speed(link, gears, velocity)
     params = MoveParams(abs(velocity), as_stored(link, "AC", ac), as_stored(link, "DC", dc), it)
     replies = link.command_line(
@@ -694,7 +705,7 @@ def _increment(
     gears = tracker.followers(a)
     rp, bg, pa, bl, fl, sc, *rest = link.query_operands(
         [f"_{op}{a}" for op in ("RP", "BG", "PA", "BL", "FL", "SC")]
-        + list(follower_operands("".join(gears)))
+        + list(follower_operands("".join(gears), tracker))
     )
     limits = follower_limits(link, tracker, gears, rest)
     shows = {a: display} if display else None
@@ -941,7 +952,7 @@ def _schedule_state(
             progress, or the user's program).
         MotionError: a limit stopped a follower during a move nobody waited for.
     """
-    names = (*_operand_names(a, _STATE), "_XQ0", *follower_operands("".join(gears)))
+    names = (*_operand_names(a, _STATE), "_XQ0", *follower_operands("".join(gears), tracker))
     values = link.query_operands(names)
     state = _states(link, a, values)[a]
     _seen_at_rest(tracker, {a: state})

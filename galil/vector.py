@@ -417,7 +417,7 @@ class VectorStream:
         if self.smoothing is None:
             extra.append("_VTS" if model.vt else f"_IT{letters[0]}")
         followers = "".join(self.followers)
-        of_followers = follower_operands(followers)
+        of_followers = follower_operands(followers, self._tracker)
         values = link.query_operands(names + extra + list(of_followers))
         n = len(_STATE)
         rows = [values[i * n : (i + 1) * n] for i in range(len(letters))]

@@ -236,6 +236,29 @@ def test_the_masters_next_motion_reports_a_follower_a_limit_dropped_unawaited_an
     assert dmc.B.reference_position == start
 
 
+@pytest.mark.parametrize("motion", list(_NEXT_MOTION))
+def test_the_masters_next_motion_reports_a_follower_dropped_unseen_whose_stop_code_was_overwritten(
+    dmc: galil.Controller, motion: str
+) -> None:
+    # (a program moved A after the limit dropped its gearing: _SCA 1 told nothing, and the
+    # master's motion predicted A following, refused A's own moves as geared, and checked
+    # A's soft limits for a gearing the controller no longer had)
+    gearing = _drop_follower_unawaited(dmc, "switch")
+    assert sim_of(dmc).feed(b"PRA=-50;BGA\r") == b"::"  # behind the library's back
+    dmc.sleep(0.5)
+    assert dmc.query_operands(["_BGA", "_SCA", "_GRA"]) == [0, 1, 0]
+    start = dmc.B.reference_position
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(MotionError) as caught:
+        _NEXT_MOTION[motion](dmc)
+    assert caught.value.axis == "A"
+    assert "ratio reads 0" in str(caught.value)
+    assert not gearing.engaged
+    assert dmc.B.reference_position == start
+    h = _NEXT_MOTION["move"](dmc)
+    assert isinstance(h, galil.MoveHandle)
+    assert h.followers == ""
+
+
 def test_after_the_report_the_master_moves_without_the_dropped_follower(
     dmc: galil.Controller,
 ) -> None:
@@ -260,7 +283,11 @@ def test_a_follower_that_still_follows_adds_no_exchange_and_no_error_to_the_next
     dmc.sleep(1.0)
     with transcript(dmc) as record:
         h = dmc.B.move_by(-400)
-    assert len(record.lines) == 2  # the state query (the followers' on it), the move's line
+    # the state query (the followers' on it: pipelined MG lines, one round trip), the move
+    *state, line = record.lines
+    assert 1 <= len(state) <= 2
+    assert all(q.startswith("MG _") for q in state), state
+    assert "BG B" in line
     assert h.followers == "A"
     assert h.wait().follower_final == {"A": 0}
 

@@ -147,4 +147,14 @@ def test_a_controller_without_the_ratio_operand_connects_and_says_gearing_is_not
         galil.connect("sim://DMC-4040", controller=sim) as dmc,
     ):
         assert dmc.C.move_by(100).wait().deviation == {"C": 0}
+        assert not dmc.tracker.reads_ratios
+        # nothing else asks it then: a master's moves, a new ratio, define_position
+        gearing = dmc.B.gear_to("A", 2)
+        assert dmc.A.move_by(100).wait().follower_final == {"B": 200}
+        gearing.set_ratio(1)
+        assert dmc.A.jog(1000) is not None
+        dmc.A.stop()
+        dmc.sleep(0.5)
+        gearing.off()
+        dmc.C.define_position(0)
     assert "gearing set up elsewhere is not looked for" in caplog.text
