@@ -205,6 +205,14 @@ def _drop_follower_unawaited(dmc: galil.Controller, limit: str) -> galil.Gearing
     return gearing
 
 
+def _move_behind_the_librarys_back(dmc: galil.Controller) -> None:
+    """Move the dropped follower A as a program would: its ``_SC`` then tells nothing of the
+    drop (1, a move's end); its ratio reads 0."""
+    assert sim_of(dmc).feed(b"PRA=-50;BGA\r") == b"::"
+    dmc.sleep(0.5)
+    assert dmc.query_operands(["_BGA", "_SCA", "_GRA"]) == [0, 1, 0]
+
+
 _NEXT_MOTION: dict[str, Callable[[galil.Controller], object]] = {
     "move": lambda dmc: dmc.B.move_by(-100),
     "plan": lambda dmc: dmc.B.plan_by(-100),
@@ -244,9 +252,7 @@ def test_the_masters_next_motion_reports_a_follower_dropped_unseen_whose_stop_co
     # master's motion predicted A following, refused A's own moves as geared, and checked
     # A's soft limits for a gearing the controller no longer had)
     gearing = _drop_follower_unawaited(dmc, "switch")
-    assert sim_of(dmc).feed(b"PRA=-50;BGA\r") == b"::"  # behind the library's back
-    dmc.sleep(0.5)
-    assert dmc.query_operands(["_BGA", "_SCA", "_GRA"]) == [0, 1, 0]
+    _move_behind_the_librarys_back(dmc)
     start = dmc.B.reference_position
     with nothing_sent(dmc, allow_queries=True), pytest.raises(MotionError) as caught:
         _NEXT_MOTION[motion](dmc)
@@ -309,37 +315,22 @@ def test_a_stop_code_a_follower_already_showed_when_geared_is_not_taken_for_a_dr
     assert r.follower_final == {"A": 0}
 
 
-def test_a_new_ratio_for_a_follower_a_limit_dropped_unseen_is_refused_and_forgets_it(
-    dmc: galil.Controller,
+@pytest.mark.parametrize(
+    ("overwritten", "said"), [(False, "nobody waited for"), (True, "ratio reads 0")]
+)
+def test_a_new_ratio_for_a_follower_dropped_unseen_is_refused_and_forgets_it(
+    dmc: galil.Controller, overwritten: bool, said: str
 ) -> None:
-    # (GR would have engaged it again from where the limit stopped it, the library's anchor
-    # still where it was geared: every later prediction of it off)
+    # (GR would have engaged it again from where the limit stopped it, or a program left it,
+    # the library's anchor still where it was geared: every later prediction of it off)
     gearing = _drop_follower_unawaited(dmc, "switch")
+    if overwritten:
+        _move_behind_the_librarys_back(dmc)
     with nothing_sent(dmc, allow_queries=True), pytest.raises(MotionError) as caught:
         gearing.set_ratio(3)
     assert caught.value.axis == "A"
-    assert "nobody waited for" in str(caught.value)
+    assert said in str(caught.value)
     assert not gearing.engaged
     a_at = dmc.A.reference_position
-    dmc.B.move_by(-100).wait()  # no GR was sent: A stays where the limit stopped it
-    assert dmc.A.reference_position == a_at
-
-
-def test_a_new_ratio_for_a_follower_dropped_unseen_whose_stop_code_a_program_overwrote_is_refused(
-    dmc: galil.Controller,
-) -> None:
-    # (a program moved A after the limit dropped its gearing: _SCA reads 1, no news of the
-    # drop, and GR engaged A again from where the program left it)
-    gearing = _drop_follower_unawaited(dmc, "switch")
-    sim = sim_of(dmc)
-    assert sim.feed(b"PRA=-50;BGA\r") == b"::"  # behind the library's back
-    dmc.sleep(0.5)
-    assert dmc.query_operands(["_BGA", "_SCA", "_GRA"]) == [0, 1, 0]
-    with nothing_sent(dmc, allow_queries=True), pytest.raises(MotionError) as caught:
-        gearing.set_ratio(3)
-    assert caught.value.axis == "A"
-    assert "ratio reads 0" in str(caught.value)
-    assert not gearing.engaged
-    a_at = dmc.A.reference_position
-    dmc.B.move_by(-100).wait()  # no GR was sent: A stays where the program left it
+    dmc.B.move_by(-100).wait()  # no GR was sent: A stays where it was
     assert dmc.A.reference_position == a_at
