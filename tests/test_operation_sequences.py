@@ -809,6 +809,19 @@ class OperationSequences(RuleBasedStateMachine):
                 assert not known, (known, by_controller)
         assert tuning.burns["BP"] == burns + (not refused and by_controller is None)
 
+    @rule(
+        values=st.lists(
+            st.integers(-8_000_000_000, 8_000_000_000).map(lambda v: v / 4), min_size=1, max_size=60
+        )
+    )
+    def array_round_trip(self, values: list[float]) -> None:
+        """``QD`` then ``QU`` (bulk transfers: decisions 0064, 0067) whatever runs meanwhile:
+        the array reads back what was written, and the link stays in step."""
+        arrays = self.dmc.arrays
+        arrays.define("fz", len(values), replace=True)
+        arrays.download("fz", values)
+        assert arrays.upload("fz").tolist() == values
+
     @rule(seconds=st.sampled_from([0.01, 0.1, 0.5, 2.0]))
     def sleep(self, seconds: float) -> None:
         self.dmc.sleep(seconds)
