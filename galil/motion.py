@@ -605,7 +605,7 @@ def refuse_dropped(
     if all(gears[f].dropped_by(c) for f, c in dropped.items()):
         what = f"a limit stopped {', '.join(dropped)} during a move nobody waited for, and the "
     else:  # (a ratio of 0: by a limit, ST or AB whose stop code a later move overwrote)
-        what = f"{', '.join(dropped)} no longer follow(s): its ratio reads 0, so the "
+        what = f"{', '.join(dropped)} no longer follow(s) (ratio reads 0): the "
     raise MotionError(
         f"{what}controller turned its gearing off ({'; '.join(parts)}). Nothing was sent; the "
         "library forgets that gearing, so the same call again moves without it (or gear it "
