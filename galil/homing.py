@@ -20,7 +20,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from galil import predict
-from galil.errors import CommandError, InvalidArgument, LimitError
+from galil.errors import InvalidArgument, LimitError
 from galil.link import CommandLink
 from galil.models import INT32_MAX, INT32_MIN
 from galil.motion import (
@@ -369,12 +369,9 @@ class AxisHoming:
         """
         link, a, tracker = self._link, self.letter, self._tracker
         others = [x for x in link.model.axes if x != a and x not in tracker.gears]
-        if not others:
-            return
-        try:
-            ratios = link.query_operands([f"_GR{x}" for x in others])
-        except CommandError:
+        if not others or not tracker.reads_ratios:
             return  # (no _GR on this firmware: no gearing is looked for, as at connect)
+        ratios = link.query_operands([f"_GR{x}" for x in others])
         unknown = [f"{x} (GR {r:g})" for x, r in zip(others, ratios, strict=True) if r != 0]
         if unknown:
             raise InvalidArgument(
