@@ -229,9 +229,16 @@ class HomingSequence:
         return self._watch
 
     def fire(self, position: int) -> None:
-        """The watched condition turned true at the last sample (``position``: caller's frame)."""
+        """The watched condition turned true at the last sample (``position``: caller's frame).
+
+        Nothing more happens once an ``ST`` or a limit ramps the axis down (its stop code
+        shows): the sequence ends with that ramp (:meth:`settle`), whatever it passes on the
+        way (the home switch's edge, an index pulse).
+        """
         self._watch = None
         prof = self.prof
+        if prof.stopping and prof.stop_code != 0:
+            return
         if self.stage == 1:
             self._decelerate()
         elif self.stage == 2:

@@ -234,6 +234,29 @@ def test_st_or_a_limit_in_the_ramp_down_past_the_home_switch_ends_the_sequence(s
     assert not sim.room(Homing).runs
 
 
+@pytest.mark.parametrize("stage", [1, 2])
+def test_st_before_the_home_switch_ends_the_sequence_whatever_its_ramp_passes(stage: int) -> None:
+    # (the edge crossed during the ST's ramp started HM's own ramp down, which set _SC back
+    # to 0: the axis showed "running" through the ramp and at rest, the sequence over; in
+    # stage 2 the crossing halted it at once and began the index phase)
+    sim = SimController("DMC-4040", servo_lag=0.0)
+    sim.set_home_switch("A", edge=-3000, index_period=2000)
+    ask(sim, "DCA=20480;HVA=8000")  # (ramps of 15,000 counts from SP, 1,560 from HV)
+    ask(sim, "HMA;BGA")
+    if stage == 2:  # past the edge, back at HV: short of it by less than the ramp's length
+        while sim.room(Homing).runs["A"].stage != 2 or number(sim, "_RPA") < -4000:
+            sim.advance(0.005)
+    else:  # short of the edge by less than the ramp's length
+        while number(sim, "_RPA") > -1500:
+            sim.advance(0.005)
+    ask(sim, "STA")
+    assert (number(sim, "_BGA"), number(sim, "_SCA")) == (1, 4)
+    while number(sim, "_BGA"):
+        sim.advance(0.01)
+        assert number(sim, "_SCA") == 4
+    assert not sim.room(Homing).runs
+
+
 def test_refusals_change_nothing() -> None:
     sim = SimController("DMC-4040")
     assert ask(sim, "HVA=0;HMA;BGA") == "::?"
