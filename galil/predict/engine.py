@@ -751,11 +751,6 @@ class AxisProfiler:
             self._set_plan(plan_position(x, v0, float(self.target), self._v, self._a, self._d))
 
     @property
-    def stopping(self) -> bool:
-        """Whether a forced ramp to rest is under way (``ST``, a limit, a homing's own)."""
-        return self.moving and self._stopping
-
-    @property
     def takes_decel(self) -> bool:
         """Whether DC may change now: at rest, in a jog, or while ST or a limit ramps down
         (not in a position move nor while contouring: TC 7)."""

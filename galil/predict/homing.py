@@ -237,7 +237,7 @@ class HomingSequence:
         """
         self._watch = None
         prof = self.prof
-        if prof.stopping and prof.stop_code != 0:
+        if prof.moving and prof.stop_code != 0:  # (ST's or a limit's ramp: its code shows)
             return
         if self.stage == 1:
             self._decelerate()
