@@ -583,18 +583,14 @@ def _jog(
     a = letter
     tracker.refuse_geared(a, "jogging it", link.model.name)
     gears = tracker.followers(a)
-    of_followers = ("SC", "TS", "GR") if tracker.reads_ratios else ("SC", "TS")
     rp, bg, sc, ac, dc, it, mo, ts, bl, fl, *ends = link.query_operands(
         [f"_{op}{a}" for op in ("RP", "BG", "SC", "AC", "DC", "IT", "MO", "TS", "BL", "FL")]
         # (a follower a limit dropped: refuse_dropped; one on its switch: a start refused)
-        + [f"_{op}{f}" for f in gears for op in of_followers]
+        + list(follower_operands("".join(gears), tracker))
     )
     if not bg:
         tracker.ended(a, rp, sc)
-    n = len(of_followers)
-    rows = {f: ends[i * n : (i + 1) * n] for i, f in enumerate(gears)}
-    ratios = {f: r[2] for f, r in rows.items()} if n == 3 else None
-    refuse_dropped(link, tracker, gears, {f: round(r[0]) for f, r in rows.items()}, ratios)
+    followers = follower_limits(link, tracker, gears, ends)
     track = tracker.track(a)
     if bg and track is not None and track.kind == "jog":
         handle = _open_jog(tracker, a)
@@ -611,7 +607,7 @@ def _jog(
         )
     _refuse_blocked(link, a, velocity, round(ts), (round(rp), bl, fl))
     for f, gear in gears.items():
-        _refuse_follower_blocked(link, gear, gear.ratio * velocity, round(rows[f][1]))
+        _refuse_follower_blocked(link, gear, gear.ratio * velocity, followers[f][2])
     _check_geared_speed(link, gears, velocity)
     params = MoveParams(abs(velocity), as_stored(link, "AC", ac), as_stored(link, "DC", dc), it)
     replies = link.command_line(
