@@ -212,7 +212,7 @@ class SimSerialLink(SimLink):
         faults: FaultHook | None = None,
         auto_advance: bool = True,
     ) -> None:
-        self.baud = _baud(baud)
+        self.baud = check_baud(baud)
         if not isinstance(controller.clock, ManualClock):
             raise InvalidArgument(
                 "baud paces the simulator's manual clock (a real clock would have to sleep); "
@@ -381,7 +381,7 @@ def _number(value: Any, what: str, kind: type[int] | type[float]) -> Any:
         raise InvalidArgument(f"{what} must be a number, not {value!r:.60}") from exc
 
 
-def _baud(value: object) -> float:
+def check_baud(value: object) -> float:
     """A line rate in bits a second: a positive finite number, or its text from a URL query.
 
     Raises:
@@ -425,7 +425,7 @@ def open_transport(url: str | urllib.parse.SplitResult, **options: Any) -> SimLi
     messages = str(opts.pop("messages", "inline"))
     baud = opts.pop("baud", None)
     if baud is not None:
-        baud = _baud(baud)
+        baud = check_baud(baud)
         if messages != "inline":
             raise InvalidArgument(
                 "baud is a serial line, where unsolicited output comes inline; "

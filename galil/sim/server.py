@@ -39,6 +39,7 @@ from galil.portnumber import check_port
 from galil.sim.clock import RealTimeClock
 from galil.sim.controller import SimController
 from galil.sim.faults import FaultHook, apply_faults
+from galil.sim.link import check_baud
 
 __all__ = ["SimPtyServer", "SimTcpServer", "check_ports", "main"]
 
@@ -655,18 +656,13 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _baud(text: str | None, pty: bool) -> float | None:
-    """``--baud``: a positive, finite line rate, and only for a pty (a serial line)."""
+    """``--baud``: a positive, finite line rate (:func:`~galil.sim.link.check_baud`), and only
+    for a pty (a serial line)."""
     if text is None:
         return None
     if not pty:
         raise InvalidArgument("--baud paces a serial line: it goes with --pty")
-    try:
-        baud = float(text)
-    except ValueError:
-        baud = math.nan
-    if not (math.isfinite(baud) and baud > 0):
-        raise InvalidArgument(f"--baud takes a positive line rate (e.g. 115200), not {text!r}")
-    return baud
+    return check_baud(text)
 
 
 def _controller(model: str, lag: float, limits: str | None) -> SimController:
