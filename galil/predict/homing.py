@@ -38,7 +38,7 @@ import numpy.typing as npt
 
 from galil.errors import InvalidArgument
 from galil.predict.engine import AxisProfiler
-from galil.predict.move import Event, SetAccel
+from galil.predict.move import Event, SetAccel, sample_of_event
 from galil.predict.profile import Profile
 from galil.predict.smoothing import smooth
 
@@ -393,9 +393,7 @@ def _accel_changes(events: Sequence[Event], sample_period: float) -> list[tuple[
             raise InvalidArgument(
                 f"a homing prediction follows AC changes only, not {type(ev).__name__}"
             )
-        if not (math.isfinite(ev.time) and ev.time >= 0):
-            raise InvalidArgument(f"event time must be >= 0, got {ev.time!r}")
-        changes.append((round(ev.time / sample_period), ev.accel))
+        changes.append((sample_of_event(ev.time, sample_period), ev.accel))
     changes.sort(key=lambda c: c[0])  # (stable: of two at one sample, the later wins)
     return changes[::-1]
 

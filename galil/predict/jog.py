@@ -10,7 +10,7 @@ import numpy as np
 from galil.errors import InvalidArgument
 from galil.models import ModelSpec
 from galil.predict.engine import AxisProfiler
-from galil.predict.move import Event, SetSpeed, Stop, _resolve, _sample_of, run
+from galil.predict.move import Event, SetSpeed, Stop, _resolve, run, sample_of_event
 from galil.predict.profile import Profile
 
 __all__ = ["jog"]
@@ -69,7 +69,7 @@ def jog(
         eng.begin_jog(speed, accel, decel, smoothing)
     until: int | None = None
     if duration is not None:
-        until = _sample_of(duration, ts)
+        until = sample_of_event(duration, ts)
     elif stop_at is None and not any(isinstance(e, Stop) for e in all_events):
         r, ref, peak = _run_until_settled(eng, all_events, speed, accel, decel, smoothing)
         peak = max(peak, abs(initial_speed))
@@ -107,7 +107,7 @@ def _run_until_settled(
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """No end given: run past the last event until the last ramp (and smoothing) settles."""
     ts = eng.sample_period
-    last = max((_sample_of(e.time, ts) for e in events), default=0)
+    last = max((sample_of_event(e.time, ts) for e in events), default=0)
     r, ref, peak = run(eng, events, speed=speed, accel=accel, decel=decel, until=last)
     plan = eng.plan
     extra = 0

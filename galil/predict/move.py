@@ -40,6 +40,7 @@ __all__ = [
     "move",
     "plan_move",
     "run",
+    "sample_of_event",
     "speed_schedule",
 ]
 
@@ -206,7 +207,12 @@ def _resolve(
     return q.speed, q.accel, q.decel, q.smoothing, q.sample_period
 
 
-def _sample_of(time: float, ts: float) -> int:
+def sample_of_event(time: float, ts: float) -> int:
+    """The sample an event at ``time`` seconds applies at (``round(time / ts)``).
+
+    Raises:
+        InvalidArgument: a time that is not a finite number >= 0.
+    """
     if not (math.isfinite(time) and time >= 0):
         raise InvalidArgument(f"event time must be >= 0, got {time!r}")
     return round(time / ts)
@@ -260,7 +266,7 @@ def run(
     sp, ac, dc = speed, accel, decel
     base = eng.sample
     for ev in sorted(events, key=lambda e: e.time):
-        k = base + _sample_of(ev.time, ts)
+        k = base + sample_of_event(ev.time, ts)
         _advance(eng, k - eng.sample, out)
         if isinstance(ev, SetSpeed):
             sp = abs(ev.speed) if eng.mode != "jog" else ev.speed
