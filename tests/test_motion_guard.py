@@ -148,8 +148,7 @@ def test_a_stop_whose_link_dies_goes_out_on_the_reopened_link_and_returns(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
     sim = SimController("DMC-4040", ManualClock())
-    dmc = _reopening(sim, b"ST")
-    try:
+    with _reopening(sim, b"ST") as dmc:
         dmc.A.jog(50_000)
         with caplog.at_level("WARNING", logger="galil.motion"):
             dmc.A.stop()  # the first ST dies with the link: it is sent again, and that is all
@@ -157,14 +156,11 @@ def test_a_stop_whose_link_dies_goes_out_on_the_reopened_link_and_returns(
         assert dmc.query_operands(["_BGA", "_SCA"]) == [0, 4]  # the link works
         assert "it was reopened and they are stopped" in caplog.text
         assert [line for _, line in sim.command_log].count("ST A") == 2
-    finally:
-        dmc.close()
 
 
 def test_a_start_cut_short_by_a_dead_link_says_the_link_works_again() -> None:
     sim = SimController("DMC-4040", ManualClock())
-    dmc = _reopening(sim, b"BG")
-    try:
+    with _reopening(sim, b"BG") as dmc:
         with pytest.raises(galil.GalilConnectionError) as info:
             dmc.A.move_by(200_000)  # the line goes out, the link dies before its reply
         text = str(info.value)
@@ -174,19 +170,14 @@ def test_a_start_cut_short_by_a_dead_link_says_the_link_works_again() -> None:
         assert isinstance(info.value.__cause__, galil.GalilConnectionError)
         assert not sim.motion("A").moving
         assert dmc.query_operands(["_BGA"]) == [0]
-    finally:
-        dmc.close()
 
 
 def test_a_motion_block_whose_link_died_says_the_link_works_again() -> None:
     sim = SimController("DMC-4040", ManualClock())
-    dmc = _reopening(sim, b"MG 7")
-    try:
+    with _reopening(sim, b"MG 7") as dmc:
         dmc.B.jog(20_000)
         with pytest.raises(galil.GalilConnectionError) as info, dmc.motion("AB"):
             dmc.command("MG 7")  # the link dies under the block
         assert "reconnect()" not in str(info.value)
         assert "it was reopened and AB stopped" in str(info.value)
         assert not sim.motion("B").moving
-    finally:
-        dmc.close()
