@@ -43,7 +43,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
-from hypothesis import HealthCheck, settings
+from hypothesis import HealthCheck, event, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, rule
 
@@ -168,6 +168,82 @@ def _limit_stopped(axes: str, into: list[MotionError]) -> Iterator[None]:
         if not follower and ("stopped by the controller" not in text or not {2, 3} & own):
             raise
         into.append(exc)
+
+
+_Call = Callable[[], object]
+_Pick = Callable[["OperationSequences", st.DataObject, str], "tuple[_Call | None, str]"]
+
+
+def _wait_call(m: OperationSequences, data: st.DataObject, a: str) -> tuple[_Call | None, str]:
+    """A wait for a handle the machine holds (on ``a`` if there is one)."""
+    runs = [r for r in m.running if a in r.handle.axes] or m.running
+    if not runs:
+        return None, ""
+    run = data.draw(st.sampled_from(runs))
+    h = run.handle
+
+    def call() -> object:
+        try:
+            with warnings.catch_warnings():
+                if run.unpredictable:
+                    warnings.simplefilter("ignore", RuntimeWarning)
+                return run, h.wait(timeout=5.0 if math.isinf(h.duration) else None), None
+        except MotionError as exc:
+            return run, None, exc
+        except GalilTimeoutError:
+            return run, None, None
+
+    return call, h.axes
+
+
+def _gear_call(m: OperationSequences, data: st.DataObject, a: str) -> tuple[_Call | None, str]:
+    master = data.draw(st.sampled_from([x for x in AXES if x != a]))
+    return (lambda: m.dmc.axes[a].gear_to(master, 2.0)), a
+
+
+def _other(a: str) -> str:
+    return "C" if a != "C" else "B"
+
+
+def _start_call(m: OperationSequences, data: st.DataObject, a: str) -> tuple[_Call | None, str]:
+    """A start (or a change) of the motion of ``a``, its arguments drawn now."""
+    ax = m.dmc.axes[a]
+    kind = data.draw(st.sampled_from(["move", "jog", "jog_speed", "increment", "schedule"]))
+    if kind == "move":
+        amount = data.draw(st.integers(-9000, 9000))
+        return (lambda: ax.move_by(amount)), a
+    if kind == "jog":
+        speed = data.draw(st.sampled_from([-9000, 6000]))
+        return (lambda: ax.jog(speed)), a
+    if kind == "jog_speed":
+        return (lambda: setattr(ax, "jog_speed", 4000)), a
+    if kind == "increment":
+        return (lambda: ax.increment(1500)), a
+    return (lambda: ax.speed_schedule(9000, [(3000, 6000)], speed=12000)), a
+
+
+def _home_call(m: OperationSequences, data: st.DataObject, a: str) -> tuple[_Call | None, str]:
+    how = data.draw(st.sampled_from(["home", "find_edge", "find_index"]))
+    switch = m.sim.home_switch(a)
+    return (lambda: getattr(m.dmc.axes[a], how)(switch=switch)), a
+
+
+#: The calls the ``interrupted`` rule interrupts: each gives the call and the axes it drives.
+_INTERRUPTIBLE: dict[str, _Pick] = {
+    "start": _start_call,
+    "move together": lambda m, d, a: (
+        (lambda: m.dmc.move({a: 4000, _other(a): -3000}, relative=True)),
+        a + _other(a),
+    ),
+    "home": _home_call,
+    "gear": _gear_call,
+    "vector": lambda m, d, a: (
+        (lambda: m.dmc.vector_move("AB", [Line(3000, -2000), Line(2000, 3000)], speed=20000)),
+        "AB",
+    ),
+    "wait": _wait_call,
+    "stop": lambda m, d, a: ((lambda: m.dmc.axes[a].stop()), a),
+}
 
 
 def _queries_only(lines: list[str]) -> list[str]:
@@ -741,6 +817,78 @@ class OperationSequences(RuleBasedStateMachine):
         assert before == self.dmc.query_operands(names), "a contour axis moves on"
         assert not any(before[0::2]), "a contour axis moves on"
         self.contour(axes, reach)
+
+    @rule(
+        data=st.data(),
+        op=st.sampled_from(sorted(_INTERRUPTIBLE)),
+        a=axis_st,
+        at=st.integers(0, 4),
+        after=st.booleans(),
+    )
+    def interrupted(self, data: st.DataObject, op: str, a: str, at: int, after: bool) -> None:
+        """Ctrl-C at the ``at``-th exchange or pause of a start, a change, a wait or a stop,
+        whatever runs meanwhile (decision 0028): once a line that is not a query went out,
+        the axes the call drives come to rest (a stop's ramp) and stay there, every gearing
+        engaged is one the library knows (the invariants), and the link stays in step. Only
+        queries out: the settings are as they were. Not interrupted (``at`` beyond its
+        calls): the call's handle or gearing is the machine's like any other."""
+        call, letters = _INTERRUPTIBLE[op](self, data, a)
+        if call is None:
+            return
+        drives = letters + "".join(self.dmc.tracker.followers(letters))
+        interrupted = False
+        out: object = None
+        by_controller: CommandError | None = None
+        with (
+            self.refusable(InvalidArgument, LimitError, MotionError) as refused,
+            transcript(self.dmc) as sent,
+        ):
+            try:
+                with _interrupted(self.dmc.link, at, after=after):
+                    out = call()
+            except KeyboardInterrupt:
+                interrupted = True
+            except CommandError as exc:  # a program's move in the way (TC 13, TC 16)
+                by_controller = exc
+        if by_controller is not None:
+            assert not self._free(a), by_controller
+            assert by_controller.code in (13, 16), by_controller
+            return
+        event(f"interrupted {op}: {'refused' if refused else 'ran' if not interrupted else 'cut'}")
+        if refused:
+            return
+        if not interrupted:
+            self.took(op, a, out)
+            return
+        self.interfere(drives)
+        self.supersede(letters)
+        if op == "gear":
+            self.gearings.pop(a, None)
+        if not _queries_only(sent.lines):
+            return
+        event(f"interrupted {op}: cut after a line went out")
+        self.dmc.sleep(3.5)  # (the slowest ramp down: SP 60 000 at DC 20 480 takes 2.9 s)
+        free = [x for x in drives if self._free(x)]
+        names = [f"_{q}{x}" for x in free for q in ("BG", "RP")]
+        before = self.dmc.query_operands(names)
+        self.dmc.sleep(0.5)
+        later = self.dmc.query_operands(names)
+        where = f"{op} on {a} interrupted at {at} ({'after' if after else 'before'})"
+        assert not any(before[0::2]), f"{where}: {free} still moving {before}"
+        assert before == later, f"{where}: {free} moved on"
+
+    def took(self, op: str, a: str, out: object) -> None:
+        """An interruptible call ran to its end: keep what it started."""
+        if isinstance(out, MoveHandle):
+            self.started(out, False)
+        elif isinstance(out, Gearing):
+            self.gearings[a] = out
+            self.supersede(a)
+        elif isinstance(out, tuple):  # a wait: (the run, its result or the limit's error)
+            run, result, limited = out
+            self.judge_wait(run, result, limited)
+        elif op == "stop":
+            self.interfere(a)
 
     # -- stops, motors, time ----------------------------------------------------------------
     @rule(axes=st.sampled_from(["", "A", "B", "C", "D", "AC"]))
