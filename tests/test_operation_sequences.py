@@ -13,6 +13,9 @@ programs that move an axis (one with IF/ELSE/ENDIF and AT, one with AS and MF/MR
   refused unsent while the library's own motion runs and by the controller (TC 7) only where
   the library cannot know (decisions 0036, 0039), and taken only at rest; MT is refused
   unsent with the motor on (decision 0043);
+- a start, a change, a wait or a stop Ctrl-C interrupts at any exchange, whatever else runs,
+  leaves the axes it drives at rest once a line that is not a query went out (decision 0028),
+  and its settings as they were when only queries did;
 - an interrupted contour leaves no axis moving or in contour mode, no segment held, and the
   next contour ends where it should (decision 0038); a contour a placed switch stops is over
   as a whole, out of contour mode, the axis on its switch (decision 0041);
@@ -830,12 +833,14 @@ class OperationSequences(RuleBasedStateMachine):
         whatever runs meanwhile (decision 0028): once a line that is not a query went out,
         the axes the call drives come to rest (a stop's ramp) and stay there, every gearing
         engaged is one the library knows (the invariants), and the link stays in step. Only
-        queries out: the settings are as they were. Not interrupted (``at`` beyond its
+        queries out: the settings are as they were (a wait excepted: a speed schedule's
+        routine sets SP as time passes). Not interrupted (``at`` beyond its
         calls): the call's handle or gearing is the machine's like any other."""
         call, letters = _INTERRUPTIBLE[op](self, data, a)
         if call is None:
             return
         drives = letters + "".join(self.dmc.tracker.followers(letters))
+        settings_before = self._settings()
         interrupted = False
         out: object = None
         by_controller: CommandError | None = None
@@ -865,6 +870,9 @@ class OperationSequences(RuleBasedStateMachine):
         if op == "gear":
             self.gearings.pop(a, None)
         if not _queries_only(sent.lines):
+            # (A wait lets time pass: a speed schedule's routine sets SP as it goes.)
+            if op != "wait":
+                assert self._settings() == settings_before, f"{op} on {a}: settings changed"
             return
         event(f"interrupted {op}: cut after a line went out")
         self.dmc.sleep(3.5)  # (the slowest ramp down: SP 60 000 at DC 20 480 takes 2.9 s)
