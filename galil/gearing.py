@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import functools
 import logging
+from collections.abc import Callable, Sequence
 
 from galil import predict
 from galil.errors import CommandError, InvalidArgument, LimitError
@@ -36,6 +37,7 @@ from galil.motion import (
     send_reopening,
 )
 from galil.protocol import commands as cmds
+from galil.protocol.commands import Command
 from galil.protocol.numbers import format_number
 from galil.units import Scale
 
@@ -136,10 +138,15 @@ class Gearing:
             self._link, self._tracker, {f: gear}, {f: round(code)}, {f: ratio[0]} if ratio else None
         )
         master_now = gear.travelled if self.master == "S" else round(now)
-        self._link.command_line([cmds.gr(model=model, **{self.follower: q})])
-        gear.anchor.follow([master_now])  # the controller carries on from the exact follower
-        gear.anchor.set_ratio(q)
-        gear.ratio = q
+
+        def taken(_: list[str]) -> None:
+            gear.anchor.follow([master_now])  # the controller carries on from the exact follower
+            gear.anchor.set_ratio(q)
+            gear.ratio = q
+
+        line = [cmds.gr(model=model, **{f: q})]
+        undo = [cmds.gr(model=model, **{f: gear.ratio})]  # (interrupted: back to the old one)
+        _send_gr(self._link, self._tracker, line, taken, undo=undo)
 
     def off(self) -> None:
         """Turn the gearing off (``GR 0``): the follower stays where it is."""
@@ -148,12 +155,12 @@ class Gearing:
                 self._off()
 
     def _off(self) -> None:
-        model = self._link.model
-        replies = self._link.command_line(
-            [cmds.gr(model=model, **{self.follower: 0}), cmds.time_stamp()]
-        )
-        self._gear.released = sample_of(replies[-1])
-        self._tracker.release(self._gear)
+        def taken(replies: list[str]) -> None:
+            self._gear.released = sample_of(replies[-1])
+            self._tracker.release(self._gear)
+
+        line = [cmds.gr(model=self._link.model, **{self.follower: 0}), cmds.time_stamp()]
+        _send_gr(self._link, self._tracker, line, taken)
 
     def __enter__(self) -> Gearing:
         return self
@@ -202,8 +209,40 @@ def gear_off(link: CommandLink, tracker: MotionTracker, follower: str) -> None:
         if gear is not None:
             Gearing(link, tracker, gear)._off()
         else:
-            link.command_line([cmds.gr(model=link.model, **{follower: 0})])
+            line = [cmds.gr(model=link.model, **{follower: 0})]
+            _send_gr(link, tracker, line, lambda _: None)
         tracker.found.pop(follower, None)
+
+
+def _send_gr(
+    link: CommandLink,
+    tracker: MotionTracker,
+    line: Sequence[str | Command],
+    taken: Callable[[list[str]], None],
+    *,
+    undo: Sequence[str | Command] | None = None,
+) -> None:
+    """Send ``line`` (a ``GR``) and call ``taken`` with its replies.
+
+    Interrupted where it may have gone out (Ctrl-C, a timeout, a dead link: anything but the
+    controller's refusal), the library would not know the ratio the controller has, the old
+    or the new (decision 0069). Then ``undo`` (the old ratio) goes out, or without one (a
+    gearing turned off: the safe side) the line again, ``taken`` following it; a dead link is
+    reopened once for it. The exception goes on. If that fails too (the link stays dead), the
+    library keeps the gearing as it knew it.
+    """
+    try:
+        replies = link.command_line(line)
+    except CommandError:
+        raise  # refused: the ratio is as it was
+    except BaseException:
+        again: list[list[str]] = []
+        back = undo or line
+        went = send_reopening(lambda: again.append(link.command_line(back)), tracker.reconnect)
+        if went and undo is None:
+            taken(again[-1])
+        raise
+    taken(replies)
 
 
 def _master_at_rest(link: CommandLink, master: str) -> None:

@@ -1503,7 +1503,10 @@ class _StopOnError:
         if tracker is not None and tracker.closed and isinstance(exc, GalilConnectionError):
             return False  # close() stopped the motion before it closed the link
         reopen = _Reopen(None if tracker is None else tracker.reconnect)
-        moving = _stop_for_guard(link, tracker, self._letters, self._stop, reopen.or_none())
+        # A stop turns off the gearing of the followers it names: whether it went out is not
+        # known, so it goes out again for them even at rest (decision 0069).
+        also = _geared_among(tracker, self._letters) if self._is_stop else ""
+        moving = _stop_for_guard(link, tracker, self._letters, self._stop, reopen.or_none(), also)
         if moving:
             raise _not_stopped(link, exc, moving, "while starting or changing motion") from exc
         if reopen.done and isinstance(exc, GalilConnectionError):
@@ -1572,13 +1575,15 @@ def _stop_for_guard(
     letters: str,
     stop: Callable[[], None] | None,
     reconnect: Callable[[], None] | None,
+    also: str = "",
 ) -> str:
-    """Stop what moves of ``letters`` (all of them if unknown) with ``stop`` (default: ``ST``
-    on those); return what may still move."""
+    """Stop what moves of ``letters`` (all of them if unknown), and ``also`` those, with
+    ``stop`` (default: ``ST`` on those); return what may still move."""
     try:
         busy = moving_axes(link, letters)
     except GalilError:
         busy = letters  # unknown (a dead link among the causes): stop them all
+    busy += "".join(a for a in also if a not in busy)
     if not busy:
         return ""
     if stop is None:
@@ -1586,6 +1591,12 @@ def _stop_for_guard(
     if not send_reopening(stop, reconnect):
         return busy
     return _wait_stopped(link, busy)
+
+
+def _geared_among(tracker: MotionTracker | None, letters: str) -> str:
+    """Those of ``letters`` the tracker counts on as gear followers."""
+    gears = {} if tracker is None else tracker.gears
+    return "".join(a for a in letters if a in gears)
 
 
 def moving_axes(link: CommandLink, letters: str) -> str:

@@ -13,8 +13,8 @@ simulator):
 - a transport failure left the link saying it is dead, and ``reconnect()`` works;
 - within a quarter of a second of controller time (a stop's deceleration) no axis moves, unless the
   operation is documented to leave it so (a follower the library knows is geared), no thread
-  runs a program (a speed schedule's routine), no axis is left in contour mode, and no
-  gearing is engaged that the library does not know of;
+  runs a program (a speed schedule's routine), no axis is left in contour mode, and the
+  gearings engaged are exactly those the library counts on, at its ratios (decision 0069);
 - what the operation would have changed for its course only (a speed schedule's speeds)
   reads as before;
 - the link answers ``MG 1`` then ``MG 2``.
@@ -38,6 +38,7 @@ from galil.errors import CommandError, GalilConnectionError, GalilError
 from galil.sim.clock import ManualClock
 from galil.sim.controller import SimController
 from galil.sim.link import open_transport
+from galil.sim.rooms.gearing import Gearing as SimGearing
 
 #: Controller time whatever an interrupted operation left stopping may take to come to rest.
 SETTLE = 0.25
@@ -207,6 +208,10 @@ OPS = [
     Op("axis.stop", lambda d, _: d.A.stop(), _start_jog, stops=True),
     Op("handle.stop", lambda d, h: h.stop(), _start_a, stops=True),
     Op("controller.abort", lambda d, _: d.abort(), _start_a, stops=True),
+    # (a stop of a follower, or of every axis, turns its gearing off: decision 0069)
+    Op("axis.stop of a follower", lambda d, _: d.B.stop(), _gear_b, stops=True),
+    Op("controller.stop, a follower", lambda d, _: d.stop(), _gear_b, stops=True),
+    Op("controller.abort, a follower", lambda d, _: d.abort(), _gear_b, stops=True),
     Op("motion guard", _guarded, _slow),
     Op("programs.run", lambda d, _: d.programs.run("#SLOW", 1), _download, goes_on="program"),
     Op("programs.wait", lambda d, _: d.programs.wait(1, 0.1), _running, "program", every=7),
@@ -249,6 +254,11 @@ def _check(bench: Bench, op: Op, where: str, before: list[int]) -> None:
     axes = sim._m.servo.axes
     contour = [a for a in letters if axes[a].contour]
     assert not contour, f"{where}: {contour} left in contour mode"
+    gearing = sim.room(SimGearing)
+    engaged = {a for a in letters if gearing.geared(axes[a]) is not None}
+    assert engaged == known, f"{where}: geared {sorted(engaged)}, the library counts on {known}"
+    for a, gear in dmc.tracker.gears.items():  # (the ratios here are whole numbers)
+        assert bench.ask([f"_GR{a}"]) == [gear.ratio], f"{where}: {a}'s ratio is not {gear.ratio}"
     if op.same:
         assert bench.ask(list(op.same)) == before, f"{where}: {op.same} changed"
     assert dmc.query_number("MG 1") == 1, where

@@ -844,6 +844,7 @@ class OperationSequences(RuleBasedStateMachine):
         interrupted = False
         out: object = None
         by_controller: CommandError | None = None
+        unconfirmed: MotionError | None = None
         with (
             self.refusable(InvalidArgument, LimitError, MotionError) as refused,
             transcript(self.dmc) as sent,
@@ -853,8 +854,17 @@ class OperationSequences(RuleBasedStateMachine):
                     out = call()
             except KeyboardInterrupt:
                 interrupted = True
+            except MotionError as exc:
+                if not isinstance(exc.__cause__, KeyboardInterrupt):
+                    raise
+                unconfirmed, interrupted = exc, True
             except CommandError as exc:  # a program's move in the way (TC 13, TC 16)
                 by_controller = exc
+        if unconfirmed is not None:
+            # The guard's stop could not be confirmed: only where something else moves the
+            # axis on (the test's program, a master).
+            assert unconfirmed.moving, unconfirmed
+            assert not any(map(self._free, unconfirmed.moving)), unconfirmed
         if by_controller is not None:
             assert not self._free(a), by_controller
             assert by_controller.code in (13, 16), by_controller
