@@ -210,8 +210,11 @@ def gear_off(link: CommandLink, tracker: MotionTracker, follower: str) -> None:
             Gearing(link, tracker, gear)._off()
         else:
             line = [cmds.gr(model=link.model, **{follower: 0})]
-            _send_gr(link, tracker, line, lambda _: None)
-        tracker.found.pop(follower, None)
+            _send_gr(link, tracker, line, lambda _: _forget_found(tracker, follower))
+
+
+def _forget_found(tracker: MotionTracker, follower: str) -> None:
+    tracker.found.pop(follower, None)
 
 
 def _send_gr(
@@ -335,7 +338,8 @@ def _disengage(link: CommandLink, tracker: MotionTracker, follower: str) -> None
     unpredicted and unchecked). A dead link is reopened once for it; a failure is dropped
     (the exception that brought us here is the one to see)."""
     line = [cmds.gr(model=link.model, **{follower: 0})]
-    send_reopening(functools.partial(link.command_line, line), tracker.reconnect)
+    if send_reopening(functools.partial(link.command_line, line), tracker.reconnect):
+        _forget_found(tracker, follower)  # (a reopened link read it as found geared)
 
 
 def _check_pair(

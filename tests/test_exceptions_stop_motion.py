@@ -116,6 +116,14 @@ def _gear_b(dmc: Controller) -> Any:
     return dmc.B.gear_to("A", 2)
 
 
+def _found_b(dmc: Controller) -> None:
+    """B geared to A behind the library's back, found at the next connect (decision 0055)."""
+    _slow(dmc)
+    dmc.command("GA ,CA")
+    dmc.command("GR ,2")
+    dmc.reconnect()
+
+
 def _homing(dmc: Controller) -> None:
     """Speeds for homing, the home switch and the index pulses far away (seconds of travel)."""
     _slow(dmc)
@@ -192,6 +200,7 @@ OPS = [
     Op("gear_to", lambda d, _: d.B.gear_to("A", 2), _slow),
     Op("gearing.set_ratio", lambda d, g: g.set_ratio(3), _gear_b),
     Op("gearing.off", lambda d, g: g.off(), _gear_b),
+    Op("gear_off of a gearing found at connect", lambda d, _: d.B.gear_off(), _found_b),
     Op("master move with a follower", lambda d, _: d.A.move_by(LONG // 4), _gear_b),
     Op("vector_move", lambda d, _: d.vector_move("AB", [Line(LONG, LONG // 2)], speed=20_000)),
     Op(
@@ -246,7 +255,7 @@ def _check(bench: Bench, op: Op, where: str, before: list[int]) -> None:
         sim.feed(b"HX1\r")
     letters = dmc.model.axes
     moving = bench.ask([f"_BG{a}" for a in letters] + ["_BGS"])
-    known = set(dmc.tracker.gears)
+    known = set(dmc.tracker.gears) | set(dmc.tracker.found)
     still = [a for a, m in zip(letters + "S", moving, strict=True) if m and a not in known]
     assert not still, f"{where}: {''.join(still)} still moving"
     threads = bench.ask([f"_XQ{n}" for n in range(8)])
