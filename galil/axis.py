@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import numbers
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,6 +29,7 @@ from galil.motion import (
     refuse_in_motion,
     sample_of,
     stop_axes,
+    stop_on_error,
 )
 from galil.moves import (
     AxisMove,
@@ -68,6 +69,12 @@ __all__ = [
 OVERRIDES = {"speed": "SP", "accel": "AC", "decel": "DC"}
 _POWER = {"SP": 1, "JG": 1, "AC": 2, "DC": 2}
 _SETTERS = {"SP": cmds.sp, "AC": cmds.ac, "DC": cmds.dc, "IT": cmds.it, "JG": cmds.jg}
+#: The settings a move's prediction follows when they change in motion, and how.
+_FOLLOWED: dict[str, Callable[[float, float], predict.Event]] = {
+    "SP": predict.SetSpeed,
+    "AC": predict.SetAccel,
+    "DC": predict.SetDecel,
+}
 
 
 @dataclass(frozen=True)
@@ -449,23 +456,24 @@ class Axis(AxisGearing, AxisPosition):
 
     def _send_param(self, cmd: str, command: cmds.Command, value: float) -> None:
         handle = self._tracker.active(self.letter)
-        if handle is None or cmd not in ("SP", "AC", "DC") or self.letter in handle._ended:
-            self._link.command_line([command])  # (at rest, or seen at rest: nothing to follow)
+        track = None if handle is None else handle.track(self.letter)
+        if (
+            handle is None
+            or cmd not in _FOLLOWED
+            or self.letter in handle._ended
+            or (cmd == "SP" and track is not None and track.kind == "jog")  # (SP: not a jog's)
+        ):
+            self._link.command_line([command])  # (nothing in motion for it to change)
             return
-        # A change in motion: stamp it so the move's prediction can follow it.
-        replies = self._link.command_line([command, cmds.time_stamp()])
-        sample = sample_of(replies[-1])
-        track = handle.track(self.letter)
-        if cmd == "SP":
-            if track is not None and track.kind == "jog":
-                return  # SP does not touch a jog
-            handle.add_event(self.letter, sample, lambda t: predict.SetSpeed(t, value))
-        elif cmd == "AC":
-            handle.add_event(self.letter, sample, lambda t: predict.SetAccel(t, value))
-        else:  # DC: a jog, a stop ramping down, or (unseen by the handle, whose prediction
-            # then refuses it and stops claiming to be exact) a limit's stop: refuse_in_motion
-            # let it out
-            handle.add_event(self.letter, sample, lambda t: predict.SetDecel(t, value))
+        # A change in motion: stamp it so the move's prediction can follow it. Interrupted,
+        # the prediction cannot know whether it took effect: the motion is stopped (decision
+        # 0028). DC gets here in a jog, a stop ramping down, or (unseen by the handle, whose
+        # prediction then refuses it and stops claiming to be exact) a limit's stop:
+        # refuse_in_motion let it out.
+        with stop_on_error(self._link, self._tracker, self.letter):
+            replies = self._link.command_line([command, cmds.time_stamp()])
+        event = _FOLLOWED[cmd]
+        handle.add_event(self.letter, sample_of(replies[-1]), lambda t: event(t, value))
 
     @property
     def speed(self) -> Any:

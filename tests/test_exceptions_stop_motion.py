@@ -186,6 +186,10 @@ OPS = [
     Op("jog again (speed change)", lambda d, _: d.A.jog(30_000), _start_jog),
     Op("jog_speed while jogging", lambda d, _: setattr(d.A, "jog_speed", 30_000), _start_jog),
     Op("increment idle", lambda d, _: d.A.increment(LONG), _slow),
+    # (SP, AC, DC in motion: the move's prediction follows them from their time stamp)
+    Op("speed in a move", lambda d, _: setattr(d.A, "speed", 30_000), _start_a),
+    Op("accel in a move", lambda d, _: setattr(d.A, "accel", 512_000), _start_a),
+    Op("decel in a jog", lambda d, _: setattr(d.A, "decel", 512_000), _start_jog),
     Op("increment in a move", lambda d, _: d.A.increment(1000), _start_a),
     Op("increment while jogging", lambda d, _: d.A.increment(10), _start_jog),
     Op(
