@@ -30,6 +30,7 @@ from galil.errors import (
 from galil.link import CommandLink, check_wait_timeout
 from galil.models import INT32_MAX
 from galil.motion import (
+    SWITCH_BITS,
     Display,
     GearLink,
     MotionTracker,
@@ -41,6 +42,7 @@ from galil.motion import (
     raise_if_limited,
     sample_of,
     send_reopening,
+    switch_blocks,
 )
 from galil.moves import check_followers, follower_limits, follower_operands
 from galil.predict import Profile
@@ -76,6 +78,30 @@ def _halted(letters: str, stop_codes: list[float], live: set[str]) -> list[str]:
         elif code in codes.HALT_STOPS and a in live:
             halted.append(a)
     return halted
+
+
+def _refuse_blocked(link: CommandLink, a: str, steps: npt.NDArray[np.int64], ts: int) -> None:
+    """Refuse a path on which ``a`` first moves towards its active limit switch (one ``LD``
+    leaves on: :func:`~galil.motion.switch_blocks`): the controller would stop the whole
+    contour there at once (decision 0041), after ``CM`` and the segments went out. Only the
+    first direction counts: moving away, the switch lets go (decision 0071).
+
+    Raises:
+        InvalidArgument: the axis would start towards its active switch.
+    """
+    if ts & SWITCH_BITS == SWITCH_BITS:
+        return  # (no switch active: the path's direction is not needed)
+    moving = np.flatnonzero(steps)
+    if not moving.size:
+        return
+    direction = float(steps[moving[0]])
+    if switch_blocks(link, a, direction, ts):
+        side = "forward" if direction > 0 else "reverse"
+        raise InvalidArgument(
+            f"axis {a} would start towards its active {side} limit switch on this contour (the "
+            "controller would stop the whole contour there at once); move off the switch first",
+            model=link.model.name,
+        )
 
 
 def _round(x: npt.NDArray[np.float64]) -> npt.NDArray[np.int64]:
@@ -320,6 +346,7 @@ class ContourStream:
         self._limits = limits or {}
         self._followers = {f: g for f, g in (followers or {}).items() if f not in letters}
         self.profiles: dict[str, Profile] = {}
+        self._ends: dict[str, int] = {}  # where each axis ends (counts), once prepared
         self._tracker = tracker
         self._watch: StopWatch | None = None
         if not isinstance(preload, bool):
@@ -361,8 +388,8 @@ class ContourStream:
 
         Raises:
             InvalidArgument: an axis is moving, or the library has it geared to another axis;
-                an axis geared to a contour axis would first move towards its active limit
-                switch (decision 0053).
+                an axis would first move towards its active limit switch (decision 0071), or
+                an axis geared to a contour axis would (decision 0053).
             LimitError: the path crosses a soft limit, or takes an axis geared to a contour
                 axis past its soft limits or beyond the model's SP maximum.
             MotionError: a limit stopped an axis geared to a contour axis during a move
@@ -372,7 +399,7 @@ class ContourStream:
         if self._tracker is not None:
             for a in self.letters:  # (before any byte, as a move of a follower is refused)
                 self._tracker.refuse_geared(a, "a contour on it", link.model.name)
-        ops = ("RP", "BG", "BL", "FL", "SC")
+        ops = ("RP", "BG", "BL", "FL", "SC", "TS")
         followers = "".join(self._followers)
         state = link.query_operands(
             [f"_{op}{a}" for a in self.letters for op in ops]
@@ -383,19 +410,21 @@ class ContourStream:
         )
         counts: dict[str, Profile] = {}
         for j, a in enumerate(self.letters):
-            rp, bg, bl, fl, sc = state[j * len(ops) : (j + 1) * len(ops)]
+            rp, bg, bl, fl, sc, ts = state[j * len(ops) : (j + 1) * len(ops)]
             if not bg and self._tracker is not None:  # (a move nobody saw end ends here)
                 self._tracker.ended(a, rp, sc)
             if bg:
                 raise InvalidArgument(
                     f"axis {a} is moving; stop it before a contour", model=link.model.name
                 )
+            _refuse_blocked(link, a, self.increments[:, j], round(ts))
             prof = predict.contour(
                 self.increments[:, j], self.dt, start=round(rp), sample_period=link.sample_period
             )
             # The whole path against FL/BL, as for any move, before CM goes out.
             predict.check_soft_limits(prof, forward_limit=fl, backward_limit=bl, axis=a)
             counts[a] = prof
+            self._ends[a] = round(rp) + int(self.increments[:, j].sum())
         if followers:  # the followers' paths too (GA C<master>: the contour's reference)
             check_followers(
                 link,
@@ -635,6 +664,33 @@ class ContourStream:
         )
         raise_if_limited(self.link, self._followers, result)
 
+    def _check_ends(self, stop_codes: Sequence[float], positions: Sequence[float]) -> None:
+        """At the contour's end, no stop code of a halt seen: each axis is where its path
+        ends, or something else moved it or cut the contour short (a limit whose stop code a
+        program's move then overwrote): it did not run as asked (decision 0071).
+
+        Raises:
+            MotionError: an axis is not at its path's end.
+        """
+        at = {a: round(p) for a, p in zip(self.letters, positions, strict=True)}
+        off = [a for a in self.letters if at[a] != self._ends[a]]
+        if not off:
+            return
+        stop = {a: round(c) for a, c in zip(self.letters, stop_codes, strict=True)}
+        link = self.link
+        raise MotionError(
+            f"contour on {self.letters} ended with {off[0]} at {at[off[0]]}, not at the end of "
+            f"its path ({self._ends[off[0]]}), and the stop codes do not say why ("
+            + "; ".join(f"{a}: {codes.stop_text(c)}" for a, c in stop.items())
+            + "): something else stopped or moved it (an ST from a program or another client,"
+            " or a limit whose stop code a program's move then overwrote)",
+            axis=off[0],
+            stop_codes=stop,
+            position=at[off[0]],
+            model=link.model.name,
+            recent=link.recent,
+        )
+
     def finish(self, state: _Progress, timeout: float | None = None) -> ContourResult:
         """End contour mode (``CD 0=0``, or ``DT 0`` then ``CD 0``) and wait for the axes to stop.
 
@@ -684,7 +740,7 @@ class ContourStream:
         )
         deadline = link.clock() + wait
         n = len(self.letters)
-        names = [f"_{op}{a}" for op in ("BG", "SC") for a in self.letters]
+        names = [f"_{op}{a}" for op in ("BG", "SC", "RP") for a in self.letters]
         names += self._follower_names()  # (on the same polls: no exchange more)
         while True:
             values = link.query_operands(names)
@@ -693,7 +749,8 @@ class ContourStream:
                     over = self._controller_stop(state)
                     if over is not None:
                         raise over
-                self._report_followers(values[n : 2 * n], values[2 * n :])
+                self._report_followers(values[n : 2 * n], values[3 * n :])
+                self._check_ends(values[n : 2 * n], values[2 * n : 3 * n])
                 return
             now = link.clock()
             if now > deadline:

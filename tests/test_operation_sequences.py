@@ -159,8 +159,9 @@ def _interrupted(link: object, at: int, *, after: bool) -> Iterator[None]:
 def _limit_stopped(axes: str, into: list[MotionError]) -> Iterator[None]:
     """Keep the ``MotionError`` of a contour on ``axes`` a limit stopped (stop code 2 or 3 on
     one of them), or of one that ran to its end and a limit stopped a follower of on the way
-    ("a follower stopped early", decision 0049), in ``into`` instead of raising it (it sent
-    the contour: not a refusal). One naming only followers that a limit had dropped before
+    ("a follower stopped early", decision 0049), or of one that ended short of its path with
+    no stop code to say why (decision 0071), in ``into`` instead of raising it (it sent the
+    contour: not a refusal). One naming only followers that a limit had dropped before
     ("nobody waited for") refused the contour unsent (so does any other error)."""
     try:
         yield
@@ -168,7 +169,13 @@ def _limit_stopped(axes: str, into: list[MotionError]) -> Iterator[None]:
         own = {exc.stop_codes.get(a) for a in axes}
         text = exc.args[0]
         follower = text.startswith("a follower stopped early") and exc.axis not in axes
-        if not follower and ("stopped by the controller" not in text or not {2, 3} & own):
+        # (one that ended short of its path with no stop code to say why: decision 0071)
+        short = "not at the end of its path" in text
+        if (
+            not follower
+            and not short
+            and ("stopped by the controller" not in text or not {2, 3} & own)
+        ):
             raise
         into.append(exc)
 
@@ -225,6 +232,34 @@ def _start_call(m: OperationSequences, data: st.DataObject, a: str) -> tuple[_Ca
     return (lambda: ax.speed_schedule(9000, [(3000, 6000)], speed=12000)), a
 
 
+def _setting_call(m: OperationSequences, data: st.DataObject, a: str) -> tuple[_Call | None, str]:
+    """SP, AC or DC, in motion or not (decision 0070); not SP in a jog, which it leaves alone
+    (nothing to stop then)."""
+    what = data.draw(st.sampled_from(["speed", "accel", "decel"]))
+    value = data.draw(st.sampled_from(_VALUES[what]))
+    handle = m.dmc.tracker.active(a)
+    track = None if handle is None else handle.track(a)
+    if what == "speed" and track is not None and track.kind == "jog":
+        return None, a
+    followed = m._followed(a)
+    over = handle is not None and m.dmc.link.clock() >= handle.started_at + handle.duration
+
+    def call() -> None:
+        refused: CommandError | None = None
+        try:
+            setattr(m.dmc.axes[a], what, value)
+        except CommandError as exc:
+            refused = exc
+        if refused is not None:
+            # DC by the controller (TC 7) only where the library cannot know the axis is in a
+            # position move, or its prediction had the move over (as set_setting judges).
+            assert what == "decel", refused
+            assert refused.code == 7, refused
+            assert followed is None or over, (a, followed, refused)
+
+    return call, a
+
+
 def _home_call(m: OperationSequences, data: st.DataObject, a: str) -> tuple[_Call | None, str]:
     how = data.draw(st.sampled_from(["home", "find_edge", "find_index"]))
     switch = m.sim.home_switch(a)
@@ -239,6 +274,7 @@ _INTERRUPTIBLE: dict[str, _Pick] = {
         a + _other(a),
     ),
     "home": _home_call,
+    "setting": _setting_call,
     "gear": _gear_call,
     "vector": lambda m, d, a: (
         (lambda: m.dmc.vector_move("AB", [Line(3000, -2000), Line(2000, 3000)], speed=20000)),
@@ -746,6 +782,10 @@ class OperationSequences(RuleBasedStateMachine):
             self.dmc.contour(axes, path, dt=3)
         if refused:
             return
+        if stopped and "not at the end of its path" in stopped[0].args[0]:
+            # Only where the test's program may stop or move an axis (decision 0071).
+            assert not self._free(stopped[0].axis or ""), stopped[0]
+            return
         if not stopped or stopped[0].args[0].startswith("a follower stopped early"):
             after = self.dmc.query_operands([f"_RP{a}" for a in axes])
             assert after == list(np.add(before, path[-1])), (before, after, stopped)
@@ -764,7 +804,7 @@ class OperationSequences(RuleBasedStateMachine):
         for a in axes:
             if codes[a] in (2, 3) and not exc.args[0].startswith("a follower stopped early"):
                 assert self.dmc.query_operands([f"_L{'F' if codes[a] == 2 else 'R'}{a}"]) == [0]
-            else:
+            elif self._free(a):  # (the test's program may have moved D since: its own code)
                 assert codes[a] == 51, exc
         for f in set(codes) - set(axes):  # (the followers read at the contour's end)
             if f"{f}, geared to " in exc.args[0]:
