@@ -26,6 +26,7 @@ from galil.motion import (
     Display,
     MotionTracker,
     MoveHandle,
+    change_line,
     refuse_in_motion,
     sample_of,
     stop_axes,
@@ -471,7 +472,7 @@ class Axis(AxisGearing, AxisPosition):
         # prediction then refuses it and stops claiming to be exact) a limit's stop:
         # refuse_in_motion let it out.
         with stop_on_error(self._link, self._tracker, self.letter):
-            replies = self._link.command_line([command, cmds.time_stamp()])
+            replies = change_line(self._link, handle, self.letter, [command, cmds.time_stamp()])
         event = _FOLLOWED[cmd]
         handle.add_event(self.letter, sample_of(replies[-1]), lambda t: event(t, value))
 

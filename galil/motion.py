@@ -42,6 +42,7 @@ from galil.link import (
 )
 from galil.models import tm_of
 from galil.protocol import commands as cmds
+from galil.protocol.commands import Command
 from galil.protocol.numbers import read_one
 from galil.units import Scale
 
@@ -58,6 +59,7 @@ __all__ = [
     "Track",
     "abort_all",
     "as_stored",
+    "change_line",
     "dropped_parts",
     "forget_dropped",
     "held",
@@ -1437,6 +1439,27 @@ def motion_guard(
 _NOTHING_RAN = (InvalidArgument, CommandError, MotionError)
 
 
+def change_line(
+    link: CommandLink, handle: MoveHandle | None, letter: str, line: Sequence[str | Command]
+) -> list[str]:
+    """Send ``line``, a change to the motion ``handle`` runs on ``letter`` (a new ``JG``, an
+    ``IP``, ``SP``/``AC``/``DC`` in motion), and return its replies.
+
+    Interrupted where it may have gone out (anything but a refusal: Ctrl-C, a lost reply, a
+    dead link), whether the change took effect is not known, so the handle's prediction of
+    ``letter`` no longer claims to be exact (decision 0072). The exception then goes on, to
+    the guard that stops the motion (:func:`stop_on_error`).
+    """
+    try:
+        return link.command_line(line)
+    except _NOTHING_RAN:
+        raise
+    except BaseException:
+        if handle is not None:
+            handle.add_event(letter, None, None)  # (a change at an unknown time: inexact)
+        raise
+
+
 def stop_on_error(
     link: CommandLink,
     tracker: MotionTracker | None,
@@ -1503,9 +1526,13 @@ class _StopOnError:
         if tracker is not None and tracker.closed and isinstance(exc, GalilConnectionError):
             return False  # close() stopped the motion before it closed the link
         reopen = _Reopen(None if tracker is None else tracker.reconnect)
-        # A stop turns off the gearing of the followers it names: whether it went out is not
-        # known, so it goes out again for them even at rest (decision 0069).
-        also = _geared_among(tracker, self._letters) if self._is_stop else ""
+        also = ""
+        if self._is_stop and tracker is not None:
+            # Whether the stop went out is not known: the moves it names no longer claim an
+            # exact prediction (decision 0072), and it goes out again for the followers it
+            # names, even at rest, whose gearing it turns off (decision 0069).
+            _doubt(tracker, self._letters)
+            also = _geared_among(tracker, self._letters)
         moving = _stop_for_guard(link, tracker, self._letters, self._stop, reopen.or_none(), also)
         if moving:
             raise _not_stopped(link, exc, moving, "while starting or changing motion") from exc
@@ -1591,6 +1618,15 @@ def _stop_for_guard(
     if not send_reopening(stop, reconnect):
         return busy
     return _wait_stopped(link, busy)
+
+
+def _doubt(tracker: MotionTracker, letters: str) -> None:
+    """The motions the library runs on ``letters`` got a change at an unknown time (or none):
+    their predictions are not exact any more."""
+    for a in letters:
+        handle = tracker.active(a)
+        if handle is not None:
+            handle.add_event(a, None, None)
 
 
 def _geared_among(tracker: MotionTracker | None, letters: str) -> str:

@@ -30,6 +30,7 @@ from galil.motion import (
     MoveParams,
     Track,
     as_stored,
+    change_line,
     predict_track,
     refuse_dropped,
     sample_of,
@@ -534,7 +535,8 @@ def _change_jog(
         LimitError: an axis geared to ``a`` would run beyond the model's SP maximum.
     """
     _check_geared_speed(link, tracker.followers(a), velocity)
-    replies = link.command_line([cmds.jg(model=link.model, **{a: velocity}), cmds.time_stamp()])
+    line = [cmds.jg(model=link.model, **{a: velocity}), cmds.time_stamp()]
+    replies = change_line(link, handle, a, line)
     handle.add_event(a, sample_of(replies[-1]), lambda t: predict.SetSpeed(t, velocity))
     return handle
 
@@ -734,7 +736,7 @@ def _increment(
     what = "steps the jog's reference to" if jogging else "moves the target of the move to"
     _check_reach(link, a, counts, end, (bl, fl), what)
     _check_followers_reach(link, gears, limits, counts, end, what)
-    replies = link.command_line([cmds.ip(model=model, **{a: counts}), cmds.time_stamp()])
+    replies = change_line(link, handle, a, [cmds.ip(model=model, **{a: counts}), cmds.time_stamp()])
     if handle is None or track is None:
         # Someone else's move: nothing to follow; a handle that only waits for it.
         lone = Track("position", round(rp), MoveParams(0.0, 1.0, 1.0, 1.0), None, exact=False)

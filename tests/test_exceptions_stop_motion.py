@@ -35,6 +35,7 @@ from client_fakes import SimLinkWrapper, Tripwire
 from galil import Line
 from galil.controller import Controller
 from galil.errors import CommandError, GalilConnectionError, GalilError
+from galil.motion import MoveHandle
 from galil.sim.clock import ManualClock
 from galil.sim.controller import SimController
 from galil.sim.link import open_transport
@@ -306,6 +307,11 @@ def _raise_at(op: Op, model: str, k: int, after: bool, error: type[BaseException
                 assert "reconnect" in repr(dmc)
                 dmc.reconnect()
         _check(bench, op, where, before)
+        if isinstance(ctx, MoveHandle):
+            # The motion the operation changed or stopped: its handle's prediction is exact
+            # or says it is not (a change whose fate is unknown: decision 0072).
+            result = ctx.wait(timeout=1.0)
+            assert all(v == 0 for v in result.deviation.values()), f"{where}: {result}"
 
 
 #: The operations also walked on a DMC-4143 (another family: its own TM, contour end, ranges).
