@@ -266,6 +266,17 @@ def _home_call(m: OperationSequences, data: st.DataObject, a: str) -> tuple[_Cal
     return (lambda: getattr(m.dmc.axes[a], how)(switch=switch)), a
 
 
+def _gearing_call(m: OperationSequences, data: st.DataObject, a: str) -> tuple[_Call | None, str]:
+    """A gearing of ``a`` the machine holds turned off, or given a new ratio (decision 0069)."""
+    gearing = m.gearings.get(a)
+    if gearing is None:
+        return None, a
+    if data.draw(st.booleans()):
+        return gearing.off, a
+    ratio = data.draw(st.sampled_from([-0.5, 1.0, 3.0]))
+    return (lambda: gearing.set_ratio(ratio)), a
+
+
 #: The calls the ``interrupted`` rule interrupts: each gives the call and the axes it drives.
 _INTERRUPTIBLE: dict[str, _Pick] = {
     "start": _start_call,
@@ -276,6 +287,7 @@ _INTERRUPTIBLE: dict[str, _Pick] = {
     "home": _home_call,
     "setting": _setting_call,
     "gear": _gear_call,
+    "gearing": _gearing_call,
     "vector": lambda m, d, a: (
         (lambda: m.dmc.vector_move("AB", [Line(3000, -2000), Line(2000, 3000)], speed=20000)),
         "AB",
@@ -917,7 +929,7 @@ class OperationSequences(RuleBasedStateMachine):
             return
         self.interfere(drives)
         self.supersede(letters)
-        if op == "gear":
+        if op == "gear" or (op == "gearing" and a not in self.dmc.tracker.gears):
             self.gearings.pop(a, None)
         if not _queries_only(sent.lines):
             # (A wait lets time pass: a speed schedule's routine sets SP as it goes.)
@@ -947,6 +959,8 @@ class OperationSequences(RuleBasedStateMachine):
             self.judge_wait(run, result, limited)
         elif op == "stop":
             self.interfere(a)
+        elif op == "gearing" and a not in self.dmc.tracker.gears:
+            self.gearings.pop(a, None)  # (turned off)
 
     # -- stops, motors, time ----------------------------------------------------------------
     @rule(axes=st.sampled_from(["", "A", "B", "C", "D", "AC"]))
