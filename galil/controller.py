@@ -545,18 +545,26 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         recorder). A waiting ``messages.get()``, ``interrupts.get()`` or record stream
         ``get()`` raises :class:`~galil.errors.GalilConnectionError` too.
 
-        Idempotent and thread-safe; never raises for a link that is already dead (a stop
-        that could not be sent is logged at WARNING on ``galil.controller``). No background
-        thread and no controller handle outlives it.
+        Idempotent and thread-safe; never raises for a link that is already dead (it is
+        reopened once for the stops; a stop that could not be sent even so is logged at
+        WARNING on ``galil.controller``). Interrupted (Ctrl-C), it still sends every stop and
+        closes the link, then the exception goes on (decision 0073). No background thread
+        and no controller handle outlives it.
         """
         if self._finalizer is not None:
             self._finalizer.detach()
         with self._life:
-            _stop_started(self.link, self.tracker)
+            interrupted: BaseException | None = None
+            try:
+                _stop_started(self.link, self.tracker)
+            except BaseException as exc:  # (Ctrl-C while stopping: the close still ends)
+                interrupted = exc
             if self.link.is_open:
                 _stop_captures(self.link, self._captures)
             _close_parts(self._parts, keep_watchdogs=False)
             self.tracker.end_watches()
+            if interrupted is not None:
+                raise interrupted
 
     def reconnect(self) -> None:
         """Close the link and open it again (same address and options), handshake included.
@@ -914,20 +922,24 @@ class _Parts:
 
 
 def _close_parts(parts: _Parts, *, keep_watchdogs: bool, keep_streams: bool = False) -> None:
-    if not keep_watchdogs:
-        for dog in parts.watchdogs:
-            dog.stop()  # leaving on purpose is not dying: the routine is halted
-        parts.watchdogs.clear()
-    if not keep_streams:
-        parts.records.close_all()
-        parts.interrupts.disable()
-    else:
-        parts.interrupts.close(keep_mask=True)
-    parts.link.detach()
-    parts.messages.stop()
-    if not keep_streams:  # closed for good: whoever waits for a line hears so
-        parts.messages.queue.close()
-        parts.interrupts.queue.close()
+    """Halt the watchdogs, close the streams, then the link and its reader: those last
+    whatever interrupts the exchanges before them (a Ctrl-C goes on once they are closed)."""
+    try:
+        if not keep_watchdogs:
+            for dog in parts.watchdogs:
+                dog.stop()  # leaving on purpose is not dying: the routine is halted
+            parts.watchdogs.clear()
+        if not keep_streams:
+            parts.records.close_all()
+            parts.interrupts.disable()
+        else:
+            parts.interrupts.close(keep_mask=True)
+    finally:
+        parts.link.detach()
+        parts.messages.stop()
+        if not keep_streams:  # closed for good: whoever waits for a line hears so
+            parts.messages.queue.close()
+            parts.interrupts.queue.close()
 
 
 def _stop_started(link: Link, tracker: MotionTracker) -> None:
@@ -936,8 +948,17 @@ def _stop_started(link: Link, tracker: MotionTracker) -> None:
     tracker.closed = True
     if not link.is_open:
         return
-    running = _moving(link, tracker.still_running(link.clock()))
-    failed = tracker.stop_started(link)
+    interrupted: BaseException | None = None
+    try:
+        running = _moving(link, tracker.still_running(link.clock()))
+    except BaseException as exc:  # (Ctrl-C: the stops go out all the same, then it goes on)
+        running, interrupted = "", exc
+    tracker.closing = True  # (a link that dies under the stops is reopened for them)
+    try:
+        failed, stop_interrupted = tracker.stop_started(link)
+    finally:
+        tracker.closing = False
+    interrupted = interrupted or stop_interrupted
     if running:  # (a script that left its with block without wait(): "nothing happened")
         _LOG.warning(
             "galil: closing the link to %s stopped axes %s mid-motion (started here, not "
@@ -953,6 +974,8 @@ def _stop_started(link: Link, tracker: MotionTracker) -> None:
             link.model_name,
             ", ".join(dict.fromkeys(failed)),
         )
+    if interrupted is not None:
+        raise interrupted
 
 
 def _moving(link: Link, letters: str) -> str:

@@ -472,14 +472,16 @@ class LinkCore:
         with self._lock:
             if not self._open:
                 return
-            for command, _ in reversed(self._restore):
-                if self._dead:
-                    break
-                with contextlib.suppress(GalilError):
-                    self._roundtrip((command,), min(self.timeout, 0.5))
-            self._restore = []
-            self._dead = ""
-            self._close_transport()
+            try:
+                for command, _ in reversed(self._restore):
+                    if self._dead:
+                        break
+                    with contextlib.suppress(GalilError):
+                        self._roundtrip((command,), min(self.timeout, 0.5))
+            finally:  # (closed whatever interrupts the restoring: a Ctrl-C goes on after)
+                self._restore = []
+                self._dead = ""
+                self._close_transport()
 
     def _close_transport(self) -> None:
         self._open = False

@@ -352,6 +352,9 @@ class MotionTracker:
         #: call that then finds the link closed has nothing left to stop, and a move not
         #: seen done by then is never seen done (:attr:`MoveHandle.done` raises).
         self.closed = False
+        #: True while close() sends those stops: a link that dies under them is reopened for
+        #: them (decision 0073); a link closed on purpose never is.
+        self.closing = False
         self._schedule: MoveHandle | None = None  # the last speed schedule started
         self._sequence: MoveHandle | None = None  # the last vector sequence started
 
@@ -362,30 +365,33 @@ class MotionTracker:
         for h in handles.values():
             h._end_watch()
 
-    def stop_started(self, link: CommandLink) -> str:
+    def stop_started(self, link: CommandLink) -> tuple[str, BaseException | None]:
         """``ST`` to every move the library started and has not seen done (each handle's own
         stop: ``ST S`` for a vector sequence) and to every contour running (its
         :class:`StopWatch`); what a link about to close must not leave running. No query
-        when nothing was started.
+        when nothing was started. Each stop is sent whatever interrupted the one before (a
+        Ctrl-C: that stop's guard stopped what it could).
 
         Returns:
-            The axes whose stop could not be sent (``""`` when every stop went out).
+            The axes whose stop could not be sent (``""`` when every stop went out), and the
+            first exception that was not a :class:`~galil.errors.GalilError` (the caller
+            raises it once it is done), if any.
         """
         with self.lock:
             handles = {id(h): h for h in self._active.values() if not h.finished}
             streams = [w.letters for w in self._watches]
+        stops: list[tuple[str, Callable[[], None]]] = [(h.axes, h.stop) for h in handles.values()]
+        stops += [(s, functools.partial(stop_axes, link, self, s)) for s in streams]
         failed = ""
-        for h in handles.values():
+        interrupted: BaseException | None = None
+        for letters, stop in stops:  # (a stream hears of its ST: no CD after it)
             try:
-                h.stop()
-            except GalilError:
-                failed += h.axes
-        for letters in streams:
-            try:
-                stop_axes(link, self, letters)  # (the stream hears of it: no CD after the ST)
+                stop()
             except GalilError:
                 failed += letters
-        return failed
+            except BaseException as exc:
+                interrupted = interrupted or exc
+        return failed, interrupted
 
     def still_running(self, now: float) -> str:
         """The axes of the motion the library started, has not seen end and, by its
@@ -1523,7 +1529,12 @@ class _StopOnError:
         if exc is None or isinstance(exc, MotionError if self._running else _NOTHING_RAN):
             return False
         link, tracker = self._link, self._tracker
-        if tracker is not None and tracker.closed and isinstance(exc, GalilConnectionError):
+        if (
+            tracker is not None
+            and tracker.closed
+            and not tracker.closing
+            and isinstance(exc, GalilConnectionError)
+        ):
             return False  # close() stopped the motion before it closed the link
         reopen = _Reopen(None if tracker is None else tracker.reconnect)
         also = ""

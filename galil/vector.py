@@ -228,7 +228,17 @@ class VectorHandle(MoveHandle):
             replies = link.command_line([cmds.st(PLANE, model=link.model), cmds.time_stamp()])
             self.add_event(self.axes[0], sample_of(replies[-1]), predict.Stop)
             return
-        with self._tracker.lock:  # (between a streamed line and the next: see _feed)
+        # Interrupted, the stop goes out again to what still moves (decision 0028; on a link
+        # that died, reopened once), and the sequence no longer claims an exact prediction.
+        guard = stop_on_error(link, self._tracker, PLANE + self.axes, stop=self._st, is_stop=True)
+        with self._tracker.lock, guard:  # (between a streamed line and the next: see _feed)
+            self._st()
+
+    def _st(self) -> None:
+        """``ST S``, told to the sequence it reaches."""
+        assert self._tracker is not None
+        link = self._link
+        with self._tracker.lock:
             reached = self._on_plane()
             replies = link.command_line([cmds.st(PLANE, model=link.model), cmds.time_stamp()])
             if reached:

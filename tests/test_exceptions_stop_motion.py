@@ -117,6 +117,10 @@ def _gear_b(dmc: Controller) -> Any:
     return dmc.B.gear_to("A", 2)
 
 
+def _start_vector(dmc: Controller) -> Any:
+    return dmc.vector_move("AB", [Line(LONG, LONG // 2)], speed=20_000)
+
+
 def _found_b(dmc: Controller) -> None:
     """B geared to A behind the library's back, found at the next connect (decision 0055)."""
     _slow(dmc)
@@ -221,6 +225,7 @@ OPS = [
     Op("controller.stop", lambda d, _: d.stop(), _start_a, stops=True),
     Op("axis.stop", lambda d, _: d.A.stop(), _start_jog, stops=True),
     Op("handle.stop", lambda d, h: h.stop(), _start_a, stops=True),
+    Op("vector handle.stop", lambda d, h: h.stop(), _start_vector, stops=True),
     Op("controller.abort", lambda d, _: d.abort(), _start_a, stops=True),
     # (a stop of a follower, or of every axis, turns its gearing off: decision 0069)
     Op("axis.stop of a follower", lambda d, _: d.B.stop(), _gear_b, stops=True),
@@ -367,3 +372,50 @@ def test_a_segment_refused_while_streaming_stops_the_running_sequence() -> None:
         assert wire.feeds >= 3
         sim.advance(SETTLE)
         assert dmc.query_operands(["_BGS", "_BGA", "_BGB"]) == [0, 0, 0]
+
+
+#: What close() finds running: a move, a jog, a vector sequence (each not waited for).
+CLOSING: dict[str, Callable[[Controller], object]] = {
+    "a move": _start_a,
+    "a jog": _start_jog,
+    "a vector sequence": _start_vector,
+}
+
+
+@pytest.mark.parametrize("running", list(CLOSING))
+def test_close_interrupted_at_any_call_still_stops_the_motion_and_closes(running: str) -> None:
+    """``close()`` whose exchanges raise, one at a time (decisions 0024, 0073): a Ctrl-C
+    goes on once every stop went out and the link is closed; a link that dies under it is
+    reopened once to send the stop, and ``close()`` returns. Either way nothing moves after
+    a stop's ramp, and the link is closed."""
+
+    def attempt(k: int | None, after: bool, error: type[BaseException]) -> BaseException | None:
+        bench = Bench()
+        dmc = bench.dmc
+        CLOSING[running](dmc)
+        wire = bench.wire
+        if k is not None:
+            wire.at, wire.after, wire.error = k, after, error
+        wire.armed = threading.get_ident()
+        caught: BaseException | None = None
+        try:
+            dmc.close()
+        except BaseException as exc:  # (judged below)
+            caught = exc
+        wire.armed = None
+        calls.append(wire.calls)
+        bench.sim.advance(SETTLE)
+        where = f"close with {running}, call {k} raising {error.__name__} after={after}"
+        assert bench.ask(["_BGA", "_BGB", "_BGS"]) == [0, 0, 0], where
+        assert not dmc.link.is_open, where
+        return caught
+
+    calls: list[int] = []
+    assert attempt(None, False, KeyboardInterrupt) is None
+    total = calls[0]
+    assert total > 0
+    for k in range(total):
+        for after in (False, True):
+            caught = attempt(k, after, KeyboardInterrupt)
+            assert isinstance(caught, KeyboardInterrupt), (k, after, caught)
+            assert attempt(k, after, GalilConnectionError) is None, (k, after)
