@@ -13,7 +13,8 @@ programs that move an axis (one with IF/ELSE/ENDIF and AT, one with AS and MF/MR
   refused unsent while the library's own motion runs and by the controller (TC 7) only where
   the library cannot know (decisions 0036, 0039), and taken only at rest; MT is refused
   unsent with the motor on (decision 0043);
-- a start, a change, a wait or a stop Ctrl-C interrupts at any exchange, whatever else runs,
+- a start, a change, a wait or a stop (an axis's, a handle's: ``ST S`` for a sequence) Ctrl-C
+  interrupts at any exchange, whatever else runs,
   leaves the axes it drives at rest once a line that is not a query went out (decision 0028),
   and its settings as they were when only queries did;
 - an interrupted contour leaves no axis moving or in contour mode, no segment held, and the
@@ -206,6 +207,20 @@ def _wait_call(m: OperationSequences, data: st.DataObject, a: str) -> tuple[_Cal
     return call, h.axes
 
 
+def _handle_stop_call(
+    m: OperationSequences, data: st.DataObject, a: str
+) -> tuple[_Call | None, str]:
+    """A stop of a handle the machine holds (``ST S`` for a vector sequence: decision 0073)."""
+    runs = [r for r in m.running if a in r.handle.axes] or m.running
+    if not runs:
+        return None, ""
+    h = data.draw(st.sampled_from(runs)).handle
+    axes = h.axes
+    if h.kind == "vector":  # (ST S reaches the sequence running now: decision 0034)
+        axes += "".join(r.handle.axes for r in m.running if r.handle.kind == "vector")
+    return h.stop, "".join(dict.fromkeys(axes))
+
+
 def _gear_call(m: OperationSequences, data: st.DataObject, a: str) -> tuple[_Call | None, str]:
     master = data.draw(st.sampled_from([x for x in AXES if x != a]))
     return (lambda: m.dmc.axes[a].gear_to(master, 2.0)), a
@@ -294,6 +309,7 @@ _INTERRUPTIBLE: dict[str, _Pick] = {
     ),
     "wait": _wait_call,
     "stop": lambda m, d, a: ((lambda: m.dmc.axes[a].stop()), a),
+    "handle stop": _handle_stop_call,
 }
 
 
@@ -926,6 +942,8 @@ class OperationSequences(RuleBasedStateMachine):
             return
         if not interrupted:
             self.took(op, a, out)
+            if op == "handle stop":
+                self.interfere(drives)
             return
         self.interfere(drives)
         self.supersede(letters)
