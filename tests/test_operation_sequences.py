@@ -13,10 +13,10 @@ programs that move an axis (one with IF/ELSE/ENDIF and AT, one with AS and MF/MR
   refused unsent while the library's own motion runs and by the controller (TC 7) only where
   the library cannot know (decisions 0036, 0039), and taken only at rest; MT is refused
   unsent with the motor on (decision 0043);
-- a start, a change, a wait or a stop (an axis's, a handle's: ``ST S`` for a sequence) Ctrl-C
-  interrupts at any exchange, whatever else runs,
-  leaves the axes it drives at rest once a line that is not a query went out (decision 0028),
-  and its settings as they were when only queries did;
+- a start, a change, a wait or a stop (an axis's, a handle's: ``ST S`` for a sequence) that
+  Ctrl-C interrupts at any exchange, whatever else runs, leaves the axes it drives at rest
+  once a line that is not a query went out (decision 0028), and its settings as they were
+  when only queries did;
 - an interrupted contour leaves no axis moving or in contour mode, no segment held, and the
   next contour ends where it should (decision 0038); a contour a placed switch stops is over
   as a whole, out of contour mode, the axis on its switch (decision 0041);
