@@ -425,6 +425,7 @@ class AsyncSequences(RuleBasedStateMachine):
         waits = [self.handles[id(r.handle)].wait() for r in runs]
         tasks: list[asyncio.Future[MoveResult]] = []
         errors: tuple[BaseException, ...] = ()
+        cancelled = False
         try:
             if not group:
                 tasks = [asyncio.ensure_future(w) for w in waits]
@@ -434,6 +435,10 @@ class AsyncSequences(RuleBasedStateMachine):
                     tasks = [tg.create_task(w) for w in waits]
         except BaseExceptionGroup as eg:  # noqa: F821 - 3.11+
             errors = eg.exceptions
+            # A TaskGroup whose wait failed while this task was being cancelled raises the
+            # group, not CancelledError: the cancellation is still pending (cancelling()).
+            me = asyncio.current_task()
+            cancelled = me is not None and me.cancelling() > 0  # type: ignore[attr-defined]
         finally:
             for run, task in zip(runs, tasks, strict=True):
                 if task.done() and not task.cancelled():
@@ -448,6 +453,8 @@ class AsyncSequences(RuleBasedStateMachine):
                 assert isinstance(task.exception(), (type(None), MotionError, GalilTimeoutError))
         if errors:
             self.stopped_siblings(runs)
+        if cancelled:
+            raise asyncio.CancelledError
 
     def stopped_siblings(self, runs: list[Running]) -> None:
         """A TaskGroup's MotionError cancelled the other waits: their moves were stopped."""
