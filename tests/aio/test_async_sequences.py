@@ -165,6 +165,7 @@ class AsyncSequences(RuleBasedStateMachine):
         self.owned: list[MoveHandle] = []
         self.unawaited: list[MoveHandle] = []  # started in the step, never awaited by it
         self.outcomes: list[tuple[Running, MoveResult | None, MotionError | None]] = []
+        self.cancel_asked = False  # the step's trap cancelled (or timed out) its task
         # Motion a cancellation stopped: (axes, the handle, controller time it must be over).
         self.stopping: list[tuple[str, MoveHandle, float]] = []
 
@@ -201,6 +202,15 @@ class AsyncSequences(RuleBasedStateMachine):
         c, loop = self.c, asyncio.get_running_loop()
         trap = WireTrap(c, n) if mode == "wire" else Trap(c.worker, c.sync.link, n, mode)
         task: asyncio.Future[T]
+        self.cancel_asked = False
+
+        def asking(cancel: Callable[[], object]) -> Callable[[], object]:
+            def ask() -> object:
+                self.cancel_asked = True
+                return cancel()
+
+            return ask
+
         if wrapper == "timeout":
             holder: list[Any] = []
 
@@ -210,13 +220,13 @@ class AsyncSequences(RuleBasedStateMachine):
                     return await body()
 
             task = asyncio.ensure_future(timed())
-            trap.watch(task, lambda: holder[0].reschedule(loop.time()))
+            trap.watch(task, asking(lambda: holder[0].reschedule(loop.time())))
         elif wrapper == "wait_for":
             task = asyncio.ensure_future(asyncio.wait_for(body(), 3600))
-            trap.watch(task, task.cancel)
+            trap.watch(task, asking(task.cancel))
         else:
             task = asyncio.ensure_future(body())
-            trap.watch(task, task.cancel)
+            trap.watch(task, asking(task.cancel))
         try:
             await asyncio.wait({task})
         finally:
@@ -435,10 +445,11 @@ class AsyncSequences(RuleBasedStateMachine):
                     tasks = [tg.create_task(w) for w in waits]
         except BaseExceptionGroup as eg:  # noqa: F821 - 3.11+
             errors = eg.exceptions
-            # A TaskGroup whose wait failed while this task was being cancelled raises the
-            # group, not CancelledError: the cancellation is still pending (cancelling()).
-            me = asyncio.current_task()
-            cancelled = me is not None and me.cancelling() > 0  # type: ignore[attr-defined]
+            # A TaskGroup whose wait failed while the step's task was being cancelled raises
+            # the group, not CancelledError, and the cancel stays pending on the task: caught
+            # here, it would be lost (Python 3.11's cancelling() also counts the TaskGroup's
+            # own cancel of its parent, so the trap says whether it cancelled).
+            cancelled = self.cancel_asked
         finally:
             for run, task in zip(runs, tasks, strict=True):
                 if task.done() and not task.cancelled():
