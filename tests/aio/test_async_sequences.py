@@ -191,6 +191,7 @@ class AsyncSequences(RuleBasedStateMachine):
                 self.judge_wait(run, result, limited)
 
     async def _act(self, body: Callable[[], Awaitable[T]], how: str, n: int) -> T:
+        self.cancel_asked = False
         if how == "plain":
             return await body()
         if how == "wait_for 0":
@@ -202,7 +203,6 @@ class AsyncSequences(RuleBasedStateMachine):
         c, loop = self.c, asyncio.get_running_loop()
         trap = WireTrap(c, n) if mode == "wire" else Trap(c.worker, c.sync.link, n, mode)
         task: asyncio.Future[T]
-        self.cancel_asked = False
 
         def asking(cancel: Callable[[], object]) -> Callable[[], object]:
             def ask() -> object:
