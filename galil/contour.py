@@ -424,7 +424,7 @@ class ContourStream:
             # The whole path against FL/BL, as for any move, before CM goes out.
             predict.check_soft_limits(prof, forward_limit=fl, backward_limit=bl, axis=a)
             counts[a] = prof
-            self._ends[a] = round(rp) + int(self.increments[:, j].sum())
+            self._ends[a] = prof.end
         if followers:  # the followers' paths too (GA C<master>: the contour's reference)
             check_followers(
                 link,

@@ -554,17 +554,13 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         if self._finalizer is not None:
             self._finalizer.detach()
         with self._life:
-            interrupted: BaseException | None = None
             try:
                 _stop_started(self.link, self.tracker)
-            except BaseException as exc:  # (Ctrl-C while stopping: the close still ends)
-                interrupted = exc
-            if self.link.is_open:
-                _stop_captures(self.link, self._captures)
-            _close_parts(self._parts, keep_watchdogs=False)
-            self.tracker.end_watches()
-            if interrupted is not None:
-                raise interrupted
+            finally:  # (Ctrl-C while stopping: the close still ends, then it goes on)
+                if self.link.is_open:
+                    _stop_captures(self.link, self._captures)
+                _close_parts(self._parts, keep_watchdogs=False)
+                self.tracker.end_watches()
 
     def reconnect(self) -> None:
         """Close the link and open it again (same address and options), handshake included.
