@@ -185,26 +185,28 @@ _Call = Callable[[], object]
 _Pick = Callable[["OperationSequences", st.DataObject, str], "tuple[_Call | None, str]"]
 
 
+def _waited(run: Running) -> tuple[MoveResult | None, MotionError | None]:
+    """Wait for ``run``'s handle (5 s for a jog): its result, or the ``MotionError`` of a
+    limit (or of a follower's), or neither (it timed out). Nothing else is read."""
+    h = run.handle
+    try:
+        with warnings.catch_warnings():
+            if run.unpredictable:  # (not the library's doing)
+                warnings.simplefilter("ignore", RuntimeWarning)
+            return h.wait(timeout=5.0 if math.isinf(h.duration) else None), None
+    except MotionError as exc:  # a limit stopped it (or a follower of it)
+        return None, exc
+    except GalilTimeoutError:
+        return None, None
+
+
 def _wait_call(m: OperationSequences, data: st.DataObject, a: str) -> tuple[_Call | None, str]:
     """A wait for a handle the machine holds (on ``a`` if there is one)."""
     runs = [r for r in m.running if a in r.handle.axes] or m.running
     if not runs:
         return None, ""
     run = data.draw(st.sampled_from(runs))
-    h = run.handle
-
-    def call() -> object:
-        try:
-            with warnings.catch_warnings():
-                if run.unpredictable:
-                    warnings.simplefilter("ignore", RuntimeWarning)
-                return run, h.wait(timeout=5.0 if math.isinf(h.duration) else None), None
-        except MotionError as exc:
-            return run, None, exc
-        except GalilTimeoutError:
-            return run, None, None
-
-    return call, h.axes
+    return (lambda: (run, *_waited(run))), run.handle.axes
 
 
 def _handle_stop_call(
@@ -247,6 +249,17 @@ def _start_call(m: OperationSequences, data: st.DataObject, a: str) -> tuple[_Ca
     return (lambda: ax.speed_schedule(9000, [(3000, 6000)], speed=12000)), a
 
 
+def judge_refused_setting(
+    a: str, what: str, refused: CommandError, followed: Track | None, over: bool
+) -> None:
+    """A setting the controller refused (TC 7, "Not valid while running"): only one it takes
+    at rest, only where the library cannot know the axis moves, or its prediction (``followed``)
+    had the motion ``over`` already."""
+    assert what in _STILL, refused
+    assert refused.code == 7, refused
+    assert followed is None or over, (a, followed, refused)
+
+
 def _setting_call(m: OperationSequences, data: st.DataObject, a: str) -> tuple[_Call | None, str]:
     """SP, AC or DC, in motion or not (decision 0070); not SP in a jog, which it leaves alone
     (nothing to stop then)."""
@@ -266,11 +279,7 @@ def _setting_call(m: OperationSequences, data: st.DataObject, a: str) -> tuple[_
         except CommandError as exc:
             refused = exc
         if refused is not None:
-            # DC by the controller (TC 7) only where the library cannot know the axis is in a
-            # position move, or its prediction had the move over (as set_setting judges).
-            assert what == "decel", refused
-            assert refused.code == 7, refused
-            assert followed is None or over, (a, followed, refused)
+            judge_refused_setting(a, what, refused, followed, over)
 
     return call, a
 
@@ -402,20 +411,7 @@ class OperationSequences(RuleBasedStateMachine):
         assert all(c == end for c in result.stop_codes.values()), (h.kind, result)
 
     def wait(self, run: Running) -> None:
-        h = run.handle
-        timeout = 5.0 if math.isinf(h.duration) else None
-        limited: MotionError | None = None
-        result: MoveResult | None = None
-        try:
-            with warnings.catch_warnings():
-                if run.unpredictable:  # (not the library's doing)
-                    warnings.simplefilter("ignore", RuntimeWarning)
-                result = h.wait(timeout=timeout)
-        except MotionError as exc:  # a limit stopped it (or a follower of it)
-            limited = exc
-        except GalilTimeoutError:
-            pass
-        self.judge_wait(run, result, limited)
+        self.judge_wait(run, *_waited(run))
 
     def judge_wait(
         self, run: Running, result: MoveResult | None, limited: MotionError | None
@@ -567,12 +563,10 @@ class OperationSequences(RuleBasedStateMachine):
             jog_or_stop = track.kind == "jog" or (track.kind == "position" and track.stopped)
             assert what != "decel" or not jog_or_stop, (a, track, refused)
         if by_controller is not None:
-            assert what in _STILL, by_controller
-            assert by_controller.code == 7, by_controller
+            judge_refused_setting(a, what, by_controller, followed, over)
             if followed is not None:
                 # Sent because its prediction had the motion over: the controller may still
                 # see its last samples, not more.
-                assert over, (a, followed, by_controller)
                 self.dmc.sleep(0.01)
                 assert not self.dmc.query_operands([f"_BG{a}"])[0], (a, followed, by_controller)
         elif not refused and what in _STILL and what != "decel":
