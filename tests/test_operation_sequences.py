@@ -14,10 +14,12 @@ programs that move an axis (one with IF/ELSE/ENDIF and AT, one with AS and MF/MR
   the library cannot know (decisions 0036, 0039), and taken only at rest; MT is refused
   unsent with the motor on (decision 0043);
 - a start, a change, a wait or a stop (an axis's, a handle's: ``ST S`` for a sequence) that
-  Ctrl-C interrupts at any exchange, whatever else runs, leaves the axes it drives at rest
-  once a line that is not a query went out (decision 0028), and its settings as they were
-  when only queries did;
-- an interrupted contour leaves no axis moving or in contour mode, no segment held, and the
+  Ctrl-C interrupts at any exchange, or whose link dies at any write or read (reopened by
+  the controller itself when the example connects with ``reconnect=True``, by the test's
+  ``reconnect()`` otherwise), whatever else runs, leaves the axes it drives at rest once a
+  line that is not a query went out (decision 0028), and its settings as they were when only
+  queries did;
+- an interrupted contour (Ctrl-C, or its link dying) leaves no axis moving or in contour mode, no segment held, and the
   next contour ends where it should (decision 0038); a contour a placed switch stops is over
   as a whole, out of contour mode, the axis on its switch (decision 0041);
 - a waited move ended where its handle predicted, to the count, with the stop code the docs
@@ -55,6 +57,7 @@ import galil
 from galil import Line
 from galil.errors import (
     CommandError,
+    GalilConnectionError,
     GalilError,
     GalilTimeoutError,
     InvalidArgument,
@@ -62,6 +65,7 @@ from galil.errors import (
     MotionError,
 )
 from galil.gearing import Gearing
+from galil.link import Link
 from galil.motion import HOMING_KINDS, GearLink, MoveHandle, MoveResult, Track
 from galil.sim.rooms.contour import Contour as SimContour
 from galil.sim.rooms.gearing import Gearing as SimGearing
@@ -131,29 +135,50 @@ class Running:
 def _interrupted(link: object, at: int, *, after: bool) -> Iterator[None]:
     """Raise ``KeyboardInterrupt`` at the ``at``-th exchange or pause on ``link`` (counting
     from 0): before it goes out, or once it is done."""
-    calls = 0
+    with _tripped(link, ("transact", "pause"), at, after=after, error=KeyboardInterrupt):
+        yield
 
-    def interrupting(method: Callable[..., object]) -> Callable[..., object]:
+
+@contextlib.contextmanager
+def _dropped(link: Link, at: int, *, after: bool) -> Iterator[None]:
+    """The link dies at the ``at``-th read or write this thread makes on its transport
+    (counting from 0): before it goes out or is read, or once it is done (a read's bytes
+    lost), as a cable pulled or a socket reset does. The controller reopens it by itself
+    (its reconnect policy) onto the same simulator."""
+    with _tripped(link.transport, ("write", "read"), at, after=after, error=GalilConnectionError):
+        yield
+
+
+@contextlib.contextmanager
+def _tripped(
+    target: object, names: tuple[str, ...], at: int, *, after: bool, error: type[BaseException]
+) -> Iterator[None]:
+    """Raise ``error`` at the ``at``-th call this thread makes of ``target``'s ``names``."""
+    calls = 0
+    me = threading.get_ident()
+
+    def tripping(method: Callable[..., object]) -> Callable[..., object]:
         def call(*args: object, **kwargs: object) -> object:
             nonlocal calls
+            if threading.get_ident() != me:  # (the message poller's are not the call's)
+                return method(*args, **kwargs)
             calls += 1
             if calls == at + 1 and not after:
-                raise KeyboardInterrupt
+                raise error(f"tripped before call {at}")
             out = method(*args, **kwargs)
             if calls == at + 1 and after:
-                raise KeyboardInterrupt
+                raise error(f"tripped after call {at}")
             return out
 
         return call
 
-    names = ("transact", "pause")
     for name in names:
-        setattr(link, name, interrupting(getattr(link, name)))
+        setattr(target, name, tripping(getattr(target, name)))
     try:
         yield
     finally:
         for name in names:
-            delattr(link, name)
+            delattr(target, name)
 
 
 @contextlib.contextmanager
@@ -322,11 +347,17 @@ _INTERRUPTIBLE: dict[str, _Pick] = {
 }
 
 
+#: What reopening a link sends (its handshake: galil.handshake): no motion, no setting.
+_HANDSHAKE = re.compile(r"\x12\x16|CW [12]|EO 0")
+
+
 def _queries_only(lines: list[str]) -> list[str]:
+    """The lines of ``lines`` that are neither queries nor a reopened link's handshake."""
     return [
         line
         for line in lines
-        if not all(_READ_ONLY.fullmatch(part.strip()) for part in line.split(";"))
+        if not _HANDSHAKE.fullmatch(line)
+        and not all(_READ_ONLY.fullmatch(part.strip()) for part in line.split(";"))
     ]
 
 
@@ -483,8 +514,12 @@ class OperationSequences(RuleBasedStateMachine):
             self.wait(run)
 
     # -- setup ------------------------------------------------------------------------------
-    @initialize()
-    def setup(self) -> None:
+    @initialize(reconnect=st.booleans())
+    def setup(self, reconnect: bool) -> None:
+        if reconnect:  # (a dead link reopened by itself: a query that met it asked again)
+            self.dmc.close()
+            self.dmc = galil.connect("sim://DMC-4040", reconnect=True)
+            self.sim = sim_of(self.dmc)
         for a in AXES:
             self.sim.set_home_switch(a, edge=-3000, index_period=2000)
             self.dmc.axes[a].home_speed = 2000
@@ -850,23 +885,39 @@ class OperationSequences(RuleBasedStateMachine):
         reach=st.integers(-3000, 3000),
         at=st.integers(0, 12),
         after=st.booleans(),
+        drop=st.sampled_from([False, False, True]),
+        read=st.booleans(),
     )
-    def interrupted_contour(self, axes: str, reach: int, at: int, after: bool) -> None:
+    def interrupted_contour(
+        self, axes: str, reach: int, at: int, after: bool, drop: bool, read: bool
+    ) -> None:
         """Ctrl-C at the contour's ``at``-th exchange with the controller (before it went out
-        or once it did), before or after the pre-loaded segments start (decision 0038):
-        nothing runs on, no axis stays in contour mode, and the next contour works."""
+        or once it did), or (``drop``) the link dying at its ``at``-th write or read, before
+        or after the pre-loaded segments start (decision 0038): nothing runs on, no axis
+        stays in contour mode, and the next contour works."""
         if not all(map(self._free, axes)) or not self.idle(axes):
             return  # (the contour is refused: the plain rule has that)
         path = np.outer(np.linspace(0, 1, 12), np.arange(1, len(axes) + 1) * reach).round()
         self.supersede(axes)  # (even if refused: harmless)
         interrupted = False
         stopped: list[MotionError] = []
+        if drop:
+            at = 2 * at + read
+        trip = _dropped if drop else _interrupted
+        cut = (KeyboardInterrupt, GalilConnectionError) if drop else (KeyboardInterrupt,)
         with self.refusable(InvalidArgument, MotionError):
             try:
-                with _limit_stopped(axes, stopped), _interrupted(self.dmc.link, at, after=after):
+                with _limit_stopped(axes, stopped), trip(self.dmc.link, at, after=after):
                     self.dmc.contour(axes, path, dt=3)
-            except KeyboardInterrupt:
+            except MotionError as exc:
+                if not isinstance(exc.__cause__, cut):
+                    raise
+                interrupted = True  # (its stop not confirmed: checked below all the same)
+            except cut:
                 interrupted = True
+        if self.dmc.link.dead:
+            assert drop, "a Ctrl-C left the link dead"
+            self.dmc.reconnect()
         if stopped:
             self.contour_stopped_at_a_switch(axes, stopped[0])
         if not interrupted:
@@ -889,18 +940,29 @@ class OperationSequences(RuleBasedStateMachine):
         a=axis_st,
         at=st.integers(0, 4),
         after=st.booleans(),
+        drop=st.sampled_from([False, False, True]),
     )
-    def interrupted(self, data: st.DataObject, op: str, a: str, at: int, after: bool) -> None:
+    def interrupted(
+        self, data: st.DataObject, op: str, a: str, at: int, after: bool, drop: bool
+    ) -> None:
         """Ctrl-C at the ``at``-th exchange or pause of a start, a change, a wait or a stop,
-        whatever runs meanwhile (decision 0028): once a line that is not a query went out,
-        the axes the call drives come to rest (a stop's ramp) and stay there, every gearing
-        engaged is one the library knows (the invariants), and the link stays in step. Only
-        queries out: the settings are as they were (a wait excepted: a speed schedule's
-        routine sets SP as time passes). Not interrupted (``at`` beyond its
-        calls): the call's handle or gearing is the machine's like any other."""
+        whatever runs meanwhile, or (``drop``) the link dying at the ``at``-th write or read
+        under it (decision 0028): once a line that is not a query went out, the axes the
+        call drives come to rest (a stop's ramp) and stay there, every gearing engaged is
+        one the library knows (the invariants), and the link stays in step (a dead one is
+        reopened by ``reconnect()``, as a user would). Only queries out: the settings are
+        as they were (a wait excepted: a speed schedule's routine sets SP as time passes).
+        Not interrupted (``at`` beyond its calls; a query asked again on the reopened link):
+        the call's handle or gearing is the machine's like any other."""
         call, letters = _INTERRUPTIBLE[op](self, data, a)
         if call is None:
             return
+        if drop:
+            at = 2 * at + data.draw(st.integers(0, 1), label="read")
+        trip = _dropped if drop else _interrupted
+        cut: tuple[type[BaseException], ...] = (KeyboardInterrupt,)
+        if drop:
+            cut = (KeyboardInterrupt, GalilConnectionError)
         drives = letters + "".join(self.dmc.tracker.followers(letters))
         settings_before = self._settings()
         interrupted = False
@@ -912,16 +974,19 @@ class OperationSequences(RuleBasedStateMachine):
             transcript(self.dmc) as sent,
         ):
             try:
-                with _interrupted(self.dmc.link, at, after=after):
+                with trip(self.dmc.link, at, after=after):
                     out = call()
-            except KeyboardInterrupt:
-                interrupted = True
             except MotionError as exc:
-                if not isinstance(exc.__cause__, KeyboardInterrupt):
+                if not isinstance(exc.__cause__, cut):
                     raise
                 unconfirmed, interrupted = exc, True
+            except cut:
+                interrupted = True
             except CommandError as exc:  # a program's move in the way (TC 13, TC 16)
                 by_controller = exc
+        if self.dmc.link.dead:
+            assert drop, "a Ctrl-C left the link dead"
+            self.dmc.reconnect()
         if unconfirmed is not None:
             # The guard's stop could not be confirmed: only where something else moves the
             # axis on (the test's program, a master).
@@ -931,7 +996,8 @@ class OperationSequences(RuleBasedStateMachine):
             assert not self._free(a), by_controller
             assert by_controller.code in (13, 16), by_controller
             return
-        event(f"interrupted {op}: {'refused' if refused else 'ran' if not interrupted else 'cut'}")
+        how = "dropped" if drop else "interrupted"
+        event(f"{how} {op}: {'refused' if refused else 'ran' if not interrupted else 'cut'}")
         if refused:
             return
         if not interrupted:
@@ -948,7 +1014,7 @@ class OperationSequences(RuleBasedStateMachine):
             if op != "wait":
                 assert self._settings() == settings_before, f"{op} on {a}: settings changed"
             return
-        event(f"interrupted {op}: cut after a line went out")
+        event(f"{how} {op}: cut after a line went out")
         self.dmc.sleep(3.5)  # (the slowest ramp down: SP 60 000 at DC 20 480 takes 2.9 s)
         free = [x for x in drives if self._free(x)]
         names = [f"_{q}{x}" for x in free for q in ("BG", "RP")]
