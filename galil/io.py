@@ -19,12 +19,13 @@ its message queue (pushed on a second Ethernet handle) instead of polling the in
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, Protocol, overload
 
-from galil.errors import GalilTimeoutError, InvalidArgument
+from galil.errors import GalilError, GalilTimeoutError, InvalidArgument
 from galil.link import CommandLink, check_wait_timeout
 from galil.protocol import commands as cmds
 from galil.routines import Routine, Routines
@@ -294,6 +295,10 @@ class IO:
             InvalidArgument: no such input, a bad timeout (infinity too: ``None`` waits for
                 ever), or a busy thread.
             GalilTimeoutError: the input did not change in time (the routine is halted).
+
+        Anything else that cuts the wait short (Ctrl-C, a reply lost) halts the routine too
+        before it propagates; a dead link cannot, and the routine watches on until its input
+        changes (the next wait reuses its thread).
         """
         n = self.inputs._check(n)
         if not isinstance(high, bool):
@@ -317,26 +322,38 @@ class IO:
                     [cmds.assign("ginput", n), cmds.assign("ginlevel", 1 if high else 0)]
                 )
                 self._routines.start(_INPUT_ROUTINE, t)
-                self._messages.ensure_polling()
-                self._wait(seen, timeout, n, high, t)
+                try:
+                    self._messages.ensure_polling()
+                    in_time = _wait(link, seen, timeout)
+                except BaseException:
+                    self._halt_quietly(t)
+                    raise
+                if not in_time:
+                    self._routines.halt(t)
+                    raise link.error(
+                        GalilTimeoutError,
+                        f"input {n} did not go {'high' if high else 'low'} within {timeout} s",
+                    )
             finally:
                 unsubscribe()
 
-    def _wait(
-        self, seen: threading.Event, timeout: float | None, n: int, high: bool, thread: int
-    ) -> None:
-        link = self._link
-        deadline = None if timeout is None else link.clock() + timeout
-        while not seen.is_set():
-            now = link.clock()
-            if deadline is not None and now >= deadline:
-                self._routines.halt(thread)
-                raise link.error(
-                    GalilTimeoutError,
-                    f"input {n} did not go {'high' if high else 'low'} within {timeout} s",
-                )
-            step = 0.05 if deadline is None else min(0.05, max(deadline - now, 0.001))
-            link.pause(step)  # real time on hardware; simulated time on a manual clock
+    def _halt_quietly(self, thread: int) -> None:
+        """Halt the routine of a wait cut short, so that it does not watch on for nobody
+        (on a dead link it cannot be: see :meth:`wait_for_input`)."""
+        with contextlib.suppress(GalilError):
+            self._routines.halt(thread)
+
+
+def _wait(link: CommandLink, seen: threading.Event, timeout: float | None) -> bool:
+    """Wait until ``seen`` is set (``True``) or ``timeout`` has passed (``False``)."""
+    deadline = None if timeout is None else link.clock() + timeout
+    while not seen.is_set():
+        now = link.clock()
+        if deadline is not None and now >= deadline:
+            return False
+        step = 0.05 if deadline is None else min(0.05, max(deadline - now, 0.001))
+        link.pause(step)  # real time on hardware; simulated time on a manual clock
+    return True
 
 
 def _input_routine() -> Routine:

@@ -73,6 +73,7 @@ __all__ = [
     "stop_axes",
     "stop_on_error",
     "switch_blocks",
+    "wait_guard",
 ]
 
 _LOG = logging.getLogger("galil.motion")
@@ -355,6 +356,9 @@ class MotionTracker:
         #: True while close() sends those stops: a link that dies under them is reopened for
         #: them (decision 0073); a link closed on purpose never is.
         self.closing = False
+        #: How many times a guard reopened a dead link (a guard whose stop reopened it
+        #: through a guard of its own knows by this that the link works again).
+        self.reopens = 0
         self._schedule: MoveHandle | None = None  # the last speed schedule started
         self._sequence: MoveHandle | None = None  # the last vector sequence started
 
@@ -1041,7 +1045,7 @@ class MoveHandle:
             timeout = duration * 1.5 + 2.0
         bar = progress_bar(self.kind, self.axes, duration) if progress else None
         try:
-            with stop_on_error(self._link, self._tracker, self._stop_letters, stop=self.stop):
+            with wait_guard(self):
                 done = self._poll_until_done(timeout, bar)
             if not done:
                 raise self._link.error(
@@ -1156,6 +1160,14 @@ class MoveHandle:
     def __repr__(self) -> str:
         state = "done" if self._done else "moving"
         return f"<MoveHandle {self.kind} {self.axes} {state}, predicted {self.duration:.4g} s>"
+
+
+def wait_guard(handle: MoveHandle) -> contextlib.AbstractContextManager[None]:
+    """The guard of a wait for ``handle``, around its polls and pauses: anything that
+    interrupts them (Ctrl-C, a dead link, no reply) stops the move (a dead link reopened once
+    for it) before it propagates (:func:`stop_on_error`). ``MoveHandle.wait`` and the async
+    handle's ``wait()`` run their polls under it."""
+    return stop_on_error(handle._link, handle._tracker, handle._stop_letters, stop=handle.stop)
 
 
 def _refuse_if_closed(handle: MoveHandle) -> None:
@@ -1429,11 +1441,11 @@ def motion_guard(
     try:
         yield
     except BaseException as exc:
-        reopen = _Reopen(reconnect)
+        reopen = _Reopen(reconnect, tracker)
         moving = _stop_for_guard(link, tracker, letters, None, reopen.or_none())
         if moving:
             raise _not_stopped(link, exc, moving, "inside motion()") from exc
-        if reopen.done and isinstance(exc, GalilConnectionError):
+        if reopen.reopened and isinstance(exc, GalilConnectionError):
             raise _reopened(link, exc, letters, "the block") from exc
         raise
 
@@ -1536,7 +1548,7 @@ class _StopOnError:
             and isinstance(exc, GalilConnectionError)
         ):
             return False  # close() stopped the motion before it closed the link
-        reopen = _Reopen(None if tracker is None else tracker.reconnect)
+        reopen = _Reopen(None if tracker is None else tracker.reconnect, tracker)
         also = ""
         if self._is_stop and tracker is not None:
             # Whether the stop went out is not known: the moves it names no longer claim an
@@ -1547,7 +1559,7 @@ class _StopOnError:
         moving = _stop_for_guard(link, tracker, self._letters, self._stop, reopen.or_none(), also)
         if moving:
             raise _not_stopped(link, exc, moving, "while starting or changing motion") from exc
-        if reopen.done and isinstance(exc, GalilConnectionError):
+        if reopen.reopened and isinstance(exc, GalilConnectionError):
             if self._is_stop:
                 # The block was the stop itself, and it went out on the reopened link: done.
                 _LOG.warning(
@@ -1561,13 +1573,21 @@ class _StopOnError:
 
 
 class _Reopen:
-    """A guard's reconnect, noting whether it was called (the link was reopened)."""
+    """A guard's reconnect, noting whether the link was reopened since the guard began:
+    by this reconnect, or by another guard's (a stop's own guard, inside this one's stop)."""
 
-    __slots__ = ("_reconnect", "done")
+    __slots__ = ("_before", "_reconnect", "_tracker", "done")
 
-    def __init__(self, reconnect: Callable[[], None] | None) -> None:
+    def __init__(self, reconnect: Callable[[], None] | None, tracker: MotionTracker | None) -> None:
         self._reconnect = reconnect
+        self._tracker = tracker
+        self._before = 0 if tracker is None else tracker.reopens
         self.done = False
+
+    @property
+    def reopened(self) -> bool:
+        tracker = self._tracker
+        return self.done or (tracker is not None and tracker.reopens != self._before)
 
     def or_none(self) -> Callable[[], None] | None:
         return None if self._reconnect is None else self
@@ -1576,6 +1596,8 @@ class _Reopen:
         assert self._reconnect is not None
         self._reconnect()
         self.done = True
+        if self._tracker is not None:
+            self._tracker.reopens += 1
 
 
 def _died_of(exc: GalilConnectionError) -> str:

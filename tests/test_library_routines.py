@@ -144,3 +144,20 @@ def test_the_librarys_routines_hold_no_command_a_program_may_not_run() -> None:
     words = [c.strip()[:2] for line in library for c in split_program_line(line)]
     assert {"WT", "AD"} <= set(words)
     assert not NOT_IN_PROGRAM & set(words)
+
+
+@pytest.mark.parametrize("error", [KeyboardInterrupt, galil.GalilTimeoutError])
+def test_a_wait_for_an_input_cut_short_halts_its_routine(error: type[BaseException]) -> None:
+    with simulated() as dmc:
+        pause = dmc.link.pause
+
+        def cut(seconds: float) -> None:  # Ctrl-C, or a reply lost, while it waits
+            pause(seconds)
+            raise error("cut short")
+
+        dmc.link.pause = cut  # type: ignore[method-assign]
+        with pytest.raises(error):
+            dmc.io.wait_for_input(2, high=False)
+        del dmc.link.pause
+        assert dmc.query_operands(["_XQ7"]) == [-1]  # not left watching the input
+        assert dmc.routines.threads == {}

@@ -181,3 +181,20 @@ def test_a_motion_block_whose_link_died_says_the_link_works_again() -> None:
         assert "reconnect()" not in str(info.value)
         assert "it was reopened and AB stopped" in str(info.value)
         assert not sim.motion("B").moving
+
+
+def test_a_wait_whose_link_dies_stops_the_move_and_says_the_link_works_again() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    with _reopening(sim, b"MG _BGA,_RPA,_SCA") as dmc:  # (the wait's poll)
+        handle = dmc.A.move_by(200_000)  # 8 s at SP 25 000
+        with pytest.raises(galil.GalilConnectionError) as info:
+            handle.wait(timeout=1.0)  # (its first poll comes after 1 s, mid-move)
+        # The stop went out through the handle's stop, whose own guard reopened the link:
+        # the wait's error says so too rather than advising reconnect().
+        text = str(info.value)
+        assert "reconnect()" not in text
+        assert "it was reopened and A stopped, so the link works again" in text
+        assert not dmc.link.dead
+        dmc.sleep(1.0)
+        assert dmc.query_operands(["_BGA", "_SCA"]) == [0, 4]
+        assert dmc.query_operands(["_RPA"])[0] < 200_000

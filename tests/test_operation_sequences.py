@@ -19,9 +19,10 @@ programs that move an axis (one with IF/ELSE/ENDIF and AT, one with AS and MF/MR
   ``reconnect()`` otherwise), whatever else runs, leaves the axes it drives at rest once a
   line that is not a query went out (decision 0028), and its settings as they were when only
   queries did;
-- an interrupted contour (Ctrl-C, or its link dying) leaves no axis moving or in contour mode, no segment held, and the
-  next contour ends where it should (decision 0038); a contour a placed switch stops is over
-  as a whole, out of contour mode, the axis on its switch (decision 0041);
+- an interrupted contour (Ctrl-C, or its link dying) leaves no axis moving or in contour
+  mode, no segment held, and the next contour ends where it should (decision 0038); a
+  contour a placed switch stops is over as a whole, out of contour mode, the axis on its
+  switch (decision 0041);
 - a waited move ended where its handle predicted, to the count, with the stop code the docs
   give its kind when nothing interfered with it;
 - the library's view agrees with the simulator's: every axis the controller moves is driven
@@ -140,33 +141,60 @@ def _interrupted(link: object, at: int, *, after: bool) -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def _dropped(link: Link, at: int, *, after: bool) -> Iterator[None]:
-    """The link dies at the ``at``-th read or write this thread makes on its transport
-    (counting from 0): before it goes out or is read, or once it is done (a read's bytes
-    lost), as a cable pulled or a socket reset does. The controller reopens it by itself
-    (its reconnect policy) onto the same simulator."""
-    with _tripped(link.transport, ("write", "read"), at, after=after, error=GalilConnectionError):
+def _dropped(
+    link: Link,
+    at: int,
+    *,
+    after: bool,
+    threads: Callable[[threading.Thread], bool] | None = None,
+    tripped: list[bool] | None = None,
+) -> Iterator[None]:
+    """The link dies at the ``at``-th read or write this thread (or ``threads``) makes on its
+    transport (counting from 0): before it goes out or is read, or once it is done (a read's
+    bytes lost), as a cable pulled or a socket reset does. ``reconnect()`` (or the
+    controller's own) reopens it onto the same simulator."""
+    with _tripped(
+        link.transport,
+        ("write", "read"),
+        at,
+        after=after,
+        error=GalilConnectionError,
+        threads=threads,
+        tripped=tripped,
+    ):
         yield
 
 
 @contextlib.contextmanager
 def _tripped(
-    target: object, names: tuple[str, ...], at: int, *, after: bool, error: type[BaseException]
+    target: object,
+    names: tuple[str, ...],
+    at: int,
+    *,
+    after: bool,
+    error: type[BaseException],
+    threads: Callable[[threading.Thread], bool] | None = None,
+    tripped: list[bool] | None = None,
 ) -> Iterator[None]:
-    """Raise ``error`` at the ``at``-th call this thread makes of ``target``'s ``names``."""
+    """Raise ``error`` at the ``at``-th call of ``target``'s ``names`` made by this thread
+    (or by the ``threads`` it says), and note it in ``tripped``."""
     calls = 0
-    me = threading.get_ident()
+    me = threading.current_thread()
+    counts = threads or (lambda t: t is me)  # (not the message poller's calls)
 
     def tripping(method: Callable[..., object]) -> Callable[..., object]:
         def call(*args: object, **kwargs: object) -> object:
             nonlocal calls
-            if threading.get_ident() != me:  # (the message poller's are not the call's)
+            if not counts(threading.current_thread()):
                 return method(*args, **kwargs)
             calls += 1
-            if calls == at + 1 and not after:
+            hit = calls == at + 1
+            if hit and tripped is not None:
+                tripped.append(True)
+            if hit and not after:
                 raise error(f"tripped before call {at}")
             out = method(*args, **kwargs)
-            if calls == at + 1 and after:
+            if hit:
                 raise error(f"tripped after call {at}")
             return out
 

@@ -40,6 +40,7 @@ from galil.motion import (
     MoveParams,
     MoveResult,
     held,
+    wait_guard,
 )
 from galil.segments import VectorPlan
 from galil.vector import VectorHandle
@@ -121,11 +122,19 @@ def progress_of(handle: MoveHandle, now: float) -> MoveProgress:
 
 
 class _Poll:
-    """One wait's deadline and cadence; every call runs on a worker thread."""
+    """One wait's deadline and cadence; every call runs on a worker thread.
 
-    def __init__(self, handle: MoveHandle, link: Link, timeout: float | None) -> None:
+    ``guarded``: a poll or a pause that fails (a dead link, no reply) stops the move before
+    the error goes on, as ``MoveHandle.wait`` does (:func:`~galil.motion.wait_guard`)."""
+
+    def __init__(
+        self, handle: MoveHandle, link: Link, timeout: float | None, guarded: bool
+    ) -> None:
         self.handle = handle
         self.link = link
+        self.guard: Callable[[], contextlib.AbstractContextManager[None]] = (
+            functools.partial(wait_guard, handle) if guarded else contextlib.nullcontext
+        )
         duration = handle.duration
         if timeout is None and math.isfinite(duration):
             timeout = duration * 1.5 + 2.0  # as MoveHandle.wait
@@ -139,8 +148,9 @@ class _Poll:
             GalilTimeoutError: past the deadline (the move is NOT stopped).
         """
         handle, link = self.handle, self.link
-        if handle.done:
-            return None
+        with self.guard():
+            if handle.done:
+                return None
         now = link.clock()
         if self.deadline is not None and now >= self.deadline:
             raise link.error(
@@ -155,6 +165,11 @@ class _Poll:
         if self.deadline is not None:
             pause = min(pause, self.deadline - now)
         return progress, min(max(pause, MIN_POLL), MAX_POLL)
+
+    def pause(self, seconds: float) -> None:
+        """Let ``seconds`` of a simulator's manual clock pass."""
+        with self.guard():
+            self.link.pause(seconds)
 
 
 class AsyncMoveHandle:
@@ -250,7 +265,9 @@ class AsyncMoveHandle:
             stop_on_cancel: stop the move (``ST``) when the task iterating is cancelled, or
                 when the generator is closed before the move is done (``aclose()``, or its
                 finalisation after the loop was left by ``break``, an exception or a
-                cancellation in the loop's body); ``False`` only watches.
+                cancellation in the loop's body), or when a poll fails (a dead link is
+                reopened once for the stop; no reply), as ``MoveHandle.wait`` does;
+                ``False`` only watches.
 
         Raises:
             InvalidArgument: a timeout that is not ``None`` or a finite number of seconds
@@ -262,12 +279,12 @@ class AsyncMoveHandle:
         check_flag(stop_on_cancel, "stop_on_cancel")
         worker, link = self._worker, self._link
         try:
-            poll = await worker.run(_Poll, self.sync, link, timeout)
+            poll = await worker.run(_Poll, self.sync, link, timeout, stop_on_cancel)
             while (step := await worker.run(poll)) is not None:
                 progress, pause = step
                 yield progress
                 if link.simulated_time:
-                    await worker.run(link.pause, pause)
+                    await worker.run(poll.pause, pause)
                 else:
                     await asyncio.sleep(pause)
         except (asyncio.CancelledError, GeneratorExit):

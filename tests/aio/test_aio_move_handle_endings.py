@@ -1,6 +1,7 @@
 """How an async move handle ends when its watcher does not see it through: a closed or
-abandoned ``watch()`` stops the move, and ``add_callback`` callbacks run only for a move seen
-done. In-process simulators on a manual clock: nothing sleeps for motion.
+abandoned ``watch()`` stops the move, so does a wait whose link dies (as the sync wait does),
+and ``add_callback`` callbacks run only for a move seen done. In-process simulators on a
+manual clock: nothing sleeps for motion.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import gc
 import pytest
 from aio_helpers import commands_of, run, sim
 
+import galil
 import galil.aio as aio
 
 
@@ -103,3 +105,54 @@ def test_callbacks_run_once_the_move_is_done() -> None:
             return called
 
     assert len(run(body)) == 1
+
+
+def _dies_after(c: aio.AsyncController, mark: bytes) -> None:
+    """The link dies once a line with ``mark`` went out (the controller got it; its reply is
+    lost with the link). ``sim://`` reopens onto the same simulator."""
+    transport = c.sync.link.transport
+    assert transport is not None
+    write = transport.write
+
+    def dying(data: bytes) -> None:
+        write(data)
+        if mark in data:
+            transport.close()
+
+    transport.write = dying  # type: ignore[method-assign]
+
+
+def test_a_wait_whose_link_dies_stops_the_move_on_the_reopened_link() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            move = await c.A.move_to(200_000)  # 8 s at SP 25 000
+            _dies_after(c, b"MG _BGA,_RPA,_SCA")  # (its first poll)
+            with pytest.raises(galil.GalilConnectionError) as info:
+                await move.wait()
+            text = str(info.value)
+            assert "it was reopened and A stopped, so the link works again" in text
+            assert "reconnect()" not in text
+            assert any(t.startswith("ST") for t in commands_of(c))
+            await _until_stopped(c)
+            assert await c.A.reference_position() < 200_000
+
+    run(body)
+
+
+def test_a_watch_whose_link_dies_stops_the_move_unless_it_only_watches() -> None:
+    async def body(only_watch: bool) -> int:
+        async with await sim() as c:
+            move = await c.A.move_to(20_000)
+            _dies_after(c, b"MG _BGA,_RPA,_SCA")
+            with pytest.raises(galil.GalilConnectionError):
+                async for _ in move.watch(stop_on_cancel=not only_watch):
+                    pass
+            if only_watch:  # nothing reopened it: the move goes on, seen by a new link
+                assert c.sync.link.dead
+                await c.reconnect()
+                await move
+            await _until_stopped(c)
+            return await c.A.reference_position()
+
+    assert run(lambda: body(only_watch=False)) < 20_000
+    assert run(lambda: body(only_watch=True)) == 20_000

@@ -57,6 +57,7 @@ from test_operation_sequences import (
     PROGRAM,
     OperationSequences,
     Running,
+    _dropped,
     _limit_stopped,
 )
 
@@ -65,6 +66,7 @@ import galil.aio as aio
 from galil import Line
 from galil.errors import (
     CommandError,
+    GalilConnectionError,
     GalilTimeoutError,
     InvalidArgument,
     MotionError,
@@ -85,7 +87,8 @@ HAS_TIMEOUT = sys.version_info >= (3, 11)  # asyncio.timeout, TaskGroup
 # How an awaitable runs: to its end, or cancelled at its n-th worker call (the call queued
 # behind busy threads, or held on its thread), or inside the n-th write to the link; by
 # task.cancel(), an outer asyncio.wait_for's task cancelled, or an expiring asyncio.timeout.
-# "wait_for 0": asyncio.wait_for(..., 0), cancelled before it starts.
+# "wait_for 0": asyncio.wait_for(..., 0), cancelled before it starts. "drop": the link dies
+# at the worker threads' n-th write or read (before it, or once it is done).
 HOWS = [
     "plain",
     "plain",
@@ -97,6 +100,8 @@ HOWS = [
     "wait_for wire",
     "wait_for 0",
     *(["timeout queued", "timeout running", "timeout wire"] if HAS_TIMEOUT else []),
+    "drop before",
+    "drop after",
 ]
 how_st = st.sampled_from(HOWS)
 call_st = st.integers(1, 16)
@@ -108,6 +113,18 @@ _RUNNING_CODES = (0, 50, 100)
 # Controller seconds within which every stop is over: the slowest ramp down here is SP
 # 60 000 at DC 20 480 (2.9 s), plus IT smoothing.
 STOP_TIME = 3.5
+
+
+def _died(error: BaseException | None) -> bool:
+    """Whether ``error`` is a dead link's, or a stop that could not be confirmed after one."""
+    if isinstance(error, MotionError):
+        error = error.__cause__
+    return isinstance(error, GalilConnectionError)
+
+
+def _worker(thread: threading.Thread) -> bool:
+    """Whether ``thread`` is one of the async controller's worker threads."""
+    return thread.name.startswith("galil-aio-")
 
 
 def _picked(items: list[T], pick: int) -> T:
@@ -166,6 +183,8 @@ class AsyncSequences(RuleBasedStateMachine):
         self.unawaited: list[MoveHandle] = []  # started in the step, never awaited by it
         self.outcomes: list[tuple[Running, MoveResult | None, MotionError | None]] = []
         self.cancel_asked = False  # the step's trap cancelled (or timed out) its task
+        # The errors a dead link may raise in the step: none, unless the step's link dies.
+        self.dead: tuple[type[GalilConnectionError], ...] = ()
         # Motion a cancellation stopped: (axes, the handle, controller time it must be over).
         self.stopping: list[tuple[str, MoveHandle, float]] = []
 
@@ -181,7 +200,11 @@ class AsyncSequences(RuleBasedStateMachine):
         self.owned, self.outcomes, self.unawaited = [], [], []
         try:
             with transcript(self.dmc) as sent:
-                return self.run(self._act(body, how, n))
+                try:
+                    return self.run(self._act(body, how, n))
+                finally:
+                    if how.startswith("drop"):
+                        self.reopen_if_dead()
         except _CancelledError:
             self.after_cancel(before, f"{how} at {n}, sent {sent.lines}")
             raise
@@ -194,6 +217,8 @@ class AsyncSequences(RuleBasedStateMachine):
         self.cancel_asked = False
         if how == "plain":
             return await body()
+        if how.startswith("drop"):
+            return await self._dropped(body, n - 1, after=how == "drop after")
         if how == "wait_for 0":
             try:
                 return await asyncio.wait_for(body(), 0)
@@ -237,6 +262,36 @@ class AsyncSequences(RuleBasedStateMachine):
             assert isinstance(task.exception(), asyncio.TimeoutError), (how, n, task)
         else:
             assert task.cancelled(), (how, n, task.exception() or task.result())
+        raise _CancelledError
+
+    def reopen_if_dead(self) -> None:
+        """A link the step's drop left dead is reopened, as a user would (``reconnect()``).
+        A reopened link's poll thread (the user's reconnect, or a guard's) is the link's,
+        not one left behind."""
+        if self.dmc.link.dead:
+            self.run(self.c.reconnect())
+        self.threads_connected |= {
+            t for t in threading.enumerate() if t.name.startswith(("galil-poll", "galil-messages"))
+        }
+
+    async def _dropped(self, body: Callable[[], Awaitable[T]], at: int, *, after: bool) -> T:
+        """Run ``body()`` while the link dies at the worker threads' ``at``-th write or read:
+        what raises the dead link's error (or a ``MotionError`` from it: a stop not
+        confirmed) was cut short, as a cancelled call is (:class:`_CancelledError`); the
+        motion it started or awaited is then checked the same way."""
+        tripped: list[bool] = []
+        self.dead = (GalilConnectionError,)
+        try:
+            with _dropped(self.dmc.link, at, after=after, threads=_worker, tripped=tripped):
+                return await body()
+        except GalilConnectionError:
+            if not tripped:
+                raise
+        except MotionError as exc:
+            if not tripped or not isinstance(exc.__cause__, GalilConnectionError):
+                raise
+        finally:
+            self.dead = ()
         raise _CancelledError
 
     def after_cancel(self, before: dict[str, MoveHandle | None], step: str) -> None:
@@ -417,9 +472,14 @@ class AsyncSequences(RuleBasedStateMachine):
             runs = []
             for got in out:
                 if isinstance(got, BaseException):
-                    assert isinstance(got, (InvalidArgument, MotionError)), repr(got)
+                    assert isinstance(got, (InvalidArgument, MotionError, *self.dead)), repr(got)
                 else:
                     runs.append(self.record(got))
+            if dead := [e for e in out if _died(e)]:
+                # (the link died under one start: the others' moves are the caller's, who
+                # has their handles and never awaits them)
+                self.unawaited.extend(r.handle for r in runs)
+                raise dead[0]
             self.owned.extend(r.handle for r in runs)
             with warnings.catch_warnings():
                 if any(r.unpredictable for r in runs):  # (not the library's doing)
@@ -456,16 +516,18 @@ class AsyncSequences(RuleBasedStateMachine):
                     error = task.exception()
                     if error is None:
                         self.outcomes.append((run, task.result(), None))
-                    elif isinstance(error, MotionError):  # a limit stopped it (or a follower)
-                        self.outcomes.append((run, None, error))
-        assert all(isinstance(e, MotionError) for e in errors), errors
-        for task in tasks:
-            if task.done() and not task.cancelled():
-                assert isinstance(task.exception(), (type(None), MotionError, GalilTimeoutError))
+                    elif isinstance(error, MotionError) and not _died(error):
+                        self.outcomes.append((run, None, error))  # a limit stopped it
+        assert all(isinstance(e, (MotionError, *self.dead)) for e in errors), errors
+        ended = [t.exception() for t in tasks if t.done() and not t.cancelled()]
+        for error in ended:
+            assert isinstance(error, (type(None), MotionError, GalilTimeoutError, *self.dead))
         if errors:
             self.stopped_siblings(runs)
         if cancelled:
             raise asyncio.CancelledError
+        if dead := [e for e in (*errors, *ended) if _died(e)]:
+            raise dead[0]  # (the step was cut short by the dead link)
 
     def stopped_siblings(self, runs: list[Running]) -> None:
         """A TaskGroup's MotionError cancelled the other waits: their moves were stopped."""
@@ -679,6 +741,10 @@ class AsyncSequences(RuleBasedStateMachine):
         if not entered:
             return  # (cancelled before the block began)
         self.interfere()
+        if how.startswith("drop"):
+            # (the guard's ST went out and the link died while it watched the ramp down: it
+            # raised the block's error once the stop was sent)
+            self.run(self.c.sleep(STOP_TIME))
         assert not any(self.dmc.query_operands([f"_BG{x}" for x in AXES if self._free(x)]))
 
     # -- programs, I/O, capture -------------------------------------------------------------
@@ -741,6 +807,10 @@ class AsyncSequences(RuleBasedStateMachine):
         ):
             self.act(body, how, n)
         xq = self.dmc.query_operands(threads)
+        if how.startswith("drop"):
+            # (a wait whose link died cannot halt its routine, on the last thread: it watches
+            # on until its input changes, and the next wait takes the thread over)
+            xq[-1] = -1
         assert all(x < 0 for x, was in zip(xq, idle, strict=True) if was), f"a routine runs: {xq}"
 
     @rule(seconds=st.sampled_from([0.1, 0.5]), how=how_st, n=call_st)
@@ -757,6 +827,10 @@ class AsyncSequences(RuleBasedStateMachine):
 
         with contextlib.suppress(_CancelledError):
             self.act(body, how, n)
+        if self.capture is None and how.startswith("drop"):
+            # (a start whose link died once its RC went out: nothing could stop the
+            # recording, which ends by itself)
+            self.run(self.c.sleep(seconds + 0.05))
         if self.capture is None:  # (what the step started is over, or never began)
             assert not self.dmc.query_operands(["_RC"])[0]
 
