@@ -356,8 +356,14 @@ class AsyncSequences(RuleBasedStateMachine):
         self.outcomes.append((run, result, limited))
 
     # -- setup ------------------------------------------------------------------------------
-    @initialize()
-    def setup(self) -> None:
+    @initialize(reconnect=st.booleans())
+    def setup(self, reconnect: bool) -> None:
+        if reconnect:  # (a dead link reopened by itself: a query that met it asked again)
+            self.run(self.c.aclose())
+            self.c = self.run(aio.connect("sim://DMC-4040", reconnect=True))
+            self.dmc = self.c.sync
+            self.sim = sim_of(self.dmc)
+            self.threads_connected = set(threading.enumerate())
         for a in AXES:
             self.sim.set_home_switch(a, edge=-3000, index_period=2000)
             self.run(self.c.axes[a].set_home_speed(2000))
