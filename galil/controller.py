@@ -592,7 +592,13 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
             with self.link.reopening():  # commands meanwhile wait for the new link
                 self.records_room.suspend()
                 _close_parts(self._parts, keep_watchdogs=True, keep_streams=True)
-                self._open(None)
+                try:
+                    self._open(None)
+                except BaseException as exc:
+                    # Dead, not closed: the motion the library started may still run, and a
+                    # later reopen (another reconnect(), a guard's, close()'s) can stop it.
+                    self.link.failed(f"reopening it failed: {_first_line(exc)}")
+                    raise
                 self.records_room.resume()
                 self.interrupts.reopen()
         finally:
@@ -1036,6 +1042,11 @@ def _collected(parts: _Parts, name: str) -> None:
         threading.Thread(
             target=_close_quietly, args=(parts,), name="galil-finalize", daemon=True
         ).start()
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).splitlines()
+    return text[0] if text and text[0] else type(exc).__name__
 
 
 def _close_quietly(parts: _Parts) -> None:

@@ -483,6 +483,13 @@ class LinkCore:
                 self._dead = ""
                 self._close_transport()
 
+    def failed(self, reason: str) -> None:
+        """The link could not be reopened: it is dead (``reason``), not closed. Calls say so
+        and advise ``reconnect()``; a guard and ``close()`` reopen it once for their stops."""
+        with self._lock:
+            self._open = True
+            self._dead = reason
+
     def _close_transport(self) -> None:
         self._open = False
         if self.transport is not None:

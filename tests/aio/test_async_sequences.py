@@ -206,6 +206,10 @@ class AsyncSequences(RuleBasedStateMachine):
                     if how.startswith("drop"):
                         self.reopen_if_dead()
         except _CancelledError:
+            if how.startswith("drop"):
+                # (a guard that met the dead link stops the axes it names, whatever runs on
+                # them: the ends of the motion already there are not the prediction's)
+                self.interfere()
             self.after_cancel(before, f"{how} at {n}, sent {sent.lines}")
             raise
         finally:

@@ -169,3 +169,52 @@ def test_a_message_handle_raising_a_bare_os_error_ends_its_reader_quietly(
         assert handle.tried.wait(5.0)  # the reader thread has read (and failed) at least once
         assert dmc.query_operands(["_BGA"]) == [0]  # the command link is untouched
     assert crashed == []  # no reader thread died with a traceback
+
+
+def _unplugged(sim: SimController) -> tuple[Controller, list[bool]]:
+    """A controller on ``sim`` jogging A, whose link then dies with the controller out of
+    reach (``reachable[0] = True`` plugs it back in)."""
+    reachable = [True]
+
+    def factory() -> SimLinkWrapper:
+        if not reachable[0]:
+            raise galil.GalilConnectionError("the controller does not answer")
+        return open_transport("sim://DMC-4040", controller=sim)  # type: ignore[return-value]
+
+    dmc = Controller(factory, timeout=0.2)
+    dmc.A.jog(20_000)
+    transport = dmc.link.transport
+    assert transport is not None
+    transport.close()  # the cable is pulled
+    reachable[0] = False
+    return dmc, reachable
+
+
+def test_a_failed_reconnect_leaves_the_link_dead_not_closed() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    dmc, reachable = _unplugged(sim)
+    with pytest.raises(galil.GalilConnectionError, match="does not answer"):
+        dmc.reconnect()
+    # Not "closed (close(), ...): galil.connect() opens a new one": the user did not close it.
+    assert "dead: call reconnect()" in repr(dmc)
+    with pytest.raises(galil.GalilConnectionError, match=r"reopening it failed.*reconnect\(\)"):
+        dmc.command("MG 1")
+    reachable[0] = True
+    dmc.reconnect()
+    assert dmc.query_number("MG 6*7") == 42
+    dmc.A.stop()  # the jog the library started is still its own
+    sim.advance(0.5)
+    assert not sim.motion("A").moving
+    dmc.close()
+
+
+def test_close_after_a_failed_reconnect_still_stops_the_motion_the_library_started() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    dmc, reachable = _unplugged(sim)
+    with pytest.raises(galil.GalilConnectionError):
+        dmc.reconnect()
+    reachable[0] = True  # back by the time the script gives up and closes
+    dmc.close()  # (reopened once for its stops, decision 0073)
+    sim.advance(0.5)
+    assert not sim.motion("A").moving
+    assert not dmc.link.is_open
