@@ -322,14 +322,7 @@ class IO:
                     [cmds.assign("ginput", n), cmds.assign("ginlevel", 1 if high else 0)]
                 )
                 self._routines.start(_INPUT_ROUTINE, t)
-                try:
-                    self._messages.ensure_polling()
-                    in_time = _wait(link, seen, timeout)
-                except BaseException:
-                    self._halt_quietly(t)
-                    raise
-                if not in_time:
-                    self._routines.halt(t)
+                if not self._watched(t, seen, timeout):
                     raise link.error(
                         GalilTimeoutError,
                         f"input {n} did not go {'high' if high else 'low'} within {timeout} s",
@@ -337,11 +330,20 @@ class IO:
             finally:
                 unsubscribe()
 
-    def _halt_quietly(self, thread: int) -> None:
-        """Halt the routine of a wait cut short, so that it does not watch on for nobody
-        (on a dead link it cannot be: see :meth:`wait_for_input`)."""
-        with contextlib.suppress(GalilError):
+    def _watched(self, thread: int, seen: threading.Event, timeout: float | None) -> bool:
+        """Wait for the routine on ``thread`` to say the input changed (``seen``): ``True``,
+        or ``False`` once ``timeout`` has passed. Either way but the first the routine is
+        halted (quietly when something cut the wait short: on a dead link it cannot be)."""
+        try:
+            self._messages.ensure_polling()
+            in_time = _wait(self._link, seen, timeout)
+        except BaseException:
+            with contextlib.suppress(GalilError):
+                self._routines.halt(thread)
+            raise
+        if not in_time:
             self._routines.halt(thread)
+        return in_time
 
 
 def _wait(link: CommandLink, seen: threading.Event, timeout: float | None) -> bool:
