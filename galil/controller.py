@@ -601,6 +601,8 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
                     raise
                 self.records_room.resume()
                 self.interrupts.reopen()
+                for dog in self._watchdogs:  # (one stopped while the link was dead)
+                    dog.reopened()
         finally:
             self._life.release()
 
@@ -745,7 +747,8 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         Args:
             timeout: seconds of controller time without a heartbeat before motion stops.
             thread: the program thread for the routine (default: the last one); a thread that
-                runs a program is refused.
+                runs a program is refused. A watchdog of this controller's on that thread is
+                replaced: it stops beating, and its ``stop()`` no longer halts the thread.
             interval: seconds between heartbeats (default: a quarter of ``timeout``).
 
         Returns:
@@ -757,6 +760,10 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
                 running while the routine must be installed.
         """
         t, n, every = check_watchdog_args(self.link, timeout, thread, interval)
+        for old in self._watchdogs:
+            if old.thread == n:
+                old.hand_over()  # (the new one takes its thread: its stop() halts nothing)
+        self._watchdogs[:] = [dog for dog in self._watchdogs if dog.beating or dog.halt_pending]
         dog = Watchdog(self.link, self.routines, t, thread=n, interval=every).start()
         self._watchdogs.append(dog)
         return dog

@@ -26,7 +26,7 @@ import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from galil.errors import InvalidArgument
+from galil.errors import CommandError, InvalidArgument
 from galil.link import CommandLink
 from galil.models import ModelSpec
 from galil.protocol import commands as cmds
@@ -293,8 +293,12 @@ class Routines:
                 return False, ()
             return True, self._download(self._checked(combined), for_user=True)
 
-    def check_free(self, thread: int, label: str) -> None:
+    def check_free(self, thread: int, label: str) -> bool:
         """Refuse a thread that does not exist or runs another program (one query).
+
+        Returns:
+            Whether the thread still runs the library's ``label`` (one left by a call that
+            could not halt it: its link died).
 
         Raises:
             InvalidArgument: the thread does not exist or runs a program.
@@ -307,11 +311,13 @@ class Routines:
                 f"{model.name} has threads 0..{model.threads - 1}, not {thread}",
                 model=model.name,
             )
-        if thread in self.running() and self._threads.get(thread) != label:
+        busy = thread in self.running()
+        if busy and self._threads.get(thread) != label:
             raise InvalidArgument(
                 f"thread {thread} runs a program; choose another thread (thread=...)",
                 model=model.name,
             )
+        return busy
 
     def start(self, label: str, thread: int, *, owner: object | None = None) -> None:
         """Run the routine at ``label`` on ``thread`` (which must be free).
@@ -321,16 +327,37 @@ class Routines:
                 refuses to start it again while it runs, and ``halt(thread, owner=owner)``
                 halts the thread only while this run holds it.
 
+        A routine of the library's that still runs ``label`` on the thread, left by a call
+        whose link died before it could halt it (a watchdog, a wait for an input), is halted
+        and started again; a one-shot run's (``owner``) is not (``XQ`` refuses it: TC 19).
+        The thread is the library's from the moment its ``XQ`` may have gone out.
+
         Raises:
             InvalidArgument: the thread does not exist or runs a program.
+            CommandError: the controller refused the ``XQ``.
         """
         with self._lock:
-            self.check_free(thread, label)
-            self.link.command_line([cmds.xq(label, thread)])
-            self._threads[thread] = label
+            left = self.check_free(thread, label)
+            line = [cmds.hx(thread)] if left and owner is None else []
+            before = self._threads.get(thread), self._owners.get(thread)
+            self._threads[thread] = label  # (the XQ's fate unknown if the link dies under it)
             self._owners.pop(thread, None)
             if owner is not None:
                 self._owners[thread] = owner
+            try:
+                self.link.command_line([*line, cmds.xq(label, thread)])
+            except CommandError:  # refused: the thread is as it was
+                self._restore(thread, *before)
+                raise
+
+    def _restore(self, thread: int, label: str | None, owner: object | None) -> None:
+        """Put back what the library held on ``thread`` before a refused start."""
+        self._threads.pop(thread, None)
+        self._owners.pop(thread, None)
+        if label is not None:
+            self._threads[thread] = label
+        if owner is not None:
+            self._owners[thread] = owner
 
     def forget(self, thread: int | None = None) -> None:
         """``thread`` was halted behind :meth:`halt`'s back (after a failed start); with no

@@ -76,6 +76,8 @@ class Watchdog:
         self._beat = cmds.stamp(BEAT)
         self._ask = cmds.mg_operand(f"_XQ{thread}")  # (on the beat's line: the routine runs?)
         self._lost = False
+        self._live = False  # started, and not stopped since
+        self._halt_pending = False  # stopped on a dead link: halted once it is reopened
 
     def start(self) -> Watchdog:
         """Install the routine, stamp the first heartbeat, run it, and keep beating.
@@ -104,6 +106,7 @@ class Watchdog:
                 f"the watchdog routine {LABEL} is not running on thread {self.thread} after "
                 "XQ; the watchdog is not started",
             )
+        self._live = True
         link.set_keepalive(self._beat, self.interval)
         self._stop.clear()
         self._beater = threading.Thread(target=self._run, name="galil-watchdog", daemon=True)
@@ -147,9 +150,33 @@ class Watchdog:
         if self._beater is not None and self._beater is not threading.current_thread():
             self._beater.join(timeout=2.0)
         self._beater = None
+        if self._live:  # (a second stop halts nothing: the thread may run another routine)
+            self._live, self._halt_pending = False, True
+        self.reopened()
+
+    def hand_over(self) -> None:
+        """Stop beating and leave the routine to a new watchdog on the same thread: this
+        one's :meth:`stop` then halts nothing."""
+        self._live = self._halt_pending = False
+        self.stop()
+
+    @property
+    def halt_pending(self) -> bool:
+        """Whether the routine still waits for a halt: stopped while the link was dead."""
+        return self._halt_pending
+
+    def reopened(self) -> None:
+        """The link works (again): a stop that could not halt the routine (its link was
+        dead) halts it now, before it fires for want of the heartbeats it stopped."""
+        if not self._halt_pending or self.beating:
+            return
+        if self._routines.holder(self.thread) != LABEL:  # (a reset halted it: nothing left)
+            self._halt_pending = False
+            return
         if self._link.is_open and not self._link.dead:
             with contextlib.suppress(GalilError):
                 self._routines.halt(self.thread)
+                self._halt_pending = False
 
     @property
     def beating(self) -> bool:

@@ -12,7 +12,7 @@ from galil.protocol import commands as cmds
 from galil.routines import MARKER, Routine
 from galil.sim.parse import split_program_line
 from galil.sim.programs import NOT_IN_PROGRAM
-from galil.testing import nothing_sent, simulated
+from galil.testing import nothing_sent, sim_of, simulated
 
 
 def _library_labels(dmc: galil.Controller) -> list[str]:
@@ -161,3 +161,27 @@ def test_a_wait_for_an_input_cut_short_halts_its_routine(error: type[BaseExcepti
         del dmc.link.pause
         assert dmc.query_operands(["_XQ7"]) == [-1]  # not left watching the input
         assert dmc.routines.threads == {}
+
+
+def test_a_wait_for_an_input_whose_link_died_at_its_start_leaves_the_thread_to_the_next() -> None:
+    with simulated() as dmc:
+        transport = dmc.link.transport
+        assert transport is not None
+        write = transport.write
+
+        def dies_after_xq(data: bytes) -> None:
+            write(data)
+            if data.startswith(b"XQ #GINWAIT"):
+                transport.close()  # the routine runs; the reply is lost with the link
+
+        transport.write = dies_after_xq  # type: ignore[method-assign]
+        with pytest.raises(galil.GalilConnectionError):
+            dmc.io.wait_for_input(2, high=False, timeout=0.1)
+        dmc.reconnect()
+        assert dmc.query_operands(["_XQ7"])[0] >= 0  # its routine watches on for nobody
+        # The library still holds the thread: the next wait halts the routine and runs it
+        # again (not "thread 7 runs a program", nor XQ's TC 19).
+        with pytest.raises(galil.GalilTimeoutError, match="did not go low"):
+            dmc.io.wait_for_input(2, high=False, timeout=0.1)
+        sim_of(dmc).set_input(2, False)
+        dmc.io.wait_for_input(2, high=False, timeout=0.5)

@@ -167,3 +167,45 @@ def test_a_program_error_that_stops_the_routine_is_said_while_the_host_beats_on(
         time.sleep(dog.interval * 3)  # more beats: said once
         assert len([r for r in caplog.records if "no longer runs" in r.getMessage()]) == 1
         assert dmc.watchdog(0.5).running  # a new one guards again
+
+
+def _pull_the_cable(dmc: galil.Controller) -> None:
+    transport = dmc.link.transport
+    assert transport is not None
+    transport.close()
+    with pytest.raises(galil.GalilConnectionError):
+        dmc.command("MG 1")  # (the link finds out)
+
+
+def test_a_watchdog_stopped_while_the_link_is_dead_is_halted_when_it_is_reopened() -> None:
+    with simulated() as dmc:
+        dog = dmc.watchdog(0.5)
+        _pull_the_cable(dmc)
+        dog.stop()  # the HX cannot go out: the routine still watches on the controller
+        assert dog.halt_pending
+        dmc.reconnect()  # back within the timeout
+        assert not dog.halt_pending
+        assert dmc.query_operands(["_XQ7"]) == [-1]
+        jog = dmc.A.jog(20_000)
+        dmc.sleep(1.0)  # the stopped watchdog does not fire on the new motion
+        assert dmc.A.moving
+        assert dmc.query_operands([FIRED]) == [0]
+        jog.stop()
+        with dmc.watchdog(0.5) as again:  # and the thread is free for a new one
+            assert again.running
+
+
+def test_a_new_watchdog_on_the_thread_of_a_running_one_takes_it_over() -> None:
+    with simulated() as dmc:
+        first = dmc.watchdog(0.5)
+        second = dmc.watchdog(2.0)  # (another timeout, say)
+        assert not first.beating
+        assert second.beating
+        first.stop()  # halts nothing now: the routine is the second's
+        assert second.running
+        jog = dmc.A.jog(20_000)
+        dmc.sleep(1.0)  # beyond the first's timeout: the second's guards
+        assert dmc.A.moving
+        jog.stop()
+        second.stop()
+        assert not second.running

@@ -185,6 +185,12 @@ class AsyncWatchdog(Room[Watchdog]):
         """Whether the host's heartbeat runs (no I/O)."""
         return self.sync.beating
 
+    @property
+    def halt_pending(self) -> bool:
+        """Whether the routine still waits for a halt: stopped while the link was dead, it
+        is halted when the link is reopened (no I/O)."""
+        return self.sync.halt_pending
+
     stop = twin(Watchdog.stop)
 
     async def running(self) -> bool:

@@ -46,6 +46,7 @@ NOT_TWINNED = {
     "on_cancel", "take_cancel",
     "queue", "reopen",  # Interrupts: the sync queue, the reconnect hook
     "start",  # Capture, Watchdog: the async ones come started
+    "reopened", "hand_over",  # Watchdog: the controller's hooks (a reconnect, a new one)
     "operand", "bank_bits", "function",  # the bank layout of the digital I/O rooms
 }  # fmt: skip
 #: Per room, sync names with no twin on purpose: the async variables are no mapping (their
