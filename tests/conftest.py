@@ -7,6 +7,7 @@ pty that a later test is using; the check below names the test that left it.
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import signal
@@ -14,6 +15,7 @@ import subprocess
 import sys
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -112,3 +114,16 @@ def galil_sim(spawn: Callable[..., subprocess.Popen[str]]) -> Iterator[Callable[
     for proc in procs:
         proc.send_signal(signal.SIGINT)
         proc.wait(timeout=20)
+
+
+@pytest.fixture
+def quiet() -> Iterator[None]:
+    """No log records and no warnings for the test: the stress tests' dropped links log
+    WARNINGs and their unwaited moves warn by the hundred, all expected."""
+    logging.disable(logging.CRITICAL)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            yield
+    finally:
+        logging.disable(logging.NOTSET)

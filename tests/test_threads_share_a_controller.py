@@ -19,14 +19,11 @@ what each thread asks for (seeded); the threads' interleaving is not. Run it lon
 from __future__ import annotations
 
 import contextlib
-import logging
 import os
 import random
 import threading
 import time
 import traceback
-import warnings
-from collections.abc import Iterator
 
 import pytest
 
@@ -40,14 +37,7 @@ SECONDS = 0.3  # of real time per trial, the threads at work
 OPS = ("move", "jog", "stop", "query", "wait", "drop", "reconnect", "speed", "vector", "home")
 
 
-@pytest.fixture(autouse=True)
-def _quiet() -> Iterator[None]:
-    """The stops after a dropped link log WARNINGs, and unwaited moves warn: expected here."""
-    logging.disable(logging.CRITICAL)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        yield
-    logging.disable(logging.NOTSET)
+pytestmark = pytest.mark.usefixtures("quiet")  # (tests/conftest.py)
 
 
 def _step(dmc: galil.Controller, rnd: random.Random) -> None:

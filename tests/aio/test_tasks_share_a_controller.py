@@ -14,12 +14,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import logging
 import os
 import random
 import traceback
-import warnings
-from collections.abc import Iterator
 
 import pytest
 from aio_helpers import run
@@ -34,14 +31,7 @@ SECONDS = 0.3  # of the loop's time per trial, the tasks at work
 OPS = ("move", "jog", "stop", "query", "drop", "reconnect", "speed", "vector", "home", "cancel")
 
 
-@pytest.fixture(autouse=True)
-def _quiet() -> Iterator[None]:
-    """The stops after a dropped link log WARNINGs, and unwaited moves warn: expected here."""
-    logging.disable(logging.CRITICAL)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        yield
-    logging.disable(logging.NOTSET)
+pytestmark = pytest.mark.usefixtures("quiet")  # (tests/conftest.py)
 
 
 async def _cancelled_start(axis: aio.AsyncAxis, rnd: random.Random) -> None:
