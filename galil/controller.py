@@ -21,7 +21,7 @@ import threading
 import time
 import warnings
 import weakref
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -592,13 +592,8 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
             with self.link.reopening():  # commands meanwhile wait for the new link
                 self.records_room.suspend()
                 _close_parts(self._parts, keep_watchdogs=True, keep_streams=True)
-                try:
+                with _dead_if_failing(self.link):
                     self._open(None)
-                except BaseException as exc:
-                    # Dead, not closed: the motion the library started may still run, and a
-                    # later reopen (another reconnect(), a guard's, close()'s) can stop it.
-                    self.link.failed(f"reopening it failed: {_first_line(exc)}")
-                    raise
                 self.records_room.resume()
                 self.interrupts.reopen()
                 for dog in self._watchdogs:  # (one stopped while the link was dead)
@@ -760,10 +755,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
                 running while the routine must be installed.
         """
         t, n, every = check_watchdog_args(self.link, timeout, thread, interval)
-        for old in self._watchdogs:
-            if old.thread == n:
-                old.hand_over()  # (the new one takes its thread: its stop() halts nothing)
-        self._watchdogs[:] = [dog for dog in self._watchdogs if dog.beating or dog.halt_pending]
+        _hand_over(self._watchdogs, n)
         dog = Watchdog(self.link, self.routines, t, thread=n, interval=every).start()
         self._watchdogs.append(dog)
         return dog
@@ -1051,9 +1043,26 @@ def _collected(parts: _Parts, name: str) -> None:
         ).start()
 
 
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).splitlines()
-    return text[0] if text and text[0] else type(exc).__name__
+@contextlib.contextmanager
+def _dead_if_failing(link: Link) -> Iterator[None]:
+    """A reopen that fails leaves the link dead, not closed (decision 0075): the motion the
+    library started may still run, and a later reopen (another reconnect(), a guard's,
+    close()'s) can stop it."""
+    try:
+        yield
+    except BaseException as exc:
+        text = str(exc).splitlines()
+        link.failed(f"reopening it failed: {text[0] if text and text[0] else type(exc).__name__}")
+        raise
+
+
+def _hand_over(dogs: list[Watchdog], thread: int) -> None:
+    """A new watchdog takes ``thread``: the old ones there stop beating, and their stop()
+    halts nothing (decision 0076); those stopped and halted are forgotten."""
+    for old in dogs:
+        if old.thread == thread:
+            old.hand_over()
+    dogs[:] = [dog for dog in dogs if dog.beating or dog.halt_pending]
 
 
 def _close_quietly(parts: _Parts) -> None:
