@@ -340,6 +340,30 @@ def test_a_set_that_times_out_stops_the_axis(engine: RunEngine) -> None:
     assert in_loop(x.axis.stop_code())[0] == 4
 
 
+def test_a_set_whose_link_dies_mid_move_fails_and_the_axis_is_stopped(engine: RunEngine) -> None:
+    x = mock_motor("tcp://127.0.0.1:4")
+    link = x.controller.sync.link
+    transport = link.transport
+    assert transport is not None
+    write = transport.write
+
+    def dies_at_the_first_poll(data: bytes) -> None:
+        write(data)
+        if data.startswith(b"MG _BGA,_RPA,_SCA"):
+            transport.close()  # the cable pulled mid-move: the poll's reply is lost
+
+    transport.write = dies_at_the_first_poll  # type: ignore[method-assign]
+
+    async def body() -> float:
+        with pytest.raises(galil.GalilConnectionError, match="reopened and A stopped"):
+            await x.set(50)  # 2.5 s at 20 mm/s
+        return await _settled(x)
+
+    assert in_loop(body()) < 50
+    assert in_loop(x.axis.stop_code())[0] == 4
+    assert not link.dead
+
+
 @pytest.mark.parametrize("timeout", [math.inf, math.nan, -1, "5", True], ids=repr)
 def test_a_bad_set_timeout_fails_the_status_before_anything_is_sent(
     engine: RunEngine, timeout: object
