@@ -359,6 +359,9 @@ class MotionTracker:
         #: How many times a guard reopened a dead link (a guard whose stop reopened it
         #: through a guard of its own knows by this that the link works again).
         self.reopens = 0
+        #: Axes a guard could not stop (its dead link not reopened): close() stops them too
+        #: (decision 0077); a start that drives one again takes it back.
+        self.unstopped = ""
         self._schedule: MoveHandle | None = None  # the last speed schedule started
         self._sequence: MoveHandle | None = None  # the last vector sequence started
 
@@ -386,6 +389,8 @@ class MotionTracker:
             streams = [w.letters for w in self._watches]
         stops: list[tuple[str, Callable[[], None]]] = [(h.axes, h.stop) for h in handles.values()]
         stops += [(s, functools.partial(stop_axes, link, self, s)) for s in streams]
+        if unstopped := self.unstopped:  # (what a guard could not stop: decision 0077)
+            stops.append((unstopped, functools.partial(stop_axes, link, self, unstopped)))
         failed = ""
         interrupted: BaseException | None = None
         for letters, stop in stops:  # (a stream hears of its ST: no CD after it)
@@ -414,6 +419,9 @@ class MotionTracker:
         """``handle`` now drives its axes (and the axes geared to them); stopped at once when
         its thread's starts are refused (:meth:`refuse_starts`)."""
         with self.lock:
+            if self.unstopped:  # (the library drives those again)
+                ours = {*handle._tracks, *handle._followers}
+                self.unstopped = "".join(a for a in self.unstopped if a not in ours)
             for a in handle._tracks:  # (handle.axes, then handle.followers)
                 self._active[a] = handle
             for a in handle._followers:
@@ -1444,7 +1452,7 @@ def motion_guard(
         reopen = _Reopen(reconnect, tracker)
         moving = _stop_for_guard(link, tracker, letters, None, reopen.or_none())
         if moving:
-            raise _not_stopped(link, exc, moving, "inside motion()") from exc
+            raise _not_stopped(link, tracker, exc, moving, "inside motion()") from exc
         if reopen.reopened and isinstance(exc, GalilConnectionError):
             raise _reopened(link, exc, letters, "the block") from exc
         raise
@@ -1558,7 +1566,9 @@ class _StopOnError:
             also = _geared_among(tracker, self._letters)
         moving = _stop_for_guard(link, tracker, self._letters, self._stop, reopen.or_none(), also)
         if moving:
-            raise _not_stopped(link, exc, moving, "while starting or changing motion") from exc
+            raise _not_stopped(
+                link, tracker, exc, moving, "while starting or changing motion"
+            ) from exc
         if reopen.reopened and isinstance(exc, GalilConnectionError):
             if self._is_stop:
                 # The block was the stop itself, and it went out on the reopened link: done.
@@ -1619,7 +1629,14 @@ def _reopened(
     )
 
 
-def _not_stopped(link: CommandLink, exc: BaseException, moving: str, where: str) -> MotionError:
+def _not_stopped(
+    link: CommandLink, tracker: MotionTracker | None, exc: BaseException, moving: str, where: str
+) -> MotionError:
+    """The error of a guard that could not stop ``moving``; the tracker keeps them for
+    close() to stop (decision 0077)."""
+    if tracker is not None:
+        with tracker.lock:
+            tracker.unstopped += "".join(a for a in moving if a not in tracker.unstopped)
     return MotionError(
         f"{type(exc).__name__} {where}; axes {moving} could not be stopped and may still be moving",
         moving=moving,

@@ -218,3 +218,34 @@ def test_close_after_a_failed_reconnect_still_stops_the_motion_the_library_start
     sim.advance(0.5)
     assert not sim.motion("A").moving
     assert not dmc.link.is_open
+
+
+def test_close_stops_what_a_guard_could_not_stop_while_the_controller_was_gone() -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    reachable = [True]
+
+    def factory() -> SimLinkWrapper:
+        if not reachable[0]:
+            raise galil.GalilConnectionError("the controller does not answer")
+        return open_transport("sim://DMC-4040", controller=sim)  # type: ignore[return-value]
+
+    dmc = Controller(factory, timeout=0.2)
+    transport = dmc.link.transport
+    assert transport is not None
+    write = transport.write
+
+    def dies_after_bg(data: bytes) -> None:
+        write(data)
+        if b"BG B" in data:  # the jog went out; the cable is pulled before its reply
+            transport.close()
+            reachable[0] = False  # ...and stays out while the guard tries to stop it
+
+    transport.write = dies_after_bg  # type: ignore[method-assign]
+    with pytest.raises(galil.MotionError, match="B could not be stopped") as info:
+        dmc.B.jog(20_000)
+    assert info.value.moving == "B"
+    assert sim.motion("B").moving
+    reachable[0] = True  # back by the time the script gives up and closes
+    dmc.close()  # (no handle for that jog: the guard's failure is what close() remembers)
+    sim.advance(0.5)
+    assert not sim.motion("B").moving
