@@ -171,9 +171,9 @@ def test_a_message_handle_raising_a_bare_os_error_ends_its_reader_quietly(
     assert crashed == []  # no reader thread died with a traceback
 
 
-def _unplugged(sim: SimController) -> tuple[Controller, list[bool]]:
-    """A controller on ``sim`` jogging A, whose link then dies with the controller out of
-    reach (``reachable[0] = True`` plugs it back in)."""
+def _pluggable(sim: SimController) -> tuple[Controller, list[bool]]:
+    """A controller on ``sim`` whose links open only while ``reachable[0]`` is true (the
+    cable plugged in)."""
     reachable = [True]
 
     def factory() -> SimLinkWrapper:
@@ -181,7 +181,13 @@ def _unplugged(sim: SimController) -> tuple[Controller, list[bool]]:
             raise galil.GalilConnectionError("the controller does not answer")
         return open_transport("sim://DMC-4040", controller=sim)  # type: ignore[return-value]
 
-    dmc = Controller(factory, timeout=0.2)
+    return Controller(factory, timeout=0.2), reachable
+
+
+def _unplugged(sim: SimController) -> tuple[Controller, list[bool]]:
+    """A controller on ``sim`` jogging A, whose link then dies with the controller out of
+    reach (``reachable[0] = True`` plugs it back in)."""
+    dmc, reachable = _pluggable(sim)
     dmc.A.jog(20_000)
     transport = dmc.link.transport
     assert transport is not None
@@ -222,14 +228,7 @@ def test_close_after_a_failed_reconnect_still_stops_the_motion_the_library_start
 
 def test_close_stops_what_a_guard_could_not_stop_while_the_controller_was_gone() -> None:
     sim = SimController("DMC-4040", ManualClock())
-    reachable = [True]
-
-    def factory() -> SimLinkWrapper:
-        if not reachable[0]:
-            raise galil.GalilConnectionError("the controller does not answer")
-        return open_transport("sim://DMC-4040", controller=sim)  # type: ignore[return-value]
-
-    dmc = Controller(factory, timeout=0.2)
+    dmc, reachable = _pluggable(sim)
     transport = dmc.link.transport
     assert transport is not None
     write = transport.write
