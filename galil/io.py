@@ -332,8 +332,9 @@ class IO:
 
     def _watched(self, thread: int, seen: threading.Event, timeout: float | None) -> bool:
         """Wait for the routine on ``thread`` to say the input changed (``seen``): ``True``,
-        or ``False`` once ``timeout`` has passed. Either way but the first the routine is
-        halted (quietly when something cut the wait short: on a dead link it cannot be)."""
+        or ``False`` once ``timeout`` has passed, the routine then halted. Cut short
+        (Ctrl-C, a lost reply), the routine is halted too, quietly: on a dead link it cannot
+        be."""
         try:
             self._messages.ensure_polling()
             in_time = _wait(self._link, seen, timeout)

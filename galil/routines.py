@@ -339,23 +339,19 @@ class Routines:
         with self._lock:
             left = self.check_free(thread, label)
             line = [cmds.hx(thread)] if left and owner is None else []
-            before = self._threads.get(thread), self._owners.get(thread)
-            self._threads[thread] = label  # (the XQ's fate unknown if the link dies under it)
-            self._owners.pop(thread, None)
-            if owner is not None:
-                self._owners[thread] = owner
             try:
                 self.link.command_line([*line, cmds.xq(label, thread)])
             except CommandError:  # refused: the thread is as it was
-                self._restore(thread, *before)
                 raise
+            except BaseException:  # (the XQ's fate unknown: the link died under it)
+                self._hold(thread, label, owner)
+                raise
+            self._hold(thread, label, owner)
 
-    def _restore(self, thread: int, label: str | None, owner: object | None) -> None:
-        """Put back what the library held on ``thread`` before a refused start."""
-        self._threads.pop(thread, None)
+    def _hold(self, thread: int, label: str, owner: object | None) -> None:
+        """``thread`` runs the library's ``label`` (a one-shot run of ``owner``'s)."""
+        self._threads[thread] = label
         self._owners.pop(thread, None)
-        if label is not None:
-            self._threads[thread] = label
         if owner is not None:
             self._owners[thread] = owner
 
