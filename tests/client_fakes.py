@@ -41,6 +41,24 @@ class SimLinkWrapper:
         self.inner.close()
 
 
+def pull_cable_after(
+    transport: object, mark: bytes, then: Callable[[], None] | None = None
+) -> None:
+    """Make ``transport`` (an open one, in place) close once a write with ``mark`` in it went
+    out: the controller got the line, its reply is lost with the link (a cable pulled);
+    ``then`` runs after (say, to keep the controller out of reach)."""
+    write = transport.write  # type: ignore[attr-defined]
+
+    def dying(data: bytes) -> None:
+        write(data)
+        if mark in data:
+            transport.close()  # type: ignore[attr-defined]
+            if then is not None:
+                then()
+
+    transport.write = dying  # type: ignore[attr-defined]
+
+
 class Interrupt(BaseException):
     """Stands for Ctrl-C (a BaseException, like KeyboardInterrupt)."""
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from client_fakes import pull_cable_after
 
 import galil
 from galil.protocol import commands as cmds
@@ -165,16 +166,7 @@ def test_a_wait_for_an_input_cut_short_halts_its_routine(error: type[BaseExcepti
 
 def test_a_wait_for_an_input_whose_link_died_at_its_start_leaves_the_thread_to_the_next() -> None:
     with simulated() as dmc:
-        transport = dmc.link.transport
-        assert transport is not None
-        write = transport.write
-
-        def dies_after_xq(data: bytes) -> None:
-            write(data)
-            if data.startswith(b"XQ #GINWAIT"):
-                transport.close()  # the routine runs; the reply is lost with the link
-
-        transport.write = dies_after_xq  # type: ignore[method-assign]
+        pull_cable_after(dmc.link.transport, b"XQ #GINWAIT")  # (the routine runs)
         with pytest.raises(galil.GalilConnectionError):
             dmc.io.wait_for_input(2, high=False, timeout=0.1)
         dmc.reconnect()

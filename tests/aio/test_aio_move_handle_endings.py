@@ -11,6 +11,7 @@ import gc
 
 import pytest
 from aio_helpers import commands_of, run, sim
+from client_fakes import pull_cable_after
 
 import galil
 import galil.aio as aio
@@ -110,16 +111,7 @@ def test_callbacks_run_once_the_move_is_done() -> None:
 def _dies_after(c: aio.AsyncController, mark: bytes) -> None:
     """The link dies once a line with ``mark`` went out (the controller got it; its reply is
     lost with the link). ``sim://`` reopens onto the same simulator."""
-    transport = c.sync.link.transport
-    assert transport is not None
-    write = transport.write
-
-    def dying(data: bytes) -> None:
-        write(data)
-        if mark in data:
-            transport.close()
-
-    transport.write = dying  # type: ignore[method-assign]
+    pull_cable_after(c.sync.link.transport, mark)
 
 
 def test_a_wait_whose_link_dies_stops_the_move_on_the_reopened_link() -> None:

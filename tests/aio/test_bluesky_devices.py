@@ -23,6 +23,7 @@ import bluesky.plan_stubs as bps
 import bluesky.plans as bp
 from bluesky import RunEngine
 from bluesky.run_engine import RunEngineInterrupted, call_in_bluesky_event_loop
+from client_fakes import pull_cable_after
 from ophyd_async.core import soft_signal_rw
 
 import galil
@@ -343,16 +344,7 @@ def test_a_set_that_times_out_stops_the_axis(engine: RunEngine) -> None:
 def test_a_set_whose_link_dies_mid_move_fails_and_the_axis_is_stopped(engine: RunEngine) -> None:
     x = mock_motor("tcp://127.0.0.1:4")
     link = x.controller.sync.link
-    transport = link.transport
-    assert transport is not None
-    write = transport.write
-
-    def dies_at_the_first_poll(data: bytes) -> None:
-        write(data)
-        if data.startswith(b"MG _BGA,_RPA,_SCA"):
-            transport.close()  # the cable pulled mid-move: the poll's reply is lost
-
-    transport.write = dies_at_the_first_poll  # type: ignore[method-assign]
+    pull_cable_after(link.transport, b"MG _BGA,_RPA,_SCA")  # (mid-move, at the first poll)
 
     async def body() -> float:
         with pytest.raises(galil.GalilConnectionError, match="reopened and A stopped"):

@@ -8,7 +8,7 @@ import threading
 from dataclasses import dataclass, field
 
 import pytest
-from client_fakes import SimLinkWrapper
+from client_fakes import SimLinkWrapper, pull_cable_after
 
 import galil
 from galil.controller import Controller
@@ -229,17 +229,12 @@ def test_close_after_a_failed_reconnect_still_stops_the_motion_the_library_start
 def test_close_stops_what_a_guard_could_not_stop_while_the_controller_was_gone() -> None:
     sim = SimController("DMC-4040", ManualClock())
     dmc, reachable = _pluggable(sim)
-    transport = dmc.link.transport
-    assert transport is not None
-    write = transport.write
 
-    def dies_after_bg(data: bytes) -> None:
-        write(data)
-        if b"BG B" in data:  # the jog went out; the cable is pulled before its reply
-            transport.close()
-            reachable[0] = False  # ...and stays out while the guard tries to stop it
+    def out_of_reach() -> None:  # (while the guard tries to stop the jog)
+        reachable[0] = False
 
-    transport.write = dies_after_bg  # type: ignore[method-assign]
+    # The jog goes out, and the cable is pulled before its reply.
+    pull_cable_after(dmc.link.transport, b"BG B", then=out_of_reach)
     with pytest.raises(galil.MotionError, match="B could not be stopped") as info:
         dmc.B.jog(20_000)
     assert info.value.moving == "B"
