@@ -282,31 +282,35 @@ def predict_track(
         profile = predict.Profile.from_samples(
             [t.start], sample_period=ts, shape="unknown", peak_speed=p.speed
         )
-    elif t.kind == "jog":
-        events = t.events
-        if t.aborted is not None and t.begin is not None and not t.stopped:
-            # (an open jog's profile ends once at speed: run it to the AB, cut below)
-            events = [*events, predict.Stop((t.aborted - t.begin) * ts)]
-        profile = predict.jog(
-            t.amount,
-            p.accel,
-            p.decel,
-            events=events,
-            sample_period=ts,
-            smoothing=p.smoothing,
-            start=t.start,
-        )
     else:
-        profile = predict.move(
-            round(t.amount),
-            _at_least_a_step(link, p.speed, ts),
-            p.accel,
-            p.decel,
-            sample_period=ts,
-            smoothing=p.smoothing,
-            start=t.start,
-            events=t.events,
-        )
+        events = t.events
+        aborted = t.aborted is not None and t.begin is not None
+        if t.aborted is not None and t.begin is not None:
+            # AB stops the profiler where it is (an event: a jog aborted after hours is
+            # predicted without keeping its samples, predict.move.KEEP_SAMPLES)
+            events = [*events, predict.Abort((t.aborted - t.begin) * ts)]
+        if t.kind == "jog":
+            profile = predict.jog(
+                t.amount,
+                p.accel,
+                p.decel,
+                events=events,
+                sample_period=ts,
+                smoothing=p.smoothing,
+                start=t.start,
+            )
+        else:
+            profile = predict.move(
+                round(t.amount),
+                _at_least_a_step(link, p.speed, ts),
+                p.accel,
+                p.decel,
+                sample_period=ts,
+                smoothing=p.smoothing,
+                start=t.start,
+                events=events,
+            )
+        return profile.recast(predict.Profile, shape="stopped", stop_code=7) if aborted else profile
     if t.aborted is not None and t.begin is not None:
         # AB stops the profiler where it is: the reference stays at that sample's value.
         k = max(0, min(t.aborted - t.begin, profile.samples))

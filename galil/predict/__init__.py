@@ -41,6 +41,7 @@ from galil.predict.homing import (
 )
 from galil.predict.jog import jog
 from galil.predict.move import (
+    Abort,
     Event,
     Increment,
     MovePlan,
@@ -67,6 +68,7 @@ from galil.predict.vector_checks import (
 )
 
 __all__ = [
+    "Abort",
     "Arc",
     "AxisProfiler",
     "Checked",

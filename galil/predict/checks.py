@@ -8,7 +8,7 @@ and, where it applies, the time and sample at which the predicted path crosses i
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,7 +16,8 @@ import numpy.typing as npt
 
 from galil.errors import InvalidArgument, LimitError
 from galil.models import ETHERNET_BYTES_PER_S, ModelSpec, get_model
-from galil.predict.profile import Profile, finite_number
+from galil.predict.engine import PlanSamples
+from galil.predict.profile import Int64Array, Profile, finite_number
 from galil.predict.smoothing import quantise_it
 
 __all__ = [
@@ -283,18 +284,82 @@ def check_soft_limits(
     Raises:
         LimitError: at the first sample beyond a limit (``name`` is ``"FL"`` or ``"BL"``).
     """
+
+    def inside(low: int, high: int) -> bool:
+        return (
+            (forward_limit is None or high <= forward_limit)
+            and (backward_limit is None or low >= backward_limit)
+            and low >= _POSITION_MIN
+            and high <= _POSITION_MAX
+        )
+
     # Quick look first: nothing can be beyond a limit when the whole path lies inside every
     # one of them; the usual case, and cheap (a planned profile knows bounds unsampled).
-    low, high = profile.bounds()
-    if (
-        (forward_limit is None or high <= forward_limit)
-        and (backward_limit is None or low >= backward_limit)
-        and low >= _POSITION_MIN
-        and high <= _POSITION_MAX
-    ):
+    if inside(*profile.bounds()):
         return
-    pos = profile.position
-    prev = np.concatenate((pos[:1], pos[:-1]))
+    hit = next(
+        (
+            (offset + first[0], int(pos[first[0]]), first[1], first[2])
+            for offset, pos, prev in _stretches(profile, inside)
+            if (first := _first_beyond(pos, prev, forward_limit, backward_limit)) is not None
+        ),
+        None,
+    )
+    if hit is None:
+        return
+    k, value, name, limit = hit
+    t = k * profile.sample_period
+    where = f" on axis {axis}" if axis else ""
+    raise LimitError(
+        f"the path{where} reaches {value} counts at t={t:.6g} s (sample {k}), beyond"
+        f" {name} {limit:g}; the move ends at {profile.end}",
+        name=name,
+        value=value,
+        limit=limit,
+        time=t,
+        sample=k,
+        axis=axis,
+    )
+
+
+#: Samples of a long planned move looked at together (:func:`_stretches`).
+_STRETCH = 1 << 16
+
+
+def _stretches(
+    profile: Profile, inside: Callable[[int, int], bool]
+) -> Iterator[tuple[int, Int64Array, Int64Array]]:
+    """``(first sample, positions, each one's previous position)`` of the parts of
+    ``profile`` that may leave the limits (``inside(low, high)`` says a part within
+    ``low .. high`` cannot), in order.
+
+    A move planned from rest (:class:`~galil.predict.engine.PlanSamples`) is evaluated part by
+    part, and only where a part's ends come within a count of a limit (its samples lie within
+    one count of its ends, as the whole move's do): a move of hours ending at a limit is
+    checked without its samples (28 h ends at 2**31 - 1 at the default speed). Any other
+    profile is one part.
+    """
+    source = profile._source()
+    if not isinstance(source, PlanSamples):
+        pos = profile.position
+        yield 0, pos, np.concatenate((pos[:1], pos[:-1]))
+        return
+    ends = source.ends()
+    for first in range(0, source.samples + 1, _STRETCH):
+        last = min(first + _STRETCH, source.samples + 1) - 1
+        a, b = ends(first), ends(last)
+        if inside(min(a, b) - 1, max(a, b) + 1):
+            continue
+        lead = max(first - 1, 0)
+        values = source.window(lead, last + 1 - lead)
+        pos = values[first - lead :]
+        yield first, pos, values[: pos.size] if first else np.concatenate((pos[:1], pos[:-1]))
+
+
+def _first_beyond(
+    pos: Int64Array, prev: Int64Array, forward_limit: float | None, backward_limit: float | None
+) -> tuple[int, str, float] | None:
+    """The first of ``pos`` beyond a limit, moving outwards: ``(index, name, limit)``."""
     checks: list[tuple[str, float, npt.NDArray[np.bool_]]] = []
     if forward_limit is not None:
         checks.append(("FL", forward_limit, (pos > forward_limit) & (pos > prev)))
@@ -307,21 +372,7 @@ def check_soft_limits(
         hit = np.flatnonzero(over)
         if hit.size and (first is None or int(hit[0]) < first[0]):
             first = (int(hit[0]), name, limit)
-    if first is None:
-        return
-    k, name, limit = first
-    t = float(profile.t[k])
-    where = f" on axis {axis}" if axis else ""
-    raise LimitError(
-        f"the path{where} reaches {int(pos[k])} counts at t={t:.6g} s (sample {k}), beyond"
-        f" {name} {limit:g}; the move ends at {profile.end}",
-        name=name,
-        value=int(pos[k]),
-        limit=limit,
-        time=t,
-        sample=k,
-        axis=axis,
-    )
+    return first
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -330,6 +331,16 @@ class PlanSamples:
 
     def __call__(self) -> Int64Array:
         return sample_plan(self.plan)
+
+    def window(self, start: int, n: int) -> Int64Array:
+        """The positions at samples ``start .. start+n-1``: those :meth:`__call__` gives."""
+        return _round_fixed(_Active(self.plan, 0).fixed(start, n))
+
+    def ends(self) -> Callable[[int], int]:
+        """A function of a sample giving its position (as :meth:`window` does), one sample at
+        a time and cheaply."""
+        act = _Active(self.plan, 0)
+        return lambda k: act.rounded(k, 1)[0]
 
 
 def plan_stop(x0: float, v0: float, d: float) -> KinematicPlan:

@@ -5,12 +5,20 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-import numpy as np
-
 from galil.errors import InvalidArgument
 from galil.models import ModelSpec
 from galil.predict.engine import AxisProfiler
-from galil.predict.move import Event, SetSpeed, Stop, _resolve, run, sample_of_event
+from galil.predict.move import (
+    Abort,
+    Event,
+    SetSpeed,
+    Stop,
+    _resolve,
+    _Run,
+    drive,
+    run_profile,
+    sample_of_event,
+)
 from galil.predict.profile import Profile
 
 __all__ = ["jog"]
@@ -45,7 +53,7 @@ def jog(
             prediction runs until the last ramp has reached its speed.
         events: further changes in motion (:class:`~galil.predict.move.SetAccel`,
             :class:`~galil.predict.move.SetDecel`, :class:`~galil.predict.move.Increment`,
-            ...).
+            :class:`~galil.predict.move.Abort` ...).
         sample_period: seconds per sample.
         smoothing: IT (1 or ``None``: none).
         start: position at sample 0.
@@ -62,21 +70,30 @@ def jog(
     )
     ts = sample_period
     all_events = _jog_events(changes, events, stop_at)
-    eng = AxisProfiler(sample_period=ts, position=int(start))
-    if initial_speed:
-        eng.resume_jog(initial_speed, speed, accel, decel, smoothing)
-    else:
-        eng.begin_jog(speed, accel, decel, smoothing)
+
+    def fresh() -> AxisProfiler:
+        eng = AxisProfiler(sample_period=ts, position=int(start))
+        if initial_speed:
+            eng.resume_jog(initial_speed, speed, accel, decel, smoothing)
+        else:
+            eng.begin_jog(speed, accel, decel, smoothing)
+        return eng
+
     until: int | None = None
     if duration is not None:
         until = sample_of_event(duration, ts)
-    elif stop_at is None and not any(isinstance(e, Stop) for e in all_events):
-        r, ref, peak = _run_until_settled(eng, all_events, speed, accel, decel, smoothing)
-        peak = max(peak, abs(initial_speed))
-        return _profile(start, r, ref, ts, peak, eng.stop_code, initial_speed)
-    r, ref, peak = run(eng, all_events, speed=speed, accel=accel, decel=decel, until=until)
-    peak = max(peak, abs(initial_speed))
-    return _profile(start, r, ref, ts, peak, eng.stop_code, initial_speed)
+    ends = any(isinstance(e, (Stop, Abort)) for e in all_events)
+    settle = until is None and stop_at is None and not ends
+
+    def go(eng: AxisProfiler, out: _Run) -> None:
+        if settle:
+            _run_until_settled(eng, all_events, speed, accel, decel, smoothing, out)
+        else:
+            drive(eng, all_events, speed=speed, accel=accel, decel=decel, until=until, out=out)
+
+    return run_profile(
+        fresh, go, start=int(start), shape=lambda begun, eng: "jog", start_velocity=initial_speed
+    )
 
 
 def _validate_jog(speed: float, accel: float, decel: float) -> None:
@@ -104,11 +121,12 @@ def _run_until_settled(
     accel: float,
     decel: float,
     smoothing: float,
-) -> tuple[np.ndarray, np.ndarray, float]:
+    out: _Run,
+) -> None:
     """No end given: run past the last event until the last ramp (and smoothing) settles."""
     ts = eng.sample_period
     last = max((sample_of_event(e.time, ts) for e in events), default=0)
-    r, ref, peak = run(eng, events, speed=speed, accel=accel, decel=decel, until=last)
+    drive(eng, events, speed=speed, accel=accel, decel=decel, until=last, out=out)
     plan = eng.plan
     extra = 0
     if plan is not None:
@@ -116,19 +134,4 @@ def _run_until_settled(
         extra = max(0, math.ceil(ramp - 1e-9) - (eng.sample - last))
     if smoothing < 1.0:
         extra += math.ceil(8 / smoothing)
-    r2, ref2, peak2 = run(eng, (), speed=speed, accel=accel, decel=decel, until=extra)
-    return np.concatenate([r, r2]), np.concatenate([ref, ref2]), max(peak, peak2)
-
-
-def _profile(
-    start: int, r: np.ndarray, ref: np.ndarray, ts: float, peak: float, code: int, v0: float
-) -> Profile:
-    return Profile.from_samples(
-        np.concatenate([[int(start)], ref]),
-        profiler=np.concatenate([[int(start)], r]),
-        sample_period=ts,
-        start_velocity=v0,
-        shape="jog",
-        peak_speed=peak,
-        stop_code=code,
-    )
+    drive(eng, (), speed=speed, accel=accel, decel=decel, until=extra, out=out)

@@ -8,7 +8,7 @@ controller's) reference sample for sample.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,6 +28,7 @@ from galil.predict.smoothing import END_LOOKAHEAD
 
 __all__ = [
     "SCHEDULE_MAX_SAMPLES",
+    "Abort",
     "Event",
     "Increment",
     "MovePlan",
@@ -40,6 +41,7 @@ __all__ = [
     "move",
     "plan_move",
     "run",
+    "run_profile",
     "sample_of_event",
     "speed_schedule",
 ]
@@ -92,7 +94,15 @@ class Stop:
     time: float
 
 
-Event = SetSpeed | SetAccel | SetDecel | Increment | Stop
+@dataclass(frozen=True)
+class Abort:
+    """AB at ``time`` seconds: the profiler stops at once where it is (stop code 7). An AB
+    that arrives once the motion is over changes nothing; events after it are ignored."""
+
+    time: float
+
+
+Event = SetSpeed | SetAccel | SetDecel | Increment | Stop | Abort
 
 
 @dataclass(frozen=True)
@@ -218,25 +228,69 @@ def sample_of_event(time: float, ts: float) -> int:
     return round(time / ts)
 
 
+#: A run of more samples than this keeps none of them: its profile knows its ends, length,
+#: bounds and peak, and computes the samples again only when they are first read
+#: (:meth:`Profile.planned`). A jog stopped after a day costs no more memory than one stopped
+#: after a minute (about 34 min at 1024 Hz; the whole arrays cost about 40 bytes a sample).
+KEEP_SAMPLES = 1 << 21
+
+#: The engine is stepped at most this many samples at a time (the memory of one step).
+_PIECE = 1 << 18
+
+
 @dataclass
 class _Run:
-    """What a driven engine produced."""
+    """What a driven engine produced: the samples (while it keeps them), how many, their
+    bounds and last values, and the peak |velocity| (counts/s).
+
+    ``keep``: once more samples than this were run, the arrays are dropped and only the
+    summary is kept (``None``: keep them all)."""
 
     r: list[Int64Array]
     ref: list[Int64Array]
     peak: float
+    keep: int | None = None
+    n: int = 0
+    low: int = 0
+    high: int = 0
+    last: int = 0
+    dropped: bool = False
+
+    def add(self, r: Int64Array, ref: Int64Array) -> None:
+        self.n += ref.size
+        self.last = int(ref[-1])
+        if self.dropped:
+            self.low = min(self.low, int(ref.min()))
+            self.high = max(self.high, int(ref.max()))
+            return
+        self.r.append(r)
+        self.ref.append(ref)
+        if self.keep is not None and self.n > self.keep:
+            self.low = min(int(a.min()) for a in self.ref)
+            self.high = max(int(a.max()) for a in self.ref)
+            self.r.clear()
+            self.ref.clear()
+            self.dropped = True
+
+    def arrays(self) -> tuple[Int64Array, Int64Array]:
+        """The profiler positions and the references of the samples run (all kept)."""
+        assert not self.dropped
+        empty = np.empty(0, np.int64)
+        r = np.concatenate(self.r) if self.r else empty
+        ref = np.concatenate(self.ref) if self.ref else empty
+        return r, ref
 
 
 def _advance(eng: AxisProfiler, n: int, run: _Run) -> None:
-    if n <= 0:
-        return
-    if eng.moving:
-        v = eng.preview_velocity(n)
-        if v.size:
-            run.peak = max(run.peak, float(np.max(np.abs(v))))
-    r, ref = eng.advance_both(n)
-    run.r.append(r)
-    run.ref.append(ref)
+    while n > 0:
+        piece = min(n, _PIECE)
+        if eng.moving:
+            v = eng.preview_velocity(piece)
+            if v.size:
+                run.peak = max(run.peak, float(np.max(np.abs(v))))
+        r, ref = eng.advance_both(piece)
+        run.add(r, ref)
+        n -= piece
 
 
 def run(
@@ -259,14 +313,35 @@ def run(
 
     Raises:
         CommandError: the controller would refuse an event (e.g. TC 16 for a wrong-sign IP).
-        InvalidArgument: the motion does not complete within ``MAX_SAMPLES``.
+        InvalidArgument: the motion does not complete within ``MAX_SAMPLES`` of its last
+            event.
     """
+    out = _Run([], [], 0.0)
+    drive(eng, events, speed=speed, accel=accel, decel=decel, until=until, out=out)
+    r, ref = out.arrays()
+    return r, ref, out.peak
+
+
+def drive(
+    eng: AxisProfiler,
+    events: Sequence[Event],
+    *,
+    speed: float,
+    accel: float,
+    decel: float,
+    until: int | None,
+    out: _Run,
+) -> None:
+    """:func:`run`, adding what the engine produces to ``out``."""
     ts = eng.sample_period
-    out = _Run([], [], abs(eng.velocity))
+    out.peak = max(out.peak, abs(eng.velocity))
     sp, ac, dc = speed, accel, decel
     base = eng.sample
     for ev in sorted(events, key=lambda e: e.time):
         k = base + sample_of_event(ev.time, ts)
+        if isinstance(ev, Abort):
+            _abort_at(eng, k, out)
+            break
         _advance(eng, k - eng.sample, out)
         if isinstance(ev, SetSpeed):
             sp = abs(ev.speed) if eng.mode != "jog" else ev.speed
@@ -283,22 +358,114 @@ def run(
             eng.stop()
     if until is not None:
         _advance(eng, base + until - eng.sample, out)
-    else:
-        step = 1024
-        while eng.moving:
-            if eng.sample - base > MAX_SAMPLES:
-                raise InvalidArgument(f"motion does not complete within {MAX_SAMPLES} samples")
-            end = eng.end_sample
-            # An unknown end is at least END_LOOKAHEAD samples away (a smoothed move ending
-            # later, or a jog): stepping that far cannot pass it. A plan that has already
-            # ended is complete on the next sample.
-            n = step if end is None else max(1, end - eng.sample)
-            _advance(eng, n, out)
-            step = min(step * 2, END_LOOKAHEAD)
-    empty = np.empty(0, np.int64)
-    r = np.concatenate(out.r) if out.r else empty
-    ref = np.concatenate(out.ref) if out.ref else empty
-    return r, ref, out.peak
+        return
+    step = 1024
+    last = eng.sample  # (the last event's: a jog may run for days before its ST)
+    while eng.moving:
+        if eng.sample - last > MAX_SAMPLES:
+            raise InvalidArgument(f"motion does not complete within {MAX_SAMPLES} samples")
+        end = eng.end_sample
+        # An unknown end is at least END_LOOKAHEAD samples away (a smoothed move ending
+        # later, or a jog): stepping that far cannot pass it. A plan that has already
+        # ended is complete on the next sample.
+        n = step if end is None else max(1, end - eng.sample)
+        _advance(eng, n, out)
+        step = min(step * 2, END_LOOKAHEAD)
+
+
+def _abort_at(eng: AxisProfiler, k: int, out: _Run) -> None:
+    """Run to sample ``k`` (no further than the motion's end) and abort there."""
+    step = 1024
+    while eng.moving and eng.sample < k:
+        end = eng.end_sample
+        n = min(k - eng.sample, step if end is None else max(1, end - eng.sample))
+        _advance(eng, n, out)
+        step = min(step * 2, END_LOOKAHEAD)
+    if eng.moving:
+        eng.abort()
+
+
+#: Drives a fresh engine (:func:`drive`, once or more) into a :class:`_Run`.
+Driver = Callable[[AxisProfiler, _Run], None]
+
+
+class _Rerun:
+    """The samples of a long run, computed again when they are first read: the source of a
+    :meth:`Profile.planned` whose summary (ends, length, bounds) the first run measured.
+
+    ``fresh()`` builds the engine as it was before the first run; ``go`` drives it as then
+    (the engine is deterministic: the same samples again)."""
+
+    def __init__(
+        self, fresh: Callable[[], AxisProfiler], go: Driver, summary: _Run, start: int
+    ) -> None:
+        self._fresh = fresh
+        self._go = go
+        self.start = start
+        self.end = summary.last
+        self.samples = summary.n
+        self.bounds = (min(start, summary.low), max(start, summary.high))
+        self._r: Int64Array | None = None
+
+    def __call__(self) -> Int64Array:
+        eng = self._fresh()
+        out = _Run([], [], 0.0)
+        self._go(eng, out)
+        r, ref = out.arrays()
+        head = np.array([self.start], np.int64)
+        self._r = np.concatenate([head, r])
+        return np.concatenate([head, ref])
+
+    def profiler(self) -> Int64Array:
+        """The profiler positions ``r`` (before smoothing), sample 0 included."""
+        if self._r is None:
+            self()
+        assert self._r is not None
+        return self._r
+
+
+def run_profile(
+    fresh: Callable[[], AxisProfiler],
+    go: Driver,
+    *,
+    start: int,
+    shape: Callable[[str, AxisProfiler], str],
+    start_velocity: float = 0.0,
+) -> Profile:
+    """The profile of a fresh engine driven by ``go``, from sample 0 (``start``).
+
+    A run of more than :data:`KEEP_SAMPLES` samples keeps none: its profile computes them
+    again when they are first read. ``shape(begun, eng)`` names the profile from the shape
+    of the plan the engine began with and the engine once driven.
+    """
+    eng = fresh()
+    begun = "" if eng.plan is None else eng.plan.shape
+    out = _Run([], [], 0.0, keep=KEEP_SAMPLES)
+    go(eng, out)
+    name = shape(begun, eng)
+    peak = max(out.peak, abs(start_velocity))
+    if out.dropped:
+        source = _Rerun(fresh, go, out, start)
+        return Profile.planned(
+            source,
+            sample_period=eng.sample_period,
+            shape=name,
+            peak_speed=peak,
+            stop_code=eng.stop_code,
+            profiler=source.profiler,
+            start_velocity=start_velocity,
+        )
+    r, ref = out.arrays()
+    head = np.array([start], np.int64)
+    return Profile.from_samples(
+        np.concatenate([head, ref]),
+        profiler=np.concatenate([head, r]),
+        sample_period=eng.sample_period,
+        start_velocity=start_velocity,
+        shape=name,
+        peak_speed=peak,
+        stop_code=eng.stop_code,
+    )
 
 
 def move(
@@ -324,7 +491,8 @@ def move(
         smoothing: IT (1 or ``None`` = none).
         start: position at sample 0.
         events: changes in motion (:class:`SetSpeed`, :class:`SetAccel`, :class:`Increment`,
-            :class:`Stop`; :class:`SetDecel` only after a stop) at given times.
+            :class:`Stop`, :class:`Abort`; :class:`SetDecel` only after a stop) at given
+            times.
         model: when given, SP/AC/DC/IT are first quantised as that model stores them (and
             range-checked), and its sample period is used.
 
@@ -358,33 +526,22 @@ def move(
             peak_speed=plan.peak / ts,
             stop_code=1,
         )
-    eng = AxisProfiler(sample_period=sample_period, position=int(start))
-    eng.begin_move(int(start) + int(distance), speed, accel, decel, smoothing)
-    begun = eng.plan
-    assert begun is not None
-    return _run_move(eng, events, speed, accel, decel, begun.shape, int(start))
+    target = int(start) + int(distance)
 
+    def fresh() -> AxisProfiler:
+        eng = AxisProfiler(sample_period=sample_period, position=int(start))
+        eng.begin_move(target, speed, accel, decel, smoothing)
+        return eng
 
-def _run_move(
-    eng: AxisProfiler,
-    events: Sequence[Event],
-    speed: float,
-    accel: float,
-    decel: float,
-    shape: str,
-    start: int,
-) -> Profile:
-    r, ref, peak = run(eng, events, speed=speed, accel=accel, decel=decel)
-    if events:
-        shape = "stopped" if eng.stop_code == 4 else "changed"
-    return Profile.from_samples(
-        np.concatenate([[start], ref]),
-        profiler=np.concatenate([[start], r]),
-        sample_period=eng.sample_period,
-        shape=shape,
-        peak_speed=peak,
-        stop_code=eng.stop_code,
-    )
+    def go(eng: AxisProfiler, out: _Run) -> None:
+        drive(eng, events, speed=speed, accel=accel, decel=decel, until=None, out=out)
+
+    def shape(begun: str, eng: AxisProfiler) -> str:
+        if not events:
+            return begun
+        return "stopped" if eng.stop_code == 4 else "changed"
+
+    return run_profile(fresh, go, start=int(start), shape=shape)
 
 
 #: The most samples a speed schedule is predicted in (2.3 h at 1024 Hz; about 300 MB).
@@ -489,15 +646,13 @@ def _predict_schedule(
                 break
             _advance(eng, n, out)
         eng.set_speed(sp)
-    r, ref, peak = run(eng, (), speed=speeds[-1], accel=accel, decel=decel)
-    out.r.append(r)
-    out.ref.append(ref)
+    drive(eng, (), speed=speeds[-1], accel=accel, decel=decel, until=None, out=out)
     return Profile.from_samples(
         np.concatenate([[int(start)], *out.ref]),
         profiler=np.concatenate([[int(start)], *out.r]),
         sample_period=sample_period,
         shape="schedule",
-        peak_speed=max(out.peak, peak),
+        peak_speed=out.peak,
         stop_code=eng.stop_code,
     )
 

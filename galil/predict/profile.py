@@ -5,7 +5,7 @@ from __future__ import annotations
 import html
 import math
 import numbers
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
@@ -85,16 +85,29 @@ class _Pending:
     """The arrays of planned profiles (one source, shared by their recast copies), computed
     once. Two threads reading at once may both compute them: the values are the same."""
 
-    __slots__ = ("_arrays", "source")
+    __slots__ = ("_arrays", "profiler", "source", "start_velocity")
 
-    def __init__(self, source: SampleSource) -> None:
+    def __init__(
+        self,
+        source: SampleSource,
+        profiler: Callable[[], Int64Array] | None = None,
+        start_velocity: float = 0.0,
+    ) -> None:
         self.source = source
+        self.profiler = profiler
+        self.start_velocity = start_velocity
         self._arrays: dict[str, Any] | None = None
 
     def arrays(self, sample_period: float) -> dict[str, Any]:
         if self._arrays is None:
+            position = self.source()
             full = Profile.from_samples(
-                self.source(), sample_period=sample_period, shape="", peak_speed=0.0
+                position,
+                profiler=None if self.profiler is None else self.profiler(),
+                start_velocity=self.start_velocity,
+                sample_period=sample_period,
+                shape="",
+                peak_speed=0.0,
             )
             self._arrays = {name: getattr(full, name) for name in _ARRAYS}
         return self._arrays
@@ -167,12 +180,16 @@ class Profile:
         shape: str,
         peak_speed: float,
         stop_code: int = 1,
+        profiler: Callable[[], Int64Array] | None = None,
+        start_velocity: float = 0.0,
     ) -> Profile:
         """A profile whose arrays are computed from ``source`` when one is first read.
 
         Planning a move needs its duration, its ends and whether it stays within the soft
         limits (:meth:`bounds`), not every sample: a move that is only sent and waited for
-        never computes them. Once computed they are exactly those of :meth:`from_samples`.
+        never computes them. Once computed they are exactly those of :meth:`from_samples`
+        (``profiler``, called after ``source``, gives the profiler positions when they differ
+        from the reference: IT smoothing).
         """
         new = object.__new__(cls)
         values = {
@@ -182,7 +199,7 @@ class Profile:
             "sample_period": float(sample_period),
             "stop_code": stop_code,
             "display": None,
-            "_pending": _Pending(source),
+            "_pending": _Pending(source, profiler, start_velocity),
         }
         new.__dict__.update(values)
         return new
