@@ -4,9 +4,13 @@ before anything is sent.
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
 import pytest
 
 import galil
+from galil.predict import HomeSwitch
 from galil.testing import nothing_sent, transcript
 from galil.units import ureg
 
@@ -133,3 +137,32 @@ def test_a_wrong_axis_attribute_lists_the_axes(dmc: galil.Controller, name: str)
     with pytest.raises(AttributeError, match="DMC-4040 has axes A, B, C, D"):
         getattr(dmc, name)
     assert not hasattr(dmc, name)
+
+
+@pytest.mark.parametrize(
+    ("field", "bad"),
+    [
+        ("edge", "abc"),
+        ("edge", 1.5),
+        ("edge", True),
+        ("index_period", math.nan),
+        ("index_period", "4000"),
+        ("index_offset", None),
+        ("side", True),
+    ],
+)
+def test_a_home_switch_with_a_field_that_is_no_count_is_refused_naming_it(
+    field: str, bad: object
+) -> None:
+    with pytest.raises(galil.InvalidArgument, match=f"^{field} "):
+        HomeSwitch(**{"edge": 500, field: bad})  # type: ignore[arg-type]
+
+
+def test_a_home_switch_in_numpy_integers_predicts_as_in_ints(dmc: galil.Controller) -> None:
+    switch = HomeSwitch(np.int64(500), np.int64(-1), np.int32(4000), np.int64(0))
+    assert switch == HomeSwitch(500, -1, 4000, 0)
+    assert type(switch.edge) is int
+    dmc.A.home_speed = 2000
+    handle = dmc.A.home(switch=switch)
+    handle.wait()
+    assert dmc.A.reference_position == 0
