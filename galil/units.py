@@ -432,7 +432,7 @@ UNIT_KINDS: dict[str, str] = {
     **dict.fromkeys(("FL", "BL", "PA", "DP", "position range"), "position"),
     **dict.fromkeys(("PR", "CD", "path point"), "distance"),
     **dict.fromkeys(("TC 30", "TC 31", "VP range", "CR radius", "speed schedule"), "length"),
-    **dict.fromkeys(("SP", "JG", "VS", "speed", "axis speed"), "speed"),
+    **dict.fromkeys(("SP", "JG", "HV", "VS", "speed", "axis speed"), "speed"),
     **dict.fromkeys(("AC", "DC", "VA", "VD", "acceleration", "axis acceleration"), "acceleration"),
 }
 

@@ -5,6 +5,7 @@ before anything is sent.
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -166,3 +167,27 @@ def test_a_home_switch_in_numpy_integers_predicts_as_in_ints(dmc: galil.Controll
     handle = dmc.A.home(switch=switch)
     handle.wait()
     assert dmc.A.reference_position == 0
+
+
+@pytest.mark.parametrize("value", [Fraction(1, 3), 1, 1.99, 0.5 * ureg.count / s])
+def test_a_home_speed_under_one_step_is_refused_not_sent_as_hv_0(
+    dmc: galil.Controller, value: object
+) -> None:
+    dmc.A.home_speed = 2000
+    with nothing_sent(dmc), pytest.raises(galil.LimitError, match=r"^HV .* less than one step"):
+        dmc.A.home_speed = value
+    assert dmc.A.home_speed == 2000
+    dmc.A.home_speed = Fraction(7, 2)  # (a Fraction as any number: HV 2)
+    assert dmc.A.home_speed == 2
+
+
+def test_a_home_speed_under_one_step_is_told_in_the_axis_unit_too(x: galil.Axis) -> None:
+    with pytest.raises(galil.LimitError, match=r"limit 0\.001 mm / s") as info:
+        x.home_speed = 0.0002 * mm / s
+    assert (info.value.name, info.value.limit) == ("HV", 2)
+
+
+def test_a_home_speed_above_the_maximum_names_hv_not_sp(dmc: galil.Controller) -> None:
+    with nothing_sent(dmc), pytest.raises(galil.LimitError, match=r"^HV 1e\+09 counts/s") as info:
+        dmc.A.home_speed = 1e9
+    assert info.value.name == "HV"
