@@ -19,6 +19,7 @@ from galil.errors import (
     MotionError,
     ProgramError,
     ProtocolError,
+    QueueTimeoutError,
     ScheduleError,
     UnknownVariableError,
 )
@@ -70,6 +71,7 @@ __all__ = [
     "Profile",
     "ProgramError",
     "ProtocolError",
+    "QueueTimeoutError",
     "ReconnectPolicy",
     "RecordFields",
     "RecordStream",

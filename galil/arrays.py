@@ -70,6 +70,17 @@ def _values(values: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
     return data
 
 
+def _index(value: object, what: str) -> int:
+    """An element index as an ``int``: an integer, numpy's too (never a bool), >= 0.
+
+    Raises:
+        InvalidArgument: naming ``what``.
+    """
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= 0:
+        return int(value)
+    raise InvalidArgument(f"{what} must be a whole number index >= 0, not {value!r:.60}")
+
+
 _DIGITS, _DECIMALS = 10, 4
 _READ_VF = cmds.vf(_DIGITS, _DECIMALS)  # what the read format {Z10.4} prints, for QU and LV
 #: The most bytes a number takes in the read format (the widest VF prints no wider): its
@@ -188,7 +199,8 @@ class Arrays:
         self.link.command_line([cmds.da(name)])
 
     def download(self, name: str, values: npt.ArrayLike, *, first: int = 0) -> None:
-        """Write ``values`` into array ``name`` from element ``first`` (``QD``).
+        """Write ``values`` into array ``name`` from element ``first`` (``QD``; an ``int``,
+        numpy's too).
 
         The array's size is read first (``LA``), so values that would not fit are
         refused before any of them is sent. The reply timeout covers the values' bytes at the
@@ -201,8 +213,7 @@ class Arrays:
         """
         cmds.array_name(name)
         data = _values(values, name)
-        if isinstance(first, bool) or not isinstance(first, int) or first < 0:
-            raise InvalidArgument(f"first must be a non-negative index, not {first!r}")
+        first = _index(first, "first")
         size = self._size(name)
         if first + data.size > size:
             raise InvalidArgument(
@@ -215,7 +226,8 @@ class Arrays:
     def upload(
         self, name: str, first: int | None = None, last: int | None = None
     ) -> npt.NDArray[np.float64]:
-        """Read array ``name`` (elements ``first`` to ``last``, default all) with ``QU``.
+        """Read array ``name`` (elements ``first`` to ``last``, default all; integers, numpy's
+        too) with ``QU``.
 
         The array's size is read first (``LA``), so a range outside the array is
         refused before the upload is sent. The reply timeout covers the most bytes the range
@@ -225,6 +237,8 @@ class Arrays:
             InvalidArgument: a bad name or range, a range outside the array, or no such array.
             ProtocolError: the reply is not the numbers asked for.
         """
+        first = None if first is None else _index(first, "first")
+        last = None if last is None else _index(last, "last")
         cmds.qu(name, first, last)  # a bad name or index: refused before the size query
         size = self._size(name)
         lo = 0 if first is None else first

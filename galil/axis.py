@@ -733,12 +733,17 @@ class Axis(AxisGearing, AxisPosition):
 
     @property
     def home_speed(self) -> Any:
-        """``HV``: the slow speed of HM's last stages and FI's return."""
+        """``HV``: the slow speed of HM's last stages and FI's return; SP's range and step.
+
+        Raises (setting it):
+            LimitError: above the model's SP maximum, or a speed above 0 that is less than
+                one step (it would be sent as HV 0, which HM and FI refuse).
+        """
         return self._out_rate(self._operand("HV"), 1)
 
     @home_speed.setter
     def home_speed(self, value: Any) -> None:
-        counts = self.check_parameter("SP", self.rate_counts(value, 1, "home_speed"))
+        counts = _home_speed_counts(self, value)
         self._link.command_line([cmds.hv(model=self._link.model, **{self.letter: counts})])
 
     # -- motor and loop settings (galil.tuning; ranges per model) --------------------------
@@ -780,6 +785,34 @@ class Axis(AxisGearing, AxisPosition):
     def __repr__(self) -> str:
         unit = f" in {self._scale.unit:~}" if self._scale is not None else " in counts"
         return f"<Axis {self.letter}{unit} of {self._link.model.name}>"
+
+
+def _home_speed_counts(axis: Axis, value: Any) -> float:
+    """``home_speed = value`` as the HV the controller stores.
+
+    Raises:
+        InvalidArgument: not a speed, or a negative one.
+        LimitError: above the model's maximum; above 0 but under one step (HV 0, with which
+            HM and FI are refused), in the user's units too.
+    """
+    counts = axis.rate_counts(value, 1, "home_speed")
+    stored = axis.check_parameter("HV", counts)
+    if stored == 0 < counts:
+        link = axis._link
+        tm = tm_of(link.sample_period)
+        step = link.model.speed_resolution(tm)
+        exc = LimitError(
+            f"HV {counts:g} counts/s is less than one step ({step:g} counts/s at "
+            f"TM {tm:g}): it would be HV 0, with which home() and find_index() are refused",
+            name="HV",
+            value=counts,
+            limit=step,
+            axis=axis.letter,
+            model=link.model.name,
+        )
+        state_in_units(exc, axis.scale, "speed")
+        raise exc
+    return stored
 
 
 def _soft_limit_counts(axis: Axis, limits: tuple[Any, Any]) -> tuple[int, int]:

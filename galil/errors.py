@@ -9,6 +9,7 @@ mixes in the stdlib type a caller would naturally catch::
     │   └── UnknownVariableError  (also KeyError) no variable of that name on the controller
     ├── ProtocolError         the peer sent bytes we cannot make sense of
     ├── GalilTimeoutError     (also TimeoutError) no reply in time
+    │   └── QueueTimeoutError (also queue.Empty) nothing arrived in a queue in time
     ├── GalilConnectionError  (also ConnectionError) the link is closed or dead
     ├── InvalidArgument       (also ValueError) refused before anything was sent
     │   └── LimitError        a move or value would cross a limit (range, soft limit, CD range,
@@ -24,6 +25,7 @@ did not end as planned".
 
 from __future__ import annotations
 
+import queue
 from collections.abc import Sequence
 
 __all__ = [
@@ -37,6 +39,7 @@ __all__ = [
     "MotionError",
     "ProgramError",
     "ProtocolError",
+    "QueueTimeoutError",
     "ScheduleError",
     "UnknownVariableError",
 ]
@@ -177,6 +180,14 @@ class ProtocolError(GalilError):
 
 class GalilTimeoutError(GalilError, TimeoutError):
     """No (complete) reply arrived within the timeout."""
+
+
+class QueueTimeoutError(GalilTimeoutError, queue.Empty):
+    """Nothing arrived within the timeout in a queue the controller fills: ``messages.get``,
+    ``interrupts.get``, a record stream's ``get`` (sync and async), and their
+    ``get_nowait`` with nothing waiting. A :class:`GalilTimeoutError` like every other wait's,
+    and also a :class:`queue.Empty`, the stdlib queue's own, so ``except queue.Empty`` still
+    catches it."""
 
 
 class GalilConnectionError(GalilError, ConnectionError):

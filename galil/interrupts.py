@@ -187,7 +187,8 @@ class Interrupts:
         """The oldest interrupt (see :class:`InterruptQueue`).
 
         Raises:
-            queue.Empty: none within ``timeout``.
+            QueueTimeoutError: none within ``timeout`` (a ``GalilTimeoutError`` that is also
+                a ``queue.Empty``).
             GalilConnectionError: none is waiting and the controller was closed.
         """
         return self.queue.get(timeout)

@@ -244,7 +244,7 @@ def _slider_limit(axis: Axis, max_speed: object) -> float:
         return 10_000.0
     if is_quantity(max_speed):
         if axis.scale is None:
-            value = counts_or_plain(max_speed, "max_speed")
+            value = counts_or_plain(max_speed, "max_speed", axis.letter, power=1)
         else:  # counts/s back to the axis's unit per second (display: sign * counts/unit)
             value = axis.scale.rate_to_counts(max_speed, 1, "max_speed") / axis.scale.display[0]
     elif isinstance(max_speed, bool) or not isinstance(max_speed, numbers.Real):

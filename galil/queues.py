@@ -10,13 +10,12 @@ same check as the async twin's (:class:`galil.aio.LoopQueue`).
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 from collections import deque
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
-from galil.errors import GalilConnectionError, InvalidArgument
+from galil.errors import GalilConnectionError, InvalidArgument, QueueTimeoutError
 from galil.link import check_wait_timeout
 
 __all__ = ["BoundedQueue", "Subscribers"]
@@ -29,7 +28,8 @@ class BoundedQueue(Generic[T]):
 
     Args:
         maxlen: items kept before the oldest drop.
-        what: what an item is, for the ``queue.Empty`` message (``"unsolicited message"``).
+        what: what an item is, for the :class:`~galil.errors.QueueTimeoutError` message
+            (``"unsolicited message"``).
     """
 
     def __init__(self, maxlen: int = 1000, what: str = "item") -> None:
@@ -55,14 +55,15 @@ class BoundedQueue(Generic[T]):
         Raises:
             InvalidArgument: a timeout that is not ``None`` or a finite number >= 0 (infinity
                 too: ``None`` waits for ever).
-            queue.Empty: nothing arrived in time.
+            QueueTimeoutError: nothing arrived in time (a ``GalilTimeoutError`` that is also
+                a ``queue.Empty``).
             GalilConnectionError: nothing is waiting and none will come: the controller was
                 closed (before or during the wait).
         """
         check_wait_timeout(timeout)
         with self._cond:
             if not self._cond.wait_for(lambda: self._items or self._closed, timeout):
-                raise queue.Empty(f"no {self._what} within {timeout} s")
+                raise QueueTimeoutError(f"no {self._what} within {timeout} s")
             if not self._items:
                 raise GalilConnectionError(f"no {self._what} will come: {self._closed}")
             return self._items.popleft()
@@ -80,10 +81,11 @@ class BoundedQueue(Generic[T]):
             self._closed = ""
 
     def get_nowait(self) -> T:
-        """Return the oldest item at once; raise ``queue.Empty`` when there is none."""
+        """Return the oldest item at once; raise :class:`~galil.errors.QueueTimeoutError`
+        (also a ``queue.Empty``) when there is none."""
         with self._cond:
             if not self._items:
-                raise queue.Empty(f"no {self._what} waiting")
+                raise QueueTimeoutError(f"no {self._what} waiting")
             return self._items.popleft()
 
     def drain(self) -> list[T]:

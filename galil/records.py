@@ -12,7 +12,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
-import queue
 import threading
 import time
 from collections import deque
@@ -27,6 +26,7 @@ from galil.errors import (
     GalilError,
     InvalidArgument,
     ProtocolError,
+    QueueTimeoutError,
 )
 from galil.link import Link, check_count, check_timeout, check_wait_timeout, read_handle, read_reply
 from galil.protocol import commands as cmds
@@ -258,7 +258,8 @@ class RecordStream:
         Raises:
             InvalidArgument: ``timeout`` not ``None`` or a finite number >= 0
                 (:func:`~galil.link.check_wait_timeout`, as the async stream), before a read.
-            queue.Empty: no record within ``timeout``.
+            QueueTimeoutError: no record within ``timeout`` (a ``GalilTimeoutError`` that is
+                also a ``queue.Empty``).
             GalilConnectionError: the stream is closed (or its handle died).
             ProtocolError: the record stream could not be decoded.
         """
@@ -276,7 +277,7 @@ class RecordStream:
             if self._closed:
                 raise GalilConnectionError("the data-record stream is closed")
             assert not ready
-            raise queue.Empty(f"no data record within {timeout} s")
+            raise QueueTimeoutError(f"no data record within {timeout} s")
 
     def _poll(self, timeout: float | None) -> np.void:
         if self._closed:
@@ -289,7 +290,7 @@ class RecordStream:
         if wait > 0:
             if timeout is not None and wait > timeout:
                 link.pause(timeout)
-                raise queue.Empty(f"no data record within {timeout} s")
+                raise QueueTimeoutError(f"no data record within {timeout} s")
             link.pause(wait)
         rec = self._source.record()
         self._count_gap(rec)

@@ -30,6 +30,7 @@ __all__ = [
     "path_to_counts",
     "sampled_values",
     "state_in_units",
+    "unit_refused",
     "ureg",
 ]
 
@@ -66,12 +67,41 @@ def is_quantity(value: object) -> bool:
     )
 
 
-def _ours(q: Any) -> Any:
-    """Re-express a Quantity of any registry in the default registry."""
+def _shown(value: object) -> str:
+    """A Quantity as a refusal shows it (``100 / °C``), whatever its registry can format."""
+    try:
+        return f"{value:~}"
+    except Exception:  # (a Quantity-like object pint's short format cannot take)
+        return f"{value!r:.60}"
+
+
+def unit_refused(what: str, value: object, why: str) -> InvalidArgument:
+    """The refusal of ``value`` (for ``what``) when pint itself failed on its unit (raise it
+    from pint's error): it does not convert (``DimensionalityError``), it multiplies an
+    offset unit such as °C (``OffsetUnitCalculusError``), or only the user's own registry
+    defines it (``UndefinedUnitError``). ``why`` says what was expected."""
+    return InvalidArgument(f"{what}: {_shown(value)} {why}")
+
+
+def _ours(q: Any, what: str = "value") -> Any:
+    """Re-express a Quantity of any registry in the default registry.
+
+    Raises:
+        InvalidArgument: a unit the default registry does not define (one a user's own
+            registry added), naming ``what``.
+    """
     reg = get_registry()
     if getattr(q, "_REGISTRY", None) is reg:
         return q
-    return reg.Quantity(q.magnitude, str(q.units))
+    try:
+        return reg.Quantity(q.magnitude, str(q.units))
+    except pint.errors.PintError as exc:
+        raise unit_refused(
+            what,
+            q,
+            "is in a unit pint's default registry does not define (give it in one it does, "
+            "such as mm, inch, degree, count)",
+        ) from exc
 
 
 @lru_cache(maxsize=256)
@@ -159,18 +189,21 @@ class Scale:
             raise InvalidArgument(
                 f"counts_per must be a Quantity such as 2000 / ureg.mm, got {self.counts_per!r}"
             )
+        expected = (
+            "counts_per must be counts per a length or an angle, e.g. 2000 / ureg.mm or "
+            f"4096 / ureg.degree, got {self.counts_per!r}"
+        )
         try:
-            cp = _without_counts(_ours(self.counts_per))
+            cp = _without_counts(_ours(self.counts_per, "counts_per"))
             magnitude = float(cp.magnitude)
+            linear = cp.dimensionality == get_registry().Quantity(1.0, "1/m").dimensionality
+            rotary = cp.dimensionless and _angle_power(cp.units) == -1
         except OverflowError:
             raise InvalidArgument(f"counts_per is too large: {self.counts_per!r:.60}") from None
-        linear = cp.dimensionality == get_registry().Quantity(1.0, "1/m").dimensionality
-        rotary = cp.dimensionless and _angle_power(cp.units) == -1
+        except pint.errors.PintError as exc:  # 100 / ureg.degC: an offset unit divides nothing
+            raise InvalidArgument(expected) from exc
         if not (linear or rotary):
-            raise InvalidArgument(
-                "counts_per must be counts per a length or an angle, e.g. 2000 / ureg.mm or "
-                f"4096 / ureg.degree, got {self.counts_per!r}"
-            )
+            raise InvalidArgument(expected)
         if not math.isfinite(magnitude) or magnitude <= 0:
             raise InvalidArgument(
                 f"counts_per must be positive and finite, got {self.counts_per!r}"
@@ -223,7 +256,7 @@ class Scale:
             raise InvalidArgument(
                 f"{what} needs units compatible with {unit:~} (the axis has a scale), got {value!r}"
             )
-        q = _ours(value)
+        q = _ours(value, what)
         if getattr(q, "_units", None) == getattr(unit, "_units", False):
             # The usual case, the axis's own unit (compared without building Unit objects):
             # nothing to convert, and the angle check below is trivially met.
@@ -236,11 +269,12 @@ class Scale:
                 out = q.__class__(q.magnitude * _factor(q.units, unit), unit)
             else:
                 out = q.to(unit)
-        except pint.DimensionalityError as exc:
-            raise InvalidArgument(
-                f"{what}: {value:~} has the wrong dimension; expected {unit:~}-compatible units"
+            angles = _angle_power(q.units), _angle_power(unit)
+        except pint.errors.PintError as exc:  # (a wrong dimension; °C in a product ...)
+            raise unit_refused(
+                what, value, f"has the wrong dimension; expected {unit:~}-compatible units"
             ) from exc
-        if _angle_power(q.units) != _angle_power(unit):
+        if angles[0] != angles[1]:
             # pint converts 5 (dimensionless) or 5 Hz to degrees silently: refuse it here.
             raise InvalidArgument(
                 f"{what}: {value:~} is not an angle; expected {unit:~}-compatible units"
@@ -251,7 +285,7 @@ class Scale:
     def position_to_counts(self, value: Any, what: str = "position") -> float:
         """A position Quantity to (unrounded) counts."""
         if is_quantity(value):
-            q = _ours(value)
+            q = _ours(value, what)
             if getattr(q, "_units", None) == getattr(self.unit, "_units", False):
                 # The usual case (_convert's own): its magnitude looked at once, not twice.
                 return self.sign * (_magnitude(q, what) - self._offset) * self._k
@@ -300,31 +334,52 @@ def _no_scale(what: str, value: object, letter: str) -> InvalidArgument:
     )
 
 
-def counts_or_plain(value: object, what: str, letter: str = "") -> float:
+#: What an axis without a scale takes, by power of time: counts, counts/s, counts/s².
+_COUNT_UNITS = ("count", "count / second", "count / second ** 2")
+
+
+@lru_cache(maxsize=64)
+def _of_time(name: str) -> bool:
+    """Whether unit ``name`` measures time alone (second, ms, minute; hertz, its inverse)."""
+    return set(get_registry().Quantity(1.0, name).dimensionality) == {"[time]"}
+
+
+def counts_or_plain(value: object, what: str, letter: str = "", *, power: int = 0) -> float:
     """For an axis (``letter``, if known; several letters: the axes of a path) without a
-    scale: a plain number, or a Quantity in counts."""
-    if is_quantity(value):
-        q = _ours(value)
-        if not q.dimensionless or dict(q.unit_items()).keys() - {"count"}:
-            raise _no_scale(what, value, letter)
-        return _magnitude(q.to("count"), what)
-    return _plain_number(value, what)
+    scale: a plain number, or a Quantity in counts (``power`` 0), counts per second (1) or
+    per second squared (2); ``count`` may be left out (``5000 / ureg.s``).
+
+    Raises:
+        InvalidArgument: not a number; a Quantity with a length, an angle or any unit but
+            counts and time (no scale to convert it); counts of the wrong power of time.
+    """
+    if not is_quantity(value):
+        return _plain_number(value, what)
+    q = _ours(value, what)
+    names = dict(q.unit_items())
+    try:
+        if all(name == "count" or _of_time(name) for name in names):
+            return _magnitude(q.to(_COUNT_UNITS[power]), what)
+    except pint.errors.PintError as exc:
+        raise unit_refused(
+            what, value, f"has the wrong dimension; expected {_COUNT_UNITS[power]}"
+        ) from exc
+    raise _no_scale(what, value, letter)
 
 
 def signed_rate_counts(
     scale: Scale | None, value: object, power: int, what: str, letter: str
 ) -> float:
     """A signed speed (power 1) or acceleration (power 2) as counts/s^power, through the
-    ``scale`` of axis ``letter`` (``None``: plain counts; a Quantity is then refused)."""
+    ``scale`` of axis ``letter`` (``None``: plain numbers, or Quantities in counts/s^power:
+    :func:`counts_or_plain`)."""
     if type(power) is not int or power not in (1, 2):
         raise InvalidArgument(
             f"power must be 1 (a speed) or 2 (an acceleration), not {power!r:.60}"
         )
     if scale is not None:
         return scale.rate_to_counts(value, power, what)
-    if is_quantity(value):
-        raise _no_scale(what, value, letter)
-    return counts_or_plain(value, what, letter)
+    return counts_or_plain(value, what, letter, power=power)
 
 
 def rate_magnitude_counts(
@@ -377,7 +432,7 @@ UNIT_KINDS: dict[str, str] = {
     **dict.fromkeys(("FL", "BL", "PA", "DP", "position range"), "position"),
     **dict.fromkeys(("PR", "CD", "path point"), "distance"),
     **dict.fromkeys(("TC 30", "TC 31", "VP range", "CR radius", "speed schedule"), "length"),
-    **dict.fromkeys(("SP", "JG", "VS", "speed", "axis speed"), "speed"),
+    **dict.fromkeys(("SP", "JG", "HV", "VS", "speed", "axis speed"), "speed"),
     **dict.fromkeys(("AC", "DC", "VA", "VD", "acceleration", "axis acceleration"), "acceleration"),
 }
 

@@ -114,6 +114,15 @@ def test_jog_widget_takes_its_range_as_a_speed_and_refuses_a_nonsense_one() -> N
                 jog_widget(axis, max_speed=bad)
 
 
+def test_jog_widget_of_an_axis_without_a_scale_takes_its_range_in_counts_per_second() -> None:
+    pytest.importorskip("ipywidgets")
+    with simulated() as dmc:
+        slider = jog_widget(dmc.A, max_speed=8000 * ureg.count / ureg.s).children[0].children[0]
+        assert (slider.min, slider.max) == (-8000, 8000)
+        with pytest.raises(galil.InvalidArgument, match="expected count / second"):
+            jog_widget(dmc.A, max_speed=8000 * ureg.count)  # a distance, not a speed
+
+
 def test_compare_refuses_a_misspelt_field_and_a_jog_still_running() -> None:
     with simulated() as dmc:
         move = dmc.A.move_by(1000)

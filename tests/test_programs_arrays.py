@@ -135,6 +135,28 @@ def test_an_upload_of_an_array_that_is_not_there_is_refused(dmc: galil.Controlle
         dmc.arrays.upload("b", 3, 1)  # a range that is no range: refused before the size query
 
 
+def test_array_indices_may_be_numpy_integers(dmc: galil.Controller) -> None:
+    dmc.arrays.define("a", np.int64(5))
+    dmc.arrays.download("a", [7, 8], first=np.int64(1))
+    assert dmc.arrays.upload("a", np.int64(0), np.int32(2)).tolist() == [0, 7, 8]
+    assert dmc.arrays.upload("a", np.uint8(2)).tolist() == [8, 0, 0]
+
+
+@pytest.mark.parametrize(
+    ("where", "bad"),
+    [("first", True), ("first", np.True_), ("first", 1.0), ("last", 2.0)],
+)
+def test_an_array_index_that_is_no_whole_number_is_refused_naming_it(
+    dmc: galil.Controller, where: str, bad: object
+) -> None:
+    dmc.arrays.define("a", 5)
+    with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match=f"^{where} must be"):
+        dmc.arrays.upload("a", **{"first": 0, "last": 3, where: bad})  # type: ignore[arg-type]
+    if where == "first":
+        with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match=r"^first must be"):
+            dmc.arrays.download("a", [1.0], first=bad)  # type: ignore[arg-type]
+
+
 def test_arrays_and_variables_round_trip(dmc: galil.Controller) -> None:
     dmc.arrays.define("speeds", 4)
     dmc.arrays.download("speeds", [1000, 2000.5, -4000, 0.0001])

@@ -640,10 +640,10 @@ def _case(
         with nothing_sent(dmc, allow_queries=True):
             try:
                 result = _invoke(entry, target, args)
+            except queue.Empty:  # a queue's get that timed out: the timeout was taken
+                pass  # (a galil.QueueTimeoutError, so caught before GalilError)
             except galil.GalilError as exc:
                 raised = exc
-            except queue.Empty:  # a queue's get that timed out: the timeout was taken
-                pass
             except (KeyError, TypeError) as exc:
                 raised = exc
                 if not entry.lookup or (type(exc) is TypeError and "unhashable" not in str(exc)):

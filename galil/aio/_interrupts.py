@@ -58,7 +58,8 @@ class AsyncInterrupts(Room[Interrupts]):
         """The oldest interrupt, waiting up to ``timeout`` seconds (``None``: for ever).
 
         Raises:
-            queue.Empty: none arrived in time.
+            QueueTimeoutError: none arrived in time (a ``GalilTimeoutError`` that is also a
+                ``queue.Empty``).
             GalilConnectionError: the controller was closed.
         """
         return await self.queue.get(timeout)

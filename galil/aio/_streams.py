@@ -13,14 +13,13 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import math
-import queue
 from collections import deque
 from typing import Any, Generic, TypeVar
 
 import numpy as np
 
 from galil.aio._worker import Worker, shielded
-from galil.errors import GalilConnectionError, InvalidArgument
+from galil.errors import GalilConnectionError, InvalidArgument, QueueTimeoutError
 from galil.link import check_count, check_wait_timeout
 from galil.records import TAKE_MAX, RecordStream
 
@@ -50,7 +49,8 @@ class LoopQueue(Generic[T]):
     Args:
         loop: the loop the items are for.
         maxlen: items kept before the oldest drop.
-        what: what an item is, for the ``queue.Empty`` text (``"unsolicited message"``).
+        what: what an item is, for the :class:`~galil.errors.QueueTimeoutError` text
+            (``"unsolicited message"``).
     """
 
     def __init__(self, loop: asyncio.AbstractEventLoop, maxlen: int, what: str = "item") -> None:
@@ -80,7 +80,8 @@ class LoopQueue(Generic[T]):
         Raises:
             InvalidArgument: a timeout the sync queue refuses too (not ``None`` or a finite
                 number >= 0), before anything is awaited.
-            queue.Empty: nothing arrived in time.
+            QueueTimeoutError: nothing arrived in time (a ``GalilTimeoutError`` that is also
+                a ``queue.Empty``).
             GalilConnectionError: the controller was closed.
         """
         wait = _wait_seconds(timeout)
@@ -91,7 +92,7 @@ class LoopQueue(Generic[T]):
                 raise GalilConnectionError("the async controller is closed")
             left = deadline - loop.time()
             if left <= 0:
-                raise queue.Empty(f"no {self._what} within {timeout} s")
+                raise QueueTimeoutError(f"no {self._what} within {timeout} s")
             self._wakeup.clear()
             # Not asyncio.wait_for: before Python 3.12 it swallows a cancellation that comes
             # as the item does, and returns (decision 0027). The timer only wakes the loop.
@@ -104,9 +105,10 @@ class LoopQueue(Generic[T]):
         return self._items.popleft()
 
     def get_nowait(self) -> T:
-        """The oldest item at once; ``queue.Empty`` when there is none."""
+        """The oldest item at once; :class:`~galil.errors.QueueTimeoutError` (also a
+        ``queue.Empty``) when there is none."""
         if not self._items:
-            raise queue.Empty(f"no {self._what} waiting")
+            raise QueueTimeoutError(f"no {self._what} waiting")
         return self._items.popleft()
 
     def drain(self) -> list[T]:
@@ -151,12 +153,12 @@ def _take(stream: RecordStream, wait: float, limit: int) -> list[np.void]:
     """Up to ``limit`` records: the first waited for (at most ``wait`` s), the rest ready."""
     try:
         out = [stream.get(wait)]
-    except queue.Empty:
+    except QueueTimeoutError:
         return []
     while len(out) < limit:
         try:
             out.append(stream.get(0.0))
-        except queue.Empty:
+        except QueueTimeoutError:
             break
     return out
 
@@ -214,7 +216,7 @@ class AsyncRecordStream:
         Raises:
             InvalidArgument: ``limit`` or ``timeout`` refused (as by the sync stream's
                 ``get``), before anything is read.
-            queue.Empty: no record within ``timeout``.
+            QueueTimeoutError: no record within ``timeout`` (also a ``queue.Empty``).
             GalilConnectionError: the stream is closed (or its handle died).
         """
         check_count(limit, "limit")
@@ -226,7 +228,7 @@ class AsyncRecordStream:
             # Take what is there in one worker call, even when asked for one record.
             self._ready.extend(await self._fetch(max(0.0, min(SLICE, left)), max(limit, BATCH)))
             if not self._ready and loop.time() >= deadline:
-                raise queue.Empty(f"no data record within {timeout} s")
+                raise QueueTimeoutError(f"no data record within {timeout} s")
         out: list[np.void] = []
         while self._ready and len(out) < limit:
             out.append(self._ready.popleft())

@@ -164,21 +164,22 @@ class Quantised:
     sample_period: float
 
 
-_COMMANDS = ("SP", "JG", "AC", "DC", "IT")
+_COMMANDS = ("SP", "JG", "AC", "DC", "IT", "HV")
 
 
 def quantise_value(
     command: str, value: float, model: str | ModelSpec = "DMC-4040", *, tm: float | None = None
 ) -> float:
-    """One value as the controller stores it: ``command`` is SP, JG, AC, DC or IT.
+    """One value as the controller stores it: ``command`` is SP, JG, AC, DC, IT or HV (the
+    homing speed: SP's range and step).
 
-    ``tm`` (µs; default the model's power-on TM) sets the step of SP/JG and AC/DC.
+    ``tm`` (µs; default the model's power-on TM) sets the step of SP/JG/HV and AC/DC.
 
     Raises:
         LimitError: outside the model's range. InvalidArgument: unknown command.
     """
     cmd = command.upper()
-    if cmd in ("SP", "JG"):
+    if cmd in ("SP", "JG", "HV"):
         return float(quantise_speed(value, model, name=cmd, signed=cmd == "JG", tm=tm))
     if cmd in ("AC", "DC"):
         return float(quantise_accel(value, model, name=cmd, tm=tm))
@@ -197,7 +198,7 @@ def check_parameter(
     axis: str | None = None,
     tm: float | None = None,
 ) -> float:
-    """Quantise and range-check one SP/JG/AC/DC/IT value (the LimitError names the axis)."""
+    """Quantise and range-check one SP/JG/AC/DC/IT/HV value (the LimitError names the axis)."""
     if not isinstance(command, str):
         raise InvalidArgument(f"cannot quantise {command!r:.60}; known: {', '.join(_COMMANDS)}")
     value = finite_number(value, command)
@@ -217,6 +218,7 @@ def quantise_limits(model: str | ModelSpec = "DMC-4040") -> dict[str, tuple[floa
         "AC": (float(spec.ac_min), float(spec.ac_max)),
         "DC": (float(spec.ac_min), float(spec.ac_max)),
         "IT": (1 / 256, 1.0),
+        "HV": (0.0, float(spec.sp_max)),
     }
 
 

@@ -76,9 +76,23 @@ class Crossing:
         return int(hits[0]) if hits.size else None
 
 
+def _whole_counts(value: object, name: str) -> int:
+    """``value`` as an ``int``: an integer (numpy's too) or a whole, finite float; a bool,
+    NaN, a fraction of a count or anything else is refused, naming ``name``."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        return int(value)
+    if isinstance(value, (float, np.floating)) and math.isfinite(value) and value.is_integer():
+        return int(value)
+    raise InvalidArgument(f"{name} must be a whole number of counts, not {value!r:.60}")
+
+
 @dataclass(frozen=True)
 class HomeSwitch:
     """Where an axis's home switch edge and index pulses are, in one frame of counts.
+
+    Every field is a whole number of counts (numpy integers and whole floats are taken, and
+    kept as ``int``); anything else is an :class:`~galil.errors.InvalidArgument` at
+    construction.
 
     Attributes:
         edge: the position where the home switch changes state.
@@ -93,8 +107,16 @@ class HomeSwitch:
     index_offset: int = 0
 
     def __post_init__(self) -> None:
-        if self.side not in (-1, 1):
-            raise InvalidArgument(f"side is -1 or 1, not {self.side!r}")
+        for name in ("edge", "index_period", "index_offset"):
+            object.__setattr__(self, name, _whole_counts(getattr(self, name), name))
+        side = self.side
+        if (
+            isinstance(side, bool)
+            or not isinstance(side, (int, float, np.integer, np.floating))
+            or side not in (-1, 1)
+        ):
+            raise InvalidArgument(f"side is -1 or 1, not {side!r:.60}")
+        object.__setattr__(self, "side", int(side))
         if self.index_period <= 0:
             raise InvalidArgument(f"index_period must be > 0, not {self.index_period!r}")
 

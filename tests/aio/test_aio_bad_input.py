@@ -375,10 +375,10 @@ def _sync_outcome(c: aio.AsyncController, e: AEntry, target: Any, args: dict[str
     try:
         with nothing_sent(c.sync, allow_queries=True):
             result = sync_fuzz._invoke(e.sync, sync_target, sync_args)
+    except queue.Empty:  # (a galil.QueueTimeoutError, so caught before GalilError)
+        return "taken"
     except (galil.GalilError, KeyError, TypeError) as exc:
         return type(exc).__name__
-    except queue.Empty:
-        return "taken"
     sync_fuzz._dispose(result)
     return "taken"
 
@@ -402,10 +402,10 @@ async def _acase(
         with nothing_sent(c.sync, allow_queries=True):
             try:
                 result = await _ainvoke(e, target, args)
+            except queue.Empty:  # (a galil.QueueTimeoutError, so caught before GalilError)
+                pass
             except galil.GalilError as exc:
                 raised = exc
-            except queue.Empty:
-                pass
             except Exception as exc:
                 raised = exc
                 problems.append(f"{where}: bare {type(exc).__name__}: {str(exc)[:120]}")

@@ -302,6 +302,23 @@ def test_bad_wait_timeouts_are_refused_before_waiting() -> None:
     run(body)
 
 
+def test_an_async_queue_wait_that_times_out_is_a_galil_timeout_error_and_a_queue_empty() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            stream = await c.records(32)
+            await stream.get()  # (the first record is due at once: the next, 32 samples on)
+            for get in (c.messages.get, c.interrupts.get, stream.get):
+                with pytest.raises(galil.QueueTimeoutError) as info:
+                    await get(timeout=0)
+                assert isinstance(info.value, queue.Empty)
+                assert isinstance(info.value, galil.GalilTimeoutError)
+            with pytest.raises(galil.QueueTimeoutError):
+                c.messages.get_nowait()
+            await stream.close()
+
+    run(body)
+
+
 def test_closing_ends_the_worker_threads_and_further_calls_fail() -> None:
     async def body() -> None:
         c = await sim()

@@ -161,6 +161,53 @@ def test_units_on_an_axis_without_scale(dmc: galil.Controller) -> None:
     assert dmc.B.reference_position == 1500
 
 
+def test_an_axis_without_a_scale_takes_counts_per_second_as_it_takes_counts(
+    dmc: galil.Controller,
+) -> None:
+    b = dmc.B
+    b.speed = 20_000 * ureg.count / ureg.s
+    b.accel = b.decel = OTHER.Quantity(512_000, "count / s**2")
+    b.jog_speed = -1000 / ureg.s  # (the counts may be left out, as in a position)
+    assert (b.speed, b.accel, b.decel, b.jog_speed) == (20_000, 512_000, 512_000, -1000)
+    plan = b.plan_by(1000 * ureg.count, speed=OTHER.Quantity(6000, "count/s"))
+    assert plan.peak_speed <= 6000
+    with (
+        nothing_sent(dmc),
+        pytest.raises(
+            InvalidArgument,
+            match=r"^speed: 1000 count has the wrong dimension; expected count / second",
+        ),
+    ):
+        b.speed = 1000 * ureg.count
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="no scale"):
+        b.speed = 1000 * ureg.radian / ureg.s
+    assert b.speed == 20_000
+
+
+@pytest.mark.parametrize("per", [100 / ureg.degC, 100 / ureg.degF])
+def test_a_scale_per_degree_celsius_is_refused_saying_what_a_scale_takes(
+    dmc: galil.Controller, per: object
+) -> None:
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="counts per a length or an angle"):
+        dmc.A.set_scale(counts_per=per)
+    assert dmc.A.scale is None
+
+
+def test_a_unit_only_the_users_registry_defines_is_refused_naming_the_argument(
+    dmc: galil.Controller,
+) -> None:
+    mine = pint.UnitRegistry()
+    mine.define("widget = 3 mm")
+    x = dmc.A.set_scale(counts_per=2000 / ureg.mm)
+    for axis in (x, dmc.B):  # (scaled or not)
+        with nothing_sent(dmc), pytest.raises(InvalidArgument, match=r"^target: 2 widget .*define"):
+            axis.move_to(2 * mine.widget)
+    with pytest.raises(InvalidArgument, match=r"^speed: 2\.0 widget / s .*define"):
+        x.speed = 2 * mine.widget / mine.s
+    with pytest.raises(InvalidArgument, match=r"^counts_per: 100 / widget .*define"):
+        dmc.C.set_scale(counts_per=100 / mine.widget)
+
+
 @pytest.mark.parametrize(
     "bad", [2000, 2000 / ureg.s, 2000 / ureg.count, -5 / ureg.mm, math.inf / ureg.mm]
 )

@@ -4,9 +4,14 @@ before anything is sent.
 
 from __future__ import annotations
 
+import math
+from fractions import Fraction
+
+import numpy as np
 import pytest
 
 import galil
+from galil.predict import HomeSwitch
 from galil.testing import nothing_sent, transcript
 from galil.units import ureg
 
@@ -133,3 +138,56 @@ def test_a_wrong_axis_attribute_lists_the_axes(dmc: galil.Controller, name: str)
     with pytest.raises(AttributeError, match="DMC-4040 has axes A, B, C, D"):
         getattr(dmc, name)
     assert not hasattr(dmc, name)
+
+
+@pytest.mark.parametrize(
+    ("field", "bad"),
+    [
+        ("edge", "abc"),
+        ("edge", 1.5),
+        ("edge", True),
+        ("index_period", math.nan),
+        ("index_period", "4000"),
+        ("index_offset", None),
+        ("side", True),
+    ],
+)
+def test_a_home_switch_with_a_field_that_is_no_count_is_refused_naming_it(
+    field: str, bad: object
+) -> None:
+    with pytest.raises(galil.InvalidArgument, match=f"^{field} "):
+        HomeSwitch(**{"edge": 500, field: bad})  # type: ignore[arg-type]
+
+
+def test_a_home_switch_in_numpy_integers_predicts_as_in_ints(dmc: galil.Controller) -> None:
+    switch = HomeSwitch(np.int64(500), np.int64(-1), np.int32(4000), np.int64(0))
+    assert switch == HomeSwitch(500, -1, 4000, 0)
+    assert type(switch.edge) is int
+    dmc.A.home_speed = 2000
+    handle = dmc.A.home(switch=switch)
+    handle.wait()
+    assert dmc.A.reference_position == 0
+
+
+@pytest.mark.parametrize("value", [Fraction(1, 3), 1, 1.99, 0.5 * ureg.count / s])
+def test_a_home_speed_under_one_step_is_refused_not_sent_as_hv_0(
+    dmc: galil.Controller, value: object
+) -> None:
+    dmc.A.home_speed = 2000
+    with nothing_sent(dmc), pytest.raises(galil.LimitError, match=r"^HV .* less than one step"):
+        dmc.A.home_speed = value
+    assert dmc.A.home_speed == 2000
+    dmc.A.home_speed = Fraction(7, 2)  # (a Fraction as any number: HV 2)
+    assert dmc.A.home_speed == 2
+
+
+def test_a_home_speed_under_one_step_is_told_in_the_axis_unit_too(x: galil.Axis) -> None:
+    with pytest.raises(galil.LimitError, match=r"limit 0\.001 mm / s") as info:
+        x.home_speed = 0.0002 * mm / s
+    assert (info.value.name, info.value.limit) == ("HV", 2)
+
+
+def test_a_home_speed_above_the_maximum_names_hv_not_sp(dmc: galil.Controller) -> None:
+    with nothing_sent(dmc), pytest.raises(galil.LimitError, match=r"^HV 1e\+09 counts/s") as info:
+        dmc.A.home_speed = 1e9
+    assert info.value.name == "HV"

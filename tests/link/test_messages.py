@@ -8,10 +8,12 @@ import threading
 import pytest
 from client_fakes import FakeGalil
 
+import galil
 from galil.controller import Controller, connect
 from galil.errors import (
     InvalidArgument,
 )
+from galil.testing import simulated
 
 
 def test_unsolicited_inside_a_reply_is_split_out(c: Controller, peer: FakeGalil) -> None:
@@ -31,6 +33,23 @@ def test_messages_arrive_while_idle(c: Controller, peer: FakeGalil) -> None:
         q.get(timeout=0.01)
     with pytest.raises(queue.Empty):
         q.get_nowait()
+
+
+def test_a_queue_wait_that_times_out_is_a_galil_timeout_error_and_still_a_queue_empty() -> None:
+    with simulated("DMC-4040") as dmc, dmc.records(32) as stream:
+        stream.get()  # (the first record is due at once: the next, 32 samples on)
+        for get in (
+            dmc.messages.get,
+            dmc.interrupts.get,
+            stream.get,
+            lambda timeout: dmc.messages.get_nowait(),
+        ):
+            with pytest.raises(galil.GalilTimeoutError, match=r"^no \w[\w -]* (within|waiting)"):
+                get(timeout=0)
+            with pytest.raises(queue.Empty):  # (code written for the stdlib queue's error)
+                get(timeout=0)
+            with pytest.raises(TimeoutError):
+                get(timeout=0)
 
 
 def test_subscribers_get_lines_and_may_send_commands(c: Controller, peer: FakeGalil) -> None:
