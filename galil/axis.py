@@ -38,6 +38,7 @@ from galil.moves import (
     execute_move,
     increment,
     jog,
+    schedule_label,
     set_jog_speed,
     speed_schedule,
 )
@@ -635,10 +636,13 @@ class Axis(AxisGearing, AxisPosition):
 
         Args:
             distance: total relative move.
-            changes: ``[(at, new_speed), ...]``, ``at`` measured from the start of the move.
+            changes: ``[(at, new_speed), ...]``, ``at`` measured from the start of the move
+                along it (a positive distance, whichever way the move goes).
             speed: initial speed (default: the axis's SP).
-            label: the routine's label (without ``#``, up to 7 characters); the routine is
-                installed beside the program in memory, which stays as it was.
+            label: the routine's label (up to 7 characters, with or without its ``#``); the
+                routine is installed beside the program in memory, which stays as it was.
+                The labels of the library's other routines (``GWDOG``, ``GINWAIT`` and
+                their inner ones) are refused: the schedule would replace their code.
 
         Stopped or aborted through the library before its end, it is cancelled: its routine
         halted, ``SP`` back as before it (one run to its end keeps its last speed).
@@ -650,9 +654,7 @@ class Axis(AxisGearing, AxisPosition):
             LimitError: a speed out of range, a path crossing a soft limit or taking a
                 follower past its soft limits or the model's SP maximum.
         """
-        if not isinstance(label, str):
-            raise InvalidArgument(f"label must be a string such as 'GSCHED', not {label!r}")
-        cmds.xq(f"#{label}")  # a bad label is refused before anything else
+        label = schedule_label(label)  # a bad label is refused before anything else
         d = round(self.distance_counts(distance, "distance"))
         pairs = self._schedule_pairs(changes)
         first = None
@@ -681,16 +683,20 @@ class Axis(AxisGearing, AxisPosition):
                 f"changes must be a list of (at, speed), got {changes!r:.60}"
             ) from exc
         pairs = []
-        for item in items:
+        sign = 1 if self._scale is None else self._scale.sign
+        for i, item in enumerate(items):
             try:
                 at, sp = item
             except (TypeError, ValueError) as exc:
                 raise InvalidArgument(f"each change is (at, speed), got {item!r}") from exc
-            pairs.append(
-                (
-                    abs(self.distance_counts(at, "trigger distance")),
-                    self.check_parameter("SP", self.rate_counts(sp, 1, "speed")),
+            counts = self.distance_counts(at, "trigger distance")
+            if counts * sign < 0:  # (the scale's sign turns a user's positive one negative)
+                raise InvalidArgument(
+                    f"change {i}: trigger distance {at!r} is negative; it is measured from the "
+                    "start of the move along it, a positive distance whichever way it goes"
                 )
+            pairs.append(
+                (abs(counts), self.check_parameter("SP", self.rate_counts(sp, 1, "speed")))
             )
         return pairs
 

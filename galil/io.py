@@ -22,19 +22,24 @@ from __future__ import annotations
 import contextlib
 import math
 import threading
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from numbers import Integral, Real
 from typing import Any, Protocol, overload
+
+import numpy as np
 
 from galil.errors import GalilError, GalilTimeoutError, InvalidArgument
 from galil.link import CommandLink, check_wait_timeout
 from galil.protocol import commands as cmds
-from galil.routines import Routine, Routines
+from galil.routines import RESERVED, Routine, Routines
 from galil.units import get_registry, is_quantity
 
 __all__ = ["IO", "AnalogInputs", "AnalogOutputs", "DigitalInputs", "DigitalOutputs"]
 
 _INPUT_ROUTINE = "#GINWAIT"
 _INPUT_MESSAGE = "galil-input"
+#: Seconds between the polls of a wait whose turn has not come (another wait holds the routine).
+_POLL = 0.05
 
 
 class MessageSource(Protocol):
@@ -56,7 +61,7 @@ def volts(value: object, what: str) -> float:
             v = float(value.to("volt").magnitude)  # type: ignore[attr-defined]
         except Exception as exc:  # pint's DimensionalityError and friends
             raise InvalidArgument(f"{what}: {value} is not a voltage") from exc
-    elif isinstance(value, bool) or not isinstance(value, (int, float)):
+    elif isinstance(value, (bool, np.bool_)) or not isinstance(value, Real):
         raise InvalidArgument(f"{what} takes volts (a number or a Quantity), not {value!r}")
     else:
         try:
@@ -68,6 +73,29 @@ def volts(value: object, what: str) -> float:
     if not math.isfinite(v):
         raise InvalidArgument(f"{what}: {value!r} is not a finite voltage")
     return v
+
+
+def _index(n: object, what: str) -> int:
+    """A channel number (or a slice's bound) as an ``int``: an integer, numpy's included,
+    never a bool.
+
+    Raises:
+        InvalidArgument: anything else (a float, a string, a bool).
+    """
+    if isinstance(n, (bool, np.bool_)) or not isinstance(n, Integral):
+        raise InvalidArgument(f"{what} must be an integer, not {n!r}")
+    return int(n)
+
+
+def _level(value: object) -> bool:
+    """An output's state: ``True``/``False`` (numpy's too) or 1/0.
+
+    Raises:
+        InvalidArgument: anything else.
+    """
+    if isinstance(value, (bool, np.bool_, Integral)) and value in (0, 1):
+        return bool(value)
+    raise InvalidArgument(f"an output is True or False, not {value!r}")
 
 
 class _Channels:
@@ -95,8 +123,7 @@ class _Channels:
         raise NotImplementedError
 
     def _check(self, n: object) -> int:
-        if isinstance(n, bool) or not isinstance(n, int):
-            raise InvalidArgument(f"{self.kind} number must be an integer, not {n!r}")
+        n = _index(n, f"{self.kind} number")
         if not self.first <= n < self.first + self.count:
             name = self._link.model.name
             span = f"{self.first} .. {self.first + self.count - 1}"
@@ -109,10 +136,11 @@ class _Channels:
         return n
 
     def _span(self, key: slice) -> list[int]:
-        if key.step not in (None, 1):
+        if key.step is not None and _index(key.step, f"{self.kind} slice step") != 1:
             raise InvalidArgument(f"{self.kind} slices take no step, got {key!r}")
-        start = self.first if key.start is None else key.start
-        stop = self.first + self.count if key.stop is None else key.stop
+        what = f"{self.kind} slice bound"
+        start = self.first if key.start is None else _index(key.start, what)
+        stop = self.first + self.count if key.stop is None else _index(key.stop, what)
         numbers = list(range(start, stop))
         for n in numbers:
             self._check(n)
@@ -175,18 +203,20 @@ class DigitalOutputs(_Bits):
     def __setitem__(self, key: int | slice, value: Any) -> None:
         model = self._link.model
         if isinstance(key, slice):
-            numbers = self._span(key)
-            states = list(value)
-            if len(states) != len(numbers):
-                raise InvalidArgument(f"{len(states)} values for {len(numbers)} outputs")
+            channels = self._span(key)
+            if isinstance(value, (str, bytes)) or not isinstance(value, Iterable):
+                raise InvalidArgument(
+                    f"outputs[{key.start}:{key.stop}] takes one True or False per output (a "
+                    f"list), not {value!r:.40}"
+                )
+            states = [_level(s) for s in value]
+            if len(states) != len(channels):
+                raise InvalidArgument(f"{len(states)} values for {len(channels)} outputs")
         else:
-            numbers, states = [self._check(key)], [value]
-        for s in states:
-            if not isinstance(s, (bool, int)) or s not in (0, 1):
-                raise InvalidArgument(f"an output is True or False, not {s!r}")
+            channels, states = [self._check(key)], [_level(value)]
         parts = [
             (cmds.sb if s else cmds.cb)(n, model=model)
-            for n, s in zip(numbers, states, strict=True)
+            for n, s in zip(channels, states, strict=True)
         ]
         self._link.command_line(parts)
 
@@ -284,6 +314,13 @@ class IO:
         message, so the link carries no polling traffic (on Ethernet the message is pushed on
         the message handle). Returns at once when the input already is at that level.
 
+        One such wait runs on the controller at a time (the routine is one). A wait that
+        comes while another runs (from another thread, or a task) does not wait for it to
+        end: until its turn comes, it polls its input (``@IN[n]`` every 50 ms), returns when
+        the input is at the level, and raises :class:`~galil.errors.GalilTimeoutError` when
+        its own timeout passes first. Its turn come, the time left of its timeout is what
+        the routine watches for.
+
         Args:
             n: the input (the controller's numbering).
             high: wait for high (True) or low (False).
@@ -294,19 +331,33 @@ class IO:
         Raises:
             InvalidArgument: no such input, a bad timeout (infinity too: ``None`` waits for
                 ever), or a busy thread.
-            GalilTimeoutError: the input did not change in time (the routine is halted).
+            GalilTimeoutError: the input did not change in time (the routine is halted; one
+                that another wait held all that time is not started).
 
         Anything else that cuts the wait short (Ctrl-C, a reply lost) halts the routine too
         before it propagates; a dead link cannot, and the routine watches on until its input
         changes (the next wait reuses its thread).
         """
         n = self.inputs._check(n)
-        if not isinstance(high, bool):
+        if not isinstance(high, (bool, np.bool_)):
             raise InvalidArgument(f"high is True or False, not {high!r}")
+        high = bool(high)
         timeout = check_wait_timeout(timeout)
         link = self._link
-        t = link.model.threads - 1 if thread is None else thread
-        with self._wait_lock:
+        t = self._routines.check_thread(link.model.threads - 1 if thread is None else thread)
+        deadline = None if timeout is None else link.clock() + timeout
+        expired = f"input {n} did not go {'high' if high else 'low'} within {timeout} s"
+        turn = self._turn(n, high, deadline)
+        if turn is None:
+            return  # the input reached the level while another wait held the routine
+        if not turn:
+            raise link.error(
+                GalilTimeoutError,
+                f"{expired}: another wait_for_input held the controller's input routine all "
+                "that time (one runs at a time; meanwhile this one polled its input)",
+            )
+        try:
+            left = None if deadline is None else max(0.0, deadline - link.clock())
             self._routines.check_free(t, _INPUT_ROUTINE)  # before the install sends a byte
             self._routines.install(_input_routine())
             seen = threading.Event()
@@ -322,13 +373,27 @@ class IO:
                     [cmds.assign("ginput", n), cmds.assign("ginlevel", 1 if high else 0)]
                 )
                 self._routines.start(_INPUT_ROUTINE, t)
-                if not self._watched(t, seen, timeout):
-                    raise link.error(
-                        GalilTimeoutError,
-                        f"input {n} did not go {'high' if high else 'low'} within {timeout} s",
-                    )
+                if not self._watched(t, seen, left):
+                    raise link.error(GalilTimeoutError, expired)
             finally:
                 unsubscribe()
+        finally:
+            self._wait_lock.release()
+
+    def _turn(self, n: int, high: bool, deadline: float | None) -> bool | None:
+        """Take the input routine (one wait at a time: its variables are shared): ``True``
+        once it is this wait's; while another wait holds it, poll input ``n`` (``@IN[n]``,
+        every :data:`_POLL` s): ``None`` when it is at the level, ``False`` when ``deadline``
+        has passed first. Never holds the routine when it returns anything but ``True``."""
+        link = self._link
+        while not self._wait_lock.acquire(blocking=False):
+            if bool(round(link.query_operands([f"@IN[{n}]"])[0])) == high:
+                return None
+            now = link.clock()
+            if deadline is not None and now >= deadline:
+                return False
+            link.pause(_POLL if deadline is None else min(_POLL, max(deadline - now, 0.001)))
+        return True
 
     def _watched(self, thread: int, seen: threading.Event, timeout: float | None) -> bool:
         """Wait for the routine on ``thread`` to say the input changed (``seen``): ``True``,
@@ -372,4 +437,5 @@ def _input_routine() -> Routine:
             f'MG "{_INPUT_MESSAGE} ",ginput{{Z3.0}}',
             "EN",
         ),
+        kind=RESERVED[label],
     )

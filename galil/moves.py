@@ -40,7 +40,7 @@ from galil.motion import (
 )
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
-from galil.routines import Routine, Routines
+from galil.routines import RESERVED, Routine, Routines
 from galil.units import state_in_units
 
 __all__ = [
@@ -51,6 +51,7 @@ __all__ = [
     "follower_operands",
     "increment",
     "jog",
+    "schedule_label",
     "set_jog_speed",
     "speed_schedule",
 ]
@@ -62,6 +63,7 @@ _FOLLOWER = ("BL", "FL", "SC", "TS")
 _FOLLOWER_GR = (*_FOLLOWER, "GR")
 _new = object.__new__
 _BUILDERS = {"SP": cmds.sp, "AC": cmds.ac, "DC": cmds.dc}
+_SCHEDULE_KIND = RESERVED["#GSCHED"]  # what a speed schedule's routine is
 
 
 @dataclass(frozen=True)
@@ -837,6 +839,29 @@ def _check_step(link: CommandLink, a: str, counts: int) -> None:
         )
 
 
+def schedule_label(label: object) -> str:
+    """A speed schedule's ``label=`` as its routine's label line: ``"GSCHED"`` or
+    ``"#GSCHED"`` both give ``"#GSCHED"``.
+
+    Raises:
+        InvalidArgument: not a string, a label the controller would refuse, or a label of
+            another of the library's routines (the watchdog's ``GWDOG``, the input wait's
+            ``GINWAIT``, their inner ones: :data:`galil.routines.RESERVED`), which the
+            schedule's routine would replace.
+    """
+    if not isinstance(label, str):
+        raise InvalidArgument(f"label must be a string such as 'GSCHED', not {label!r}")
+    line = label if label.startswith("#") else f"#{label}"
+    cmds.xq(line)  # the controller's label rules
+    owner = RESERVED.get(line)
+    if owner is not None and owner != _SCHEDULE_KIND:
+        raise InvalidArgument(
+            f"label {label!r} is the label of {owner}'s routine, which a speed schedule "
+            "would replace; choose another label (such as the default 'GSCHED')"
+        )
+    return line
+
+
 def speed_schedule(
     link: CommandLink,
     tracker: MotionTracker,
@@ -869,7 +894,7 @@ def speed_schedule(
         MotionError: a limit stopped an axis geared to ``letter`` during a move nobody waited
             for: its gearing is off, and forgotten (:func:`~galil.motion.refuse_dropped`).
     """
-    cmds.xq(f"#{label}")  # the label is checked before anything is read or sent
+    label = schedule_label(label)  # checked before anything is read or sent
     # Held from the thread 0 check to the handle: another thread's schedule would install
     # its routine over this one's, or take thread 0 in between.
     with tracker.lock, stop_on_error(link, tracker, letter):
@@ -917,12 +942,13 @@ def _speed_schedule(
         geared = {f: g.profile(schedule.profile) for f, g in gears.items()}
         check_followers(link, gears, geared, limits)
     program = _schedule_program(link, a, label, first, distance, schedule)
-    routines.install(Routine(f"#{label}", tuple(program)))  # beside the user's program
+    # Beside the user's program; a schedule's routine may not take another's label.
+    routines.install(Routine(label, tuple(program), kind=_SCHEDULE_KIND))
     tracker.schedule_starting()  # (the line below resets the begin it may not have read)
     link.command_line([cmds.assign(SCHEDULE_BEGIN, -1)])
     run = object()  # this schedule's hold on thread 0
     try:
-        routines.start(f"#{label}", 0, owner=run)
+        routines.start(label, 0, owner=run)
     except BaseException:
         # XQ may have gone out: no change point may run after the stop (stop_on_error), and
         # SP goes back, as for a schedule stopped before its end (_cancel_schedule).
@@ -1014,7 +1040,7 @@ def _schedule_program(
     """The program of a speed schedule: SP, PR, BG, stamp the start, then AD/SP pairs."""
     model = link.model
     program = [
-        f"#{label}",
+        label,
         cmds.sp(model=model, **{a: first}).text,
         cmds.pr(model=model, **{a: distance}).text,
         cmds.bg(a, model=model).text,

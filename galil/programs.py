@@ -37,7 +37,7 @@ from galil.link import CommandLink, check_flag, check_seconds
 from galil.motion import MotionTracker
 from galil.protocol import commands as cmds
 from galil.protocol.programs import check_program, program_lines
-from galil.routines import MARKER, Routines, split_program
+from galil.routines import MARKER, Routines, check_user_labels, split_program
 from galil.tuning import burn
 
 __all__ = ["Download", "Programs", "check_thread_timeout"]
@@ -104,7 +104,22 @@ def check_thread_timeout(timeout: object) -> float:
     return check_seconds(timeout, "timeout")
 
 
+#: A one-line string that looks like a path: a path separator, or a file suffix at its end
+#: (``.dmc``, ``.txt``); ``_PROGRAM_TEXT`` rules out what a program line holds.
+_PATHLIKE = re.compile(r"[/\\]|\.[A-Za-z][A-Za-z0-9_]*$")
+_PROGRAM_TEXT = re.compile(r"^\s*[#']|[;=,\"]")
+
+
 def _read_source(source: str | os.PathLike[str]) -> str:
+    """The program's text: a path's file read, a one-line string naming a file read, any
+    other string as it is.
+
+    Raises:
+        InvalidArgument: neither text nor a path, or a one-line string that looks like a
+            path (:func:`_looks_like_path`) and names no file: a mistyped file name would
+            otherwise replace the program with the path's text.
+        OSError: a file that cannot be read.
+    """
     if isinstance(source, os.PathLike):
         return Path(source).read_text(encoding="ascii", errors="strict")
     if not isinstance(source, str):
@@ -116,7 +131,19 @@ def _read_source(source: str | os.PathLike[str]) -> str:
                 return path.read_text(encoding="ascii", errors="strict")
         except (OSError, ValueError):
             pass
+        if _looks_like_path(source):
+            raise InvalidArgument(
+                f"no such file: {source!r}; to download a one-line program that reads like a "
+                "path, end it with a line break"
+            )
     return source
+
+
+def _looks_like_path(text: str) -> bool:
+    """Whether a one-line string reads as a file name rather than a program line: a path
+    separator (``/``, ``\\``) or a file suffix at its end (``.dmc``, ``.txt``), and none of
+    a program line's marks (a label or a comment at its start, ``;``, ``=``, ``,``, ``"``)."""
+    return _PATHLIKE.search(text.strip()) is not None and not _PROGRAM_TEXT.search(text)
 
 
 class Programs:
@@ -152,7 +179,10 @@ class Programs:
 
         Args:
             source: the program text, or a path (a :class:`~pathlib.Path`, or a one-line
-                string naming a file that exists).
+                string naming a file that exists). A one-line string that looks like a path
+                (a ``/`` or ``\\``, or a suffix such as ``.dmc`` at its end, and no label,
+                ``;``, ``=``, ``,`` or ``"``) but names no file is refused: a mistyped file
+                name never replaces the program.
             strip_comments: drop comments and the lines they leave empty (program memory is
                 scarce; comments take it too).
             pack: join lines into compound lines up to the model's line length.
@@ -162,7 +192,9 @@ class Programs:
 
         Raises:
             InvalidArgument: a line or the program breaks a rule of the model (nothing is
-                sent), a label of the library's routines, or a program of the user's running.
+                sent), a label of the library's routines (:data:`galil.routines.RESERVED`
+                always, before anything is sent; those of a speed schedule's routine in
+                memory), a program of the user's running, or a file that does not exist.
         """
         check_flag(strip_comments, "strip_comments")
         check_flag(pack, "pack")
@@ -175,6 +207,7 @@ class Programs:
             text, strip_comments=strip_comments, pack=model.line_length if pack else None
         )
         check_program(lines, model)
+        check_user_labels(line.text for line in lines)  # (before the UL: nothing is sent)
         for line in lines:
             if line.text == MARKER:
                 raise InvalidArgument(

@@ -14,6 +14,9 @@ A routine owns all its labels: installing it again replaces the whole routine.
 Rules, all checked before the download:
 - none of a routine's labels (inner ones included) may be one of the user's labels, or a label
   of another of the library's routines (``InvalidArgument``);
+- the labels of the library's own routines (:data:`RESERVED`: the watchdog's, the input
+  wait's, a speed schedule's default) belong to them: a routine of another kind may not take
+  one (``Routine`` refuses it), nor may a program of the user's (:func:`check_user_labels`);
 - the whole program must fit the model's line length and line count;
 - no user program may be running (a download would disturb it): the caller is told which
   thread runs; the library's own threads are halted for the download and started again.
@@ -23,18 +26,40 @@ from __future__ import annotations
 
 import re
 import threading
-from collections.abc import Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 
 from galil.errors import CommandError, InvalidArgument
 from galil.link import CommandLink
 from galil.models import ModelSpec
 from galil.protocol import commands as cmds
 
-__all__ = ["MARKER", "Routine", "Routines", "split_program", "ul_reply_bytes"]
+__all__ = [
+    "MARKER",
+    "RESERVED",
+    "Routine",
+    "Routines",
+    "check_user_labels",
+    "split_program",
+    "ul_reply_bytes",
+]
 
 #: The line that separates the user's program (above) from the library's routines (below).
 MARKER = "'galil library"
+
+#: The labels of the library's own routines (first and inner ones), each with the routine it
+#: belongs to. A routine of another kind may not take one (a speed schedule's ``label=``
+#: would replace the watchdog's code), and a program of the user's may not use one.
+RESERVED: Mapping[str, str] = MappingProxyType(
+    {
+        "#GWDOG": "the watchdog",
+        "#GWDOGL": "the watchdog",
+        "#GINWAIT": "wait_for_input",
+        "#GINLOOP": "wait_for_input",
+        "#GSCHED": "a speed schedule",
+    }
+)
 _LABEL = re.compile(r"#([A-Za-z][A-Za-z0-9]*)")
 _END = re.compile(r"EN\b")
 
@@ -59,16 +84,29 @@ class Routine:
     """A piece of program the library installs: its label line first, its lines, ``EN``
     last. Inner labels are allowed, never right after an ``EN`` (there a routine starts).
 
+    Attributes:
+        kind: what the routine is (``"the watchdog"``, ``"a speed schedule"``): it may take
+            the :data:`RESERVED` labels of its own kind only.
+
     Raises:
         InvalidArgument: a bad label, lines that do not start with it or end with ``EN``, an
-            inner label right after an ``EN``, or a label twice.
+            inner label right after an ``EN``, a label twice, or a label reserved for a
+            routine of another kind.
     """
 
     label: str
     lines: tuple[str, ...]
+    kind: str = ""
 
     def __post_init__(self) -> None:
         cmds.xq(self.label)  # the label rules (refused before anything is sent)
+        for label in sorted(_labels(self.lines) | {self.label}):
+            owner = RESERVED.get(label)
+            if owner is not None and owner != self.kind:
+                raise InvalidArgument(
+                    f"{label} is the label of {owner}'s routine, reserved by the library; "
+                    f"choose another label for {self.kind or 'this routine'}"
+                )
         if not self.lines or self.lines[0] != self.label:
             raise InvalidArgument(f"a routine starts with its label line {self.label!r}")
         if not _is_end(self.lines[-1]):
@@ -92,8 +130,25 @@ class Routine:
         return frozenset(_labels(self.lines))
 
 
-def _labels(lines: Sequence[str]) -> set[str]:
+def _labels(lines: Iterable[str]) -> set[str]:
     return {label for line in lines if (label := _label_of(line)) is not None}
+
+
+def check_user_labels(lines: Iterable[str]) -> None:
+    """Refuse a program of the user's that uses a label of the library's own routines
+    (:data:`RESERVED`), whether or not the routine is in memory now: it would clash the day
+    the library installs it.
+
+    Raises:
+        InvalidArgument: such a label, named with the routine it belongs to.
+    """
+    taken = sorted(_labels(lines) & RESERVED.keys())
+    if taken:
+        whose = ", ".join(f"{label} ({RESERVED[label]})" for label in taken)
+        raise InvalidArgument(
+            f"your program uses the label(s) {whose} that the library reserves for its own "
+            "routines; rename them"
+        )
 
 
 def split_program(lines: Sequence[str]) -> tuple[list[str], dict[str, tuple[str, ...]]]:
@@ -274,9 +329,11 @@ class Routines:
             again (the watchdog, say).
 
         Raises:
-            InvalidArgument: a label of the library's routines in ``lines``, a program too
-                long with the routines, or a user program running.
+            InvalidArgument: a label of the library's routines (installed, or
+                :data:`RESERVED`) in ``lines``, a program too long with the routines, or a
+                user program running.
         """
+        check_user_labels(lines)
         with self._lock:
             current = self.upload()
             _, library = split_program(current)
@@ -293,6 +350,22 @@ class Routines:
                 return False, ()
             return True, self._download(self._checked(combined), for_user=True)
 
+    def check_thread(self, thread: object) -> int:
+        """``thread`` if the model has it; nothing is sent.
+
+        Raises:
+            InvalidArgument: not an integer, or no such thread.
+        """
+        model = self.link.model
+        if isinstance(thread, bool) or not isinstance(thread, int):
+            raise InvalidArgument(f"thread must be an integer, not {thread!r}")
+        if not 0 <= thread < model.threads:
+            raise InvalidArgument(
+                f"{model.name} has threads 0..{model.threads - 1}, not {thread}",
+                model=model.name,
+            )
+        return thread
+
     def check_free(self, thread: int, label: str) -> bool:
         """Refuse a thread that does not exist or runs another program (one query).
 
@@ -304,13 +377,7 @@ class Routines:
             InvalidArgument: the thread does not exist or runs a program.
         """
         model = self.link.model
-        if isinstance(thread, bool) or not isinstance(thread, int):
-            raise InvalidArgument(f"thread must be an integer, not {thread!r}")
-        if not 0 <= thread < model.threads:
-            raise InvalidArgument(
-                f"{model.name} has threads 0..{model.threads - 1}, not {thread}",
-                model=model.name,
-            )
+        self.check_thread(thread)
         busy = thread in self.running()
         if busy and self._threads.get(thread) != label:
             raise InvalidArgument(

@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import threading
+import weakref
 from types import TracebackType
 
 from galil.errors import GalilConnectionError, GalilError, InvalidArgument
@@ -24,7 +25,7 @@ from galil.link import CommandLink, Link, check_seconds
 from galil.models import INT32_MAX
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import read_one
-from galil.routines import Routine, Routines
+from galil.routines import RESERVED, Routine, Routines
 
 __all__ = ["LABEL", "Watchdog", "watchdog_routine"]
 
@@ -50,7 +51,7 @@ def watchdog_routine(axes: str) -> Routine:
         'MG "galil watchdog: motion stopped"',  # within every model's MG text and line
         "EN",
     )
-    return Routine(LABEL, lines)
+    return Routine(LABEL, lines, kind=RESERVED[LABEL])
 
 
 class Watchdog:
@@ -75,7 +76,9 @@ class Watchdog:
         self._beater: threading.Thread | None = None
         self._beat = cmds.stamp(BEAT)
         self._ask = cmds.mg_operand(f"_XQ{thread}")  # (on the beat's line: the routine runs?)
-        self._lost = False
+        self._lost = False  # a heartbeat found the routine not running (said once)
+        self._ended = False  # a query of running found the routine not running
+        self._fired = False  # the routine seen fired (by a query of fired)
         self._live = False  # started, and not stopped since
         self._halt_pending = False  # stopped on a dead link: halted once it is reopened
 
@@ -107,7 +110,7 @@ class Watchdog:
                 "XQ; the watchdog is not started",
             )
         self._live = True
-        link.set_keepalive(self._beat, self.interval)
+        _keepalives.add(link, self)
         self._stop.clear()
         self._beater = threading.Thread(target=self._run, name="galil-watchdog", daemon=True)
         self._beater.start()
@@ -146,7 +149,7 @@ class Watchdog:
     def stop(self) -> None:
         """Stop beating and halt the routine (the axes are left as they are); idempotent."""
         self._stop.set()
-        self._link.set_keepalive(None)
+        _keepalives.remove(self._link, self)  # (another watchdog's beat stays: decision 0076)
         if self._beater is not None and self._beater is not threading.current_thread():
             self._beater.join(timeout=2.0)
         self._beater = None
@@ -187,12 +190,15 @@ class Watchdog:
     @property
     def running(self) -> bool:
         """Whether the routine runs on the controller (``_XQn`` is not -1); one query."""
-        return round(self._link.query_operands([f"_XQ{self.thread}"])[0]) >= 0
+        running = round(self._link.query_operands([f"_XQ{self.thread}"])[0]) >= 0
+        self._ended = not running
+        return running
 
     @property
     def fired(self) -> bool:
         """Whether the routine stopped the axes for want of a heartbeat; one query."""
-        return bool(round(self._link.query_operands([FIRED])[0]))
+        self._fired = bool(round(self._link.query_operands([FIRED])[0]))
+        return self._fired
 
     def __enter__(self) -> Watchdog:
         return self
@@ -206,9 +212,56 @@ class Watchdog:
         self.stop()
 
     def __repr__(self) -> str:
-        beater = self._beater
-        state = "beating" if beater is not None and beater.is_alive() else "stopped"
+        """The state as last seen, without a query: ``stopped`` (no heartbeat), ``fired``
+        (:attr:`fired` read true), ``beating, routine not running`` (a heartbeat or
+        :attr:`running` found the routine ended: nothing guards the motion), or ``beating``."""
+        if not self.beating:
+            state = "stopped"
+        elif self._fired:
+            state = "fired"
+        elif self._lost or self._ended:
+            state = "beating, routine not running"
+        else:
+            state = "beating"
         return f"<Watchdog {self.timeout:g} s on thread {self.thread}, {state}>"
+
+
+class _Keepalives:
+    """The link's keepalive (which slices a simulator's pauses with heartbeats) for the
+    watchdogs that beat on it: set while one beats, at the shortest interval, and cleared
+    only when the last stops. A watchdog replaced on its thread, or one of another thread,
+    stopping leaves the others' beat in place."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        # (weak both ways: a watchdog holds its link, and neither is kept alive from here)
+        self._dogs: weakref.WeakKeyDictionary[Link, weakref.WeakSet[Watchdog]] = (
+            weakref.WeakKeyDictionary()
+        )
+
+    def add(self, link: Link, dog: Watchdog) -> None:
+        with self._lock:
+            dogs = self._dogs.setdefault(link, weakref.WeakSet())
+            dogs.add(dog)
+            self._set(link, dogs)
+
+    def remove(self, link: Link, dog: Watchdog) -> None:
+        with self._lock:
+            dogs = self._dogs.get(link)
+            if dogs is not None and dog in dogs:  # (else the others' beat is left alone)
+                dogs.discard(dog)
+                self._set(link, dogs)
+
+    @staticmethod
+    def _set(link: Link, dogs: weakref.WeakSet[Watchdog]) -> None:
+        beating = list(dogs)
+        if beating:
+            link.set_keepalive(beating[0]._beat, min(d.interval for d in beating))
+        else:
+            link.set_keepalive(None)
+
+
+_keepalives = _Keepalives()
 
 
 def check_watchdog_args(

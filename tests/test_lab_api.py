@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import warnings
 
+import numpy as np
 import pytest
 
 import galil
@@ -226,6 +227,32 @@ def test_io_refuses_channels_and_values_the_model_lacks_before_sending() -> None
             rio.io.analog_out[0] = 1 * ureg.mm
         with pytest.raises(galil.InvalidArgument):
             rio.io.outputs[0:2] = [True]
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda d: d.io.inputs["a":3],
+        lambda d: d.io.inputs[1.0:3],
+        lambda d: d.io.inputs[1:3.0],
+        lambda d: d.io.outputs.__setitem__(slice(1, 3), True),
+    ],
+)
+def test_io_refuses_wrong_types_as_invalid_argument_before_sending(call: object) -> None:
+    with simulated() as dmc, nothing_sent(dmc), pytest.raises(galil.InvalidArgument):
+        call(dmc)  # type: ignore[operator]
+
+
+def test_io_takes_numpy_integers_and_bools() -> None:
+    with simulated() as dmc:
+        sim_of(dmc).set_input(2, False)
+        assert dmc.io.inputs[np.int64(2)] is False
+        assert dmc.io.inputs[np.int32(1) : np.int64(3)] == (True, False)
+        dmc.io.outputs[np.int64(1)] = np.True_
+        dmc.io.outputs[2:4] = np.array([True, False])
+        dmc.io.outputs[np.int16(4)] = np.int64(1)
+        assert [sim_of(dmc).output(n) for n in (1, 2, 3, 4)] == [True, True, False, True]
+        dmc.io.wait_for_input(np.int64(2), high=np.False_, timeout=1)
 
 
 def test_wait_for_input_returns_when_the_input_changes() -> None:

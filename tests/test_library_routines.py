@@ -3,7 +3,10 @@ user's labels (inner labels included), and a watchdog that says it beats only wh
 
 from __future__ import annotations
 
+import contextlib
 import math
+import threading
+import time
 
 import pytest
 from client_fakes import pull_cable_after
@@ -53,7 +56,8 @@ def test_a_stale_inner_block_left_in_memory_is_replaced_with_the_routine() -> No
 
 def test_a_user_label_equal_to_a_routines_inner_label_is_refused_before_download() -> None:
     with simulated() as dmc:
-        dmc.programs.download("#A\nEN\n#GWDOGL\nEN")
+        # (put there by other software: programs.download refuses the library's labels)
+        assert dmc.exchange(cmds.dl(["#A", "EN", "#GWDOGL", "EN"])).ok
         with (
             nothing_sent(dmc, allow_queries=True),
             pytest.raises(galil.InvalidArgument, match="GWDOGL"),
@@ -177,3 +181,60 @@ def test_a_wait_for_an_input_whose_link_died_at_its_start_leaves_the_thread_to_t
             dmc.io.wait_for_input(2, high=False, timeout=0.1)
         sim_of(dmc).set_input(2, False)
         dmc.io.wait_for_input(2, high=False, timeout=0.5)
+
+
+def test_a_routine_may_not_take_a_label_reserved_for_another_kind_of_routine() -> None:
+    with pytest.raises(galil.InvalidArgument, match="watchdog"):
+        Routine("#GWDOG", ("#GWDOG", "EN"), kind="a speed schedule")
+    with pytest.raises(galil.InvalidArgument, match="wait_for_input"):
+        Routine("#MINE", ("#MINE", "#GINLOOP", "JP #GINLOOP", "EN"), kind="a speed schedule")
+    Routine("#GSCHED", ("#GSCHED", "EN"), kind="a speed schedule")  # its own
+
+
+def test_a_program_with_a_library_label_is_refused_unsent_with_no_routine_installed() -> None:
+    with simulated() as dmc:
+        with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match="GWDOG"):
+            dmc.programs.download("#GWDOG\nEN")
+        dog = dmc.watchdog(0.5)  # the label is free for the watchdog
+        assert dog.running
+        dog.stop()
+
+
+def _waiting_on(dmc: galil.Controller, n: int, timeout: float) -> threading.Thread:
+    """A wait for input ``n`` to go low in another thread, once its routine runs."""
+
+    def wait() -> None:
+        with contextlib.suppress(galil.GalilError):
+            dmc.io.wait_for_input(n, high=False, timeout=timeout)
+
+    waiting = threading.Thread(target=wait)
+    waiting.start()
+    deadline = time.monotonic() + 10.0
+    while dmc.query_operands(["_XQ7"]) == [-1] and time.monotonic() < deadline:
+        time.sleep(0.001)
+    return waiting
+
+
+def test_a_second_wait_for_an_input_keeps_its_own_timeout() -> None:
+    with simulated() as dmc:
+        first = _waiting_on(dmc, 1, timeout=30.0)
+        start = dmc.link.clock()
+        with pytest.raises(galil.GalilTimeoutError, match="another wait_for_input"):
+            dmc.io.wait_for_input(2, high=False, timeout=0.5, thread=3)
+        assert 0.5 <= dmc.link.clock() - start < 1.0
+        assert dmc.query_operands(["_XQ3"]) == [-1]  # not started on its thread
+        sim_of(dmc).set_input(1, False)
+        first.join(10.0)
+        assert not first.is_alive()
+
+
+def test_a_second_wait_for_an_input_returns_when_its_input_is_at_the_level() -> None:
+    with simulated() as dmc:
+        first = _waiting_on(dmc, 1, timeout=30.0)
+        sim_of(dmc).set_input(2, False)
+        start = dmc.link.clock()
+        dmc.io.wait_for_input(2, high=False, timeout=5.0, thread=3)
+        assert dmc.link.clock() - start < 0.5
+        sim_of(dmc).set_input(1, False)
+        first.join(10.0)
+        assert not first.is_alive()

@@ -60,6 +60,20 @@ def test_a_file_is_read_and_comments_stripped_and_lines_packed(
     assert not dmc.programs.download(str(path), strip_comments=True, pack=True).sent
 
 
+def test_a_mistyped_file_name_is_refused_and_one_line_programs_are_still_text(
+    dmc: galil.Controller, tmp_path: Path
+) -> None:
+    dmc.programs.download("#MAIN\nEN")
+    typo = str(tmp_path / "mian.dmc")
+    with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match="no such file") as e:
+        dmc.programs.download(typo)
+    assert typo in str(e.value)
+    assert dmc.programs.upload() == "#MAIN\nEN"
+    for text in ["#A;MG 10/2;EN", "MG 1.5", "x=a/b", "#A;EN", "MG 10/2\n"]:
+        assert dmc.programs.download(text).sent  # one-line programs: still program text
+        assert dmc.programs.upload() == text.strip()
+
+
 @pytest.mark.parametrize(
     ("call", "words"),
     [
@@ -71,6 +85,10 @@ def test_a_file_is_read_and_comments_stripped_and_lines_packed(
         (lambda d: d.programs.download('#A\nMG "x'), "not closed"),
         (lambda d: d.programs.download("#A\n" + "EN\n" * 2000), "holds 2000"),
         (lambda d: d.programs.download(f"#A\n{MARKER}\nEN"), "marks the library"),
+        (lambda d: d.programs.download("#A\nJS #GINLOOP\nEN\n#GINLOOP\nEN"), "GINLOOP"),
+        (lambda d: d.programs.download("/tmp/no/such/prog.dmc"), "no such file"),
+        (lambda d: d.programs.download("programs\\main.txt"), "no such file"),
+        (lambda d: d.programs.download("square.dmc"), "no such file"),
         (lambda d: d.programs.run("#A", thread=8), "threads 0..7"),
         (lambda d: d.programs.run("A", thread=0), "label"),
         (lambda d: d.programs.halt(-1), "threads 0..7"),

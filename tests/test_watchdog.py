@@ -209,3 +209,44 @@ def test_a_new_watchdog_on_the_thread_of_a_running_one_takes_it_over() -> None:
         jog.stop()
         second.stop()
         assert not second.running
+
+
+def test_stopping_a_replaced_watchdog_leaves_its_successors_heartbeat() -> None:
+    with simulated() as dmc:
+        first = dmc.watchdog(1.0)
+        second = dmc.watchdog(1.0)
+        first.stop()
+        jog = dmc.A.jog(1000)
+        dmc.sleep(3.0)  # the host beats through it: the second's heartbeat goes on
+        assert dmc.A.moving
+        assert not second.fired
+        assert repr(second) == "<Watchdog 1 s on thread 7, beating>"
+        jog.stop()
+        second.stop()
+
+
+def test_stopping_a_watchdog_leaves_the_heartbeat_of_one_on_another_thread() -> None:
+    with simulated() as dmc:
+        other = dmc.watchdog(1.0, thread=6)
+        dog = dmc.watchdog(1.0)
+        dog.stop()
+        jog = dmc.A.jog(1000)
+        dmc.sleep(3.0)
+        assert dmc.A.moving
+        assert not other.fired
+        jog.stop()
+        other.stop()
+
+
+def test_a_watchdog_that_fired_says_so_in_its_repr() -> None:
+    with simulated() as dmc:
+        dog = dmc.watchdog(0.5)
+        assert repr(dog) == "<Watchdog 0.5 s on thread 7, beating>"
+        dmc.A.jog(20_000)
+        sim_of(dmc).advance(2.0)  # the host silent
+        assert not dog.running
+        assert repr(dog) == "<Watchdog 0.5 s on thread 7, beating, routine not running>"
+        assert dog.fired
+        assert repr(dog) == "<Watchdog 0.5 s on thread 7, fired>"
+        dog.stop()
+        assert repr(dog) == "<Watchdog 0.5 s on thread 7, stopped>"

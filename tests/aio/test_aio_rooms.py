@@ -7,6 +7,7 @@ they need).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import inspect
 import threading
 from typing import Any
@@ -179,6 +180,31 @@ def test_wait_for_input_times_out_after_the_whole_timeout_not_a_slice() -> None:
     assert 1.2 <= took < 1.5
     assert "input 2 did not go low within 1.2 s" in text
     assert thread == [-1.0]  # the routine is halted
+
+
+def test_an_awaited_wait_for_input_beside_a_sync_one_keeps_its_own_timeout() -> None:
+    async def body() -> tuple[float, str]:
+        async with await sim() as c:
+
+            def wait() -> None:  # another thread of the program waits, the sync way
+                with contextlib.suppress(galil.GalilError):
+                    c.sync.io.wait_for_input(1, high=False, timeout=30)
+
+            first = threading.Thread(target=wait)
+            first.start()
+            while await c.query_operands(["_XQ7"]) == [-1.0]:  # its routine runs
+                await asyncio.sleep(0.001)
+            start = await c.run(c.sync.link.clock)
+            with pytest.raises(galil.GalilTimeoutError) as raised:
+                await c.io.wait_for_input(2, high=False, timeout=1.2, thread=3)
+            took = await c.run(c.sync.link.clock) - start
+            sim_of(c.sync).set_input(1, False)
+            await asyncio.to_thread(first.join, 10.0)
+            return took, str(raised.value)
+
+    took, text = run(body)
+    assert 1.2 <= took < 2.0
+    assert "input 2 did not go low within 1.2 s" in text
 
 
 def test_cancelling_a_wait_for_input_frees_its_thread_and_halts_the_routine() -> None:

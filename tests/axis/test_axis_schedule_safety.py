@@ -255,3 +255,39 @@ def test_thread_0_is_the_users_again_once_a_speed_schedule_has_ended(
         dmc.programs.run("#A")
     h.wait()
     dmc.programs.run("#A")
+
+
+@pytest.mark.parametrize("label", ["GWDOG", "#GWDOG", "GWDOGL", "GINWAIT", "GINLOOP"])
+def test_a_speed_schedule_may_not_take_the_label_of_another_library_routine(
+    dmc: galil.Controller, label: str
+) -> None:
+    dog = dmc.watchdog(0.5)
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="routine"):
+        dmc.A.speed_schedule(20_000, [(10_000, 5000)], speed=20_000, label=label)
+    jog = dmc.A.jog(20_000)
+    sim_of(dmc).advance(2.0)  # the host silent: the watchdog's routine is its own still
+    assert dog.fired
+    assert not dmc.A.moving
+    jog.wait()
+
+
+def test_a_speed_schedule_label_may_be_given_with_its_hash(dmc: galil.Controller) -> None:
+    with transcript(dmc) as sent:
+        h = dmc.A.speed_schedule(20_000, [(10_000, 5000)], speed=20_000, label="#MINE")
+    assert "#MINE" in sent.lines
+    assert h.wait().final == {"A": 20_000}
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="##MINE"):
+        dmc.A.speed_schedule(20_000, [(10_000, 5000)], speed=20_000, label="##MINE")
+
+
+def test_a_negative_change_point_is_refused_not_made_positive(dmc: galil.Controller) -> None:
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="negative"):
+        dmc.A.speed_schedule(20_000, [(-10_000, 5000)], speed=20_000)
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="negative"):
+        dmc.A.speed_schedule(-20_000, [(-10_000, 5000)], speed=20_000)
+    mm, s = ureg.mm, ureg.s
+    x = dmc.C.set_scale(counts_per=2000 / mm, sign=-1)  # a positive mm is negative counts
+    with nothing_sent(dmc), pytest.raises(InvalidArgument, match="negative"):
+        x.speed_schedule(10 * mm, [(-4 * mm, 2.5 * mm / s)], speed=10 * mm / s)
+    h = x.speed_schedule(10 * mm, [(4 * mm, 2.5 * mm / s)], speed=10 * mm / s)
+    assert h.wait().final == {"C": -20_000}
