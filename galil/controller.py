@@ -724,12 +724,12 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         """A context in which an exception or Ctrl-C stops the guarded axes and waits for them.
 
         ``with controller.motion(): ...``: on any exception, ``ST`` goes to every axis still
-        moving (of ``axes``, default all; all of them when that cannot be read), a dead link
-        is reopened once to send it, and the block's exception is re-raised once they have
-        stopped. If they could not be stopped, :class:`~galil.errors.MotionError` says which
-        axes may still be moving.
+        moving (of ``axes``, default or ``""``: all; all of them when that cannot be read), a
+        dead link is reopened once to send it, and the block's exception is re-raised once they
+        have stopped. If they could not be stopped, :class:`~galil.errors.MotionError` says
+        which axes may still be moving.
         """
-        letters = self.model.axes if axes is None else self._letters(axes)
+        letters = self.model.axes if axes is None else self._letters(axes) or self.model.axes
         reopen = self.reconnect if self._factory is not None else None
         return motion_guard(self.link, self.tracker, letters, reconnect=reopen)
 
