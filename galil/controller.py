@@ -795,7 +795,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         before it propagates.
 
         Raises:
-            InvalidArgument: bad axes, path, DT or timeout (nothing sent), or an axis moving.
+            InvalidArgument: bad axes, path, DT, timeout (nothing sent); axis moving, motor off.
             LimitError: the path beyond the model's or the given limits (nothing sent).
             GalilTimeoutError: the contour not finished within ``timeout`` (axes stopped).
         """

@@ -1256,6 +1256,24 @@ def raise_if_limited(
 #: ``TS`` bits 3 and 2: set while the forward and the reverse limit switch are inactive (both
 #: set: no switch active, nothing for :func:`switch_blocks` to look at).
 SWITCH_BITS = 0x0C
+#: ``TS`` bit 5: set while the motor is off (``MO``, or an abort or a position error that
+#: turned it off).
+MOTOR_OFF_BIT = 0x20
+
+
+def refuse_motor_off(link: CommandLink, letter: str, ts: int) -> None:
+    """Refuse a start on ``letter`` whose ``TS`` (read before anything is sent) says its motor
+    is off: the controller would take the profile, and the reference would move without the
+    motor.
+
+    Raises:
+        InvalidArgument: the motor is off.
+    """
+    if ts & MOTOR_OFF_BIT:
+        raise InvalidArgument(
+            f"axis {letter} has its motor off; call controller.servo_here()",
+            model=link.model.name,
+        )
 
 
 def switch_blocks(link: CommandLink, letter: str, direction: float, ts: int) -> bool:

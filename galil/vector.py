@@ -38,6 +38,7 @@ from galil.motion import (
     MoveParams,
     Track,
     held,
+    refuse_motor_off,
     sample_of,
     stop_on_error,
     switch_blocks,
@@ -270,7 +271,6 @@ def _path_master(counts: predict.VectorProfile, gear: GearLink) -> predict.Profi
 #: ``TS`` in place of ``_MO``: its bit 5 is "motor off", and its bits 3 and 2 the limit
 #: switches (set while inactive), with one operand per axis (the state query stays one line).
 _STATE = ("RP", "BG", "TS", "FL", "BL", "SC")
-_MOTOR_OFF_BIT = 0x20
 #: What a line of streamed segments ends with: the sample it ran in.
 _STAMP_SIZE = len(cmds.time_stamp().text) + 1
 
@@ -440,10 +440,7 @@ class VectorStream:
                 self._tracker.ended(a, rp, sc)
             if bg:
                 raise InvalidArgument(f"axis {a} is moving; stop it or wait", model=model.name)
-            if round(ts) & _MOTOR_OFF_BIT:
-                raise InvalidArgument(
-                    f"axis {a} has its motor off; call controller.servo_here()", model=model.name
-                )
+            refuse_motor_off(link, a, round(ts))
         tail = len(values) - len(of_followers)
         limits = follower_limits(link, self._tracker, self.followers, values[tail:])
         rest = iter(values[len(letters) * n + 1 : tail])
