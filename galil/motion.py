@@ -1076,8 +1076,8 @@ class MoveHandle:
 
     @property
     def _stop_letters(self) -> str:
-        """What ``_BG`` says of this move: its axes (a sequence's handle: ``"S"``)."""
-        return self.axes
+        """What ``_BG`` says of this move: the axes it still drives (a sequence's: ``"S"``)."""
+        return driven_axes(self)
 
     def _poll_until_done(self, timeout: float | None, bar: Any) -> bool:
         """Poll until the move is done (``True``) or ``timeout`` has passed (``False``)."""
@@ -1162,12 +1162,38 @@ class MoveHandle:
             watcher.join(timeout=2.0)
 
     def stop(self) -> None:
-        """Decelerate the move's axes to a stop (``ST``) at their DC."""
-        stop_axes(self._link, self._tracker, self.axes)
+        """Decelerate the axes the move still drives to a stop (``ST``) at their DC: none once
+        it was seen done, nor those newer motion took (:func:`driven_axes`)."""
+        stop_driven(self)
 
     def __repr__(self) -> str:
         state = "done" if self._done else "moving"
         return f"<MoveHandle {self.kind} {self.axes} {state}, predicted {self.duration:.4g} s>"
+
+
+def driven_axes(handle: MoveHandle) -> str:
+    """The axes ``handle`` may still drive, those its ``stop()`` stops: none once it was seen
+    done; else its axes but those a later start read at rest (decision 0030) or a newer
+    handle took since (:class:`MotionTracker`). When in doubt (a move not waited for, a
+    dead link), an axis no newer handle took counts as driven: it is stopped."""
+    if handle._done:
+        return ""
+    tracker, ended = handle._tracker, handle._ended
+    drivers = {} if tracker is None else tracker._active
+    return "".join(
+        [a for a in handle._tracks if a not in ended and drivers.get(a, handle) is handle]
+    )
+
+
+def stop_driven(handle: MoveHandle) -> None:
+    """``ST`` on the axes ``handle`` still drives (:func:`driven_axes`); nothing when it
+    drives none, so an old handle's stop never ends a newer move on its axes. Under the
+    tracker's lock: no start takes an axis between the look and the ``ST``."""
+    tracker = handle._tracker
+    with held(tracker):
+        letters = driven_axes(handle)
+        if letters:
+            stop_axes(handle._link, tracker, letters)
 
 
 def wait_guard(handle: MoveHandle) -> contextlib.AbstractContextManager[None]:

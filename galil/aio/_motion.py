@@ -321,7 +321,8 @@ class AsyncMoveHandle:
         return self.wait().__await__()
 
     async def stop(self) -> None:
-        """Decelerate the move's axes to a stop (``ST``) at their DC.
+        """Decelerate the axes the move still drives to a stop (``ST``) at their DC (none once
+        it was seen done, nor those newer motion took: ``MoveHandle.stop``).
 
         Once asked for, the stop goes out even if the awaiting task is cancelled (before the
         call has started too)."""
