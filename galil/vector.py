@@ -382,7 +382,8 @@ class VectorStream:
                     f"{what} along the path in user units needs the same counts per unit on "
                     f"every axis ({describe_scales(self.axes)}); give it in counts"
                 )
-            counts = abs(scaled[0].rate_to_counts(value, power, what))
+            # (in the user's direction: a reversed axis's scale makes a rate's counts negative)
+            counts = scaled[0].sign * scaled[0].rate_to_counts(value, power, what)
         elif scaled and self.path.per_unit is not None:
             raise InvalidArgument(
                 f"{what}: {value!r} has no units but the axes have scales; give a Quantity"
