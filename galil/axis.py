@@ -222,7 +222,18 @@ class AxisGearing:
     def gear_to(self, master: Axis | str, ratio: float) -> Gearing:
         """Follow ``master`` (an axis, or ``"S"``: the S sequences' path) at ``ratio`` (``GA``
         its commanded position, ``GR``); its moves then predict this axis too. See
-        :mod:`galil.gearing`."""
+        :mod:`galil.gearing`.
+
+        Raises:
+            InvalidArgument: ``master`` an axis of another controller (nothing sent), and
+                :func:`galil.gearing.gear_to`'s refusals.
+        """
+        if isinstance(master, Axis) and master._link is not self._link:
+            raise InvalidArgument(
+                f"master {master!r} is an axis of another controller: a follower follows an "
+                "axis of its own controller only",
+                model=self._link.model.name,
+            )
         name = master.letter if isinstance(master, Axis) else master
         return gear_to(
             self._link, self._tracker, self.letter, name, ratio,

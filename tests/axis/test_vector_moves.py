@@ -448,6 +448,16 @@ def test_gearing_refusals_send_nothing_that_changes_anything(dmc: galil.Controll
         dmc.B.gear_to("C", 1)
 
 
+def test_gearing_to_an_axis_of_another_controller_is_refused_before_sending(
+    dmc: galil.Controller,
+) -> None:
+    with simulated() as other:
+        with nothing_sent(dmc), pytest.raises(InvalidArgument, match="another controller"):
+            dmc.B.gear_to(other.C, 1)  # (it would gear B to this controller's C)
+        assert dmc.query_operands(["_GRB"]) == [0]
+        assert dmc.B.gear_to(dmc.C, 1).master == "C"  # its own axis, as an Axis
+
+
 def test_a_ratio_change_at_rest_keeps_the_prediction_exact() -> None:
     with simulated() as dmc:
         gearing = dmc.B.gear_to("A", 1 / 3)
