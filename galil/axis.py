@@ -842,11 +842,17 @@ def resolve_moves(
         if axes[name].letter in seen:
             raise InvalidArgument(f"axis {axes[name].letter} given twice")
         seen.add(axes[name].letter)
-    return [resolve_move(axes[name], value, relative, overrides) for name, value in targets.items()]
+    return [
+        resolve_move(axes[name], value, relative, overrides, named=True)
+        for name, value in targets.items()
+    ]
 
 
-def resolve_move(axis: Axis, value: Any, relative: bool, overrides: Mapping[str, Any]) -> AxisMove:
-    """One axis's target (or distance) and overrides in counts (:func:`resolve_moves`).
+def resolve_move(
+    axis: Axis, value: Any, relative: bool, overrides: Mapping[str, Any], *, named: bool = False
+) -> AxisMove:
+    """One axis's target (or distance) and overrides in counts (:func:`resolve_moves`; with
+    ``named``, a refusal of the target names its axis: one of several).
 
     Raises:
         InvalidArgument: wrong units.
@@ -858,10 +864,11 @@ def resolve_move(axis: Axis, value: Any, relative: bool, overrides: Mapping[str,
             if overrides.get(key) is not None:
                 counts = axis.rate_counts(overrides[key], _POWER[cmd], key)
                 given[key] = axis.check_parameter(cmd, counts)
+    what = ("distance" if relative else "target") + (f" of {axis.letter}" if named else "")
     if relative:
-        amount = round(axis.distance_counts(value, "distance"))
+        amount = round(axis.distance_counts(value, what))
     else:
-        amount = round(axis.position_counts(value, "target"))
+        amount = round(axis.position_counts(value, what))
     if not INT32_MIN <= amount <= INT32_MAX:
         with user_units({axis.letter: axis}):
             check_int32("PR" if relative else "PA", amount, axis.letter, axis._link.model.name)
@@ -885,7 +892,7 @@ def in_user_units(exc: LimitError, axes: Mapping[str, Axis]) -> None:
     """Add the user's units to ``exc`` (raised in counts) when its axis has a scale."""
     axis = axes.get(exc.axis) if exc.axis else None
     if axis is not None:
-        state_in_units(exc, axis.scale)
+        state_in_units(exc, axis.scale, "distance" if exc.name == "IP" else None)
 
 
 _KIND = {1: "speed", 2: "acceleration"}

@@ -1056,12 +1056,7 @@ class MoveHandle:
             with wait_guard(self):
                 done = self._poll_until_done(timeout, bar)
             if not done:
-                raise self._link.error(
-                    GalilTimeoutError,
-                    f"move on {self.axes} not done after {timeout:.3g} s "
-                    f"(predicted {self.duration:.3g} s); it goes on: wait again, "
-                    "or stop it",
-                )
+                raise self._link.error(GalilTimeoutError, not_done_text(self, timeout))
         finally:
             if bar is not None:
                 if self._done and bar.total is not None:
@@ -1194,6 +1189,17 @@ def stop_driven(handle: MoveHandle) -> None:
         letters = driven_axes(handle)
         if letters:
             stop_axes(handle._link, tracker, letters)
+
+
+def not_done_text(handle: MoveHandle, timeout: float | None) -> str:
+    """What a wait for ``handle`` that timed out says: the wait leaves the move running,
+    unless the error leaves a ``controller.motion()`` block guarding its axes (which stops
+    it: the message must not promise it goes on without saying so)."""
+    return (
+        f"move on {handle.axes} not done after {timeout:.3g} s (predicted "
+        f"{handle.duration:.3g} s); it goes on: wait again, or stop it (a controller.motion() "
+        "block guarding its axes stops it when this error leaves the block)"
+    )
 
 
 def wait_guard(handle: MoveHandle) -> contextlib.AbstractContextManager[None]:

@@ -40,6 +40,7 @@ from galil.motion import (
     MoveParams,
     MoveResult,
     held,
+    not_done_text,
     wait_guard,
 )
 from galil.segments import VectorPlan
@@ -153,12 +154,7 @@ class _Poll:
                 return None
         now = link.clock()
         if self.deadline is not None and now >= self.deadline:
-            raise link.error(
-                GalilTimeoutError,
-                f"move on {handle.axes} not done after {self.timeout:.3g} s "
-                f"(predicted {handle.duration:.3g} s); it goes on: wait again, "
-                "or stop it",
-            )
+            raise link.error(GalilTimeoutError, not_done_text(handle, self.timeout))
         progress = progress_of(handle, now)
         remaining = progress.duration - progress.elapsed
         pause = remaining / 4 if math.isfinite(remaining) else MAX_POLL
