@@ -223,7 +223,18 @@ class AxisGearing:
     def gear_to(self, master: Axis | str, ratio: float) -> Gearing:
         """Follow ``master`` (an axis, or ``"S"``: the S sequences' path) at ``ratio`` (``GA``
         its commanded position, ``GR``); its moves then predict this axis too. See
-        :mod:`galil.gearing`."""
+        :mod:`galil.gearing`.
+
+        Raises:
+            InvalidArgument: ``master`` an axis of another controller (nothing sent), and
+                :func:`galil.gearing.gear_to`'s refusals.
+        """
+        if isinstance(master, Axis) and master._link is not self._link:
+            raise InvalidArgument(
+                f"master {master!r} is an axis of another controller: a follower follows an "
+                "axis of its own controller only",
+                model=self._link.model.name,
+            )
         name = master.letter if isinstance(master, Axis) else master
         return gear_to(
             self._link, self._tracker, self.letter, name, ratio,
@@ -870,11 +881,17 @@ def resolve_moves(
         if axes[name].letter in seen:
             raise InvalidArgument(f"axis {axes[name].letter} given twice")
         seen.add(axes[name].letter)
-    return [resolve_move(axes[name], value, relative, overrides) for name, value in targets.items()]
+    return [
+        resolve_move(axes[name], value, relative, overrides, named=True)
+        for name, value in targets.items()
+    ]
 
 
-def resolve_move(axis: Axis, value: Any, relative: bool, overrides: Mapping[str, Any]) -> AxisMove:
-    """One axis's target (or distance) and overrides in counts (:func:`resolve_moves`).
+def resolve_move(
+    axis: Axis, value: Any, relative: bool, overrides: Mapping[str, Any], *, named: bool = False
+) -> AxisMove:
+    """One axis's target (or distance) and overrides in counts (:func:`resolve_moves`; with
+    ``named``, a refusal of the target names its axis: one of several).
 
     Raises:
         InvalidArgument: wrong units.
@@ -886,10 +903,11 @@ def resolve_move(axis: Axis, value: Any, relative: bool, overrides: Mapping[str,
             if overrides.get(key) is not None:
                 counts = axis.rate_counts(overrides[key], _POWER[cmd], key)
                 given[key] = axis.check_parameter(cmd, counts)
+    what = ("distance" if relative else "target") + (f" of {axis.letter}" if named else "")
     if relative:
-        amount = round(axis.distance_counts(value, "distance"))
+        amount = round(axis.distance_counts(value, what))
     else:
-        amount = round(axis.position_counts(value, "target"))
+        amount = round(axis.position_counts(value, what))
     if not INT32_MIN <= amount <= INT32_MAX:
         with user_units({axis.letter: axis}):
             check_int32("PR" if relative else "PA", amount, axis.letter, axis._link.model.name)
@@ -913,7 +931,7 @@ def in_user_units(exc: LimitError, axes: Mapping[str, Axis]) -> None:
     """Add the user's units to ``exc`` (raised in counts) when its axis has a scale."""
     axis = axes.get(exc.axis) if exc.axis else None
     if axis is not None:
-        state_in_units(exc, axis.scale)
+        state_in_units(exc, axis.scale, "distance" if exc.name == "IP" else None)
 
 
 _KIND = {1: "speed", 2: "acceleration"}

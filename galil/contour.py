@@ -40,6 +40,7 @@ from galil.motion import (
     forget_dropped,
     held,
     raise_if_limited,
+    refuse_motor_off,
     sample_of,
     send_reopening,
     switch_blocks,
@@ -387,9 +388,9 @@ class ContourStream:
         """Read where the axes are (one round trip), predict, check the soft limits.
 
         Raises:
-            InvalidArgument: an axis is moving, or the library has it geared to another axis;
-                an axis would first move towards its active limit switch (decision 0071), or
-                an axis geared to a contour axis would (decision 0053).
+            InvalidArgument: an axis is moving or its motor off, or the library has it geared
+                to another axis; an axis would first move towards its active limit switch
+                (decision 0071), or an axis geared to a contour axis would (decision 0053).
             LimitError: the path crosses a soft limit, or takes an axis geared to a contour
                 axis past its soft limits or beyond the model's SP maximum.
             MotionError: a limit stopped an axis geared to a contour axis during a move
@@ -417,6 +418,7 @@ class ContourStream:
                 raise InvalidArgument(
                     f"axis {a} is moving; stop it before a contour", model=link.model.name
                 )
+            refuse_motor_off(link, a, round(ts))
             _refuse_blocked(link, a, self.increments[:, j], round(ts))
             prof = predict.contour(
                 self.increments[:, j], self.dt, start=round(rp), sample_period=link.sample_period

@@ -147,7 +147,7 @@ class CoordinatedMotion:
         raise NotImplementedError
 
     def _prepared(self, axes: str, segments: Sequence[Segment], **options: Any) -> VectorStream:
-        chosen = [self.axis(a) for a in _axis_names(axes)]
+        chosen = [self.axis(a) for a in _axis_names(axes, self.link)]
         path_axes = [PathAxis(a.letter, a.scale, a.display) for a in chosen]
         options.setdefault("byte_rate", self.link.byte_rate)
         with user_units({a.letter: a for a in chosen}):
@@ -636,9 +636,9 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         """The axis called ``name`` (``"A"``, or ``"X"`` where the model aliases it).
 
         Raises:
-            InvalidArgument: the model has no such axis.
+            InvalidArgument: the model has no such axis, or ``name`` is an Axis, not a letter.
         """
-        return self.axes[self.model.axis_letter(name)]
+        return self.axes[self.model.axis_letter(_letter_given(self.link, name))]
 
     def _letters(self, axes: str) -> str:
         if not self.model.axes:
@@ -724,12 +724,12 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         """A context in which an exception or Ctrl-C stops the guarded axes and waits for them.
 
         ``with controller.motion(): ...``: on any exception, ``ST`` goes to every axis still
-        moving (of ``axes``, default all; all of them when that cannot be read), a dead link
-        is reopened once to send it, and the block's exception is re-raised once they have
-        stopped. If they could not be stopped, :class:`~galil.errors.MotionError` says which
-        axes may still be moving.
+        moving (of ``axes``, default or ``""``: all; all of them when that cannot be read), a
+        dead link is reopened once to send it, and the block's exception is re-raised once they
+        have stopped. If they could not be stopped, :class:`~galil.errors.MotionError` says
+        which axes may still be moving.
         """
-        letters = self.model.axes if axes is None else self._letters(axes)
+        letters = self.model.axes if axes is None else self._letters(axes) or self.model.axes
         reopen = self.reconnect if self._factory is not None else None
         return motion_guard(self.link, self.tracker, letters, reconnect=reopen)
 
@@ -795,12 +795,12 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         before it propagates.
 
         Raises:
-            InvalidArgument: bad axes, path, DT or timeout (nothing sent), or an axis moving.
+            InvalidArgument: bad axes, path, DT, timeout (nothing sent); axis moving, motor off.
             LimitError: the path beyond the model's or the given limits (nothing sent).
             GalilTimeoutError: the contour not finished within ``timeout`` (axes stopped).
         """
         check_flag(progress, "progress")
-        chosen = [self.axis(a) for a in _axis_names(axes)]
+        chosen = [self.axis(a) for a in _axis_names(axes, self.link)]
         letters = "".join(a.letter for a in chosen)
         counts = path_to_counts(path, [a.scale for a in chosen], letters)
         with user_units({a.letter: a for a in chosen}):
@@ -987,11 +987,33 @@ def _moving(link: Link, letters: str) -> str:
         return ""
 
 
-def _axis_names(axes: object) -> list[str]:
+def _axis_names(axes: object, link: Link) -> list[str]:
     """The axes of a path or contour: a string of letters (``"AB"``) or a list of names."""
     if isinstance(axes, str):
         return list(axes)
-    return [str(a) for a in check_items(axes, "axes")]
+    return [str(_letter_given(link, a)) for a in check_items(axes, "axes")]
+
+
+def _letter_given(link: Link, name: Any) -> Any:
+    """``name``, where an axis is named by its letter; an :class:`Axis` object is refused
+    saying so (and whose it is: this controller's, or another's).
+
+    Raises:
+        InvalidArgument: ``name`` is an Axis.
+    """
+    if not isinstance(name, Axis):
+        return name
+    model = link.model
+    if name._link is not link:
+        raise InvalidArgument(
+            f"{name!r} is an axis of another controller: name this controller's axes by "
+            f"their letters ({', '.join(model.axes)})",
+            model=model.name,
+        )
+    raise InvalidArgument(
+        f"axes are named by their letters here: give {name.letter!r}, not {name!r}",
+        model=model.name,
+    )
 
 
 def _check_options(echo: object, handshake: object, unsolicited: object, model: object) -> None:

@@ -1060,12 +1060,7 @@ class MoveHandle:
             with wait_guard(self):
                 done = self._poll_until_done(timeout, bar)
             if not done:
-                raise self._link.error(
-                    GalilTimeoutError,
-                    f"move on {self.axes} not done after {timeout:.3g} s "
-                    f"(predicted {self.duration:.3g} s); it goes on: wait again, "
-                    "or stop it",
-                )
+                raise self._link.error(GalilTimeoutError, not_done_text(self, timeout))
         finally:
             if bar is not None:
                 if self._done and bar.total is not None:
@@ -1080,8 +1075,8 @@ class MoveHandle:
 
     @property
     def _stop_letters(self) -> str:
-        """What ``_BG`` says of this move: its axes (a sequence's handle: ``"S"``)."""
-        return self.axes
+        """What ``_BG`` says of this move: the axes it still drives (a sequence's: ``"S"``)."""
+        return driven_axes(self)
 
     def _poll_until_done(self, timeout: float | None, bar: Any) -> bool:
         """Poll until the move is done (``True``) or ``timeout`` has passed (``False``)."""
@@ -1166,12 +1161,49 @@ class MoveHandle:
             watcher.join(timeout=2.0)
 
     def stop(self) -> None:
-        """Decelerate the move's axes to a stop (``ST``) at their DC."""
-        stop_axes(self._link, self._tracker, self.axes)
+        """Decelerate the axes the move still drives to a stop (``ST``) at their DC: none once
+        it was seen done, nor those newer motion took (:func:`driven_axes`)."""
+        stop_driven(self)
 
     def __repr__(self) -> str:
         state = "done" if self._done else "moving"
         return f"<MoveHandle {self.kind} {self.axes} {state}, predicted {self.duration:.4g} s>"
+
+
+def driven_axes(handle: MoveHandle) -> str:
+    """The axes ``handle`` may still drive, those its ``stop()`` stops: none once it was seen
+    done; else its axes but those a later start read at rest (decision 0030) or a newer
+    handle took since (:class:`MotionTracker`). When in doubt (a move not waited for, a
+    dead link), an axis no newer handle took counts as driven: it is stopped."""
+    if handle._done:
+        return ""
+    tracker, ended = handle._tracker, handle._ended
+    drivers = {} if tracker is None else tracker._active
+    return "".join(
+        [a for a in handle._tracks if a not in ended and drivers.get(a, handle) is handle]
+    )
+
+
+def stop_driven(handle: MoveHandle) -> None:
+    """``ST`` on the axes ``handle`` still drives (:func:`driven_axes`); nothing when it
+    drives none, so an old handle's stop never ends a newer move on its axes. Under the
+    tracker's lock: no start takes an axis between the look and the ``ST``."""
+    tracker = handle._tracker
+    with held(tracker):
+        letters = driven_axes(handle)
+        if letters:
+            stop_axes(handle._link, tracker, letters)
+
+
+def not_done_text(handle: MoveHandle, timeout: float | None) -> str:
+    """What a wait for ``handle`` that timed out says: the wait leaves the move running,
+    unless the error leaves a ``controller.motion()`` block guarding its axes (which stops
+    it: the message must not promise it goes on without saying so)."""
+    return (
+        f"move on {handle.axes} not done after {timeout:.3g} s (predicted "
+        f"{handle.duration:.3g} s); it goes on: wait again, or stop it (a controller.motion() "
+        "block guarding its axes stops it when this error leaves the block)"
+    )
 
 
 def wait_guard(handle: MoveHandle) -> contextlib.AbstractContextManager[None]:
@@ -1260,6 +1292,24 @@ def raise_if_limited(
 #: ``TS`` bits 3 and 2: set while the forward and the reverse limit switch are inactive (both
 #: set: no switch active, nothing for :func:`switch_blocks` to look at).
 SWITCH_BITS = 0x0C
+#: ``TS`` bit 5: set while the motor is off (``MO``, or an abort or a position error that
+#: turned it off).
+MOTOR_OFF_BIT = 0x20
+
+
+def refuse_motor_off(link: CommandLink, letter: str, ts: int) -> None:
+    """Refuse a start on ``letter`` whose ``TS`` (read before anything is sent) says its motor
+    is off: the controller would take the profile, and the reference would move without the
+    motor.
+
+    Raises:
+        InvalidArgument: the motor is off.
+    """
+    if ts & MOTOR_OFF_BIT:
+        raise InvalidArgument(
+            f"axis {letter} has its motor off; call controller.servo_here()",
+            model=link.model.name,
+        )
 
 
 def switch_blocks(link: CommandLink, letter: str, direction: float, ts: int) -> bool:

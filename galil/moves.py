@@ -367,13 +367,15 @@ def _ready(link: CommandLink, a: str, state: _State) -> None:
 
 
 def _plan_axis(
-    link: CommandLink, move: AxisMove, state: _State, relative: bool
+    link: CommandLink, move: AxisMove, state: _State, relative: bool, command: str = "PA"
 ) -> tuple[Track, predict.Profile, int]:
     """Predict and check one axis: its track, its profile (counts) and the value to send."""
     a = move.letter
     distance = move.value if relative else move.value - state.rp
     target = state.rp + distance
     if not INT32_MIN <= target <= INT32_MAX:
+        if command == "IP":
+            _check_ip_end(link, a, distance, target, "moves the axis to")
         check_int32("PA", target, a, link.model.name)
     speed = state.sp if move.speed is None else move.speed
     if speed <= 0 and distance:
@@ -496,7 +498,7 @@ def _execute_move(
         a = m.letter
         if not dry_run:
             _ready(link, a, state[a])
-        track, profile, target = _plan_axis(link, m, state[a], relative)
+        track, profile, target = _plan_axis(link, m, state[a], relative, command)
         tracks[a] = track
         show = None if display is None else display.get(a)
         profiles[a] = profile if show is None else show(profile)
@@ -689,6 +691,8 @@ def increment(
         MotionError: a limit stopped an axis geared to ``letter`` during a move nobody waited
             for: its gearing is off, and forgotten (:func:`~galil.motion.refuse_dropped`).
     """
+    if not INT32_MIN <= counts <= INT32_MAX:  # (the increment itself: before any byte)
+        check_int32("IP", counts, letter, link.model.name)
     with tracker.lock, stop_on_error(link, tracker, letter):  # (an IP would extend a move
         return _increment(link, tracker, letter, counts, display)  # another thread starts)
 
@@ -789,6 +793,24 @@ def _check_same_direction(
         )
 
 
+def _check_ip_end(link: CommandLink, a: str, step: int, end: int, what: str) -> None:
+    """Refuse an ``IP`` of ``step`` counts that takes ``a`` to ``end`` beyond the 32-bit
+    position range, naming the IP (``what`` it does: "moves the target of the move to").
+
+    Raises:
+        LimitError: name ``"PA"`` (the position it would reach).
+    """
+    if not INT32_MIN <= end <= INT32_MAX:
+        raise LimitError(
+            f"IP {step} on axis {a} {what} {end}, outside the 32-bit position range",
+            name="PA",
+            value=end,
+            limit=INT32_MAX if end > 0 else INT32_MIN,
+            axis=a,
+            model=link.model.name,
+        )
+
+
 def _check_reach(
     link: CommandLink, a: str, step: int, end: int, limits: tuple[float, float], what: str
 ) -> None:
@@ -799,7 +821,7 @@ def _check_reach(
         LimitError: name ``"PA"``, ``"FL"`` or ``"BL"``.
     """
     model = link.model
-    check_int32("PA", end, a, model.name)
+    _check_ip_end(link, a, step, end, what)
     bl, fl = limits
     if step > 0 and end > fl:
         name, limit = "FL", fl

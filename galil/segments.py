@@ -107,8 +107,8 @@ class Arc(Segment):
     """A circular segment in the plane of two axes (``CR``), starting where the path is.
 
     Attributes:
-        radius: a length in the axes' user unit (counts on axes without a scale); both axes
-            need the same counts per unit, or the circle would be an ellipse.
+        radius: a positive length in the axes' user unit (counts on axes without a scale);
+            both axes need the same counts per unit, or the circle would be an ellipse.
         start: the angle of the start point seen from the centre: degrees (a number) or a pint
             angle; 0 is the first axis's positive direction, 90 the second's.
         sweep: the angle travelled, degrees or a pint angle; positive is counter-clockwise.
@@ -120,6 +120,8 @@ class Arc(Segment):
 
     def __post_init__(self) -> None:
         _finite(self.radius, "Arc radius")
+        if not getattr(self.radius, "magnitude", self.radius) > 0:
+            raise InvalidArgument(f"Arc radius must be positive, got {self.radius!r}")
         if _degrees(self.sweep, "Arc sweep") == 0:
             raise InvalidArgument("Arc sweep must not be 0")
         _degrees(self.start, "Arc start")
@@ -219,11 +221,12 @@ def _arc_in_counts(i: int, arc: Arc, axes: Sequence[PathAxis], resolution: float
             f" ({describe_scales(axes)}): with different scales the circle would be an ellipse"
             " in counts"
         )
-    radius = abs(_distance(axes[0], arc.radius, f"segment {i} radius"))
     theta = _degrees(arc.start, f"segment {i} start")
     sweep = _degrees(arc.sweep, f"segment {i} sweep")
     sx = 1 if axes[0].scale is None else axes[0].scale.sign
     sy = 1 if axes[1].scale is None else axes[1].scale.sign
+    # (a reversed first axis gives the radius negative counts: a length is a magnitude)
+    radius = sx * _distance(axes[0], arc.radius, f"segment {i} radius")
     # A reversed axis mirrors the circle: the start angle reflects and the turn reverses.
     if sx < 0 and sy < 0:
         theta += 180.0

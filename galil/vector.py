@@ -38,6 +38,7 @@ from galil.motion import (
     MoveParams,
     Track,
     held,
+    refuse_motor_off,
     sample_of,
     stop_on_error,
     switch_blocks,
@@ -219,40 +220,38 @@ class VectorHandle(MoveHandle):
     def stop(self) -> None:
         """Decelerate the sequence to a stop along its path at VD (``ST S``).
 
-        ``ST S`` reaches the sequence that runs on S now, and nothing else: once this one is
+        ``ST S`` reaches the sequence that runs on S now, whichever it is: once this one is
         over (seen done, an axis of it read at rest by a later start, or a sequence started
-        since), the stop is told to the sequence started since, if it runs, and not to what
-        now runs on this one's axes (a gearing, a jog, a contour), which never gets it."""
+        since), nothing is sent, so a late stop never ends a newer sequence. While this one
+        may still run (not waited for, a dead link), ``ST S`` goes out."""
         link = self._link
         if self._tracker is None:
-            replies = link.command_line([cmds.st(PLANE, model=link.model), cmds.time_stamp()])
-            self.add_event(self.axes[0], sample_of(replies[-1]), predict.Stop)
+            if not self._done:
+                replies = link.command_line([cmds.st(PLANE, model=link.model), cmds.time_stamp()])
+                self.add_event(self.axes[0], sample_of(replies[-1]), predict.Stop)
             return
         # Interrupted, the stop goes out again to what still moves (decision 0028; on a link
         # that died, reopened once), and the sequence no longer claims an exact prediction.
         guard = stop_on_error(link, self._tracker, PLANE + self.axes, stop=self._st, is_stop=True)
-        with self._tracker.lock, guard:  # (between a streamed line and the next: see _feed)
-            self._st()
+        with self._tracker.lock:  # (between a streamed line and the next: see _feed)
+            if self._on_plane():
+                with guard:
+                    self._st()
 
     def _st(self) -> None:
-        """``ST S``, told to the sequence it reaches."""
+        """``ST S``, told to this sequence, unless it is over (:meth:`_on_plane`)."""
         assert self._tracker is not None
         link = self._link
         with self._tracker.lock:
-            reached = self._on_plane()
-            replies = link.command_line([cmds.st(PLANE, model=link.model), cmds.time_stamp()])
-            if reached:
-                self._tracker.notify(reached, sample_of(replies[-1]), predict.Stop)
+            if self._on_plane():
+                replies = link.command_line([cmds.st(PLANE, model=link.model), cmds.time_stamp()])
+                self._tracker.notify(self.axes, sample_of(replies[-1]), predict.Stop)
 
-    def _on_plane(self) -> str:
-        """The axes of the sequence on S that an ``ST S`` reaches now: the last one the library
-        started, unless it is over (seen done, or an axis of it read at rest by a later
-        start: decision 0030); ``""`` when none runs."""
+    def _on_plane(self) -> bool:
+        """Whether this sequence may still run on S: the last one the library started, and
+        not over (seen done, or an axis of it read at rest by a later start: decision 0030)."""
         assert self._tracker is not None
-        last = self._tracker.last_sequence()
-        if not isinstance(last, VectorHandle) or last._done or last._ended:
-            return ""
-        return last.axes
+        return self._tracker.last_sequence() is self and not self._done and not self._ended
 
 
 def _path_master(counts: predict.VectorProfile, gear: GearLink) -> predict.Profile:
@@ -270,7 +269,6 @@ def _path_master(counts: predict.VectorProfile, gear: GearLink) -> predict.Profi
 #: ``TS`` in place of ``_MO``: its bit 5 is "motor off", and its bits 3 and 2 the limit
 #: switches (set while inactive), with one operand per axis (the state query stays one line).
 _STATE = ("RP", "BG", "TS", "FL", "BL", "SC")
-_MOTOR_OFF_BIT = 0x20
 #: What a line of streamed segments ends with: the sample it ran in.
 _STAMP_SIZE = len(cmds.time_stamp().text) + 1
 
@@ -384,7 +382,8 @@ class VectorStream:
                     f"{what} along the path in user units needs the same counts per unit on "
                     f"every axis ({describe_scales(self.axes)}); give it in counts"
                 )
-            counts = abs(scaled[0].rate_to_counts(value, power, what))
+            # (in the user's direction: a reversed axis's scale makes a rate's counts negative)
+            counts = scaled[0].sign * scaled[0].rate_to_counts(value, power, what)
         elif scaled and self.path.per_unit is not None:
             raise InvalidArgument(
                 f"{what}: {value!r} has no units but the axes have scales; give a Quantity"
@@ -440,10 +439,7 @@ class VectorStream:
                 self._tracker.ended(a, rp, sc)
             if bg:
                 raise InvalidArgument(f"axis {a} is moving; stop it or wait", model=model.name)
-            if round(ts) & _MOTOR_OFF_BIT:
-                raise InvalidArgument(
-                    f"axis {a} has its motor off; call controller.servo_here()", model=model.name
-                )
+            refuse_motor_off(link, a, round(ts))
         tail = len(values) - len(of_followers)
         limits = follower_limits(link, self._tracker, self.followers, values[tail:])
         rest = iter(values[len(letters) * n + 1 : tail])

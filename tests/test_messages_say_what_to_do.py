@@ -57,6 +57,22 @@ def test_a_wait_that_times_out_says_the_move_goes_on(dmc: galil.Controller) -> N
     move.wait()
 
 
+def _wait_too_short_in_a_guard(dmc: galil.Controller) -> None:
+    with dmc.motion():
+        dmc.A.move_by(100_000).wait(timeout=0.1)
+
+
+def test_a_wait_that_times_out_in_a_motion_block_says_the_block_stops_the_move(
+    dmc: galil.Controller,
+) -> None:
+    with pytest.raises(galil.GalilTimeoutError) as info:
+        _wait_too_short_in_a_guard(dmc)
+    assert "it goes on: wait again" in str(info.value)  # (not in a block: as it says)
+    assert "a controller.motion() block guarding its axes stops it" in str(info.value)
+    assert not dmc.A.moving  # as it says: the guard stopped it
+    assert dmc.A.stop_code[0] == 4
+
+
 def test_an_async_wait_that_times_out_says_the_move_goes_on() -> None:
     async def body() -> None:
         async with await galil.aio.connect("sim://DMC-4040") as c:
@@ -128,3 +144,29 @@ def test_running_a_label_without_its_hash_suggests_the_label(dmc: galil.Controll
     assert "did you mean" not in str(info.value)
     dmc.programs.run("#SQUARES")  # what it suggests runs
     dmc.programs.wait()
+
+
+def test_a_move_keyed_by_an_axis_object_says_axes_are_named_by_letter(
+    dmc: galil.Controller,
+) -> None:
+    with nothing_sent(dmc), pytest.raises(galil.InvalidArgument) as info:
+        dmc.move({dmc.A: 100})
+    assert "axes are named by their letters here: give 'A'" in str(info.value)
+    with simulated() as other:
+        with nothing_sent(dmc), pytest.raises(galil.InvalidArgument) as info:
+            dmc.move({other.A: 100})
+        assert "is an axis of another controller" in str(info.value)
+        with nothing_sent(dmc), pytest.raises(galil.InvalidArgument) as info:
+            dmc.vector_move([other.A, other.B], [galil.Line(100, 100)], speed=1000)  # type: ignore[arg-type]
+        assert "is an axis of another controller" in str(info.value)
+    dmc.move({"A": 100}).wait()  # as it says
+
+
+@pytest.mark.parametrize("relative", [False, True])
+def test_a_move_of_several_axes_names_the_axis_of_a_bad_target(
+    dmc: galil.Controller, relative: bool
+) -> None:
+    with nothing_sent(dmc), pytest.raises(galil.InvalidArgument) as info:
+        dmc.move({"A": 1, "B": float("nan")}, relative=relative)
+    what = "distance" if relative else "target"
+    assert f"{what} of B must be a finite number, got nan" in str(info.value)

@@ -198,3 +198,20 @@ def test_a_wait_whose_link_dies_stops_the_move_and_says_the_link_works_again() -
         dmc.sleep(1.0)
         assert dmc.query_operands(["_BGA", "_SCA"]) == [0, 4]
         assert dmc.query_operands(["_RPA"])[0] < 200_000
+
+
+@pytest.mark.parametrize("axes", [None, "", " ", ","])
+def test_a_guard_of_no_named_axes_guards_every_axis(axes: str | None) -> None:
+    # As stop(""), motor_off("") and servo_here(""): no axes named means all of them.
+    def jog_then_fail(dmc: galil.Controller) -> None:
+        with dmc.motion(axes):
+            dmc.A.jog(5000)
+            dmc.D.jog(-5000)
+            raise RuntimeError("boom")
+
+    with galil.connect("sim://DMC-4040") as dmc:
+        with pytest.raises(RuntimeError, match="boom"):
+            jog_then_fail(dmc)
+        assert not dmc.A.moving
+        assert not dmc.D.moving
+        assert dmc.query_operands(["_SCA", "_SCD"]) == [4, 4]

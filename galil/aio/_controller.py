@@ -256,9 +256,9 @@ class AsyncController(AsyncLinkFacade):
     @contextlib.asynccontextmanager
     async def motion(self, axes: str | None = None) -> AsyncIterator[None]:
         """A block in which an exception (cancellation included) stops the guarded axes
-        (default all) and waits for them, as ``Controller.motion`` does; a start in the block
-        that the cancellation left running on its worker thread is let end first, so its
-        motion is stopped and waited for too (decision 0061)."""
+        (default or ``""``: all) and waits for them, as ``Controller.motion`` does; a start in
+        the block that the cancellation left running on its worker thread is let end first, so
+        its motion is stopped and waited for too (decision 0061)."""
         guard = self.sync.motion(axes)
         guard.__enter__()
         try:

@@ -40,6 +40,7 @@ from galil.motion import (
     MoveParams,
     MoveResult,
     held,
+    not_done_text,
     wait_guard,
 )
 from galil.segments import VectorPlan
@@ -153,12 +154,7 @@ class _Poll:
                 return None
         now = link.clock()
         if self.deadline is not None and now >= self.deadline:
-            raise link.error(
-                GalilTimeoutError,
-                f"move on {handle.axes} not done after {self.timeout:.3g} s "
-                f"(predicted {handle.duration:.3g} s); it goes on: wait again, "
-                "or stop it",
-            )
+            raise link.error(GalilTimeoutError, not_done_text(handle, self.timeout))
         progress = progress_of(handle, now)
         remaining = progress.duration - progress.elapsed
         pause = remaining / 4 if math.isfinite(remaining) else MAX_POLL
@@ -321,7 +317,8 @@ class AsyncMoveHandle:
         return self.wait().__await__()
 
     async def stop(self) -> None:
-        """Decelerate the move's axes to a stop (``ST``) at their DC.
+        """Decelerate the axes the move still drives to a stop (``ST``) at their DC (none once
+        it was seen done, nor those newer motion took: ``MoveHandle.stop``).
 
         Once asked for, the stop goes out even if the awaiting task is cancelled (before the
         call has started too)."""

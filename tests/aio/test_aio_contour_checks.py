@@ -36,3 +36,15 @@ def test_async_contour_reports_a_follower_a_limit_switch_stopped() -> None:
             assert c.sync.tracker.followers("A") == {}
 
     run(body)
+
+
+def test_async_contour_on_an_axis_with_its_motor_off_sends_no_cm() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            await c.motor_off("A")
+            with pytest.raises(InvalidArgument, match="axis A has its motor off"):
+                await c.contour("A", [100, 200, 300], dt=2)
+            assert not any(text.startswith(("CM", "CD")) for text in commands_of(c))
+            assert await c.query_operands(["_RPA"]) == [0.0]
+
+    run(body)

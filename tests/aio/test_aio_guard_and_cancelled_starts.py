@@ -36,3 +36,18 @@ def test_a_guard_left_while_its_move_starts_leaves_nothing_moving(write: int) ->
                 assert await c.query_operands(["_BGA"]) == [0.0]
 
     run(body)
+
+
+def test_an_async_guard_of_no_named_axes_guards_every_axis() -> None:
+    async def jog_then_fail(c: aio.AsyncController) -> None:
+        async with c.motion(""):
+            await c.A.jog(5000)
+            raise RuntimeError("boom")
+
+    async def body() -> None:
+        async with await sim() as c:
+            with pytest.raises(RuntimeError, match="boom"):
+                await jog_then_fail(c)
+            assert await c.query_operands(["_BGA", "_SCA"]) == [0.0, 4.0]
+
+    run(body)

@@ -148,3 +148,21 @@ def test_a_watch_whose_link_dies_stops_the_move_unless_it_only_watches() -> None
 
     assert run(lambda: body(only_watch=False)) < 20_000
     assert run(lambda: body(only_watch=True)) == 20_000
+
+
+def test_a_late_stop_of_an_old_handle_leaves_the_newer_move_on_its_axis_running() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            old = await c.A.move_by(1000)
+            await old.wait()
+            new = await c.A.move_by(50_000)
+            await c.sleep(0.2)
+            before = len(commands_of(c))
+            await old.stop()  # (its axis moved on to the newer move: nothing is sent)
+            await old.stop_unless_done()
+            assert not any(t.startswith("ST") for t in commands_of(c)[before:])
+            result = await new.wait()
+            assert result.final == {"A": 51_000}
+            assert result.stop_codes == {"A": 1}
+
+    run(body)

@@ -198,6 +198,18 @@ def test_contour_bad_input_sends_nothing(dmc: galil.Controller) -> None:
         dmc.contour("A", [1, 2], dt=1)
 
 
+@pytest.mark.parametrize("axes", ["A", "BA"])
+def test_a_contour_on_an_axis_with_its_motor_off_is_refused_before_cm(
+    dmc: galil.Controller, axes: str
+) -> None:
+    dmc.motor_off("A")  # (the state query reads TS, whose bit 5 is "motor off")
+    path = np.column_stack([[100, 200, 300]] * len(axes))
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument) as info:
+        dmc.contour(axes, path, dt=2)
+    assert "axis A has its motor off; call controller.servo_here()" in str(info.value)
+    assert dmc.query_operands(["_RPA", "_RPB", "_MOA"]) == [0, 0, 1]  # nothing moved
+
+
 def test_contour_past_a_soft_limit_is_refused_before_cm() -> None:
     from galil.errors import LimitError
     from galil.testing import nothing_sent, simulated

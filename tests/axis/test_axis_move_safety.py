@@ -121,6 +121,22 @@ def test_increment_during_a_move_beyond_32_bits_is_refused(dmc: galil.Controller
         dmc.A.increment(1_000_000)
 
 
+def test_an_increment_beyond_32_bits_is_refused_naming_the_ip(dmc: galil.Controller) -> None:
+    with nothing_sent(dmc), pytest.raises(LimitError) as caught:
+        dmc.A.increment(2**31)  # (the increment itself: no query either)
+    assert str(caught.value).startswith("IP 2147483648 on A is outside the 32-bit")
+    assert caught.value.name == "IP"
+    dmc.A.move_by(1000).wait()
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as caught:
+        dmc.A.increment(2**31 - 10)  # (idle: the position it would reach)
+    assert "IP 2147483638 on axis A moves the axis to 2147484638, outside" in str(caught.value)
+    dmc.A.move_to(2_147_000_000)
+    dmc.sleep(0.2)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as caught:
+        dmc.A.increment(1_000_000)  # (in a move: the target it would move)
+    assert "IP 1000000 on axis A moves the target of the move to" in str(caught.value)
+
+
 def test_increment_while_jogging_past_the_soft_limit_is_refused(dmc: galil.Controller) -> None:
     d = dmc.D
     d.soft_limits = (-5000, 5000)

@@ -156,21 +156,62 @@ def test_a_change_after_a_stopped_jogs_end_leaves_its_prediction_as_it_was(
     assert jog.duration == before.duration < 0.1
 
 
+def _sent(dmc: galil.Controller, since: int) -> list[str]:
+    return [text for _, text in list(sim_of(dmc).command_log)[since:]]
+
+
 @pytest.mark.parametrize("plane", ["AB", "CD"])
-def test_a_late_stop_of_a_vector_sequence_stops_the_sequence_running_since_as_predicted(
-    dmc: galil.Controller, plane: str
+@pytest.mark.parametrize("waited", [False, True])
+def test_a_late_stop_of_a_vector_sequence_leaves_the_sequence_running_since_alone(
+    dmc: galil.Controller, plane: str, waited: bool
 ) -> None:
     first = dmc.vector_move("AB", [Line(0, 1)], speed=20000)
-    dmc.sleep(1.0)  # over, but nobody looked
+    dmc.sleep(1.0)  # over (waited for, or nobody looked)
+    if waited:
+        first.wait()
     second = dmc.vector_move(plane, [Line(20000, 0)], speed=20000)
     dmc.sleep(0.1)
-    first.stop()  # (ST S: it reaches the sequence on S now)
+    before = len(sim_of(dmc).command_log)
+    first.stop()  # (over: no ST S, which would reach the sequence on S now)
+    assert not any(text.startswith("ST") for text in _sent(dmc, before))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         result = second.wait()
-    assert set(result.stop_codes.values()) == {4}
+    assert set(result.stop_codes.values()) == {101}
     assert result.worst == 0
     assert first.wait().stop_codes == {"A": 101, "B": 101}
+
+
+@pytest.mark.parametrize("waited", [False, True])
+def test_a_late_stop_of_a_move_leaves_the_move_started_since_on_its_axis_running(
+    dmc: galil.Controller, waited: bool
+) -> None:
+    old = dmc.A.move_by(1000)
+    dmc.sleep(1.0)  # over (waited for, or nobody looked)
+    if waited:
+        old.wait()
+    new = dmc.A.move_by(50_000)
+    dmc.sleep(0.2)
+    before = len(sim_of(dmc).command_log)
+    old.stop()  # its axis moved on to the newer move: nothing is sent
+    assert not any(text.startswith("ST") for text in _sent(dmc, before))
+    result = new.wait()
+    assert result.final == {"A": 51_000}
+    assert result.stop_codes == {"A": 1}
+
+
+def test_a_stop_of_a_move_not_waited_for_stops_only_the_axes_no_newer_move_took(
+    dmc: galil.Controller,
+) -> None:
+    old = dmc.move({"A": 1000, "B": 100_000})  # A done within 1 s, B runs on
+    dmc.sleep(1.0)
+    new = dmc.A.move_by(50_000)  # (reads A at rest: A's part of the old move is over)
+    dmc.sleep(0.2)
+    before = len(sim_of(dmc).command_log)
+    old.stop()  # (B: not seen done, so when in doubt, stopped)
+    assert [t for t in _sent(dmc, before) if t.startswith("ST")] == ["ST B"]
+    assert old.wait().stop_codes == {"A": 1, "B": 4}
+    assert new.wait().stop_codes == {"A": 1}
 
 
 @pytest.mark.parametrize("jog", [False, True])

@@ -289,6 +289,29 @@ def test_bad_paths_and_values_are_refused_before_a_byte(dmc: galil.Controller) -
         Arc(1, 0, 0)
 
 
+@pytest.mark.parametrize("sign", [1, -1])
+@pytest.mark.parametrize("name", ["speed", "accel", "decel"])
+def test_a_negative_rate_along_the_path_in_user_units_is_refused_on_any_scale(
+    dmc: galil.Controller, name: str, sign: int
+) -> None:
+    # A minus is a mistake, as in counts, not a direction; a reversed axis's scale makes
+    # the counts of a positive rate negative, and that one still runs.
+    dmc.A.set_scale(counts_per=2000 / mm, sign=sign)
+    dmc.B.set_scale(counts_per=2000 / mm, sign=sign)
+    rate = {"speed": -SPEED, "accel": -ACCEL, "decel": -ACCEL}[name]
+    options = {"speed": SPEED, "accel": ACCEL, "decel": ACCEL, name: rate}
+    path = [Line(1 * mm, 0)]
+    _refused(dmc, InvalidArgument, f"{name} along the path must be", segments=path, **options)
+    dmc.vector_move("AB", path, speed=SPEED, accel=ACCEL, decel=ACCEL).wait()
+    assert dmc.A.reference_position == 1 * mm
+
+
+@pytest.mark.parametrize("radius", [-5 * mm, -1000, 0, 0 * mm])
+def test_an_arc_with_a_radius_that_is_not_positive_is_refused(radius: object) -> None:
+    with pytest.raises(InvalidArgument, match="Arc radius must be positive"):
+        Arc(radius, 0, 90)
+
+
 @pytest.mark.parametrize(
     "path",
     [[Line(1000, 500)], [Line(1000, 0), Line(0, 500)], [Arc(1000, 270, 90)]],
@@ -423,6 +446,16 @@ def test_gearing_refusals_send_nothing_that_changes_anything(dmc: galil.Controll
         dmc.C.gear_to("B", 1)
     with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match="already"):
         dmc.B.gear_to("C", 1)
+
+
+def test_gearing_to_an_axis_of_another_controller_is_refused_before_sending(
+    dmc: galil.Controller,
+) -> None:
+    with simulated() as other:
+        with nothing_sent(dmc), pytest.raises(InvalidArgument, match="another controller"):
+            dmc.B.gear_to(other.C, 1)  # (it would gear B to this controller's C)
+        assert dmc.query_operands(["_GRB"]) == [0]
+        assert dmc.B.gear_to(dmc.C, 1).master == "C"  # its own axis, as an Axis
 
 
 def test_a_ratio_change_at_rest_keeps_the_prediction_exact() -> None:
