@@ -667,7 +667,7 @@ class Axis(AxisGearing, AxisPosition):
         """
         label = schedule_label(label)  # a bad label is refused before anything else
         d = round(self.distance_counts(distance, "distance"))
-        pairs = self._schedule_pairs(changes)
+        pairs = _schedule_pairs(self, changes)
         first = None
         if speed is not None:
             first = self.check_parameter("SP", self.rate_counts(speed, 1, "speed"))
@@ -683,33 +683,6 @@ class Axis(AxisGearing, AxisPosition):
                 label=label,
                 display=self._display,
             )
-
-    def _schedule_pairs(self, changes: Any) -> list[tuple[float, float]]:
-        try:
-            if isinstance(changes, (str, bytes, Mapping)):
-                raise TypeError("a string or a mapping")
-            items = list(changes)
-        except TypeError as exc:
-            raise InvalidArgument(
-                f"changes must be a list of (at, speed), got {changes!r:.60}"
-            ) from exc
-        pairs = []
-        sign = 1 if self._scale is None else self._scale.sign
-        for i, item in enumerate(items):
-            try:
-                at, sp = item
-            except (TypeError, ValueError) as exc:
-                raise InvalidArgument(f"each change is (at, speed), got {item!r}") from exc
-            counts = self.distance_counts(at, "trigger distance")
-            if counts * sign < 0:  # (the scale's sign turns a user's positive one negative)
-                raise InvalidArgument(
-                    f"change {i}: trigger distance {at!r} is negative; it is measured from the "
-                    "start of the move along it, a positive distance whichever way it goes"
-                )
-            pairs.append(
-                (abs(counts), self.check_parameter("SP", self.rate_counts(sp, 1, "speed")))
-            )
-        return pairs
 
     def stop(self) -> None:
         """Decelerate to a stop (``ST``) at DC."""
@@ -935,3 +908,31 @@ def in_user_units(exc: LimitError, axes: Mapping[str, Axis]) -> None:
 
 
 _KIND = {1: "speed", 2: "acceleration"}
+
+
+def _schedule_pairs(axis: Axis, changes: Any) -> list[tuple[float, float]]:
+    """A speed schedule's ``(at, new_speed)`` pairs in counts: trigger distances measured
+    along the move (positive), speeds checked as SP."""
+    try:
+        if isinstance(changes, (str, bytes, Mapping)):
+            raise TypeError("a string or a mapping")
+        items = list(changes)
+    except TypeError as exc:
+        raise InvalidArgument(
+            f"changes must be a list of (at, speed), got {changes!r:.60}"
+        ) from exc
+    pairs = []
+    sign = 1 if axis.scale is None else axis.scale.sign
+    for i, item in enumerate(items):
+        try:
+            at, sp = item
+        except (TypeError, ValueError) as exc:
+            raise InvalidArgument(f"each change is (at, speed), got {item!r}") from exc
+        counts = axis.distance_counts(at, "trigger distance")
+        if counts * sign < 0:  # (the scale's sign turns a user's positive one negative)
+            raise InvalidArgument(
+                f"change {i}: trigger distance {at!r} is negative; it is measured from the "
+                "start of the move along it, a positive distance whichever way it goes"
+            )
+        pairs.append((abs(counts), axis.check_parameter("SP", axis.rate_counts(sp, 1, "speed"))))
+    return pairs

@@ -390,7 +390,7 @@ class VectorStream:
                 f" such as 10 * ureg.{self.path.unit}/s" + ("²" if power == 2 else "")
             )
         else:
-            counts = counts_or_plain(value, what, self.path.letters)
+            counts = counts_or_plain(value, what, self.path.letters, power=power)
         if not counts > 0:
             raise InvalidArgument(f"{what} along the path must be positive, got {value!r}")
         return counts

@@ -520,3 +520,18 @@ def test_an_increment_during_a_vector_sequence_is_refused_before_sending(
         dmc.C.increment(-2000)
     path.wait()
     assert dmc.query_operands(["_RPC", "_RPD"]) == [0, 4000]
+
+
+def test_a_path_of_axes_without_scales_takes_its_rates_in_counts_per_second() -> None:
+    """As an axis without a scale takes its speed in ``count / s``, so does a path of them; a
+    rate in counts of the wrong power of time is refused, naming the power it needs."""
+    with simulated() as dmc:
+        move = dmc.vector_move(
+            "AB",
+            [Line(1000, 1000)],
+            speed=10_000 * ureg.count / ureg.s,
+            accel=100_000 * ureg.count / ureg.s**2,
+        )
+        assert move.wait().deviation == {"A": 0, "B": 0}
+        with nothing_sent(dmc), pytest.raises(InvalidArgument, match="count / second"):
+            dmc.vector_move("AB", [Line(1000, 1000)], speed=10_000 * ureg.count)
