@@ -1214,6 +1214,13 @@ def wait_guard(handle: MoveHandle) -> contextlib.AbstractContextManager[None]:
     return stop_on_error(handle._link, handle._tracker, handle._stop_letters, stop=handle.stop)
 
 
+class _ClosedMeanwhileError(GalilConnectionError):
+    """A poll of a move found that ``close()`` had begun (:func:`_refuse_if_closed`):
+    close() stops the move, so a wait's guard lets this pass rather than stop it again (its
+    stop would be refused by the closing controller, and the caller told, wrongly, that the
+    axes could not be stopped)."""
+
+
 def _refuse_if_closed(handle: MoveHandle) -> None:
     """Raise once ``close()`` has begun (:attr:`MotionTracker.closed`), after a poll's reply
     and before it is taken: close() stops every move not seen done and closes the link, and a
@@ -1228,7 +1235,7 @@ def _refuse_if_closed(handle: MoveHandle) -> None:
     tracker = handle._tracker
     if tracker is not None and tracker.closed:
         raise handle._link.error(
-            GalilConnectionError,
+            _ClosedMeanwhileError,
             f"the controller was closed (close(), or the end of its with block) before the "
             f"move on {handle.axes} was seen done: close() stopped it",
         )
@@ -1602,6 +1609,8 @@ class _StopOnError:
     def __exit__(self, kind: object, exc: BaseException | None, tb: object) -> bool:
         if exc is None or isinstance(exc, MotionError if self._running else _NOTHING_RAN):
             return False
+        if isinstance(exc, _ClosedMeanwhileError):
+            return False  # close() has begun: it stops the motion (even while it closes)
         link, tracker = self._link, self._tracker
         if (
             tracker is not None
