@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -177,6 +178,8 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 
 def _cmd_terminal(args: argparse.Namespace) -> int:
+    from galil.errors import GalilConnectionError
+    from galil.link import RECONNECT_ADVICE
     from galil.terminal import default_history_path, run_terminal
 
     history = None if args.no_history else (args.history or default_history_path())
@@ -188,14 +191,19 @@ def _cmd_terminal(args: argparse.Namespace) -> int:
             file=sys.stderr,
             flush=True,
         )
-        return run_terminal(dmc, timeout=args.timeout, history=history)
+        try:
+            return run_terminal(dmc, timeout=args.timeout, history=history)
+        except GalilConnectionError as exc:  # the link died: the terminal has ended
+            why = str(exc.args[0] if exc.args else exc).replace(RECONNECT_ADVICE, "")
+            print(f"galil: {why}; start galil terminal {args.address} again", file=sys.stderr)
+            return 2
 
 
 def _cmd_dl(args: argparse.Namespace) -> int:
     from galil.terminal import Terminal, program_lines
 
     lines = program_lines(Path(args.file).read_text(encoding="ascii", errors="replace"))
-    with _connect(args.address, args.timeout) as dmc:
+    with _connect(args.address, args.timeout) as dmc:  # (checked as programs.download checks)
         return 0 if Terminal(dmc, timeout=args.timeout).download(lines) else 2
 
 
@@ -206,12 +214,16 @@ def _cmd_ul(args: argparse.Namespace) -> int:
     command = cmds.ul()
     with _connect(args.address, args.timeout) as dmc:
         text = dmc.link.transfer(command, ul_reply_bytes(dmc.model)).text
-    program = "\n".join(text.splitlines()) + "\n"
+    lines = text.splitlines()
+    program = "".join(f"{line}\n" for line in lines)  # (no program: an empty file)
     if args.file:
         Path(args.file).write_text(program, encoding="ascii")
-        print(f"{len(program.splitlines())} lines saved to {args.file}", file=sys.stderr)
+        count = f"{len(lines)} line{'s' if len(lines) != 1 else ''}" if lines else "no program"
+        print(f"{count} saved to {args.file}", file=sys.stderr)
     else:
         sys.stdout.write(program)
+        if not lines:
+            print("no program in the controller's memory", file=sys.stderr)
     return 0
 
 
@@ -260,7 +272,9 @@ def _add_connection_commands(sub: Any) -> None:
         help="type commands, see replies and program output as it arrives",
         description="A Galil terminal: lines go to the controller as typed (PRA=1000;BGA); "
         "a rejected line is explained with TC1; DL alone starts a program download ending "
-        "with a line holding a backslash; Ctrl-C sends ST; Ctrl-D leaves.",
+        "with a line holding a backslash; Ctrl-C sends ST; Ctrl-D leaves. Piped input "
+        "(galil terminal ADDRESS < setup.txt) runs line by line; the exit status is then 1 "
+        "if any line was refused or failed.",
     )
     p.add_argument("address", help="controller address, e.g. 192.168.0.42 or sim://DMC-4040")
     _timeout(p, 5.0)
@@ -358,9 +372,15 @@ def _add_offline_commands(sub: Any) -> None:
         "plan",
         help="predict a position move and print (or plot) it",
         description="Predict a relative move as the controller's profiler will run it. "
-        "Plain numbers are counts; with --scale, values take units (12.5mm, 20mm/s).",
+        "Plain numbers are counts; with --scale, values take units (12.5mm, 20mm/s). "
+        "A negative distance is given as it is written: galil plan -12.5mm --scale 2000/mm.",
     )
-    p.add_argument("distance", help="relative move: counts, or a length with --scale (12.5mm)")
+    # A value that begins with a minus and a digit is a value, units or not (-12.5mm, as
+    # Python 3.13's argparse reads it): argparse before took it for an unknown option.
+    p._negative_number_matcher = re.compile(r"-\.?\d")
+    p.add_argument(
+        "distance", help="relative move: counts, or a length with --scale (12.5mm, -12.5mm)"
+    )
     p.add_argument("--speed", default="25000", help="SP: counts/s, or e.g. 20mm/s")
     p.add_argument("--accel", default="256000", help="AC: counts/s^2, or e.g. 200mm/s^2")
     p.add_argument("--decel", default=None, help="DC (default: the acceleration)")

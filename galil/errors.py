@@ -80,6 +80,9 @@ class CommandError(GalilError):
         code: the TC error code (``None`` when TC1 could not be read).
         text: the controller's (or our table's) explanation.
         command: the command line that was rejected.
+        replies: when ``command`` was part of a compound line (``MG 1;XYZ;MG 2``), one entry
+            per part of that line, in order: the reply text of a part the controller
+            answered, ``None`` for one it rejected; empty otherwise.
     """
 
     def __init__(
@@ -98,6 +101,7 @@ class CommandError(GalilError):
         self.code = code
         self.text = text
         self.command = command
+        self.replies: tuple[str | None, ...] = ()
 
     def __str__(self) -> str:
         # The model is already part of the sentence; do not repeat it.

@@ -108,6 +108,14 @@ def _parse(text: str) -> Command:
     return cmd
 
 
+def _with_replies(error: GalilError, done: Sequence[Completed]) -> GalilError:
+    """A refusal in a compound line carries the replies of its parts (``galil terminal``
+    prints them): what the controller answered before the rejected part, and after it."""
+    if isinstance(error, CommandError) and len(done) > 1:
+        error.replies = tuple(d.text if d.ok else None for d in done)
+    return error
+
+
 def refuse_link_settings(command: Command) -> None:
     """Refuse a raw command that would change the link's own settings or reset the
     controller under it (``RS``, ``^R^S``, ``CW 1``, ``EO 0``, ``CF``, ``IHS=>``; decision 0031),
@@ -999,7 +1007,7 @@ class Link(LinkCore):
                 done = self._roundtrip(batch, t, stall)
                 for d in done:
                     if not d.ok:
-                        raise self._explain(d, t)
+                        raise _with_replies(self._explain(d, t), done)
                 return done
         finally:
             if self._inbox:
@@ -1118,7 +1126,7 @@ class Link(LinkCore):
                     return done[0].text
                 for d in done:
                     if not d.ok:
-                        raise self._explain(d, t)
+                        raise _with_replies(self._explain(d, t), done)
             finally:
                 lock.release()
                 if self._inbox:

@@ -4,17 +4,23 @@ Every line goes to the controller as typed, compound lines included (``PRA=1000;
 reply is printed, a ``?`` is explained with ``TC1`` and the session goes on, and unsolicited
 output (a program's ``MG``) is printed the moment it arrives. ``DL`` alone starts a program
 download: the lines typed (or pasted) after it are collected until a line holding ``\\`` and
-sent as one ``DL``. ``UL`` prints the program. ``RS`` alone resets the controller through
+sent as one ``DL``. ``UL`` prints the program and ``LS`` lists it, each with a timeout from the
+most its reply can hold, as every bulk transfer has (a whole program memory over a slow serial
+line takes minutes). ``QR`` says how long the data record was (it is binary: in Python,
+:meth:`~galil.Controller.record` reads it). ``RS`` alone resets the controller through
 :meth:`~galil.Controller.reset` (the link is set up again), ``BN`` alone burns through
 :meth:`~galil.Controller.save`; the commands that would change the link's own settings
 (``CW 1``, ``EO 0``, ``CF``, ``^R^S``, ``RS`` or ``BN`` in a compound line) are not sent, and
-the terminal says why. Ctrl-C sends ``ST`` (and says so), Ctrl-D
-leaves; a reply that does not come in time is reported and the next command resynchronises the
-link first.
+the terminal says why and what to type instead. A compound line with a rejected part prints
+the replies of the other parts, in order around the rejection. Ctrl-C sends ``ST`` (and says
+so), Ctrl-D leaves; a reply that does not come in time is reported and the next command
+resynchronises the link first. SIGTERM and SIGHUP end the terminal as Ctrl-D does (the tty is
+put back, the controller closed) with status 128 + the signal's number.
 
 On a terminal, input goes through prompt-toolkit (history, line editing, messages printed above
-the prompt); piped input is read line by line, so ``galil terminal ADDRESS < setup.txt`` runs a
-script.
+the prompt); a history file that cannot be written is kept for the session only, and the
+terminal says so. Piped input is read line by line, so ``galil terminal ADDRESS < setup.txt``
+runs a script; its status is then 1 when any line was refused or failed.
 """
 
 from __future__ import annotations
@@ -23,12 +29,13 @@ import asyncio
 import contextlib
 import contextvars
 import os
+import re
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from galil.controller import Controller
 from galil.errors import (
@@ -40,6 +47,12 @@ from galil.errors import (
 )
 from galil.link import check_seconds
 from galil.protocol import commands as cmds
+from galil.protocol.programs import ProgramLine, check_program
+from galil.protocol.session import Completed
+from galil.routines import ul_reply_bytes
+
+if TYPE_CHECKING:
+    from prompt_toolkit.history import History
 
 __all__ = ["Terminal", "default_history_path", "program_lines", "run_terminal"]
 
@@ -51,6 +64,28 @@ _PROGRAM_ONLY_HINT = (
     "  (program only: put it in a program (DL) and run that (XQ);"
     " from here, wait for a move by polling MG _BGA until it is 0)"
 )
+# Typed alone, these get a reply bigger than a line: a program (UL, LS) or a binary record (QR).
+_TRANSFER = re.compile(r"(UL|LS|QR)(?=$|[\s#,0-9])")
+# What the library's refusals advise in Python (decision 0031), said for a person typing here.
+_TYPE_INSTEAD = {
+    "RS": "RS in a line with other commands would reset the controller under the link: type "
+    "RS alone (the terminal then sets the link up again)",
+    "BN": "BN in a line with other commands would burn the link's own CW 1 and EO 0: type BN "
+    "alone (the terminal then burns the controller's own)",
+    "^R^S": "^R^S (master reset) returns the controller to its factory settings: use Galil's "
+    "own tools, then start galil terminal again",
+    "CW": "{cmd!r} changes how program output is marked, which the link set up when it "
+    "connected (MG _CW reads it)",
+    "EO": "{cmd!r} switches the echo the link handles (MG _EO reads it)",
+    "CF": "{cmd!r} would send program output away from this terminal (MG _CF reads where it goes)",
+    "IH": "{cmd!r} would close the handle this terminal talks on (Ctrl-D leaves; IHC=>-1 "
+    "frees another handle)",
+    "DL": "{cmd!r}: a program download starts with DL typed alone; then type or paste the "
+    "program and end it with a line holding \\ (DL #label is not sent from here)",
+    "QD": "{cmd!r}: QD takes an array's values from the lines after it, which this terminal "
+    "does not send: set the elements one at a time (x[0]=1), or in Python use "
+    "controller.arrays.download()",
+}
 
 
 def program_lines(text: str) -> list[str]:
@@ -106,6 +141,8 @@ class Terminal:
         self.controller = controller
         self.write: Callable[[str], None] = write if write is not None else _print
         self.timeout = check_seconds(timeout, "timeout", positive=True)  # a reply timeout
+        #: Lines refused or failed so far (a piped session's exit status tells whether any).
+        self.failures = 0
         self._download: list[str] | None = None
 
     @property
@@ -179,12 +216,17 @@ class Terminal:
         self.download(lines)
 
     def download(self, lines: Iterable[str]) -> bool:
-        """Send a program with ``DL``; print what happened. Returns whether it was accepted."""
+        """Send a program with ``DL``; print what happened. Returns whether it was accepted.
+
+        The program is checked as :meth:`~galil.programs.Programs.download` checks it (each
+        line, the labels, and the model's program memory); nothing is sent if it breaks a rule.
+        """
         try:
-            command = cmds.dl(list(lines), model=self.controller.model)
-            link = self.controller.link
-            wait = max(self.timeout, link.transfer_timeout(command))
-            link.exchange(command, timeout=wait, stall=max(self.timeout, link.transfer_stall))
+            program = list(lines)
+            command = cmds.dl(program, model=self.controller.model)
+            numbered = [ProgramLine(text, n) for n, text in enumerate(program, 1)]
+            check_program(numbered, self.controller.model)
+            self._transfer(command)
         except GalilError as exc:
             self._report(exc, "DL")
             return False
@@ -198,31 +240,54 @@ class Terminal:
             self._download = None
             self.write("download cancelled")
 
+    def _transfer(self, command: cmds.Command, reply_bytes: int = 0) -> Completed:
+        """A bulk transfer, with the timeout its size gives (never less than the terminal's)."""
+        link = self.controller.link
+        wait = max(self.timeout, link.transfer_timeout(command, reply_bytes))
+        return link.exchange(command, timeout=wait, stall=max(self.timeout, link.transfer_stall))
+
     def _send(self, command: str) -> None:
         try:
-            reply = self.controller.command(command, timeout=self.timeout, allow_compound=True)
+            reply = self._exchange(command)
         except GalilError as exc:
-            self._report(exc, command)
+            instead = _type_instead(command) if isinstance(exc, InvalidArgument) else None
+            if instead is None:
+                self._report(exc, command)
+            else:
+                self.failures += 1
+                self.write(f"not sent: {instead}")
             return
         for text in reply.splitlines():
             self.write(text)
 
+    def _exchange(self, command: str) -> str:
+        """Send one typed line; what to print."""
+        special = _TRANSFER.match(command)
+        if special is None or len(cmds.split_commands(command)) > 1:
+            return self.controller.command(command, timeout=self.timeout, allow_compound=True)
+        parsed = cmds.parse_line(command)
+        model = self.controller.model
+        if special.group(1) == "UL":
+            return self._transfer(parsed, ul_reply_bytes(model)).text
+        if special.group(1) == "LS":  # each line numbered: "1999 " before the text
+            number = len(str(model.program_lines - 1)) + 1
+            most = model.program_lines * (number + model.line_length + 2) + 1
+            return self._transfer(parsed, most).text
+        record = self.controller.exchange(parsed, timeout=self.timeout).record or b""
+        return (
+            f"(QR: a {len(record)}-byte binary data record; in Python, controller.record() "
+            "reads it)"
+        )
+
     def _report(self, exc: GalilError, command: str) -> None:
+        self.failures += 1
         message = str(exc.args[0]) if exc.args else type(exc).__name__
         if isinstance(exc, CommandError):
-            code = "?" if exc.code is None else str(exc.code)
-            self.write(f"? {code} {exc.text}")
-            hint = message.partition("(Galil commands")
-            if hint[1]:
-                self.write(f"  (Galil commands{hint[2]}")
-            elif exc.command != command:
-                self.write(f"  (refused: {exc.command!r})")
-            if exc.code == 2:
-                self.write(_PROGRAM_ONLY_HINT)
+            self._refused(exc, command, message)
         elif isinstance(exc, GalilTimeoutError):
             self.write(f"timeout: {message}; the controller may still be busy (Ctrl-C sends ST)")
         elif isinstance(exc, InvalidArgument):
-            self.write(f"not sent: {message}")
+            self.write(f"not sent: {message.removeprefix('not sent: ')}")
         elif isinstance(exc, GalilConnectionError):
             if self.controller.link.dead or self.controller.closed:
                 raise exc
@@ -230,6 +295,27 @@ class Terminal:
             self.write(f"not sent: {message} (an earlier reply may still be due, e.g. a burn's)")
         else:
             self.write(f"error: {message}")
+
+    def _refused(self, exc: CommandError, command: str, message: str) -> None:
+        """A ``?``, explained, among the replies of the rest of its compound line."""
+        replies = exc.replies
+        at = replies.index(None) if None in replies else len(replies)
+        self._show(replies[:at])
+        code = "?" if exc.code is None else str(exc.code)
+        self.write(f"? {code} {exc.text}")
+        hint = message.partition("(Galil commands")
+        if hint[1]:
+            self.write(f"  (Galil commands{hint[2]}")
+        elif exc.command != command:
+            self.write(f"  (refused: {exc.command!r})")
+        if exc.code == 2:
+            self.write(_PROGRAM_ONLY_HINT)
+        self._show(replies[at + 1 :])
+
+    def _show(self, replies: Iterable[str | None]) -> None:
+        for reply in replies:
+            for text in (reply or "").splitlines():
+                self.write(text)
 
     def interrupt(self) -> None:
         """Ctrl-C: cancel a download being typed and stop all motion with ``ST``."""
@@ -248,6 +334,16 @@ def _print(text: str) -> None:
     print(text, flush=True)
 
 
+def _type_instead(command: str) -> str | None:
+    """What to type instead of a line the library refuses to send, or ``None``."""
+    for part in cmds.split_commands(command):
+        text = part.strip()
+        head = "^R^S" if text.startswith("\x12\x13") else text[:2].upper()
+        if head in ("DL", "QD") or (head in _TYPE_INSTEAD and cmds.link_setting(part)):
+            return _TYPE_INSTEAD[head].format(cmd=text)
+    return None
+
+
 def run_terminal(
     controller: Controller,
     *,
@@ -257,25 +353,39 @@ def run_terminal(
 ) -> int:
     """Run the terminal on ``controller`` until Ctrl-D (or the end of piped input).
 
+    SIGTERM and SIGHUP end it too (when it runs in the main thread): the line being handled
+    is abandoned as Ctrl-C abandons it, the tty is put back as the line editor found it, and
+    the caller closes the controller.
+
     Args:
         controller: the connected controller.
         timeout: seconds to wait for each reply.
-        history: file that keeps the typed lines between sessions (``None``: memory only).
+        history: file that keeps the typed lines between sessions (``None``: memory only;
+            one that cannot be written is kept for this session only, and the terminal says so).
         interactive: use the line editor; default: when stdin and stdout are terminals.
+
+    Returns:
+        The exit status: 0; for piped input, 1 when any line was refused or failed; 128 plus
+        the signal's number when SIGTERM or SIGHUP ended it.
     """
     if interactive is None:
         interactive = sys.stdin.isatty() and sys.stdout.isatty()
     screen = _Screen() if interactive else None
     term = Terminal(controller, timeout=timeout, write=screen.write if screen else None)
+    signals = _Signals()
     unsubscribe = controller.subscribe(term.write)
     try:
-        if screen is not None:
-            _interactive(term, screen, history)
-        else:
-            _piped(term)
+        with signals.installed():
+            if screen is not None:
+                _interactive(term, screen, history, signals)
+            else:
+                signals.feeding = True  # nothing to put back: a signal ends it at once
+                _piped(term)
+    except _Ended as ended:
+        return 128 + ended.signum
     finally:
         unsubscribe()
-    return 0
+    return 1 if term.failures and not interactive else 0
 
 
 def _piped(term: Terminal) -> None:
@@ -289,18 +399,138 @@ def _piped(term: Terminal) -> None:
             term.interrupt()
 
 
-def _interactive(term: Terminal, screen: _Screen, history_file: Path | None) -> None:
-    from prompt_toolkit import PromptSession
-    from prompt_toolkit.history import FileHistory, History, InMemoryHistory
+class _Ended(BaseException):
+    """SIGTERM or SIGHUP ended the terminal (a BaseException, as KeyboardInterrupt: nothing on
+    its way out mistakes it for a failed command)."""
 
-    history: History = InMemoryHistory()
-    if history_file is not None:
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+class _Signals:
+    """SIGTERM and SIGHUP, which end the terminal.
+
+    While a line is handled (``feeding``), the signal raises :class:`_Ended` at once (as
+    Ctrl-C raises there); while a prompt is shown, the prompt is ended from its own event loop
+    with :class:`_Ended`, so that prompt-toolkit puts the tty back; in between, the signal is
+    noted and :meth:`check` raises it (a signal must not land inside prompt-toolkit's setup).
+    """
+
+    def __init__(self) -> None:
+        self.ended = 0  # the signal that came, or 0
+        self.feeding = False
+        self._app: Any = None  # the prompt shown, and its loop
+        self._loop: asyncio.AbstractEventLoop | None = None
+
+    @contextlib.contextmanager
+    def installed(self) -> Iterator[None]:
+        """Handle the signals in the block (only the main thread can)."""
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        names = ("SIGTERM", "SIGHUP")
+        ending = [getattr(signal, n) for n in names if hasattr(signal, n)]
+        previous = {signum: signal.signal(signum, self._handle) for signum in ending}
         try:
-            history_file.parent.mkdir(parents=True, exist_ok=True)
-            history = FileHistory(str(history_file))
-        except OSError:
-            pass  # a read-only home: keep the history for this session only
-    session: PromptSession[str] = PromptSession(history=history)
+            yield
+        finally:
+            for signum, handler in previous.items():
+                signal.signal(signum, signal.SIG_DFL if handler is None else handler)
+
+    def _handle(self, signum: int, frame: object) -> None:
+        if self.ended:
+            return  # (on its way out already)
+        self.ended = signum
+        if self.feeding:
+            raise _Ended(signum)
+        loop, app = self._loop, self._app
+        if loop is not None:
+            with contextlib.suppress(RuntimeError):  # closed: check() raises after the prompt
+                loop.call_soon_threadsafe(self._end_prompt, app)
+
+    def prompt_shown(self, app: Any) -> None:
+        """The prompt ``app`` is shown (called on its loop): a signal now ends it."""
+        self._app, self._loop = app, asyncio.get_running_loop()
+        self._end_prompt(app)  # (one that came while the prompt was set up)
+
+    def prompt_gone(self) -> None:
+        """The prompt has returned."""
+        self._app = self._loop = None
+
+    def _end_prompt(self, app: Any) -> None:
+        if self.ended and app.is_running and not app.future.done():
+            app.exit(exception=_Ended(self.ended))
+
+    def check(self) -> None:
+        """Raise :class:`_Ended` if a signal came."""
+        if self.ended:
+            raise _Ended(self.ended)
+
+
+class _History:
+    """The history of the line editor: a file, or memory when the file cannot be used."""
+
+    def __init__(self, note: Callable[[str], None]) -> None:
+        self.note = note
+
+    def open(self, path: Path | None) -> History:
+        """A history kept in ``path``, if it can be written; else in memory (said once)."""
+        from prompt_toolkit.history import InMemoryHistory
+
+        if path is None:
+            return InMemoryHistory()
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with open(path, "ab"):  # (a directory, a file not ours, a read-only home)
+                pass
+        except OSError as exc:
+            self.lost(path, exc)
+            return InMemoryHistory()
+        return _file_history(path, self)
+
+    def lost(self, path: Path | str, exc: OSError) -> None:
+        """Say that the history file cannot be used."""
+        why = exc.strerror or type(exc).__name__
+        self.note(f"history: cannot use {path} ({why}); the history is kept for this session only")
+
+
+def _file_history(path: Path, kept: _History) -> History:
+    """A prompt-toolkit ``FileHistory`` that, when its file fails (full, taken away), goes on
+    in memory and says so once: prompt-toolkit would leave its prompt hung on the error."""
+    from prompt_toolkit.history import FileHistory
+
+    class _Kept(FileHistory):
+        failed = False
+
+        def load_history_strings(self) -> Iterable[str]:
+            try:
+                return list(super().load_history_strings())
+            except OSError as exc:
+                self._failed(exc)
+                return []
+
+        def store_string(self, string: str) -> None:
+            if self.failed:
+                return
+            try:
+                super().store_string(string)
+            except OSError as exc:
+                self._failed(exc)
+
+        def _failed(self, exc: OSError) -> None:
+            self.failed = True
+            kept.lost(path, exc)
+
+    return _Kept(str(path))
+
+
+def _interactive(
+    term: Terminal, screen: _Screen, history_file: Path | None, signals: _Signals
+) -> None:
+    from prompt_toolkit import PromptSession
+
+    session: PromptSession[str] = PromptSession(history=_History(term.write).open(history_file))
     # Ctrl-C at the prompt is a key; between prompts (the tty is then in cooked mode) it is a
     # SIGINT, which must not land inside prompt-toolkit's setup: it is noted and handled here.
     state = {"interrupted": False}
@@ -310,7 +540,7 @@ def _interactive(term: Terminal, screen: _Screen, history_file: Path | None) -> 
 
     previous = signal.getsignal(signal.SIGINT)
     try:
-        _prompt_loop(term, screen, session, note, state)
+        _prompt_loop(term, screen, session, note, state, signals)
     finally:
         signal.signal(signal.SIGINT, previous)
 
@@ -321,6 +551,7 @@ def _prompt_loop(
     session: Any,
     note: Callable[[int, Any], None],
     state: dict[str, bool],
+    signals: _Signals,
 ) -> None:
     # Anything else printed while the prompt is shown (a warning, say) goes above it too.
     from prompt_toolkit.patch_stdout import patch_stdout
@@ -332,8 +563,9 @@ def _prompt_loop(
 
             def start(app: Any = session.app) -> None:
                 screen.prompt_shown(app)
+                signals.prompt_shown(app)
                 # A Ctrl-C that came while the prompt was being set up: act on it now.
-                if state["interrupted"]:
+                if state["interrupted"] and not app.future.done():
                     app.exit(exception=KeyboardInterrupt())
 
             try:
@@ -345,7 +577,9 @@ def _prompt_loop(
                     return
                 term.cancel()
             finally:
+                signals.prompt_gone()
                 screen.prompt_gone()
+            signals.check()
             if state["interrupted"]:
                 state["interrupted"] = False
                 term.interrupt()
@@ -353,13 +587,16 @@ def _prompt_loop(
             if line is None:
                 continue
             signal.signal(signal.SIGINT, signal.default_int_handler)
+            signals.feeding = True
             try:
                 try:
+                    signals.check()
                     term.feed(line)
                 finally:
                     # Noted again before the loop goes round: a Ctrl-C just after the reply
                     # (shown before feed returns) would raise where nothing catches it.
                     signal.signal(signal.SIGINT, note)
+                    signals.feeding = False
             except KeyboardInterrupt:
                 term.interrupt()
 

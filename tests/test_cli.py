@@ -75,7 +75,7 @@ def test_terminal_sends_lines_and_explains_rejections() -> None:
         text=True,
         timeout=60,
     )
-    assert run.returncode == 0, run.stderr
+    assert run.returncode == 1, run.stderr  # piped: a refused line makes the status 1
     assert "3.0000" in run.stdout
     assert "? 1 Unrecognized command" in run.stdout
 
@@ -216,6 +216,25 @@ def test_plan_takes_units_with_a_scale(capsys: pytest.CaptureFixture[str]) -> No
     assert "peak speed 20 mm/s" in out
 
 
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["-12.5mm", "--scale", "2000/mm"],
+        ["--scale", "2000/mm", "-12.5mm"],
+        ["--scale", "2000/mm", "--speed", "20mm/s", "-12.5mm"],
+    ],
+)
+def test_plan_takes_a_negative_distance_with_units(
+    argv: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Before: "the following arguments are required: distance" (argparse took -12.5mm for an
+    # option), with or without `--` before it.
+    assert cli.main(["plan", *argv]) == 0
+    assert "0 → -12.5 mm (0 → -25000 counts)" in capsys.readouterr().out
+    (plan,) = [p for p in _parsers() if p.prog == "galil plan"]
+    assert "galil plan -12.5mm --scale 2000/mm" in " ".join(plan.format_help().split())
+
+
 def test_plan_refuses_units_without_a_scale(capsys: pytest.CaptureFixture[str]) -> None:
     assert cli.main(["plan", "12.5mm"]) == 2
     assert "scale" in capsys.readouterr().err
@@ -339,3 +358,27 @@ def test_info_reports_a_bad_address_in_one_line(
     err = capsys.readouterr().err
     assert err.startswith("galil: ")
     assert err.count("\n") == 1
+
+
+def test_ul_of_an_empty_program_saves_an_empty_file_and_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    saved = tmp_path / "saved.dmc"
+    assert cli.main(["ul", "sim://DMC-4040", str(saved)]) == 0  # a new controller: no program
+    assert saved.read_text() == ""  # before: one empty line, "1 lines saved"
+    assert capsys.readouterr().err == f"no program saved to {saved}\n"
+    assert cli.main(["ul", "sim://DMC-4040"]) == 0
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err == "no program in the controller's memory\n"
+
+
+def test_dl_refuses_a_program_bigger_than_the_models_memory(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    source = tmp_path / "big.dmc"
+    source.write_text("#A\n" + "MG 1\n" * 2000 + "EN\n")  # a DMC-4040 holds 2000 lines
+    assert cli.main(["dl", str(source), "sim://DMC-4040"]) == 2  # before: "downloaded"
+    assert capsys.readouterr().out == (
+        "not sent: the program has 2002 lines; DMC-4040 holds 2000\n"
+    )

@@ -6,6 +6,7 @@ import math
 import os
 import re
 import select
+import signal
 import subprocess
 import sys
 import time
@@ -163,8 +164,10 @@ _ANSI = re.compile(rb"\x1b\[[0-9;?]*[A-Za-z]|\x1b[()][A-Z0-9]|\x1b[=>]|\r")
 class PtyScreen:
     """A child process on a real pseudo-terminal, read as plain text."""
 
-    def __init__(self, fd: int) -> None:
+    def __init__(self, fd: int, proc: subprocess.Popen[str]) -> None:
         self.fd = fd
+        self.proc = proc
+        self.status = 0  # how the child is to end (checked at teardown)
         self.text = ""
 
     def send(self, data: str) -> None:
@@ -207,7 +210,7 @@ class PtyScreen:
 
 @pytest.fixture
 def pty_terminal(spawn: Spawn, tmp_path: Path) -> Iterator[Callable[..., PtyScreen]]:
-    started: list[tuple[subprocess.Popen[str], int]] = []
+    started: list[PtyScreen] = []
 
     def start(*args: str) -> PtyScreen:
         master, slave = os.openpty()
@@ -223,17 +226,17 @@ def pty_terminal(spawn: Spawn, tmp_path: Path) -> Iterator[Callable[..., PtyScre
             preexec_fn=_ctty,  # the pty is its controlling terminal: ^C in a wait is SIGINT
         )
         os.close(slave)
-        started.append((proc, master))
-        return PtyScreen(master)
+        started.append(PtyScreen(master, proc))
+        return started[-1]
 
     yield start
-    for proc, master in started:
-        if proc.poll() is None:
-            proc.kill()
-        proc.wait(timeout=30)
-        os.close(master)
-    for proc, _ in started:
-        assert proc.returncode == 0
+    for screen in started:
+        if screen.proc.poll() is None:
+            screen.proc.kill()
+        screen.proc.wait(timeout=30)
+        os.close(screen.fd)
+    for screen in started:
+        assert screen.proc.returncode == screen.status
 
 
 def _ctty() -> None:
@@ -332,3 +335,25 @@ def test_a_session_on_the_in_process_simulator_runs_in_real_time(
     screen.expect(r"sent ST.*\n:")
     screen.send("\x04")
     screen.wait_closed()
+
+
+@pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pseudo-terminal")
+@pytest.mark.parametrize("name", ["SIGTERM", "SIGHUP"])
+def test_sigterm_or_sighup_at_the_prompt_puts_the_tty_back_and_exits_128_plus_the_signal(
+    pty_terminal: Callable[..., PtyScreen], name: str
+) -> None:
+    # Before, the signal killed the terminal where it stood: the tty stayed in raw mode (no
+    # echo, no line editing, no Ctrl-C) and the controller was never closed.
+    import termios
+
+    signum = int(getattr(signal, name))
+    screen = pty_terminal("sim://DMC-4040")
+    screen.expect(r"Ctrl-D leaves")
+    screen.send("MG 1\r")
+    screen.expect(r" 1\.0000\n:")
+    screen.status = 128 + signum
+    screen.proc.send_signal(signum)
+    assert screen.proc.wait(timeout=30) == 128 + signum
+    flags = termios.tcgetattr(screen.fd)[3]  # the line settings of the pty, as left
+    for flag in (termios.ECHO, termios.ICANON, termios.ISIG):  # echo, lines, Ctrl-C
+        assert flags & flag

@@ -6,7 +6,10 @@ reset, a Ctrl-C that cannot reach the controller, piped and line-edited input.
 from __future__ import annotations
 
 import asyncio
+import errno
 import io
+import os
+import re
 import signal
 import sys
 import threading
@@ -19,12 +22,13 @@ from typing import Any
 import pytest
 from prompt_toolkit import PromptSession
 from prompt_toolkit.application import create_app_session
+from prompt_toolkit.history import FileHistory
 from prompt_toolkit.input import create_pipe_input
 from prompt_toolkit.output.plain_text import PlainTextOutput
 from prompt_toolkit.patch_stdout import StdoutProxy
 
 import galil
-from galil import terminal
+from galil import cli, terminal
 from galil.sim.server import SimTcpServer
 from galil.terminal import Terminal, _Screen, default_history_path, run_terminal
 from galil.testing import nothing_sent, sim_of
@@ -133,7 +137,7 @@ def test_piped_input_runs_as_a_script_and_prints_program_output(
 ) -> None:
     script = 'MG 1+2\nbg\nDL\n#A\nMG "hello"\nEN\n\\\nXQ #A\nMG 4\n'
     monkeypatch.setattr(sys, "stdin", io.StringIO(script))
-    assert run_terminal(dmc) == 0  # stdin is no terminal: read line by line
+    assert run_terminal(dmc) == 1  # stdin is no terminal: read line by line; bg is refused
     lines = capsys.readouterr().out.splitlines()
     assert lines[:2] == [" 3.0000", "? 1 Unrecognized command"]
     assert "downloaded 3 lines" in lines
@@ -374,3 +378,203 @@ def test_the_history_lives_in_the_xdg_state_directory(monkeypatch: pytest.Monkey
     monkeypatch.delenv("XDG_STATE_HOME")
     monkeypatch.setenv("HOME", "/home/someone")
     assert default_history_path() == Path("/home/someone/.local/state/galil/terminal-history")
+
+
+def test_a_history_file_that_cannot_be_written_is_kept_for_the_session_and_says_so(
+    dmc: galil.Controller, tmp_path: Path
+) -> None:
+    # A directory, or a file not ours (left by `sudo galil terminal`): before, a directory
+    # printed prompt-toolkit's traceback, and a file it could not append to hung the terminal
+    # at the first line typed.
+    shown = _session(dmc, "MG 9\rMG 8\r\x04", tmp_path)
+    assert shown.count(f"history: cannot use {tmp_path} (Is a directory)") == 1
+    assert "the history is kept for this session only" in shown
+    assert shown.index(" 9.0000") < shown.index(" 8.0000")
+    assert "Traceback" not in shown
+
+
+def test_a_history_file_that_fails_during_the_session_goes_on_in_memory(
+    dmc: galil.Controller, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def full(self: FileHistory, string: str) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(FileHistory, "store_string", full)  # the disk fills up
+    history = tmp_path / "terminal-history"
+    shown = _session(dmc, "MG 1\rMG 2\rMG 3\r\x04", history)  # before, MG 1 hung it
+    assert shown.count("(No space left on device); the history is kept for this session") == 1
+    assert shown.index(" 1.0000") < shown.index(" 2.0000") < shown.index(" 3.0000")
+
+
+def test_a_typed_ul_or_ls_has_the_timeout_of_a_whole_program_memory() -> None:
+    # At 9600 baud, the 200 lines take about 2 s: more than the terminal's 1 s reply timeout,
+    # which a typed UL had before ("timeout: no reply to 'UL'"), while `galil ul` worked.
+    program = "\n".join(["#A", *(f"MG {n}" for n in range(200)), "EN"])
+    with galil.connect("sim://DMC-4040?baud=9600") as slow:
+        slow.programs.download(program)
+        out: list[str] = []
+        term = Terminal(slow, write=out.append, timeout=1.0)
+        term.feed("UL")
+        assert out == program.splitlines()
+        out.clear()
+        term.feed("LS")
+        assert out[:2] == ["0 #A", "1 MG 0"]
+        assert out[-2:] == ["201 EN", "202 "]
+        assert term.failures == 0
+
+
+def test_qr_says_what_came_back(term: Terminal, out: list[str]) -> None:
+    term.feed("QR")  # before, nothing at all was printed
+    assert out == ["(QR: a 226-byte binary data record; in Python, controller.record() reads it)"]
+
+
+def test_a_compound_line_with_a_rejected_part_prints_the_replies_of_the_others(
+    term: Terminal, out: list[str]
+) -> None:
+    term.feed("MG 1;XYZ;MG 2")  # before, only the rejection was printed
+    assert out == [" 1.0000", "? 1 Unrecognized command", "  (refused: 'XYZ')", " 2.0000"]
+
+
+@pytest.mark.parametrize(
+    ("line", "advice"),
+    [
+        ("RS;MG 1", "not sent: RS in a line with other commands would reset the controller"),
+        ("MG 1;BN", "not sent: BN in a line with other commands would burn"),
+        ("DL #A", "not sent: 'DL #A': a program download starts with DL typed alone"),
+        ("QD x[]", "not sent: 'QD x[]': QD takes an array's values from the lines after it"),
+        ("CW 2", "not sent: 'CW 2' changes how program output is marked"),
+        ("EO 1", "not sent: 'EO 1' switches the echo the link handles"),
+        ("CF A", "not sent: 'CF A' would send program output away from this terminal"),
+        ("IHS=>-1", "not sent: 'IHS=>-1' would close the handle this terminal talks on"),
+    ],
+)
+def test_a_line_the_library_will_not_send_says_what_to_type_instead(
+    dmc: galil.Controller, term: Terminal, out: list[str], line: str, advice: str
+) -> None:
+    # Before: "not sent: not sent: ...", with the Python call to use (controller.reset(),
+    # commands.dl(), connect(..., echo=True)).
+    with nothing_sent(dmc):
+        term.feed(line)
+    assert len(out) == 1
+    assert out[0].startswith(advice)
+    for python in ("reset()", "commands.", "connect("):
+        assert python not in out[0]
+    assert term.failures == 1
+
+
+def test_a_downloaded_program_is_checked_as_programs_download_checks_it(
+    dmc: galil.Controller, term: Terminal, out: list[str]
+) -> None:
+    lines = ["#A", *(["MG 1"] * dmc.model.program_lines), "EN"]
+    with nothing_sent(dmc):
+        assert not term.download(lines)
+    assert out[-1] == "not sent: the program has 2002 lines; DMC-4040 holds 2000"
+
+
+@pytest.mark.parametrize(
+    ("script", "status"),
+    [
+        ("MG 1\nMG 2\n", 0),
+        ("MG 1\nXYZ\nMG 2\n", 1),  # refused by the controller
+        ("RS;MG 1\nMG 2\n", 1),  # not sent
+        ("DL\n#A\nMG " + "1+" * 60 + "1\n\\\n", 1),  # a download refused
+    ],
+)
+def test_a_piped_script_ends_with_status_1_when_a_line_failed(
+    dmc: galil.Controller, monkeypatch: pytest.MonkeyPatch, script: str, status: int
+) -> None:
+    # Before, `galil terminal ADDRESS < setup.txt` ended with 0 whatever happened.
+    monkeypatch.setattr(sys, "stdin", io.StringIO(script))
+    assert run_terminal(dmc, interactive=False) == status
+
+
+def test_a_line_edited_session_ends_with_status_0_after_a_refused_line(
+    dmc: galil.Controller,
+) -> None:
+    assert "? 1 Unrecognized command" in _session(dmc, "XYZ\r\x04", None)  # (status 0 there)
+
+
+class SignalOnRead(io.StringIO):
+    """Piped input during whose second read the process gets ``signum``."""
+
+    def __init__(self, text: str, signum: int) -> None:
+        super().__init__(text)
+        self.signum = signum
+        self.reads = 0
+
+    def readline(self, size: int = -1) -> str:  # type: ignore[override]
+        self.reads += 1
+        if self.reads == 2:
+            signal.raise_signal(self.signum)
+        return super().readline(size)
+
+
+def test_sigterm_ends_the_galil_terminal_command_which_closes_the_controller(
+    dmc: galil.Controller, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    noted: list[int] = []
+
+    def handler(signum: int, frame: object) -> None:
+        noted.append(signum)
+
+    before = signal.signal(signal.SIGTERM, handler)
+    try:
+        monkeypatch.setattr(sys, "stdin", SignalOnRead("MG 1\nMG 2\n", signal.SIGTERM))
+        monkeypatch.setattr("galil.cli._connect", lambda address, timeout: dmc)
+        assert cli.main(["terminal", "sim://DMC-4040"]) == 128 + signal.SIGTERM
+        assert dmc.closed
+        assert capsys.readouterr().out.splitlines() == [" 1.0000"]
+        assert noted == []  # the terminal's own handler had it, and then put this one back
+        assert signal.getsignal(signal.SIGTERM) is handler
+    finally:
+        signal.signal(signal.SIGTERM, before)
+
+
+def test_sigterm_at_the_line_edited_prompt_ends_the_terminal_with_128_plus_15(
+    dmc: galil.Controller,
+) -> None:
+    noted: list[int] = []
+
+    def handler(signum: int, frame: object) -> None:
+        noted.append(signum)
+
+    before = signal.signal(signal.SIGTERM, handler)
+    screen = io.StringIO()
+    try:
+        with create_pipe_input() as typed:
+
+            def at_the_prompt() -> None:  # once the reply to MG 1 is shown, and the prompt
+                deadline = time.monotonic() + 30
+                while not re.search(r" 1\.0000\n.*:", screen.getvalue(), re.S):
+                    if time.monotonic() > deadline:
+                        break
+                    time.sleep(0.01)
+                os.kill(os.getpid(), signal.SIGTERM)
+                time.sleep(2)
+                typed.send_text("\x04")  # (ends a terminal that did not end on the signal)
+
+            typed.send_text("MG 1\r")
+            killer = threading.Thread(target=at_the_prompt, daemon=True)
+            killer.start()
+            with create_app_session(input=typed, output=PlainTextOutput(screen)):
+                status = run_terminal(dmc, interactive=True)
+            killer.join()
+        assert status == 128 + signal.SIGTERM
+        assert noted == []  # the terminal's own handler had it, and then put this one back
+        assert signal.getsignal(signal.SIGTERM) is handler
+    finally:
+        signal.signal(signal.SIGTERM, before)
+
+
+def test_a_link_lost_under_the_terminal_says_to_start_it_again(
+    dmc: galil.Controller, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(sys, "stdin", io.StringIO("MG 1\n"))
+    monkeypatch.setattr("galil.cli._connect", lambda address, timeout: dmc)
+    dmc.transport.close()  # the cable is pulled
+    assert cli.main(["terminal", "sim://DMC-4040"]) == 2
+    err = capsys.readouterr().err.splitlines()[-1]
+    assert err.startswith("galil: ")
+    assert "link is closed" in err
+    assert err.endswith("; start galil terminal sim://DMC-4040 again")
+    assert "reconnect()" not in err  # (Python advice: before, the terminal's own)
