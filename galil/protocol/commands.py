@@ -1726,6 +1726,8 @@ def link_setting(text: str) -> str | None:
 
 def _raw_command(text: str) -> Command:
     head = text.lstrip().upper()[:2]
+    if _variable_named_like(text.lstrip(), head):
+        return Command(text, Expect.ANY)
     if head in ("DL", "QD"):
         raise InvalidArgument(f"{head} needs a payload; use commands.{head.lower()}()")
     if head == "QR":
@@ -1735,6 +1737,30 @@ def _raw_command(text: str) -> Command:
     if head in _QUERIES or text.startswith("\x12\x16"):
         return Command(text, Expect.DATA)
     return Command(text, Expect.ANY)
+
+
+#: Commands that take no axis letters after their name: any name that only begins like them
+#: is a variable's (``ULIM=5``, ``DLY=2``).
+_BARE = frozenset({"DL", "QD", "UL", "QU"})
+
+
+def _variable_named_like(text: str, head: str) -> bool:
+    """Whether ``text`` begins with a variable (or array) whose name only begins like the
+    command ``head``, or assigns to one: ``ULIM=5``, ``QRX=2``, ``TPOS=1``, ``TP2[3]=0`` are no
+    ``UL``, ``QR`` or ``TP`` (their replies are a ``:`` or a value, never a transfer or a
+    record)."""
+    if head not in _BARE and head != "QR" and head not in _QUERIES:
+        return False
+    found = _COMMAND_NAME.match(text)
+    if found is None:
+        return False
+    suffix = found.group()[2:]
+    rest = text[found.end() :].lstrip()
+    if rest.startswith("[") or (rest.startswith("=") and not rest.startswith("=?")):
+        return True  # an array element, or an assignment: no transfer, record or query
+    if not suffix:
+        return False
+    return head in _BARE or _AXIS_SUFFIX.fullmatch(suffix) is None
 
 
 # ------------------------------------------------------- homing, switches, I/O, loop settings

@@ -379,3 +379,29 @@ def test_a_stepped_speed_goes_out_at_or_just_beyond_its_step() -> None:
     assert c.va(1024 * (1000 / 1500) ** 2 * 1001).text == "VAS=455566.2223"
     assert c.sp(A=25_000).text == "SPA=25000"
     assert c.pr(A=1000).text == "PRA=1000"
+
+
+@pytest.mark.parametrize(
+    ("line", "kind"),
+    [
+        ("ULIM=5", ReplyKind.ANY),
+        ("ULIM", ReplyKind.ANY),
+        ("DLY=3", ReplyKind.ANY),
+        ("QDX=1", ReplyKind.ANY),
+        ("QRX=2", ReplyKind.ANY),
+        ("TPOS=1", ReplyKind.ANY),
+        ("TP2[3]=0", ReplyKind.ANY),
+        ("UL", ReplyKind.CTRL_Z),
+        ("QU a[],0,3,1", ReplyKind.CTRL_Z),
+        ("QR", ReplyKind.RECORD),
+        ("QR ABC", ReplyKind.RECORD),
+        ("TPA", ReplyKind.DATA),
+        ("TPA=?", ReplyKind.DATA),
+    ],
+)
+def test_a_variable_whose_name_begins_like_a_transfer_or_query_is_a_plain_command(
+    line: str, kind: ReplyKind
+) -> None:
+    """``ULIM=5`` is an assignment, not ``UL`` (it waited for a ^Z that never came), and
+    ``QRX=2`` no ``QR`` (a data record); ``DLY=3`` is not refused as a ``DL``."""
+    assert parse_line(line).expect.kind is kind
