@@ -12,20 +12,24 @@ collects the controller's data records as the scan's data, the prediction alongs
     await x.connect()               # or init_devices(); connect(mock=True): a simulator
     RE(scan([det], x, 0, 10, 5))
 
-Devices on the same address share one :class:`~galil.aio.AsyncController` per event loop;
-:meth:`GalilMotor.disconnect` lets go of it (the last one closes it). Everything goes through
-:mod:`galil.aio`, so the units, predictions and checks are the sync core's.
+Devices on the same address share one :class:`~galil.aio.AsyncController` per event loop, and
+its axes' scales: a device whose scale differs from the one an axis already has is refused at
+``connect()``. :meth:`GalilMotor.disconnect` lets go of the controller (the last one closes
+it); ``connect()`` after it, or after :func:`release_all`, connects again. Everything goes
+through :mod:`galil.aio`, so the units, predictions and checks are the sync core's.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import functools
 import math
 import numbers
 import time
-from collections.abc import AsyncIterator, Mapping
+from collections.abc import AsyncIterator, Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -34,40 +38,56 @@ from bluesky.protocols import (
     Flyable,
     Locatable,
     Location,
+    Pausable,
     Preparable,
+    Stageable,
     Stoppable,
 )
 from event_model import DataKey
 from event_model.documents.event import PartialEvent
 from ophyd_async.core import (
     CALCULATE_TIMEOUT,
+    DEFAULT_TIMEOUT,
     AsyncStatus,
     CalculatableTimeout,
     Device,
     DeviceConnector,
     DeviceMock,
     NotConnectedError,
+    SignalR,
+    SoftSignalBackend,
     StandardReadable,
     WatchableAsyncStatus,
     WatcherUpdate,
-    soft_signal_r_and_setter,
 )
 from ophyd_async.core import StandardReadableFormat as Format
 
 from galil.aio import AsyncAxis, AsyncController, AsyncMoveHandle, AsyncRecordStream
 from galil.aio import connect as aio_connect
+from galil.aio._motion import Starting
+from galil.aio._worker import shielded
 from galil.contour import ContourResult, ContourStream
 from galil.controller import Controller
-from galil.errors import InvalidArgument
+from galil.errors import GalilError, GalilTimeoutError, InvalidArgument, MotionError
 from galil.link import check_count, check_flag, check_seconds, check_wait_timeout
 from galil.motion import held
 from galil.predict import Profile
+from galil.protocol import commands as cmds
+from galil.protocol.records import RecordSplitter, decode_records
 from galil.units import Scale, get_registry, path_to_counts
 
-__all__ = ["ContourPath", "GalilContourFlyer", "GalilMotor", "release_all"]
+if TYPE_CHECKING:
+    from galil.sim import SimController
+
+__all__ = ["POLL_PERIOD", "ContourPath", "GalilContourFlyer", "GalilMotor", "release_all"]
 
 #: Model of the simulator a device connects to in mock mode (unless its address is sim://).
 MOCK_MODEL = "DMC-4040"
+
+#: Seconds between reads of a motor's ``readback`` and ``setpoint`` while something is
+#: subscribed to them (``bps.monitor``, ``observe_value``, ``wait_for_value``): one query
+#: each a poll, and none when nothing is subscribed.
+POLL_PERIOD = 0.1
 
 
 # ----------------------------------------------------------------------------- connections
@@ -130,7 +150,9 @@ async def _release(controller: AsyncController) -> None:
 
 
 async def release_all() -> None:
-    """Close every controller the devices of this event loop share (end of a session)."""
+    """Close every controller the devices of this event loop share (end of a session).
+
+    A device's ``connect()`` after it connects again (a new connection)."""
     loop = asyncio.get_running_loop()
     for key, entry in list(_shared.items()):
         if key[0] is not loop:
@@ -152,8 +174,13 @@ class _GalilConnector(DeviceConnector):
         if self.controller is not None:
             await _release(self.controller)
             self.controller = None
-        self.controller = await _acquire(self.address, mock)
-        device._attached(self.controller)
+        controller = await _acquire(self.address, mock)
+        try:
+            device._attached(controller)
+        except BaseException:
+            await _release(controller)  # (refused: the device holds nothing)
+            raise
+        self.controller = controller
 
     async def connect_real(self, device: Device, timeout: float, force_reconnect: bool) -> None:
         assert isinstance(device, _GalilDevice)
@@ -172,7 +199,22 @@ class _GalilDevice(Device):
     _connector: _GalilConnector
 
     def _attached(self, controller: AsyncController) -> None:
-        """The controller is connected: take what the device needs from it (no I/O)."""
+        """The controller is connected: take what the device needs from it (no I/O).
+
+        Raises:
+            InvalidArgument: the device cannot use this controller as it is (a scale).
+        """
+
+    def _not_connected(self) -> NotConnectedError:
+        return NotConnectedError(
+            f"{self.name or type(self).__name__} is not connected: await its connect() "
+            "(again after disconnect() or galil.bluesky.release_all())"
+        )
+
+    @property
+    def _live(self) -> bool:
+        c = self._connector.controller
+        return c is not None and not c.closed
 
     @property
     def controller(self) -> AsyncController:
@@ -183,11 +225,26 @@ class _GalilDevice(Device):
         """
         c = self._connector.controller
         if c is None or c.closed:
-            raise NotConnectedError(f"{self.name or type(self).__name__} is not connected")
+            raise self._not_connected()
         return c
 
+    async def connect(
+        self,
+        mock: bool | DeviceMock[Any] = False,
+        timeout: float = DEFAULT_TIMEOUT,
+        force_reconnect: bool = False,
+    ) -> None:
+        """Connect the device (see ophyd-async's ``Device.connect``). After
+        :meth:`disconnect`, :func:`release_all` or its controller's close, it connects
+        again: ophyd-async would return at once, remembering the earlier connect."""
+        earlier = self._connect_task
+        if not mock and earlier is not None and earlier.done() and not self._live:
+            force_reconnect = True
+        await super().connect(mock, timeout, force_reconnect)
+
     async def disconnect(self) -> None:
-        """Let go of the shared controller (closed when its last device lets go)."""
+        """Let go of the shared controller (closed when its last device lets go);
+        ``connect()`` connects again."""
         c = self._connector.controller
         self._connector.controller = None
         if c is not None:
@@ -195,7 +252,68 @@ class _GalilDevice(Device):
 
 
 def _scale_of(counts_per: Any, offset: Any, sign: int) -> Scale | None:
-    return None if counts_per is None else Scale(counts_per, offset, sign)
+    """A motor's scale; ``offset`` and ``sign`` only with ``counts_per`` (they would be
+    dropped silently on an axis counted in counts).
+
+    Raises:
+        InvalidArgument: a bad scale, or an offset or a sign without one.
+    """
+    if counts_per is not None:
+        return Scale(counts_per, offset, sign)
+    if offset is not None or not _plain_sign(sign):
+        raise InvalidArgument(
+            f"offset and sign belong to a scale: give scale= too (got offset={offset!r:.40}, "
+            f"sign={sign!r:.40}, no scale: positions in counts)"
+        )
+    return None
+
+
+def _plain_sign(sign: object) -> bool:
+    """Whether ``sign`` is the default +1 (an int; not True)."""
+    return not isinstance(sign, bool) and isinstance(sign, numbers.Integral) and sign == 1
+
+
+def _same_scale(a: Scale, b: Scale) -> bool:
+    """Whether two scales map positions onto the same counts (units may differ)."""
+    try:
+        per = float(b.counts_per.m_as(a.counts_per.units))
+        offset = float(b.offset.m_as(a.offset.units))
+    except Exception:  # (pint: another dimension; an angle for a length)
+        return False
+    close = functools.partial(math.isclose, rel_tol=1e-12, abs_tol=1e-12)
+    same = close(per, float(a.counts_per.magnitude))
+    return same and a.sign == b.sign and close(offset, float(a.offset.magnitude))
+
+
+def _claim_scale(axis: AsyncAxis, scale: Scale | None, device: str) -> None:
+    """Give the shared ``axis`` the device's ``scale``; refuse a device whose scale is not
+    the one the axis already has (another device on the address gave it: it would change
+    what that device's numbers mean). A device without a scale (counts) needs an axis
+    without one.
+
+    Raises:
+        InvalidArgument: the axis has another scale, or one and the device none.
+    """
+    have = axis.scale
+    if have is None:
+        if scale is not None:
+            axis.set_scale(scale.counts_per, scale.offset, scale.sign)
+        return
+    if scale is not None and _same_scale(have, scale):
+        return
+    wanted = "no scale (counts)" if scale is None else f"scale {_scale_text(scale)}"
+    raise InvalidArgument(
+        f"{device}: axis {axis.letter} already has the scale {_scale_text(have)}, given by "
+        f"another device on this address; this one asks for {wanted}. Devices on one "
+        "controller share its axes' scales: give them all the same one"
+    )
+
+
+def _scale_text(scale: Scale) -> str:
+    text = f"{scale.counts_per:~}"
+    if float(scale.offset.magnitude):
+        text += f", offset {scale.offset:~}"
+    return text + (", sign -1" if scale.sign < 0 else "")
 
 
 def _unit_and_precision(scale: Scale | None) -> tuple[str, int]:
@@ -204,6 +322,34 @@ def _unit_and_precision(scale: Scale | None) -> tuple[str, int]:
         return "counts", 0
     per = float(scale.counts_per.magnitude)
     return f"{scale.unit:~}", max(0, math.ceil(math.log10(per) - 1e-9))
+
+
+class _ControllerBackend(SoftSignalBackend[float]):
+    """A soft signal whose value is read from the controller (its getter), and whose
+    ``source`` names what is read (``galil://<address>/_TPA``), not ``soft://``."""
+
+    def __init__(self, source: Callable[[], str], **kwargs: Any) -> None:
+        self._source = source
+        super().__init__(float, 0.0, **kwargs)
+
+    def source(self, name: str, read: bool) -> str:
+        return self._source()
+
+
+def _controller_signal(
+    source: Callable[[], str],
+    getter: Callable[[], Any],
+    *,
+    units: str,
+    precision: int | None = None,
+    poll: float | None = None,
+) -> tuple[SignalR[float], Callable[[float], None]]:
+    """A read-only signal read from the controller, and the function that pushes a value to
+    its subscribers; ``poll``: seconds between reads while something is subscribed."""
+    backend = _ControllerBackend(
+        source, units=units, precision=precision, getter=getter, poll_period=poll
+    )
+    return SignalR(backend=backend), backend.set_value
 
 
 # ------------------------------------------------------------------------------------ motor
@@ -244,6 +390,14 @@ def _watch_timeout(timeout: object) -> float | None:
     return 1e9 if seconds is None else seconds
 
 
+@dataclass
+class _Request:
+    """One ``set()`` call, from the call to the end of its status."""
+
+    target: float | None = None  # the target, once the controller has taken the move
+    stopped: bool | None = None  # the success flag of a stop() since the call
+
+
 class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[float], Stoppable):
     """One Galil axis as an ophyd-async motor.
 
@@ -252,8 +406,10 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         axis: the axis letter (or an alias such as ``"X"``).
         name: the device name (its readback is read under this name).
         scale: counts per user unit (``2000 / ureg.mm``); positions are then numbers in that
-            unit. Without it they are counts.
-        offset, sign: the rest of the axis's :class:`~galil.units.Scale`.
+            unit. Without it they are counts. Devices on one address share the axis's scale:
+            one that differs from the scale the axis already has is refused at connect.
+        offset, sign: the rest of the axis's :class:`~galil.units.Scale` (with ``scale``
+            only: without one they are refused).
         in_position: after the profile ends, ``set()`` waits until the position error
             (``_TE``) is within this distance (the axis's unit; default one count) ...
         settle_timeout: ... or this many seconds have passed (then the readback reports
@@ -264,7 +420,13 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
     ``units`` and ``precision`` in ``describe()``), ``setpoint`` (the target of the ``set()``
     in progress, else the controller's commanded position ``_RP``: where the last move,
     made here or not, ended), and the configuration ``velocity`` (``SP``) and
-    ``acceleration`` (``AC``).
+    ``acceleration`` (``AC``). ``readback`` and ``setpoint`` are read again every
+    :data:`POLL_PERIOD` seconds while something is subscribed to them (``bps.monitor``,
+    ``observe_value``), and on every read.
+
+    Raises:
+        InvalidArgument: a bad argument (at construction); a scale other than the one
+            another device on the address gave the axis (at ``connect()``).
     """
 
     def __init__(
@@ -282,34 +444,49 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         if not isinstance(address, str) or not isinstance(axis, str) or not axis:
             raise InvalidArgument(f"GalilMotor takes an address and an axis letter, not {axis!r}")
         _check_name(name)
+        self._address = address
         self._letter = axis
         self._scale = _scale_of(scale, offset, sign)
         per = 1.0 if self._scale is None else float(self._scale.counts_per.magnitude)
         self._in_position = 1.0 if in_position is None else _distance(in_position) * per
         self._settle_timeout = check_seconds(settle_timeout, "settle_timeout")
         self._axis: AsyncAxis | None = None
-        self._stopped: bool | None = None  # success flag of a stop() during set()
-        self._moving_to: float | None = None  # the target of the set() in progress
+        self._requests: list[_Request] = []  # the set() calls whose status is not done
         unit, precision = _unit_and_precision(self._scale)
         self._unit = unit
         self._precision = precision
         with self.add_children_as_readables(Format.HINTED_UNCACHED_SIGNAL):
-            self.readback, _ = soft_signal_r_and_setter(
-                float, 0.0, units=unit, precision=precision, getter=self._read_position
+            self.readback, _ = _controller_signal(
+                self._source("TP"),
+                self._read_position,
+                units=unit,
+                precision=precision,
+                poll=POLL_PERIOD,
             )
         with self.add_children_as_readables(Format.CONFIG_SIGNAL):
-            self.velocity, _ = soft_signal_r_and_setter(
-                float, 0.0, units=f"{unit}/s", getter=self._read_speed
+            self.velocity, _ = _controller_signal(
+                self._source("SP"), self._read_speed, units=f"{unit}/s"
             )
-            self.acceleration, _ = soft_signal_r_and_setter(
-                float, 0.0, units=f"{unit}/s**2", getter=self._read_accel
+            self.acceleration, _ = _controller_signal(
+                self._source("AC"), self._read_accel, units=f"{unit}/s**2"
             )
         # Read from the controller, as an ophyd-async EPICS motor reads its setpoint PV: a
         # cached last target would be wrong at connect and after a move made elsewhere.
-        self.setpoint, _ = soft_signal_r_and_setter(
-            float, 0.0, units=unit, precision=precision, getter=self._read_setpoint
+        self.setpoint, self._show_setpoint = _controller_signal(
+            self._source("RP"),
+            self._read_setpoint,
+            units=unit,
+            precision=precision,
+            poll=POLL_PERIOD,
         )
         super().__init__(name=name, connector=_GalilConnector(address))
+
+    def _source(self, operand: str) -> Callable[[], str]:
+        def source() -> str:
+            letter = self._letter if self._axis is None else self._axis.letter
+            return f"galil://{self._address}/_{operand}{letter}"
+
+        return source
 
     def set_name(self, name: str, *, child_name_separator: str | None = None) -> None:
         """Name the device; its readback is read under the device's own name."""
@@ -318,16 +495,18 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
 
     def _attached(self, controller: AsyncController) -> None:
         axis = controller.axis(self._letter)
-        if self._scale is not None:
-            s = self._scale
-            axis.set_scale(s.counts_per, s.offset, s.sign)
+        _claim_scale(axis, self._scale, self.name or "GalilMotor")
         self._axis = axis
 
     @property
     def axis(self) -> AsyncAxis:
-        """The :class:`~galil.aio.AsyncAxis` this motor moves (after ``connect()``)."""
-        if self._axis is None or self._connector.controller is None:
-            raise NotConnectedError(f"{self.name or 'GalilMotor'} is not connected")
+        """The :class:`~galil.aio.AsyncAxis` this motor moves (after ``connect()``).
+
+        Raises:
+            NotConnectedError: the motor is not connected.
+        """
+        if self._axis is None or not self._live:
+            raise self._not_connected()
         return self._axis
 
     # -- values in the user's unit --------------------------------------------------------
@@ -364,8 +543,9 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         return self._rate(await self.axis.accel(), 2)
 
     async def _read_setpoint(self) -> float:
-        if self._moving_to is not None:
-            return self._moving_to
+        for request in reversed(self._requests):  # (the newest move the controller took)
+            if request.target is not None:
+                return request.target
         return self._user(await self.axis.reference_position())
 
     # -- Movable, Checkable, Locatable, Stoppable ---------------------------------------------
@@ -378,43 +558,84 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         for ever; else a finite number of seconds >= 0, as every wait's (a bad one fails the
         status with :class:`~galil.errors.InvalidArgument` before anything is sent). A status
         that fails (a timeout, an error, a cancellation) leaves no motion: the axis is stopped
-        first. A ``stop()`` at any point of the move, even before it has started, stops it;
-        with ``success=False`` the status then fails.
+        first (a timeout fails with :class:`~galil.errors.GalilTimeoutError` saying so). A
+        ``stop()`` at any point of the move, even before it has started, stops it; with
+        ``success=False`` the status then fails. A ``set()`` the controller refuses (the
+        axis is still moving) fails alone: the move in progress goes on as it was.
         """
-        self._stopped = None  # from the call on, not once the move's task runs: stop() counts
-        return self._move(value, timeout)
+        request = _Request()  # from the call on, not once the move's task runs: stop() counts
+        self._requests.append(request)
+        return self._move(value, timeout, request)
 
     @WatchableAsyncStatus.wrap
     async def _move(
-        self, value: float, timeout: CalculatableTimeout
+        self, value: float, timeout: CalculatableTimeout, request: _Request
     ) -> AsyncIterator[WatcherUpdate[float]]:
-        axis = self.axis
-        target = self._target(value)
-        wait = _watch_timeout(timeout)
-        initial = await self.readback.get_value()
-        if not self._stop_requested():  # else stopped before the move began: it never does
-            self._moving_to = float(value)
-            try:
-                handle = await axis.move_to(target)
-                try:
-                    if self._stop_requested():  # stop() came while the move was starting
-                        await handle.stop()
-                    async for update in self._progress(handle, float(value), initial, wait):
-                        yield update
-                    await handle.wait()
-                except BaseException:
-                    await handle.stop_unless_done()  # motion never outlives a failed status
-                    raise
-            finally:
-                self._moving_to = None
-            await self._settle()
-            yield self._update(await self.readback.get_value(), initial, float(value), 1.0, 0.0)
-        if self._stopped is False:
-            raise RuntimeError(f"{self.name} was stopped")
+        try:
+            axis = self.axis
+            target = self._target(value)
+            wait = _watch_timeout(timeout)
+            initial = await self.readback.get_value()
+            if request.stopped is None:  # else stopped before the move began: it never does
+                async for update in self._moved(axis, target, float(value), initial, wait, request):
+                    yield update
+            if request.stopped is False:
+                raise RuntimeError(f"{self.name} was stopped")
+        finally:
+            self._requests.remove(request)
 
-    def _stop_requested(self) -> bool:
-        """Whether ``stop()`` was called since the last ``set()`` (read again after awaits)."""
-        return self._stopped is not None
+    async def _moved(
+        self,
+        axis: AsyncAxis,
+        target: Any,
+        value: float,
+        initial: float,
+        wait: float | None,
+        request: _Request,
+    ) -> AsyncIterator[WatcherUpdate[float]]:
+        """The move of one ``set()``, once its arguments are checked: its progress, then the
+        settling and the last update."""
+        handle = await axis.move_to(target)
+        request.target = value  # (taken: the setpoint is its target until it ends)
+        self._show_setpoint(value)
+        begun = self.controller.sync.link.clock()
+        try:
+            if request.stopped is not None:  # stop() came while the move was starting
+                await handle.stop()
+            async for update in self._progress(handle, value, initial, wait):
+                yield update
+            await handle.wait()
+        except GalilTimeoutError as exc:
+            error = self._timed_out(exc, handle, value, wait, begun)  # (before the stop
+            await handle.stop_unless_done()  # changes the prediction); no motion outlives it
+            raise error from exc
+        except BaseException:
+            await handle.stop_unless_done()
+            raise
+        finally:
+            request.target = None
+        await self._settle()
+        yield self._update(await self.readback.get_value(), initial, value, 1.0, 0.0)
+
+    def _timed_out(
+        self,
+        exc: GalilTimeoutError,
+        handle: AsyncMoveHandle,
+        value: float,
+        wait: float | None,
+        begun: float,
+    ) -> GalilTimeoutError:
+        """The error of a ``set()`` whose move outlasted its timeout: the move was stopped
+        (the watch's own error says it goes on, which is true only of a bare watch)."""
+        allowed = handle.duration * 1.5 + 2.0 if wait is None else wait  # (as the watch's)
+        if self.controller.sync.link.clock() - begun < allowed:
+            return exc  # (a reply that did not come: that error says so, and the axis stopped)
+        return GalilTimeoutError(
+            f"{self.name}: the move to {value:g} {self._unit} was not done after {allowed:.3g} "
+            f"s (predicted {handle.duration:.3g} s): the axis was stopped (ST)",
+            model=exc.model,
+            recent=exc.recent,
+        )
 
     async def _progress(
         self, handle: AsyncMoveHandle, value: float, initial: float, wait: float | None
@@ -471,7 +692,9 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
 
     async def stop(self, success: bool = True) -> None:
         """Decelerate to a stop (``ST``); with ``success=False`` a move in progress fails."""
-        self._stopped = check_flag(success, "success")
+        flag = check_flag(success, "success")
+        for request in self._requests:
+            request.stopped = flag
         await self.axis.stop()
 
 
@@ -495,18 +718,150 @@ class ContourPath:
     record_period: int | None = None
 
 
+class _Recorder:
+    """The data records of one flight, from its kickoff until :meth:`close` (``recorded``:
+    every record taken, oldest first)."""
+
+    def __init__(self) -> None:
+        self.recorded: list[np.void] = []
+
+    async def finish(self, end: int) -> None:
+        """Take the records up to the first one at or after sample ``end`` (the flight's
+        end), at most two seconds for them to arrive; then close."""
+        raise NotImplementedError
+
+    async def close(self) -> None:
+        """Record no more and let go of what recording took (idempotent; the controller
+        closed meanwhile too)."""
+        raise NotImplementedError
+
+
+class _StreamRecorder(_Recorder):
+    """Records the controller streams (``DR`` to a handle of their own over Ethernet,
+    polled with ``QR`` elsewhere), taken by a task of the loop."""
+
+    def __init__(self, stream: AsyncRecordStream) -> None:
+        super().__init__()
+        self._stream = stream
+        self._reader = asyncio.get_running_loop().create_task(self._read())
+
+    async def _read(self) -> None:
+        async for rec in self._stream:
+            self.recorded.append(rec)
+
+    async def finish(self, end: int) -> None:
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline and not _past(self.recorded, end):
+            if self._reader.done():
+                break
+            await asyncio.sleep(0.01)
+        await self.close()
+
+    async def close(self) -> None:
+        self._reader.cancel()
+        await asyncio.gather(self._reader, return_exceptions=True)
+        with contextlib.suppress(GalilError):  # (the controller was closed: so is the stream)
+            await self._stream.close()
+
+
+class _SimRecorder(_Recorder):
+    """Records of an in-process simulator, streamed by its own ``DR`` to a handle opened on
+    it: each at the exact sample it is due, however the simulator's clock is moved (a
+    manual one moves only while someone waits, in steps a poller would miss records in)."""
+
+    def __init__(
+        self,
+        c: AsyncController,
+        sim: SimController,
+        layout: tuple[int, int, int, int],
+        period: int,
+    ) -> None:
+        super().__init__()
+        self._c = c
+        self._sim = sim
+        self._layout = layout
+        self._period = period
+        self._splitter = RecordSplitter(layout)
+        self._port: int | None = None
+
+    def start(self) -> None:
+        """Worker side: open the handle and ``DR period`` on it."""
+        port = self._sim.open_port("galil.bluesky records")
+        reply = self._sim.feed(f"{cmds.dr(self._period).text}\r".encode(), port)
+        if not reply.startswith(b":"):
+            self._sim.close_port(port)
+            raise InvalidArgument(f"DR {self._period} refused by the simulator: {reply!r:.60}")
+        self._port = port
+        # The first record now, as a controller's stream over Ethernet has one before the
+        # path begins (its DR sent a while before): the start, held, is in the scan too.
+        self.recorded.extend(decode_records(self._sim.record(), self._layout))
+
+    def _take(self, last: bool = False) -> None:
+        """The records the simulator has streamed so far (``last``: close the handle)."""
+        port = self._port
+        if port is None:
+            return
+        data = self._sim.poll(port)
+        if last:
+            self._sim.close_port(port)  # (its DR stream ends with it)
+            self._port = None
+        whole = self._splitter.feed_block(data)
+        if whole:
+            self.recorded.extend(decode_records(whole, self._layout))
+
+    async def _run(self, fn: Callable[[], None]) -> None:
+        if self._c.worker.closed:
+            fn()  # (a few in-process calls: the loop can afford them once)
+        else:
+            await self._c.run(fn)
+
+    async def finish(self, end: int) -> None:
+        for _ in range(3):  # (the record at or after the end is at most a period away)
+            await self._run(self._take)
+            if _past(self.recorded, end):
+                break
+            await self._c.sleep(self._period * self._c.sample_period)
+        await self.close()
+
+    async def close(self) -> None:
+        await self._run(functools.partial(self._take, last=True))
+
+
+def _simulator(c: AsyncController) -> SimController | None:
+    """The in-process simulator behind ``c`` (``sim://`` and mock mode), if it is one."""
+    from galil.sim import SimController
+
+    sim = getattr(c.transport, "controller", None)
+    return sim if isinstance(sim, SimController) else None
+
+
+async def _recorder(c: AsyncController, period: int) -> _Recorder:
+    """Start recording a flight: every ``period`` samples.
+
+    Raises:
+        InvalidArgument: the model's ``DR`` refuses the period (nothing started).
+    """
+    sim = _simulator(c)
+    if sim is None:
+        return _StreamRecorder(await c.records(period))
+    cmds.dr(period, 0, model=c.model)  # (the model's range, as its DR stream refuses it)
+    recorder = _SimRecorder(c, sim, await c.run(c.sync.records_room.layout), period)
+    await c.run(recorder.start)
+    return recorder
+
+
 @dataclass
 class _Flight:
     """One fly scan's state from prepare to collect."""
 
     stream: ContourStream
     record_period: int
-    run: asyncio.Task[ContourResult] | None = None
-    records: AsyncRecordStream | None = None
-    reader: asyncio.Task[None] | None = None
+    starting: Starting | None = None  # the contour's start on a worker (what a stop refuses)
+    run: asyncio.Task[ContourResult] | None = None  # the contour, then its records closed
+    records: _Recorder | None = None
     start_sample: int = 0
     start_time: float = 0.0
-    recorded: list[np.void] = field(default_factory=list)
+    stopped: str = ""  # who stopped it (stop(), a pause ...), once one did
     result: ContourResult | None = None
     points: dict[str, npt.NDArray[Any]] = field(default_factory=dict)
 
@@ -544,7 +899,7 @@ def _fly(stream: ContourStream) -> ContourResult:
     return stream.run()
 
 
-class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable):
+class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, Stageable):
     """A contour path on one or more axes as a bluesky flyer.
 
     ``prepare(ContourPath(...))`` checks and predicts the path (nothing moves), ``kickoff()``
@@ -552,11 +907,19 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable):
     ``collect()`` yields one event per data record taken during the path: the recorded
     reference and encoder positions per axis, and the predicted position at the same sample.
 
+    A flight does not outlive its plan: it is stopped (``ST``) and its records closed when
+    the RunEngine pauses (``pause()``, so also before an abort or a halt of the paused
+    run), when a plan that staged the flyer ends in any way (``unstage()``), when bluesky
+    collects a flyer a failed, aborted or halted run left flying (``collect()`` before
+    ``complete()``), on ``stop()``, and on the next ``prepare()`` or ``stage()``. Its
+    ``complete()`` then fails with a :class:`~galil.errors.MotionError` saying so.
+
     Args:
         address: the controller's address (shared with the motors on it).
         axes: the contour axes, in the order of the path's columns (``"AB"``).
         name: the device name (also the name of the event stream).
-        scales: counts per user unit per axis, for axes no motor has scaled.
+        scales: counts per user unit per axis, for axes no motor has scaled (one another
+            device on the address gave the axis must be the same: else refused at connect).
     """
 
     def __init__(
@@ -574,18 +937,17 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable):
         _check_name(name)
         if scales is not None and not isinstance(scales, Mapping):
             raise InvalidArgument(f"scales must map axis letters to scales, not {scales!r:.60}")
-        for per in (scales or {}).values():
-            Scale(per)  # refused here, not at connect()
+        # (refused here, not at connect())
+        self._scales = {a: Scale(per) for a, per in (scales or {}).items()}
         self._axes_given = axes
-        self._scales = dict(scales or {})
         self._letters = ""
         self._flight: _Flight | None = None
         super().__init__(name=name, connector=_GalilConnector(address))
 
     def _attached(self, controller: AsyncController) -> None:
         letters = "".join(controller.axis(a).letter for a in self._axes_given)
-        for a, per in self._scales.items():
-            controller.axis(a).set_scale(per)
+        for a, scale in self._scales.items():
+            _claim_scale(controller.axis(a), scale, self.name or "GalilContourFlyer")
         self._letters = letters
 
     @property
@@ -601,7 +963,8 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable):
 
     @AsyncStatus.wrap
     async def prepare(self, value: ContourPath) -> None:
-        """Check the path and predict it from where the axes are (one state query)."""
+        """Check the path and predict it from where the axes are (one state query). A
+        flight an earlier ``prepare()`` left is over first (stopped if it still flies)."""
         if not isinstance(value, ContourPath):
             raise InvalidArgument(f"prepare takes a ContourPath, not {value!r}")
         period = value.record_period
@@ -609,6 +972,9 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable):
             # as the records of kickoff() would refuse it, but before the path is prepared
             raise InvalidArgument(f"record_period is a number of samples 1..65535, not {period!r}")
         c = self.controller
+        if self._flight is not None:
+            await self._end_flight(self._flight, "a new prepare()")
+            self._flight = None
         stream, _ = await c.run(_build_stream, c.sync, self._letters, value.path, value.dt)
         period = value.record_period or (1 << value.dt)
         self._flight = _Flight(stream, period)
@@ -633,55 +999,97 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable):
         if flight is None or flight.run is not None:
             raise RuntimeError(f"{self.name}: prepare() must come before kickoff()")
         c = self.controller
-        flight.records = await c.records(flight.record_period)
-        flight.start_sample = round((await c.query_operands(["TIME"]))[0])
-        flight.start_time = time.time()
-        flight.reader = asyncio.get_running_loop().create_task(self._read(flight))
-        flight.run = asyncio.get_running_loop().create_task(self._run(flight))
-
-    async def _run(self, flight: _Flight) -> ContourResult:
-        c = self.controller
+        records = await _recorder(c, flight.record_period)
         try:
-            return await c.run(_fly, flight.stream)
-        except asyncio.CancelledError:
-            await c.stop(self._letters)
+            flight.start_sample = round((await c.query_operands(["TIME"]))[0])
+        except BaseException:
+            await records.close()
             raise
+        flight.records = records
+        flight.start_time = time.time()
+        flight.starting = Starting(c.sync.tracker)
+        flight.run = asyncio.get_running_loop().create_task(self._flown(c, flight))
+        flight.run.add_done_callback(_retrieved)  # (complete() raises it; none may come)
 
-    async def _read(self, flight: _Flight) -> None:
+    async def _flown(self, c: AsyncController, flight: _Flight) -> ContourResult:
+        """The flight's task: the contour, then the records up to its end; the records are
+        closed however it ends."""
         records = flight.records
         assert records is not None
-        async for rec in records:
-            flight.recorded.append(rec)
+        try:
+            result = await self._contour(c, flight)
+            end = round((await c.query_operands(["TIME"]))[0])
+            await records.finish(end)
+            return result
+        finally:
+            await records.close()
+
+    async def _contour(self, c: AsyncController, flight: _Flight) -> ContourResult:
+        """The contour on a worker thread, started as ``AsyncController.contour`` starts one:
+        a stop refuses what it has not started yet (:class:`~galil.aio._motion.Starting`)."""
+        starting = flight.starting
+        assert starting is not None
+        future = c.worker.submit(starting.run, functools.partial(_fly, flight.stream))
+        try:
+            return await shielded(future)
+        except asyncio.CancelledError:  # (complete()'s status cancelled, the loop's end)
+            if not future.cancel():
+                await self._send_stop(c, starting)
+            raise
+
+    async def _send_stop(self, c: AsyncController, starting: Starting) -> None:
+        """``ST`` on the contour axes, under the tracker's lock: a flight that has not entered
+        contour mode yet never sends a segment; one that has stops (and sends no ``CD``)."""
+        stop = functools.partial(c.sync.stop, self._letters)
+        with contextlib.suppress(GalilError):  # (a controller closed since: it stopped it)
+            await c.worker.run_shielded(starting.cancel, stop)
+
+    async def _halt(self, flight: _Flight, why: str) -> bool:
+        """Stop ``flight`` if it is in progress (without waiting for its end); whether it
+        was."""
+        run, starting = flight.run, flight.starting
+        if run is None or starting is None or run.done():
+            return False
+        flight.stopped = flight.stopped or why
+        starting.abandon()  # (a flight not started yet never starts)
+        c = self._connector.controller
+        if c is not None and not c.closed:
+            await self._send_stop(c, starting)
+        return True
+
+    async def _end_flight(self, flight: _Flight, why: str) -> None:
+        """Stop ``flight`` if it is in progress, and wait for its end (records closed)."""
+        await self._halt(flight, why)
+        if flight.run is not None:
+            await asyncio.gather(flight.run, return_exceptions=True)
 
     @AsyncStatus.wrap
     async def complete(self) -> None:
         """Wait for the end of the path, stop the records and line them up with the
-        prediction."""
+        prediction.
+
+        Raises:
+            MotionError: the flight was stopped (``stop()``, a pause ...) before its end.
+        """
         flight = self._flight
         if flight is None or flight.run is None:
             raise RuntimeError(f"{self.name}: kickoff() must come before complete()")
         try:
             flight.result = await flight.run
-            end = round((await self.controller.query_operands(["TIME"]))[0])
-            await self._stop_records(flight, end)
-        finally:
-            await self._stop_records(flight, None)
+        except Exception as exc:
+            if not flight.stopped:
+                raise
+            raise MotionError(
+                f"{self.name or 'the flyer'}: the flight on {self._letters} was stopped "
+                f"({flight.stopped}) before the end of its path",
+                axis=self._letters[0],
+                model=self.controller.model.name if self._live else None,
+            ) from exc
+        records = flight.records
+        assert records is not None
         flight.points = await self.controller.run(
-            _line_up, flight.recorded, flight.stream.profiles, self._letters, flight.start_sample
+            _line_up, records.recorded, flight.stream.profiles, self._letters, flight.start_sample
         )
-
-    async def _stop_records(self, flight: _Flight, until: int | None) -> None:
-        records, reader = flight.records, flight.reader
-        if records is None or reader is None or records.closed:
-            return
-        if until is not None:
-            # Let the reader take every record up to the end sample before closing.
-            deadline = time.monotonic() + 2.0
-            while time.monotonic() < deadline and not _past(flight, until):
-                await asyncio.sleep(0.01)
-        reader.cancel()
-        await asyncio.gather(reader, return_exceptions=True)
-        await records.close()
 
     def describe_collect(self) -> dict[str, dict[str, DataKey]]:
         """One stream (named after the device): per axis the recorded reference and encoder
@@ -704,9 +1112,17 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable):
         return {self._stream_name(): keys}
 
     async def collect(self) -> AsyncIterator[PartialEvent]:
-        """One partial event per data record taken during the path."""
+        """One partial event per data record taken during the path (after ``complete()``).
+
+        Before ``complete()`` nothing: a flight still in progress is stopped (``ST``) and its
+        records closed (bluesky collects so a flyer that a failed, aborted or halted run left
+        flying)."""
         flight = self._flight
-        if flight is None or not flight.points:
+        if flight is None:
+            return
+        if flight.run is not None and not flight.run.done():
+            await self._end_flight(flight, "collect() before complete()")
+        if not flight.points:
             return
         points = flight.points
         ts = self.controller.sample_period
@@ -720,14 +1136,44 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable):
             yield PartialEvent(data=data, timestamps=dict.fromkeys(data, t), time=t)
 
     async def stop(self, success: bool = True) -> None:
-        """Stop the contour's axes (``ST``); the flight then fails."""
+        """Stop the contour's axes (``ST``): a flight in progress is over (its ``complete()``
+        fails, saying it was stopped); without one, ``ST`` on the axes all the same."""
         check_flag(success, "success")
         flight = self._flight
-        if flight is not None and flight.run is not None and not flight.run.done():
-            flight.run.cancel()
-            await asyncio.gather(flight.run, return_exceptions=True)
-        else:
+        if flight is None or not await self._halt(flight, "stop()"):
             await self.controller.stop(self._letters)
+
+    async def pause(self) -> None:
+        """The RunEngine pauses (Ctrl-C twice, ``RE.request_pause``, a suspender): a flight
+        in progress is stopped (``ST``) and its records closed; a flight is not resumed
+        halfway (its ``complete()`` fails)."""
+        if self._flight is not None:
+            await self._end_flight(self._flight, "the RunEngine paused")
+
+    async def resume(self) -> None:
+        """The RunEngine resumes: nothing to do (a paused flight was stopped)."""
+
+    @AsyncStatus.wrap
+    async def stage(self) -> None:
+        """Before a plan's flights: a flight an earlier plan left is over (stopped if it
+        still flies, its records closed)."""
+        if self._flight is not None:
+            await self._end_flight(self._flight, "stage()")
+
+    @AsyncStatus.wrap
+    async def unstage(self) -> None:
+        """At the end of a plan that staged the flyer (bluesky unstages it however the plan
+        ends: a failure, an abort, a halt): a flight still in progress is stopped (``ST``)
+        and its records closed."""
+        if self._flight is not None:
+            await self._end_flight(self._flight, "unstage()")
+
+
+def _retrieved(task: asyncio.Task[ContourResult]) -> None:
+    """Mark a flight's outcome seen: a flight nobody completes (stopped, its plan failed)
+    is no "exception never retrieved" in the log."""
+    if not task.cancelled():
+        task.exception()
 
 
 def _in_unit(profile: Profile, counts: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
@@ -735,10 +1181,11 @@ def _in_unit(profile: Profile, counts: npt.NDArray[np.float64]) -> npt.NDArray[n
     return counts / per + offset
 
 
-def _past(flight: _Flight, sample: int) -> bool:
-    if not flight.recorded:
+def _past(recorded: list[np.void], sample: int) -> bool:
+    """Whether the last record of ``recorded`` was taken at ``sample`` or after it."""
+    if not recorded:
         return False
-    last = int(flight.recorded[-1]["sample"])
+    last = int(recorded[-1]["sample"])
     return (last - sample) % 65536 < 32768
 
 

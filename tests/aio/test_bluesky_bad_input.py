@@ -154,3 +154,10 @@ def test_a_quantity_for_a_position_is_refused_naming_the_motors_unit() -> None:
     in_mm, in_counts = _run(body)
     assert "m: a position is a number (in mm, the motor's unit), not" in in_mm
     assert "n: a position is a number (in counts, the motor's unit), not" in in_counts
+
+
+@pytest.mark.parametrize("extra", [{"offset": 100}, {"sign": -1}, {"offset": 0 * ureg.mm}])
+def test_an_offset_or_a_sign_without_a_scale_is_refused(extra: dict[str, Any]) -> None:
+    # (they were dropped silently: mv(b, 1000) sent _RPB = 1000 with sign=-1, offset=100)
+    with pytest.raises(galil.InvalidArgument, match="offset and sign belong to a scale"):
+        GalilMotor("sim://DMC-4040", "B", **extra)

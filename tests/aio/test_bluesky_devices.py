@@ -21,10 +21,12 @@ pytest.importorskip("ophyd_async")
 
 import bluesky.plan_stubs as bps
 import bluesky.plans as bp
+import bluesky.preprocessors as bpp
 from bluesky import RunEngine
 from bluesky.run_engine import RunEngineInterrupted, call_in_bluesky_event_loop
+from bluesky.utils import FailedStatus
 from client_fakes import pull_cable_after
-from ophyd_async.core import soft_signal_rw
+from ophyd_async.core import NotConnectedError, observe_value, soft_signal_rw, wait_for_value
 
 import galil
 from galil.bluesky import ContourPath, GalilContourFlyer, GalilMotor, release_all
@@ -333,8 +335,12 @@ def test_a_set_that_times_out_stops_the_axis(engine: RunEngine) -> None:
     x = mock_motor("tcp://127.0.0.1:3")
 
     async def body() -> float:
-        with pytest.raises(galil.GalilTimeoutError):
+        # (it said the move "goes on: wait again, or stop it", of a move already stopped)
+        with pytest.raises(galil.GalilTimeoutError) as info:
             await x.set(50, timeout=0.05)
+        said = r"x: the move to 50 mm was not done after 0.05 s \(predicted [\d.]+ s\): the axis"
+        assert re.match(said + r" was stopped \(ST\)", str(info.value))
+        assert "goes on" not in str(info.value)
         return await _settled(x)
 
     assert in_loop(body()) < 5
@@ -544,6 +550,10 @@ def test_the_flyers_stop_during_a_flight_ends_its_stream(
     sent = [t for _, t in sim.command_log]
     after = sent[sent.index("ST A") :]
     assert [t for t in after if t.startswith("CD")] == ["CD 0=0"]
+    # (complete() failed with "CancelledError while awaiting <coroutine ...>")
+    failed = in_loop(_completed(flyer))
+    assert isinstance(failed, galil.MotionError)
+    assert str(failed).startswith("fly: the flight on A was stopped (stop()) before the end")
 
 
 # -- a shared controller whose sync side was closed directly -------------------------------
@@ -561,3 +571,280 @@ def test_a_shared_controller_closed_behind_the_devices_back_still_ends_its_worke
     replacement.sync.close()
     in_loop(release_all())
     assert replacement.worker.closed
+
+
+# -- a flight does not outlive its plan, nor hold a record handle after it -----------------
+def tcp_flyer(url: str) -> GalilContourFlyer:
+    flyer = GalilContourFlyer(url, "A", name="fly", scales={"A": 2000 / mm})
+    in_loop(flyer.connect())
+    return flyer
+
+
+LONG = ContourPath(np.linspace(0.05, 10, 200) * mm, dt=4)  # 200 segments of 16 ms: 3.2 s
+
+
+def flight(flyer: GalilContourFlyer, path: ContourPath, then: Callable[[], Any]) -> Any:
+    """A plan that opens a run, kicks the flyer off along ``path`` and runs ``then()``."""
+    yield from bps.open_run()
+    yield from bps.prepare(flyer, path, wait=True)
+    yield from bps.kickoff(flyer, wait=True)
+    yield from then()
+    yield from bps.complete(flyer, wait=True)
+    yield from bps.collect(flyer)
+    yield from bps.close_run()
+
+
+async def _stopped_at(flyer: GalilContourFlyer) -> float:
+    """Where the contour axis came to rest (mm), once at rest."""
+    c = flyer.controller
+    while (await c.query_operands(["_BGA"]))[0]:
+        await c.sleep(0.01)
+    return float((await c.query_operands(["_RPA"]))[0]) / 2000
+
+
+def _handles(flyer: GalilContourFlyer) -> int:
+    return str(in_loop(flyer.controller.command("TH"))).count("TCP PORT")
+
+
+def _fails(error: str) -> Callable[[], Any]:
+    def then() -> Any:
+        yield from bps.sleep(0.3)  # (the contour under way)
+        raise ValueError(error)
+
+    return then
+
+
+def _pauses() -> Any:
+    yield from bps.sleep(0.3)  # (the contour under way)
+    yield from bps.pause()  # (as Ctrl-C twice)
+
+
+def test_a_pause_stops_the_flight_and_closes_its_records(
+    server: SimTcpServer, engine: RunEngine
+) -> None:
+    # (the contour flew on through a pause and the abort after it, its DR handle open)
+    flyer = tcp_flyer(server.url)
+    handles = _handles(flyer)
+    with pytest.raises(RunEngineInterrupted):
+        engine(flight(flyer, LONG, _pauses))
+    assert engine.state == "paused"
+    assert in_loop(_stopped_at(flyer)) < 5
+    assert _handles(flyer) == handles  # the record stream's handle is closed
+    engine.abort()
+    failed = in_loop(_completed(flyer))
+    assert isinstance(failed, galil.MotionError)
+    assert "was stopped (the RunEngine paused)" in str(failed)
+
+
+def test_a_plan_that_fails_after_kickoff_stops_the_flyer_it_staged(
+    server: SimTcpServer, engine: RunEngine
+) -> None:
+    flyer = tcp_flyer(server.url)
+
+    @bpp.stage_decorator([flyer])
+    @bpp.run_decorator()
+    def staged() -> Any:
+        yield from bps.prepare(flyer, LONG, wait=True)
+        yield from bps.kickoff(flyer, wait=True)
+        yield from _fails("the detector died")()
+
+    with pytest.raises(ValueError, match="the detector died"):
+        engine(staged())
+    assert in_loop(_stopped_at(flyer)) < 5
+
+
+def test_a_run_a_failing_plan_left_open_stops_its_flight(
+    server: SimTcpServer, engine: RunEngine
+) -> None:
+    # bluesky collects the flyers of a run left open (its "backstop"): the flight ends there
+    flyer = tcp_flyer(server.url)
+    handles = _handles(flyer)
+    with pytest.raises(ValueError, match="the detector died"):
+        engine(flight(flyer, LONG, _fails("the detector died")))
+    assert in_loop(_stopped_at(flyer)) < 5
+    assert _handles(flyer) == handles
+
+
+def test_flights_of_failed_plans_leave_no_record_handle_open(
+    server: SimTcpServer, engine: RunEngine, docs: Docs
+) -> None:
+    # (each left its DR stream open: after six the controller's eight handles were taken)
+    flyer = tcp_flyer(server.url)
+    handles = _handles(flyer)
+    short = ContourPath(np.linspace(0.1, 1.6, 16) * mm, dt=3)
+
+    @bpp.run_decorator()  # (closes the run: no backstop collect, no stage)
+    def failing() -> Any:
+        yield from bps.prepare(flyer, short, wait=True)
+        yield from bps.kickoff(flyer, wait=True)
+        raise ValueError("the detector died")
+
+    for _ in range(8):
+        with pytest.raises(ValueError, match="the detector died"):
+            engine(failing())
+    engine(flight(flyer, short, bps.null))
+    assert len(next(d for name, d in docs if name == "event_page")["data"]["fly-sample"]) >= 16
+    assert _handles(flyer) == handles
+
+
+def test_a_new_prepare_stops_the_flight_in_progress(engine: RunEngine) -> None:
+    flyer = mock_flyer("tcp://127.0.0.1:43")
+    sim = sim_of(flyer.controller.sync)
+    in_loop(_fly(flyer, np.cumsum(np.full(3000, 20.0)), 2))  # six buffers
+    assert "ST A" not in [text for _, text in sim.command_log]
+    in_loop(_fly(flyer, np.linspace(20, 640, 32), 3))  # prepare() again, and kickoff()
+    assert "ST A" in [text for _, text in sim.command_log]
+    assert in_loop(_completed(flyer)) is None  # the new flight flies
+
+
+def test_a_stopped_flight_fails_complete_saying_it_was_stopped(
+    server: SimTcpServer, engine: RunEngine
+) -> None:
+    # (complete() failed with "CancelledError while awaiting <coroutine ...>")
+    flyer = tcp_flyer(server.url)
+
+    def stop_it() -> Any:
+        yield from bps.sleep(0.3)  # (the contour under way)
+        yield from bps.stop(flyer)
+
+    with pytest.raises(FailedStatus) as info:
+        engine(flight(flyer, LONG, stop_it))
+    assert isinstance(info.value.__cause__, galil.MotionError)
+    assert "fly: the flight on A was stopped (stop()) before the end of its path" in str(
+        info.value.__cause__
+    )
+    assert in_loop(_stopped_at(flyer)) < 5
+
+
+def test_a_mock_fly_scan_records_every_point_the_same_each_time(
+    engine: RunEngine, docs: Docs
+) -> None:
+    # (records were polled while the manual clock ran in steps: 18, 25, 23 of the 33)
+    path = ContourPath(np.linspace(0.1, 3.2, 32) * mm, dt=3)
+    pages = []
+    for address in ("tcp://127.0.0.1:44", "tcp://127.0.0.1:47", "tcp://127.0.0.1:44"):
+        flyer = GalilContourFlyer(address, "A", name="fly", scales={"A": 2000 / mm})
+        in_loop(flyer.connect(mock=True))
+        docs.clear()
+        engine(flight(flyer, path, bps.null))
+        pages.append(next(d for name, d in docs if name == "event_page")["data"])
+        in_loop(release_all())  # (the next flight on a new simulator)
+    for data in pages:
+        samples = np.array(data["fly-sample"])
+        assert len(samples) == 33  # the start, held, then one record per segment
+        assert np.all(np.diff(samples) == 8)
+        assert data["fly-A-reference"] == pytest.approx(data["fly-A-predicted"], abs=1e-12)
+        assert data["fly-A-predicted"][-1] == pytest.approx(3.2)
+    for key in ("fly-sample", "fly-A-reference", "fly-A-position"):
+        assert pages[0][key] == pages[1][key] == pages[2][key]
+
+
+# -- devices on one address share its axes' scales ---------------------------------------
+def test_a_device_asking_another_scale_of_a_shared_axis_is_refused_at_connect(
+    engine: RunEngine,
+) -> None:
+    # (the last device connected set the scale of all: x read 20 mm without moving, and
+    # mv(x, 20) sent 20000 counts; a counts motor failed with pint's DimensionalityError)
+    address = "tcp://127.0.0.1:45"
+    x = mock_motor(address)
+    engine(bps.mv(x, 10))
+    flyer = GalilContourFlyer(address, "A", name="fly", scales={"A": 1000 / mm})
+    with pytest.raises(galil.InvalidArgument, match="axis A already has the scale 2000 / mm"):
+        in_loop(flyer.connect(mock=True))
+    raw = GalilMotor(address, "A", name="raw")
+    with pytest.raises(galil.InvalidArgument, match="asks for no scale"):
+        in_loop(raw.connect(mock=True))
+    assert in_loop(x.locate())["setpoint"] == 10
+    engine(bps.mv(x, 20))
+    assert in_loop(x.controller.query_operands(["_RPA"])) == [40000]
+    same = GalilContourFlyer(address, "A", name="same", scales={"A": 2 / ureg.um})
+    in_loop(same.connect(mock=True))  # the same scale, in another unit
+    assert same.controller is x.controller
+    assert in_loop(x.locate())["setpoint"] == 20
+
+
+def test_describe_names_what_the_controller_is_asked(engine: RunEngine) -> None:
+    x = mock_motor("tcp://127.0.0.1:46")
+    described = in_loop(x.describe())
+    assert described["x"]["source"] == "mock+galil://tcp://127.0.0.1:46/_TPA"  # (ophyd's mock+)
+
+
+# -- the readback updates its subscribers ------------------------------------------------
+def test_readback_subscribers_see_the_axis_move(server: SimTcpServer, engine: RunEngine) -> None:
+    # (a soft signal with a getter only: one value, then nothing)
+    x = motor(server.url, speed=5.0)
+
+    async def body() -> tuple[list[float], float]:
+        seen: list[float] = []
+        status = x.set(5)  # 1 s: some ten polls
+        async for value in observe_value(x.readback, done_status=status):
+            seen.append(value)
+        await status
+        status = x.set(0)
+        await wait_for_value(x.readback, lambda v: v < 2.5, timeout=5)
+        passing = await x.readback.get_value()
+        await status
+        return seen, passing
+
+    seen, passing = in_loop(body())
+    assert len(set(seen)) >= 3
+    assert seen == sorted(seen)
+    assert 0 < passing < 2.5
+
+
+def test_a_monitor_records_the_readback_during_a_move(
+    server: SimTcpServer, engine: RunEngine, docs: Docs
+) -> None:
+    x = motor(server.url, speed=5.0)  # 1 s: some ten polls
+
+    def plan() -> Any:
+        yield from bps.open_run()
+        yield from bps.monitor(x.readback, name="xmon")
+        yield from bps.mv(x, 5)
+        yield from bps.unmonitor(x.readback)
+        yield from bps.close_run()
+
+    engine(plan())
+    assert len(set(events(docs, "x"))) >= 3
+
+
+# -- connect() after disconnect() or release_all() --------------------------------------------
+def test_connect_after_disconnect_or_release_all_connects_again(engine: RunEngine) -> None:
+    # (ophyd-async remembered the first connect: connect() did nothing, the device was dead)
+    x = GalilMotor("sim://DMC-4040", "A", name="x", scale=2000 / mm)
+    in_loop(x.connect())
+    in_loop(x.disconnect())
+    with pytest.raises(NotConnectedError, match="connect"):
+        in_loop(x.locate())
+    in_loop(x.connect())
+    assert in_loop(x.locate()) == {"setpoint": 0, "readback": 0}
+    in_loop(release_all())
+    with pytest.raises(NotConnectedError, match=r"release_all\(\)"):
+        in_loop(x.locate())
+    in_loop(x.connect())
+    assert in_loop(x.locate()) == {"setpoint": 0, "readback": 0}
+
+
+# -- a refused set() leaves the move in progress as it was ---------------------------------
+def test_a_refused_set_leaves_the_move_in_progress_as_it_was(
+    server: SimTcpServer, engine: RunEngine
+) -> None:
+    # (the refused set() forgot the target and an earlier stop(success=False))
+    x = motor(server.url, speed=20.0)
+
+    async def body() -> tuple[float, BaseException | None]:
+        first = x.set(50)  # 2.5 s
+        while not await x.axis.moving():
+            await x.controller.sleep(0.005)
+        with pytest.raises(galil.InvalidArgument):
+            await x.set(2)
+        setpoint = (await x.locate())["setpoint"]
+        await x.stop(success=False)
+        with pytest.raises(galil.InvalidArgument):
+            await x.set(5)  # (still decelerating)
+        return setpoint, await _failure_of(first)
+
+    setpoint, failure = in_loop(body())
+    assert setpoint == 50
+    assert failure is not None
+    assert "was stopped" in str(failure)
