@@ -378,7 +378,7 @@ def _plan_axis(
             _check_ip_end(link, a, distance, target, "moves the axis to")
         check_int32("PA", target, a, link.model.name)
     speed = state.sp if move.speed is None else move.speed
-    if speed <= 0 and distance:
+    if speed <= 0:  # (BG refuses SP 0 even for a move of no distance: TC 6)
         model = link.model
         raise LimitError(
             f"axis {a} has SP 0: set a speed first",

@@ -304,3 +304,16 @@ def test_a_reversing_increment_in_a_moves_last_samples_is_refused_before_sending
         dmc.D.increment(-2000)
     assert dmc.D.increment(300) is handle
     assert handle.wait().final == {"D": 1000}
+
+
+@pytest.mark.parametrize("distance", [0, 100])
+def test_a_move_at_speed_0_is_refused_before_anything_moves_even_of_no_distance(
+    distance: int,
+) -> None:
+    """BG refuses SP 0 (TC 6) even for a move to where the axis is: the library says to set a
+    speed first rather than send the move and meet the controller's refusal."""
+    dmc = galil.connect("sim://DMC-4040")
+    dmc.A.speed = 0
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError, match="set a speed"):
+        dmc.A.move_by(distance)
+    dmc.close()
