@@ -1005,6 +1005,66 @@ class Link(LinkCore):
             if self._inbox:
                 self._flush()
 
+    # -- readers whose source died ----------------------------------------------------------
+
+    def source_lost(self, what: str, exc: GalilConnectionError | None) -> str | None:
+        """A reader's source is gone: ``what`` (a handle of the same controller: "the message
+        handle") closed under ``exc``, or (``exc`` ``None``) the poll of the idle command link
+        found it closed or dead. A closed handle may mean the controller went away: the
+        command link is asked (one query, :meth:`_probe`) and marked dead if it does not
+        answer either.
+
+        Returns:
+            ``None`` while the command link works, or a reopen is under way (it brings a new
+            source); else why nothing more will come (the link's closed or dead error).
+        """
+        if not self._reopened.is_set():
+            return None
+        if exc is not None and self._open and not self._dead:
+            self._probe(what, exc)
+        return self.gone() or None
+
+    def _probe(self, what: str, exc: GalilConnectionError) -> None:
+        try:
+            self._transact([cmds.time_stamp()], self.timeout)
+        except GalilTimeoutError:
+            with self._lock:
+                if self._open and not self._dead:
+                    self._link_failed(
+                        GalilConnectionError(
+                            f"{what} was closed ({exc}) and the controller did not answer on"
+                            f" the command link within {self.timeout:g} s"
+                        )
+                    )
+        except GalilError:
+            pass  # it answered (a refusal), or the link found itself dead or closed
+
+    def gone(self) -> str:
+        """Why a reader's queue gets nothing more from this link: the text of its closed or
+        dead error; ``""`` while it works, or while a reopen is under way."""
+        if not self._reopened.is_set() or (self._open and not self._dead):
+            return ""
+        return str(self._closed_error().args[0])
+
+    def revive(self) -> bool:
+        """For a reader's queue whose source died with the link: reopen the dead link with
+        the automatic reconnect (``on_dead``, ``connect(..., reconnect=True)``), or wait for
+        a reopen under way (up to :attr:`timeout`).
+
+        Returns:
+            Whether the link works again (``False``: it is closed, or dead with no automatic
+            reconnect).
+
+        Raises:
+            GalilConnectionError: the automatic reconnect failed.
+        """
+        if not self._reopened.is_set():
+            self._reopened.wait(self.timeout)
+            return self._open and not self._dead
+        if not self._dead:
+            return False
+        return self._recover(self._closed_error())
+
     def _explain(self, rejected: Completed, t: float) -> GalilError:
         """Ask ``TC1`` why a command was refused; a doubtful ``?`` is no refusal.
 

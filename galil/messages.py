@@ -21,7 +21,7 @@ from galil.link import Link, check_count, read_handle, read_reply
 from galil.protocol import commands as cmds
 from galil.protocol.framing import FrameParser, Unsolicited
 from galil.protocol.numbers import read_one
-from galil.queues import BoundedQueue, Subscribers
+from galil.queues import BoundedQueue, Subscribers, source_ended
 from galil.transport import HandleSource, MessagesOnly, Transport
 
 __all__ = ["MessageCallback", "MessageQueue", "Messages"]
@@ -102,6 +102,7 @@ class Messages:
         self.marking = False  # unsolicited output is marked with CW 1 on the command link
         self._wanted_pump = False
         link.on_messages = self._accept
+        self.queue.gone, self.queue.revive = link.gone, link.revive  # (a dead link's get())
 
     def _accept(self, lines: list[str]) -> None:
         for line in lines:
@@ -240,6 +241,8 @@ class Messages:
         # behind a blocked poll.
         while not stop.wait(self._poll_interval):
             if not self.link.poll_unsolicited(self._poll_interval):
+                # Closed or dead: whoever waits for a line hears so (unless stopped).
+                source_ended(self.link, self.queue, stop, "the command link", None)
                 return
 
     def _read_secondary(self, secondary: Transport, stop: threading.Event) -> None:
@@ -247,7 +250,9 @@ class Messages:
         while not stop.is_set():
             try:
                 chunk = read_handle(secondary, 0.25)
-            except GalilConnectionError:
+            except GalilConnectionError as exc:
+                if not stop.is_set():  # (closed by stop(): nothing to tell)
+                    source_ended(self.link, self.queue, stop, "the message handle", exc)
                 return
             if not chunk:
                 # Some handles return at once when idle (a simulator's): do not spin.
