@@ -1011,7 +1011,7 @@ class Link(LinkCore):
         """A reader's source is gone: ``what`` (a handle of the same controller: "the message
         handle") closed under ``exc``, or (``exc`` ``None``) the poll of the idle command link
         found it closed or dead. A closed handle may mean the controller went away: the
-        command link is asked (one query, :meth:`_probe`) and marked dead if it does not
+        command link is asked (one query) and marked dead if it does not
         answer either.
 
         Returns:
@@ -1021,23 +1021,8 @@ class Link(LinkCore):
         if not self._reopened.is_set():
             return None
         if exc is not None and self._open and not self._dead:
-            self._probe(what, exc)
+            _probe(self, what, exc)
         return self.gone() or None
-
-    def _probe(self, what: str, exc: GalilConnectionError) -> None:
-        try:
-            self._transact([cmds.time_stamp()], self.timeout)
-        except GalilTimeoutError:
-            with self._lock:
-                if self._open and not self._dead:
-                    self._link_failed(
-                        GalilConnectionError(
-                            f"{what} was closed ({exc}) and the controller did not answer on"
-                            f" the command link within {self.timeout:g} s"
-                        )
-                    )
-        except GalilError:
-            pass  # it answered (a refusal), or the link found itself dead or closed
 
     def gone(self) -> str:
         """Why a reader's queue gets nothing more from this link: the text of its closed or
@@ -1393,6 +1378,24 @@ class Link(LinkCore):
                 )
             out += values
         return out
+
+
+def _probe(link: Link, what: str, exc: GalilConnectionError) -> None:
+    """Whether ``link`` answers, now that ``what`` (a handle of the same controller) closed
+    under ``exc``: one query; a link that does not answer in time is dead."""
+    try:
+        link._transact([cmds.time_stamp()], link.timeout)
+    except GalilTimeoutError:
+        with link._lock:
+            if link.is_open and not link.dead:
+                link._link_failed(
+                    GalilConnectionError(
+                        f"{what} was closed ({exc}) and the controller did not answer on the"
+                        f" command link within {link.timeout:g} s"
+                    )
+                )
+    except GalilError:
+        pass  # it answered (a refusal), or the link found itself dead or closed
 
 
 def _one_command(text: str, allow_compound: bool) -> Command:
