@@ -27,16 +27,21 @@ _ECHO_OF_IDENTIFY = re.compile(r"[\x12\x16]*\r\n?")
 
 
 def identify(
-    link: Link, given: ModelSpec | None, *, keep_echo: bool
+    link: Link, given: ModelSpec | None, *, keep_echo: bool, expect: Identity | None = None
 ) -> tuple[Identity | None, bool]:
     """Ask ``^R^V``, set ``link.model``, and deal with an echo (lock taken here).
+
+    Args:
+        expect: the identity the link found before (a reopen): another one is refused, and
+            ``link.model`` is left as it was.
 
     Returns:
         The parsed identity (``None`` when only ``given`` names the model) and whether the
         controller still echoes (only with ``keep_echo``, or if it refused ``EO 0``).
 
     Raises:
-        GalilConnectionError: no answer, or an answer that names no model and none was given.
+        GalilConnectionError: no answer, an answer that names no model and none was given,
+            or (``expect``) another controller than before.
     """
     with link.locked():
         try:
@@ -63,8 +68,33 @@ def identify(
                 problem = str(exc)
         else:
             problem = "the controller refused ^R^V"
+    if expect is not None:
+        _check_same(link, ident, expect)
     _settle_model(link, ident, given, problem)
     return ident, echo
+
+
+def _check_same(link: Link, ident: Identity | None, expect: Identity) -> None:
+    """A link reopened (a reconnect, automatic or not) must reach the controller it reached
+    before: another model at the same address (a controller swapped, an address reused)
+    would take commands meant for the first one (its axes, its ranges, its program).
+
+    Raises:
+        GalilConnectionError: ``^R^V`` names another model (or none at all).
+    """
+    if ident is not None and ident.raw_model == expect.raw_model:
+        return  # (the firmware may have changed: an update between the two links)
+    found = (
+        "a controller whose ^R^V names no model"
+        if ident is None
+        else f"a {ident.raw_model} (firmware {ident.firmware})"
+    )
+    raise link.error(
+        GalilConnectionError,
+        f"the link was reopened to {found}, not the {expect.raw_model} (firmware"
+        f" {expect.firmware}) it reached before: refused, since commands meant for one would"
+        " go to the other; galil.connect() opens a link to the new one",
+    )
 
 
 def _settle_model(
