@@ -46,6 +46,7 @@ from galil.protocol.session import Completed, Session
 from galil.transport import ByteRate, ControllerClock, Transport
 
 __all__ = [
+    "LONGEST_TIMEOUT",
     "RECONNECT_ADVICE",
     "TRANSFER_MARGIN",
     "TRANSFER_TIMEOUT",
@@ -65,6 +66,10 @@ __all__ = [
     "refuse_link_settings",
 ]
 
+#: The longest timeout, wait or pause :func:`check_seconds` takes (seconds, about 31 years:
+#: for ever, in practice; ``None`` is the way to wait for ever). Every deadline and socket
+#: timeout holds it; a 64-bit ``time_t`` of nanoseconds ends at about 9.2e9 s.
+LONGEST_TIMEOUT = 1e9
 #: What a dead link's error ends with: the way to open it again.
 RECONNECT_ADVICE = "; call reconnect() to open it again"
 #: The least reply timeout a bulk transfer (``QU``, ``QD``, ``DL``, ``UL``, ``LV``) gets: what
@@ -178,14 +183,16 @@ def _finite(value: float) -> bool:
 def check_seconds(value: object, name: str = "timeout", *, positive: bool = False) -> float:
     """The one check of every timeout, wait and pause in the public API: ``value`` must be a
     finite number of seconds >= 0 (``> 0`` with ``positive``: a reply timeout, a watchdog
-    period, where 0 cannot be met). The wrappers below decide what ``None`` means.
+    period, where 0 cannot be met), and at most :data:`LONGEST_TIMEOUT`. The wrappers below
+    decide what ``None`` means.
 
     Returns:
         ``value`` as a float.
 
     Raises:
         InvalidArgument: naming ``name``: ``None``, a bool, a string or anything else that is
-            not an int or a float, NaN, infinity, a negative number (or 0 with ``positive``).
+            not an int or a float, NaN, infinity, a negative number (or 0 with ``positive``),
+            more than :data:`LONGEST_TIMEOUT`.
     """
     if (
         isinstance(value, bool)
@@ -193,9 +200,13 @@ def check_seconds(value: object, name: str = "timeout", *, positive: bool = Fals
         or not _finite(value)
         or value < 0
         or (positive and value == 0)
+        or value > LONGEST_TIMEOUT
     ):
         least = "> 0" if positive else ">= 0"
-        raise InvalidArgument(f"{name} must be a finite number of seconds {least}, not {value!r}")
+        raise InvalidArgument(
+            f"{name} must be a finite number of seconds {least}, at most {LONGEST_TIMEOUT:g}"
+            f" (about 31 years), not {value!r}"
+        )
     return float(value)
 
 
