@@ -19,10 +19,13 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import os
 import re
 import sys
 import threading
 import time
+import types
+import warnings
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -64,6 +67,7 @@ __all__ = [
     "is_query",
     "parse_numbers_reply",
     "refuse_link_settings",
+    "warn_caller",
 ]
 
 #: The longest timeout, wait or pause :func:`check_seconds` takes (seconds, about 31 years:
@@ -170,6 +174,21 @@ def check_callable(value: object, name: str) -> None:
     """
     if not callable(value):
         raise InvalidArgument(f"{name} must be callable, not {value!r:.60}")
+
+
+_PACKAGE = os.path.dirname(os.path.abspath(__file__)) + os.sep
+
+
+def warn_caller(message: str, category: type[Warning] = RuntimeWarning) -> None:
+    """``warnings.warn`` attributed to the first caller outside the ``galil`` package (the
+    user's line that connected, reconnected ...), however deep inside it the warning comes
+    from: a fixed ``stacklevel`` points at one of the library's own lines when the depth
+    varies (``connect()``, ``Controller()``, ``reconnect()``)."""
+    frame: types.FrameType | None = sys._getframe(1)
+    level = 2  # (warn's stacklevel 2: this function's caller)
+    while frame is not None and frame.f_code.co_filename.startswith(_PACKAGE):
+        frame, level = frame.f_back, level + 1
+    warnings.warn(message, category, stacklevel=level if frame is not None else 2)
 
 
 def _finite(value: float) -> bool:

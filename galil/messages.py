@@ -12,12 +12,11 @@ from __future__ import annotations
 import contextlib
 import logging
 import threading
-import warnings
 from collections import deque
 from collections.abc import Callable
 
 from galil.errors import GalilConnectionError, GalilError, ProtocolError
-from galil.link import Link, check_count, read_handle, read_reply
+from galil.link import Link, check_count, read_handle, read_reply, warn_caller
 from galil.protocol import commands as cmds
 from galil.protocol.framing import FrameParser, Unsolicited
 from galil.protocol.numbers import read_one
@@ -142,11 +141,9 @@ class Messages:
             except GalilError as exc:
                 with contextlib.suppress(AttributeError):
                     transport.secondary = None  # closed: do not offer it to anyone
-                warnings.warn(
+                warn_caller(
                     f"no second Ethernet handle for unsolicited messages ({exc}); "
                     "they will be marked with CW1 on the command handle instead",
-                    RuntimeWarning,
-                    stacklevel=5,
                 )
         self._mark()
 
@@ -202,11 +199,9 @@ class Messages:
             except (ProtocolError, GalilError):
                 ok = False
         if not ok:
-            warnings.warn(
+            warn_caller(
                 f"{link.model.name} refused CW 1: unsolicited output is not marked and may be "
                 "mistaken for replies",
-                RuntimeWarning,
-                stacklevel=5,
             )
             return
         self.marking = True
