@@ -510,7 +510,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         try:
             if self._handshake:
                 self.identity, self.echo = identify(
-                    link, self._given_model, keep_echo=self._keep_echo
+                    link, self._given_model, keep_echo=self._keep_echo, expect=self.identity
                 )
                 if self._unsolicited:
                     self.messages_room.restart()
@@ -1098,6 +1098,7 @@ def _reopen_with_policy(controller: Controller, error: GalilConnectionError) -> 
     policy = controller._policy
     assert policy is not None
     delay = policy.delay
+    name = controller.link.model_name  # (the one that died, whatever answers on reopening)
     for attempt in range(1, policy.attempts + 1):
         try:
             controller._reconnect(controller.link.timeout)  # (maybe inside a start: see _reconnect)
@@ -1106,7 +1107,7 @@ def _reopen_with_policy(controller: Controller, error: GalilConnectionError) -> 
                 "galil: reconnect %d/%d to %s failed: %s",
                 attempt,
                 policy.attempts,
-                controller.link.model_name,
+                name,
                 str(exc).splitlines()[0],
             )
             if attempt == policy.attempts:
@@ -1116,7 +1117,7 @@ def _reopen_with_policy(controller: Controller, error: GalilConnectionError) -> 
         else:
             _LOG.warning(
                 "galil: link to %s died (%s); reconnected (attempt %d)",
-                controller.link.model_name,
+                name,
                 str(error).splitlines()[0],
                 attempt,
             )

@@ -69,6 +69,9 @@ USB_SERIAL_BRIDGES = {
     0x1A86: "WCH",
 }
 _MAX_HOSTS = 1024
+#: The most bytes an answer to ``^R^V`` is read for: an identity is a line of some 30
+#: (``DMC4040 Rev 1.2f``), a controller that echoes sends it twice.
+_IDENTIFY_MOST = 1024
 _PCI_GLOB = "/dev/galilpci*"
 
 
@@ -103,17 +106,18 @@ class Found:
 
 
 def _ask_transport(transport: Transport, timeout: float) -> str:
-    """Write ``^R^V`` on an open transport and return the identity (``""`` if none)."""
+    """Write ``^R^V`` on an open transport and return the identity (``""`` if none: no
+    answer in time, or more than :data:`_IDENTIFY_MOST` bytes, no Galil's)."""
     try:
         transport.write(IDENTIFY)
-        got = b""
+        got = bytearray()
         deadline = time.monotonic() + timeout
         while not got.rstrip().endswith((b":", b"?")):
             left = deadline - time.monotonic()
-            if left <= 0:
-                return ""
+            if left <= 0 or len(got) > _IDENTIFY_MOST:
+                return ""  # (a peer that floods is no controller: nothing more is kept)
             got += transport.read(left)
-        return parse_identify_reply(got)
+        return parse_identify_reply(bytes(got))
     except (GalilError, OSError):
         return ""
     finally:
@@ -227,8 +231,8 @@ def pci_nodes(
 
 
 def _targets(specs: Iterable[str] | str) -> list[tuple[str, int]]:
-    """``"10.0.0.5"``, ``"10.0.0.5:23"``, ``"10.0.0.0/24"`` (one, or a list) -> (host, port)
-    pairs.
+    """``"10.0.0.5"``, ``"10.0.0.5:23"``, ``"10.0.0.0/24"``, ``"::1"``, ``"[::1]:23"`` (one,
+    or a list) -> (host, port) pairs.
 
     Raises:
         InvalidArgument: a spec that is none of these, not a list of them, or more than 1024
@@ -240,8 +244,16 @@ def _targets(specs: Iterable[str] | str) -> list[tuple[str, int]]:
             raise InvalidArgument(f"not an address to probe: {spec!r}")
         text = spec.strip()
         host, port = text, COMMAND_PORT
-        if text.count(":") == 1:
+        port_text = None
+        if text.startswith("[") and "]" in text:  # [::1] or [::1]:23, as in a URL
+            host, _, rest = text[1:].partition("]")
+            if rest:
+                if not rest.startswith(":"):
+                    raise InvalidArgument(f"bad port in {spec!r}")
+                port_text = rest[1:]
+        elif text.count(":") == 1:
             host, _, port_text = text.partition(":")
+        if port_text is not None:
             if not port_text.isdigit():
                 raise InvalidArgument(f"bad port in {spec!r}")
             port = check_port(int(port_text), f"the port in {spec!r}")
@@ -289,7 +301,10 @@ def probe_hosts(specs: Iterable[str], *, timeout: float = 1.0) -> list[Found]:
 
 
 def _tcp_address(host: str, port: int) -> str:
-    return f"tcp://{host}" if port == COMMAND_PORT else f"tcp://{host}:{port}"
+    """The address :func:`galil.connect` takes: an IPv6 address in brackets
+    (``tcp://[::1]:23``: without them its colons would read as a port)."""
+    where = f"[{host}]" if ":" in host else host
+    return f"tcp://{where}" if port == COMMAND_PORT else f"tcp://{where}:{port}"
 
 
 def ask_group(

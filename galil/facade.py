@@ -7,16 +7,20 @@ logic. The controller adds the life cycle, the axes and motion on top.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
+from galil.arrays import _lv_reply_bytes, _qu_reply_bytes
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.link import Link, WireLog, check_flag, check_items, check_seconds, refuse_link_settings
 from galil.messages import MessageCallback, MessageQueue, Messages
 from galil.models import ModelSpec
+from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
 from galil.protocol.session import Completed
 from galil.records import Records, RecordStream
+from galil.routines import ul_reply_bytes
 from galil.transport import Transport
 from galil.tuning import follow_tm
 
@@ -39,6 +43,34 @@ def check_sleep(seconds: object) -> float:
     if value > LONGEST_SLEEP:
         raise InvalidArgument(f"seconds must be at most {LONGEST_SLEEP:g}, not {seconds!r}")
     return value
+
+
+#: The bulk transfers sent as raw text (``command("UL")``): timed by their size.
+_UPLOADS = frozenset({"UL", "QU", "LV"})
+#: A bulk transfer's command (decision 0064): ``DL``, ``UL``, ``LV``; ``QU``/``QD`` and an
+#: array name, and for ``QU`` its range (``QU a[],0,99,1``) when given.
+_TRANSFER = re.compile(r"(DL|UL|LV)$|(QD) ?[A-Za-z]|QU ?[A-Za-z]\w*\[\](?:,(\d+),(\d+))?")
+
+
+def _transfer_bytes(link: Link, command: Command) -> int | None:
+    """The most bytes the reply of ``command`` holds when it is a bulk transfer (``None``
+    when it is not): a colon for ``DL`` and ``QD`` (their size is their payload); the whole
+    program memory for ``UL``; every variable for ``LV``; the elements for ``QU`` (all the
+    model's array space when its range is not given)."""
+    m = _TRANSFER.match(command.text) if isinstance(command, Command) else None
+    if m is None or command.parts:
+        return None
+    head = m.group(1) or m.group(2) or "QU"
+    if head == "UL":
+        return ul_reply_bytes(link.model)
+    if head == "LV":
+        return _lv_reply_bytes(link)
+    if head == "QU":
+        first, last = m.group(3), m.group(4)
+        known = first is not None and last is not None and int(last) >= int(first)
+        count = int(last) - int(first) + 1 if known else link.model.array_elements
+        return _qu_reply_bytes(count)
+    return 0
 
 
 def _prepared(command: Command) -> Command:
@@ -127,8 +159,13 @@ class LinkFacade:
             GalilTimeoutError: no complete reply within the timeout.
             GalilConnectionError: the link is closed or dead.
         """
+        head = text.lstrip()[:2].upper() if type(text) is str else ""
+        if timeout is None and head in _UPLOADS:
+            command = cmds.parse_line(text)
+            if not command.parts:  # (a compound line: the link says what it takes)
+                return self.send(command)  # a bulk transfer: timed by its size
         reply = self.link.command(text, timeout=timeout, allow_compound=allow_compound)
-        if type(text) is str and text.lstrip()[:2].upper() == "TM":  # the rest, cheaply
+        if head == "TM":  # the rest, cheaply
             self._follow_tm([text])
         return reply
 
@@ -154,13 +191,21 @@ class LinkFacade:
             InvalidArgument: not a Command, or one that would change the link's own
                 settings (``RS``, ``CW 1`` ...: see :meth:`command`); nothing is sent.
         """
-        reply = self.link.send(_prepared(command), timeout=timeout)
-        self._follow_tm([command])
-        return reply
+        return self.exchange(command, timeout=timeout).text
 
     def exchange(self, command: Command, *, timeout: float | None = None) -> Completed:
-        """Send a prepared command and return the whole reply (``record`` for QR)."""
-        done = self.link.exchange(_prepared(command), timeout=timeout)
+        """Send a prepared command and return the whole reply (``record`` for QR).
+
+        A bulk transfer (``DL``, ``UL``, ``QD``, ``QU``, ``LV``) sent without a ``timeout``
+        gets the timeout of its size, as the rooms' own transfers do
+        (:meth:`~galil.link.Link.transfer`, decisions 0064 and 0067).
+        """
+        prepared = _prepared(command)
+        size = None if timeout is not None else _transfer_bytes(self.link, prepared)
+        if size is None:
+            done = self.link.exchange(prepared, timeout=timeout)
+        else:
+            done = self.link.transfer(prepared, size)
         self._follow_tm([command])
         return done
 

@@ -9,10 +9,9 @@ own library does, or kept and stripped from every reply when the caller asks for
 from __future__ import annotations
 
 import re
-import warnings
 
 from galil.errors import GalilConnectionError, GalilTimeoutError, InvalidArgument, ProtocolError
-from galil.link import Link
+from galil.link import RECONNECT_ADVICE, Link, warn_caller
 from galil.models import Identity, ModelSpec, parse_identity
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command, Expect
@@ -27,16 +26,21 @@ _ECHO_OF_IDENTIFY = re.compile(r"[\x12\x16]*\r\n?")
 
 
 def identify(
-    link: Link, given: ModelSpec | None, *, keep_echo: bool
+    link: Link, given: ModelSpec | None, *, keep_echo: bool, expect: Identity | None = None
 ) -> tuple[Identity | None, bool]:
     """Ask ``^R^V``, set ``link.model``, and deal with an echo (lock taken here).
+
+    Args:
+        expect: the identity the link found before (a reopen): another one is refused, and
+            ``link.model`` is left as it was.
 
     Returns:
         The parsed identity (``None`` when only ``given`` names the model) and whether the
         controller still echoes (only with ``keep_echo``, or if it refused ``EO 0``).
 
     Raises:
-        GalilConnectionError: no answer, or an answer that names no model and none was given.
+        GalilConnectionError: no answer, an answer that names no model and none was given,
+            or (``expect``) another controller than before.
     """
     with link.locked():
         try:
@@ -44,11 +48,14 @@ def identify(
             # its own), and that is how the echo is found.
             reply = link.roundtrip_locked([_IDENTIFY_ANY], link.timeout)[0]
         except GalilTimeoutError as exc:
+            serial = getattr(link.transport, "kind", "") == "serial"
             raise link.error(
                 GalilConnectionError,
-                f"no answer to ^R^V on {link.transport!r} within {link.timeout} s: is a Galil "
-                "controller on the other end (and the baud rate right)?",
+                f"no answer to ^R^V on the {_where(link)} within {link.timeout:g} s: is a Galil"
+                f" controller on the other end{' (and the baud rate right)' if serial else ''}?",
             ) from exc
+        except GalilConnectionError as exc:
+            raise link.error(GalilConnectionError, _dropped(link, exc)) from exc
         echo = False
         ident: Identity | None = None
         problem = ""
@@ -63,8 +70,55 @@ def identify(
                 problem = str(exc)
         else:
             problem = "the controller refused ^R^V"
+    if expect is not None:
+        _check_same(link, ident, expect)
     _settle_model(link, ident, given, problem)
     return ident, echo
+
+
+def _where(link: Link) -> str:
+    """The link as messages name it: its transport's label ("TCP link to 10.0.0.2:23",
+    "serial port /dev/ttyUSB0"), else its repr (a plug-in transport)."""
+    label = getattr(link.transport, "label", None)
+    return label if isinstance(label, str) and label else repr(link.transport)
+
+
+def _dropped(link: Link, exc: GalilConnectionError) -> str:
+    """The message of a link that failed before the controller answered ``^R^V`` (the
+    handshake of a connect or a reopen: no advice to call reconnect() on an object the
+    caller may never get). Over Ethernet, a controller with all its handles taken accepts
+    the connection and drops it at once."""
+    why = str(exc.args[0] if exc.args else exc).removesuffix(RECONNECT_ADVICE)
+    if getattr(link.transport, "kind", "") == "ethernet":
+        return (
+            f"the controller dropped the connection before it answered ^R^V ({why}): it may"
+            " have no free Ethernet handle (it has eight; TH on another connection lists them:"
+            " close one, or free a stale one with IHm=>-1)"
+        )
+    return f"the link failed before the controller answered ^R^V ({why})"
+
+
+def _check_same(link: Link, ident: Identity | None, expect: Identity) -> None:
+    """A link reopened (a reconnect, automatic or not) must reach the controller it reached
+    before: another model at the same address (a controller swapped, an address reused)
+    would take commands meant for the first one (its axes, its ranges, its program).
+
+    Raises:
+        GalilConnectionError: ``^R^V`` names another model (or none at all).
+    """
+    if ident is not None and ident.raw_model == expect.raw_model:
+        return  # (the firmware may have changed: an update between the two links)
+    found = (
+        "a controller whose ^R^V names no model"
+        if ident is None
+        else f"a {ident.raw_model} (firmware {ident.firmware})"
+    )
+    raise link.error(
+        GalilConnectionError,
+        f"the link was reopened to {found}, not the {expect.raw_model} (firmware"
+        f" {expect.firmware}) it reached before: refused, since commands meant for one would"
+        " go to the other; galil.connect() opens a link to the new one",
+    )
 
 
 def _settle_model(
@@ -76,7 +130,7 @@ def _settle_model(
                 GalilConnectionError,
                 f"cannot identify the controller ({problem}); pass model='DMC-....'",
             )
-        warnings.warn(f"{problem}; using model={given.name} as given", RuntimeWarning, stacklevel=5)
+        warn_caller(f"{problem}; using model={given.name} as given")
         link.model = given
         return
     if ident.model.generic and given is not None:
@@ -84,20 +138,16 @@ def _settle_model(
         return
     link.model = ident.model
     if ident.model.generic:
-        warnings.warn(
+        warn_caller(
             f"{ident.raw_model} (firmware {ident.firmware}) is a Galil controller the tables "
             f"do not know; connected as a generic model with conservative limits "
             f"({len(ident.model.axes)} axes, no data record); pass model= to choose tables",
-            RuntimeWarning,
-            stacklevel=5,
         )
         return
     if given is not None and given.name != ident.model.name:
-        warnings.warn(
+        warn_caller(
             f"model={given.name} was given but the controller says {ident.raw_model}; "
             f"using {ident.model.name}",
-            RuntimeWarning,
-            stacklevel=5,
         )
 
 
@@ -116,9 +166,7 @@ def _handle_echo(link: Link, given: ModelSpec | None, keep_echo: bool) -> bool:
         link.restore_on_close(cmds.eo(1), own=cmds.eo(0))
         return False
     name = given.name if given is not None else "the controller"
-    warnings.warn(
+    warn_caller(
         f"{name} echoes and refused EO 0; the echo is stripped from every reply",
-        RuntimeWarning,
-        stacklevel=6,
     )
     return True

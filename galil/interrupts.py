@@ -35,7 +35,7 @@ from galil.protocol import commands as cmds
 from galil.protocol.handles import parse_th
 from galil.protocol.interrupts import Interrupt, InterruptParser
 from galil.protocol.numbers import read_one
-from galil.queues import BoundedQueue, Subscribers
+from galil.queues import BoundedQueue, Subscribers, source_ended
 from galil.transport import DatagramSource, HandleSource, LocalAddress, Transport
 
 __all__ = ["Interrupt", "InterruptCallback", "InterruptQueue", "Interrupts"]
@@ -67,6 +67,7 @@ class Interrupts:
     def __init__(self, link: Link, *, maxlen: int = 1000) -> None:
         self.link = link
         self.queue = InterruptQueue(maxlen)
+        self.queue.gone, self.queue.revive = link.gone, link.revive  # (a dead link's get())
         self.mask: int | None = None
         self._handle: Transport | None = None
         self._index = 0
@@ -163,7 +164,9 @@ class Interrupts:
         while not stop.is_set():
             try:
                 chunk = read_handle(handle, 0.25)
-            except GalilConnectionError:
+            except GalilConnectionError as exc:
+                if not stop.is_set():  # (closed by close(): nothing to tell)
+                    source_ended(self.link, self.queue, stop, "the interrupt handle", exc)
                 return
             if not chunk:
                 stop.wait(0.005)  # some handles return at once when idle

@@ -19,10 +19,13 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import os
 import re
 import sys
 import threading
 import time
+import types
+import warnings
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -46,6 +49,7 @@ from galil.protocol.session import Completed, Session
 from galil.transport import ByteRate, ControllerClock, Transport
 
 __all__ = [
+    "LONGEST_TIMEOUT",
     "RECONNECT_ADVICE",
     "TRANSFER_MARGIN",
     "TRANSFER_TIMEOUT",
@@ -63,8 +67,13 @@ __all__ = [
     "is_query",
     "parse_numbers_reply",
     "refuse_link_settings",
+    "warn_caller",
 ]
 
+#: The longest timeout, wait or pause :func:`check_seconds` takes (seconds, about 31 years:
+#: for ever, in practice; ``None`` is the way to wait for ever). Every deadline and socket
+#: timeout holds it; a 64-bit ``time_t`` of nanoseconds ends at about 9.2e9 s.
+LONGEST_TIMEOUT = 1e9
 #: What a dead link's error ends with: the way to open it again.
 RECONNECT_ADVICE = "; call reconnect() to open it again"
 #: The least reply timeout a bulk transfer (``QU``, ``QD``, ``DL``, ``UL``, ``LV``) gets: what
@@ -175,6 +184,21 @@ def check_callable(value: object, name: str) -> None:
         raise InvalidArgument(f"{name} must be callable, not {value!r:.60}")
 
 
+_PACKAGE = os.path.dirname(os.path.abspath(__file__)) + os.sep
+
+
+def warn_caller(message: str, category: type[Warning] = RuntimeWarning) -> None:
+    """``warnings.warn`` attributed to the first caller outside the ``galil`` package (the
+    user's line that connected, reconnected ...), however deep inside it the warning comes
+    from: a fixed ``stacklevel`` points at one of the library's own lines when the depth
+    varies (``connect()``, ``Controller()``, ``reconnect()``)."""
+    frame: types.FrameType | None = sys._getframe(1)
+    level = 2  # (warn's stacklevel 2: this function's caller)
+    while frame is not None and frame.f_code.co_filename.startswith(_PACKAGE):
+        frame, level = frame.f_back, level + 1
+    warnings.warn(message, category, stacklevel=level if frame is not None else 2)
+
+
 def _finite(value: float) -> bool:
     """``math.isfinite`` that says no to an int no float holds (10**400) rather than raise."""
     try:
@@ -186,14 +210,16 @@ def _finite(value: float) -> bool:
 def check_seconds(value: object, name: str = "timeout", *, positive: bool = False) -> float:
     """The one check of every timeout, wait and pause in the public API: ``value`` must be a
     finite number of seconds >= 0 (``> 0`` with ``positive``: a reply timeout, a watchdog
-    period, where 0 cannot be met). The wrappers below decide what ``None`` means.
+    period, where 0 cannot be met), and at most :data:`LONGEST_TIMEOUT`. The wrappers below
+    decide what ``None`` means.
 
     Returns:
         ``value`` as a float.
 
     Raises:
         InvalidArgument: naming ``name``: ``None``, a bool, a string or anything else that is
-            not an int or a float, NaN, infinity, a negative number (or 0 with ``positive``).
+            not an int or a float, NaN, infinity, a negative number (or 0 with ``positive``),
+            more than :data:`LONGEST_TIMEOUT`.
     """
     if (
         isinstance(value, bool)
@@ -201,9 +227,13 @@ def check_seconds(value: object, name: str = "timeout", *, positive: bool = Fals
         or not _finite(value)
         or value < 0
         or (positive and value == 0)
+        or value > LONGEST_TIMEOUT
     ):
         least = "> 0" if positive else ">= 0"
-        raise InvalidArgument(f"{name} must be a finite number of seconds {least}, not {value!r}")
+        raise InvalidArgument(
+            f"{name} must be a finite number of seconds {least}, at most {LONGEST_TIMEOUT:g}"
+            f" (about 31 years), not {value!r}"
+        )
     return float(value)
 
 
@@ -1013,6 +1043,51 @@ class Link(LinkCore):
             if self._inbox:
                 self._flush()
 
+    # -- readers whose source died ----------------------------------------------------------
+
+    def source_lost(self, what: str, exc: GalilConnectionError | None) -> str | None:
+        """A reader's source is gone: ``what`` (a handle of the same controller: "the message
+        handle") closed under ``exc``, or (``exc`` ``None``) the poll of the idle command link
+        found it closed or dead. A closed handle may mean the controller went away: the
+        command link is asked (one query) and marked dead if it does not
+        answer either.
+
+        Returns:
+            ``None`` while the command link works, or a reopen is under way (it brings a new
+            source); else why nothing more will come (the link's closed or dead error).
+        """
+        if not self._reopened.is_set():
+            return None
+        if exc is not None and self._open and not self._dead:
+            _probe(self, what, exc)
+        return self.gone() or None
+
+    def gone(self) -> str:
+        """Why a reader's queue gets nothing more from this link: the text of its closed or
+        dead error; ``""`` while it works, or while a reopen is under way."""
+        if not self._reopened.is_set() or (self._open and not self._dead):
+            return ""
+        return str(self._closed_error().args[0])
+
+    def revive(self) -> bool:
+        """For a reader's queue whose source died with the link: reopen the dead link with
+        the automatic reconnect (``on_dead``, ``connect(..., reconnect=True)``), or wait for
+        a reopen under way (up to :attr:`timeout`).
+
+        Returns:
+            Whether the link works again (``False``: it is closed, or dead with no automatic
+            reconnect).
+
+        Raises:
+            GalilConnectionError: the automatic reconnect failed.
+        """
+        if not self._reopened.is_set():
+            self._reopened.wait(self.timeout)
+            return self._open and not self._dead
+        if not self._dead:
+            return False
+        return self._recover(self._closed_error())
+
     def _explain(self, rejected: Completed, t: float) -> GalilError:
         """Ask ``TC1`` why a command was refused; a doubtful ``?`` is no refusal.
 
@@ -1341,6 +1416,24 @@ class Link(LinkCore):
                 )
             out += values
         return out
+
+
+def _probe(link: Link, what: str, exc: GalilConnectionError) -> None:
+    """Whether ``link`` answers, now that ``what`` (a handle of the same controller) closed
+    under ``exc``: one query; a link that does not answer in time is dead."""
+    try:
+        link._transact([cmds.time_stamp()], link.timeout)
+    except GalilTimeoutError:
+        with link._lock:
+            if link.is_open and not link.dead:
+                link._link_failed(
+                    GalilConnectionError(
+                        f"{what} was closed ({exc}) and the controller did not answer on the"
+                        f" command link within {link.timeout:g} s"
+                    )
+                )
+    except GalilError:
+        pass  # it answered (a refusal), or the link found itself dead or closed
 
 
 def _one_command(text: str, allow_compound: bool) -> Command:

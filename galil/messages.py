@@ -12,16 +12,15 @@ from __future__ import annotations
 import contextlib
 import logging
 import threading
-import warnings
 from collections import deque
 from collections.abc import Callable
 
 from galil.errors import GalilConnectionError, GalilError, ProtocolError
-from galil.link import Link, check_count, read_handle, read_reply
+from galil.link import Link, check_count, read_handle, read_reply, warn_caller
 from galil.protocol import commands as cmds
 from galil.protocol.framing import FrameParser, Unsolicited
 from galil.protocol.numbers import read_one
-from galil.queues import BoundedQueue, Subscribers
+from galil.queues import BoundedQueue, Subscribers, source_ended
 from galil.transport import HandleSource, MessagesOnly, Transport
 
 __all__ = ["MessageCallback", "MessageQueue", "Messages"]
@@ -102,6 +101,7 @@ class Messages:
         self.marking = False  # unsolicited output is marked with CW 1 on the command link
         self._wanted_pump = False
         link.on_messages = self._accept
+        self.queue.gone, self.queue.revive = link.gone, link.revive  # (a dead link's get())
 
     def _accept(self, lines: list[str]) -> None:
         for line in lines:
@@ -141,11 +141,9 @@ class Messages:
             except GalilError as exc:
                 with contextlib.suppress(AttributeError):
                     transport.secondary = None  # closed: do not offer it to anyone
-                warnings.warn(
+                warn_caller(
                     f"no second Ethernet handle for unsolicited messages ({exc}); "
                     "they will be marked with CW1 on the command handle instead",
-                    RuntimeWarning,
-                    stacklevel=5,
                 )
         self._mark()
 
@@ -201,11 +199,9 @@ class Messages:
             except (ProtocolError, GalilError):
                 ok = False
         if not ok:
-            warnings.warn(
+            warn_caller(
                 f"{link.model.name} refused CW 1: unsolicited output is not marked and may be "
                 "mistaken for replies",
-                RuntimeWarning,
-                stacklevel=5,
             )
             return
         self.marking = True
@@ -240,6 +236,8 @@ class Messages:
         # behind a blocked poll.
         while not stop.wait(self._poll_interval):
             if not self.link.poll_unsolicited(self._poll_interval):
+                # Closed or dead: whoever waits for a line hears so (unless stopped).
+                source_ended(self.link, self.queue, stop, "the command link", None)
                 return
 
     def _read_secondary(self, secondary: Transport, stop: threading.Event) -> None:
@@ -247,7 +245,9 @@ class Messages:
         while not stop.is_set():
             try:
                 chunk = read_handle(secondary, 0.25)
-            except GalilConnectionError:
+            except GalilConnectionError as exc:
+                if not stop.is_set():  # (closed by stop(): nothing to tell)
+                    source_ended(self.link, self.queue, stop, "the message handle", exc)
                 return
             if not chunk:
                 # Some handles return at once when idle (a simulator's): do not spin.

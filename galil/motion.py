@@ -1568,9 +1568,11 @@ def stop_on_error(
         running: the motion runs already and the block sends the rest of it (a streamed
             path's later segments): a refusal of one of those stops it too (what follows it
             would never be sent); only a :class:`MotionError` (the motion is over) passes.
-        is_stop: the block is itself a stop (``ST``, ``AB``): when its link died and the guard
-            got the stop through on the reopened link, the block has done its job, and the
-            dead link's error is logged (WARNING on ``galil.motion``) rather than raised.
+        is_stop: the block is itself a stop (``ST``, ``AB``): when it failed with a
+            :class:`GalilError` (its link died, its reply was lost, the link out of step did
+            not resynchronise in time) and the guard got the stop through (on the reopened
+            link if it had died) with the axes confirmed at rest, the block has done its job,
+            and the error is logged (WARNING on ``galil.motion``) rather than raised.
 
     Raises:
         MotionError: from the exception, naming the axes that may still move, when the stop
@@ -1632,17 +1634,32 @@ class _StopOnError:
             raise _not_stopped(
                 link, tracker, exc, moving, "while starting or changing motion"
             ) from exc
+        if self._is_stop and isinstance(exc, GalilError):
+            # The block was the stop itself, and the guard got it through: done.
+            _late_stop(self._letters, exc, reopen.reopened)
+            return True
         if reopen.reopened and isinstance(exc, GalilConnectionError):
-            if self._is_stop:
-                # The block was the stop itself, and it went out on the reopened link: done.
-                _LOG.warning(
-                    "the link died while stopping %s (%s); it was reopened and they are stopped",
-                    self._letters,
-                    _died_of(exc),
-                )
-                return True
             raise _reopened(link, exc, self._letters, "the operation") from exc
         return False
+
+
+def _late_stop(letters: str, exc: GalilError, reopened: bool) -> None:
+    """Log (WARNING) a stop whose first try failed and whose guard stopped ``letters``: on
+    the reopened link (the link had died), or late (a lost reply, a link out of step that
+    took long to resynchronise: decision 0065)."""
+    if reopened and isinstance(exc, GalilConnectionError):
+        _LOG.warning(
+            "the link died while stopping %s (%s); it was reopened and they are stopped",
+            letters,
+            _died_of(exc),
+        )
+    else:
+        _LOG.warning(
+            "stopping %s failed at first (%s: %s); the stop was sent again and they are stopped",
+            letters,
+            type(exc).__name__,
+            exc.args[0] if exc.args else exc,
+        )
 
 
 class _Reopen:

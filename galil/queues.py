@@ -10,17 +10,22 @@ same check as the async twin's (:class:`galil.aio.LoopQueue`).
 from __future__ import annotations
 
 import logging
+import math
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
-from typing import Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
 from galil.errors import GalilConnectionError, InvalidArgument, QueueTimeoutError
-from galil.link import check_wait_timeout
+from galil.link import Link, check_wait_timeout
 
-__all__ = ["BoundedQueue", "Subscribers"]
+__all__ = ["CHECK", "BoundedQueue", "Subscribers", "source_ended"]
 
 T = TypeVar("T")
+
+#: Seconds between a waiting :meth:`BoundedQueue.get`'s looks at its source (a dead link).
+CHECK = 0.25
 
 
 class BoundedQueue(Generic[T]):
@@ -37,8 +42,14 @@ class BoundedQueue(Generic[T]):
         self._maxlen = maxlen
         self._what = what
         self._cond = threading.Condition(threading.Lock())
-        self._closed = ""  # why no more items will come (the controller was closed)
+        self._closed = ""  # why no more items will come (closed, or their source died)
         self.dropped = 0
+        #: Why the source of the items is gone while the queue is open (the link died: its
+        #: error), ``""`` while it works; a wait looks every :data:`CHECK` seconds.
+        self.gone: Callable[[], str] | None = None
+        #: Called by a :meth:`get` that finds none will come: reopens the link if it can (the
+        #: automatic reconnect), and says whether it did.
+        self.revive: Callable[[], bool] | None = None
 
     def put(self, item: T) -> None:
         """Append an item (used by the reader that receives them)."""
@@ -49,8 +60,18 @@ class BoundedQueue(Generic[T]):
             self._items.append(item)
             self._cond.notify()
 
+    def ended(self) -> str:
+        """Why no more items will come (the queue was closed, or its source is gone: the link
+        died); ``""`` while they may."""
+        gone = self.gone
+        return self._closed or ("" if gone is None else gone())
+
     def get(self, timeout: float | None = None) -> T:
         """Return the oldest item, waiting up to ``timeout`` seconds (``None``: for ever).
+
+        When none is waiting and none will come (the controller was closed, or its link
+        died), :attr:`revive` gets its chance first: with an automatic reconnect
+        (``connect(..., reconnect=True)``) the link is reopened and the wait goes on.
 
         Raises:
             InvalidArgument: a timeout that is not ``None`` or a finite number >= 0 (infinity
@@ -58,19 +79,32 @@ class BoundedQueue(Generic[T]):
             QueueTimeoutError: nothing arrived in time (a ``GalilTimeoutError`` that is also
                 a ``queue.Empty``).
             GalilConnectionError: nothing is waiting and none will come: the controller was
-                closed (before or during the wait).
+                closed or its link died (before or during the wait), or the reconnect failed.
         """
         check_wait_timeout(timeout)
-        with self._cond:
-            if not self._cond.wait_for(lambda: self._items or self._closed, timeout):
-                raise QueueTimeoutError(f"no {self._what} within {timeout} s")
-            if not self._items:
-                raise GalilConnectionError(f"no {self._what} will come: {self._closed}")
-            return self._items.popleft()
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            with self._cond:
+                while not self._items:
+                    why = self.ended()
+                    if why:
+                        break
+                    left = math.inf if deadline is None else deadline - time.monotonic()
+                    if left <= 0:
+                        raise QueueTimeoutError(f"no {self._what} within {timeout} s")
+                    self._cond.wait(min(left, CHECK))
+                else:
+                    return self._items.popleft()
+            revive = self.revive
+            if not (revive is not None and revive()):
+                why = self.ended()
+                if why:
+                    raise GalilConnectionError(f"no {self._what} will come: {why}")
 
     def close(self, why: str = "the controller is closed") -> None:
         """No more items will come: a :meth:`get` waiting (or called later, once the items
-        left are taken) raises :class:`~galil.errors.GalilConnectionError` saying ``why``."""
+        left are taken) raises :class:`~galil.errors.GalilConnectionError` saying ``why``
+        (unless :attr:`revive` reopens the link)."""
         with self._cond:
             self._closed = why
             self._cond.notify_all()
@@ -145,3 +179,30 @@ class Subscribers(Generic[T]):
 
     def __bool__(self) -> bool:
         return bool(self._callbacks)
+
+
+def source_ended(
+    link: Link,
+    queue: BoundedQueue[Any],
+    stop: threading.Event,
+    what: str,
+    exc: GalilConnectionError | None,
+) -> None:
+    """A reader thread's source is gone (:meth:`~galil.link.Link.source_lost`: ``what``
+    closed under ``exc``, or the idle command link found dead): unless the reader was stopped
+    meanwhile (the controller closed, or a reconnect replaced it), ``queue`` is closed saying
+    why, so that a :meth:`~BoundedQueue.get` waiting for it (or a later one) does not wait for
+    ever: it raises, or reopens the link with the automatic reconnect
+    (:attr:`~BoundedQueue.revive`).
+    """
+    why = link.source_lost(what, exc)
+    if stop.is_set():
+        return
+    if why is None:
+        if exc is None:
+            return
+        why = (
+            f"{what} was closed ({exc}) while the command link works; call reconnect() to"
+            " open it again"
+        )
+    queue.close(why)

@@ -9,6 +9,7 @@ import ipaddress
 import math
 import socket
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -314,3 +315,57 @@ def test_ask_group_refuses_a_port_out_of_range() -> None:
 def test_listen_bootp_refuses_a_port_out_of_range() -> None:
     with pytest.raises(InvalidArgument, match="port"):
         listen_bootp(timeout=0.1, address=("127.0.0.1", 70000))
+
+
+class _Peer:
+    """A TCP peer on ``family``'s loopback that answers every connection with ``answer``
+    (once, or for ever with ``flood``), counting the connections."""
+
+    def __init__(self, answer: bytes, *, flood: bool = False, family: int = socket.AF_INET):
+        self.server = socket.socket(family)
+        self.server.bind(("::1" if family == socket.AF_INET6 else "127.0.0.1", 0))
+        self.server.listen()
+        self.port = self.server.getsockname()[1]
+        self._answer, self._flood = answer, flood
+        self._thread = threading.Thread(target=self._serve, daemon=True)
+        self._thread.start()
+
+    def _serve(self) -> None:
+        try:
+            conn, _ = self.server.accept()
+        except OSError:
+            return
+        with conn:
+            try:
+                conn.recv(16)
+                conn.sendall(self._answer)
+                while self._flood:
+                    conn.sendall(self._answer)
+            except OSError:
+                return  # (the client closed)
+
+    def close(self) -> None:
+        self.server.close()
+        self._thread.join(5)
+
+
+def test_a_peer_that_floods_the_identify_read_is_left_soon() -> None:
+    peer = _Peer(b"x" * 65536, flood=True)
+    try:
+        began = time.monotonic()
+        assert probe_hosts([f"127.0.0.1:{peer.port}"], timeout=10.0) == []
+        assert time.monotonic() - began < 5.0  # (not the whole 10 s, keeping all it sent)
+    finally:
+        peer.close()
+
+
+def test_an_ipv6_address_is_listed_as_connect_takes_it() -> None:
+    peer = _Peer(b"DMC4040 Rev 1.2f\r\n:", family=socket.AF_INET6)
+    try:
+        found = probe_hosts([f"[::1]:{peer.port}"], timeout=2.0)
+    finally:
+        peer.close()
+    assert [f.address for f in found] == [f"tcp://[::1]:{peer.port}"]
+    assert found[0].identity == "DMC4040 Rev 1.2f"
+    with pytest.raises(GalilConnectionError, match="cannot connect"):
+        galil.connect(found[0].address, timeout=0.5)  # (read as an address: no "bad port")

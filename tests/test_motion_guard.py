@@ -215,3 +215,44 @@ def test_a_guard_of_no_named_axes_guards_every_axis(axes: str | None) -> None:
         assert not dmc.A.moving
         assert not dmc.D.moving
         assert dmc.query_operands(["_SCA", "_SCD"]) == [4, 4]
+
+
+def _first(mark: bytes) -> Callable[[bytes], bool]:
+    """True for the first write with ``mark`` in it only."""
+    seen: list[bytes] = []
+
+    def first(data: bytes) -> bool:
+        if mark in data and not seen:
+            seen.append(data)
+            return True
+        return False
+
+    return first
+
+
+@pytest.mark.parametrize(
+    ("lost", "out_of_step"),
+    [
+        (b"ST", False),  # the ST's reply never comes: a timeout
+        (b"SYNC", True),  # the link does not resynchronise in time: a GalilConnectionError
+    ],
+)
+def test_a_stop_whose_first_try_fails_but_whose_guard_stops_the_axes_returns(
+    gated: tuple[galil.Controller, Gate, SimController],
+    caplog: pytest.LogCaptureFixture,
+    lost: bytes,
+    out_of_step: bool,
+) -> None:
+    dmc, gate, sim = gated
+    dmc.A.jog(50_000)
+    if out_of_step:
+        gate.swallow = _first(b"MG 7")
+        with pytest.raises(galil.GalilTimeoutError):
+            dmc.command("MG 7")  # the link is out of step: the stop resynchronises first
+    gate.swallow = _first(lost)
+    with caplog.at_level("WARNING", logger="galil.motion"):
+        dmc.A.stop()  # its first try fails; the guard sends ST again and sees A stop
+    assert not sim.motion("A").moving
+    assert dmc.query_operands(["_BGA", "_SCA"]) == [0, 4]
+    assert "the stop was sent again and they are stopped" in caplog.text
+    assert not dmc.link.dead

@@ -123,6 +123,24 @@ def test_a_list_of_hundreds_of_variables_at_9600_baud_comes_whole(
     assert listed == {f"var{i}": i + 0.5 for i in range(300)}
 
 
+def test_raw_transfers_get_the_timeout_of_their_size_as_the_rooms_do() -> None:
+    # send(cmds.dl(...)) is the form docs/raw.md shows: no "no reply to 'DL' within 1 s"
+    with _slow(2400) as c:
+        program = ["#A", *[f"MG {i}" for i in range(200)], "EN"]
+        assert c.send(cmds.dl(program)) == ""  # 1.4 kB out at 240 B/s
+        assert len(c.command("UL").splitlines()) == 202  # and back
+        assert len(c.exchange(cmds.ul()).text.splitlines()) == 202
+        c.arrays.define("big", 300)
+        c.send(cmds.qd("big", [-2_000_000_000.25] * 300))
+        assert c.command("QU big[],0,299,1").count(",") >= 299  # 5 kB back
+        assert c.send(cmds.qu("big")).count(",") >= 299  # (the whole array: its size unknown)
+        for first in range(0, 40, 4):
+            c.command(";".join(f"v{i}={i}.5" for i in range(first, first + 4)), allow_compound=True)
+        assert len(c.command("LV").splitlines()) == 40
+        with pytest.raises(GalilTimeoutError, match="within 1 s"):
+            c.command("UL", timeout=1.0)  # a timeout given is the timeout
+
+
 class _Silence:
     """A fault hook that passes replies through until armed, then keeps ``keep`` bytes of
     what follows (0: the controller falls silent; more: a reply cut off)."""

@@ -387,6 +387,13 @@ async def connect(address: str | Transport, *, threads: int = 4, **options: Any)
     except BaseException:
         worker.close()
         raise
+
+    async def revive() -> bool:  # (a get() that finds the link dead: the automatic reconnect)
+        return await worker.run(sync.link.revive)
+
+    messages.gone = sync.messages_room.queue.ended
+    interrupts.gone = sync.interrupts.queue.ended
+    messages.revive = interrupts.revive = revive
     return AsyncController(sync, worker, loop, messages, interrupts, unsubscribe)
 
 

@@ -14,6 +14,7 @@ import asyncio
 import concurrent.futures
 import math
 from collections import deque
+from collections.abc import Awaitable, Callable
 from typing import Any, Generic, TypeVar
 
 import numpy as np
@@ -21,6 +22,7 @@ import numpy as np
 from galil.aio._worker import Worker, shielded
 from galil.errors import GalilConnectionError, InvalidArgument, QueueTimeoutError
 from galil.link import check_count, check_wait_timeout
+from galil.queues import CHECK
 from galil.records import TAKE_MAX, RecordStream
 
 __all__ = ["SLICE", "AsyncMessages", "AsyncRecordStream", "LoopQueue"]
@@ -61,11 +63,31 @@ class LoopQueue(Generic[T]):
         self._wakeup: asyncio.Event = asyncio.Event()
         self._closed = False
         self.dropped = 0
+        #: Why none will come from the sync core (its queue's :meth:`~galil.queues.
+        #: BoundedQueue.ended`: the link died), ``""`` while they may; a wait looks every
+        #: :data:`~galil.queues.CHECK` seconds.
+        self.gone: Callable[[], str] | None = None
+        #: Reopens a dead link (the automatic reconnect, on a worker thread) for a
+        #: :meth:`get` that finds none will come; says whether it did.
+        self.revive: Callable[[], Awaitable[bool]] | None = None
 
     def deliver(self, item: T) -> None:
         """Hand an item over from any thread (a subscriber of the sync core)."""
         if not self._loop.is_closed():
             self._loop.call_soon_threadsafe(self._put, item)
+
+    def _ended(self) -> str:
+        gone = self.gone
+        return "" if gone is None else gone()
+
+    async def _revive(self) -> None:
+        """None will come (the link died): reopen it (:attr:`revive`) or raise."""
+        revive = self.revive
+        if revive is not None and await revive():
+            return
+        why = self._ended()
+        if why:
+            raise GalilConnectionError(f"no {self._what} will come: {why}")
 
     def _put(self, item: T) -> None:
         if len(self._items) >= self._maxlen:
@@ -82,7 +104,9 @@ class LoopQueue(Generic[T]):
                 number >= 0), before anything is awaited.
             QueueTimeoutError: nothing arrived in time (a ``GalilTimeoutError`` that is also
                 a ``queue.Empty``).
-            GalilConnectionError: the controller was closed.
+            GalilConnectionError: the controller was closed, or its link died (with an
+                automatic reconnect, ``reconnect=True``, the link is reopened first, and the
+                wait goes on; this if the reconnect failed).
         """
         wait = _wait_seconds(timeout)
         loop = asyncio.get_running_loop()
@@ -90,12 +114,18 @@ class LoopQueue(Generic[T]):
         while not self._items:
             if self._closed:
                 raise GalilConnectionError("the async controller is closed")
+            if self._ended():
+                await self._revive()
+                continue
             left = deadline - loop.time()
             if left <= 0:
                 raise QueueTimeoutError(f"no {self._what} within {timeout} s")
             self._wakeup.clear()
             # Not asyncio.wait_for: before Python 3.12 it swallows a cancellation that comes
-            # as the item does, and returns (decision 0027). The timer only wakes the loop.
+            # as the item does, and returns (decision 0027). The timer only wakes the loop
+            # (in time for a look at the source, when it has one).
+            if self.gone is not None:
+                left = min(left, CHECK)
             timer = None if math.isinf(left) else loop.call_later(left, self._wakeup.set)
             try:
                 await self._wakeup.wait()
@@ -129,6 +159,8 @@ class LoopQueue(Generic[T]):
         try:
             return await self.get()
         except GalilConnectionError:
+            if not self._closed:
+                raise  # the link died: the loop does not end as if all were well
             raise StopAsyncIteration from None
 
     def __len__(self) -> int:

@@ -122,7 +122,9 @@ class Machine:
         self.ports = Ports()
         self.servo = Servo(spec, clock, servo_lag)
         self.interp = Interpreter(spec, self.servo)
-        self.programs = Programs(self.interp, self.ports.emit, lambda: self.servo.sample)
+        self.programs = Programs(
+            self.interp, self.ports.emit, lambda: self.servo.sample, memory=spec
+        )
         #: ``(sample, command text)`` of the latest host commands, oldest first.
         self.command_log: deque[tuple[int, str]] = deque(maxlen=10_000)
         self._list = [cls(self) for cls in rooms]
@@ -278,6 +280,7 @@ class Machine:
                 p.wait = result
         elif isinstance(result, Download):
             p.download = []
+            p.download_refused = False
         elif isinstance(result, Collect):
             p.collect = result
         else:

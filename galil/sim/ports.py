@@ -33,6 +33,7 @@ class Port:
     out: bytearray = field(default_factory=bytearray)
     wait: Wait | None = None
     download: list[str] | None = None
+    download_refused: bool = False  # a DL line was refused (TC 60): the rest is dropped
     collect: Collect | None = None
     collected: str = ""
     swallow_cr: bool = False

@@ -29,6 +29,7 @@ from galil.sim.ports import Port
 from galil.sim.registry import Collect, Download, Result, Wait
 
 __all__ = [
+    "DOWNLOAD_ERROR",
     "LINES_PER_SAMPLE",
     "NOT_IN_PROGRAM",
     "NO_ERROR",
@@ -36,6 +37,7 @@ __all__ = [
     "STACK_DEPTH",
     "Executor",
     "Frame",
+    "Memory",
     "Programs",
     "Thread",
     "program_only",
@@ -133,6 +135,30 @@ class Executor(Protocol):
         ...
 
 
+class Memory(Protocol):
+    """What a program memory holds (a :class:`~galil.models.ModelSpec` says it)."""
+
+    @property
+    def program_lines(self) -> int:
+        """Lines of program memory."""
+        ...
+
+    @property
+    def line_length(self) -> int:
+        """Characters of the longest line."""
+        ...
+
+
+@dataclass(frozen=True)
+class _Memory:
+    program_lines: int = 2000
+    line_length: int = 80
+
+
+#: TC 60: "Download error - line too long or too many lines" (galil.codes).
+DOWNLOAD_ERROR = 60
+
+
 class Programs:
     """The program store and its threads.
 
@@ -140,14 +166,21 @@ class Programs:
         executor: runs the threads' commands (the interpreter).
         emit: sends a thread's output as unsolicited output.
         clock: the present servo sample.
+        memory: the program memory's size: lines, and characters a line (the model's).
     """
 
     def __init__(
-        self, executor: Executor, emit: Callable[[str], None], clock: Callable[[], int]
+        self,
+        executor: Executor,
+        emit: Callable[[str], None],
+        clock: Callable[[], int],
+        *,
+        memory: Memory | None = None,
     ) -> None:
         self._x = executor
         self._emit = emit
         self._sample = clock
+        self._memory: Memory = _Memory() if memory is None else memory
         self.program: list[str] = []
         self.labels: dict[str, int] = {}
         self.threads: dict[int, Thread] = {}
@@ -177,7 +210,16 @@ class Programs:
 
     # ---- DL ----------------------------------------------------------------------------
     def collect(self, p: Port) -> bool:
-        """Collect program lines from ``p`` until ``\\``; return False when more is needed."""
+        """Collect program lines from ``p`` until ``\\``; return False when more is needed.
+
+        A line longer than the model's line length, or one more than its program memory
+        holds, is refused as the controller refuses it: ``?`` at once and TC 60 ("Download
+        error - line too long or too many lines"; galil-protocol.md: "a rejected line
+        produces ``?``", before the ``\\``). The rest of the download is dropped, the
+        ``\\`` ends it with ``:`` (two terminators in all, as a download's ``::``) and the
+        program in memory stays as it was. [UNVERIFIED: what follows the ``?`` on hardware,
+        and whether a refused download leaves the old program.]
+        """
         assert p.download is not None
         while True:
             cut = [i for i in (p.inbuf.find("\r"), p.inbuf.find("\n")) if i >= 0]
@@ -185,12 +227,16 @@ class Programs:
             if slash >= 0 and (not cut or slash < min(cut)):
                 head = p.inbuf[:slash]
                 if head.strip():
-                    p.download.append(head)
+                    self._take(p, head)
                 p.inbuf = p.inbuf[slash + 1 :]
-                self.install(p.download)
+                if p.download_refused:
+                    p.out += b":"
+                else:
+                    self.install(p.download)
+                    p.out += b"::"
                 p.download = None
+                p.download_refused = False
                 p.swallow_cr = True
-                p.out += b"::"
                 return True
             if not cut:
                 return False
@@ -198,7 +244,20 @@ class Programs:
             line = p.inbuf[:i]
             p.inbuf = p.inbuf[i + 1 :]
             if line.strip():
-                p.download.append(line)
+                self._take(p, line)
+
+    def _take(self, p: Port, line: str) -> None:
+        """One downloaded line: kept, or refused (TC 60) when it does not fit."""
+        assert p.download is not None
+        if p.download_refused:
+            return
+        memory = self._memory
+        if len(line) > memory.line_length or len(p.download) >= memory.program_lines:
+            self._x.tc = DOWNLOAD_ERROR
+            p.out += b"?"
+            p.download_refused = True
+            return
+        p.download.append(line)
 
     def install(self, lines: list[str]) -> None:
         """Make ``lines`` the program (the threads stop): a download, or the burned program

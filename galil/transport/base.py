@@ -28,6 +28,7 @@ from abc import ABC, abstractmethod
 from typing import TYPE_CHECKING, ClassVar, Generic, TypeVar
 
 from galil.errors import GalilConnectionError
+from galil.transport.options import LONGEST_WAIT
 
 if TYPE_CHECKING:
     from galil.transport import Transport
@@ -140,7 +141,8 @@ class TransportBase(ABC, Generic[H]):
             raise self._failure("sending", exc) from exc
 
     def read(self, timeout: float) -> bytes:
-        """Return what arrives within ``timeout`` seconds (``b""`` if nothing; 0 polls).
+        """Return what arrives within ``timeout`` seconds (``b""`` if nothing; 0 polls; at
+        most :data:`~galil.transport.options.LONGEST_WAIT`, what every OS call takes).
 
         Raises:
             GalilConnectionError: the transport is closed or the link failed.
@@ -148,6 +150,8 @@ class TransportBase(ABC, Generic[H]):
         handle = self._handle
         if handle is None:
             raise self._closed_error()
+        if timeout > LONGEST_WAIT:  # (a wait longer than the OS takes: the caller reads again)
+            timeout = LONGEST_WAIT
         try:
             if timeout != self._timeout_in:
                 self._regrid(handle, timeout)

@@ -16,21 +16,29 @@ from collections.abc import Collection
 
 from galil.errors import InvalidArgument
 
-__all__ = ["choice", "dotted_quad", "flag", "seconds", "whole_number"]
+__all__ = ["LONGEST_WAIT", "choice", "dotted_quad", "flag", "seconds", "whole_number"]
 
 _DOTTED = re.compile(r"^[0-9.]+$")
 
+#: The longest a transport waits in one call to the OS (seconds, about 11.6 days): what
+#: every platform's socket timeout, ``poll`` (milliseconds in a C int: 24.8 days) and USB
+#: read (milliseconds in an unsigned int) take. A transport option in seconds is at most this.
+LONGEST_WAIT = 1e6
+
 
 def seconds(value: object, what: str) -> float:
-    """``value`` as a positive, finite number of seconds (numeric text is accepted)."""
+    """``value`` as a positive, finite number of seconds, at most :data:`LONGEST_WAIT`
+    (numeric text is accepted)."""
     if not isinstance(value, bool):
         try:
             number = float(value) if isinstance(value, (int, float, str)) else math.nan
         except (ValueError, OverflowError):  # not a number; an int no float holds (10**400)
             number = math.nan
-        if math.isfinite(number) and number > 0:
+        if math.isfinite(number) and 0 < number <= LONGEST_WAIT:
             return number
-    raise InvalidArgument(f"{what} must be a positive number of seconds, got {value!r}")
+    raise InvalidArgument(
+        f"{what} must be a positive number of seconds, at most {LONGEST_WAIT:g}, got {value!r}"
+    )
 
 
 def whole_number(value: object, what: str, low: int, high: int) -> int:

@@ -7,13 +7,16 @@ follow Galil's own host library: 8 data bits, no parity, 1 stop bit, RTS/CTS han
 
 from __future__ import annotations
 
+import contextlib
+import errno
+import sys
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import Any, ClassVar, Protocol
 from urllib.parse import SplitResult, parse_qsl
 
 import serial
 
-from galil.errors import GalilConnectionError, InvalidArgument
+from galil.errors import GalilConnectionError, GalilError, InvalidArgument
 from galil.transport import PYSERIAL_SCHEMES, parse_options
 from galil.transport.base import TransportBase
 from galil.transport.options import choice, flag, seconds, whole_number
@@ -21,6 +24,15 @@ from galil.transport.options import choice, flag, seconds, whole_number
 __all__ = ["DEFAULT_BAUDRATE", "SerialPort", "SerialTransport", "open_serial"]
 
 DEFAULT_BAUDRATE = 115200
+
+# What the OS's line settings call raises when the port refuses them (a data size, a parity
+# or a speed it cannot do): termios.error on POSIX, which is no OSError.
+if sys.platform != "win32":
+    import termios
+
+    _LINE_ERRORS: tuple[type[Exception], ...] = (termios.error,)
+else:  # pragma: no cover - pyserial raises SerialException (an OSError) there
+    _LINE_ERRORS = ()
 
 
 _LOG_LEVELS = ("debug", "info", "warning", "error")
@@ -94,6 +106,8 @@ class SerialTransport(TransportBase[SerialPort]):
     """
 
     kind = "serial"
+    # (a port that refuses a line setting as its timeout is set raises termios.error)
+    _io_errors: ClassVar[tuple[type[Exception], ...]] = (OSError, *_LINE_ERRORS)
 
     def __init__(self, port: SerialPort, name: str = "") -> None:
         name = name or str(getattr(port, "name", None) or getattr(port, "port", "serial"))
@@ -172,7 +186,8 @@ def open_serial(url: SplitResult, **options: Any) -> SerialTransport:
     ``inter_byte_timeout``.
 
     Raises:
-        InvalidArgument: unknown option, a bad value, or no port named.
+        InvalidArgument: unknown option, a bad value, no port named, or line settings the
+            port refuses (``bytesize=7`` on a port that only does 8).
         GalilConnectionError: the port cannot be opened.
     """
     scheme = url.scheme.lower()
@@ -190,10 +205,34 @@ def open_serial(url: SplitResult, **options: Any) -> SerialTransport:
         if not target:
             raise InvalidArgument(f"no serial port in {url.geturl()!r}; e.g. serial:///dev/ttyS0")
     opts = _checked(opts)
+    port = None
     try:
         port = serial.serial_for_url(target, timeout=0, **opts)
-    except (serial.SerialException, OSError) as exc:
-        raise GalilConnectionError(f"cannot open serial port {target!r}: {exc}") from exc
-    except ValueError as exc:  # pyserial refused a value (a query we do not check)
-        raise InvalidArgument(f"cannot open serial port {target!r}: {exc}") from exc
+        # The settings once more: a port may ignore one it cannot do when it opens (a pty
+        # keeps 8 data bits) and refuse it at the next change (the first read's timeout).
+        port.timeout = 0
+    except BaseException as exc:
+        if port is not None:
+            with contextlib.suppress(Exception):
+                port.close()
+        if isinstance(exc, _LINE_ERRORS):  # the OS refused the line settings
+            raise _refused(target, opts, exc) from exc
+        if isinstance(exc, (serial.SerialException, OSError)):
+            raise GalilConnectionError(f"cannot open serial port {target!r}: {exc}") from exc
+        if isinstance(exc, ValueError):  # pyserial refused a value (a query we do not check)
+            raise InvalidArgument(f"cannot open serial port {target!r}: {exc}") from exc
+        raise
     return SerialTransport(port, target)
+
+
+def _refused(target: str, opts: dict[str, Any], exc: Exception) -> GalilError:
+    """The error for line settings the OS refused: :class:`InvalidArgument` when the port
+    cannot do them (``EINVAL``), else :class:`GalilConnectionError` (the port failed)."""
+    code = exc.args[0] if exc.args and isinstance(exc.args[0], int) else None
+    text = exc.args[1] if len(exc.args) > 1 else str(exc)
+    if code == errno.EINVAL:
+        settings = ", ".join(f"{k}={v}" for k, v in opts.items())
+        return InvalidArgument(
+            f"serial port {target!r} refused its line settings ({settings}): {text}"
+        )
+    return GalilConnectionError(f"cannot open serial port {target!r}: {text}")

@@ -429,3 +429,36 @@ def test_four_controllers_in_one_loop_never_block_it_for_a_millisecond() -> None
     # OS's and the GIL's scheduling on a shared machine, and of the garbage collector's pauses
     # of the whole process).
     assert watch.max_own_cpu < 1e-3, watch.summary() + " " + watch.slowest
+
+
+def test_an_async_message_wait_raises_once_the_link_dies_and_the_iteration_says_so() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            waiting = asyncio.ensure_future(c.messages.get(timeout=20))
+            await asyncio.sleep(0.05)  # (the wait begins)
+            c.sync.transport.close()  # the link dies under the poll of the idle link
+            with pytest.raises(galil.GalilConnectionError, match="link died"):
+                await asyncio.wait_for(waiting, 5)
+            with pytest.raises(galil.GalilConnectionError, match="link died"):
+                async for _ in c.messages:  # not an end as if all were well
+                    pass
+
+    run(body)
+
+
+def test_an_async_message_wait_on_a_link_that_dies_reconnects_with_reconnect_on() -> None:
+    async def body() -> str:
+        policy = galil.ReconnectPolicy(attempts=3, delay=0.01)
+        async with await aio.connect("sim://DMC-4040", reconnect=policy) as c:
+            waiting = asyncio.ensure_future(c.messages.get(timeout=20))
+            await asyncio.sleep(0.05)
+            old = c.sync.transport
+            old.close()  # the link dies; the waiting get() alone finds it out
+            for _ in range(500):
+                if c.sync.transport is not old and not c.sync.link.dead:
+                    break
+                await asyncio.sleep(0.01)  # (a thread's work, not motion)
+            sim_of(c.sync).emit_message("after the reconnect")
+            return await asyncio.wait_for(waiting, 5)
+
+    assert run(body) == "after the reconnect"

@@ -24,8 +24,9 @@ from galil.testing import nothing_sent, sim_of, simulated
 T = TypeVar("T")
 
 #: Refused by every wait: infinity (``None`` is the way to wait for ever), NaN, a negative
-#: number, a string (a numeric one too) and a bool.
-BAD = [math.inf, -math.inf, -1, math.nan, "5", True]
+#: number, a string (a numeric one too), a bool, and more than the longest timeout (1e9 s:
+#: past what a socket's timeout or a deadline holds, it crashed with OverflowError).
+BAD = [math.inf, -math.inf, -1, math.nan, "5", True, 1e10]
 
 Wait = Callable[[Any, object], Any]
 #: name -> (what to wait on, made from the controller (it may send: a move, a capture), the

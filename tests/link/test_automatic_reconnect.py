@@ -79,3 +79,46 @@ def test_without_an_address_there_is_no_automatic_reconnect() -> None:
             galil.connect("sim://DMC-4040", reconnect=bad)
     with pytest.raises(galil.InvalidArgument):
         galil.ReconnectPolicy(attempts=0)
+
+
+def _swapped() -> tuple[galil.Controller, list[SimController]]:
+    """A controller whose link reaches a DMC-4040 first, and a DMC-4020 once reopened (the
+    controller at the address swapped, the address reused)."""
+    from galil.controller import Controller
+
+    sims = [SimController("DMC-4040", ManualClock()), SimController("DMC-4020", ManualClock())]
+    opened: list[SimLink] = []
+
+    def factory() -> SimLink:
+        opened.append(SimLink(sims[min(len(opened), 1)]))
+        return opened[-1]
+
+    return Controller(factory, timeout=0.5, reconnect=FAST), sims
+
+
+@pytest.mark.parametrize("how", ["automatic", "reconnect()"])
+def test_a_reopen_that_finds_another_controller_is_refused_and_the_link_stays_dead(
+    how: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    dmc, _ = _swapped()
+    try:
+        assert dmc.query_numbers("TP") == [0, 0, 0, 0]
+        dmc.transport.close()  # the first controller goes away
+        reopen = (lambda: dmc.query_numbers("TP")) if how == "automatic" else dmc.reconnect
+        with (
+            caplog.at_level(logging.WARNING, logger="galil.controller"),
+            pytest.raises(galil.GalilConnectionError) as info,
+        ):
+            reopen()
+        text = str(info.value)
+        assert "reopened to a DMC4020" in text
+        assert "not the DMC4040" in text
+        assert dmc.link.dead
+        assert dmc.model.name == "DMC-4040"  # nothing learned from the other controller
+        assert list(dmc.axes) == ["A", "B", "C", "D"]
+        with pytest.raises(galil.GalilConnectionError):
+            dmc.query_numbers("TP")
+        if how == "automatic":
+            assert "reconnect 1/3 to DMC-4040 failed" in caplog.text
+    finally:
+        dmc.close()

@@ -4,6 +4,8 @@ scriptable firmware stand-in, tests/client_fakes.py).
 
 from __future__ import annotations
 
+import socket
+import threading
 import warnings
 from typing import Any
 
@@ -15,6 +17,7 @@ from galil.errors import (
     GalilConnectionError,
     InvalidArgument,
 )
+from galil.sim.server import SimTcpServer
 
 
 def test_connect_identifies_and_marks_unsolicited(c: Controller, peer: FakeGalil) -> None:
@@ -161,3 +164,45 @@ def test_axes_and_letters(c: Controller) -> None:
     with pytest.raises(AttributeError):
         _ = c.nothing
     assert c.sample_period == pytest.approx(1 / 1024)
+
+
+def test_a_silent_tcp_peer_is_named_by_its_address_without_a_baud_rate() -> None:
+    srv = socket.create_server(("127.0.0.1", 0))
+    port = srv.getsockname()[1]
+    held: list[socket.socket] = []
+    taker = threading.Thread(target=lambda: held.append(srv.accept()[0]), daemon=True)
+    taker.start()
+    try:
+        with pytest.raises(GalilConnectionError) as info:
+            connect(f"tcp://127.0.0.1:{port}", timeout=0.2)
+        text = str(info.value).splitlines()[0]
+        assert f"no answer to ^R^V on the TCP link to 127.0.0.1:{port}" in text
+        assert "baud" not in text  # (Ethernet has none)
+        assert "<TcpTransport" not in text
+    finally:
+        taker.join(2)
+        for s in (*held, srv):
+            s.close()
+
+
+def test_a_connect_the_controller_drops_says_it_may_have_no_free_handle() -> None:
+    with SimTcpServer() as server:
+        opened = [connect(server.url, timeout=1.0) for _ in range(4)]  # 2 handles each
+        try:
+            with pytest.raises(GalilConnectionError) as info:
+                connect(server.url, timeout=1.0)  # all eight taken: dropped at once
+            text = str(info.value)
+            assert "before it answered ^R^V" in text
+            assert "no free Ethernet handle" in text
+            assert "reconnect()" not in text  # (connect() returned no object to call it on)
+        finally:
+            for c in opened:
+                c.close()
+
+
+def test_a_warning_at_connect_points_at_the_callers_line() -> None:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        c = connect("sim://DMC-4040", model="DMC-4020")  # (the controller says DMC4040)
+    c.close()
+    assert [w.filename for w in caught if w.category is RuntimeWarning] == [__file__]

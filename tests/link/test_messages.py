@@ -3,17 +3,24 @@
 from __future__ import annotations
 
 import queue
+import socket
 import threading
+import time
+from collections.abc import Callable
 
 import pytest
 from client_fakes import FakeGalil
+from test_message_handles_tcp import HandleServer
 
 import galil
 from galil.controller import Controller, connect
 from galil.errors import (
     InvalidArgument,
 )
-from galil.testing import simulated
+from galil.sim.clock import RealTimeClock
+from galil.sim.controller import SimController
+from galil.sim.server import SimTcpServer
+from galil.testing import sim_of, simulated
 
 
 def test_unsolicited_inside_a_reply_is_split_out(c: Controller, peer: FakeGalil) -> None:
@@ -86,3 +93,110 @@ def test_message_queue_is_bounded(peer: FakeGalil) -> None:
     assert c.messages_room.queue.dropped == 2
     assert "dropped" in repr(c.messages_room.queue)
     c.close()
+
+
+# -- a wait for messages when their source dies ----------------------------------------------
+
+
+class _Waiter:
+    """``queue.get(timeout)`` on a thread of its own; ``outcome`` is what it returned or
+    raised."""
+
+    def __init__(self, get: Callable[[], object]) -> None:
+        self.outcome: object = None
+        self.done = threading.Event()
+        self._get = get
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        try:
+            self.outcome = self._get()
+        except BaseException as exc:  # (what the test checks)
+            self.outcome = exc
+        self.done.set()
+
+
+def _served(srv: HandleServer) -> Controller:
+    c = connect(f"tcp://127.0.0.1:{srv.port}", timeout=0.5)
+    assert srv.claimed.wait(2)
+    return c
+
+
+def test_a_message_wait_raises_once_the_controller_goes_away_over_tcp() -> None:
+    srv = HandleServer()
+    c = _served(srv)
+    try:
+        waiter = _Waiter(lambda: c.messages.get(timeout=30))
+        srv.close()  # the controller goes away: both handles close
+        assert waiter.done.wait(5), "messages.get() still waits"
+        assert isinstance(waiter.outcome, galil.GalilConnectionError)
+        assert "link died" in str(waiter.outcome)
+        assert c.link.dead
+        assert "dead" in repr(c)
+        with pytest.raises(galil.GalilConnectionError, match="link died"):
+            c.messages.get(timeout=30)  # at once: none will come
+    finally:
+        c.close()
+
+
+def test_a_message_handle_closed_alone_ends_the_wait_and_reconnect_brings_messages_back() -> None:
+    srv = HandleServer()
+    c = _served(srv)
+    try:
+        waiter = _Waiter(lambda: c.messages.get(timeout=30))
+        assert srv.message_handle is not None
+        srv.claimed.clear()
+        srv.message_handle.shutdown(socket.SHUT_RDWR)  # the message handle alone closes
+        assert waiter.done.wait(5), "messages.get() still waits"
+        assert isinstance(waiter.outcome, galil.GalilConnectionError)
+        assert "while the command link works; call reconnect()" in str(waiter.outcome)
+        assert not c.link.dead
+        assert c.command("MG 3") == " 3"  # the command link works
+        c.reconnect()
+        assert srv.claimed.wait(2)
+        srv.emit("back")
+        assert c.messages.get(timeout=2) == "back"
+    finally:
+        c.close()
+        srv.close()
+
+
+def test_a_message_wait_raises_once_a_serial_like_link_dies() -> None:
+    with simulated("DMC-4040") as dmc:
+        waiter = _Waiter(lambda: dmc.messages.get(timeout=30))
+        dmc.transport.close()  # the port goes away under the poll of the idle link
+        assert waiter.done.wait(5), "messages.get() still waits"
+        assert isinstance(waiter.outcome, galil.GalilConnectionError)
+        assert "link died" in str(waiter.outcome)
+        assert dmc.link.dead
+
+
+def test_a_message_wait_on_a_link_that_dies_reconnects_with_reconnect_on() -> None:
+    policy = galil.ReconnectPolicy(attempts=3, delay=0.01)
+    with simulated("DMC-4040", reconnect=policy) as dmc:
+        sim = sim_of(dmc)
+        waiter = _Waiter(lambda: dmc.messages.get(timeout=30))
+        old = dmc.transport
+        old.close()  # the link dies; the waiting get() alone finds it out
+        deadline = time.monotonic() + 5
+        while dmc.transport is old or dmc.link.dead:
+            assert time.monotonic() < deadline, "the link was not reopened"
+            time.sleep(0.01)  # (a thread's work, not motion)
+        sim.emit_message("after the reconnect")
+        assert waiter.done.wait(5), "messages.get() still waits"
+        assert waiter.outcome == "after the reconnect"
+
+
+def test_an_interrupt_wait_raises_once_the_controller_goes_away() -> None:
+    sim = SimController("DMC-4040", RealTimeClock())
+    with SimTcpServer(sim) as server:
+        c = connect(server.url, timeout=0.5)
+        try:
+            c.interrupts.enable(axes="A")
+            waiter = _Waiter(lambda: c.interrupts.get(timeout=30))
+            server.stop()  # the controller goes away with every handle
+            assert waiter.done.wait(5), "interrupts.get() still waits"
+            assert isinstance(waiter.outcome, galil.GalilConnectionError)
+        finally:
+            c.close()

@@ -5,6 +5,8 @@ from __future__ import annotations
 import pytest
 from engine_expect import move, references
 
+import galil
+from galil.protocol import commands as cmds
 from galil.protocol.interrupts import InterruptParser
 from galil.sim.controller import SimController
 
@@ -155,3 +157,40 @@ def test_user_interrupts_and_motion_complete_reach_the_ei_handle(sim: SimControl
     ask(sim, "PRA=100;BG A")
     sim.advance(0.2)
     assert sim.poll(handle) == b""
+
+
+# -- a download the program memory cannot hold (TC 60) ---------------------------------------
+
+
+def _ul(sim: SimController) -> bytes:
+    return ask(sim, "UL")
+
+
+def test_a_download_of_more_lines_than_the_program_memory_is_refused_with_tc_60(
+    sim: SimController,
+) -> None:
+    assert sim.feed(b"DL\r#OLD\rEN\r\\") == b"::"
+    before = _ul(sim)
+    lines = ["#A", *[f"MG {i}" for i in range(2000)], "EN"]  # 2002: a DMC-4040 holds 2000
+    reply = sim.feed(b"DL\r" + "\r".join(lines).encode() + b"\r\\")
+    assert reply == b"?:"  # the line that does not fit, then the end of the download
+    assert tc(sim) == 60
+    assert _ul(sim) == before  # the program in memory is as it was
+    assert ask(sim, "MG 1") == b" 1.0000\r\n:"  # in step
+
+
+def test_a_downloaded_line_longer_than_the_models_is_refused_with_tc_60(
+    sim: SimController,
+) -> None:
+    assert sim.feed(b"DL\r#A\rMG " + b"1" * 77 + b"\rEN\r\\") == b"::"  # 80 characters
+    assert sim.feed(b"DL\r#A\rMG " + b"1" * 78 + b"\rEN\r\\") == b"?:"  # 81
+    assert tc(sim) == 60
+
+
+def test_a_raw_download_the_memory_cannot_hold_is_a_command_error() -> None:
+    lines = ["#A", *[f"MG {i}" for i in range(2500)], "EN"]
+    with galil.connect("sim://DMC-4040") as dmc:
+        with pytest.raises(galil.CommandError) as info:
+            dmc.send(cmds.dl(lines, model=dmc.model))
+        assert info.value.code == 60
+        assert dmc.query_number("MG 2") == 2

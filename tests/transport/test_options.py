@@ -39,6 +39,8 @@ def no_io(monkeypatch: pytest.MonkeyPatch) -> None:
         ("tcp://127.0.0.1:1", {"connect_timeout": -1}, "connect_timeout"),
         ("tcp://127.0.0.1:1", {"connect_timeout": math.nan}, "connect_timeout"),
         ("tcp://127.0.0.1:1", {"connect_timeout": math.inf}, "connect_timeout"),
+        ("tcp://127.0.0.1:1?connect_timeout=1e10", {}, "connect_timeout.*at most 1e\\+06"),
+        ("tcp://127.0.0.1:1", {"write_timeout": 1e7}, "write_timeout.*at most"),
         ("tcp://127.0.0.1:1", {"write_timeout": 0}, "write_timeout"),
         ("tcp://127.0.0.1:1", {"port": "23"}, "TCP port"),
         ("tcp://127.0.0.1:1", {"message_port": "x"}, "message port"),

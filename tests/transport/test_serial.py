@@ -6,6 +6,7 @@ test_contract.py, over a pty and loop://.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import pytest
@@ -108,3 +109,50 @@ def test_missing_device() -> None:
 def test_bad_serial_options(address: str, options: dict[str, object], message: str) -> None:
     with pytest.raises(InvalidArgument, match=message):
         open_transport(address, **options)
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="a pty and termios")
+@pytest.mark.parametrize("bytesize", [6, 7])
+def test_line_settings_the_port_cannot_do_are_refused_with_a_galil_error(
+    pty_pair: PtyPair, bytesize: int
+) -> None:
+    # (a pty keeps 8 data bits: the OS refuses the others, with termios.error, no OSError)
+    with pytest.raises(InvalidArgument, match="refused its line settings") as info:
+        open_transport(f"serial://{pty_pair.path}?bytesize={bytesize}")
+    assert f"bytesize={bytesize}" in str(info.value)
+
+
+class _Refusing:
+    """A port whose line settings the OS refuses as its read timeout changes."""
+
+    in_waiting = 0
+    name = "/dev/ttyFAKE"
+
+    def __init__(self) -> None:
+        self._timeout: float | None = 0.0
+
+    @property
+    def timeout(self) -> float | None:
+        return self._timeout
+
+    @timeout.setter
+    def timeout(self, value: float | None) -> None:
+        import termios
+
+        raise termios.error(22, "Invalid argument")
+
+    def read(self, size: int = 1) -> bytes:
+        return b""
+
+    def write(self, data: bytes, /) -> int | None:
+        return len(data)
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="termios")
+def test_a_port_refusing_its_settings_as_it_reads_fails_as_a_dead_link() -> None:
+    t = SerialTransport(_Refusing())
+    with pytest.raises(GalilConnectionError, match="failed while reading"):
+        t.read(0.5)

@@ -12,7 +12,9 @@ import threading
 import pytest
 from transport_peers import TcpPeer, read_until
 
+import galil
 from galil.errors import GalilConnectionError, InvalidArgument
+from galil.sim.server import SimTcpServer
 from galil.transport import MessagesOnly, open_transport
 from galil.transport.tcp import DEFAULT_PORT, TcpTransport
 
@@ -196,3 +198,15 @@ def test_a_write_the_peer_never_takes_gives_up_after_the_write_timeout() -> None
         finally:
             t.close()
             conn.close()
+
+
+def test_the_longest_timeouts_work_on_a_tcp_link() -> None:
+    # (9.3e9 s crashed in settimeout, 1e308 in the 10 ms grid; the longest now reaches no
+    # OS call longer than it takes, and a reply still comes at once)
+    with SimTcpServer() as server:
+        with galil.connect(server.url, timeout=1e9, connect_timeout=1e6, write_timeout=1e6) as c:
+            assert c.command("MG 1", timeout=1e9).strip() == "1.0000"
+            assert c.query_number("MG 2") == 2
+        for bad in (9.3e9, 1e10, 1e308):
+            with pytest.raises(galil.InvalidArgument, match=r"at most 1e\+09"):
+                galil.connect(server.url, timeout=bad)
