@@ -24,7 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from galil.sim.parse import Refused, split_fields, split_program_line
+from galil.sim.parse import Refused, internal_error, split_fields, split_program_line
 from galil.sim.ports import Port
 from galil.sim.registry import Collect, Download, Result, Wait
 
@@ -321,6 +321,9 @@ class Programs:
             except Refused as e:
                 self._halt(th, e.code)
                 return False
+            except Exception:
+                self._halt(th, internal_error("a held program command").code)
+                return False
             if out:
                 self._emit(out)
         return True
@@ -336,6 +339,9 @@ class Programs:
             result = self._x.execute(text, th)
         except Refused as e:
             self._halt(th, e.code)
+            return False
+        except Exception:  # a simulator bug: halt the thread as a refused command does
+            self._halt(th, internal_error(text).code)
             return False
         # (DL and QD, which switch a port to collecting, never run here: NOT_IN_PROGRAM)
         assert not isinstance(result, (Download, Collect)), text
