@@ -131,3 +131,13 @@ def test_mg_text_longer_than_the_model_allows_is_refused_with_tc_52(
     assert sim.feed(f'MG "{fits}"\r'.encode()) == fits.encode() + b"\r\n:"
     assert sim.feed(f'MG "{fits}x"\r'.encode()) == b"?"
     assert sim.feed(b"TC\r") == b" 52\r\n:"
+
+
+def test_xq_starts_a_thread_at_a_line_number() -> None:
+    # "EPICS starts with XQ 0,0" (galil-wave2-facts.md, XQ)
+    sim = SimController("DMC-4040")
+    assert sim.feed(b'DL\r#A\rMG "one"\rMG "two"\rEN\r\\') == b"::"
+    assert sim.feed(b"XQ 0,0\r") == b":one\r\ntwo\r\n"
+    assert sim.feed(b"XQ 2,1\r") == b":two\r\n"
+    assert sim.feed(b"XQ 4\r") == b"?"
+    assert sim.feed(b"TC\r") == b" 11\r\n:"
