@@ -47,7 +47,7 @@ from galil.predict.homing import HomeSwitch
 from galil.sim.clock import Clock, ManualClock
 from galil.sim.machine import Machine, Room
 from galil.sim.motion import AxisMotion
-from galil.sim.parse import Refused
+from galil.sim.parse import LOG, Refused
 from galil.sim.rooms import IO, ROOMS, Limits, Records
 from galil.sim.rooms.limits import DEFAULT_HOME_EDGE, DEFAULT_INDEX_PERIOD, HomeGeometry
 
@@ -148,7 +148,9 @@ class SimController:
     def feed(self, data: bytes, port: int = 0) -> bytes:
         """Give the controller bytes from the host; return what it answers right away.
 
-        Replies held by a trippoint come later from :meth:`poll`.
+        Replies held by a trippoint come later from :meth:`poll`. Never raises for what the
+        host sends: a command that breaks the simulator itself is answered ``?`` (and logged
+        at ERROR on the ``galil.sim`` logger), as a refused command is.
         """
         with self._lock:
             m = self._m
@@ -157,8 +159,13 @@ class SimController:
             if m.ports.echo:
                 p.out += data
             p.inbuf += data.decode("latin-1")
-            m.pump(p)
-            m.service()
+            try:
+                m.pump(p)
+                m.service()
+            except Exception:
+                # A simulator bug outside any one command (each command's own is answered
+                # with ? by the machine): logged; the replies made so far are returned.
+                LOG.error("simulator error while serving port %d", port, exc_info=True)
             return p.take()
 
     def poll(self, port: int = 0) -> bytes:

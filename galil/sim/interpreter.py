@@ -150,10 +150,8 @@ class Interpreter:
                 self._check_caller(s[:2])  # AM S as AM A
                 return self.plane_commands[s[:2]].run(planes)
         if command is not None:
-            if eq > 0 and not command.spec.equals:
-                name = s[:eq].strip()
-                if not self._is_axis_spec(s[2:eq].strip()) and self._variable.fullmatch(name):
-                    return self.assign(name, s[eq + 1 :])
+            if eq > 0 and self._is_assignment(s, eq, equals=command.spec.equals):
+                return self.assign(s[:eq].strip(), s[eq + 1 :])
             self._check_caller(s[:2])
             args = s[2:]
             kind = command.spec.args
@@ -165,6 +163,21 @@ class Interpreter:
         if eq > 0:
             return self.assign(s[:eq].strip(), s[eq + 1 :])
         raise Refused(1, f"unrecognised command {s!r}")
+
+    def _is_assignment(self, s: str, eq: int, *, equals: bool) -> bool:
+        """Whether ``s`` (a command's name first, ``=`` at ``eq``) assigns a variable.
+
+        A command whose own syntax has ``=`` (``CD 100=2``, ``VSS=``, ``IHA=>-1``) keeps it
+        after a blank or a plane/axis/handle letter; glued digits make a variable name:
+        "``CD0=0`` would assign a variable named CD0 -- need ``CD 0=0`` with a space"
+        (galil-protocol.md §3 contour mode; C1400 DT, C18x6 CD, C40x0 DT).
+        """
+        name = s[:eq].strip()
+        if not self._variable.fullmatch(name):
+            return False
+        if equals:
+            return s[2:3].isdigit()
+        return not self._is_axis_spec(s[2:eq].strip())
 
     def _check_caller(self, name: str) -> None:
         """Refuse a program-only command (:data:`~galil.sim.programs.PROGRAM_ONLY`) that a

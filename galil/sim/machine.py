@@ -27,7 +27,7 @@ from typing import ClassVar, TypeVar
 from galil.models import ModelSpec
 from galil.sim.clock import Clock
 from galil.sim.interpreter import Command, Interpreter
-from galil.sim.parse import Refused, next_command
+from galil.sim.parse import Refused, internal_error, next_command
 from galil.sim.ports import Port, Ports
 from galil.sim.programs import NO_ERROR, Programs
 from galil.sim.registry import (
@@ -270,8 +270,10 @@ class Machine:
         try:
             result = self.interp.execute(text, p)
         except Refused as e:
-            self.interp.tc = e.code
-            p.out += b"?"
+            self._refuse(p, e.code)
+            return
+        except Exception:  # a simulator bug: answer ? and keep the replies in step
+            self._refuse(p, internal_error(text).code)
             return
         if isinstance(result, Wait):
             if result.ready(self.servo.sample):
@@ -298,11 +300,18 @@ class Machine:
         try:
             reply = done(data)
         except Refused as e:
-            self.interp.tc = e.code
-            p.out += b"?"
+            self._refuse(p, e.code)
+            return True
+        except Exception:
+            self._refuse(p, internal_error(data[:40]).code)
             return True
         p.out += reply.encode("latin-1") + b":"
         return True
+
+    def _refuse(self, p: Port, code: int) -> None:
+        """Answer ``?`` on ``p`` and record ``code`` (TC)."""
+        self.interp.tc = code
+        p.out += b"?"
 
     def _release(self, port: Port, w: Wait) -> None:
         data = ""
@@ -310,8 +319,10 @@ class Machine:
             try:
                 data = w.then()
             except Refused as e:
-                self.interp.tc = e.code
-                port.out += b"?"
+                self._refuse(port, e.code)
+                return
+            except Exception:
+                self._refuse(port, internal_error("a held command").code)
                 return
         port.out += data.encode("latin-1") + b":"
 

@@ -7,6 +7,7 @@ right with parentheses only, as Galil's interpreter does (``1+2*3`` is 9).
 
 from __future__ import annotations
 
+import logging
 import math
 import re
 from collections.abc import Callable, Mapping
@@ -15,8 +16,12 @@ from galil.protocol.commands import split_commands
 
 __all__ = [
     "FUNCTIONS",
+    "INTERNAL_ERROR",
+    "LOG",
     "Refused",
     "evaluate",
+    "in_range",
+    "internal_error",
     "next_command",
     "split_fields",
     "split_program_line",
@@ -34,6 +39,22 @@ class Refused(Exception):  # noqa: N818 (a reply, not a failure)
     def __init__(self, code: int, why: str = "") -> None:
         super().__init__(why or f"TC {code}")
         self.code = code
+
+
+#: The simulator's logger: an internal error (a bug of the simulator) is logged here at ERROR.
+LOG = logging.getLogger("galil.sim")
+
+#: The TC recorded for a command that broke the simulator itself. The facts have no "unknown
+#: error" code (galil-protocol.md §1.2); 1 "Unrecognized command" is the controller's generic
+#: refusal. What matters is the reply: "just ``?`` for a rejected command" (§1.1).
+INTERNAL_ERROR = 1
+
+
+def internal_error(text: str) -> Refused:
+    """Log the exception being handled (a simulator bug met while running ``text``) and
+    return the refusal that answers it: ``?``, TC :data:`INTERNAL_ERROR`."""
+    LOG.error("simulator error while running %r; answered ?", text, exc_info=True)
+    return Refused(INTERNAL_ERROR, "internal simulator error")
 
 
 def next_command(buffer: str) -> tuple[str, int] | None:
@@ -105,8 +126,30 @@ FUNCTIONS: dict[str, Callable[[float], float]] = {
     "FRAC": lambda x: x - math.trunc(x),
     "RND": lambda x: float(math.floor(x + 0.5)),
     "SQR": lambda x: math.sqrt(x) if x >= 0 else math.nan,
-    "COM": lambda x: float(~int(x) & 0xFFFFFFFF),
+    # Bitwise complement of the 32-bit whole part. The facts do not describe @COM [U]; numbers
+    # are 32-bit two's complement (galil-protocol.md §1.4: range -2,147,483,648 ..
+    # 2,147,483,647; hex "2's complement"), so the complement of a value in range is in range
+    # (@COM[0] is -1), never the unsigned 4294967295 the controller could not hold.
+    "COM": lambda x: float(~int(x)),
 }
+
+#: The raw 32.16 limits: "Numeric range -2,147,483,648 ... 2,147,483,647 with fractional
+#: resolution 1/65,536" (galil-protocol.md §1.4, C40x0 operator pages).
+_RAW_MIN = -(1 << 47)
+_RAW_MAX = (1 << 47) - 1
+
+
+def in_range(value: float) -> bool:
+    """Whether ``value`` is a number the controller can hold (32.16 fixed point)."""
+    return math.isfinite(value) and _RAW_MIN <= round(value * 65536) <= _RAW_MAX
+
+
+def _checked(value: float) -> float:
+    """``value``, or TC 6 "Number out of range" (galil-protocol.md §1.2) for a result the
+    controller's 32.16 arithmetic cannot hold (§1.4): ``MG 2147483647+1``, ``65536*65536``."""
+    if not in_range(value):
+        raise Refused(6, "number out of range")
+    return value
 
 
 #: An array element's value: ``element(name, index)``.
@@ -158,12 +201,15 @@ def evaluate(
         value, pos = _sequence(tokens, 0, (lookup, functions, element))
         if pos != len(tokens):
             raise Refused(59 if tokens[pos][1] in ")]" else 1, f"unexpected {tokens[pos][1]!r}")
-    if not math.isfinite(value):
-        raise Refused(6, "value out of range")
-    return value
+    return _checked(value)
 
 
 def _apply(op: str, a: float, b: float) -> float:
+    # Every step is a 32.16 number: an intermediate result out of range is refused too.
+    return _checked(_arith(op, a, b))
+
+
+def _arith(op: str, a: float, b: float) -> float:
     if op == "+":
         return a + b
     if op == "-":
@@ -205,13 +251,13 @@ def _operand(tokens: list[tuple[str, str]], pos: int, env: _Env) -> tuple[float,
         raise Refused(1, "missing value")
     kind, text = tokens[pos]
     if kind == "num":
-        return float(text), pos + 1
+        return _checked(float(text)), pos + 1
     if kind == "hex":
         whole, _, frac = text[1:].partition(".")
         value = float(int(whole, 16))
         if frac:
             value += int(frac, 16) / 16 ** len(frac)
-        return value, pos + 1
+        return _checked(value), pos + 1
     if kind == "name":
         return env[0](text), pos + 1
     if kind == "func":
@@ -222,7 +268,7 @@ def _operand(tokens: list[tuple[str, str]], pos: int, env: _Env) -> tuple[float,
         arg, pos = _sequence(tokens, pos + 1, env)
         if pos >= len(tokens) or tokens[pos][1] != "]":
             raise Refused(55, "missing ]")
-        return fn(arg), pos + 1
+        return _checked(fn(arg)), pos + 1
     if kind == "element":
         get = env[2]
         if get is None:
@@ -232,6 +278,8 @@ def _operand(tokens: list[tuple[str, str]], pos: int, env: _Env) -> tuple[float,
             raise Refused(55, "missing ]")
         return get(text[:-1], index), pos + 1
     if text == "-":
+        if pos + 1 < len(tokens) and tokens[pos + 1][0] == "num":  # -2147483648 is in range
+            return _checked(-float(tokens[pos + 1][1])), pos + 2
         value, pos = _operand(tokens, pos + 1, env)
         return -value, pos
     if text == "+":

@@ -24,7 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from galil.sim.parse import Refused, split_fields, split_program_line
+from galil.sim.parse import Refused, internal_error, split_fields, split_program_line
 from galil.sim.ports import Port
 from galil.sim.registry import Collect, Download, Result, Wait
 
@@ -155,6 +155,10 @@ class _Memory:
     line_length: int = 80
 
 
+#: What ends a download: "terminate with ``\\`` (also ^Z, ^Q, ^D accepted)"
+#: (galil-wave2-facts.md §5 DL [P: EPICS, BLISS, IRTF]).
+_DL_ENDS = ("\\", "\x1a", "\x11", "\x04")
+
 #: TC 60: "Download error - line too long or too many lines" (galil.codes).
 DOWNLOAD_ERROR = 60
 
@@ -210,7 +214,8 @@ class Programs:
 
     # ---- DL ----------------------------------------------------------------------------
     def collect(self, p: Port) -> bool:
-        """Collect program lines from ``p`` until ``\\``; return False when more is needed.
+        """Collect program lines from ``p`` until ``\\`` (or ^Z, ^Q, ^D); return False when
+        more is needed.
 
         A line longer than the model's line length, or one more than its program memory
         holds, is refused as the controller refuses it: ``?`` at once and TC 60 ("Download
@@ -223,7 +228,8 @@ class Programs:
         assert p.download is not None
         while True:
             cut = [i for i in (p.inbuf.find("\r"), p.inbuf.find("\n")) if i >= 0]
-            slash = p.inbuf.find("\\")
+            ends = [i for i in map(p.inbuf.find, _DL_ENDS) if i >= 0]
+            slash = min(ends) if ends else -1
             if slash >= 0 and (not cut or slash < min(cut)):
                 head = p.inbuf[:slash]
                 if head.strip():
@@ -321,6 +327,9 @@ class Programs:
             except Refused as e:
                 self._halt(th, e.code)
                 return False
+            except Exception:
+                self._halt(th, internal_error("a held program command").code)
+                return False
             if out:
                 self._emit(out)
         return True
@@ -336,6 +345,9 @@ class Programs:
             result = self._x.execute(text, th)
         except Refused as e:
             self._halt(th, e.code)
+            return False
+        except Exception:  # a simulator bug: halt the thread as a refused command does
+            self._halt(th, internal_error(text).code)
             return False
         # (DL and QD, which switch a port to collecting, never run here: NOT_IN_PROGRAM)
         assert not isinstance(result, (Download, Collect)), text

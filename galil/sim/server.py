@@ -40,6 +40,7 @@ from galil.sim.clock import RealTimeClock
 from galil.sim.controller import SimController
 from galil.sim.faults import FaultHook, apply_faults
 from galil.sim.link import check_baud
+from galil.sim.parse import LOG
 
 __all__ = ["SimPtyServer", "SimTcpServer", "check_ports", "main"]
 
@@ -129,9 +130,24 @@ class _Server:
     def _serve(self) -> None:
         try:
             while not self._stop.is_set():
-                self._tick()
+                try:
+                    self._tick()
+                except Exception:
+                    # A simulator bug must not end the server: every client would then time
+                    # out. Logged; the next tick serves on (after a pause, should it repeat).
+                    LOG.error("simulator server error; serving on", exc_info=True)
+                    time.sleep(_TICK)
         except BaseException as e:  # surfaced by the owner; a server thread must not vanish
             self._error = e
+
+    def _feed(self, data: bytes, port: int = 0) -> bytes:
+        """The controller's reply to ``data``; ``?`` (logged) if the model breaks on it: "just
+        ``?`` for a rejected command" (galil-protocol.md §1.1)."""
+        try:
+            return self.controller.feed(data, port=port)
+        except Exception:
+            LOG.error("simulator error on %r; answered ?", data[:80], exc_info=True)
+            return b"?"
 
     def _open(self) -> None:
         raise NotImplementedError
@@ -273,7 +289,7 @@ class SimTcpServer(_Server):
                 return  # all eight handles taken
             entry = self._udp_peers[peer] = (number, _Outbox(self.faults))
         number, box = entry
-        box.put(self.controller.feed(data, port=number))
+        box.put(self._feed(data, port=number))
 
     def _send_datagrams(self) -> None:
         assert self._udp is not None
@@ -351,7 +367,7 @@ class SimTcpServer(_Server):
             elif key.data == "client":
                 number, box = self._clients[sock]
                 if self.controller.has_port(number):
-                    box.put(self.controller.feed(data, port=number))
+                    box.put(self._feed(data, port=number))
         for sock, (number, box) in list(self._clients.items()):
             if not self.controller.has_port(number):
                 # Closed from the inside (IH...=>-1): the controller ends the connection.
@@ -449,7 +465,7 @@ class SimPtyServer(_Server):
         if line is None:
             data = self._read(4096) if self._sel.select(timeout=_TICK) else b""
             if data:
-                self._box.put(self.controller.feed(data))
+                self._box.put(self._feed(data))
         else:
             self._carry_inward(line)
         self._box.put(self.controller.poll())
@@ -471,7 +487,7 @@ class SimPtyServer(_Server):
             line.sending += self._read(space)
         carried = line.carry()
         if carried:
-            self._box.put(self.controller.feed(carried))
+            self._box.put(self._feed(carried))
         elif line.sending:
             time.sleep(_TICK)  # the line is busy with them
 

@@ -8,6 +8,7 @@ from engine_expect import move, references
 import galil
 from galil.protocol import commands as cmds
 from galil.protocol.interrupts import InterruptParser
+from galil.sim.clock import ManualClock
 from galil.sim.controller import SimController
 
 
@@ -194,3 +195,11 @@ def test_a_raw_download_the_memory_cannot_hold_is_a_command_error() -> None:
             dmc.send(cmds.dl(lines, model=dmc.model))
         assert info.value.code == 60
         assert dmc.query_number("MG 2") == 2
+
+
+@pytest.mark.parametrize("end", [b"\\", b"\x1a", b"\x11", b"\x04"])
+def test_a_download_ends_at_a_backslash_or_ctrl_z_q_or_d(end: bytes) -> None:
+    # "terminate with \ (also ^Z, ^Q, ^D accepted)" (galil-wave2-facts.md, DL)
+    sim = SimController("DMC-4040", ManualClock())
+    assert sim.feed(b"DL\r#A\rEN\r" + end + b"\rTPA\r") == b":: 0\r\n:"
+    assert sim.feed(b"UL\r") == b"#A\r\nEN\r\n\x1a:"

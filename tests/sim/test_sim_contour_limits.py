@@ -16,6 +16,7 @@ from collections.abc import Callable, Sequence
 
 import pytest
 
+from galil.sim.clock import ManualClock
 from galil.sim.controller import SimController
 
 TS = 1 / 1024
@@ -153,3 +154,14 @@ def test_a_contour_limit_stop_runs_limswi() -> None:
         place(forward=1000),
     )
     assert b"L 2.0000" in out
+
+
+def test_cd0_without_a_space_assigns_a_variable_and_leaves_contour_mode_on() -> None:
+    # "CD0=0 would assign a variable named CD0 -- need CD 0=0 with a space" (galil-protocol.md)
+    sim = SimController("DMC-4040", ManualClock())
+    assert sim.feed(b"CM A;CD 100=2;CD0=0\r") == b":::"
+    sim.advance(1.0)
+    assert sim.feed(b"MG _SCA,CD0\r") == b" 50.0000 0.0000\r\n:"
+    assert sim.feed(b"CD 0=0\r") == b":"
+    sim.advance(0.1)
+    assert sim.feed(b"MG _SCA\r") == b" 51.0000\r\n:"

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import logging
 import math
+import random
 
 import pytest
 from hypothesis import given, settings
@@ -10,7 +12,10 @@ from hypothesis import strategies as st
 
 from galil.sim.clock import ManualClock
 from galil.sim.controller import SimController
-from galil.sim.parse import Refused, evaluate, next_command
+from galil.sim.machine import Room
+from galil.sim.parse import Refused, evaluate, next_command, split_program_line
+from galil.sim.registry import handler
+from galil.sim.rooms import rooms_with
 
 
 @settings(max_examples=150, deadline=None)
@@ -18,9 +23,16 @@ from galil.sim.parse import Refused, evaluate, next_command
 def test_expressions_run_left_to_right(values: list[int], op: str) -> None:
     text = op.join(f"({v})" for v in values)
     expected = float(values[0])
+    overflow = False
     for v in values[1:]:
         expected = {"+": expected + v, "-": expected - v, "*": expected * v}[op]
-    assert evaluate(text, lambda name: 0.0) == expected
+        overflow = overflow or not -(2**31) <= expected < 2**31
+    if overflow:  # every step is a 32.16 number: a step out of range is TC 6
+        with pytest.raises(Refused) as e:
+            evaluate(text, lambda name: 0.0)
+        assert e.value.code == 6
+    else:
+        assert evaluate(text, lambda name: 0.0) == expected
 
 
 def test_expression_errors() -> None:
@@ -113,3 +125,111 @@ def _next_command_by_characters(buffer: str) -> tuple[str, int] | None:
 @given(st.text(alphabet='AB1 ;"\r\n,{}', max_size=40))
 def test_commands_are_cut_where_the_character_rule_cuts_them(buffer: str) -> None:
     assert next_command(buffer) == _next_command_by_characters(buffer)
+
+
+# ---- nothing the host sends breaks the simulator ------------------------------------------
+@pytest.mark.parametrize(
+    "expression", ["2147483647+1", "65536*65536", "-2147483648-1", "$FFFFFFFF", "99999999999*0"]
+)
+def test_arithmetic_out_of_the_32_16_range_is_refused_with_tc_6(
+    sim: SimController, expression: str
+) -> None:
+    # galil-protocol.md §1.4: -2,147,483,648 .. 2,147,483,647; §1.2: TC 6 "Number out of range"
+    assert sim.feed(f"MG {expression}\r".encode()) == b"?"
+    assert sim.feed(b"TC1\r") == b" 6 Number out of range\r\n:"
+    assert sim.feed(b"MG -2147483648\r") == b"-2147483648.0000\r\n:"
+
+
+def test_an_overflow_in_a_program_halts_it_and_the_replies_stay_in_step(
+    sim: SimController,
+) -> None:
+    assert sim.feed(b"DL\r#A;x=65536;MG x*x;EN\r\\") == b"::"
+    assert sim.feed(b"XQ #A\r") == b":"
+    sim.advance(0.01)
+    assert sim.feed(b"TP\r") == b" 0, 0, 0, 0\r\n:"
+    assert sim.feed(b"MG _XQ0,_TC\r") == b"-1.0000 6.0000\r\n:"
+
+
+def test_com_is_the_32_bit_complement(sim: SimController) -> None:
+    assert sim.feed(b"MG @COM[0],@COM[-1],@COM[5]\r") == b"-1.0000 0.0000-6.0000\r\n:"
+
+
+class _Broken(Room):
+    """A room with a bug: ``ZZ`` raises what no command should."""
+
+    @handler("ZZ")
+    def zz(self, args: str) -> str:
+        raise RuntimeError("a simulator bug")
+
+
+def test_a_command_that_breaks_the_simulator_is_answered_with_a_question_mark(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    sim = SimController("DMC-4040", ManualClock(), rooms=rooms_with(_Broken))
+    with caplog.at_level(logging.ERROR, logger="galil.sim"):
+        assert sim.feed(b"ZZ;TPA\r") == b"? 0\r\n:"
+        assert sim.feed(b"DL\r#A;ZZ;MG 1;EN\r\\\rXQ #A\r") == b":::"
+        sim.advance(0.01)
+        assert sim.feed(b"MG _XQ0;TPA\r") == b"-1.0000\r\n: 0\r\n:"
+    assert [r.levelname for r in caplog.records] == ["ERROR", "ERROR"]
+    assert "ZZ" in caplog.records[0].getMessage()
+
+
+#: Commands whose replies are not ``data CR LF :`` text: binary records (QR, DR), ^Z-ended
+#: listings (UL, QU), a switch to collecting input (DL, QD), echo (EO).
+_NOT_FUZZED = {"DL", "QD", "QR", "DR", "UL", "QU", "EO"}
+_MNEMONICS = sorted(
+    c for c in SimController("DMC-4040")._m.interp.commands if c.isalpha() and c not in _NOT_FUZZED
+)
+#: Operands of an argument: numbers in and out of the controller's range, names, functions,
+#: planes and axes, a string, and tokens it does not read.
+_OPERANDS = [
+    *("0", "1", "-1", ".5", "2147483647", "2147483648", "-2147483648", "65536", "4294967296"),
+    *("99999999999", "$FFFFFFFF", "$7FFF.FFFF", "_TPA", "_LMS", "_XQ0", "@COM[0]", "@SQR[-1]"),
+    *("@ABS[-2147483648]", "(1", "2)", "a[1]", "?", "S", "T", "ST", "A", "AB", "X", '"ab"'),
+    *("1e300", "nan", "inf", "-0", "#A", ""),
+]
+_OPERATORS = ["+", "-", "*", "/", "&", "|", "<", ">", "<>", "="]
+
+
+def _random_command(rnd: random.Random) -> str:
+    """A mnemonic of the simulator's table with random fields (``PR 65536*65536,?``)."""
+    fields = []
+    for _ in range(rnd.randrange(4)):
+        field = rnd.choice(_OPERANDS)
+        for _ in range(rnd.randrange(3)):
+            field += rnd.choice(_OPERATORS) + rnd.choice(_OPERANDS)
+        fields.append(field)
+    head = rnd.choice(["", " ", " A=", " AB=", "*=", "S=", " ?"])
+    return rnd.choice(_MNEMONICS) + head + ",".join(fields)
+
+
+def _terminators(reply: bytes) -> int:
+    """How many ``:``/``?`` answers ``reply`` holds, past the data lines (ended CR LF)."""
+    count = 0
+    while reply:
+        if reply[:1] in (b":", b"?"):
+            count, reply = count + 1, reply[1:]
+            continue
+        end = reply.find(b"\r\n")
+        assert end >= 0, reply
+        reply = reply[end + 2 :]
+    return count
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.randoms(use_true_random=False))
+def test_any_command_line_gets_exactly_its_replies(rnd: random.Random) -> None:
+    # Random lines of random commands on one controller (its state carries from line to
+    # line): feed never raises, and each command gets one ':' or '?', in order.
+    sim = SimController("DMC-4040", ManualClock())
+    replies, sent = b"", 0
+    for _ in range(30):
+        line = ";".join(_random_command(rnd) for _ in range(rnd.randint(1, 3)))
+        replies += sim.feed(line.encode() + b"\r")
+        sent += len(split_program_line(line))
+        sim.advance(0.001)
+    sim.advance(1.0)  # a burn (0.25 s) or another held command has answered by now
+    replies += sim.poll()
+    assert _terminators(replies) == sent, replies
+    assert sim.feed(b"\x12\x16\r") == sim.identity.encode() + b"\r\n:"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import socket
@@ -197,3 +198,35 @@ def test_cli_stops_cleanly_when_signalled_as_it_announces_itself(
         signal.signal(signal.SIGTERM, previous)
     assert len(announced) == 1
     assert "DMC4040" in announced[0]
+
+
+def test_the_tcp_server_survives_a_simulator_error(
+    caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    real_feed = sim.feed
+    broken = [True]
+
+    def feed(data: bytes, port: int = 0) -> bytes:
+        if broken.pop() if broken else False:
+            raise RuntimeError("a simulator bug")
+        return real_feed(data, port)
+
+    monkeypatch.setattr(sim, "feed", feed)
+    with caplog.at_level(logging.ERROR, logger="galil.sim"), SimTcpServer(sim) as srv:
+        s = socket.create_connection(srv.address, timeout=5)
+
+        def ask(line: bytes) -> bytes:
+            s.sendall(line + b"\r")
+            got = b""
+            while not got.endswith((b":", b"?")):
+                chunk = s.recv(4096)
+                assert chunk
+                got += chunk
+            return got
+
+        assert ask(b"TPA") == b"?"  # answered, not silence
+        assert ask(b"MG 65536*65536") == b"?"
+        assert ask(b"TPA") == b" 0\r\n:"
+        s.close()
+    assert [r.name for r in caplog.records] == ["galil.sim"]

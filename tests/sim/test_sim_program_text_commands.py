@@ -119,3 +119,25 @@ def test_da_takes_arrays_written_with_index_zero_as_its_examples_do() -> None:
     assert ask(sim, "LA;LV") == "pets[5]\r\n:x= 1.0000\r\n:"
     assert ask(sim, "DA *,*[0]") == ":"
     assert ask(sim, "LA;LV") == "::"
+
+
+@pytest.mark.parametrize(("model", "longest"), [("DMC-4040", 72), ("DMC-1500", 31)])
+def test_mg_text_longer_than_the_model_allows_is_refused_with_tc_52(
+    model: str, longest: int
+) -> None:
+    # "MG text max 72 chars ..., 31 chars on DMC-1000/1500" (galil-protocol.md §1.1)
+    sim = SimController(model)
+    fits = "x" * longest
+    assert sim.feed(f'MG "{fits}"\r'.encode()) == fits.encode() + b"\r\n:"
+    assert sim.feed(f'MG "{fits}x"\r'.encode()) == b"?"
+    assert sim.feed(b"TC\r") == b" 52\r\n:"
+
+
+def test_xq_starts_a_thread_at_a_line_number() -> None:
+    # "EPICS starts with XQ 0,0" (galil-wave2-facts.md, XQ)
+    sim = SimController("DMC-4040")
+    assert sim.feed(b'DL\r#A\rMG "one"\rMG "two"\rEN\r\\') == b"::"
+    assert sim.feed(b"XQ 0,0\r") == b":one\r\ntwo\r\n"
+    assert sim.feed(b"XQ 2,1\r") == b":two\r\n"
+    assert sim.feed(b"XQ 4\r") == b"?"
+    assert sim.feed(b"TC\r") == b" 11\r\n:"

@@ -419,3 +419,12 @@ def test_a_sequence_axis_turning_towards_a_switch_active_at_its_start_is_stopped
     rpb, sca, scb, bgs = numbers(ask(sim, "MG _RPB,_SCA,_SCB,_BGS"))
     assert (sca, scb, bgs) == (2, 2, 0)
     assert -500 < rpb < 0  # turned, and stopped on the way back, short of the switch side
+
+
+@pytest.mark.parametrize("command", ["CA", "CA ST", "CA X", "CS ST"])
+def test_a_plane_command_without_one_plane_is_refused(command: str) -> None:
+    # One plane, S or T (galil-wave2-facts.md §6); TC 28 "S operand not valid"
+    sim = SimController("DMC-4040", ManualClock())
+    assert sim.feed(command.encode() + b"\r") == b"?"
+    assert sim.feed(b"TC\r") == b" 28\r\n:"
+    assert sim.feed(b"VS 1000;CA ?;VS ?\r") == b": 0\r\n: 1000\r\n:"

@@ -79,7 +79,14 @@ class ProgramCommands(Room):
         fields = split_fields(args)
         label = fields[0].strip()
         number = self._thread(fields[1]) if len(fields) > 1 and fields[1].strip() else 0
-        if label:
+        if label and not label.startswith("#"):
+            # A line number (0-based) instead of a label: "EPICS starts with XQ 0,0"
+            # (galil-wave2-facts.md §5 XQ [P]). Past the program: TC 11 "Invalid label or
+            # line number" (galil-protocol.md §1.2).
+            line = int(self.machine.interp.evaluate(label))
+            if not 0 <= line < len(programs.program):
+                raise Refused(11, "no such line")
+        elif label:
             line = programs.line_of(label)
         elif not programs.program:
             raise Refused(10, "no program")

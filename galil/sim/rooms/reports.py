@@ -116,6 +116,11 @@ class Reports(Room):
             if kind == "num":
                 out.append(self._number(i.evaluate(text), fmt))
             elif kind == "text":
+                if len(text) > i.spec.mg_max:
+                    # "MG text max 72 chars (C40x0 p.165, C18x2 optcom-145), 31 chars on
+                    # DMC-1000/1500 (C1000 p.96)" (galil-protocol.md §1.1): TC 52 "Missing
+                    # quote or string too long" (§1.2).
+                    raise Refused(52, "string too long")
                 out.append(text)
             else:
                 out.append(self._character(text))

@@ -46,7 +46,8 @@ from galil.sim.servo import Axis
 __all__ = ["PlaneFeed", "Vector"]
 
 Int64Array = npt.NDArray[np.int64]
-_PLANES = "ST"
+#: The coordinate systems, one letter each (a tuple: "" and "ST" are no plane).
+_PLANES = ("S", "T")
 
 
 class PlaneFeed:
@@ -267,6 +268,9 @@ class Vector(Room):
         if a == "?":
             return self.machine.interp.num(_PLANES.index(self.selected), "1.0") + "\r\n"
         if a not in _PLANES:
+            # One plane, S or T ("CA S", "CS S|T": galil-wave2-facts.md §6 [P:EPICS, QCODES]);
+            # a bare CA or "CA ST" names none: refused with TC 28 "S operand not valid"
+            # (galil-protocol.md §1.2) as a bad plane is [U: the code for a missing one].
             raise Refused(28, "CA takes S or T")
         self.selected = a
         return ""
