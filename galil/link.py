@@ -502,8 +502,11 @@ class LinkCore:
             self._dead = ""
             for _ in range(64):
                 # Bytes left over from an earlier program or session would pass for replies.
-                if not self._read(0.0):
-                    break
+                try:
+                    if not self._read(0.0):
+                        break
+                except GalilConnectionError:
+                    break  # (dropped at once, the link is dead: the handshake says why)
 
     def detach(self) -> None:
         """Send what must be restored (best effort), then close the transport; idempotent."""

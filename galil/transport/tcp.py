@@ -82,8 +82,15 @@ class TcpTransport(TransportBase[socket.socket]):
             try:
                 sock = socket.create_connection((host, port), timeout=connect_timeout)
             except OSError as exc:
+                hint = ""
+                if isinstance(exc, ConnectionResetError):
+                    # (a controller with its eight handles taken drops a connection at once)
+                    hint = (
+                        ": the controller may have no free Ethernet handle (TH on another"
+                        " connection lists them: close one, or free a stale one with IHm=>-1)"
+                    )
                 raise GalilConnectionError(
-                    f"cannot connect to {host}:{port} over TCP: {exc}"
+                    f"cannot connect to {host}:{port} over TCP: {exc}{hint}"
                 ) from exc
         # Commands are a few bytes each; Nagle would hold them back waiting for an ACK.
         # (A socketpair adopted in tests is no TCP socket: nothing to tune then.)

@@ -192,7 +192,8 @@ def test_a_connect_the_controller_drops_says_it_may_have_no_free_handle() -> Non
             with pytest.raises(GalilConnectionError) as info:
                 connect(server.url, timeout=1.0)  # all eight taken: dropped at once
             text = str(info.value)
-            assert "before it answered ^R^V" in text
+            # (dropped once the connection was made, or reset while it was being made)
+            assert "before it answered ^R^V" in text or "Connection reset" in text
             assert "no free Ethernet handle" in text
             assert "reconnect()" not in text  # (connect() returned no object to call it on)
         finally:
