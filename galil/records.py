@@ -110,6 +110,7 @@ class RecordStream:
         self._error: GalilError | None = None
         self._subscribers: Subscribers[np.void] = Subscribers("data-record", _LOG)
         self._next_due: float | None = None
+        self._poll_lock = threading.Lock()  # one QR poll at a time
         self._thread: threading.Thread | None = None
         self._suspended = False
 
@@ -280,6 +281,18 @@ class RecordStream:
             raise QueueTimeoutError(f"no data record within {timeout} s")
 
     def _poll(self, timeout: float | None) -> np.void:
+        # One poll at a time (threads, or the async stream's worker calls): each takes the
+        # next record due, never the one another thread is fetching.
+        started = time.monotonic()
+        if not self._poll_lock.acquire(timeout=-1 if timeout is None else timeout):
+            raise QueueTimeoutError(f"no data record within {timeout} s")
+        try:
+            left = None if timeout is None else max(0.0, timeout - (time.monotonic() - started))
+            return self._poll_locked(left)
+        finally:
+            self._poll_lock.release()
+
+    def _poll_locked(self, timeout: float | None) -> np.void:
         if self._closed:
             raise GalilConnectionError("the data-record stream is closed")
         link = self._source.link

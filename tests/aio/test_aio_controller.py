@@ -462,3 +462,36 @@ def test_an_async_message_wait_on_a_link_that_dies_reconnects_with_reconnect_on(
             return await asyncio.wait_for(waiting, 5)
 
     assert run(body) == "after the reconnect"
+
+
+def test_a_polled_record_read_cancelled_mid_poll_leaves_no_duplicate_for_the_next_read() -> None:
+    """A get() cancelled (a timeout) while its QR is on the wire: the next get() waits for
+    that poll rather than polling beside it, and the records stay one period apart."""
+
+    async def body() -> list[int]:
+        async with await sim() as c, await c.records(32) as stream:
+            loop = asyncio.get_running_loop()
+            writing = asyncio.Event()
+            go_on = threading.Event()
+
+            def hook(direction: str, data: bytes) -> None:
+                if direction == "out" and b"QR" in data and not go_on.is_set():
+                    loop.call_soon_threadsafe(writing.set)
+                    go_on.wait(timeout=10)  # bounded: a broken test fails, never hangs
+
+            remove = c.wire_log.add(hook)
+            task = asyncio.ensure_future(stream.get())
+            await writing.wait()
+            task.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await task
+            nxt = asyncio.ensure_future(stream.get())
+            await asyncio.sleep(0.05)  # (not motion: time for a second poll to begin, if any)
+            go_on.set()
+            first = await nxt
+            remove()
+            rest = await stream.take(3)
+            assert stream.sync.missed == 0
+            return [int(first["time"]), *rest["time"].tolist()]
+
+    assert np.diff(run(body)).tolist() == [32] * 3
