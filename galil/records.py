@@ -212,6 +212,9 @@ class RecordStream:
                 return
             except GalilConnectionError as exc:
                 if not self._closed and not self._suspended:
+                    # A dead handle may mean a dead link: asked once, it is marked dead if
+                    # it does not answer either (a get() then reconnects, or raises).
+                    self._source.link.source_lost("the data-record handle", exc)
                     self._fail(exc)
                 return
             if records is not None:
@@ -261,24 +264,42 @@ class RecordStream:
                 (:func:`~galil.link.check_wait_timeout`, as the async stream), before a read.
             QueueTimeoutError: no record within ``timeout`` (a ``GalilTimeoutError`` that is
                 also a ``queue.Empty``).
-            GalilConnectionError: the stream is closed (or its handle died).
+            GalilConnectionError: the stream is closed, or its handle died (with the
+                automatic reconnect, ``reconnect=True``, a link that died with it is reopened
+                first, the stream with it, and the wait goes on; this if the reconnect
+                failed).
             ProtocolError: the record stream could not be decoded.
         """
         check_wait_timeout(timeout)
         if self.method == "QR":
             return self._poll(timeout)
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            with self._cond:
+                left = None if deadline is None else max(0.0, deadline - time.monotonic())
+                ready = self._cond.wait_for(
+                    lambda: self._items or self._closed or self._error is not None, left
+                )
+                if self._items:
+                    return self._items.popleft()
+                error = self._error
+                if error is None:
+                    if self._closed:
+                        raise GalilConnectionError("the data-record stream is closed")
+                    assert not ready
+                    raise QueueTimeoutError(f"no data record within {timeout} s")
+            if not self._revived(error):
+                raise error
+
+    def _revived(self, error: GalilError) -> bool:
+        """The handle died with its link: with the automatic reconnect the link is reopened
+        (and the stream with it: a new handle, ``DR`` again); says whether it was."""
+        if self._closed or not isinstance(error, GalilConnectionError):
+            return False
+        if not self._source.link.revive():
+            return False
         with self._cond:
-            ready = self._cond.wait_for(
-                lambda: self._items or self._closed or self._error is not None, timeout
-            )
-            if self._items:
-                return self._items.popleft()
-            if self._error is not None:
-                raise self._error
-            if self._closed:
-                raise GalilConnectionError("the data-record stream is closed")
-            assert not ready
-            raise QueueTimeoutError(f"no data record within {timeout} s")
+            return self._error is None
 
     def _poll(self, timeout: float | None) -> np.void:
         # One poll at a time (threads, or the async stream's worker calls): each takes the
@@ -329,12 +350,21 @@ class RecordStream:
         return out
 
     def __iter__(self) -> Iterator[np.void]:
-        """Records until the stream is closed."""
+        """Records until the stream is closed (:meth:`close`: the loop ends).
+
+        Raises:
+            GalilConnectionError: the stream's link died (with the automatic reconnect,
+                ``reconnect=True``, the link is reopened and the loop goes on; this if the
+                reconnect failed), or its handle was closed while the link works.
+        """
         while True:
             try:
-                yield self.get()
+                rec = self.get()
             except GalilConnectionError:
-                return
+                if self._closed:
+                    return
+                raise
+            yield rec
 
     def __len__(self) -> int:
         with self._cond:

@@ -200,8 +200,11 @@ class AsyncRecordStream:
     """Data records every ``period`` samples, decoded: ``async for rec in stream``.
 
     Build it with ``await controller.records(period)``; close it (or use ``async with``) to
-    stop it. Records are the sync stream's (:attr:`sync`): pushed by ``DR`` over Ethernet,
-    polled with ``QR`` elsewhere, on the controller's clock.
+    stop it: ``async for`` ends then. If its link dies, ``async for`` raises
+    :class:`~galil.errors.GalilConnectionError` (with ``reconnect=True`` the link is reopened
+    and the loop goes on), as the sync stream's ``for`` does. Records are the sync stream's
+    (:attr:`sync`): pushed by ``DR`` over Ethernet, polled with ``QR`` elsewhere, on the
+    controller's clock.
     """
 
     def __init__(self, stream: RecordStream, worker: Worker) -> None:
@@ -314,6 +317,8 @@ class AsyncRecordStream:
         try:
             return await self.get()
         except GalilConnectionError:
+            if not self.sync.closed:
+                raise  # the link died: the loop does not end as if all were well
             raise StopAsyncIteration from None
 
     async def close(self) -> None:

@@ -25,6 +25,10 @@ import galil
 import galil.aio as aio
 from galil.aio import probe
 from galil.controller import Controller
+from galil.sim.clock import RealTimeClock
+from galil.sim.controller import SimController
+from galil.sim.proxy import FaultProxy
+from galil.sim.server import SimTcpServer
 from galil.testing import sim_of
 from galil.units import ureg
 
@@ -495,3 +499,27 @@ def test_a_polled_record_read_cancelled_mid_poll_leaves_no_duplicate_for_the_nex
             return [int(first["time"]), *rest["time"].tolist()]
 
     assert np.diff(run(body)).tolist() == [32] * 3
+
+
+def test_an_async_loop_over_a_record_stream_whose_link_dies_raises() -> None:
+    async def body() -> None:
+        sim_controller = SimController("DMC-4040", RealTimeClock())
+        with SimTcpServer(sim_controller) as server, FaultProxy(server.address) as proxy:
+            async with await aio.connect(proxy.url, timeout=1.0) as c:
+                stream = await c.records(16, method="DR")
+
+                async def pull_after_three() -> None:
+                    n = 0
+                    async for _ in stream:
+                        n += 1
+                        if n == 3:
+                            proxy.cut()
+
+                with pytest.raises(galil.GalilConnectionError):
+                    await pull_after_three()
+                assert not stream.closed
+                await stream.close()
+                async for _ in stream:  # closed by the user: the loop just ends
+                    raise AssertionError("a record from a closed stream")
+
+    run(body)
