@@ -1061,11 +1061,24 @@ def _collected(parts: _Parts, name: str) -> None:
         ResourceWarning,
         stacklevel=1,
     )
+    _close_in_background(parts)
+
+
+def _close_in_background(parts: _Parts) -> None:
     # On a thread of its own: a collection may run on a thread that holds the link's lock.
     with contextlib.suppress(RuntimeError):  # at shutdown, the process closes the rest
         threading.Thread(
             target=_close_quietly, args=(parts,), name="galil-finalize", daemon=True
         ).start()
+
+
+def close_collected(controller: Controller) -> None:
+    """Close ``controller`` as its garbage collection would (its link, readers and streams,
+    on a thread of its own; motion is not stopped), without its warning: for a wrapper
+    collected unclosed that warned in its own words (the async controller)."""
+    if controller._finalizer is not None:
+        controller._finalizer.detach()
+    _close_in_background(controller._parts)
 
 
 @contextlib.contextmanager

@@ -25,7 +25,7 @@ import galil
 import galil.aio as aio
 from galil.aio import probe
 from galil.controller import Controller
-from galil.sim.clock import RealTimeClock
+from galil.sim.clock import ManualClock, RealTimeClock
 from galil.sim.controller import SimController
 from galil.sim.proxy import FaultProxy
 from galil.sim.server import SimTcpServer
@@ -523,3 +523,27 @@ def test_an_async_loop_over_a_record_stream_whose_link_dies_raises() -> None:
                     raise AssertionError("a record from a closed stream")
 
     run(body)
+
+
+def test_an_async_controller_dropped_unclosed_warns_and_closes_its_link_and_threads() -> None:
+    with SimTcpServer(SimController("DMC-4040", ManualClock())) as server:
+        gc.collect()  # what earlier tests left to the collector
+        before = set(threading.enumerate())
+
+        async def session() -> None:
+            c = await aio.connect(server.url, timeout=2.0)
+            await c.query_number("MG 1")  # and no aclose()
+
+        def drop_two() -> None:
+            for _ in range(2):
+                asyncio.run(session())
+            gc.collect()
+
+        with pytest.warns(ResourceWarning, match=r"never closed: await aclose\(\)") as seen:
+            drop_two()
+        said = [str(w.message) for w in seen]
+        assert sum("AsyncController" in m for m in said) == 2
+        assert not any("call close()" in m for m in said)  # (the sync ones say nothing more)
+        for t in set(threading.enumerate()) - before:
+            t.join(5)  # the workers, the readers, and the threads that close them
+        assert sorted(t.name for t in set(threading.enumerate()) - before) == []
