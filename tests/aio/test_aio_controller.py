@@ -377,6 +377,32 @@ def test_the_loop_watch_reads_a_callbacks_cpu_time_inside_its_wall_time(
     assert all(cpu < wall for cpu, wall in zip(watch.cpu, watch.wall, strict=True))
 
 
+def test_timing_a_callback_costs_the_same_however_many_were_timed_before(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    scanned = 0
+
+    def counting_max(values: Any, **kwargs: Any) -> Any:
+        nonlocal scanned
+        values = list(values)
+        scanned += len(values)
+        return max(values, **kwargs)
+
+    monkeypatch.setattr(probe, "max", counting_max, raising=False)
+    watch = aio.LoopWatch()
+    loop = asyncio.new_event_loop()
+    try:
+        handle = loop.call_soon(print)
+        for i in range(2000):
+            watch._record(float(i % 7), 0.0, handle)
+        handle.cancel()
+    finally:
+        loop.close()
+    assert scanned < 2000  # not the whole history at each callback (2 million values)
+    assert watch.max_wall == 6.0
+    assert watch.slowest
+
+
 def test_the_loop_watch_tells_garbage_collection_from_a_callbacks_work() -> None:
     async def body() -> aio.LoopWatch:
         with aio.watch_loop() as watch:
