@@ -74,7 +74,8 @@ class RecordStream:
 
     Each record's ``time`` field is the controller sample it was taken at. The stream checks
     that consecutive records are ``period`` samples apart: :attr:`missed` counts the records
-    that never arrived (the controller sent them, or a poll came late), :attr:`gaps` says
+    that never arrived (the controller sent them, a poll came late, or they were lost while
+    a reconnect reopened the stream), :attr:`gaps` says
     where, and each gap is logged (WARNING on ``galil.records``).
 
     Attributes:
@@ -100,6 +101,7 @@ class RecordStream:
         self.missed = 0
         self.gaps: list[tuple[int, int]] = []
         self._last: int | None = None  # time of the last record
+        self._fresh = False  # the next pushed record is the first after a DR line
         self._anchor: tuple[int, float] | None = None  # (TIME, host clock) on the DR line
         self._source = source
         self._handle = handle
@@ -120,15 +122,19 @@ class RecordStream:
         return self.period * self._source.link.sample_period
 
     def _anchor_at(self, time: int) -> None:
-        """The controller's ``TIME`` read on the ``DR`` line (records come after it)."""
+        """The controller's ``TIME`` read on the ``DR`` line (records come after it). The
+        last record's time stays for the gap count: records lost across a reconnect are
+        missed too (:attr:`missed`), unless the controller's ``TIME`` went back (a reset)."""
         self._anchor = (time, self._source.link.clock())
-        self._last = None
+        self._fresh = True
 
     def _expected(self, sample: int) -> int:
         """Where the next pushed record should be: a period after the last one, or where
         the host's clock says the controller is when they disagree by more than a quarter
         wrap (or for the first record after the ``DR`` line)."""
-        expected = self._last + self.period if self._last is not None else None
+        fresh, self._fresh = self._fresh, False
+        last = None if fresh else self._last
+        expected = last + self.period if last is not None else None
         if self._anchor is not None:
             t0, c0 = self._anchor
             link = self._source.link

@@ -177,3 +177,25 @@ def test_a_loop_over_a_record_stream_whose_link_dies_raises() -> None:
         assert not stream.closed
         stream.close()
         assert list(stream) == []  # closed by the user: the loop just ends
+
+
+def test_records_lost_while_a_reconnect_reopens_the_stream_are_counted_missed() -> None:
+    sim = SimController("DMC-4040", RealTimeClock())
+    with (
+        SimTcpServer(sim) as server,
+        FaultProxy(server.address) as proxy,
+        galil.connect(proxy.url, reconnect=FAST, timeout=1.0) as dmc,
+        dmc.records(64, method="DR") as stream,
+    ):
+        times: list[int] = []
+        stream.subscribe(lambda rec: times.append(int(rec["time"])))
+        stream.take(3)
+        proxy.cut()
+        time.sleep(0.3)  # (the controller's clock runs on: records are sent to no one)
+        assert dmc.query_number("MG 4") == 4  # finds the link dead, reopens it
+        stream.take(len(stream) + 3)
+        steps = np.diff(times)
+        lost = [(t, round(d / 64) - 1) for t, d in zip(times[1:], steps, strict=True) if d > 64]
+        assert lost
+        assert stream.gaps == lost
+        assert stream.missed == sum(n for _, n in lost)
