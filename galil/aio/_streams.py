@@ -229,9 +229,46 @@ class AsyncRecordStream:
         return self.sync.dropped
 
     @property
+    def missed(self) -> int:
+        """Records missing between the ones received (gaps in their ``time``)."""
+        return self.sync.missed
+
+    @property
+    def gaps(self) -> list[tuple[int, int]]:
+        """``(time, missed)`` for each gap: the record after it, and how many were missing
+        (a copy)."""
+        return list(self.sync.gaps)
+
+    @property
+    def period_seconds(self) -> float:
+        """Seconds between records."""
+        return self.sync.period_seconds
+
+    @property
     def closed(self) -> bool:
         """Whether :meth:`close` was called."""
         return self.sync.closed
+
+    def __len__(self) -> int:
+        """Records received and not read yet."""
+        return len(self._ready) + len(self.sync)
+
+    async def subscribe(self, callback: Callable[[np.void], None]) -> Callable[[], None]:
+        """Call ``callback(record)`` on this event loop for each record as it arrives (with
+        ``QR``: as a read polls it); returns a function that unsubscribes.
+
+        Raises:
+            InvalidArgument: ``callback`` cannot be called.
+        """
+        if not callable(callback):
+            raise InvalidArgument(f"callback must be callable, not {callback!r}")
+        loop = asyncio.get_running_loop()
+
+        def deliver(rec: np.void) -> None:
+            if not loop.is_closed():
+                loop.call_soon_threadsafe(callback, rec)
+
+        return self.sync.subscribe(deliver)
 
     def _fetch(self, wait: float, limit: int) -> asyncio.Future[list[np.void]]:
         """The worker call taking records, started unless one is in flight already: one at

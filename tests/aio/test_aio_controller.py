@@ -573,3 +573,22 @@ def test_an_async_controller_dropped_unclosed_warns_and_closes_its_link_and_thre
         for t in set(threading.enumerate()) - before:
             t.join(5)  # the workers, the readers, and the threads that close them
         assert sorted(t.name for t in set(threading.enumerate()) - before) == []
+
+
+def test_an_async_record_stream_reads_out_what_its_sync_stream_counts() -> None:
+    async def body() -> None:
+        async with await sim() as c, await c.records(32) as stream:
+            seen: list[int] = []
+            unsubscribe = await stream.subscribe(lambda rec: seen.append(int(rec["time"])))
+            got = [int((await stream.get())["time"])]
+            await c.sleep(0.2)  # a poll comes late: records missed
+            got += (await stream.take(2))["time"].tolist()
+            await asyncio.sleep(0)  # (the callbacks come through the loop)
+            unsubscribe()
+            assert seen == got
+            assert stream.missed == stream.sync.missed > 0
+            assert stream.gaps == stream.sync.gaps == [(got[1], stream.missed)]
+            assert stream.period_seconds == pytest.approx(32 * c.sync.link.sample_period)
+            assert len(stream) == 0
+
+    run(body)
