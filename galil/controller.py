@@ -491,8 +491,8 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         self.tracker.reconnect = _reopener(self) if self._factory is not None else None
         if self._policy is not None:  # weakly: a controller dropped unclosed is still garbage
             self.link.on_dead = _weakly(self._reopen_dead_link)
-        self._parts = _Parts(self.link, self.messages_room, self.records_room,
-                             self.interrupts, self._watchdogs, self._life)  # fmt: skip
+        self._parts = _Parts(self.link, self.messages_room, self.records_room, self.interrupts,
+                             self._watchdogs, self._life, self.io)  # fmt: skip
         self._finalizer: weakref.finalize[Any, Any] | None = None
         self._open(first)
 
@@ -540,7 +540,8 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         begins is never seen done, even by a poll that finds it stopped meanwhile). What
         raw commands or a program on the controller started is left as it is, and so is
         gearing (``GA``): an axis geared to one that a program or a handwheel moves goes on
-        following it. The watchdog's routine is halted (leaving on purpose is not dying). A
+        following it. The watchdog's routine is halted (leaving on purpose is not dying), and so
+        is a ``wait_for_input``'s in flight (the wait raises). A
         capture started here and not read back is stopped (``RC 0``: it would hold the
         recorder). A waiting ``messages.get()``, ``interrupts.get()`` or record stream
         ``get()`` raises :class:`~galil.errors.GalilConnectionError` too.
@@ -920,6 +921,7 @@ class _Parts:
     interrupts: Interrupts
     watchdogs: list[Watchdog]
     life: threading.RLock
+    io: IO
 
 
 def _close_parts(parts: _Parts, *, keep_watchdogs: bool, keep_streams: bool = False) -> None:
@@ -930,6 +932,7 @@ def _close_parts(parts: _Parts, *, keep_watchdogs: bool, keep_streams: bool = Fa
             for dog in parts.watchdogs:
                 dog.stop()  # leaving on purpose is not dying: the routine is halted
             parts.watchdogs.clear()
+            parts.io.end_wait()  # a wait_for_input's routine too (its waiter raises)
         if not keep_streams:
             parts.records.close_all()
             parts.interrupts.disable()
@@ -1058,11 +1061,24 @@ def _collected(parts: _Parts, name: str) -> None:
         ResourceWarning,
         stacklevel=1,
     )
+    _close_in_background(parts)
+
+
+def _close_in_background(parts: _Parts) -> None:
     # On a thread of its own: a collection may run on a thread that holds the link's lock.
     with contextlib.suppress(RuntimeError):  # at shutdown, the process closes the rest
         threading.Thread(
             target=_close_quietly, args=(parts,), name="galil-finalize", daemon=True
         ).start()
+
+
+def close_collected(controller: Controller) -> None:
+    """Close ``controller`` as its garbage collection would (its link, readers and streams,
+    on a thread of its own; motion is not stopped), without its warning: for a wrapper
+    collected unclosed that warned in its own words (the async controller)."""
+    if controller._finalizer is not None:
+        controller._finalizer.detach()
+    _close_in_background(controller._parts)
 
 
 @contextlib.contextmanager

@@ -28,7 +28,7 @@ from typing import Any, Protocol, overload
 
 import numpy as np
 
-from galil.errors import GalilError, GalilTimeoutError, InvalidArgument
+from galil.errors import GalilConnectionError, GalilError, GalilTimeoutError, InvalidArgument
 from galil.link import CommandLink, check_wait_timeout
 from galil.protocol import commands as cmds
 from galil.routines import RESERVED, Routine, Routines
@@ -51,6 +51,10 @@ class MessageSource(Protocol):
 
     def ensure_polling(self) -> None:
         """Make sure unsolicited lines are being read."""
+        ...
+
+    def ended(self) -> str:
+        """Why no more lines will come (the link was closed or died); ``""`` while they may."""
         ...
 
 
@@ -268,6 +272,7 @@ class IO:
         self._messages = messages
         self._routines = routines
         self._wait_lock = threading.Lock()
+        self._watching: int | None = None  # the thread of the routine a wait is watching
 
     def _model_channels(self) -> tuple[int, Any]:
         m = self._link.model
@@ -333,10 +338,14 @@ class IO:
                 ever), or a busy thread.
             GalilTimeoutError: the input did not change in time (the routine is halted; one
                 that another wait held all that time is not started).
+            GalilConnectionError: the controller was closed, or its link died, during the
+                wait.
 
         Anything else that cuts the wait short (Ctrl-C, a reply lost) halts the routine too
         before it propagates; a dead link cannot, and the routine watches on until its input
-        changes (the next wait reuses its thread).
+        changes (the next wait reuses its thread, in this session or a later one). Closing
+        the controller halts the routine of a wait in flight; the wait (in another thread)
+        raises :class:`~galil.errors.GalilConnectionError`, as it does when the link dies.
         """
         n = self.inputs._check(n)
         if not isinstance(high, (bool, np.bool_)):
@@ -373,12 +382,23 @@ class IO:
                     [cmds.assign("ginput", n), cmds.assign("ginlevel", 1 if high else 0)]
                 )
                 self._routines.start(_INPUT_ROUTINE, t)
+                self._watching = t
                 if not self._watched(t, seen, left):
                     raise link.error(GalilTimeoutError, expired)
             finally:
+                self._watching = None
                 unsubscribe()
         finally:
             self._wait_lock.release()
+
+    def end_wait(self) -> None:
+        """Closing: halt the routine of a wait in flight (another thread's, or an async
+        wait's slice), which then raises :class:`~galil.errors.GalilConnectionError` as the
+        link closes; nothing is sent when no wait runs. Never raises for a dead link."""
+        thread = self._watching
+        if thread is not None and self._routines.holder(thread) == _INPUT_ROUTINE:
+            with contextlib.suppress(GalilError):
+                self._routines.halt(thread)
 
     def _turn(self, n: int, high: bool, deadline: float | None) -> bool | None:
         """Take the input routine (one wait at a time: its variables are shared): ``True``
@@ -402,7 +422,7 @@ class IO:
         be."""
         try:
             self._messages.ensure_polling()
-            in_time = _wait(self._link, seen, timeout)
+            in_time = _wait(self._link, seen, timeout, self._messages.ended)
         except BaseException:
             with contextlib.suppress(GalilError):
                 self._routines.halt(thread)
@@ -412,10 +432,20 @@ class IO:
         return in_time
 
 
-def _wait(link: CommandLink, seen: threading.Event, timeout: float | None) -> bool:
-    """Wait until ``seen`` is set (``True``) or ``timeout`` has passed (``False``)."""
+def _wait(
+    link: CommandLink, seen: threading.Event, timeout: float | None, ended: Callable[[], str]
+) -> bool:
+    """Wait until ``seen`` is set (``True``) or ``timeout`` has passed (``False``).
+
+    Raises:
+        GalilConnectionError: no message will come (``ended()`` says why: the link was
+            closed, or died).
+    """
     deadline = None if timeout is None else link.clock() + timeout
     while not seen.is_set():
+        why = ended()
+        if why:
+            raise GalilConnectionError(f"the wait for an input ended: {why}")
         now = link.clock()
         if deadline is not None and now >= deadline:
             return False

@@ -221,6 +221,11 @@ class Messages:
 
     # -- threads ----------------------------------------------------------------------------
 
+    def ended(self) -> str:
+        """Why no more lines will come (the controller was closed, or its link died: the
+        queue's :meth:`~galil.queues.BoundedQueue.ended`); ``""`` while they may."""
+        return self.queue.ended()
+
     def ensure_polling(self) -> None:
         """Poll an idle command link for unsolicited lines (unless a handle carries them)."""
         self._wanted_pump = True

@@ -340,6 +340,7 @@ class MotionTracker:
 
     def __init__(self) -> None:
         self._active: dict[str, MoveHandle] = {}
+        self._stop_sent: set[str] = set()  # axes of handles the library sent ST or AB to
         self.gears: dict[str, GearLink] = {}  # follower letter -> its gearing, while engaged
         #: Followers geared on the controller by something else (found at connect or after a
         #: reset, decision 0055): letter -> ratio. Their master is unknown.
@@ -407,16 +408,18 @@ class MotionTracker:
         return failed, interrupted
 
     def still_running(self, now: float) -> str:
-        """The axes of the motion the library started, has not seen end and, by its
-        prediction at controller time ``now``, still runs (an open jog always; a contour
-        streaming): what closing the link now stops mid-way. No query."""
+        """The axes of the motion the library started, has not seen end, has not stopped
+        already (its ``ST`` or ``AB`` sent: a cancelled wait's, say) and, by its prediction at
+        controller time ``now``, still runs (an open jog always; a contour streaming): what
+        closing the link now stops mid-way. No query."""
         with self.lock:
             handles = {id(h): h for h in self._active.values() if not h.finished}
             letters = "".join(w.letters for w in self._watches)
+            stopped = set(self._stop_sent)
         for h in handles.values():
             open_jog = any(t.open_jog for t in h._tracks.values())
             if open_jog or now <= h.started_at + h.duration:
-                letters += h.axes
+                letters += "".join(a for a in h.axes if a not in stopped)
         return "".join(dict.fromkeys(letters))
 
     def started(self, handle: MoveHandle) -> None:
@@ -428,6 +431,7 @@ class MotionTracker:
                 self.unstopped = "".join(a for a in self.unstopped if a not in ours)
             for a in handle._tracks:  # (handle.axes, then handle.followers)
                 self._active[a] = handle
+                self._stop_sent.discard(a)
             for a in handle._followers:
                 self._active[a] = handle
             if handle.kind == "schedule":
@@ -582,6 +586,8 @@ class MotionTracker:
             handle = self._active.get(a)
             if handle is not None:
                 handle.add_event(a, sample, make)
+                if stopping:
+                    self._stop_sent.add(a)
                 # (a follower's stop leaves its master's move to run on)
                 cancel = handle.take_cancel() if stopping and a in handle.axes else None
                 if cancel is not None:

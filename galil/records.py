@@ -74,7 +74,8 @@ class RecordStream:
 
     Each record's ``time`` field is the controller sample it was taken at. The stream checks
     that consecutive records are ``period`` samples apart: :attr:`missed` counts the records
-    that never arrived (the controller sent them, or a poll came late), :attr:`gaps` says
+    that never arrived (the controller sent them, a poll came late, or they were lost while
+    a reconnect reopened the stream), :attr:`gaps` says
     where, and each gap is logged (WARNING on ``galil.records``).
 
     Attributes:
@@ -100,6 +101,7 @@ class RecordStream:
         self.missed = 0
         self.gaps: list[tuple[int, int]] = []
         self._last: int | None = None  # time of the last record
+        self._fresh = False  # the next pushed record is the first after a DR line
         self._anchor: tuple[int, float] | None = None  # (TIME, host clock) on the DR line
         self._source = source
         self._handle = handle
@@ -110,6 +112,7 @@ class RecordStream:
         self._error: GalilError | None = None
         self._subscribers: Subscribers[np.void] = Subscribers("data-record", _LOG)
         self._next_due: float | None = None
+        self._poll_lock = threading.Lock()  # one QR poll at a time
         self._thread: threading.Thread | None = None
         self._suspended = False
 
@@ -119,15 +122,19 @@ class RecordStream:
         return self.period * self._source.link.sample_period
 
     def _anchor_at(self, time: int) -> None:
-        """The controller's ``TIME`` read on the ``DR`` line (records come after it)."""
+        """The controller's ``TIME`` read on the ``DR`` line (records come after it). The
+        last record's time stays for the gap count: records lost across a reconnect are
+        missed too (:attr:`missed`), unless the controller's ``TIME`` went back (a reset)."""
         self._anchor = (time, self._source.link.clock())
-        self._last = None
+        self._fresh = True
 
     def _expected(self, sample: int) -> int:
         """Where the next pushed record should be: a period after the last one, or where
         the host's clock says the controller is when they disagree by more than a quarter
         wrap (or for the first record after the ``DR`` line)."""
-        expected = self._last + self.period if self._last is not None else None
+        fresh, self._fresh = self._fresh, False
+        last = None if fresh else self._last
+        expected = last + self.period if last is not None else None
         if self._anchor is not None:
             t0, c0 = self._anchor
             link = self._source.link
@@ -211,6 +218,9 @@ class RecordStream:
                 return
             except GalilConnectionError as exc:
                 if not self._closed and not self._suspended:
+                    # A dead handle may mean a dead link: asked once, it is marked dead if
+                    # it does not answer either (a get() then reconnects, or raises).
+                    self._source.link.source_lost("the data-record handle", exc)
                     self._fail(exc)
                 return
             if records is not None:
@@ -260,26 +270,56 @@ class RecordStream:
                 (:func:`~galil.link.check_wait_timeout`, as the async stream), before a read.
             QueueTimeoutError: no record within ``timeout`` (a ``GalilTimeoutError`` that is
                 also a ``queue.Empty``).
-            GalilConnectionError: the stream is closed (or its handle died).
+            GalilConnectionError: the stream is closed, or its handle died (with the
+                automatic reconnect, ``reconnect=True``, a link that died with it is reopened
+                first, the stream with it, and the wait goes on; this if the reconnect
+                failed).
             ProtocolError: the record stream could not be decoded.
         """
         check_wait_timeout(timeout)
         if self.method == "QR":
             return self._poll(timeout)
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            with self._cond:
+                left = None if deadline is None else max(0.0, deadline - time.monotonic())
+                ready = self._cond.wait_for(
+                    lambda: self._items or self._closed or self._error is not None, left
+                )
+                if self._items:
+                    return self._items.popleft()
+                error = self._error
+                if error is None:
+                    if self._closed:
+                        raise GalilConnectionError("the data-record stream is closed")
+                    assert not ready
+                    raise QueueTimeoutError(f"no data record within {timeout} s")
+            if not self._revived(error):
+                raise error
+
+    def _revived(self, error: GalilError) -> bool:
+        """The handle died with its link: with the automatic reconnect the link is reopened
+        (and the stream with it: a new handle, ``DR`` again); says whether it was."""
+        if self._closed or not isinstance(error, GalilConnectionError):
+            return False
+        if not self._source.link.revive():
+            return False
         with self._cond:
-            ready = self._cond.wait_for(
-                lambda: self._items or self._closed or self._error is not None, timeout
-            )
-            if self._items:
-                return self._items.popleft()
-            if self._error is not None:
-                raise self._error
-            if self._closed:
-                raise GalilConnectionError("the data-record stream is closed")
-            assert not ready
-            raise QueueTimeoutError(f"no data record within {timeout} s")
+            return self._error is None
 
     def _poll(self, timeout: float | None) -> np.void:
+        # One poll at a time (threads, or the async stream's worker calls): each takes the
+        # next record due, never the one another thread is fetching.
+        started = time.monotonic()
+        if not self._poll_lock.acquire(timeout=-1 if timeout is None else timeout):
+            raise QueueTimeoutError(f"no data record within {timeout} s")
+        try:
+            left = None if timeout is None else max(0.0, timeout - (time.monotonic() - started))
+            return self._poll_locked(left)
+        finally:
+            self._poll_lock.release()
+
+    def _poll_locked(self, timeout: float | None) -> np.void:
         if self._closed:
             raise GalilConnectionError("the data-record stream is closed")
         link = self._source.link
@@ -316,12 +356,21 @@ class RecordStream:
         return out
 
     def __iter__(self) -> Iterator[np.void]:
-        """Records until the stream is closed."""
+        """Records until the stream is closed (:meth:`close`: the loop ends).
+
+        Raises:
+            GalilConnectionError: the stream's link died (with the automatic reconnect,
+                ``reconnect=True``, the link is reopened and the loop goes on; this if the
+                reconnect failed), or its handle was closed while the link works.
+        """
         while True:
             try:
-                yield self.get()
+                rec = self.get()
             except GalilConnectionError:
-                return
+                if self._closed:
+                    return
+                raise
+            yield rec
 
     def __len__(self) -> int:
         with self._cond:

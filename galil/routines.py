@@ -151,6 +151,23 @@ def check_user_labels(lines: Iterable[str]) -> None:
         )
 
 
+def routine_at(lines: Sequence[str], line: int) -> str | None:
+    """The first label of the library's routine that holds program line ``line`` (``_XQn``,
+    from 0) of the program ``lines`` (as uploaded: the controller keeps no empty line, so
+    they are numbered as it numbers them); ``None`` for a line of the user's."""
+    if MARKER not in lines:
+        return None
+    at = list(lines).index(MARKER)
+    if not at < line < len(lines):
+        return None
+    current: str | None = None
+    for i in range(at + 1, line + 1):
+        label = _label_of(lines[i])
+        if current is None or (label is not None and _is_end(lines[i - 1])):
+            current = label
+    return current
+
+
 def split_program(lines: Sequence[str]) -> tuple[list[str], dict[str, tuple[str, ...]]]:
     """The user's lines, and the library's routines by their first label, from an uploaded
     program. A routine starts at the block's first line or at a label right after an ``EN``
@@ -367,24 +384,43 @@ class Routines:
         return thread
 
     def check_free(self, thread: int, label: str) -> bool:
-        """Refuse a thread that does not exist or runs another program (one query).
+        """Refuse a thread that does not exist or runs another program (one query; and an
+        upload when the thread runs a program the library does not know it holds).
+
+        A thread found running inside the library's own ``label`` routine (left by an
+        earlier session, or by a call whose link died) is the library's again: the caller
+        halts it and starts it afresh (:meth:`start`).
 
         Returns:
-            Whether the thread still runs the library's ``label`` (one left by a call that
-            could not halt it: its link died).
+            Whether the thread still runs the library's ``label``.
 
         Raises:
-            InvalidArgument: the thread does not exist or runs a program.
+            InvalidArgument: the thread does not exist or runs a program (another of the
+                library's routines too: the error says which, and how to halt it).
         """
         model = self.link.model
         self.check_thread(thread)
-        busy = thread in self.running()
-        if busy and self._threads.get(thread) != label:
+        with self._lock:
+            running = self.running()
+            busy = thread in running
+            if not busy or self._threads.get(thread) == label:
+                return busy
+            left = routine_at(self.upload(), running[thread])
+            if left == label:
+                self._hold(thread, label, None)  # (an earlier session's: the library's again)
+                return True
+        if left is not None:
             raise InvalidArgument(
-                f"thread {thread} runs a program; choose another thread (thread=...)",
+                f"thread {thread} runs the library's routine {left} "
+                f"({RESERVED.get(left, 'a routine of the library')}), left running by an "
+                f"earlier session; halt it (controller.programs.halt({thread}), or HX{thread})"
+                " or choose another thread (thread=...)",
                 model=model.name,
             )
-        return busy
+        raise InvalidArgument(
+            f"thread {thread} runs a program; choose another thread (thread=...)",
+            model=model.name,
+        )
 
     def start(self, label: str, thread: int, *, owner: object | None = None) -> None:
         """Run the routine at ``label`` on ``thread`` (which must be free).

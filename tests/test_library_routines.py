@@ -238,3 +238,73 @@ def test_a_second_wait_for_an_input_returns_when_its_input_is_at_the_level() -> 
         sim_of(dmc).set_input(1, False)
         first.join(10.0)
         assert not first.is_alive()
+
+
+def _left_by_an_earlier_session(sim: object, label: str, thread: int = 7) -> None:
+    """A session that installed the library's routines and left ``label`` running on
+    ``thread`` (as one whose link died, or an older version's close, would)."""
+    from galil.controller import Controller
+    from galil.sim.link import SimLink
+
+    with Controller(SimLink(sim)) as dmc:  # type: ignore[arg-type]
+        dmc.watchdog(0.5, thread=6).stop()
+        with pytest.raises(galil.GalilTimeoutError):
+            dmc.io.wait_for_input(1, high=False, timeout=0.1)
+        dmc.command(f"ginput=1;ginlevel=0;XQ {label},{thread}", allow_compound=True)
+
+
+def test_a_new_session_takes_over_an_input_routine_an_earlier_one_left_running() -> None:
+    from galil.controller import Controller
+    from galil.sim.clock import ManualClock
+    from galil.sim.controller import SimController
+    from galil.sim.link import SimLink
+
+    sim = SimController("DMC-4040", ManualClock())
+    _left_by_an_earlier_session(sim, "#GINWAIT")
+    with Controller(SimLink(sim)) as dmc:
+        assert dmc.query_number("MG _XQ7") >= 0
+        with pytest.raises(galil.GalilTimeoutError):
+            dmc.io.wait_for_input(2, high=False, timeout=0.3)
+        assert dmc.query_number("MG _XQ7") == -1  # halted by the timed-out wait
+
+
+def test_a_thread_running_another_library_routine_says_whose_it_is_and_how_to_halt_it() -> None:
+    from galil.controller import Controller
+    from galil.sim.clock import ManualClock
+    from galil.sim.controller import SimController
+    from galil.sim.link import SimLink
+
+    sim = SimController("DMC-4040", ManualClock())
+    _left_by_an_earlier_session(sim, "#GWDOG")
+    with Controller(SimLink(sim)) as dmc:
+        with pytest.raises(galil.InvalidArgument, match=r"#GWDOG \(the watchdog\).*HX7"):
+            dmc.io.wait_for_input(2, high=False, timeout=0.3)
+        dmc.command("HX7")
+
+
+def test_a_sync_wait_for_an_input_in_another_thread_ends_when_the_controller_closes() -> None:
+    from galil.controller import Controller
+    from galil.sim.clock import ManualClock
+    from galil.sim.controller import SimController
+    from galil.sim.link import SimLink
+
+    sim = SimController("DMC-4040", ManualClock())
+    dmc = Controller(SimLink(sim))
+    ended: list[BaseException] = []
+
+    def waiter() -> None:
+        try:
+            dmc.io.wait_for_input(1, high=False)
+        except BaseException as exc:
+            ended.append(exc)
+
+    t = threading.Thread(target=waiter, daemon=True)
+    t.start()
+    while dmc.routines.threads.get(7) != "#GINWAIT":  # its routine runs
+        time.sleep(0.01)
+    dmc.close()
+    t.join(5)
+    assert not t.is_alive()
+    assert isinstance(ended[0], galil.GalilConnectionError)
+    with Controller(SimLink(sim)) as again:
+        assert again.query_number("MG _XQ7") == -1  # the routine was halted

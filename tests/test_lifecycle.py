@@ -478,6 +478,27 @@ def test_closing_on_motion_nobody_waited_for_warns_naming_the_axes(
     assert "wait()" in record.getMessage()
 
 
+def test_closing_while_a_stopped_move_decelerates_warns_only_of_the_unstopped_axes(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # A wait cancelled or timed out (async) sends the move's ST: nothing was left running
+    # unwaited for on that axis, though it still decelerates when close() comes.
+    with (
+        caplog.at_level("WARNING", logger="galil.controller"),
+        galil.connect("sim://DMC-4040") as c,
+    ):
+        c.C.speed = 200_000
+        c.C.decel = 20_000
+        stopped = c.C.move_by(2_000_000)
+        c.A.move_by(10_000)
+        c.sleep(0.05)
+        stopped.stop()
+        c.sleep(0.05)
+        assert c.C.moving  # decelerating
+    (record,) = [r for r in caplog.records if "mid-motion" in r.getMessage()]
+    assert "axes A mid-motion" in record.getMessage()
+
+
 @pytest.mark.parametrize("how", ["waited", "over by its prediction", "a jog a limit stopped"])
 def test_closing_after_the_motion_is_over_says_nothing(
     how: str, caplog: pytest.LogCaptureFixture

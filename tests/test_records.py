@@ -10,6 +10,7 @@ from __future__ import annotations
 import queue
 import socket
 import struct
+import threading
 import time
 from collections.abc import Iterator
 
@@ -319,3 +320,31 @@ def test_a_failing_record_callback_is_logged_and_the_others_still_get_records(
         with pytest.raises(InvalidArgument, match="callable"):
             stream.subscribe("not callable")  # type: ignore[arg-type]
         stream.close()
+
+
+def test_two_threads_polling_one_qr_stream_get_successive_records_never_the_same() -> None:
+    """The first poll is held inside its QR write while a second thread asks: the second
+    waits for its turn and takes the next record, a period later (not a second QR at once)."""
+    with simulated("DMC-4040") as c, c.records(32) as stream:
+        held = threading.Event()
+        go_on = threading.Event()
+
+        def hook(direction: str, data: bytes) -> None:
+            if direction == "out" and b"QR" in data and not go_on.is_set():
+                held.set()
+                go_on.wait(timeout=10)  # bounded: a broken test fails, never hangs
+
+        remove = c.wire_log.add(hook)
+        got: list[int] = []
+        first = threading.Thread(target=lambda: got.append(int(stream.get()["time"])))
+        first.start()
+        assert held.wait(10)
+        second = threading.Thread(target=lambda: got.append(int(stream.get()["time"])))
+        second.start()
+        time.sleep(0.05)  # (not motion: lets the second thread reach its poll)
+        go_on.set()
+        first.join(10)
+        second.join(10)
+        remove()
+        assert sorted(got)[1] - sorted(got)[0] == 32
+        assert stream.missed == 0

@@ -11,6 +11,8 @@ import concurrent.futures
 import contextlib
 import functools
 import itertools
+import warnings
+import weakref
 from collections.abc import AsyncIterator, Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -25,7 +27,7 @@ from galil.aio._streams import AsyncMessages, LoopQueue
 from galil.aio._worker import Worker, shielded, twin
 from galil.capture import Capture
 from galil.contour import ContourResult
-from galil.controller import Controller, CoordinatedMotion, no_axis_attribute
+from galil.controller import Controller, CoordinatedMotion, close_collected, no_axis_attribute
 from galil.controller import connect as connect_sync
 from galil.errors import GalilError, InvalidArgument
 from galil.homing import SwitchPolarity
@@ -143,6 +145,9 @@ class AsyncController(AsyncLinkFacade):
         self.arrays = AsyncArrays(sync.arrays, worker)
         self.variables = AsyncVariables(sync.variables, worker)
         self.interrupts = AsyncInterrupts(sync.interrupts, worker, loop, interrupts)
+        # Dropped unclosed: a ResourceWarning, and its link and threads are closed.
+        self._finalizer = weakref.finalize(self, _collected, sync, worker, repr(self))
+        self._finalizer.atexit = False
 
     @property
     def closed(self) -> bool:
@@ -328,6 +333,7 @@ class AsyncController(AsyncLinkFacade):
         streams and interrupts stop) and end the worker's threads; idempotent."""
         if self._worker.closed:
             return
+        self._finalizer.detach()
         self._messages.close()
         self.interrupts.queue.close()
         self._unsubscribe()
@@ -344,6 +350,18 @@ class AsyncController(AsyncLinkFacade):
 
     def __repr__(self) -> str:
         return f"<AsyncController of {self.sync!r}>"
+
+
+def _collected(sync: Controller, worker: Worker, name: str) -> None:
+    warnings.warn(
+        f"{name} was never closed: await aclose() or use `async with await "
+        "galil.aio.connect(...)`; its link and worker threads are closed now (motion it "
+        "started is not stopped)",
+        ResourceWarning,
+        stacklevel=1,
+    )
+    worker.close()
+    close_collected(sync)
 
 
 def _stop_watchdog(dog: Any) -> None:

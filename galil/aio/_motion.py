@@ -343,14 +343,15 @@ class AsyncMoveHandle:
         duration plus the margin of :meth:`watch`), they are never called: the error is
         logged (logger ``galil.aio``) and they are dropped. A move not seen done when
         :meth:`~galil.aio.AsyncController.aclose` begins is never seen done, though the stop
-        ``aclose()`` sends ends it and the watcher polls meanwhile.
+        ``aclose()`` sends ends it and the watcher polls meanwhile. A callback that raises
+        is logged (ERROR on ``galil.aio``) and the others still run.
 
         Raises:
             InvalidArgument: ``callback`` cannot be called.
         """
         check_callable(callback, "callback")
         if self.sync.finished:
-            callback(self)
+            self._call(callback)
             return
         self._callbacks.append(callback)
         if self._watcher is None:
@@ -371,7 +372,15 @@ class AsyncMoveHandle:
             return
         callbacks, self._callbacks = self._callbacks, []
         for cb in callbacks:
-            cb(self)
+            self._call(cb)
+
+    def _call(self, callback: Callable[[AsyncMoveHandle], None]) -> None:
+        """Run one done-callback; what it raises is logged (ERROR on ``galil.aio``), never
+        passed on: the other callbacks still run (as the sync handle's)."""
+        try:
+            callback(self)
+        except Exception:
+            _LOG.exception("move callback %r on %s failed", callback, self.axes)
 
     def __repr__(self) -> str:
         return f"<AsyncMoveHandle of {self.sync!r}>"

@@ -5,13 +5,14 @@ calls back) and are handed to the loop with ``call_soon_threadsafe``: no thread 
 them (:class:`LoopQueue`). Records stay
 in the sync :class:`~galil.records.RecordStream` (its queue, its ``dropped`` count, its
 errors) and are taken from it in batches on a worker thread, in slices of at most
-:data:`SLICE` seconds so a cancelled reader frees its thread soon.
+:data:`SLICE` seconds so a cancelled reader frees its thread soon. One such call at a time
+per stream: a read cancelled while it runs leaves it to finish, and the next read waits for
+it (its records are kept, in order) rather than starting a second one beside it.
 """
 
 from __future__ import annotations
 
 import asyncio
-import concurrent.futures
 import math
 from collections import deque
 from collections.abc import Awaitable, Callable
@@ -19,7 +20,7 @@ from typing import Any, Generic, TypeVar
 
 import numpy as np
 
-from galil.aio._worker import Worker, shielded
+from galil.aio._worker import Worker
 from galil.errors import GalilConnectionError, InvalidArgument, QueueTimeoutError
 from galil.link import check_count, check_wait_timeout
 from galil.queues import CHECK
@@ -199,14 +200,18 @@ class AsyncRecordStream:
     """Data records every ``period`` samples, decoded: ``async for rec in stream``.
 
     Build it with ``await controller.records(period)``; close it (or use ``async with``) to
-    stop it. Records are the sync stream's (:attr:`sync`): pushed by ``DR`` over Ethernet,
-    polled with ``QR`` elsewhere, on the controller's clock.
+    stop it: ``async for`` ends then. If its link dies, ``async for`` raises
+    :class:`~galil.errors.GalilConnectionError` (with ``reconnect=True`` the link is reopened
+    and the loop goes on), as the sync stream's ``for`` does. Records are the sync stream's
+    (:attr:`sync`): pushed by ``DR`` over Ethernet, polled with ``QR`` elsewhere, on the
+    controller's clock.
     """
 
     def __init__(self, stream: RecordStream, worker: Worker) -> None:
         self.sync = stream
         self._worker = worker
         self._ready: deque[np.void] = deque()
+        self._pending: asyncio.Future[list[np.void]] | None = None
 
     @property
     def period(self) -> int:
@@ -224,22 +229,69 @@ class AsyncRecordStream:
         return self.sync.dropped
 
     @property
+    def missed(self) -> int:
+        """Records missing between the ones received (gaps in their ``time``)."""
+        return self.sync.missed
+
+    @property
+    def gaps(self) -> list[tuple[int, int]]:
+        """``(time, missed)`` for each gap: the record after it, and how many were missing
+        (a copy)."""
+        return list(self.sync.gaps)
+
+    @property
+    def period_seconds(self) -> float:
+        """Seconds between records."""
+        return self.sync.period_seconds
+
+    @property
     def closed(self) -> bool:
         """Whether :meth:`close` was called."""
         return self.sync.closed
 
-    async def _fetch(self, wait: float, limit: int) -> list[np.void]:
-        future = self._worker.submit(_take, self.sync, wait, limit)
-        try:
-            return await shielded(future)
-        except asyncio.CancelledError:
-            # Records the worker takes after the cancellation wait for the next reader.
-            future.add_done_callback(self._keep)
-            raise
+    def __len__(self) -> int:
+        """Records received and not read yet."""
+        return len(self._ready) + len(self.sync)
 
-    def _keep(self, future: concurrent.futures.Future[list[np.void]]) -> None:
+    async def subscribe(self, callback: Callable[[np.void], None]) -> Callable[[], None]:
+        """Call ``callback(record)`` on this event loop for each record as it arrives (with
+        ``QR``: as a read polls it); returns a function that unsubscribes.
+
+        Raises:
+            InvalidArgument: ``callback`` cannot be called.
+        """
+        if not callable(callback):
+            raise InvalidArgument(f"callback must be callable, not {callback!r}")
+        loop = asyncio.get_running_loop()
+
+        def deliver(rec: np.void) -> None:
+            if not loop.is_closed():
+                loop.call_soon_threadsafe(callback, rec)
+
+        return self.sync.subscribe(deliver)
+
+    def _fetch(self, wait: float, limit: int) -> asyncio.Future[list[np.void]]:
+        """The worker call taking records, started unless one is in flight already: one at
+        a time, so a read cancelled while its call runs (a timeout) leaves no second call
+        beside the next read's (two would split or repeat records, or poll twice at once).
+        The call's records go to :attr:`_ready` as it ends, before any reader resumes."""
+        pending = self._pending
+        if pending is None:
+            pending = asyncio.wrap_future(self._worker.submit(_take, self.sync, wait, limit))
+            pending.add_done_callback(self._keep)  # first: it runs before any reader resumes
+            self._pending = pending
+        return pending
+
+    def _keep(self, future: asyncio.Future[list[np.void]]) -> None:
+        self._pending = None
         if not future.cancelled() and future.exception() is None:
             self._ready.extend(future.result())
+
+    async def _await_fetch(self, wait: float, limit: int) -> None:
+        """Wait for the worker call in flight (started if none is: at most ``wait`` s for a
+        record); cancelling the wait leaves the call running (its records wait for the next
+        read)."""
+        await asyncio.shield(self._fetch(wait, limit))
 
     async def batch(self, limit: int = 1000, timeout: float | None = None) -> list[np.void]:
         """The records waiting (at least one, at most ``limit``), waiting up to ``timeout`` s
@@ -258,7 +310,7 @@ class AsyncRecordStream:
         while not self._ready:
             left = deadline - loop.time()
             # Take what is there in one worker call, even when asked for one record.
-            self._ready.extend(await self._fetch(max(0.0, min(SLICE, left)), max(limit, BATCH)))
+            await self._await_fetch(max(0.0, min(SLICE, left)), max(limit, BATCH))
             if not self._ready and loop.time() >= deadline:
                 raise QueueTimeoutError(f"no data record within {timeout} s")
         out: list[np.void] = []
@@ -302,6 +354,8 @@ class AsyncRecordStream:
         try:
             return await self.get()
         except GalilConnectionError:
+            if not self.sync.closed:
+                raise  # the link died: the loop does not end as if all were well
             raise StopAsyncIteration from None
 
     async def close(self) -> None:

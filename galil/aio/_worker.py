@@ -92,6 +92,7 @@ class Worker:
                 future.set_exception(exc)
             else:
                 future.set_result(result)
+                del result  # (a thread keeps nothing of the last call: not its controller)
             del future, call, job
 
     def submit(

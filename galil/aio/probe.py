@@ -55,6 +55,7 @@ class LoopWatch:
     slowest: str = ""
     _gc_started: float = 0.0
     _gc_in_step: float = 0.0
+    _top_wall: float = 0.0  # the longest wall time so far (no rescan of the history)
 
     @property
     def steps(self) -> int:
@@ -89,7 +90,8 @@ class LoopWatch:
         return sum(1 for v in (self.cpu if cpu else self.wall) if v > seconds)
 
     def _record(self, wall: float, cpu: float, handle: asyncio.Handle) -> None:
-        if wall > self.max_wall:
+        if wall > self._top_wall:
+            self._top_wall = wall
             self.slowest = _describe(handle)
         self.wall.append(wall)
         self.cpu.append(cpu)

@@ -25,6 +25,10 @@ import galil
 import galil.aio as aio
 from galil.aio import probe
 from galil.controller import Controller
+from galil.sim.clock import ManualClock, RealTimeClock
+from galil.sim.controller import SimController
+from galil.sim.proxy import FaultProxy
+from galil.sim.server import SimTcpServer
 from galil.testing import sim_of
 from galil.units import ureg
 
@@ -373,6 +377,32 @@ def test_the_loop_watch_reads_a_callbacks_cpu_time_inside_its_wall_time(
     assert all(cpu < wall for cpu, wall in zip(watch.cpu, watch.wall, strict=True))
 
 
+def test_timing_a_callback_costs_the_same_however_many_were_timed_before(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    scanned = 0
+
+    def counting_max(values: Any, **kwargs: Any) -> Any:
+        nonlocal scanned
+        values = list(values)
+        scanned += len(values)
+        return max(values, **kwargs)
+
+    monkeypatch.setattr(probe, "max", counting_max, raising=False)
+    watch = aio.LoopWatch()
+    loop = asyncio.new_event_loop()
+    try:
+        handle = loop.call_soon(print)
+        for i in range(2000):
+            watch._record(float(i % 7), 0.0, handle)
+        handle.cancel()
+    finally:
+        loop.close()
+    assert scanned < 2000  # not the whole history at each callback (2 million values)
+    assert watch.max_wall == 6.0
+    assert watch.slowest
+
+
 def test_the_loop_watch_tells_garbage_collection_from_a_callbacks_work() -> None:
     async def body() -> aio.LoopWatch:
         with aio.watch_loop() as watch:
@@ -462,3 +492,103 @@ def test_an_async_message_wait_on_a_link_that_dies_reconnects_with_reconnect_on(
             return await asyncio.wait_for(waiting, 5)
 
     assert run(body) == "after the reconnect"
+
+
+def test_a_polled_record_read_cancelled_mid_poll_leaves_no_duplicate_for_the_next_read() -> None:
+    """A get() cancelled (a timeout) while its QR is on the wire: the next get() waits for
+    that poll rather than polling beside it, and the records stay one period apart."""
+
+    async def body() -> list[int]:
+        async with await sim() as c, await c.records(32) as stream:
+            loop = asyncio.get_running_loop()
+            writing = asyncio.Event()
+            go_on = threading.Event()
+
+            def hook(direction: str, data: bytes) -> None:
+                if direction == "out" and b"QR" in data and not go_on.is_set():
+                    loop.call_soon_threadsafe(writing.set)
+                    go_on.wait(timeout=10)  # bounded: a broken test fails, never hangs
+
+            remove = c.wire_log.add(hook)
+            task = asyncio.ensure_future(stream.get())
+            await writing.wait()
+            task.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await task
+            nxt = asyncio.ensure_future(stream.get())
+            await asyncio.sleep(0.05)  # (not motion: time for a second poll to begin, if any)
+            go_on.set()
+            first = await nxt
+            remove()
+            rest = await stream.take(3)
+            assert stream.sync.missed == 0
+            return [int(first["time"]), *rest["time"].tolist()]
+
+    assert np.diff(run(body)).tolist() == [32] * 3
+
+
+def test_an_async_loop_over_a_record_stream_whose_link_dies_raises() -> None:
+    async def body() -> None:
+        sim_controller = SimController("DMC-4040", RealTimeClock())
+        with SimTcpServer(sim_controller) as server, FaultProxy(server.address) as proxy:
+            async with await aio.connect(proxy.url, timeout=1.0) as c:
+                stream = await c.records(16, method="DR")
+
+                async def pull_after_three() -> None:
+                    n = 0
+                    async for _ in stream:
+                        n += 1
+                        if n == 3:
+                            proxy.cut()
+
+                with pytest.raises(galil.GalilConnectionError):
+                    await pull_after_three()
+                assert not stream.closed
+                await stream.close()
+                async for _ in stream:  # closed by the user: the loop just ends
+                    raise AssertionError("a record from a closed stream")
+
+    run(body)
+
+
+def test_an_async_controller_dropped_unclosed_warns_and_closes_its_link_and_threads() -> None:
+    with SimTcpServer(SimController("DMC-4040", ManualClock())) as server:
+        gc.collect()  # what earlier tests left to the collector
+        before = set(threading.enumerate())
+
+        async def session() -> None:
+            c = await aio.connect(server.url, timeout=2.0)
+            await c.query_number("MG 1")  # and no aclose()
+
+        def drop_two() -> None:
+            for _ in range(2):
+                asyncio.run(session())
+            gc.collect()
+
+        with pytest.warns(ResourceWarning, match=r"never closed: await aclose\(\)") as seen:
+            drop_two()
+        said = [str(w.message) for w in seen]
+        assert sum("AsyncController" in m for m in said) == 2
+        assert not any("call close()" in m for m in said)  # (the sync ones say nothing more)
+        for t in set(threading.enumerate()) - before:
+            t.join(5)  # the workers, the readers, and the threads that close them
+        assert sorted(t.name for t in set(threading.enumerate()) - before) == []
+
+
+def test_an_async_record_stream_reads_out_what_its_sync_stream_counts() -> None:
+    async def body() -> None:
+        async with await sim() as c, await c.records(32) as stream:
+            seen: list[int] = []
+            unsubscribe = await stream.subscribe(lambda rec: seen.append(int(rec["time"])))
+            got = [int((await stream.get())["time"])]
+            await c.sleep(0.2)  # a poll comes late: records missed
+            got += (await stream.take(2))["time"].tolist()
+            await asyncio.sleep(0)  # (the callbacks come through the loop)
+            unsubscribe()
+            assert seen == got
+            assert stream.missed == stream.sync.missed > 0
+            assert stream.gaps == stream.sync.gaps == [(got[1], stream.missed)]
+            assert stream.period_seconds == pytest.approx(32 * c.sync.link.sample_period)
+            assert len(stream) == 0
+
+    run(body)

@@ -108,6 +108,32 @@ def test_callbacks_run_once_the_move_is_done() -> None:
     assert len(run(body)) == 1
 
 
+def test_a_callback_that_raises_is_logged_and_the_others_still_run(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    def buggy(handle: object) -> None:
+        raise RuntimeError("bug in a UI callback")
+
+    async def body() -> list[object]:
+        async with await sim() as c:
+            move = await c.A.move_to(2_000)
+            called: list[object] = []
+            for cb in (buggy, called.append):
+                move.add_callback(cb)
+            await move
+            watcher = move._watcher
+            assert watcher is not None
+            await watcher
+            for cb in (buggy, called.append):  # done already: called at once
+                move.add_callback(cb)
+            return called
+
+    assert len(run(body)) == 2
+    failed = [r for r in caplog.records if "callback" in r.getMessage()]
+    assert [(r.name, r.levelname) for r in failed] == [("galil.aio", "ERROR")] * 2
+    assert all("bug in a UI callback" in (r.exc_text or "") for r in failed)
+
+
 def _dies_after(c: aio.AsyncController, mark: bytes) -> None:
     """The link dies once a line with ``mark`` went out (the controller got it; its reply is
     lost with the link). ``sim://`` reopens onto the same simulator."""

@@ -4,7 +4,9 @@ asked again on the new link; a command that may have changed something is never 
 from __future__ import annotations
 
 import logging
+import time
 
+import numpy as np
 import pytest
 
 import galil
@@ -122,3 +124,78 @@ def test_a_reopen_that_finds_another_controller_is_refused_and_the_link_stays_de
             assert "reconnect 1/3 to DMC-4040 failed" in caplog.text
     finally:
         dmc.close()
+
+
+def _pulled_while_iterating(stream: galil.RecordStream, proxy: FaultProxy) -> list[int]:
+    """Iterate ``stream``, pulling the cable after 3 records, until 3 records came over the
+    reopened link (at most 10 s)."""
+    times: list[int] = []
+    connections = proxy.connections
+    after = 0
+    start = time.monotonic()
+    for rec in stream:
+        times.append(int(rec["time"]))
+        if len(times) == 3:
+            connections = proxy.connections
+            proxy.cut()
+        after += len(times) > 3 and proxy.connections > connections
+        if after == 3 or time.monotonic() - start > 10:
+            break
+    assert after == 3
+    return times
+
+
+def test_a_loop_over_a_record_stream_goes_on_through_a_reconnect() -> None:
+    sim = SimController("DMC-4040", RealTimeClock())
+    with (
+        SimTcpServer(sim) as server,
+        FaultProxy(server.address) as proxy,
+        galil.connect(proxy.url, reconnect=FAST, timeout=1.0) as dmc,
+        dmc.records(16, method="DR") as stream,
+    ):
+        times = _pulled_while_iterating(stream, proxy)  # the loop alone reopens the link
+        assert np.all(np.diff(times) > 0)
+        assert not stream.closed
+
+
+def test_a_loop_over_a_record_stream_whose_link_dies_raises() -> None:
+    sim = SimController("DMC-4040", RealTimeClock())
+    with (
+        SimTcpServer(sim) as server,
+        FaultProxy(server.address) as proxy,
+        galil.connect(proxy.url, timeout=1.0) as dmc,
+        dmc.records(16, method="DR") as stream,
+    ):
+
+        def pull_after_three() -> None:
+            for n, _ in enumerate(stream, 1):
+                if n == 3:
+                    proxy.cut()
+
+        with pytest.raises(galil.GalilConnectionError):
+            pull_after_three()
+        assert not stream.closed
+        stream.close()
+        assert list(stream) == []  # closed by the user: the loop just ends
+
+
+def test_records_lost_while_a_reconnect_reopens_the_stream_are_counted_missed() -> None:
+    sim = SimController("DMC-4040", RealTimeClock())
+    with (
+        SimTcpServer(sim) as server,
+        FaultProxy(server.address) as proxy,
+        galil.connect(proxy.url, reconnect=FAST, timeout=1.0) as dmc,
+        dmc.records(64, method="DR") as stream,
+    ):
+        times: list[int] = []
+        stream.subscribe(lambda rec: times.append(int(rec["time"])))
+        stream.take(3)
+        proxy.cut()
+        time.sleep(0.3)  # (the controller's clock runs on: records are sent to no one)
+        assert dmc.query_number("MG 4") == 4  # finds the link dead, reopens it
+        stream.take(len(stream) + 3)
+        steps = np.diff(times)
+        lost = [(t, round(d / 64) - 1) for t, d in zip(times[1:], steps, strict=True) if d > 64]
+        assert lost
+        assert stream.gaps == lost
+        assert stream.missed == sum(n for _, n in lost)
