@@ -3,8 +3,10 @@ asked again on the new link; a command that may have changed something is never 
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -17,6 +19,22 @@ from galil.sim.proxy import FaultProxy
 from galil.sim.server import SimTcpServer
 
 FAST = galil.ReconnectPolicy(attempts=3, delay=0.01)
+
+
+@contextlib.contextmanager
+def _dr_stream_through_a_cable(
+    period: int, reconnect: galil.ReconnectPolicy | None = FAST
+) -> Iterator[tuple[galil.Controller, FaultProxy, galil.RecordStream]]:
+    """A real-time simulator behind a cable that can be cut, a controller on it (with the
+    automatic reconnect, unless ``reconnect`` is None) and a DR record stream."""
+    sim = SimController("DMC-4040", RealTimeClock())
+    with (
+        SimTcpServer(sim) as server,
+        FaultProxy(server.address) as proxy,
+        galil.connect(proxy.url, reconnect=reconnect, timeout=1.0) as dmc,
+        dmc.records(period, method="DR") as stream,
+    ):
+        yield dmc, proxy, stream
 
 
 def test_a_query_survives_a_pulled_cable_and_the_reconnect_is_logged(
@@ -54,13 +72,7 @@ def test_a_command_that_may_have_run_is_not_sent_twice() -> None:
 
 
 def test_a_data_record_stream_goes_on_after_a_reconnect() -> None:
-    sim = SimController("DMC-4040", RealTimeClock())
-    with (
-        SimTcpServer(sim) as server,
-        FaultProxy(server.address) as proxy,
-        galil.connect(proxy.url, reconnect=FAST, timeout=1.0) as dmc,
-        dmc.records(64, method="DR") as stream,
-    ):
+    with _dr_stream_through_a_cable(64) as (dmc, proxy, stream):
         dmc.sleep(0.2)
         assert stream.get(timeout=2) is not None
         proxy.cut()
@@ -146,26 +158,14 @@ def _pulled_while_iterating(stream: galil.RecordStream, proxy: FaultProxy) -> li
 
 
 def test_a_loop_over_a_record_stream_goes_on_through_a_reconnect() -> None:
-    sim = SimController("DMC-4040", RealTimeClock())
-    with (
-        SimTcpServer(sim) as server,
-        FaultProxy(server.address) as proxy,
-        galil.connect(proxy.url, reconnect=FAST, timeout=1.0) as dmc,
-        dmc.records(16, method="DR") as stream,
-    ):
+    with _dr_stream_through_a_cable(16) as (_, proxy, stream):
         times = _pulled_while_iterating(stream, proxy)  # the loop alone reopens the link
         assert np.all(np.diff(times) > 0)
         assert not stream.closed
 
 
 def test_a_loop_over_a_record_stream_whose_link_dies_raises() -> None:
-    sim = SimController("DMC-4040", RealTimeClock())
-    with (
-        SimTcpServer(sim) as server,
-        FaultProxy(server.address) as proxy,
-        galil.connect(proxy.url, timeout=1.0) as dmc,
-        dmc.records(16, method="DR") as stream,
-    ):
+    with _dr_stream_through_a_cable(16, reconnect=None) as (_, proxy, stream):
 
         def pull_after_three() -> None:
             for n, _ in enumerate(stream, 1):
@@ -180,13 +180,7 @@ def test_a_loop_over_a_record_stream_whose_link_dies_raises() -> None:
 
 
 def test_records_lost_while_a_reconnect_reopens_the_stream_are_counted_missed() -> None:
-    sim = SimController("DMC-4040", RealTimeClock())
-    with (
-        SimTcpServer(sim) as server,
-        FaultProxy(server.address) as proxy,
-        galil.connect(proxy.url, reconnect=FAST, timeout=1.0) as dmc,
-        dmc.records(64, method="DR") as stream,
-    ):
+    with _dr_stream_through_a_cable(64) as (dmc, proxy, stream):
         times: list[int] = []
         stream.subscribe(lambda rec: times.append(int(rec["time"])))
         stream.take(3)
