@@ -1042,7 +1042,7 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
         contour mode yet never sends a segment; one that has stops (and sends no ``CD``)."""
         stop = functools.partial(c.sync.stop, self._letters)
         with contextlib.suppress(GalilError):  # (a controller closed since: it stopped it)
-            await c.worker.run_shielded(starting.cancel, stop)
+            await c.worker.run_urgent(starting.cancel, stop)
 
     async def _halt(self, flight: _Flight, why: str) -> bool:
         """Stop ``flight`` if it is in progress (without waiting for its end); whether it

@@ -307,7 +307,7 @@ class AsyncAxis(MotionRoom[Axis]):
     speed_schedule = motion_twin(Axis.speed_schedule)
     plan_to = twin(_plan_to)
     plan_by = twin(_plan_by)
-    stop = twin(Axis.stop, shield=True)  # asked for, a stop goes out even if cancelled
+    stop = twin(Axis.stop, urgent=True)  # asked for, a stop goes out even if cancelled
 
     async def gear_to(self, master: AsyncAxis | Axis | str, ratio: float) -> AsyncGearing:
         """Follow ``master`` (an axis, or ``"S"``: the S sequences' path) at ``ratio`` (``GA``

@@ -208,8 +208,8 @@ class AsyncController(AsyncLinkFacade):
         _stop_sequence_started
     )
     plan_vector = twin(_plan_vector)
-    stop = twin(Controller.stop, shield=True)  # asked for, a stop goes out even if cancelled
-    abort = twin(Controller.abort, shield=True)
+    stop = twin(Controller.stop, urgent=True)  # asked for, a stop goes out even if cancelled
+    abort = twin(Controller.abort, urgent=True)
     servo_here = twin(Controller.servo_here)
     motor_off = twin(Controller.motor_off)
 
@@ -255,7 +255,7 @@ class AsyncController(AsyncLinkFacade):
                 # never sends a segment; one that has is stopped (ST, and no CD after it).
                 with contextlib.suppress(GalilError):
                     stop = functools.partial(self.sync.stop, axes)
-                    await self._worker.run_shielded(starting.cancel, stop)
+                    await self._worker.run_urgent(starting.cancel, stop)
             raise
 
     @contextlib.asynccontextmanager

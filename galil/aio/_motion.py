@@ -322,7 +322,7 @@ class AsyncMoveHandle:
 
         Once asked for, the stop goes out even if the awaiting task is cancelled (before the
         call has started too)."""
-        await self._worker.run_shielded(self.sync.stop)
+        await self._worker.run_urgent(self.sync.stop)
 
     async def stop_unless_done(self) -> None:
         """Stop the move (``ST``) unless it was seen done: for clean-up on the way out of a
@@ -332,7 +332,7 @@ class AsyncMoveHandle:
         if self.sync.finished:
             return
         with contextlib.suppress(GalilError):
-            await self._worker.run_shielded(self.sync.stop)
+            await self._worker.run_urgent(self.sync.stop)
 
     def add_callback(self, callback: Callable[[AsyncMoveHandle], None]) -> None:
         """Call ``callback(handle)`` on the event loop once the move is done (at once if it
@@ -741,7 +741,7 @@ class motion_twin(Generic[S, P, H]):  # noqa: N801 - used like a decorator
                 starting.abandon()
                 then = None if at_once is None else functools.partial(at_once, sync, starting)
                 with contextlib.suppress(GalilConnectionError):
-                    worker.submit(starting.cancel, then)
+                    worker.submit_urgent(starting.cancel, then)
                 raise
             return started
 

@@ -50,6 +50,10 @@ async def shielded(future: concurrent.futures.Future[R]) -> R:
         raise
 
 
+def _nothing() -> None:
+    pass
+
+
 def _retrieve(future: asyncio.Future[Any]) -> None:
     if not future.cancelled():
         future.exception()
@@ -60,8 +64,10 @@ class Worker:
 
     The threads start at construction (a thread start is the one thing here that takes the
     loop's time, so it happens at connect, not in the middle of a scan). Several threads let
-    a stop get through while another call (a contour, a polled record) is still running; the
-    link's own lock keeps their round trips apart.
+    a call through while another (a contour, a polled record) is still running; the link's
+    own lock keeps their round trips apart. Stops have a lane of their own (one more thread,
+    :meth:`run_urgent`): with every other thread busy (waits for inputs, record reads, each
+    holding its thread for up to half a second), a stop does not queue behind them.
 
     Args:
         name: names the threads (``galil-aio-<name>-<i>``).
@@ -70,17 +76,25 @@ class Worker:
 
     def __init__(self, name: str, threads: int = 3) -> None:
         self._jobs: queue.SimpleQueue[_Job | None] = queue.SimpleQueue()
+        self._urgent: queue.SimpleQueue[_Job | None] = queue.SimpleQueue()
         self._closed = False
         self._threads = [
-            threading.Thread(target=self._serve, name=f"galil-aio-{name}-{i}", daemon=True)
+            threading.Thread(
+                target=self._serve, args=(self._jobs,), name=f"galil-aio-{name}-{i}", daemon=True
+            )
             for i in range(threads)
         ]
+        self._threads.append(
+            threading.Thread(
+                target=self._serve, args=(self._urgent,), name=f"galil-aio-{name}-stop", daemon=True
+            )
+        )
         for t in self._threads:
             t.start()
 
-    def _serve(self) -> None:
+    def _serve(self, jobs: queue.SimpleQueue[_Job | None]) -> None:
         while True:
-            job = self._jobs.get()
+            job = jobs.get()
             if job is None:
                 return
             future, call = job
@@ -103,13 +117,26 @@ class Worker:
         Raises:
             GalilConnectionError: the worker was closed.
         """
+        return self._queue(self._jobs, functools.partial(fn, *args, **kwargs))
+
+    def submit_urgent(
+        self, fn: Callable[P, R], /, *args: P.args, **kwargs: P.kwargs
+    ) -> concurrent.futures.Future[R]:
+        """:meth:`submit` on the stops' own lane (a stop, the undoing of a cancelled start):
+        it runs as soon as the calls before it on that lane are done, whatever the other
+        threads run."""
+        return self._queue(self._urgent, functools.partial(fn, *args, **kwargs))
+
+    def _queue(
+        self, jobs: queue.SimpleQueue[_Job | None], call: Callable[[], R]
+    ) -> concurrent.futures.Future[R]:
         if self._closed:
             raise GalilConnectionError(
                 "the async controller is closed (aclose(), or the end of its async with "
                 "block); galil.aio.connect() opens a new one"
             )
         future: concurrent.futures.Future[R] = concurrent.futures.Future()
-        self._jobs.put((future, functools.partial(fn, *args, **kwargs)))
+        jobs.put((future, call))
         return future
 
     async def run(self, fn: Callable[P, R], /, *args: P.args, **kwargs: P.kwargs) -> R:
@@ -124,6 +151,10 @@ class Worker:
     async def run_shielded(self, fn: Callable[P, R], /, *args: P.args, **kwargs: P.kwargs) -> R:
         """Like :meth:`run`, but the call completes even if the awaiting task is cancelled."""
         return await shielded(self.submit(fn, *args, **kwargs))
+
+    async def run_urgent(self, fn: Callable[P, R], /, *args: P.args, **kwargs: P.kwargs) -> R:
+        """:meth:`run_shielded` on the stops' own lane (:meth:`submit_urgent`)."""
+        return await shielded(self.submit_urgent(fn, *args, **kwargs))
 
     async def run_or_undo(
         self,
@@ -150,6 +181,16 @@ class Worker:
         with contextlib.suppress(GalilConnectionError):
             self.submit(undo, future.result())
 
+    async def drained(self) -> None:
+        """Return once every call submitted before is over: each thread of the calls' lane
+        takes a barrier call (none is busy with anything else then), and the stops' lane a
+        call of its own (for tests that look at the wire once a cancellation has settled)."""
+        lane = len(self._threads) - 1
+        barrier = threading.Barrier(lane)
+        await asyncio.gather(
+            *(self.run(barrier.wait, 10) for _ in range(lane)), self.run_urgent(_nothing)
+        )
+
     @property
     def threads(self) -> list[threading.Thread]:
         """The worker threads (for tests that check nothing outlives a controller)."""
@@ -165,8 +206,9 @@ class Worker:
         if self._closed:
             return
         self._closed = True
-        for _ in self._threads:
+        for _ in self._threads[:-1]:
             self._jobs.put(None)
+        self._urgent.put(None)
 
 
 class Backed(Generic[S_co]):
@@ -209,13 +251,21 @@ class twin(Generic[S, P, R]):  # noqa: N801 - used like a decorator
     """The async twin of a sync method: ``await room.name(...)`` runs ``S.name(room.sync, ...)``
     on the room's worker. Parameters, return type and docstring are the sync method's.
 
-    ``shield=True`` for a call that must happen once asked for (a stop): cancelling the
-    awaiting task, even before the call has started, leaves it to run (``run_shielded``).
+    ``shield=True`` for a call that must happen once asked for: cancelling the awaiting task,
+    even before the call has started, leaves it to run (``run_shielded``). ``urgent=True``
+    for a stop: shielded, and on the stops' own lane (``run_urgent``).
     """
 
-    def __init__(self, method: Callable[Concatenate[S, P], R], *, shield: bool = False) -> None:
+    def __init__(
+        self,
+        method: Callable[Concatenate[S, P], R],
+        *,
+        shield: bool = False,
+        urgent: bool = False,
+    ) -> None:
         self._method = method
         self._shield = shield
+        self._urgent = urgent
         self.__doc__ = method.__doc__
         self.__name__ = getattr(method, "__name__", "twin")
 
@@ -233,7 +283,13 @@ class twin(Generic[S, P, R]):  # noqa: N801 - used like a decorator
         method = self._method
         sync = room.sync
         worker = room._worker
-        run = worker.run_shielded if self._shield else worker.run
+        run = (
+            worker.run_urgent
+            if self._urgent
+            else worker.run_shielded
+            if self._shield
+            else worker.run
+        )
 
         async def call(*args: P.args, **kwargs: P.kwargs) -> R:
             return await run(method, sync, *args, **kwargs)

@@ -23,9 +23,7 @@ from galil.aio._motion import Starting
 async def _worker_idle(c: aio.AsyncController) -> None:
     """Return once every call submitted to the worker before is over (each thread takes a
     barrier call: none is busy with anything else then)."""
-    threads = c.worker.threads
-    barrier = threading.Barrier(len(threads))
-    await asyncio.gather(*(c.worker.run(barrier.wait, 10) for _ in threads))
+    await c.worker.drained()
 
 
 @pytest.mark.parametrize("ticks", [1, 2, 3])

@@ -592,3 +592,35 @@ def test_an_async_record_stream_reads_out_what_its_sync_stream_counts() -> None:
             assert len(stream) == 0
 
     run(body)
+
+
+@pytest.mark.parametrize("how", ["axis", "controller", "handle", "abort"])
+def test_a_stop_does_not_queue_behind_calls_that_hold_every_worker_thread(how: str) -> None:
+    """Every worker thread busy (a long wait for an input, a record read: here calls that
+    block until released) and a stop still goes out at once, on the stops' own lane; before,
+    it waited for a thread (0.4 s behind input waits, for ever behind these)."""
+
+    async def body() -> list[str]:
+        c = await aio.connect("sim://DMC-4040", threads=2)
+        release = threading.Event()
+        move = await c.A.jog(20_000)
+        busy = [asyncio.ensure_future(c.worker.run(release.wait, 10)) for _ in range(2)]
+        await asyncio.sleep(0.05)  # (both threads now hold a call that waits for release)
+        try:
+            stop = {
+                "axis": c.A.stop,
+                "controller": c.stop,
+                "handle": move.stop,
+                "abort": c.abort,
+            }[how]
+            await asyncio.wait_for(stop(), 5)
+            assert not release.is_set()  # the stop went out while both threads were held
+        finally:
+            release.set()
+            await asyncio.gather(*busy)
+        sent = commands_of(c)
+        await c.aclose()
+        return sent
+
+    sent = run(body)
+    assert ("AB" if how == "abort" else "ST") in " ".join(sent[-4:])

@@ -862,13 +862,7 @@ class AsyncSequences(RuleBasedStateMachine):
         """No task on the loop, no call on the worker (each thread takes one at once), no
         thread but the worker's."""
         assert not asyncio.all_tasks(self.loop), asyncio.all_tasks(self.loop)
-        workers = self.c.worker.threads
-        barrier = threading.Barrier(len(workers))
-
-        async def all_free() -> None:
-            await asyncio.gather(*(self.c.worker.run(barrier.wait, 10) for _ in workers))
-
-        self.run(all_free())
+        self.run(self.c.worker.drained())
         extra = set(threading.enumerate()) - self.threads_connected
         assert not extra, extra
 
