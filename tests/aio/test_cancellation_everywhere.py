@@ -59,6 +59,7 @@ class Trap:
     def __init__(self, worker: Worker, link: Any, n: int = 0, mode: str = "queued") -> None:
         self.worker, self.link, self.n, self.mode = worker, link, n, mode
         self.real = worker.submit
+        self.real_urgent = worker.submit_urgent
         self.loop = asyncio.get_running_loop()
         self.loop_thread = threading.current_thread()
         self.count = 0
@@ -68,27 +69,39 @@ class Trap:
         self.futures: list[Any] = []
         self.cancel: Callable[[], object] = lambda: None
         worker.submit = self.submit  # type: ignore[method-assign]
+        worker.submit_urgent = self.submit_urgent  # type: ignore[method-assign]
 
     def watch(self, task: asyncio.Future[Any], cancel: Callable[[], object]) -> None:
         self.cancel = cancel
         task.add_done_callback(lambda _: self.gate.set())
 
     def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Any:
+        return self._submit(self.real, fn, *args, **kwargs)
+
+    def submit_urgent(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Any:
+        """A call on the stops' own lane: counted and trapped as any other."""
+        return self._submit(self.real_urgent, fn, *args, **kwargs)
+
+    def _submit(
+        self, real: Callable[..., Any], fn: Callable[..., Any], /, *args: Any, **kwargs: Any
+    ) -> Any:
         on_loop = threading.current_thread() is self.loop_thread
         if on_loop and not self.fired:
             self.count += 1
         if self.fired and self.mode != "running":
             self.gate.set()  # a call made after the cancel: the held threads go on
         if not on_loop or self.fired or self.count != self.n:
-            future = self.real(fn, *args, **kwargs)
+            future = real(fn, *args, **kwargs)
             self.futures.append(future)
             return future
         self.fired = True
         if self.mode == "queued":
+            # Every thread held (the stops' lane too): the call queues behind them.
             self.fired_at = self.link.clock()
-            for _ in self.worker.threads:
+            for _ in self.worker.threads[:-1]:
                 self.futures.append(self.real(self.gate.wait, 10))
-            future = self.real(fn, *args, **kwargs)
+            self.futures.append(self.real_urgent(self.gate.wait, 10))
+            future = real(fn, *args, **kwargs)
             self.cancel()
         else:
             loop, gate, link, cancel = self.loop, self.gate, self.link, self.cancel
@@ -99,7 +112,7 @@ class Trap:
                 gate.wait(10)
                 return fn(*args, **kwargs)
 
-            future = self.real(held)
+            future = real(held)
         self.futures.append(future)
         return future
 
@@ -113,8 +126,9 @@ class Trap:
             seen = len(self.futures) if all(f.done() for f in self.futures) else -1
             await asyncio.sleep(0.005)
         assert all(f.done() for f in self.futures), "a worker call never ended"
-        if "submit" in vars(self.worker):
-            del self.worker.submit
+        for patched in ("submit", "submit_urgent"):
+            if patched in vars(self.worker):
+                delattr(self.worker, patched)
 
 
 @dataclass
