@@ -79,11 +79,9 @@ def jog(
             eng.begin_jog(speed, accel, decel, smoothing)
         return eng
 
-    until: int | None = None
-    if duration is not None:
-        until = sample_of_event(duration, ts)
-    ends = any(isinstance(e, (Stop, Abort)) for e in all_events)
-    settle = until is None and stop_at is None and not ends
+    until = None if duration is None else sample_of_event(duration, ts)
+    # (stop_at is a Stop among the events)
+    settle = until is None and not any(isinstance(e, (Stop, Abort)) for e in all_events)
 
     def go(eng: AxisProfiler, out: _Run) -> None:
         if settle:

@@ -340,7 +340,9 @@ def drive(
     for ev in sorted(events, key=lambda e: e.time):
         k = base + sample_of_event(ev.time, ts)
         if isinstance(ev, Abort):
-            _abort_at(eng, k, out)
+            _run_down(eng, out, until=k)  # (no further than the motion's end)
+            if eng.moving:
+                eng.abort()
             break
         _advance(eng, k - eng.sample, out)
         if isinstance(ev, SetSpeed):
@@ -359,30 +361,29 @@ def drive(
     if until is not None:
         _advance(eng, base + until - eng.sample, out)
         return
+    _run_down(eng, out)
+
+
+def _run_down(eng: AxisProfiler, out: _Run, *, until: int | None = None) -> None:
+    """Step ``eng`` until its motion is over, or (``until``) to that sample at most.
+
+    Raises:
+        InvalidArgument: with no ``until``, the motion does not complete within
+            ``MAX_SAMPLES`` (counted from here, the last event: a jog may run for days before
+            its ST).
+    """
     step = 1024
-    last = eng.sample  # (the last event's: a jog may run for days before its ST)
-    while eng.moving:
-        if eng.sample - last > MAX_SAMPLES:
+    last = eng.sample
+    while eng.moving and (until is None or eng.sample < until):
+        if until is None and eng.sample - last > MAX_SAMPLES:
             raise InvalidArgument(f"motion does not complete within {MAX_SAMPLES} samples")
         end = eng.end_sample
         # An unknown end is at least END_LOOKAHEAD samples away (a smoothed move ending
         # later, or a jog): stepping that far cannot pass it. A plan that has already
         # ended is complete on the next sample.
         n = step if end is None else max(1, end - eng.sample)
-        _advance(eng, n, out)
+        _advance(eng, n if until is None else min(n, until - eng.sample), out)
         step = min(step * 2, END_LOOKAHEAD)
-
-
-def _abort_at(eng: AxisProfiler, k: int, out: _Run) -> None:
-    """Run to sample ``k`` (no further than the motion's end) and abort there."""
-    step = 1024
-    while eng.moving and eng.sample < k:
-        end = eng.end_sample
-        n = min(k - eng.sample, step if end is None else max(1, end - eng.sample))
-        _advance(eng, n, out)
-        step = min(step * 2, END_LOOKAHEAD)
-    if eng.moving:
-        eng.abort()
 
 
 #: Drives a fresh engine (:func:`drive`, once or more) into a :class:`_Run`.
@@ -526,10 +527,32 @@ def move(
             peak_speed=plan.peak / ts,
             stop_code=1,
         )
-    target = int(start) + int(distance)
+    return _run_move(
+        int(start),
+        int(start) + int(distance),
+        speed,
+        accel,
+        decel,
+        smoothing,
+        sample_period,
+        events,
+    )
+
+
+def _run_move(
+    start: int,
+    target: int,
+    speed: float,
+    accel: float,
+    decel: float,
+    smoothing: float,
+    sample_period: float,
+    events: Sequence[Event],
+) -> Profile:
+    """:func:`move` on the engine (changes in motion, or IT smoothing)."""
 
     def fresh() -> AxisProfiler:
-        eng = AxisProfiler(sample_period=sample_period, position=int(start))
+        eng = AxisProfiler(sample_period=sample_period, position=start)
         eng.begin_move(target, speed, accel, decel, smoothing)
         return eng
 
@@ -541,7 +564,7 @@ def move(
             return begun
         return "stopped" if eng.stop_code == 4 else "changed"
 
-    return run_profile(fresh, go, start=int(start), shape=shape)
+    return run_profile(fresh, go, start=start, shape=shape)
 
 
 #: The most samples a speed schedule is predicted in (2.3 h at 1024 Hz; about 300 MB).
