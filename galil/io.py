@@ -367,29 +367,33 @@ class IO:
             )
         try:
             left = None if deadline is None else max(0.0, deadline - link.clock())
-            self._routines.check_free(t, _INPUT_ROUTINE)  # before the install sends a byte
-            self._routines.install(_input_routine())
-            seen = threading.Event()
-            tag = [_INPUT_MESSAGE, str(n)]
-
-            def on_message(line: str) -> None:
-                if line.split()[:2] == tag:
-                    seen.set()
-
-            unsubscribe = self._messages.subscribe(on_message)
-            try:
-                link.command_line(
-                    [cmds.assign("ginput", n), cmds.assign("ginlevel", 1 if high else 0)]
-                )
-                self._routines.start(_INPUT_ROUTINE, t)
-                self._watching = t
-                if not self._watched(t, seen, left):
-                    raise link.error(GalilTimeoutError, expired)
-            finally:
-                self._watching = None
-                unsubscribe()
+            if not self._routine_saw(n, high, t, left):
+                raise link.error(GalilTimeoutError, expired)
         finally:
             self._wait_lock.release()
+
+    def _routine_saw(self, n: int, high: bool, thread: int, timeout: float | None) -> bool:
+        """Run the input routine on ``thread`` for input ``n`` (this wait holds it): whether
+        it said the input reached the level within ``timeout`` (:meth:`_watched`)."""
+        link = self._link
+        self._routines.check_free(thread, _INPUT_ROUTINE)  # before the install sends a byte
+        self._routines.install(_input_routine())
+        seen = threading.Event()
+        tag = [_INPUT_MESSAGE, str(n)]
+
+        def on_message(line: str) -> None:
+            if line.split()[:2] == tag:
+                seen.set()
+
+        unsubscribe = self._messages.subscribe(on_message)
+        try:
+            link.command_line([cmds.assign("ginput", n), cmds.assign("ginlevel", 1 if high else 0)])
+            self._routines.start(_INPUT_ROUTINE, thread)
+            self._watching = thread
+            return self._watched(thread, seen, timeout)
+        finally:
+            self._watching = None
+            unsubscribe()
 
     def end_wait(self) -> None:
         """Closing: halt the routine of a wait in flight (another thread's, or an async
