@@ -30,7 +30,7 @@ from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
 
 from galil import predict
 from galil.aio._worker import Room, Worker
-from galil.errors import GalilConnectionError, GalilError, GalilTimeoutError
+from galil.errors import GalilError, GalilTimeoutError
 from galil.link import Link, check_callable, check_flag, check_wait_timeout
 from galil.motion import (
     MAX_POLL,
@@ -710,7 +710,8 @@ class motion_twin(Generic[S, P, H]):  # noqa: N801 - used like a decorator
         cancelled, while the start is still running (a long path streaming on its thread is
         stopped then, not only once every segment has been sent); under the tracker's lock,
         with the start's motion refused from then on. ``starting`` (:class:`Starting`) tells
-        what the start has registered so far: only that is to be stopped."""
+        what the start has registered so far: only that is to be stopped. The cancellation
+        awaits it (shielded): the caller gets its ``CancelledError`` once the stop went out."""
         self._at_once = at_once
         return self
 
@@ -740,8 +741,10 @@ class motion_twin(Generic[S, P, H]):  # noqa: N801 - used like a decorator
             except asyncio.CancelledError:
                 starting.abandon()
                 then = None if at_once is None else functools.partial(at_once, sync, starting)
-                with contextlib.suppress(GalilConnectionError):
-                    worker.submit_urgent(starting.cancel, then)
+                # Awaited (shielded, on the stops' lane): when the cancellation reaches the
+                # caller, what the start registered is stopped and the rest refused (0085).
+                with contextlib.suppress(GalilError):
+                    await worker.run_urgent(starting.cancel, then)
                 raise
             return started
 

@@ -118,3 +118,41 @@ def test_a_vector_start_cancelled_before_it_began_never_begins_if_its_cancel_run
             assert await c.query_operands(["_BGS", "_RPA", "_RPB"]) == [0, 0, 0]
 
     run(body)
+
+
+def test_a_cancelled_vector_start_has_stopped_its_sequence_when_the_cancellation_arrives() -> None:
+    """The cancellation waits for its own stop (decision 0085): before, ``ST S`` was submitted
+    and the task ended at once, the stop still queued (here: the stops' lane held a few loop
+    steps longer), so a caller that looked right after the ``CancelledError`` found the
+    sequence running."""
+
+    async def body() -> None:
+        async with await sim() as c:
+            path = [Line(400, 100 * (-1) ** i) for i in range(2000)]  # more than the buffer holds
+            streaming = asyncio.ensure_future(c.vector_move("CD", path, speed=20_000))
+            for _ in range(2000):  # until its sequence has registered: it streams on
+                if c.sync.tracker.last_sequence() is not None:
+                    break
+                await c.query_operands(["_BGS"])
+            lane = threading.Event()
+            c.worker.submit_urgent(lane.wait, 10)  # the stops' lane busy for a moment
+
+            async def let_go() -> None:
+                for _ in range(20):
+                    await asyncio.sleep(0)
+                lane.set()
+
+            freeing = asyncio.ensure_future(let_go())
+            streaming.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await streaming
+            sent = commands_of(c)  # right away: nothing drained first
+            lane.set()
+            await freeing
+            assert "ST S" in sent
+            sequence = c.sync.tracker.last_sequence()
+            assert sequence is not None
+            assert sequence.stopped
+            await _worker_idle(c)
+
+    run(body)
