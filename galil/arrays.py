@@ -102,6 +102,14 @@ def _lv_reply_bytes(link: CommandLink) -> int:
     return (model.variable_length + 3 + _NUMBER_BYTES + 2) * model.variables + _END_BYTES
 
 
+def _la_reply_bytes(link: CommandLink) -> int:
+    """The most bytes ``LA``'s reply can hold: every array the model has, a line each (a
+    space, its name, its size in brackets, CR LF)."""
+    model = link.model
+    line = 1 + model.variable_length + len(str(model.array_elements)) + 2 + 2
+    return line * model.arrays + _END_BYTES
+
+
 def _in_read_format(link: CommandLink, command: cmds.Command, reply_bytes: int) -> str:
     """The reply to ``command`` (``QU``, ``LV``: printed in VF, with no format of their own;
     a transfer of at most ``reply_bytes``) with ``VF 10.4`` for it and the user's (or a
@@ -141,8 +149,9 @@ class Arrays:
         self.link = link
 
     def list(self) -> dict[str, int]:
-        """Every array and its size (``LA``)."""
-        text = self.link.exchange(cmds.la()).text
+        """Every array and its size (``LA``; its reply timeout covers every array the model
+        can hold, decision 0064)."""
+        text = self.link.transfer(cmds.la(), _la_reply_bytes(self.link)).text
         out: dict[str, int] = {}
         for line in text.splitlines():
             if not line.strip():

@@ -11,7 +11,7 @@ import re
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
-from galil.arrays import _lv_reply_bytes, _qu_reply_bytes
+from galil.arrays import _la_reply_bytes, _lv_reply_bytes, _qu_reply_bytes
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.link import Link, WireLog, check_flag, check_items, check_seconds, refuse_link_settings
 from galil.messages import MessageCallback, MessageQueue, Messages
@@ -46,17 +46,17 @@ def check_sleep(seconds: object) -> float:
 
 
 #: The bulk transfers sent as raw text (``command("UL")``): timed by their size.
-_UPLOADS = frozenset({"UL", "QU", "LV"})
-#: A bulk transfer's command (decision 0064): ``DL``, ``UL``, ``LV``; ``QU``/``QD`` and an
-#: array name, and for ``QU`` its range (``QU a[],0,99,1``) when given.
-_TRANSFER = re.compile(r"(DL|UL|LV)$|(QD) ?[A-Za-z]|QU ?[A-Za-z]\w*\[\](?:,(\d+),(\d+))?")
+_UPLOADS = frozenset({"UL", "QU", "LV", "LA"})
+#: A bulk transfer's command (decision 0064): ``DL``, ``UL``, ``LV``, ``LA``; ``QU``/``QD``
+#: and an array name, and for ``QU`` its range (``QU a[],0,99,1``) when given.
+_TRANSFER = re.compile(r"(DL|UL|LV|LA)$|(QD) ?[A-Za-z]|QU ?[A-Za-z]\w*\[\](?:,(\d+),(\d+))?")
 
 
 def _transfer_bytes(link: Link, command: Command) -> int | None:
     """The most bytes the reply of ``command`` holds when it is a bulk transfer (``None``
     when it is not): a colon for ``DL`` and ``QD`` (their size is their payload); the whole
-    program memory for ``UL``; every variable for ``LV``; the elements for ``QU`` (all the
-    model's array space when its range is not given)."""
+    program memory for ``UL``; every variable for ``LV``, every array for ``LA``; the
+    elements for ``QU`` (all the model's array space when its range is not given)."""
     m = _TRANSFER.match(command.text) if isinstance(command, Command) else None
     if m is None or command.parts:
         return None
@@ -65,6 +65,8 @@ def _transfer_bytes(link: Link, command: Command) -> int | None:
         return ul_reply_bytes(link.model)
     if head == "LV":
         return _lv_reply_bytes(link)
+    if head == "LA":
+        return _la_reply_bytes(link)
     if head == "QU":
         first, last = m.group(3), m.group(4)
         known = first is not None and last is not None and int(last) >= int(first)

@@ -123,6 +123,22 @@ def test_a_list_of_hundreds_of_variables_at_9600_baud_comes_whole(
     assert listed == {f"var{i}": i + 0.5 for i in range(300)}
 
 
+def test_a_list_of_every_array_at_2400_baud_comes_whole() -> None:
+    # LA had the link's ordinary timeout (1 s): 30 lines of 15 bytes take 1.9 s at 240 B/s
+    with _slow(2400) as c:
+        model = c.model
+        size = model.array_elements // model.arrays
+        names = [f"arrays{i:02d}" for i in range(model.arrays)]  # 8 letters, the longest
+        for name in names:
+            c.arrays.define(name, size)
+        began = c.link.clock()
+        listed = c.arrays.list()
+        assert c.link.clock() - began > 1.5
+        assert listed == dict.fromkeys(names, size)
+        assert len(c.command("LA").splitlines()) == model.arrays  # as a raw command too
+        assert "arrays29" in c.arrays  # (in: a listing)
+
+
 def test_raw_transfers_get_the_timeout_of_their_size_as_the_rooms_do() -> None:
     # send(cmds.dl(...)) is the form docs/raw.md shows: no "no reply to 'DL' within 1 s"
     with _slow(2400) as c:
