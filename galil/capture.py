@@ -156,6 +156,15 @@ class Capture:
         self.start_sample: int | None = None
         self.result: Recording | None = None
         self._started_at = 0.0
+        self._stop_pending = False  # an RC 0 owed to the controller (decision 0085)
+        self._cut_at: int | None = None  # values recorded when the library stopped it
+
+    @property
+    def stop_pending(self) -> bool:
+        """Whether the controller may still record for this capture although its start
+        failed or its stop could not be sent (a dead link, Ctrl-C): :meth:`reopened`, run by
+        the controller once the link works again, stops it (``RC 0``); no I/O."""
+        return self._stop_pending
 
     @property
     def duration(self) -> float:
@@ -194,9 +203,12 @@ class Capture:
             except ProtocolError as exc:
                 raise link.error(ProtocolError, f"MG TIME answered {replies[-1]!r}") from exc
         except BaseException:
-            # RC may have started (a lost or malformed reply): no recording outlives start()
+            # RC may have started (a lost or malformed reply): no recording outlives start(),
+            # and one whose RC 0 cannot go out (a dead link) is stopped once it works again
+            self._stop_pending = True
             with contextlib.suppress(GalilError):
                 link.command_line([cmds.rc(0)])
+                self._stop_pending = False
             raise
         self.start_sample = start
         self._started_at = link.clock()
@@ -225,6 +237,12 @@ class Capture:
             return self.result
         if self.start_sample is None:
             raise InvalidArgument("start() the capture first")
+        if self._cut_at is not None:
+            raise InvalidArgument(
+                f"this capture was stopped (RC 0) when its link was reopened, after "
+                f"{self._cut_at} of {self.count} values: stop() uploads those",
+                model=self.link.model.name,
+            )
         link = self.link
         limit = self.duration * 1.5 + 2.0 if timeout is None else timeout
         deadline = self._started_at + limit
@@ -241,17 +259,47 @@ class Capture:
         return self._upload(self.count)
 
     def stop(self) -> Recording:
-        """Stop recording now (``RC 0``) and upload what was recorded."""
+        """Stop recording now (``RC 0``) and upload what was recorded.
+
+        A stop cut short before the recording is known stopped (a dead link, Ctrl-C) leaves
+        :attr:`stop_pending`: the ``RC 0`` goes out when the link works again."""
         if self.result is not None:
             return self.result
         if self.start_sample is None:
             raise InvalidArgument("start() the capture first")
-        link = self.link
-        n = self.count
-        if round(link.query_operands(["_RC"])[0]):
-            link.command_line([cmds.rc(0)])
-            n = round(link.query_operands(["_RD"])[0])
+        n = self._cut_at
+        if n is None:
+            self._stop_pending = True
+            recorded = self._stopped(self.link)
+            self._stop_pending = False
+            n = self.count if recorded is None else recorded
         return self._upload(n)
+
+    def _stopped(self, link: CommandLink) -> int | None:
+        """``RC 0`` if the controller still records, and how many values it has recorded then
+        (``_RD``); ``None`` when it had stopped already."""
+        if not round(link.query_operands(["_RC"])[0]):
+            return None
+        link.command_line([cmds.rc(0)])
+        return round(link.query_operands(["_RD"])[0])
+
+    def reopened(self) -> bool:
+        """The link works (again): a recording this capture left running (its start failed
+        once ``RC`` had gone out, or its stop could not be sent) is stopped now (``RC 0``);
+        :meth:`stop` then uploads the values recorded until then, and :meth:`wait` refuses
+        (they are fewer than ``count``). The controller runs this on every reopen and before
+        the next capture (decision 0085).
+
+        Returns:
+            Whether the controller was still recording (and was stopped).
+        """
+        if not self._stop_pending:
+            return False
+        n = self._stopped(self.link)
+        if n is not None and self.start_sample is not None:
+            self._cut_at = n
+        self._stop_pending = False
+        return n is not None
 
     def _upload(self, n: int) -> Recording:
         assert self.start_sample is not None

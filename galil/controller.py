@@ -541,9 +541,9 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         raw commands or a program on the controller started is left as it is, and so is
         gearing (``GA``): an axis geared to one that a program or a handwheel moves goes on
         following it. The watchdog's routine is halted (leaving on purpose is not dying), and so
-        is a ``wait_for_input``'s in flight (the wait raises). A
-        capture started here and not read back is stopped (``RC 0``: it would hold the
-        recorder). A waiting ``messages.get()``, ``interrupts.get()`` or record stream
+        is a ``wait_for_input``'s in flight (the wait raises). A capture started here and not
+        read back, or cut short by a dead link, is stopped (``RC 0``: it holds the recorder).
+        A waiting ``messages.get()``, ``interrupts.get()`` or record stream
         ``get()`` raises :class:`~galil.errors.GalilConnectionError` too.
 
         Idempotent and thread-safe; never raises for a link that is already dead (it is
@@ -559,12 +559,13 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
                 _stop_started(self.link, self.tracker)
             finally:  # (Ctrl-C while stopping: the close still ends, then it goes on)
                 if self.link.is_open:
-                    _stop_captures(self.link, self._captures)
+                    _stop_captures(self.link, self.tracker, self._captures)
                 _close_parts(self._parts, keep_watchdogs=False)
                 self.tracker.end_watches()
 
     def reconnect(self) -> None:
-        """Close the link and open it again (same address and options), handshake included.
+        """Close the link and open it again (same address and options), handshake included;
+        then end what a dead link left running (a watchdog's halt, a capture's ``RC 0``).
 
         Thread-safe: several threads asking at once get one reconnect.
 
@@ -599,6 +600,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
                 self.interrupts.reopen()
                 for dog in self._watchdogs:  # (one stopped while the link was dead)
                     dog.reopened()
+                _end_captures_left_quietly(self.link, self._captures)
         finally:
             self._life.release()
 
@@ -876,9 +878,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
                 already (``_RC`` read, nothing set up).
         """
         capture = Capture(self.link, sources, every=every, count=count, seconds=seconds)
-        self._captures[:] = [c for c in self._captures if c.result is None]
-        self._captures.append(capture.start())
-        return capture
+        return _start_capture(self.link, self._captures, capture)
 
     if not TYPE_CHECKING:  # mypy knows the letters below, and nothing else
 
@@ -1035,11 +1035,65 @@ def _check_options(echo: object, handshake: object, unsolicited: object, model: 
         raise InvalidArgument("handshake=False needs model= (nothing identifies it then)")
 
 
-def _stop_captures(link: Link, captures: list[Capture]) -> None:
-    """``RC 0`` if a capture started here has not been read back (it may still record: the
-    next one would be refused until its count was reached); nothing sent otherwise."""
-    if not any(c.result is None for c in captures):
+def _holds_recorder(capture: Capture) -> bool:
+    """Whether ``capture`` may still record: started and not read back, or owed an ``RC 0``
+    (its start or stop cut short)."""
+    return capture.stop_pending or (capture.result is None and capture.start_sample is not None)
+
+
+def _start_capture(link: Link, captures: list[Capture], capture: Capture) -> Capture:
+    """Start ``capture`` once the captures a dead link left recording are stopped, and keep
+    it among ``captures`` while it may record (a start whose ``RC 0`` could not go out too:
+    it is stopped once the link works)."""
+    _end_captures_left(link, captures)
+    captures[:] = [c for c in captures if _holds_recorder(c)]
+    try:
+        capture.start()
+    finally:
+        if _holds_recorder(capture):
+            captures.append(capture)
+    return capture
+
+
+def _end_captures_left(link: Link, captures: list[Capture]) -> None:
+    """``RC 0`` for the captures a dead link (or a Ctrl-C) left recording (decision 0085),
+    said at WARNING on ``galil.controller`` when one was still recording.
+
+    Raises:
+        GalilError: the link failed (they stay owed).
+    """
+    for capture in [c for c in captures if c.stop_pending]:
+        if capture.reopened():
+            _LOG.warning(
+                "galil: the capture of %s on %s was still recording after its %s was cut "
+                "short; it is stopped now (RC 0)",
+                ", ".join(capture.sources),
+                link.model_name,
+                "start" if capture.start_sample is None else "stop",
+            )
+
+
+def _end_captures_left_quietly(link: Link, captures: list[Capture]) -> None:
+    """:func:`_end_captures_left` on a reopen: a failure is logged (they stay owed: the next
+    capture, reopen or ``close()`` tries again)."""
+    try:
+        _end_captures_left(link, captures)
+    except GalilError as exc:
+        _LOG.warning(
+            "galil: RC 0 for a capture left recording on %s not sent (%s)", link.model_name, exc
+        )
+
+
+def _stop_captures(link: Link, tracker: MotionTracker, captures: list[Capture]) -> None:
+    """Closing: ``RC 0`` if a capture started here has not been read back, or is owed one (it
+    may still record: the next one would be refused until its count was reached); nothing
+    sent otherwise. A dead link is reopened once for it, as for the stops (decision 0085)."""
+    if not any(_holds_recorder(c) for c in captures):
         return
+    if link.dead and tracker.reconnect is not None:
+        with contextlib.suppress(GalilError):
+            tracker.reconnect()  # (its own reopen sends the RC 0 owed)
+        tracker.closed = True  # (the reopen set the link up as for use)
     try:
         link.command_line([cmds.rc(0)])
     except GalilError as exc:

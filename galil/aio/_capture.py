@@ -96,6 +96,12 @@ class AsyncCapture(Room[Capture]):
         """The :class:`~galil.capture.Recording`, once uploaded."""
         return self.sync.result
 
+    @property
+    def stop_pending(self) -> bool:
+        """Whether its stop could not be sent (a dead link): the controller stops it
+        (``RC 0``) once the link works again; no I/O."""
+        return self.sync.stop_pending
+
     async def done(self) -> bool:
         """Whether the recording is over (``_RC`` is 0); one query."""
         return await self._worker.run(_is_done, self.sync)

@@ -14,7 +14,7 @@ from aio_helpers import run, sim
 import galil
 import galil.aio as aio
 from galil.sim.server import SimTcpServer
-from galil.testing import simulated
+from galil.testing import sim_of, simulated
 
 
 def test_a_capture_wait_that_times_out_raises_at_its_timeout_and_recording_goes_on() -> None:
@@ -176,3 +176,39 @@ def test_a_loop_watch_times_only_its_own_thread_and_refuses_a_second_watch() -> 
     summary = watch.summary()
     assert summary.startswith(f"{watch.steps} loop steps: wall p50 ")
     assert f"max {watch.max_wall * 1e6:.0f} us" in summary
+
+
+def test_an_async_capture_left_by_a_dead_link_is_stopped_when_the_link_is_reopened() -> None:
+    # The block's stop could not go out (decision 0085): the controller recorded on after
+    # reconnect(), into arrays nobody was to read, and the next capture was refused.
+    async def body() -> None:
+        async with await sim() as c:
+            simulator = sim_of(c.sync)
+            await c.A.jog(20_000)
+            started: list[aio.AsyncCapture] = []
+
+            async def block() -> None:
+                async with await c.capture(["_RPA"], count=2000) as cap:
+                    started.append(cap)
+                    await c.sleep(0.5)
+                    transport = c.sync.link.transport
+                    assert transport is not None
+                    transport.close()  # the cable is pulled: the block's stop cannot go out
+                    await c.command("MG 1")
+
+            with pytest.raises(galil.GalilConnectionError):
+                await block()
+            cap = started[0]
+            await c.reconnect()
+            assert await c.query_operands(["_RC"]) == [0]
+            assert not cap.stop_pending
+            with pytest.raises(galil.InvalidArgument, match="stopped"):
+                await cap.wait()
+            recording = await cap.stop()
+            assert 200 < len(recording) < 2000  # (0.5 s of 4)
+            assert recording["_RPA"][-1] > 0  # recorded, not the arrays' unrecorded zeros
+            assert len(await (await c.capture(["_RPA"], count=10)).wait()) == 10
+            await c.stop()
+            simulator.advance(0.5)
+
+    run(body)
