@@ -962,6 +962,7 @@ def _stop_started(link: Link, tracker: MotionTracker) -> None:
         failed, stop_interrupted = tracker.stop_started(link)
     finally:
         tracker.closing = False
+        tracker.closed = True  # (a reopen for the stops set the link up as for use)
     interrupted = interrupted or stop_interrupted
     if running:  # (a script that left its with block without wait(): "nothing happened")
         _LOG.warning(

@@ -34,7 +34,7 @@ from client_fakes import SimLinkWrapper, Tripwire
 
 from galil import Line
 from galil.controller import Controller
-from galil.errors import CommandError, GalilConnectionError, GalilError
+from galil.errors import CommandError, GalilConnectionError, GalilError, MotionError
 from galil.motion import MoveHandle
 from galil.sim.clock import ManualClock
 from galil.sim.controller import SimController
@@ -419,3 +419,31 @@ def test_close_interrupted_at_any_call_still_stops_the_motion_and_closes(running
             caught = attempt(k, after, KeyboardInterrupt)
             assert isinstance(caught, KeyboardInterrupt), (k, after, caught)
             assert attempt(k, after, GalilConnectionError) is None, (k, after)
+
+
+def test_a_move_waited_after_a_close_that_reopened_its_link_says_close_stopped_it() -> None:
+    """A link that dies under close()'s stops is reopened for them (decision 0073); the
+    reopen must not leave the controller looking open to the moves it stopped. A wait on
+    such a move afterwards says the controller was closed (close() stopped the move), not
+    that the axes "could not be stopped and may still be moving" (a false alarm)."""
+    reopened = 0
+    for k in range(6):
+        bench = Bench()
+        dmc = bench.dmc
+        move = _start_a(dmc)
+        wire = bench.wire
+        wire.at, wire.after, wire.error = k, False, GalilConnectionError
+        wire.armed = threading.get_ident()
+        dmc.close()
+        wire.armed = None
+        if len(bench.wires) == 1:
+            continue  # (this call was not one of the stops: no reopen)
+        reopened += 1
+        bench.sim.advance(SETTLE)
+        assert bench.ask(["_BGA"]) == [0]
+        with pytest.raises(GalilConnectionError) as caught:
+            move.wait(timeout=1)
+        assert not isinstance(caught.value, MotionError), (k, caught.value)
+        assert "closed" in str(caught.value), (k, caught.value)
+        assert not dmc.link.is_open
+    assert reopened > 0
