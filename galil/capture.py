@@ -158,6 +158,7 @@ class Capture:
         self._started_at = 0.0
         self._stop_pending = False  # an RC 0 owed to the controller (decision 0085)
         self._cut_at: int | None = None  # values recorded when the library stopped it
+        self._reused = False  # a later capture took its arrays before it was read back
 
     @property
     def stop_pending(self) -> bool:
@@ -229,14 +230,14 @@ class Capture:
 
         Raises:
             InvalidArgument: the capture was not started, or ``timeout`` is not ``None`` or a
-                finite number >= 0 (:func:`~galil.link.check_wait_timeout`).
+                finite number >= 0 (:func:`~galil.link.check_wait_timeout`), or a later
+                capture took its arrays before it was read back (:meth:`reused`).
             GalilTimeoutError: still recording after ``timeout`` (it goes on; :meth:`stop`).
         """
         check_wait_timeout(timeout)
         if self.result is not None:
             return self.result
-        if self.start_sample is None:
-            raise InvalidArgument("start() the capture first")
+        self._check_readable()
         if self._cut_at is not None:
             raise InvalidArgument(
                 f"this capture was stopped (RC 0) when its link was reopened, after "
@@ -262,11 +263,15 @@ class Capture:
         """Stop recording now (``RC 0``) and upload what was recorded.
 
         A stop cut short before the recording is known stopped (a dead link, Ctrl-C) leaves
-        :attr:`stop_pending`: the ``RC 0`` goes out when the link works again."""
+        :attr:`stop_pending`: the ``RC 0`` goes out when the link works again.
+
+        Raises:
+            InvalidArgument: the capture was not started, or a later capture took its arrays
+                before it was read back (:meth:`reused`): it would stop that one.
+        """
         if self.result is not None:
             return self.result
-        if self.start_sample is None:
-            raise InvalidArgument("start() the capture first")
+        self._check_readable()
         n = self._cut_at
         if n is None:
             self._stop_pending = True
@@ -274,6 +279,24 @@ class Capture:
             self._stop_pending = False
             n = self.count if recorded is None else recorded
         return self._upload(n)
+
+    def reused(self) -> None:
+        """A later capture of the same controller took this one's arrays (``gcap0``...)
+        before it was read back: its values are gone, and :meth:`wait` and :meth:`stop`
+        refuse rather than read (or stop) the later recording; no I/O."""
+        if self.result is None and self.start_sample is not None:
+            self._reused = True
+
+    def _check_readable(self) -> None:
+        if self.start_sample is None:
+            raise InvalidArgument("start() the capture first")
+        if self._reused:
+            raise InvalidArgument(
+                "a later capture reused this capture's arrays before it was read back: its "
+                "values are gone (read a capture with wait() or stop() before starting the "
+                "next)",
+                model=self.link.model.name,
+            )
 
     def _stopped(self, link: CommandLink) -> int | None:
         """``RC 0`` if the controller still records, and how many values it has recorded then

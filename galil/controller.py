@@ -1045,15 +1045,31 @@ def _holds_recorder(capture: Capture) -> bool:
 def _start_capture(link: Link, captures: list[Capture], capture: Capture) -> Capture:
     """Start ``capture`` once the captures a dead link left recording are stopped, and keep
     it among ``captures`` while it may record (a start whose ``RC 0`` could not go out too:
-    it is stopped once the link works)."""
+    it is stopped once the link works). Earlier captures not read back lose their arrays to
+    it: their ``wait()`` and ``stop()`` refuse from then on."""
     _end_captures_left(link, captures)
     captures[:] = [c for c in captures if _holds_recorder(c)]
+    earlier = list(captures)
     try:
         capture.start()
+    except InvalidArgument:
+        raise  # (refused before its arrays were touched: the earlier ones stay readable)
+    except BaseException:
+        _reused(captures, earlier)  # (their arrays may have been freed or redefined already)
+        raise
     finally:
         if _holds_recorder(capture):
             captures.append(capture)
+    _reused(captures, earlier)
     return capture
+
+
+def _reused(captures: list[Capture], earlier: list[Capture]) -> None:
+    """A new capture took the arrays (the same ``gcap`` names) of the ``earlier`` ones, not
+    read back: they refuse to be read, and no longer hold the recorder."""
+    for capture in earlier:
+        capture.reused()
+    captures[:] = [c for c in captures if c not in earlier]
 
 
 def _end_captures_left(link: Link, captures: list[Capture]) -> None:

@@ -139,6 +139,35 @@ def test_one_recording_at_a_time_and_a_stopped_one_keeps_what_it_has(
     assert cap.stop() is rec
 
 
+def test_a_capture_not_read_before_the_next_starts_refuses_to_read_the_next_ones_values(
+    dmc: galil.Controller,
+) -> None:
+    """Every capture records into the same arrays: one finished and not read back when
+    the next starts has lost its values. Its wait() and stop() refuse (they read, and stop
+    would end, the later recording); the later capture reads its own values whole."""
+    first = dmc.capture(["_RPA"], every=2, count=10)
+    dmc.sleep(0.05)
+    assert first.done
+    move = dmc.A.move_by(1000)
+    second = dmc.capture(["_RPA"], every=2, count=10)
+    move.wait()
+    for read in (first.wait, first.stop):
+        with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match="reused"):
+            read()
+    values = second.wait()["_RPA"]
+    assert len(values) == 10
+    assert values[-1] > values[0]  # the move, recorded by the second capture
+
+
+def test_a_capture_refused_for_a_recording_under_way_leaves_the_earlier_one_readable(
+    dmc: galil.Controller,
+) -> None:
+    first = dmc.capture(["_RPA"], every=2, count=100)
+    with pytest.raises(galil.InvalidArgument, match="recording already"):
+        dmc.capture(["_TPA"], every=2, count=10)
+    assert len(first.wait()["_RPA"]) == 100
+
+
 def test_records_carry_controller_time_and_a_period_in_seconds(dmc: galil.Controller) -> None:
     dmc.sleep(70.0)  # past a wrap of the record's 16-bit sample counter
     now = round(dmc.query_number("MG TIME"))
