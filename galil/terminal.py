@@ -225,7 +225,7 @@ class Terminal:
             program = list(lines)
             command = cmds.dl(program, model=self.controller.model)
             numbered = [ProgramLine(text, n) for n, text in enumerate(program, 1)]
-            check_program(numbered, self.controller.model)
+            check_program(numbered, self.controller.model, at_terminal=True)
             self._transfer(command)
         except GalilError as exc:
             self._report(exc, "DL")

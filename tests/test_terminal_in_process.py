@@ -471,6 +471,20 @@ def test_a_downloaded_program_is_checked_as_programs_download_checks_it(
     assert out[-1] == "not sent: the program has 2002 lines; DMC-4040 holds 2000"
 
 
+def test_a_typed_download_refused_says_what_to_change_in_its_lines_not_a_python_keyword(
+    dmc: galil.Controller, term: Terminal, out: list[str]
+) -> None:
+    term.feed("DL")
+    with nothing_sent(dmc):
+        for line in ("#A", "PR 1000;REM the first move", "EN", "\\"):
+            term.feed(line)
+    assert out[-1].startswith("not sent: program line 2: REM after a label or a command")
+    assert out[-1].endswith("write ' for a comment after a command, or drop the comment")
+    assert "strip_comments" not in out[-1]
+    with pytest.raises(galil.InvalidArgument, match=r"or pass strip_comments=True \[DMC-4040\]$"):
+        dmc.programs.download("#A\nPR 1000;REM the first move\nEN")  # (the API's own advice)
+
+
 @pytest.mark.parametrize(
     ("script", "status"),
     [
