@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from galil import codes, predict
-from galil.errors import InvalidArgument, LimitError
+from galil.errors import InvalidArgument, LimitError, decimal_hint
 from galil.gearing import Gearing, gear_off, gear_to
 from galil.homing import AxisHoming, Homed, Switches, read_switches
 from galil.link import CommandLink
@@ -200,7 +200,9 @@ def _smoothing_value(value: object, model: ModelSpec) -> float:
     """IT as a float: numpy's numbers too; a bool or an int no float holds refused."""
     low, high = model.it_range
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise InvalidArgument(f"smoothing must be a number in [{low}, {high}], got {value!r}")
+        raise InvalidArgument(
+            f"smoothing must be a number in [{low}, {high}], got {value!r}{decimal_hint(value)}"
+        )
     try:
         return float(value)
     except OverflowError:  # 10**400

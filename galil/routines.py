@@ -476,9 +476,10 @@ class Routines:
         dl``, ``Controller.send(commands.dl(...))``): it replaces the whole program, the
         library's routines with it. Refused, unsent, while any thread runs (one query): the
         controller refuses ``DL`` then (TC 17) and runs the program's lines that follow as
-        commands (the simulator does; unsourced for a controller: decision 0084). Once sent (whatever came of it) the library forgets the threads it held:
-        none runs, and its routines are no longer in memory (the next use installs them
-        again, as every use does: :meth:`install` reads the program first).
+        commands (the simulator does; unsourced for a controller: decision 0084). Once sent
+        (whatever came of it) the library forgets the threads it held: none runs, and its
+        routines are no longer in memory (the next use installs them again, as every use
+        does: :meth:`install` reads the program first).
 
         Raises:
             InvalidArgument: a thread runs (the library's own are named).

@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from galil import predict
-from galil.errors import InvalidArgument
+from galil.errors import InvalidArgument, decimal_hint
 from galil.predict.path import PathLayout, quantise_angle
 from galil.units import Scale, angle_in_degrees, counts_or_plain, is_quantity
 
@@ -64,7 +64,8 @@ def _finite(value: object, what: str) -> None:
         and math.isfinite(float(value))
     ):
         return
-    raise InvalidArgument(f"{what} must be a finite number or a pint Quantity, got {value!r}")
+    hint = decimal_hint(getattr(value, "magnitude", value))
+    raise InvalidArgument(f"{what} must be a finite number or a pint Quantity, got {value!r}{hint}")
 
 
 class Segment:

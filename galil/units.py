@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 import pint
 
-from galil.errors import InvalidArgument, LimitError
+from galil.errors import InvalidArgument, LimitError, decimal_hint
 
 __all__ = [
     "UNIT_KINDS",
@@ -194,7 +194,9 @@ def _plain_number(value: object, what: str) -> float:
     if type(value) is int or type(value) is float:  # (the usual case: no ABC check)
         return _real(value, what)
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise InvalidArgument(f"{what} must be a number or a pint Quantity, got {value!r}")
+        raise InvalidArgument(
+            f"{what} must be a number or a pint Quantity, got {value!r}{decimal_hint(value)}"
+        )
     return _real(value, what)
 
 
@@ -206,7 +208,7 @@ def _magnitude(q: Any, what: str) -> float:
     if getattr(m, "ndim", 0) == 0 and hasattr(m, "item"):
         m = m.item()
     if isinstance(m, bool) or not isinstance(m, numbers.Real):
-        raise InvalidArgument(f"{what} must be one real value, got {q!r}")
+        raise InvalidArgument(f"{what} must be one real value, got {q!r}{decimal_hint(m)}")
     return _real(m, what)
 
 
@@ -548,8 +550,9 @@ def _real_array(values: object, what: str) -> npt.NDArray[np.float64]:
             ) from exc
         raise InvalidArgument(f"{what} must be an array of numbers: {exc}") from exc
     if array.dtype.kind not in "iuf":
+        hint = next((decimal_hint(v) for v in array.flat if decimal_hint(v)), "")
         raise InvalidArgument(
-            f"{what} must hold real numbers, got {array.dtype} values ({values!r:.60})"
+            f"{what} must hold real numbers, got {array.dtype} values ({values!r:.60}){hint}"
         )
     out = array.astype(np.float64)
     if not np.all(np.isfinite(out)):

@@ -30,7 +30,7 @@ from typing import ClassVar, NamedTuple
 
 import numpy as np
 
-from galil.errors import InvalidArgument, LimitError
+from galil.errors import InvalidArgument, LimitError, decimal_hint
 from galil.models import INT32_MAX, INT32_MIN, IT_RANGE, ModelSpec
 from galil.protocol.numbers import format_number
 
@@ -354,7 +354,7 @@ def _axis_list(axes: str | Iterable[str], model: ModelSpec | None, extra: str = 
 def _number(value: object, what: str) -> float:
     # bool is an int, but True as a count is almost always a bug.
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, Real):
-        raise InvalidArgument(f"{what}: {value!r} is not a number")
+        raise InvalidArgument(f"{what}: {value!r} is not a number{decimal_hint(value)}")
     try:
         v = float(value)
     except OverflowError:  # an int too large for any float
