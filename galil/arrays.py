@@ -183,12 +183,14 @@ class Arrays:
 
         Args:
             name: the array's name.
-            size: its number of elements (within the model's array space).
+            size: its number of elements (within the model's array space): an ``int`` or a
+                numpy integer; a float is refused, a whole one too (``10.0``), and a bool.
             replace: free an array of that name first (its values are lost); without it an
                 existing array is refused by the controller.
 
         Raises:
-            InvalidArgument: a bad name, or a size outside the model's array space.
+            InvalidArgument: a bad name, a size that is not an integer, or one outside the
+                model's array space.
             CommandError: the controller refused (the name exists, no room left).
         """
         check_flag(replace, "replace")

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from galil import codes, predict
-from galil.errors import InvalidArgument, LimitError
+from galil.errors import InvalidArgument, LimitError, decimal_hint
 from galil.gearing import Gearing, gear_off, gear_to
 from galil.homing import AxisHoming, Homed, Switches, read_switches
 from galil.link import CommandLink
@@ -200,7 +200,9 @@ def _smoothing_value(value: object, model: ModelSpec) -> float:
     """IT as a float: numpy's numbers too; a bool or an int no float holds refused."""
     low, high = model.it_range
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise InvalidArgument(f"smoothing must be a number in [{low}, {high}], got {value!r}")
+        raise InvalidArgument(
+            f"smoothing must be a number in [{low}, {high}], got {value!r}{decimal_hint(value)}"
+        )
     try:
         return float(value)
     except OverflowError:  # 10**400
@@ -447,17 +449,21 @@ class Axis(AxisGearing, AxisPosition):
 
     # -- parameters -------------------------------------------------------------------------
     def check_parameter(self, cmd: str, counts: float) -> float:
-        """Quantise and range-check SP/JG/AC/DC/IT; a refusal also gives the user's units.
+        """Quantise and range-check SP/JG/HV/AC/DC/IT; a refusal also gives the user's units.
 
         Raises:
-            LimitError: outside the model's range.
+            LimitError: outside the model's range; a speed (SP, JG, HV) above 0 but under one
+                step, which the controller would store as 0.
         """
+        tm = tm_of(self._link.sample_period)  # the TM in force: SP/AC steps
         try:
-            tm = tm_of(self._link.sample_period)  # the TM in force: SP/AC steps
-            return predict.check_parameter(cmd, counts, self._link.model, axis=self.letter, tm=tm)
+            stored = predict.check_parameter(cmd, counts, self._link.model, axis=self.letter, tm=tm)
+            if stored == 0 and counts != 0 and cmd in _SPEEDS:
+                raise _under_one_step(cmd, counts, self._link.model, tm, self.letter)
         except LimitError as exc:
             state_in_units(exc, self._scale, _KIND[_POWER.get(cmd, 1)])
             raise
+        return stored
 
     def _set_param(self, cmd: str, counts: float) -> None:
         value = self.check_parameter(cmd, counts)
@@ -785,24 +791,29 @@ def _home_speed_counts(axis: Axis, value: Any) -> float:
         LimitError: above the model's maximum; above 0 but under one step (HV 0, with which
             HM and FI are refused), in the user's units too.
     """
-    counts = axis.rate_counts(value, 1, "home_speed")
-    stored = axis.check_parameter("HV", counts)
-    if stored == 0 < counts:
-        link = axis._link
-        tm = tm_of(link.sample_period)
-        step = link.model.speed_resolution(tm)
-        exc = LimitError(
-            f"HV {counts:g} counts/s is less than one step ({step:g} counts/s at "
-            f"TM {tm:g}): it would be HV 0, with which home() and find_index() are refused",
-            name="HV",
-            value=counts,
-            limit=step,
-            axis=axis.letter,
-            model=link.model.name,
-        )
-        state_in_units(exc, axis.scale, "speed")
-        raise exc
-    return stored
+    return axis.check_parameter("HV", axis.rate_counts(value, 1, "home_speed"))
+
+
+#: The speeds a nonzero request of under one step would silently set to 0, and what 0 does.
+_SPEEDS = {
+    "SP": "a move at SP 0 is refused",
+    "JG": "a jog at JG 0 never moves",
+    "HV": "home() and find_index() are refused at HV 0",
+}
+
+
+def _under_one_step(cmd: str, counts: float, model: ModelSpec, tm: float, axis: str) -> LimitError:
+    """The refusal of a speed above 0 but under one step: the controller would store 0."""
+    step = model.speed_resolution(tm)
+    return LimitError(
+        f"{cmd} {counts:g} counts/s is less than one step ({step:g} counts/s at TM {tm:g}): "
+        f"it would be {cmd} 0 ({_SPEEDS[cmd]}); the smallest speed above 0 is one step",
+        name=cmd,
+        value=counts,
+        limit=step,
+        axis=axis,
+        model=model.name,
+    )
 
 
 def _soft_limit_counts(axis: Axis, limits: tuple[Any, Any]) -> tuple[int, int]:

@@ -68,7 +68,7 @@ from galil.aio._motion import Starting
 from galil.aio._worker import shielded
 from galil.contour import ContourResult, ContourStream
 from galil.controller import Controller
-from galil.errors import GalilError, GalilTimeoutError, InvalidArgument, MotionError
+from galil.errors import GalilError, GalilTimeoutError, InvalidArgument, MotionError, decimal_hint
 from galil.link import check_count, check_flag, check_seconds, check_wait_timeout
 from galil.motion import held
 from galil.predict import Profile
@@ -370,7 +370,9 @@ def _finite(value: Any) -> bool:
 def _distance(value: object) -> float:
     """``in_position``: a finite number >= 0 in the axis's unit."""
     if isinstance(value, bool) or not isinstance(value, numbers.Real) or not _finite(value):
-        raise InvalidArgument(f"in_position must be a finite number >= 0, not {value!r:.60}")
+        raise InvalidArgument(
+            f"in_position must be a finite number >= 0, not {value!r:.60}{decimal_hint(value)}"
+        )
     if value < 0:
         raise InvalidArgument(f"in_position must be a finite number >= 0, not {value!r:.60}")
     return float(value)
@@ -524,7 +526,7 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
             unit = "counts" if self._scale is None else f"{self._scale.unit:~}"
             raise InvalidArgument(
                 f"{self.name}: a position is a number (in {unit}, the motor's unit), not "
-                f"{value!r:.60}"
+                f"{value!r:.60}{decimal_hint(value)}"
             )
         if not _finite(value):  # (an int no float holds, 10**400: the setpoint is a float)
             raise InvalidArgument(f"{self.name}: a position is a finite number, not {value!r:.40}")

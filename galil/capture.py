@@ -28,7 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from galil.arrays import Arrays
-from galil.errors import GalilError, GalilTimeoutError, InvalidArgument, ProtocolError
+from galil.errors import GalilError, GalilTimeoutError, InvalidArgument, ProtocolError, decimal_hint
 from galil.link import CommandLink, check_count, check_wait_timeout
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import read_one
@@ -97,7 +97,9 @@ def _count(count: object, seconds: object, every: int, sample_period: float) -> 
             or not isinstance(seconds, (int, float))
             or not (math.isfinite(seconds) and seconds > 0)
         ):
-            raise InvalidArgument(f"seconds must be a positive number, not {seconds!r}")
+            raise InvalidArgument(
+                f"seconds must be a positive number, not {seconds!r}{decimal_hint(seconds)}"
+            )
         return math.ceil(seconds / (every * sample_period) - 1e-9) + 1
     return check_count(count, "count")
 

@@ -25,6 +25,7 @@ did not end as planned".
 
 from __future__ import annotations
 
+import decimal
 import queue
 from collections.abc import Sequence
 
@@ -43,6 +44,15 @@ __all__ = [
     "ScheduleError",
     "UnknownVariableError",
 ]
+
+
+def decimal_hint(value: object) -> str:
+    """What the refusal of ``value`` as a number adds when it is a :class:`decimal.Decimal`
+    (a number, but no :class:`numbers.Real`; never taken, so that no digits are rounded away
+    unseen): how to give it. Empty for anything else."""
+    if isinstance(value, decimal.Decimal):
+        return " (a decimal.Decimal is not taken: pass float() of it)"
+    return ""
 
 
 class GalilError(Exception):

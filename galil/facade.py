@@ -7,6 +7,7 @@ logic. The controller adds the life cycle, the axes and motion on top.
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
@@ -20,7 +21,7 @@ from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
 from galil.protocol.session import Completed
 from galil.records import Records, RecordStream
-from galil.routines import ul_reply_bytes
+from galil.routines import Routines, ul_reply_bytes
 from galil.transport import Transport
 from galil.tuning import follow_tm
 
@@ -89,11 +90,13 @@ class LinkFacade:
         link: the command link.
         messages_room: unsolicited output.
         records_room: data records.
+        routines: the library's routines in program memory (a raw ``DL`` replaces them).
     """
 
     link: Link
     messages_room: Messages
     records_room: Records
+    routines: Routines
 
     @property
     def model(self) -> ModelSpec:
@@ -205,9 +208,13 @@ class LinkFacade:
         prepared = _prepared(command)
         size = None if timeout is not None else _transfer_bytes(self.link, prepared)
         if size is None:
-            done = self.link.exchange(prepared, timeout=timeout)
+            send = functools.partial(self.link.exchange, prepared, timeout=timeout)
         else:
-            done = self.link.transfer(prepared, size)
+            send = functools.partial(self.link.transfer, prepared, size)
+        # A DL replaces the library's routines too: refused while a thread runs, and they
+        # are forgotten once it is sent.
+        raw_dl = isinstance(prepared, Command) and prepared.text == "DL"
+        done = self.routines.download_raw(send) if raw_dl else send()
         self._follow_tm([command])
         return done
 

@@ -25,7 +25,7 @@ import logging
 from collections.abc import Callable, Sequence
 
 from galil import predict
-from galil.errors import CommandError, InvalidArgument, LimitError
+from galil.errors import CommandError, InvalidArgument, LimitError, decimal_hint
 from galil.link import CommandLink
 from galil.motion import (
     Display,
@@ -53,7 +53,7 @@ def _ratio(link: CommandLink, ratio: object) -> float:
         LimitError: beyond the model's range. InvalidArgument: not a number.
     """
     if isinstance(ratio, bool) or not isinstance(ratio, (int, float)):
-        raise InvalidArgument(f"a gear ratio is a number, got {ratio!r}")
+        raise InvalidArgument(f"a gear ratio is a number, got {ratio!r}{decimal_hint(ratio)}")
     try:
         sent = float(format_number(float(ratio)))
     except InvalidArgument as exc:

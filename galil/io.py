@@ -28,7 +28,13 @@ from typing import Any, Protocol, overload
 
 import numpy as np
 
-from galil.errors import GalilConnectionError, GalilError, GalilTimeoutError, InvalidArgument
+from galil.errors import (
+    GalilConnectionError,
+    GalilError,
+    GalilTimeoutError,
+    InvalidArgument,
+    decimal_hint,
+)
 from galil.link import CommandLink, check_wait_timeout
 from galil.protocol import commands as cmds
 from galil.routines import RESERVED, Routine, Routines
@@ -66,7 +72,9 @@ def volts(value: object, what: str) -> float:
         except Exception as exc:  # pint's DimensionalityError and friends
             raise InvalidArgument(f"{what}: {value} is not a voltage") from exc
     elif isinstance(value, (bool, np.bool_)) or not isinstance(value, Real):
-        raise InvalidArgument(f"{what} takes volts (a number or a Quantity), not {value!r}")
+        raise InvalidArgument(
+            f"{what} takes volts (a number or a Quantity), not {value!r}{decimal_hint(value)}"
+        )
     else:
         try:
             v = float(value)

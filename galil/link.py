@@ -39,6 +39,7 @@ from galil.errors import (
     GalilTimeoutError,
     InvalidArgument,
     ProtocolError,
+    decimal_hint,
 )
 from galil.models import ModelSpec
 from galil.protocol import commands as cmds
@@ -232,7 +233,7 @@ def check_seconds(value: object, name: str = "timeout", *, positive: bool = Fals
         least = "> 0" if positive else ">= 0"
         raise InvalidArgument(
             f"{name} must be a finite number of seconds {least}, at most {LONGEST_TIMEOUT:g}"
-            f" (about 31 years), not {value!r}"
+            f" (about 31 years), not {value!r}{decimal_hint(value)}"
         )
     return float(value)
 

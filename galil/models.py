@@ -12,7 +12,7 @@ import numbers
 import re
 from dataclasses import dataclass, field
 
-from galil.errors import InvalidArgument
+from galil.errors import InvalidArgument, decimal_hint
 
 __all__ = [
     "ETHERNET_BYTES_PER_S",
@@ -107,7 +107,9 @@ def _check_tm(tm: object) -> float:
     if type(tm) is float and 0 < tm < math.inf:  # the usual case, at once (NaN fails too)
         return tm
     if isinstance(tm, bool) or not isinstance(tm, numbers.Real):
-        raise InvalidArgument(f"tm must be a number of microseconds, not {tm!r:.60}")
+        raise InvalidArgument(
+            f"tm must be a number of microseconds, not {tm!r:.60}{decimal_hint(tm)}"
+        )
     try:
         value = float(tm)
     except OverflowError:  # 10**400

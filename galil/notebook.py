@@ -19,7 +19,7 @@ import numpy.typing as npt
 from galil.axis import Axis
 from galil.capture import Recording
 from galil.contour import ContourResult
-from galil.errors import GalilError, InvalidArgument
+from galil.errors import GalilError, InvalidArgument, decimal_hint
 from galil.motion import MoveHandle
 from galil.predict import Profile
 from galil.units import counts_or_plain, get_registry, is_quantity
@@ -248,7 +248,7 @@ def _slider_limit(axis: Axis, max_speed: object) -> float:
         else:  # counts/s back to the axis's unit per second (display: sign * counts/unit)
             value = axis.scale.rate_to_counts(max_speed, 1, "max_speed") / axis.scale.display[0]
     elif isinstance(max_speed, bool) or not isinstance(max_speed, numbers.Real):
-        raise InvalidArgument(f"max_speed is a speed, not {max_speed!r}")
+        raise InvalidArgument(f"max_speed is a speed, not {max_speed!r}{decimal_hint(max_speed)}")
     else:
         value = float(max_speed)
     if not (math.isfinite(value) and value > 0):

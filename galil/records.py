@@ -27,6 +27,7 @@ from galil.errors import (
     InvalidArgument,
     ProtocolError,
     QueueTimeoutError,
+    decimal_hint,
 )
 from galil.link import Link, check_count, check_timeout, check_wait_timeout, read_handle, read_reply
 from galil.protocol import commands as cmds
@@ -502,7 +503,9 @@ class Records:
             or not isinstance(value, (int, float))
             or not (math.isfinite(value) and value > 0)
         ):
-            raise InvalidArgument(f"seconds must be a positive number, not {seconds!r}")
+            raise InvalidArgument(
+                f"seconds must be a positive number, not {seconds!r}{decimal_hint(value)}"
+            )
         ts = self.link.sample_period
         if value / ts > 2**53:
             raise InvalidArgument(f"{value} s is longer than a record stream can count")

@@ -26,9 +26,10 @@ from __future__ import annotations
 
 import re
 import threading
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
+from typing import TypeVar
 
 from galil.errors import CommandError, InvalidArgument
 from galil.link import CommandLink
@@ -61,6 +62,7 @@ RESERVED: Mapping[str, str] = MappingProxyType(
     }
 )
 _LABEL = re.compile(r"#([A-Za-z][A-Za-z0-9]*)")
+_T = TypeVar("_T")
 _END = re.compile(r"EN\b")
 
 
@@ -219,6 +221,17 @@ def _merge(library: dict[str, tuple[str, ...]], routines: Sequence[Routine]) -> 
                     f"routine {r.label}"
                 )
         library[r.label] = r.lines
+
+
+def _threads_named(running: Mapping[int, int], library: Mapping[int, str]) -> str:
+    """``thread 7 (the library's #GWDOG: the watchdog), thread 1``: running threads, the
+    library's routines named."""
+    named = []
+    for t in sorted(running):
+        label = library.get(t)
+        whose = RESERVED.get(label, "a routine of the library's") if label else ""
+        named.append(f"thread {t} (the library's {label}: {whose})" if label else f"thread {t}")
+    return ", ".join(named) + (" is" if len(named) == 1 else " are")
 
 
 class Routines:
@@ -458,10 +471,40 @@ class Routines:
         if owner is not None:
             self._owners[thread] = owner
 
+    def download_raw(self, send: Callable[[], _T]) -> _T:
+        """Run ``send``, a ``DL`` the library did not build (typed at the terminal, ``galil
+        dl``, ``Controller.send(commands.dl(...))``): it replaces the whole program, the
+        library's routines with it. Refused, unsent, while any thread runs (one query): the
+        controller refuses ``DL`` then (TC 17) and runs the program's lines that follow as
+        commands (the simulator does; unsourced for a controller: decision 0084). Once sent
+        (whatever came of it) the library forgets the threads it held: none runs, and its
+        routines are no longer in memory (the next use installs them again, as every use
+        does: :meth:`install` reads the program first).
+
+        Raises:
+            InvalidArgument: a thread runs (the library's own are named).
+        """
+        with self._lock:
+            running = self.running()
+            if running:
+                raise InvalidArgument(
+                    f"{_threads_named(running, self._threads)} running: the controller "
+                    "refuses DL while a program runs (TC 17) and would then run the "
+                    "program's lines as commands; halt them first (HX n), or download "
+                    "with controller.programs.download(), which keeps the library's "
+                    "routines running",
+                    model=self.link.model.name,
+                )
+            try:
+                return send()
+            finally:
+                self.forget()
+
     def forget(self, thread: int | None = None) -> None:
         """``thread`` was halted behind :meth:`halt`'s back (after a failed start); with no
         ``thread``, every one: the controller was reset (``RS``), its threads are halted and
-        the program in memory is the burned one, so the library runs no routine any more."""
+        the program in memory is the burned one, or a raw ``DL`` replaced the program
+        (:meth:`download_raw`), so the library runs no routine any more."""
         with self._lock:
             if thread is None:
                 self._threads.clear()

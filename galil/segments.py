@@ -24,9 +24,9 @@ import numpy as np
 import numpy.typing as npt
 
 from galil import predict
-from galil.errors import InvalidArgument
+from galil.errors import InvalidArgument, decimal_hint
 from galil.predict.path import PathLayout, quantise_angle
-from galil.units import Scale, counts_or_plain, get_registry, is_quantity
+from galil.units import Scale, angle_in_degrees, counts_or_plain, is_quantity
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -64,7 +64,8 @@ def _finite(value: object, what: str) -> None:
         and math.isfinite(float(value))
     ):
         return
-    raise InvalidArgument(f"{what} must be a finite number or a pint Quantity, got {value!r}")
+    hint = decimal_hint(getattr(value, "magnitude", value))
+    raise InvalidArgument(f"{what} must be a finite number or a pint Quantity, got {value!r}{hint}")
 
 
 class Segment:
@@ -128,16 +129,10 @@ class Arc(Segment):
 
 
 def _degrees(value: object, what: str) -> float:
-    """An angle in degrees: a number is degrees, a Quantity must be an angle."""
+    """An angle in degrees: a number is degrees, a Quantity must be an angle (one only the
+    user's own registry defines is refused as every unit is: :func:`angle_in_degrees`)."""
     _finite(value, what)
-    if not is_quantity(value):
-        return float(value)  # type: ignore[arg-type]
-    q: Any = value
-    reg = get_registry()
-    ours = reg.Quantity(q.magnitude, str(q.units))
-    if dict(ours.to_root_units().unit_items()).get("radian", 0) != 1:
-        raise InvalidArgument(f"{what}: {value!r} is not an angle")
-    return float(ours.to("degree").magnitude)
+    return angle_in_degrees(value, what)
 
 
 @dataclass(frozen=True)

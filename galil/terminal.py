@@ -225,8 +225,9 @@ class Terminal:
             program = list(lines)
             command = cmds.dl(program, model=self.controller.model)
             numbered = [ProgramLine(text, n) for n, text in enumerate(program, 1)]
-            check_program(numbered, self.controller.model)
-            self._transfer(command)
+            check_program(numbered, self.controller.model, at_terminal=True)
+            # (refused while a thread runs; the library forgets the routines it replaces)
+            self.controller.routines.download_raw(lambda: self._transfer(command))
         except GalilError as exc:
             self._report(exc, "DL")
             return False

@@ -21,7 +21,7 @@ import re
 from collections.abc import Callable
 from typing import Generic, Protocol, TypeVar, overload
 
-from galil.errors import CommandError, GalilError, InvalidArgument
+from galil.errors import CommandError, GalilError, InvalidArgument, decimal_hint
 from galil.link import CommandLink, Link, check_timeout
 from galil.models import MOTOR_TYPES, ModelSpec
 from galil.motion import MotionTracker, refuse_in_motion
@@ -259,7 +259,7 @@ class Setting(Generic[T]):
 
     def __set__(self, obj: _HasLink, value: float) -> None:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise InvalidArgument(f"{self.name} takes a number, not {value!r}")
+            raise InvalidArgument(f"{self.name} takes a number, not {value!r}{decimal_hint(value)}")
         number = float(value.value) if isinstance(value, MotorType) else value
         link = obj._link
         command = self.builder(model=link.model, **{obj.letter: number})

@@ -18,12 +18,13 @@ import numpy as np
 import numpy.typing as npt
 import pint
 
-from galil.errors import InvalidArgument, LimitError
+from galil.errors import InvalidArgument, LimitError, decimal_hint
 
 __all__ = [
     "UNIT_KINDS",
     "PathSamples",
     "Scale",
+    "angle_in_degrees",
     "counts_or_plain",
     "get_registry",
     "is_quantity",
@@ -83,25 +84,67 @@ def unit_refused(what: str, value: object, why: str) -> InvalidArgument:
     return InvalidArgument(f"{what}: {_shown(value)} {why}")
 
 
-def _ours(q: Any, what: str = "value") -> Any:
+def _ours(q: Any, what: str = "value", expected: str = "") -> Any:
     """Re-express a Quantity of any registry in the default registry.
 
     Raises:
         InvalidArgument: a unit the default registry does not define (one a user's own
-            registry added), naming ``what``.
+            registry added), naming ``what`` and, when given, what was ``expected``.
     """
     reg = get_registry()
-    if getattr(q, "_REGISTRY", None) is reg:
+    theirs = getattr(q, "_REGISTRY", None)
+    if theirs is reg:
         return q
+    wanted = f"; expected {expected}, in a unit that registry defines" if expected else ""
     try:
-        return reg.Quantity(q.magnitude, str(q.units))
+        ours = reg.Quantity(q.magnitude, str(q.units))
     except pint.errors.PintError as exc:
+        why = "is in a unit pint's default registry does not define"
+        why += wanted or " (give it in one it does, such as mm, inch, degree, count)"
+        raise unit_refused(what, q, why) from exc
+    if theirs is not None and not _same_meaning(theirs, str(q.units)):
+        # (a user's "qturn = 90 * degree" is a quecto-turn to the default registry)
         raise unit_refused(
-            what,
-            q,
-            "is in a unit pint's default registry does not define (give it in one it does, "
-            "such as mm, inch, degree, count)",
-        ) from exc
+            what, q, f"is {ours.units} to pint's default registry, not your unit{wanted}"
+        )
+    return ours
+
+
+@lru_cache(maxsize=64)
+def _same_meaning(registry: Any, units: str) -> bool:
+    """Whether ``units`` means the same in ``registry`` (a user's own) as in the default one:
+    the same root units and factor. A unit that fails to convert in either is left to the
+    conversion that follows (which refuses it in the library's words)."""
+    try:
+        theirs = registry.Quantity(1.0, units).to_root_units()
+        ours = get_registry().Quantity(1.0, units).to_root_units()
+    except pint.errors.PintError:
+        return True
+    if str(theirs.units) != str(ours.units):
+        return False
+    return math.isclose(float(theirs.magnitude), float(ours.magnitude), rel_tol=1e-9)
+
+
+def angle_in_degrees(value: object, what: str) -> float:
+    """An angle in degrees: a plain number is degrees, a Quantity must be an angle (of any
+    registry, in a unit the default registry defines).
+
+    Raises:
+        InvalidArgument: not a finite real number; a Quantity that is not an angle, or whose
+            unit pint's default registry does not define; both naming ``what``.
+    """
+    if not is_quantity(value):
+        return _plain_number(value, what)
+    expected = "an angle such as 90 * ureg.degree (a plain number is degrees)"
+    q = _ours(value, what, expected)
+    try:
+        angle = _angle_power(q.units) == 1 and q.to_root_units().dimensionless
+        degrees = _magnitude(q.to("degree"), what) if angle else None
+    except pint.errors.PintError as exc:  # (an offset unit such as °C: no root units)
+        raise unit_refused(what, value, f"is not an angle; expected {expected}") from exc
+    if degrees is None:
+        raise InvalidArgument(f"{what}: {_shown(value)} is not an angle; expected {expected}")
+    return degrees
 
 
 @lru_cache(maxsize=256)
@@ -151,7 +194,9 @@ def _plain_number(value: object, what: str) -> float:
     if type(value) is int or type(value) is float:  # (the usual case: no ABC check)
         return _real(value, what)
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise InvalidArgument(f"{what} must be a number or a pint Quantity, got {value!r}")
+        raise InvalidArgument(
+            f"{what} must be a number or a pint Quantity, got {value!r}{decimal_hint(value)}"
+        )
     return _real(value, what)
 
 
@@ -163,7 +208,7 @@ def _magnitude(q: Any, what: str) -> float:
     if getattr(m, "ndim", 0) == 0 and hasattr(m, "item"):
         m = m.item()
     if isinstance(m, bool) or not isinstance(m, numbers.Real):
-        raise InvalidArgument(f"{what} must be one real value, got {q!r}")
+        raise InvalidArgument(f"{what} must be one real value, got {q!r}{decimal_hint(m)}")
     return _real(m, what)
 
 
@@ -256,7 +301,7 @@ class Scale:
             raise InvalidArgument(
                 f"{what} needs units compatible with {unit:~} (the axis has a scale), got {value!r}"
             )
-        q = _ours(value, what)
+        q = _ours(value, what, f"{unit:~}-compatible units")
         if getattr(q, "_units", None) == getattr(unit, "_units", False):
             # The usual case, the axis's own unit (compared without building Unit objects):
             # nothing to convert, and the angle check below is trivially met.
@@ -285,7 +330,7 @@ class Scale:
     def position_to_counts(self, value: Any, what: str = "position") -> float:
         """A position Quantity to (unrounded) counts."""
         if is_quantity(value):
-            q = _ours(value, what)
+            q = _ours(value, what, f"{self.unit:~}-compatible units")
             if getattr(q, "_units", None) == getattr(self.unit, "_units", False):
                 # The usual case (_convert's own): its magnitude looked at once, not twice.
                 return self.sign * (_magnitude(q, what) - self._offset) * self._k
@@ -355,7 +400,7 @@ def counts_or_plain(value: object, what: str, letter: str = "", *, power: int = 
     """
     if not is_quantity(value):
         return _plain_number(value, what)
-    q = _ours(value, what)
+    q = _ours(value, what, _COUNT_UNITS[power])
     names = dict(q.unit_items())
     try:
         if all(name == "count" or _of_time(name) for name in names):
@@ -505,8 +550,9 @@ def _real_array(values: object, what: str) -> npt.NDArray[np.float64]:
             ) from exc
         raise InvalidArgument(f"{what} must be an array of numbers: {exc}") from exc
     if array.dtype.kind not in "iuf":
+        hint = next((decimal_hint(v) for v in array.flat if decimal_hint(v)), "")
         raise InvalidArgument(
-            f"{what} must hold real numbers, got {array.dtype} values ({values!r:.60})"
+            f"{what} must hold real numbers, got {array.dtype} values ({values!r:.60}){hint}"
         )
     out = array.astype(np.float64)
     if not np.all(np.isfinite(out)):

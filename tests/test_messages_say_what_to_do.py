@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Iterator
+from decimal import Decimal
 
 import numpy as np
 import pytest
@@ -170,3 +171,35 @@ def test_a_move_of_several_axes_names_the_axis_of_a_bad_target(
         dmc.move({"A": 1, "B": float("nan")}, relative=relative)
     what = "distance" if relative else "target"
     assert f"{what} of B must be a finite number, got nan" in str(info.value)
+
+
+_DECIMAL = Decimal("0.5")
+_TAKES_A_NUMBER = {
+    "speed": lambda d: setattr(d.A, "speed", _DECIMAL),
+    "move_to": lambda d: d.A.move_to(_DECIMAL),
+    "move": lambda d: d.move({"A": _DECIMAL}),
+    "jog": lambda d: d.A.jog(_DECIMAL),
+    "kp": lambda d: setattr(d.A, "kp", _DECIMAL),
+    "smoothing": lambda d: setattr(d.A, "smoothing", _DECIMAL),
+    "variable": lambda d: d.variables.__setitem__("x", _DECIMAL),
+    "sleep": lambda d: d.sleep(_DECIMAL),
+    "timeout": lambda d: setattr(d, "timeout", _DECIMAL),
+    "watchdog": lambda d: d.watchdog(_DECIMAL),
+    "Line": lambda d: galil.Line(_DECIMAL, 0),
+    "Arc": lambda d: galil.Arc(5, 0, _DECIMAL),
+    "analog output": lambda d: d.io.analog_out.__setitem__(1, _DECIMAL),
+    "gear ratio": lambda d: d.B.gear_to("A", _DECIMAL),
+    "records seconds": lambda d: d.records(seconds=_DECIMAL),
+    "vector speed": lambda d: d.plan_vector("AB", [galil.Line(100, 0)], speed=_DECIMAL),
+    "a Quantity of one": lambda d: d.A.set_scale(counts_per=2000 / mm).move_to(_DECIMAL * mm),
+    "predict tm": lambda d: galil.predict.check_parameter("SP", 100, tm=_DECIMAL),
+}
+
+
+@pytest.mark.parametrize("call", _TAKES_A_NUMBER.values(), ids=_TAKES_A_NUMBER.keys())
+def test_a_decimal_where_a_number_is_taken_is_refused_saying_to_float_it(
+    dmc: galil.Controller, call: object
+) -> None:
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(galil.InvalidArgument) as info:
+        call(dmc)  # type: ignore[operator]
+    assert "a decimal.Decimal is not taken: pass float() of it" in str(info.value)

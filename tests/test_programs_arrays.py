@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import galil
+from galil.protocol import commands as cmds
 from galil.routines import MARKER
 from galil.testing import nothing_sent, simulated, transcript
 
@@ -307,3 +308,38 @@ def test_a_program_whose_mg_text_is_longer_than_the_model_prints_is_refused_nami
             dmc.programs.download(f'#A\nMG "a;b", x\n{third}\nEN')
         # The longest text, and a longer one in a comment, are no refusal.
         assert dmc.programs.download(f'#A\nMG "{longest}"\n\' MG "{over}"\nEN').sent
+
+
+@pytest.mark.parametrize("size", [10.0, np.float64(4), True, np.bool_(True), "4"])
+def test_an_array_size_that_is_not_an_integer_is_refused_even_a_whole_float(
+    dmc: galil.Controller, size: object
+) -> None:
+    with (
+        nothing_sent(dmc),
+        pytest.raises(galil.InvalidArgument, match=r"DM a\[\] size must be an int"),
+    ):
+        dmc.arrays.define("a", size)  # type: ignore[arg-type]
+    assert "a" not in dmc.arrays.list()
+
+
+def test_an_array_size_in_a_numpy_integer_defines_the_array(dmc: galil.Controller) -> None:
+    dmc.arrays.define("a", np.int64(4))
+    dmc.arrays.define("b", np.uint8(2))
+    assert dmc.arrays.list() == {"a": 4, "b": 2}
+
+
+@pytest.mark.parametrize(
+    "build",
+    [
+        lambda: cmds.dm("a", 10.0),
+        lambda: cmds.xq("#A", 1.0),
+        lambda: cmds.hx(True),
+        lambda: cmds.qu("a", 1.0),
+        lambda: cmds.qu("a", 0, 2.0),
+        lambda: cmds.qd("a", [1.0], 1.0),
+        lambda: cmds.rc(2, 10.0),
+    ],
+)
+def test_the_command_builders_refuse_a_float_where_they_take_a_count(build: object) -> None:
+    with pytest.raises(galil.InvalidArgument, match="must be an int"):
+        build()  # type: ignore[operator]

@@ -29,6 +29,7 @@ from prompt_toolkit.patch_stdout import StdoutProxy
 
 import galil
 from galil import cli, terminal
+from galil.protocol import commands
 from galil.sim.server import SimTcpServer
 from galil.terminal import Terminal, _Screen, default_history_path, run_terminal
 from galil.testing import nothing_sent, sim_of
@@ -471,6 +472,20 @@ def test_a_downloaded_program_is_checked_as_programs_download_checks_it(
     assert out[-1] == "not sent: the program has 2002 lines; DMC-4040 holds 2000"
 
 
+def test_a_typed_download_refused_says_what_to_change_in_its_lines_not_a_python_keyword(
+    dmc: galil.Controller, term: Terminal, out: list[str]
+) -> None:
+    term.feed("DL")
+    with nothing_sent(dmc):
+        for line in ("#A", "PR 1000;REM the first move", "EN", "\\"):
+            term.feed(line)
+    assert out[-1].startswith("not sent: program line 2: REM after a label or a command")
+    assert out[-1].endswith("write ' for a comment after a command, or drop the comment")
+    assert "strip_comments" not in out[-1]
+    with pytest.raises(galil.InvalidArgument, match=r"or pass strip_comments=True \[DMC-4040\]$"):
+        dmc.programs.download("#A\nPR 1000;REM the first move\nEN")  # (the API's own advice)
+
+
 @pytest.mark.parametrize(
     ("script", "status"),
     [
@@ -578,3 +593,53 @@ def test_a_link_lost_under_the_terminal_says_to_start_it_again(
     assert "link is closed" in err
     assert err.endswith("; start galil terminal sim://DMC-4040 again")
     assert "reconnect()" not in err  # (Python advice: before, the terminal's own)
+
+
+def test_a_typed_download_makes_the_library_forget_the_routines_it_replaced(
+    dmc: galil.Controller, term: Terminal
+) -> None:
+    sim_of(dmc).set_input(2, False)
+    dmc.io.wait_for_input(2, high=False, timeout=0.1, thread=3)  # (its routine has ended)
+    assert term.download(["#A", "MG 5", "EN"])
+    assert dmc.routines.upload() == ["#A", "MG 5", "EN"]  # (the library's block is gone)
+    assert dmc.routines.threads == {}
+    dmc.programs.run("#A", thread=3)  # (before: "thread 3 runs the library's #GINWAIT")
+    dmc.programs.wait(3)
+    dmc.io.wait_for_input(2, high=False, timeout=0.1, thread=3)  # installed again, beside it
+    assert dmc.programs.upload() == "#A\nMG 5\nEN"
+    assert "#GINWAIT" in dmc.routines.upload()
+
+
+def test_a_typed_download_while_the_watchdog_runs_is_not_sent_nor_its_lines_run(
+    dmc: galil.Controller, term: Terminal, out: list[str]
+) -> None:
+    dog = dmc.watchdog(5.0)
+    term.feed("DL")
+    with nothing_sent(dmc, allow_queries=True):
+        for line in ("#A", "PR 1000", "BG A", "EN", "\\"):
+            term.feed(line)
+    assert out[-1].startswith("not sent: thread 7 (the library's #GWDOG: the watchdog) is ")
+    assert "refuses DL while a program runs (TC 17)" in out[-1]
+    dmc.sleep(1.0)  # (before: the controller refused the DL and ran PR 1000 and BG A)
+    assert dmc.A.reference_position == 0
+    assert dog.running
+    assert dmc.routines.threads == {7: "#GWDOG"}
+    dog.stop()
+
+
+def test_a_download_sent_raw_makes_the_library_forget_the_routines_it_replaced(
+    dmc: galil.Controller,
+) -> None:
+    dog = dmc.watchdog(5.0)
+    with (
+        nothing_sent(dmc, allow_queries=True),
+        pytest.raises(galil.InvalidArgument, match=r"thread 7 .* is running"),
+    ):
+        dmc.send(commands.dl(["#A", "EN"]))
+    dog.stop()
+    sim_of(dmc).set_input(2, False)
+    dmc.io.wait_for_input(2, high=False, timeout=0.1, thread=3)
+    assert dmc.routines.threads == {3: "#GINWAIT"}
+    assert dmc.exchange(commands.dl(["#A", "EN"])).ok
+    assert dmc.routines.threads == {}
+    dmc.programs.run("#A", thread=3)

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 import numpy as np
 import numpy.typing as npt
 
-from galil.errors import InvalidArgument
+from galil.errors import InvalidArgument, decimal_hint
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -121,7 +121,9 @@ def finite_number(value: object, name: str) -> float:
         InvalidArgument: naming ``name``.
     """
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise InvalidArgument(f"{name} must be a finite number, not {value!r:.60}")
+        raise InvalidArgument(
+            f"{name} must be a finite number, not {value!r:.60}{decimal_hint(value)}"
+        )
     try:
         x = float(value)
     except OverflowError:

@@ -30,7 +30,7 @@ from typing import ClassVar, NamedTuple
 
 import numpy as np
 
-from galil.errors import InvalidArgument, LimitError
+from galil.errors import InvalidArgument, LimitError, decimal_hint
 from galil.models import INT32_MAX, INT32_MIN, IT_RANGE, ModelSpec
 from galil.protocol.numbers import format_number
 
@@ -354,7 +354,7 @@ def _axis_list(axes: str | Iterable[str], model: ModelSpec | None, extra: str = 
 def _number(value: object, what: str) -> float:
     # bool is an int, but True as a count is almost always a bug.
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, Real):
-        raise InvalidArgument(f"{what}: {value!r} is not a number")
+        raise InvalidArgument(f"{what}: {value!r} is not a number{decimal_hint(value)}")
     try:
         v = float(value)
     except OverflowError:  # an int too large for any float
@@ -409,6 +409,19 @@ def _ranged(
             model=model,
         )
     return format_number(v)
+
+
+def _counted(value: object, lo: int, hi: int, what: str, model: str | None = None) -> str:
+    """A count (an array's size, an element index, a thread, how many values) within
+    ``lo`` .. ``hi``: an ``int`` or a numpy integer, as Python's sequences take (``[0] *
+    10.0`` is a TypeError); a float, even a whole one, and a bool are refused."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        shown = f"{value!r:.60}"
+        raise InvalidArgument(
+            f"{what} must be an int (a count: a whole number; numpy's too), not {shown}",
+            model=model,
+        )
+    return _ranged(int(value), lo, hi, what, model=model, integer=True)
 
 
 def _away(text: str, value: object) -> str:
@@ -1356,7 +1369,7 @@ def xq(label: str = "", thread: int | None = None) -> Command:
     if label:
         text += " " + _label(label)
     if thread is not None:
-        t = _ranged(thread, 0, 7, "XQ thread", integer=True)
+        t = _counted(thread, 0, 7, "XQ thread")
         text += f",{t}" if label else f" ,{t}"
     return Command(text)
 
@@ -1365,7 +1378,7 @@ def hx(thread: int | None = None) -> Command:
     """HX: halt program thread ``thread`` (``None``: all)."""
     if thread is None:
         return Command("HX")
-    return Command("HX" + _ranged(thread, 0, 7, "HX thread", integer=True))
+    return Command("HX" + _counted(thread, 0, 7, "HX thread"))
 
 
 def dl(program: str | Sequence[str], *, model: ModelSpec | None = None) -> Command:
@@ -1400,10 +1413,10 @@ def ul() -> Command:
 def _array_range(first: int | None, last: int | None) -> str:
     if first is None and last is None:
         return ""
-    lo = _ranged(0 if first is None else first, 0, 999_999, "first index", integer=True)
+    lo = _counted(0 if first is None else first, 0, 999_999, "first index")
     if last is None:
         return f",{lo}"
-    hi = _ranged(last, int(lo), 999_999, "last index", integer=True)
+    hi = _counted(last, int(lo), 999_999, "last index")
     return f",{lo},{hi}"
 
 
@@ -1425,7 +1438,7 @@ def qd(name: str, values: Sequence[float], first: int | None = None) -> Command:
     _variable_name(name, "array")
     if len(values) == 0:
         raise InvalidArgument("QD: no values")
-    start = 0 if first is None else int(_ranged(first, 0, 999_999, "first index", integer=True))
+    start = 0 if first is None else int(_counted(first, 0, 999_999, "first index"))
     data = ",".join(format_number(_number(v, f"{name}[{start + i}]")) for i, v in enumerate(values))
     text = f"QD {name}[],{start},{start + len(values) - 1}"
     return Command(text, _ACK, (data + "\\").encode("ascii"))
@@ -1447,14 +1460,7 @@ def dm(name: str, size: int, *, model: ModelSpec | None = None) -> Command:
     """DM: dimension array ``name`` with ``size`` elements (the model's array space)."""
     _variable_name(name, "array")
     most = 24_000 if model is None else model.array_elements
-    n = _ranged(
-        size,
-        1,
-        most,
-        f"DM {name}[] size",
-        model=None if model is None else model.name,
-        integer=True,
-    )
+    n = _counted(size, 1, most, f"DM {name}[] size", None if model is None else model.name)
     return Command(f"DM {name}[{n}]")
 
 
@@ -1536,7 +1542,7 @@ def rc(every: int, count: int | None = None, *, model: ModelSpec | None = None) 
     text = f"RC {every.bit_length() - 1}"
     if count is not None:
         most = 24_000 if model is None else model.array_elements
-        text += "," + _ranged(count, 1, most, "RC count", integer=True)
+        text += "," + _counted(count, 1, most, "RC count")
     return Command(text)
 
 

@@ -18,7 +18,7 @@ strips before a download; a ``'`` comment is a command and stays unless ``strip_
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from galil.errors import InvalidArgument
@@ -177,12 +177,28 @@ def _check_label(line: ProgramLine, model: ModelSpec) -> str | None:
     return "#" + name
 
 
-def _check_line(line: ProgramLine, model: ModelSpec) -> None:
+#: What to do about a line :func:`check_program` refuses, by where it ran: the library's
+#: download (``programs.download``, whose keywords fix it) or a ``DL`` typed at the terminal
+#: or ``galil dl`` (no keywords there: the lines themselves are changed).
+_FIXES = {
+    False: {
+        "empty": "write ' for a blank comment line, or pass strip_comments=True",
+        "long": "pass pack=False and split it, or strip_comments=True",
+        "REM": "write ' for a comment after a command, or pass strip_comments=True",
+    },
+    True: {
+        "empty": "write ' for a blank comment line",
+        "long": "split it at a ';' into shorter lines, or shorten or drop its comment",
+        "REM": "write ' for a comment after a command, or drop the comment",
+    },
+}
+
+
+def _check_line(line: ProgramLine, model: ModelSpec, fixes: Mapping[str, str]) -> None:
     where = f"program line {line.source}"
     if not line.text:
         raise InvalidArgument(
-            f"{where} is empty; the controller refuses empty lines (write ' for a blank "
-            "comment line, or pass strip_comments=True)",
+            f"{where} is empty; the controller refuses empty lines ({fixes['empty']})",
             model=model.name,
         )
     bad = _BAD_CHAR.search(line.text)
@@ -194,7 +210,7 @@ def _check_line(line: ProgramLine, model: ModelSpec) -> None:
     if len(line.text) > model.line_length:
         raise InvalidArgument(
             f"{where}: {len(line.text)} characters; {model.name} takes {model.line_length} "
-            "(pass pack=False and split it, or strip_comments=True)",
+            f"({fixes['long']})",
             model=model.name,
         )
     c = _comment_start(line.text)
@@ -202,7 +218,7 @@ def _check_line(line: ProgramLine, model: ModelSpec) -> None:
         raise InvalidArgument(
             f"{where}: REM after a label or a command; REM is no controller command, only a "
             "line of its own beginning with REM is a remark (dropped before the download): "
-            "write ' for a comment after a command, or pass strip_comments=True",
+            f"{fixes['REM']}",
             model=model.name,
         )
     code = line.text if c < 0 else line.text[:c]
@@ -237,7 +253,13 @@ def _mg_texts(code: str) -> list[str]:
     ]
 
 
-def check_program(lines: Sequence[ProgramLine], model: ModelSpec, *, reserve: int = 0) -> None:
+def check_program(
+    lines: Sequence[ProgramLine],
+    model: ModelSpec,
+    *,
+    reserve: int = 0,
+    at_terminal: bool = False,
+) -> None:
     """Check every line and the whole program against ``model``; nothing to send if it fails.
 
     Args:
@@ -245,6 +267,9 @@ def check_program(lines: Sequence[ProgramLine], model: ModelSpec, *, reserve: in
         model: the controller's model (line length, program lines, labels).
         reserve: lines of program memory already taken by something else (the library's
             routines), so the program must fit in what is left.
+        at_terminal: the program was typed after a ``DL`` (or read by ``galil dl``): a
+            refusal says what to change in its lines, not which keyword of
+            ``programs.download`` to pass.
 
     Raises:
         InvalidArgument: the first rule broken, naming the line.
@@ -252,8 +277,9 @@ def check_program(lines: Sequence[ProgramLine], model: ModelSpec, *, reserve: in
     if not lines:
         raise InvalidArgument("the program is empty")
     seen: dict[str, int] = {}
+    fixes = _FIXES[bool(at_terminal)]
     for line in lines:
-        _check_line(line, model)
+        _check_line(line, model, fixes)
         label = _check_label(line, model)
         if label is None:
             continue

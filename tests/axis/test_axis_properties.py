@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import galil
+from galil import Arc, Line
 from galil.errors import InvalidArgument
 from galil.predict import quantise_value
 from galil.testing import nothing_sent, sim_of, simulated
@@ -206,6 +207,43 @@ def test_a_unit_only_the_users_registry_defines_is_refused_naming_the_argument(
         x.speed = 2 * mine.widget / mine.s
     with pytest.raises(InvalidArgument, match=r"^counts_per: 100 / widget .*define"):
         dmc.C.set_scale(counts_per=100 / mine.widget)
+
+
+def test_a_path_in_a_unit_only_the_users_registry_defines_is_refused_naming_what_it_expected(
+    dmc: galil.Controller,
+) -> None:
+    mine = pint.UnitRegistry()
+    mine.define("quadrant = 90 * degree")
+    mine.define("widget = 3 mm")
+    mine.define("qturn = 90 * degree")  # (a quecto-turn to the default registry)
+    for name in ("sweep", "start"):
+        angles = {"start": 0, "sweep": 90, name: 1 * mine.quadrant}
+        with pytest.raises(InvalidArgument, match=rf"^Arc {name}: 1 quadrant .*expected an angle"):
+            Arc(radius=5, **angles)
+    with pytest.raises(InvalidArgument, match=r"^Arc sweep: 1 qturn is quectoturn to pint's def"):
+        Arc(5, 0, 1 * mine.qturn)
+    with pytest.raises(InvalidArgument, match=r"^Arc sweep: 5 °C is not an angle; expected an"):
+        Arc(5, 0, ureg.Quantity(5, "degC"))
+    dmc.A.set_scale(counts_per=2000 / ureg.mm)
+    dmc.B.set_scale(counts_per=2000 / ureg.mm)
+    mm_s = ureg.mm / ureg.s
+    cases = [
+        ([Arc(1 * mine.widget, 0, 90)], {}, r"^segment 0 radius: 1 widget .*expected mm-compat"),
+        ([Line(1 * mine.widget, 0)], {}, r"^segment 0 on A: 1 widget .*expected mm-compatible"),
+        ([Line(1 * ureg.mm, 0)], {"speed": 2 * mine.widget / mine.s}, r"^speed: .*mm / s-comp"),
+        ([Line(1 * ureg.mm, 0)], {"accel": 2 * mine.widget}, r"^accel: .*mm / s \*\* 2-comp"),
+        ([Line(0, 100)], {"speed": 10, "axis_speed": {"D": 1 * mine.widget}}, r"count / sec"),
+    ]
+    same = [
+        dmc.plan_vector("AB", [Arc(1 * ureg.mm, 0, a)], speed=10 * mm_s)
+        for a in (0.25 * mine.turn, 90)
+    ]  # (a unit both registries define alike is taken)
+    assert same[0].duration == same[1].duration
+    for segments, options, words in cases:
+        options = {"speed": 10 * mm_s} | options
+        axes = "CD" if "axis_speed" in options else "AB"
+        with nothing_sent(dmc, allow_queries=True), pytest.raises(InvalidArgument, match=words):
+            dmc.plan_vector(axes, segments, **options)
 
 
 @pytest.mark.parametrize(

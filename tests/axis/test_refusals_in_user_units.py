@@ -135,3 +135,45 @@ def test_galil_plan_with_a_scale_refuses_in_its_unit(capsys: pytest.CaptureFixtu
     assert cli.main(["plan", "10deg", "--scale", "4096/deg", "--speed", "1e4deg/s"]) == 2
     err = capsys.readouterr().err
     assert "(in user units: 10000 deg / s, limit 5371.09 deg / s)" in err
+
+
+def _set(axis: galil.Axis, name: str, value: object) -> None:
+    setattr(axis, name, value)
+
+
+@pytest.mark.parametrize(
+    ("name", "call"),
+    [
+        ("SP", lambda x, v: _set(x, "speed", v)),
+        ("JG", lambda x, v: _set(x, "jog_speed", v)),
+        ("JG", lambda x, v: _set(x, "jog_speed", -v)),
+        ("HV", lambda x, v: _set(x, "home_speed", v)),
+        ("JG", lambda x, v: x.jog(v)),
+        ("SP", lambda x, v: x.move_by(1 * mm, speed=v)),
+        ("SP", lambda x, v: x.speed_schedule(10 * mm, [(5 * mm, v)])),
+    ],
+)
+def test_a_speed_under_one_step_is_refused_with_the_smallest_speed_in_the_axis_unit(
+    dmc: galil.Controller, name: str, call: object
+) -> None:
+    x = dmc.A  # 2000 counts/mm: one step (2 counts/s at TM 1000) is 0.001 mm/s
+    x.jog_speed = x.home_speed = 5 * mm / s
+    before = (x.speed, x.jog_speed, x.home_speed)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(galil.InvalidArgument) as info:
+        call(x, 0.0004 * mm / s)  # type: ignore[operator]
+    assert isinstance(info.value, galil.LimitError)
+    assert (info.value.name, info.value.limit, info.value.axis) == (name, 2, "A")
+    assert f"it would be {name} 0" in str(info.value)
+    assert "(in user units: 0.0004 mm / s, limit 0.001 mm / s)" in str(info.value)
+    assert in_unit(info.value.limit_in_units, "mm/s") == pytest.approx(0.001)
+    assert (x.speed, x.jog_speed, x.home_speed) == before
+    assert not x.moving
+
+
+def test_a_speed_of_0_or_of_one_step_is_still_set(dmc: galil.Controller) -> None:
+    x = dmc.A
+    x.speed = 0.001 * mm / s
+    assert x.speed == 0.001 * mm / s
+    x.speed = 0 * mm / s
+    x.jog_speed = 0 * mm / s
+    assert (x.speed, x.jog_speed) == (0 * mm / s, 0 * mm / s)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import pytest
 from hypothesis import given
@@ -145,3 +146,24 @@ def test_rem_after_a_command_or_a_label_is_refused_unless_comments_are_stripped(
     with pytest.raises(InvalidArgument, match="line 2: REM after a label or a command"):
         check_program(program_lines(f"#A\n{line}\nEN"), MODEL)
     check_program(program_lines(f"#A\n{line}\nEN", strip_comments=True), MODEL)
+
+
+@pytest.mark.parametrize(
+    ("text", "api", "terminal"),
+    [
+        ("", "or pass strip_comments=True)", "(write ' for a blank comment line)"),
+        ("MG " + "1+" * 60 + "1", "pass pack=False and split it", "split it at a ';'"),
+        ("PR 1;REM go", "or pass strip_comments=True", "or drop the comment"),
+    ],
+)
+def test_a_refused_line_advises_a_keyword_in_python_and_an_edit_at_the_terminal(
+    text: str, api: str, terminal: str
+) -> None:
+    lines = [ProgramLine("#A", 1), ProgramLine(text, 2), ProgramLine("EN", 3)]
+    with pytest.raises(InvalidArgument, match=re.escape(api)):
+        check_program(lines, MODEL)
+    with pytest.raises(InvalidArgument) as info:
+        check_program(lines, MODEL, at_terminal=True)
+    assert terminal in str(info.value)
+    assert "strip_comments" not in str(info.value)
+    assert "pack=" not in str(info.value)
