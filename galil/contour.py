@@ -50,7 +50,7 @@ from galil.predict import Profile
 from galil.predict.checks import check_contour
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
-from galil.protocol.numbers import read_one
+from galil.protocol.numbers import read_one, whole
 from galil.units import PathSamples, sampled_values
 
 __all__ = ["ContourResult", "ContourStream", "ContourUnderrunError", "increments", "sample_path"]
@@ -181,8 +181,10 @@ def sample_path(
     """
     if not (math.isfinite(duration) and duration > 0):
         raise InvalidArgument(f"duration must be positive, got {duration!r}")
-    if isinstance(dt, bool) or not isinstance(dt, int) or not 1 <= dt <= 8:
+    n = whole(dt)
+    if n is None or not 1 <= n <= 8:
         raise InvalidArgument(f"DT must be an integer in 1..8, got {dt!r}")
+    dt = n
     if not (math.isfinite(sample_period) and sample_period > 0):
         raise InvalidArgument(f"sample_period must be positive, got {sample_period!r}")
     seg = (1 << dt) * sample_period
@@ -329,8 +331,10 @@ class ContourStream:
     ) -> None:
         if not letters or len(set(letters)) != len(letters):
             raise InvalidArgument(f"contour axes must be distinct and non-empty, got {letters!r}")
-        if isinstance(dt, bool) or not isinstance(dt, int):
+        exponent = whole(dt)
+        if exponent is None:
             raise InvalidArgument(f"dt must be an integer exponent, got {dt!r}")
+        dt = exponent
         ideal = path[:, None] if path.ndim == 1 else path
         if ideal.ndim != 2 or ideal.shape[1] != len(letters) or ideal.shape[0] == 0:
             raise InvalidArgument(

@@ -45,7 +45,7 @@ from galil.models import ModelSpec
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command, ReplyKind
 from galil.protocol.framing import Unsolicited
-from galil.protocol.numbers import parse_number, parse_plain_read, parse_read
+from galil.protocol.numbers import parse_number, parse_plain_read, parse_read, whole
 from galil.protocol.session import Completed, Session
 from galil.transport import ByteRate, ControllerClock, Transport
 
@@ -141,14 +141,16 @@ def refuse_link_settings(command: Command) -> None:
 
 
 def check_count(value: object, name: str) -> int:
-    """``value`` as a positive whole number (a bool is refused too).
+    """``value`` as a positive whole number (an ``int`` or a numpy integer; a bool is refused
+    too).
 
     Raises:
         InvalidArgument: naming ``name``.
     """
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+    n = whole(value)
+    if n is None or n < 1:
         raise InvalidArgument(f"{name} must be a positive integer, not {value!r}")
-    return value
+    return n
 
 
 def check_flag(value: object, name: str) -> bool:

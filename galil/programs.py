@@ -36,6 +36,7 @@ from galil.errors import CommandError, GalilTimeoutError, InvalidArgument, Progr
 from galil.link import CommandLink, check_flag, check_seconds
 from galil.motion import MotionTracker
 from galil.protocol import commands as cmds
+from galil.protocol.numbers import whole
 from galil.protocol.programs import check_program, program_lines
 from galil.routines import MARKER, Routines, check_user_labels, split_program
 from galil.tuning import burn
@@ -230,19 +231,20 @@ class Programs:
 
     def _thread(self, thread: object) -> int:
         n = self.link.model.threads
-        if isinstance(thread, bool) or not isinstance(thread, int) or not 0 <= thread < n:
+        t = whole(thread)
+        if t is None or not 0 <= t < n:
             raise InvalidArgument(
                 f"{self.link.model.name} has threads 0..{n - 1}, not {thread!r}",
                 model=self.link.model.name,
             )
-        label = self.routines.holder(thread)
+        label = self.routines.holder(t)
         if label is not None:
             raise InvalidArgument(
-                f"thread {thread} runs the library's {label} (the watchdog or a speed "
-                "schedule); stop that through the library",
+                f"thread {t} runs the library's {label} (a library routine: the watchdog, a "
+                "speed schedule or an input wait); stop that through the library",
                 model=self.link.model.name,
             )
-        return thread
+        return t
 
     def run(self, label: str = "#A", thread: int = 0) -> None:
         """Run the program from ``label`` on ``thread`` (``XQ``). Where the last program

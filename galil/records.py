@@ -31,7 +31,7 @@ from galil.errors import (
 )
 from galil.link import Link, check_count, check_timeout, check_wait_timeout, read_handle, read_reply
 from galil.protocol import commands as cmds
-from galil.protocol.numbers import read_one
+from galil.protocol.numbers import read_one, whole
 from galil.protocol.records import (
     SAMPLE_WRAP,
     RecordSplitter,
@@ -531,8 +531,10 @@ class Records:
             raise InvalidArgument("give the record period in samples or in seconds=, not both")
         if seconds is not None:
             period = self.samples_of(seconds)
-        if isinstance(period, bool) or not isinstance(period, int) or not 1 <= period <= 65535:
+        n = whole(period)
+        if n is None or not 1 <= n <= 65535:
             raise InvalidArgument(f"period is a number of samples 1..65535, not {period!r}")
+        period = n
         if method not in ("auto", "DR", "QR"):
             raise InvalidArgument(f"method is 'auto', 'DR' or 'QR', not {method!r}")
         check_count(maxlen, "maxlen")

@@ -35,6 +35,7 @@ from galil.errors import CommandError, InvalidArgument
 from galil.link import CommandLink
 from galil.models import ModelSpec
 from galil.protocol import commands as cmds
+from galil.protocol.numbers import whole
 
 __all__ = [
     "MARKER",
@@ -387,14 +388,15 @@ class Routines:
             InvalidArgument: not an integer, or no such thread.
         """
         model = self.link.model
-        if isinstance(thread, bool) or not isinstance(thread, int):
+        t = whole(thread)
+        if t is None:
             raise InvalidArgument(f"thread must be an integer, not {thread!r}")
-        if not 0 <= thread < model.threads:
+        if not 0 <= t < model.threads:
             raise InvalidArgument(
-                f"{model.name} has threads 0..{model.threads - 1}, not {thread}",
+                f"{model.name} has threads 0..{model.threads - 1}, not {t}",
                 model=model.name,
             )
-        return thread
+        return t
 
     def check_free(self, thread: int, label: str) -> bool:
         """Refuse a thread that does not exist or runs another program (one query; and an

@@ -161,6 +161,27 @@ def test_array_indices_may_be_numpy_integers(dmc: galil.Controller) -> None:
     assert dmc.arrays.upload("a", np.uint8(2)).tolist() == [8, 0, 0]
 
 
+def test_threads_periods_and_exponents_may_be_numpy_integers(dmc: galil.Controller) -> None:
+    """Wherever a count, a thread, a record period or a DT exponent is taken, a numpy integer
+    (what indexing an array hands back) is that integer, as array sizes are; a numpy bool
+    and a whole float are refused as a bool and a float are."""
+    dmc.programs.download("#A\nWT 10\nEN\n")
+    dmc.programs.run("#A", thread=np.int64(1))
+    dmc.programs.wait(thread=np.int32(1))
+    assert isinstance(
+        dmc.contour("A", np.linspace(0, 100, 20), dt=np.int64(3)), galil.ContourResult
+    )
+    with dmc.records(np.int64(8)) as stream:
+        assert stream.get(timeout=1.0) is not None
+    capture = dmc.capture(["_RPA"], every=np.int64(4), count=np.int64(10))
+    assert len(capture.wait()["_RPA"]) == 10
+    for bad in (1.0, np.bool_(True), np.float64(1)):
+        with nothing_sent(dmc), pytest.raises(galil.InvalidArgument):
+            dmc.programs.run("#A", thread=bad)  # type: ignore[arg-type]
+        with nothing_sent(dmc), pytest.raises(galil.InvalidArgument):
+            dmc.records(bad)  # type: ignore[arg-type]
+
+
 @pytest.mark.parametrize(
     ("where", "bad"),
     [("first", True), ("first", np.True_), ("first", 1.0), ("last", 2.0)],

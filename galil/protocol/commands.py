@@ -32,7 +32,7 @@ import numpy as np
 
 from galil.errors import InvalidArgument, LimitError, decimal_hint
 from galil.models import INT32_MAX, INT32_MIN, IT_RANGE, ModelSpec
-from galil.protocol.numbers import format_number
+from galil.protocol.numbers import format_number, whole
 
 __all__ = [
     "COMMAND_NAMES",
@@ -1273,8 +1273,10 @@ def dr(period: int, handle: int | None = None, *, model: ModelSpec | None = None
     ``dr(0)`` stops the stream. The period must be 0 or within the model's ``dr_range``.
     """
     low, high = (1, 65535) if model is None else model.dr_range
-    if isinstance(period, bool) or not isinstance(period, int):
+    n = whole(period)
+    if n is None:
         raise InvalidArgument(f"DR period is a whole number of samples, not {period!r}")
+    period = n
     if period != 0:
         _ranged(period, low, high, "DR period", integer=True)
     if handle is None:
@@ -1528,8 +1530,10 @@ def rd(*sources: str, model: ModelSpec | None = None) -> Command:
 def rc(every: int, count: int | None = None, *, model: ModelSpec | None = None) -> Command:
     """RC: record every ``every`` samples (a power of two in the model's range), ``count``
     values (default: as many as the smallest array holds); ``rc(0)`` stops recording."""
-    if isinstance(every, bool) or not isinstance(every, int):
+    n = whole(every)
+    if n is None:
         raise InvalidArgument(f"RC interval is a whole number of samples, not {every!r}")
+    every = n
     if every == 0:
         return Command("RC 0")
     lo, hi = (1, 8) if model is None else model.record_exponents

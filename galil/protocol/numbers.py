@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import re
 from functools import lru_cache
-from numbers import Real
+from numbers import Integral, Real
 
 import numpy as np
 
@@ -30,6 +30,7 @@ __all__ = [
     "parse_read",
     "read_one",
     "to_fixed",
+    "whole",
 ]
 
 #: Largest magnitude an argument may have (the integer range plus four decimals).
@@ -285,3 +286,11 @@ def _format_hex(raw: int, digits: int, decimals: int) -> str:
     if decimals == 0:
         return "$" + int_text
     return f"${int_text}.{frac16 >> (16 - 4 * decimals):0{decimals}X}"
+
+
+def whole(value: object) -> int | None:
+    """``value`` as an ``int`` if it is one or a numpy integer; ``None`` otherwise (a bool,
+    numpy's too, and a float, even a whole one: counts, indices and periods are integers)."""
+    if isinstance(value, bool) or not isinstance(value, Integral):
+        return None  # (numpy's integers are Integral; numpy's bool is not)
+    return int(value)
