@@ -743,8 +743,10 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         Args:
             timeout: seconds of controller time without a heartbeat before motion stops.
             thread: the program thread for the routine (default: the last one); a thread that
-                runs a program is refused. A watchdog of this controller's on that thread is
-                replaced: it stops beating, and its ``stop()`` no longer halts the thread.
+                runs a program is refused. One watchdog guards a controller (decision 0082):
+                the running one is replaced, on any thread: it stops beating, and its
+                ``stop()`` halts nothing (on another thread, its routine is halted once this
+                one runs; if this one fails to start, it guards on with its own timeout).
             interval: seconds between heartbeats (default: a quarter of ``timeout``).
 
         Returns:
@@ -756,10 +758,8 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
                 running while the routine must be installed.
         """
         t, n, every = check_watchdog_args(self.link, timeout, thread, interval)
-        _hand_over(self._watchdogs, n)
-        dog = Watchdog(self.link, self.routines, t, thread=n, interval=every).start()
-        self._watchdogs.append(dog)
-        return dog
+        dog = Watchdog(self.link, self.routines, t, thread=n, interval=every)
+        return _replace_watchdog(self._watchdogs, dog)
 
     def contour(
         self,
@@ -1094,13 +1094,21 @@ def _dead_if_failing(link: Link) -> Iterator[None]:
         raise
 
 
-def _hand_over(dogs: list[Watchdog], thread: int) -> None:
-    """A new watchdog takes ``thread``: the old ones there stop beating, and their stop()
-    halts nothing (decision 0076); those stopped and halted are forgotten."""
-    for old in dogs:
-        if old.thread == thread:
-            old.hand_over()
-    dogs[:] = [dog for dog in dogs if dog.beating or dog.halt_pending]
+def _replace_watchdog(dogs: list[Watchdog], new: Watchdog) -> Watchdog:
+    """Start ``new``, the controller's one watchdog (decision 0082), in place of those that
+    beat: one on its thread is handed over first (it stops beating, and its stop() halts
+    nothing: decision 0076); those on other threads are stopped once ``new`` runs. Those
+    stopped and halted are forgotten."""
+    old = [dog for dog in dogs if dog.beating]
+    for dog in old:
+        if dog.thread == new.thread:
+            dog.hand_over()
+    try:
+        new.start(replacing=old)
+    finally:
+        dogs[:] = [dog for dog in dogs if dog.beating or dog.halt_pending]
+    dogs.append(new)
+    return new
 
 
 def _close_quietly(parts: _Parts) -> None:

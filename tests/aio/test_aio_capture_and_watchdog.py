@@ -176,3 +176,18 @@ def test_a_loop_watch_times_only_its_own_thread_and_refuses_a_second_watch() -> 
     summary = watch.summary()
     assert summary.startswith(f"{watch.steps} loop steps: wall p50 ")
     assert f"max {watch.max_wall * 1e6:.0f} us" in summary
+
+
+def test_an_async_watchdog_on_another_thread_replaces_the_running_one() -> None:
+    async def body() -> tuple[bool, bool, list[float]]:
+        async with await sim() as c:
+            first = await c.watchdog(0.5, thread=6)
+            async with await c.watchdog(2.0) as second:
+                threads = await c.query_operands(["_XQ6", "_XQ7"])
+                return first.beating, second.beating, threads
+
+    first, second, threads = run(body)
+    assert not first
+    assert second
+    assert threads[0] == -1  # the first's routine halted on its thread
+    assert threads[1] >= 0
