@@ -74,7 +74,7 @@ from galil.transport import Transport, open_transport
 from galil.tuning import burn, burn_parameters
 from galil.units import path_to_counts
 from galil.vector import VectorHandle, VectorStream
-from galil.watchdog import Watchdog, check_watchdog_args
+from galil.watchdog import Watchdog, check_watchdog_args, replace_running
 
 __all__ = [
     "CLIENT_OPTIONS",
@@ -759,7 +759,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         """
         t, n, every = check_watchdog_args(self.link, timeout, thread, interval)
         dog = Watchdog(self.link, self.routines, t, thread=n, interval=every)
-        return _replace_watchdog(self._watchdogs, dog)
+        return replace_running(self._watchdogs, dog)
 
     def contour(
         self,
@@ -1092,23 +1092,6 @@ def _dead_if_failing(link: Link) -> Iterator[None]:
         text = str(exc).splitlines()
         link.failed(f"reopening it failed: {text[0] if text and text[0] else type(exc).__name__}")
         raise
-
-
-def _replace_watchdog(dogs: list[Watchdog], new: Watchdog) -> Watchdog:
-    """Start ``new``, the controller's one watchdog (decision 0082), in place of those that
-    beat: one on its thread is handed over first (it stops beating, and its stop() halts
-    nothing: decision 0076); those on other threads are stopped once ``new`` runs. Those
-    stopped and halted are forgotten."""
-    old = [dog for dog in dogs if dog.beating]
-    for dog in old:
-        if dog.thread == new.thread:
-            dog.hand_over()
-    try:
-        new.start(replacing=old)
-    finally:
-        dogs[:] = [dog for dog in dogs if dog.beating or dog.halt_pending]
-    dogs.append(new)
-    return new
 
 
 def _close_quietly(parts: _Parts) -> None:

@@ -88,19 +88,20 @@ class Watchdog:
         self._halt_pending = False  # stopped on a dead link: halted once it is reopened
         self._replaced = False  # a newer watchdog guards the controller (its flag is the new's)
 
-    def start(self, *, replacing: Sequence[Watchdog] = ()) -> Watchdog:
+    def start(self) -> Watchdog:
         """Install the routine, stamp the first heartbeat, run it, and keep beating.
-
-        Args:
-            replacing: the controller's watchdogs on other threads (one guards a controller:
-                they share its variables). Stopped once this one runs (never a moment
-                unguarded); if this one fails to start, they guard on with their own timeout.
 
         Raises:
             InvalidArgument: the thread is busy, or the routine cannot be installed.
             GalilError: the routine is not running after ``XQ`` (it is halted; no heartbeat
                 is started, so the watchdog never claims to guard what it does not).
         """
+        return self._start(())
+
+    def _start(self, replacing: Sequence[Watchdog]) -> Watchdog:
+        """:meth:`start` in place of the watchdogs ``replacing`` (:func:`replace_running`):
+        stopped once this one runs; if this one fails to start, those on other threads guard
+        on with their own timeout."""
         link = self._link
         samples = self._samples()
         self._routines.check_free(self.thread, LABEL)  # before anything is sent
@@ -263,6 +264,28 @@ class Watchdog:
         else:
             state = "beating"
         return f"<Watchdog {self.timeout:g} s on thread {self.thread}, {state}>"
+
+
+def replace_running(dogs: list[Watchdog], new: Watchdog) -> Watchdog:
+    """Start ``new`` as the controller's one watchdog (decision 0082) in place of ``dogs``
+    that beat: one on its thread is handed over first (it stops beating, and its stop()
+    halts nothing: decision 0076); those on other threads are stopped once ``new`` runs, and
+    guard on if it fails to start. ``dogs`` keeps those that beat or wait for a halt, and
+    ``new``.
+
+    Raises:
+        What :meth:`Watchdog.start` raises.
+    """
+    old = [dog for dog in dogs if dog.beating]
+    for dog in old:
+        if dog.thread == new.thread:
+            dog.hand_over()
+    try:
+        new._start(old)
+    finally:
+        dogs[:] = [dog for dog in dogs if dog.beating or dog.halt_pending]
+    dogs.append(new)
+    return new
 
 
 class _Keepalives:
