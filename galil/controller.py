@@ -74,7 +74,7 @@ from galil.transport import Transport, open_transport
 from galil.tuning import burn, burn_parameters
 from galil.units import path_to_counts
 from galil.vector import VectorHandle, VectorStream
-from galil.watchdog import Watchdog, check_watchdog_args
+from galil.watchdog import Watchdog, check_watchdog_args, replace_running
 
 __all__ = [
     "CLIENT_OPTIONS",
@@ -745,8 +745,10 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         Args:
             timeout: seconds of controller time without a heartbeat before motion stops.
             thread: the program thread for the routine (default: the last one); a thread that
-                runs a program is refused. A watchdog of this controller's on that thread is
-                replaced: it stops beating, and its ``stop()`` no longer halts the thread.
+                runs a program is refused. One watchdog guards a controller (decision 0082):
+                the running one is replaced, on any thread: it stops beating, and its
+                ``stop()`` halts nothing (on another thread, its routine is halted once this
+                one runs; if this one fails to start, it guards on with its own timeout).
             interval: seconds between heartbeats (default: a quarter of ``timeout``).
 
         Returns:
@@ -758,10 +760,8 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
                 running while the routine must be installed.
         """
         t, n, every = check_watchdog_args(self.link, timeout, thread, interval)
-        _hand_over(self._watchdogs, n)
-        dog = Watchdog(self.link, self.routines, t, thread=n, interval=every).start()
-        self._watchdogs.append(dog)
-        return dog
+        dog = Watchdog(self.link, self.routines, t, thread=n, interval=every)
+        return replace_running(self._watchdogs, dog)
 
     def contour(
         self,
@@ -1163,15 +1163,6 @@ def _dead_if_failing(link: Link) -> Iterator[None]:
         text = str(exc).splitlines()
         link.failed(f"reopening it failed: {text[0] if text and text[0] else type(exc).__name__}")
         raise
-
-
-def _hand_over(dogs: list[Watchdog], thread: int) -> None:
-    """A new watchdog takes ``thread``: the old ones there stop beating, and their stop()
-    halts nothing (decision 0076); those stopped and halted are forgotten."""
-    for old in dogs:
-        if old.thread == thread:
-            old.hand_over()
-    dogs[:] = [dog for dog in dogs if dog.beating or dog.halt_pending]
 
 
 def _close_quietly(parts: _Parts) -> None:

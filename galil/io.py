@@ -63,6 +63,10 @@ class MessageSource(Protocol):
         """Why no more lines will come (the link was closed or died); ``""`` while they may."""
         ...
 
+    def poll(self) -> None:
+        """Read the lines the link holds now (a wait on a simulator's clock, between pauses)."""
+        ...
+
 
 def volts(value: object, what: str) -> float:
     """A voltage as a float: a pint Quantity convertible to volts, or a plain number."""
@@ -355,58 +359,14 @@ class IO:
         the controller halts the routine of a wait in flight; the wait (in another thread)
         raises :class:`~galil.errors.GalilConnectionError`, as it does when the link dies.
         """
-        n = self.inputs._check(n)
-        if not isinstance(high, (bool, np.bool_)):
-            raise InvalidArgument(f"high is True or False, not {high!r}")
-        high = bool(high)
-        timeout = check_wait_timeout(timeout)
-        link = self._link
-        t = self._routines.check_thread(link.model.threads - 1 if thread is None else thread)
-        deadline = None if timeout is None else link.clock() + timeout
-        expired = f"input {n} did not go {'high' if high else 'low'} within {timeout} s"
-        turn = self._turn(n, high, deadline)
-        if turn is None:
-            return  # the input reached the level while another wait held the routine
-        if not turn:
-            raise link.error(
-                GalilTimeoutError,
-                f"{expired}: another wait_for_input held the controller's input routine all "
-                "that time (one runs at a time; meanwhile this one polled its input)",
-            )
-        try:
-            left = None if deadline is None else max(0.0, deadline - link.clock())
-            if not self._routine_saw(n, high, t, left):
-                raise link.error(GalilTimeoutError, expired)
-        finally:
-            self._wait_lock.release()
-
-    def _routine_saw(self, n: int, high: bool, thread: int, timeout: float | None) -> bool:
-        """Run the input routine on ``thread`` for input ``n`` (this wait holds it): whether
-        it said the input reached the level within ``timeout`` (:meth:`_watched`)."""
-        link = self._link
-        self._routines.check_free(thread, _INPUT_ROUTINE)  # before the install sends a byte
-        self._routines.install(_input_routine())
-        seen = threading.Event()
-        tag = [_INPUT_MESSAGE, str(n)]
-
-        def on_message(line: str) -> None:
-            if line.split()[:2] == tag:
-                seen.set()
-
-        unsubscribe = self._messages.subscribe(on_message)
-        try:
-            link.command_line([cmds.assign("ginput", n), cmds.assign("ginlevel", 1 if high else 0)])
-            self._routines.start(_INPUT_ROUTINE, thread)
-            self._watching = thread
-            return self._watched(thread, seen, timeout)
-        finally:
-            self._watching = None
-            unsubscribe()
+        watch = InputWatch(self, n, high=high, timeout=timeout, thread=thread)
+        watch.step()  # to the deadline: returns once the input is at the level, or raises
 
     def end_wait(self) -> None:
         """Closing: halt the routine of a wait in flight (another thread's, or an async
-        wait's slice), which then raises :class:`~galil.errors.GalilConnectionError` as the
-        link closes; nothing is sent when no wait runs. Never raises for a dead link."""
+        wait's, between its slices too), which then raises
+        :class:`~galil.errors.GalilConnectionError` as the link closes; nothing is sent when
+        no wait runs. Never raises for a dead link."""
         thread = self._watching
         if thread is not None and self._routines.holder(thread) == _INPUT_ROUTINE:
             with contextlib.suppress(GalilError):
@@ -427,35 +387,163 @@ class IO:
             link.pause(_POLL if deadline is None else min(_POLL, max(deadline - now, 0.001)))
         return True
 
-    def _watched(self, thread: int, seen: threading.Event, timeout: float | None) -> bool:
-        """Wait for the routine on ``thread`` to say the input changed (``seen``): ``True``,
-        or ``False`` once ``timeout`` has passed, the routine then halted. Cut short
-        (Ctrl-C, a lost reply), the routine is halted too, quietly: on a dead link it cannot
-        be."""
+
+class InputWatch:
+    """One :meth:`IO.wait_for_input`, taken in steps: the sync wait takes one step to its
+    deadline; its async twin takes steps of at most half a second on a worker thread, so a
+    cancelled task frees its thread soon, while the routine, installed and started at the
+    first step that holds it, watches on between steps (it is not installed again per step).
+
+    Every argument is checked here, before a byte is sent. One step at a time; :meth:`end`
+    (idempotent) halts a routine still watching and lets the next wait take it.
+
+    Raises:
+        InvalidArgument: no such input, a bad ``high``, timeout or thread.
+    """
+
+    def __init__(
+        self, io: IO, n: int, *, high: bool, timeout: float | None, thread: int | None
+    ) -> None:
+        self._n = n = io.inputs._check(n)
+        if not isinstance(high, (bool, np.bool_)):
+            raise InvalidArgument(f"high is True or False, not {high!r}")
+        self._high = high = bool(high)
+        timeout = check_wait_timeout(timeout)
+        link = self._link = io._link
+        self._thread = io._routines.check_thread(
+            link.model.threads - 1 if thread is None else thread
+        )
+        self._io = io
+        self._deadline = None if timeout is None else link.clock() + timeout
+        self._expired = f"input {n} did not go {'high' if high else 'low'} within {timeout} s"
+        self._seen = threading.Event()
+        self._held = False  # this wait holds the routine (IO._wait_lock)
+        self._started = False  # its XQ may have gone out
+        self._over = False
+        self._unsubscribe: Callable[[], None] | None = None
+        self._lock = threading.Lock()  # one step (or end) at a time
+
+    def step(self, seconds: float | None = None) -> bool:
+        """Wait at most ``seconds`` (``None``: to the deadline) of the whole wait.
+
+        Returns:
+            ``True`` once the input is at the level (the wait is over); ``False`` when the
+            seconds passed first and time is left (the routine, if it runs, watches on).
+
+        Raises:
+            GalilTimeoutError: the whole timeout passed (the routine is halted; one that
+                another wait held all that time is not started).
+            GalilConnectionError: the controller was closed, or its link died.
+            GalilError: the wait was ended (:meth:`end`) before this step.
+        """
+        with self._lock:
+            if self._over:
+                if self._seen.is_set():
+                    return True
+                raise GalilError(f"the wait for input {self._n} was ended")
+            link = self._link
+            until = self._deadline
+            if seconds is not None:
+                end_of_step = link.clock() + seconds
+                until = end_of_step if until is None else min(until, end_of_step)
+            try:
+                seen = self._watch(until)
+            except BaseException:
+                self._end(quiet=True)
+                raise
+            if seen is not False:
+                self._end(quiet=True)  # (the routine said so and ended: nothing to halt)
+                return True
+            if self._deadline is None or until is None or until < self._deadline:
+                return False
+            held = self._held
+            self._end(quiet=False)  # the whole timeout passed: the routine is halted
+            raise link.error(
+                GalilTimeoutError,
+                f"{self._expired}: another wait_for_input held the controller's input routine "
+                "all that time (one runs at a time; meanwhile this one polled its input)"
+                if not held
+                else self._expired,
+            )
+
+    def _watch(self, until: float | None) -> bool | None:
+        """Take the routine (polling the input until it is this wait's turn), start it
+        unless it runs, and wait for its message until ``until``: ``True`` (the message
+        came), ``None`` (the input reached the level while another wait held the routine),
+        ``False`` (``until`` passed first)."""
+        io, link = self._io, self._link
+        if not self._held:
+            turn = io._turn(self._n, self._high, until)
+            if not turn:
+                return turn
+            self._held = True
+        if not self._started:
+            self._start()
+        io._messages.ensure_polling()
+        left = None if until is None else max(0.0, until - link.clock())
+        return _wait(link, self._seen, left, io._messages)
+
+    def _start(self) -> None:
+        """Install the routine (when it is not in memory), listen for its message, set its
+        variables and start it on the thread."""
+        io, thread, tag = self._io, self._thread, [_INPUT_MESSAGE, str(self._n)]
+        io._routines.check_free(thread, _INPUT_ROUTINE)  # before the install sends a byte
+        io._routines.install(_input_routine())
+
+        def on_message(line: str) -> None:
+            if line.split()[:2] == tag:
+                self._seen.set()
+
+        self._unsubscribe = io._messages.subscribe(on_message)
+        level = 1 if self._high else 0
+        io._link.command_line([cmds.assign("ginput", self._n), cmds.assign("ginlevel", level)])
+        io._routines.start(_INPUT_ROUTINE, thread)
+        self._started = True
+        io._watching = thread
+
+    def end(self) -> None:
+        """End the wait (a cancelled async wait): halt its routine if it still watches, and
+        let the next wait take the routine. Idempotent; never raises for a dead link."""
+        with self._lock:
+            self._end(quiet=True)
+
+    def _end(self, *, quiet: bool) -> None:
+        """Halt a routine that said nothing (errors raised unless ``quiet``: on a dead link it
+        cannot be halted), stop listening and give the routine up."""
+        if self._over:
+            return
+        self._over = True
         try:
-            self._messages.ensure_polling()
-            in_time = _wait(self._link, seen, timeout, self._messages.ended)
-        except BaseException:
-            with contextlib.suppress(GalilError):
-                self._routines.halt(thread)
-            raise
-        if not in_time:
-            self._routines.halt(thread)
-        return in_time
+            if self._started and not self._seen.is_set():
+                if quiet:
+                    with contextlib.suppress(GalilError):
+                        self._io._routines.halt(self._thread)
+                else:
+                    self._io._routines.halt(self._thread)
+        finally:
+            if self._unsubscribe is not None:
+                self._unsubscribe()
+            if self._held:
+                self._io._watching = None
+                self._io._wait_lock.release()
 
 
 def _wait(
-    link: CommandLink, seen: threading.Event, timeout: float | None, ended: Callable[[], str]
+    link: CommandLink, seen: threading.Event, timeout: float | None, messages: MessageSource
 ) -> bool:
     """Wait until ``seen`` is set (``True``) or ``timeout`` has passed (``False``).
 
+    On a simulator's clock the link is read between pauses (:meth:`MessageSource.poll`):
+    the routine's line is heard in the simulated time it was printed in.
+
     Raises:
-        GalilConnectionError: no message will come (``ended()`` says why: the link was
-            closed, or died).
+        GalilConnectionError: no message will come (``messages.ended()`` says why: the link
+            was closed, or died).
     """
     deadline = None if timeout is None else link.clock() + timeout
+    simulated = link.simulated_time
     while not seen.is_set():
-        why = ended()
+        why = messages.ended()
         if why:
             raise GalilConnectionError(f"the wait for an input ended: {why}")
         now = link.clock()
@@ -463,6 +551,8 @@ def _wait(
             return False
         step = 0.05 if deadline is None else min(0.05, max(deadline - now, 0.001))
         link.pause(step)  # real time on hardware; simulated time on a manual clock
+        if simulated:
+            messages.poll()
     return True
 
 

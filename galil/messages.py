@@ -236,6 +236,16 @@ class Messages:
         )
         self._pump.start()
 
+    def poll(self) -> None:
+        """Read what an idle command link holds now, when no handle of its own carries the
+        lines (a zero-timeout read; nothing when a command is under way: it collects them).
+
+        The idle poll runs on real time; a wait on a simulator's clock calls this between
+        its pauses, so a line printed in simulated time is heard in it, not seconds later.
+        """
+        if self._reader is None and self.link.is_open:
+            self.link.poll_unsolicited(0.0)
+
     def _poll_idle(self, stop: threading.Event) -> None:
         # Reads only with a zero timeout while holding the lock, so a command never waits
         # behind a blocked poll.

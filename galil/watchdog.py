@@ -10,6 +10,10 @@ halts the routine first: leaving on purpose is not dying.
 
 The routine takes one program thread (by default the last one, ``threads - 1``); it refuses
 a thread that runs a program, so it never takes one the user's programs need without saying so.
+
+One watchdog guards a controller: its variables (``gwbeat``, ``gwlimit``, ``gwfire``) and its
+routine are the controller's, so a new watchdog replaces the running one, on any thread
+(decision 0082).
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import contextlib
 import logging
 import threading
 import weakref
+from collections.abc import Sequence
 from types import TracebackType
 
 from galil.errors import GalilConnectionError, GalilError, InvalidArgument
@@ -81,6 +86,7 @@ class Watchdog:
         self._fired = False  # the routine seen fired (by a query of fired)
         self._live = False  # started, and not stopped since
         self._halt_pending = False  # stopped on a dead link: halted once it is reopened
+        self._replaced = False  # a newer watchdog guards the controller (its flag is the new's)
 
     def start(self) -> Watchdog:
         """Install the routine, stamp the first heartbeat, run it, and keep beating.
@@ -90,31 +96,61 @@ class Watchdog:
             GalilError: the routine is not running after ``XQ`` (it is halted; no heartbeat
                 is started, so the watchdog never claims to guard what it does not).
         """
+        return self._start(())
+
+    def _start(self, replacing: Sequence[Watchdog]) -> Watchdog:
+        """:meth:`start` in place of the watchdogs ``replacing`` (:func:`replace_running`):
+        stopped once this one runs; if this one fails to start, those on other threads guard
+        on with their own timeout."""
         link = self._link
-        ticks = self.timeout / link.sample_period
-        samples = round(ticks) if ticks <= INT32_MAX else INT32_MAX + 1
-        if not 2 <= samples <= INT32_MAX:
-            raise InvalidArgument(
-                f"watchdog timeout {self.timeout!r} s is not 2 to {INT32_MAX} samples"
-            )
+        samples = self._samples()
         self._routines.check_free(self.thread, LABEL)  # before anything is sent
         self._routines.install(watchdog_routine(link.model.axes))
         link.command_line([cmds.assign(LIMIT, samples), self._beat])
-        self._routines.start(LABEL, self.thread)
-        if not self.running:
-            with contextlib.suppress(GalilError):
-                self._routines.halt(self.thread)
-            raise link.error(
-                GalilError,
-                f"the watchdog routine {LABEL} is not running on thread {self.thread} after "
-                "XQ; the watchdog is not started",
-            )
+        fired = bool(round(link.query_operands([FIRED])[0])) if replacing else False
+        try:
+            self._launch()
+        except BaseException:
+            for other in replacing:
+                if other.beating:  # (its own timeout again: the limit is the controller's one)
+                    with contextlib.suppress(GalilError):
+                        link.command_line([cmds.assign(LIMIT, other._samples())])
+            raise
         self._live = True
         _keepalives.add(link, self)
         self._stop.clear()
         self._beater = threading.Thread(target=self._run, name="galil-watchdog", daemon=True)
         self._beater.start()
+        for other in replacing:
+            other._replaced, other._fired = True, other._fired or fired
+            other.stop()  # (on another thread, its routine halted: this one guards)
         return self
+
+    def _launch(self) -> None:
+        """Run the routine on the thread; halt it and raise if it does not run after ``XQ``."""
+        self._routines.start(LABEL, self.thread)
+        if not self.running:
+            with contextlib.suppress(GalilError):
+                self._routines.halt(self.thread)
+            raise self._link.error(
+                GalilError,
+                f"the watchdog routine {LABEL} is not running on thread {self.thread} after "
+                "XQ; the watchdog is not started",
+            )
+
+    def _samples(self) -> int:
+        """The timeout in samples (``gwlimit``).
+
+        Raises:
+            InvalidArgument: not 2 to ``INT32_MAX`` samples.
+        """
+        ticks = self.timeout / self._link.sample_period
+        samples = round(ticks) if ticks <= INT32_MAX else INT32_MAX + 1
+        if not 2 <= samples <= INT32_MAX:
+            raise InvalidArgument(
+                f"watchdog timeout {self.timeout!r} s is not 2 to {INT32_MAX} samples"
+            )
+        return samples
 
     def _run(self) -> None:
         while not self._stop.wait(self.interval):
@@ -196,7 +232,11 @@ class Watchdog:
 
     @property
     def fired(self) -> bool:
-        """Whether the routine stopped the axes for want of a heartbeat; one query."""
+        """Whether the routine stopped the axes for want of a heartbeat; one query. Once a
+        newer watchdog replaced this one (the controller's ``gwfire`` is the new one's), what
+        it was when this one was replaced, with no query."""
+        if self._replaced:
+            return self._fired
         self._fired = bool(round(self._link.query_operands([FIRED])[0]))
         return self._fired
 
@@ -226,11 +266,34 @@ class Watchdog:
         return f"<Watchdog {self.timeout:g} s on thread {self.thread}, {state}>"
 
 
+def replace_running(dogs: list[Watchdog], new: Watchdog) -> Watchdog:
+    """Start ``new`` as the controller's one watchdog (decision 0082) in place of ``dogs``
+    that beat: one on its thread is handed over first (it stops beating, and its stop()
+    halts nothing: decision 0076); those on other threads are stopped once ``new`` runs, and
+    guard on if it fails to start. ``dogs`` keeps those that beat or wait for a halt, and
+    ``new``.
+
+    Raises:
+        What :meth:`Watchdog.start` raises.
+    """
+    old = [dog for dog in dogs if dog.beating]
+    for dog in old:
+        if dog.thread == new.thread:
+            dog.hand_over()
+    try:
+        new._start(old)
+    finally:
+        dogs[:] = [dog for dog in dogs if dog.beating or dog.halt_pending]
+    dogs.append(new)
+    return new
+
+
 class _Keepalives:
     """The link's keepalive (which slices a simulator's pauses with heartbeats) for the
     watchdogs that beat on it: set while one beats, at the shortest interval, and cleared
-    only when the last stops. A watchdog replaced on its thread, or one of another thread,
-    stopping leaves the others' beat in place."""
+    only when the last stops. A replaced watchdog stopping leaves its successor's beat in
+    place (one watchdog guards a controller; several of one link beat only while one replaces
+    another)."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()

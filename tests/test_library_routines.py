@@ -240,6 +240,27 @@ def test_a_second_wait_for_an_input_returns_when_its_input_is_at_the_level() -> 
         assert not first.is_alive()
 
 
+def test_a_wait_for_an_input_on_a_simulators_clock_hears_the_change_in_the_time_it_came() -> None:
+    """The idle poll reads the routine's line in real time (20 ms), while the wait lets the
+    simulator's time run: the wait reads the link between its pauses itself."""
+    with simulated() as dmc:
+        changed: list[float] = []
+
+        def change_later() -> None:
+            deadline = time.monotonic() + 10.0
+            while dmc.query_operands(["_XQ7"]) == [-1] and time.monotonic() < deadline:
+                time.sleep(0.001)  # the routine starts
+            with dmc.link.locked():  # no time passes between the reading and the change
+                changed.append(dmc.link.clock())
+                sim_of(dmc).set_input(2, False)
+
+        setter = threading.Thread(target=change_later)
+        setter.start()
+        dmc.io.wait_for_input(2, high=False, timeout=30.0)
+        setter.join(10.0)
+        assert dmc.link.clock() - changed[0] <= 0.1  # one pause of the wait
+
+
 def _left_by_an_earlier_session(sim: object, label: str, thread: int = 7) -> None:
     """A session that installed the library's routines and left ``label`` running on
     ``thread`` (as one whose link died, or an older version's close, would)."""

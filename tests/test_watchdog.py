@@ -225,17 +225,68 @@ def test_stopping_a_replaced_watchdog_leaves_its_successors_heartbeat() -> None:
         second.stop()
 
 
-def test_stopping_a_watchdog_leaves_the_heartbeat_of_one_on_another_thread() -> None:
+def test_a_new_watchdog_on_another_thread_replaces_the_running_one() -> None:
+    """One watchdog guards a controller (decision 0082): the variables are the controller's."""
     with simulated() as dmc:
-        other = dmc.watchdog(1.0, thread=6)
-        dog = dmc.watchdog(1.0)
-        dog.stop()
-        jog = dmc.A.jog(1000)
-        dmc.sleep(3.0)
+        short = dmc.watchdog(0.5, thread=6)
+        long = dmc.watchdog(5.0, thread=7)
+        assert not short.beating
+        assert long.beating
+        assert dmc.query_operands(["_XQ6"]) == [-1]  # the replaced one's routine halted
+        assert long.running
+        short.stop()  # halts nothing, and leaves the new one's heartbeat alone
+        assert long.running
+        jog = dmc.A.jog(20_000)
+        dmc.sleep(6.0)  # the host waits: the heartbeat goes on
         assert dmc.A.moving
-        assert not other.fired
-        jog.stop()
-        other.stop()
+        sim_of(dmc).advance(1.0)  # the host silent beyond the replaced one's timeout
+        assert sim_of(dmc).motion("A").moving  # the 5 s watchdog guards, as its caller said
+        sim_of(dmc).advance(5.0)
+        assert not sim_of(dmc).motion("A").moving
+        assert long.fired
+        assert not short.fired  # its own flag: nothing fired while it guarded
+        assert jog.done
+        long.stop()
+
+
+@pytest.mark.parametrize("thread", [6, 7])
+def test_a_replaced_watchdog_that_fired_still_says_so(thread: int) -> None:
+    with simulated() as dmc:
+        first = dmc.watchdog(0.5, thread=thread)
+        dmc.A.jog(20_000)
+        sim_of(dmc).advance(1.0)  # the host silent: it fires
+        second = dmc.watchdog(0.5)  # (on thread 7: the first's, or another)
+        assert first.fired  # not the new one's flag, which its routine cleared
+        assert not second.fired
+        assert repr(first) == f"<Watchdog 0.5 s on thread {thread}, stopped>"
+        second.stop()
+
+
+def test_a_watchdog_whose_replacement_fails_to_start_guards_on_with_its_own_timeout() -> None:
+    with simulated() as dmc:
+        first = dmc.watchdog(0.5, thread=6)
+        transport = dmc.link.transport
+        write = transport.write  # type: ignore[union-attr]
+
+        def refused(data: bytes) -> None:  # Ctrl-C as the new routine's XQ would go out
+            if b"XQ #GWDOG,7" in data:
+                raise KeyboardInterrupt
+            write(data)
+
+        transport.write = refused  # type: ignore[method-assign,union-attr]
+        with pytest.raises(KeyboardInterrupt):
+            dmc.watchdog(5.0)
+        transport.write = write  # type: ignore[method-assign,union-attr]
+        assert first.beating
+        assert first.running
+        jog = dmc.A.jog(20_000)
+        dmc.sleep(2.0)
+        assert dmc.A.moving
+        sim_of(dmc).advance(1.0)  # silent beyond the first's timeout, not the failed one's
+        assert not sim_of(dmc).motion("A").moving
+        assert first.fired
+        assert jog.done
+        first.stop()
 
 
 def test_a_watchdog_that_fired_says_so_in_its_repr() -> None:

@@ -281,7 +281,9 @@ class AsyncController(AsyncLinkFacade):
     ) -> AsyncWatchdog:
         """Start a dead-man switch: the controller stops every axis (``ST``) when the host has
         been silent for ``timeout`` seconds (see ``Controller.watchdog``; the heartbeat runs
-        on a thread of the sync core). :meth:`aclose` stops it.
+        on a thread of the sync core). :meth:`aclose` stops it. One watchdog guards a
+        controller: a new one replaces the running one, on any thread (decision 0082); a call
+        cancelled while it starts stops the new one, and the one it replaced stays stopped.
 
         Raises:
             InvalidArgument: a bad timeout, interval or thread, a busy thread, a user program

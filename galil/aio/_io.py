@@ -18,10 +18,17 @@ import operator
 from collections.abc import Awaitable, Iterable, Sequence
 from typing import Any, Generic, TypeVar, overload
 
-from galil.aio._waits import in_slices
+from galil.aio._waits import in_steps
 from galil.aio._worker import Room, Worker
-from galil.io import IO, AnalogInputs, AnalogOutputs, DigitalInputs, DigitalOutputs
-from galil.link import Link, check_wait_timeout
+from galil.io import (
+    IO,
+    AnalogInputs,
+    AnalogOutputs,
+    DigitalInputs,
+    DigitalOutputs,
+    InputWatch,
+)
+from galil.link import Link
 
 __all__ = [
     "AsyncAnalogInputs",
@@ -192,24 +199,23 @@ class AsyncIO(Room[IO]):
         """Wait until input ``n`` is high (``high=False``: low); see
         :meth:`galil.io.IO.wait_for_input` (a routine on the controller watches the input).
 
-        The sync wait runs in slices of at most ``WAIT_SLICE`` (0.5 s) on a worker, so a
-        cancelled task frees its thread within one slice; each slice that runs out halts
-        the routine, and the next starts it again.
+        The sync wait runs in steps of at most ``WAIT_SLICE`` (0.5 s) on a worker, so a
+        cancelled task frees its thread within one step; the routine is installed and
+        started once, at the first step that holds it, and watches on between steps (a wait
+        costs the link what the sync wait costs). Cancelled, the wait halts the routine once
+        the step under way is over.
 
         Raises:
             InvalidArgument: no such input, a bad timeout (refused before anything is sent,
                 as by the sync wait: infinity too, ``None`` waits for ever), or a busy thread.
             GalilTimeoutError: the input did not change in time (the routine is halted).
+            GalilConnectionError: the controller was closed, or its link died, during the
+                wait.
         """
-        total = check_wait_timeout(timeout)  # as the sync wait: inf refused, None for ever
-        io = self.sync
-
-        def wait(seconds: float) -> None:
-            io.wait_for_input(n, high=high, timeout=seconds, thread=thread)
-
-        level = "high" if high is True else "low"
-        expired = f"input {n} did not go {level} within {timeout} s"
-        await in_slices(self._worker, self._link, wait, total, expired)
+        watch = await self._worker.run(
+            InputWatch, self.sync, n, high=high, timeout=timeout, thread=thread
+        )
+        await in_steps(self._worker, watch.step, watch.end)
 
     def __repr__(self) -> str:
         return f"<AsyncIO of {self.sync!r}>"

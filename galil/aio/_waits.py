@@ -5,21 +5,30 @@ timeout passes. Awaited as one call, a cancelled task would leave a worker threa
 as long as that timeout (for ever for ``timeout=None``). :func:`in_slices` calls the same sync
 wait again and again with a timeout of at most :data:`WAIT_SLICE` seconds of controller time,
 until it returns or the caller's own timeout has passed: each slice is the sync call, its
-checks and its clean-up on a timeout (a routine halted), and a cancellation takes effect at
-the end of the slice under way.
+checks and its clean-up on a timeout, and a cancellation takes effect at the end of the slice
+under way.
+
+A wait that starts something on the controller keeps it between slices instead:
+:func:`in_steps` awaits the steps of a wait taken in steps (:class:`galil.io.InputWatch`: its
+routine installed and started once per wait, not once per slice) and, when cancelled, ends it
+(the routine halted) once the step under way is over.
 """
 
 from __future__ import annotations
 
+import asyncio
+import concurrent.futures
+import contextlib
+import functools
 import math
 from collections.abc import Callable
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from galil.aio._worker import Worker
-from galil.errors import GalilTimeoutError
+from galil.errors import GalilConnectionError, GalilTimeoutError
 from galil.link import Link
 
-__all__ = ["WAIT_SLICE", "in_slices"]
+__all__ = ["WAIT_SLICE", "in_slices", "in_steps"]
 
 #: Longest a sliced wait holds a worker thread in one call (seconds of controller time).
 WAIT_SLICE = 0.5
@@ -72,3 +81,33 @@ async def in_slices(
     while (done := await worker.run(deadline.slice, wait)) is None:
         pass
     return done[0]
+
+
+async def in_steps(
+    worker: Worker, step: Callable[[float], bool], end: Callable[[], object]
+) -> None:
+    """Await a sync wait taken in steps (:class:`galil.io.InputWatch`) that keeps what it
+    started between them: ``step(WAIT_SLICE)`` on a worker until it returns ``True``.
+
+    A step that raises has ended the wait itself. Cancelled (or cut short on the loop),
+    ``end()`` runs on the stops' lane once the step under way is over, or at once when it
+    had not started (it never does then): what the earlier steps started is undone.
+
+    Raises:
+        Whatever ``step`` raises (its timeout, a dead link).
+    """
+    while True:
+        future = worker.submit(step, WAIT_SLICE)
+        try:
+            if await asyncio.wrap_future(future):
+                return
+        except BaseException:
+            future.add_done_callback(functools.partial(_then, worker, end))
+            raise
+
+
+def _then(worker: Worker, end: Callable[[], object], step: concurrent.futures.Future[Any]) -> None:
+    if not step.cancelled() and step.exception() is not None:
+        return  # the step raised: it ended the wait itself
+    with contextlib.suppress(GalilConnectionError):  # closed: close() halted the routine
+        worker.submit_urgent(end)

@@ -212,3 +212,18 @@ def test_an_async_capture_left_by_a_dead_link_is_stopped_when_the_link_is_reopen
             simulator.advance(0.5)
 
     run(body)
+
+
+def test_an_async_watchdog_on_another_thread_replaces_the_running_one() -> None:
+    async def body() -> tuple[bool, bool, list[float]]:
+        async with await sim() as c:
+            first = await c.watchdog(0.5, thread=6)
+            async with await c.watchdog(2.0) as second:
+                threads = await c.query_operands(["_XQ6", "_XQ7"])
+                return first.beating, second.beating, threads
+
+    first, second, threads = run(body)
+    assert not first
+    assert second
+    assert threads[0] == -1  # the first's routine halted on its thread
+    assert threads[1] >= 0

@@ -51,6 +51,7 @@ NOT_TWINNED = {
     "queue", "reopen",  # Interrupts: the sync queue, the reconnect hook
     "start",  # Capture, Watchdog: the async ones come started
     "reopened", "hand_over",  # Watchdog: the controller's hooks (a reconnect, a new one)
+    "reused",  # Capture: the controller's hook (a new capture took its arrays)
     "end_wait",  # IO: the controller's hook (close)
     "operand", "bank_bits", "function",  # the bank layout of the digital I/O rooms
 }  # fmt: skip
@@ -166,9 +167,8 @@ def test_wait_for_input_returns_when_the_input_changes() -> None:
             await waiting
             return await c.run(c.sync.link.clock) - start
 
-    # Within the slice under way, most often; the simulator's line reaches the host when the
-    # idle poll (20 ms of real time) reads it, so now and then a slice ends first and the
-    # next one sees the input at once.
+    # Within the slice under way: the wait reads the simulator's line between its pauses
+    # (the clock runs on meanwhile, for the test's own queries too).
     assert run(body) < 3 * aio.WAIT_SLICE
 
 
@@ -229,6 +229,93 @@ def test_cancelling_a_wait_for_input_frees_its_thread_and_halts_the_routine() ->
             assert c.sync.routines.threads == {}
 
     run(body)
+
+
+def _wire(c: aio.AsyncController, since: int) -> list[str]:
+    """The commands the simulator got after the first ``since``, by name (``HX7``: ``HX``)."""
+    return [
+        text.split(" ")[0].split("=")[0].rstrip("0123456789") for text in commands_of(c)[since:]
+    ]
+
+
+def test_an_awaited_wait_for_input_of_many_slices_costs_the_link_what_the_sync_wait_costs() -> None:
+    """The routine is installed (UL) and started (XQ) once per wait, not once per slice."""
+
+    async def body() -> tuple[list[str], list[str]]:
+        async with await sim() as c:
+            with pytest.raises(galil.GalilTimeoutError):  # the routine installed once
+                await c.run(c.sync.io.wait_for_input, 2, high=False, timeout=0.1)
+            before = len(commands_of(c))
+            with pytest.raises(galil.GalilTimeoutError):
+                await c.run(c.sync.io.wait_for_input, 2, high=False, timeout=3.0)
+            sync = _wire(c, before)
+            before = len(commands_of(c))
+            with pytest.raises(galil.GalilTimeoutError, match=r"did not go low within 3\.0 s"):
+                await c.io.wait_for_input(2, high=False, timeout=3.0)  # 6 slices
+            return sync, _wire(c, before)
+
+    sync, awaited = run(body)
+    assert sorted(awaited) == sorted(sync)
+    assert awaited.count("UL") == awaited.count("XQ") == awaited.count("HX") == 1
+
+
+def _set_low_now(c: aio.AsyncController, n: int) -> float:
+    """Set input ``n`` low, with no time passing meanwhile: the controller's time then."""
+    with c.sync.link.locked():
+        sim_of(c.sync).set_input(n, False)
+        return c.sync.link.clock()
+
+
+def test_an_awaited_wait_for_input_hears_its_input_slices_after_its_start() -> None:
+    async def body() -> tuple[float, list[str]]:
+        async with await sim() as c:
+            before = len(commands_of(c))
+            clock = c.sync.link.clock
+            waiting = asyncio.ensure_future(c.io.wait_for_input(2, high=False, timeout=10))
+            while await c.query_operands(["_XQ7"]) == [-1.0]:  # the routine starts
+                await asyncio.sleep(0.001)
+            start = await c.run(clock)
+            while await c.run(clock) < start + 4 * aio.WAIT_SLICE:  # the wait lets it pass
+                await asyncio.sleep(0.001)
+            changed = await c.run(_set_low_now, c, 2)
+            await waiting
+            return await c.run(clock) - changed, _wire(c, before)
+
+    took, wire = run(body)
+    assert took <= 0.1  # one pause of the wait: the routine's line is heard in its time
+    assert wire.count("UL") == 1  # (and the download of the routine, once)
+    assert wire.count("XQ") == 1
+    assert "HX" not in wire  # it said so and ended by itself
+
+
+def test_a_wait_for_input_cancelled_slices_after_its_start_halts_its_routine_for_the_next() -> None:
+    async def body() -> tuple[list[float], dict[int, str], list[str]]:
+        async with await sim() as c:
+            clock = c.sync.link.clock
+            waiting = asyncio.ensure_future(c.io.wait_for_input(2, high=False))
+            while await c.query_operands(["_XQ7"]) == [-1.0]:
+                await asyncio.sleep(0.001)
+            start = await c.run(clock)
+            while await c.run(clock) < start + 3 * aio.WAIT_SLICE:
+                await asyncio.sleep(0.001)
+            waiting.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await waiting
+            await c.worker.drained()  # the slice under way, then the halt
+            halted = await c.query_operands(["_XQ7"])
+            threads = c.sync.routines.threads
+            before = len(commands_of(c))
+            nxt = asyncio.ensure_future(c.io.wait_for_input(3, high=False, timeout=5))
+            while await c.query_operands(["_XQ7"]) == [-1.0]:  # the next wait takes it
+                await asyncio.sleep(0.001)
+            sim_of(c.sync).set_input(3, False)
+            await nxt
+            return halted, threads, _wire(c, before)
+
+    halted, threads, wire = run(body)
+    assert halted == [-1.0]
+    assert threads == {}
+    assert wire.count("XQ") == 1
 
 
 # -- programs, arrays, variables ------------------------------------------------------------
