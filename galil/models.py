@@ -577,7 +577,9 @@ _add(
             "record laid out like the 40x0 one (gclib GDataRecord1806); sizes assumed equal",
             "8 threads as on the 40x0 (the 18x6 is an Accelera card like it): no 18x6 page gives"
             " the count, and EPICS (GalilController.cpp, model_[3] == '1') gives every DMC-1xxx,"
-            " the 18x6 included, 2 threads",
+            " the 18x6 included, 2 threads; gclib's GDataRecord1806 carries the 40x0's thread"
+            " status byte (bit n = thread n) where the 18x2's GDataRecord1802 has a general"
+            " status byte, which fits 8 but does not count them",
             _VECTOR_TM_ASSUMPTION,
             _OP_ASSUMPTION,
         ),

@@ -33,12 +33,14 @@ __all__ = [
     "KinematicPlan",
     "PlanSamples",
     "Segment",
+    "final_decel",
     "plan_from_rest",
     "plan_jog",
     "plan_position",
     "plan_stop",
     "ramping",
     "sample_plan",
+    "slewing",
 ]
 
 _new = object.__new__
@@ -1108,3 +1110,31 @@ def ramping(prof: AxisProfiler) -> bool:
         x = act.state(prof.sample)[0]
         slew = math.copysign(slew, prof.target - x if prof.target != x else v)
     return a * (slew - v) > 0
+
+
+def slewing(prof: AxisProfiler) -> bool:
+    """Whether ``prof`` runs at a constant, non-zero speed at its present sample: a position
+    move's cruise at SP, a jog at its JG speed. The data record's axis status bit 5 "Motion
+    is slewing" (galil-protocol.md section 4; DMC-2x00 user manual p.68); the profile before
+    IT smoothing; false while contouring and during ST or a limit's stop."""
+    act = prof._active
+    if act is None or prof._stopping or prof.mode not in ("position", "jog"):
+        return False
+    v, a = act.ramp(prof.sample)
+    return a == 0.0 and v != 0.0
+
+
+def final_decel(prof: AxisProfiler) -> bool:
+    """Whether ``prof`` is in the ramp that brings its motion to rest: the last phase of a
+    position move's profile, or the ramp of ST or a limit's stop. The data record's axis
+    status bit 3 "Motion is making final decel." (galil-protocol.md section 4; DMC-2x00 user
+    manual p.68). [U] The manuals do not say whether a stop's ramp counts as the final
+    deceleration: here it does (bit 4, "stopping", says why it stops)."""
+    act = prof._active
+    if act is None or act.end_sample is None or prof.mode not in ("position", "jog"):
+        return False
+    k = prof.sample
+    if k >= act.end_sample or act._segment(float(k - act.k0)) != len(act.t0) - 1:
+        return False
+    v, a = act.ramp(k)
+    return v * a < 0.0

@@ -27,7 +27,7 @@ import numpy.typing as npt
 from galil.codes import tc_text
 from galil.errors import CommandError, InvalidArgument, LimitError
 from galil.models import ModelSpec
-from galil.predict.engine import AxisProfiler, ramping
+from galil.predict.engine import AxisProfiler, final_decel, ramping, slewing
 from galil.predict.path import (
     ANGLE_RESOLUTION,
     Arc,
@@ -138,6 +138,23 @@ class VectorProfiler:
         """Whether the path speed changes towards VS at the present sample (see
         :func:`galil.predict.engine.ramping`): what ``AS S`` waits out."""
         return self.moving and ramping(self._path)
+
+    @property
+    def slewing(self) -> bool:
+        """Whether the path runs at a constant speed now (:func:`~galil.predict.engine.slewing`):
+        the plane status bit 5 of the data record."""
+        return self.moving and slewing(self._path)
+
+    @property
+    def stopping(self) -> bool:
+        """Whether ``ST`` or a limit is bringing the sequence to rest (plane status bit 4)."""
+        return self.moving and self._stopping
+
+    @property
+    def final_decel(self) -> bool:
+        """Whether the path is in the ramp to its end or to a stop
+        (:func:`~galil.predict.engine.final_decel`): plane status bit 3."""
+        return self.moving and final_decel(self._path)
 
     @property
     def length(self) -> int:

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import functools
 import struct
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -34,6 +34,8 @@ __all__ = [
     "AXIS_LETTERS",
     "AxisFields",
     "AxisStatus",
+    "PlaneFields",
+    "PlaneStatus",
     "RecordFields",
     "RecordSplitter",
     "Switches",
@@ -603,6 +605,68 @@ class Switches:
 
 
 @dataclass(frozen=True)
+class PlaneStatus:
+    """A coordinate plane's move status word (``S`` or ``T``), bit 15 first (DMC-4123 user
+    manual, "Coordinated Motion Status for S or T Plane"; the 2x00 and 1700 share it).
+
+    Attributes:
+        raw: the word itself.
+        moving: b15, a sequence is in progress (``_BGS``).
+        slewing: b5, the path runs at its vector speed.
+        stopping: b4, stopping because of ST or a limit.
+        final_decel: b3, in the deceleration that ends the sequence (or its stop).
+    """
+
+    moving: bool
+    slewing: bool
+    stopping: bool
+    final_decel: bool
+    raw: int = 0
+
+    @classmethod
+    def from_word(cls, word: int) -> PlaneStatus:
+        """Decode a plane status word."""
+        w = int(word)
+        return cls(
+            moving=bool(w & 0x8000),
+            slewing=bool(w & 0x0020),
+            stopping=bool(w & 0x0010),
+            final_decel=bool(w & 0x0008),
+            raw=w,
+        )
+
+
+@dataclass(frozen=True)
+class PlaneFields:
+    """A coordinate plane's block of a record (gclib ``s_plane_*``, ``t_plane_*``).
+
+    Attributes:
+        segments: the segment count of the sequence (``_CSS``).
+        status: the move status word.
+        distance: the distance travelled along the path (``_AVS``), counts.
+        buffer: free places in the segment buffer (``_LMS``); ``None`` where the layout has
+            none (the DMC-21x3/2x00/18x2 record).
+    """
+
+    segments: int
+    status: PlaneStatus
+    distance: int
+    buffer: int | None
+
+
+def _plane_fields(record: np.void, names: tuple[str, ...], p: str) -> PlaneFields | None:
+    if f"{p}_status" not in names:
+        return None
+    buffer = f"{p}_buffer"
+    return PlaneFields(
+        segments=int(record[f"{p}_segments"]),
+        status=PlaneStatus.from_word(int(record[f"{p}_status"])),
+        distance=int(record[f"{p}_distance"]),
+        buffer=int(record[buffer]) if buffer in names else None,
+    )
+
+
+@dataclass(frozen=True)
 class AxisFields:
     """One axis block of a record, by name, in counts.
 
@@ -645,6 +709,8 @@ class RecordFields:
         threads: the program threads running.
         inputs: the input bytes (bank 0 first).
         axes: the axis blocks by letter.
+        planes: the coordinate planes' blocks by letter (``"S"``, ``"T"``: those the layout
+            has).
     """
 
     sample: int
@@ -653,6 +719,7 @@ class RecordFields:
     threads: frozenset[int]
     inputs: tuple[int, ...]
     axes: dict[str, AxisFields]
+    planes: dict[str, PlaneFields] = field(default_factory=dict)
 
 
 def _axis_fields(block: np.void) -> AxisFields:
@@ -685,6 +752,7 @@ def decode_fields(record: np.void) -> RecordFields:
     threads = int(record["thread_status"]) if "thread_status" in names else 0
     inputs = tuple(int(v) for v in np.atleast_1d(record["inputs"])) if "inputs" in names else ()
     axes = {n: _axis_fields(record[n]) for n in names if n in AXIS_LETTERS and len(n) == 1}
+    planes = {p.upper(): _plane_fields(record, names, p) for p in "st"}
     return RecordFields(
         sample=int(record["sample"]),
         time=int(record["time"]) if "time" in names else None,
@@ -692,4 +760,5 @@ def decode_fields(record: np.void) -> RecordFields:
         threads=frozenset(t for t in range(8) if threads >> t & 1),
         inputs=inputs,
         axes=axes,
+        planes={p: block for p, block in planes.items() if block is not None},
     )

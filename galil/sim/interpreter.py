@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 from galil.models import INT32_MAX, INT32_MIN, ModelSpec
 from galil.protocol.numbers import format_reply, parse_format
-from galil.sim.parse import FUNCTIONS, Refused, evaluate, split_fields
+from galil.sim.parse import FUNCTIONS, Refused, evaluate, quantised, split_fields
 from galil.sim.ports import Port
 from galil.sim.programs import NOT_IN_PROGRAM, PROGRAM_ONLY, Thread, program_only
 from galil.sim.registry import Args, HandlerSpec, Result
@@ -234,7 +234,7 @@ class Interpreter:
             raise Refused(6, "out of range")
         if name not in self.variables and len(self.variables) >= self.spec.variables:
             raise Refused(67, "too many variables")
-        self.variables[name] = round(value * 65536) / 65536
+        self.variables[name] = quantised(value)  # 32.16, as every number (parse.py)
         return ""
 
     def evaluate(self, text: str) -> float:

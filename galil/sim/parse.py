@@ -2,7 +2,10 @@
 
 The controller reads ASCII commands ended by ``;`` or carriage return (never inside a quoted
 string), two upper-case letters and their arguments. Expressions are evaluated strictly left to
-right with parentheses only, as Galil's interpreter does (``1+2*3`` is 9).
+right with parentheses only, as Galil's interpreter does (``1+2*3`` is 9), in the controller's
+32.16 fixed point (:func:`quantised`): every number in an expression and every intermediate
+result is a multiple of 1/65536, so ``0.1+0.2=0.3`` holds and ``1.4*80000`` is 111999.5117
+(DMC-40x0 user manual p.142).
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ __all__ = [
     "in_range",
     "internal_error",
     "next_command",
+    "quantised",
     "split_fields",
     "split_program_line",
 ]
@@ -119,6 +123,8 @@ _TOKEN = re.compile(
 )
 #: An expression that is a name alone (leading and trailing blanks allowed): one name token.
 _NAME_ONLY = re.compile(r"\s*(_?[A-Za-z][A-Za-z0-9_]*)\s*")
+#: An expression that is a decimal number alone, signed or not (blanks allowed).
+_NUMBER_ONLY = re.compile(r"\s*[-+]?(?:\d+(?:\.\d*)?|\.\d+)\s*")
 #: The interpreter's own functions (``@ABS[x]``); rooms may add more (``@IN[n]``).
 FUNCTIONS: dict[str, Callable[[float], float]] = {
     "ABS": abs,
@@ -139,17 +145,41 @@ _RAW_MIN = -(1 << 47)
 _RAW_MAX = (1 << 47) - 1
 
 
+#: The fraction of a 32.16 number: values are floats that are whole multiples of 1/65536,
+#: which a double holds exactly (48 significant bits of 53), so ``+``, ``-`` and comparisons
+#: on them are exact; ``*`` and ``/`` go through the raw integers (:func:`_arith`).
+_ONE = 65536
+
+
 def in_range(value: float) -> bool:
     """Whether ``value`` is a number the controller can hold (32.16 fixed point)."""
-    return math.isfinite(value) and _RAW_MIN <= round(value * 65536) <= _RAW_MAX
+    return math.isfinite(value) and _RAW_MIN <= round(value * _ONE) <= _RAW_MAX
 
 
-def _checked(value: float) -> float:
-    """``value``, or TC 6 "Number out of range" (galil-protocol.md §1.2) for a result the
-    controller's 32.16 arithmetic cannot hold (§1.4): ``MG 2147483647+1``, ``65536*65536``."""
+def _rounded(num: int, den: int) -> int:
+    """``num / den`` to the nearest integer, halves away from zero (``den`` > 0)."""
+    q, r = divmod(abs(num), den)
+    if 2 * r >= den:
+        q += 1
+    return q if num >= 0 else -q
+
+
+def quantised(value: float) -> float:
+    """``value`` as the controller holds it: the nearest multiple of 1/65536, or TC 6.
+
+    "1.4 must be stored to the nearest multiple of 1/65536, which is 91750/65536" (DMC-40x0
+    user manual p.142, "Mathematical Operation Precision and Range"); Application Note 3311a
+    stores .001 as 66/65536. Halves go away from zero [U: no source shows a tie].
+
+    Raises:
+        Refused: TC 6 "Number out of range" (galil-protocol.md §1.2) for a value the 32.16
+            format cannot hold (§1.4): ``MG 2147483647+1``, ``65536*65536``.
+    """
     if not in_range(value):
         raise Refused(6, "number out of range")
-    return value
+    scaled = value * _ONE
+    raw = math.floor(abs(scaled) + 0.5)
+    return math.copysign(raw, scaled) / _ONE if raw else 0.0
 
 
 #: An array element's value: ``element(name, index)``.
@@ -190,6 +220,18 @@ def evaluate(
     Raises:
         Refused: a syntax error (TC 1), unbalanced parentheses (TC 59), a bad value (TC 6).
     """
+    literal = _NUMBER_ONLY.fullmatch(text)
+    if literal is not None:
+        # A decimal number alone (``IT 0.004``, ``ILA=9.998``, ``x=0.1``) is handed on as
+        # typed: the command applies its own resolution and range to it, and a variable or an
+        # array element stores it at 1/65536. [U] The manuals accept IT 0.004 and IL 9.998
+        # (their documented bounds), which their nearest 1/65536 (0.0039978, 9.9980011) would
+        # fail against those bounds: the controller checks the number as typed, or against
+        # bounds in its own format; either way the same settings are taken.
+        value = float(literal.group(0))
+        if not in_range(value):
+            raise Refused(6, "number out of range")
+        return value
     plain = _NAME_ONLY.fullmatch(text)
     if plain is not None:
         # A name alone (MG _TPA, a variable): what the tokens below would give, directly.
@@ -201,25 +243,32 @@ def evaluate(
         value, pos = _sequence(tokens, 0, (lookup, functions, element))
         if pos != len(tokens):
             raise Refused(59 if tokens[pos][1] in ")]" else 1, f"unexpected {tokens[pos][1]!r}")
-    return _checked(value)
+    return quantised(value)
 
 
 def _apply(op: str, a: float, b: float) -> float:
     # Every step is a 32.16 number: an intermediate result out of range is refused too.
-    return _checked(_arith(op, a, b))
+    return quantised(_arith(op, a, b))
 
 
 def _arith(op: str, a: float, b: float) -> float:
+    # a and b are 32.16 numbers (multiples of 1/65536, exact as doubles). A sum or a
+    # difference is exact; a product or a quotient is taken from the raw integers and rounded
+    # to the nearest 1/65536: the DMC-40x0 user manual's (91750/65536)*80000 = 111999.5117
+    # (p.142) and AN3311a's (66/65536)*819200 = 825 are exact either way [U: how the
+    # firmware rounds a product or quotient that is not a multiple of 1/65536].
     if op == "+":
         return a + b
     if op == "-":
         return a - b
     if op == "*":
-        return a * b
+        return _rounded(round(a * _ONE) * round(b * _ONE), _ONE) / _ONE
     if op == "/":
         if b == 0:
             raise Refused(6, "division by zero")
-        return a / b
+        rb = round(b * _ONE)
+        num = round(a * _ONE) * _ONE
+        return _rounded(num if rb > 0 else -num, abs(rb)) / _ONE
     if op == "&":
         return float(int(a) & int(b))
     if op == "|":
@@ -251,15 +300,15 @@ def _operand(tokens: list[tuple[str, str]], pos: int, env: _Env) -> tuple[float,
         raise Refused(1, "missing value")
     kind, text = tokens[pos]
     if kind == "num":
-        return _checked(float(text)), pos + 1
+        return quantised(float(text)), pos + 1
     if kind == "hex":
         whole, _, frac = text[1:].partition(".")
         value = float(int(whole, 16))
         if frac:
             value += int(frac, 16) / 16 ** len(frac)
-        return _checked(value), pos + 1
+        return quantised(value), pos + 1
     if kind == "name":
-        return env[0](text), pos + 1
+        return quantised(env[0](text)), pos + 1
     if kind == "func":
         name = text[1:-1]
         fn = env[1].get(name)
@@ -268,7 +317,7 @@ def _operand(tokens: list[tuple[str, str]], pos: int, env: _Env) -> tuple[float,
         arg, pos = _sequence(tokens, pos + 1, env)
         if pos >= len(tokens) or tokens[pos][1] != "]":
             raise Refused(55, "missing ]")
-        return _checked(fn(arg)), pos + 1
+        return quantised(fn(arg)), pos + 1
     if kind == "element":
         get = env[2]
         if get is None:
@@ -276,10 +325,10 @@ def _operand(tokens: list[tuple[str, str]], pos: int, env: _Env) -> tuple[float,
         index, pos = _sequence(tokens, pos + 1, env)
         if pos >= len(tokens) or tokens[pos][1] != "]":
             raise Refused(55, "missing ]")
-        return get(text[:-1], index), pos + 1
+        return quantised(get(text[:-1], index)), pos + 1
     if text == "-":
         if pos + 1 < len(tokens) and tokens[pos + 1][0] == "num":  # -2147483648 is in range
-            return _checked(-float(tokens[pos + 1][1])), pos + 2
+            return quantised(-float(tokens[pos + 1][1])), pos + 2
         value, pos = _operand(tokens, pos + 1, env)
         return -value, pos
     if text == "+":

@@ -20,6 +20,7 @@ PROGRAM = b"#W\rWT 10000\rEN\r\\"
 #: Fields the simulator fills; every other byte of a record is zero.
 FILLED_GENERAL = {"header", "axes_present", "size", "sample", "inputs", "error_code"}
 FILLED_GENERAL |= {"thread_status", "contour_buffer", "general_status"}
+FILLED_GENERAL |= {f"{p}_{n}" for p in "st" for n in ("segments", "status", "distance", "buffer")}
 FILLED_AXIS = {"status", "switches", "stop_code", "reference", "position", "error"}
 FILLED_AXIS |= {"aux_position", "velocity"}
 
@@ -65,7 +66,8 @@ def expected_status(sim: SimController, letter: str) -> int:
         if m.profiler.velocity < 0:
             word |= 0x0080
         if m.profiler.stop_code in (2, 3, 4):
-            word |= 0x0010
+            word |= 0x0010 | 0x0008  # stopping, in the ramp that ends the motion
+        # (B, started by PA, is still accelerating: neither slewing nor decelerating)
     if m.profiler.mode == "contour":
         word |= 0x0040
     if not m.motor_on:
@@ -103,6 +105,12 @@ def test_every_field_of_the_record_matches_the_controllers_answers(model: str) -
         assert rec["contour_buffer"] == number(sim, "MG _CM")
     else:
         assert rec["general_status"] == number(sim, "TB") & 0x81 == 0x81
+    if "s_buffer" in rec:  # no sequence: an empty buffer, no segments, no distance
+        assert rec["s_buffer"] == number(sim, "MG _LMS") == sim.spec.vector_buffer
+        assert rec.get("t_buffer", rec["s_buffer"]) == rec["s_buffer"]
+    planes = [k for k in rec if k[:2] in ("s_", "t_") and not k.endswith("_buffer")]
+    assert planes
+    assert all(rec[k] == 0 for k in planes)
     assert all(v == 0 or v == [0] * len(v) for k, v in rec.items() if k not in FILLED_GENERAL), rec
 
 

@@ -27,7 +27,7 @@ import re
 
 from galil.models import INT32_MAX, INT32_MIN
 from galil.sim.machine import Machine, Room
-from galil.sim.parse import Refused, split_fields
+from galil.sim.parse import Refused, quantised, split_fields
 from galil.sim.registry import Collect, handler, operand
 
 __all__ = ["Arrays", "fixed"]
@@ -44,7 +44,7 @@ def fixed(value: float) -> float:
     """
     if not math.isfinite(value) or not INT32_MIN <= value < INT32_MAX + 1:
         raise Refused(6, "value out of range")
-    return round(value * 65536) / 65536
+    return quantised(value)
 
 
 class Arrays(Room):

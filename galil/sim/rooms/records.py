@@ -17,6 +17,7 @@ import numpy as np
 
 from galil.errors import InvalidArgument
 from galil.models import INT32_MAX, INT32_MIN
+from galil.predict.engine import final_decel, slewing
 from galil.protocol.records import record_dtype
 from galil.sim.machine import Machine, Room
 from galil.sim.parse import Refused, split_fields
@@ -28,6 +29,7 @@ from galil.sim.rooms.io import IO
 from galil.sim.rooms.limits import Limits
 from galil.sim.rooms.motion import Motion
 from galil.sim.rooms.reports import Reports
+from galil.sim.rooms.vector import Vector
 from galil.sim.servo import Axis
 
 __all__ = ["Records"]
@@ -35,8 +37,11 @@ __all__ = ["Records"]
 #: What every known general block starts with; a block of unknown layout (kept raw by
 #: galil.protocol.records) gets these and nothing else.
 _GENERAL_START = np.dtype([("sample", "<u2"), ("inputs", "u1", (10,))])
-#: The general fields that change (those a layout has), filled by name.
-_GENERAL = ("sample", "error_code", "thread_status", "contour_buffer", "general_status")
+#: The general fields that change (those a layout has), filled by name; the coordinated
+#: planes' blocks (S, and T where the layout has it) with them.
+_PLANE = ("segments", "status", "distance", "buffer")
+_GENERAL: tuple[str, ...] = ("sample", "error_code", "thread_status", "contour_buffer")
+_GENERAL += ("general_status", *(f"{p}_{name}" for p in "st" for name in _PLANE))
 #: The axis fields that change, in the order :meth:`Records._axis` gives their values.
 _AXIS = ["status", "switches", "stop_code", "reference", "position", "error"]
 _AXIS += ["aux_position", "velocity"]
@@ -92,6 +97,8 @@ class Records(Room):
         self.stream: tuple[int, int] | None = None
         self._next = 0
         self._fill: list[Callable[[np.ndarray[Any, Any], str], None]] | None = None
+        self._vector_room: Vector | None = None
+        self._vector_known = False  # whether _vector_room was looked up
 
     # ---- the record --------------------------------------------------------------------
     def record(self, axes: str = "") -> bytes:
@@ -148,7 +155,21 @@ class Records(Room):
         }
         if "contour_buffer" in names:
             values["contour_buffer"] = m.room(Contour).free()
-        return tuple(values[n] for n in names)
+        vector = self._vector()
+        if vector is not None:
+            for p in "st":
+                if f"{p}_status" in names:
+                    block = vector.record_block(p.upper())
+                    values.update(zip([f"{p}_{n}" for n in _PLANE], block, strict=True))
+        return tuple(values.get(n, 0) for n in names)
+
+    def _vector(self) -> Vector | None:
+        """The coordinated-motion room, when the controller has one."""
+        if not self._vector_known:
+            with contextlib.suppress(KeyError):
+                self._vector_room = self.machine.room(Vector)
+            self._vector_known = True
+        return self._vector_room
 
     @staticmethod
     def _axis(ax: Axis, motion: Motion, limits: Limits, reports: Reports) -> tuple[int, ...]:
@@ -163,6 +184,14 @@ class Records(Room):
                 status |= 0x0080
             if ax.limit_stop or prof.stop_code in (2, 3, 4):
                 status |= 0x0010
+            # b8 coordinated motion, b5 slewing, b3 final deceleration (galil-protocol.md
+            # section 4, axis status word; DMC-2x00 user manual p.68).
+            if prof.mode == "vector":  # a VM or LM sequence drives the axis
+                status |= 0x0100
+            elif slewing(prof):  # b5 (a sequence's phases are in its plane's block)
+                status |= 0x0020
+            elif final_decel(prof):  # b3
+                status |= 0x0008
         if prof.mode == "contour":
             status |= 0x0040
         if not m.motor_on:

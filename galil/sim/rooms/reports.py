@@ -13,6 +13,7 @@ the encoder velocity averaged over a quarter second, as the manuals describe.
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 
 from galil.codes import tc_text
 from galil.errors import InvalidArgument
@@ -32,21 +33,38 @@ class Reports(Room):
     """What the controller tells about its axes and itself."""
 
     # ---- per-axis reports --------------------------------------------------------------
-    @handler("TP", Args.AXES)
-    def tp(self, axes: list[Axis]) -> str:
-        return self.machine.interp.report(axes, self.position, self.machine.interp.pnum)
+    @handler("TP")
+    def tp(self, args: str) -> str:
+        return self._positions(args, self.position)
 
-    @handler("TD", Args.AXES)
-    def td(self, axes: list[Axis]) -> str:
-        return self.machine.interp.report(axes, self.auxiliary, self.machine.interp.pnum)
+    @handler("TD")
+    def td(self, args: str) -> str:
+        return self._positions(args, self.auxiliary)
 
-    @handler("RP", Args.AXES)
-    def rp(self, axes: list[Axis]) -> str:
-        return self.machine.interp.report(axes, self.reference, self.machine.interp.pnum)
+    @handler("RP")
+    def rp(self, args: str) -> str:
+        return self._positions(args, self.reference)
 
-    @handler("TE", Args.AXES)
-    def te(self, axes: list[Axis]) -> str:
-        return self.machine.interp.report(axes, self.error, self.machine.interp.pnum)
+    @handler("TE")
+    def te(self, args: str) -> str:
+        return self._positions(args, self.error)
+
+    def _positions(self, args: str, get: Callable[[Axis], float]) -> str:
+        """A position report in PF, or in a format of its own written after the axes: "Local
+        format: ``TP {F2.2}`` -> ``-05.00, 05.00, 00.00, 07.00``; ``TP {$4.2}`` -> hex"
+        (galil-protocol.md section 1.4, DMC-2x00 user manual p.166-167, DMC-1700 p.172).
+        ``{Zm.n}`` drops the leading zeros as in ``MG``. [U] The manuals show it on ``TP``;
+        ``TD``, ``RP`` and ``TE``, which PF formats too, take it here as well."""
+        i = self.machine.interp
+        found = _BRACES.search(args) if "{" in args else None
+        if found is None:
+            return i.report(i.axis_list(args), get, i.pnum)
+        fmt = found.group(1).strip()
+        if fmt[:1].upper() not in ("F", "Z", "$") or _BRACES.search(args, found.end()):
+            raise Refused(53, f"bad format {{{fmt}}}")
+        self._number(0, fmt)  # a bad format is refused before anything is read
+        axes = i.axis_list(args[: found.start()] + args[found.end() :])
+        return i.report(axes, get, lambda v: self._number(v, fmt))
 
     @handler("TV", Args.AXES)
     def tv(self, axes: list[Axis]) -> str:

@@ -531,6 +531,26 @@ class Vector(Room):
             self.machine.room(Motion).st(axes)
         return ""
 
+    # ---- the data record ---------------------------------------------------------------
+    def record_block(self, p: str) -> tuple[int, int, int, int]:
+        """Plane ``p``'s block of the data record: segment count (``_CSp``), move status,
+        distance travelled (``_AVp``), buffer space (``_LMp``) (gclib ``GDataRecord4000``
+        ``s_plane_*``, galil-wave2-facts.md lines 55 and 131). The status word: b15 move in
+        progress (``_BGp``), b5 slewing, b4 stopping (ST or a limit), b3 final deceleration
+        (galil-protocol.md section 4, "Coordinated plane status"; DMC-4123 user manual p.55).
+        The count is a 16-bit field: [U] a longer sequence's count is kept modulo 65536."""
+        plane = self.planes[p]
+        eng = self.engine(plane)
+        if eng is None:
+            return 0, 0, 0, self.machine.spec.vector_buffer
+        status = 0
+        if self.busy(plane):
+            status = 0x8000
+            status |= 0x0020 if eng.slewing else 0
+            status |= 0x0010 if eng.stopping else 0
+            status |= 0x0008 if eng.final_decel else 0
+        return eng.segments_completed & 0xFFFF, status, eng.distance, max(0, eng.free_slots)
+
     # ---- operands ----------------------------------------------------------------------
     @operand("BG", kind=OperandKind.PLANE)
     def moving(self, p: str) -> float:
