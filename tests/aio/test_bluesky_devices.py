@@ -831,6 +831,7 @@ def test_a_refused_set_leaves_the_move_in_progress_as_it_was(
 ) -> None:
     # (the refused set() forgot the target and an earlier stop(success=False))
     x = motor(server.url, speed=20.0)
+    in_loop(x.axis.set_decel(40 * mm / s**2))  # (a stop's ramp of 0.5 s: seen on a busy host)
 
     async def body() -> tuple[float, BaseException | None]:
         first = x.set(50)  # 2.5 s
