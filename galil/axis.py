@@ -701,6 +701,8 @@ class Axis(AxisGearing, AxisPosition):
 
         Raises:
             InvalidArgument: moving, motor off, SP or HV 0, into an active switch or past FL/BL.
+            LimitError: (``switch`` given) the predicted path crosses BL or FL: the controller
+                would stop it there, short of the switch (also for find_edge, find_index).
         """
         return self._home("HM", switch)
 

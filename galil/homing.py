@@ -3,8 +3,9 @@
 An :class:`~galil.axis.Axis` holds one :class:`AxisHoming`; ``axis.home()``,
 ``axis.find_edge()`` and ``axis.find_index()`` call :meth:`AxisHoming.start`, which reads
 the axis's state in one round trip, refuses what the controller would refuse, predicts the
-sequence when the switch positions are known (:func:`galil.predict.homing`), and sends
-``HM A;BG A;MG TIME`` (or ``FE``/``FI``) as one line. The :class:`~galil.motion.MoveHandle`
+sequence when the switch positions are known (:func:`galil.predict.homing`), checks that
+path against the soft limits as a move's is, and sends ``HM A;BG A;MG TIME`` (or
+``FE``/``FI``) as one line. The :class:`~galil.motion.MoveHandle`
 it returns waits, shows progress and stops like any move; its stop code is 10 after HM and
 FI, 9 after FE.
 
@@ -150,7 +151,8 @@ class AxisHoming:
             InvalidArgument: the axis moves or its motor is off, a speed it needs is 0, it
                 would start into an active limit switch that LD leaves on, it is geared to
                 another axis, or another axis is geared to it (see :meth:`_refuse_gearing`).
-            LimitError: it would start on past a soft limit it is beyond already (TC 22).
+            LimitError: it would start on past a soft limit it is beyond already (TC 22), or
+                (``switch`` given) its predicted path crosses BL or FL (:meth:`_check_path`).
         """
         if switch is not None and not isinstance(switch, predict.HomeSwitch):
             raise InvalidArgument(f"switch must be a galil.predict.HomeSwitch, not {switch!r}")
@@ -179,7 +181,7 @@ class AxisHoming:
             stepper=abs(mt) in (2.0, 2.5),
         )
         self._refuse_limit(kind, round(ts), params, (round(rp), bl, fl))
-        track = self._track(kind, round(rp), params, switch)
+        track = self._track(kind, round(rp), params, switch, (bl, fl))
         mode, build = _KINDS[kind]
         replies = link.command_line(
             [build(a, model=model), cmds.bg(a, model=model), cmds.time_stamp()]
@@ -282,7 +284,12 @@ class AxisHoming:
             )
 
     def _track(
-        self, kind: str, rp: int, params: predict.HomingParams, switch: predict.HomeSwitch | None
+        self,
+        kind: str,
+        rp: int,
+        params: predict.HomingParams,
+        switch: predict.HomeSwitch | None,
+        limits: tuple[float, float],
     ) -> Track:
         move = MoveParams(params.speed, params.accel, params.decel, 1.0)
         mode = _KINDS[kind][0]
@@ -291,6 +298,7 @@ class AxisHoming:
             return Track(mode, rp, move, None, exact=False, note=note)
         ts = self._link.sample_period
         found = predict.homing(kind, params, switch, start=rp, sample_period=ts)
+        self._check_path(kind, found, limits)
 
         def replan(events: Sequence[predict.Event]) -> predict.Profile:
             # (an AC while it runs: the phase in progress re-plans; decision 0066)
@@ -307,6 +315,42 @@ class AxisHoming:
             )
         note += f"; position 0 at {found.zero_at} (old counts), exact"
         return Track(mode, rp, move, None, fixed=found.profile, note=note, replan=replan)
+
+    def _check_path(
+        self, kind: str, found: predict.HomingPrediction, limits: tuple[float, float]
+    ) -> None:
+        """Refuse a predicted sequence whose path crosses ``BL`` or ``FL`` (``limits``)
+        outwards, as a move's is (decision 0003): the controller would stop it there with stop
+        code 2 or 3, short of its switch or index. HM and FI define position 0 only when they
+        end, so the path is checked in the counts at the start (the prediction's profile is in
+        the frame the sequence ends with).
+
+        Raises:
+            LimitError: naming the command, where the path crosses and where it would end.
+        """
+        profile = found.profile
+        if found.zero_at:
+            profile = predict.Profile.from_samples(
+                profile.position + found.zero_at,
+                sample_period=profile.sample_period,
+                shape=profile.shape,
+                peak_speed=profile.peak_speed,
+            )
+        bl, fl = limits
+        try:
+            predict.check_soft_limits(
+                profile, forward_limit=fl, backward_limit=bl, axis=self.letter
+            )
+        except LimitError as exc:
+            exc.end = profile.end
+            exc.model = self._link.model.name
+            exc.args = (
+                f"{kind} on {self.letter} (predicted from the given switch positions) would be "
+                f"stopped by the controller short of its switch or index: {exc.args[0]}; widen "
+                "the soft limits (soft_limits) or start it from elsewhere",
+                *exc.args[1:],
+            )
+            raise
 
     def forget(self) -> None:
         """The controller was reset (``RS``): a homing seen before defines nothing now."""

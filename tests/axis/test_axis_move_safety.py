@@ -15,6 +15,9 @@ import galil
 import galil.aio as aio
 from galil.errors import InvalidArgument, LimitError
 from galil.testing import nothing_sent, sim_of, simulated, transcript
+from galil.units import ureg
+
+mm, s = ureg.mm, ureg.s
 
 
 def _begins(lines: list[str]) -> list[str]:
@@ -272,6 +275,60 @@ def test_homing_on_past_a_soft_limit_the_axis_is_beyond_is_refused_before_sendin
     homing = getattr(dmc.A, start)()  # inside again: allowed
     homing.stop()
     homing.wait()
+
+
+@pytest.mark.parametrize(
+    ("start", "limits", "name"),
+    [
+        ("home", (-5000, None), "BL"),  # (the edge at -10,000: HM passes it, back to -8000)
+        ("find_edge", (-9000, None), "BL"),  # (FE decelerates past the edge)
+        ("find_index", (-3000, None), "BL"),  # (JG < 0: the index at -4000)
+        ("find_index", (None, 3000), "FL"),  # (JG > 0: the index at 4000)
+    ],
+)
+def test_a_homing_whose_predicted_path_crosses_a_soft_limit_is_refused_before_sending(
+    dmc: galil.Controller, start: str, limits: tuple[int | None, int | None], name: str
+) -> None:
+    """Given the switch positions, the whole predicted sequence is checked against BL and FL
+    as a move's path is (decision 0003): the controller would stop it at the limit (stop code
+    3 or 2), short of its switch, the axis left unhomed."""
+    a = dmc.A
+    a.home_speed = 2000
+    a.jog_speed = -2000 if name == "BL" else 2000
+    a.soft_limits = limits
+    switch = sim_of(dmc).home_switch("A")
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as info:
+        getattr(a, start)(switch=switch)
+    assert info.value.name == name
+    assert info.value.limit == limits[0] if name == "BL" else limits[1]
+    assert info.value.axis == "A"
+    assert "switch positions" in str(info.value)
+    assert a.position == 0
+    assert a.moving is False
+    a.soft_limits = (None, None)  # nothing in the way: the same start goes ahead
+    assert getattr(a, start)(switch=switch).wait().stop_codes == {
+        "A": 9 if start == "find_edge" else 10
+    }
+
+
+def test_a_homing_path_is_checked_in_the_counts_it_starts_in(dmc: galil.Controller) -> None:
+    """HM defines 0 at the index only when it ends: the controller meets its soft limits in
+    the counts at the start. The prediction's profile is in the counts it ends with (from
+    +8000 down to 0 here), which a limit at 5000 would refuse; the path itself (0 down past
+    the edge at -10,000, back to the index at -8000) never comes near it."""
+    a = dmc.A
+    a.home_speed = 2000
+    a.soft_limits = (-20_000, 5000)
+    assert a.home(switch=sim_of(dmc).home_switch("A")).wait().stop_codes == {"A": 10}
+    assert a.position == 0
+
+
+def test_a_refused_homing_path_speaks_the_axis_unit(dmc: galil.Controller, x: galil.Axis) -> None:
+    x.home_speed = 1 * mm / s
+    x.soft_limits = (-2.5 * mm, None)  # (-5000 counts: HM passes it on its way to the edge)
+    switch = sim_of(dmc).home_switch("A")
+    with pytest.raises(LimitError, match=r"in user units: reaches -2.5\d* mm, limit -2.5 mm"):
+        x.home(switch=switch)
 
 
 def test_a_speed_schedule_towards_an_active_limit_switch_is_refused_before_sending(
