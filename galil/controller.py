@@ -836,18 +836,22 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
 
         The controller's own ``CW`` and ``EO`` (those :meth:`close` restores) are burned,
         not the link's ``CW 1``/``EO 0``: put back for the burn, set again after (decision
-        0057). Refused while a program thread runs (the controller refuses ``BN``: TC 17).
+        0057). The controller refuses ``BN`` while a program thread runs (TC 17): the
+        library's own (the watchdog, a wait for an input) are halted for the burn and started
+        again (decision 0087); a program of the user's is refused unsent.
 
         Raises:
-            InvalidArgument: a bad ``timeout``; a program thread runs (nothing is burned).
+            InvalidArgument: a bad ``timeout``; a program of the user's runs (nothing is
+                burned).
             CommandError: the controller refused ``BN``.
         """
-        burn_parameters(self.link, timeout)
+        burn_parameters(self.link, timeout, self.routines)
 
     def save_program(self, timeout: float | None = None) -> None:
-        """Burn the program to flash (``BP``); refused while an axis moves (see
+        """Burn the program to flash (``BP``); refused while an axis moves or a program of
+        the user's runs, the library's own threads halted for it and started again (see
         :meth:`Programs.burn <galil.programs.Programs.burn>`)."""
-        burn(self.link, "BP", timeout, self.tracker)
+        burn(self.link, "BP", timeout, self.tracker, self.routines)
 
     def save_variables(self, timeout: float | None = None) -> None:
         """Burn the variables and arrays to flash (``BV``)."""

@@ -352,7 +352,10 @@ class Programs:
     def burn(self, timeout: float | None = None) -> None:
         """Burn the program into flash (``BP``), the library's routines with it; it then
         survives a power cycle. Slow: the model's ``burn_timeout`` is allowed. The same as
-        ``controller.save_program()``; refused while a program runs (TC 17), the watchdog's
-        included, and while an axis moves (the controller's TC 7; unsent, as
-        :class:`~galil.errors.InvalidArgument`, while a motion the library started runs)."""
-        burn(self.link, "BP", timeout, self._tracker)
+        ``controller.save_program()``. The controller refuses ``BP`` while a program runs
+        (TC 17): the library's own threads (the watchdog, a wait for an input) are halted for
+        the burn and started again, as for :meth:`download` (decision 0087); a program of
+        the user's, or a speed schedule, running is refused unsent
+        (:class:`~galil.errors.InvalidArgument`). So is a motion the library started (the
+        controller's TC 7 otherwise)."""
+        burn(self.link, "BP", timeout, self._tracker, self.routines)

@@ -24,14 +24,15 @@ Rules, all checked before the download:
 
 from __future__ import annotations
 
+import contextlib
 import re
 import threading
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import TypeVar
 
-from galil.errors import CommandError, InvalidArgument
+from galil.errors import CommandError, GalilError, InvalidArgument
 from galil.link import CommandLink
 from galil.models import ModelSpec
 from galil.protocol import commands as cmds
@@ -351,6 +352,56 @@ class Routines:
         for t, label in restart.items():
             self.link.command_line([cmds.xq(label, t)])
         return tuple(sorted(restart))
+
+    @contextlib.contextmanager
+    def paused(self, what: str) -> Iterator[tuple[int, ...]]:
+        """Halt the library's own threads (the watchdog, a wait for an input) for ``what``
+        (``BN``, ``BP``), which the controller refuses while any thread runs (TC 17), and
+        start them again after it, whatever came of it (as :meth:`replace_user` does for a
+        download). Yields the threads halted (none: nothing is sent).
+
+        Raises:
+            InvalidArgument: a program of the user's runs, or a speed schedule (its start
+                again would move the axis): nothing is sent but the one ``_XQn`` query.
+        """
+        with self._lock:
+            running = self.running()
+            users = {t: line for t, line in running.items() if t not in self._threads}
+            once = sorted(t for t in running if t in self._owners)
+            if users or once:
+                named = _threads_named(running, self._threads)
+                advice = (
+                    "halt your program first (controller.programs.halt())"
+                    if users
+                    else "wait for the speed schedule to end, or stop it, first"
+                )
+                raise InvalidArgument(
+                    f"{what} is not valid while a program runs ({named} running): the "
+                    f"controller refuses it (TC 17); nothing was sent. {advice.capitalize()}; "
+                    "the library's own routines (the watchdog) are halted for it and started "
+                    "again",
+                    model=self.link.model.name,
+                )
+            restart = {t: label for t, label in self._threads.items() if t in running}
+            if restart:
+                self.link.command_line([cmds.hx(t) for t in restart])
+            try:
+                yield tuple(sorted(restart))
+            except BaseException:
+                with contextlib.suppress(GalilError):
+                    self._restart(restart)
+                raise
+            self._restart(restart)
+
+    def _restart(self, threads: Mapping[int, str]) -> None:
+        """``XQ`` each of the library's ``threads`` halted by :meth:`paused` again; a thread
+        whose ``XQ`` failed is no longer the library's (the error says which)."""
+        for t, label in threads.items():
+            try:
+                self.link.command_line([cmds.xq(label, t)])
+            except BaseException:
+                self._threads.pop(t, None)
+                raise
 
     def replace_user(self, lines: Sequence[str]) -> tuple[bool, tuple[int, ...]]:
         """Put ``lines`` above the marker as the user's program, keeping the library's block.

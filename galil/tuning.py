@@ -17,8 +17,9 @@ from __future__ import annotations
 
 import contextlib
 import enum
+import logging
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Generic, Protocol, TypeVar, overload
 
 from galil.errors import CommandError, GalilError, InvalidArgument, decimal_hint
@@ -29,6 +30,7 @@ from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
 from galil.protocol.numbers import read_one
 from galil.protocol.session import Completed
+from galil.routines import Routines
 
 __all__ = [
     "EncoderConfig",
@@ -43,6 +45,8 @@ __all__ = [
     "motor_type",
     "whole",
 ]
+
+_LOG = logging.getLogger("galil.tuning")
 
 
 class MotorType(float, enum.Enum):
@@ -287,6 +291,7 @@ def burn(
     what: str,
     timeout: float | None = None,
     tracker: MotionTracker | None = None,
+    routines: Routines | None = None,
 ) -> None:
     """``BN``/``BP``/``BV`` with a timeout that fits a flash write (``model.burn_timeout``).
 
@@ -294,11 +299,15 @@ def burn(
     it is refused unsent while an axis moves that the library itself started and has not
     seen end (:func:`~galil.motion.refuse_in_motion`: one query of that axis, none
     otherwise). Motion started elsewhere (a program, a raw ``BG``) gets the controller's
-    refusal.
+    refusal. With ``routines``, ``BP`` (refused while a program runs: TC 17 in the simulator,
+    as ``BN``; unsourced for ``BP`` on a controller, decision 0087)
+    halts the library's own threads for the burn and starts them again
+    (:meth:`~galil.routines.Routines.paused`), and is refused unsent while a program of the
+    user's runs.
 
     Raises:
         InvalidArgument: ``what`` is not BN, BP or BV; a bad ``timeout``; ``BP`` while the
-            library's own motion runs.
+            library's own motion runs, or (``routines``) while a program of the user's runs.
         CommandError: the controller refused (a program running: TC 17; motion: TC 7).
     """
     command = cmds.burn(what)
@@ -309,14 +318,39 @@ def burn(
     with tracker.lock:  # (no start in another thread between the check and BP)
         for letter in link.model.axes:
             refuse_in_motion(link, tracker, letter, "BP")
-        link.command_line([command], timeout=wait)
+        with _paused(routines, "BP") as halted:
+            link.command_line([command], timeout=wait)
+    _say_halted(halted, "BP")
+
+
+@contextlib.contextmanager
+def _paused(routines: Routines | None, what: str) -> Iterator[tuple[int, ...]]:
+    """:meth:`Routines.paused <galil.routines.Routines.paused>`, or nothing without
+    ``routines``."""
+    if routines is None:
+        yield ()
+        return
+    with routines.paused(what) as halted:
+        yield halted
+
+
+def _say_halted(halted: tuple[int, ...], what: str) -> None:
+    if halted:
+        _LOG.warning(
+            "galil: library thread(s) %s halted for %s (refused while a program runs) and "
+            "started again",
+            list(halted),
+            what,
+        )
 
 
 _BN = cmds.burn("BN")
 _ECHO_ON = cmds.eo(1).text
 
 
-def burn_parameters(link: Link, timeout: float | None = None) -> None:
+def burn_parameters(
+    link: Link, timeout: float | None = None, routines: Routines | None = None
+) -> None:
     """``BN``, burning the controller's own ``CW`` and ``EO`` rather than the link's
     (decision 0057).
 
@@ -329,11 +363,21 @@ def burn_parameters(link: Link, timeout: float | None = None) -> None:
     refuses ``BN`` then (TC 17), and the thread's output would be unmarked in between.
     Anything raised in between sends the link's settings again and resynchronises.
 
+    With ``routines``, the library's own threads (the watchdog) are halted for the burn and
+    started again (:meth:`~galil.routines.Routines.paused`; decision 0087).
+
     Raises:
         InvalidArgument: a bad ``timeout``; a program thread runs (nothing is burned).
         CommandError: the controller refused a part.
     """
     wait = check_timeout(timeout, link.model.burn_timeout)
+    with _paused(routines, "BN") as halted:
+        _burn_parameters(link, wait)
+    _say_halted(halted, "BN")
+
+
+def _burn_parameters(link: Link, wait: float) -> None:
+    """:func:`burn_parameters` once ``wait`` is checked (its threads halted, if any)."""
     own = link.own_settings()
     echo = link.echo
     theirs = [c for c, _ in reversed(own) if c.text != _ECHO_ON]

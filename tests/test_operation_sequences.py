@@ -1115,9 +1115,10 @@ class OperationSequences(RuleBasedStateMachine):
     @rule(often=st.integers(0, 1))
     def burn(self, often: int) -> None:
         """``BP`` (rarely: it holds the link for the burn's time): refused unsent while the
-        library's own motion runs; the controller's TC 7 only for motion the library did not
-        start (a program, a follower), its TC 17 while a program thread runs (decision 0047);
-        burned only then."""
+        library's own motion runs, or a program of the user's (its TC 17: decision 0087);
+        the controller's TC 7 only for motion the library did not start (a program, a
+        follower), its TC 17 while a program thread runs unseen (decision 0047); burned only
+        then."""
         if often:
             return
         tuning = self.sim.room(SimTuning)
@@ -1128,7 +1129,10 @@ class OperationSequences(RuleBasedStateMachine):
                 self.dmc.programs.burn()
         except CommandError as exc:
             by_controller = exc
-        if refused:
+        if refused and "TC 17" in str(refused):
+            threads = range(self.dmc.model.threads)
+            assert max(self.dmc.query_operands([f"_XQ{t}" for t in threads])) >= 0, refused
+        elif refused:
             assert any(self.dmc.tracker.active(a) for a in AXES), refused
             assert any(self.dmc.query_operands([f"_BG{a}" for a in AXES])), refused
         elif by_controller is not None:

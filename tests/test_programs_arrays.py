@@ -291,10 +291,12 @@ def test_a_program_with_rem_lines_runs_to_its_end(dmc: galil.Controller) -> None
     assert dmc.programs.upload() == "#R\nn=1\nn=n+1\nEN"
 
 
-def test_burn_sends_bp(dmc: galil.Controller) -> None:
+def test_burn_reads_the_threads_once_and_sends_bp(dmc: galil.Controller) -> None:
+    # (BP is refused while a thread runs, TC 17: the library's own are halted for it,
+    # a program of the user's is refused unsent; decision 0087)
     with transcript(dmc) as sent:
         dmc.programs.burn()
-    assert sent.lines == ["BP"]
+    assert sent.lines == ["MG " + ",".join(f"_XQ{t}" for t in range(8)), "BP"]
 
 
 def test_waiting_for_a_thread_times_out_in_controller_time(dmc: galil.Controller) -> None:

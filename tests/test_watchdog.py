@@ -18,6 +18,7 @@ from galil.protocol import commands as cmds
 from galil.routines import MARKER
 from galil.sim.clock import RealTimeClock
 from galil.sim.controller import SimController
+from galil.sim.rooms.tuning import Tuning
 from galil.sim.server import SimTcpServer
 from galil.testing import nothing_sent, sim_of, simulated
 from galil.watchdog import BEAT, FIRED, LIMIT
@@ -301,3 +302,56 @@ def test_a_watchdog_that_fired_says_so_in_its_repr() -> None:
         assert repr(dog) == "<Watchdog 0.5 s on thread 7, fired>"
         dog.stop()
         assert repr(dog) == "<Watchdog 0.5 s on thread 7, stopped>"
+
+
+_BURNS: dict[str, Callable[[galil.Controller], None]] = {
+    "save": lambda dmc: dmc.save(),
+    "save_program": lambda dmc: dmc.save_program(),
+    "programs.burn": lambda dmc: dmc.programs.burn(),
+}
+
+
+@pytest.mark.parametrize("burn", sorted(_BURNS))
+def test_a_burn_with_the_watchdog_running_halts_it_burns_and_guards_again(
+    burn: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The controller refuses BN and BP while any thread runs (TC 17): the watchdog's routine
+    is halted for the burn and started again, as for a program download (decision 0087)."""
+    with simulated() as dmc:
+        dog = dmc.watchdog(0.5)
+        with caplog.at_level("WARNING", logger="galil"):
+            _BURNS[burn](dmc)
+        command = "BN" if burn == "save" else "BP"
+        assert sim_of(dmc).room(Tuning).burns[command] == 1
+        assert f"halted for {command}" in caplog.text
+        assert dog.running
+        assert dog.beating
+        assert dmc.programs.threads == {}
+        dmc.A.jog(20_000)
+        sim_of(dmc).advance(0.8)  # the host silent: the routine, running again, stops the axis
+        assert not sim_of(dmc).motion("A").moving
+        assert dog.fired
+
+
+@pytest.mark.parametrize("burn", sorted(_BURNS))
+def test_a_burn_while_a_users_program_runs_is_refused_unsent_naming_it(burn: str) -> None:
+    with simulated() as dmc:
+        dog = dmc.watchdog(0.5)
+        dmc.programs.download("#LOOP\nWT 10\nJP #LOOP\nEN\n")
+        dmc.programs.run("#LOOP", thread=2)
+        command = "BN" if burn == "save" else "BP"
+        with (
+            nothing_sent(dmc, allow_queries=True),
+            pytest.raises(galil.InvalidArgument, match=f"{command} is not valid") as info,
+        ):
+            _BURNS[burn](dmc)
+        assert "thread 2" in str(info.value)
+        assert "TC 17" in str(info.value)
+        assert "programs.halt()" in str(info.value)
+        assert sim_of(dmc).room(Tuning).burns[command] == 0
+        assert dmc.programs.threads.keys() == {2}
+        assert dog.running
+        dmc.programs.halt()
+        _BURNS[burn](dmc)  # the user's program halted: burned, the watchdog guarding on
+        assert sim_of(dmc).room(Tuning).burns[command] == 1
+        assert dog.running
