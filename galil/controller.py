@@ -834,23 +834,19 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
     def save(self, timeout: float | None = None) -> None:
         """Burn the parameters to flash (``BN``), waiting as long as a flash write takes.
 
-        The controller's own ``CW`` and ``EO`` (those :meth:`close` restores) are burned,
-        not the link's ``CW 1``/``EO 0``: put back for the burn, set again after (decision
-        0057). The controller refuses ``BN`` while a program thread runs (TC 17): the
-        library's own (the watchdog, a wait for an input) are halted for the burn and started
-        again (decision 0087); a program of the user's is refused unsent.
+        The controller's own ``CW`` and ``EO`` are burned, not the link's (decision 0057).
+        ``BN`` is refused while a thread runs (TC 17): the library's own (the watchdog) are
+        halted for it and started again (decision 0087).
 
         Raises:
-            InvalidArgument: a bad ``timeout``; a program of the user's runs (nothing is
-                burned).
+            InvalidArgument: a bad ``timeout``; a program of the user's runs (nothing sent).
             CommandError: the controller refused ``BN``.
         """
         burn_parameters(self.link, timeout, self.routines)
 
     def save_program(self, timeout: float | None = None) -> None:
-        """Burn the program to flash (``BP``); refused while an axis moves or a program of
-        the user's runs, the library's own threads halted for it and started again (see
-        :meth:`Programs.burn <galil.programs.Programs.burn>`)."""
+        """Burn the program to flash (``BP``), as :meth:`Programs.burn
+        <galil.programs.Programs.burn>` (the watchdog halted for it and started again)."""
         burn(self.link, "BP", timeout, self.tracker, self.routines)
 
     def save_variables(self, timeout: float | None = None) -> None:
