@@ -60,10 +60,14 @@ def main() -> int:
 
         # Jogging through a soft limit is refused by the controller itself: set limits
         # around where we are and watch the axis stop on its own.
-        saved = x.soft_limits  # put the stage's own limits back afterwards
+        saved = x.soft_limits  # put the stage's own limits back afterwards (None: off)
         here = x.position
         # Only ever tighten limits: max/min keep the stage's own where they are closer.
-        x.soft_limits = (max(saved[0], here - 20 * mm), min(saved[1], here + 1 * mm))
+        low, high = here - 20 * mm, here + 1 * mm
+        x.soft_limits = (
+            low if saved[0] is None else max(saved[0], low),
+            high if saved[1] is None else min(saved[1], high),
+        )
         try:
             with dmc.motion("A"):
                 x.jog(5 * mm / s)

@@ -41,9 +41,13 @@ def main() -> int:
             axis.decel = 200 * mm / s**2
         # Soft limits: the controller enforces them, and every move is checked against them
         # over its whole predicted path before it is sent. Keep the stage's own to restore.
-        saved = x.soft_limits
+        saved = x.soft_limits  # None on a side that is off
         # Only ever tighten them: max/min keep the stage's own where they are closer.
-        x.soft_limits = (max(saved[0], -1 * mm), min(saved[1], 30 * mm))
+        low, high = saved
+        x.soft_limits = (
+            -1 * mm if low is None else max(low, -1 * mm),
+            30 * mm if high is None else min(high, 30 * mm),
+        )
         low, high = x.soft_limits
         print(f"A: speed {x.speed:~.3f}, accel {x.accel:~.1f}, soft limits {low:~} to {high:~}")
 

@@ -549,9 +549,12 @@ class Axis(AxisGearing, AxisPosition):
 
     @property
     def soft_limits(self) -> tuple[Any, Any]:
-        """``(low, high)`` soft limits (``BL``, ``FL``); ``None`` on either side removes it."""
+        """``(low, high)`` soft limits (``BL``, ``FL``); ``None`` on either side removes it,
+        and reads back for a side that is off (``BL`` -2147483648, ``FL`` 2147483647: the
+        values that disable them)."""
         bl, fl = self._link.query_operands([f"_BL{self.letter}", f"_FL{self.letter}"])
-        low, high = self._out_pos(bl), self._out_pos(fl)
+        low = None if bl <= INT32_MIN else self._out_pos(bl)
+        high = None if fl >= INT32_MAX else self._out_pos(fl)
         if self._scale is not None and self._scale.sign < 0:
             low, high = high, low
         return low, high

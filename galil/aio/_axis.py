@@ -265,7 +265,7 @@ class AsyncAxis(MotionRoom[Axis]):
         await self._set("jog_speed", value)
 
     async def soft_limits(self) -> tuple[Any, Any]:
-        """``(low, high)`` soft limits (``BL``, ``FL``)."""
+        """``(low, high)`` soft limits (``BL``, ``FL``); ``None`` for a side that is off."""
         low, high = await self._get("soft_limits")
         return low, high
 

@@ -58,7 +58,8 @@ def test_soft_limits_shift_with_the_coordinate(dmc: galil.Controller) -> None:
     a.define_position(0)
     b.define_position(-1000)
     assert a.soft_limits == (-17000, 38000)
-    assert b.soft_limits == (galil.models.INT32_MIN, 29000)  # off stays off
+    assert b.soft_limits == (None, 29000)  # off stays off
+    assert dmc.query_operands(["_BLB"]) == [galil.models.INT32_MIN]
     with pytest.raises(galil.LimitError, match="FL"), nothing_sent(dmc, allow_queries=True):
         a.move_to(38001)  # one count past where FL 50000 was on the machine
     assert a.move_to(38000).wait().final == {"A": 38000}

@@ -58,7 +58,8 @@ def test_typed_properties_in_counts(dmc: galil.Controller) -> None:
     a.soft_limits = (-1000, 50_000)
     assert a.soft_limits == (-1000, 50_000)
     a.soft_limits = (None, None)
-    assert a.soft_limits == (-2_147_483_648, 2_147_483_647)
+    assert a.soft_limits == (None, None)  # off reads as off (BL/FL at the 32-bit ends)
+    assert dmc.query_operands(["_BLA", "_FLA"]) == [-2_147_483_648, 2_147_483_647]
     assert a.position == 0
     assert a.reference_position == 0
     assert a.velocity == 0
@@ -107,6 +108,27 @@ def test_properties_are_quantities_with_a_scale(dmc: galil.Controller) -> None:
     assert x.velocity.units == mm / s
     x.set_scale(None)
     assert x.reference_position == 5000
+
+
+@pytest.mark.parametrize("sign", [1, -1])
+@pytest.mark.parametrize(
+    "limits", [(None, None), (None, 10.0), (-10.0, None), (-10.0, 10.0)], ids=str
+)
+def test_a_soft_limit_that_is_off_reads_back_as_none(
+    dmc: galil.Controller, sign: int, limits: tuple[float | None, float | None]
+) -> None:
+    """``None`` removes a side (BL -2147483648, FL 2147483647) and reads back as ``None``,
+    whatever the scale's offset and sign (a sign of -1 swaps BL and FL), not as the
+    sentinel's number in the axis's unit."""
+    mm = ureg.mm
+    x = dmc.A.set_scale(counts_per=2000 / mm, offset=5 * mm, sign=sign)
+    given = tuple(None if v is None else v * mm for v in limits)
+    x.soft_limits = given
+    assert x.soft_limits == given
+    dmc.A.set_scale(None)
+    bl, fl = dmc.A.soft_limits  # in counts too
+    assert (bl is None) == (limits[0 if sign > 0 else 1] is None)
+    assert (fl is None) == (limits[1 if sign > 0 else 0] is None)
 
 
 def test_rotary_axis_offset_and_sign(dmc: galil.Controller) -> None:
