@@ -703,7 +703,8 @@ class Axis(AxisGearing, AxisPosition):
         position 0; stop code 10. ``switch`` (positions in counts) makes a prediction.
 
         Raises:
-            InvalidArgument: moving, motor off, SP or HV 0, into an active switch or past FL/BL.
+            InvalidArgument: moving, motor off, into an active switch or past FL/BL.
+            LimitError: SP or HV 0 (JG 0 for find_index), as a move at SP 0 is.
             LimitError: (``switch`` given) the predicted path crosses BL or FL: the controller
                 would stop it there, short of the switch (also for find_edge, find_index).
         """

@@ -108,7 +108,7 @@ class Gearing:
         Raises:
             InvalidArgument: the gearing is off, or the master is moving (the prediction of
                 its move would not know when the ratio changed).
-            LimitError: a ratio beyond the model's range.
+            LimitError: a ratio beyond the model's range, or of 0 (as ``gear_to``'s).
             MotionError: a limit stopped the follower since, unseen, and the controller
                 turned its gearing off (:func:`~galil.motion.refuse_dropped`), or its ratio
                 reads 0 on the controller (turned off by a limit, ``ST`` or ``AB`` whose stop
@@ -116,7 +116,7 @@ class Gearing:
         """
         q = _ratio(self._link, ratio)
         if q == 0:
-            raise InvalidArgument("a ratio of 0 turns the gearing off: call off()")
+            raise _zero_ratio(self._link, self.follower, ratio, "to turn it off, call off()")
         with self._tracker.lock:  # (the master at rest until the ratio is sent)
             self._set_ratio(q)
 
@@ -277,7 +277,7 @@ def gear_to(
         InvalidArgument: an axis geared to itself, a master that is a follower or a follower
             that is a master (TC 46), the follower or the master moving, the follower's motor
             off.
-        LimitError: a ratio beyond the model's range (``GR``, ±127).
+        LimitError: a ratio beyond the model's range (``GR``, ±127), or of 0.
     """
     model = link.model
     if master != "S":
@@ -342,6 +342,22 @@ def _disengage(link: CommandLink, tracker: MotionTracker, follower: str) -> None
         _forget_found(tracker, follower)  # (a reopened link read it as found geared)
 
 
+def _zero_ratio(link: CommandLink, follower: str, given: object, advice: str) -> LimitError:
+    """The refusal of a gear ratio of 0, or ``given`` that the controller would store as 0:
+    one type wherever it is met (``gear_to``, ``set_ratio``), the ratio below the model's
+    smallest step."""
+    model = link.model
+    stored = "" if given == 0 else f" ({given!r} is stored as 0)"
+    return LimitError(
+        f"a gear ratio of 0 is no gearing{stored}: {advice}",
+        name="GR",
+        value=0.0,
+        limit=model.gr_resolution,
+        axis=follower,
+        model=model.name,
+    )
+
+
 def _check_pair(
     link: CommandLink, tracker: MotionTracker, follower: str, master: str, ratio: float
 ) -> None:
@@ -350,9 +366,7 @@ def _check_pair(
     if master == follower:
         raise InvalidArgument(f"axis {follower} cannot follow itself (TC 46)")
     if ratio == 0:
-        raise LimitError(
-            "a gear ratio of 0 is no gearing", name="GR", value=0.0, limit=model.gr_resolution
-        )
+        raise _zero_ratio(link, follower, ratio, "give a ratio other than 0")
     found = tracker.found
     if follower in found:
         raise InvalidArgument(found_text(follower, found[follower], "gearing it"), model=model.name)

@@ -34,6 +34,7 @@ from galil.motion import (
     sample_of,
     stop_on_error,
     switch_blocks,
+    zero_speed,
 )
 from galil.protocol import commands as cmds
 
@@ -148,10 +149,12 @@ class AxisHoming:
         """Start HM, FE or FI; predict it when ``switch`` (positions in counts) is given.
 
         Raises:
-            InvalidArgument: the axis moves or its motor is off, a speed it needs is 0, it
-                would start into an active limit switch that LD leaves on, it is geared to
-                another axis, or another axis is geared to it (see :meth:`_refuse_gearing`).
-            LimitError: it would start on past a soft limit it is beyond already (TC 22), or
+            InvalidArgument: the axis moves or its motor is off, it would start into an
+                active limit switch that LD leaves on, it is geared to another axis, or
+                another axis is geared to it (see :meth:`_refuse_gearing`).
+            LimitError: a speed it needs (SP, HV, JG) is 0, as for a move
+                (:func:`~galil.motion.zero_speed`); it would start on past a soft limit it is
+                beyond already (TC 22), or
                 (``switch`` given) its predicted path crosses BL or FL (:meth:`_check_path`).
         """
         if switch is not None and not isinstance(switch, predict.HomeSwitch):
@@ -232,14 +235,17 @@ class AxisHoming:
             raise InvalidArgument(
                 f"axis {a} has its motor off; call controller.servo_here()", model=name
             )
+        link = self._link
         if kind != "FI" and sp <= 0:
-            raise InvalidArgument(f"axis {a} has SP 0: set a speed first", model=name)
+            raise zero_speed(link, a, "SP", f"axis {a} has SP 0: set a speed first")
         if kind != "FE" and hv <= 0:
-            raise InvalidArgument(f"axis {a} has HV 0: set home_speed first", model=name)
+            raise zero_speed(link, a, "HV", f"axis {a} has HV 0: set home_speed first")
         if kind == "FI" and jg == 0:
-            raise InvalidArgument(
+            raise zero_speed(
+                link,
+                a,
+                "JG",
                 f"FI runs at JG, which is 0 on {a}: set jog_speed (its sign is the direction)",
-                model=name,
             )
 
     def _refuse_limit(

@@ -30,6 +30,7 @@ from galil.errors import (
     GalilError,
     GalilTimeoutError,
     InvalidArgument,
+    LimitError,
     MotionError,
     ProtocolError,
 )
@@ -74,6 +75,7 @@ __all__ = [
     "stop_on_error",
     "switch_blocks",
     "wait_guard",
+    "zero_speed",
 ]
 
 _LOG = logging.getLogger("galil.motion")
@@ -1338,6 +1340,22 @@ def switch_blocks(link: CommandLink, letter: str, direction: float, ts: int) -> 
         return True
     ld = round(link.query_operands([f"_LD{letter}"])[0])
     return not ld & (1 if forward else 2)
+
+
+def zero_speed(link: CommandLink, letter: str, name: str, message: str) -> LimitError:
+    """The refusal of a start at a speed of 0 (``name``: ``SP``, ``HV`` or ``JG``): ``BG``
+    refuses ``SP 0`` (TC 6), HM and FI ``HV 0``, FI ``JG 0``. One type wherever it is met
+    (a move, a homing, a speed schedule): :class:`~galil.errors.LimitError`, the speed
+    below the model's smallest step."""
+    model = link.model
+    return LimitError(
+        message,
+        name=name,
+        value=0,
+        limit=model.sp_resolution,
+        axis=letter,
+        model=model.name,
+    )
 
 
 def refuse_in_motion(link: CommandLink, tracker: MotionTracker, letter: str, name: str) -> None:

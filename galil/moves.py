@@ -37,6 +37,7 @@ from galil.motion import (
     send_reopening,
     stop_on_error,
     switch_blocks,
+    zero_speed,
 )
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
@@ -379,15 +380,7 @@ def _plan_axis(
         check_int32("PA", target, a, link.model.name)
     speed = state.sp if move.speed is None else move.speed
     if speed <= 0:  # (BG refuses SP 0 even for a move of no distance: TC 6)
-        model = link.model
-        raise LimitError(
-            f"axis {a} has SP 0: set a speed first",
-            name="SP",
-            value=0,
-            limit=model.sp_resolution,
-            axis=a,
-            model=model.name,
-        )
+        raise zero_speed(link, a, "SP", f"axis {a} has SP 0: set a speed first")
     params = _new(MoveParams)  # (a frozen dataclass, built without its setattrs: a hot path)
     params.__dict__.update(
         speed=speed,
@@ -941,7 +934,7 @@ def _speed_schedule(
     state, limits = _schedule_state(link, tracker, a, gears)
     rp, sp0, ac, dc, it = state.rp, state.sp, state.ac, state.dc, state.it
     _refuse_blocked(link, a, distance, state.ts, None)  # (the program's BG would fail: TC 22)
-    first = sp0 if speed is None else speed
+    first = _first_speed(link, a, sp0 if speed is None else speed)
     try:
         schedule = predict.speed_schedule(
             distance,
@@ -985,6 +978,18 @@ def _speed_schedule(
     handle.on_cancel(functools.partial(_cancel_schedule, link, routines, handle, a, sp0, run))
     tracker.started(handle)
     return handle
+
+
+def _first_speed(link: CommandLink, a: str, speed: float) -> float:
+    """A schedule's first speed; refused at 0 as a move's is (its program's BG would refuse
+    SP 0: TC 6).
+
+    Raises:
+        LimitError: the speed is 0 (:func:`~galil.motion.zero_speed`).
+    """
+    if speed <= 0:
+        raise zero_speed(link, a, "SP", f"axis {a} has SP 0: set a speed first")
+    return speed
 
 
 def _schedule_state(

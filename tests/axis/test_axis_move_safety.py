@@ -5,6 +5,7 @@ jog, an increment past a soft limit, gear followers past theirs.
 from __future__ import annotations
 
 import asyncio
+import functools
 import re
 import warnings
 from collections.abc import Callable
@@ -361,6 +362,60 @@ def test_a_reversing_increment_in_a_moves_last_samples_is_refused_before_sending
         dmc.D.increment(-2000)
     assert dmc.D.increment(300) is handle
     assert handle.wait().final == {"D": 1000}
+
+
+_AT_ZERO: dict[str, tuple[str, Callable[[galil.Controller], object]]] = {
+    # what is 0, how it is started: one condition, one type wherever it is met
+    "move_by": ("SP", lambda dmc: dmc.A.move_by(1000)),
+    "move": ("SP", lambda dmc: dmc.move({"A": 1000})),
+    "home": ("SP", lambda dmc: dmc.A.home()),
+    "find_edge": ("SP", lambda dmc: dmc.A.find_edge()),
+    "speed_schedule": ("SP", lambda dmc: dmc.A.speed_schedule(2000, [(1000, 3000)])),
+    "home at HV 0": ("HV", lambda dmc: dmc.A.home()),
+    "find_index at HV 0": ("HV", lambda dmc: dmc.A.find_index()),
+    "find_index at JG 0": ("JG", lambda dmc: dmc.A.find_index()),
+}
+
+
+@pytest.mark.parametrize("start", sorted(_AT_ZERO))
+def test_a_start_at_a_speed_of_0_is_a_limit_error_whatever_starts_it(
+    dmc: galil.Controller, start: str
+) -> None:
+    """``axis A has SP 0: set a speed first`` was a ``LimitError`` from a move and a plain
+    ``InvalidArgument`` from a homing; HV 0 and JG 0 likewise. Each is a ``LimitError``
+    (an ``InvalidArgument`` too) naming the speed, its value 0, and the axis."""
+    name, begin = _AT_ZERO[start]
+    dmc.A.speed, dmc.A.home_speed, dmc.A.jog_speed = 20_000, 2000, 2000
+    setattr(dmc.A, {"SP": "speed", "HV": "home_speed", "JG": "jog_speed"}[name], 0)
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as info:
+        begin(dmc)
+    assert info.value.name == name
+    assert info.value.value == 0
+    assert info.value.axis == "A"
+    assert f"{name} 0" in str(info.value) or f"{name}, which is 0" in str(info.value)
+    assert not dmc.A.moving
+
+
+@pytest.mark.parametrize("how", ["gear_to", "set_ratio"])
+@pytest.mark.parametrize("ratio", [0, 0.0, 1e-9])
+def test_a_gear_ratio_of_0_is_a_limit_error_whether_gearing_or_changing_it(
+    dmc: galil.Controller, how: str, ratio: float
+) -> None:
+    gearing = dmc.B.gear_to(dmc.A, 1) if how == "set_ratio" else None
+    change = (
+        functools.partial(dmc.B.gear_to, dmc.A, ratio)
+        if gearing is None
+        else functools.partial(gearing.set_ratio, ratio)
+    )
+    with nothing_sent(dmc, allow_queries=True), pytest.raises(LimitError) as info:
+        change()
+    assert info.value.name == "GR"
+    assert info.value.value == 0
+    assert "a gear ratio of 0 is no gearing" in str(info.value)
+    if gearing is not None:
+        assert gearing.engaged
+        assert gearing.ratio == 1
+        gearing.off()
 
 
 @pytest.mark.parametrize("distance", [0, 100])
