@@ -83,6 +83,7 @@ class Watchdog:
         self._link = link
         self._routines = routines
         self.timeout = timeout
+        self._samples()  # (a timeout refused before the query below)
         # (None: the last thread no other routine of this session's runs on; one query)
         self.thread = routines.default_thread(LABEL) if thread is None else thread
         self.interval = interval

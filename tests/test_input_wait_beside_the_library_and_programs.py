@@ -15,7 +15,7 @@ import pytest
 
 import galil
 from galil.sim.server import SimTcpServer
-from galil.testing import sim_of, simulated
+from galil.testing import nothing_sent, sim_of, simulated
 
 LOOP = "#MAIN\nn=0\n#L\nn=n+1\nWT 10\nJP #L\nEN\n"  # a program of the user's that runs on
 
@@ -85,6 +85,11 @@ def test_a_watchdog_started_while_an_input_wait_runs_takes_another_thread_by_def
         waiting.join(10.0)
         assert ended == [None]
         dog.stop()
+
+
+def test_a_watchdog_timeout_under_two_samples_is_refused_before_its_thread_is_chosen() -> None:
+    with simulated() as dmc, nothing_sent(dmc), pytest.raises(galil.InvalidArgument):
+        dmc.watchdog(0.0001)  # (the default thread takes a query: the refusal comes first)
 
 
 def test_a_thread_named_that_this_sessions_watchdog_runs_on_is_refused_naming_the_watchdog() -> (
