@@ -14,7 +14,8 @@ is sent::
 Slices read whole banks in one line (``_TIn`` holds 8 inputs, ``_OPn`` 16 outputs) and write
 outputs with one line of ``SB``/``CB``. :meth:`IO.wait_for_input` lets a small routine on the
 controller watch the input and report the edge as an unsolicited message, so the host waits on
-its message queue (pushed on a second Ethernet handle) instead of polling the input.
+its message queue (pushed on a second Ethernet handle) instead of polling the input; the
+message is the library's, never in ``controller.messages``.
 """
 
 from __future__ import annotations
@@ -37,22 +38,23 @@ from galil.errors import (
 )
 from galil.link import CommandLink, check_wait_timeout
 from galil.protocol import commands as cmds
-from galil.routines import RESERVED, Routine, Routines
+from galil.routines import INPUT_MESSAGE, RESERVED, ProgramRunning, Routine, Routines
 from galil.units import get_registry, is_quantity
 
 __all__ = ["IO", "AnalogInputs", "AnalogOutputs", "DigitalInputs", "DigitalOutputs"]
 
 _INPUT_ROUTINE = "#GINWAIT"
-_INPUT_MESSAGE = "galil-input"
-#: Seconds between the polls of a wait whose turn has not come (another wait holds the routine).
+#: Seconds between the polls of a wait that cannot use the routine (another wait holds it, or
+#: a program of the user's runs while it is not in memory).
 _POLL = 0.05
 
 
 class MessageSource(Protocol):
     """What the I/O room needs of the message room (:class:`galil.messages.Messages`)."""
 
-    def subscribe(self, callback: Callable[[str], None]) -> Callable[[], None]:
-        """Call ``callback(line)`` for each unsolicited line; return an unsubscribe."""
+    def subscribe_library(self, callback: Callable[[str], None]) -> Callable[[], None]:
+        """Call ``callback(line)`` for each line the library's routines print for the
+        library (never in the user's queue); return an unsubscribe."""
         ...
 
     def ensure_polling(self) -> None:
@@ -326,10 +328,12 @@ class IO:
     ) -> None:
         """Block until input ``n`` is high (``high=False``: low).
 
-        A routine on the controller (installed beside your program, :mod:`galil.routines`)
-        watches the input and prints one message when it changes; the host waits for that
-        message, so the link carries no polling traffic (on Ethernet the message is pushed on
-        the message handle). Returns at once when the input already is at that level.
+        The input is read first (``@IN[n]``, one query): the wait returns at once when it
+        already is at that level. Otherwise a routine on the controller (installed beside
+        your program, :mod:`galil.routines`) watches the input and prints one message when
+        it changes; the host waits for that message, so the link carries no polling traffic
+        (on Ethernet the message is pushed on the message handle). The message is the
+        library's: it never reaches ``controller.messages`` nor your callbacks.
 
         One such wait runs on the controller at a time (the routine is one). A wait that
         comes while another runs (from another thread, or a task) does not wait for it to
@@ -338,16 +342,22 @@ class IO:
         its own timeout passes first. Its turn come, the time left of its timeout is what
         the routine watches for.
 
+        While a program of yours runs, the routine can be started beside it only if it is
+        in memory already (an earlier wait put it there): adding it takes a download, which
+        would disturb your program. The wait then polls its input the same way (``@IN[n]``
+        every 50 ms), for the whole of its timeout.
+
         Args:
             n: the input (the controller's numbering).
             high: wait for high (True) or low (False).
             timeout: seconds to wait at most (``None``: for ever), a finite number >= 0
                 (:func:`~galil.link.check_wait_timeout`).
-            thread: program thread for the routine (default: the last one).
+            thread: program thread for the routine (default: the last one none of this
+                session's other library routines runs on: never the watchdog's).
 
         Raises:
             InvalidArgument: no such input, a bad timeout (infinity too: ``None`` waits for
-                ever), or a busy thread.
+                ever), or a busy thread (one of this session's watchdog is named so).
             GalilTimeoutError: the input did not change in time (the routine is halted; one
                 that another wait held all that time is not started).
             GalilConnectionError: the controller was closed, or its link died, during the
@@ -377,15 +387,32 @@ class IO:
         once it is this wait's; while another wait holds it, poll input ``n`` (``@IN[n]``,
         every :data:`_POLL` s): ``None`` when it is at the level, ``False`` when ``deadline``
         has passed first. Never holds the routine when it returns anything but ``True``."""
-        link = self._link
-        while not self._wait_lock.acquire(blocking=False):
-            if bool(round(link.query_operands([f"@IN[{n}]"])[0])) == high:
-                return None
-            now = link.clock()
-            if deadline is not None and now >= deadline:
-                return False
-            link.pause(_POLL if deadline is None else min(_POLL, max(deadline - now, 0.001)))
-        return True
+        return _poll(self._link, n, high, deadline, lambda: self._wait_lock.acquire(False))
+
+
+def _at_level(link: CommandLink, n: int, high: bool) -> bool:
+    """Whether input ``n`` is at the level (``@IN[n]``, one query)."""
+    return bool(round(link.query_operands([f"@IN[{n}]"])[0])) == high
+
+
+def _poll(
+    link: CommandLink,
+    n: int,
+    high: bool,
+    until: float | None,
+    turn: Callable[[], bool] | None = None,
+) -> bool | None:
+    """Poll input ``n`` every :data:`_POLL` s: ``None`` once it is at the level, ``False``
+    once ``until`` has passed first; with ``turn`` (tried before each poll), ``True`` as soon
+    as ``turn()`` is."""
+    while turn is None or not turn():
+        if _at_level(link, n, high):
+            return None
+        now = link.clock()
+        if until is not None and now >= until:
+            return False
+        link.pause(_POLL if until is None else min(_POLL, max(until - now, 0.001)))
+    return True
 
 
 class InputWatch:
@@ -410,15 +437,15 @@ class InputWatch:
         self._high = high = bool(high)
         timeout = check_wait_timeout(timeout)
         link = self._link = io._link
-        self._thread = io._routines.check_thread(
-            link.model.threads - 1 if thread is None else thread
-        )
+        # (None: the default thread, chosen when the routine starts: Routines.default_thread)
+        self._thread = None if thread is None else io._routines.check_thread(thread)
         self._io = io
         self._deadline = None if timeout is None else link.clock() + timeout
         self._expired = f"input {n} did not go {'high' if high else 'low'} within {timeout} s"
         self._seen = threading.Event()
         self._held = False  # this wait holds the routine (IO._wait_lock)
         self._started = False  # its XQ may have gone out
+        self._polling = False  # a program of the user's runs: no routine, the input polled
         self._over = False
         self._unsubscribe: Callable[[], None] | None = None
         self._lock = threading.Lock()  # one step (or end) at a time
@@ -456,50 +483,71 @@ class InputWatch:
                 return True
             if self._deadline is None or until is None or until < self._deadline:
                 return False
-            held = self._held
+            why = self._expired_why()
             self._end(quiet=False)  # the whole timeout passed: the routine is halted
-            raise link.error(
-                GalilTimeoutError,
-                f"{self._expired}: another wait_for_input held the controller's input routine "
-                "all that time (one runs at a time; meanwhile this one polled its input)"
-                if not held
-                else self._expired,
+            raise link.error(GalilTimeoutError, f"{self._expired}{why}")
+
+    def _expired_why(self) -> str:
+        """What a timeout adds: why the wait polled its input, if it did."""
+        if self._polling:
+            return (
+                ": a program of yours ran while the input routine was not in memory (its "
+                "download would have disturbed the program), so this wait polled its input"
             )
+        if not self._held:
+            return (
+                ": another wait_for_input held the controller's input routine all that time "
+                "(one runs at a time; meanwhile this one polled its input)"
+            )
+        return ""
 
     def _watch(self, until: float | None) -> bool | None:
         """Take the routine (polling the input until it is this wait's turn), start it
         unless it runs, and wait for its message until ``until``: ``True`` (the message
-        came), ``None`` (the input reached the level while another wait held the routine),
-        ``False`` (``until`` passed first)."""
-        io, link = self._io, self._link
+        came), ``None`` (the input was at the level: read before the routine started, or
+        polled while it could not be used), ``False`` (``until`` passed first)."""
+        io, link, n, high = self._io, self._link, self._n, self._high
+        if self._polling:
+            return _poll(link, n, high, until)
         if not self._held:
-            turn = io._turn(self._n, self._high, until)
+            turn = io._turn(n, high, until)
             if not turn:
                 return turn
             self._held = True
-        if not self._started:
-            self._start()
+            if not self._started and _at_level(link, n, high):
+                return None  # (at the level already: no routine)
+        if not self._started and not self._start():
+            self._polling, self._held = True, False
+            io._wait_lock.release()  # (no routine used: the next wait may take it)
+            return _poll(link, n, high, until)
         io._messages.ensure_polling()
         left = None if until is None else max(0.0, until - link.clock())
         return _wait(link, self._seen, left, io._messages)
 
-    def _start(self) -> None:
+    def _start(self) -> bool:
         """Install the routine (when it is not in memory), listen for its message, set its
-        variables and start it on the thread."""
-        io, thread, tag = self._io, self._thread, [_INPUT_MESSAGE, str(self._n)]
-        io._routines.check_free(thread, _INPUT_ROUTINE)  # before the install sends a byte
-        io._routines.install(_input_routine())
+        variables and start it on the thread: ``False`` (nothing started) when the install
+        needs a download a running program of the user's refuses (:class:`ProgramRunning`)."""
+        io, tag = self._io, [INPUT_MESSAGE, str(self._n)]
+        routines = io._routines
+        # (before the install sends a byte; the default: Routines.default_thread)
+        thread = self._thread = routines.free_thread(self._thread, _INPUT_ROUTINE)
+        try:
+            routines.install(_input_routine())
+        except ProgramRunning:
+            return False
 
         def on_message(line: str) -> None:
             if line.split()[:2] == tag:
                 self._seen.set()
 
-        self._unsubscribe = io._messages.subscribe(on_message)
+        self._unsubscribe = io._messages.subscribe_library(on_message)
         level = 1 if self._high else 0
         io._link.command_line([cmds.assign("ginput", self._n), cmds.assign("ginlevel", level)])
-        io._routines.start(_INPUT_ROUTINE, thread)
+        routines.start(_INPUT_ROUTINE, thread)
         self._started = True
         io._watching = thread
+        return True
 
     def end(self) -> None:
         """End the wait (a cancelled async wait): halt its routine if it still watches, and
@@ -509,17 +557,21 @@ class InputWatch:
 
     def _end(self, *, quiet: bool) -> None:
         """Halt a routine that said nothing (errors raised unless ``quiet``: on a dead link it
-        cannot be halted), stop listening and give the routine up."""
+        cannot be halted), or give up the thread of one that said so and ended; stop
+        listening and give the routine up."""
         if self._over:
             return
         self._over = True
+        routines, thread = self._io._routines, self._thread
         try:
-            if self._started and not self._seen.is_set():
+            if self._started and thread is not None and not self._seen.is_set():
                 if quiet:
                     with contextlib.suppress(GalilError):
-                        self._io._routines.halt(self._thread)
+                        routines.halt(thread)
                 else:
-                    self._io._routines.halt(self._thread)
+                    routines.halt(thread)
+            elif self._started and thread is not None:
+                routines.release(thread, _INPUT_ROUTINE)  # (it printed, then ended at EN)
         finally:
             if self._unsubscribe is not None:
                 self._unsubscribe()
@@ -566,7 +618,7 @@ def _input_routine() -> Routine:
             label,
             loop,
             f"JP {loop},@IN[ginput]<>ginlevel",
-            f'MG "{_INPUT_MESSAGE} ",ginput{{Z3.0}}',
+            f'MG "{INPUT_MESSAGE} ",ginput{{Z3.0}}',
             "EN",
         ),
         kind=RESERVED[label],

@@ -5,6 +5,11 @@ routes that output away from command replies when the link connects: a second Et
 (``CF I`` sent on it, or a message-only port), else ``CW 1`` marks every unsolicited byte with
 bit 7 on the command link. Lines land in a bounded :class:`MessageQueue` and go to subscribers
 in order, outside the link lock, so a callback may send commands itself, on any transport.
+
+The lines the library's own routines print for the library (the input wait's ``galil-input
+n``: :func:`galil.routines.is_library_line`) go to the library's subscribers only
+(:meth:`Messages.subscribe_library`), never to the queue or the user's callbacks: a script
+reading its own program's ``MG`` output sees none of them (decision 0086).
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from galil.protocol import commands as cmds
 from galil.protocol.framing import FrameParser, Unsolicited
 from galil.protocol.numbers import read_one
 from galil.queues import BoundedQueue, Subscribers, source_ended
+from galil.routines import is_library_line
 from galil.transport import HandleSource, MessagesOnly, Transport
 
 __all__ = ["MessageCallback", "MessageQueue", "Messages"]
@@ -50,8 +56,8 @@ class _Dispatcher:
     runs, so nothing can deadlock on it.
     """
 
-    def __init__(self) -> None:
-        self.subscribers: Subscribers[str] = Subscribers("unsolicited-message", _LOG)
+    def __init__(self, what: str = "unsolicited-message") -> None:
+        self.subscribers: Subscribers[str] = Subscribers(what, _LOG)
         self._pending: deque[str] = deque()
         self._state = threading.Lock()
         self._delivering = False
@@ -92,6 +98,7 @@ class Messages:
         self.link = link
         self.queue = MessageQueue(max_messages)
         self._dispatch = _Dispatcher()
+        self._library = _Dispatcher("library-message")  # (the library's own lines)
         self._poll_interval = poll_interval
         self._stop = threading.Event()
         self._pump: threading.Thread | None = None
@@ -104,15 +111,27 @@ class Messages:
         self.queue.gone, self.queue.revive = link.gone, link.revive  # (a dead link's get())
 
     def _accept(self, lines: list[str]) -> None:
-        for line in lines:
+        users = [line for line in lines if not is_library_line(line)]
+        for line in users:
             self.queue.put(line)
-        self._dispatch(lines)
+        if users:
+            self._dispatch(users)
+        if len(users) < len(lines):
+            self._library([line for line in lines if is_library_line(line)])
 
     # -- subscribers ------------------------------------------------------------------------
 
     def subscribe(self, callback: MessageCallback) -> Callable[[], None]:
         """Call ``callback(line)`` for each unsolicited line; returns an unsubscriber."""
         unsubscribe = self._dispatch.subscribers.add(callback)
+        self.ensure_polling()
+        return unsubscribe
+
+    def subscribe_library(self, callback: MessageCallback) -> Callable[[], None]:
+        """Call ``callback(line)`` for each line the library's routines print for the
+        library (:func:`~galil.routines.is_library_line`), which the queue and the user's
+        callbacks never see; returns an unsubscriber."""
+        unsubscribe = self._library.subscribers.add(callback)
         self.ensure_polling()
         return unsubscribe
 

@@ -19,7 +19,13 @@ Rules, all checked before the download:
   one (``Routine`` refuses it), nor may a program of the user's (:func:`check_user_labels`);
 - the whole program must fit the model's line length and line count;
 - no user program may be running (a download would disturb it): the caller is told which
-  thread runs; the library's own threads are halted for the download and started again.
+  thread runs (:class:`ProgramRunning`); the library's own threads are halted for the
+  download and started again.
+
+Two of the library's features of one session never take the same thread by default
+(:meth:`Routines.default_thread`: the last thread none of this session's other routines
+runs on), and a thread one of them runs on is refused to the other with the feature named
+(decision 0086).
 """
 
 from __future__ import annotations
@@ -39,11 +45,14 @@ from galil.protocol import commands as cmds
 from galil.protocol.numbers import whole
 
 __all__ = [
+    "INPUT_MESSAGE",
     "MARKER",
     "RESERVED",
+    "ProgramRunning",
     "Routine",
     "Routines",
     "check_user_labels",
+    "is_library_line",
     "split_program",
     "ul_reply_bytes",
 ]
@@ -63,6 +72,10 @@ RESERVED: Mapping[str, str] = MappingProxyType(
         "#GSCHED": "a speed schedule",
     }
 )
+#: What the input wait's routine prints when its input is at the level (``galil-input  3``):
+#: a line for the library, kept out of the user's messages (:func:`is_library_line`).
+INPUT_MESSAGE = "galil-input"
+_LIBRARY_LINE = re.compile(rf"{INPUT_MESSAGE} +[0-9]+")
 _LABEL = re.compile(r"#([A-Za-z][A-Za-z0-9]*)")
 _T = TypeVar("_T")
 _END = re.compile(r"EN\b")
@@ -72,6 +85,19 @@ def ul_reply_bytes(model: ModelSpec) -> int:
     """The most bytes ``UL``'s reply can hold: a full program memory (the model's program
     lines, each as long as a line can be, with CR LF), then ^Z and ``:``."""
     return model.program_lines * (model.line_length + 2) + 2
+
+
+class ProgramRunning(InvalidArgument):
+    """A routine could not be installed: a program runs, and the download it needs would
+    disturb it (a caller that can do without the routine, a wait for an input, polls
+    instead)."""
+
+
+def is_library_line(line: str) -> bool:
+    """Whether ``line`` (an unsolicited line) is one the library's routines print for the
+    library itself: the input wait's ``galil-input n``. The watchdog's ``galil watchdog:
+    motion stopped`` is the user's to read, and is not one (decision 0086)."""
+    return _LIBRARY_LINE.fullmatch(line.strip()) is not None
 
 
 def _label_of(line: str) -> str | None:
@@ -335,12 +361,12 @@ class Routines:
                 else "the library cannot add its routine without disturbing it (halt it "
                 "first, or install the routine before you start your program)"
             )
-            raise InvalidArgument(
+            raise ProgramRunning(
                 f"a program runs on thread(s) {users}; {what}", model=self.link.model.name
             )
         once = sorted(t for t in running if t in self._owners)
         if once:
-            raise InvalidArgument(
+            raise ProgramRunning(
                 f"thread(s) {once} run a speed schedule, which a download would start again "
                 "(its motion with it): wait for the schedule to end or stop it first",
                 model=self.link.model.name,
@@ -462,19 +488,49 @@ class Routines:
 
         Raises:
             InvalidArgument: the thread does not exist or runs a program (another of the
-                library's routines too: the error says which, and how to halt it).
+                library's routines too: the error says which; one this session runs is
+                named with its feature, one left by an earlier session with how to halt it).
         """
-        model = self.link.model
         self.check_thread(thread)
         with self._lock:
+            return self._free(thread, label, self.running())
+
+    def free_thread(self, thread: int | None, label: str) -> int:
+        """:meth:`check_free` of ``thread``, or of :meth:`default_thread`'s choice when it is
+        ``None``, in one query (an upload as :meth:`check_free`'s).
+
+        Returns:
+            The thread.
+
+        Raises:
+            InvalidArgument: what :meth:`check_free` raises.
+        """
+        if thread is not None:
+            self.check_thread(thread)
+        with self._lock:
             running = self.running()
-            busy = thread in running
-            if not busy or self._threads.get(thread) == label:
-                return busy
-            left = routine_at(self.upload(), running[thread])
-            if left == label:
-                self._hold(thread, label, None)  # (an earlier session's: the library's again)
-                return True
+            t = self._default(label, running) if thread is None else thread
+            self._free(t, label, running)
+            return t
+
+    def _free(self, thread: int, label: str, running: Mapping[int, int]) -> bool:
+        """:meth:`check_free`, the threads ``running`` read (under the lock)."""
+        model = self.link.model
+        busy = thread in running
+        held = self._threads.get(thread)
+        if not busy or held == label:
+            return busy
+        if held is not None:  # (this session's: never advise to halt it raw)
+            raise InvalidArgument(
+                f"thread {thread} runs {self._feature(thread, held)}, started in this "
+                "session; choose another thread (thread=...), or leave thread= out: by "
+                "default the library's routines take threads apart",
+                model=model.name,
+            )
+        left = routine_at(self.upload(), running[thread])
+        if left == label:
+            self._hold(thread, label, None)  # (an earlier session's: the library's again)
+            return True
         if left is not None:
             raise InvalidArgument(
                 f"thread {thread} runs the library's routine {left} "
@@ -487,6 +543,34 @@ class Routines:
             f"thread {thread} runs a program; choose another thread (thread=...)",
             model=model.name,
         )
+
+    def _feature(self, thread: int, label: str) -> str:
+        """What runs ``label`` on ``thread``: ``the watchdog (#GWDOG)``."""
+        what = RESERVED.get(label)
+        if what is None:
+            what = "a speed schedule" if thread in self._owners else "a routine of the library's"
+        return f"{what} ({label})"
+
+    def default_thread(self, label: str) -> int:
+        """The thread a routine of ``label`` takes when none is named: the last one that none
+        of this session's other routines runs on (one query). A thread a program of the
+        user's runs on is not skipped (:meth:`check_free` refuses it, saying so), nor one
+        that runs ``label`` itself (a new watchdog takes over the running one's)."""
+        with self._lock:
+            return self._default(label, self.running())
+
+    def _default(self, label: str, running: Mapping[int, int]) -> int:
+        """:meth:`default_thread`, the threads ``running`` read (under the lock)."""
+        taken = {t for t, held in self._threads.items() if held != label and t in running}
+        free = [t for t in range(self.link.model.threads) if t not in taken]
+        return free[-1] if free else self.link.model.threads - 1
+
+    def release(self, thread: int, label: str) -> None:
+        """The routine ``label`` ended by itself on ``thread`` (the input wait's, once it
+        said so): the library holds the thread no more, unless another routine took it."""
+        with self._lock:
+            if self._threads.get(thread) == label and thread not in self._owners:
+                del self._threads[thread]
 
     def start(self, label: str, thread: int, *, owner: object | None = None) -> None:
         """Run the routine at ``label`` on ``thread`` (which must be free).

@@ -8,8 +8,9 @@ the cable was pulled, the host froze), it stops every axis with ``ST`` (a decele
 each axis's DC), sets ``gwfire=1`` and prints a message. A clean :meth:`Controller.close`
 halts the routine first: leaving on purpose is not dying.
 
-The routine takes one program thread (by default the last one, ``threads - 1``); it refuses
-a thread that runs a program, so it never takes one the user's programs need without saying so.
+The routine takes one program thread (by default the last one none of this session's other
+library routines runs on: an input wait's, say; decision 0086); it refuses a thread that runs
+a program, so it never takes one the user's programs need without saying so.
 
 One watchdog guards a controller: its variables (``gwbeat``, ``gwlimit``, ``gwfire``) and its
 routine are the controller's, so a new watchdog replaces the running one, on any thread
@@ -66,21 +67,30 @@ class Watchdog:
     Attributes:
         timeout: seconds of silence after which the controller stops the axes.
         interval: seconds between heartbeats.
-        thread: the program thread the routine runs on.
+        thread: the program thread the routine runs on (``None`` given: the last one no
+            other routine of this session's library runs on, decision 0086).
     """
 
     def __init__(
-        self, link: Link, routines: Routines, timeout: float, *, thread: int, interval: float
+        self,
+        link: Link,
+        routines: Routines,
+        timeout: float,
+        *,
+        thread: int | None,
+        interval: float,
     ) -> None:
         self._link = link
         self._routines = routines
         self.timeout = timeout
-        self.thread = thread
+        self._samples()  # (a timeout refused before the query below)
+        # (None: the last thread no other routine of this session's runs on; one query)
+        self.thread = routines.default_thread(LABEL) if thread is None else thread
         self.interval = interval
         self._stop = threading.Event()
         self._beater: threading.Thread | None = None
         self._beat = cmds.stamp(BEAT)
-        self._ask = cmds.mg_operand(f"_XQ{thread}")  # (on the beat's line: the routine runs?)
+        self._ask = cmds.mg_operand(f"_XQ{self.thread}")  # (on the beat's line: the routine runs?)
         self._lost = False  # a heartbeat found the routine not running (said once)
         self._ended = False  # a query of running found the routine not running
         self._fired = False  # the routine seen fired (by a query of fired)
@@ -329,8 +339,9 @@ _keepalives = _Keepalives()
 
 def check_watchdog_args(
     link: CommandLink, timeout: object, thread: object, interval: object
-) -> tuple[float, int, float]:
-    """Validate ``watchdog()`` arguments before anything is sent.
+) -> tuple[float, int | None, float]:
+    """Validate ``watchdog()`` arguments before anything is sent; the thread is ``None`` when
+    none is named (:meth:`galil.routines.Routines.default_thread` chooses it).
 
     Raises:
         InvalidArgument: a timeout that is not a positive finite number, a thread that does
@@ -344,8 +355,10 @@ def check_watchdog_args(
             "there is none to stop",
             model=model.name,
         )
-    chosen = model.threads - 1 if thread is None else thread
-    if isinstance(chosen, bool) or not isinstance(chosen, int) or not 0 <= chosen < model.threads:
+    chosen = thread
+    if chosen is not None and (
+        isinstance(chosen, bool) or not isinstance(chosen, int) or not 0 <= chosen < model.threads
+    ):
         raise InvalidArgument(
             f"thread must be 0..{model.threads - 1} on {model.name}, not {thread!r}",
             model=model.name,

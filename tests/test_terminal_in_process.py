@@ -598,14 +598,15 @@ def test_a_link_lost_under_the_terminal_says_to_start_it_again(
 def test_a_typed_download_makes_the_library_forget_the_routines_it_replaced(
     dmc: galil.Controller, term: Terminal
 ) -> None:
-    sim_of(dmc).set_input(2, False)
-    dmc.io.wait_for_input(2, high=False, timeout=0.1, thread=3)  # (its routine has ended)
+    with pytest.raises(galil.GalilTimeoutError):  # (input 2 is high: the routine installed)
+        dmc.io.wait_for_input(2, high=False, timeout=0.1, thread=3)
     assert term.download(["#A", "MG 5", "EN"])
     assert dmc.routines.upload() == ["#A", "MG 5", "EN"]  # (the library's block is gone)
     assert dmc.routines.threads == {}
     dmc.programs.run("#A", thread=3)  # (before: "thread 3 runs the library's #GINWAIT")
     dmc.programs.wait(3)
-    dmc.io.wait_for_input(2, high=False, timeout=0.1, thread=3)  # installed again, beside it
+    with pytest.raises(galil.GalilTimeoutError):  # installed again, beside it
+        dmc.io.wait_for_input(2, high=False, timeout=0.1, thread=3)
     assert dmc.programs.upload() == "#A\nMG 5\nEN"
     assert "#GINWAIT" in dmc.routines.upload()
 
@@ -637,9 +638,11 @@ def test_a_download_sent_raw_makes_the_library_forget_the_routines_it_replaced(
     ):
         dmc.send(commands.dl(["#A", "EN"]))
     dog.stop()
-    sim_of(dmc).set_input(2, False)
-    dmc.io.wait_for_input(2, high=False, timeout=0.1, thread=3)
-    assert dmc.routines.threads == {3: "#GINWAIT"}
+    dog = dmc.watchdog(0.5, thread=3)
+    sim_of(dmc).advance(1.0)  # the host silent: it fires, and its routine ends at EN
+    assert dog.fired
+    assert dmc.routines.threads == {3: "#GWDOG"}  # (held, its routine ended: no thread runs)
     assert dmc.exchange(commands.dl(["#A", "EN"])).ok
     assert dmc.routines.threads == {}
+    dog.stop()
     dmc.programs.run("#A", thread=3)

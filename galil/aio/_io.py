@@ -197,7 +197,10 @@ class AsyncIO(Room[IO]):
         self, n: int, *, high: bool = True, timeout: float | None = None, thread: int | None = None
     ) -> None:
         """Wait until input ``n`` is high (``high=False``: low); see
-        :meth:`galil.io.IO.wait_for_input` (a routine on the controller watches the input).
+        :meth:`galil.io.IO.wait_for_input` (the input read first: at the level, the wait
+        returns at once; else a routine on the controller watches it, on a thread the
+        watchdog does not hold, and its line never reaches ``c.messages``; while a program
+        of yours runs and the routine is not in memory, the input is polled instead).
 
         The sync wait runs in steps of at most ``WAIT_SLICE`` (0.5 s) on a worker, so a
         cancelled task frees its thread within one step; the routine is installed and
@@ -207,7 +210,8 @@ class AsyncIO(Room[IO]):
 
         Raises:
             InvalidArgument: no such input, a bad timeout (refused before anything is sent,
-                as by the sync wait: infinity too, ``None`` waits for ever), or a busy thread.
+                as by the sync wait: infinity too, ``None`` waits for ever), or a busy thread
+                (one of this session's watchdog is named so).
             GalilTimeoutError: the input did not change in time (the routine is halted).
             GalilConnectionError: the controller was closed, or its link died, during the
                 wait.
