@@ -731,13 +731,12 @@ class LinkCore:
             if silent is not None:
                 wait = pause
             if wait <= 0:
+                begun = session.receiving  # (before abandon() forgets it)
                 lost = session.abandon()
                 for c in lost:
                     recent.append(("t", c.text))
                 text = lost[0].text if lost else batch[-1].text
-                what = (
-                    f"no reply to {text!r} within {t:g} s" if silent is None else silent.what(text)
-                )
+                what = _no_reply(text, t, begun) if silent is None else silent.what(text)
                 raise self.error(
                     GalilTimeoutError,
                     f"{what} (the link will resynchronise before the next command)",
@@ -1440,6 +1439,17 @@ def _probe(link: Link, what: str, exc: GalilConnectionError) -> None:
                 )
     except GalilError:
         pass  # it answered (a refusal), or the link found itself dead or closed
+
+
+def _no_reply(text: str, t: float, begun: int) -> str:
+    """What a reply timeout says: no reply at all, or a reply cut part way (``begun`` bytes
+    of it had arrived: a long one, such as ``LS`` on a slow line, needs a longer timeout)."""
+    if not begun:
+        return f"no reply to {text!r} within {t:g} s"
+    return (
+        f"the reply to {text!r} was cut part way: {begun} bytes had arrived and it had not "
+        f"ended within {t:g} s; a long reply needs a longer timeout (pass timeout=)"
+    )
 
 
 def _one_command(text: str, allow_compound: bool) -> Command:

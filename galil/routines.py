@@ -73,6 +73,13 @@ def ul_reply_bytes(model: ModelSpec) -> int:
     return model.program_lines * (model.line_length + 2) + 2
 
 
+def ls_reply_bytes(model: ModelSpec) -> int:
+    """The most bytes ``LS``'s reply can hold: a full program memory, each line numbered
+    (``1999 `` before its text) and ended with CR LF, then ``:``."""
+    number = len(str(model.program_lines - 1)) + 1
+    return model.program_lines * (number + model.line_length + 2) + 1
+
+
 def _label_of(line: str) -> str | None:
     m = _LABEL.match(line.strip())
     return None if m is None else "#" + m.group(1)

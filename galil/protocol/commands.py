@@ -1744,9 +1744,81 @@ def _raw_command(text: str) -> Command:
         return Command(text, Expect.record(None))
     if head in ("UL", "QU"):
         return Command(text, Expect.CTRL_Z)
+    if head == "MG":
+        why = _mg_unframed(text)
+        if why is not None:
+            raise InvalidArgument(f"{text.strip()!r}: {why}")
     if head in _QUERIES or text.startswith("\x12\x16"):
         return Command(text, Expect.DATA)
     return Command(text, Expect.ANY)
+
+
+# What an MG prints that the reply framing cannot cut (decision 0090; the formats from the
+# MG entry of the command reference, /work/shared/reference/galil-protocol.md): {N} drops the
+# CR LF, so the ':' that ends the reply starts no line; {^n} prints the byte n.
+_MG_NO_CRLF = re.compile(r"\{\s*N\s*\}", re.IGNORECASE)
+_MG_BYTE = re.compile(r"\{\s*\^\s*(\d+)\s*\}")
+_QUOTED_TEXT = re.compile(r'"([^"]*)"?')
+#: Bytes the framing reads as a reply's end or a rejection at a line's start, as a line's
+#: end, or (bit 7 set) as unsolicited output.
+_FRAMING_BYTES = {10: "LF", 13: "CR", 58: "':'", 63: "'?'"}
+
+
+def _mg_unframed(text: str) -> str | None:
+    """Why the raw ``MG`` line ``text`` prints what the link cannot cut into its reply, or
+    ``None``: ``{N}`` (no CR LF: the reply never ends), a ``?`` in a string (the controller
+    refuses it, TC 54; one that starts a line reads as a rejection), a line that starts with
+    ``:`` (read as the reply's end), ``{^n}`` of ``:``, ``?``, CR, LF or a byte of 128 and
+    more (read as unsolicited output)."""
+    # Formats are looked for inside strings too: whether the controller prints a brace in a
+    # string as it is is not in the sources [A] (the simulator reads it as a format; mg()
+    # refuses braces in a message for that).
+    if _MG_NO_CRLF.search(text):
+        return (
+            "{N} leaves out the CR LF, so the ':' that ends the reply starts no line and the "
+            "link cannot tell where the reply ends; send it without {N} (a program may use it)"
+        )
+    strings = _QUOTED_TEXT.findall(text)
+    if any("?" in x for x in strings):
+        return "a '?' inside an MG string is refused by the controller (TC 54)"
+    for match in _MG_BYTE.finditer(text):
+        code = int(match.group(1))
+        if code in _FRAMING_BYTES or code >= 128:
+            what = _FRAMING_BYTES.get(code, "a byte with bit 7 set (unsolicited output)")
+            return f"{match.group()} prints {what}, which the link reads as part of the framing"
+    if _first_printed(text).startswith(":"):
+        return "the line it prints starts with ':', which the link reads as the reply's end"
+    return None
+
+
+def _first_printed(text: str) -> str:
+    """The text the MG line prints first: its leading string arguments, joined (the
+    controller prints strings back to back)."""
+    body = text.lstrip()[2:]
+    printed = ""
+    for argument in _split_arguments(body):
+        item = argument.strip()
+        if not (item.startswith('"') and _QUOTED_TEXT.fullmatch(item)):
+            break
+        printed += item.strip('"')
+        if printed:
+            break
+    return printed
+
+
+def _split_arguments(text: str) -> list[str]:
+    """Split at the ``,`` outside double quotes (``"a,b", 1`` is two)."""
+    parts: list[str] = []
+    start = 0
+    quoted = False
+    for i, ch in enumerate(text):
+        if ch == '"':
+            quoted = not quoted
+        elif ch == "," and not quoted:
+            parts.append(text[start:i])
+            start = i + 1
+    parts.append(text[start:])
+    return parts
 
 
 #: Commands that take no axis letters after their name: any name that only begins like them
