@@ -104,7 +104,6 @@ _NUMBER_TOKEN = re.compile(r"\$-?[0-9A-Fa-f]+(?:\.[0-9A-Fa-f]*)?|[-+]?(?:\d+(?:\
 _SEPARATORS = re.compile(r"[\s,]*")
 _DECIMAL = r"[-+]?(?:\d+(?:\.\d*)?|\.\d+)"
 _PLAIN_NUMBERS = re.compile(rf"[\s,]*{_DECIMAL}(?:[\s,]+{_DECIMAL})*[\s,]*")
-_QUOTED = re.compile(r'"[^"]*"?')
 
 
 def _parse(text: str) -> Command:
@@ -432,16 +431,10 @@ def _new_completed(fields: tuple[Command, bool, str, None]) -> Completed:
 
 
 def _case_hint(text: str) -> str | None:
-    """For a command refused as unrecognised: point at lower case, the usual cause."""
-    # Strings in quotes keep their case; only the command and operand names must be upper.
-    bare = _QUOTED.sub("", text)
-    if bare == bare.upper():
-        return None
-    quoted = _QUOTED.findall(text)
-    pieces = _QUOTED.split(text)
-    rest = zip(quoted, pieces[1:], strict=True)
-    upper = pieces[0].upper() + "".join(q + p.upper() for q, p in rest)
-    return f"Galil commands and operands are upper case: did you mean {upper!r}?"
+    """For a command refused as unrecognised: what lower case in it may be to blame (the
+    commands and operands upper case, or variables of those names not defined: see
+    :func:`~galil.protocol.commands.unrecognized_hint`)."""
+    return cmds.unrecognized_hint(text)
 
 
 # ----------------------------------------------------------------------------------- the link

@@ -135,6 +135,7 @@ __all__ = [
     "tv",
     "ui",
     "ul",
+    "unrecognized_hint",
     "va",
     "variable_name",
     "vd",
@@ -1732,6 +1733,70 @@ def link_setting(text: str) -> str | None:
         or (head == "IH" and _CLOSES_OWN_HANDLE.match(args) is not None)
     )
     return _WHY_REFUSED[head].format(cmd=s.rstrip()) if refused else None
+
+
+# A raw line refused as unrecognised (TC 1): words and quoted strings, and the ';' between
+# commands. A word at a command's head is a command; after it, an operand (_TPA), a function
+# (@ABS), a keyword, an axis list (BG a) or a variable, whose name is case sensitive (0060).
+_TOKEN = re.compile(r'"[^"]*"?|(?<![\w.$])[_@#]?[A-Za-z][A-Za-z0-9]*|;')  # (not 1e3, $ff)
+_AXES_ONLY = re.compile(r"[A-HSTXYZW]{1,8}")
+
+
+def unrecognized_hint(text: str) -> str | None:
+    """What to say of lower case in a raw line the controller refused as unrecognised: the
+    line with its commands, operands and keywords in upper case, when one of them was not;
+    else the lower-case names that can only be variables, which none of is defined (variable
+    names are case sensitive: upper-casing them would name another variable). ``None`` when
+    lower case is not to blame."""
+    out: list[str] = []
+    unknown: list[str] = []
+    last, head, command = 0, True, ""
+    for m in _TOKEN.finditer(text):
+        word = m.group()
+        out.append(text[last : m.start()])
+        last = m.end()
+        known = _known_word(word.upper(), head, command)
+        if head and word != ";":
+            command = word.upper() if known else ""
+        at_head, head = head, word == ";"
+        if word.startswith(('"', "#")) or word == word.upper():
+            out.append(word)
+        elif known:
+            out.append(word.upper())
+        else:
+            out.append(word)
+            assigned = text[last:].lstrip().startswith(("=", "["))
+            if not (at_head and assigned):  # (x=1 makes x: no name is missing there)
+                unknown.append(word)
+    out.append(text[last:])
+    suggestion = "".join(out)
+    if suggestion != text:
+        return f"Galil commands and operands are upper case: did you mean {suggestion!r}?"
+    names = list(dict.fromkeys(unknown))
+    if not names:
+        return None
+    which = (  # (which of several is missing, the refusal does not say)
+        f"no command, operand or variable {names[0]!r}"
+        if len(names) == 1
+        else f"one of {', '.join(repr(n) for n in names)} is no command, operand or variable"
+    )
+    return (
+        f"{which} on the controller: variable names are case sensitive, and variables.list() "
+        "names those there"
+    )
+
+
+def _known_word(upper: str, head: bool, command: str) -> bool:
+    """Whether ``upper`` (a word in upper case) is the controller's: a command at a head, an
+    operand, a function or keyword anywhere, an axis list after a command but MG."""
+    if upper.startswith("_"):
+        return upper[1:3] in COMMAND_NAMES
+    if upper.startswith("@") or upper in _KEYWORDS:
+        return True
+    if head:
+        rest = upper[2:]
+        return upper[:2] in COMMAND_NAMES and (not rest or _AXIS_SUFFIX.fullmatch(rest) is not None)
+    return command not in ("", "MG") and _AXES_ONLY.fullmatch(upper) is not None
 
 
 def _raw_command(text: str) -> Command:
