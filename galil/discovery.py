@@ -6,7 +6,9 @@ Where it looks, and how sure each way is (sources in ``docs/decisions/0010``):
   as given to this project; not in the public USB id list) or whose manufacturer or
   description names Galil are listed and asked ``^R^V``; ports of common USB-serial bridges
   (FTDI, Prolific, Silicon Labs, WCH) are listed as *possible* and only opened when asked
-  (``identify_bridges=True``), since opening a port can reset the device behind it.
+  (``identify_bridges=True``), since opening a port can reset the device behind it. A port
+  (or PCI node) another process holds is listed as in use and not asked: it is opened
+  exclusively, and a second opener would read the replies meant for the first.
 - **USB** (pyusb, needs libusb): devices with Galil's vendor id, listed, not opened.
 - **PCI**: the nodes of Galil's driver, ``/dev/galilpci*``, opened and asked ``^R^V``.
 - **Ethernet, by address**: ``probe=["192.168.0.0/24", "10.0.0.5:23"]`` connects to TCP port
@@ -44,6 +46,7 @@ from galil.protocol.discovery import (
     parse_identify_reply,
 )
 from galil.transport import Transport, open_transport
+from galil.transport.base import port_in_use
 from galil.transport.tcp import TcpTransport
 
 __all__ = [
@@ -125,12 +128,23 @@ def _ask_transport(transport: Transport, timeout: float) -> str:
             transport.close()
 
 
-def _identify_address(address: str, timeout: float) -> str:
+#: What a port or node another process holds is listed with (it is not asked).
+_BUSY = "in use by another process, not asked"
+
+
+def _identify_address(address: str, timeout: float) -> tuple[str, bool]:
+    """(identity, busy): what the device at ``address`` answers to ``^R^V``, and whether it
+    was not asked because another process holds it (opened exclusively: a second opener
+    would read, and steal, the replies meant for that process)."""
     try:
         transport = open_transport(address)
-    except (GalilError, OSError):
-        return ""
-    return _ask_transport(transport, timeout)
+    except (GalilError, OSError) as exc:
+        return "", port_in_use(exc)
+    return _ask_transport(transport, timeout), False
+
+
+def _described(description: str, busy: bool) -> str:
+    return f"{description} ({_BUSY})" if busy else description
 
 
 def _ask_tcp(host: str, port: int, timeout: float) -> str:
@@ -170,12 +184,15 @@ def serial_ports(
         ids = f"USB {vid:04x}:{port.pid or 0:04x}" if vid is not None else ""
         if vid == GALIL_USB_VENDOR_ID or "galil" in text.lower():
             label = ", ".join(x for x in (ids, text.strip()) if x)
-            ident = _identify_address(port.device, timeout) if identify else ""
-            out.append(Found(port.device, "serial", f"Galil USB serial port {label}", ident))
+            ident, busy = _identify_address(port.device, timeout) if identify else ("", False)
+            what = _described(f"Galil USB serial port {label}", busy)
+            out.append(Found(port.device, "serial", what, ident))
         elif vid in USB_SERIAL_BRIDGES:
             bridge = f"{USB_SERIAL_BRIDGES[vid]} USB-serial bridge ({ids})"
-            ident = _identify_address(port.device, timeout) if identify_bridges else ""
-            out.append(Found(port.device, "serial", bridge, ident, likely=bool(ident)))
+            asked = _identify_address(port.device, timeout) if identify_bridges else ("", False)
+            ident, busy = asked
+            what = _described(bridge, busy)
+            out.append(Found(port.device, "serial", what, ident, likely=bool(ident)))
     return out
 
 
@@ -222,8 +239,8 @@ def pci_nodes(
         raise InvalidArgument(f"pattern must be a glob pattern, not {pattern!r:.60}")
     out = []
     for path in sorted(glob.glob(pattern)):
-        ident = _identify_address(path, timeout) if identify else ""
-        out.append(Found(path, "pci", "Galil PCI driver node", ident))
+        ident, busy = _identify_address(path, timeout) if identify else ("", False)
+        out.append(Found(path, "pci", _described("Galil PCI driver node", busy), ident))
     return out
 
 
@@ -332,12 +349,15 @@ def ask_group(
         while (left := deadline - time.monotonic()) > 0:
             sock.settimeout(left)
             try:
-                data, (host, _) = sock.recvfrom(2048)
+                data, (host, answered_from) = sock.recvfrom(2048)
             except TimeoutError:
                 break
             with contextlib.suppress(ProtocolError):
                 ident = parse_identify_reply(data)
-                found[host] = Found(f"tcp://{host}", "ethernet", f"answered {group}", ident)
+                # Answered from its command port: the TCP port of the same number (23 on a
+                # controller; the simulator's responder answers from the port it was given).
+                address = _tcp_address(host, answered_from)
+                found[address] = Found(address, "ethernet", f"answered {group}", ident)
     return list(found.values())
 
 

@@ -21,7 +21,7 @@ from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
 from galil.protocol.session import Completed
 from galil.records import Records, RecordStream
-from galil.routines import Routines, ul_reply_bytes
+from galil.routines import Routines, ls_reply_bytes, ul_reply_bytes
 from galil.transport import Transport
 from galil.tuning import follow_tm
 
@@ -47,29 +47,36 @@ def check_sleep(seconds: object) -> float:
 
 
 #: The bulk transfers sent as raw text (``command("UL")``): timed by their size.
-_UPLOADS = frozenset({"UL", "QU", "LV", "LA"})
-#: A bulk transfer's command (decision 0064): ``DL``, ``UL``, ``LV``, ``LA``; ``QU``/``QD``
-#: and an array name, and for ``QU`` its range (``QU a[],0,99,1``) when given.
-_TRANSFER = re.compile(r"(DL|UL|LV|LA)$|(QD) ?[A-Za-z]|QU ?[A-Za-z]\w*\[\](?:,(\d+),(\d+))?")
+_UPLOADS = frozenset({"UL", "QU", "LV", "LA", "LS"})
+#: A bulk transfer's command (decision 0064): ``DL``, ``UL``, ``LV``, ``LA``; ``LS`` alone or
+#: with its label or line range (``LS #A,20``: bounded by the whole program all the same,
+#: decision 0090); ``QU``/``QD`` and an array name, and for ``QU`` its range
+#: (``QU a[],0,99,1``) when given.
+_TRANSFER = re.compile(
+    r"(DL|UL|LV|LA)$|(LS)(?:$|[\s#,\d])|(QD) ?[A-Za-z]|QU ?[A-Za-z]\w*\[\](?:,(\d+),(\d+))?"
+)
 
 
 def _transfer_bytes(link: Link, command: Command) -> int | None:
     """The most bytes the reply of ``command`` holds when it is a bulk transfer (``None``
     when it is not): a colon for ``DL`` and ``QD`` (their size is their payload); the whole
-    program memory for ``UL``; every variable for ``LV``, every array for ``LA``; the
-    elements for ``QU`` (all the model's array space when its range is not given)."""
+    program memory for ``UL`` (numbered, for ``LS``); every variable for ``LV``, every array
+    for ``LA``; the elements for ``QU`` (all the model's array space when its range is not
+    given)."""
     m = _TRANSFER.match(command.text) if isinstance(command, Command) else None
     if m is None or command.parts:
         return None
-    head = m.group(1) or m.group(2) or "QU"
+    head = m.group(1) or m.group(2) or m.group(3) or "QU"
     if head == "UL":
         return ul_reply_bytes(link.model)
+    if head == "LS":
+        return ls_reply_bytes(link.model)
     if head == "LV":
         return _lv_reply_bytes(link)
     if head == "LA":
         return _la_reply_bytes(link)
     if head == "QU":
-        first, last = m.group(3), m.group(4)
+        first, last = m.group(4), m.group(5)
         known = first is not None and last is not None and int(last) >= int(first)
         count = int(last) - int(first) + 1 if known else link.model.array_elements
         return _qu_reply_bytes(count)

@@ -160,7 +160,9 @@ class Interrupts:
         self._thread.start()
 
     def _read(self, handle: Transport, stop: threading.Event) -> None:
-        parser = InterruptParser()
+        # Over UDP each read is one datagram, parsed on its own (a datagram cut short is not
+        # completed by the next one's bytes).
+        parser = InterruptParser(datagram=self._datagram)
         while not stop.is_set():
             try:
                 chunk = read_handle(handle, 0.25)
@@ -171,11 +173,9 @@ class Interrupts:
             if not chunk:
                 stop.wait(0.005)  # some handles return at once when idle
                 continue
-            try:
-                events = parser.feed(chunk)
-            except ProtocolError as exc:
-                _LOG.warning("galil: interrupt packet dropped: %s", exc)
-                continue
+            events = parser.feed(chunk)  # (the good packets of a read, around a bad one)
+            for why in parser.take_dropped():
+                _LOG.warning("galil: interrupt packet dropped: %s", why)
             for event in events:
                 # Callbacks first: once an interrupt is in the queue, every callback has had it.
                 self._subscribers.notify(event)

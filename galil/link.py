@@ -104,7 +104,6 @@ _NUMBER_TOKEN = re.compile(r"\$-?[0-9A-Fa-f]+(?:\.[0-9A-Fa-f]*)?|[-+]?(?:\d+(?:\
 _SEPARATORS = re.compile(r"[\s,]*")
 _DECIMAL = r"[-+]?(?:\d+(?:\.\d*)?|\.\d+)"
 _PLAIN_NUMBERS = re.compile(rf"[\s,]*{_DECIMAL}(?:[\s,]+{_DECIMAL})*[\s,]*")
-_QUOTED = re.compile(r'"[^"]*"?')
 
 
 def _parse(text: str) -> Command:
@@ -432,16 +431,10 @@ def _new_completed(fields: tuple[Command, bool, str, None]) -> Completed:
 
 
 def _case_hint(text: str) -> str | None:
-    """For a command refused as unrecognised: point at lower case, the usual cause."""
-    # Strings in quotes keep their case; only the command and operand names must be upper.
-    bare = _QUOTED.sub("", text)
-    if bare == bare.upper():
-        return None
-    quoted = _QUOTED.findall(text)
-    pieces = _QUOTED.split(text)
-    rest = zip(quoted, pieces[1:], strict=True)
-    upper = pieces[0].upper() + "".join(q + p.upper() for q, p in rest)
-    return f"Galil commands and operands are upper case: did you mean {upper!r}?"
+    """For a command refused as unrecognised: what lower case in it may be to blame (the
+    commands and operands upper case, or variables of those names not defined: see
+    :func:`~galil.protocol.commands.unrecognized_hint`)."""
+    return cmds.unrecognized_hint(text)
 
 
 # ----------------------------------------------------------------------------------- the link
@@ -731,13 +724,12 @@ class LinkCore:
             if silent is not None:
                 wait = pause
             if wait <= 0:
+                begun = session.receiving  # (before abandon() forgets it)
                 lost = session.abandon()
                 for c in lost:
                     recent.append(("t", c.text))
                 text = lost[0].text if lost else batch[-1].text
-                what = (
-                    f"no reply to {text!r} within {t:g} s" if silent is None else silent.what(text)
-                )
+                what = _no_reply(text, t, begun) if silent is None else silent.what(text)
                 raise self.error(
                     GalilTimeoutError,
                     f"{what} (the link will resynchronise before the next command)",
@@ -1440,6 +1432,17 @@ def _probe(link: Link, what: str, exc: GalilConnectionError) -> None:
                 )
     except GalilError:
         pass  # it answered (a refusal), or the link found itself dead or closed
+
+
+def _no_reply(text: str, t: float, begun: int) -> str:
+    """What a reply timeout says: no reply at all, or a reply cut part way (``begun`` bytes
+    of it had arrived: a long one, such as ``LS`` on a slow line, needs a longer timeout)."""
+    if not begun:
+        return f"no reply to {text!r} within {t:g} s"
+    return (
+        f"the reply to {text!r} was cut part way: {begun} bytes had arrived and it had not "
+        f"ended within {t:g} s; a long reply needs a longer timeout (pass timeout=)"
+    )
 
 
 def _one_command(text: str, allow_compound: bool) -> Command:

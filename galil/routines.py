@@ -100,6 +100,13 @@ def is_library_line(line: str) -> bool:
     return _LIBRARY_LINE.fullmatch(line.strip()) is not None
 
 
+def ls_reply_bytes(model: ModelSpec) -> int:
+    """The most bytes ``LS``'s reply can hold: a full program memory, each line numbered
+    (``1999 `` before its text) and ended with CR LF, then ``:``."""
+    number = len(str(model.program_lines - 1)) + 1
+    return model.program_lines * (number + model.line_length + 2) + 1
+
+
 def _label_of(line: str) -> str | None:
     m = _LABEL.match(line.strip())
     return None if m is None else "#" + m.group(1)

@@ -49,7 +49,7 @@ from galil.link import check_seconds
 from galil.protocol import commands as cmds
 from galil.protocol.programs import ProgramLine, check_program
 from galil.protocol.session import Completed
-from galil.routines import ul_reply_bytes
+from galil.routines import ls_reply_bytes, ul_reply_bytes
 
 if TYPE_CHECKING:
     from prompt_toolkit.history import History
@@ -271,9 +271,7 @@ class Terminal:
         if special.group(1) == "UL":
             return self._transfer(parsed, ul_reply_bytes(model)).text
         if special.group(1) == "LS":  # each line numbered: "1999 " before the text
-            number = len(str(model.program_lines - 1)) + 1
-            most = model.program_lines * (number + model.line_length + 2) + 1
-            return self._transfer(parsed, most).text
+            return self._transfer(parsed, ls_reply_bytes(model)).text
         record = self.controller.exchange(parsed, timeout=self.timeout).record or b""
         return (
             f"(QR: a {len(record)}-byte binary data record; in Python, controller.record() "

@@ -115,11 +115,13 @@ def test_probing_skips_addresses_that_do_not_answer() -> None:
     assert found[0].identity == tcp.controller.identity
 
 
-def test_the_multicast_query_collects_every_answer() -> None:
+def test_the_multicast_query_collects_every_answer_with_the_port_it_came_from() -> None:
     first = SimController("DMC-4040", ManualClock()).identity
     with SimDiscoveryResponder(first) as responder:
         found = ask_group(*responder.address, timeout=0.3)
-    assert [(f.address, f.identity) for f in found] == [("tcp://127.0.0.1", first)]
+        port = responder.address[1]
+    # (the responder answers from a port of its own, not 23: connect must be told it)
+    assert [(f.address, f.identity) for f in found] == [(f"tcp://127.0.0.1:{port}", first)]
     assert responder.answered == 1
 
 
@@ -369,3 +371,60 @@ def test_an_ipv6_address_is_listed_as_connect_takes_it() -> None:
     assert found[0].identity == "DMC4040 Rev 1.2f"
     with pytest.raises(GalilConnectionError, match="cannot connect"):
         galil.connect(found[0].address, timeout=0.5)  # (read as an address: no "bad port")
+
+
+def test_a_serial_port_another_process_holds_is_listed_as_in_use_and_not_asked(
+    monkeypatch: pytest.MonkeyPatch, pty_sim: SimPtyServer
+) -> None:
+    monkeypatch.setattr(list_ports, "comports", lambda: [_port(pty_sim.path, 0x1079, 1)])
+    with galil.connect(pty_sim.path, timeout=2.0) as dmc:
+        (found,) = serial_ports(timeout=0.5)
+        assert found.identity == ""
+        assert "in use by another process" in found.description
+        assert dmc.query_number("MG 11") == 11.0  # (its replies were not read by the asker)
+    (found,) = serial_ports(timeout=2.0)  # free again
+    assert found.identity == pty_sim.controller.identity
+
+
+def test_a_pci_node_another_process_holds_is_listed_as_in_use(pty_sim: SimPtyServer) -> None:
+    with galil.connect(f"pci://{pty_sim.path}", timeout=2.0):
+        (found,) = pci_nodes(pattern=pty_sim.path, timeout=0.5)
+    assert (found.identity, found.kind) == ("", "pci")
+    assert "in use by another process" in found.description
+
+
+@pytest.mark.parametrize(
+    "answer",
+    [
+        b"\xff\xfd\x18\xff\xfd\x20Ubuntu 22.04 LTS\r\nfactory-gw login: ",
+        b"Password:",
+        b"220 ftp ready\r\nName:",
+    ],
+)
+def test_a_device_that_is_no_controller_is_not_listed_by_a_probe(answer: bytes) -> None:
+    peer = _Peer(answer)
+    try:
+        assert probe_hosts([f"127.0.0.1:{peer.port}"], timeout=2.0) == []
+    finally:
+        peer.close()
+    with pytest.raises(galil.ProtocolError, match="no Galil identity"):
+        parse_identify_reply(answer)
+
+
+def test_galil_list_probe_lists_no_telnet_login_as_a_controller(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    peer = _Peer(b"\xff\xfd\x18\xff\xfd\x20Ubuntu 22.04 LTS\r\nfactory-gw login: ")
+    try:
+        code = cli.main(
+            ["list", "--no-serial", "--no-usb", "--no-pci", "--probe", f"127.0.0.1:{peer.port}"]
+        )
+    finally:
+        peer.close()
+    assert code == 1
+    assert "factory-gw" not in capsys.readouterr().out
+
+
+def test_a_multicast_answer_that_is_no_identity_is_not_listed() -> None:
+    with SimDiscoveryResponder("factory-gw login") as responder:
+        assert ask_group(*responder.address, timeout=0.3) == []

@@ -12,6 +12,7 @@ import pytest
 import galil
 from galil.errors import GalilTimeoutError
 from galil.link import read_reply
+from galil.protocol.interrupts import packet
 from galil.sim.server import SimTcpServer
 from galil.testing import transcript
 from galil.transport.tcp import UdpTransport
@@ -153,3 +154,38 @@ def test_a_failing_callback_is_logged_and_the_others_still_hear(
     unsubscribe()
     with pytest.raises(galil.InvalidArgument):
         dmc.interrupts.subscribe("not callable")  # type: ignore[arg-type]
+
+
+class _BadPacketBeside:
+    """A fault hook for the simulator's fronts: the interrupt packet of ``UI 1`` gets a
+    malformed packet after it in the same datagram, and that of ``UI 3`` is cut short (its
+    datagram holds ``01 D0`` alone). Other output passes unchanged."""
+
+    def __call__(self, data: bytes) -> list[tuple[float, bytes]]:
+        if data == packet([0xF1]):
+            return [(0.0, data + b"\x01\xd0\x07")]
+        if data == packet([0xF3]):
+            return [(0.0, b"\x01\xd0")]
+        return [(0.0, data)]
+
+
+def test_a_malformed_interrupt_datagram_loses_no_good_interrupt_beside_it(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # UI 1 was lost with the bad packet after it in its datagram, and UI 4 was lost with the
+    # cut-short datagram before it (its bytes were taken as that packet's continuation).
+    with (
+        SimTcpServer(model="DMC-4040", faults=_BadPacketBeside()) as server,
+        galil.connect(server.url, timeout=2.0) as dmc,
+        caplog.at_level(logging.WARNING, logger="galil.interrupts"),
+    ):
+        dmc.interrupts.enable()
+        for number in (1, 3, 4):  # one datagram each
+            dmc.programs.download(f"#U\nUI {number}\nEN")
+            dmc.programs.run("#U", thread=1)
+            if number != 3:
+                assert dmc.interrupts.get(timeout=5).number == number
+    dropped = [r.getMessage() for r in caplog.records if "dropped" in r.getMessage()]
+    assert len(dropped) == 2, dropped
+    assert "length 7" in dropped[0]
+    assert "cut short" in dropped[1]

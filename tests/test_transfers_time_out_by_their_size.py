@@ -157,6 +157,28 @@ def test_raw_transfers_get_the_timeout_of_their_size_as_the_rooms_do() -> None:
             c.command("UL", timeout=1.0)  # a timeout given is the timeout
 
 
+def test_a_raw_ls_of_a_long_program_at_9600_baud_gets_the_timeout_of_program_memory() -> None:
+    # It failed with "no reply to 'LS' within 1 s" while the listing streamed in.
+    with galil.connect("sim://DMC-4040?baud=9600", timeout=1.0) as c:
+        c.programs.download("\n".join(["#A", *[f"v{i % 50}={i}" for i in range(300)], "EN"]))
+        listing = c.command("LS").splitlines()
+        assert listing[301] == "301 EN"  # numbered, to the program's last line
+
+        assert c.command("LS #A,2").split() == ["0", "#A", "1", "v0=0", "2", "v1=1"]
+        assert c.query_number("MG 3") == 3.0  # in step
+
+
+def test_a_reply_cut_part_way_by_its_timeout_says_so_and_how_to_wait_longer() -> None:
+    # (the link's 5 s let the resync wait out the rest of the 4 s listing)
+    with galil.connect("sim://DMC-4040?baud=9600", timeout=5.0) as c:
+        c.programs.download("\n".join(["#A", *[f"v{i % 50}={i}" for i in range(300)], "EN"]))
+        with pytest.raises(GalilTimeoutError, match=r"'LS' was cut part way: \d+ bytes") as info:
+            c.command("LS", timeout=1.0)  # (a timeout given is the timeout)
+        assert "pass timeout=" in str(info.value)
+        assert "no reply" not in str(info.value).splitlines()[0]
+        assert c.query_number("MG 3") == 3.0  # resynchronised
+
+
 class _Silence:
     """A fault hook that passes replies through until armed, then keeps ``keep`` bytes of
     what follows (0: the controller falls silent; more: a reply cut off)."""

@@ -135,6 +135,7 @@ __all__ = [
     "tv",
     "ui",
     "ul",
+    "unrecognized_hint",
     "va",
     "variable_name",
     "vd",
@@ -1734,6 +1735,70 @@ def link_setting(text: str) -> str | None:
     return _WHY_REFUSED[head].format(cmd=s.rstrip()) if refused else None
 
 
+# A raw line refused as unrecognised (TC 1): words and quoted strings, and the ';' between
+# commands. A word at a command's head is a command; after it, an operand (_TPA), a function
+# (@ABS), a keyword, an axis list (BG a) or a variable, whose name is case sensitive (0060).
+_TOKEN = re.compile(r'"[^"]*"?|(?<![\w.$])[_@#]?[A-Za-z][A-Za-z0-9]*|;')  # (not 1e3, $ff)
+_AXES_ONLY = re.compile(r"[A-HSTXYZW]{1,8}")
+
+
+def unrecognized_hint(text: str) -> str | None:
+    """What to say of lower case in a raw line the controller refused as unrecognised: the
+    line with its commands, operands and keywords in upper case, when one of them was not;
+    else the lower-case names that can only be variables, which none of is defined (variable
+    names are case sensitive: upper-casing them would name another variable). ``None`` when
+    lower case is not to blame."""
+    out: list[str] = []
+    unknown: list[str] = []
+    last, head, command = 0, True, ""
+    for m in _TOKEN.finditer(text):
+        word = m.group()
+        out.append(text[last : m.start()])
+        last = m.end()
+        known = _known_word(word.upper(), head, command)
+        if head and word != ";":
+            command = word.upper() if known else ""
+        at_head, head = head, word == ";"
+        if word.startswith(('"', "#")) or word == word.upper():
+            out.append(word)
+        elif known:
+            out.append(word.upper())
+        else:
+            out.append(word)
+            assigned = text[last:].lstrip().startswith(("=", "["))
+            if not (at_head and assigned):  # (x=1 makes x: no name is missing there)
+                unknown.append(word)
+    out.append(text[last:])
+    suggestion = "".join(out)
+    if suggestion != text:
+        return f"Galil commands and operands are upper case: did you mean {suggestion!r}?"
+    names = list(dict.fromkeys(unknown))
+    if not names:
+        return None
+    which = (  # (which of several is missing, the refusal does not say)
+        f"no command, operand or variable {names[0]!r}"
+        if len(names) == 1
+        else f"one of {', '.join(repr(n) for n in names)} is no command, operand or variable"
+    )
+    return (
+        f"{which} on the controller: variable names are case sensitive, and variables.list() "
+        "names those there"
+    )
+
+
+def _known_word(upper: str, head: bool, command: str) -> bool:
+    """Whether ``upper`` (a word in upper case) is the controller's: a command at a head, an
+    operand, a function or keyword anywhere, an axis list after a command but MG."""
+    if upper.startswith("_"):
+        return upper[1:3] in COMMAND_NAMES
+    if upper.startswith("@") or upper in _KEYWORDS:
+        return True
+    if head:
+        rest = upper[2:]
+        return upper[:2] in COMMAND_NAMES and (not rest or _AXIS_SUFFIX.fullmatch(rest) is not None)
+    return command not in ("", "MG") and _AXES_ONLY.fullmatch(upper) is not None
+
+
 def _raw_command(text: str) -> Command:
     head = text.lstrip().upper()[:2]
     if _variable_named_like(text.lstrip(), head):
@@ -1744,9 +1809,81 @@ def _raw_command(text: str) -> Command:
         return Command(text, Expect.record(None))
     if head in ("UL", "QU"):
         return Command(text, Expect.CTRL_Z)
+    if head == "MG":
+        why = _mg_unframed(text)
+        if why is not None:
+            raise InvalidArgument(f"{text.strip()!r}: {why}")
     if head in _QUERIES or text.startswith("\x12\x16"):
         return Command(text, Expect.DATA)
     return Command(text, Expect.ANY)
+
+
+# What an MG prints that the reply framing cannot cut (decision 0090; the formats from the
+# MG entry of the command reference, /work/shared/reference/galil-protocol.md): {N} drops the
+# CR LF, so the ':' that ends the reply starts no line; {^n} prints the byte n.
+_MG_NO_CRLF = re.compile(r"\{\s*N\s*\}", re.IGNORECASE)
+_MG_BYTE = re.compile(r"\{\s*\^\s*(\d+)\s*\}")
+_QUOTED_TEXT = re.compile(r'"([^"]*)"?')
+#: Bytes the framing reads as a reply's end or a rejection at a line's start, as a line's
+#: end, or (bit 7 set) as unsolicited output.
+_FRAMING_BYTES = {10: "LF", 13: "CR", 58: "':'", 63: "'?'"}
+
+
+def _mg_unframed(text: str) -> str | None:
+    """Why the raw ``MG`` line ``text`` prints what the link cannot cut into its reply, or
+    ``None``: ``{N}`` (no CR LF: the reply never ends), a ``?`` in a string (the controller
+    refuses it, TC 54; one that starts a line reads as a rejection), a line that starts with
+    ``:`` (read as the reply's end), ``{^n}`` of ``:``, ``?``, CR, LF or a byte of 128 and
+    more (read as unsolicited output)."""
+    # Formats are looked for inside strings too: whether the controller prints a brace in a
+    # string as it is is not in the sources [A] (the simulator reads it as a format; mg()
+    # refuses braces in a message for that).
+    if _MG_NO_CRLF.search(text):
+        return (
+            "{N} leaves out the CR LF, so the ':' that ends the reply starts no line and the "
+            "link cannot tell where the reply ends; send it without {N} (a program may use it)"
+        )
+    strings = _QUOTED_TEXT.findall(text)
+    if any("?" in x for x in strings):
+        return "a '?' inside an MG string is refused by the controller (TC 54)"
+    for match in _MG_BYTE.finditer(text):
+        code = int(match.group(1))
+        if code in _FRAMING_BYTES or code >= 128:
+            what = _FRAMING_BYTES.get(code, "a byte with bit 7 set (unsolicited output)")
+            return f"{match.group()} prints {what}, which the link reads as part of the framing"
+    if _first_printed(text).startswith(":"):
+        return "the line it prints starts with ':', which the link reads as the reply's end"
+    return None
+
+
+def _first_printed(text: str) -> str:
+    """The text the MG line prints first: its leading string arguments, joined (the
+    controller prints strings back to back)."""
+    body = text.lstrip()[2:]
+    printed = ""
+    for argument in _split_arguments(body):
+        item = argument.strip()
+        if not (item.startswith('"') and _QUOTED_TEXT.fullmatch(item)):
+            break
+        printed += item.strip('"')
+        if printed:
+            break
+    return printed
+
+
+def _split_arguments(text: str) -> list[str]:
+    """Split at the ``,`` outside double quotes (``"a,b", 1`` is two)."""
+    parts: list[str] = []
+    start = 0
+    quoted = False
+    for i, ch in enumerate(text):
+        if ch == '"':
+            quoted = not quoted
+        elif ch == "," and not quoted:
+            parts.append(text[start:i])
+            start = i + 1
+    parts.append(text[start:])
+    return parts
 
 
 #: Commands that take no axis letters after their name: any name that only begins like them

@@ -19,6 +19,7 @@ import struct
 from dataclasses import dataclass
 
 from galil.errors import InvalidArgument, ProtocolError
+from galil.models import parse_identity
 
 __all__ = [
     "BOOTP_CLIENT_PORT",
@@ -129,8 +130,12 @@ def build_bootp_request(mac: bytes, xid: int = 0, *, dhcp: bool = True) -> bytes
 def parse_identify_reply(data: bytes) -> str:
     """The identity in a reply to ``^R^V`` (``b"DMC4040 Rev 1.2f\\r\\n:"`` -> the text).
 
+    Only a Galil identification string (:func:`galil.models.parse_identity`: a model, ``Rev``
+    and a firmware) is one: any other device on the port (a telnet login ending in ``login:``)
+    is no controller.
+
     Raises:
-        ProtocolError: no complete reply, a ``?``, or no text.
+        ProtocolError: no complete reply, a ``?``, no text, or text that is no Galil identity.
     """
     text = data.replace(b"\r\n", b"\n").strip()
     if not text.endswith(b":"):
@@ -139,4 +144,8 @@ def parse_identify_reply(data: bytes) -> str:
     line = body.splitlines()[-1].strip() if body else ""
     if not line:
         raise ProtocolError(f"no identity in {data!r}")
+    try:
+        parse_identity(line)
+    except InvalidArgument as exc:
+        raise ProtocolError(f"no Galil identity in {data[:80]!r}") from exc
     return line

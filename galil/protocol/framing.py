@@ -177,6 +177,11 @@ class FrameParser:
         )
 
     @property
+    def receiving(self) -> int:
+        """Bytes of a reply that has begun to arrive and has not ended yet (0: none)."""
+        return 0 if self._mode == _HUNT else len(self._buf)
+
+    @property
     def hunting(self) -> bool:
         """Whether the parser is still looking for the resync marker."""
         return self._mode == _HUNT

@@ -15,8 +15,9 @@ Status bytes (same page; ``UI`` page for user interrupts):
 ``0xF0`` - ``0xFF``   user interrupt ``UI 0`` - ``UI 15``
 ====================  =================================================
 
-:class:`InterruptParser` cuts a byte stream into :class:`Interrupt` events (one per status
-byte, in order); :func:`packet` builds a packet (the simulator sends them).
+:class:`InterruptParser` cuts a byte stream (or UDP datagrams, each on its own) into
+:class:`Interrupt` events (one per status byte, in order), dropping a malformed packet alone;
+:func:`packet` builds a packet (the simulator sends them).
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from galil.errors import InvalidArgument, ProtocolError
+from galil.errors import InvalidArgument
 
 __all__ = ["HEADER", "Interrupt", "InterruptParser", "decode_status", "packet"]
 
@@ -96,46 +97,78 @@ def packet(statuses: Sequence[int]) -> bytes:
 class InterruptParser:
     """Cut a stream of interrupt packets into :class:`Interrupt` events; sans-I/O.
 
-    Packets may arrive split anywhere or several at once (a TCP handle). A byte that cannot
-    start or continue a packet raises :class:`ProtocolError`; call :meth:`reset` to go on.
+    Packets may arrive split anywhere or several at once (a TCP handle). A malformed packet
+    (a byte that cannot start or continue one, a wrong length) is dropped alone: the parser
+    goes on at the next header byte, so the good packets around it are kept, and says what
+    it dropped in :meth:`take_dropped`. A header byte (``01``) never is a status or a length
+    (those are ``80``-``FF`` and 3-18), so it always starts a packet.
+
+    Args:
+        datagram: each :meth:`feed` is one whole UDP datagram: a packet it leaves unfinished
+            is dropped (a datagram cut short), not completed by the next datagram's bytes.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, *, datagram: bool = False) -> None:
+        self.datagram = datagram
         self._buf = bytearray()
+        self._dropped: list[str] = []
 
     def reset(self) -> None:
         """Forget a partial packet."""
         self._buf.clear()
 
-    def feed(self, data: bytes) -> list[Interrupt]:
-        """Add bytes; return the interrupts of every packet now complete, oldest first.
+    def take_dropped(self) -> list[str]:
+        """What was dropped since the last call, one line per malformed packet (and forget
+        it)."""
+        dropped, self._dropped = self._dropped, []
+        return dropped
 
-        Raises:
-            ProtocolError: a packet is malformed (its partial bytes are dropped).
+    def feed(self, data: bytes) -> list[Interrupt]:
+        """Add bytes; return the interrupts of every good packet now complete, oldest first.
+
+        A malformed packet is dropped (see :meth:`take_dropped`); those around it are kept.
         """
         buf = self._buf
         buf += data
         out: list[Interrupt] = []
         while buf:
-            if buf[0] != HEADER:
-                bad = buf[0]
-                self.reset()
-                raise ProtocolError(f"not an interrupt packet: starts with byte {bad:#04x}")
-            end = 1
-            while end < len(buf) and buf[end] >= 0x80:
-                end += 1
-            if end == len(buf):
-                if end - 1 > _MAX_STATUS:
-                    self.reset()
-                    raise ProtocolError("interrupt packet longer than 16 statuses")
-                break  # the length byte has not arrived
-            statuses = bytes(buf[1:end])
-            length = buf[end]
-            if not statuses or length != len(statuses) + 2:
-                self.reset()
-                raise ProtocolError(
-                    f"interrupt packet of {len(statuses)} statuses says length {length}"
-                )
-            del buf[: end + 1]
+            statuses = self._next_packet(buf)
+            if statuses is None:
+                break  # the rest of a packet has not arrived
             out += [decode_status(s) for s in statuses]
+        if self.datagram and buf:
+            self._drop(len(buf), f"interrupt datagram cut short: {bytes(buf).hex(' ')}")
         return out
+
+    def _next_packet(self, buf: bytearray) -> bytes | None:
+        """The statuses of the packet at the start of ``buf`` (taken from it), ``b""`` for a
+        malformed one (dropped), ``None`` when it has not all arrived."""
+        if buf[0] != HEADER:
+            return self._drop(_to_header(buf), f"not an interrupt packet: {buf[0]:#04x}")
+        end = 1
+        while end < len(buf) and buf[end] >= 0x80:
+            end += 1
+        if end == len(buf):
+            if end - 1 > _MAX_STATUS:
+                return self._drop(end, "interrupt packet longer than 16 statuses")
+            return None
+        statuses = bytes(buf[1:end])
+        length = buf[end]
+        if length == HEADER:  # a packet cut short, and the next one begins
+            return self._drop(end, f"interrupt packet cut short: {bytes(buf[:end]).hex(' ')}")
+        if not statuses or len(statuses) > _MAX_STATUS or length != len(statuses) + 2:
+            why = f"interrupt packet of {len(statuses)} statuses says length {length}"
+            return self._drop(end + 1, why)
+        del buf[: end + 1]
+        return statuses
+
+    def _drop(self, count: int, why: str) -> bytes:
+        del self._buf[:count]
+        self._dropped.append(why)
+        return b""
+
+
+def _to_header(buf: bytearray) -> int:
+    """How many bytes of ``buf`` come before its next header byte (after the first byte)."""
+    at = buf.find(HEADER, 1)
+    return len(buf) if at < 0 else at

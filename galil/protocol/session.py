@@ -85,6 +85,11 @@ class Session:
         return len(self._pending)
 
     @property
+    def receiving(self) -> int:
+        """Bytes of the reply that has begun to arrive and has not ended yet (0: none)."""
+        return self._parser.receiving if self._pending else 0
+
+    @property
     def resyncing(self) -> bool:
         """Whether a resync marker was sent and has not come back yet."""
         return self._parser.hunting

@@ -23,7 +23,9 @@ What the base gives every subclass:
 from __future__ import annotations
 
 import contextlib
+import errno
 import math
+import sys
 from abc import ABC, abstractmethod
 from typing import TYPE_CHECKING, ClassVar, Generic, TypeVar
 
@@ -33,7 +35,36 @@ from galil.transport.options import LONGEST_WAIT
 if TYPE_CHECKING:
     from galil.transport import Transport
 
-__all__ = ["TransportBase", "timeout_grid"]
+__all__ = ["TransportBase", "locked_out", "port_in_use", "timeout_grid"]
+
+
+def locked_out(exc: BaseException) -> bool:
+    """Whether ``exc`` is the refusal of an exclusive lock on a device (``flock`` with
+    ``LOCK_NB`` found it locked: ``EWOULDBLOCK``; pyserial's ``exclusive=True`` raises it as a
+    ``SerialException``, an ``OSError``), or Windows' refusal of a COM port another program
+    holds (pyserial: ``could not open port 'COM3': PermissionError(13, 'Access is denied.'``)."""
+    if not isinstance(exc, OSError):
+        return False
+    if exc.errno in (errno.EAGAIN, errno.EWOULDBLOCK):
+        return True
+    return sys.platform == "win32" and "PermissionError" in str(exc)  # pragma: no cover
+
+
+def port_in_use(exc: BaseException) -> bool:
+    """Whether ``exc`` (a :class:`GalilConnectionError` from opening a serial port or a PCI
+    node, or from :func:`galil.connect`) says another process holds the device, rather than
+    that it is missing or broken."""
+    if not isinstance(exc, GalilConnectionError):
+        return False
+    cause: BaseException | None = exc
+    for _ in range(8):  # (the chain of a connect that wrapped the transport's error)
+        if cause is None:
+            return False
+        if locked_out(cause):
+            return True
+        cause = cause.__cause__
+    return False
+
 
 H = TypeVar("H")
 """The OS-level handle a transport holds (socket, pyserial port, USB device, fd)."""

@@ -2,12 +2,14 @@
 
 The driver exposes the controller's command FIFO as a byte stream: ``write`` sends commands,
 ``read`` returns replies. The node is opened non-blocking and read through ``poll`` so that a
-read honours its timeout.
+read honours its timeout, and locked (``flock``, advisory) so that a second opener of this
+library (a script, ``galil list``) is refused instead of reading the first one's replies.
 """
 
 from __future__ import annotations
 
 import errno
+import fcntl
 import os
 import select
 import time
@@ -17,7 +19,7 @@ from urllib.parse import SplitResult
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.transport import parse_options
 from galil.transport.base import TransportBase
-from galil.transport.options import seconds
+from galil.transport.options import flag, seconds
 
 __all__ = ["PciTransport", "open_pci"]
 
@@ -34,18 +36,24 @@ class PciTransport(TransportBase[int]):
     Args:
         path: the node, e.g. ``/dev/galilpci0``.
         write_timeout: seconds to wait for the driver to take a write.
+        exclusive: lock the node (``flock``): a node another process holds this way is
+            refused. The lock is advisory: it keeps out other users of this library (and of
+            pyserial's ``exclusive``), not a program that does not ask for it.
     """
 
     kind = "pci"
 
-    def __init__(self, path: str, *, write_timeout: float = 1.0) -> None:
+    def __init__(self, path: str, *, write_timeout: float = 1.0, exclusive: bool = True) -> None:
         self.path = path
         self.write_timeout = seconds(write_timeout, "write_timeout")
+        exclusive = flag(exclusive, "exclusive")
         try:
             flags = os.O_RDWR | os.O_NONBLOCK | os.O_NOCTTY | getattr(os, "O_CLOEXEC", 0)
             fd = os.open(path, flags)
         except OSError as exc:
             raise GalilConnectionError(f"cannot open PCI node {path}: {exc}") from exc
+        if exclusive:
+            _lock(fd, path)
         super().__init__(fd, name=path, label=f"PCI node {path}")
         self._poll_in = select.poll()
         self._poll_in.register(fd, select.POLLIN | select.POLLPRI)
@@ -103,18 +111,35 @@ class PciTransport(TransportBase[int]):
         os.close(handle)
 
 
+def _lock(fd: int, path: str) -> None:
+    """Lock the node ``fd`` for this process, or close it and say who holds it."""
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as exc:
+        os.close(fd)
+        if exc.errno in (errno.EAGAIN, errno.EWOULDBLOCK):
+            raise GalilConnectionError(
+                f"cannot open PCI node {path}: the node is in use by another process (close "
+                f"the program that holds it, or pass exclusive=0 to share it): {exc}"
+            ) from exc
+        raise GalilConnectionError(f"cannot lock PCI node {path}: {exc}") from exc
+
+
 def open_pci(url: SplitResult, **options: Any) -> PciTransport:
-    """Open ``/dev/galilpciN`` or ``pci:///path/to/node``; option ``write_timeout``.
+    """Open ``/dev/galilpciN`` or ``pci:///path/to/node``; options ``write_timeout`` and
+    ``exclusive`` (True: a node another process holds is refused).
 
     Raises:
-        InvalidArgument: no path, a bad ``write_timeout``, or an unknown option.
-        GalilConnectionError: the node cannot be opened.
+        InvalidArgument: no path, a bad ``write_timeout`` or ``exclusive``, or an unknown
+            option.
+        GalilConnectionError: the node cannot be opened, or another process holds it.
     """
     opts = parse_options(url, options)
     path = url.netloc + url.path
     if not path:
         raise InvalidArgument(f"no device node in {url.geturl()!r}; e.g. /dev/galilpci0")
     write_timeout = seconds(opts.pop("write_timeout", 1.0), "write_timeout")
+    exclusive = flag(opts.pop("exclusive", True), "exclusive")
     if opts:
         raise InvalidArgument(f"unknown PCI option(s): {', '.join(sorted(opts))}")
-    return PciTransport(path, write_timeout=write_timeout)
+    return PciTransport(path, write_timeout=write_timeout, exclusive=exclusive)

@@ -18,7 +18,7 @@ import serial
 
 from galil.errors import GalilConnectionError, GalilError, InvalidArgument
 from galil.transport import PYSERIAL_SCHEMES, parse_options
-from galil.transport.base import TransportBase
+from galil.transport.base import TransportBase, locked_out
 from galil.transport.options import choice, flag, seconds, whole_number
 
 __all__ = ["DEFAULT_BAUDRATE", "SerialPort", "SerialTransport", "open_serial"]
@@ -182,13 +182,15 @@ def open_serial(url: SplitResult, **options: Any) -> SerialTransport:
     """Open a serial port or pyserial URL.
 
     Options (URL query or keywords): ``baudrate`` (115200), ``bytesize``, ``parity``,
-    ``stopbits``, ``rtscts`` (True), ``xonxoff``, ``dsrdtr``, ``write_timeout``, ``exclusive``,
-    ``inter_byte_timeout``.
+    ``stopbits``, ``rtscts`` (True), ``xonxoff``, ``dsrdtr``, ``write_timeout``, ``exclusive``
+    (True for a device on POSIX: a port another process holds is refused, as Windows does;
+    ``exclusive=0`` shares it), ``inter_byte_timeout``.
 
     Raises:
         InvalidArgument: unknown option, a bad value, no port named, or line settings the
             port refuses (``bytesize=7`` on a port that only does 8).
-        GalilConnectionError: the port cannot be opened.
+        GalilConnectionError: the port cannot be opened, or another process holds it
+            (:func:`~galil.transport.base.port_in_use` tells that case).
     """
     scheme = url.scheme.lower()
     if scheme in PYSERIAL_SCHEMES:
@@ -204,6 +206,11 @@ def open_serial(url: SplitResult, **options: Any) -> SerialTransport:
         opts = parse_options(url, options)
         if not target:
             raise InvalidArgument(f"no serial port in {url.geturl()!r}; e.g. serial:///dev/ttyS0")
+        if sys.platform != "win32":
+            # pyserial's flock(LOCK_EX | LOCK_NB) on the device: a second opener (another
+            # script, `galil list`, a terminal) would read the replies meant for this one.
+            # Windows opens a COM port exclusively anyway.
+            opts.setdefault("exclusive", True)
     opts = _checked(opts)
     port = None
     try:
@@ -217,6 +224,12 @@ def open_serial(url: SplitResult, **options: Any) -> SerialTransport:
                 port.close()
         if isinstance(exc, _LINE_ERRORS):  # the OS refused the line settings
             raise _refused(target, opts, exc) from exc
+        if locked_out(exc):
+            raise GalilConnectionError(
+                f"cannot open serial port {target!r}: the port is in use by another process "
+                "(close the program that holds it; exclusive=0 shares it, and then the two "
+                f"read each other's replies): {exc}"
+            ) from exc
         if isinstance(exc, (serial.SerialException, OSError)):
             raise GalilConnectionError(f"cannot open serial port {target!r}: {exc}") from exc
         if isinstance(exc, ValueError):  # pyserial refused a value (a query we do not check)

@@ -1,4 +1,6 @@
-"""A refused command is explained: lower case gets a hint, upper case does not."""
+"""A refused command is explained: lower case gets a hint, upper case does not; a lower-case
+name that can only be a variable is said to be missing, never upper-cased (variable names are
+case sensitive, decision 0060: ``spd`` and ``SPD`` are two variables)."""
 
 from __future__ import annotations
 
@@ -16,7 +18,14 @@ def dmc() -> galil.Controller:
 
 @pytest.mark.parametrize(
     ("text", "suggestion"),
-    [("tp", "'TP'"), ("MG _tpa", "'MG _TPA'"), ('MG "keep", _tpa', "'MG \"keep\", _TPA'")],
+    [
+        ("tp", "'TP'"),
+        ("MG _tpa", "'MG _TPA'"),
+        ('MG "keep", _tpa', "'MG \"keep\", _TPA'"),
+        ("bg a", "'BG A'"),
+        ("MG _tpa, Speed", "'MG _TPA, Speed'"),  # (the variable keeps its case)
+        ("MG @abs[-2]", "'MG @ABS[-2]'"),
+    ],
 )
 def test_a_lower_case_command_is_explained(
     dmc: galil.Controller, text: str, suggestion: str
@@ -31,3 +40,33 @@ def test_an_upper_case_refusal_gets_no_case_hint(dmc: galil.Controller) -> None:
     with pytest.raises(galil.CommandError) as info:
         dmc.command("XQ #NOSUCH")
     assert "upper case" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("text", "missing"),
+    [
+        ("MG speed", "no command, operand or variable 'speed'"),
+        ("x=spd+1", "no command, operand or variable 'spd'"),
+        ("MG Speed+nosuch", "one of 'Speed', 'nosuch' is no command, operand or variable"),
+    ],
+)
+def test_a_lower_case_name_no_variable_has_is_said_missing_not_upper_cased(
+    dmc: galil.Controller, text: str, missing: str
+) -> None:
+    dmc.variables["Speed"] = 5
+    with pytest.raises(galil.CommandError) as info:
+        dmc.command(text)
+    message = str(info.value).splitlines()[0]
+    assert "upper case" not in message
+    assert f"{missing} on the controller" in message
+    assert "case sensitive" in message
+    assert dmc.command("MG Speed") == " 5.0000"
+
+
+def test_one_missing_name_among_operands_is_the_one_named(dmc: galil.Controller) -> None:
+    with pytest.raises(galil.CommandError) as info:
+        dmc.query_operands(["_TPA"] * 3 + ["nosuch"] + ["_TPB"] * 3)
+    message = str(info.value).splitlines()[0]
+    assert "upper case" not in message
+    assert "variable 'nosuch' on the controller" in message
+    assert "NOSUCH" not in message

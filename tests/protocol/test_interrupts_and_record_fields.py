@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from galil.errors import InvalidArgument, ProtocolError
+from galil.errors import InvalidArgument
 from galil.models import get_model
 from galil.protocol import commands as c
 from galil.protocol.interrupts import InterruptParser, decode_status, packet
@@ -63,11 +63,40 @@ def test_packets_split_anywhere_give_their_statuses_in_order(
 
 
 @pytest.mark.parametrize("data", [b"\x02\xf0\x03", b"\x01\xf0\x09", b"\x01\x05"])
-def test_a_malformed_packet_is_a_protocol_error(data: bytes) -> None:
+def test_a_malformed_packet_is_dropped_and_said(data: bytes) -> None:
     parser = InterruptParser()
-    with pytest.raises(ProtocolError):
-        parser.feed(data)
+    assert parser.feed(data) == []
+    assert len(parser.take_dropped()) == 1
+    assert parser.take_dropped() == []  # (said once)
     assert [e.status for e in parser.feed(packet([0xF2]))] == [0xF2]  # and it goes on
+
+
+@pytest.mark.parametrize("bad", [b"\x02\xf0\x03", b"\x01\xf0\x09", b"\x01\x05", b"\xaa"])
+def test_the_good_packets_around_a_malformed_one_in_one_read_are_kept(bad: bytes) -> None:
+    parser = InterruptParser()
+    got = parser.feed(packet([0xF1]) + bad + packet([0xD0, 0xF4]))
+    assert [e.status for e in got] == [0xF1, 0xD0, 0xF4]
+    assert len(parser.take_dropped()) == 1
+
+
+def test_a_packet_cut_short_does_not_swallow_the_next_one() -> None:
+    # 01 D0 (no length byte) then a good UI 3: the UI 3 was taken as the cut packet's length.
+    parser = InterruptParser()
+    assert parser.feed(b"\x01\xd0") == []
+    assert [e.number for e in parser.feed(packet([0xF3]))] == [3]
+    assert parser.take_dropped() == ["interrupt packet cut short: 01 d0"]
+    assert [e.number for e in parser.feed(packet([0xF4]))] == [4]
+
+
+def test_each_datagram_is_parsed_on_its_own() -> None:
+    parser = InterruptParser(datagram=True)
+    assert parser.feed(b"\x01\xd0\xd1") == []  # a datagram cut short: dropped at once
+    assert parser.take_dropped() == ["interrupt datagram cut short: 01 d0 d1"]
+    assert [e.status for e in parser.feed(b"\xd2\x03" + packet([0xF5]))] == [0xF5]
+    assert len(parser.take_dropped()) == 1  # (its rest, which starts no packet)
+    stream = InterruptParser()  # a stream (TCP) keeps a packet split over two reads
+    assert stream.feed(b"\x01\xd0") == []
+    assert [e.status for e in stream.feed(b"\xd1\x04")] == [0xD0, 0xD1]
 
 
 @pytest.mark.parametrize("bad", [[], [0x10], list(range(0x80, 0x91)), [True]])

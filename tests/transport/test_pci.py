@@ -14,6 +14,7 @@ from transport_peers import PtyPair
 
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.transport import open_transport
+from galil.transport.base import port_in_use
 from galil.transport.pci import PciTransport
 
 
@@ -74,3 +75,23 @@ def test_a_node_at_end_of_file_waits_out_the_read_timeout_instead_of_spinning(
         assert reads < 100
     finally:
         t.close()
+
+
+def test_a_node_another_opener_holds_is_refused_as_in_use(pty_pair: PtyPair) -> None:
+    held = open_transport(f"pci://{pty_pair.path}")
+    try:
+        with pytest.raises(GalilConnectionError, match="in use by another process") as info:
+            open_transport(f"pci://{pty_pair.path}")
+        assert port_in_use(info.value)
+        shared = open_transport(f"pci://{pty_pair.path}", exclusive=False)
+        shared.close()  # exclusive=0 opens it without asking for the lock
+        held.write(b"TPA\r")
+        assert pty_pair.recv(4) == b"TPA\r"
+    finally:
+        held.close()
+    open_transport(f"pci://{pty_pair.path}").close()
+
+
+def test_a_bad_exclusive_option_is_refused_before_the_node_is_opened() -> None:
+    with pytest.raises(InvalidArgument, match="exclusive"):
+        open_transport("pci:///dev/galilpci-nosuch", exclusive="maybe")

@@ -12,8 +12,11 @@ from pathlib import Path
 import pytest
 from transport_peers import PtyPair, PtyResponder, TcpPeer, read_until
 
+import galil
 from galil.errors import GalilConnectionError, InvalidArgument
+from galil.sim.server import SimPtyServer
 from galil.transport import open_transport
+from galil.transport.base import port_in_use
 from galil.transport.serial import SerialTransport
 
 
@@ -156,3 +159,49 @@ def test_a_port_refusing_its_settings_as_it_reads_fails_as_a_dead_link() -> None
     t = SerialTransport(_Refusing())
     with pytest.raises(GalilConnectionError, match="failed while reading"):
         t.read(0.5)
+
+
+def test_a_port_another_opener_holds_is_refused_as_in_use_and_the_holder_keeps_it(
+    pty_pair: PtyPair,
+) -> None:
+    held = open_transport(pty_pair.path)
+    try:
+        with pytest.raises(GalilConnectionError, match="in use by another process") as info:
+            open_transport(pty_pair.path)
+        assert port_in_use(info.value)
+        with pytest.raises(GalilConnectionError, match="in use by another process"):
+            open_transport(f"serial://{pty_pair.path}?baudrate=9600")
+        # the holder's replies still reach the holder
+        held.write(b"MG 5\r")
+        assert pty_pair.recv(5) == b"MG 5\r"
+        pty_pair.send(b" 5\r\n:")
+        assert read_until(held.read, b":") == b" 5\r\n:"
+    finally:
+        held.close()
+    open_transport(pty_pair.path).close()  # free again once the holder closed it
+
+
+def test_exclusive_0_shares_a_port_as_before(pty_pair: PtyPair) -> None:
+    first = open_transport(pty_pair.path, exclusive=False)
+    try:
+        second = open_transport(f"serial://{pty_pair.path}?exclusive=0")
+        assert isinstance(second, SerialTransport)
+        assert second.port.exclusive is False  # type: ignore[attr-defined]
+        second.close()
+    finally:
+        first.close()
+
+
+def test_a_missing_port_is_not_reported_as_in_use() -> None:
+    with pytest.raises(GalilConnectionError, match="cannot open serial port") as info:
+        open_transport("/dev/ttyGALILNOSUCH9")
+    assert not port_in_use(info.value)
+    assert "in use" not in str(info.value)
+
+
+def test_a_second_connect_to_a_controllers_port_is_refused_and_the_first_keeps_working() -> None:
+    with SimPtyServer() as server, galil.connect(server.path, timeout=2.0) as dmc:
+        with pytest.raises(GalilConnectionError, match="in use by another process") as info:
+            galil.connect(server.path, timeout=2.0)
+        assert port_in_use(info.value)
+        assert dmc.query_number("MG 7") == 7.0
