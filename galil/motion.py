@@ -26,6 +26,7 @@ import numpy.typing as npt
 from galil import codes, predict
 from galil.errors import (
     CommandError,
+    FixedAttributes,
     GalilConnectionError,
     GalilError,
     GalilTimeoutError,
@@ -681,7 +682,7 @@ def _poll_names(letters: str, followers: str) -> tuple[str, ...]:
     return tuple(names)
 
 
-class MoveHandle:
+class MoveHandle(FixedAttributes):
     """A move in progress on one or more axes.
 
     Attributes:
@@ -689,6 +690,8 @@ class MoveHandle:
             for HM/FE/FI (stop code 10, 9, 10 at their end).
         started_at: the controller clock (seconds) when the handle was made.
     """
+
+    _fields = ("kind", "started_at")
 
     def __init__(
         self,
@@ -699,19 +702,36 @@ class MoveHandle:
         display: Mapping[str, Display] | None = None,
         tracker: MotionTracker | None = None,
     ) -> None:
-        self._link = link
-        self._tracks = dict(tracks)
-        self._display = dict(display or {})
-        self._tracker = tracker
-        self.kind = kind
-        self.started_at = link.clock()
-        # The TM the move ran at: a TM sent once it is over (unseen) must not re-predict it.
-        self._sample_period = link.sample_period
-        self._callbacks: list[Callable[[MoveHandle], None]] = []
-        self._lock = threading.RLock()
-        self._cache: dict[str, predict.Profile] = {}
-        self._followers: dict[str, GearLink] = {}
-        self._ended: dict[str, tuple[int, int]] = {}  # axis -> (RP, SC) seen at rest since
+        # One update of the instance's dict, not twelve assignments through
+        # FixedAttributes.__setattr__: a handle is made on every plan (decision 0091).
+        vars(self).update(
+            _link=link,
+            _tracks=dict(tracks),
+            _display=dict(display or {}),
+            _tracker=tracker,
+            kind=kind,
+            started_at=link.clock(),
+            _sample_period=link.sample_period,
+            _callbacks=[],
+            _lock=threading.RLock(),
+            _cache={},
+            _followers={},
+            _ended={},
+        )
+
+    _link: CommandLink
+    _tracks: dict[str, Track]
+    _display: dict[str, Display]
+    _tracker: MotionTracker | None
+    kind: str
+    started_at: float
+    # The TM the move ran at: a TM sent once it is over (unseen) must not re-predict it.
+    _sample_period: float
+    _callbacks: list[Callable[[MoveHandle], None]]
+    _lock: threading.RLock
+    _cache: dict[str, predict.Profile]
+    _followers: dict[str, GearLink]
+    _ended: dict[str, tuple[int, int]]  # axis -> (RP, SC) seen at rest since
 
     # Until set on the handle itself, the class's values (a handle is made on every plan).
     _done = False

@@ -25,7 +25,7 @@ import weakref
 from collections.abc import Sequence
 from types import TracebackType
 
-from galil.errors import GalilConnectionError, GalilError, InvalidArgument
+from galil.errors import FixedAttributes, GalilConnectionError, GalilError, InvalidArgument
 from galil.link import CommandLink, Link, check_seconds
 from galil.models import INT32_MAX
 from galil.protocol import commands as cmds
@@ -59,7 +59,7 @@ def watchdog_routine(axes: str) -> Routine:
     return Routine(LABEL, lines, kind=RESERVED[LABEL])
 
 
-class Watchdog:
+class Watchdog(FixedAttributes):
     """The controller-side dead-man switch and the host's heartbeat. Build it with
     :meth:`galil.Controller.watchdog`.
 
@@ -68,6 +68,8 @@ class Watchdog:
         interval: seconds between heartbeats.
         thread: the program thread the routine runs on.
     """
+
+    _fields = ("timeout", "thread", "interval")
 
     def __init__(
         self, link: Link, routines: Routines, timeout: float, *, thread: int, interval: float
