@@ -76,19 +76,28 @@ def _quantity(text: str, what: str) -> Any:
         raise InvalidArgument(f"{what}: cannot read {text!r} as a number or a quantity") from exc
 
 
+def _model_with_axes(name: str) -> Any:
+    """The model ``galil plan`` plans for; one with no axes (a RIO) is refused, as the library
+    refuses a move on it."""
+    from galil.errors import InvalidArgument
+    from galil.models import get_model
+
+    model = get_model(name)
+    if not model.axes:
+        raise InvalidArgument(
+            f"{model.name} is an I/O controller with no axes: it has no motion to plan"
+        )
+    return model
+
+
 def plan_profile(args: argparse.Namespace) -> Any:
     """The profile ``galil plan`` prints: counts, or the units of ``--scale``."""
     from galil import predict
     from galil.errors import InvalidArgument, LimitError
-    from galil.models import get_model
     from galil.moves import check_int32
     from galil.units import Scale, counts_or_plain, state_in_units
 
-    model = get_model(args.model)
-    if not model.axes:  # (as the library refuses a move on it)
-        raise InvalidArgument(
-            f"{model.name} is an I/O controller with no axes: it has no motion to plan"
-        )
+    model = _model_with_axes(args.model)
     given = {  # what was typed, under the option's name
         "distance": ("the distance", args.distance),
         "SP": ("--speed", args.speed),

@@ -442,20 +442,8 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade, FixedAttributes):
         interrupts: ``UI``/``EI`` interrupts (:class:`~galil.interrupts.Interrupts`).
     """
 
-    _fields = (
-        "link",
-        "messages_room",
-        "records_room",
-        "tracker",
-        "routines",
-        "io",
-        "programs",
-        "arrays",
-        "variables",
-        "interrupts",
-        "identity",
-        "echo",
-    )
+    _fields = ("link", "messages_room", "records_room", "tracker", "routines", "io", "programs",
+               "arrays", "variables", "interrupts", "identity", "echo")  # fmt: skip
 
     def __init__(
         self,
@@ -568,21 +556,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade, FixedAttributes):
         closes the link, then the exception goes on (decision 0073). No background thread
         and no controller handle outlives it.
         """
-        self._close_after(None)
-
-    def _close_after(self, error: BaseException | None) -> None:
-        """:meth:`close`, at the end of a ``with`` block (``error``: the exception that
-        ended it, ``None``): the warning for motion it stops says why it was stopped."""
-        if self._finalizer is not None:
-            self._finalizer.detach()
-        with self._life:
-            try:
-                _stop_started(self.link, self.tracker, error)
-            finally:  # (Ctrl-C while stopping: the close still ends, then it goes on)
-                if self.link.is_open:
-                    _stop_captures(self.link, self.tracker, self._captures)
-                _close_parts(self._parts, keep_watchdogs=False)
-                self.tracker.end_watches()
+        close_after(self, None)
 
     def reconnect(self) -> None:
         """Close the link and open it again (same address and options), handshake included;
@@ -638,7 +612,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade, FixedAttributes):
         return self
 
     def __exit__(self, kind: object, error: BaseException | None, tb: object) -> None:
-        self._close_after(error)
+        close_after(self, error)
 
     def __repr__(self) -> str:
         link = self.link
@@ -965,6 +939,21 @@ def _close_parts(parts: _Parts, *, keep_watchdogs: bool, keep_streams: bool = Fa
         if not keep_streams:  # closed for good: whoever waits for a line hears so
             parts.messages.queue.close()
             parts.interrupts.queue.close()
+
+
+def close_after(c: Controller, error: BaseException | None) -> None:
+    """``c.close()``, at the end of a ``with`` block (``error``: the exception that ended it,
+    or ``None``): the warning for the motion it stops says why it was stopped."""
+    if c._finalizer is not None:
+        c._finalizer.detach()
+    with c._life:
+        try:
+            _stop_started(c.link, c.tracker, error)
+        finally:  # (Ctrl-C while stopping: the close still ends, then it goes on)
+            if c.link.is_open:
+                _stop_captures(c.link, c.tracker, c._captures)
+            _close_parts(c._parts, keep_watchdogs=False)
+            c.tracker.end_watches()
 
 
 def _stop_started(link: Link, tracker: MotionTracker, error: BaseException | None) -> None:

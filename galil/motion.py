@@ -682,42 +682,10 @@ def _poll_names(letters: str, followers: str) -> tuple[str, ...]:
     return tuple(names)
 
 
-class MoveHandle(FixedAttributes):
-    """A move in progress on one or more axes.
-
-    Attributes:
-        kind: ``"position"``, ``"jog"``, ``"schedule"``, or ``"home"``/``"edge"``/``"index"``
-            for HM/FE/FI (stop code 10, 9, 10 at their end).
-        started_at: the controller clock (seconds) when the handle was made.
-    """
+class _HandleState(FixedAttributes):
+    """What a :class:`MoveHandle` holds (its ``__init__`` fills it in one update)."""
 
     _fields = ("kind", "started_at")
-
-    def __init__(
-        self,
-        link: CommandLink,
-        tracks: Mapping[str, Track],
-        kind: str,
-        *,
-        display: Mapping[str, Display] | None = None,
-        tracker: MotionTracker | None = None,
-    ) -> None:
-        # One update of the instance's dict, not twelve assignments through
-        # FixedAttributes.__setattr__: a handle is made on every plan (decision 0091).
-        vars(self).update(
-            _link=link,
-            _tracks=dict(tracks),
-            _display=dict(display or {}),
-            _tracker=tracker,
-            kind=kind,
-            started_at=link.clock(),
-            _sample_period=link.sample_period,
-            _callbacks=[],
-            _lock=threading.RLock(),
-            _cache={},
-            _followers={},
-            _ended={},
-        )
 
     _link: CommandLink
     _tracks: dict[str, Track]
@@ -732,6 +700,31 @@ class MoveHandle(FixedAttributes):
     _cache: dict[str, predict.Profile]
     _followers: dict[str, GearLink]
     _ended: dict[str, tuple[int, int]]  # axis -> (RP, SC) seen at rest since
+
+
+class MoveHandle(_HandleState):
+    """A move in progress on one or more axes.
+
+    Attributes:
+        kind: ``"position"``, ``"jog"``, ``"schedule"``, or ``"home"``/``"edge"``/``"index"``
+            for HM/FE/FI (stop code 10, 9, 10 at their end).
+        started_at: the controller clock (seconds) when the handle was made.
+    """
+
+    def __init__(
+        self,
+        link: CommandLink,
+        tracks: Mapping[str, Track],
+        kind: str,
+        *,
+        display: Mapping[str, Display] | None = None,
+        tracker: MotionTracker | None = None,
+    ) -> None:
+        # One dict update, not twelve FixedAttributes.__setattr__ calls: a plan makes a handle.
+        vars(self).update(_link=link, _tracks=dict(tracks), _display=dict(display or {}),
+                          _tracker=tracker, kind=kind, started_at=link.clock(),
+                          _sample_period=link.sample_period, _callbacks=[],
+                          _lock=threading.RLock(), _cache={}, _followers={}, _ended={})  # fmt: skip
 
     # Until set on the handle itself, the class's values (a handle is made on every plan).
     _done = False

@@ -482,12 +482,16 @@ def test_closing_after_an_exception_warns_that_the_exception_stopped_the_motion(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
     # The block ended with an exception: stopping was the point, and wait() no advice.
-    with caplog.at_level("WARNING", logger="galil.controller"), pytest.raises(KeyError):
-        with galil.connect("sim://DMC-4040") as c:
-            c.A.jog(10_000)
-            c.sleep(0.1)
-            sim = sim_of(c)
-            raise KeyError("boom")
+    def jog_then_fail(c: galil.Controller) -> None:
+        c.A.jog(10_000)
+        c.sleep(0.1)
+        raise KeyError("boom")
+
+    with caplog.at_level("WARNING", logger="galil.controller"):
+        c = galil.connect("sim://DMC-4040")
+        sim = sim_of(c)
+        with pytest.raises(KeyError), c:
+            jog_then_fail(c)
     assert _stops_sent(sim) == ["ST A"]
     (record,) = [r for r in caplog.records if "mid-motion" in r.getMessage()]
     assert "axes A mid-motion" in record.getMessage()

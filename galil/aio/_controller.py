@@ -27,7 +27,13 @@ from galil.aio._streams import AsyncMessages, LoopQueue
 from galil.aio._worker import Worker, shielded, twin
 from galil.capture import Capture
 from galil.contour import ContourResult
-from galil.controller import Controller, CoordinatedMotion, close_collected, no_axis_attribute
+from galil.controller import (
+    Controller,
+    CoordinatedMotion,
+    close_after,
+    close_collected,
+    no_axis_attribute,
+)
 from galil.controller import connect as connect_sync
 from galil.errors import GalilError, InvalidArgument
 from galil.homing import SwitchPolarity
@@ -367,7 +373,7 @@ class AsyncController(AsyncLinkFacade):
         self.interrupts.queue.close()
         self._unsubscribe()
         try:
-            await self._worker.run_shielded(self.sync._close_after, error)
+            await self._worker.run_shielded(close_after, self.sync, error)
         finally:
             self._worker.close()
 
