@@ -11,6 +11,7 @@ from galil.discovery import Found, find
 from galil.errors import (
     CommandError,
     ContourUnderrunError,
+    GalilAttributeError,
     GalilConnectionError,
     GalilError,
     GalilTimeoutError,
@@ -51,6 +52,7 @@ __all__ = [
     "EncoderConfig",
     "EncoderType",
     "Found",
+    "GalilAttributeError",
     "GalilConnectionError",
     "GalilError",
     "GalilTimeoutError",

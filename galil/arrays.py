@@ -26,6 +26,7 @@ import numpy.typing as npt
 
 from galil.errors import (
     CommandError,
+    FixedAttributes,
     GalilError,
     InvalidArgument,
     LimitError,
@@ -138,12 +139,14 @@ def _in_read_format(link: CommandLink, command: cmds.Command, reply_bytes: int) 
     return text
 
 
-class Arrays:
+class Arrays(FixedAttributes):
     """The controller's arrays.
 
     Args:
         link: the command link.
     """
+
+    _fields = ("link",)
 
     def __init__(self, link: CommandLink) -> None:
         self.link = link
@@ -282,7 +285,7 @@ class Arrays:
         return f"<Arrays of {self.link.model.name}>"
 
 
-class Variables(MutableMapping[str, float]):
+class Variables(MutableMapping[str, float], FixedAttributes):
     """The controller's variables, a mapping of name to value: ``variables["x"]`` reads one
     (``MG x``), ``variables["x"] = 2`` sets it, ``del variables["x"]`` frees it (``DA x``);
     ``get``, ``pop``, ``in``, ``keys()``, ``items()`` and ``dict(variables)`` work as on a
@@ -297,6 +300,8 @@ class Variables(MutableMapping[str, float]):
     Args:
         link: the command link.
     """
+
+    _fields = ("link",)
 
     def __init__(self, link: CommandLink) -> None:
         self.link = link

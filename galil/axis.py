@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from galil import codes, predict
-from galil.errors import InvalidArgument, LimitError, decimal_hint
+from galil.errors import FixedAttributes, InvalidArgument, LimitError, decimal_hint
 from galil.gearing import Gearing, gear_off, gear_to
 from galil.homing import AxisHoming, Homed, Switches, read_switches
 from galil.link import CommandLink
@@ -299,12 +299,14 @@ class AxisPosition:
             self._homing.define(counts, bool(shift_limits))
 
 
-class Axis(AxisGearing, AxisPosition):
+class Axis(AxisGearing, AxisPosition, FixedAttributes):
     """One axis of a controller.
 
     Properties read the controller's operands (``_TP``, ``_SP``, ...) and return Quantities when
     the axis has a scale, counts otherwise; setters validate and quantise before sending.
     """
+
+    _fields = ("letter",)
 
     def __init__(
         self, link: CommandLink, letter: str, tracker: MotionTracker, routines: Routines

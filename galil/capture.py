@@ -28,7 +28,14 @@ import numpy as np
 import numpy.typing as npt
 
 from galil.arrays import Arrays
-from galil.errors import GalilError, GalilTimeoutError, InvalidArgument, ProtocolError, decimal_hint
+from galil.errors import (
+    FixedAttributes,
+    GalilError,
+    GalilTimeoutError,
+    InvalidArgument,
+    ProtocolError,
+    decimal_hint,
+)
 from galil.link import CommandLink, check_count, check_wait_timeout
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import read_one
@@ -104,7 +111,7 @@ def _count(count: object, seconds: object, every: int, sample_period: float) -> 
     return check_count(count, "count")
 
 
-class Capture:
+class Capture(FixedAttributes):
     """A recording on the controller: started by :meth:`start`, read by :meth:`wait` or
     :meth:`stop`. Build it with ``controller.capture(...)``.
 
@@ -123,6 +130,8 @@ class Capture:
         result: the :class:`Recording`, once uploaded.
         start_sample: the controller sample of the first value, once started.
     """
+
+    _fields = ("link", "sources", "every", "count", "arrays", "start_sample", "result")
 
     def __init__(
         self,

@@ -7,6 +7,7 @@ Errors from the library are reported as one line (``galil: ...``) with exit stat
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import re
 import sys
@@ -49,24 +50,15 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return run_demo(png=png, model=args.model, quiet=args.quiet, quick=args.quick)
 
 
-def _cmd_sim(args: argparse.Namespace) -> int:
-    from galil.sim.server import check_ports
-    from galil.sim.server import main as sim_main
+def _cmd_sim(argv: Sequence[str]) -> int:
+    """``galil sim``: the server's own parser reads the options (one usage line, in the help
+    and in every error), then the ports are checked (refused in one line) and it serves."""
+    from galil.sim.server import check_ports, options, serve
 
-    check_ports(args.tcp, args.message_port)  # refused in one line, before the server's parser
-    argv = ["--model", args.model]
-    if args.tcp:
-        argv += ["--tcp", args.tcp]
-    if args.pty:
-        argv += ["--pty"]
-    if args.baud is not None:
-        argv += ["--baud", args.baud]
-    if args.message_port is not None:
-        argv += ["--message-port", str(args.message_port)]
-    argv += ["--lag", str(args.lag)]
-    if args.limits:
-        argv += [f"--limits={args.limits}"]
-    return sim_main(argv)
+    parser = options()
+    args = parser.parse_args(argv)
+    check_ports(args.tcp, args.message_port)
+    return serve(parser, args)
 
 
 def _quantity(text: str, what: str) -> Any:
@@ -84,15 +76,28 @@ def _quantity(text: str, what: str) -> Any:
         raise InvalidArgument(f"{what}: cannot read {text!r} as a number or a quantity") from exc
 
 
+def _model_with_axes(name: str) -> Any:
+    """The model ``galil plan`` plans for; one with no axes (a RIO) is refused, as the library
+    refuses a move on it."""
+    from galil.errors import InvalidArgument
+    from galil.models import get_model
+
+    model = get_model(name)
+    if not model.axes:
+        raise InvalidArgument(
+            f"{model.name} is an I/O controller with no axes: it has no motion to plan"
+        )
+    return model
+
+
 def plan_profile(args: argparse.Namespace) -> Any:
     """The profile ``galil plan`` prints: counts, or the units of ``--scale``."""
     from galil import predict
     from galil.errors import InvalidArgument, LimitError
-    from galil.models import get_model
     from galil.moves import check_int32
     from galil.units import Scale, counts_or_plain, state_in_units
 
-    model = get_model(args.model)
+    model = _model_with_axes(args.model)
     given = {  # what was typed, under the option's name
         "distance": ("the distance", args.distance),
         "SP": ("--speed", args.speed),
@@ -348,25 +353,13 @@ def _add_offline_commands(sub: Any) -> None:
     p.add_argument("--quiet", action="store_true", help="print nothing; the status tells")
     p.set_defaults(func=_cmd_demo)
 
-    p = sub.add_parser("sim", help="serve a simulated controller over TCP or a pty")
-    p.add_argument("--model", default="DMC-4040", help="simulated model (default DMC-4040)")
-    p.add_argument("--tcp", metavar="HOST:PORT", help="e.g. 127.0.0.1:0 (0 picks a free port)")
-    p.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal")
-    p.add_argument(
-        "--baud",
-        help="with --pty: carry bytes no faster than a serial line of this rate (e.g. 115200)",
+    # Listed here; its options are the server's parser's (galil.sim.server.options), which
+    # main() hands the arguments after "sim" to.
+    sub.add_parser(
+        "sim",
+        help="serve a simulated controller over TCP (default: 127.0.0.1, a free port) or a pty",
+        add_help=False,
     )
-    p.add_argument(
-        "--message-port",
-        type=int,
-        default=None,
-        help="TCP port for unsolicited messages (0 picks one, -1 none: use CF on a handle)",
-    )
-    p.add_argument("--lag", type=float, default=0.003, help="servo lag time constant, s")
-    p.add_argument(
-        "--limits", metavar="REV,FWD", help="limit switches of every axis at these positions"
-    )
-    p.set_defaults(func=_cmd_sim)
 
     p = sub.add_parser(
         "plan",
@@ -413,9 +406,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``galil`` command; returns the exit status."""
-    args = build_parser().parse_args(argv)
+    given = list(sys.argv[1:] if argv is None else argv)
+    if given[:1] == ["sim"]:
+        run: Any = functools.partial(_cmd_sim, given[1:])
+    else:
+        args = build_parser().parse_args(given)
+        run = functools.partial(args.func, args)
     try:
-        return int(args.func(args))
+        return int(run())
     except KeyboardInterrupt:
         return 130
     except BrokenPipeError:  # `galil info ... | head`: the reader has gone, quietly

@@ -31,6 +31,7 @@ from galil.axis import Axis, check_overrides, limits_by_axis, resolve_moves, use
 from galil.capture import Capture
 from galil.contour import ContourResult, ContourStream
 from galil.errors import (
+    FixedAttributes,
     GalilConnectionError,
     GalilError,
     GalilTimeoutError,
@@ -409,7 +410,7 @@ def _stop_and_settle(link: Link, tracker: MotionTracker, wait: float) -> None:
             _ = handle.done
 
 
-class Controller(CoordinatedMotion, Resetting, LinkFacade):
+class Controller(CoordinatedMotion, Resetting, LinkFacade, FixedAttributes):
     """A connected controller. Build it with :func:`connect`.
 
     Args:
@@ -440,6 +441,9 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         variables: the controller's variables (:class:`~galil.arrays.Variables`).
         interrupts: ``UI``/``EI`` interrupts (:class:`~galil.interrupts.Interrupts`).
     """
+
+    _fields = ("link", "messages_room", "records_room", "tracker", "routines", "io", "programs",
+               "arrays", "variables", "interrupts", "identity", "echo")  # fmt: skip
 
     def __init__(
         self,
@@ -552,16 +556,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
         closes the link, then the exception goes on (decision 0073). No background thread
         and no controller handle outlives it.
         """
-        if self._finalizer is not None:
-            self._finalizer.detach()
-        with self._life:
-            try:
-                _stop_started(self.link, self.tracker)
-            finally:  # (Ctrl-C while stopping: the close still ends, then it goes on)
-                if self.link.is_open:
-                    _stop_captures(self.link, self.tracker, self._captures)
-                _close_parts(self._parts, keep_watchdogs=False)
-                self.tracker.end_watches()
+        close_after(self, None)
 
     def reconnect(self) -> None:
         """Close the link and open it again (same address and options), handshake included;
@@ -616,8 +611,8 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade):
     def __enter__(self) -> Controller:
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    def __exit__(self, kind: object, error: BaseException | None, tb: object) -> None:
+        close_after(self, error)
 
     def __repr__(self) -> str:
         link = self.link
@@ -946,9 +941,25 @@ def _close_parts(parts: _Parts, *, keep_watchdogs: bool, keep_streams: bool = Fa
             parts.interrupts.queue.close()
 
 
-def _stop_started(link: Link, tracker: MotionTracker) -> None:
+def close_after(c: Controller, error: BaseException | None) -> None:
+    """``c.close()``, at the end of a ``with`` block (``error``: the exception that ended it,
+    or ``None``): the warning for the motion it stops says why it was stopped."""
+    if c._finalizer is not None:
+        c._finalizer.detach()
+    with c._life:
+        try:
+            _stop_started(c.link, c.tracker, error)
+        finally:  # (Ctrl-C while stopping: the close still ends, then it goes on)
+            if c.link.is_open:
+                _stop_captures(c.link, c.tracker, c._captures)
+            _close_parts(c._parts, keep_watchdogs=False)
+            c.tracker.end_watches()
+
+
+def _stop_started(link: Link, tracker: MotionTracker, error: BaseException | None) -> None:
     """Closing: stop what the library started (on a link still open); a call that finds the
-    link closed from now on has nothing left to stop (``tracker.closed``)."""
+    link closed from now on has nothing left to stop (``tracker.closed``). ``error``: the
+    exception that ended the ``with`` block closing it (the warning says so)."""
     tracker.closed = True
     if not link.is_open:
         return
@@ -964,14 +975,8 @@ def _stop_started(link: Link, tracker: MotionTracker) -> None:
         tracker.closing = False
         tracker.closed = True  # (a reopen for the stops set the link up as for use)
     interrupted = interrupted or stop_interrupted
-    if running:  # (a script that left its with block without wait(): "nothing happened")
-        _LOG.warning(
-            "galil: closing the link to %s stopped axes %s mid-motion (started here, not "
-            "waited for: call wait() on a move's handle before closing or leaving the with "
-            "block)",
-            link.model_name,
-            ", ".join(running),
-        )
+    if running:
+        _warn_stopped(link, running, error)
     if failed:
         _LOG.warning(
             "galil: closing the link to %s: the stop of axes %s could not be sent; they may "
@@ -981,6 +986,26 @@ def _stop_started(link: Link, tracker: MotionTracker) -> None:
         )
     if interrupted is not None:
         raise interrupted
+
+
+def _warn_stopped(link: Link, running: str, error: BaseException | None) -> None:
+    """Closing stopped motion the library started: say why, and what to do about it."""
+    if error is not None:  # (motion never outlives an exception: stopping was the point)
+        _LOG.warning(
+            "galil: closing the link to %s stopped axes %s mid-motion: the with block ended "
+            "with an exception (%s)",
+            link.model_name,
+            ", ".join(running),
+            type(error).__name__,
+        )
+        return
+    _LOG.warning(  # (a script that left its with block without wait(): "nothing happened")
+        "galil: closing the link to %s stopped axes %s mid-motion (started here, not "
+        "waited for: call wait() on a move's handle before closing or leaving the with "
+        "block)",
+        link.model_name,
+        ", ".join(running),
+    )
 
 
 def _moving(link: Link, letters: str) -> str:

@@ -11,6 +11,9 @@ mixes in the stdlib type a caller would naturally catch::
     ├── GalilTimeoutError     (also TimeoutError) no reply in time
     │   └── QueueTimeoutError (also queue.Empty) nothing arrived in a queue in time
     ├── GalilConnectionError  (also ConnectionError) the link is closed or dead
+    ├── GalilAttributeError   (also AttributeError) an assignment to a name that is no setting
+    │                         (a misspelt one, a method, a read-only property, any public name
+    │                         of an async object); nothing is sent
     ├── InvalidArgument       (also ValueError) refused before anything was sent
     │   └── LimitError        a move or value would cross a limit (range, soft limit, CD range,
     │       │                 contour feasibility); says which value, limit, and when
@@ -26,12 +29,16 @@ did not end as planned".
 from __future__ import annotations
 
 import decimal
+import difflib
+import inspect
 import queue
 from collections.abc import Sequence
+from typing import ClassVar
 
 __all__ = [
     "CommandError",
     "ContourUnderrunError",
+    "GalilAttributeError",
     "GalilConnectionError",
     "GalilError",
     "GalilTimeoutError",
@@ -206,6 +213,106 @@ class QueueTimeoutError(GalilTimeoutError, queue.Empty):
 
 class GalilConnectionError(GalilError, ConnectionError):
     """The link could not be opened, or is closed or dead."""
+
+
+class GalilAttributeError(GalilError, AttributeError):
+    """An assignment refused before anything was sent: ``axis.soft_limit = ...`` (no such
+    setting; the nearest names are suggested), ``axis.velocity = ...`` (read-only), or any
+    public name of an async object, whose settings are ``await x.set_...(...)`` calls
+    (decision 0091). Also an :class:`AttributeError`, what a refused assignment raises in
+    Python.
+
+    Attributes:
+        attribute: the name that was assigned.
+        suggestions: the names meant, nearest first (``"set_soft_limits"`` for an async object).
+    """
+
+    def __init__(self, message: str, *, attribute: str, suggestions: Sequence[str] = ()) -> None:
+        super().__init__(message)
+        self.attribute = attribute
+        self.suggestions = tuple(suggestions)
+
+
+class FixedAttributes:
+    """A mixin for the user-facing objects (axes, controllers, rooms, handles): assigning a
+    public name that is not one of the class's settings raises :class:`GalilAttributeError`
+    instead of binding a new attribute that nothing reads (decision 0091).
+
+    What may be assigned: a name with a leading underscore; a property with a setter (or any
+    data descriptor with ``__set__``, such as a tuning setting); a name the class lists in
+    ``_fields`` (the public attributes its own methods bind). ``_awaited`` marks an async
+    object: its settings are ``await x.set_<name>(...)``, which the refusal names.
+    """
+
+    __slots__ = ()
+    _fields: ClassVar[tuple[str, ...]] = ()
+    _awaited: ClassVar[bool] = False
+    _settable: ClassVar[frozenset[str]] = frozenset()
+
+    def __init_subclass__(cls, **kwargs: object) -> None:
+        super().__init_subclass__(**kwargs)
+        names = {n for klass in cls.__mro__ for n in vars(klass).get("_fields", ())}
+        for name in dir(cls):
+            if not name.startswith("_") and _has_setter(inspect.getattr_static(cls, name)):
+                names.add(name)
+        cls._settable = frozenset(names)
+
+    def __setattr__(self, name: str, value: object) -> None:
+        if name[:1] != "_" and name not in self._settable:
+            raise assignment_refused(type(self), name)
+        object.__setattr__(self, name, value)
+
+
+def _has_setter(attribute: object) -> bool:
+    if isinstance(attribute, property):
+        return attribute.fset is not None
+    return hasattr(type(attribute), "__set__")
+
+
+def assignment_refused(cls: type[FixedAttributes], name: str) -> GalilAttributeError:
+    """Why ``name`` cannot be assigned on a ``cls`` (a :class:`FixedAttributes`), with the
+    name meant when there is one."""
+    what, setter = f"{cls.__name__}.{name}", f"set_{name}"
+    if cls._awaited and hasattr(cls, setter):
+        return GalilAttributeError(
+            f"{what} cannot be assigned, an async object's settings are awaited: use "
+            f"`await x.{setter}(...)`; nothing was set",
+            attribute=name,
+            suggestions=(setter,),
+        )
+    if hasattr(cls, name):
+        known = inspect.getattr_static(cls, name)
+        kind = "read-only" if isinstance(known, property) else "not a setting"
+        how = f": use `{'await ' if cls._awaited else ''}x.{setter}(...)`"
+        return GalilAttributeError(
+            f"{what} is {kind}{how if hasattr(cls, setter) else ''}; nothing was set",
+            attribute=name,
+            suggestions=(setter,) if hasattr(cls, setter) else (),
+        )
+    meant = _nearest(cls, name)
+    hint = f" (did you mean {' or '.join(repr(m) for m in meant)}?)" if meant else ""
+    return GalilAttributeError(
+        f"{cls.__name__} has no setting {name!r}{hint}; nothing was set",
+        attribute=name,
+        suggestions=meant,
+    )
+
+
+def _nearest(cls: type[FixedAttributes], name: str) -> list[str]:
+    """The settings ``name`` may have meant (``set_`` methods of an async object): the same
+    name in another case, one it extends or shortens (``accel`` for ``acceleration``), then
+    the closest spellings (:func:`difflib.get_close_matches`); three at most."""
+    pool = {n: n for n in cls._settable}
+    setters = (n for n in dir(cls) if n.startswith("set_"))
+    pool.update({n[4:]: n for n in setters} if cls._awaited else {})
+    low = name.lower()
+    lowered = {n.lower(): n for n in sorted(pool)}
+    near = [n for n in lowered if n == low]
+    near += [n for n in lowered if n not in near and len(n) >= 3 and (
+        low.startswith(n) or n.startswith(low))]  # fmt: skip
+    close = difflib.get_close_matches(low, list(lowered), n=3, cutoff=0.6)
+    near += [n for n in close if n not in near]
+    return [pool[lowered[n]] for n in near[:3]]
 
 
 class InvalidArgument(GalilError, ValueError):  # noqa: N818 (name fixed by the public API)

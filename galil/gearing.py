@@ -25,7 +25,7 @@ import logging
 from collections.abc import Callable, Sequence
 
 from galil import predict
-from galil.errors import CommandError, InvalidArgument, LimitError, decimal_hint
+from galil.errors import CommandError, FixedAttributes, InvalidArgument, LimitError, decimal_hint
 from galil.link import CommandLink
 from galil.motion import (
     Display,
@@ -63,13 +63,15 @@ def _ratio(link: CommandLink, ratio: object) -> float:
     return predict.quantise_ratio(sent, link.model)
 
 
-class Gearing:
+class Gearing(FixedAttributes):
     """A follower geared to its master (from :meth:`galil.Axis.gear_to`).
 
     Attributes:
         follower: the geared axis.
         master: the master axis (its commanded position), or ``"S"``.
     """
+
+    _fields = ("follower", "master")
 
     def __init__(self, link: CommandLink, tracker: MotionTracker, gear: GearLink) -> None:
         self._link = link

@@ -24,6 +24,7 @@ import threading
 from collections.abc import Callable
 
 from galil.errors import (
+    FixedAttributes,
     GalilConnectionError,
     GalilError,
     GalilTimeoutError,
@@ -52,7 +53,7 @@ class InterruptQueue(BoundedQueue[Interrupt]):
         super().__init__(maxlen, "interrupt")
 
 
-class Interrupts:
+class Interrupts(FixedAttributes):
     """The interrupts of one controller.
 
     Args:
@@ -63,6 +64,8 @@ class Interrupts:
         queue: the interrupts received, oldest first.
         mask: the ``EI`` mask sent last (``None`` while not enabled).
     """
+
+    _fields = ("link", "queue", "mask")
 
     def __init__(self, link: Link, *, maxlen: int = 1000) -> None:
         self.link = link

@@ -30,6 +30,7 @@ from typing import Any, Protocol, overload
 import numpy as np
 
 from galil.errors import (
+    FixedAttributes,
     GalilConnectionError,
     GalilError,
     GalilTimeoutError,
@@ -116,8 +117,10 @@ def _level(value: object) -> bool:
     raise InvalidArgument(f"an output is True or False, not {value!r}")
 
 
-class _Channels:
+class _Channels(FixedAttributes):
     """Channels ``first .. first + count - 1`` of one kind, indexed as the controller does."""
+
+    _fields = ("first", "count")
 
     kind = "channel"
 
@@ -278,7 +281,7 @@ class AnalogOutputs(_Channels):
         self._link.command_line([cmds.ao(self._check(n), v, model=self._link.model)])
 
 
-class IO:
+class IO(FixedAttributes):
     """The controller's digital and analog I/O (``controller.io``)."""
 
     def __init__(self, link: CommandLink, messages: MessageSource, routines: Routines) -> None:

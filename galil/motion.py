@@ -26,6 +26,7 @@ import numpy.typing as npt
 from galil import codes, predict
 from galil.errors import (
     CommandError,
+    FixedAttributes,
     GalilConnectionError,
     GalilError,
     GalilTimeoutError,
@@ -683,7 +684,27 @@ def _poll_names(letters: str, followers: str) -> tuple[str, ...]:
     return tuple(names)
 
 
-class MoveHandle:
+class _HandleState(FixedAttributes):
+    """What a :class:`MoveHandle` holds (its ``__init__`` fills it in one update)."""
+
+    _fields = ("kind", "started_at")
+
+    _link: CommandLink
+    _tracks: dict[str, Track]
+    _display: dict[str, Display]
+    _tracker: MotionTracker | None
+    kind: str
+    started_at: float
+    # The TM the move ran at: a TM sent once it is over (unseen) must not re-predict it.
+    _sample_period: float
+    _callbacks: list[Callable[[MoveHandle], None]]
+    _lock: threading.RLock
+    _cache: dict[str, predict.Profile]
+    _followers: dict[str, GearLink]
+    _ended: dict[str, tuple[int, int]]  # axis -> (RP, SC) seen at rest since
+
+
+class MoveHandle(_HandleState):
     """A move in progress on one or more axes.
 
     Attributes:
@@ -701,19 +722,11 @@ class MoveHandle:
         display: Mapping[str, Display] | None = None,
         tracker: MotionTracker | None = None,
     ) -> None:
-        self._link = link
-        self._tracks = dict(tracks)
-        self._display = dict(display or {})
-        self._tracker = tracker
-        self.kind = kind
-        self.started_at = link.clock()
-        # The TM the move ran at: a TM sent once it is over (unseen) must not re-predict it.
-        self._sample_period = link.sample_period
-        self._callbacks: list[Callable[[MoveHandle], None]] = []
-        self._lock = threading.RLock()
-        self._cache: dict[str, predict.Profile] = {}
-        self._followers: dict[str, GearLink] = {}
-        self._ended: dict[str, tuple[int, int]] = {}  # axis -> (RP, SC) seen at rest since
+        # One dict update, not twelve FixedAttributes.__setattr__ calls: a plan makes a handle.
+        vars(self).update(_link=link, _tracks=dict(tracks), _display=dict(display or {}),
+                          _tracker=tracker, kind=kind, started_at=link.clock(),
+                          _sample_period=link.sample_period, _callbacks=[],
+                          _lock=threading.RLock(), _cache={}, _followers={}, _ended={})  # fmt: skip
 
     # Until set on the handle itself, the class's values (a handle is made on every plan).
     _done = False

@@ -32,7 +32,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from galil.codes import tc_text
-from galil.errors import CommandError, GalilTimeoutError, InvalidArgument, ProgramError
+from galil.errors import (
+    CommandError,
+    FixedAttributes,
+    GalilTimeoutError,
+    InvalidArgument,
+    ProgramError,
+)
 from galil.link import CommandLink, check_flag, check_seconds
 from galil.motion import MotionTracker
 from galil.protocol import commands as cmds
@@ -147,7 +153,7 @@ def _looks_like_path(text: str) -> bool:
     return _PATHLIKE.search(text.strip()) is not None and not _PROGRAM_TEXT.search(text)
 
 
-class Programs:
+class Programs(FixedAttributes):
     """The user's program, its threads, and burning it to flash.
 
     Args:
@@ -155,6 +161,8 @@ class Programs:
         routines: the library's routines (their block is kept by every download).
         tracker: the motion the library started (``burn`` is refused unsent during it).
     """
+
+    _fields = ("link", "routines")
 
     def __init__(
         self, link: CommandLink, routines: Routines, tracker: MotionTracker | None = None

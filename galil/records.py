@@ -22,6 +22,7 @@ import numpy as np
 
 from galil.errors import (
     CommandError,
+    FixedAttributes,
     GalilConnectionError,
     GalilError,
     InvalidArgument,
@@ -63,7 +64,7 @@ RecordCallback = Callable[[np.void], None]
 Layout = tuple[int, int, int, int]
 
 
-class RecordStream:
+class RecordStream(FixedAttributes):
     """Data records at a fixed period, decoded, oldest first. Build it with
     :meth:`galil.Controller.records`.
 
@@ -86,6 +87,8 @@ class RecordStream:
         missed: records missing between the ones received.
         gaps: ``(time, missed)`` for each gap: the record after it, and how many were missing.
     """
+
+    _fields = ("period", "method", "dropped", "missed", "gaps")
 
     def __init__(
         self,

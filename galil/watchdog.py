@@ -26,7 +26,7 @@ import weakref
 from collections.abc import Sequence
 from types import TracebackType
 
-from galil.errors import GalilConnectionError, GalilError, InvalidArgument
+from galil.errors import FixedAttributes, GalilConnectionError, GalilError, InvalidArgument
 from galil.link import CommandLink, Link, check_seconds
 from galil.models import INT32_MAX
 from galil.protocol import commands as cmds
@@ -60,7 +60,7 @@ def watchdog_routine(axes: str) -> Routine:
     return Routine(LABEL, lines, kind=RESERVED[LABEL])
 
 
-class Watchdog:
+class Watchdog(FixedAttributes):
     """The controller-side dead-man switch and the host's heartbeat. Build it with
     :meth:`galil.Controller.watchdog`.
 
@@ -70,6 +70,8 @@ class Watchdog:
         thread: the program thread the routine runs on (``None`` given: the last one no
             other routine of this session's library runs on, decision 0086).
     """
+
+    _fields = ("timeout", "thread", "interval")
 
     def __init__(
         self,

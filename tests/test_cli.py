@@ -382,3 +382,41 @@ def test_dl_refuses_a_program_bigger_than_the_models_memory(
     assert capsys.readouterr().out == (
         "not sent: the program has 2002 lines; DMC-4040 holds 2000\n"
     )
+
+
+def _usage(text: str) -> str:
+    """The usage block at the top of an argparse help or error text."""
+    return text.split("\n\n")[0].split("\ngalil sim: error:")[0].strip()
+
+
+def test_sim_help_and_its_errors_show_one_usage_line(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as helped:
+        cli.main(["sim", "--help"])
+    assert helped.value.code == 0
+    help_text = capsys.readouterr().out
+    with pytest.raises(SystemExit) as refused:
+        cli.main(["sim", "--bogus"])
+    assert refused.value.code == 2
+    error = capsys.readouterr().err
+    assert "galil sim: error: unrecognized arguments: --bogus" in error
+    assert _usage(help_text) == _usage(error)
+    assert "[--tcp HOST:PORT | --pty]" in _usage(help_text)  # one or the other
+
+
+def test_sim_help_says_where_it_serves_without_tcp_or_pty(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    with pytest.raises(SystemExit):
+        cli.main(["sim", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "With neither --tcp nor --pty it serves TCP on 127.0.0.1 on a free port" in text
+    for action in sim_server.options()._actions:
+        assert action.help, f"galil sim: {action.option_strings} has no help"
+
+
+def test_plan_refuses_a_model_with_no_axes(capsys: pytest.CaptureFixture[str]) -> None:
+    # As the library's RIO refuses a move: an I/O unit has no profile to print.
+    assert cli.main(["plan", "1000", "--model", "RIO-47100"]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err == "galil: RIO-47100 is an I/O controller with no axes: it has no motion to plan\n"

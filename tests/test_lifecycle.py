@@ -478,6 +478,43 @@ def test_closing_on_motion_nobody_waited_for_warns_naming_the_axes(
     assert "wait()" in record.getMessage()
 
 
+def test_closing_after_an_exception_warns_that_the_exception_stopped_the_motion(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # The block ended with an exception: stopping was the point, and wait() no advice.
+    def jog_then_fail(c: galil.Controller) -> None:
+        c.A.jog(10_000)
+        c.sleep(0.1)
+        raise KeyError("boom")
+
+    with caplog.at_level("WARNING", logger="galil.controller"):
+        c = galil.connect("sim://DMC-4040")
+        sim = sim_of(c)
+        with pytest.raises(KeyError), c:
+            jog_then_fail(c)
+    assert _stops_sent(sim) == ["ST A"]
+    (record,) = [r for r in caplog.records if "mid-motion" in r.getMessage()]
+    assert "axes A mid-motion" in record.getMessage()
+    assert "the with block ended with an exception (KeyError)" in record.getMessage()
+    assert "wait()" not in record.getMessage()
+
+
+def test_leaving_an_async_with_block_on_an_exception_warns_that_it_stopped_the_motion(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    async def main() -> None:
+        async with await galil.aio.connect("sim://DMC-4040") as c:
+            await c.A.jog(10_000)
+            await c.sleep(0.1)
+            raise KeyError("boom")
+
+    with caplog.at_level("WARNING", logger="galil.controller"), pytest.raises(KeyError):
+        asyncio.run(main())
+    (record,) = [r for r in caplog.records if "mid-motion" in r.getMessage()]
+    assert "the with block ended with an exception (KeyError)" in record.getMessage()
+    assert "wait()" not in record.getMessage()
+
+
 def test_closing_while_a_stopped_move_decelerates_warns_only_of_the_unstopped_axes(
     caplog: pytest.LogCaptureFixture,
 ) -> None:

@@ -20,7 +20,13 @@ dmc.interrupts``, ``await dmc.capture([...])``, ``await dmc.watchdog(0.5)``, ``a
 dmc.vector_move("AB", [Line(...), Arc(...)], speed=...)``, ``await dmc.A.home()``,
 ``await dmc.A.kp()``. A sync property that reads the controller becomes a method, its
 setter a ``set_`` method (``await x.set_speed(v)``); an item assignment a ``set`` call
-(``await dmc.io.outputs.set(2, True)``).
+(``await dmc.io.outputs.set(2, True)``). Assigning a public name of an async object (the sync
+idiom ``x.speed = v``) raises :class:`~galil.errors.GalilAttributeError` naming the ``set_``
+method, and sets nothing (decision 0091).
+
+No event loop is bound at connect: messages, interrupts and record streams are delivered to
+the loop that reads them, and ``subscribe`` calls back on the loop that subscribed, so a
+controller connected in one ``asyncio.run`` may be used in the next.
 """
 
 from __future__ import annotations

@@ -27,7 +27,13 @@ from galil.aio._streams import AsyncMessages, LoopQueue
 from galil.aio._worker import Worker, shielded, twin
 from galil.capture import Capture
 from galil.contour import ContourResult
-from galil.controller import Controller, CoordinatedMotion, close_collected, no_axis_attribute
+from galil.controller import (
+    Controller,
+    CoordinatedMotion,
+    close_after,
+    close_collected,
+    no_axis_attribute,
+)
 from galil.controller import connect as connect_sync
 from galil.errors import GalilError, InvalidArgument
 from galil.homing import SwitchPolarity
@@ -131,23 +137,47 @@ class AsyncController(AsyncLinkFacade):
         self,
         sync: Controller,
         worker: Worker,
-        loop: asyncio.AbstractEventLoop,
         messages: AsyncMessages,
         interrupts: LoopQueue[Interrupt],
         unsubscribe: Callable[[], None],
     ) -> None:
-        super().__init__(sync, worker, loop, messages)
+        super().__init__(sync, worker, messages)
         self._axes: dict[str, AsyncAxis] | None = None
         self._unsubscribe = unsubscribe
         link = sync.link
-        self.io = AsyncIO(sync.io, worker, link)
-        self.programs = AsyncPrograms(sync.programs, worker, link)
-        self.arrays = AsyncArrays(sync.arrays, worker)
-        self.variables = AsyncVariables(sync.variables, worker)
-        self.interrupts = AsyncInterrupts(sync.interrupts, worker, loop, interrupts)
+        self._io = AsyncIO(sync.io, worker, link)
+        self._programs = AsyncPrograms(sync.programs, worker, link)
+        self._arrays = AsyncArrays(sync.arrays, worker)
+        self._variables = AsyncVariables(sync.variables, worker)
+        self._interrupts = AsyncInterrupts(sync.interrupts, worker, interrupts)
         # Dropped unclosed: a ResourceWarning, and its link and threads are closed.
         self._finalizer = weakref.finalize(self, _collected, sync, worker, repr(self))
         self._finalizer.atexit = False
+
+    @property
+    def io(self) -> AsyncIO:
+        """Digital and analog I/O."""
+        return self._io
+
+    @property
+    def programs(self) -> AsyncPrograms:
+        """The user's program and threads."""
+        return self._programs
+
+    @property
+    def arrays(self) -> AsyncArrays:
+        """The controller's arrays."""
+        return self._arrays
+
+    @property
+    def variables(self) -> AsyncVariables:
+        """The controller's variables."""
+        return self._variables
+
+    @property
+    def interrupts(self) -> AsyncInterrupts:
+        """``UI``/``EI`` interrupts."""
+        return self._interrupts
 
     @property
     def closed(self) -> bool:
@@ -333,6 +363,9 @@ class AsyncController(AsyncLinkFacade):
     async def aclose(self) -> None:
         """Close the sync controller (restoring what connect changed; watchdogs, record
         streams and interrupts stop) and end the worker's threads; idempotent."""
+        await self._aclose(None)
+
+    async def _aclose(self, error: BaseException | None) -> None:
         if self._worker.closed:
             return
         self._finalizer.detach()
@@ -340,15 +373,15 @@ class AsyncController(AsyncLinkFacade):
         self.interrupts.queue.close()
         self._unsubscribe()
         try:
-            await self._worker.run_shielded(self.sync.close)
+            await self._worker.run_shielded(close_after, self.sync, error)
         finally:
             self._worker.close()
 
     async def __aenter__(self) -> AsyncController:
         return self
 
-    async def __aexit__(self, *exc: object) -> None:
-        await self.aclose()
+    async def __aexit__(self, kind: object, error: BaseException | None, tb: object) -> None:
+        await self._aclose(error)
 
     def __repr__(self) -> str:
         return f"<AsyncController of {self.sync!r}>"
@@ -391,9 +424,8 @@ async def connect(address: str | Transport, *, threads: int = 4, **options: Any)
     if isinstance(threads, bool) or not isinstance(threads, int) or not 1 <= threads <= 64:
         raise InvalidArgument(f"threads must be an integer 1..64, not {threads!r}")
     maxlen = check_count(options.get("max_messages", 1000), "max_messages")
-    loop = asyncio.get_running_loop()
-    messages = AsyncMessages(loop, maxlen)
-    interrupts: LoopQueue[Interrupt] = LoopQueue(loop, 1000, "interrupt")
+    messages = AsyncMessages(maxlen)
+    interrupts: LoopQueue[Interrupt] = LoopQueue(1000, "interrupt")
     worker = Worker(str(next(_names)), threads)
     future = worker.submit(_open, address, options, messages.deliver, interrupts.deliver)
     try:
@@ -414,7 +446,7 @@ async def connect(address: str | Transport, *, threads: int = 4, **options: Any)
     messages.gone = sync.messages_room.queue.ended
     interrupts.gone = sync.interrupts.queue.ended
     messages.revive = interrupts.revive = revive
-    return AsyncController(sync, worker, loop, messages, interrupts, unsubscribe)
+    return AsyncController(sync, worker, messages, interrupts, unsubscribe)
 
 
 def _close_if_opened(

@@ -32,11 +32,9 @@ class AsyncLinkFacade(MotionRoom[Controller]):
         self,
         sync: Controller,
         worker: Worker,
-        loop: asyncio.AbstractEventLoop,
         messages: AsyncMessages,
     ) -> None:
         super().__init__(sync, worker, sync.link, sync.tracker)
-        self._loop = loop
         self._messages = messages
 
     # -- what needs no I/O --------------------------------------------------------------------
@@ -115,11 +113,11 @@ class AsyncLinkFacade(MotionRoom[Controller]):
         return self._messages
 
     async def subscribe(self, callback: Callable[[str], None]) -> Callable[[], None]:
-        """Call ``callback(line)`` on this event loop for each unsolicited line; returns a
-        function that unsubscribes."""
+        """Call ``callback(line)`` on this event loop (the one awaiting ``subscribe``) for
+        each unsolicited line; returns a function that unsubscribes."""
         if not callable(callback):
             raise InvalidArgument(f"callback must be callable, not {callback!r}")
-        loop = self._loop
+        loop = asyncio.get_running_loop()
 
         def deliver(line: str) -> None:
             if not loop.is_closed():

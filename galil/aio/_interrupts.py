@@ -1,7 +1,8 @@
 """Interrupts, awaited: the twin of ``controller.interrupts`` (:mod:`galil.interrupts`).
 
-The sync room's reader thread hands every interrupt to the loop (``call_soon_threadsafe``):
-no thread waits for them, and they come as an async iterator::
+The sync room's reader thread hands every interrupt to the loop that reads it
+(``call_soon_threadsafe``; any loop, decision 0091): no thread waits for them, and they come
+as an async iterator::
 
     await dmc.interrupts.enable(axes="A")
     async for interrupt in dmc.interrupts:    # "UI 3", "axis A done" ...
@@ -34,12 +35,15 @@ class AsyncInterrupts(Room[Interrupts]):
         self,
         sync: Interrupts,
         worker: Worker,
-        loop: asyncio.AbstractEventLoop,
         queue: LoopQueue[Interrupt],
     ) -> None:
         super().__init__(sync, worker)
-        self._loop = loop
-        self.queue = queue
+        self._queue = queue
+
+    @property
+    def queue(self) -> LoopQueue[Interrupt]:
+        """The interrupts received and not yet read, oldest first."""
+        return self._queue
 
     enable = twin(Interrupts.enable)
     disable = twin(Interrupts.disable)
@@ -65,11 +69,12 @@ class AsyncInterrupts(Room[Interrupts]):
         return await self.queue.get(timeout)
 
     async def subscribe(self, callback: Callable[[Interrupt], None]) -> Callable[[], None]:
-        """Call ``callback(interrupt)`` on this event loop for each interrupt; returns a
-        function that unsubscribes. Interrupts arrive only once :meth:`enable` was called."""
+        """Call ``callback(interrupt)`` on this event loop (the one awaiting ``subscribe``)
+        for each interrupt; returns a function that unsubscribes. Interrupts arrive only once
+        :meth:`enable` was called."""
         if not callable(callback):
             raise InvalidArgument(f"callback must be callable, not {callback!r}")
-        loop = self._loop
+        loop = asyncio.get_running_loop()
 
         def deliver(interrupt: Interrupt) -> None:
             if not loop.is_closed():

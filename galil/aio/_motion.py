@@ -30,7 +30,7 @@ from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
 
 from galil import predict
 from galil.aio._worker import Room, Worker
-from galil.errors import GalilError, GalilTimeoutError
+from galil.errors import FixedAttributes, GalilError, GalilTimeoutError
 from galil.link import Link, check_callable, check_flag, check_wait_timeout
 from galil.motion import (
     MAX_POLL,
@@ -168,7 +168,7 @@ class _Poll:
             self.link.pause(seconds)
 
 
-class AsyncMoveHandle:
+class AsyncMoveHandle(FixedAttributes):
     """A move in progress, awaited from a coroutine: ``result = await handle``.
 
     The prediction is the sync handle's (:attr:`sync`): :attr:`profile`, :attr:`duration`
@@ -178,12 +178,19 @@ class AsyncMoveHandle:
         sync: the :class:`~galil.motion.MoveHandle` this one polls.
     """
 
+    _awaited = True
+
     def __init__(self, handle: MoveHandle, worker: Worker, link: Link) -> None:
-        self.sync = handle
+        self._sync = handle
         self._worker = worker
         self._link = link
         self._callbacks: list[Callable[[AsyncMoveHandle], None]] = []
         self._watcher: asyncio.Task[None] | None = None
+
+    @property
+    def sync(self) -> MoveHandle:
+        """The :class:`~galil.motion.MoveHandle` this one polls."""
+        return self._sync
 
     # -- the prediction (computed by the sync handle) ----------------------------------------
     @property

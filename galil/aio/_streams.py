@@ -1,8 +1,9 @@
 """Unsolicited messages, interrupts and data records as async iterators.
 
 Messages and interrupts arrive through the sync controller's subscriptions (a reader thread
-calls back) and are handed to the loop with ``call_soon_threadsafe``: no thread waits for
-them (:class:`LoopQueue`). Records stay
+calls back) and wait in a :class:`LoopQueue`; a reader waiting on any event loop is woken
+with that loop's ``call_soon_threadsafe``: no thread waits for them, and no loop is bound at
+connect (decision 0091). Records stay
 in the sync :class:`~galil.records.RecordStream` (its queue, its ``dropped`` count, its
 errors) and are taken from it in batches on a worker thread, in slices of at most
 :data:`SLICE` seconds so a cancelled reader frees its thread soon. One such call at a time
@@ -13,15 +14,18 @@ it (its records are kept, in order) rather than starting a second one beside it.
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
+import contextlib
 import math
+import threading
 from collections import deque
 from collections.abc import Awaitable, Callable
 from typing import Any, Generic, TypeVar
 
 import numpy as np
 
-from galil.aio._worker import Worker
-from galil.errors import GalilConnectionError, InvalidArgument, QueueTimeoutError
+from galil.aio._worker import Worker, shielded
+from galil.errors import FixedAttributes, GalilConnectionError, InvalidArgument, QueueTimeoutError
 from galil.link import check_count, check_wait_timeout
 from galil.queues import CHECK
 from galil.records import TAKE_MAX, RecordStream
@@ -43,27 +47,32 @@ def _wait_seconds(timeout: object) -> float:
     return math.inf if seconds is None else seconds
 
 
-class LoopQueue(Generic[T]):
-    """Items handed over from a thread of the sync core to one event loop, oldest first:
-    ``async for item in queue`` or ``await queue.get(timeout)``.
+class LoopQueue(FixedAttributes, Generic[T]):
+    """Items handed over from a thread of the sync core to the event loop that reads them,
+    oldest first: ``async for item in queue`` or ``await queue.get(timeout)``.
 
-    Bounded: when nobody reads, the oldest items drop (``dropped`` counts them).
+    No loop is bound: the items wait here (thread-safe), and a reader waiting on any loop is
+    woken on its own loop, so a controller connected in one ``asyncio.run`` is read in the
+    next (decision 0091). Bounded: when nobody reads, the oldest items drop (``dropped``
+    counts them).
 
     Args:
-        loop: the loop the items are for.
         maxlen: items kept before the oldest drop.
         what: what an item is, for the :class:`~galil.errors.QueueTimeoutError` text
             (``"unsolicited message"``).
     """
 
-    def __init__(self, loop: asyncio.AbstractEventLoop, maxlen: int, what: str = "item") -> None:
-        self._loop = loop
+    _fields = ("gone", "revive")
+    _awaited = True
+
+    def __init__(self, maxlen: int, what: str = "item") -> None:
         self._items: deque[T] = deque()
+        self._lock = threading.Lock()  # the items, the count and the readers waiting
+        self._waiting: set[tuple[asyncio.AbstractEventLoop, asyncio.Event]] = set()
         self._maxlen = maxlen
         self._what = what
-        self._wakeup: asyncio.Event = asyncio.Event()
         self._closed = False
-        self.dropped = 0
+        self._dropped = 0
         #: Why none will come from the sync core (its queue's :meth:`~galil.queues.
         #: BoundedQueue.ended`: the link died), ``""`` while they may; a wait looks every
         #: :data:`~galil.queues.CHECK` seconds.
@@ -72,10 +81,30 @@ class LoopQueue(Generic[T]):
         #: :meth:`get` that finds none will come; says whether it did.
         self.revive: Callable[[], Awaitable[bool]] | None = None
 
+    @property
+    def dropped(self) -> int:
+        """Items dropped from a full queue (the oldest first)."""
+        return self._dropped
+
     def deliver(self, item: T) -> None:
         """Hand an item over from any thread (a subscriber of the sync core)."""
-        if not self._loop.is_closed():
-            self._loop.call_soon_threadsafe(self._put, item)
+        self._put(item)
+
+    def _put(self, item: T) -> None:
+        with self._lock:
+            if len(self._items) >= self._maxlen:
+                self._items.popleft()
+                self._dropped += 1
+            self._items.append(item)
+        self._wake()
+
+    def _wake(self) -> None:
+        """Wake every reader waiting, each on its own loop."""
+        with self._lock:
+            waiting = list(self._waiting)
+        for loop, event in waiting:
+            with contextlib.suppress(RuntimeError):  # its loop closed meanwhile
+                loop.call_soon_threadsafe(event.set)
 
     def _ended(self) -> str:
         gone = self.gone
@@ -90,15 +119,9 @@ class LoopQueue(Generic[T]):
         if why:
             raise GalilConnectionError(f"no {self._what} will come: {why}")
 
-    def _put(self, item: T) -> None:
-        if len(self._items) >= self._maxlen:
-            self._items.popleft()
-            self.dropped += 1
-        self._items.append(item)
-        self._wakeup.set()
-
     async def get(self, timeout: float | None = None) -> T:
-        """The oldest item, waiting up to ``timeout`` seconds (``None``: for ever).
+        """The oldest item, waiting up to ``timeout`` seconds (``None``: for ever), on the
+        loop that awaits it.
 
         Raises:
             InvalidArgument: a timeout the sync queue refuses too (not ``None`` or a finite
@@ -112,7 +135,10 @@ class LoopQueue(Generic[T]):
         wait = _wait_seconds(timeout)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + wait
-        while not self._items:
+        while True:
+            with self._lock:
+                if self._items:
+                    return self._items.popleft()
             if self._closed:
                 raise GalilConnectionError("the async controller is closed")
             if self._ended():
@@ -121,37 +147,50 @@ class LoopQueue(Generic[T]):
             left = deadline - loop.time()
             if left <= 0:
                 raise QueueTimeoutError(f"no {self._what} within {timeout} s")
-            self._wakeup.clear()
-            # Not asyncio.wait_for: before Python 3.12 it swallows a cancellation that comes
-            # as the item does, and returns (decision 0027). The timer only wakes the loop
-            # (in time for a look at the source, when it has one).
             if self.gone is not None:
                 left = min(left, CHECK)
-            timer = None if math.isinf(left) else loop.call_later(left, self._wakeup.set)
-            try:
-                await self._wakeup.wait()
-            finally:
-                if timer is not None:
-                    timer.cancel()
-        return self._items.popleft()
+            await self._sleep(loop, left)
+
+    async def _sleep(self, loop: asyncio.AbstractEventLoop, left: float) -> None:
+        """Wait on ``loop`` until an item comes, the queue closes or ``left`` seconds pass.
+
+        Not asyncio.wait_for: before Python 3.12 it swallows a cancellation that comes as the
+        item does, and returns (decision 0027). The timer only wakes the loop (in time for a
+        look at the source, when it has one)."""
+        waiter = (loop, asyncio.Event())
+        with self._lock:
+            if self._items:
+                return
+            self._waiting.add(waiter)
+        timer = None if math.isinf(left) else loop.call_later(left, waiter[1].set)
+        try:
+            if not self._closed:
+                await waiter[1].wait()
+        finally:
+            with self._lock:
+                self._waiting.discard(waiter)
+            if timer is not None:
+                timer.cancel()
 
     def get_nowait(self) -> T:
         """The oldest item at once; :class:`~galil.errors.QueueTimeoutError` (also a
         ``queue.Empty``) when there is none."""
-        if not self._items:
-            raise QueueTimeoutError(f"no {self._what} waiting")
-        return self._items.popleft()
+        with self._lock:
+            if self._items:
+                return self._items.popleft()
+        raise QueueTimeoutError(f"no {self._what} waiting")
 
     def drain(self) -> list[T]:
         """Remove and return every waiting item."""
-        out = list(self._items)
-        self._items.clear()
+        with self._lock:
+            out = list(self._items)
+            self._items.clear()
         return out
 
     def close(self) -> None:
         """End the iteration of every reader (the controller is closing)."""
         self._closed = True
-        self._wakeup.set()
+        self._wake()
 
     def __aiter__(self) -> LoopQueue[T]:
         return self
@@ -173,13 +212,13 @@ class LoopQueue(Generic[T]):
 
 class AsyncMessages(LoopQueue[str]):
     """Unsolicited lines (program ``MG`` output ...), oldest first: ``async for line in
-    controller.messages`` or ``await controller.messages.get(timeout)``.
+    controller.messages`` or ``await controller.messages.get(timeout)``, on any event loop.
 
     Bounded: when nobody reads, the oldest lines drop (``dropped`` counts them).
     """
 
-    def __init__(self, loop: asyncio.AbstractEventLoop, maxlen: int) -> None:
-        super().__init__(loop, maxlen, "unsolicited message")
+    def __init__(self, maxlen: int) -> None:
+        super().__init__(maxlen, "unsolicited message")
 
 
 def _take(stream: RecordStream, wait: float, limit: int) -> list[np.void]:
@@ -196,7 +235,7 @@ def _take(stream: RecordStream, wait: float, limit: int) -> list[np.void]:
     return out
 
 
-class AsyncRecordStream:
+class AsyncRecordStream(FixedAttributes):
     """Data records every ``period`` samples, decoded: ``async for rec in stream``.
 
     Build it with ``await controller.records(period)``; close it (or use ``async with``) to
@@ -207,11 +246,19 @@ class AsyncRecordStream:
     controller's clock.
     """
 
+    _awaited = True
+
     def __init__(self, stream: RecordStream, worker: Worker) -> None:
-        self.sync = stream
+        self._sync = stream
         self._worker = worker
         self._ready: deque[np.void] = deque()
-        self._pending: asyncio.Future[list[np.void]] | None = None
+        # The worker call in flight: a thread's future, bound to no event loop.
+        self._pending: concurrent.futures.Future[list[np.void]] | None = None
+
+    @property
+    def sync(self) -> RecordStream:
+        """The sync :class:`~galil.records.RecordStream` this one reads."""
+        return self._sync
 
     @property
     def period(self) -> int:
@@ -270,28 +317,31 @@ class AsyncRecordStream:
 
         return self.sync.subscribe(deliver)
 
-    def _fetch(self, wait: float, limit: int) -> asyncio.Future[list[np.void]]:
+    def _fetch(self, wait: float, limit: int) -> concurrent.futures.Future[list[np.void]]:
         """The worker call taking records, started unless one is in flight already: one at
         a time, so a read cancelled while its call runs (a timeout) leaves no second call
         beside the next read's (two would split or repeat records, or poll twice at once).
-        The call's records go to :attr:`_ready` as it ends, before any reader resumes."""
+        The call's records go to :attr:`_ready` as it ends (on its thread), before any
+        reader resumes; a reader on another event loop than the last one's waits for it as
+        well (decision 0091)."""
         pending = self._pending
         if pending is None:
-            pending = asyncio.wrap_future(self._worker.submit(_take, self.sync, wait, limit))
-            pending.add_done_callback(self._keep)  # first: it runs before any reader resumes
+            pending = self._worker.submit(_take, self.sync, wait, limit)
             self._pending = pending
+            pending.add_done_callback(self._keep)  # first: it runs before any reader resumes
         return pending
 
-    def _keep(self, future: asyncio.Future[list[np.void]]) -> None:
-        self._pending = None
+    def _keep(self, future: concurrent.futures.Future[list[np.void]]) -> None:
         if not future.cancelled() and future.exception() is None:
             self._ready.extend(future.result())
+        if self._pending is future:
+            self._pending = None
 
     async def _await_fetch(self, wait: float, limit: int) -> None:
         """Wait for the worker call in flight (started if none is: at most ``wait`` s for a
         record); cancelling the wait leaves the call running (its records wait for the next
         read)."""
-        await asyncio.shield(self._fetch(wait, limit))
+        await shielded(self._fetch(wait, limit))
 
     async def batch(self, limit: int = 1000, timeout: float | None = None) -> list[np.void]:
         """The records waiting (at least one, at most ``limit``), waiting up to ``timeout`` s

@@ -26,7 +26,7 @@ import threading
 from collections.abc import Awaitable, Callable
 from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
 
-from galil.errors import GalilConnectionError, InvalidArgument
+from galil.errors import FixedAttributes, GalilConnectionError, InvalidArgument
 
 __all__ = ["Backed", "Room", "Worker", "same", "shielded", "twin"]
 
@@ -211,15 +211,20 @@ class Worker:
         self._urgent.put(None)
 
 
-class Backed(Generic[S_co]):
+class Backed(FixedAttributes, Generic[S_co]):
     """An async twin of one sync object: the object and the worker its calls run on.
 
     Covariant: a twin of a base class's method (``LinkFacade.command``) serves a room of a
-    subclass (``Controller``).
+    subclass (``Controller``). Its settings are awaited ``set_`` methods: assigning any of
+    its public names (``x.soft_limits = ...``, the sync idiom) raises
+    :class:`~galil.errors.GalilAttributeError` naming the ``set_`` method, and nothing is set
+    (decision 0091).
 
     Attributes:
         sync: the sync object (its cheap, I/O-free members may be used directly).
     """
+
+    _awaited = True
 
     def __init__(self, sync: S_co, worker: Worker) -> None:
         self._sync = sync

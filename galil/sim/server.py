@@ -582,8 +582,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     usage error; a port that cannot be had (in use, not ours) is one line on stderr. Both
     return (or exit with) status 2, without a traceback.
     """
-    parser = _parser()
-    args = parser.parse_args(argv)
+    parser = options()
+    return serve(parser, parser.parse_args(argv))
+
+
+def serve(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    """Serve what ``args`` (parsed by ``parser``, :func:`options`) describe until Ctrl-C; a
+    bad value is ``parser``'s usage error."""
     try:
         host, port = check_ports(args.tcp, args.message_port)
         baud = _baud(args.baud, args.pty)
@@ -644,13 +649,22 @@ def _serve(server: _Server, *, announce_messages: bool) -> None:
             signal.signal(signal.SIGTERM, previous)
 
 
-def _parser() -> argparse.ArgumentParser:
-    """The options of ``galil sim``."""
-    parser = argparse.ArgumentParser(prog="galil sim", description="Serve a simulated Galil DMC")
+def options() -> argparse.ArgumentParser:
+    """The options of ``galil sim`` (and of ``python -m galil.sim.server``): one parser, so
+    the help and the errors show one usage line."""
+    parser = argparse.ArgumentParser(
+        prog="galil sim",
+        description="Serve a simulated Galil DMC until Ctrl-C. With neither --tcp nor --pty it "
+        "serves TCP on 127.0.0.1 on a free port, and prints the address (tcp://HOST:PORT).",
+    )
     parser.add_argument("--model", default="DMC-4040", help="controller model (DMC-4040)")
     where = parser.add_mutually_exclusive_group()
-    where.add_argument("--tcp", metavar="HOST:PORT", help="serve TCP (default 127.0.0.1:0)")
-    where.add_argument("--pty", action="store_true", help="serve a pseudo-terminal")
+    where.add_argument(
+        "--tcp",
+        metavar="HOST:PORT",
+        help="serve TCP there (port 0: a free one); the default is 127.0.0.1:0",
+    )
+    where.add_argument("--pty", action="store_true", help="serve a pseudo-terminal instead")
     parser.add_argument(
         "--message-port",
         type=int,

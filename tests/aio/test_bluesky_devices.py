@@ -317,7 +317,8 @@ def test_a_stop_while_the_move_is_being_started_stops_it(engine: RunEngine) -> N
         await x.stop(success=False)  # its ST goes out before the move's BG
         return await start(target)
 
-    axis.move_to = stopped_on_the_way  # type: ignore[method-assign]
+    # (an async axis refuses assignments, decision 0091: this test's own patch goes around it)
+    object.__setattr__(axis, "move_to", stopped_on_the_way)
 
     async def body() -> BaseException | None:
         return await _failure_of(x.set(50))
