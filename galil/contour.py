@@ -771,7 +771,7 @@ class ContourStream:
         Raises:
             InvalidArgument: a timeout that is not ``None`` or a finite number >= 0.
         """
-        check_wait_timeout(timeout)
+        timeout = check_wait_timeout(timeout)
         self.check()
         try:
             with held(self._tracker):  # no other thread's motion from the state read to CM

@@ -29,6 +29,7 @@ __all__ = [
     "get_registry",
     "is_quantity",
     "path_to_counts",
+    "plain_seconds",
     "sampled_values",
     "state_in_units",
     "unit_refused",
@@ -145,6 +146,36 @@ def angle_in_degrees(value: object, what: str) -> float:
     if degrees is None:
         raise InvalidArgument(f"{what}: {_shown(value)} is not an angle; expected {expected}")
     return degrees
+
+
+#: What a time argument takes, as a refusal says it.
+_A_TIME = "a time such as 0.5 * ureg.s or 100 * ureg.ms (a plain number is seconds)"
+
+
+def plain_seconds(value: object, what: str) -> object:
+    """A time Quantity (of any registry: s, ms, min ...) as a float of seconds, for the checks
+    of every timeout, pause and duration; anything else is returned as it is, for the
+    caller's own check of a plain number of seconds.
+
+    Raises:
+        InvalidArgument: a Quantity that is not a time (``5 * ureg.mm``, ``10 * ureg.Hz``), an
+            array, a complex or non-finite magnitude, naming ``what``.
+    """
+    if not is_quantity(value):
+        return value
+    q = _ours(value, what, _A_TIME)
+    try:
+        if q.dimensionality != _second().dimensionality:
+            raise InvalidArgument(f"{what}: {_shown(value)} is not a time; expected {_A_TIME}")
+        seconds = q.to("second")
+    except pint.errors.PintError as exc:  # (an offset unit such as degC)
+        raise unit_refused(what, value, f"is not a time; expected {_A_TIME}") from exc
+    return _magnitude(seconds, what)
+
+
+@cache
+def _second() -> Any:
+    return get_registry().Quantity(1.0, "second")
 
 
 @lru_cache(maxsize=256)
