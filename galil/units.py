@@ -243,6 +243,22 @@ def _magnitude(q: Any, what: str) -> float:
     return _real(m, what)
 
 
+def _one_value(m: object, given: object) -> float:
+    """The magnitude ``m`` of ``counts_per`` (``given``) as a float: one real value.
+
+    Raises:
+        InvalidArgument: an array (``np.array([2000, 1]) / ureg.mm``), a complex value.
+    """
+    if getattr(m, "ndim", 0) == 0 and hasattr(m, "item"):
+        m = m.item()  # (a numpy scalar or a 0-d array)
+    if isinstance(m, bool) or not isinstance(m, numbers.Real):
+        raise InvalidArgument(
+            f"counts_per must be one real value, such as 2000 / ureg.mm, got {given!r:.80}"
+            f"{decimal_hint(m)}"
+        )
+    return float(m)
+
+
 @dataclass(frozen=True)
 class Scale:
     """How one axis maps user units onto encoder counts.
@@ -271,7 +287,7 @@ class Scale:
         )
         try:
             cp = _without_counts(_ours(self.counts_per, "counts_per"))
-            magnitude = float(cp.magnitude)
+            magnitude = _one_value(cp.magnitude, self.counts_per)
             linear = cp.dimensionality == get_registry().Quantity(1.0, "1/m").dimensionality
             rotary = cp.dimensionless and _angle_power(cp.units) == -1
         except OverflowError:
