@@ -80,13 +80,23 @@ _FOLLOWED: dict[str, Callable[[float, float], predict.Event]] = {
 }
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, repr=False)  # (Profile's own equality and concise repr)
 class UnitProfile(predict.Profile):
     """A predicted profile of a scaled axis: everything a :class:`~galil.predict.Profile` has
     (arrays in counts, for comparing with the controller), and :attr:`q`, the same motion in
     the axis's units."""
 
     scale: Scale | None = field(default=None, repr=False, compare=False)
+
+    def __repr__(self) -> str:
+        if self.scale is None:
+            return super().__repr__()
+        q = self.q
+        return (
+            f"UnitProfile(shape={self.shape!r}, duration={self.duration:.6g}, samples="
+            f"{self.samples}, start={q.start:~.6g}, end={q.end:~.6g}, peak_speed="
+            f"{q.peak_speed:~.6g}, counts {self.start} -> {self.end})"
+        )
 
     @property
     def q(self) -> ProfileQuantities:

@@ -61,6 +61,14 @@ class Recording:
     def __len__(self) -> int:
         return len(next(iter(self.values.values()))) if self.values else 0
 
+    def __repr__(self) -> str:
+        n = len(self)
+        return (
+            f"Recording(sources={self.sources!r}, {n} value{'s' if n != 1 else ''} each,"
+            f" every={self.every}, start={self.start}, sample_period={self.sample_period:.6g},"
+            f" {n * self.every * self.sample_period:.6g} s)"
+        )
+
     def __getitem__(self, source: str) -> npt.NDArray[np.float64]:
         try:
             return self.values[source]

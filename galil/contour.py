@@ -227,6 +227,15 @@ class ContourResult:
         """Predicted duration in seconds."""
         return max(p.duration for p in self.profiles.values())
 
+    def __repr__(self) -> str:
+        # (the generated one printed every increment row)
+        ends = {a: p.end for a, p in self.profiles.items()}
+        return (
+            f"ContourResult(axes={self.axes!r}, segments={len(self.increments)}, dt={self.dt},"
+            f" duration={self.duration:.6g} s, ends={ends}, low_water={self.low_water},"
+            f" lines={self.lines}, begin={self.begin})"
+        )
+
 
 def _bar(total: int, letters: str) -> Any:
     try:
