@@ -166,10 +166,10 @@ def plain_seconds(value: object, what: str) -> object:
     q = _ours(value, what, _A_TIME)
     try:
         if q.dimensionality != _second().dimensionality:
-            raise InvalidArgument(f"{what}: {_shown(value)} is not a time; expected {_A_TIME}")
+            raise InvalidArgument(f"{what} must be {_A_TIME}, not {_shown(value)}")
         seconds = q.to("second")
     except pint.errors.PintError as exc:  # (an offset unit such as degC)
-        raise unit_refused(what, value, f"is not a time; expected {_A_TIME}") from exc
+        raise InvalidArgument(f"{what} must be {_A_TIME}, not {_shown(value)}") from exc
     return _magnitude(seconds, what)
 
 

@@ -74,7 +74,7 @@ def test_a_quantity_that_is_not_a_time_is_refused_naming_the_dimension(what: str
             with nothing_sent(dmc), pytest.raises(galil.InvalidArgument) as info:
                 wait(target, bad)
             assert named in str(info.value)
-            assert "is not a time; expected a time such as" in str(info.value)
+            assert "must be a time such as 0.5 * ureg.s" in str(info.value)
 
 
 def test_sleep_lets_the_time_of_a_quantity_pass() -> None:
@@ -91,7 +91,7 @@ def test_a_capture_for_a_time_quantity_records_as_for_its_seconds() -> None:
         capture = dmc.capture(["_RPA"], seconds=100 * ms)
         assert capture.count == 53  # as for seconds=0.1: a value every 2 samples, both ends
         capture.wait()
-        with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match="not a time"):
+        with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match="must be a time"):
             dmc.capture(["_RPA"], seconds=5 * mm)
 
 
