@@ -42,6 +42,7 @@ from galil.moves import (
     set_jog_speed,
     speed_schedule,
 )
+from galil.predict.counts import whole_counts
 from galil.protocol import commands as cmds
 from galil.routines import Routines
 from galil.tuning import EncoderConfig, Setting, limit_disable_of, motor_type, whole
@@ -79,13 +80,23 @@ _FOLLOWED: dict[str, Callable[[float, float], predict.Event]] = {
 }
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, repr=False)  # (Profile's own equality and concise repr)
 class UnitProfile(predict.Profile):
     """A predicted profile of a scaled axis: everything a :class:`~galil.predict.Profile` has
     (arrays in counts, for comparing with the controller), and :attr:`q`, the same motion in
     the axis's units."""
 
     scale: Scale | None = field(default=None, repr=False, compare=False)
+
+    def __repr__(self) -> str:
+        if self.scale is None:
+            return super().__repr__()
+        q = self.q
+        return (
+            f"UnitProfile(shape={self.shape!r}, duration={self.duration:.6g}, samples="
+            f"{self.samples}, start={q.start:~.6g}, end={q.end:~.6g}, peak_speed="
+            f"{q.peak_speed:~.6g}, counts {self.start} -> {self.end})"
+        )
 
     @property
     def q(self) -> ProfileQuantities:
@@ -293,7 +304,7 @@ class AxisPosition:
         scale = self._scale
         if scale is not None and type(position) is int and position == 0:
             position = 0 * scale.unit  # (the default: 0 in the axis's units)
-        counts = round(self.position_counts(position, "position"))
+        counts = count_of(self, self.position_counts(position, "position"), "position")
         with user_units({self.letter: self}):
             check_int32("DP", counts, self.letter, self._link.model.name)
             self._homing.define(counts, bool(shift_limits))
@@ -641,7 +652,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
             CommandError: TC 16, a reversal of a move the library did not start (a program's)
                 in its last samples, at its target: nothing shows its direction then.
         """
-        counts = round(self.distance_counts(n, "increment"))
+        counts = count_of(self, self.distance_counts(n, "increment"), "increment")
         with user_units({self.letter: self}):
             return increment(self._link, self._tracker, self.letter, counts, display=self._display)
 
@@ -677,7 +688,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
                 follower past its soft limits or the model's SP maximum.
         """
         label = schedule_label(label)  # a bad label is refused before anything else
-        d = round(self.distance_counts(distance, "distance"))
+        d = count_of(self, self.distance_counts(distance, "distance"), "distance")
         pairs = _schedule_pairs(self, changes)
         first = None
         if speed is not None:
@@ -824,6 +835,31 @@ def _under_one_step(cmd: str, counts: float, model: ModelSpec, tm: float, axis: 
     )
 
 
+#: What an axis without a scale says when given a fraction of a count.
+_WHOLE_HINT = (
+    " (an axis without a scale takes whole counts; with a scale, a value in its unit is"
+    " rounded to the nearest count)"
+)
+
+
+def count_of(axis: Axis, counts: float, what: str) -> int:
+    """``counts`` (``what``, converted from the user's value) as whole counts: rounded to the
+    nearest (a half to the even one) on an axis with a scale, whose units rarely land on a
+    count; on an axis without one the value is counts, and a fraction of one is refused, as
+    the predictor and ``galil plan`` refuse it (decision 0092).
+
+    Raises:
+        InvalidArgument: a fraction of a count on an axis without a scale.
+    """
+    if axis._scale is not None:
+        return round(counts)
+    return whole_counts(counts, what, _WHOLE_HINT)
+
+
+def _limit_count(axis: Axis, value: Any, what: str) -> int:
+    return count_of(axis, axis.position_counts(value, what), what)
+
+
 def _soft_limit_counts(axis: Axis, limits: tuple[Any, Any]) -> tuple[int, int]:
     """``BL`` and ``FL`` in counts for ``soft_limits = (low, high)`` (``None``: no limit).
 
@@ -835,8 +871,8 @@ def _soft_limit_counts(axis: Axis, limits: tuple[Any, Any]) -> tuple[int, int]:
         low, high = limits
     except (TypeError, ValueError) as exc:
         raise InvalidArgument(f"soft_limits takes (low, high), got {limits!r}") from exc
-    bl = INT32_MIN if low is None else round(axis.position_counts(low, "reverse soft limit"))
-    fl = INT32_MAX if high is None else round(axis.position_counts(high, "forward soft limit"))
+    bl = INT32_MIN if low is None else _limit_count(axis, low, "reverse soft limit")
+    fl = INT32_MAX if high is None else _limit_count(axis, high, "forward soft limit")
     scale = axis._scale
     if scale is not None and scale.sign < 0:
         bl, fl = fl, bl  # a negative scale sign swaps the ends
@@ -897,9 +933,9 @@ def resolve_move(
                 given[key] = axis.check_parameter(cmd, counts)
     what = ("distance" if relative else "target") + (f" of {axis.letter}" if named else "")
     if relative:
-        amount = round(axis.distance_counts(value, what))
+        amount = count_of(axis, axis.distance_counts(value, what), what)
     else:
-        amount = round(axis.position_counts(value, what))
+        amount = count_of(axis, axis.position_counts(value, what), what)
     if not INT32_MIN <= amount <= INT32_MAX:
         with user_units({axis.letter: axis}):
             check_int32("PR" if relative else "PA", amount, axis.letter, axis._link.model.name)

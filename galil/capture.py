@@ -39,6 +39,7 @@ from galil.errors import (
 from galil.link import CommandLink, check_count, check_wait_timeout
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import read_one
+from galil.units import plain_seconds
 
 __all__ = ["Capture", "Recording"]
 
@@ -66,6 +67,14 @@ class Recording:
 
     def __len__(self) -> int:
         return len(next(iter(self.values.values()))) if self.values else 0
+
+    def __repr__(self) -> str:
+        n = len(self)
+        return (
+            f"Recording(sources={self.sources!r}, {n} value{'s' if n != 1 else ''} each,"
+            f" every={self.every}, start={self.start}, sample_period={self.sample_period:.6g},"
+            f" {n * self.every * self.sample_period:.6g} s)"
+        )
 
     def __getitem__(self, source: str) -> npt.NDArray[np.float64]:
         try:
@@ -99,15 +108,17 @@ def _count(count: object, seconds: object, every: int, sample_period: float) -> 
     if (count is None) == (seconds is None):
         raise InvalidArgument("give how many values to record (count=) or for how long (seconds=)")
     if seconds is not None:
+        value = plain_seconds(seconds, "seconds")  # (a time Quantity, in seconds)
         if (
-            isinstance(seconds, bool)
-            or not isinstance(seconds, (int, float))
-            or not (math.isfinite(seconds) and seconds > 0)
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or not (math.isfinite(value) and value > 0)
         ):
             raise InvalidArgument(
-                f"seconds must be a positive number, not {seconds!r}{decimal_hint(seconds)}"
+                f"seconds must be a positive number (or a time Quantity), not {seconds!r}"
+                f"{decimal_hint(seconds)}"
             )
-        return math.ceil(seconds / (every * sample_period) - 1e-9) + 1
+        return math.ceil(value / (every * sample_period) - 1e-9) + 1
     return check_count(count, "count")
 
 
@@ -245,7 +256,7 @@ class Capture(FixedAttributes):
                 capture took its arrays before it was read back (:meth:`reused`).
             GalilTimeoutError: still recording after ``timeout`` (it goes on; :meth:`stop`).
         """
-        check_wait_timeout(timeout)
+        timeout = check_wait_timeout(timeout)
         if self.result is not None:
             return self.result
         self._check_readable()

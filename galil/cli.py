@@ -121,16 +121,7 @@ def plan_profile(args: argparse.Namespace) -> Any:
             counts[name] = scale.distance_to_counts(value)
         else:
             counts[name] = abs(scale.rate_to_counts(value, 1 if name == "SP" else 2, name))
-    distance = round(counts["distance"])
-    if abs(distance - counts["distance"]) > 1e-6 * max(1.0, abs(distance)):
-        unit = (
-            ""
-            if scale is None
-            else f" (plain numbers are counts: write {args.distance}{scale.unit:~})"
-        )
-        raise InvalidArgument(
-            f"the distance is {counts['distance']:g} counts, not a whole number{unit}"
-        )
+    distance = _plan_distance(args.distance, values["distance"], counts["distance"], scale)
     try:  # (refused as Axis.plan_by refuses it: in counts, and in the scale's unit)
         check_int32("PR", distance, "the axis", model.name)
         sp, ac, dc = (predict.check_parameter(n, counts[n], model) for n in ("SP", "AC", "DC"))
@@ -148,6 +139,19 @@ def plan_profile(args: argparse.Namespace) -> Any:
     if scale is not None:
         profile = profile.with_units(float(scale.counts_per.magnitude), f"{scale.unit:~}")
     return profile
+
+
+def _plan_distance(text: str, value: Any, counts: float, scale: Any) -> int:
+    """The distance in whole counts, by the predictor's rule (decision 0092): a plain number
+    is counts and must be whole; a distance in the units of ``--scale`` is rounded to the
+    nearest count, as an axis with a scale rounds it."""
+    from galil.predict.counts import ROUND_IT, whole_counts
+
+    if scale is not None and not isinstance(value, float):
+        return round(counts)
+    # (a plain number with a scale: the unit was left out)
+    hint = f" (plain numbers are counts: write {text}{scale.unit:~})" if scale else ROUND_IT
+    return whole_counts(counts, "the distance", hint)
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:

@@ -227,6 +227,15 @@ class ContourResult:
         """Predicted duration in seconds."""
         return max(p.duration for p in self.profiles.values())
 
+    def __repr__(self) -> str:
+        # (the generated one printed every increment row)
+        ends = {a: p.end for a, p in self.profiles.items()}
+        return (
+            f"ContourResult(axes={self.axes!r}, segments={len(self.increments)}, dt={self.dt},"
+            f" duration={self.duration:.6g} s, ends={ends}, low_water={self.low_water},"
+            f" lines={self.lines}, begin={self.begin})"
+        )
+
 
 def _bar(total: int, letters: str) -> Any:
     try:
@@ -295,6 +304,25 @@ def _raise_if_ran_dry(link: CommandLink, state: _Progress, reply: str, batch: in
     )
 
 
+def _bad_shape(shape: tuple[int, ...], letters: str) -> InvalidArgument:
+    """The refusal of a path of ``shape`` for the axes ``letters``, saying what is wrong: no
+    segment, a 1-D path for several axes, or the wrong number of columns."""
+    n = len(letters)
+    wanted = "(segments,) or (segments, 1)" if n == 1 else f"(segments, {n}), a column per axis"
+    if len(shape) in (1, 2) and shape[0] == 0:
+        return InvalidArgument(
+            f"the path is empty (shape {shape}): a contour needs at least one segment"
+        )
+    if len(shape) == 1:
+        why = f"a 1-D path (shape {shape}) is for one axis, and {letters} are {n}"
+    elif len(shape) == 2:
+        drives = f"{n} axis" if n == 1 else f"{n} axes"
+        why = f"the path has {shape[1]} columns (shape {shape}) but the contour drives {drives}"
+    else:
+        why = f"the path has {len(shape)} dimensions (shape {shape})"
+    return InvalidArgument(f"{why}: give shape {wanted}")
+
+
 class ContourStream:
     """One contour run: :meth:`check` (no I/O), :meth:`prepare` (one state query, the
     predictions, soft limits), :meth:`feed` (CM, DT, segments keeping the buffer fed) and
@@ -337,9 +365,7 @@ class ContourStream:
         dt = exponent
         ideal = path[:, None] if path.ndim == 1 else path
         if ideal.ndim != 2 or ideal.shape[1] != len(letters) or ideal.shape[0] == 0:
-            raise InvalidArgument(
-                f"path must have shape (segments,) or (segments, {len(letters)}), got {path.shape}"
-            )
+            raise _bad_shape(path.shape, letters)
         self.link = link
         self.letters = letters
         self.dt = dt
@@ -771,7 +797,7 @@ class ContourStream:
         Raises:
             InvalidArgument: a timeout that is not ``None`` or a finite number >= 0.
         """
-        check_wait_timeout(timeout)
+        timeout = check_wait_timeout(timeout)
         self.check()
         try:
             with held(self._tracker):  # no other thread's motion from the state read to CM

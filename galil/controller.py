@@ -109,8 +109,8 @@ class ReconnectPolicy:
 
     def __post_init__(self) -> None:
         check_count(self.attempts, "attempts")
-        check_timeout(self.delay, 0.2, "delay")
-        check_timeout(self.max_delay, 5.0, "max_delay")
+        for name, default in (("delay", 0.2), ("max_delay", 5.0)):  # (a Quantity: in seconds)
+            object.__setattr__(self, name, check_timeout(getattr(self, name), default, name))
         if (
             isinstance(self.backoff, bool)
             or not isinstance(self.backoff, (int, float))

@@ -259,8 +259,7 @@ class LinkFacade:
         Raises:
             InvalidArgument: not a number, negative, not finite or longer than that.
         """
-        check_sleep(seconds)
-        self.link.pause(float(seconds))
+        self.link.pause(check_sleep(seconds))
 
     # -- unsolicited output and records -----------------------------------------------------
 

@@ -204,6 +204,14 @@ class Interrupts(FixedAttributes):
         """Whether interrupts come (``enable`` was called and not undone)."""
         return self._handle is not None
 
+    def __repr__(self) -> str:
+        mask = self.mask
+        on = self.enabled and mask is not None
+        state = f"enabled, EI mask {mask:#x}" if on else "not enabled"
+        q = self.queue
+        name = self.link.model.name
+        return f"<Interrupts of {name}: {state}, {len(q)} waiting, {q.dropped} dropped>"
+
     def disable(self) -> None:
         """``EI 0`` (the controller forgets the mask and its queue) and close the handle.
 

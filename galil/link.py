@@ -48,6 +48,7 @@ from galil.protocol.framing import Unsolicited
 from galil.protocol.numbers import parse_number, parse_plain_read, parse_read, whole
 from galil.protocol.session import Completed, Session
 from galil.transport import ByteRate, ControllerClock, Transport
+from galil.units import is_quantity, plain_seconds
 
 __all__ = [
     "LONGEST_TIMEOUT",
@@ -212,17 +213,22 @@ def _finite(value: float) -> bool:
 def check_seconds(value: object, name: str = "timeout", *, positive: bool = False) -> float:
     """The one check of every timeout, wait and pause in the public API: ``value`` must be a
     finite number of seconds >= 0 (``> 0`` with ``positive``: a reply timeout, a watchdog
-    period, where 0 cannot be met), and at most :data:`LONGEST_TIMEOUT`. The wrappers below
-    decide what ``None`` means.
+    period, where 0 cannot be met), and at most :data:`LONGEST_TIMEOUT`; a time Quantity
+    (``0.5 * ureg.s``, ``100 * ureg.ms``) is taken in seconds. The wrappers below decide what
+    ``None`` means.
 
     Returns:
         ``value`` as a float.
 
     Raises:
         InvalidArgument: naming ``name``: ``None``, a bool, a string or anything else that is
-            not an int or a float, NaN, infinity, a negative number (or 0 with ``positive``),
-            more than :data:`LONGEST_TIMEOUT`.
+            not an int, a float or a time Quantity, a Quantity of another dimension, NaN,
+            infinity, a negative number (or 0 with ``positive``), more than
+            :data:`LONGEST_TIMEOUT`.
     """
+    given = value
+    if type(value) is not float and type(value) is not int and is_quantity(value):
+        value = plain_seconds(value, name)  # (a time Quantity: 0.5 * ureg.s, 100 * ureg.ms)
     if (
         isinstance(value, bool)
         or not isinstance(value, (int, float))
@@ -233,8 +239,8 @@ def check_seconds(value: object, name: str = "timeout", *, positive: bool = Fals
     ):
         least = "> 0" if positive else ">= 0"
         raise InvalidArgument(
-            f"{name} must be a finite number of seconds {least}, at most {LONGEST_TIMEOUT:g}"
-            f" (about 31 years), not {value!r}{decimal_hint(value)}"
+            f"{name} must be a finite number of seconds {least} (or a time Quantity), at most"
+            f" {LONGEST_TIMEOUT:g} (about 31 years), not {given!r}{decimal_hint(value)}"
         )
     return float(value)
 

@@ -332,6 +332,19 @@ class ModelSpec:
     generic: bool = False
     assumptions: tuple[str, ...] = ()
 
+    def __repr__(self) -> str:
+        # Short: the generated one printed all 80 fields and the assumptions' prose (about
+        # 3 KB in every Identity); dataclasses.asdict(spec) gives them all.
+        motion = "no axes"
+        if self.axes:
+            motion = f"axes {self.axes}, SP max {self.sp_max}, AC {self.ac_min}..{self.ac_max}"
+        note = ", generic" if self.generic else ""
+        return (
+            f"<ModelSpec {self.name} ({self.family}): {motion}, TM {self.tm_default:g} µs,"
+            f" {self.threads} threads, {self.digital_inputs} in / {self.digital_outputs} out"
+            f"{note}>"
+        )
+
     @property
     def has_axes(self) -> bool:
         """Whether the model drives motors (a RIO has none)."""

@@ -1070,7 +1070,7 @@ class MoveHandle(_HandleState):
         before it propagates (:func:`stop_on_error`).
         """
         if timeout is not None:
-            check_wait_timeout(timeout)
+            timeout = check_wait_timeout(timeout)
         if progress is not False:
             check_flag(progress, "progress")
         duration = self.duration

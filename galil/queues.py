@@ -81,7 +81,7 @@ class BoundedQueue(Generic[T]):
             GalilConnectionError: nothing is waiting and none will come: the controller was
                 closed or its link died (before or during the wait), or the reconnect failed.
         """
-        check_wait_timeout(timeout)
+        timeout = check_wait_timeout(timeout)
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
             with self._cond:

@@ -47,6 +47,7 @@ from galil.protocol.records import (
 )
 from galil.queues import Subscribers
 from galil.transport import HandleSource, Transport
+from galil.units import plain_seconds
 
 __all__ = ["READ_INTERVAL", "TAKE_MAX", "RecordCallback", "RecordStream", "Records"]
 
@@ -280,7 +281,7 @@ class RecordStream(FixedAttributes):
                 failed).
             ProtocolError: the record stream could not be decoded.
         """
-        check_wait_timeout(timeout)
+        timeout = check_wait_timeout(timeout)
         if self.method == "QR":
             return self._poll(timeout)
         deadline = None if timeout is None else time.monotonic() + timeout
@@ -351,7 +352,7 @@ class RecordStream(FixedAttributes):
         check_count(n, "n")
         if n > TAKE_MAX:
             raise InvalidArgument(f"n must be at most {TAKE_MAX} records at once, not {n!r:.40}")
-        check_wait_timeout(timeout)
+        timeout = check_wait_timeout(timeout)
         first = self.get(timeout)
         out = np.empty(n, dtype=first.dtype)
         out[0] = first
@@ -495,12 +496,7 @@ class Records:
             InvalidArgument: not a positive time, or more than 5 % from a whole number of
                 samples.
         """
-        value = seconds
-        if hasattr(value, "to") and hasattr(value, "magnitude"):
-            try:
-                value = value.to("s").magnitude
-            except Exception as exc:
-                raise InvalidArgument(f"seconds must be a time, not {seconds!r}") from exc
+        value = plain_seconds(seconds, "seconds")  # (a time Quantity, in seconds)
         if (
             isinstance(value, bool)
             or not isinstance(value, (int, float))

@@ -29,6 +29,7 @@ __all__ = [
     "get_registry",
     "is_quantity",
     "path_to_counts",
+    "plain_seconds",
     "sampled_values",
     "state_in_units",
     "unit_refused",
@@ -147,6 +148,36 @@ def angle_in_degrees(value: object, what: str) -> float:
     return degrees
 
 
+#: What a time argument takes, as a refusal says it.
+_A_TIME = "a time such as 0.5 * ureg.s or 100 * ureg.ms (a plain number is seconds)"
+
+
+def plain_seconds(value: object, what: str) -> object:
+    """A time Quantity (of any registry: s, ms, min ...) as a float of seconds, for the checks
+    of every timeout, pause and duration; anything else is returned as it is, for the
+    caller's own check of a plain number of seconds.
+
+    Raises:
+        InvalidArgument: a Quantity that is not a time (``5 * ureg.mm``, ``10 * ureg.Hz``), an
+            array, a complex or non-finite magnitude, naming ``what``.
+    """
+    if not is_quantity(value):
+        return value
+    q = _ours(value, what, _A_TIME)
+    try:
+        if q.dimensionality != _second().dimensionality:
+            raise InvalidArgument(f"{what} must be {_A_TIME}, not {_shown(value)}")
+        seconds = q.to("second")
+    except pint.errors.PintError as exc:  # (an offset unit such as degC)
+        raise InvalidArgument(f"{what} must be {_A_TIME}, not {_shown(value)}") from exc
+    return _magnitude(seconds, what)
+
+
+@cache
+def _second() -> Any:
+    return get_registry().Quantity(1.0, "second")
+
+
 @lru_cache(maxsize=256)
 def _angle_power(units: Any) -> int:
     """The power of angle in ``units`` (pint treats angles as dimensionless: count radians)."""
@@ -212,6 +243,22 @@ def _magnitude(q: Any, what: str) -> float:
     return _real(m, what)
 
 
+def _one_value(m: object, given: object) -> float:
+    """The magnitude ``m`` of ``counts_per`` (``given``) as a float: one real value.
+
+    Raises:
+        InvalidArgument: an array (``np.array([2000, 1]) / ureg.mm``), a complex value.
+    """
+    if getattr(m, "ndim", 0) == 0 and hasattr(m, "item"):
+        m = m.item()  # (a numpy scalar or a 0-d array)
+    if isinstance(m, bool) or not isinstance(m, numbers.Real):
+        raise InvalidArgument(
+            f"counts_per must be one real value, such as 2000 / ureg.mm, got {given!r:.80}"
+            f"{decimal_hint(m)}"
+        )
+    return float(m)
+
+
 @dataclass(frozen=True)
 class Scale:
     """How one axis maps user units onto encoder counts.
@@ -240,7 +287,7 @@ class Scale:
         )
         try:
             cp = _without_counts(_ours(self.counts_per, "counts_per"))
-            magnitude = float(cp.magnitude)
+            magnitude = _one_value(cp.magnitude, self.counts_per)
             linear = cp.dimensionality == get_registry().Quantity(1.0, "1/m").dimensionality
             rotary = cp.dimensionless and _angle_power(cp.units) == -1
         except OverflowError:

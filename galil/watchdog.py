@@ -32,6 +32,7 @@ from galil.models import INT32_MAX
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import read_one
 from galil.routines import RESERVED, Routine, Routines
+from galil.units import plain_seconds
 
 __all__ = ["LABEL", "Watchdog", "watchdog_routine"]
 
@@ -365,7 +366,7 @@ def check_watchdog_args(
             f"thread must be 0..{model.threads - 1} on {model.name}, not {thread!r}",
             model=model.name,
         )
-    every = seconds / 4 if interval is None else interval
+    every = seconds / 4 if interval is None else plain_seconds(interval, "heartbeat interval")
     if isinstance(every, bool) or not isinstance(every, (int, float)) or not 0 < every < seconds:
         raise InvalidArgument(
             f"heartbeat interval must be positive and shorter than the timeout, not {interval!r}"

@@ -119,7 +119,7 @@ class AsyncCapture(Room[Capture]):
                 >= 0 (:func:`~galil.link.check_wait_timeout`).
             GalilTimeoutError: still recording after ``timeout`` (it goes on; :meth:`stop`).
         """
-        check_wait_timeout(timeout)
+        timeout = check_wait_timeout(timeout)
         if self.sync.result is not None:
             return self.sync.result
         worker, link = self._worker, self._link

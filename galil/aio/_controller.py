@@ -264,7 +264,7 @@ class AsyncController(AsyncLinkFacade):
             InvalidArgument: a bad timeout (refused before anything is sent), and the sync
                 method's errors.
         """
-        check_wait_timeout(timeout)
+        timeout = check_wait_timeout(timeout)
         starting = Starting(self.sync.tracker)
         call = functools.partial(
             self.sync.contour,

@@ -100,11 +100,11 @@ class AsyncLinkFacade(MotionRoom[Controller]):
     async def sleep(self, seconds: float) -> None:
         """Let ``seconds`` pass for the controller: simulated time on a manual-clock
         simulator, ``asyncio.sleep`` otherwise (the loop stays free)."""
-        check_sleep(seconds)
+        seconds = check_sleep(seconds)
         if self.sync.link.simulated_time:
-            await self._worker.run(self.sync.sleep, float(seconds))
+            await self._worker.run(self.sync.sleep, seconds)
         else:
-            await asyncio.sleep(float(seconds))
+            await asyncio.sleep(seconds)
 
     # -- unsolicited output and records -----------------------------------------------------
     @property

@@ -278,7 +278,7 @@ class AsyncMoveHandle(FixedAttributes):
                 anything is sent.
             GalilTimeoutError: not done in time (the move is NOT stopped).
         """
-        check_wait_timeout(timeout)
+        timeout = check_wait_timeout(timeout)
         check_flag(stop_on_cancel, "stop_on_cancel")
         worker, link = self._worker, self._link
         try:

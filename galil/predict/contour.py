@@ -15,6 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from galil.errors import InvalidArgument
+from galil.predict.counts import whole_counts
 from galil.predict.profile import Profile
 
 __all__ = ["contour", "interpolate"]
@@ -146,9 +147,10 @@ def contour(
         lengths = np.left_shift(np.int64(1), n)
         total = int(lengths.sum())
         peak = float(np.max(np.abs(c) / lengths)) if c.size else 0.0
+    start = whole_counts(start, "start")
     pos = np.empty(total + 1, np.int64)
-    pos[0] = int(start)
-    interpolate(c, int(n) if n.ndim == 0 else n, int(start), pos[1:])
+    pos[0] = start
+    interpolate(c, int(n) if n.ndim == 0 else n, start, pos[1:])
     return Profile.from_samples(
         pos,
         sample_period=sample_period,

@@ -24,6 +24,7 @@ import numpy.typing as npt
 from galil.errors import InvalidArgument, LimitError
 from galil.models import ModelSpec
 from galil.predict.checks import resolve_model
+from galil.predict.counts import whole_counts
 from galil.predict.profile import Profile
 
 __all__ = ["GearFollower", "gear", "gear_profile", "quantise_ratio"]
@@ -157,7 +158,8 @@ def gear(
     m = _masters(master)
     if m.size == 0:
         return np.empty(0, dtype=np.int64)
-    follower = GearFollower(q, master=int(m[0]), position=int(start), resolution=spec.gr_resolution)
+    position = whole_counts(start, "start")
+    follower = GearFollower(q, master=int(m[0]), position=position, resolution=spec.gr_resolution)
     return follower.follow(m)
 
 

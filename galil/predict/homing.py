@@ -37,6 +37,7 @@ import numpy as np
 import numpy.typing as npt
 
 from galil.errors import InvalidArgument
+from galil.predict.counts import whole_counts
 from galil.predict.engine import AxisProfiler
 from galil.predict.move import Event, SetAccel, sample_of_event
 from galil.predict.profile import Profile
@@ -355,11 +356,11 @@ def homing(
             in the direction of travel, a speed is 0 ...); an event other than ``AC``, or at a
             time before ``BG``.
     """
-    changes = _accel_changes(events, sample_period)
-    prof = AxisProfiler(sample_period=sample_period, position=int(start))
+    start, changes = whole_counts(start, "start"), _accel_changes(events, sample_period)
+    prof = AxisProfiler(sample_period=sample_period, position=start)
     seq = HomingSequence(kind, prof, params, switch)
-    chunks: list[npt.NDArray[np.int64]] = [np.array([int(start)], np.int64)]
-    seq.start(int(start))
+    chunks: list[npt.NDArray[np.int64]] = [np.array([start], np.int64)]
+    seq.start(start)
     run = 0
     while not seq.done:
         while changes and changes[-1][0] <= prof.sample:

@@ -7,6 +7,7 @@ from collections.abc import Sequence
 
 from galil.errors import InvalidArgument
 from galil.models import ModelSpec
+from galil.predict.counts import whole_counts
 from galil.predict.engine import AxisProfiler
 from galil.predict.move import (
     Abort,
@@ -62,8 +63,10 @@ def jog(
         model: quantise JG/AC/DC/IT as this model stores them first.
 
     Raises:
-        InvalidArgument: bad arguments. CommandError: an event the controller would refuse.
+        InvalidArgument: bad arguments (a ``start`` that is not a whole number of counts too).
+        CommandError: an event the controller would refuse.
     """
+    start = whole_counts(start, "start")
     _validate_jog(speed, accel, decel)
     speed, accel, decel, smoothing, sample_period = _resolve(
         speed, accel, decel, smoothing, sample_period, model, jog=True
@@ -72,7 +75,7 @@ def jog(
     all_events = _jog_events(changes, events, stop_at)
 
     def fresh() -> AxisProfiler:
-        eng = AxisProfiler(sample_period=ts, position=int(start))
+        eng = AxisProfiler(sample_period=ts, position=start)
         if initial_speed:
             eng.resume_jog(initial_speed, speed, accel, decel, smoothing)
         else:
@@ -90,7 +93,7 @@ def jog(
             drive(eng, all_events, speed=speed, accel=accel, decel=decel, until=until, out=out)
 
     return run_profile(
-        fresh, go, start=int(start), shape=lambda begun, eng: "jog", start_velocity=initial_speed
+        fresh, go, start=start, shape=lambda begun, eng: "jog", start_velocity=initial_speed
     )
 
 

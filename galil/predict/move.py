@@ -16,6 +16,7 @@ import numpy.typing as npt
 
 from galil.errors import InvalidArgument, LimitError, ScheduleError
 from galil.models import ModelSpec
+from galil.predict.counts import check_position_range, whole_counts
 from galil.predict.engine import (
     AxisProfiler,
     KinematicPlan,
@@ -161,12 +162,31 @@ def plan_move(
     """Plan a PR move from rest without sampling it: duration, peak speed and shape.
 
     Raises:
-        InvalidArgument: a non-positive speed, accel, decel or sample period.
+        InvalidArgument: a non-positive speed, accel, decel or sample period; a distance that
+            is not a whole number of counts (:func:`move`).
+        LimitError: a distance outside the 32-bit range ``PR`` takes.
     """
+    distance = _distance(distance)
     _validate(speed, accel, decel, sample_period)
     ts = sample_period
     plan = plan_position(0.0, 0.0, float(distance), speed * ts, accel * ts * ts, decel * ts * ts)
-    return _move_plan(int(distance), plan, ts)
+    return _move_plan(distance, plan, ts)
+
+
+def _distance(distance: object, start: object = 0, model: str | None = None) -> int:
+    """A move's distance as whole counts, its ``PR`` and its target (``start + distance``)
+    inside the controller's 32-bit range.
+
+    Raises:
+        InvalidArgument: not a whole number of counts (``10.7``, ``"1000"``, ``True``).
+        LimitError: the distance or the target outside -2147483648 .. 2147483647.
+    """
+    d = whole_counts(distance, "distance")
+    check_position_range("PR", d, "PR", model=model)
+    if start != 0:
+        target = whole_counts(start, "start") + d
+        check_position_range("PA", target, "the target (start + distance)", model=model)
+    return d
 
 
 def _move_plan(distance: int, plan: KinematicPlan, ts: float) -> MovePlan:
@@ -215,6 +235,10 @@ def _resolve(
     assert q.decel is not None
     assert q.smoothing is not None
     return q.speed, q.accel, q.decel, q.smoothing, q.sample_period
+
+
+def _model_name(model: str | ModelSpec | None) -> str | None:
+    return model.name if isinstance(model, ModelSpec) else model
 
 
 def sample_of_event(time: float, ts: float) -> int:
@@ -500,10 +524,19 @@ def move(
     Returns:
         The :class:`Profile` from sample 0 (``start``) to the sample where the move completes.
 
+    A distance or start that is not a whole number of counts (``10.7``; a whole float such
+    as ``1000.0`` is taken) is refused, as are a string or a bool: the controller moves whole
+    counts (an axis with a scale rounds its units to them first). The distance and the target
+    must lie in the 32-bit range the controller's ``PR`` and ``PA`` take, with a model or
+    without.
+
     Raises:
-        InvalidArgument: bad arguments. LimitError: out of the model's range (with ``model``).
+        InvalidArgument: bad arguments. LimitError: out of the model's range (with ``model``),
+        or a distance or target outside the 32-bit range.
         CommandError: an event the controller would refuse.
     """
+    start = whole_counts(start, "start")
+    distance = _distance(distance, start, _model_name(model))
     _validate(speed, accel, decel, sample_period)
     if model is not None or smoothing is None:  # (else _resolve returns them as they are)
         speed, accel, decel, smoothing, sample_period = _resolve(
@@ -517,8 +550,8 @@ def move(
         v = speed * ts
         if v <= 0:
             raise InvalidArgument(f"speed must be > 0, got {speed!r}")
-        x0 = float(int(start))
-        target = float(int(start) + int(distance))
+        x0 = float(start)
+        target = float(start + distance)
         plan = plan_from_rest(x0, target, v, accel * ts * ts, decel * ts * ts)
         return Profile.planned(
             PlanSamples.of(plan),
@@ -528,8 +561,8 @@ def move(
             stop_code=1,
         )
     return _run_move(
-        int(start),
-        int(start) + int(distance),
+        start,
+        start + distance,
         speed,
         accel,
         decel,
@@ -722,9 +755,13 @@ def speed_schedule(
 
     Raises:
         ScheduleError: a change point that is not valid, with the earliest valid one.
-        InvalidArgument: malformed arguments.
-        LimitError: a schedule longer than :data:`SCHEDULE_MAX_SAMPLES` samples.
+        InvalidArgument: malformed arguments; a distance or start that is not a whole number of
+            counts (as :func:`move`).
+        LimitError: a schedule longer than :data:`SCHEDULE_MAX_SAMPLES` samples; a distance
+            or target outside the 32-bit range.
     """
+    start = whole_counts(start, "start")
+    distance = _distance(distance, start)
     _validate(initial_speed, accel, decel, sample_period)
     triggers, speeds, ramp_ends = _schedule_points(distance, initial_speed, changes, accel, decel)
     longest = _schedule_seconds(abs(int(distance)), triggers, speeds, accel, decel)
