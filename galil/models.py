@@ -410,11 +410,24 @@ class ModelSpec:
         return self.ac_min * self._tm_scale(tm) ** 2
 
     def analog_input_range(self, n: int) -> tuple[float, float]:
-        """The volts analog input ``n`` (the model's numbering) reads, lowest and highest, at
-        the default AQ: :attr:`analog_in_range` unless :attr:`analog_in_ranges` says otherwise
-        (the DMC-30010's input 2 reads 0 ... 5 V). A number past the inputs gets the model's
-        range too (whether it exists is the caller's check)."""
-        return self.analog_in_ranges.get(n, self.analog_in_range)
+        """The volts analog input ``n`` (the model's numbering, from :attr:`io_first`) reads,
+        lowest and highest, at the default AQ: :attr:`analog_in_range` unless
+        :attr:`analog_in_ranges` says otherwise (the DMC-30010's input 2 reads 0 ... 5 V).
+
+        Raises:
+            InvalidArgument: ``n`` is not an integer (numpy's are taken; a bool is not), or
+                the model has no such input.
+        """
+        if isinstance(n, bool) or not isinstance(n, numbers.Integral):
+            raise InvalidArgument(f"analog input number must be an integer, not {n!r:.60}")
+        first, count = self.io_first, self.analog_inputs
+        if not first <= n < first + count:
+            raise InvalidArgument(
+                f"analog input {n!r:.60} does not exist on {self.name} "
+                f"({first} .. {first + count - 1})",
+                model=self.name,
+            )
+        return self.analog_in_ranges.get(int(n), self.analog_in_range)
 
     @property
     def record_size(self) -> int | None:

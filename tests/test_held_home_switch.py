@@ -95,7 +95,8 @@ def test_a_switch_the_input_contradicts_is_not_predicted(start: str) -> None:
         assert "home input reads low" in handle.notes["A"]
         assert handle.duration == float("inf")
         track = handle.track("A")
-        assert track is not None and not track.exact
+        assert track is not None
+        assert not track.exact
         dmc.sleep(0.3)
         sim.set_home_switch("A", pressed=None)
         result = handle.wait(timeout=30)
