@@ -418,16 +418,17 @@ class ModelSpec:
             InvalidArgument: ``n`` is not an integer (numpy's are taken; a bool is not), or
                 the model has no such input.
         """
-        if isinstance(n, bool) or not isinstance(n, numbers.Integral):
+        given: object = n  # (checked: a caller may pass anything)
+        if isinstance(given, bool) or not isinstance(given, numbers.Integral):
             raise InvalidArgument(f"analog input number must be an integer, not {n!r:.60}")
         first, count = self.io_first, self.analog_inputs
-        if not first <= n < first + count:
+        if not first <= int(given) < first + count:
             raise InvalidArgument(
                 f"analog input {n!r:.60} does not exist on {self.name} "
                 f"({first} .. {first + count - 1})",
                 model=self.name,
             )
-        return self.analog_in_ranges.get(int(n), self.analog_in_range)
+        return self.analog_in_ranges.get(int(given), self.analog_in_range)
 
     @property
     def record_size(self) -> int | None:
