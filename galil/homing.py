@@ -184,7 +184,7 @@ class AxisHoming:
             stepper=abs(mt) in (2.0, 2.5),
         )
         self._refuse_limit(kind, round(ts), params, (round(rp), bl, fl))
-        track = self._track(kind, round(rp), params, switch, (bl, fl))
+        track = self._track(kind, round(rp), params, switch, (bl, fl), round(ts) >> 1 & 1)
         mode, build = _KINDS[kind]
         replies = link.command_line(
             [build(a, model=model), cmds.bg(a, model=model), cmds.time_stamp()]
@@ -296,11 +296,24 @@ class AxisHoming:
         params: predict.HomingParams,
         switch: predict.HomeSwitch | None,
         limits: tuple[float, float],
+        level: int,
     ) -> Track:
+        """The handle's record: predicted from ``switch`` when it is given and agrees with the
+        home input's ``level`` as TS read it (HM and FE start from that input; decision 0088),
+        its path checked against the soft ``limits`` (:meth:`_check_path`).
+        """
         move = MoveParams(params.speed, params.accel, params.decel, 1.0)
         mode = _KINDS[kind][0]
         if switch is None:
             note = "no switch positions given: duration and path unknown; the end is read back"
+            return Track(mode, rp, move, None, exact=False, note=note)
+        if kind != "FI" and switch.level(rp) != level:
+            note = (
+                f"the home input reads {'high' if level else 'low'}, but the given switch "
+                f"positions put it {'low' if level else 'high'} at {rp} (a switch held, or not "
+                "where they say): the controller searches from the input, so duration and path "
+                "are unknown; the end is read back"
+            )
             return Track(mode, rp, move, None, exact=False, note=note)
         ts = self._link.sample_period
         found = predict.homing(kind, params, switch, start=rp, sample_period=ts)

@@ -205,6 +205,8 @@ class ModelSpec:
         analog_inputs: analog inputs (``@AN[n]``).
         analog_outputs: analog outputs (``AO n,v``); 0 where the model has none we know of.
         analog_in_range, analog_out_range: volts at the default AQ/DQ setting.
+        analog_in_ranges: the inputs (by number) whose range differs from
+            ``analog_in_range``, at the default AQ; :meth:`analog_input_range` reads them.
         reply_formats: format (``"4.2"``) of the interrogation replies ``KP ?``, ``KI ?``,
             ``KD ?`` and ``TM ?``, by command: the command reference's "Default Format"
             (sources at ``_REPLY_FORMATS``; families without a page of their own are assumed
@@ -305,6 +307,7 @@ class ModelSpec:
     analog_outputs: int = 0
     analog_in_range: tuple[float, float] = (-10.0, 10.0)
     analog_out_range: tuple[float, float] = (-10.0, 10.0)
+    analog_in_ranges: dict[int, tuple[float, float]] = field(default_factory=dict)
     # Motor and loop settings (facts section 4).
     reply_formats: dict[str, str] = field(default_factory=lambda: dict(_REPLY_FORMATS))
     motor_types: frozenset[float] = _MT_STANDARD
@@ -418,6 +421,27 @@ class ModelSpec:
     def accel_min(self, tm: float | None = None) -> float:
         """Smallest AC/DC in counts/s² at ``tm`` µs: ``ac_min * (1000 / TM)**2``."""
         return self.ac_min * self._tm_scale(tm) ** 2
+
+    def analog_input_range(self, n: int) -> tuple[float, float]:
+        """The volts analog input ``n`` (the model's numbering, from :attr:`io_first`) reads,
+        lowest and highest, at the default AQ: :attr:`analog_in_range` unless
+        :attr:`analog_in_ranges` says otherwise (the DMC-30010's input 2 reads 0 ... 5 V).
+
+        Raises:
+            InvalidArgument: ``n`` is not an integer (numpy's are taken; a bool is not), or
+                the model has no such input.
+        """
+        given: object = n  # (checked: a caller may pass anything)
+        if isinstance(given, bool) or not isinstance(given, numbers.Integral):
+            raise InvalidArgument(f"analog input number must be an integer, not {n!r:.60}")
+        first, count = self.io_first, self.analog_inputs
+        if not first <= int(given) < first + count:
+            raise InvalidArgument(
+                f"analog input {n!r:.60} does not exist on {self.name} "
+                f"({first} .. {first + count - 1})",
+                model=self.name,
+            )
+        return self.analog_in_ranges.get(int(given), self.analog_in_range)
 
     @property
     def record_size(self) -> int | None:
@@ -738,12 +762,16 @@ _add(
         threads=6,
         has_limit_disable=True,
         # gclib GDataRecord30000: analog input 1 in the axis block, input 2 and outputs 1-2
-        # in the general block; EPICS drives AO ±10 V (3276.8 counts/V) on the 30010.
+        # in the general block; EPICS drives AO ±10 V (3276.8 counts/V) on the 30010 and
+        # reads @AN[2] as 0-5 V (13107.2 counts/V, unsigned; wave-2 facts, DMC-30010/31010).
         analog_inputs=2,
         analog_outputs=2,
+        analog_in_ranges={2: (0.0, 5.0)},
         assumptions=(
             "contour buffer 511 as on Accelera-class firmware: not confirmed",
-            "analog input 2 reads 0-5 V (EPICS); both inputs are modelled at ±10 V",
+            "analog input 1 at ±10 V as the other DMC controllers' (input 2's 0-5 V is"
+            " EPICS's); a DMC-31010, which takes this table, decodes its inputs per AQ"
+            " (EPICS), which is not modelled",
             _VECTOR_TM_ASSUMPTION,
             _OP_ASSUMPTION,
         ),
@@ -889,6 +917,8 @@ _add(
             "qz": (0, 4, 52, 0),  # EPICS: I/O block 52 on the RIO-47300
             "assumptions": (
                 "24 inputs and 24 outputs (gclib's 47300 record: 0-23 each)",
+                "8 analog inputs and outputs at ±10 V as the RIO-47120 (the record's fields"
+                " are the 47100's; no source gives the 47300's ranges)",
                 *_RIO_ASSUMPTIONS,
             ),
         }

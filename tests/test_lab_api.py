@@ -400,6 +400,24 @@ def test_the_30010s_two_analog_outputs_and_inputs_are_driven_and_recorded() -> N
         assert dmc.io.analog_in[2].to("V").magnitude == pytest.approx(1.5, abs=1e-3)
         record = dmc.record()
         assert record["analog_out"].tolist() == [0, round(-2.5 * 3276.8)]
-        assert record["analog_in"] == round(1.5 * 3276.8)
+        assert record["analog_in"] == round(1.5 * 13107.2)  # (input 2: 0-5 V, unsigned)
         with nothing_sent(dmc), pytest.raises(galil.InvalidArgument):
             dmc.io.analog_out[3] = 1.0  # it has two
+
+
+def test_the_30010s_second_analog_input_reads_0_to_5_volts_and_its_first_10() -> None:
+    # (the simulator clipped both to ±10 V: input 2 read 7 V, and -2 V)
+    with simulated("DMC-30010") as dmc:
+        sim, analog_in = sim_of(dmc), dmc.io.analog_in
+        for volts, seen in [(7.0, 5.0), (-2.0, 0.0), (5.0, 5.0), (3.25, 3.25)]:
+            sim.set_analog_input(2, volts)
+            assert analog_in[2].to("V").magnitude == pytest.approx(seen, abs=1e-4)
+        assert dmc.record()["analog_in"] == round(3.25 * 13107.2)
+        sim.set_analog_input(2, 5.0)
+        assert dmc.record()["analog_in"] == 0xFFFF  # (the top count, not a wrap to 0)
+        sim.set_analog_input(1, -12.0)
+        assert analog_in[1].to("V").magnitude == -10.0
+        sim.set_analog_input(1, 7.0)
+        assert analog_in[1].to("V").magnitude == 7.0
+        assert dmc.model.analog_input_range(2) == (0.0, 5.0)  # (the one place it is said)
+        assert dmc.model.analog_input_range(1) == (-10.0, 10.0)

@@ -331,6 +331,7 @@ ENTRIES: list[Entry] = [
     E("model", "speed_resolution", {"tm": 1000}),
     E("model", "sample_period_for", {"tm": 1000}),
     E("model", "axis_letter", {"name": "A"}),
+    E("model", "analog_input_range", {"n": 1}),
     E("wire_log", "add", {"hook": _quiet}),
     E("io", "wait_for_input", {"n": 1, "high": True, "timeout": 0.01, "thread": None}),
     E("io.inputs", "__getitem__", {"key": 1}, kind="getitem"),

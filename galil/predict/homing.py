@@ -214,6 +214,7 @@ class HomingSequence:
         self._watch: Crossing | None = None
         self._latched = 0
         self._direction = 1
+        self._tripped = False  # the switch at the start of the phase that waits for it
 
     @property
     def code(self) -> int:
@@ -244,12 +245,29 @@ class HomingSequence:
             self.stage = 3
             self.prof.begin_jog(p.jog_speed, p.accel, p.decel)
             return
+        self._tripped = self.switch.on_flag(position)
         self._watch = self.switch.leaving(position)
         self.prof.begin_jog(d * p.speed, p.accel, p.decel)
 
     def watch(self) -> Crossing | None:
         """The condition the present phase waits for (``None``: it ends with its motion)."""
         return self._watch
+
+    def rewire(self, switch: HomeSwitch, position: int) -> None:
+        """The home input follows ``switch`` from now on: it changed otherwise than by the
+        motion (the simulator's test hook held the switch, released it or moved it), with the
+        axis at ``position`` (caller's frame). A phase waiting for the input to change sees it
+        changed at ``position`` if it differs now from what it was when the phase began (its
+        watch is met there), and otherwise waits for the new switch's edge. The index pulses
+        of a phase that looks for one are kept (the pulse it latched is where it returns).
+        """
+        self.switch = switch
+        if self.stage not in (1, 2) or self._watch is None:
+            return
+        if switch.on_flag(position) != self._tripped:
+            self._watch = Crossing(position, 1)  # (met at once)
+        else:
+            self._watch = switch.leaving(position)
 
     def fire(self, position: int) -> None:
         """The watched condition turned true at the last sample (``position``: caller's frame).
@@ -286,6 +304,7 @@ class HomingSequence:
                 self.stage = 0
                 return
             self.stage = 2
+            self._tripped = self.switch.on_flag(prof.position + self.origin)
             self._watch = self.switch.leaving(prof.position + self.origin)
             prof.begin_jog(-self._direction * p.home_speed, p.accel, p.decel)
         elif self.stage == 3:

@@ -363,7 +363,11 @@ class SimController:
             index_period: counts between index pulses (default 4,000).
             index_offset: one index pulse's position (default 0).
             pressed: hold the home switch tripped (True) or released (False) whatever the
-                position; ``None`` follows the edge.
+                position; ``None`` follows the edge. The home input (TS, ``_HMx``, the data
+                record) reads the held level, and HM/FE search from it: they start the way it
+                reads, and a phase that waits for the input to change sees it change when the
+                hold ends (the input differs from the held level there), and never while the
+                hold lasts (decision 0088). Changed while a homing runs, it takes effect at once.
 
         Raises:
             InvalidArgument: bad axis, side or period.
@@ -378,7 +382,9 @@ class SimController:
 
     def home_switch(self, axis: str) -> HomeSwitch:
         """The home switch and index of ``axis`` in its present encoder frame: what a
-        prediction of HM, FE or FI needs (``axis.home(switch=...)``)."""
+        prediction of HM, FE or FI needs (``axis.home(switch=...)``). The geometry only: a
+        switch held by :meth:`set_home_switch` is not in it (the host's homing then finds the
+        input disagreeing with it, or sees the held switch's search deviate)."""
         with self._lock:
             letter = self.spec.axis_letter(axis)
             g = self._m.room(Limits).axes[letter].home

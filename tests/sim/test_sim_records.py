@@ -155,11 +155,13 @@ def test_analog_inputs_are_in_their_axis_blocks_and_the_30010s_second_in_the_gen
 ) -> None:
     sim = SimController(model, ManualClock())
     volts = [(-1) ** n * 1.25 * (n + 1) for n in range(sim.spec.analog_inputs)]
+    if model == "DMC-30010":
+        volts[1] = 1.25  # (its input 2 reads 0-5 V: 13107.2 counts/V, unsigned; EPICS)
     for n, v in enumerate(volts, start=1):
         sim.set_analog_input(n, v)
         assert number(sim, f"MG @AN[{n}]*10000") == round(v * 10000)
 
-    def counts(v: float) -> int:
+    def counts(v: float) -> int:  # ±10 V: 3276.8 counts/V, two's complement
         return round(v * 32768 / 10) & 0xFFFF
 
     rec = record_to_dict(decode_record(sim.record(), sim.spec))
@@ -167,7 +169,7 @@ def test_analog_inputs_are_in_their_axis_blocks_and_the_30010s_second_in_the_gen
         want = counts(volts[k]) if k < len(volts) else 0
         assert rec[letter]["analog_in"] == want, letter
     if general is not None:
-        assert rec["analog_in"] == counts(volts[general - 1])
+        assert rec["analog_in"] == round(volts[general - 1] * 13107.2) == 16384
 
 
 def test_the_18x2_record_ends_each_axis_block_in_two_reserved_bytes() -> None:

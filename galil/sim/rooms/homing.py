@@ -65,9 +65,10 @@ class Homing(Room):
 
     # ---- the geometry the sequence sees --------------------------------------------------
     def switch(self, ax: Axis) -> HomeSwitch:
-        """The home switch and index of ``ax`` in the machine's fixed frame."""
-        g = self.machine.room(Limits).axes[ax.letter].home
-        return HomeSwitch(g.edge, g.side, g.index_period, g.index_offset)
+        """The home switch and index of ``ax`` in the machine's fixed frame, as the home input
+        follows them: the input TS reads (a switch the test holds has its edge out of reach;
+        decision 0088)."""
+        return self.machine.room(Limits).home_switch(ax.letter)
 
     def _params(self, ax: Axis) -> HomingParams:
         p = self.machine.room(Motion).params(ax)
@@ -114,6 +115,9 @@ class Homing(Room):
         for letter, seq in list(self.runs.items()):
             ax = servo.axes[letter]
             seq.prof = ax.m.profiler  # the servo loop may have replaced it (a bisection)
+            switch = self.switch(ax)
+            if seq.switch is not switch:  # (the test hook held, released or moved it)
+                seq.rewire(switch, ax.physical)
             cross = seq.watch()
             if cross is not None and ax.m.moving:
                 if cross.hit(ax.physical):

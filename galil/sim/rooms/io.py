@@ -4,8 +4,12 @@ Channels are numbered from the model's ``io_first`` (1 on DMC controllers, 0 on 
 Inputs read high when nothing is connected; a test sets them with :meth:`IO.set_input` and
 :meth:`IO.set_analog_input` (``galil.testing`` reaches these). ``_TIn`` is input bank ``n``
 (8 inputs a byte), ``_OPn`` output word ``n`` (16 outputs). ``AI n`` holds until input ``n``
-is high (``AI -n``: low), from the host or a program thread. Analog values in the data record
-are 16-bit counts at ±10 V full scale (an assumption for AQ 2 / DQ 4).
+is high (``AI -n``: low), from the host or a program thread. An analog input takes the volts
+of its model's range at the default AQ (:meth:`~galil.models.ModelSpec.analog_input_range`;
+the DMC-30010's input 2 reads 0-5 V); the test hook clips to it. Analog values in the data
+record are 16-bit counts of that range: two's complement over ±R (32768/R counts/V), unsigned
+over 0-R (65536/R: the 30010's input 2 at 13107.2 counts/V, EPICS); the outputs at ±10 V full
+scale (an assumption for DQ 4; the RIO-47100's 0-5 V outputs too).
 """
 
 from __future__ import annotations
@@ -54,9 +58,14 @@ class IO(Room):
         self.inputs[self.channel(n, len(self.inputs))] = bool(high)
 
     def set_analog_input(self, n: int, volts: float) -> None:
-        """Test hook: put ``volts`` on analog input ``n`` (clipped to the model's range)."""
-        lo, hi = self.machine.spec.analog_in_range
-        self.analog_in[self.channel(n, len(self.analog_in))] = min(max(float(volts), lo), hi)
+        """Test hook: put ``volts`` on analog input ``n`` (clipped to the input's range)."""
+        k = self.channel(n, len(self.analog_in))
+        lo, hi = self.machine.spec.analog_input_range(int(n))
+        self.analog_in[k] = min(max(float(volts), lo), hi)
+
+    def _input_ranges(self) -> list[tuple[float, float]]:
+        spec = self.machine.spec
+        return [spec.analog_input_range(self.first + k) for k in range(len(self.analog_in))]
 
     def input_bits(self) -> int:
         """Every input as one integer (bit k = input ``first + k``)."""
@@ -188,13 +197,14 @@ class IO(Room):
             _put_bits(buf, "inputs", self.input_bits() | unconnected)
         if "outputs" in names:
             _put_bits(buf, "outputs", self.output_bits())
+        ranges = self._input_ranges()
         if "analog_in" in names:
             if buf.dtype["analog_in"].shape:  # the RIO's eight
-                _put_counts(buf, "analog_in", self.analog_in)
+                _put_counts(buf, "analog_in", self.analog_in, ranges)
             else:  # the DMC-30010's input 2 (input 1 is in its axis block)
-                _put_counts(buf, "analog_in", self.analog_in[1:2])
+                _put_counts(buf, "analog_in", self.analog_in[1:2], ranges[1:2])
         if "analog_out" in names:
-            _put_counts(buf, "analog_out", self.analog_out)
+            _put_counts(buf, "analog_out", self.analog_out, [_FULL_SCALE] * len(self.analog_out))
         for letter in letters:
             # An axis block's analog input is the input of the axis's number (gclib: "A axis
             # analog input"); blocks for axes past the model's inputs keep 0.
@@ -202,7 +212,7 @@ class IO(Room):
             if "analog_in" in (block.dtype.names or ()):
                 number = self.machine.spec.axes.index(letter)
                 if number < len(self.analog_in):
-                    block["analog_in"] = _counts(self.analog_in[number])
+                    block["analog_in"] = _counts(self.analog_in[number], ranges[number])
 
 
 def _put_bits(buf: np.ndarray[Any, Any], name: str, bits: int) -> None:
@@ -214,11 +224,15 @@ def _put_bits(buf: np.ndarray[Any, Any], name: str, bits: int) -> None:
         field[0] = bits & ((1 << (8 * field.dtype.itemsize)) - 1)
 
 
-def _put_counts(buf: np.ndarray[Any, Any], name: str, volts: list[float]) -> None:
-    """As many channels as the record's field holds (the DMC-30010's holds one input)."""
+def _put_counts(
+    buf: np.ndarray[Any, Any], name: str, volts: list[float], ranges: list[tuple[float, float]]
+) -> None:
+    """As many channels as the record's field holds (the DMC-30010's holds one input), each
+    in the counts of its range."""
     field = buf[name]
     signed = field.dtype.base.kind == "i"
-    values = [_counts(v) - (0x10000 if signed and _counts(v) & 0x8000 else 0) for v in volts]
+    counts = [_counts(v, r) for v, r in zip(volts, ranges, strict=True)]
+    values = [c - (0x10000 if signed and c & 0x8000 else 0) for c in counts]
     if field.shape[1:]:
         n = min(len(values), field.shape[1])
         field[0][:n] = values[:n]
@@ -226,6 +240,14 @@ def _put_counts(buf: np.ndarray[Any, Any], name: str, volts: list[float]) -> Non
         field[0] = values[0]
 
 
-def _counts(volts: float) -> int:
-    """16-bit two's complement counts of ``volts`` at ±10 V full scale."""
-    return round(volts * 32768 / 10) & 0xFFFF
+#: The range the analog outputs' counts are taken over.
+_FULL_SCALE = (-10.0, 10.0)
+
+
+def _counts(volts: float, span: tuple[float, float]) -> int:
+    """16-bit counts of ``volts`` in the range ``span``: two's complement over ±R, unsigned
+    over 0-R (EPICS's AQ decoding; the top of an unsigned range is the largest count)."""
+    lo, hi = span
+    if lo < 0:  # (+R itself reads the largest count, as an ADC saturates, not -32768)
+        return min(round(volts * 32768 / hi), 0x7FFF) & 0xFFFF
+    return min(round(volts * 65536 / hi), 0xFFFF)

@@ -21,7 +21,11 @@ inside one step unseen; and a step ends at the sample an axis starts towards a s
 already (a jog reversed, a follower's master or a path turning), so one long advance stops it
 where stepping sample by sample does. The home switch is a flag on one side of an edge
 (default: below -10,000 counts) that pulls the home input (TS bit 1, ``_HMx``) low; index
-pulses come every 4,000 counts from 0 (:class:`HomeGeometry`). Decision 0015.
+pulses come every 4,000 counts from 0 (:class:`HomeGeometry`). Decision 0015. A test may
+hold the home switch tripped or released whatever the position (:meth:`Limits.set_home`); the
+home input then reads that level, and HM/FE see that same input (:meth:`Limits.home_switch`, the
+one switch TS, ``_HMx``, the record and the homing room read): they start from it and find the
+edge only when the hold ends, or never while it lasts (decision 0088).
 
 ``LD`` disables a limit switch per axis (1 forward, 2 reverse, 3 both; decision 0046): a
 disabled switch neither stops motion towards it nor refuses a start towards it, so no
@@ -52,6 +56,7 @@ import numpy.typing as npt
 from galil.errors import InvalidArgument
 from galil.models import INT32_MAX, INT32_MIN
 from galil.predict.engine import KinematicPlan
+from galil.predict.homing import HomeSwitch
 from galil.sim.interpreter import int32
 from galil.sim.machine import Room
 from galil.sim.parse import Refused, split_fields
@@ -65,6 +70,9 @@ __all__ = ["DEFAULT_HOME_EDGE", "DEFAULT_INDEX_PERIOD", "HomeGeometry", "Limits"
 DEFAULT_HOME_EDGE = -10_000
 #: Counts between index pulses by default (one motor turn of a 1000-line encoder).
 DEFAULT_INDEX_PERIOD = 4_000
+#: Beyond any position a motor reaches (counts): a held home switch's edge is put there, so
+#: the input reads one level wherever the motor is and no motion meets an edge.
+_OUT_OF_REACH = 2**62
 
 
 @dataclass(frozen=True)
@@ -96,6 +104,17 @@ class HomeGeometry:
         below = off + k * p
         return below if below < physical else below - p
 
+    def input(self, pressed: bool | None) -> HomeSwitch:
+        """The switch the home input follows: this geometry, or (``pressed`` not ``None``) one
+        held tripped or released everywhere, its edge out of reach, the index pulses kept."""
+        if pressed is None:
+            return HomeSwitch(self.edge, self.side, self.index_period, self.index_offset)
+        edge = _OUT_OF_REACH if pressed else -_OUT_OF_REACH  # (side -1: tripped below)
+        return HomeSwitch(edge, -1, self.index_period, self.index_offset)
+
+
+_FREE_HOME = HomeGeometry().input(None)
+
 
 @dataclass
 class _AxisLimits:
@@ -107,6 +126,7 @@ class _AxisLimits:
     reverse_at: int | None = None
     home: HomeGeometry = field(default_factory=HomeGeometry)
     home_pressed: bool | None = None  # the test hook holds the home switch (None: geometry)
+    home_input: HomeSwitch = _FREE_HOME  # what the home input follows (the two above)
     ld: int = 0  # LD: 1 the forward switch disabled, 2 the reverse one, 3 both
 
 
@@ -160,9 +180,13 @@ class Limits(Room):
 
     def home_level(self, ax: Axis) -> int:
         """The home input: 0 (low) while the home switch is tripped, 1 otherwise."""
-        s = self.axes[ax.letter]
-        on = s.home.on_flag(ax.physical) if s.home_pressed is None else s.home_pressed
-        return 0 if on else 1
+        return self.axes[ax.letter].home_input.level(ax.physical)
+
+    def home_switch(self, letter: str) -> HomeSwitch:
+        """The switch the home input of ``letter`` follows, in the fixed frame: the one TS
+        and ``_HMx`` read and HM/FE/FI search (a held switch's edge is out of reach). A new
+        object whenever :meth:`set_home` changes it, the same one until then."""
+        return self.axes[letter].home_input
 
     def place(self, letter: str, forward: int | None, reverse: int | None) -> None:
         """Place the limit switches of ``letter`` at fixed-frame positions (``None``: none)."""
@@ -174,6 +198,7 @@ class Limits(Room):
         """Set where the home flag and index pulses are; ``pressed`` holds the switch."""
         s = self.axes[letter]
         s.home, s.home_pressed = geometry, pressed
+        s.home_input = geometry.input(pressed)
 
     def _update_switched(self) -> None:
         self._placed = any(
