@@ -1481,7 +1481,8 @@ def _unsynced(limit: float, heard: int, held: Sequence[str]) -> str:
         )
     if heard:
         return (
-            f"{why} within {limit:g} s: {heard} bytes came but not the answer to its marker"
+            f"{why} within {limit:g} s: {heard} byte{'s' if heard > 1 else ''} came but not"
+            " the answer to its marker"
             f" (a long reply still arriving?), {again}"
         )
     return (
