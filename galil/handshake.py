@@ -8,9 +8,16 @@ own library does, or kept and stripped from every reply when the caller asks for
 
 from __future__ import annotations
 
+import contextlib
 import re
 
-from galil.errors import GalilConnectionError, GalilTimeoutError, InvalidArgument, ProtocolError
+from galil.errors import (
+    GalilConnectionError,
+    GalilError,
+    GalilTimeoutError,
+    InvalidArgument,
+    ProtocolError,
+)
 from galil.link import RECONNECT_ADVICE, Link, warn_caller
 from galil.models import Identity, ModelSpec, parse_identity
 from galil.protocol import commands as cmds
@@ -43,19 +50,7 @@ def identify(
             or (``expect``) another controller than before.
     """
     with link.locked():
-        try:
-            # Any reply shape: with echo on, the echo of ^R^V comes first (maybe a line of
-            # its own), and that is how the echo is found.
-            reply = link.roundtrip_locked([_IDENTIFY_ANY], link.timeout)[0]
-        except GalilTimeoutError as exc:
-            serial = getattr(link.transport, "kind", "") == "serial"
-            raise link.error(
-                GalilConnectionError,
-                f"no answer to ^R^V on the {_where(link)} within {link.timeout:g} s: is a Galil"
-                f" controller on the other end{' (and the baud rate right)' if serial else ''}?",
-            ) from exc
-        except GalilConnectionError as exc:
-            raise link.error(GalilConnectionError, _dropped(link, exc)) from exc
+        reply = _ask(link)
         echo = False
         ident: Identity | None = None
         problem = ""
@@ -64,16 +59,109 @@ def identify(
             if found is not None and found.end():
                 reply = Completed(reply.command, True, reply.text[found.end() :])
                 echo = _handle_echo(link, given, keep_echo)
-            try:
-                ident = parse_identity(reply.text)
-            except InvalidArgument as exc:
-                problem = str(exc)
+            ident, problem = _identity_in(reply.text)
         else:
             problem = "the controller refused ^R^V"
     if expect is not None:
         _check_same(link, ident, expect)
     _settle_model(link, ident, given, problem)
     return ident, echo
+
+
+def _ask(link: Link) -> Completed:
+    """``^R^V`` (lock held), asked once more if the first gets no answer, one that does not
+    fit, or one that names no controller (stray bytes: a gateway's banner, a program's
+    output). The link resynchronises first: its ``\\`` ends a download a host left open
+    (``DL`` without its closing ``\\``: the controller is silent, taking every line as
+    program text), and what came before the marker is thrown away. On a controller not
+    downloading, ``\\`` is a line of its own that changes nothing (Galil's legacy library
+    sends ``\\;`` to clear the link when it opens one: galil-protocol.md §3).
+
+    Raises:
+        GalilConnectionError: no answer, or none that fits, either time; the link failed.
+    """
+    before = link.bytes_received
+    try:
+        first: Completed | GalilError = link.roundtrip_locked([_IDENTIFY_ANY], link.timeout)[0]
+    except (GalilTimeoutError, ProtocolError) as exc:
+        first = exc
+    except GalilConnectionError as exc:
+        raise link.error(GalilConnectionError, _dropped(link, exc)) from exc
+    if isinstance(first, Completed) and not _names_nothing(first):
+        return first
+    heard, before = link.bytes_received - before, link.bytes_received
+    link.note("no identity: resynchronising (its \\ ends a download left open), asking again")
+    try:
+        link.settle_locked([], link.timeout, echo=link.echo)
+        return link.roundtrip_locked([_IDENTIFY_ANY], link.timeout)[0]
+    except (GalilTimeoutError, ProtocolError, GalilConnectionError) as exc:
+        silent = link.bytes_received == before
+        why = _unidentified(link, (first, heard), exc, silent)
+        raise link.error(GalilConnectionError, why) from exc
+
+
+def _names_nothing(reply: Completed) -> bool:
+    """Whether an accepted ``^R^V`` reply holds no identity (past an echo of the query)."""
+    if not reply.ok:
+        return False  # (the controller refused it: an answer all the same)
+    found = _ECHO_OF_IDENTIFY.match(reply.text)
+    text = reply.text[found.end() :] if found is not None else reply.text
+    return _identity_in(text)[0] is None
+
+
+def _unidentified(
+    link: Link, first: tuple[Completed | GalilError, int], then: GalilError, silent: bool
+) -> str:
+    """The message of a handshake whose ``^R^V`` failed twice (``first``, with the bytes
+    heard, then ``then``, after a resynchronisation; ``silent``: not one byte came to that):
+    what arrived, and what the peer may be."""
+    serial = getattr(link.transport, "kind", "") == "serial"
+    where = _where(link)
+    reply, heard = first
+    if isinstance(reply, Completed):
+        what = f"the answer to ^R^V on the {where} named no controller ({reply.text!r})"
+    elif isinstance(reply, GalilTimeoutError):
+        what = f"no answer to ^R^V on the {where} within {link.timeout:g} s"
+        if heard:
+            what += f" ({heard} byte{'s' if heard > 1 else ''} came, none ending a reply)"
+    else:
+        what = f"the answer to ^R^V on the {where} did not fit ({_said(reply)})"
+    if silent:
+        after = f"nor a byte to the resynchronisation after it in {max(link.timeout, 0.2):g} s"
+    elif isinstance(then, GalilTimeoutError):
+        after = "none to a second ^R^V after the link resynchronised"
+    elif isinstance(then, ProtocolError):
+        after = f"after the link resynchronised, none that fits either ({_said(then)})"
+    else:
+        why = _said(then).removeprefix("the link is out of step and did not resynchronise ")
+        after = f"then the link could not resynchronise ({why})"
+    return (
+        f"{what}; {after}: is a Galil controller on the other end"
+        f"{' (and the baud rate right)' if serial else ''}? (The resynchronisation sent"
+        " \\, which ends a download a host left open with DL.)"
+    )
+
+
+def _said(exc: GalilError) -> str:
+    """An error's message without the link's advice or what it says happens next."""
+    text = str(exc.args[0] if exc.args else exc)
+    for tail in (RECONNECT_ADVICE, "; the command may have executed (the link resynchronises)"):
+        text = text.removesuffix(tail)
+    return text.split(", so try again", 1)[0]  # (advice for a link in use, not a handshake)
+
+
+def _identity_in(text: str) -> tuple[Identity | None, str]:
+    """The identity in a ``^R^V`` reply and, if none, why: its last line that parses. A
+    running program's output (``MG`` in ``#AUTO``) is not marked before the link sets
+    ``CW 1``, so it may come in front of the identity."""
+    for line in reversed(text.splitlines()):
+        if line.strip():
+            with contextlib.suppress(InvalidArgument):
+                return parse_identity(line), ""
+    try:
+        return parse_identity(text), ""
+    except InvalidArgument as exc:
+        return None, str(exc)
 
 
 def _where(link: Link) -> str:

@@ -78,6 +78,8 @@ __all__ = [
 LONGEST_TIMEOUT = 1e9
 #: What a dead link's error ends with: the way to open it again.
 RECONNECT_ADVICE = "; call reconnect() to open it again"
+#: The burns: the controller holds their answer (and every later one) while flash is written.
+_BURNS = frozenset({"BN", "BP", "BV"})
 #: The least reply timeout a bulk transfer (``QU``, ``QD``, ``DL``, ``UL``, ``LV``) gets: what
 #: every transfer had before its size counted (EPICS allows 10 s for a download); the link's
 #: own timeout when that is longer (decision 0064).
@@ -767,35 +769,28 @@ class LinkCore:
             ) from exc
 
     def _resync(self, t: float, before: bytes = b"") -> None:
+        """Write the marker (behind ``before``) and read until its answer comes back (lock
+        held): what comes before it is thrown away.
+
+        Raises:
+            GalilConnectionError: no answer within ``t`` (at least 0.2 s). If not one byte
+                came and no burn was given up (the controller holds a burn's answer for
+                seconds), the link is dead: a connection gone silent without being closed
+                (decision 0089; the automatic reconnect reopens it). Otherwise it stays
+                open and out of step, and the next exchange tries again (decision 0081).
+        """
         session = self._session
+        held = [c.text.strip() for c in session.unanswered if c.text.strip() in _BURNS]
         self.note("link out of step: resynchronising")
         self._write(before + session.resync())
         limit = max(t, 0.2)
-        clock = self._clock_source
-        sim_deadline = clock.controller_time() + limit if clock is not None else 0.0
-        deadline = _monotonic() + limit
-        while session.out_of_step:
-            wait = deadline - _monotonic()
-            if clock is not None:
-                wait = min(wait, sim_deadline - clock.controller_time())
-            chunk = self._read(max(wait, 0.0))
-            if chunk:
-                try:
-                    events = session.receive_data(chunk)
-                except ProtocolError:
-                    continue  # the parser is hunting for the marker; junk is expected
-                for ev in events:
-                    if type(ev) is Unsolicited:
-                        self._message(ev.line)
-            elif wait <= 0:
-                raise self.error(
-                    GalilConnectionError,
-                    f"the link is out of step and did not resynchronise within {limit:g} s:"
-                    " a command the controller still holds (a burn: BN, BP, BV) delays its"
-                    " answers, so try again once it is done; if the controller does not"
-                    " answer at all, call reconnect()",
-                )
-        self.note("link back in step")
+        heard = _hunt(self, limit)
+        if heard is None:
+            self.note("link back in step")
+        elif heard or held:
+            raise self.error(GalilConnectionError, _unsynced(limit, heard, held))
+        else:
+            raise self._link_failed(GalilConnectionError(_unsynced(limit, 0, held)))
 
     # -- raw I/O (lock held) ------------------------------------------------------------------
 
@@ -1146,7 +1141,8 @@ class Link(LinkCore):
             GalilConnectionError: no answer to the marker within ``timeout`` (the session
                 stays out of step: the next exchange resynchronises first).
         """
-        self._session = Session(echo=echo)
+        # (a burn given up may still hold the answers: the new session knows it)
+        self._session = Session(echo=echo, unanswered=self._session.unanswered)
         self._resync(timeout, b"".join(c.text.encode("latin-1") + b"\r" for c in batch))
 
     def explain_locked(self, rejected: Completed, timeout: float) -> GalilError:
@@ -1448,6 +1444,60 @@ def _no_reply(text: str, t: float, begun: int) -> str:
     return (
         f"the reply to {text!r} was cut part way: {begun} bytes had arrived and it had not "
         f"ended within {t:g} s; a long reply needs a longer timeout (pass timeout=)"
+    )
+
+
+def _hunt(link: LinkCore, limit: float) -> int | None:
+    """Read until the resync marker's answer (``None``), or until ``limit`` seconds have
+    passed on the host's clock or the controller's: then the bytes heard meanwhile (lock
+    held). Bytes that never stop do not hold the link for ever either."""
+    session = link._session
+    clock = link._clock_source
+    sim_deadline = clock.controller_time() + limit if clock is not None else 0.0
+    deadline = _monotonic() + limit
+    heard = 0
+    while session.out_of_step:
+        wait = deadline - _monotonic()
+        if clock is not None:
+            wait = min(wait, sim_deadline - clock.controller_time())
+        chunk = link._read(max(wait, 0.0))
+        if chunk:
+            heard += len(chunk)
+            try:
+                events = session.receive_data(chunk)
+            except ProtocolError:
+                events = []  # the parser is hunting for the marker; junk is expected
+            for ev in events:
+                if type(ev) is Unsolicited:
+                    link._message(ev.line)
+        if wait <= 0 and session.out_of_step:
+            return heard
+    return None
+
+
+def _unsynced(limit: float, heard: int, held: Sequence[str]) -> str:
+    """Why a resynchronisation failed: a burn given up may still hold the answers, or a
+    reply still arriving (``heard`` bytes) hid the marker's (both: try again), or not one
+    byte came (the link is dead)."""
+    why = "the link is out of step and did not resynchronise"
+    again = (
+        "so try again once it is done; if the controller does not answer at all, call reconnect()"
+    )
+    if held:
+        return (
+            f"{why} within {limit:g} s: the controller may still be busy with {held[-1]}"
+            f" (a burn holds its answers for seconds), {again}"
+        )
+    if heard:
+        return (
+            f"{why} within {limit:g} s: {heard} byte{'s' if heard > 1 else ''} came but not"
+            " the answer to its marker"
+            f" (a long reply still arriving?), {again}"
+        )
+    return (
+        f"{why}: not one byte came back within {limit:g} s, so the connection is gone"
+        " although it was not closed (the controller or a switch on the way restarted, a"
+        " cable was pulled)"
     )
 
 

@@ -202,21 +202,9 @@ class Messages:
         """``CW 1`` on the command link (the previous setting, or ``known``, restored at
         close)."""
         link = self.link
-        previous = 2 if known is None else known  # factory default: unmarked
         with link.locked():
-            try:
-                if known is None:
-                    done = link.roundtrip_locked([cmds.mg_operand("_CW")], link.timeout)[0]
-                    if done.ok:
-                        value = round(read_one(done.text))
-                        if value in (1, 2):
-                            previous = value
-            except (GalilError, ValueError):
-                pass  # optional: without a reading we restore the factory default
-            try:
-                ok = link.roundtrip_locked([cmds.cw(1)], link.timeout)[0].ok
-            except (ProtocolError, GalilError):
-                ok = False
+            previous = _read_cw(link) if known is None else known
+            ok = _set_cw1(link)
         if not ok:
             warn_caller(
                 f"{link.model.name} refused CW 1: unsolicited output is not marked and may be "
@@ -319,3 +307,37 @@ class Messages:
     def threads(self) -> list[threading.Thread]:
         """The background threads now running (for tests and diagnostics)."""
         return [t for t in (self._pump, self._reader) if t is not None and t.is_alive()]
+
+
+# A running program's output is not marked until CW 1 has run, and may come in front of a
+# reply: the link is then out of step, and the exchange is tried again (it resynchronises).
+_TRIES = 3
+
+
+def _read_cw(link: Link) -> int:
+    """``_CW`` as the controller has it (lock held); the factory default (2: unmarked) if it
+    cannot be read."""
+    for _ in range(_TRIES):
+        try:
+            done = link.roundtrip_locked([cmds.mg_operand("_CW")], link.timeout)[0]
+            value = round(read_one(done.text)) if done.ok else None
+        except ProtocolError:
+            continue  # (a program's line came first: ask again)
+        except (GalilError, ValueError):
+            break
+        return value if value in (1, 2) else 2
+    return 2
+
+
+def _set_cw1(link: Link) -> bool:
+    """``CW 1`` (lock held): whether it took. A reply out of step is no refusal: ``CW 1``
+    may have run, and goes again (the same setting; once it runs, output is marked and
+    cannot get in the way); if it never got a clean answer, ``_CW`` says."""
+    for _ in range(_TRIES):
+        try:
+            return link.roundtrip_locked([cmds.cw(1)], link.timeout)[0].ok
+        except ProtocolError:
+            continue
+        except GalilError:
+            return False
+    return _read_cw(link) == 1

@@ -36,18 +36,21 @@ from galil.testing import nothing_sent, sim_of
 
 
 class Faults:
-    """A fault hook for ``sim://``: drops every reply while ``drop``; raises SIGINT (Ctrl-C)
-    when a reply holds ``interrupt_on``."""
+    """A fault hook for ``sim://``: drops every reply while ``drop`` but those holding
+    ``keep``; raises SIGINT (Ctrl-C) when a reply holds ``interrupt_on``."""
 
     def __init__(self) -> None:
         self.drop = False
+        self.keep: bytes | None = None
         self.interrupt_on: bytes | None = None
 
     def __call__(self, data: bytes) -> list[tuple[float, bytes]]:
         if self.interrupt_on is not None and self.interrupt_on in data:
             self.interrupt_on = None
             signal.raise_signal(signal.SIGINT)
-        return [] if self.drop else [(0.0, data)]
+        if self.drop and (self.keep is None or self.keep not in data):
+            return []
+        return [(0.0, data)]
 
 
 @pytest.fixture
@@ -104,7 +107,9 @@ def test_a_program_line_the_controller_cannot_take_is_not_sent(
 def test_a_failed_reset_is_reported_and_the_session_goes_on(
     faults: Faults, term: Terminal, out: list[str]
 ) -> None:
-    faults.drop = True  # the controller falls silent: ST (before RS) is never answered
+    # ST (before RS) is never answered, nor anything else but the resync marker: the link is
+    # alive (one that hears nothing at all is dead and ends the terminal: decision 0089).
+    faults.drop, faults.keep = True, b"SYNC"
     term.feed("RS")
     assert out[-1].startswith("error: ")
     assert "could not be stopped" in out[-1]
@@ -116,7 +121,7 @@ def test_a_failed_reset_is_reported_and_the_session_goes_on(
 
 
 def test_ctrl_c_that_cannot_send_st_says_so(faults: Faults, term: Terminal, out: list[str]) -> None:
-    faults.drop = True
+    faults.drop, faults.keep = True, b"SYNC"  # (alive: the resync marker is answered)
     term.interrupt()
     assert out[-1].startswith("Ctrl-C: ST not sent: ")
     faults.drop = False
@@ -149,14 +154,15 @@ def test_piped_input_runs_as_a_script_and_prints_program_output(
 
 
 class HoldReply:
-    """A fault hook for the simulator's servers: the next reply holding ``b"7777"`` comes
-    ``seconds`` late."""
+    """A fault hook for the simulator's servers: the next reply holding ``mark`` comes
+    ``seconds`` late (and what follows it, in order)."""
 
     def __init__(self) -> None:
         self.seconds = 0.0
+        self.mark = b"7777"
 
     def __call__(self, data: bytes) -> list[tuple[float, bytes]]:
-        if self.seconds and b"7777" in data:
+        if self.seconds and self.mark in data:
             seconds, self.seconds = self.seconds, 0.0
             return [(seconds, data)]
         return [(0.0, data)]
@@ -167,11 +173,12 @@ def test_a_command_while_a_late_reply_is_due_is_not_sent_and_says_why() -> None:
     with SimTcpServer(model="DMC-4040", faults=hold) as srv, galil.connect(srv.url) as dmc:
         out: list[str] = []
         term = Terminal(dmc, write=out.append, timeout=0.05)
-        hold.seconds = 0.3
-        term.feed("MG 7777")
-        assert out[-1].startswith("timeout: no reply to 'MG 7777'")
-        term.feed("MG 1")  # the link cannot resynchronise while 7777 is still due
+        hold.seconds, hold.mark = 0.3, b":"  # a burn holds its reply while flash is written
+        term.feed("BV")
+        assert out[-1].startswith("timeout: no reply to 'BV'")
+        term.feed("MG 1")  # the link cannot resynchronise while the burn's reply is due
         assert out[-1].startswith("not sent: the link is out of step")
+        assert "busy with BV" in out[-1]
         assert out[-1].endswith("(an earlier reply may still be due, e.g. a burn's)")
         for _ in range(100):  # once the late reply has come, the session goes on
             term.feed("MG 2")

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import secrets
 from collections import deque
+from collections.abc import Sequence
 from typing import NamedTuple
 
 from galil.errors import ProtocolError
@@ -55,6 +56,7 @@ class Completed(NamedTuple):
 
 
 _new = tuple.__new__
+_UNANSWERED_KEPT = 64  # (only whether a burn is among them matters: a few are enough)
 _ACK_KIND, _ANY_KIND, _DATA_KIND = ReplyKind.ACK, ReplyKind.ANY, ReplyKind.DATA
 
 
@@ -63,14 +65,16 @@ class Session:
 
     Args:
         echo: the controller echoes what it receives (``EO1`` on serial); the echo is removed.
+        unanswered: commands an earlier session gave up (see :attr:`unanswered`).
     """
 
-    def __init__(self, echo: bool = False) -> None:
+    def __init__(self, echo: bool = False, unanswered: Sequence[Command] = ()) -> None:
         self.echo = echo
         self._parser = FrameParser()
         self._pending: deque[Command] = deque()
         self._dl_first: bool | None = None  # first terminator of the DL at the head
         self.out_of_step = False
+        self._unanswered = list(unanswered)  # given up since the link was last in step
         self._token = ""
         self._resyncs = 0
         # Fast path for the usual one-command exchange: while the parser is idle, a lone
@@ -245,6 +249,7 @@ class Session:
                 out.append(event)
             elif type(event) is Synced:
                 self.out_of_step = False
+                self._unanswered.clear()
             else:
                 done = self._match(event)  # type: ignore[arg-type]
                 if done is not None:
@@ -303,7 +308,17 @@ class Session:
     def _describe(self) -> str:
         return ", ".join(repr(c.text) for c in list(self._pending)[:4]) or "none"
 
+    @property
+    def unanswered(self) -> tuple[Command, ...]:
+        """The commands whose replies were given up (a timeout, a reply that did not fit)
+        since the link was last in step, oldest first: what the controller may still be
+        busy with while the link resynchronises (a burn holds its answer for seconds)."""
+        return tuple(self._unanswered)
+
     def _lose_step(self) -> None:
+        if self._pending:
+            self._unanswered.extend(self._pending)
+            del self._unanswered[:-_UNANSWERED_KEPT]
         self.out_of_step = True
         self._lazy = False
         self._idle = False

@@ -3,7 +3,9 @@
 Put it between a client and any TCP controller (the simulator's server, or real hardware on
 a bench): every chunk the controller sends back is delivered through a fault plan (splits,
 drops, corruption, stray ``:`` or ``?``, injected unsolicited lines), after a fixed latency,
-and :meth:`FaultProxy.cut` drops every connection at once, like a pulled cable. Loopback only.
+and :meth:`FaultProxy.cut` drops every connection at once, like a pulled cable;
+:meth:`FaultProxy.hush` lets nothing more through them but closes none, like a switch or a
+controller that restarted with no reset reaching the host. Loopback only.
 """
 
 from __future__ import annotations
@@ -89,6 +91,7 @@ class _Pair:
         self.upstream = upstream
         self.pending: deque[tuple[float, bytes]] = deque()  # (due time, bytes) to the client
         self.requests: deque[tuple[float, bytes]] = deque()  # (due time, bytes) upstream
+        self.hushed = False  # nothing more passes either way; the sockets stay open
 
 
 class FaultProxy:
@@ -135,6 +138,16 @@ class FaultProxy:
                 with contextlib.suppress(OSError):
                     s.shutdown(socket.SHUT_RDWR)
                 s.close()
+
+    def hush(self) -> None:
+        """Let nothing more through on every open connection, in either direction, and close
+        none: the host's socket stays open and hears nothing, as when a switch or the
+        controller restarted and no reset reached the host. New connections are forwarded."""
+        with self._lock:
+            for p in self._pairs:
+                p.hushed = True
+                p.requests.clear()
+                p.pending.clear()
 
     def stop(self) -> None:
         """Stop forwarding and close everything; idempotent."""
@@ -193,6 +206,8 @@ class FaultProxy:
             data = b""
         if not data:
             self._drop(pair)
+            return
+        if pair.hushed:
             return
         due = time.monotonic() + self.latency
         if from_client:

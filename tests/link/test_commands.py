@@ -191,17 +191,21 @@ def test_resync_impossible_says_so(c: Controller, peer: FakeGalil) -> None:
         c.command("MG 8", timeout=0.05)
 
 
-def test_resync_delayed_by_a_held_command_succeeds_on_a_later_try(
+def test_resync_delayed_by_a_held_burn_succeeds_on_a_later_try(
     c: Controller, peer: FakeGalil
 ) -> None:
-    # A held reply (AM on a long move, say) keeps the marker's answer back too: the link says
-    # to try again, and once the controller answers, the next command resynchronises.
-    peer.hold.add("MG 7")
+    # A burn holds its reply (and the marker's) while flash is written: the link says to try
+    # again, and once the controller answers, the next command resynchronises. (A silence
+    # with no burn given up is a dead link: tests/link/test_silent_link.py.)
+    peer.hold.add("BV")
     with pytest.raises(GalilTimeoutError):
-        c.command("MG 7", timeout=0.05)
-    peer.silent = True  # the controller answers nothing while it holds MG 7
-    with pytest.raises(GalilConnectionError, match="try again once it is done"):
+        c.command("BV", timeout=0.05)
+    peer.silent = True  # the controller answers nothing while it holds BV
+    with pytest.raises(GalilConnectionError, match=r"busy with BV .*try again once it is done"):
         c.command("MG 8", timeout=0.05)
+    assert not c.link.dead
+    with pytest.raises(GalilConnectionError, match=r"busy with BV"):
+        c.command("MG 8", timeout=0.05)  # (still the burn: the next try knows it too)
     peer.silent = False
     peer.hold.clear()
     peer.release_held()
