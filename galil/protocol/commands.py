@@ -1646,13 +1646,18 @@ _QUERIES = frozenset(
 
 def split_commands(text: str) -> list[str]:
     """Split a command line at the ``;`` outside double quotes (``MG "a;b";TP`` is two)."""
+    return _split_outside_quotes(text, ";")
+
+
+def _split_outside_quotes(text: str, separator: str) -> list[str]:
+    """Split ``text`` at each ``separator`` outside double quotes."""
     parts: list[str] = []
     start = 0
     quoted = False
     for i, ch in enumerate(text):
         if ch == '"':
             quoted = not quoted
-        elif ch == ";" and not quoted:
+        elif ch == separator and not quoted:
             parts.append(text[start:i])
             start = i + 1
     parts.append(text[start:])
@@ -1873,17 +1878,7 @@ def _first_printed(text: str) -> str:
 
 def _split_arguments(text: str) -> list[str]:
     """Split at the ``,`` outside double quotes (``"a,b", 1`` is two)."""
-    parts: list[str] = []
-    start = 0
-    quoted = False
-    for i, ch in enumerate(text):
-        if ch == '"':
-            quoted = not quoted
-        elif ch == "," and not quoted:
-            parts.append(text[start:i])
-            start = i + 1
-    parts.append(text[start:])
-    return parts
+    return _split_outside_quotes(text, ",")
 
 
 #: Commands that take no axis letters after their name: any name that only begins like them

@@ -46,15 +46,22 @@ def test_a_cancelled_vector_start_leaves_the_running_sequence_going(ticks: int) 
     run(body)
 
 
+async def _streaming(c: aio.AsyncController) -> asyncio.Future[Any]:
+    """A vector start on CD whose path is more than the buffer holds, once its sequence has
+    registered (it streams on)."""
+    path = [Line(400, 100 * (-1) ** i) for i in range(2000)]
+    streaming = asyncio.ensure_future(c.vector_move("CD", path, speed=20_000))
+    for _ in range(2000):
+        if c.sync.tracker.last_sequence() is not None:
+            break
+        await c.query_operands(["_BGS"])
+    return streaming
+
+
 def test_a_vector_start_cancelled_while_it_streams_stops_its_own_sequence() -> None:
     async def body() -> None:
         async with await sim() as c:
-            path = [Line(400, 100 * (-1) ** i) for i in range(2000)]  # more than the buffer holds
-            streaming = asyncio.ensure_future(c.vector_move("CD", path, speed=20_000))
-            for _ in range(2000):  # until its sequence has registered: it streams on
-                if c.sync.tracker.last_sequence() is not None:
-                    break
-                await c.query_operands(["_BGS"])
+            streaming = await _streaming(c)
             streaming.cancel()
             with pytest.raises(asyncio.CancelledError):
                 await streaming
@@ -128,12 +135,7 @@ def test_a_cancelled_vector_start_has_stopped_its_sequence_when_the_cancellation
 
     async def body() -> None:
         async with await sim() as c:
-            path = [Line(400, 100 * (-1) ** i) for i in range(2000)]  # more than the buffer holds
-            streaming = asyncio.ensure_future(c.vector_move("CD", path, speed=20_000))
-            for _ in range(2000):  # until its sequence has registered: it streams on
-                if c.sync.tracker.last_sequence() is not None:
-                    break
-                await c.query_operands(["_BGS"])
+            streaming = await _streaming(c)
             lane = threading.Event()
             c.worker.submit_urgent(lane.wait, 10)  # the stops' lane busy for a moment
 
