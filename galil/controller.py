@@ -334,16 +334,17 @@ class Resetting:
         link.attach(link.transport)  # a fresh session, nothing to restore, stale bytes gone
         self.records_room.reset()
         if self._handshake:
-            deadline = time.monotonic() + wait
-            while True:
-                try:
-                    self.identity, self.echo = identify(
-                        link, self._given_model, keep_echo=self._keep_echo
-                    )
-                    break
-                except GalilConnectionError:
-                    if link.dead or time.monotonic() >= deadline:
-                        raise
+            deadline = link.clock() + wait  # (the controller's clock: a simulator's too)
+            with link.rebooting():  # (silent while it boots: not a dead link; decision 0089)
+                while True:
+                    try:
+                        self.identity, self.echo = identify(
+                            link, self._given_model, keep_echo=self._keep_echo
+                        )
+                        break
+                    except GalilConnectionError:
+                        if link.dead or link.clock() >= deadline:
+                            raise
             if self._unsolicited:
                 self.messages_room.after_reset(previous_cw)
         self.records_room.resume()

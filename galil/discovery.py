@@ -129,7 +129,7 @@ def _ask_transport(transport: Transport, timeout: float) -> str:
 
 
 #: What a port or node another process holds is listed with (it is not asked).
-_BUSY = "in use by another process, not asked"
+_BUSY = "in use by another process (or a connection of this one), not asked"
 
 
 def _identify_address(address: str, timeout: float) -> tuple[str, bool]:

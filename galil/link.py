@@ -480,6 +480,7 @@ class LinkCore:
         self.bytes_received = 0
         self._open = False
         self._dead = ""  # why the command link broke, until it is attached again
+        self._rebooting = False  # a silence is the controller's reboot (RS), not a dead link
         self._clock_source: ControllerClock | None = None
         self._inbox: list[str] = []
         self.on_messages: Callable[[list[str]], None] | None = None
@@ -768,6 +769,17 @@ class LinkCore:
                 ProtocolError, f"{exc}; the command may have executed (the link resynchronises)"
             ) from exc
 
+    @contextlib.contextmanager
+    def rebooting(self) -> Iterator[None]:
+        """While the controller reboots (after ``RS``) it is silent: a resynchronisation that
+        hears nothing then does not mark the link dead (decision 0089), so the handshake can
+        try again until the reboot is over."""
+        self._rebooting = True
+        try:
+            yield
+        finally:
+            self._rebooting = False
+
     def _resync(self, t: float, before: bytes = b"") -> None:
         """Write the marker (behind ``before``) and read until its answer comes back (lock
         held): what comes before it is thrown away.
@@ -787,6 +799,11 @@ class LinkCore:
         heard = _hunt(self, limit)
         if heard is None:
             self.note("link back in step")
+        elif self._rebooting and not heard:
+            raise self.error(
+                GalilConnectionError,
+                f"the controller is still silent after its reset (nothing within {limit:g} s)",
+            )
         elif heard or held:
             raise self.error(GalilConnectionError, _unsynced(limit, heard, held))
         else:

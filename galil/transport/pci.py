@@ -119,8 +119,9 @@ def _lock(fd: int, path: str) -> None:
         os.close(fd)
         if exc.errno in (errno.EAGAIN, errno.EWOULDBLOCK):
             raise GalilConnectionError(
-                f"cannot open PCI node {path}: the node is in use by another process (close "
-                f"the program that holds it, or pass exclusive=0 to share it): {exc}"
+                f"cannot open PCI node {path}: the node is in use by another process, or by "
+                "another connection of this one not closed yet: close that one, or pass "
+                f"exclusive=0 to share it: {exc}"
             ) from exc
         raise GalilConnectionError(f"cannot lock PCI node {path}: {exc}") from exc
 

@@ -226,9 +226,10 @@ def open_serial(url: SplitResult, **options: Any) -> SerialTransport:
             raise _refused(target, opts, exc) from exc
         if locked_out(exc):
             raise GalilConnectionError(
-                f"cannot open serial port {target!r}: the port is in use by another process "
-                "(close the program that holds it; exclusive=0 shares it, and then the two "
-                f"read each other's replies): {exc}"
+                f"cannot open serial port {target!r}: the port is in use by another process, "
+                "or by another connection of this one not closed yet (an earlier connect() in "
+                "a notebook, say): close that one; exclusive=0 shares the port, and then the "
+                f"two read each other's replies: {exc}"
             ) from exc
         if isinstance(exc, (serial.SerialException, OSError)):
             raise GalilConnectionError(f"cannot open serial port {target!r}: {exc}") from exc

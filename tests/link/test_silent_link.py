@@ -101,3 +101,44 @@ def test_a_resync_that_hears_a_reply_still_draining_leaves_the_link_open_and_bla
         assert wire.controller_time() < wire.until
         wire.until = -1.0  # the reply is over
         assert dmc.command("MG 3") == " 3.0000"
+
+
+@dataclass
+class Rebooting(SimLinkWrapper):
+    """After ``RS`` the controller hears and says nothing for ``boot`` s of its clock."""
+
+    boot: float = 2.5
+    until: float = -1.0
+
+    def write(self, data: bytes) -> None:
+        if self.inner.controller_time() < self.until:
+            return  # booting
+        self.inner.write(data)
+        if b"RS\r" in data:
+            self.inner.read(0)
+            self.until = self.inner.controller_time() + self.boot
+
+    def read(self, timeout: float) -> bytes:
+        if self.inner.controller_time() < self.until:
+            self.inner.let_time_pass(timeout)
+            return b""
+        return self.inner.read(timeout)
+
+
+@pytest.mark.parametrize("boot", [2.5, 30.0])
+def test_a_reset_waits_out_a_silent_reboot_on_a_link_without_an_address(boot: float) -> None:
+    # A controller built on a transport object cannot be reopened: a reboot's silence, longer
+    # than the link's timeout, must not mark its link dead (decision 0089 amended). A reboot
+    # longer than reset()'s timeout fails, and says the controller is still silent.
+    wire = Rebooting(SimLink(SimController("DMC-4040", ManualClock())), boot=boot)
+    dmc = galil.Controller(wire, timeout=0.5)
+    try:
+        if boot < 10:
+            dmc.reset(timeout=10)
+            assert dmc.query_number("MG 7") == 7
+        else:
+            with pytest.raises(galil.GalilConnectionError, match="still silent after its reset"):
+                dmc.reset(timeout=3)
+        assert not dmc.link.dead
+    finally:
+        dmc.close()

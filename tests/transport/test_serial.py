@@ -169,6 +169,7 @@ def test_a_port_another_opener_holds_is_refused_as_in_use_and_the_holder_keeps_i
         with pytest.raises(GalilConnectionError, match="in use by another process") as info:
             open_transport(pty_pair.path)
         assert port_in_use(info.value)
+        assert "another connection of this one" in str(info.value)  # (as here: same process)
         with pytest.raises(GalilConnectionError, match="in use by another process"):
             open_transport(f"serial://{pty_pair.path}?baudrate=9600")
         # the holder's replies still reach the holder
