@@ -58,8 +58,8 @@ def main() -> int:
         code, text = x.stop_code
         print(f"stopped at {x.position:~.3f}: stop code {code} ({text})")
 
-        # Jogging through a soft limit is refused by the controller itself: set limits
-        # around where we are and watch the axis stop on its own.
+        # A jog cannot be checked ahead; the controller stops it at a soft limit itself
+        # (stop code 2): set limits around where we are and watch the axis stop on its own.
         saved = x.soft_limits  # put the stage's own limits back afterwards (None: off)
         here = x.position
         # Only ever tighten limits: max/min keep the stage's own where they are closer.
