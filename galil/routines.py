@@ -276,7 +276,21 @@ class Routines:
         self.link = link
         self._threads: dict[int, str] = {}  # library thread -> label it runs
         self._owners: dict[int, object] = {}  # thread -> the one-shot run that holds it
+        self._preludes: dict[str, tuple[cmds.Command, ...]] = {}  # label -> sent before its XQ
         self._lock = threading.RLock()
+
+    def restart_with(self, label: str, *commands: cmds.Command) -> None:
+        """Send ``commands`` on the line of every ``XQ`` that starts the routine ``label``
+        again after the library halted it for a download or a burn (:meth:`paused`): the
+        watchdog's fresh heartbeat (``gwbeat=TIME``), without which the routine would measure
+        its silence from a beat taken before the halt and fire at once."""
+        with self._lock:
+            self._preludes[label] = tuple(commands)
+
+    def _xq_again(self, label: str, thread: int) -> None:
+        """``XQ label,thread`` after a halt, behind the routine's :meth:`restart_with`
+        commands on the same line."""
+        self.link.command_line([*self._preludes.get(label, ()), cmds.xq(label, thread)])
 
     def upload(self) -> list[str]:
         """The program in memory, one string per line (``UL``).
@@ -383,7 +397,7 @@ class Routines:
             self.link.command_line([cmds.hx(t)])
         self.link.transfer(download)
         for t, label in restart.items():
-            self.link.command_line([cmds.xq(label, t)])
+            self._xq_again(label, t)
         return tuple(sorted(restart))
 
     @contextlib.contextmanager
@@ -431,7 +445,7 @@ class Routines:
         whose ``XQ`` failed is no longer the library's (the error says which)."""
         for t, label in threads.items():
             try:
-                self.link.command_line([cmds.xq(label, t)])
+                self._xq_again(label, t)
             except BaseException:
                 self._threads.pop(t, None)
                 raise

@@ -118,6 +118,9 @@ class Watchdog(FixedAttributes):
         link = self._link
         samples = self._samples()
         self._routines.check_free(self.thread, LABEL)  # before anything is sent
+        # (a fresh beat on the line of every XQ that starts it again after a download or a
+        # burn halted it: the last beat is as old as the halt, which outlasts a short timeout)
+        self._routines.restart_with(LABEL, self._beat)
         self._routines.install(watchdog_routine(link.model.axes))
         link.command_line([cmds.assign(LIMIT, samples), self._beat])
         fired = bool(round(link.query_operands([FIRED])[0])) if replacing else False
