@@ -253,17 +253,21 @@ class Capture(FixedAttributes):
         Raises:
             InvalidArgument: the capture was not started, or ``timeout`` is not ``None`` or a
                 finite number >= 0 (:func:`~galil.link.check_wait_timeout`), or a later
-                capture took its arrays before it was read back (:meth:`reused`).
+                capture took its arrays before it was read back (:meth:`reused`), or the
+                recording was stopped before its ``count`` values (a stop cut short, whose
+                ``RC 0`` went out or goes out now: :meth:`stop` uploads what it holds).
             GalilTimeoutError: still recording after ``timeout`` (it goes on; :meth:`stop`).
         """
         timeout = check_wait_timeout(timeout)
         if self.result is not None:
             return self.result
         self._check_readable()
+        if self._stop_pending:  # (a stop cut short on a link that works: it is owed now)
+            self.reopened()
         if self._cut_at is not None:
             raise InvalidArgument(
-                f"this capture was stopped (RC 0) when its link was reopened, after "
-                f"{self._cut_at} of {self.count} values: stop() uploads those",
+                f"this capture was stopped (RC 0) after {self._cut_at} of {self.count} "
+                "values (its stop was cut short, or its link reopened): stop() uploads those",
                 model=self.link.model.name,
             )
         link = self.link
@@ -285,7 +289,9 @@ class Capture(FixedAttributes):
         """Stop recording now (``RC 0``) and upload what was recorded.
 
         A stop cut short before the recording is known stopped (a dead link, Ctrl-C) leaves
-        :attr:`stop_pending`: the ``RC 0`` goes out when the link works again.
+        :attr:`stop_pending`: the ``RC 0`` goes out when the link works again, and ``_RD``
+        is read then even if the recording had stopped (that ``RC 0`` may have gone out
+        before the link died), so only the values recorded are uploaded.
 
         Raises:
             InvalidArgument: the capture was not started, or a later capture took its arrays
@@ -296,10 +302,10 @@ class Capture(FixedAttributes):
         self._check_readable()
         n = self._cut_at
         if n is None:
-            self._stop_pending = True
-            recorded = self._stopped(self.link)
+            owed, self._stop_pending = self._stop_pending, True
+            _, recorded = self._stopped(self.link, owed=owed)
             self._stop_pending = False
-            n = self.count if recorded is None else recorded
+            n = self.count if recorded is None else min(recorded, self.count)
         return self._upload(n)
 
     def reused(self) -> None:
@@ -320,31 +326,42 @@ class Capture(FixedAttributes):
                 model=self.link.model.name,
             )
 
-    def _stopped(self, link: CommandLink) -> int | None:
-        """``RC 0`` if the controller still records, and how many values it has recorded then
-        (``_RD``); ``None`` when it had stopped already."""
-        if not round(link.query_operands(["_RC"])[0]):
-            return None
+    def _stopped(self, link: CommandLink, *, owed: bool = False) -> tuple[bool, int | None]:
+        """``RC 0`` if the controller still records; whether it did, and how many values it
+        had recorded then (``_RD``), or ``None`` when it had ended already, unless a stop was
+        ``owed`` (one cut short: its ``RC 0`` may have gone out before the link died): then
+        ``_RD``, read in the same query as ``_RC``, says how far the recording got.
+
+        ``_RD`` is the index of the next element to record, so a recording that ended by
+        itself reads ``count`` (the simulator's; unsourced for a controller's end of a
+        recording).
+        """
+        names = ["_RC", "_RD"] if owed else ["_RC"]
+        values = link.query_operands(names)
+        if not round(values[0]):
+            return False, round(values[1]) if owed else None
         link.command_line([cmds.rc(0)])
-        return round(link.query_operands(["_RD"])[0])
+        return True, round(link.query_operands(["_RD"])[0])
 
     def reopened(self) -> bool:
         """The link works (again): a recording this capture left running (its start failed
         once ``RC`` had gone out, or its stop could not be sent) is stopped now (``RC 0``);
         :meth:`stop` then uploads the values recorded until then, and :meth:`wait` refuses
-        (they are fewer than ``count``). The controller runs this on every reopen and before
-        the next capture (decision 0085).
+        (they are fewer than ``count``). A stop whose ``RC 0`` went out before its link died
+        found the recording stopped: ``_RD`` says how many values it holds all the same. The
+        controller runs this on every reopen and before the next capture (decision 0085).
 
         Returns:
             Whether the controller was still recording (and was stopped).
         """
         if not self._stop_pending:
             return False
-        n = self._stopped(self.link)
-        if n is not None and self.start_sample is not None:
-            self._cut_at = n
+        started = self.start_sample is not None
+        recording, n = self._stopped(self.link, owed=started)
+        if n is not None and started and n < self.count:
+            self._cut_at = n  # (count values recorded: the recording ended by itself)
         self._stop_pending = False
-        return n is not None
+        return recording
 
     def _upload(self, n: int) -> Recording:
         assert self.start_sample is not None
