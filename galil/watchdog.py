@@ -30,7 +30,7 @@ from galil.errors import FixedAttributes, GalilConnectionError, GalilError, Inva
 from galil.link import CommandLink, Link, check_seconds
 from galil.models import INT32_MAX
 from galil.protocol import commands as cmds
-from galil.protocol.numbers import read_one
+from galil.protocol.numbers import read_one, whole
 from galil.routines import RESERVED, Routine, Routines
 from galil.units import plain_seconds
 
@@ -361,10 +361,8 @@ def check_watchdog_args(
             "there is none to stop",
             model=model.name,
         )
-    chosen = thread
-    if chosen is not None and (
-        isinstance(chosen, bool) or not isinstance(chosen, int) or not 0 <= chosen < model.threads
-    ):
+    chosen = None if thread is None else whole(thread)  # (an int or a numpy integer)
+    if thread is not None and (chosen is None or not 0 <= chosen < model.threads):
         raise InvalidArgument(
             f"thread must be 0..{model.threads - 1} on {model.name}, not {thread!r}",
             model=model.name,

@@ -146,7 +146,7 @@ class LoopQueue(FixedAttributes, Generic[T]):
                 continue
             left = deadline - loop.time()
             if left <= 0:
-                raise QueueTimeoutError(f"no {self._what} within {timeout} s")
+                raise QueueTimeoutError(f"no {self._what} within {wait} s")
             if self.gone is not None:
                 left = min(left, CHECK)
             await self._sleep(loop, left)
@@ -362,7 +362,7 @@ class AsyncRecordStream(FixedAttributes):
             # Take what is there in one worker call, even when asked for one record.
             await self._await_fetch(max(0.0, min(SLICE, left)), max(limit, BATCH))
             if not self._ready and loop.time() >= deadline:
-                raise QueueTimeoutError(f"no data record within {timeout} s")
+                raise QueueTimeoutError(f"no data record within {wait} s")
         out: list[np.void] = []
         while self._ready and len(out) < limit:
             out.append(self._ready.popleft())
