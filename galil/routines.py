@@ -648,15 +648,31 @@ class Routines:
                 raise InvalidArgument(
                     f"{_threads_named(running, self._threads)} running: the controller "
                     "refuses DL while a program runs (TC 17) and would then run the "
-                    "program's lines as commands; halt them first (HX n), or download "
-                    "with controller.programs.download(), which keeps the library's "
-                    "routines running",
+                    f"program's lines as commands; {self._ending_advice(running)}, or "
+                    "download with controller.programs.download(), which keeps the "
+                    "library's routines running",
                     model=self.link.model.name,
                 )
             try:
                 return send()
             finally:
                 self.forget()
+
+    def _ending_advice(self, running: Mapping[int, int]) -> str:
+        """How to end the ``running`` threads first: this session's routines of the library
+        through the library (never a raw ``HX`` behind its back), the others with a halt."""
+        features = {RESERVED.get(self._threads[t]) for t in running if t in self._threads}
+        advice = []
+        if "the watchdog" in features:
+            advice.append("stop the watchdog (its stop())")
+        if "wait_for_input" in features:
+            advice.append("let the wait for an input end (at its input or its timeout)")
+        if features - {"the watchdog", "wait_for_input"}:
+            advice.append("let the speed schedule end, or stop its motion")
+        others = sorted(t for t in running if t not in self._threads)
+        if others:
+            advice.append(f"halt thread(s) {others} (controller.programs.halt(n), or HX n)")
+        return "; ".join(advice) + " first"
 
     def forget(self, thread: int | None = None) -> None:
         """``thread`` was halted behind :meth:`halt`'s back (after a failed start); with no
