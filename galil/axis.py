@@ -825,13 +825,14 @@ def _under_one_step(cmd: str, counts: float, model: ModelSpec, tm: float, axis: 
     """The refusal of a speed above 0 but under one step: the controller would store 0."""
     step = model.speed_resolution(tm)
     return LimitError(
-        f"{cmd} {counts:g} counts/s is less than one step ({step:g} counts/s at TM {tm:g}): "
-        f"it would be {cmd} 0 ({_SPEEDS[cmd]}); the smallest speed above 0 is one step",
+        f"{cmd} {counts:g} counts/s is less than one step, the smallest speed above 0 "
+        f"({step:g} counts/s at TM {tm:g}): it would be {cmd} 0, and {_SPEEDS[cmd]}",
         name=cmd,
         value=counts,
         limit=step,
         axis=axis,
         model=model.name,
+        floor=True,
     )
 
 

@@ -334,6 +334,9 @@ class LimitError(InvalidArgument):
         value_in_units: ``value`` in the user's units (a pint Quantity) when the axis has a
             scale; ``value`` stays in counts.
         limit_in_units: ``limit`` likewise.
+        floor: whether ``limit`` is the smallest value allowed, which ``value`` is under (a
+            speed above 0 but under one step): the user's units then say "the smallest is
+            ..., you gave ...".
     """
 
     def __init__(
@@ -349,9 +352,11 @@ class LimitError(InvalidArgument):
         model: str | None = None,
         end: float | None = None,
         segment: int | None = None,
+        floor: bool = False,
     ) -> None:
         super().__init__(message, model=model)
         self.name = name
+        self.floor = floor
         self.value = value
         self.limit = limit
         self.time = time
