@@ -739,9 +739,9 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade, FixedAttributes):
 
         Args:
             timeout: seconds of controller time without a heartbeat before motion stops.
-            thread: the program thread for the routine (default: the last one no other
-                routine of this session's library runs on, decision 0086); a thread that runs
-                a program is refused. One watchdog guards a controller (decision 0082): the
+            thread: the program thread for the routine (default: the last one that runs
+                neither a program nor another routine of this session's library, decision
+                0086); a thread named that runs a program is refused. One watchdog guards a controller (decision 0082): the
                 running one is replaced, on any thread (it stops beating, and its ``stop()``
                 halts nothing; if this one fails to start, it guards on).
             interval: seconds between heartbeats (default: a quarter of ``timeout``).

@@ -23,8 +23,8 @@ Rules, all checked before the download:
   download and started again.
 
 Two of the library's features of one session never take the same thread by default
-(:meth:`Routines.default_thread`: the last thread none of this session's other routines
-runs on), and a thread one of them runs on is refused to the other with the feature named
+(:meth:`Routines.default_thread`: the last thread that runs neither a program of the user's
+nor another of this session's routines), and a thread one of them runs on is refused to the other with the feature named
 (decision 0086).
 """
 
@@ -524,13 +524,23 @@ class Routines:
             The thread.
 
         Raises:
-            InvalidArgument: what :meth:`check_free` raises.
+            ProgramRunning: no thread named, and every thread runs a program of the user's
+                or another routine of this session's (a caller that can do without the
+                routine, a wait for an input, polls instead).
+            InvalidArgument: what :meth:`check_free` raises for a named thread.
         """
         if thread is not None:
             self.check_thread(thread)
         with self._lock:
             running = self.running()
             t = self._default(label, running) if thread is None else thread
+            if t is None:
+                raise ProgramRunning(
+                    f"every thread of {self.link.model.name} runs a program "
+                    f"({_threads_named(running, self._threads)} running): none is free "
+                    f"for {RESERVED.get(label, 'the routine ' + label)}",
+                    model=self.link.model.name,
+                )
             self._free(t, label, running)
             return t
 
@@ -573,18 +583,30 @@ class Routines:
         return f"{what} ({label})"
 
     def default_thread(self, label: str) -> int:
-        """The thread a routine of ``label`` takes when none is named: the last one that none
-        of this session's other routines runs on (one query). A thread a program of the
-        user's runs on is not skipped (:meth:`check_free` refuses it, saying so), nor one
-        that runs ``label`` itself (a new watchdog takes over the running one's)."""
+        """The thread a routine of ``label`` takes when none is named: the last one that runs
+        neither another of this session's routines nor a program of the user's (one query; an
+        upload when a thread runs a program the library does not know it holds, to tell an
+        earlier session's ``label`` from the user's). A thread that runs ``label`` itself is
+        not skipped (a new watchdog takes over the running one's). With no such thread, the
+        last one (:meth:`check_free` refuses it, saying what runs there)."""
         with self._lock:
-            return self._default(label, self.running())
+            t = self._default(label, self.running())
+            return self.link.model.threads - 1 if t is None else t
 
-    def _default(self, label: str, running: Mapping[int, int]) -> int:
-        """:meth:`default_thread`, the threads ``running`` read (under the lock)."""
-        taken = {t for t, held in self._threads.items() if held != label and t in running}
-        free = [t for t in range(self.link.model.threads) if t not in taken]
-        return free[-1] if free else self.link.model.threads - 1
+    def _default(self, label: str, running: Mapping[int, int]) -> int | None:
+        """:meth:`default_thread`, the threads ``running`` read (under the lock); ``None``
+        when every thread runs something else."""
+        lines: list[str] | None = None
+        for t in reversed(range(self.link.model.threads)):
+            held = self._threads.get(t)
+            if t not in running or held == label:
+                return t
+            if held is not None:
+                continue  # (another routine of this session's)
+            lines = self.upload() if lines is None else lines
+            if routine_at(lines, running[t]) == label:
+                return t  # (an earlier session's: taken over, as check_free does)
+        return None
 
     def release(self, thread: int, label: str) -> None:
         """The routine ``label`` ended by itself on ``thread`` (the input wait's, once it

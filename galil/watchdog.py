@@ -8,9 +8,10 @@ the cable was pulled, the host froze), it stops every axis with ``ST`` (a decele
 each axis's DC), sets ``gwfire=1`` and prints a message. A clean :meth:`Controller.close`
 halts the routine first: leaving on purpose is not dying.
 
-The routine takes one program thread (by default the last one none of this session's other
-library routines runs on: an input wait's, say; decision 0086); it refuses a thread that runs
-a program, so it never takes one the user's programs need without saying so.
+The routine takes one program thread (by default the last one that runs neither a program nor
+another of this session's library routines: an input wait's, say; decision 0086); it refuses
+a named thread that runs a program, so it never takes one the user's programs need without
+saying so.
 
 One watchdog guards a controller: its variables (``gwbeat``, ``gwlimit``, ``gwfire``) and its
 routine are the controller's, so a new watchdog replaces the running one, on any thread
@@ -68,8 +69,8 @@ class Watchdog(FixedAttributes):
     Attributes:
         timeout: seconds of silence after which the controller stops the axes.
         interval: seconds between heartbeats.
-        thread: the program thread the routine runs on (``None`` given: the last one no
-            other routine of this session's library runs on, decision 0086).
+        thread: the program thread the routine runs on (``None`` given: the last one that
+            runs neither a program nor another routine of this session's library, 0086).
     """
 
     _fields = ("timeout", "thread", "interval")
@@ -87,7 +88,7 @@ class Watchdog(FixedAttributes):
         self._routines = routines
         self.timeout = timeout
         self._samples()  # (a timeout refused before the query below)
-        # (None: the last thread no other routine of this session's runs on; one query)
+        # (None: the last thread running no program nor another routine; one query)
         self.thread = routines.default_thread(LABEL) if thread is None else thread
         self.interval = interval
         self._stop = threading.Event()

@@ -299,7 +299,10 @@ def test_a_thread_running_another_library_routine_says_whose_it_is_and_how_to_ha
     _left_by_an_earlier_session(sim, "#GWDOG")
     with Controller(SimLink(sim)) as dmc:
         with pytest.raises(galil.InvalidArgument, match=r"#GWDOG \(the watchdog\).*HX7"):
+            dmc.io.wait_for_input(2, high=False, timeout=0.3, thread=7)
+        with pytest.raises(galil.GalilTimeoutError):  # by default: the next thread, 6
             dmc.io.wait_for_input(2, high=False, timeout=0.3)
+        assert "XQ #GINWAIT,6" in [line for _, line in sim.command_log]
         dmc.command("HX7")
 
 

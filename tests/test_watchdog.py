@@ -383,3 +383,16 @@ def test_a_burn_longer_than_a_short_timeout_restarts_the_watchdog_with_a_fresh_h
         assert dog.fired
         assert jog.done
         dog.stop()
+
+
+def test_a_watchdog_beside_a_program_on_the_last_thread_takes_another_thread_by_default() -> None:
+    with simulated() as dmc:
+        dmc.programs.download("#LOOP\nWT 10\nJP #LOOP\nEN\n")
+        dmc.watchdog(0.5).stop()  # (its routine in memory: no download needed beside a program)
+        dmc.programs.run("#LOOP", thread=7)
+        dog = dmc.watchdog(0.5)  # (before: "thread 7 runs a program; choose another thread")
+        assert dog.thread == 6
+        assert dog.running
+        assert dmc.programs.threads.keys() == {7}
+        dog.stop()
+        dmc.programs.halt()
