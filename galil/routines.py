@@ -24,8 +24,8 @@ Rules, all checked before the download:
 
 Two of the library's features of one session never take the same thread by default
 (:meth:`Routines.default_thread`: the last thread that runs neither a program of the user's
-nor another of this session's routines), and a thread one of them runs on is refused to the other with the feature named
-(decision 0086).
+nor another of this session's routines), and a thread one of them runs on is refused to the
+other with the feature named (decision 0086).
 """
 
 from __future__ import annotations

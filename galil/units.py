@@ -542,10 +542,11 @@ def state_in_units(exc: LimitError, scale: Scale | None, kind: str | None = None
     """Add to ``exc`` (raised in counts) its value and limit in ``scale``'s unit: the message
     gains `` (in user units: 25.1 mm / s, limit 25 mm / s)`` (a position ``reaches`` its limit,
     and says where the motion would ``end``; a :attr:`~galil.errors.LimitError.floor` says
-    ``the smallest is 0.001 mm / s, you gave 0.0004 mm / s``), and ``value_in_units``/``limit_in_units`` are
-    set. ``kind`` is ``"position"``, ``"distance"``, ``"length"``, ``"speed"`` or
-    ``"acceleration"`` (default: :data:`UNIT_KINDS` by ``exc.name``). Nothing changes without a
-    scale, without a value or a limit, for a name of no known kind, or when it was done."""
+    ``the smallest is 0.001 mm / s, you gave 0.0004 mm / s``), and
+    ``value_in_units``/``limit_in_units`` are set. ``kind`` is ``"position"``, ``"distance"``,
+    ``"length"``, ``"speed"`` or ``"acceleration"`` (default: :data:`UNIT_KINDS` by
+    ``exc.name``). Nothing changes without a scale, without a value or a limit, for a name of
+    no known kind, or when it was done."""
     kind = UNIT_KINDS.get(exc.name) if kind is None else kind
     value, limit = exc.value, exc.limit
     if scale is None or kind is None or value is None or limit is None:
