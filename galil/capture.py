@@ -34,6 +34,7 @@ from galil.errors import (
     GalilTimeoutError,
     InvalidArgument,
     ProtocolError,
+    ReadOnly,
     decimal_hint,
 )
 from galil.link import CommandLink, check_count, check_wait_timeout
@@ -142,7 +143,13 @@ class Capture(FixedAttributes):
         start_sample: the controller sample of the first value, once started.
     """
 
-    _fields = ("link", "sources", "every", "count", "arrays", "start_sample", "result")
+    link: ReadOnly[CommandLink] = ReadOnly()
+    sources: ReadOnly[tuple[str, ...]] = ReadOnly()
+    every: ReadOnly[int] = ReadOnly()
+    count: ReadOnly[int] = ReadOnly()
+    arrays: ReadOnly[tuple[str, ...]] = ReadOnly()
+    start_sample: ReadOnly[int | None] = ReadOnly()
+    result: ReadOnly[Recording | None] = ReadOnly()
 
     def __init__(
         self,
@@ -170,13 +177,13 @@ class Capture(FixedAttributes):
                 f"{model.name} has {model.array_elements}",
                 model=model.name,
             )
-        self.link = link
-        self.sources = names
-        self.every = every
-        self.count = n
-        self.arrays = tuple(f"{ARRAY_PREFIX}{i}" for i in range(len(names)))
-        self.start_sample: int | None = None
-        self.result: Recording | None = None
+        self._link = link
+        self._sources = names
+        self._every = every
+        self._count = n
+        self._arrays = tuple(f"{ARRAY_PREFIX}{i}" for i in range(len(names)))
+        self._start_sample: int | None = None
+        self._result: Recording | None = None
         self._started_at = 0.0
         self._stop_pending = False  # an RC 0 owed to the controller (decision 0085)
         self._cut_at: int | None = None  # values recorded when the library stopped it
@@ -233,7 +240,7 @@ class Capture(FixedAttributes):
                 link.command_line([cmds.rc(0)])
                 self._stop_pending = False
             raise
-        self.start_sample = start
+        self._start_sample = start
         self._started_at = link.clock()
         return self
 
@@ -372,10 +379,9 @@ class Capture(FixedAttributes):
             for s, a in zip(self.sources, self.arrays, strict=True)
         }
         link.command_line([cmds.da(*self.arrays)])
-        self.result = Recording(
-            self.sources, self.every, self.start_sample, link.sample_period, values
-        )
-        return self.result
+        result = Recording(self.sources, self.every, self.start_sample, link.sample_period, values)
+        self._result = result
+        return result
 
     def __enter__(self) -> Capture:
         if self.start_sample is None:

@@ -35,6 +35,7 @@ from galil.errors import (
     GalilError,
     GalilTimeoutError,
     InvalidArgument,
+    ReadOnly,
     decimal_hint,
 )
 from galil.link import CommandLink, check_wait_timeout
@@ -120,14 +121,15 @@ def _level(value: object) -> bool:
 class _Channels(FixedAttributes):
     """Channels ``first .. first + count - 1`` of one kind, indexed as the controller does."""
 
-    _fields = ("first", "count")
+    first: ReadOnly[int] = ReadOnly()
+    count: ReadOnly[int] = ReadOnly()
 
     kind = "channel"
 
     def __init__(self, link: CommandLink, first: int, count: int) -> None:
         self._link = link
-        self.first = first
-        self.count = count
+        self._first = first
+        self._count = count
 
     def __len__(self) -> int:
         return self.count

@@ -27,7 +27,13 @@ import weakref
 from collections.abc import Sequence
 from types import TracebackType
 
-from galil.errors import FixedAttributes, GalilConnectionError, GalilError, InvalidArgument
+from galil.errors import (
+    FixedAttributes,
+    GalilConnectionError,
+    GalilError,
+    InvalidArgument,
+    ReadOnly,
+)
 from galil.link import CommandLink, Link, check_seconds
 from galil.models import INT32_MAX
 from galil.protocol import commands as cmds
@@ -73,7 +79,9 @@ class Watchdog(FixedAttributes):
             runs neither a program nor another routine of this session's library, 0086).
     """
 
-    _fields = ("timeout", "thread", "interval")
+    timeout: ReadOnly[float] = ReadOnly()
+    thread: ReadOnly[int] = ReadOnly()
+    interval: ReadOnly[float] = ReadOnly()
 
     def __init__(
         self,
@@ -86,11 +94,11 @@ class Watchdog(FixedAttributes):
     ) -> None:
         self._link = link
         self._routines = routines
-        self.timeout = timeout
+        self._timeout = timeout
         self._samples()  # (a timeout refused before the query below)
         # (None: the last thread running no program nor another routine; one query)
-        self.thread = routines.default_thread(LABEL) if thread is None else thread
-        self.interval = interval
+        self._thread = routines.default_thread(LABEL) if thread is None else thread
+        self._interval = interval
         self._stop = threading.Event()
         self._beater: threading.Thread | None = None
         self._beat = cmds.stamp(BEAT)
