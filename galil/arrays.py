@@ -31,6 +31,7 @@ from galil.errors import (
     InvalidArgument,
     LimitError,
     ProtocolError,
+    ReadOnly,
     UnknownVariableError,
 )
 from galil.link import CommandLink, check_flag
@@ -146,10 +147,10 @@ class Arrays(FixedAttributes):
         link: the command link.
     """
 
-    _fields = ("link",)
+    link: ReadOnly[CommandLink] = ReadOnly()
 
     def __init__(self, link: CommandLink) -> None:
-        self.link = link
+        self._link = link
 
     def list(self) -> dict[str, int]:
         """Every array and its size (``LA``; its reply timeout covers every array the model
@@ -301,10 +302,10 @@ class Variables(MutableMapping[str, float], FixedAttributes):
         link: the command link.
     """
 
-    _fields = ("link",)
+    link: ReadOnly[CommandLink] = ReadOnly()
 
     def __init__(self, link: CommandLink) -> None:
-        self.link = link
+        self._link = link
 
     def read(self, name: str) -> float:
         """The value of variable ``name`` (``MG name``).

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from galil import codes, predict
-from galil.errors import FixedAttributes, InvalidArgument, LimitError, decimal_hint
+from galil.errors import FixedAttributes, InvalidArgument, LimitError, ReadOnly, decimal_hint
 from galil.gearing import Gearing, gear_off, gear_to
 from galil.homing import AxisHoming, Homed, Switches, read_switches
 from galil.link import CommandLink
@@ -317,7 +317,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
     the axis has a scale, counts otherwise; setters validate and quantise before sending.
     """
 
-    _fields = ("letter",)
+    letter: ReadOnly[str] = ReadOnly()
 
     def __init__(
         self, link: CommandLink, letter: str, tracker: MotionTracker, routines: Routines
@@ -325,7 +325,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         self._link = link
         self._tracker = tracker
         self._routines = routines
-        self.letter = letter
+        self._letter = letter
         self._scale: Scale | None = None
         self._homing = AxisHoming(link, letter, tracker)
 
@@ -825,13 +825,14 @@ def _under_one_step(cmd: str, counts: float, model: ModelSpec, tm: float, axis: 
     """The refusal of a speed above 0 but under one step: the controller would store 0."""
     step = model.speed_resolution(tm)
     return LimitError(
-        f"{cmd} {counts:g} counts/s is less than one step ({step:g} counts/s at TM {tm:g}): "
-        f"it would be {cmd} 0 ({_SPEEDS[cmd]}); the smallest speed above 0 is one step",
+        f"{cmd} {counts:g} counts/s is less than one step, the smallest speed above 0 "
+        f"({step:g} counts/s at TM {tm:g}): it would be {cmd} 0, and {_SPEEDS[cmd]}",
         name=cmd,
         value=counts,
         limit=step,
         axis=axis,
         model=model.name,
+        floor=True,
     )
 
 

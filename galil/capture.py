@@ -34,6 +34,7 @@ from galil.errors import (
     GalilTimeoutError,
     InvalidArgument,
     ProtocolError,
+    ReadOnly,
     decimal_hint,
 )
 from galil.link import CommandLink, check_count, check_wait_timeout
@@ -142,7 +143,13 @@ class Capture(FixedAttributes):
         start_sample: the controller sample of the first value, once started.
     """
 
-    _fields = ("link", "sources", "every", "count", "arrays", "start_sample", "result")
+    link: ReadOnly[CommandLink] = ReadOnly()
+    sources: ReadOnly[tuple[str, ...]] = ReadOnly()
+    every: ReadOnly[int] = ReadOnly()
+    count: ReadOnly[int] = ReadOnly()
+    arrays: ReadOnly[tuple[str, ...]] = ReadOnly()
+    start_sample: ReadOnly[int | None] = ReadOnly()
+    result: ReadOnly[Recording | None] = ReadOnly()
 
     def __init__(
         self,
@@ -170,13 +177,13 @@ class Capture(FixedAttributes):
                 f"{model.name} has {model.array_elements}",
                 model=model.name,
             )
-        self.link = link
-        self.sources = names
-        self.every = every
-        self.count = n
-        self.arrays = tuple(f"{ARRAY_PREFIX}{i}" for i in range(len(names)))
-        self.start_sample: int | None = None
-        self.result: Recording | None = None
+        self._link = link
+        self._sources = names
+        self._every = every
+        self._count = n
+        self._arrays = tuple(f"{ARRAY_PREFIX}{i}" for i in range(len(names)))
+        self._start_sample: int | None = None
+        self._result: Recording | None = None
         self._started_at = 0.0
         self._stop_pending = False  # an RC 0 owed to the controller (decision 0085)
         self._cut_at: int | None = None  # values recorded when the library stopped it
@@ -233,7 +240,7 @@ class Capture(FixedAttributes):
                 link.command_line([cmds.rc(0)])
                 self._stop_pending = False
             raise
-        self.start_sample = start
+        self._start_sample = start
         self._started_at = link.clock()
         return self
 
@@ -253,17 +260,21 @@ class Capture(FixedAttributes):
         Raises:
             InvalidArgument: the capture was not started, or ``timeout`` is not ``None`` or a
                 finite number >= 0 (:func:`~galil.link.check_wait_timeout`), or a later
-                capture took its arrays before it was read back (:meth:`reused`).
+                capture took its arrays before it was read back (:meth:`reused`), or the
+                recording was stopped before its ``count`` values (a stop cut short, whose
+                ``RC 0`` went out or goes out now: :meth:`stop` uploads what it holds).
             GalilTimeoutError: still recording after ``timeout`` (it goes on; :meth:`stop`).
         """
         timeout = check_wait_timeout(timeout)
         if self.result is not None:
             return self.result
         self._check_readable()
+        if self._stop_pending:  # (a stop cut short on a link that works: it is owed now)
+            self.reopened()
         if self._cut_at is not None:
             raise InvalidArgument(
-                f"this capture was stopped (RC 0) when its link was reopened, after "
-                f"{self._cut_at} of {self.count} values: stop() uploads those",
+                f"this capture was stopped (RC 0) after {self._cut_at} of {self.count} "
+                "values (its stop was cut short, or its link reopened): stop() uploads those",
                 model=self.link.model.name,
             )
         link = self.link
@@ -285,7 +296,9 @@ class Capture(FixedAttributes):
         """Stop recording now (``RC 0``) and upload what was recorded.
 
         A stop cut short before the recording is known stopped (a dead link, Ctrl-C) leaves
-        :attr:`stop_pending`: the ``RC 0`` goes out when the link works again.
+        :attr:`stop_pending`: the ``RC 0`` goes out when the link works again, and ``_RD``
+        is read then even if the recording had stopped (that ``RC 0`` may have gone out
+        before the link died), so only the values recorded are uploaded.
 
         Raises:
             InvalidArgument: the capture was not started, or a later capture took its arrays
@@ -296,10 +309,10 @@ class Capture(FixedAttributes):
         self._check_readable()
         n = self._cut_at
         if n is None:
-            self._stop_pending = True
-            recorded = self._stopped(self.link)
+            owed, self._stop_pending = self._stop_pending, True
+            _, recorded = self._stopped(self.link, owed=owed)
             self._stop_pending = False
-            n = self.count if recorded is None else recorded
+            n = self.count if recorded is None else min(recorded, self.count)
         return self._upload(n)
 
     def reused(self) -> None:
@@ -320,31 +333,42 @@ class Capture(FixedAttributes):
                 model=self.link.model.name,
             )
 
-    def _stopped(self, link: CommandLink) -> int | None:
-        """``RC 0`` if the controller still records, and how many values it has recorded then
-        (``_RD``); ``None`` when it had stopped already."""
-        if not round(link.query_operands(["_RC"])[0]):
-            return None
+    def _stopped(self, link: CommandLink, *, owed: bool = False) -> tuple[bool, int | None]:
+        """``RC 0`` if the controller still records; whether it did, and how many values it
+        had recorded then (``_RD``), or ``None`` when it had ended already, unless a stop was
+        ``owed`` (one cut short: its ``RC 0`` may have gone out before the link died): then
+        ``_RD``, read in the same query as ``_RC``, says how far the recording got.
+
+        ``_RD`` is the index of the next element to record, so a recording that ended by
+        itself reads ``count`` (the simulator's; unsourced for a controller's end of a
+        recording).
+        """
+        names = ["_RC", "_RD"] if owed else ["_RC"]
+        values = link.query_operands(names)
+        if not round(values[0]):
+            return False, round(values[1]) if owed else None
         link.command_line([cmds.rc(0)])
-        return round(link.query_operands(["_RD"])[0])
+        return True, round(link.query_operands(["_RD"])[0])
 
     def reopened(self) -> bool:
         """The link works (again): a recording this capture left running (its start failed
         once ``RC`` had gone out, or its stop could not be sent) is stopped now (``RC 0``);
         :meth:`stop` then uploads the values recorded until then, and :meth:`wait` refuses
-        (they are fewer than ``count``). The controller runs this on every reopen and before
-        the next capture (decision 0085).
+        (they are fewer than ``count``). A stop whose ``RC 0`` went out before its link died
+        found the recording stopped: ``_RD`` says how many values it holds all the same. The
+        controller runs this on every reopen and before the next capture (decision 0085).
 
         Returns:
             Whether the controller was still recording (and was stopped).
         """
         if not self._stop_pending:
             return False
-        n = self._stopped(self.link)
-        if n is not None and self.start_sample is not None:
-            self._cut_at = n
+        started = self.start_sample is not None
+        recording, n = self._stopped(self.link, owed=started)
+        if n is not None and started and n < self.count:
+            self._cut_at = n  # (count values recorded: the recording ended by itself)
         self._stop_pending = False
-        return n is not None
+        return recording
 
     def _upload(self, n: int) -> Recording:
         assert self.start_sample is not None
@@ -355,10 +379,9 @@ class Capture(FixedAttributes):
             for s, a in zip(self.sources, self.arrays, strict=True)
         }
         link.command_line([cmds.da(*self.arrays)])
-        self.result = Recording(
-            self.sources, self.every, self.start_sample, link.sample_period, values
-        )
-        return self.result
+        result = Recording(self.sources, self.every, self.start_sample, link.sample_period, values)
+        self._result = result
+        return result
 
     def __enter__(self) -> Capture:
         if self.start_sample is None:

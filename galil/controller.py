@@ -37,6 +37,7 @@ from galil.errors import (
     GalilTimeoutError,
     InvalidArgument,
     ProtocolError,
+    ReadOnly,
 )
 from galil.facade import LinkFacade
 from galil.gearing import read_found
@@ -220,6 +221,8 @@ class Resetting:
     interrupts: Interrupts
     identity: Identity | None
     echo: bool
+    _identity: Identity | None
+    _echo: bool
     _watchdogs: list[Watchdog]
     _life: threading.RLock
     _factory: Callable[[], Transport] | None
@@ -338,7 +341,7 @@ class Resetting:
             with link.rebooting():  # (silent while it boots: not a dead link; decision 0089)
                 while True:
                     try:
-                        self.identity, self.echo = identify(
+                        self._identity, self._echo = identify(
                             link, self._given_model, keep_echo=self._keep_echo
                         )
                         break
@@ -411,7 +414,26 @@ def _stop_and_settle(link: Link, tracker: MotionTracker, wait: float) -> None:
             _ = handle.done
 
 
-class Controller(CoordinatedMotion, Resetting, LinkFacade, FixedAttributes):
+class _PublicParts(FixedAttributes):
+    """The controller's public parts, bound by its own methods (each through its private twin,
+    ``self._link``) and read-only to a user, whose assignment would change what the object
+    says without changing the link or the controller behind it (decision 0091)."""
+
+    link: ReadOnly[Link] = ReadOnly()
+    messages_room: ReadOnly[Messages] = ReadOnly()
+    records_room: ReadOnly[Records] = ReadOnly()
+    tracker: ReadOnly[MotionTracker] = ReadOnly()
+    routines: ReadOnly[Routines] = ReadOnly()
+    io: ReadOnly[IO] = ReadOnly()
+    programs: ReadOnly[Programs] = ReadOnly()
+    arrays: ReadOnly[Arrays] = ReadOnly()
+    variables: ReadOnly[Variables] = ReadOnly()
+    interrupts: ReadOnly[Interrupts] = ReadOnly()
+    identity: ReadOnly[Identity | None] = ReadOnly()
+    echo: ReadOnly[bool] = ReadOnly()
+
+
+class Controller(_PublicParts, CoordinatedMotion, Resetting, LinkFacade):
     """A connected controller. Build it with :func:`connect`.
 
     Args:
@@ -443,9 +465,6 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade, FixedAttributes):
         interrupts: ``UI``/``EI`` interrupts (:class:`~galil.interrupts.Interrupts`).
     """
 
-    _fields = ("link", "messages_room", "records_room", "tracker", "routines", "io", "programs",
-               "arrays", "variables", "interrupts", "identity", "echo")  # fmt: skip
-
     def __init__(
         self,
         transport: Transport | Callable[[], Transport],
@@ -461,28 +480,28 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade, FixedAttributes):
         reconnect: bool | ReconnectPolicy = False,
     ) -> None:
         _check_options(echo, handshake, unsolicited, model)
-        self.link = Link(timeout=timeout, history=history)
+        self._link = Link(timeout=timeout, history=history)
         self._keep_echo = echo
         self._given_model = get_model(model) if isinstance(model, str) else model
         self._handshake = handshake
         self._unsolicited = unsolicited
-        self.messages_room = Messages(
+        self._messages_room = Messages(
             self.link,
             max_messages=max_messages,
             poll_interval=check_timeout(poll_interval, 0.02, "poll_interval"),
         )
-        self.records_room = Records(self.link)
-        self.tracker = MotionTracker()
-        self.routines = Routines(self.link)
-        self.io = IO(self.link, self.messages_room, self.routines)
-        self.programs = Programs(self.link, self.routines, self.tracker)
-        self.arrays = Arrays(self.link)
-        self.variables = Variables(self.link)
-        self.interrupts = Interrupts(self.link)
+        self._records_room = Records(self.link)
+        self._tracker = MotionTracker()
+        self._routines = Routines(self.link)
+        self._io = IO(self.link, self.messages_room, self.routines)
+        self._programs = Programs(self.link, self.routines, self.tracker)
+        self._arrays = Arrays(self.link)
+        self._variables = Variables(self.link)
+        self._interrupts = Interrupts(self.link)
         self._watchdogs: list[Watchdog] = []
         self._captures: list[Capture] = []  # started here and not yet read back
-        self.identity: Identity | None = None
-        self.echo = False
+        self._identity: Identity | None = None
+        self._echo = False
         self._axes: dict[str, Axis] | None = None
         self._life = threading.RLock()  # open, close and reconnect, one at a time
         self._generation = 0
@@ -514,7 +533,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade, FixedAttributes):
         self.records_room.reset()
         try:
             if self._handshake:
-                self.identity, self.echo = identify(
+                self._identity, self._echo = identify(
                     link, self._given_model, keep_echo=self._keep_echo, expect=self.identity
                 )
                 if self._unsolicited:
@@ -740,11 +759,12 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade, FixedAttributes):
 
         Args:
             timeout: seconds of controller time without a heartbeat before motion stops.
-            thread: the program thread for the routine (default: the last one no other
-                routine of this session's library runs on, decision 0086); a thread that runs
-                a program is refused. One watchdog guards a controller (decision 0082): the
-                running one is replaced, on any thread (it stops beating, and its ``stop()``
-                halts nothing; if this one fails to start, it guards on).
+            thread: the program thread for the routine (default: the last one that runs
+                neither a program nor another routine of this session's library, decision
+                0086); a thread named that runs a program is refused. One watchdog guards a
+                controller (decision 0082): the running one is replaced, on any thread (it
+                stops beating, and its ``stop()`` halts nothing; if this one fails to start,
+                it guards on).
             interval: seconds between heartbeats (default: a quarter of ``timeout``).
 
         Returns:
@@ -883,7 +903,7 @@ class Controller(CoordinatedMotion, Resetting, LinkFacade, FixedAttributes):
 
     def _axis_attribute(self, name: str) -> Axis:
         # Only single axis letters reach here (and X/Y/Z/W aliases where the model has them).
-        link = self.__dict__.get("link")
+        link = self.__dict__.get("_link")
         model = None if link is None else link._model
         if len(name) == 1 and name.isupper() and model is not None:
             try:

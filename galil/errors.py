@@ -33,7 +33,7 @@ import difflib
 import inspect
 import queue
 from collections.abc import Sequence
-from typing import ClassVar
+from typing import ClassVar, Generic, NoReturn, TypeVar, overload
 
 __all__ = [
     "CommandError",
@@ -233,6 +233,43 @@ class GalilAttributeError(GalilError, AttributeError):
         self.suggestions = tuple(suggestions)
 
 
+_T = TypeVar("_T")
+
+
+class ReadOnly(Generic[_T]):
+    """A public attribute the library binds and a user only reads (``capture.count``,
+    ``watchdog.thread``, ``controller.link``): it reads the private ``_<name>`` the class's
+    own methods bind, and a user's assignment is refused as a read-only property's is
+    (:class:`FixedAttributes`; decision 0091), since it would change what the object says
+    without changing the controller (or the link) behind it.
+
+    Declared on the class: ``count: ReadOnly[int] = ReadOnly()``; bound inside it:
+    ``self._count = n``.
+    """
+
+    __slots__ = ("_name", "_private")
+
+    def __init__(self) -> None:
+        self._name = self._private = ""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self._name, self._private = name, "_" + name
+
+    @overload
+    def __get__(self, obj: None, owner: type | None = None) -> ReadOnly[_T]: ...
+    @overload
+    def __get__(self, obj: object, owner: type | None = None) -> _T: ...
+    def __get__(self, obj: object, owner: type | None = None) -> ReadOnly[_T] | _T:
+        if obj is None:
+            return self
+        value: _T = getattr(obj, self._private)
+        return value
+
+    def __set__(self, obj: FixedAttributes, value: NoReturn) -> None:
+        # (a type checker refuses the assignment too; FixedAttributes refuses it first)
+        raise assignment_refused(type(obj), self._name)
+
+
 class FixedAttributes:
     """A mixin for the user-facing objects (axes, controllers, rooms, handles): assigning a
     public name that is not one of the class's settings raises :class:`GalilAttributeError`
@@ -240,7 +277,9 @@ class FixedAttributes:
 
     What may be assigned: a name with a leading underscore; a property with a setter (or any
     data descriptor with ``__set__``, such as a tuning setting); a name the class lists in
-    ``_fields`` (the public attributes its own methods bind). ``_awaited`` marks an async
+    ``_fields`` (public attributes a user may rebind without desynchronising anything). A
+    public attribute the class's own methods bind is a :class:`ReadOnly` (bound through its
+    private twin): refused to a user like a read-only property. ``_awaited`` marks an async
     object: its settings are ``await x.set_<name>(...)``, which the refusal names.
     """
 
@@ -264,6 +303,8 @@ class FixedAttributes:
 
 
 def _has_setter(attribute: object) -> bool:
+    if isinstance(attribute, ReadOnly):
+        return False  # (its __set__ refuses: the library binds its private twin)
     if isinstance(attribute, property):
         return attribute.fset is not None
     return hasattr(type(attribute), "__set__")
@@ -282,7 +323,7 @@ def assignment_refused(cls: type[FixedAttributes], name: str) -> GalilAttributeE
         )
     if hasattr(cls, name):
         known = inspect.getattr_static(cls, name)
-        kind = "read-only" if isinstance(known, property) else "not a setting"
+        kind = "read-only" if isinstance(known, (property, ReadOnly)) else "not a setting"
         how = f": use `{'await ' if cls._awaited else ''}x.{setter}(...)`"
         return GalilAttributeError(
             f"{what} is {kind}{how if hasattr(cls, setter) else ''}; nothing was set",
@@ -334,6 +375,9 @@ class LimitError(InvalidArgument):
         value_in_units: ``value`` in the user's units (a pint Quantity) when the axis has a
             scale; ``value`` stays in counts.
         limit_in_units: ``limit`` likewise.
+        floor: whether ``limit`` is the smallest value allowed, which ``value`` is under (a
+            speed above 0 but under one step): the user's units then say "the smallest is
+            ..., you gave ...".
     """
 
     def __init__(
@@ -349,9 +393,11 @@ class LimitError(InvalidArgument):
         model: str | None = None,
         end: float | None = None,
         segment: int | None = None,
+        floor: bool = False,
     ) -> None:
         super().__init__(message, model=model)
         self.name = name
+        self.floor = floor
         self.value = value
         self.limit = limit
         self.time = time

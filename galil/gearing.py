@@ -25,7 +25,14 @@ import logging
 from collections.abc import Callable, Sequence
 
 from galil import predict
-from galil.errors import CommandError, FixedAttributes, InvalidArgument, LimitError, decimal_hint
+from galil.errors import (
+    CommandError,
+    FixedAttributes,
+    InvalidArgument,
+    LimitError,
+    ReadOnly,
+    decimal_hint,
+)
 from galil.link import CommandLink
 from galil.motion import (
     Display,
@@ -71,14 +78,15 @@ class Gearing(FixedAttributes):
         master: the master axis (its commanded position), or ``"S"``.
     """
 
-    _fields = ("follower", "master")
+    follower: ReadOnly[str] = ReadOnly()
+    master: ReadOnly[str] = ReadOnly()
 
     def __init__(self, link: CommandLink, tracker: MotionTracker, gear: GearLink) -> None:
         self._link = link
         self._tracker = tracker
         self._gear = gear
-        self.follower = gear.follower
-        self.master = gear.master
+        self._follower = gear.follower
+        self._master = gear.master
 
     @property
     def ratio(self) -> float:

@@ -30,6 +30,7 @@ from galil.errors import (
     GalilTimeoutError,
     InvalidArgument,
     ProtocolError,
+    ReadOnly,
 )
 from galil.link import Link, read_handle, read_reply
 from galil.protocol import commands as cmds
@@ -65,13 +66,15 @@ class Interrupts(FixedAttributes):
         mask: the ``EI`` mask sent last (``None`` while not enabled).
     """
 
-    _fields = ("link", "queue", "mask")
+    link: ReadOnly[Link] = ReadOnly()
+    queue: ReadOnly[InterruptQueue] = ReadOnly()
+    mask: ReadOnly[int | None] = ReadOnly()
 
     def __init__(self, link: Link, *, maxlen: int = 1000) -> None:
-        self.link = link
-        self.queue = InterruptQueue(maxlen)
+        self._link = link
+        self._queue = InterruptQueue(maxlen)
         self.queue.gone, self.queue.revive = link.gone, link.revive  # (a dead link's get())
-        self.mask: int | None = None
+        self._mask: int | None = None
         self._handle: Transport | None = None
         self._index = 0
         self._datagram = False  # the handle is UDP: the controller cannot see it close
@@ -83,7 +86,7 @@ class Interrupts(FixedAttributes):
         self._stop = threading.Event()
         self._subscribers: Subscribers[Interrupt] = Subscribers("interrupt", _LOG)
 
-    def _mask(self, axes: str, all_done: bool) -> int:
+    def _mask_of(self, axes: str, all_done: bool) -> int:
         model = self.link.model
         mask = 0
         if not isinstance(axes, str):
@@ -104,7 +107,7 @@ class Interrupts(FixedAttributes):
             InvalidArgument: a bad axis, or no second Ethernet handle on this link.
             GalilConnectionError: the handle could not be opened.
         """
-        mask = self._mask(axes, all_done)
+        mask = self._mask_of(axes, all_done)
         link = self.link
         transport: object = link.transport
         if not isinstance(transport, HandleSource) or not link.model.has_ethernet:
@@ -116,7 +119,7 @@ class Interrupts(FixedAttributes):
         if self._handle is None:
             self._open(transport)
         link.command_line([cmds.ei(mask, None, self._index)])
-        self.mask = mask
+        self._mask = mask
 
     def _open(self, transport: HandleSource) -> None:
         link = self.link
@@ -246,7 +249,7 @@ class Interrupts(FixedAttributes):
         if thread is not None and thread is not threading.current_thread():
             thread.join(timeout=2.0)
         if not keep_mask:
-            self.mask = None
+            self._mask = None
 
     def reopen(self) -> None:
         """After a reconnect: the old UDP handle freed on the controller (if it is still this

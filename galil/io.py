@@ -35,6 +35,7 @@ from galil.errors import (
     GalilError,
     GalilTimeoutError,
     InvalidArgument,
+    ReadOnly,
     decimal_hint,
 )
 from galil.link import CommandLink, check_wait_timeout
@@ -120,14 +121,15 @@ def _level(value: object) -> bool:
 class _Channels(FixedAttributes):
     """Channels ``first .. first + count - 1`` of one kind, indexed as the controller does."""
 
-    _fields = ("first", "count")
+    first: ReadOnly[int] = ReadOnly()
+    count: ReadOnly[int] = ReadOnly()
 
     kind = "channel"
 
     def __init__(self, link: CommandLink, first: int, count: int) -> None:
         self._link = link
-        self.first = first
-        self.count = count
+        self._first = first
+        self._count = count
 
     def __len__(self) -> int:
         return self.count
@@ -355,8 +357,9 @@ class IO(FixedAttributes):
             high: wait for high (True) or low (False).
             timeout: seconds to wait at most (``None``: for ever), a finite number >= 0
                 (:func:`~galil.link.check_wait_timeout`).
-            thread: program thread for the routine (default: the last one none of this
-                session's other library routines runs on: never the watchdog's).
+            thread: program thread for the routine (default: the last one that runs neither
+                a program of yours nor another of this session's library routines: never the
+                watchdog's; with none free, the wait polls its input).
 
         Raises:
             InvalidArgument: no such input, a bad timeout (infinity too: ``None`` waits for
@@ -449,6 +452,7 @@ class InputWatch:
         self._held = False  # this wait holds the routine (IO._wait_lock)
         self._started = False  # its XQ may have gone out
         self._polling = False  # a program of the user's runs: no routine, the input polled
+        self._why_polled = ""  # (the ProgramRunning that made it poll)
         self._over = False
         self._unsubscribe: Callable[[], None] | None = None
         self._lock = threading.Lock()  # one step (or end) at a time
@@ -492,6 +496,11 @@ class InputWatch:
 
     def _expired_why(self) -> str:
         """What a timeout adds: why the wait polled its input, if it did."""
+        if self._polling and self._why_polled.startswith("every thread"):
+            return (
+                ": every thread ran a program of yours (or another of the library's routines),"
+                " so this wait polled its input"
+            )
         if self._polling:
             return (
                 ": a program of yours ran while the input routine was not in memory (its "
@@ -533,11 +542,13 @@ class InputWatch:
         needs a download a running program of the user's refuses (:class:`ProgramRunning`)."""
         io, tag = self._io, [INPUT_MESSAGE, str(self._n)]
         routines = io._routines
-        # (before the install sends a byte; the default: Routines.default_thread)
-        thread = self._thread = routines.free_thread(self._thread, _INPUT_ROUTINE)
         try:
+            # (before the install sends a byte; the default: Routines.default_thread, and
+            # with every thread running a program (ProgramRunning), the wait polls)
+            thread = self._thread = routines.free_thread(self._thread, _INPUT_ROUTINE)
             routines.install(_input_routine())
-        except ProgramRunning:
+        except ProgramRunning as exc:
+            self._why_polled = str(exc)
             return False
 
         def on_message(line: str) -> None:

@@ -34,6 +34,7 @@ from galil.errors import (
     LimitError,
     MotionError,
     ProtocolError,
+    ReadOnly,
 )
 from galil.link import (
     RECONNECT_ADVICE,
@@ -687,14 +688,15 @@ def _poll_names(letters: str, followers: str) -> tuple[str, ...]:
 class _HandleState(FixedAttributes):
     """What a :class:`MoveHandle` holds (its ``__init__`` fills it in one update)."""
 
-    _fields = ("kind", "started_at")
+    kind: ReadOnly[str] = ReadOnly()
+    started_at: ReadOnly[float] = ReadOnly()
 
     _link: CommandLink
     _tracks: dict[str, Track]
     _display: dict[str, Display]
     _tracker: MotionTracker | None
-    kind: str
-    started_at: float
+    _kind: str
+    _started_at: float
     # The TM the move ran at: a TM sent once it is over (unseen) must not re-predict it.
     _sample_period: float
     _callbacks: list[Callable[[MoveHandle], None]]
@@ -724,7 +726,7 @@ class MoveHandle(_HandleState):
     ) -> None:
         # One dict update, not twelve FixedAttributes.__setattr__ calls: a plan makes a handle.
         vars(self).update(_link=link, _tracks=dict(tracks), _display=dict(display or {}),
-                          _tracker=tracker, kind=kind, started_at=link.clock(),
+                          _tracker=tracker, _kind=kind, _started_at=link.clock(),
                           _sample_period=link.sample_period, _callbacks=[],
                           _lock=threading.RLock(), _cache={}, _followers={}, _ended={})  # fmt: skip
 

@@ -38,6 +38,7 @@ from galil.errors import (
     GalilTimeoutError,
     InvalidArgument,
     ProgramError,
+    ReadOnly,
 )
 from galil.link import CommandLink, check_flag, check_seconds
 from galil.motion import MotionTracker
@@ -162,13 +163,14 @@ class Programs(FixedAttributes):
         tracker: the motion the library started (``burn`` is refused unsent during it).
     """
 
-    _fields = ("link", "routines")
+    link: ReadOnly[CommandLink] = ReadOnly()
+    routines: ReadOnly[Routines] = ReadOnly()
 
     def __init__(
         self, link: CommandLink, routines: Routines, tracker: MotionTracker | None = None
     ) -> None:
-        self.link = link
-        self.routines = routines
+        self._link = link
+        self._routines = routines
         self._tracker = tracker
         #: ``_ED``/``_ED1``/``_TC`` as each thread's run began (decision 0059).
         self._marks: dict[int, _Mark] = {}

@@ -28,6 +28,7 @@ from galil.errors import (
     InvalidArgument,
     ProtocolError,
     QueueTimeoutError,
+    ReadOnly,
     decimal_hint,
 )
 from galil.link import Link, check_count, check_timeout, check_wait_timeout, read_handle, read_reply
@@ -89,7 +90,11 @@ class RecordStream(FixedAttributes):
         gaps: ``(time, missed)`` for each gap: the record after it, and how many were missing.
     """
 
-    _fields = ("period", "method", "dropped", "missed", "gaps")
+    period: ReadOnly[int] = ReadOnly()
+    method: ReadOnly[str] = ReadOnly()
+    dropped: ReadOnly[int] = ReadOnly()
+    missed: ReadOnly[int] = ReadOnly()
+    gaps: ReadOnly[list[tuple[int, int]]] = ReadOnly()
 
     def __init__(
         self,
@@ -100,11 +105,11 @@ class RecordStream(FixedAttributes):
         handle: Transport | None = None,
         maxlen: int = 10_000,
     ) -> None:
-        self.period = period
-        self.method = method
-        self.dropped = 0
-        self.missed = 0
-        self.gaps: list[tuple[int, int]] = []
+        self._period = period
+        self._method = method
+        self._dropped = 0
+        self._missed = 0
+        self._gaps: list[tuple[int, int]] = []
         self._last: int | None = None  # time of the last record
         self._fresh = False  # the next pushed record is the first after a DR line
         self._anchor: tuple[int, float] | None = None  # (TIME, host clock) on the DR line
@@ -176,7 +181,7 @@ class RecordStream(FixedAttributes):
 
     def _gap(self, t: int, missed: int) -> None:
         if missed > 0:
-            self.missed += missed
+            self._missed += missed
             self.gaps.append((t, missed))
             _LOG.warning(
                 "galil: %d data record(s) missing before sample %d (every %d samples)",
@@ -253,7 +258,7 @@ class RecordStream(FixedAttributes):
                 for _ in range(min(over, len(items))):
                     items.popleft()
                 rows = rows[skipped:]
-                self.dropped += over
+                self._dropped += over
             items.extend(rows)
             self._cond.notify_all()
         if self._subscribers:

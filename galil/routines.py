@@ -23,9 +23,9 @@ Rules, all checked before the download:
   download and started again.
 
 Two of the library's features of one session never take the same thread by default
-(:meth:`Routines.default_thread`: the last thread none of this session's other routines
-runs on), and a thread one of them runs on is refused to the other with the feature named
-(decision 0086).
+(:meth:`Routines.default_thread`: the last thread that runs neither a program of the user's
+nor another of this session's routines), and a thread one of them runs on is refused to the
+other with the feature named (decision 0086).
 """
 
 from __future__ import annotations
@@ -276,7 +276,21 @@ class Routines:
         self.link = link
         self._threads: dict[int, str] = {}  # library thread -> label it runs
         self._owners: dict[int, object] = {}  # thread -> the one-shot run that holds it
+        self._preludes: dict[str, tuple[cmds.Command, ...]] = {}  # label -> sent before its XQ
         self._lock = threading.RLock()
+
+    def restart_with(self, label: str, *commands: cmds.Command) -> None:
+        """Send ``commands`` on the line of every ``XQ`` that starts the routine ``label``
+        again after the library halted it for a download or a burn (:meth:`paused`): the
+        watchdog's fresh heartbeat (``gwbeat=TIME``), without which the routine would measure
+        its silence from a beat taken before the halt and fire at once."""
+        with self._lock:
+            self._preludes[label] = tuple(commands)
+
+    def _xq_again(self, label: str, thread: int) -> None:
+        """``XQ label,thread`` after a halt, behind the routine's :meth:`restart_with`
+        commands on the same line."""
+        self.link.command_line([*self._preludes.get(label, ()), cmds.xq(label, thread)])
 
     def upload(self) -> list[str]:
         """The program in memory, one string per line (``UL``).
@@ -383,7 +397,7 @@ class Routines:
             self.link.command_line([cmds.hx(t)])
         self.link.transfer(download)
         for t, label in restart.items():
-            self.link.command_line([cmds.xq(label, t)])
+            self._xq_again(label, t)
         return tuple(sorted(restart))
 
     @contextlib.contextmanager
@@ -431,7 +445,7 @@ class Routines:
         whose ``XQ`` failed is no longer the library's (the error says which)."""
         for t, label in threads.items():
             try:
-                self.link.command_line([cmds.xq(label, t)])
+                self._xq_again(label, t)
             except BaseException:
                 self._threads.pop(t, None)
                 raise
@@ -510,13 +524,23 @@ class Routines:
             The thread.
 
         Raises:
-            InvalidArgument: what :meth:`check_free` raises.
+            ProgramRunning: no thread named, and every thread runs a program of the user's
+                or another routine of this session's (a caller that can do without the
+                routine, a wait for an input, polls instead).
+            InvalidArgument: what :meth:`check_free` raises for a named thread.
         """
         if thread is not None:
             self.check_thread(thread)
         with self._lock:
             running = self.running()
             t = self._default(label, running) if thread is None else thread
+            if t is None:
+                raise ProgramRunning(
+                    f"every thread of {self.link.model.name} runs a program "
+                    f"({_threads_named(running, self._threads)} running): none is free "
+                    f"for {RESERVED.get(label, 'the routine ' + label)}",
+                    model=self.link.model.name,
+                )
             self._free(t, label, running)
             return t
 
@@ -559,18 +583,30 @@ class Routines:
         return f"{what} ({label})"
 
     def default_thread(self, label: str) -> int:
-        """The thread a routine of ``label`` takes when none is named: the last one that none
-        of this session's other routines runs on (one query). A thread a program of the
-        user's runs on is not skipped (:meth:`check_free` refuses it, saying so), nor one
-        that runs ``label`` itself (a new watchdog takes over the running one's)."""
+        """The thread a routine of ``label`` takes when none is named: the last one that runs
+        neither another of this session's routines nor a program of the user's (one query; an
+        upload when a thread runs a program the library does not know it holds, to tell an
+        earlier session's ``label`` from the user's). A thread that runs ``label`` itself is
+        not skipped (a new watchdog takes over the running one's). With no such thread, the
+        last one (:meth:`check_free` refuses it, saying what runs there)."""
         with self._lock:
-            return self._default(label, self.running())
+            t = self._default(label, self.running())
+            return self.link.model.threads - 1 if t is None else t
 
-    def _default(self, label: str, running: Mapping[int, int]) -> int:
-        """:meth:`default_thread`, the threads ``running`` read (under the lock)."""
-        taken = {t for t, held in self._threads.items() if held != label and t in running}
-        free = [t for t in range(self.link.model.threads) if t not in taken]
-        return free[-1] if free else self.link.model.threads - 1
+    def _default(self, label: str, running: Mapping[int, int]) -> int | None:
+        """:meth:`default_thread`, the threads ``running`` read (under the lock); ``None``
+        when every thread runs something else."""
+        lines: list[str] | None = None
+        for t in reversed(range(self.link.model.threads)):
+            held = self._threads.get(t)
+            if t not in running or held == label:
+                return t
+            if held is not None:
+                continue  # (another routine of this session's)
+            lines = self.upload() if lines is None else lines
+            if routine_at(lines, running[t]) == label:
+                return t  # (an earlier session's: taken over, as check_free does)
+        return None
 
     def release(self, thread: int, label: str) -> None:
         """The routine ``label`` ended by itself on ``thread`` (the input wait's, once it
@@ -634,15 +670,31 @@ class Routines:
                 raise InvalidArgument(
                     f"{_threads_named(running, self._threads)} running: the controller "
                     "refuses DL while a program runs (TC 17) and would then run the "
-                    "program's lines as commands; halt them first (HX n), or download "
-                    "with controller.programs.download(), which keeps the library's "
-                    "routines running",
+                    f"program's lines as commands; {self._ending_advice(running)}, or "
+                    "download with controller.programs.download(), which keeps the "
+                    "library's routines running",
                     model=self.link.model.name,
                 )
             try:
                 return send()
             finally:
                 self.forget()
+
+    def _ending_advice(self, running: Mapping[int, int]) -> str:
+        """How to end the ``running`` threads first: this session's routines of the library
+        through the library (never a raw ``HX`` behind its back), the others with a halt."""
+        features = {RESERVED.get(self._threads[t]) for t in running if t in self._threads}
+        advice = []
+        if "the watchdog" in features:
+            advice.append("stop the watchdog (its stop())")
+        if "wait_for_input" in features:
+            advice.append("let the wait for an input end (at its input or its timeout)")
+        if features - {"the watchdog", "wait_for_input"}:
+            advice.append("let the speed schedule end, or stop its motion")
+        others = sorted(t for t in running if t not in self._threads)
+        if others:
+            advice.append(f"halt thread(s) {others} (controller.programs.halt(n), or HX n)")
+        return "; ".join(advice) + " first"
 
     def forget(self, thread: int | None = None) -> None:
         """``thread`` was halted behind :meth:`halt`'s back (after a failed start); with no

@@ -541,10 +541,12 @@ def _in_unit(scale: Scale, counts: float, kind: str) -> Any:
 def state_in_units(exc: LimitError, scale: Scale | None, kind: str | None = None) -> None:
     """Add to ``exc`` (raised in counts) its value and limit in ``scale``'s unit: the message
     gains `` (in user units: 25.1 mm / s, limit 25 mm / s)`` (a position ``reaches`` its limit,
-    and says where the motion would ``end``), and ``value_in_units``/``limit_in_units`` are
-    set. ``kind`` is ``"position"``, ``"distance"``, ``"length"``, ``"speed"`` or
-    ``"acceleration"`` (default: :data:`UNIT_KINDS` by ``exc.name``). Nothing changes without a
-    scale, without a value or a limit, for a name of no known kind, or when it was done."""
+    and says where the motion would ``end``; a :attr:`~galil.errors.LimitError.floor` says
+    ``the smallest is 0.001 mm / s, you gave 0.0004 mm / s``), and
+    ``value_in_units``/``limit_in_units`` are set. ``kind`` is ``"position"``, ``"distance"``,
+    ``"length"``, ``"speed"`` or ``"acceleration"`` (default: :data:`UNIT_KINDS` by
+    ``exc.name``). Nothing changes without a scale, without a value or a limit, for a name of
+    no known kind, or when it was done."""
     kind = UNIT_KINDS.get(exc.name) if kind is None else kind
     value, limit = exc.value, exc.limit
     if scale is None or kind is None or value is None or limit is None:
@@ -554,6 +556,8 @@ def state_in_units(exc: LimitError, scale: Scale | None, kind: str | None = None
     shown, top = _in_unit(scale, value, kind), _in_unit(scale, limit, kind)
     exc.value_in_units, exc.limit_in_units = shown, top
     text = f"{'reaches ' if kind == 'position' else ''}{shown:~.6g}, limit {top:~.6g}"
+    if exc.floor:  # (the limit is the smallest value allowed: not read as the value given)
+        text = f"the smallest is {top:~.6g}, you gave {shown:~.6g}"
     if kind == "position" and exc.end is not None:
         text += f", end {scale.counts_to_position(exc.end):~.6g}"
     exc.args = (f"{exc.args[0]} (in user units: {text})", *exc.args[1:])

@@ -8,9 +8,10 @@ the cable was pulled, the host froze), it stops every axis with ``ST`` (a decele
 each axis's DC), sets ``gwfire=1`` and prints a message. A clean :meth:`Controller.close`
 halts the routine first: leaving on purpose is not dying.
 
-The routine takes one program thread (by default the last one none of this session's other
-library routines runs on: an input wait's, say; decision 0086); it refuses a thread that runs
-a program, so it never takes one the user's programs need without saying so.
+The routine takes one program thread (by default the last one that runs neither a program nor
+another of this session's library routines: an input wait's, say; decision 0086); it refuses
+a named thread that runs a program, so it never takes one the user's programs need without
+saying so.
 
 One watchdog guards a controller: its variables (``gwbeat``, ``gwlimit``, ``gwfire``) and its
 routine are the controller's, so a new watchdog replaces the running one, on any thread
@@ -26,11 +27,17 @@ import weakref
 from collections.abc import Sequence
 from types import TracebackType
 
-from galil.errors import FixedAttributes, GalilConnectionError, GalilError, InvalidArgument
+from galil.errors import (
+    FixedAttributes,
+    GalilConnectionError,
+    GalilError,
+    InvalidArgument,
+    ReadOnly,
+)
 from galil.link import CommandLink, Link, check_seconds
 from galil.models import INT32_MAX
 from galil.protocol import commands as cmds
-from galil.protocol.numbers import read_one
+from galil.protocol.numbers import read_one, whole
 from galil.routines import RESERVED, Routine, Routines
 from galil.units import plain_seconds
 
@@ -68,11 +75,13 @@ class Watchdog(FixedAttributes):
     Attributes:
         timeout: seconds of silence after which the controller stops the axes.
         interval: seconds between heartbeats.
-        thread: the program thread the routine runs on (``None`` given: the last one no
-            other routine of this session's library runs on, decision 0086).
+        thread: the program thread the routine runs on (``None`` given: the last one that
+            runs neither a program nor another routine of this session's library, 0086).
     """
 
-    _fields = ("timeout", "thread", "interval")
+    timeout: ReadOnly[float] = ReadOnly()
+    thread: ReadOnly[int] = ReadOnly()
+    interval: ReadOnly[float] = ReadOnly()
 
     def __init__(
         self,
@@ -85,11 +94,11 @@ class Watchdog(FixedAttributes):
     ) -> None:
         self._link = link
         self._routines = routines
-        self.timeout = timeout
+        self._timeout = timeout
         self._samples()  # (a timeout refused before the query below)
-        # (None: the last thread no other routine of this session's runs on; one query)
-        self.thread = routines.default_thread(LABEL) if thread is None else thread
-        self.interval = interval
+        # (None: the last thread running no program nor another routine; one query)
+        self._thread = routines.default_thread(LABEL) if thread is None else thread
+        self._interval = interval
         self._stop = threading.Event()
         self._beater: threading.Thread | None = None
         self._beat = cmds.stamp(BEAT)
@@ -118,6 +127,9 @@ class Watchdog(FixedAttributes):
         link = self._link
         samples = self._samples()
         self._routines.check_free(self.thread, LABEL)  # before anything is sent
+        # (a fresh beat on the line of every XQ that starts it again after a download or a
+        # burn halted it: the last beat is as old as the halt, which outlasts a short timeout)
+        self._routines.restart_with(LABEL, self._beat)
         self._routines.install(watchdog_routine(link.model.axes))
         link.command_line([cmds.assign(LIMIT, samples), self._beat])
         fired = bool(round(link.query_operands([FIRED])[0])) if replacing else False
@@ -358,10 +370,8 @@ def check_watchdog_args(
             "there is none to stop",
             model=model.name,
         )
-    chosen = thread
-    if chosen is not None and (
-        isinstance(chosen, bool) or not isinstance(chosen, int) or not 0 <= chosen < model.threads
-    ):
+    chosen = None if thread is None else whole(thread)  # (an int or a numpy integer)
+    if thread is not None and (chosen is None or not 0 <= chosen < model.threads):
         raise InvalidArgument(
             f"thread must be 0..{model.threads - 1} on {model.name}, not {thread!r}",
             model=model.name,

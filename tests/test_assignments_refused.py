@@ -89,3 +89,43 @@ def test_the_rooms_and_handles_refuse_a_new_public_name() -> None:
                 assert "timout" not in vars(obj)
         # Private names stay the objects' own business.
         move._note = 1  # type: ignore[attr-defined]
+
+
+def test_the_attributes_the_library_binds_are_read_only_to_the_user() -> None:
+    """Before: ``dog.thread = 3`` changed the repr but not the controller (the stop then left
+    the routine running on thread 7, with no heartbeat), and ``cap.count = 5000`` made
+    ``wait()`` read past its arrays."""
+    with simulated() as dmc:
+        dog = dmc.watchdog(0.5)
+        cap = dmc.capture(["_RPA"], count=10)
+        gear = dmc.B.gear_to(dmc.A, 1.0)
+        move = dmc.A.move_by(1000)
+        with dmc.records(32) as stream:
+            bound: list[tuple[Any, str]] = [
+                (dog, "timeout"), (dog, "interval"), (dog, "thread"),
+                (cap, "count"), (cap, "every"), (cap, "sources"), (cap, "arrays"),
+                (cap, "link"), (cap, "start_sample"), (cap, "result"),
+                (dmc, "link"), (dmc, "io"), (dmc, "programs"), (dmc, "arrays"),
+                (dmc, "variables"), (dmc, "interrupts"), (dmc, "routines"), (dmc, "tracker"),
+                (dmc, "messages_room"), (dmc, "records_room"), (dmc, "identity"), (dmc, "echo"),
+                (dmc.A, "letter"), (dmc.programs, "link"), (dmc.programs, "routines"),
+                (dmc.arrays, "link"), (dmc.variables, "link"), (dmc.io.inputs, "first"),
+                (dmc.io.inputs, "count"), (dmc.interrupts, "link"), (dmc.interrupts, "queue"),
+                (dmc.interrupts, "mask"), (stream, "period"), (stream, "method"),
+                (stream, "dropped"), (stream, "missed"), (stream, "gaps"), (move, "kind"),
+                (move, "started_at"), (gear, "follower"), (gear, "master"),
+            ]  # fmt: skip
+            sent = len(sim_of(dmc).command_log)
+            for obj, name in bound:
+                before = getattr(obj, name)
+                with pytest.raises(galil.GalilAttributeError, match="is read-only") as info:
+                    setattr(obj, name, 3)
+                assert info.value.attribute == name
+                assert getattr(obj, name) is before, (type(obj).__name__, name)
+                assert name not in vars(obj)
+            assert len(sim_of(dmc).command_log) == sent  # nothing sent
+        move.wait()
+        gear.off()
+        assert len(cap.wait()) == 10  # its own count
+        dog.stop()
+        assert dmc.query_operands(["_XQ7"]) == [-1]  # the routine halted where it ran

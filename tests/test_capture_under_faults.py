@@ -173,3 +173,42 @@ def test_a_capture_whose_wait_lost_its_link_goes_on_and_is_read_whole_after_reco
         assert len(rec) == 100
         assert (np.diff(rec["_RPA"]) >= 0).all()
         assert rec["_RPA"][-1] > 0
+
+
+def test_a_capture_whose_stop_lost_its_link_after_its_rc_0_keeps_only_the_values_recorded() -> None:
+    # The RC 0 went out and the controller stopped; the reply was lost with the link. After
+    # the reconnect _RC reads 0 ("stopped already"): only _RD tells how far it got.
+    with simulated() as dmc:
+        dmc.A.jog(20_000)  # (something to record)
+        cap = dmc.capture(["_RPA"], count=2000)  # 4 s of recording
+        dmc.sleep(0.5)
+        pull_cable_after(dmc.link.transport, b"RC 0")
+        with pytest.raises(GalilConnectionError):
+            cap.stop()
+        assert cap.stop_pending
+        dmc.reconnect()
+        assert not cap.stop_pending
+        assert not _recording(sim_of(dmc))
+        dmc.sleep(4.0)  # (past the recording's whole duration: it recorded no more)
+        with nothing_sent(dmc), pytest.raises(InvalidArgument, match=r"stopped .* of 2000 values"):
+            cap.wait()  # before: 2000 values, the last ones the arrays' unrecorded zeros
+        rec = cap.stop()
+        assert 200 < len(rec) < 300  # 0.5 s every 2 samples
+        assert (np.diff(rec["_RPA"]) >= 0).all()
+        assert rec["_RPA"][-1] > 0
+
+
+def test_a_capture_that_ended_by_itself_before_its_stop_lost_its_link_is_read_whole() -> None:
+    with simulated() as dmc:
+        dmc.A.jog(20_000)
+        cap = dmc.capture(["_RPA"], count=100)  # 0.2 s
+        dmc.sleep(0.5)  # every value recorded
+        pull_cable_after(dmc.link.transport, b"_RC")  # the stop's query of _RC: no reply
+        with pytest.raises(GalilConnectionError):
+            cap.stop()
+        assert cap.stop_pending
+        dmc.reconnect()
+        rec = cap.wait()  # _RD says all 100 were recorded: nothing was cut
+        assert len(rec) == 100
+        assert (np.diff(rec["_RPA"]) >= 0).all()
+        assert rec["_RPA"][-1] > 0

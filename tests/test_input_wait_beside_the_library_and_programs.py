@@ -240,3 +240,50 @@ def test_a_routine_in_memory_from_an_earlier_wait_starts_beside_a_running_progra
         assert "DL" not in words
         assert words.count("XQ") == 1  # the routine, started by XQ alone
         assert list(dmc.programs.threads) == [0]
+
+
+def test_a_wait_beside_a_program_on_the_last_thread_takes_another_thread_by_default() -> None:
+    with simulated() as dmc:
+        dmc.programs.download(LOOP)
+        with pytest.raises(galil.GalilTimeoutError):  # (installs the routine: input 1 is high)
+            dmc.io.wait_for_input(1, high=False, timeout=0.1)
+        dmc.programs.run("#MAIN", thread=7)
+        before = len(sim_of(dmc).command_log)
+        with goes_low_after_a_pause(dmc, 1):
+            dmc.io.wait_for_input(1, high=False, timeout=5)  # (before: "thread 7 runs a program")
+        assert "XQ #GINWAIT,6" in _sent_since(dmc, before)
+        assert list(dmc.programs.threads) == [7]  # undisturbed
+
+
+def test_a_wait_beside_a_program_on_the_last_thread_polls_when_its_routine_is_not_in_memory() -> (
+    None
+):
+    with simulated() as dmc:
+        dmc.programs.download(LOOP)
+        dmc.programs.run("#MAIN", thread=7)
+        with goes_low_after_a_pause(dmc, 1):
+            dmc.io.wait_for_input(1, high=False, timeout=5)  # (before: "thread 7 runs a program")
+        with pytest.raises(galil.GalilTimeoutError, match="so this wait polled its input"):
+            dmc.io.wait_for_input(1, high=True, timeout=0.2)
+        assert list(dmc.programs.threads) == [7]
+        before = len(sim_of(dmc).command_log)
+        with pytest.raises(galil.InvalidArgument, match="thread 7 runs a program"):
+            dmc.io.wait_for_input(1, high=True, timeout=0.2, thread=7)  # named: refused
+        assert all(line == "UL" or line.startswith("MG ") for line in _sent_since(dmc, before))
+
+
+def test_a_wait_with_every_thread_running_a_program_polls_and_says_why() -> None:
+    with simulated() as dmc:
+        dmc.programs.download(LOOP)
+        with pytest.raises(galil.GalilTimeoutError):  # (installs the routine: input 1 is high)
+            dmc.io.wait_for_input(1, high=False, timeout=0.1)
+        for thread in range(8):
+            dmc.programs.run("#MAIN", thread=thread)
+        before = len(sim_of(dmc).command_log)
+        with pytest.raises(galil.GalilTimeoutError, match="every thread ran a program of yours"):
+            dmc.io.wait_for_input(1, high=False, timeout=0.2)
+        assert "XQ" not in _words(_sent_since(dmc, before))
+        with goes_low_after_a_pause(dmc, 1):
+            dmc.io.wait_for_input(1, high=False, timeout=5)  # polled, and seen
+        assert list(dmc.programs.threads) == list(range(8))
+        dmc.programs.halt()

@@ -299,7 +299,10 @@ def test_a_thread_running_another_library_routine_says_whose_it_is_and_how_to_ha
     _left_by_an_earlier_session(sim, "#GWDOG")
     with Controller(SimLink(sim)) as dmc:
         with pytest.raises(galil.InvalidArgument, match=r"#GWDOG \(the watchdog\).*HX7"):
+            dmc.io.wait_for_input(2, high=False, timeout=0.3, thread=7)
+        with pytest.raises(galil.GalilTimeoutError):  # by default: the next thread, 6
             dmc.io.wait_for_input(2, high=False, timeout=0.3)
+        assert "XQ #GINWAIT,6" in [line for _, line in sim.command_log]
         dmc.command("HX7")
 
 
@@ -329,3 +332,23 @@ def test_a_sync_wait_for_an_input_in_another_thread_ends_when_the_controller_clo
     assert isinstance(ended[0], galil.GalilConnectionError)
     with Controller(SimLink(sim)) as again:
         assert again.query_number("MG _XQ7") == -1  # the routine was halted
+
+
+def test_a_raw_download_refused_says_to_stop_the_librarys_routines_through_the_library() -> None:
+    with simulated() as dmc:
+        dog = dmc.watchdog(0.5)
+        with nothing_sent(dmc, allow_queries=True), pytest.raises(galil.InvalidArgument) as info:
+            dmc.send(cmds.dl(["#A", "EN"]))
+        said = str(info.value)
+        assert "stop the watchdog (its stop()) first" in said
+        assert "HX" not in said  # (before: "halt them first (HX n)", behind the library's back)
+        dmc.programs.download("#L\nWT 10\nJP #L\nEN\n")
+        dmc.programs.run("#L", thread=2)
+        with nothing_sent(dmc, allow_queries=True), pytest.raises(galil.InvalidArgument) as info:
+            dmc.send(cmds.dl(["#A", "EN"]))
+        said = str(info.value)
+        assert "stop the watchdog (its stop())" in said
+        assert "halt thread(s) [2] (controller.programs.halt(n), or HX n)" in said  # the user's
+        dmc.programs.halt()
+        dog.stop()
+        assert dmc.exchange(cmds.dl(["#A", "EN"])).ok

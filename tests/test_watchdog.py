@@ -355,3 +355,44 @@ def test_a_burn_while_a_users_program_runs_is_refused_unsent_naming_it(burn: str
         _BURNS[burn](dmc)  # the user's program halted: burned, the watchdog guarding on
         assert sim_of(dmc).room(Tuning).burns[command] == 1
         assert dog.running
+
+
+@pytest.mark.parametrize("timeout", [0.1, 0.2])
+@pytest.mark.parametrize("burn", sorted(_BURNS))
+def test_a_burn_longer_than_a_short_timeout_restarts_the_watchdog_with_a_fresh_heartbeat(
+    burn: str, timeout: float
+) -> None:
+    """The burn halts the routine for longer than the timeout (0.25 s in the simulator): it
+    starts again measuring the silence from a beat stamped on its XQ's line, not from the
+    last beat before the burn (which made it fire at once)."""
+    with simulated() as dmc:
+        dog = dmc.watchdog(timeout)
+        before = dmc.link.clock()
+        _BURNS[burn](dmc)
+        assert dmc.link.clock() - before > timeout  # (the halt outlasted the timeout)
+        dmc.sleep(timeout / 2)
+        assert dog.running
+        assert not dog.fired
+        jog = dmc.A.jog(20_000)
+        dmc.sleep(1.0)  # the host beats on: the jog goes on
+        assert dmc.A.moving
+        sim_of(dmc).advance(timeout / 2)  # the host silent, not yet for the timeout
+        assert sim_of(dmc).motion("A").moving
+        sim_of(dmc).advance(timeout + 0.3)  # silent beyond it: the routine stops the axis
+        assert not sim_of(dmc).motion("A").moving
+        assert dog.fired
+        assert jog.done
+        dog.stop()
+
+
+def test_a_watchdog_beside_a_program_on_the_last_thread_takes_another_thread_by_default() -> None:
+    with simulated() as dmc:
+        dmc.programs.download("#LOOP\nWT 10\nJP #LOOP\nEN\n")
+        dmc.watchdog(0.5).stop()  # (its routine in memory: no download needed beside a program)
+        dmc.programs.run("#LOOP", thread=7)
+        dog = dmc.watchdog(0.5)  # (before: "thread 7 runs a program; choose another thread")
+        assert dog.thread == 6
+        assert dog.running
+        assert dmc.programs.threads.keys() == {7}
+        dog.stop()
+        dmc.programs.halt()

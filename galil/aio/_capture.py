@@ -87,6 +87,11 @@ class AsyncCapture(Room[Capture]):
         return self.sync.duration
 
     @property
+    def arrays(self) -> tuple[str, ...]:
+        """The controller's arrays it records into (``gcap0`` ...), one per source."""
+        return self.sync.arrays
+
+    @property
     def start_sample(self) -> int | None:
         """The controller sample (``TIME``) of the first value."""
         return self.sync.start_sample

@@ -443,9 +443,8 @@ async def connect(address: str | Transport, *, threads: int = 4, **options: Any)
     async def revive() -> bool:  # (a get() that finds the link dead: the automatic reconnect)
         return await worker.run(sync.link.revive)
 
-    messages.gone = sync.messages_room.queue.ended
-    interrupts.gone = sync.interrupts.queue.ended
-    messages.revive = interrupts.revive = revive
+    messages._follow(sync.messages_room.queue.ended, revive)
+    interrupts._follow(sync.interrupts.queue.ended, revive)
     return AsyncController(sync, worker, messages, interrupts, unsubscribe)
 
 

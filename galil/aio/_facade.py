@@ -49,6 +49,11 @@ class AsyncLinkFacade(MotionRoom[Controller]):
         return self.sync.identity
 
     @property
+    def echo(self) -> bool:
+        """Whether the controller echoes (found at the handshake and kept)."""
+        return self.sync.echo
+
+    @property
     def sample_period(self) -> float:
         """Seconds per servo sample."""
         return self.sync.sample_period

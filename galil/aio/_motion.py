@@ -200,6 +200,11 @@ class AsyncMoveHandle(FixedAttributes):
         return self.sync.kind
 
     @property
+    def started_at(self) -> float:
+        """The controller clock (seconds) when the handle was made."""
+        return self.sync.started_at
+
+    @property
     def notes(self) -> dict[str, str]:
         """What is known of each axis's prediction, where the handle has something to say
         (a homing sequence: predicted from given switch positions, or unknown)."""

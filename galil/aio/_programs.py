@@ -63,7 +63,7 @@ class AsyncPrograms(Backed[Programs]):
         def wait(seconds: float) -> None:
             programs.wait(thread, seconds)
 
-        expired = f"thread {thread} still runs after {timeout} s"
+        expired = f"thread {thread} still runs after {total} s"  # (seconds: not a Quantity)
         await in_slices(self._worker, self._link, wait, total, expired)
 
     def __repr__(self) -> str:

@@ -62,7 +62,6 @@ class LoopQueue(FixedAttributes, Generic[T]):
             (``"unsolicited message"``).
     """
 
-    _fields = ("gone", "revive")
     _awaited = True
 
     def __init__(self, maxlen: int, what: str = "item") -> None:
@@ -73,13 +72,8 @@ class LoopQueue(FixedAttributes, Generic[T]):
         self._what = what
         self._closed = False
         self._dropped = 0
-        #: Why none will come from the sync core (its queue's :meth:`~galil.queues.
-        #: BoundedQueue.ended`: the link died), ``""`` while they may; a wait looks every
-        #: :data:`~galil.queues.CHECK` seconds.
-        self.gone: Callable[[], str] | None = None
-        #: Reopens a dead link (the automatic reconnect, on a worker thread) for a
-        #: :meth:`get` that finds none will come; says whether it did.
-        self.revive: Callable[[], Awaitable[bool]] | None = None
+        self._gone: Callable[[], str] | None = None  # (see _follow())
+        self._revive_link: Callable[[], Awaitable[bool]] | None = None
 
     @property
     def dropped(self) -> int:
@@ -106,13 +100,23 @@ class LoopQueue(FixedAttributes, Generic[T]):
             with contextlib.suppress(RuntimeError):  # its loop closed meanwhile
                 loop.call_soon_threadsafe(event.set)
 
+    def _follow(self, gone: Callable[[], str], revive: Callable[[], Awaitable[bool]]) -> None:
+        """Follow the sync core's link (the async controller does, once, at connect):
+        ``gone`` says why no item will come (its queue's :meth:`~galil.queues.BoundedQueue.
+        ended`: the link died), ``""`` while they may (a wait looks every
+        :data:`~galil.queues.CHECK` seconds); ``revive`` reopens a dead link (the automatic
+        reconnect, on a worker thread) for a :meth:`get` that finds none will come, and says
+        whether it did."""
+        self._gone, self._revive_link = gone, revive
+
     def _ended(self) -> str:
-        gone = self.gone
+        gone = self._gone
         return "" if gone is None else gone()
 
     async def _revive(self) -> None:
-        """None will come (the link died): reopen it (:attr:`revive`) or raise."""
-        revive = self.revive
+        """None will come (the link died): reopen it (``revive`` of :meth:`_follow`) or
+        raise."""
+        revive = self._revive_link
         if revive is not None and await revive():
             return
         why = self._ended()
@@ -146,8 +150,8 @@ class LoopQueue(FixedAttributes, Generic[T]):
                 continue
             left = deadline - loop.time()
             if left <= 0:
-                raise QueueTimeoutError(f"no {self._what} within {timeout} s")
-            if self.gone is not None:
+                raise QueueTimeoutError(f"no {self._what} within {wait} s")
+            if self._gone is not None:
                 left = min(left, CHECK)
             await self._sleep(loop, left)
 
@@ -362,7 +366,7 @@ class AsyncRecordStream(FixedAttributes):
             # Take what is there in one worker call, even when asked for one record.
             await self._await_fetch(max(0.0, min(SLICE, left)), max(limit, BATCH))
             if not self._ready and loop.time() >= deadline:
-                raise QueueTimeoutError(f"no data record within {timeout} s")
+                raise QueueTimeoutError(f"no data record within {wait} s")
         out: list[np.void] = []
         while self._ready and len(out) < limit:
             out.append(self._ready.popleft())

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 import pytest
 from aio_helpers import run, sim
 from test_wait_timeouts_sync_and_async import ASYNC, SYNC
@@ -117,3 +118,46 @@ def test_a_reconnect_policy_keeps_its_delays_in_seconds() -> None:
     assert (policy.delay, policy.max_delay) == (0.1, 2.0)
     with pytest.raises(galil.InvalidArgument, match="delay"):
         galil.ReconnectPolicy(delay=3 * mm)
+
+
+def test_an_async_wait_that_times_out_says_its_timeout_in_seconds_not_the_quantity() -> None:
+    # Before: "thread 0 still runs after 100 millisecond s", "no ... within 100 millisecond s".
+    async def body() -> list[str]:
+        async with await sim() as c:
+            await c.programs.download("#A\nWT 2000\nEN\n")
+            await c.programs.run("#A")
+            said = []
+            for wait in (
+                c.programs.wait(0, 100 * ms),
+                c.messages.get(100 * ms),
+                c.interrupts.get(100 * ms),
+            ):
+                with pytest.raises(galil.GalilTimeoutError) as info:
+                    await wait
+                said.append(str(info.value))
+            await c.programs.halt()
+            return said
+
+    ran, message, interrupt = run(body)
+    assert "thread 0 still runs after 0.1 s" in ran
+    assert "no unsolicited message within 0.1 s" in message
+    assert "no interrupt within 0.1 s" in interrupt
+
+
+@pytest.mark.parametrize("thread", [5, np.int64(5), np.int32(5)])
+def test_a_watchdog_takes_its_thread_as_any_integer_sync_and_async(thread: object) -> None:
+    with simulated() as dmc:
+        dog = dmc.watchdog(0.5, thread=thread)  # type: ignore[arg-type]
+        assert dog.thread == 5
+        assert type(dog.thread) is int
+        assert dog.running
+        dog.stop()
+
+    async def body() -> tuple[int, bool]:
+        async with await sim() as c:
+            dog = await c.watchdog(0.5, thread=thread)  # type: ignore[arg-type]
+            running = await dog.running()
+            await dog.stop()
+            return dog.thread, running
+
+    assert run(body) == (5, True)

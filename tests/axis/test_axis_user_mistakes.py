@@ -182,7 +182,8 @@ def test_a_home_speed_under_one_step_is_refused_not_sent_as_hv_0(
 
 
 def test_a_home_speed_under_one_step_is_told_in_the_axis_unit_too(x: galil.Axis) -> None:
-    with pytest.raises(galil.LimitError, match=r"limit 0\.001 mm / s") as info:
+    said = r"the smallest is 0\.001 mm / s, you gave 0\.0002 mm / s"
+    with pytest.raises(galil.LimitError, match=said) as info:
         x.home_speed = 0.0002 * mm / s
     assert (info.value.name, info.value.limit) == ("HV", 2)
 

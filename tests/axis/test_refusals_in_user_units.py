@@ -164,7 +164,12 @@ def test_a_speed_under_one_step_is_refused_with_the_smallest_speed_in_the_axis_u
     assert isinstance(info.value, galil.LimitError)
     assert (info.value.name, info.value.limit, info.value.axis) == (name, 2, "A")
     assert f"it would be {name} 0" in str(info.value)
-    assert "(in user units: 0.0004 mm / s, limit 0.001 mm / s)" in str(info.value)
+    assert "the smallest speed above 0 (2 counts/s at TM 1000)" in str(info.value)
+    # (before: "the smallest speed above 0 is one step (in user units: 0.0004 mm / s, limit
+    # 0.001 mm / s)", which read as if the speed given were the smallest)
+    assert str(info.value).endswith(
+        "(in user units: the smallest is 0.001 mm / s, you gave 0.0004 mm / s) [DMC-4040]"
+    )
     assert in_unit(info.value.limit_in_units, "mm/s") == pytest.approx(0.001)
     assert (x.speed, x.jog_speed, x.home_speed) == before
     assert not x.moving
