@@ -183,13 +183,13 @@ class Worker:
 
     async def drained(self) -> None:
         """Return once every call submitted before is over: each thread of the calls' lane
-        takes a barrier call (none is busy with anything else then), and the stops' lane a
-        call of its own (for tests that look at the wire once a cancellation has settled)."""
+        takes a barrier call (none is busy with anything else then), and then the stops' lane
+        a call of its own, so a stop that a call ending submitted (a cancelled wait's end) is
+        over too (for tests that look at the wire once a cancellation has settled)."""
         lane = len(self._threads) - 1
         barrier = threading.Barrier(lane)
-        await asyncio.gather(
-            *(self.run(barrier.wait, 10) for _ in range(lane)), self.run_urgent(_nothing)
-        )
+        await asyncio.gather(*(self.run(barrier.wait, 10) for _ in range(lane)))
+        await self.run_urgent(_nothing)
 
     @property
     def threads(self) -> list[threading.Thread]:
