@@ -503,8 +503,8 @@ class InputWatch:
             )
         if self._polling:
             return (
-                ": a program of yours ran while the input routine was not in memory (its "
-                "download would have disturbed the program), so this wait polled its input"
+                ": a program of yours (or a speed schedule) ran while the input routine was not "
+                "in memory (its download would have disturbed it), so this wait polled its input"
             )
         if not self._held:
             return (
