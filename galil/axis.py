@@ -225,6 +225,7 @@ class AxisGearing:
     short): :meth:`gear_to` and :meth:`gear_off` (see :mod:`galil.gearing`)."""
 
     letter: str
+    _letter: str
     _link: CommandLink
     _tracker: MotionTracker
     _scale: Scale | None
@@ -250,7 +251,7 @@ class AxisGearing:
             )
         name = master.letter if isinstance(master, Axis) else master
         return gear_to(
-            self._link, self._tracker, self.letter, name, ratio,
+            self._link, self._tracker, self._letter, name, ratio,
             display=self._display, scale=self._scale,
         )  # fmt: skip
 
@@ -259,7 +260,7 @@ class AxisGearing:
         the library (as :meth:`Gearing.off <galil.gearing.Gearing.off>`), or something else,
         found geared at connect or after a reset, whose own motion the library refuses until
         then (decision 0055). Sent even when the library knows of no gearing."""
-        gear_off(self._link, self._tracker, self.letter)
+        gear_off(self._link, self._tracker, self._letter)
 
 
 class AxisPosition:
@@ -267,6 +268,7 @@ class AxisPosition:
     short): :meth:`define_position` (``DP``)."""
 
     letter: str
+    _letter: str
     _link: CommandLink
     _homing: AxisHoming
 
@@ -305,8 +307,8 @@ class AxisPosition:
         if scale is not None and type(position) is int and position == 0:
             position = 0 * scale.unit  # (the default: 0 in the axis's units)
         counts = count_of(self, self.position_counts(position, "position"), "position")
-        with user_units({self.letter: self}):
-            check_int32("DP", counts, self.letter, self._link.model.name)
+        with user_units({self._letter: self}):
+            check_int32("DP", counts, self._letter, self._link.model.name)
             self._homing.define(counts, bool(shift_limits))
 
 
@@ -368,13 +370,13 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         """A position in this axis's units (or counts) as counts."""
         if self._scale is not None:
             return self._scale.position_to_counts(value, what)
-        return counts_or_plain(value, what, self.letter)
+        return counts_or_plain(value, what, self._letter)
 
     def distance_counts(self, value: object, what: str = "distance") -> float:
         """A distance in this axis's units (or counts) as counts."""
         if self._scale is not None:
             return self._scale.distance_to_counts(value, what)
-        return counts_or_plain(value, what, self.letter)
+        return counts_or_plain(value, what, self._letter)
 
     def rate_counts(self, value: object, power: int, what: str) -> float:
         """A speed (power 1) or acceleration (power 2) magnitude as counts/s^power.
@@ -386,12 +388,12 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         # comes from its target, so a negative value is a mistake worth naming.
         hint = " (the direction comes from the target; jog takes a signed speed)"
         return rate_magnitude_counts(
-            self._scale, value, power, what, self.letter, hint if power == 1 else ""
+            self._scale, value, power, what, self._letter, hint if power == 1 else ""
         )
 
     def signed_rate_counts(self, value: object, power: int, what: str) -> float:
         """A signed speed or acceleration as counts/s^power."""
-        return signed_rate_counts(self._scale, value, power, what, self.letter)
+        return signed_rate_counts(self._scale, value, power, what, self._letter)
 
     def limit_counts(self, limit: object, power: int, what: str) -> float | None:
         """A user's speed (power 1) or acceleration (2) limit for this axis, in counts.
@@ -399,7 +401,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         ``limit`` is ``None``, one value, or a mapping of axis letters (or names) to values.
         """
         if isinstance(limit, Mapping):
-            limit = limits_by_axis(self._link.model, limit, what).get(self.letter)
+            limit = limits_by_axis(self._link.model, limit, what).get(self._letter)
         if limit is None:
             return None
         counts = self.rate_counts(limit, power, what)
@@ -417,7 +419,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
 
     # -- operands ---------------------------------------------------------------------------
     def _operand(self, name: str) -> float:
-        return self._link.query_operands([f"_{name}{self.letter}"])[0]
+        return self._link.query_operands([f"_{name}{self._letter}"])[0]
 
     @property
     def position(self) -> Any:
@@ -470,9 +472,11 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         """
         tm = tm_of(self._link.sample_period)  # the TM in force: SP/AC steps
         try:
-            stored = predict.check_parameter(cmd, counts, self._link.model, axis=self.letter, tm=tm)
+            stored = predict.check_parameter(
+                cmd, counts, self._link.model, axis=self._letter, tm=tm
+            )
             if stored == 0 and counts != 0 and cmd in _SPEEDS:
-                raise _under_one_step(cmd, counts, self._link.model, tm, self.letter)
+                raise _under_one_step(cmd, counts, self._link.model, tm, self._letter)
         except LimitError as exc:
             state_in_units(exc, self._scale, _KIND[_POWER.get(cmd, 1)])
             raise
@@ -480,19 +484,19 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
 
     def _set_param(self, cmd: str, counts: float) -> None:
         value = self.check_parameter(cmd, counts)
-        command = _SETTERS[cmd](model=self._link.model, **{self.letter: value})
+        command = _SETTERS[cmd](model=self._link.model, **{self._letter: value})
         with self._tracker.lock:  # (a move another thread starts gets the change stamped)
             if cmd == "DC":
-                refuse_in_motion(self._link, self._tracker, self.letter, cmd)
+                refuse_in_motion(self._link, self._tracker, self._letter, cmd)
             self._send_param(cmd, command, value)
 
     def _send_param(self, cmd: str, command: cmds.Command, value: float) -> None:
-        handle = self._tracker.active(self.letter)
-        track = None if handle is None else handle.track(self.letter)
+        handle = self._tracker.active(self._letter)
+        track = None if handle is None else handle.track(self._letter)
         if (
             handle is None
             or cmd not in _FOLLOWED
-            or self.letter in handle._ended
+            or self._letter in handle._ended
             or (cmd == "SP" and track is not None and track.kind == "jog")  # (SP: not a jog's)
         ):
             self._link.command_line([command])  # (nothing in motion for it to change)
@@ -502,10 +506,10 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         # 0028). DC gets here in a jog, a stop ramping down, or (unseen by the handle, whose
         # prediction then refuses it and stops claiming to be exact) a limit's stop:
         # refuse_in_motion let it out.
-        with stop_on_error(self._link, self._tracker, self.letter):
-            replies = change_line(self._link, handle, self.letter, [command, cmds.time_stamp()])
+        with stop_on_error(self._link, self._tracker, self._letter):
+            replies = change_line(self._link, handle, self._letter, [command, cmds.time_stamp()])
         event = _FOLLOWED[cmd]
-        handle.add_event(self.letter, sample_of(replies[-1]), lambda t: event(t, value))
+        handle.add_event(self._letter, sample_of(replies[-1]), lambda t: event(t, value))
 
     @property
     def speed(self) -> Any:
@@ -558,14 +562,14 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
     def jog_speed(self, value: Any) -> None:
         # Never a BG: the controller is asked whether a jog runs (see moves.set_jog_speed).
         v = self.check_parameter("JG", self.signed_rate_counts(value, 1, "jog speed"))
-        set_jog_speed(self._link, self._tracker, self.letter, v)
+        set_jog_speed(self._link, self._tracker, self._letter, v)
 
     @property
     def soft_limits(self) -> tuple[Any, Any]:
         """``(low, high)`` soft limits (``BL``, ``FL``); ``None`` on either side removes it,
         and reads back for a side that is off (``BL`` -2147483648, ``FL`` 2147483647: the
         values that disable them)."""
-        bl, fl = self._link.query_operands([f"_BL{self.letter}", f"_FL{self.letter}"])
+        bl, fl = self._link.query_operands([f"_BL{self._letter}", f"_FL{self._letter}"])
         low = None if bl <= INT32_MIN else self._out_pos(bl)
         high = None if fl >= INT32_MAX else self._out_pos(fl)
         if self._scale is not None and self._scale.sign < 0:
@@ -576,12 +580,12 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
     def soft_limits(self, limits: tuple[Any, Any]) -> None:
         bl, fl = _soft_limit_counts(self, limits)
         model = self._link.model
-        a = self.letter
+        a = self._letter
         self._link.command_line([cmds.bl(model=model, **{a: bl}), cmds.fl(model=model, **{a: fl})])
 
     # -- moves ------------------------------------------------------------------------------
     def _move(self, value: Any, relative: bool, dry_run: bool, **overrides: Any) -> MoveHandle:
-        a = self.letter
+        a = self._letter
         moves = [resolve_move(self, value, relative, overrides)]  # (resolve_moves of one axis)
         try:
             return execute_move(
@@ -636,8 +640,8 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
             LimitError: a speed beyond the model's range.
         """
         v = self.check_parameter("JG", self.signed_rate_counts(speed, 1, "jog speed"))
-        with user_units({self.letter: self}):  # (a start beyond FL/BL: in its unit)
-            return jog(self._link, self._tracker, self.letter, v, display=self._display)
+        with user_units({self._letter: self}):  # (a start beyond FL/BL: in its unit)
+            return jog(self._link, self._tracker, self._letter, v, display=self._display)
 
     def increment(self, n: Any) -> MoveHandle:
         """Increment the position by ``n`` (``IP``).
@@ -653,8 +657,8 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
                 in its last samples, at its target: nothing shows its direction then.
         """
         counts = count_of(self, self.distance_counts(n, "increment"), "increment")
-        with user_units({self.letter: self}):
-            return increment(self._link, self._tracker, self.letter, counts, display=self._display)
+        with user_units({self._letter: self}):
+            return increment(self._link, self._tracker, self._letter, counts, display=self._display)
 
     def speed_schedule(
         self, distance: Any, changes: Any, *, speed: Any = None, label: str = "GSCHED"
@@ -693,12 +697,12 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         first = None
         if speed is not None:
             first = self.check_parameter("SP", self.rate_counts(speed, 1, "speed"))
-        with user_units({self.letter: self}):
+        with user_units({self._letter: self}):
             return speed_schedule(
                 self._link,
                 self._tracker,
                 self._routines,
-                self.letter,
+                self._letter,
                 d,
                 pairs,
                 speed=first,
@@ -708,7 +712,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
 
     def stop(self) -> None:
         """Decelerate to a stop (``ST``) at DC."""
-        stop_axes(self._link, self._tracker, self.letter)
+        stop_axes(self._link, self._tracker, self._letter)
 
     # -- homing and switches (galil.homing) ------------------------------------------------
     def home(self, *, switch: predict.HomeSwitch | None = None) -> MoveHandle:
@@ -733,7 +737,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         return self._home("FI", switch)
 
     def _home(self, kind: str, switch: predict.HomeSwitch | None) -> MoveHandle:
-        with user_units({self.letter: self}):  # (a start beyond FL/BL: in its unit)
+        with user_units({self._letter: self}):  # (a start beyond FL/BL: in its unit)
             return self._homing.start(kind, switch, display=self._display)
 
     @property
@@ -744,7 +748,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
     @property
     def switches(self) -> Switches:
         """Limit and home switches (``TS``, one round trip); True means tripped."""
-        return read_switches(self._link, self.letter)
+        return read_switches(self._link, self._letter)
 
     @property
     def home_speed(self) -> Any:
@@ -759,7 +763,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
     @home_speed.setter
     def home_speed(self, value: Any) -> None:
         counts = _home_speed_counts(self, value)
-        self._link.command_line([cmds.hv(model=self._link.model, **{self.letter: counts})])
+        self._link.command_line([cmds.hv(model=self._link.model, **{self._letter: counts})])
 
     # -- motor and loop settings (galil.tuning; ranges per model) --------------------------
     motor_type = Setting("MT", cmds.mt, motor_type, still=True, motor_off=True)
@@ -799,7 +803,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
 
     def __repr__(self) -> str:
         unit = f" in {self._scale.unit:~}" if self._scale is not None else " in counts"
-        return f"<Axis {self.letter}{unit} of {self._link.model.name}>"
+        return f"<Axis {self._letter}{unit} of {self._link.model.name}>"
 
 
 def _home_speed_counts(axis: Axis, value: Any) -> float:
@@ -942,7 +946,7 @@ def resolve_move(
             check_int32("PR" if relative else "PA", amount, axis.letter, axis._link.model.name)
     if given:
         return AxisMove(axis.letter, amount, **given)
-    return AxisMove(axis.letter, amount)
+    return AxisMove(axis._letter, amount)
 
 
 @contextlib.contextmanager

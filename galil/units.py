@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cache, cached_property, lru_cache
 from typing import Any, TypeAlias
@@ -85,17 +85,20 @@ def unit_refused(what: str, value: object, why: str) -> InvalidArgument:
     return InvalidArgument(f"{what}: {_shown(value)} {why}")
 
 
-def _ours(q: Any, what: str = "value", expected: str = "") -> Any:
+def _ours(q: Any, what: str = "value", expected: str | Callable[[], str] = "") -> Any:
     """Re-express a Quantity of any registry in the default registry.
 
     Raises:
         InvalidArgument: a unit the default registry does not define (one a user's own
-            registry added), naming ``what`` and, when given, what was ``expected``.
+            registry added), naming ``what`` and, when given, what was ``expected`` (a
+            callable is called only then: formatting a unit costs microseconds).
     """
     reg = get_registry()
     theirs = getattr(q, "_REGISTRY", None)
     if theirs is reg:
         return q
+    if callable(expected):
+        expected = expected()
     wanted = f"; expected {expected}, in a unit that registry defines" if expected else ""
     try:
         ours = reg.Quantity(q.magnitude, str(q.units))
@@ -348,7 +351,7 @@ class Scale:
             raise InvalidArgument(
                 f"{what} needs units compatible with {unit:~} (the axis has a scale), got {value!r}"
             )
-        q = _ours(value, what, f"{unit:~}-compatible units")
+        q = _ours(value, what, lambda: f"{unit:~}-compatible units")
         if getattr(q, "_units", None) == getattr(unit, "_units", False):
             # The usual case, the axis's own unit (compared without building Unit objects):
             # nothing to convert, and the angle check below is trivially met.
@@ -377,7 +380,7 @@ class Scale:
     def position_to_counts(self, value: Any, what: str = "position") -> float:
         """A position Quantity to (unrounded) counts."""
         if is_quantity(value):
-            q = _ours(value, what, f"{self.unit:~}-compatible units")
+            q = _ours(value, what, lambda: f"{self.unit:~}-compatible units")
             if getattr(q, "_units", None) == getattr(self.unit, "_units", False):
                 # The usual case (_convert's own): its magnitude looked at once, not twice.
                 return self.sign * (_magnitude(q, what) - self._offset) * self._k

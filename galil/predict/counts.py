@@ -39,12 +39,27 @@ def whole_counts(value: object, what: str, hint: str = ROUND_IT) -> int:
     """
     if type(value) is int:
         return value
-    refused = f"{what} must be a whole number of counts, not {value!r:.60}"
-    if isinstance(value, (bool, np.bool_)):  # (an int, but True as a count is a mistake)
-        raise InvalidArgument(refused)
-    if isinstance(value, (int, np.integer)):
+    if type(value) is float and math.isfinite(value):  # (the usual case after a conversion)
+        v = value
+    elif isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)):
         return int(value)
-    if not isinstance(value, numbers.Real):
+    else:
+        v = _real(value, what)
+    n = round(v)
+    if abs(v - n) > WHOLE_TOLERANCE:
+        raise InvalidArgument(f"{what} {value!r:.60} is not a whole number of counts{hint}")
+    return int(n)
+
+
+def _real(value: object, what: str) -> float:
+    """:func:`whole_counts` for what is neither an integer nor a finite float: ``value`` as a
+    finite float.
+
+    Raises:
+        InvalidArgument: a bool, anything not a real number, NaN or infinity.
+    """
+    refused = f"{what} must be a whole number of counts, not {value!r:.60}"
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
         raise InvalidArgument(refused + decimal_hint(value))
     try:
         v = float(value)
@@ -52,10 +67,7 @@ def whole_counts(value: object, what: str, hint: str = ROUND_IT) -> int:
         raise InvalidArgument(f"{what} is far out of range: {value!r:.60}") from None
     if not math.isfinite(v):
         raise InvalidArgument(refused)
-    n = round(v)
-    if abs(v - n) > WHOLE_TOLERANCE:
-        raise InvalidArgument(f"{what} {value!r:.60} is not a whole number of counts{hint}")
-    return int(n)
+    return v
 
 
 def check_position_range(
