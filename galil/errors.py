@@ -420,7 +420,13 @@ class ScheduleError(LimitError):
 
     def __init__(self, message: str, *, index: int, earliest: float, value: float) -> None:
         super().__init__(
-            message, name="speed schedule", value=value, limit=earliest, time=None, sample=None
+            message,
+            name="speed schedule",
+            value=value,
+            limit=earliest,
+            time=None,
+            sample=None,
+            floor=True,  # (the earliest valid trigger: the smallest distance allowed)
         )
         self.index = index
         self.earliest = earliest

@@ -86,7 +86,7 @@ def test_a_speed_schedule_change_too_early_names_the_axis_and_its_unit(
     err = info.value
     assert err.axis == "C"
     assert str(err).startswith("axis C: change 0 at 40.96 counts")
-    assert "(in user units: 0.01 deg, limit 1 deg)" in str(err)
+    assert "(in user units: the smallest is 1 deg, you gave 0.01 deg)" in str(err)
 
 
 def test_a_jog_from_beyond_a_soft_limit_states_it_in_the_axis_unit(
