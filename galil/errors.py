@@ -276,25 +276,23 @@ class FixedAttributes:
     instead of binding a new attribute that nothing reads (decision 0091).
 
     What may be assigned: a name with a leading underscore; a property with a setter (or any
-    data descriptor with ``__set__``, such as a tuning setting); a name the class lists in
-    ``_fields`` (public attributes a user may rebind without desynchronising anything). A
-    public attribute the class's own methods bind is a :class:`ReadOnly` (bound through its
-    private twin): refused to a user like a read-only property. ``_awaited`` marks an async
-    object: its settings are ``await x.set_<name>(...)``, which the refusal names.
+    data descriptor with ``__set__``, such as a tuning setting). A public attribute the
+    class's own methods bind is a :class:`ReadOnly` (bound through its private twin): refused
+    to a user like a read-only property. ``_awaited`` marks an async object: its settings are
+    ``await x.set_<name>(...)``, which the refusal names.
     """
 
     __slots__ = ()
-    _fields: ClassVar[tuple[str, ...]] = ()
     _awaited: ClassVar[bool] = False
     _settable: ClassVar[frozenset[str]] = frozenset()
 
     def __init_subclass__(cls, **kwargs: object) -> None:
         super().__init_subclass__(**kwargs)
-        names = {n for klass in cls.__mro__ for n in vars(klass).get("_fields", ())}
-        for name in dir(cls):
-            if not name.startswith("_") and _has_setter(inspect.getattr_static(cls, name)):
-                names.add(name)
-        cls._settable = frozenset(names)
+        cls._settable = frozenset(
+            name
+            for name in dir(cls)
+            if not name.startswith("_") and _has_setter(inspect.getattr_static(cls, name))
+        )
 
     def __setattr__(self, name: str, value: object) -> None:
         if name[:1] != "_" and name not in self._settable:
