@@ -416,13 +416,14 @@ def _counted(value: object, lo: int, hi: int, what: str, model: str | None = Non
     """A count (an array's size, an element index, a thread, how many values) within
     ``lo`` .. ``hi``: an ``int`` or a numpy integer, as Python's sequences take (``[0] *
     10.0`` is a TypeError); a float, even a whole one, and a bool are refused."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+    n = whole(value)
+    if n is None:
         shown = f"{value!r:.60}"
         raise InvalidArgument(
             f"{what} must be an int (a count: a whole number; numpy's too), not {shown}",
             model=model,
         )
-    return _ranged(int(value), lo, hi, what, model=model, integer=True)
+    return _ranged(n, lo, hi, what, model=model, integer=True)
 
 
 def _away(text: str, value: object) -> str:
