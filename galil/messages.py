@@ -111,13 +111,16 @@ class Messages:
         self.queue.gone, self.queue.revive = link.gone, link.revive  # (a dead link's get())
 
     def _accept(self, lines: list[str]) -> None:
-        users = [line for line in lines if not is_library_line(line)]
+        users: list[str] = []
+        library: list[str] = []
+        for line in lines:
+            (library if is_library_line(line) else users).append(line)
         for line in users:
             self.queue.put(line)
         if users:
             self._dispatch(users)
-        if len(users) < len(lines):
-            self._library([line for line in lines if is_library_line(line)])
+        if library:
+            self._library(library)
 
     # -- subscribers ------------------------------------------------------------------------
 
