@@ -405,6 +405,36 @@ def test_the_30010s_two_analog_outputs_and_inputs_are_driven_and_recorded() -> N
             dmc.io.analog_out[3] = 1.0  # it has two
 
 
+def test_an_analog_input_reads_the_range_its_aq_code_sets_and_the_record_follows() -> None:
+    # (the simulator kept AQ but read every input over its power-on range: 7.5 V at AQ 1)
+    with simulated("DMC-4040") as dmc:
+        sim, analog_in = sim_of(dmc), dmc.io.analog_in
+        sim.set_analog_input(1, 7.5)
+        assert analog_in[1].to("V").magnitude == 7.5
+        dmc.command("AQ 1,1")  # ±5 V
+        assert dmc.query_number("MG _AQ1") == 1
+        assert analog_in[1].to("V").magnitude == 5.0
+        assert dmc.record()["A"]["analog_in"] == 0x7FFF  # the top count of ±5 V
+        dmc.command("AQ 1,4")  # 0-10 V
+        sim.set_analog_input(1, -3.0)
+        assert analog_in[1].to("V").magnitude == 0.0
+        assert dmc.record()["A"]["analog_in"] == 0
+        assert dmc.model.analog_input_range(1) == (-10.0, 10.0)  # (at the default AQ)
+
+
+def test_the_rio_47100_reads_by_aq_0_and_1_and_refuses_the_others() -> None:
+    with simulated("RIO-47100") as rio:
+        sim_of(rio).set_analog_input(3, -2.5)
+        assert rio.io.analog_in[3].to("V").magnitude == 0.0  # AQ 0: 0-5 V
+        rio.command("AQ 3,1")  # ±5 V (RIO-47xxx user manual p.44)
+        assert rio.io.analog_in[3].to("V").magnitude == -2.5
+        with pytest.raises(galil.CommandError) as caught:
+            rio.command("AQ 3,2")
+        assert caught.value.code == 6
+        rio.command("AQ 3,0")
+        assert rio.query_number("MG _AQ3") == 0
+
+
 def test_the_30010s_second_analog_input_reads_0_to_5_volts_and_its_first_10() -> None:
     # (the simulator clipped both to ±10 V: input 2 read 7 V, and -2 V)
     with simulated("DMC-30010") as dmc:

@@ -414,7 +414,9 @@ class SimController:
             self._m.service()
 
     def set_analog_input(self, n: int, volts: float) -> None:
-        """Test hook: put ``volts`` on analog input ``n`` (clipped to the model's range).
+        """Test hook: put ``volts`` on analog input ``n``'s pin; ``@AN[n]`` and the data
+        record read them clipped to the range the input's ``AQ`` code sets (at power-on the
+        model's, :meth:`~galil.models.ModelSpec.analog_input_range`).
 
         Raises:
             InvalidArgument: no such analog input.

@@ -12,6 +12,7 @@ from galil.predict.homing import HomeSwitch, HomingParams, homing
 from galil.predict.move import SetAccel, SetDecel, SetSpeed, Stop
 from galil.protocol.numbers import parse_number, parse_numbers
 from galil.protocol.records import decode_record
+from galil.sim.clock import ManualClock
 from galil.sim.controller import SimController
 from galil.sim.rooms import Homing
 from galil.testing import nothing_sent, simulated
@@ -342,6 +343,68 @@ def test_analog_outputs_are_range_checked_and_reported_in_the_rio_record() -> No
     assert record["analog_out"][2] == (-8192) & 0xFFFF
     assert record["analog_in"][1] == 9830
     assert ask(SimController("DMC-4040"), "AO 1,1") == "?"  # no analog outputs there
+
+
+def test_aq_sets_the_range_each_analog_input_reads_and_the_record_counts_in() -> None:
+    # AQ 1 ±5 V, 2 ±10 V (default), 3 0-5 V, 4 0-10 V (wave-2 facts, I/O); _AQn reads it.
+    # (The simulator stored AQ and read every input over its power-on range.)
+    sim = SimController("DMC-4040", ManualClock())
+    sim.set_analog_input(1, 7.5)
+    sim.set_analog_input(2, -7.5)
+    assert [number(sim, f"_AQ{n}") for n in (1, 2)] == [2, 2]
+    assert [number(sim, f"@AN[{n}]") for n in (1, 2)] == [7.5, -7.5]
+
+    def counts() -> list[int]:
+        record = decode_record(sim.record(), sim.spec)
+        return [int(record[letter]["analog_in"]) for letter in "AB"]
+
+    assert counts() == [round(7.5 * 3276.8), round(-7.5 * 3276.8) & 0xFFFF]
+    assert ask(sim, "AQ 1,1;AQ 2,3") == "::"
+    assert [number(sim, f"_AQ{n}") for n in (1, 2)] == [1, 3]
+    assert [number(sim, f"@AN[{n}]") for n in (1, 2)] == [5.0, 0.0]  # clipped, per input
+    assert counts() == [0x7FFF, 0]
+    sim.set_analog_input(2, 2.5)
+    assert ask(sim, "AQ 2,4") == ":"
+    assert number(sim, "@AN[2]") == 2.5
+    assert counts() == [0x7FFF, round(2.5 * 6553.6)]  # (0-10 V: 65536/10 counts/V)
+    assert ask(sim, "AQ 1,-2") == ":"  # (differential [U]: the range of AQ 2)
+    assert (number(sim, "_AQ1"), number(sim, "@AN[1]")) == (-2, 7.5)
+
+
+@pytest.mark.parametrize("code", ["0", "5", "-5", "1.5"])
+def test_aq_refuses_a_code_the_dmc_has_not(code: str) -> None:
+    sim = SimController("DMC-4040", ManualClock())
+    assert ask(sim, f"AQ 1,{code}") == "?"
+    assert ask(sim, "TC 1") == " 6 Number out of range\r\n:"
+    assert number(sim, "_AQ1") == 2
+
+
+def test_the_rio_47100_takes_aq_0_and_1_and_reads_by_them() -> None:
+    # RIO-47xxx user manual p.44: on the 47100 AQ 0 is 0-5 V (its power-on range), 1 ±5 V;
+    # it lists no other code. The 47120 lists 1-4 and no 0. (AQ 0 was refused on both, and
+    # the 47100 read -2.5 V as 0 V whatever its AQ.)
+    rio = SimController("RIO-47100", ManualClock())
+    rio.set_analog_input(0, -2.5)
+    assert (number(rio, "_AQ0"), number(rio, "@AN[0]")) == (0, 0.0)
+    assert ask(rio, "AQ 0,1") == ":"
+    assert (number(rio, "_AQ0"), number(rio, "@AN[0]")) == (1, -2.5)
+    assert decode_record(rio.record(), rio.spec)["analog_in"][0] == round(-2.5 * 6553.6) & 0xFFFF
+    for code in (2, 3, 4):
+        assert ask(rio, f"AQ 0,{code}") == "?"
+    assert ask(rio, "AQ 0,0") == ":"
+    assert number(rio, "@AN[0]") == 0.0
+    rio_47120 = SimController("RIO-47120", ManualClock())
+    assert number(rio_47120, "_AQ0") == 2
+    assert ask(rio_47120, "AQ 0,0") == "?"
+    assert ask(rio_47120, "AQ 0,4") == ":"
+
+
+def test_the_30010s_second_analog_input_powers_on_at_aq_3_and_follows_aq() -> None:
+    sim = SimController("DMC-30010", ManualClock())
+    sim.set_analog_input(2, 7.5)
+    assert (number(sim, "_AQ1"), number(sim, "_AQ2"), number(sim, "@AN[2]")) == (2, 3, 5.0)
+    assert ask(sim, "AQ 2,2") == ":"  # (that the 30010 takes it is [U]; the 31010 does)
+    assert number(sim, "@AN[2]") == 7.5
 
 
 def test_op_sets_outputs_as_the_sourced_examples_show() -> None:

@@ -1,15 +1,20 @@
-"""Digital and analog I/O: SB CB OB OP AO AQ AI, ``@IN @OUT @AN @AO``, ``_TI`` and ``_OP``.
+"""Digital and analog I/O: SB CB OB OP AO AQ AI, ``@IN @OUT @AN @AO``, ``_TI _OP _AQ``.
 
 Channels are numbered from the model's ``io_first`` (1 on DMC controllers, 0 on the RIO).
 Inputs read high when nothing is connected; a test sets them with :meth:`IO.set_input` and
 :meth:`IO.set_analog_input` (``galil.testing`` reaches these). ``_TIn`` is input bank ``n``
 (8 inputs a byte), ``_OPn`` output word ``n`` (16 outputs). ``AI n`` holds until input ``n``
-is high (``AI -n``: low), from the host or a program thread. An analog input takes the volts
-of its model's range at the default AQ (:meth:`~galil.models.ModelSpec.analog_input_range`;
-the DMC-30010's input 2 reads 0-5 V); the test hook clips to it. Analog values in the data
-record are 16-bit counts of that range: two's complement over ±R (32768/R counts/V), unsigned
-over 0-R (65536/R: the 30010's input 2 at 13107.2 counts/V, EPICS); the outputs at ±10 V full
-scale (an assumption for DQ 4; the RIO-47100's 0-5 V outputs too).
+is high (``AI -n``: low), from the host or a program thread.
+
+An analog input reads the volts on its pin (the test hook's) clipped to the range its ``AQ``
+code sets, per input (``_AQn`` reads the code): :data:`AQ_RANGES` on the DMC controllers and
+the RIO-47120/47300, :data:`AQ_RANGES_47100` on the RIO-47100. At power-on each input's code
+is the one of its model's range (:meth:`~galil.models.ModelSpec.analog_input_range`: AQ 2,
+±10 V; the DMC-30010's input 2, 0-5 V, AQ 3; the RIO-47100's AQ 0). ``@AN[n]`` and the data
+record read the same range. Analog values in the data record are 16-bit counts of that range:
+two's complement over ±R (32768/R counts/V), unsigned over 0-R (65536/R: the 30010's input 2
+at 13107.2 counts/V, EPICS); the outputs at ±10 V full scale (an assumption for DQ 4; the
+RIO-47100's 0-5 V outputs too).
 """
 
 from __future__ import annotations
@@ -18,11 +23,37 @@ from typing import Any
 
 import numpy as np
 
+from galil.models import ModelSpec
 from galil.sim.machine import Room
 from galil.sim.parse import Refused, split_fields
 from galil.sim.registry import OperandKind, Wait, function, handler, operand
 
-__all__ = ["IO"]
+__all__ = ["AQ_RANGES", "AQ_RANGES_47100", "IO", "aq_ranges"]
+
+#: ``AQ n,code`` -> the volts input ``n`` reads, lowest and highest (wave-2 facts, I/O: EPICS's
+#: decoding of ``_AQn`` and the RIO-47120 user manual p.44 agree: 1 ±5 V, 2 ±10 V (the
+#: default), 3 0-5 V, 4 0-10 V, all in 16-bit counts). A negative code (differential, [U]) is
+#: taken where its positive one is and reads the same range: the pairing of inputs it means
+#: is not modelled. That the DMC-30010 (input 2 included) and the RIO-47300 take these codes
+#: is [U]: the simulator took them before AQ set a range, and keeps taking them.
+AQ_RANGES: dict[int, tuple[float, float]] = {
+    1: (-5.0, 5.0),
+    2: (-10.0, 10.0),
+    3: (0.0, 5.0),
+    4: (0.0, 10.0),
+}
+#: The RIO-47100's codes (RIO-47xxx user manual p.44: AQ 0 0-5 V, AQ 1 ±5 V, the only two it
+#: lists); 2, 3 and 4 are refused there. Its record counts of them as EPICS decodes AQ 3 and
+#: AQ 1 [U: the manual's Modbus table gives 0 ... 0x7FF0 for both ranges, not the record's].
+AQ_RANGES_47100: dict[int, tuple[float, float]] = {0: (0.0, 5.0), 1: (-5.0, 5.0)}
+
+
+def aq_ranges(spec: ModelSpec) -> dict[int, tuple[float, float]]:
+    """The AQ codes ``spec`` takes and the range each sets: :data:`AQ_RANGES_47100` on a RIO
+    whose inputs read 0-5 V at power-on (the RIO-47100, and the generic RIO, which has its
+    I/O), :data:`AQ_RANGES` everywhere else."""
+    rio = not spec.axes and spec.io_first == 0
+    return AQ_RANGES_47100 if rio and spec.analog_in_range == (0.0, 5.0) else AQ_RANGES
 
 
 class IO(Room):
@@ -33,9 +64,19 @@ class IO(Room):
         self.first = spec.io_first
         self.inputs = [True] * spec.digital_inputs
         self.outputs = [False] * spec.digital_outputs
-        self.analog_in = [0.0] * spec.analog_inputs
+        self.analog_in = [0.0] * spec.analog_inputs  # the volts on the pins
         self.analog_out = [0.0] * spec.analog_outputs
-        self.aq = [2.0] * spec.analog_inputs
+        self.aq_ranges = aq_ranges(spec)
+        code_of = {span: code for code, span in self.aq_ranges.items()}
+        self.aq = [
+            code_of[spec.analog_input_range(self.first + k)] for k in range(spec.analog_inputs)
+        ]
+        # (a pin's volts are kept within the widest range any code sets: that clips nothing
+        # a reading would not)
+        self.pin_range = (
+            min(lo for lo, _ in self.aq_ranges.values()),
+            max(hi for _, hi in self.aq_ranges.values()),
+        )
 
     def burn(self, name: str) -> object | None:
         # The BN table: SB CB OP (the outputs) and AQ; the inputs are the outside world's.
@@ -58,14 +99,20 @@ class IO(Room):
         self.inputs[self.channel(n, len(self.inputs))] = bool(high)
 
     def set_analog_input(self, n: int, volts: float) -> None:
-        """Test hook: put ``volts`` on analog input ``n`` (clipped to the input's range)."""
+        """Test hook: put ``volts`` on analog input ``n``'s pin (a reading clips them to the
+        range its AQ sets)."""
         k = self.channel(n, len(self.analog_in))
-        lo, hi = self.machine.spec.analog_input_range(int(n))
+        lo, hi = self.pin_range
         self.analog_in[k] = min(max(float(volts), lo), hi)
 
     def _input_ranges(self) -> list[tuple[float, float]]:
-        spec = self.machine.spec
-        return [spec.analog_input_range(self.first + k) for k in range(len(self.analog_in))]
+        """Each input's range, as its AQ code sets it."""
+        return [self.aq_ranges[abs(code)] for code in self.aq]
+
+    def analog_volts(self, k: int) -> float:
+        """The volts input ``first + k`` reads: its pin's, clipped to its AQ range."""
+        lo, hi = self.aq_ranges[abs(self.aq[k])]
+        return min(max(self.analog_in[k], lo), hi)
 
     def input_bits(self) -> int:
         """Every input as one integer (bit k = input ``first + k``)."""
@@ -86,7 +133,7 @@ class IO(Room):
 
     @function("AN")
     def read_analog(self, n: float) -> float:
-        return round(self.analog_in[self.channel(n, len(self.analog_in))], 4)
+        return round(self.analog_volts(self.channel(n, len(self.analog_in))), 4)
 
     @function("AO")
     def read_analog_output(self, n: float) -> float:
@@ -103,6 +150,13 @@ class IO(Room):
         if not index.isdigit():
             raise Refused(4, "word number")
         return float(self.output_bits() >> (16 * int(index)) & 0xFFFF)
+
+    @operand("AQ", kind=OperandKind.INDEX)
+    def analog_range(self, index: str) -> float:
+        """``_AQn``: input n's AQ code (EPICS reads ``MG{Z10.0}_AQn``; IRTF ``MG _AQ0``)."""
+        if not index.isdigit():
+            raise Refused(4, "input number")
+        return float(self.aq[self.channel(int(index), len(self.aq))])
 
     # ---- commands ------------------------------------------------------------------------
     def _output(self, args: str) -> int:
@@ -175,9 +229,10 @@ class IO(Room):
         i = self.machine.interp
         k = self.channel(i.evaluate(fields[0]), len(self.analog_in))
         code = i.evaluate(fields[1])
-        if abs(code) not in (1, 2, 3, 4):
-            raise Refused(6, "AQ range is ±1..±4")
-        self.aq[k] = code
+        if code != int(code) or abs(int(code)) not in self.aq_ranges:
+            taken = ", ".join(str(c) for c in self.aq_ranges)
+            raise Refused(6, f"AQ code is one of {taken} (negative: differential)")
+        self.aq[k] = int(code)
         return ""
 
     @handler("AI")
@@ -198,11 +253,12 @@ class IO(Room):
         if "outputs" in names:
             _put_bits(buf, "outputs", self.output_bits())
         ranges = self._input_ranges()
+        volts = [self.analog_volts(k) for k in range(len(self.analog_in))]
         if "analog_in" in names:
             if buf.dtype["analog_in"].shape:  # the RIO's eight
-                _put_counts(buf, "analog_in", self.analog_in, ranges)
+                _put_counts(buf, "analog_in", volts, ranges)
             else:  # the DMC-30010's input 2 (input 1 is in its axis block)
-                _put_counts(buf, "analog_in", self.analog_in[1:2], ranges[1:2])
+                _put_counts(buf, "analog_in", volts[1:2], ranges[1:2])
         if "analog_out" in names:
             _put_counts(buf, "analog_out", self.analog_out, [_FULL_SCALE] * len(self.analog_out))
         for letter in letters:
@@ -212,7 +268,7 @@ class IO(Room):
             if "analog_in" in (block.dtype.names or ()):
                 number = self.machine.spec.axes.index(letter)
                 if number < len(self.analog_in):
-                    block["analog_in"] = _counts(self.analog_in[number], ranges[number])
+                    block["analog_in"] = _counts(volts[number], ranges[number])
 
 
 def _put_bits(buf: np.ndarray[Any, Any], name: str, bits: int) -> None:
