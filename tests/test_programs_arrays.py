@@ -335,6 +335,18 @@ def test_a_program_whose_mg_text_is_longer_than_the_model_prints_is_refused_nami
         assert dmc.programs.download(f'#A\nMG "{longest}"\n\' MG "{over}"\nEN').sent
 
 
+def test_a_program_with_a_question_mark_in_an_mg_string_is_refused_naming_the_line() -> None:
+    # TC 54 "Question mark part of string": the line could never run (it was downloaded).
+    with simulated("DMC-4040") as dmc:
+        with nothing_sent(dmc), pytest.raises(galil.InvalidArgument, match="line 2: MG text"):
+            dmc.programs.download('#A\nMG "ready?", x\nEN')
+        # {^63} prints one; a '?' in a comment, or outside MG, is no refusal.
+        assert dmc.programs.download('#A\nMG "ready", {^63}\n\' MG "why?"\nEN').sent
+        dmc.programs.run("#A")
+        dmc.programs.wait(1)
+        assert dmc.messages.get(timeout=1) == "ready?"
+
+
 @pytest.mark.parametrize("size", [10.0, np.float64(4), True, np.bool_(True), "4"])
 def test_an_array_size_that_is_not_an_integer_is_refused_even_a_whole_float(
     dmc: galil.Controller, size: object

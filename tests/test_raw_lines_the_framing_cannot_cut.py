@@ -10,6 +10,7 @@ from __future__ import annotations
 import pytest
 
 import galil
+from galil.protocol.commands import Command, Expect
 from galil.testing import nothing_sent, simulated
 
 
@@ -59,3 +60,13 @@ def test_a_variable_named_like_mg_is_no_mg() -> None:
     with simulated(timeout=0.5) as dmc:
         dmc.command("MGN=5")
         assert dmc.query_number("MG MGN") == 5.0
+
+
+def test_a_prepared_mg_with_a_question_mark_in_a_string_is_refused_by_the_controller() -> None:
+    # A Command built by hand is sent as it is; the controller refuses it with TC 54 "Question
+    # mark part of string", and so does the simulator (it printed the text).
+    with simulated() as dmc:
+        with pytest.raises(galil.CommandError) as caught:
+            dmc.send(Command('MG "a?b"', Expect.ANY))
+        assert caught.value.code == 54
+        assert dmc.command("MG 42") == " 42.0000"

@@ -231,6 +231,12 @@ def _check_line(line: ProgramLine, model: ModelSpec, fixes: Mapping[str, str]) -
                 f"{model.mg_max} at most",
                 model=model.name,
             )
+        if "?" in text:  # (TC 54 "Question mark part of string", galil-protocol.md §1.2)
+            raise InvalidArgument(
+                f"{where}: MG text {text!r} holds a '?', which the controller refuses in a "
+                "string (TC 54 when the line runs); {^63} prints one",
+                model=model.name,
+            )
 
 
 _QUOTED = re.compile(r'"([^"]*)"')

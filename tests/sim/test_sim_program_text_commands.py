@@ -133,6 +133,22 @@ def test_mg_text_longer_than_the_model_allows_is_refused_with_tc_52(
     assert sim.feed(b"TC\r") == b" 52\r\n:"
 
 
+@pytest.mark.parametrize("line", ['MG "a?b"', 'MG "?"', 'MG 1,"why?"', 'MG "ok", "a?"{N}'])
+def test_a_question_mark_in_an_mg_string_is_refused_with_tc_54(line: str) -> None:
+    # TC 54 "Question mark part of string" (galil-protocol.md §1.2); the simulator printed it.
+    sim = SimController("DMC-4040")
+    assert sim.feed(f"{line}\r".encode()) == b"?"  # (nothing printed before the '?')
+    assert sim.feed(b"TC 1\r") == b" 54 Question mark part of string\r\n:"
+    assert sim.feed(b"MG {^63}\r") == b"?\r\n:"  # a '?' outside a string is a character
+
+
+def test_a_program_line_with_a_question_mark_in_an_mg_string_stops_its_thread_with_tc_54() -> None:
+    sim = SimController("DMC-4040")
+    assert sim.feed(b'DL\r#A\rMG "one"\rMG "two?"\rMG "three"\rEN\r\\') == b"::"
+    assert sim.feed(b"XQ #A\r") == b":one\r\n"  # (the '?' line prints nothing, the next never runs)
+    assert sim.feed(b"MG _XQ0,_ED,_TC\r") == b"-1.0000 2.0000 54.0000\r\n:"
+
+
 def test_xq_starts_a_thread_at_a_line_number() -> None:
     # "EPICS starts with XQ 0,0" (galil-wave2-facts.md, XQ)
     sim = SimController("DMC-4040")

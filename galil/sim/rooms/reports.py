@@ -199,6 +199,11 @@ def _build_mg_plan(args: str) -> _Plan:
         if expr.startswith('"'):
             if len(expr) < 2 or not expr.endswith('"') or '"' in expr[1:-1]:
                 raise Refused(52, "missing quote")
+            if "?" in expr:
+                # TC 54 "Question mark part of string" (galil-protocol.md §1.2). The whole
+                # line is refused before it prints anything, from a program thread when it
+                # runs there [U: whether a download refuses the line sooner is not sourced].
+                raise Refused(54, "question mark part of string")
             items.append(("text", expr[1:-1], None))
         elif expr:
             items.append(("num", expr, fmt))
