@@ -20,7 +20,9 @@ Rules, all checked before the download:
 - the whole program must fit the model's line length and line count;
 - no user program may be running (a download would disturb it): the caller is told which
   thread runs (:class:`ProgramRunning`); the library's own threads are halted for the
-  download and started again.
+  download and started again, whatever came of it, as for a burn (:meth:`Routines.paused`;
+  decision 0094): a thread whose ``XQ`` the controller refused is forgotten and said in a
+  WARNING.
 
 Two of the library's features of one session never take the same thread by default
 (:meth:`Routines.default_thread`: the last thread that runs neither a program of the user's
@@ -31,6 +33,7 @@ other with the feature named (decision 0086).
 from __future__ import annotations
 
 import contextlib
+import logging
 import re
 import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -79,6 +82,7 @@ _LIBRARY_LINE = re.compile(rf"{INPUT_MESSAGE} +[0-9]+")
 _LABEL = re.compile(r"#([A-Za-z][A-Za-z0-9]*)")
 _T = TypeVar("_T")
 _END = re.compile(r"EN\b")
+_LOG = logging.getLogger("galil.routines")
 
 
 def ul_reply_bytes(model: ModelSpec) -> int:
@@ -105,6 +109,12 @@ def ls_reply_bytes(model: ModelSpec) -> int:
     (``1999 `` before its text) and ended with CR LF, then ``:``."""
     number = len(str(model.program_lines - 1)) + 1
     return model.program_lines * (number + model.line_length + 2) + 1
+
+
+def _first(exc: BaseException) -> str:
+    """The first line of ``exc``'s text (a ``GalilError``'s recent exchanges left out)."""
+    text = str(exc).splitlines()
+    return text[0] if text else type(exc).__name__
 
 
 def _label_of(line: str) -> str | None:
@@ -269,6 +279,28 @@ def _threads_named(running: Mapping[int, int], library: Mapping[int, str]) -> st
     return ", ".join(named) + (" is" if len(named) == 1 else " are")
 
 
+def _say_not_restarted(thread: int, label: str, what: str, why: str, *, held: bool) -> None:
+    """A WARNING: the library's ``thread`` (running ``label``), halted for ``what``, was not
+    started again, ``why``; whether the library still holds it (``held``: the ``XQ`` may have
+    gone out) or forgot it."""
+    whose = RESERVED.get(label, "a routine of the library's")
+    if held:
+        fate = "the library still holds it"
+    else:
+        fate = "it no longer runs, and the library no longer holds it"
+        if whose == "the watchdog":
+            fate += " (nothing guards the motion: start a new watchdog)"
+    _LOG.warning(
+        "galil: the library's thread %d (%s: %s), halted for %s, was not started again: %s; %s",
+        thread,
+        label,
+        whose,
+        what,
+        why,
+        fate,
+    )
+
+
 class Routines:
     """Installs the library's routines into program memory and runs them on threads."""
 
@@ -370,8 +402,13 @@ class Routines:
         return cmds.dl(lines, model=model)
 
     def _download(self, download: cmds.Command, *, for_user: bool = False) -> tuple[int, ...]:
-        """Download, halting the library's own threads around it; return the threads halted
-        and started again."""
+        """Download, the library's own threads halted around it and started again whatever
+        came of it (:meth:`_halted`); return the threads halted and started again.
+
+        Raises:
+            ProgramRunning: a program of the user's runs, or a speed schedule; nothing is
+                sent but the one ``_XQn`` query.
+        """
         running = self.running()
         users = sorted(t for t in running if t not in self._threads)
         if users:
@@ -392,20 +429,16 @@ class Routines:
                 "(its motion with it): wait for the schedule to end or stop it first",
                 model=self.link.model.name,
             )
-        restart = {t: label for t, label in self._threads.items() if t in running}
-        for t in restart:
-            self.link.command_line([cmds.hx(t)])
-        self.link.transfer(download)
-        for t, label in restart.items():
-            self._xq_again(label, t)
-        return tuple(sorted(restart))
+        with self._halted("DL", running) as halted:
+            self.link.transfer(download)
+        return halted
 
     @contextlib.contextmanager
     def paused(self, what: str) -> Iterator[tuple[int, ...]]:
         """Halt the library's own threads (the watchdog, a wait for an input) for ``what``
         (``BN``, ``BP``), which the controller refuses while any thread runs (TC 17), and
-        start them again after it, whatever came of it (as :meth:`replace_user` does for a
-        download). Yields the threads halted (none: nothing is sent).
+        start them again after it, whatever came of it, as a download does (one path:
+        :meth:`_halted`; decision 0094). Yields the threads halted (none: nothing is sent).
 
         Raises:
             InvalidArgument: a program of the user's runs, or a speed schedule (its start
@@ -429,26 +462,63 @@ class Routines:
                     "again",
                     model=self.link.model.name,
                 )
-            restart = {t: label for t, label in self._threads.items() if t in running}
-            if restart:
-                self.link.command_line([cmds.hx(t) for t in restart])
-            try:
-                yield tuple(sorted(restart))
-            except BaseException:
-                with contextlib.suppress(GalilError):
-                    self._restart(restart)
-                raise
-            self._restart(restart)
+            with self._halted(what, running) as halted:
+                yield halted
 
-    def _restart(self, threads: Mapping[int, str]) -> None:
-        """``XQ`` each of the library's ``threads`` halted by :meth:`paused` again; a thread
-        whose ``XQ`` failed is no longer the library's (the error says which)."""
+    @contextlib.contextmanager
+    def _halted(self, what: str, running: Mapping[int, int]) -> Iterator[tuple[int, ...]]:
+        """Halt the library's threads among ``running`` (one line of ``HX n``) for ``what``
+        (``DL``, ``BN``, ``BP``), and start each again after it, whatever came of it: a
+        failed download or burn leaves the routines that ran running again, each with its
+        :meth:`restart_with` commands (the watchdog's fresh heartbeat). A restart that failed
+        is said (:meth:`_restart`); raised when ``what`` worked, else ``what``'s error is
+        (decision 0094). Yields the threads halted. Under the lock."""
+        restart = {t: label for t, label in self._threads.items() if t in running}
+        if restart:
+            self.link.command_line([cmds.hx(t) for t in restart])
+        try:
+            yield tuple(sorted(restart))
+        except BaseException:
+            self._restart(restart, what, failed=True)
+            raise
+        self._restart(restart, what, failed=False)
+
+    def _restart(self, threads: Mapping[int, str], what: str, *, failed: bool) -> None:
+        """``XQ`` each of the library's ``threads``, halted for ``what``, again.
+
+        A thread whose ``XQ`` the controller refused runs nothing: the library forgets it and
+        tries the next. One whose ``XQ``'s fate is unknown (the link died under it, a Ctrl-C)
+        stays the library's, as :meth:`start` keeps it (decision 0076), and the threads not
+        tried yet are forgotten (halted, never started again). Each is said in a WARNING on
+        the ``galil.routines`` logger.
+
+        Raises:
+            The first failure, unless ``failed`` (``what`` failed: its error is the one
+            raised), when a ``GalilError`` is suppressed; anything else (a Ctrl-C) is raised.
+        """
+        refused: CommandError | None = None
+        left = dict(threads)
         for t, label in threads.items():
+            del left[t]
             try:
                 self._xq_again(label, t)
-            except BaseException:
+            except CommandError as exc:  # (refused: the routine does not run)
                 self._threads.pop(t, None)
+                why = f"its XQ was refused ({_first(exc)})"
+                _say_not_restarted(t, label, what, why, held=False)
+                refused = refused or exc
+            except BaseException as exc:  # (the XQ may have gone out: held, as start() holds)
+                why = f"its XQ's fate is unknown ({_first(exc)})"
+                _say_not_restarted(t, label, what, why, held=True)
+                for other, its in left.items():
+                    self._threads.pop(other, None)
+                    why = f"thread {t}'s restart failed first"
+                    _say_not_restarted(other, its, what, why, held=False)
+                if failed and isinstance(exc, GalilError):
+                    return
                 raise
+        if refused is not None and not failed:
+            raise refused
 
     def replace_user(self, lines: Sequence[str]) -> tuple[bool, tuple[int, ...]]:
         """Put ``lines`` above the marker as the user's program, keeping the library's block.
