@@ -1078,7 +1078,7 @@ class MoveHandle(_HandleState):
         duration = self.duration
         if timeout is None and math.isfinite(duration):
             timeout = duration * 1.5 + 2.0
-        bar = progress_bar(self.kind, self.axes, duration) if progress else None
+        bar = WaitBar.open(self.kind, self.axes, duration) if progress else None
         try:
             with wait_guard(self):
                 done = self._poll_until_done(timeout, bar)
@@ -1086,10 +1086,7 @@ class MoveHandle(_HandleState):
                 raise self._link.error(GalilTimeoutError, not_done_text(self, timeout))
         finally:
             if bar is not None:
-                if self._done and bar.total is not None:
-                    bar.n = bar.total
-                bar.refresh()
-                bar.close()
+                bar.close(self._done)
         if self._error is not None:
             raise self._error
         assert self._result is not None
@@ -1101,7 +1098,7 @@ class MoveHandle(_HandleState):
         """What ``_BG`` says of this move: the axes it still drives (a sequence's: ``"S"``)."""
         return driven_axes(self)
 
-    def _poll_until_done(self, timeout: float | None, bar: Any) -> bool:
+    def _poll_until_done(self, timeout: float | None, bar: WaitBar | None) -> bool:
         """Poll until the move is done (``True``) or ``timeout`` has passed (``False``)."""
         link = self._link
         deadline = None if timeout is None else link.clock() + timeout
@@ -1113,8 +1110,7 @@ class MoveHandle(_HandleState):
                 return False
             elapsed = now - self.started_at
             if bar is not None:
-                bar.n = elapsed if bar.total is None else min(elapsed, bar.total)
-                bar.refresh()
+                bar.show(elapsed)
             remaining = self.duration - elapsed
             pause = remaining / 4 if math.isfinite(remaining) else MAX_POLL
             if deadline is not None:
@@ -1413,15 +1409,48 @@ def refuse_in_motion(link: CommandLink, tracker: MotionTracker, letter: str, nam
     )
 
 
-def progress_bar(kind: str, axes: str, duration: float) -> Any:
-    """A ``tqdm.auto`` bar over a predicted duration (``None`` without tqdm)."""
-    try:
-        from tqdm.auto import tqdm
-    except ImportError:  # progress is a nicety; the wait itself does not need it
-        return None
-    total = duration if math.isfinite(duration) else None
-    fmt = "{l_bar}{bar}| {n:.2f}/{total:.2f} s" if total is not None else "{desc}: {n:.2f} s"
-    return tqdm(total=total, desc=f"{kind} {axes}", unit="s", bar_format=fmt)
+class WaitBar:
+    """The bar of a wait with ``progress=True``, the sync :meth:`MoveHandle.wait`'s and the
+    async handle's alike: a ``tqdm.auto`` bar over the predicted duration, in seconds (a jog
+    not yet stopped has no total: the bar counts seconds).
+
+    Made only when asked for: a wait without it neither imports tqdm nor pays a check per poll
+    beyond ``bar is not None``. Whoever opens one closes it on every way out of the wait
+    (:meth:`close`, in a ``finally``), so tqdm keeps no bar of it.
+    """
+
+    __slots__ = ("_bar",)
+
+    def __init__(self, bar: Any) -> None:
+        self._bar = bar
+
+    @classmethod
+    def open(cls, kind: str, axes: str, duration: float) -> WaitBar | None:
+        """A bar named ``"<kind> <axes>"`` over ``duration`` seconds (``None`` without tqdm)."""
+        try:
+            from tqdm.auto import tqdm
+        except ImportError:  # progress is a nicety; the wait itself does not need it
+            return None
+        total = duration if math.isfinite(duration) else None
+        fmt = "{l_bar}{bar}| {n:.2f}/{total:.2f} s" if total is not None else "{desc}: {n:.2f} s"
+        return cls(tqdm(total=total, desc=f"{kind} {axes}", unit="s", bar_format=fmt))
+
+    def show(self, elapsed: float) -> None:
+        """Show ``elapsed`` seconds of the move (at most the total)."""
+        bar = self._bar
+        bar.n = elapsed if bar.total is None else min(elapsed, bar.total)
+        bar.refresh()
+
+    def close(self, done: bool) -> None:
+        """Show the end (the whole total once the move was seen ``done``; else where it got)
+        and close the bar, even if showing it fails."""
+        bar = self._bar
+        try:
+            if done and bar.total is not None:
+                bar.n = bar.total
+            bar.refresh()
+        finally:
+            bar.close()
 
 
 # ----------------------------------------------------------------------------------- stopping

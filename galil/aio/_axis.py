@@ -126,7 +126,8 @@ class write_setting(Generic[T]):  # noqa: N801 - used like a decorator
 class AsyncGearing(Room[Gearing]):
     """A follower geared to its master (``await follower.gear_to(master, ratio)``), the twin
     of :class:`~galil.gearing.Gearing`: what needs no I/O is read at once, ``set_ratio`` and
-    ``off`` are awaited."""
+    ``off`` are awaited; ``async with await follower.gear_to(...)`` turns it off at the end of
+    the block (the sync ``with``)."""
 
     @property
     def follower(self) -> str:
@@ -151,6 +152,14 @@ class AsyncGearing(Room[Gearing]):
     predict = same(Gearing.predict)
     set_ratio = twin(Gearing.set_ratio)
     off = twin(Gearing.off)
+
+    async def __aenter__(self) -> AsyncGearing:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:  # (Gearing.__exit__'s parameters)
+        """Turn the gearing off (``GR 0``) however the block ends, as the sync ``with`` does;
+        a cancellation of the task meanwhile still lets it go out."""
+        await self._worker.run_shielded(self.sync.off)
 
     def __repr__(self) -> str:
         return f"<AsyncGearing of {self.sync!r}>"

@@ -141,12 +141,7 @@ class AsyncCapture(Room[Capture]):
     async def __aenter__(self) -> AsyncCapture:
         return self
 
-    async def __aexit__(
-        self,
-        kind: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    async def __aexit__(self, kind: object, *exc: object) -> None:  # (Capture.__exit__'s)
         if self.sync.result is None and self.sync.start_sample is not None:
             try:
                 await self._worker.run_shielded(self.sync.stop)
@@ -215,7 +210,12 @@ class AsyncWatchdog(Room[Watchdog]):
     async def __aenter__(self) -> AsyncWatchdog:
         return self
 
-    async def __aexit__(self, *exc: object) -> None:
+    async def __aexit__(  # (Watchdog.__exit__'s parameters)
+        self,
+        kind: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
         await self._worker.run_shielded(self.sync.stop)
 
     def __repr__(self) -> str:

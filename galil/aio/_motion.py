@@ -39,6 +39,7 @@ from galil.motion import (
     MoveHandle,
     MoveParams,
     MoveResult,
+    WaitBar,
     held,
     not_done_text,
     wait_guard,
@@ -301,8 +302,13 @@ class AsyncMoveHandle(FixedAttributes):
                 await self.stop_unless_done()
             raise
 
-    def wait(self, timeout: float | None = None) -> MoveWait:
+    def wait(self, timeout: float | None = None, progress: bool = False) -> MoveWait:
         """Wait until the move is done and compare its end with the prediction.
+
+        ``progress=True`` shows the bar of ``MoveHandle.wait(progress=True)`` (a
+        ``tqdm.auto`` bar over the predicted duration, moved at each poll on the event loop);
+        it is closed however the wait ends (done, a ``MotionError``, a timeout, a
+        cancellation).
 
         Cancelling the waiting task stops the move (``ST``) before the cancellation ends,
         also when the task is cancelled before the wait has begun: the coroutine returned is
@@ -312,18 +318,29 @@ class AsyncMoveHandle(FixedAttributes):
         decision 0061). A wait closed or dropped without ever being awaited stops nothing.
 
         Raises:
-            InvalidArgument: a bad timeout (see :meth:`watch`), before anything is sent.
+            InvalidArgument: a bad timeout (see :meth:`watch`) or a ``progress`` that is not a
+                bool, once awaited and before anything is sent.
             GalilTimeoutError: the move did not finish in time (it is NOT stopped).
             MotionError: an axis stopped on a limit switch or soft limit, or a limit stopped
                 an axis geared to one of them (see ``MoveHandle.wait``).
         """
-        return MoveWait(self, timeout)
+        return MoveWait(self, timeout, progress)
 
-    async def _wait(self, timeout: float | None) -> MoveResult:
-        async for _ in self.watch(timeout):
-            pass
+    async def _wait(self, timeout: float | None, progress: bool) -> MoveResult:
+        if progress is not False:  # (the sync wait's order: the timeout, then the flag)
+            timeout = check_wait_timeout(timeout)
+            check_flag(progress, "progress")
+        sync = self.sync
+        bar = WaitBar.open(sync.kind, sync.axes, sync.duration) if progress else None
+        try:
+            async for step in self.watch(timeout):
+                if bar is not None:
+                    bar.show(step.elapsed)
+        finally:
+            if bar is not None:
+                bar.close(sync.finished)
         # Done: the sync handle's own wait returns at once with the result (or raises).
-        return await self._worker.run(self.sync.wait, 0)
+        return await self._worker.run(sync.wait, 0)
 
     def __await__(self) -> Generator[object, None, MoveResult]:
         return self.wait().__await__()
@@ -441,11 +458,14 @@ class MoveWait(Coroutine[object, None, MoveResult]):
     native coroutine, warns (:class:`RuntimeWarning`) only when it is dropped unclosed.
     """
 
-    __slots__ = ("_closed", "_handle", "_inner", "_timeout")
+    __slots__ = ("_closed", "_handle", "_inner", "_progress", "_timeout")
 
-    def __init__(self, handle: AsyncMoveHandle, timeout: float | None) -> None:
+    def __init__(
+        self, handle: AsyncMoveHandle, timeout: float | None, progress: bool = False
+    ) -> None:
         self._handle = handle
         self._timeout = timeout
+        self._progress = progress
         self._inner: Coroutine[object, None, MoveResult] | None = None
         self._closed = False
 
@@ -454,7 +474,7 @@ class MoveWait(Coroutine[object, None, MoveResult]):
         if self._inner is None:
             if self._closed:
                 raise RuntimeError("cannot reuse already awaited coroutine")
-            self._inner = self._handle._wait(self._timeout)
+            self._inner = self._handle._wait(self._timeout, self._progress)
         return self._inner.send(value)
 
     def throw(

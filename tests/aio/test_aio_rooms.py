@@ -534,6 +534,35 @@ def test_a_geared_follower_is_predicted_with_its_master() -> None:
     run(body)
 
 
+def test_a_gearing_used_in_async_with_is_turned_off_however_the_block_ends() -> None:
+    async def body() -> None:
+        async with await sim() as c:
+            async with await c.B.gear_to(c.A, 0.5) as gearing:
+                assert gearing.engaged
+                sent = len(commands_of(c))
+            assert not gearing.engaged
+            assert any(t.startswith("GR") for t in commands_of(c)[sent:])  # GR 0
+            with pytest.raises(RuntimeError, match="in the block"):
+                async with await c.B.gear_to(c.A, 0.5) as gearing:
+                    raise RuntimeError("in the block")
+            assert not gearing.engaged
+
+            async def block(entered: asyncio.Event) -> None:
+                async with await c.B.gear_to(c.A, 0.5):
+                    entered.set()
+                    await asyncio.Event().wait()
+
+            entered = asyncio.Event()
+            task = asyncio.ensure_future(block(entered))
+            await entered.wait()
+            task.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await task
+            assert await c.query_operands(["_GRB"]) == [0]
+
+    run(body)
+
+
 # -- coordinated motion ---------------------------------------------------------------------
 
 

@@ -31,6 +31,7 @@ async def check(c: aio.AsyncController) -> None:
     assert_type(await c.plan({"A": 1}), MultiProfile)
     assert_type(await (await c.A.move_to(10)), galil.MoveResult)
     assert_type(await (await c.A.move_to(10)).wait(), galil.MoveResult)
+    assert_type(await (await c.A.move_to(10)).wait(5, progress=True), galil.MoveResult)
     assert_type(await asyncio.gather((await c.A.move_to(10)).wait()), tuple[galil.MoveResult])
     assert_type(await asyncio.create_task((await c.A.move_to(10)).wait()), galil.MoveResult)
     assert_type(await c.contour("A", [1.0], dt=2), ContourResult)
