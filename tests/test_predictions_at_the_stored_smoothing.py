@@ -6,6 +6,8 @@ at the reading strays from the controller's reference by a count.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import pytest
 
 import galil
@@ -14,7 +16,7 @@ from galil.testing import simulated
 
 
 @pytest.fixture
-def dmc() -> galil.Controller:
+def dmc() -> Iterator[galil.Controller]:
     with simulated("DMC-4040") as controller:
         yield controller
 
