@@ -18,6 +18,7 @@ numbers: 32-bit with four decimals (1/65536 resolution)::
 from __future__ import annotations
 
 import contextlib
+import numbers
 import re
 from collections.abc import ItemsView, Iterator, KeysView, MutableMapping, ValuesView
 
@@ -33,13 +34,14 @@ from galil.errors import (
     ProtocolError,
     ReadOnly,
     UnknownVariableError,
+    decimal_hint,
 )
 from galil.link import CommandLink, check_flag
 from galil.models import INT32_MAX, INT32_MIN
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import read_one
 
-__all__ = ["LIBRARY_VARIABLES", "Arrays", "Variables"]
+__all__ = ["CAPTURE_ARRAYS", "LIBRARY_VARIABLES", "Arrays", "Variables"]
 
 _LA_LINE = re.compile(r"\s*([A-Za-z][A-Za-z0-9]*)\s*\[\s*(\d+)\s*\]")
 _LV_LINE = re.compile(r"\s*([A-Za-z][A-Za-z0-9]*)\s*=\s*(\S+)")
@@ -47,16 +49,40 @@ _LV_LINE = re.compile(r"\s*([A-Za-z][A-Za-z0-9]*)\s*=\s*(\S+)")
 #: schedule's, ``io.wait_for_input``'s): freeing one would stop such a routine with an error
 #: (a watchdog would stop guarding, silently), so ``del`` refuses them and ``clear`` keeps them.
 LIBRARY_VARIABLES = frozenset({"gwbeat", "gwlimit", "gwfire", "gsbegin", "ginput", "ginlevel"})
+#: The arrays a capture records into (one per source, ``RD`` takes 8 at most): a capture frees
+#: them before it sets them up and once it is read, so ``define`` and ``download`` refuse them
+#: (decision 0097), as ``del`` refuses the library's variables.
+CAPTURE_ARRAYS = tuple(f"gcap{i}" for i in range(8))
 _DA_NAMES = 6  # names per DA line: 6 of 8 letters and commas stay within 80 characters
 
 
 def _values(values: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
+    """``values`` as float64, each a real number: a bool, a string or a complex number is
+    refused (decision 0026: numpy would take ``True`` as 1 and ``"1"`` as 1.0).
+
+    Raises:
+        InvalidArgument: not a non-empty 1-D sequence of finite real numbers.
+        LimitError: a value outside the controller's 32-bit range.
+    """
+    if isinstance(values, (str, bytes)):
+        raise InvalidArgument(f"values for {name}[] are numbers, not {values!r:.40}")
     try:
-        data = np.asarray(values, dtype=np.float64)
+        raw = values if isinstance(values, np.ndarray) else np.asarray(values, dtype=object)
+    except (TypeError, ValueError) as exc:
+        raise InvalidArgument(f"values for {name}[] must be numbers: {exc}") from exc
+    if raw.ndim != 1 or raw.size == 0:
+        raise InvalidArgument(f"values for {name}[] must be a non-empty 1-D sequence")
+    if raw.dtype.kind not in "iuf":  # (bool, complex, strings, objects: look at each)
+        for i, v in enumerate(raw.tolist()):
+            if isinstance(v, bool) or not isinstance(v, numbers.Real):
+                raise InvalidArgument(
+                    f"{name}[{i}] is {v!r:.40}: values for {name}[] are real numbers, never"
+                    f" a bool, a string or a complex number{decimal_hint(v)}"
+                )
+    try:
+        data = np.asarray(raw, dtype=np.float64)
     except (TypeError, ValueError, OverflowError) as exc:  # OverflowError: 10**400
         raise InvalidArgument(f"values for {name}[] must be numbers: {exc}") from exc
-    if data.ndim != 1 or data.size == 0:
-        raise InvalidArgument(f"values for {name}[] must be a non-empty 1-D sequence")
     if not np.all(np.isfinite(data)):
         i = int(np.argmin(np.isfinite(data)))
         raise InvalidArgument(f"{name}[{i}] is {data[i]!r}: NaN and infinity cannot be sent")
@@ -140,6 +166,20 @@ def _in_read_format(link: CommandLink, command: cmds.Command, reply_bytes: int) 
     return text
 
 
+def _not_a_capture_array(name: str, what: str) -> None:
+    """Refuse one of :data:`CAPTURE_ARRAYS`: a capture frees and rebuilds them (decision 0097).
+
+    Raises:
+        InvalidArgument: ``name`` is a capture's array.
+    """
+    if name in CAPTURE_ARRAYS:
+        raise InvalidArgument(
+            f"{name!r} is a name captures record into (gcap0 .. gcap7): a capture frees it"
+            f" before it records and once it is read, so it is not {what} here; give your"
+            " array another name"
+        )
+
+
 class Arrays(FixedAttributes):
     """The controller's arrays.
 
@@ -193,12 +233,13 @@ class Arrays(FixedAttributes):
                 existing array is refused by the controller.
 
         Raises:
-            InvalidArgument: a bad name, a size that is not an integer, or one outside the
-                model's array space.
+            InvalidArgument: a bad name, a capture's name (:data:`CAPTURE_ARRAYS`), a size
+                that is not an integer, or one outside the model's array space.
             CommandError: the controller refused (the name exists, no room left).
         """
         check_flag(replace, "replace")
         command = cmds.dm(name, size, model=self.link.model)
+        _not_a_capture_array(name, "defined")
         parts = [command]
         if replace and name in self.list():
             parts.insert(0, cmds.da(name))
@@ -222,11 +263,13 @@ class Arrays(FixedAttributes):
         link's byte rate (decision 0064): a large download over a slow serial line has time.
 
         Raises:
-            InvalidArgument: a bad name or index, values that are not finite numbers, no such
-                array, more values than fit.
+            InvalidArgument: a bad name or index, a capture's name (:data:`CAPTURE_ARRAYS`),
+                values that are not finite real numbers (a bool, a string or a complex number
+                is refused, decision 0026), no such array, more values than fit.
             LimitError: a value outside the controller's 32-bit range.
         """
         cmds.array_name(name)
+        _not_a_capture_array(name, "written")
         data = _values(values, name)
         first = _index(first, "first")
         size = self._size(name)

@@ -796,7 +796,7 @@ class _SimRecorder(_Recorder):
         self._port = port
         # The first record now, as a controller's stream over Ethernet has one before the
         # path begins (its DR sent a while before): the start, held, is in the scan too.
-        self.recorded.extend(decode_records(self._sim.record(), self._layout))
+        self.recorded.extend(self._decode(self._sim.record()))
 
     def _take(self, last: bool = False) -> None:
         """The records the simulator has streamed so far (``last``: close the handle)."""
@@ -809,7 +809,11 @@ class _SimRecorder(_Recorder):
             self._port = None
         whole = self._splitter.feed_block(data)
         if whole:
-            self.recorded.extend(decode_records(whole, self._layout))
+            self.recorded.extend(self._decode(whole))
+
+    def _decode(self, whole: bytes) -> np.ndarray[Any, np.dtype[Any]]:
+        """Records in the layout, their axis blocks as the simulator's model has them."""
+        return decode_records(whole, self._layout, analog=self._sim.spec.record_axis_analog)
 
     async def _run(self, fn: Callable[[], None]) -> None:
         if self._c.worker.closed:

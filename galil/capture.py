@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from galil.arrays import Arrays
+from galil.arrays import CAPTURE_ARRAYS, Arrays
 from galil.errors import (
     FixedAttributes,
     GalilError,
@@ -43,9 +43,6 @@ from galil.protocol.numbers import read_one
 from galil.units import plain_seconds
 
 __all__ = ["Capture", "Recording"]
-
-#: Arrays the library records into (deallocated once uploaded).
-ARRAY_PREFIX = "gcap"
 
 
 @dataclass(frozen=True)
@@ -181,7 +178,7 @@ class Capture(FixedAttributes):
         self._sources = names
         self._every = every
         self._count = n
-        self._arrays = tuple(f"{ARRAY_PREFIX}{i}" for i in range(len(names)))
+        self._arrays = CAPTURE_ARRAYS[: len(names)]
         self._start_sample: int | None = None
         self._result: Recording | None = None
         self._started_at = 0.0
@@ -204,45 +201,98 @@ class Capture(FixedAttributes):
     def start(self) -> Capture:
         """Set the arrays up and start recording (``RC n,m`` with ``MG TIME`` behind it).
 
+        Before anything is set up, ``_RC`` and the arrays (``LA``) are read: the capture's
+        arrays must fit the array space the user's arrays leave. Arrays it set up are freed
+        again (``DA``) if the start fails (decision 0097).
+
         Raises:
-            InvalidArgument: a recording runs already (``_RC`` is 1).
-            CommandError: the controller refused (no room for the arrays ...).
+            InvalidArgument: a recording runs already (``_RC`` is 1), or the arrays the
+                controller has leave too few elements or arrays free (nothing is set up).
+            CommandError: the controller refused.
         """
         link = self.link
-        model = link.model
         if self.start_sample is not None:
             raise InvalidArgument("this capture was started already; make a new one")
         if round(link.query_operands(["_RC"])[0]):
             raise InvalidArgument(
                 "the controller is recording already (_RC is 1); wait for it or stop it "
                 "(RC 0) first",
+                model=link.model.name,
+            )
+        old = self._check_room(Arrays(link).list())
+        try:
+            self._set_up(old)
+            start = self._record()
+        except BaseException:
+            self._free_arrays()
+            raise
+        self._start_sample = start
+        self._started_at = link.clock()
+        return self
+
+    def _check_room(self, existing: Mapping[str, int]) -> list[str]:
+        """The capture's arrays left by an earlier one (freed first), once the room the
+        other arrays leave is seen to hold this capture's.
+
+        Raises:
+            InvalidArgument: too few elements or arrays free.
+        """
+        model = self.link.model
+        others = {a: n for a, n in existing.items() if a not in self.arrays}
+        free = model.array_elements - sum(others.values())
+        need = self.count * len(self.arrays)
+        if need > free or len(others) + len(self.arrays) > model.arrays:
+            raise InvalidArgument(
+                f"{self.count} values of {len(self.arrays)} sources need {need} array elements"
+                f" in {len(self.arrays)} arrays; the controller's {len(others)} other arrays"
+                f" ({', '.join(others) or 'none'}) leave {free} of {model.array_elements}"
+                f" elements and {model.arrays - len(others)} of {model.arrays} arrays: free"
+                " some (arrays.delete) or record fewer values",
                 model=model.name,
             )
-        existing = set(Arrays(link).list())
-        old = [a for a in self.arrays if a in existing]
+        return [a for a in self.arrays if a in existing]
+
+    def _set_up(self, old: Sequence[str]) -> None:
+        """``DA`` the arrays an earlier capture left, ``DM`` each, ``RA`` and ``RD``."""
+        link = self.link
+        model = link.model
         setup = [cmds.da(*old)] if old else []
         setup += [cmds.dm(a, self.count, model=model) for a in self.arrays]
         setup += [cmds.ra(*self.arrays, model=model), self._rd]
         link.command_line(setup)
+
+    def _record(self) -> int:
+        """``RC n,m;MG TIME``: the sample of the first value.
+
+        RC may have started when this fails (a lost or malformed reply): no recording
+        outlives start(), and one whose RC 0 cannot go out (a dead link) is stopped once it
+        works again (:attr:`stop_pending`).
+        """
+        link = self.link
         try:
             replies = link.command_line(
-                [cmds.rc(self.every, self.count, model=model), cmds.time_stamp()]
+                [cmds.rc(self.every, self.count, model=link.model), cmds.time_stamp()]
             )
             try:
-                start = round(read_one(replies[-1]))
+                return round(read_one(replies[-1]))
             except ProtocolError as exc:
                 raise link.error(ProtocolError, f"MG TIME answered {replies[-1]!r}") from exc
         except BaseException:
-            # RC may have started (a lost or malformed reply): no recording outlives start(),
-            # and one whose RC 0 cannot go out (a dead link) is stopped once it works again
             self._stop_pending = True
             with contextlib.suppress(GalilError):
                 link.command_line([cmds.rc(0)])
                 self._stop_pending = False
             raise
-        self._start_sample = start
-        self._started_at = link.clock()
-        return self
+
+    def _free_arrays(self) -> None:
+        """After a failed start, ``DA`` the capture's arrays it set up (those ``LA`` lists),
+        unless a recording may still write them (an ``RC 0`` owed) or the link fails."""
+        if self._stop_pending:
+            return
+        with contextlib.suppress(GalilError):
+            present = [a for a in self.arrays if a in Arrays(self.link).list()]
+            if present:
+                self.link.command_line([cmds.da(*present)])
 
     @property
     def done(self) -> bool:

@@ -283,8 +283,11 @@ class LinkFacade:
         Returns:
             A structured numpy record (``rec["A"]["position"]``, ``rec["sample"]``,
             ``rec["error_code"]``, ``rec["time"]``: the controller sample in full; field
-            names in :mod:`galil.protocol.records`), or a dict. ``galil.decode_fields(rec)``
-            names its status bits, switches and stop codes.
+            names in :mod:`galil.protocol.records`), or a dict, both raw as the controller
+            sends them: an axis's ``velocity`` is 64 times ``TV``
+            (:data:`~galil.protocol.records.RECORD_VELOCITY_SCALE`).
+            ``galil.decode_fields(rec)`` gives it in counts/s and names its status bits,
+            switches and stop codes.
         """
         if check_flag(as_dict, "as_dict"):
             return self.records_room.record_dict(axes, timeout=timeout)

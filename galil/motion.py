@@ -44,6 +44,7 @@ from galil.link import (
     check_wait_timeout,
 )
 from galil.models import tm_of
+from galil.predict.smoothing import stored_it
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
 from galil.protocol.numbers import read_one
@@ -242,12 +243,15 @@ class GearLink:
 
 
 def as_stored(link: CommandLink, cmd: str, value: float) -> float:
-    """``value`` of ``cmd`` (SP, JG, AC or DC; HV as SP) read back from the controller, as the
-    step it holds: the text has four decimals of a 32.16 number, up to 5.8e-5 from the step
-    (TM 1656.25: SP 2.41509... reads ``2.4151``), and a plan must run at the step itself.
-    A whole value (every step at TM 1000) is taken as it is."""
+    """``value`` of ``cmd`` (SP, JG, AC, DC or IT; HV as SP) read back from the controller, as
+    the step it holds: the text has four decimals of a 32.16 number, up to 5.8e-5 from the
+    step (TM 1656.25: SP 2.41509... reads ``2.4151``; IT 0.1, stored as 26/256, reads
+    ``0.1016``), and a plan must run at the step itself. A whole value (every step at TM 1000,
+    IT 1) is taken as it is."""
     if value.is_integer() if type(value) is float else float(value).is_integer():
         return value
+    if cmd == "IT":  # (1/256 steps, 0.0039 apart: the 4-decimal reading names one)
+        return stored_it(value)
     return predict.quantise_value(cmd, value, link.model, tm=tm_of(link.sample_period))
 
 

@@ -136,7 +136,7 @@ def _read_state(
 
 def _states(link: CommandLink, letters: str, values: Sequence[float]) -> dict[str, _State]:
     """Each axis's :class:`_State` from the values of ``_operand_names(letters, _STATE)``
-    (more values may follow); SP, AC and DC as the steps the controller holds
+    (more values may follow); SP, AC, DC and IT as the steps the controller holds
     (:func:`~galil.motion.as_stored`)."""
     n = len(_STATE)
     out: dict[str, _State] = {}
@@ -149,6 +149,8 @@ def _states(link: CommandLink, letters: str, values: Sequence[float]) -> dict[st
             ac = as_stored(link, "AC", ac)
         if not (type(dc) is float and dc.is_integer()):
             dc = as_stored(link, "DC", dc)
+        if it != 1.0:
+            it = as_stored(link, "IT", it)
         out[a] = _State(round(rp), bool(bg), sp, ac, dc, it, bl, fl, bool(mo), round(sc), round(ts))
     return out
 
@@ -608,7 +610,12 @@ def _jog(
     for f, gear in gears.items():
         _refuse_follower_blocked(link, gear, gear.ratio * velocity, followers[f][2])
     _check_geared_speed(link, gears, velocity)
-    params = MoveParams(abs(velocity), as_stored(link, "AC", ac), as_stored(link, "DC", dc), it)
+    params = MoveParams(
+        abs(velocity),
+        as_stored(link, "AC", ac),
+        as_stored(link, "DC", dc),
+        as_stored(link, "IT", it),
+    )
     replies = link.command_line(
         [
             cmds.jg(model=link.model, **{a: velocity}),

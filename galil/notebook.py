@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 import numbers
 import threading
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -27,8 +27,12 @@ from galil.units import counts_or_plain, get_registry, is_quantity
 __all__ = ["Comparison", "compare", "compare_plot", "jog_widget"]
 
 FloatArray = npt.NDArray[np.float64]
-#: The operand a capture records for each data-record field compared.
-_OPERANDS = {"reference": "RP", "position": "TP", "error": "TE", "aux_position": "TD"}
+#: The operand a capture records for each data-record field compared: positions, as the
+#: prediction is (a stepper's ``TD`` counts its steps; a servo's is its auxiliary encoder).
+_OPERANDS = {"reference": "RP", "position": "TP", "aux_position": "TD"}
+#: Fields a recording has that are not positions: compared with one, they would be off by
+#: the whole motion (``error`` is the following error, ``_TE``: 0 for an ideal servo).
+_NOT_POSITIONS = {"error": "_TE", "velocity": "_TV", "torque": "_TT"}
 Predicted = MoveHandle | ContourResult | Mapping[str, Profile]
 Recorded = Recording | np.ndarray[Any, Any] | Mapping[str, tuple[npt.ArrayLike, npt.ArrayLike]]
 
@@ -137,18 +141,22 @@ def compare(
             carry their controller ``time``), or ``(t, positions)`` per axis with ``t`` in
             seconds from the prediction's start.
         field: what is compared: ``"reference"`` (what the profiler commanded: a data
-            record's ``reference``, a capture's ``_RPx``) or ``"position"`` (the encoder:
-            ``position``, ``_TPx``).
+            record's ``reference``, a capture's ``_RPx``), ``"position"`` (the encoder:
+            ``position``, ``_TPx``) or ``"aux_position"`` (``_TDx``: a stepper's step count).
 
     Returns:
         A :class:`Comparison` per axis found in both.
 
     Raises:
-        InvalidArgument: a recording given by controller samples while the prediction does
-            not know the sample it began on.
+        InvalidArgument: a field that is not a position (``"error"``: the following error
+            ``_TE`` is no position to hold against a prediction); no axis of the prediction
+            recorded in ``field`` (the message names what was recorded); an axis with fewer
+            than two recorded values within its predicted motion (a recording that ended
+            before the motion began, or began after it ended: nothing would be compared);
+            a recording given by controller samples while the prediction does not know the
+            sample it began on.
     """
-    if field not in _OPERANDS:
-        raise InvalidArgument(f"field is one of {', '.join(_OPERANDS)}, not {field!r}")
+    _check_field(field)
     profiles, begins = _predictions(predicted)
     out: dict[str, Comparison] = {}
     for letter, prof in profiles.items():
@@ -156,6 +164,7 @@ def compare(
         if found is None:
             continue
         t, pos = found
+        _check_overlap(letter, prof, t)
         # Compare at the recorded times, not index by index: records every few samples or
         # a polling loop must not be misaligned. The prediction holds its end after it
         # finishes, and its start before it begins, as the axis does.
@@ -164,7 +173,57 @@ def compare(
         else:
             expected = np.full(t.size, float(prof.end))
         out[letter] = Comparison(t, pos, expected)
+    if not out:
+        raise InvalidArgument(
+            f"nothing to compare in field {field!r}: the prediction is of"
+            f" {', '.join(profiles) or 'no axis'}, and {_what_was_recorded(recorded, profiles)}"
+        )
     return out
+
+
+def _check_field(field: str) -> None:
+    if field in _NOT_POSITIONS:
+        raise InvalidArgument(
+            f"field {field!r} ({_NOT_POSITIONS[field]}) is not a position: a prediction is"
+            " compared with 'reference' or 'position' (read the recording's own values for"
+            f" {field})"
+        )
+    if field not in _OPERANDS:
+        raise InvalidArgument(f"field is one of {', '.join(_OPERANDS)}, not {field!r}")
+
+
+def _check_overlap(letter: str, prof: Profile, t: FloatArray) -> None:
+    """Refuse a recording of ``letter`` with fewer than two values within its predicted
+    motion (0 .. duration s): it would compare as exact whatever the axis did. A prediction
+    of no motion (0 samples) is compared wherever it was recorded."""
+    if prof.samples < 1:
+        return
+    inside = int(np.count_nonzero((t >= 0) & (t <= prof.duration)))
+    if inside >= 2:
+        return
+    held = f"{t[0]:.4g} .. {t[-1]:.4g} s" if t.size else "no values"
+    raise InvalidArgument(
+        f"the recording of {letter} has {inside} value(s) within its predicted motion"
+        f" (0 .. {prof.duration:.4g} s from its start; the recording holds {held}):"
+        " record while the motion runs (start the capture or the records just before it)"
+    )
+
+
+def _what_was_recorded(recorded: Recorded, letters: Iterable[str]) -> str:
+    """What a recording holds, for the message of a comparison that found nothing (and the
+    fields a capture's sources could be compared in)."""
+    if isinstance(recorded, Recording):
+        fields = [
+            repr(f)
+            for f, op in _OPERANDS.items()
+            if any(f"_{op}{a}" in recorded.sources for a in letters)
+        ]
+        hint = f" (compare with field={' or '.join(fields)})" if fields else ""
+        return f"the capture recorded {', '.join(recorded.sources)}{hint}"
+    if isinstance(recorded, np.ndarray):
+        names = [n for n in recorded.dtype.names or () if len(n) == 1 and n.isalpha()]
+        return f"the data records hold axes {', '.join(names) or 'none'}"
+    return f"the recording holds axes {', '.join(map(str, recorded)) or 'none'}"
 
 
 def compare_plot(

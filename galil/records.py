@@ -221,7 +221,7 @@ class RecordStream(FixedAttributes):
             try:
                 chunk = read_handle(handle, 0.25)
                 whole = splitter.feed_block(chunk)
-                records = self._timed(decode_records(whole, layout)) if whole else None
+                records = self._timed(self._source.decode(whole, layout)) if whole else None
             except ProtocolError as exc:
                 # A stream out of step cannot be re-cut reliably: stop and say why.
                 self._fail(exc)
@@ -462,6 +462,12 @@ class Records:
                 self._layout = model.qz
         return self._layout
 
+    def decode(self, whole: bytes, layout: Layout) -> np.ndarray[Any, np.dtype[Any]]:
+        """Records laid end to end, in ``layout`` (the ``QZ`` reply), their axis blocks as the
+        model has them (an 18x2's end in reserved bytes, a 21x3's in the analog input: the
+        same QZ)."""
+        return decode_records(whole, layout, analog=self.link.model.record_axis_analog)
+
     def record(self, axes: str = "", *, timeout: float | None = None) -> np.void:
         """Read one data record (``QR``, with ``MG TIME`` behind it) and decode it.
 
@@ -481,7 +487,7 @@ class Records:
         if done.record is None:
             raise link.error(ProtocolError, f"{command.text!r} answered no binary record")
         try:
-            rec = decode_record(done.record, layout)
+            rec = decode_record(done.record, layout, analog=link.model.record_axis_analog)
             now = round(read_one(stamp.text))
         except (ProtocolError, InvalidArgument, ValueError) as exc:
             raise link.error(ProtocolError, f"{command.text!r}: {exc}") from exc

@@ -28,6 +28,7 @@ __all__ = [
     "quantise_it",
     "smooth",
     "smooth_page",
+    "stored_it",
 ]
 
 IT_MIN, IT_MAX = IT_RANGE
@@ -58,6 +59,13 @@ def quantise_it(value: float) -> float:
         raise InvalidArgument(f"IT must be in [{IT_MIN}, {IT_MAX}], got {value!r}")
     # 0.004 is just above 1/256, so the smallest legal value maps to one step.
     return max(1, round(value * 256)) / 256.0
+
+
+def stored_it(reading: float) -> float:
+    """IT as the controller holds it, from its 4-decimal reading (``MG _ITA``: IT 0.1, held as
+    26/256, reads 0.1016; the smallest step reads 0.0039): the nearest multiple of 1/256 in
+    [1/256, 1]. The steps are 0.0039 apart, so a reading names exactly one."""
+    return min(256, max(1, round(reading * 256))) / 256.0
 
 
 @lru_cache(maxsize=32)

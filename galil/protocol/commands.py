@@ -1493,20 +1493,36 @@ def lv() -> Command:
     return Command("LV", Expect.ANY)
 
 
-# The operands RD records (DMC-1600/1700/1800 manuals: _DE _TP _TE _SH _RL _TS _SC _NO _TT
-# per axis, _TI and _OP; _AF analog inputs; _RP and _TV as on the 40x0, assumed).
-_RECORD_AXIS = frozenset({"DE", "TP", "TE", "SH", "RL", "TS", "SC", "NO", "TT", "AF", "RP", "TV"})
-_RECORD_SOURCE = re.compile(r"_([A-Z]{2})([A-H])|_(TI|OP)(\d?)")
+# The operands RD records, one table for the library and its simulator (whose RD checks with
+# record_source too). Per axis: _TP _TE _DE _TS _SC _TT, from the RD sources the DMC-1600/1700/
+# 1800 manuals list; _RP and _TV as listed on the 40x0 (decision 0018: unconfirmed on the other
+# families). _TI and _OP are the input and output banks, taken with their bank as every other
+# use of the operands takes them (_TI0; the bank in an RD argument is unsourced). The manuals
+# list _SH, _RL, _NO and _AF too; they are refused (decision 0097): _SH has no operand on
+# today's controllers, _NO is the threads' mask there, not an axis's, _AF reads the AF setting,
+# and a latched position (_RL) needs the latch the simulator does not model. TIME, the
+# controller's sample, is taken as the simulator records it (unsourced, decision 0018).
+_RECORD_AXIS = frozenset({"DE", "TP", "TE", "TS", "SC", "TT", "RP", "TV"})
+_RECORD_REFUSED = frozenset({"SH", "RL", "NO", "AF"})
+_RECORD_SOURCE = re.compile(r"_([A-Z]{2})([A-H])|_(TI|OP)(\d)")
 
 
 def record_source(source: str, *, model: ModelSpec | None = None) -> str:
-    """``source`` if ``RD`` can record it (``"_RPA"``, ``"_TEB"``, ``"_TI0"``), else
-    :class:`InvalidArgument`."""
+    """``source`` if ``RD`` can record it (``"_RPA"``, ``"_TEB"``, ``"_TI0"``, ``"TIME"``), else
+    :class:`InvalidArgument` (decision 0097)."""
+    if source == "TIME":
+        return source
     m = _RECORD_SOURCE.fullmatch(source) if isinstance(source, str) else None
     if m is None or (m.group(1) is not None and m.group(1) not in _RECORD_AXIS):
         known = ", ".join(f"_{op}A" for op in sorted(_RECORD_AXIS))
+        why = ""
+        if m is not None and m.group(1) in _RECORD_REFUSED:
+            why = " (listed by the old manuals, unsettled on today's controllers: decision 0097)"
+        elif isinstance(source, str) and source in ("_TI", "_OP"):
+            why = f" (give the bank: {source}0)"
         raise InvalidArgument(
-            f"cannot record {source!r}: RD records {known} (any axis), _TI and _OP"
+            f"cannot record {source!r:.40}{why}: RD records {known} (any axis), the input"
+            " and output banks _TI0, _OP0 ..., and TIME"
         )
     if m.group(2) is not None:
         _axes(model).position(m.group(2))

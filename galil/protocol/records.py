@@ -32,6 +32,7 @@ from galil.models import ModelSpec
 
 __all__ = [
     "AXIS_LETTERS",
+    "RECORD_VELOCITY_SCALE",
     "AxisFields",
     "AxisStatus",
     "PlaneFields",
@@ -53,6 +54,9 @@ __all__ = [
 ]
 
 AXIS_LETTERS = "ABCDEFGH"
+#: A data record's ``velocity`` field is this many times ``TV`` (counts/s; M40-UM, decision
+#: 0097): the record and its dict keep the controller's raw value, ``decode_fields`` divides.
+RECORD_VELOCITY_SCALE = 64
 
 _HEADER: list[tuple[str, str]] = [("header", "u1"), ("axes_present", "u1"), ("size", "<u2")]
 
@@ -186,12 +190,20 @@ def record_dtype(
     model: ModelSpec | tuple[int, int, int, int],
     axes: int | None = None,
     letters: str | None = None,
+    *,
+    analog: bool | None = None,
 ) -> np.dtype[Any]:
     """Return the structured dtype of a full data record for ``model`` (or a QZ tuple).
 
     ``axes`` overrides the axis count (a record holding fewer axis blocks) and ``letters``
     names the axis blocks (default ``"A"``, ``"B"``, ...). The general and coordinated blocks
     are flattened into top-level fields (``sample``, ``error_code``, ``contour_buffer``, ...).
+    The fields keep the controller's raw values: an axis's ``velocity`` is
+    :data:`RECORD_VELOCITY_SCALE` (64) times ``TV`` in counts/s, its ``status`` and
+    ``switches`` the raw bits (:func:`decode_fields` gives counts/s and named bits).
+    ``analog``: whether a 28-byte axis block ends with the axis's analog input (the 21x3's)
+    or reserved bytes (the 18x2's, whose QZ is the same); default the model's
+    (:attr:`~galil.models.ModelSpec.record_axis_analog`), True for a QZ tuple alone.
 
     Raises:
         InvalidArgument: the model has no data record we know of.
@@ -200,7 +212,8 @@ def record_dtype(
     if qz is None:
         name = model.name if isinstance(model, ModelSpec) else str(model)
         raise InvalidArgument(f"{name} has no binary data record layout")
-    analog = model.record_axis_analog if isinstance(model, ModelSpec) else True
+    if analog is None:
+        analog = model.record_axis_analog if isinstance(model, ModelSpec) else True
     return _record_dtype(tuple(qz), axes, letters, analog)
 
 
@@ -247,11 +260,14 @@ def _size(fields: list[tuple[Any, ...]]) -> int:
     return np.dtype(fields).itemsize
 
 
-def decode_record(data: bytes, model: ModelSpec | tuple[int, int, int, int]) -> np.void:
+def decode_record(
+    data: bytes, model: ModelSpec | tuple[int, int, int, int], *, analog: bool | None = None
+) -> np.void:
     """Decode one record into a structured scalar (``rec["A"]["position"]``).
 
     The axis blocks present are read from the header (byte 1, bit n = axis n), so a ``QR``
-    limited to some axes decodes too, with its blocks named by their letters.
+    limited to some axes decodes too, with its blocks named by their letters. ``analog``: as
+    :func:`record_dtype`.
 
     Raises:
         ProtocolError: the size disagrees with the header or the layout.
@@ -262,7 +278,7 @@ def decode_record(data: bytes, model: ModelSpec | tuple[int, int, int, int]) -> 
     if size != len(data):
         raise ProtocolError(f"record of {len(data)} bytes but its header says {size}")
     letters = "".join(AXIS_LETTERS[i] for i in range(8) if data[1] >> i & 1)
-    dtype = record_dtype(model, axes=len(letters), letters=letters)
+    dtype = record_dtype(model, axes=len(letters), letters=letters, analog=analog)
     if dtype.itemsize != len(data):
         raise ProtocolError(f"record of {len(data)} bytes, the layout wants {dtype.itemsize}")
     record: np.void = np.frombuffer(data, dtype=dtype)[0]
@@ -270,9 +286,13 @@ def decode_record(data: bytes, model: ModelSpec | tuple[int, int, int, int]) -> 
 
 
 def decode_records(
-    data: bytes | bytearray | memoryview, model: ModelSpec | tuple[int, int, int, int]
+    data: bytes | bytearray | memoryview,
+    model: ModelSpec | tuple[int, int, int, int],
+    *,
+    analog: bool | None = None,
 ) -> np.ndarray[Any, np.dtype[Any]]:
-    """Decode records laid end to end (a ``DR`` stream's bytes, whole records) in one pass.
+    """Decode records laid end to end (a ``DR`` stream's bytes, whole records) in one pass;
+    ``analog`` as :func:`record_dtype`.
 
     Every header is checked (at once, as an array) against the first one: a stream's records
     all have the same axis blocks. The result is a structured array viewing ``data``, nothing
@@ -284,13 +304,13 @@ def decode_records(
     """
     raw = np.frombuffer(data, dtype=np.uint8)
     if raw.size == 0:
-        return np.frombuffer(b"", dtype=record_dtype(model))
+        return np.frombuffer(b"", dtype=record_dtype(model, analog=analog))
     if raw.size < 4 or not raw[0] & 0x80:
         raise ProtocolError("not a data record: missing header")
     size = int(raw[2]) | int(raw[3]) << 8
     mask = int(raw[1])
     letters = "".join(AXIS_LETTERS[i] for i in range(8) if mask >> i & 1)
-    dtype = record_dtype(model, axes=len(letters), letters=letters)
+    dtype = record_dtype(model, axes=len(letters), letters=letters, analog=analog)
     if dtype.itemsize != size:
         raise ProtocolError(f"record header says {size} bytes, the layout wants {dtype.itemsize}")
     if raw.size % size:
@@ -308,7 +328,9 @@ def decode_records(
 
 
 def record_to_dict(record: np.void) -> dict[str, Any]:
-    """Turn a decoded record into plain Python values (nested dicts per axis)."""
+    """Turn a decoded record into plain Python values (nested dicts per axis), raw as the
+    record holds them: ``velocity`` is 64 times ``TV`` (:data:`RECORD_VELOCITY_SCALE`;
+    :func:`decode_fields` gives counts/s)."""
     out: dict[str, Any] = {}
     for name in record.dtype.names or ():
         value = record[name]
@@ -729,7 +751,7 @@ def _axis_fields(block: np.void) -> AxisFields:
         reference=value.get("reference", 0),
         position=value.get("position", 0),
         error=value.get("error", 0),
-        velocity=value.get("velocity", 0) / 64,
+        velocity=value.get("velocity", 0) / RECORD_VELOCITY_SCALE,
         torque=value.get("torque", 0),
         aux_position=value.get("aux_position", 0),
         stop_code=value.get("stop_code", 0),

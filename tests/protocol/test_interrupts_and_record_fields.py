@@ -175,6 +175,7 @@ def test_program_array_and_capture_builders() -> None:
     assert c.da("pos", "vel").text == "DA pos[],vel[]"
     assert c.ra("a", "b", model=MODEL).text == "RA a[],b[]"
     assert c.rd("_RPA", "_TEB", "_TI0", model=MODEL).text == "RD _RPA,_TEB,_TI0"
+    assert c.rd("_TTA", "TIME", model=MODEL).text == "RD _TTA,TIME"  # (as the simulator's)
     assert c.rc(2, 500, model=MODEL).text == "RC 1,500"
     assert c.rc(256).text == "RC 8"
     assert c.rc(0).text == "RC 0"
@@ -194,7 +195,8 @@ def test_program_array_and_capture_builders() -> None:
         lambda: c.rc(2, 0, model=MODEL),
         lambda: c.rd("_XXA", model=MODEL),
         lambda: c.rd("_RPE", model=MODEL),  # no axis E on a DMC-4040
-        lambda: c.rd("TIME", model=MODEL),
+        lambda: c.rd("_TI", model=MODEL),  # the bank is given: _TI0 (decision 0097)
+        lambda: c.rd("_SHA", model=MODEL),  # listed by the old manuals only (0097)
         lambda: c.rd(*(["_TPA"] * 9), model=MODEL),
         lambda: c.ra(model=MODEL),
         lambda: c.dm("arr", 0, model=MODEL),

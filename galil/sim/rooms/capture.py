@@ -7,13 +7,17 @@ are read in the servo loop at their exact samples, the first one in the sample `
 (after the rest of its command line), so a recording of ``_RPA`` holds exactly what the motion
 engine commanded. ``_RC`` is 1 while recording, ``_RD`` the index of the next element.
 
-Refusals: ``RC`` while recording (TC 80), without arrays or sources or with fewer arrays than
-sources (TC 81), an array ``RA`` names that does not exist (TC 82), ``m`` larger than the
-smallest array (TC 84), ``n`` outside the model's ``record_exponents`` (TC 6).
+``RD`` takes the sources the library's ``record_source`` takes (decision 0097; a source it
+refuses is TC 1, unsourced). Refusals: ``RC`` while recording (TC 80), without arrays or
+sources or with fewer arrays than sources (TC 81), an array ``RA`` names that does not exist
+(TC 82), ``m`` larger than the smallest array (TC 84), ``n`` outside the model's
+``record_exponents`` (TC 6).
 """
 
 from __future__ import annotations
 
+from galil.errors import InvalidArgument
+from galil.protocol.commands import record_source
 from galil.sim.machine import Machine, Room
 from galil.sim.parse import Refused, split_fields
 from galil.sim.registry import handler, operand
@@ -67,7 +71,11 @@ class Capture(Room):
         if not sources or len(sources) > self.machine.spec.record_arrays:
             raise Refused(6, "RD takes 1 to 8 sources")
         for s in sources:
-            self.machine.interp.lookup(s)  # an unknown operand is refused now
+            try:  # the library's own table of RD sources (decision 0097)
+                record_source(s, model=self.machine.spec)
+            except InvalidArgument as exc:  # (TC 1 for a source RD refuses: unsourced)
+                raise Refused(1, str(exc)) from None
+            self.machine.interp.lookup(s)  # an operand the simulator lacks is refused now
         self.sources = sources
         return ""
 

@@ -98,6 +98,12 @@ class Reports(Room):
     def velocity(self, ax: Axis) -> float:
         return round(ax.m.velocity)
 
+    @operand("TT", kind=OperandKind.AXIS)
+    def torque(self, ax: Axis) -> float:
+        """``_TT``: the torque command, 0: the simulator models no amplifier or load (its data
+        record's torque is 0 too; unsourced as a model of a controller)."""
+        return 0.0
+
     @operand("SC", kind=OperandKind.AXIS)
     def stop_code(self, ax: Axis) -> float:
         return int(ax.m.profiler.stop_code)
