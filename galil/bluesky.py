@@ -70,6 +70,7 @@ from galil.aio import AsyncAxis, AsyncController, AsyncMoveHandle, AsyncRecordSt
 from galil.aio import connect as aio_connect
 from galil.aio._motion import Starting
 from galil.aio._worker import shielded
+from galil.axis import Axis, user_units
 from galil.contour import ContourResult, ContourStream
 from galil.controller import Controller
 from galil.errors import (
@@ -135,7 +136,11 @@ async def _acquire(address: str, mock: bool) -> AsyncController:
         return await asyncio.shield(entry.connecting)
     except BaseException:
         entry.users -= 1
-        if entry.connecting.done() and _shared.get(key) is entry:
+        if entry.users == 0 and not entry.connecting.done():
+            # Nobody waits for it any more (a connect's timeout, a cancellation): cancelled,
+            # galil.aio.connect closes the connection should it still be made.
+            entry.connecting.cancel()
+        if _shared.get(key) is entry and (entry.connecting.done() or entry.users == 0):
             del _shared[key]
         raise
 
@@ -205,8 +210,23 @@ class _GalilConnector(DeviceConnector):
         self.controller = controller
 
     async def connect_real(self, device: Device, timeout: float, force_reconnect: bool) -> None:
+        """Connect (``timeout`` s at most for the controller) then the signals.
+
+        Raises:
+            GalilTimeoutError: no connection within ``timeout`` (the attempt is given up:
+                a connection made after it is closed).
+        """
         assert isinstance(device, _GalilDevice)
-        await asyncio.wait_for(self._attach(device, mock=False), timeout)
+        try:
+            await asyncio.wait_for(self._attach(device, mock=False), timeout)
+        except asyncio.TimeoutError as exc:
+            if isinstance(exc, GalilError):  # (the link's own, from inside)
+                raise
+            raise GalilTimeoutError(
+                f"{device.name or type(device).__name__}: no connection to the controller at "
+                f"{self.address} within {timeout:g} s (connect(timeout=...)): the link did "
+                "not open or the controller did not answer; the attempt was given up"
+            ) from None
         await super().connect_real(device, timeout, force_reconnect)
 
     async def connect_mock(self, device: Device, mock: DeviceMock[Any]) -> None:
@@ -1055,6 +1075,7 @@ class _Flight:
     """One fly scan's state from prepare to collect."""
 
     stream: ContourStream
+    axes: dict[str, Axis]  # the contour's axes (a refusal in counts adds their units)
     record_period: int
     starting: Starting | None = None  # the contour's start on a worker (what a stop refuses)
     run: asyncio.Task[ContourResult] | None = None  # the contour, then its records closed
@@ -1062,41 +1083,47 @@ class _Flight:
     start_sample: int = 0
     start_time: float = 0.0
     stopped: str = ""  # who stopped it (stop(), a pause ...), once one did
+    unstaged: bool = False  # unstage() stopped it: the plan ended first (complete() returns)
     result: ContourResult | None = None
     points: dict[str, npt.NDArray[Any]] = field(default_factory=dict)
 
 
 def _build_stream(
     controller: Controller, letters: str, path: object, dt: int
-) -> tuple[ContourStream, dict[str, Profile]]:
+) -> tuple[ContourStream, dict[str, Axis]]:
     """Worker side: the stream ``Controller.contour`` would run, checked and predicted, on the
-    controller's motion tracker (:func:`_fly` runs it as ``Controller.contour`` does)."""
+    controller's motion tracker (:func:`_fly` runs it as ``Controller.contour`` does), and
+    its axes. A refusal in counts says the user's units too, as ``Controller.contour``'s
+    (decision 0063)."""
     chosen = [controller.axis(a) for a in letters]
+    axes = {a.letter: a for a in chosen}
     counts = path_to_counts(path, [a.scale for a in chosen], letters)
     tracker = controller.tracker
-    stream = ContourStream(
-        controller.link,
-        letters,
-        counts,
-        dt=dt,
-        display={a.letter: a.display for a in chosen},
-        byte_rate=controller.link.byte_rate,
-        followers=tracker.followers(letters),
-        tracker=tracker,
-    )
-    stream.check()
-    with held(tracker):  # (a plan: the flight reads the state again before CM)
-        stream.prepare()
-    return stream, dict(stream.profiles)
+    with user_units(axes):
+        stream = ContourStream(
+            controller.link,
+            letters,
+            counts,
+            dt=dt,
+            display={a.letter: a.display for a in chosen},
+            byte_rate=controller.link.byte_rate,
+            followers=tracker.followers(letters),
+            tracker=tracker,
+        )
+        stream.check()
+        with held(tracker):  # (a plan: the flight reads the state again before CM)
+            stream.prepare()
+    return stream, axes
 
 
-def _fly(stream: ContourStream) -> ContourResult:
+def _fly(stream: ContourStream, axes: Mapping[str, Axis]) -> ContourResult:
     """Worker side: the flight, as ``Controller.contour`` runs a contour (decisions 0023,
     0024): the state read again and ``CM`` under the tracker's lock, so another thread's
     motion takes turns with it (the axes may have moved since ``prepare()``), and a
     :class:`~galil.motion.StopWatch` open while it streams, so ``stop()``, ``abort()`` and
     ``Controller.close()`` reach it (``ST``, and no ``CD`` after it)."""
-    return stream.run()
+    with user_units(axes):
+        return stream.run()
 
 
 class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, Stageable):
@@ -1111,8 +1138,10 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
     the RunEngine pauses (``pause()``, so also before an abort or a halt of the paused
     run), when a plan that staged the flyer ends in any way (``unstage()``), when bluesky
     collects a flyer a failed, aborted or halted run left flying (``collect()`` before
-    ``complete()``), on ``stop()``, and on the next ``prepare()`` or ``stage()``. Its
-    ``complete()`` then fails with a :class:`~galil.errors.MotionError` saying so.
+    ``complete()``), on ``stop()``, on ``disconnect()``, and on the next ``prepare()`` or
+    ``stage()``. Its ``complete()`` then fails with a :class:`~galil.errors.MotionError`
+    saying so; but for ``unstage()``: the plan is over (an abort, a stop or a failure says
+    how), and ``complete()`` returns without data.
 
     Args:
         address: the controller's address (shared with the motors on it).
@@ -1162,6 +1191,11 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
         """The contour axes (letters, after ``connect()``)."""
         return self._letters or self._axes_given
 
+    @property
+    def _called(self) -> str:
+        """The device's name in a message."""
+        return self.name or "the flyer"
+
     def _stream_name(self) -> str:
         return self.name or "contour"
 
@@ -1182,15 +1216,19 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
         if self._flight is not None:
             await self._end_flight(self._flight, "a new prepare()")
             self._flight = None
-        stream, _ = await c.run(_build_stream, c.sync, self._letters, value.path, value.dt)
+        stream, axes = await c.run(_build_stream, c.sync, self._letters, value.path, value.dt)
         period = value.record_period or (1 << value.dt)
-        self._flight = _Flight(stream, period)
+        self._flight = _Flight(stream, axes, period)
 
     @property
     def predicted(self) -> dict[str, Profile]:
-        """The predicted profile per axis of the prepared path (in the axes' units)."""
+        """The predicted profile per axis of the prepared path (in the axes' units).
+
+        Raises:
+            InvalidArgument: no path was prepared.
+        """
         if self._flight is None:
-            raise RuntimeError(f"{self.name}: prepare() first")
+            raise InvalidArgument(f"{self._called}: no path prepared: prepare() one first")
         return dict(self._flight.stream.profiles)
 
     @AsyncStatus.wrap
@@ -1201,10 +1239,18 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
         (they may have moved since ``prepare()``) and checked, and motion from other threads
         takes turns with its start; ``stop()``, a stop through the controller and ``close()``
         stop it.
+
+        Raises:
+            InvalidArgument: no path prepared, or this one kicked off already.
         """
         flight = self._flight
-        if flight is None or flight.run is not None:
-            raise RuntimeError(f"{self.name}: prepare() must come before kickoff()")
+        if flight is None:
+            raise InvalidArgument(f"{self._called}: prepare() must come before kickoff()")
+        if flight.run is not None:
+            raise InvalidArgument(
+                f"{self._called}: this path was kicked off already (a prepared path flies "
+                "once): prepare() it again for another flight"
+            )
         c = self.controller
         records = await _recorder(c, flight.record_period)
         try:
@@ -1236,7 +1282,7 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
         a stop refuses what it has not started yet (:class:`~galil.aio._motion.Starting`)."""
         starting = flight.starting
         assert starting is not None
-        future = c.worker.submit(starting.run, functools.partial(_fly, flight.stream))
+        future = c.worker.submit(starting.run, functools.partial(_fly, flight.stream, flight.axes))
         try:
             return await shielded(future)
         except asyncio.CancelledError:  # (complete()'s status cancelled, the loop's end)
@@ -1275,19 +1321,25 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
         """Wait for the end of the path, stop the records and line them up with the
         prediction.
 
+        A flight that ``unstage()`` stopped returns without data: the plan that staged the
+        flyer ended first (``RE.abort()``, ``RE.stop()``, a failure), and its end says how.
+
         Raises:
+            InvalidArgument: no ``kickoff()`` before it.
             MotionError: the flight was stopped (``stop()``, a pause ...) before its end.
         """
         flight = self._flight
         if flight is None or flight.run is None:
-            raise RuntimeError(f"{self.name}: kickoff() must come before complete()")
+            raise InvalidArgument(f"{self._called}: kickoff() must come before complete()")
         try:
             flight.result = await flight.run
         except Exception as exc:
             if not flight.stopped:
                 raise
+            if flight.unstaged:
+                return  # (the plan ended first: its abort, stop or failure says how)
             raise MotionError(
-                f"{self.name or 'the flyer'}: the flight on {self._letters} was stopped "
+                f"{self._called}: the flight on {self._letters} was stopped "
                 f"({flight.stopped}) before the end of its path",
                 axis=self._letters[0],
                 model=self.controller.model.name if self._live else None,
@@ -1372,8 +1424,10 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
         """At the end of a plan that staged the flyer (bluesky unstages it however the plan
         ends: a failure, an abort, a halt): a flight still in progress is stopped (``ST``)
         and its records closed."""
-        if self._flight is not None:
-            await self._end_flight(self._flight, "unstage()")
+        flight = self._flight
+        if flight is not None:
+            flight.unstaged = not flight.stopped
+            await self._end_flight(flight, "unstage()")
 
 
 async def _at_rest(handle: AsyncMoveHandle) -> None:

@@ -7,8 +7,10 @@ short with high speeds so the whole file takes a few seconds.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import re
+import socket
 import threading
 import time
 from collections.abc import Callable, Coroutine, Iterator
@@ -1000,3 +1002,128 @@ def test_release_all_during_a_set_stops_the_move_without_a_warning(
     assert "was stopped (release_all())" in str(error)
     assert not [r for r in caplog.records if "mid-motion" in r.getMessage()]
     assert sim.feed(b"MG _BGA\r").split(b"\r")[0].strip() == b"0.0000"
+
+
+# -- a connect() that times out says so, and gives its attempt up -------------------------------
+def test_a_connect_to_a_silent_controller_times_out_naming_its_address() -> None:
+    # (a bare TimeoutError(''), and the attempt went on: the next connect() joined it)
+    accepted: list[socket.socket] = []
+    done = threading.Event()
+    with socket.create_server(("127.0.0.1", 0)) as listener:
+        port = listener.getsockname()[1]
+        listener.settimeout(0.05)
+
+        def accept() -> None:
+            while not done.is_set():
+                with contextlib.suppress(TimeoutError):
+                    accepted.append(listener.accept()[0])
+
+        acceptor = threading.Thread(target=accept)
+        acceptor.start()
+        address = f"tcp://127.0.0.1:{port}"
+        z = GalilMotor(address, "A", name="z")
+
+        async def body() -> list[str]:
+            said = []
+            for _ in range(2):
+                with pytest.raises(galil.GalilTimeoutError) as info:
+                    await z.connect(timeout=0.2)
+                said.append(str(info.value))
+            return said
+
+        try:
+            said = asyncio.run(body())
+        finally:
+            done.set()
+            acceptor.join(5)
+        expected = f"z: no connection to the controller at {address} within 0.2 s"
+        assert all(text.startswith(expected) for text in said)
+        assert len(accepted) == 2  # the second connect() made an attempt of its own
+        for conn in accepted:  # each given up and closed by its worker
+            conn.settimeout(20)
+            with conn:
+                while conn.recv(1024):
+                    pass
+
+
+# -- the flyer's call order, and its refusals in the user's unit ------------------------------
+def test_the_flyers_calls_out_of_order_are_refused_saying_which_comes_first(
+    engine: RunEngine,
+) -> None:
+    # (bare RuntimeErrors; a second kickoff() said "prepare() must come before kickoff()")
+    flyer = mock_flyer("tcp://127.0.0.1:55")
+
+    async def body() -> list[str]:
+        said = []
+        for call in (flyer.complete, flyer.kickoff, lambda: flyer.predicted):
+            with pytest.raises(galil.InvalidArgument) as info:
+                await call()
+            said.append(str(info.value))
+        await _fly(flyer, np.linspace(20, 640, 32), 3)
+        with pytest.raises(galil.InvalidArgument) as info:
+            await flyer.kickoff()
+        said.append(str(info.value))
+        assert await _completed(flyer) is None
+        return said
+
+    assert in_loop(body()) == [
+        "fly: kickoff() must come before complete()",
+        "fly: prepare() must come before kickoff()",
+        "fly: no path prepared: prepare() one first",
+        "fly: this path was kicked off already (a prepared path flies once): prepare() it "
+        "again for another flight",
+    ]
+
+
+def test_a_flyer_path_beyond_a_soft_limit_is_refused_in_the_users_unit_too(
+    engine: RunEngine,
+) -> None:
+    # (in counts only: Controller.contour's refusal adds the user's unit, decision 0063)
+    x = mock_motor("tcp://127.0.0.1:56")
+    in_loop(x.axis.set_soft_limits((-5 * mm, 5 * mm)))
+    flyer = GalilContourFlyer("tcp://127.0.0.1:56", "A", name="fly")
+    in_loop(flyer.connect(mock=True))
+    path = ContourPath(np.linspace(0.5, 8, 16) * mm, dt=3)
+
+    async def prepare() -> None:
+        await flyer.prepare(path)
+
+    with pytest.raises(galil.LimitError, match=r"in user units: reaches [\d.]+ mm, limit 5 mm"):
+        in_loop(prepare())
+
+
+# -- an abort or a stop of a staged fly scan ends as it does unstaged -----------------------------
+@pytest.mark.parametrize(("interrupt", "status"), [("abort", "abort"), ("stop", "success")])
+def test_an_abort_or_a_stop_of_a_staged_fly_scan_is_no_failure(
+    server: SimTcpServer, engine: RunEngine, docs: Docs, interrupt: str, status: str
+) -> None:
+    # (unstage() stopped the flight, complete() failed with MotionError: exit_status 'fail')
+    flyer = tcp_flyer(server.url)
+    completing = threading.Event()
+    engine.msg_hook = lambda msg: completing.set() if msg.command == "complete" else None
+
+    def interrupt_when_completing() -> None:
+        if completing.wait(10):
+            getattr(engine, interrupt)()
+
+    interrupter = threading.Thread(target=interrupt_when_completing)
+    interrupter.start()
+    staged = bpp.stage_decorator([flyer])(flight)
+    with contextlib.suppress(RunEngineInterrupted, FailedStatus):  # (told by the stop doc)
+        engine(staged(flyer, LONG, bps.null))
+    interrupter.join(10)
+    stop = next(d for name, d in docs if name == "stop")
+    assert stop["exit_status"] == status
+    assert in_loop(_stopped_at(flyer)) < 5
+
+
+def test_the_flyers_disconnect_during_a_flight_stops_it(engine: RunEngine) -> None:
+    # (a motor on the address kept the controller open: the contour flew on)
+    address = "tcp://127.0.0.1:57"
+    x = mock_motor(address)  # (keeps the controller open)
+    flyer = mock_flyer(address)
+    sim = sim_of(x.controller.sync)
+    in_loop(_fly(flyer, np.cumsum(np.full(3000, 20.0)), 2))  # six buffers
+    in_loop(flyer.disconnect())
+    assert "ST A" in [text for _, text in sim.command_log]
+    assert in_loop(x.axis.moving()) is False
