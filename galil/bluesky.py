@@ -14,9 +14,10 @@ collects the controller's data records as the scan's data, the prediction alongs
 
 Devices on the same address share one :class:`~galil.aio.AsyncController` per event loop, and
 its axes' scales: a device whose scale differs from the one an axis already has is refused at
-``connect()``. :meth:`GalilMotor.disconnect` lets go of the controller (the last one closes
-it); ``connect()`` after it, or after :func:`release_all`, connects again. Everything goes
-through :mod:`galil.aio`, so the units, predictions and checks are the sync core's.
+``connect()``. :meth:`GalilMotor.disconnect` stops the moves of its ``set()`` calls in
+progress and lets go of the controller (the last one closes it); ``connect()`` after it, or
+after :func:`release_all`, connects again. Everything goes through :mod:`galil.aio`, so the
+units, predictions and checks are the sync core's.
 """
 
 from __future__ import annotations
@@ -558,10 +559,13 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
     Signals (in the axis's unit): ``readback`` (``_TP``, read under the device's name, with
     ``units`` and ``precision`` in ``describe()``), ``setpoint`` (the target of the ``set()``
     in progress, else the controller's commanded position ``_RP``: where the last move,
-    made here or not, ended), and the configuration ``velocity`` (``SP``) and
-    ``acceleration`` (``AC``). ``readback`` and ``setpoint`` are read again every
-    :data:`POLL_PERIOD` seconds while something is subscribed to them (``bps.monitor``,
-    ``observe_value``), and on every read.
+    made here or not, ended), and the configuration ``velocity`` (``SP``), ``acceleration``
+    (``AC``) and ``deceleration`` (``DC``), which a plan can set (``bps.mv(m.velocity, 5)``;
+    checked by the axis's setters, in the motor's unit per second or second squared). Every
+    read reads the controller, a subscriber's first value too; ``readback`` and ``setpoint``
+    then every :data:`POLL_PERIOD` seconds while something is subscribed to them
+    (``bps.monitor``, ``observe_value``). In mock mode they read the simulator:
+    ``set_mock_value`` on them raises :class:`~galil.errors.InvalidArgument`.
 
     Raises:
         InvalidArgument: a bad argument (at construction); a scale other than the one
