@@ -14,9 +14,10 @@ collects the controller's data records as the scan's data, the prediction alongs
 
 Devices on the same address share one :class:`~galil.aio.AsyncController` per event loop, and
 its axes' scales: a device whose scale differs from the one an axis already has is refused at
-``connect()``. :meth:`GalilMotor.disconnect` lets go of the controller (the last one closes
-it); ``connect()`` after it, or after :func:`release_all`, connects again. Everything goes
-through :mod:`galil.aio`, so the units, predictions and checks are the sync core's.
+``connect()``. :meth:`GalilMotor.disconnect` stops the moves of its ``set()`` calls in
+progress and lets go of the controller (the last one closes it); ``connect()`` after it, or
+after :func:`release_all`, connects again. Everything goes through :mod:`galil.aio`, so the
+units, predictions and checks are the sync core's.
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ import functools
 import math
 import numbers
 import time
-from collections.abc import AsyncIterator, Callable, Mapping
+import weakref
+from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -40,6 +42,7 @@ from bluesky.protocols import (
     Location,
     Pausable,
     Preparable,
+    Reading,
     Stageable,
     Stoppable,
 )
@@ -50,11 +53,13 @@ from ophyd_async.core import (
     DEFAULT_TIMEOUT,
     AsyncStatus,
     CalculatableTimeout,
+    Callback,
     Device,
     DeviceConnector,
     DeviceMock,
     NotConnectedError,
     SignalR,
+    SignalRW,
     SoftSignalBackend,
     StandardReadable,
     WatchableAsyncStatus,
@@ -66,9 +71,17 @@ from galil.aio import AsyncAxis, AsyncController, AsyncMoveHandle, AsyncRecordSt
 from galil.aio import connect as aio_connect
 from galil.aio._motion import Starting
 from galil.aio._worker import shielded
+from galil.axis import Axis, user_units
 from galil.contour import ContourResult, ContourStream
 from galil.controller import Controller
-from galil.errors import GalilError, GalilTimeoutError, InvalidArgument, MotionError, decimal_hint
+from galil.errors import (
+    GalilError,
+    GalilTimeoutError,
+    InvalidArgument,
+    LimitError,
+    MotionError,
+    decimal_hint,
+)
 from galil.link import check_count, check_flag, check_seconds, check_wait_timeout
 from galil.motion import held
 from galil.predict import Profile
@@ -100,6 +113,7 @@ class _Shared:
 
 
 _shared: dict[tuple[asyncio.AbstractEventLoop, str], _Shared] = {}
+_motors: weakref.WeakSet[GalilMotor] = weakref.WeakSet()  # (release_all() stops their moves)
 
 
 def _mock_address(address: str) -> str:
@@ -123,7 +137,11 @@ async def _acquire(address: str, mock: bool) -> AsyncController:
         return await asyncio.shield(entry.connecting)
     except BaseException:
         entry.users -= 1
-        if entry.connecting.done() and _shared.get(key) is entry:
+        if entry.users == 0 and not entry.connecting.done():
+            # Nobody waits for it any more (a connect's timeout, a cancellation): cancelled,
+            # galil.aio.connect closes the connection should it still be made.
+            entry.connecting.cancel()
+        if _shared.get(key) is entry and (entry.connecting.done() or entry.users == 0):
             del _shared[key]
         raise
 
@@ -152,8 +170,18 @@ async def _release(controller: AsyncController) -> None:
 async def release_all() -> None:
     """Close every controller the devices of this event loop share (end of a session).
 
-    A device's ``connect()`` after it connects again (a new connection)."""
+    The moves of motors' ``set()`` calls in progress are stopped first, and their statuses
+    end (failed, saying so) once the axes are at rest. A device's ``connect()`` after it
+    connects again (a new connection)."""
     loop = asyncio.get_running_loop()
+    closing = [
+        entry.connecting.result()
+        for key, entry in _shared.items()
+        if key[0] is loop and entry.connecting.done() and not _unusable(entry.connecting)
+    ]
+    for motor in list(_motors):
+        if any(motor._connector.controller is c for c in closing):
+            await motor._end_moves("release_all()")
     for key, entry in list(_shared.items()):
         if key[0] is not loop:
             continue
@@ -183,8 +211,23 @@ class _GalilConnector(DeviceConnector):
         self.controller = controller
 
     async def connect_real(self, device: Device, timeout: float, force_reconnect: bool) -> None:
+        """Connect (``timeout`` s at most for the controller) then the signals.
+
+        Raises:
+            GalilTimeoutError: no connection within ``timeout`` (the attempt is given up:
+                a connection made after it is closed).
+        """
         assert isinstance(device, _GalilDevice)
-        await asyncio.wait_for(self._attach(device, mock=False), timeout)
+        try:
+            await asyncio.wait_for(self._attach(device, mock=False), timeout)
+        except asyncio.TimeoutError as exc:
+            if isinstance(exc, GalilError):  # (the link's own, from inside)
+                raise
+            raise GalilTimeoutError(
+                f"{device.name or type(device).__name__}: no connection to the controller at "
+                f"{self.address} within {timeout:g} s (connect(timeout=...)): the link did "
+                "not open or the controller did not answer; the attempt was given up"
+            ) from None
         await super().connect_real(device, timeout, force_reconnect)
 
     async def connect_mock(self, device: Device, mock: DeviceMock[Any]) -> None:
@@ -325,31 +368,123 @@ def _unit_and_precision(scale: Scale | None) -> tuple[str, int]:
 
 
 class _ControllerBackend(SoftSignalBackend[float]):
-    """A soft signal whose value is read from the controller (its getter), and whose
-    ``source`` names what is read (``galil://<address>/_TPA``), not ``soft://``."""
+    """A signal whose value is read from the controller (``getter``) on every read, and
+    whose ``source`` names what is read (``galil://<address>/_TPA``), not ``soft://``.
 
-    def __init__(self, source: Callable[[], str], **kwargs: Any) -> None:
+    A subscriber's first value is read from the controller too (a soft backend would give
+    it the value cached at the last read: 0.0 before any), then one every ``poll`` seconds
+    while it is subscribed (none without ``poll``). With a ``setter`` the signal is
+    writable: ``put`` sets the controller, then reads it back. Nothing else sets the value:
+    ``set_mock_value`` (mock mode is a simulator, read as the controller) is refused.
+    """
+
+    def __init__(
+        self,
+        source: Callable[[], str],
+        getter: Callable[[], Awaitable[float]],
+        *,
+        setter: Callable[[float], Awaitable[None]] | None = None,
+        poll: float | None = None,
+        units: str,
+        precision: int | None = None,
+    ) -> None:
         self._source = source
-        super().__init__(float, 0.0, **kwargs)
+        self._read = getter
+        self._write = setter
+        self._period = poll
+        self._follower: asyncio.Task[None] | None = None
+        self._written: float | None = None
+        super().__init__(float, 0.0, units=units, precision=precision)
 
     def source(self, name: str, read: bool) -> str:
         return self._source()
 
+    def set_value(self, value: float) -> None:
+        """Refused once constructed: the value is the controller's (``set_mock_value``)."""
+        if getattr(self, "reading", None) is None:  # (the soft backend's own first value)
+            super().set_value(value)
+            return
+        raise InvalidArgument(
+            f"{self._source()} is read from the controller (in mock mode an in-process "
+            "simulator): set_mock_value cannot set it; move or set the simulated axis "
+            "instead (the motor's set(), its velocity signal, or motor.axis)"
+        )
+
+    def show(self, value: float) -> None:
+        """Give the subscribers ``value`` (what the controller holds)."""
+        SoftSignalBackend.set_value(self, value)
+
+    async def _fresh(self) -> None:
+        self.show(await self._read())
+
+    async def get_reading(self) -> Reading[float]:
+        await self._fresh()
+        return self.reading
+
+    async def get_value(self) -> float:
+        await self._fresh()
+        return self.reading["value"]
+
+    async def get_setpoint(self) -> float:
+        return self._written if self._written is not None else await self.get_value()
+
+    async def put(self, value: float | None) -> None:
+        if self._write is None:
+            raise InvalidArgument(f"{self._source()} is read-only")
+        if value is None:
+            raise InvalidArgument(f"{self._source()}: a value to set, not None")
+        await self._write(value)
+        self._written = float(value)
+        await self._fresh()
+
+    def set_callback(self, callback: Callback[Reading[float]] | None) -> None:
+        if callback is not None and self.callback is not None:
+            raise RuntimeError("Cannot set a callback when one is already set")
+        if self._follower is not None:
+            self._follower.cancel()
+            self._follower = None
+        self.callback = callback
+        if callback is not None:
+            self._follower = asyncio.get_running_loop().create_task(self._follow())
+
+    async def _follow(self) -> None:
+        """A subscription: the controller's value now, then every ``poll`` seconds (a read
+        that fails is tried again a poll later, as ophyd-async's polls are)."""
+        while True:
+            try:
+                await self._fresh()
+            except Exception:
+                pass
+            else:
+                if self._period is None:
+                    return
+            await asyncio.sleep(self._period or POLL_PERIOD)
+
 
 def _controller_signal(
     source: Callable[[], str],
-    getter: Callable[[], Any],
+    getter: Callable[[], Awaitable[float]],
     *,
     units: str,
     precision: int | None = None,
     poll: float | None = None,
-) -> tuple[SignalR[float], Callable[[float], None]]:
-    """A read-only signal read from the controller, and the function that pushes a value to
-    its subscribers; ``poll``: seconds between reads while something is subscribed."""
-    backend = _ControllerBackend(
-        source, units=units, precision=precision, getter=getter, poll_period=poll
-    )
-    return SignalR(backend=backend), backend.set_value
+) -> tuple[SignalR[float], _ControllerBackend]:
+    """A read-only signal read from the controller, and its backend (whose ``show`` gives
+    its subscribers a value); ``poll``: seconds between reads while something is
+    subscribed."""
+    backend = _ControllerBackend(source, getter, units=units, precision=precision, poll=poll)
+    return SignalR(backend=backend), backend
+
+
+def _setting_signal(
+    source: Callable[[], str],
+    getter: Callable[[], Awaitable[float]],
+    setter: Callable[[float], Awaitable[None]],
+    *,
+    units: str,
+) -> SignalRW[float]:
+    """A writable signal of a controller setting (``SP``, ``AC``, ``DC``)."""
+    return SignalRW(backend=_ControllerBackend(source, getter, setter=setter, units=units))
 
 
 # ------------------------------------------------------------------------------------ motor
@@ -398,6 +533,9 @@ class _Request:
 
     target: float | None = None  # the target, once the controller has taken the move
     stopped: bool | None = None  # the success flag of a stop() since the call
+    by: str = "stop(success=False)"  # what stopped it, when the status fails for a stop
+    handle: AsyncMoveHandle | None = None  # the move, once the controller has taken it
+    status: WatchableAsyncStatus[float] | None = None
 
 
 class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[float], Stoppable):
@@ -421,10 +559,13 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
     Signals (in the axis's unit): ``readback`` (``_TP``, read under the device's name, with
     ``units`` and ``precision`` in ``describe()``), ``setpoint`` (the target of the ``set()``
     in progress, else the controller's commanded position ``_RP``: where the last move,
-    made here or not, ended), and the configuration ``velocity`` (``SP``) and
-    ``acceleration`` (``AC``). ``readback`` and ``setpoint`` are read again every
-    :data:`POLL_PERIOD` seconds while something is subscribed to them (``bps.monitor``,
-    ``observe_value``), and on every read.
+    made here or not, ended), and the configuration ``velocity`` (``SP``), ``acceleration``
+    (``AC``) and ``deceleration`` (``DC``), which a plan can set (``bps.mv(m.velocity, 5)``;
+    checked by the axis's setters, in the motor's unit per second or second squared). Every
+    read reads the controller, a subscriber's first value too; ``readback`` and ``setpoint``
+    then every :data:`POLL_PERIOD` seconds while something is subscribed to them
+    (``bps.monitor``, ``observe_value``). In mock mode they read the simulator:
+    ``set_mock_value`` on them raises :class:`~galil.errors.InvalidArgument`.
 
     Raises:
         InvalidArgument: a bad argument (at construction); a scale other than the one
@@ -466,15 +607,18 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
                 poll=POLL_PERIOD,
             )
         with self.add_children_as_readables(Format.CONFIG_SIGNAL):
-            self.velocity, _ = _controller_signal(
-                self._source("SP"), self._read_speed, units=f"{unit}/s"
+            self.velocity = _setting_signal(
+                self._source("SP"), self._read_speed, self._set_speed, units=f"{unit}/s"
             )
-            self.acceleration, _ = _controller_signal(
-                self._source("AC"), self._read_accel, units=f"{unit}/s**2"
+            self.acceleration = _setting_signal(
+                self._source("AC"), self._read_accel, self._set_accel, units=f"{unit}/s**2"
+            )
+            self.deceleration = _setting_signal(
+                self._source("DC"), self._read_decel, self._set_decel, units=f"{unit}/s**2"
             )
         # Read from the controller, as an ophyd-async EPICS motor reads its setpoint PV: a
         # cached last target would be wrong at connect and after a move made elsewhere.
-        self.setpoint, self._show_setpoint = _controller_signal(
+        self.setpoint, self._setpoint_backend = _controller_signal(
             self._source("RP"),
             self._read_setpoint,
             units=unit,
@@ -499,6 +643,7 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         axis = controller.axis(self._letter)
         _claim_scale(axis, self._scale, self.name or "GalilMotor")
         self._axis = axis
+        _motors.add(self)
 
     @property
     def axis(self) -> AsyncAxis:
@@ -544,6 +689,34 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
     async def _read_accel(self) -> float:
         return self._rate(await self.axis.accel(), 2)
 
+    async def _read_decel(self) -> float:
+        return self._rate(await self.axis.decel(), 2)
+
+    def _rate_value(self, value: object, power: int, what: str) -> Any:
+        """A ``velocity``/``acceleration``/``deceleration`` signal's value (a number in the
+        motor's unit per second, or per second squared) as the axis's setter takes it; the
+        setter checks its range (nothing is sent before)."""
+        unit = self._unit + ("/s" if power == 1 else "/s**2")
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+            raise InvalidArgument(
+                f"{self.name}: {what} is a number (in {unit}), not {value!r:.60}"
+                f"{decimal_hint(value)}"
+            )
+        if not _finite(value):
+            raise InvalidArgument(f"{self.name}: {what} is a finite number, not {value!r:.40}")
+        if self._scale is None:
+            return float(value)
+        return get_registry().Quantity(float(value), self._scale.unit / get_registry().s ** power)
+
+    async def _set_speed(self, value: float) -> None:
+        await self.axis.set_speed(self._rate_value(value, 1, "velocity"))
+
+    async def _set_accel(self, value: float) -> None:
+        await self.axis.set_accel(self._rate_value(value, 2, "acceleration"))
+
+    async def _set_decel(self, value: float) -> None:
+        await self.axis.set_decel(self._rate_value(value, 2, "deceleration"))
+
     async def _read_setpoint(self) -> float:
         for request in reversed(self._requests):  # (the newest move the controller took)
             if request.target is not None:
@@ -560,14 +733,18 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         for ever; else a finite number of seconds >= 0, as every wait's (a bad one fails the
         status with :class:`~galil.errors.InvalidArgument` before anything is sent). A status
         that fails (a timeout, an error, a cancellation) leaves no motion: the axis is stopped
-        first (a timeout fails with :class:`~galil.errors.GalilTimeoutError` saying so). A
-        ``stop()`` at any point of the move, even before it has started, stops it; with
-        ``success=False`` the status then fails. A ``set()`` the controller refuses (the
-        axis is still moving) fails alone: the move in progress goes on as it was.
+        first, and the status fails once it is at rest (a timeout fails with
+        :class:`~galil.errors.GalilTimeoutError` saying so). A ``stop()`` at any point of the
+        move, even before it has started, stops it; with ``success=False`` the status then
+        fails (:class:`~galil.errors.MotionError`, once the axis is at rest), as it does when
+        :meth:`disconnect` or :func:`release_all` stops the move. A ``set()`` the controller
+        refuses (the axis is still moving) fails alone, with
+        :class:`~galil.errors.InvalidArgument`: the move in progress goes on as it was.
         """
         request = _Request()  # from the call on, not once the move's task runs: stop() counts
         self._requests.append(request)
-        return self._move(value, timeout, request)
+        request.status = self._move(value, timeout, request)
+        return request.status
 
     @WatchableAsyncStatus.wrap
     async def _move(
@@ -582,7 +759,11 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
                 async for update in self._moved(axis, target, float(value), initial, wait, request):
                     yield update
             if request.stopped is False:
-                raise RuntimeError(f"{self.name} was stopped")
+                raise MotionError(
+                    f"{self.name}: the move to {value:g} {self._unit} was stopped ({request.by})",
+                    axis=axis.letter,
+                    model=self.controller.model.name if self._live else None,
+                )
         finally:
             self._requests.remove(request)
 
@@ -597,9 +778,10 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
     ) -> AsyncIterator[WatcherUpdate[float]]:
         """The move of one ``set()``, once its arguments are checked: its progress, then the
         settling and the last update."""
-        handle = await axis.move_to(target)
+        handle = await self._begin(axis, target)
+        request.handle = handle
         request.target = value  # (taken: the setpoint is its target until it ends)
-        self._show_setpoint(value)
+        self._setpoint_backend.show(value)
         begun = self.controller.sync.link.clock()
         try:
             if request.stopped is not None:  # stop() came while the move was starting
@@ -609,15 +791,33 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
             await handle.wait()
         except GalilTimeoutError as exc:
             error = self._timed_out(exc, handle, value, wait, begun)  # (before the stop
-            await handle.stop_unless_done()  # changes the prediction); no motion outlives it
+            await _at_rest(handle)  # changes the prediction); no motion outlives it
             raise error from exc
         except BaseException:
-            await handle.stop_unless_done()
+            await _at_rest(handle)
             raise
         finally:
             request.target = None
+        if request.stopped is False:
+            return  # (it fails: no settling)
         await self._settle()
         yield self._update(await self.readback.get_value(), initial, value, 1.0, 0.0)
+
+    async def _begin(self, axis: AsyncAxis, target: Any) -> AsyncMoveHandle:
+        """``axis.move_to(target)``; refused because the axis is still moving, the error
+        says what a ``set()`` caller can do (the axis's own advice is a handle's)."""
+        try:
+            return await axis.move_to(target)
+        except InvalidArgument as exc:
+            if isinstance(exc, LimitError) or not await _still_moving(axis):
+                raise
+            raise InvalidArgument(
+                f"{self.name}: axis {axis.letter} is still moving (an earlier set() whose "
+                "status is not done, a stop still decelerating, or motion started outside "
+                "this device): wait for that status, or stop() the motor and set() again "
+                "once it is at rest",
+                model=exc.model,
+            ) from exc
 
     def _timed_out(
         self,
@@ -693,11 +893,33 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         return Location(setpoint=setpoint, readback=readback)
 
     async def stop(self, success: bool = True) -> None:
-        """Decelerate to a stop (``ST``); with ``success=False`` a move in progress fails."""
+        """Decelerate to a stop (``ST``); with ``success=False`` a move in progress fails
+        (:class:`~galil.errors.MotionError`)."""
         flag = check_flag(success, "success")
         for request in self._requests:
             request.stopped = flag
         await self.axis.stop()
+
+    async def disconnect(self) -> None:
+        """Stop the moves of the ``set()`` calls in progress and wait until they are at rest
+        (their statuses fail, saying so), then let go of the shared controller (closed when
+        its last device lets go); ``connect()`` connects again."""
+        await self._end_moves("disconnect()")
+        await super().disconnect()
+
+    async def _end_moves(self, why: str) -> None:
+        """Stop the moves of the ``set()`` calls in progress (those not begun never begin)
+        and wait for their statuses to end: failed, saying ``why``. No motion this device
+        started outlives its connection."""
+        requests = list(self._requests)
+        for request in requests:
+            request.stopped, request.by = False, why
+        for request in requests:
+            if request.handle is not None:
+                await request.handle.stop_unless_done()
+        tasks = [r.status.task for r in requests if r.status is not None]
+        if tasks:
+            await asyncio.wait(tasks)
 
 
 # ----------------------------------------------------------------------------------- flyer
@@ -861,6 +1083,7 @@ class _Flight:
     """One fly scan's state from prepare to collect."""
 
     stream: ContourStream
+    axes: dict[str, Axis]  # the contour's axes (a refusal in counts adds their units)
     record_period: int
     starting: Starting | None = None  # the contour's start on a worker (what a stop refuses)
     run: asyncio.Task[ContourResult] | None = None  # the contour, then its records closed
@@ -868,41 +1091,47 @@ class _Flight:
     start_sample: int = 0
     start_time: float = 0.0
     stopped: str = ""  # who stopped it (stop(), a pause ...), once one did
+    unstaged: bool = False  # unstage() stopped it: the plan ended first (complete() returns)
     result: ContourResult | None = None
     points: dict[str, npt.NDArray[Any]] = field(default_factory=dict)
 
 
 def _build_stream(
     controller: Controller, letters: str, path: object, dt: int
-) -> tuple[ContourStream, dict[str, Profile]]:
+) -> tuple[ContourStream, dict[str, Axis]]:
     """Worker side: the stream ``Controller.contour`` would run, checked and predicted, on the
-    controller's motion tracker (:func:`_fly` runs it as ``Controller.contour`` does)."""
+    controller's motion tracker (:func:`_fly` runs it as ``Controller.contour`` does), and
+    its axes. A refusal in counts says the user's units too, as ``Controller.contour``'s
+    (decision 0063)."""
     chosen = [controller.axis(a) for a in letters]
+    axes = {a.letter: a for a in chosen}
     counts = path_to_counts(path, [a.scale for a in chosen], letters)
     tracker = controller.tracker
-    stream = ContourStream(
-        controller.link,
-        letters,
-        counts,
-        dt=dt,
-        display={a.letter: a.display for a in chosen},
-        byte_rate=controller.link.byte_rate,
-        followers=tracker.followers(letters),
-        tracker=tracker,
-    )
-    stream.check()
-    with held(tracker):  # (a plan: the flight reads the state again before CM)
-        stream.prepare()
-    return stream, dict(stream.profiles)
+    with user_units(axes):
+        stream = ContourStream(
+            controller.link,
+            letters,
+            counts,
+            dt=dt,
+            display={a.letter: a.display for a in chosen},
+            byte_rate=controller.link.byte_rate,
+            followers=tracker.followers(letters),
+            tracker=tracker,
+        )
+        stream.check()
+        with held(tracker):  # (a plan: the flight reads the state again before CM)
+            stream.prepare()
+    return stream, axes
 
 
-def _fly(stream: ContourStream) -> ContourResult:
+def _fly(stream: ContourStream, axes: Mapping[str, Axis]) -> ContourResult:
     """Worker side: the flight, as ``Controller.contour`` runs a contour (decisions 0023,
     0024): the state read again and ``CM`` under the tracker's lock, so another thread's
     motion takes turns with it (the axes may have moved since ``prepare()``), and a
     :class:`~galil.motion.StopWatch` open while it streams, so ``stop()``, ``abort()`` and
     ``Controller.close()`` reach it (``ST``, and no ``CD`` after it)."""
-    return stream.run()
+    with user_units(axes):
+        return stream.run()
 
 
 class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, Stageable):
@@ -917,8 +1146,10 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
     the RunEngine pauses (``pause()``, so also before an abort or a halt of the paused
     run), when a plan that staged the flyer ends in any way (``unstage()``), when bluesky
     collects a flyer a failed, aborted or halted run left flying (``collect()`` before
-    ``complete()``), on ``stop()``, and on the next ``prepare()`` or ``stage()``. Its
-    ``complete()`` then fails with a :class:`~galil.errors.MotionError` saying so.
+    ``complete()``), on ``stop()``, on ``disconnect()``, and on the next ``prepare()`` or
+    ``stage()``. Its ``complete()`` then fails with a :class:`~galil.errors.MotionError`
+    saying so; but for ``unstage()``: the plan is over (an abort, a stop or a failure says
+    how), and ``complete()`` returns without data.
 
     Args:
         address: the controller's address (shared with the motors on it).
@@ -956,10 +1187,22 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
             _claim_scale(controller.axis(a), scale, self.name or "GalilContourFlyer")
         self._letters = letters
 
+    async def disconnect(self) -> None:
+        """End a flight in progress (stopped, its records closed; its ``complete()`` fails,
+        saying so), then let go of the shared controller."""
+        if self._flight is not None:
+            await self._end_flight(self._flight, "disconnect()")
+        await super().disconnect()
+
     @property
     def axes(self) -> str:
         """The contour axes (letters, after ``connect()``)."""
         return self._letters or self._axes_given
+
+    @property
+    def _called(self) -> str:
+        """The device's name in a message."""
+        return self.name or "the flyer"
 
     def _stream_name(self) -> str:
         return self.name or "contour"
@@ -981,15 +1224,19 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
         if self._flight is not None:
             await self._end_flight(self._flight, "a new prepare()")
             self._flight = None
-        stream, _ = await c.run(_build_stream, c.sync, self._letters, value.path, value.dt)
+        stream, axes = await c.run(_build_stream, c.sync, self._letters, value.path, value.dt)
         period = value.record_period or (1 << value.dt)
-        self._flight = _Flight(stream, period)
+        self._flight = _Flight(stream, axes, period)
 
     @property
     def predicted(self) -> dict[str, Profile]:
-        """The predicted profile per axis of the prepared path (in the axes' units)."""
+        """The predicted profile per axis of the prepared path (in the axes' units).
+
+        Raises:
+            InvalidArgument: no path was prepared.
+        """
         if self._flight is None:
-            raise RuntimeError(f"{self.name}: prepare() first")
+            raise InvalidArgument(f"{self._called}: no path prepared: prepare() one first")
         return dict(self._flight.stream.profiles)
 
     @AsyncStatus.wrap
@@ -1000,10 +1247,18 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
         (they may have moved since ``prepare()``) and checked, and motion from other threads
         takes turns with its start; ``stop()``, a stop through the controller and ``close()``
         stop it.
+
+        Raises:
+            InvalidArgument: no path prepared, or this one kicked off already.
         """
         flight = self._flight
-        if flight is None or flight.run is not None:
-            raise RuntimeError(f"{self.name}: prepare() must come before kickoff()")
+        if flight is None:
+            raise InvalidArgument(f"{self._called}: prepare() must come before kickoff()")
+        if flight.run is not None:
+            raise InvalidArgument(
+                f"{self._called}: this path was kicked off already (a prepared path flies "
+                "once): prepare() it again for another flight"
+            )
         c = self.controller
         records = await _recorder(c, flight.record_period)
         try:
@@ -1035,7 +1290,7 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
         a stop refuses what it has not started yet (:class:`~galil.aio._motion.Starting`)."""
         starting = flight.starting
         assert starting is not None
-        future = c.worker.submit(starting.run, functools.partial(_fly, flight.stream))
+        future = c.worker.submit(starting.run, functools.partial(_fly, flight.stream, flight.axes))
         try:
             return await shielded(future)
         except asyncio.CancelledError:  # (complete()'s status cancelled, the loop's end)
@@ -1074,19 +1329,25 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
         """Wait for the end of the path, stop the records and line them up with the
         prediction.
 
+        A flight that ``unstage()`` stopped returns without data: the plan that staged the
+        flyer ended first (``RE.abort()``, ``RE.stop()``, a failure), and its end says how.
+
         Raises:
+            InvalidArgument: no ``kickoff()`` before it.
             MotionError: the flight was stopped (``stop()``, a pause ...) before its end.
         """
         flight = self._flight
         if flight is None or flight.run is None:
-            raise RuntimeError(f"{self.name}: kickoff() must come before complete()")
+            raise InvalidArgument(f"{self._called}: kickoff() must come before complete()")
         try:
             flight.result = await flight.run
         except Exception as exc:
             if not flight.stopped:
                 raise
+            if flight.unstaged:
+                return  # (the plan ended first: its abort, stop or failure says how)
             raise MotionError(
-                f"{self.name or 'the flyer'}: the flight on {self._letters} was stopped "
+                f"{self._called}: the flight on {self._letters} was stopped "
                 f"({flight.stopped}) before the end of its path",
                 axis=self._letters[0],
                 model=self.controller.model.name if self._live else None,
@@ -1171,8 +1432,27 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
         """At the end of a plan that staged the flyer (bluesky unstages it however the plan
         ends: a failure, an abort, a halt): a flight still in progress is stopped (``ST``)
         and its records closed."""
-        if self._flight is not None:
-            await self._end_flight(self._flight, "unstage()")
+        flight = self._flight
+        if flight is not None:
+            flight.unstaged = not flight.stopped
+            await self._end_flight(flight, "unstage()")
+
+
+async def _at_rest(handle: AsyncMoveHandle) -> None:
+    """Stop ``handle``'s move unless it was seen done, and wait until its axes are at rest
+    (the stop's deceleration): a failing ``set()`` leaves no motion. A wait that fails (a
+    dead link, a closed controller: its stop was sent, or close() sent one) ends it."""
+    await handle.stop_unless_done()
+    with contextlib.suppress(GalilError):
+        await handle.wait()
+
+
+async def _still_moving(axis: AsyncAxis) -> bool:
+    """Whether ``axis`` is moving (``False`` when that cannot be read)."""
+    try:
+        return await axis.moving()
+    except GalilError:
+        return False
 
 
 def _retrieved(task: asyncio.Task[ContourResult]) -> None:

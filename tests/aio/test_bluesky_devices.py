@@ -7,8 +7,10 @@ short with high speeds so the whole file takes a few seconds.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import re
+import socket
 import threading
 import time
 from collections.abc import Callable, Coroutine, Iterator
@@ -221,8 +223,9 @@ def test_stop_with_failure_makes_the_move_fail(server: SimTcpServer, engine: Run
         return None
 
     error = in_loop(body())
-    assert error is not None
-    assert "was stopped" in str(error)
+    # (a bare RuntimeError "x was stopped": the flyer's MotionError for the same event)
+    assert isinstance(error, galil.MotionError)
+    assert str(error).startswith("x: the move to 50 mm was stopped (stop(success=False))")
 
 
 def test_a_target_beyond_a_soft_limit_is_refused_before_moving(
@@ -346,6 +349,47 @@ def test_a_set_that_times_out_stops_the_axis(engine: RunEngine) -> None:
 
     assert in_loop(body()) < 5
     assert in_loop(x.axis.stop_code())[0] == 4
+
+
+def test_a_set_that_times_out_fails_once_the_axis_is_at_rest(engine: RunEngine) -> None:
+    # (the status failed as soon as ST was sent: the axis still decelerated, and the next
+    # set() was refused "already moving; wait for its move (handle.wait())")
+    x = mock_motor("tcp://127.0.0.1:5")
+    in_loop(x.axis.set_decel(20 * mm / s**2))  # a stop's ramp of 1 s at 20 mm/s
+
+    async def body() -> tuple[bool, float]:
+        with pytest.raises(galil.GalilTimeoutError, match="the axis was stopped"):
+            await x.set(50, timeout=0.5)
+        moving = await x.axis.moving()
+        await x.set(0)  # at once, as a plan's next step would
+        return moving, await x.readback.get_value()
+
+    moving, back = in_loop(body())
+    assert not moving
+    assert back == pytest.approx(0, abs=0.0006)
+
+
+def test_a_set_refused_while_the_axis_moves_says_what_a_set_caller_can_do(
+    engine: RunEngine,
+) -> None:
+    # (it passed on the axis's advice, "wait for its move (handle.wait()) or stop it
+    # (axis.stop())": a handle a bluesky user does not have)
+    x = mock_motor("tcp://127.0.0.1:6")
+
+    async def body() -> str:
+        first = x.set(50)
+        while not await x.axis.moving():
+            await x.controller.sleep(0.005)
+        with pytest.raises(galil.InvalidArgument) as info:
+            await x.set(2)
+        await x.stop()
+        await first
+        return str(info.value)
+
+    said = in_loop(body())
+    assert said.startswith("x: axis A is still moving (an earlier set() whose status is not done")
+    assert "stop() the motor" in said
+    assert "handle" not in said
 
 
 def test_a_set_whose_link_dies_mid_move_fails_and_the_axis_is_stopped(engine: RunEngine) -> None:
@@ -850,3 +894,236 @@ def test_a_refused_set_leaves_the_move_in_progress_as_it_was(
     assert setpoint == 50
     assert failure is not None
     assert "was stopped" in str(failure)
+
+
+# -- a subscriber's first value is the controller's --------------------------------------------
+async def _first(signal: Any) -> float:
+    async for value in observe_value(signal):
+        return float(value)
+    raise AssertionError("no value")
+
+
+def test_a_subscribers_first_value_is_read_from_the_controller(engine: RunEngine) -> None:
+    # (the soft backend gave a new subscriber its cached 0.0: monitors began at 0, and
+    # wait_for_value(x.readback, ~0) returned at once with the axis at 5 mm)
+    x = mock_motor("tcp://127.0.0.1:50")
+
+    async def body() -> tuple[float, float]:
+        await (await x.axis.move_to(5 * mm))  # outside bluesky: nothing read it since
+        readback, setpoint = await _first(x.readback), await _first(x.setpoint)
+        with pytest.raises(asyncio.TimeoutError):
+            await wait_for_value(x.readback, lambda v: abs(v) < 0.01, timeout=0.3)
+        return readback, setpoint
+
+    readback, setpoint = in_loop(body())
+    assert readback == pytest.approx(5, abs=0.0006)
+    assert setpoint == 5
+
+
+# -- velocity, acceleration and deceleration are settings a plan can set ------------------------
+def test_a_plan_sets_the_velocity_acceleration_and_deceleration(engine: RunEngine) -> None:
+    # (read-only: mv(x.velocity, 5) failed "does not implement all Movable methods"; and the
+    # configuration had no DC)
+    x = mock_motor("tcp://127.0.0.1:51")
+    engine(bps.mv(x.velocity, 5, x.acceleration, 300, x.deceleration, 200))
+    assert in_loop(x.axis.speed()) == 5 * mm / s
+    assert in_loop(x.axis.accel()).m_as(mm / s**2) == pytest.approx(300, abs=1)
+    assert in_loop(x.axis.decel()).m_as(mm / s**2) == pytest.approx(200, abs=1)
+    config = in_loop(x.read_configuration())
+    assert config["x-velocity"]["value"] == 5
+    assert config["x-deceleration"]["value"] == pytest.approx(200, abs=1)
+    described = in_loop(x.describe_configuration())
+    assert described["x-deceleration"]["units"] == "mm/s**2"
+    assert described["x-deceleration"]["source"].endswith("/_DCA")
+    with pytest.raises(FailedStatus) as info:
+        engine(bps.mv(x.velocity, 1e9))  # beyond the model's SP maximum
+    assert isinstance(info.value.__cause__, galil.LimitError)
+    assert in_loop(x.axis.speed()) == 5 * mm / s
+
+
+def test_set_mock_value_on_a_motors_signal_is_refused(engine: RunEngine) -> None:
+    # (taken and ignored: the next read was the simulator's again)
+    from ophyd_async.core import set_mock_value
+
+    x = mock_motor("tcp://127.0.0.1:52")
+    for signal in (x.readback, x.setpoint, x.velocity):
+        with pytest.raises(galil.InvalidArgument, match="set_mock_value cannot set it"):
+            set_mock_value(signal, 3.0)
+    assert in_loop(x.locate()) == {"setpoint": 0, "readback": 0}
+
+
+# -- no motion outlives the device's connection ------------------------------------------------
+async def _moving_set(x: GalilMotor, target: float) -> Any:
+    status = x.set(target)
+    while not await x.axis.moving():
+        await x.controller.sleep(0.005)
+    return status
+
+
+def test_disconnect_during_a_set_stops_the_move_and_fails_its_status(
+    engine: RunEngine,
+) -> None:
+    # (the move went on, and its status failed only at its end, "x is not connected")
+    address = "tcp://127.0.0.1:53"
+    x = mock_motor(address)
+    y = GalilMotor(address, "B", name="y")  # (keeps the controller open)
+    in_loop(y.connect(mock=True))
+
+    async def body() -> tuple[bool, BaseException | None, list[float]]:
+        status = await _moving_set(x, 50)
+        await x.disconnect()
+        done = status.done
+        error = status.exception() if done else None
+        return done, error, await y.controller.query_operands(["_BGA"])
+
+    done, error, moving = in_loop(body())
+    assert done
+    assert isinstance(error, galil.MotionError)
+    assert str(error).startswith("x: the move to 50 mm was stopped (disconnect())")
+    assert moving == [0]
+
+
+def test_release_all_during_a_set_stops_the_move_without_a_warning(
+    engine: RunEngine, caplog: pytest.LogCaptureFixture
+) -> None:
+    # (close() warned "call wait() on a move's handle", of a move a status was waiting on)
+    x = mock_motor("tcp://127.0.0.1:54")
+    sim = sim_of(x.controller.sync)
+
+    async def body() -> BaseException | None:
+        status = await _moving_set(x, 50)
+        await release_all()
+        assert status.done
+        return status.exception()
+
+    with caplog.at_level("WARNING", logger="galil"):
+        error = in_loop(body())
+    assert isinstance(error, galil.MotionError)
+    assert "was stopped (release_all())" in str(error)
+    assert not [r for r in caplog.records if "mid-motion" in r.getMessage()]
+    assert sim.feed(b"MG _BGA\r").split(b"\r")[0].strip() == b"0.0000"
+
+
+# -- a connect() that times out says so, and gives its attempt up -------------------------------
+def test_a_connect_to_a_silent_controller_times_out_naming_its_address() -> None:
+    # (a bare TimeoutError(''), and the attempt went on: the next connect() joined it)
+    accepted: list[socket.socket] = []
+    done = threading.Event()
+    with socket.create_server(("127.0.0.1", 0)) as listener:
+        port = listener.getsockname()[1]
+        listener.settimeout(0.05)
+
+        def accept() -> None:
+            while not done.is_set():
+                with contextlib.suppress(TimeoutError):
+                    accepted.append(listener.accept()[0])
+
+        acceptor = threading.Thread(target=accept)
+        acceptor.start()
+        address = f"tcp://127.0.0.1:{port}"
+        z = GalilMotor(address, "A", name="z")
+
+        async def body() -> list[str]:
+            said = []
+            for _ in range(2):
+                with pytest.raises(galil.GalilTimeoutError) as info:
+                    await z.connect(timeout=0.2)
+                said.append(str(info.value))
+            return said
+
+        try:
+            said = asyncio.run(body())
+        finally:
+            done.set()
+            acceptor.join(5)
+        expected = f"z: no connection to the controller at {address} within 0.2 s"
+        assert all(text.startswith(expected) for text in said)
+        assert len(accepted) == 2  # the second connect() made an attempt of its own
+        for conn in accepted:  # each given up and closed by its worker
+            conn.settimeout(20)
+            with conn:
+                while conn.recv(1024):
+                    pass
+
+
+# -- the flyer's call order, and its refusals in the user's unit ------------------------------
+def test_the_flyers_calls_out_of_order_are_refused_saying_which_comes_first(
+    engine: RunEngine,
+) -> None:
+    # (bare RuntimeErrors; a second kickoff() said "prepare() must come before kickoff()")
+    flyer = mock_flyer("tcp://127.0.0.1:55")
+
+    async def body() -> list[str]:
+        said = []
+        for call in (flyer.complete, flyer.kickoff, lambda: flyer.predicted):
+            with pytest.raises(galil.InvalidArgument) as info:
+                await call()
+            said.append(str(info.value))
+        await _fly(flyer, np.linspace(20, 640, 32), 3)
+        with pytest.raises(galil.InvalidArgument) as info:
+            await flyer.kickoff()
+        said.append(str(info.value))
+        assert await _completed(flyer) is None
+        return said
+
+    assert in_loop(body()) == [
+        "fly: kickoff() must come before complete()",
+        "fly: prepare() must come before kickoff()",
+        "fly: no path prepared: prepare() one first",
+        "fly: this path was kicked off already (a prepared path flies once): prepare() it "
+        "again for another flight",
+    ]
+
+
+def test_a_flyer_path_beyond_a_soft_limit_is_refused_in_the_users_unit_too(
+    engine: RunEngine,
+) -> None:
+    # (in counts only: Controller.contour's refusal adds the user's unit, decision 0063)
+    x = mock_motor("tcp://127.0.0.1:56")
+    in_loop(x.axis.set_soft_limits((-5 * mm, 5 * mm)))
+    flyer = GalilContourFlyer("tcp://127.0.0.1:56", "A", name="fly")
+    in_loop(flyer.connect(mock=True))
+    path = ContourPath(np.linspace(0.5, 8, 16) * mm, dt=3)
+
+    async def prepare() -> None:
+        await flyer.prepare(path)
+
+    with pytest.raises(galil.LimitError, match=r"in user units: reaches [\d.]+ mm, limit 5 mm"):
+        in_loop(prepare())
+
+
+# -- an abort or a stop of a staged fly scan ends as it does unstaged -----------------------------
+@pytest.mark.parametrize(("interrupt", "status"), [("abort", "abort"), ("stop", "success")])
+def test_an_abort_or_a_stop_of_a_staged_fly_scan_is_no_failure(
+    server: SimTcpServer, engine: RunEngine, docs: Docs, interrupt: str, status: str
+) -> None:
+    # (unstage() stopped the flight, complete() failed with MotionError: exit_status 'fail')
+    flyer = tcp_flyer(server.url)
+    completing = threading.Event()
+    engine.msg_hook = lambda msg: completing.set() if msg.command == "complete" else None
+
+    def interrupt_when_completing() -> None:
+        if completing.wait(10):
+            getattr(engine, interrupt)()
+
+    interrupter = threading.Thread(target=interrupt_when_completing)
+    interrupter.start()
+    staged = bpp.stage_decorator([flyer])(flight)
+    with contextlib.suppress(RunEngineInterrupted, FailedStatus):  # (told by the stop doc)
+        engine(staged(flyer, LONG, bps.null))
+    interrupter.join(10)
+    stop = next(d for name, d in docs if name == "stop")
+    assert stop["exit_status"] == status
+    assert in_loop(_stopped_at(flyer)) < 5
+
+
+def test_the_flyers_disconnect_during_a_flight_stops_it(engine: RunEngine) -> None:
+    # (a motor on the address kept the controller open: the contour flew on)
+    address = "tcp://127.0.0.1:57"
+    x = mock_motor(address)  # (keeps the controller open)
+    flyer = mock_flyer(address)
+    sim = sim_of(x.controller.sync)
+    in_loop(_fly(flyer, np.cumsum(np.full(3000, 20.0)), 2))  # six buffers
+    in_loop(flyer.disconnect())
+    assert "ST A" in [text for _, text in sim.command_log]
+    assert in_loop(x.axis.moving()) is False
