@@ -124,11 +124,13 @@ def test_dr_callbacks_and_iteration(tcp: tuple[SimTcpServer, Controller]) -> Non
     assert len(got + rest) <= 0.1 / srv.controller.sample_period / 16 + 1
 
 
-def test_a_full_queue_drops_the_oldest_records_and_counts_them(
-    tcp: tuple[SimTcpServer, Controller],
+def test_a_full_queue_drops_the_oldest_records_and_counts_them_as_missed(
+    tcp: tuple[SimTcpServer, Controller], caplog: pytest.LogCaptureFixture
 ) -> None:
+    # Decision 0096: what the host dropped is missing for the reader too (missed, gaps, one
+    # WARNING per burst), and dropped says how much of it the host dropped.
     srv, c = tcp
-    with c.records(8, maxlen=10) as stream:
+    with caplog.at_level("WARNING", logger="galil.records"), c.records(8, maxlen=10) as stream:
         srv.advance(0.5)  # 64 records, in several batches, nobody reading
         deadline = time.monotonic() + WAIT
         while stream.dropped + len(stream) < 60 and time.monotonic() < deadline:
@@ -137,7 +139,9 @@ def test_a_full_queue_drops_the_oldest_records_and_counts_them(
     assert len(kept) == 10
     assert stream.dropped >= 50
     assert np.all(np.diff(kept["time"]) == 8)  # the newest ten, in order
-    assert stream.missed == 0  # dropped by the host, not missing from the stream
+    assert stream.missed == stream.dropped
+    assert stream.gaps == [(int(kept["time"][0]), stream.dropped)]
+    assert caplog.text.count("queue is full") == 1
 
 
 def test_dr_period_below_the_minimum_is_refused(tcp: tuple[SimTcpServer, Controller]) -> None:

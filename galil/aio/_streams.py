@@ -19,7 +19,7 @@ import contextlib
 import math
 import threading
 from collections import deque
-from collections.abc import Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Any, Generic, TypeVar
 
 import numpy as np
@@ -28,7 +28,7 @@ from galil.aio._worker import Worker, shielded
 from galil.errors import FixedAttributes, GalilConnectionError, InvalidArgument, QueueTimeoutError
 from galil.link import check_count, check_wait_timeout
 from galil.queues import CHECK
-from galil.records import TAKE_MAX, RecordStream
+from galil.records import TAKE_MAX, RecordStream, fill_room
 
 __all__ = ["SLICE", "AsyncMessages", "AsyncRecordStream", "LoopQueue"]
 
@@ -276,19 +276,25 @@ class AsyncRecordStream(FixedAttributes):
 
     @property
     def dropped(self) -> int:
-        """Records dropped from a full queue (``DR`` only)."""
+        """Records dropped from a full queue (``DR`` only; counted in :attr:`missed` too)."""
         return self.sync.dropped
 
     @property
     def missed(self) -> int:
-        """Records missing between the ones received (gaps in their ``time``)."""
+        """Records a reader will never get: missing between the ones received (gaps in their
+        ``time``), and those :attr:`dropped`."""
         return self.sync.missed
 
     @property
     def gaps(self) -> list[tuple[int, int]]:
         """``(time, missed)`` for each gap: the record after it, and how many were missing
-        (a copy)."""
-        return list(self.sync.gaps)
+        (a copy; the latest :data:`~galil.records.GAPS_KEPT`)."""
+        return self.sync.gaps
+
+    @property
+    def gap_count(self) -> int:
+        """Gaps seen since the stream began (:attr:`gaps` keeps the latest)."""
+        return self.sync.gap_count
 
     @property
     def period_seconds(self) -> float:
@@ -380,29 +386,52 @@ class AsyncRecordStream(FixedAttributes):
     async def take(self, n: int, timeout: float | None = None) -> np.ndarray[Any, np.dtype[Any]]:
         """The next ``n`` records as one structured array; ``timeout`` bounds each wait.
 
-        Cancelled or timed out part-way, the records it had taken wait for the next read.
+        Cancelled or timed out part-way, the records it had taken wait for the next read
+        (as the sync stream's).
 
         Raises:
-            InvalidArgument: ``n`` not a positive integer, or more than ``TAKE_MAX`` (as by
-                the sync stream's ``take``), or a bad timeout, before anything is read.
+            InvalidArgument: ``n`` not a positive integer, more than ``TAKE_MAX``, or more
+                records than memory holds (as by the sync stream's ``take``), or a bad
+                timeout, before anything is read.
         """
         if check_count(n, "n") > TAKE_MAX:
             raise InvalidArgument(f"n must be at most {TAKE_MAX} records at once, not {n!r:.40}")
         _wait_seconds(timeout)
+        room = self.sync._room(n)
         records: list[np.void] = []
         try:
             while len(records) < n:
                 records.extend(await self.batch(n - len(records), timeout))
+            return fill_room(room, records)
         except BaseException:  # cancelled, or timed out: the records taken wait for the next
             self._ready.extendleft(reversed(records))
             raise
-        out = np.empty(n, dtype=records[0].dtype)
-        for i, rec in enumerate(records):
-            out[i] = rec
-        return out
 
-    def __aiter__(self) -> AsyncRecordStream:
-        return self
+    def __aiter__(self) -> AsyncIterator[np.void]:
+        """Records until the stream is closed: ``async for rec in stream``.
+
+        The loop closes the stream as it ends (``break``, ``return``, an exception, a
+        cancellation: ``DR 0`` and its handle let go, as the loop's iterator is finalized),
+        unless ``async with`` holds the stream or the loop ended because the link died, as
+        the sync stream's ``for`` does.
+        """
+        return self._loop()
+
+    async def _loop(self) -> AsyncIterator[np.void]:
+        close = True  # as the loop ends, unless its link died (a reconnect() may revive it)
+        try:
+            while True:
+                try:
+                    rec = await self.get()
+                except GalilConnectionError:
+                    if self.sync.closed:
+                        return
+                    close = False
+                    raise
+                yield rec
+        finally:
+            if close and not self.sync._held and not self.sync.closed:
+                await self.close()
 
     async def __anext__(self) -> np.void:
         try:
@@ -417,6 +446,7 @@ class AsyncRecordStream(FixedAttributes):
         await self._worker.run_shielded(self.sync.close)
 
     async def __aenter__(self) -> AsyncRecordStream:
+        self.sync._held = True
         return self
 
     async def __aexit__(self, *exc: object) -> None:
