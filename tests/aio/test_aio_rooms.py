@@ -485,6 +485,11 @@ def test_homing_is_an_awaitable_move_that_ends_at_the_index() -> None:
 def test_cancelling_the_task_that_awaits_a_homing_stops_the_axis() -> None:
     async def body() -> None:
         async with await sim() as c:
+            # Slowly: the simulator's switch is found after about 40 s at this speed, so the
+            # waiter's own polls (which advance the simulated clock) cannot reach it before
+            # the cancel lands, however late a loaded host lets the test run (at the
+            # default speed the edge was found 1 s in, and the axis ended with code 9).
+            await c.A.set_speed(250)
             edge = await c.A.find_edge()  # no switch positions: no known end
             assert edge.duration == float("inf")
             waiter = asyncio.ensure_future(edge.wait())
