@@ -25,6 +25,7 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from galil.codes import stop_text
 from galil.errors import InvalidArgument, ProtocolError
@@ -186,7 +187,7 @@ def record_dtype(
     model: ModelSpec | tuple[int, int, int, int],
     axes: int | None = None,
     letters: str | None = None,
-) -> np.dtype[Any]:
+) -> np.dtype[np.void]:
     """Return the structured dtype of a full data record for ``model`` (or a QZ tuple).
 
     ``axes`` overrides the axis count (a record holding fewer axis blocks) and ``letters``
@@ -207,7 +208,7 @@ def record_dtype(
 @functools.lru_cache(maxsize=256)
 def _record_dtype(
     qz: tuple[int, ...], axes: int | None, letters: str | None, analog: bool = True
-) -> np.dtype[Any]:
+) -> np.dtype[np.void]:
     # Built once per layout and set of axis blocks: a stream decodes thousands a second.
     # ``analog``: the 2103 axis block ends with the analog input (the 18x2's: reserved).
     n, general, coord, per_axis = qz
@@ -271,7 +272,7 @@ def decode_record(data: bytes, model: ModelSpec | tuple[int, int, int, int]) -> 
 
 def decode_records(
     data: bytes | bytearray | memoryview, model: ModelSpec | tuple[int, int, int, int]
-) -> np.ndarray[Any, np.dtype[Any]]:
+) -> npt.NDArray[np.void]:
     """Decode records laid end to end (a ``DR`` stream's bytes, whole records) in one pass.
 
     Every header is checked (at once, as an array) against the first one: a stream's records
@@ -303,13 +304,13 @@ def decode_records(
     if not good.all():
         i = int(np.argmin(good))
         raise ProtocolError(f"record {i}: header {bytes(heads[i])!r} is not the stream's")
-    records: np.ndarray[Any, np.dtype[Any]] = np.frombuffer(data, dtype=dtype)
+    records: npt.NDArray[np.void] = np.frombuffer(data, dtype=dtype)
     return records
 
 
-def record_to_dict(record: np.void) -> dict[str, Any]:
+def record_to_dict(record: np.void) -> dict[str, object]:
     """Turn a decoded record into plain Python values (nested dicts per axis)."""
-    out: dict[str, Any] = {}
+    out: dict[str, object] = {}
     for name in record.dtype.names or ():
         value = record[name]
         if value.dtype.names:
@@ -434,7 +435,7 @@ def extend_sample(low: int, near: int) -> int:
     return base
 
 
-def follow_samples(samples: Any, near: int, period: int) -> np.ndarray[Any, np.dtype[np.int64]]:
+def follow_samples(samples: npt.ArrayLike, near: int, period: int) -> npt.NDArray[np.int64]:
     """Extend the 16-bit sample counters of consecutive records to full samples, at once.
 
     The first is extended against ``near`` (a ``TIME`` close to it), each next one against
@@ -460,9 +461,7 @@ def follow_samples(samples: Any, near: int, period: int) -> np.ndarray[Any, np.d
     return out
 
 
-def with_times(
-    records: np.ndarray[Any, np.dtype[Any]], times: Any
-) -> np.ndarray[Any, np.dtype[Any]]:
+def with_times(records: npt.NDArray[np.void], times: npt.ArrayLike) -> npt.NDArray[np.void]:
     """:func:`with_time` for an array of records: a new array with a ``time`` field last.
 
     Raises:
