@@ -339,8 +339,9 @@ class Scale:
     """
 
     counts_per: pint.Quantity[float]
-    offset: pint.Quantity[float]
-    sign: int
+    # (None only as __init__'s default, as before: the checked offset replaces it)
+    offset: pint.Quantity[float] = None  # type: ignore[assignment]
+    sign: int = 1
 
     def __init__(
         self, counts_per: QuantityLike, offset: QuantityLike | None = None, sign: int = 1
