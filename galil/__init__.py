@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from galil.axis import Axis
+from galil.axis import Axis, MoveOverrides
 from galil.capture import Capture, Recording
 from galil.codes import stop_text, tc_text
 from galil.contour import ContourResult
@@ -36,12 +36,15 @@ from galil.protocol.records import RecordFields, decode_fields
 from galil.records import RecordStream
 from galil.segments import Arc, Line, VectorPlan
 from galil.tuning import EncoderConfig, EncoderType, LimitDisable, MotorType
-from galil.vector import VectorHandle
+from galil.units import Amount, Amounts, QuantityLike, Reading, Readings
+from galil.vector import VectorHandle, VectorOptions
 
 __version__ = "0.1.0.dev0"
 
 __all__ = [
     "IO",
+    "Amount",
+    "Amounts",
     "Arc",
     "Axis",
     "Capture",
@@ -68,12 +71,16 @@ __all__ = [
     "MotionError",
     "MotorType",
     "MoveHandle",
+    "MoveOverrides",
     "MoveResult",
     "MultiProfile",
     "Profile",
     "ProgramError",
     "ProtocolError",
+    "QuantityLike",
     "QueueTimeoutError",
+    "Reading",
+    "Readings",
     "ReconnectPolicy",
     "RecordFields",
     "RecordStream",
@@ -83,6 +90,7 @@ __all__ = [
     "Switches",
     "UnknownVariableError",
     "VectorHandle",
+    "VectorOptions",
     "VectorPlan",
     "__version__",
     "connect",

@@ -10,11 +10,14 @@ from __future__ import annotations
 
 import contextlib
 import numbers
-from collections.abc import Callable, Iterator, Mapping
+import sys
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeAlias, TypedDict, cast
 
 import numpy as np
+import numpy.typing as npt
+import pint
 
 from galil import codes, predict
 from galil.errors import FixedAttributes, InvalidArgument, LimitError, ReadOnly, decimal_hint
@@ -47,6 +50,9 @@ from galil.protocol import commands as cmds
 from galil.routines import Routines
 from galil.tuning import EncoderConfig, Setting, limit_disable_of, motor_type, whole
 from galil.units import (
+    Amount,
+    QuantityLike,
+    Reading,
     Scale,
     counts_or_plain,
     get_registry,
@@ -56,10 +62,18 @@ from galil.units import (
     state_in_units,
 )
 
+if sys.version_info >= (3, 11):
+    from typing import Unpack
+else:  # (typing_extensions: a dependency on Python 3.10)
+    from typing_extensions import Unpack
+
 __all__ = [
     "OVERRIDES",
     "Axis",
+    "MoveOverrides",
+    "MoveTargets",
     "ProfileQuantities",
+    "SpeedChanges",
     "UnitProfile",
     "check_overrides",
     "in_user_units",
@@ -70,6 +84,24 @@ __all__ = [
 
 #: The keyword overrides a move takes, and the command each sets.
 OVERRIDES = {"speed": "SP", "accel": "AC", "decel": "DC"}
+
+
+#: Each axis's target (or distance) of a move of several axes, by letter or alias.
+MoveTargets: TypeAlias = Mapping[str, Amount]
+#: A speed schedule's changes: ``[(at, new_speed), ...]`` (:meth:`Axis.speed_schedule`).
+SpeedChanges: TypeAlias = Iterable[Sequence[Amount]]
+
+
+class MoveOverrides(TypedDict, total=False):
+    """The keyword overrides of a move (:data:`OVERRIDES`; ``**overrides`` of
+    :meth:`Axis.move_to`, :meth:`Controller.move <galil.Controller.move>` ...), in the axis's
+    units: sent with the move, they stay set. ``None`` leaves the setting as it is."""
+
+    speed: Amount | None
+    accel: Amount | None
+    decel: Amount | None
+
+
 _POWER = {"SP": 1, "JG": 1, "AC": 2, "DC": 2}
 _SETTERS = {"SP": cmds.sp, "AC": cmds.ac, "DC": cmds.dc, "IT": cmds.it, "JG": cmds.jg}
 #: The settings a move's prediction follows when they change in motion, and how.
@@ -113,49 +145,56 @@ class ProfileQuantities:
     scale: Scale
 
     @property
-    def t(self) -> Any:
+    def t(self) -> pint.Quantity[npt.NDArray[np.float64]]:
         """Sample times, seconds."""
-        return self.profile.t * get_registry().second
+        t: Any = self.profile.t * get_registry().second  # (pint types its arithmetic as Any)
+        return cast("pint.Quantity[npt.NDArray[np.float64]]", t)
 
     @property
-    def duration(self) -> Any:
+    def duration(self) -> pint.Quantity[float]:
         """Duration, seconds."""
-        return self.profile.duration * get_registry().second
+        duration: Any = self.profile.duration * get_registry().second
+        return cast("pint.Quantity[float]", duration)
 
     @property
-    def position(self) -> Any:
+    def position(self) -> pint.Quantity[npt.NDArray[np.float64]]:
         """Reference position at each sample."""
         return self.scale.counts_to_position(self.profile.position.astype(np.float64))
 
     @property
-    def velocity(self) -> Any:
+    def velocity(self) -> pint.Quantity[npt.NDArray[np.float64]]:
         """Velocity at each sample (signed, in the user's direction)."""
         return self.scale.counts_to_rate(self.profile.velocity, 1)
 
     @property
-    def acceleration(self) -> Any:
+    def acceleration(self) -> pint.Quantity[npt.NDArray[np.float64]]:
         """Per-sample change of velocity (signed)."""
         return self.scale.counts_to_rate(self.profile.acceleration, 2)
 
     @property
-    def peak_speed(self) -> Any:
+    def peak_speed(self) -> pint.Quantity[float]:
         """Largest speed."""
-        return abs(self.scale.counts_to_rate(self.profile.peak_speed, 1))
+        return _abs(self.scale.counts_to_rate(self.profile.peak_speed, 1))
 
     @property
-    def start(self) -> Any:
+    def start(self) -> pint.Quantity[float]:
         """Position at sample 0."""
         return self.scale.counts_to_position(self.profile.start)
 
     @property
-    def end(self) -> Any:
+    def end(self) -> pint.Quantity[float]:
         """Position at the last sample."""
         return self.scale.counts_to_position(self.profile.end)
 
     @property
-    def distance(self) -> Any:
+    def distance(self) -> pint.Quantity[float]:
         """End minus start."""
         return self.scale.counts_to_distance(self.profile.distance)
+
+
+def _abs(q: pint.Quantity[float]) -> pint.Quantity[float]:
+    """``abs(q)``, typed as it is (pint types it as its base class's)."""
+    return cast("pint.Quantity[float]", abs(q))
 
 
 def check_overrides(where: str, overrides: Mapping[str, object]) -> None:
@@ -179,7 +218,7 @@ def _show(value: object) -> str:
 
 
 def limits_by_axis(
-    model: ModelSpec, limits: Mapping[Any, object], what: str, letters: str | None = None
+    model: ModelSpec, limits: Mapping[str, object], what: str, letters: str | None = None
 ) -> dict[str, object]:
     """A mapping of axis letters or aliases to limits, keyed by axis letter.
 
@@ -275,7 +314,7 @@ class AxisPosition:
     def position_counts(self, value: object, what: str = "position") -> float:
         raise NotImplementedError
 
-    def define_position(self, position: Any = 0, *, shift_limits: bool = True) -> None:
+    def define_position(self, position: Amount = 0, *, shift_limits: bool = True) -> None:
         """Call the present position ``position`` (``DP``): in the axis's units, like
         :meth:`~Axis.move_to` (counts without a scale; a plain 0, the default, is 0 in any
         unit; a scale's offset stays as it is, so ``axis.position`` then reads ``position``).
@@ -304,7 +343,8 @@ class AxisPosition:
             raise InvalidArgument(f"shift_limits must be True or False, not {shift_limits!r:.40}")
         assert isinstance(self, Axis)
         scale = self._scale
-        if scale is not None and type(position) is int and position == 0:
+        given: object = position  # (what the caller gave: any type, checked below)
+        if scale is not None and type(given) is int and given == 0:
             position = 0 * scale.unit  # (the default: 0 in the axis's units)
         counts = count_of(self, self.position_counts(position, "position"), "position")
         with user_units({self._letter: self}):
@@ -332,7 +372,9 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         self._homing = AxisHoming(link, letter, tracker)
 
     # -- units ------------------------------------------------------------------------------
-    def set_scale(self, counts_per: Any, offset: Any = None, sign: int = 1) -> Axis:
+    def set_scale(
+        self, counts_per: QuantityLike | None, offset: QuantityLike | None = None, sign: int = 1
+    ) -> Axis:
         """Give the axis a scale, e.g. ``counts_per=2000 / ureg.mm``; ``None`` removes it.
 
         Args:
@@ -369,13 +411,13 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
     def position_counts(self, value: object, what: str = "position") -> float:
         """A position in this axis's units (or counts) as counts."""
         if self._scale is not None:
-            return self._scale.position_to_counts(value, what)
+            return self._scale.position_to_counts(cast("QuantityLike", value), what)
         return counts_or_plain(value, what, self._letter)
 
     def distance_counts(self, value: object, what: str = "distance") -> float:
         """A distance in this axis's units (or counts) as counts."""
         if self._scale is not None:
-            return self._scale.distance_to_counts(value, what)
+            return self._scale.distance_to_counts(cast("QuantityLike", value), what)
         return counts_or_plain(value, what, self._letter)
 
     def rate_counts(self, value: object, power: int, what: str) -> float:
@@ -409,30 +451,28 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
             raise InvalidArgument(f"{what} must be positive, got {limit!r}")
         return counts
 
-    def _out_pos(self, counts: float) -> Any:
+    def _out_pos(self, counts: float) -> Reading:
         return counts if self._scale is None else self._scale.counts_to_position(counts)
 
-    def _out_rate(self, counts: float, power: int) -> Any:
-        if self._scale is None:
-            return counts
-        return abs(self._scale.counts_to_rate(counts, power))
+    def _out_rate(self, counts: float, power: int) -> Reading:
+        return counts if self._scale is None else _abs(self._scale.counts_to_rate(counts, power))
 
     # -- operands ---------------------------------------------------------------------------
     def _operand(self, name: str) -> float:
         return self._link.query_operands([f"_{name}{self._letter}"])[0]
 
     @property
-    def position(self) -> Any:
+    def position(self) -> Reading:
         """Encoder position ``_TP``."""
         return self._out_pos(self._operand("TP"))
 
     @property
-    def reference_position(self) -> Any:
+    def reference_position(self) -> Reading:
         """Commanded (reference) position ``_RP``."""
         return self._out_pos(self._operand("RP"))
 
     @property
-    def velocity(self) -> Any:
+    def velocity(self) -> Reading:
         """Filtered actual velocity ``_TV`` (signed; averaged over ~0.25 s by the controller).
 
         The average lags: just after a stop it still reads part of the speed before it.
@@ -441,7 +481,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         return v if self._scale is None else self._scale.counts_to_rate(v, 1)
 
     @property
-    def error(self) -> Any:
+    def error(self) -> Reading:
         """Position error ``_TE``."""
         e = self._operand("TE")
         return e if self._scale is None else self._scale.counts_to_distance(e)
@@ -512,32 +552,32 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         handle.add_event(self._letter, sample_of(replies[-1]), lambda t: event(t, value))
 
     @property
-    def speed(self) -> Any:
+    def speed(self) -> Reading:
         """Slew speed ``SP`` (the controller's quantised value); settable in motion."""
         return self._out_rate(self._operand("SP"), 1)
 
     @speed.setter
-    def speed(self, value: Any) -> None:
+    def speed(self, value: Amount) -> None:
         self._set_param("SP", self.rate_counts(value, 1, "speed"))
 
     @property
-    def accel(self) -> Any:
+    def accel(self) -> Reading:
         """Acceleration ``AC``; settable in motion."""
         return self._out_rate(self._operand("AC"), 2)
 
     @accel.setter
-    def accel(self, value: Any) -> None:
+    def accel(self, value: Amount) -> None:
         self._set_param("AC", self.rate_counts(value, 2, "accel"))
 
     @property
-    def decel(self) -> Any:
+    def decel(self) -> Reading:
         """Deceleration ``DC``: not in a PA/PR move (refused while the library's runs), but
         in a jog, or while an ``ST`` ramps down (the command reference); the motion's
         prediction follows it from the next sample."""
         return self._out_rate(self._operand("DC"), 2)
 
     @decel.setter
-    def decel(self, value: Any) -> None:
+    def decel(self, value: Amount) -> None:
         self._set_param("DC", self.rate_counts(value, 2, "decel"))
 
     @property
@@ -550,7 +590,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         self._set_param("IT", _smoothing_value(value, self._link.model))
 
     @property
-    def jog_speed(self) -> Any:
+    def jog_speed(self) -> Reading:
         """Jog speed ``JG`` (signed). Setting it never starts a jog: while the controller runs
         one it changes the speed in motion, otherwise it is kept for the next jog. (``JG``
         also selects jog mode: a program's ``BG`` after it, with no ``PR``/``PA`` between,
@@ -559,13 +599,13 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         return v if self._scale is None else self._scale.counts_to_rate(v, 1)
 
     @jog_speed.setter
-    def jog_speed(self, value: Any) -> None:
+    def jog_speed(self, value: Amount) -> None:
         # Never a BG: the controller is asked whether a jog runs (see moves.set_jog_speed).
         v = self.check_parameter("JG", self.signed_rate_counts(value, 1, "jog speed"))
         set_jog_speed(self._link, self._tracker, self._letter, v)
 
     @property
-    def soft_limits(self) -> tuple[Any, Any]:
+    def soft_limits(self) -> tuple[Reading | None, Reading | None]:
         """``(low, high)`` soft limits (``BL``, ``FL``); ``None`` on either side removes it,
         and reads back for a side that is off (``BL`` -2147483648, ``FL`` 2147483647: the
         values that disable them)."""
@@ -577,14 +617,16 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         return low, high
 
     @soft_limits.setter
-    def soft_limits(self, limits: tuple[Any, Any]) -> None:
+    def soft_limits(self, limits: tuple[Amount | None, Amount | None]) -> None:
         bl, fl = _soft_limit_counts(self, limits)
         model = self._link.model
         a = self._letter
         self._link.command_line([cmds.bl(model=model, **{a: bl}), cmds.fl(model=model, **{a: fl})])
 
     # -- moves ------------------------------------------------------------------------------
-    def _move(self, value: Any, relative: bool, dry_run: bool, **overrides: Any) -> MoveHandle:
+    def _move(
+        self, value: object, relative: bool, dry_run: bool, **overrides: Unpack[MoveOverrides]
+    ) -> MoveHandle:
         a = self._letter
         moves = [resolve_move(self, value, relative, overrides)]  # (resolve_moves of one axis)
         try:
@@ -600,7 +642,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
             in_user_units(exc, {a: self})
             raise
 
-    def move_to(self, position: Any, **overrides: Any) -> MoveHandle:
+    def move_to(self, position: Amount, **overrides: Unpack[MoveOverrides]) -> MoveHandle:
         """Move to an absolute position (``PA`` then ``BG``).
 
         Keyword overrides ``speed``, ``accel``, ``decel`` apply to this move (they are sent
@@ -613,22 +655,22 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         check_overrides("move_to", overrides)
         return self._move(position, False, False, **overrides)
 
-    def move_by(self, distance: Any, **overrides: Any) -> MoveHandle:
+    def move_by(self, distance: Amount, **overrides: Unpack[MoveOverrides]) -> MoveHandle:
         """Move by a relative distance (``PR`` then ``BG``)."""
         check_overrides("move_by", overrides)
         return self._move(distance, True, False, **overrides)
 
-    def plan_to(self, position: Any, **overrides: Any) -> predict.Profile:
+    def plan_to(self, position: Amount, **overrides: Unpack[MoveOverrides]) -> predict.Profile:
         """Predict and check ``move_to(position)`` without sending anything."""
         check_overrides("plan_to", overrides)
         return self._move(position, False, True, **overrides).profile
 
-    def plan_by(self, distance: Any, **overrides: Any) -> predict.Profile:
+    def plan_by(self, distance: Amount, **overrides: Unpack[MoveOverrides]) -> predict.Profile:
         """Predict and check ``move_by(distance)`` without sending anything."""
         check_overrides("plan_by", overrides)
         return self._move(distance, True, True, **overrides).profile
 
-    def jog(self, speed: Any) -> MoveHandle:
+    def jog(self, speed: Amount) -> MoveHandle:
         """Jog at ``speed`` (signed).
 
         Already jogging: the speed changes in motion and the jog's own handle is returned, its
@@ -643,7 +685,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         with user_units({self._letter: self}):  # (a start beyond FL/BL: in its unit)
             return jog(self._link, self._tracker, self._letter, v, display=self._display)
 
-    def increment(self, n: Any) -> MoveHandle:
+    def increment(self, n: Amount) -> MoveHandle:
         """Increment the position by ``n`` (``IP``).
 
         Idle: the same as ``move_by(n)``. During a position move: the target moves by ``n``
@@ -661,7 +703,12 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
             return increment(self._link, self._tracker, self._letter, counts, display=self._display)
 
     def speed_schedule(
-        self, distance: Any, changes: Any, *, speed: Any = None, label: str = "GSCHED"
+        self,
+        distance: Amount,
+        changes: SpeedChanges,
+        *,
+        speed: Amount | None = None,
+        label: str = "GSCHED",
     ) -> MoveHandle:
         """Move by ``distance``, changing speed at given distances from the start.
 
@@ -751,7 +798,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         return read_switches(self._link, self._letter)
 
     @property
-    def home_speed(self) -> Any:
+    def home_speed(self) -> Reading:
         """``HV``: the slow speed of HM's last stages and FI's return; SP's range and step.
 
         Raises (setting it):
@@ -761,7 +808,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         return self._out_rate(self._operand("HV"), 1)
 
     @home_speed.setter
-    def home_speed(self, value: Any) -> None:
+    def home_speed(self, value: Amount) -> None:
         counts = _home_speed_counts(self, value)
         self._link.command_line([cmds.hv(model=self._link.model, **{self._letter: counts})])
 
@@ -806,7 +853,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         return f"<Axis {self._letter}{unit} of {self._link.model.name}>"
 
 
-def _home_speed_counts(axis: Axis, value: Any) -> float:
+def _home_speed_counts(axis: Axis, value: object) -> float:
     """``home_speed = value`` as the HV the controller stores.
 
     Raises:
@@ -861,11 +908,11 @@ def count_of(axis: Axis, counts: float, what: str) -> int:
     return whole_counts(counts, what, _WHOLE_HINT)
 
 
-def _limit_count(axis: Axis, value: Any, what: str) -> int:
+def _limit_count(axis: Axis, value: object, what: str) -> int:
     return count_of(axis, axis.position_counts(value, what), what)
 
 
-def _soft_limit_counts(axis: Axis, limits: tuple[Any, Any]) -> tuple[int, int]:
+def _soft_limit_counts(axis: Axis, limits: Any) -> tuple[int, int]:
     """``BL`` and ``FL`` in counts for ``soft_limits = (low, high)`` (``None``: no limit).
 
     Raises:
@@ -895,9 +942,9 @@ def _soft_limit_counts(axis: Axis, limits: tuple[Any, Any]) -> tuple[int, int]:
 
 def resolve_moves(
     axes: Mapping[str, Axis],
-    targets: Mapping[str, Any],
+    targets: Mapping[str, object],
     relative: bool,
-    overrides: Mapping[str, Any],
+    overrides: Mapping[str, object],
 ) -> list[AxisMove]:
     """Turn targets and overrides in user units into counts, refusing bad values first.
 
@@ -921,7 +968,12 @@ def resolve_moves(
 
 
 def resolve_move(
-    axis: Axis, value: Any, relative: bool, overrides: Mapping[str, Any], *, named: bool = False
+    axis: Axis,
+    value: object,
+    relative: bool,
+    overrides: Mapping[str, object],
+    *,
+    named: bool = False,
 ) -> AxisMove:
     """One axis's target (or distance) and overrides in counts (:func:`resolve_moves`; with
     ``named``, a refusal of the target names its axis: one of several).

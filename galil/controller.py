@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import sys
 import threading
 import time
 import warnings
@@ -27,7 +28,15 @@ from typing import TYPE_CHECKING, Any
 
 from galil import predict
 from galil.arrays import Arrays, Variables
-from galil.axis import Axis, check_overrides, limits_by_axis, resolve_moves, user_units
+from galil.axis import (
+    Axis,
+    MoveOverrides,
+    MoveTargets,
+    check_overrides,
+    limits_by_axis,
+    resolve_moves,
+    user_units,
+)
 from galil.capture import Capture
 from galil.contour import ContourResult, ContourStream
 from galil.errors import (
@@ -74,9 +83,14 @@ from galil.routines import Routines
 from galil.segments import PathAxis, Segment, VectorPlan, show
 from galil.transport import Transport, open_transport
 from galil.tuning import burn, burn_parameters
-from galil.units import path_to_counts
-from galil.vector import VectorHandle, VectorStream
+from galil.units import Amount, Amounts, path_to_counts
+from galil.vector import StreamOptions, VectorHandle, VectorOptions, VectorStream
 from galil.watchdog import Watchdog, check_watchdog_args, replace_running
+
+if sys.version_info >= (3, 11):
+    from typing import Unpack
+else:  # (typing_extensions: a dependency on Python 3.10)
+    from typing_extensions import Unpack
 
 __all__ = [
     "CLIENT_OPTIONS",
@@ -148,7 +162,9 @@ class CoordinatedMotion:
         """The axis called ``name`` (the Controller's)."""
         raise NotImplementedError
 
-    def _prepared(self, axes: str, segments: Sequence[Segment], **options: Any) -> VectorStream:
+    def _prepared(
+        self, axes: str, segments: Sequence[Segment], **options: Unpack[StreamOptions]
+    ) -> VectorStream:
         chosen = [self.axis(a) for a in _axis_names(axes, self.link)]
         path_axes = [PathAxis(a.letter, a.scale, a.display) for a in chosen]
         options.setdefault("byte_rate", self.link.byte_rate)
@@ -160,14 +176,14 @@ class CoordinatedMotion:
         axes: str,
         segments: Sequence[Segment],
         *,
-        speed: Any,
-        accel: Any = None,
-        decel: Any = None,
+        speed: Amount,
+        accel: Amount | None = None,
+        decel: Amount | None = None,
         smoothing: float | None = None,
         mode: str | None = None,
         stream: bool = True,
-        axis_speed: Mapping[str, Any] | None = None,
-        axis_accel: Mapping[str, Any] | None = None,
+        axis_speed: Mapping[str, Amount] | None = None,
+        axis_accel: Mapping[str, Amount] | None = None,
     ) -> VectorHandle:
         """Run a path of :class:`~galil.Line` and :class:`~galil.Arc` segments on ``axes``
         (in the order of the segments' components), in the axes' user units.
@@ -190,7 +206,9 @@ class CoordinatedMotion:
         )  # fmt: skip
         return run.start(self.tracker)
 
-    def plan_vector(self, axes: str, segments: Sequence[Segment], **options: Any) -> VectorPlan:
+    def plan_vector(
+        self, axes: str, segments: Sequence[Segment], **options: Unpack[VectorOptions]
+    ) -> VectorPlan:
         """Predict and check :meth:`vector_move` (same arguments) without sending anything.
 
         Returns:
@@ -676,7 +694,7 @@ class Controller(_PublicParts, CoordinatedMotion, Resetting, LinkFacade):
     # -- motion on several axes -------------------------------------------------------------
 
     def _execute(
-        self, targets: Mapping[str, Any], relative: bool, dry_run: bool, overrides: dict[str, Any]
+        self, targets: MoveTargets, relative: bool, dry_run: bool, overrides: MoveOverrides
     ) -> MoveHandle:
         if not isinstance(targets, Mapping) or not targets:
             raise InvalidArgument(
@@ -697,7 +715,7 @@ class Controller(_PublicParts, CoordinatedMotion, Resetting, LinkFacade):
             )
 
     def move(
-        self, targets: Mapping[str, Any], *, relative: bool = False, **overrides: Any
+        self, targets: MoveTargets, *, relative: bool = False, **overrides: Unpack[MoveOverrides]
     ) -> MoveHandle:
         """Move several axes at once, sent in one line and begun together (``BG AB``).
 
@@ -711,7 +729,7 @@ class Controller(_PublicParts, CoordinatedMotion, Resetting, LinkFacade):
         return self._execute(targets, relative, False, overrides)
 
     def plan(
-        self, targets: Mapping[str, Any], *, relative: bool = False, **overrides: Any
+        self, targets: MoveTargets, *, relative: bool = False, **overrides: Unpack[MoveOverrides]
     ) -> predict.MultiProfile:
         """Predict and check :meth:`move` without sending anything."""
         check_overrides("plan", overrides)
@@ -782,13 +800,13 @@ class Controller(_PublicParts, CoordinatedMotion, Resetting, LinkFacade):
     def contour(
         self,
         axes: str,
-        path: object,
+        path: Amounts,
         *,
         dt: int,
         progress: bool = False,
         timeout: float | None = None,
-        speed_limit: object = None,
-        accel_limit: object = None,
+        speed_limit: Amount | Mapping[str, Amount] | None = None,
+        accel_limit: Amount | Mapping[str, Amount] | None = None,
     ) -> ContourResult:
         """Run a contour path on ``axes`` and return when it is done.
 
@@ -1328,7 +1346,7 @@ def no_axis_attribute(owner: str, name: str, model: ModelSpec | None) -> Attribu
     return AttributeError(f"{owner} has no attribute {name!r}")
 
 
-def connect(address: str | Transport, **options: Any) -> Controller:
+def connect(address: str | Transport, **options: object) -> Controller:
     """Connect to a controller with one line.
 
     Args:
@@ -1344,7 +1362,8 @@ def connect(address: str | Transport, **options: Any) -> Controller:
         InvalidArgument: the address or an option is not understood.
         GalilConnectionError: the link cannot be opened or the controller does not answer.
     """
-    client_opts = {k: options.pop(k) for k in list(options) if k in CLIENT_OPTIONS}
+    # (each client option is checked by Controller, each transport option by its transport)
+    client_opts: dict[str, Any] = {k: options.pop(k) for k in list(options) if k in CLIENT_OPTIONS}
     if "timeout" in client_opts:
         client_opts["timeout"] = check_timeout(client_opts["timeout"], 1.0)
     if isinstance(address, str):

@@ -196,7 +196,7 @@ def serial_ports(
     return out
 
 
-def usb_devices(*, backend: Any = None) -> list[Found]:
+def usb_devices(*, backend: object = None) -> list[Found]:
     """USB devices with Galil's vendor id (pyusb; empty when no libusb backend is found).
 
     Raises:

@@ -10,7 +10,9 @@ from __future__ import annotations
 import functools
 import re
 from collections.abc import Callable, Iterable, Sequence
-from typing import Any
+from typing import Literal, overload
+
+import numpy as np
 
 from galil.arrays import _la_reply_bytes, _lv_reply_bytes, _qu_reply_bytes
 from galil.errors import GalilConnectionError, InvalidArgument
@@ -277,7 +279,21 @@ class LinkFacade:
         (a callback may send commands itself). Returns a function that unsubscribes."""
         return self.messages_room.subscribe(callback)
 
-    def record(self, axes: str = "", *, as_dict: bool = False, timeout: float | None = None) -> Any:
+    @overload
+    def record(
+        self, axes: str = "", *, as_dict: Literal[False] = False, timeout: float | None = None
+    ) -> np.void: ...
+    @overload
+    def record(
+        self, axes: str = "", *, as_dict: Literal[True], timeout: float | None = None
+    ) -> dict[str, object]: ...
+    @overload
+    def record(
+        self, axes: str = "", *, as_dict: bool, timeout: float | None = None
+    ) -> np.void | dict[str, object]: ...
+    def record(
+        self, axes: str = "", *, as_dict: bool = False, timeout: float | None = None
+    ) -> np.void | dict[str, object]:
         """Read one data record (``QR``) and decode it.
 
         Returns:

@@ -25,9 +25,10 @@ import math
 import threading
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from numbers import Integral, Real
-from typing import Any, Protocol, overload
+from typing import Any, Generic, Protocol, TypeVar, overload
 
 import numpy as np
+import pint
 
 from galil.errors import (
     FixedAttributes,
@@ -41,7 +42,7 @@ from galil.errors import (
 from galil.link import CommandLink, check_wait_timeout
 from galil.protocol import commands as cmds
 from galil.routines import INPUT_MESSAGE, RESERVED, ProgramRunning, Routine, Routines
-from galil.units import get_registry, is_quantity
+from galil.units import Amount, get_registry, is_quantity
 
 __all__ = ["IO", "AnalogInputs", "AnalogOutputs", "DigitalInputs", "DigitalOutputs"]
 
@@ -118,7 +119,11 @@ def _level(value: object) -> bool:
     raise InvalidArgument(f"an output is True or False, not {value!r}")
 
 
-class _Channels(FixedAttributes):
+#: What one channel reads: a bool (digital), a Quantity of volts (analog).
+V = TypeVar("V")
+
+
+class _Channels(FixedAttributes, Generic[V]):
     """Channels ``first .. first + count - 1`` of one kind, indexed as the controller does."""
 
     first: ReadOnly[int] = ReadOnly()
@@ -138,10 +143,10 @@ class _Channels(FixedAttributes):
         """The channel numbers, in the controller's numbering."""
         return range(self.first, self.first + self.count)
 
-    def __iter__(self) -> Iterator[Any]:
+    def __iter__(self) -> Iterator[V]:
         return iter(self._all())
 
-    def _all(self) -> Sequence[Any]:
+    def _all(self) -> Sequence[V]:
         """Every channel's value (one round trip)."""
         raise NotImplementedError
 
@@ -175,7 +180,7 @@ class _Channels(FixedAttributes):
         return f"<{type(self).__name__} {self.first}..{self.first + self.count - 1}>"
 
 
-class _Bits(_Channels):
+class _Bits(_Channels[bool]):
     """Digital channels read as banks of bits (``_TIn`` / ``_OPn``)."""
 
     operand = "TI"
@@ -192,7 +197,7 @@ class _Bits(_Channels):
         n = self._check(key)
         return bool(round(self._link.query_operands([f"@{self.function}[{n}]"])[0]))
 
-    def _all(self) -> Sequence[Any]:
+    def _all(self) -> Sequence[bool]:
         return self._read(list(self.numbers())) if self.count else ()
 
     def _read(self, numbers: list[int]) -> tuple[bool, ...]:
@@ -223,7 +228,7 @@ class DigitalOutputs(_Bits):
     def __setitem__(self, key: int, value: bool) -> None: ...
     @overload
     def __setitem__(self, key: slice, value: Sequence[bool]) -> None: ...
-    def __setitem__(self, key: int | slice, value: Any) -> None:
+    def __setitem__(self, key: int | slice, value: object) -> None:
         model = self._link.model
         if isinstance(key, slice):
             channels = self._span(key)
@@ -244,41 +249,43 @@ class DigitalOutputs(_Bits):
         self._link.command_line(parts)
 
 
-class AnalogInputs(_Channels):
+class AnalogInputs(_Channels[pint.Quantity[float]]):
     """``io.analog_in[n]``: the volts on analog input ``n`` (``@AN[n]``) as a Quantity."""
 
     kind = "analog input"
 
     @overload
-    def __getitem__(self, key: int) -> Any: ...
+    def __getitem__(self, key: int) -> pint.Quantity[float]: ...
     @overload
-    def __getitem__(self, key: slice) -> tuple[Any, ...]: ...
-    def __getitem__(self, key: int | slice) -> Any:
+    def __getitem__(self, key: slice) -> tuple[pint.Quantity[float], ...]: ...
+    def __getitem__(
+        self, key: int | slice
+    ) -> pint.Quantity[float] | tuple[pint.Quantity[float], ...]:
         numbers = self._span(key) if isinstance(key, slice) else [self._check(key)]
         values = self._link.query_operands([f"@AN[{n}]" for n in numbers])
         out = tuple(get_registry().Quantity(v, "volt") for v in values)
         return out if isinstance(key, slice) else out[0]
 
-    def _all(self) -> Sequence[Any]:
+    def _all(self) -> Sequence[pint.Quantity[float]]:
         return self[self.first : self.first + self.count] if self.count else ()
 
 
-class AnalogOutputs(_Channels):
+class AnalogOutputs(_Channels[pint.Quantity[float]]):
     """``io.analog_out[n]``: set (``AO n,v``, range-checked per model) and read (``@AO[n]``)."""
 
     kind = "analog output"
 
-    def __getitem__(self, n: int) -> Any:
+    def __getitem__(self, n: int) -> pint.Quantity[float]:
         value = self._link.query_operands([f"@AO[{self._check(n)}]"])[0]
         return get_registry().Quantity(value, "volt")
 
-    def _all(self) -> Sequence[Any]:
+    def _all(self) -> Sequence[pint.Quantity[float]]:
         if not self.count:
             return ()
         values = self._link.query_operands([f"@AO[{n}]" for n in self.numbers()])
         return tuple(get_registry().Quantity(v, "volt") for v in values)
 
-    def __setitem__(self, n: int, value: object) -> None:
+    def __setitem__(self, n: int, value: Amount) -> None:
         v = volts(value, f"analog output {n}")
         self._link.command_line([cmds.ao(self._check(n), v, model=self._link.model)])
 

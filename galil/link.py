@@ -29,7 +29,7 @@ import warnings
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol, TypeVar
+from typing import Protocol, TypeVar, overload
 
 from galil.codes import parse_tc1
 from galil.errors import (
@@ -96,6 +96,7 @@ _DEBUG = logging.DEBUG
 _monotonic = time.monotonic
 
 _E = TypeVar("_E", bound=GalilError)
+_T = TypeVar("_T")
 
 # Polling loops send the same few lines again and again: each text is parsed once (a plain
 # dict, looked up inline by Link.command; cleared when it grows, so it stays bounded).
@@ -167,7 +168,11 @@ def check_flag(value: object, name: str) -> bool:
     return value
 
 
-def check_items(value: object, name: str) -> list[Any]:
+@overload
+def check_items(value: Iterable[_T], name: str) -> list[_T]: ...
+@overload
+def check_items(value: object, name: str) -> list[object]: ...
+def check_items(value: Iterable[_T] | object, name: str) -> list[_T] | list[object]:
     """The items of a list, tuple or other iterable given where several things are expected; a
     string (one item, or characters?), a mapping or anything not iterable is refused.
 

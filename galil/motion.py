@@ -1460,7 +1460,7 @@ class WaitBar:
 # ----------------------------------------------------------------------------------- stopping
 
 
-def held(tracker: MotionTracker | None) -> contextlib.AbstractContextManager[Any]:
+def held(tracker: MotionTracker | None) -> contextlib.AbstractContextManager[object]:
     """The tracker's :attr:`~MotionTracker.lock` (nothing to hold without a tracker)."""
     return contextlib.nullcontext() if tracker is None else tracker.lock
 

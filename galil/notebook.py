@@ -11,7 +11,7 @@ import numbers
 import threading
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -22,7 +22,11 @@ from galil.contour import ContourResult
 from galil.errors import GalilError, InvalidArgument, decimal_hint
 from galil.motion import MoveHandle
 from galil.predict import Profile
-from galil.units import counts_or_plain, get_registry, is_quantity
+from galil.units import Amount, counts_or_plain, get_registry, is_quantity
+
+if TYPE_CHECKING:
+    from ipywidgets import VBox
+    from matplotlib.figure import Figure
 
 __all__ = ["Comparison", "compare", "compare_plot", "jog_widget"]
 
@@ -34,7 +38,9 @@ _OPERANDS = {"reference": "RP", "position": "TP", "aux_position": "TD"}
 #: the whole motion (``error`` is the following error, ``_TE``: 0 for an ideal servo).
 _NOT_POSITIONS = {"error": "_TE", "velocity": "_TV", "torque": "_TT"}
 Predicted = MoveHandle | ContourResult | Mapping[str, Profile]
-Recorded = Recording | np.ndarray[Any, Any] | Mapping[str, tuple[npt.ArrayLike, npt.ArrayLike]]
+#: Data records: a structured array (``RecordStream.take``).
+Records = npt.NDArray[np.void]
+Recorded = Recording | Records | Mapping[str, tuple[npt.ArrayLike, npt.ArrayLike]]
 
 
 @dataclass(frozen=True)
@@ -83,7 +89,7 @@ def _predictions(predicted: Predicted) -> tuple[dict[str, Profile], dict[str, in
 
 
 def _recorded(
-    recorded: Recording | np.ndarray[Any, Any], letter: str, field: str
+    recorded: Recording | Records, letter: str, field: str
 ) -> tuple[npt.NDArray[np.int64], FloatArray] | None:
     """(controller samples, positions) of ``letter`` in a recording, or None if absent."""
     if isinstance(recorded, Recording):
@@ -232,7 +238,7 @@ def compare_plot(
     *,
     title: str = "predicted vs recorded",
     field: str = "reference",
-) -> Any:
+) -> Figure:
     """Plot predicted positions against recorded ones, and their difference in counts.
 
     Positions are drawn in each profile's unit (millimetres for a move of a scaled axis,
@@ -397,7 +403,7 @@ class _JogControl:
                 self._jog(value)
 
 
-def jog_widget(axis: Axis, *, max_speed: float | None = None) -> Any:
+def jog_widget(axis: Axis, *, max_speed: Amount | None = None) -> VBox:
     """A slider that jogs ``axis`` at the chosen speed, and a Stop button; needs ipywidgets.
 
     Moving the slider jogs (or changes the jog speed in motion); 0 or Stop decelerates to a

@@ -18,7 +18,7 @@ import math
 import numbers
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -26,7 +26,14 @@ import numpy.typing as npt
 from galil import predict
 from galil.errors import InvalidArgument, decimal_hint
 from galil.predict.path import PathLayout, quantise_angle
-from galil.units import Scale, angle_in_degrees, counts_or_plain, is_quantity
+from galil.units import (
+    Amount,
+    QuantityLike,
+    Scale,
+    angle_in_degrees,
+    counts_or_plain,
+    is_quantity,
+)
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -83,9 +90,9 @@ class Line(Segment):
     interpolation on more axes (``LI``).
     """
 
-    deltas: tuple[Any, ...]
+    deltas: tuple[Amount, ...]
 
-    def __init__(self, *deltas: Any) -> None:
+    def __init__(self, *deltas: Amount) -> None:
         if not deltas:
             raise InvalidArgument("a Line needs the move of each axis, e.g. Line(10 * mm, 0)")
         for i, d in enumerate(deltas):
@@ -93,12 +100,12 @@ class Line(Segment):
         object.__setattr__(self, "deltas", tuple(deltas))
 
     @property
-    def dx(self) -> Any:
+    def dx(self) -> Amount:
         """The first axis's move."""
         return self.deltas[0]
 
     @property
-    def dy(self) -> Any:
+    def dy(self) -> Amount | None:
         """The second axis's move (``None`` on a one-axis line)."""
         return self.deltas[1] if len(self.deltas) > 1 else None
 
@@ -115,13 +122,14 @@ class Arc(Segment):
         sweep: the angle travelled, degrees or a pint angle; positive is counter-clockwise.
     """
 
-    radius: Any
-    start: Any
-    sweep: Any
+    radius: Amount
+    start: Amount
+    sweep: Amount
 
     def __post_init__(self) -> None:
         _finite(self.radius, "Arc radius")
-        if not getattr(self.radius, "magnitude", self.radius) > 0:
+        radius: Any = getattr(self.radius, "magnitude", self.radius)  # (checked finite above)
+        if not radius > 0:
             raise InvalidArgument(f"Arc radius must be positive, got {self.radius!r}")
         if _degrees(self.sweep, "Arc sweep") == 0:
             raise InvalidArgument("Arc sweep must not be 0")
@@ -204,7 +212,7 @@ def _distance(axis: PathAxis, value: object, what: str) -> float:
     if not is_quantity(value) and value == 0 and not isinstance(value, bool):
         return 0.0  # no move needs no unit: Line(10 * mm, 0)
     if axis.scale is not None:
-        return axis.scale.distance_to_counts(value, what)
+        return axis.scale.distance_to_counts(cast("QuantityLike", value), what)
     return counts_or_plain(value, what, axis.letter)
 
 

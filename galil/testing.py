@@ -18,7 +18,6 @@ import contextlib
 import re
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 from galil.controller import Controller, connect
 from galil.errors import InvalidArgument
@@ -29,7 +28,7 @@ __all__ = ["Transcript", "nothing_sent", "sim_of", "simulated", "transcript"]
 
 
 @contextlib.contextmanager
-def simulated(model: str = "DMC-4040", **options: Any) -> Iterator[Controller]:
+def simulated(model: str = "DMC-4040", **options: object) -> Iterator[Controller]:
     """A :class:`~galil.controller.Controller` connected to a fresh in-process simulator.
 
     The simulator runs on a manual clock: time passes only while the client waits for a reply

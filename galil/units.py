@@ -12,7 +12,7 @@ import numbers
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cache, cached_property, lru_cache
-from typing import Any, TypeAlias
+from typing import Any, Protocol, TypeAlias, TypeGuard, cast, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -22,7 +22,13 @@ from galil.errors import InvalidArgument, LimitError, decimal_hint
 
 __all__ = [
     "UNIT_KINDS",
+    "Amount",
+    "Amounts",
     "PathSamples",
+    "QuantityLike",
+    "Reading",
+    "Readings",
+    "Real",
     "Scale",
     "angle_in_degrees",
     "counts_or_plain",
@@ -37,30 +43,87 @@ __all__ = [
 ]
 
 
+# -- the public types (decision 0099) ------------------------------------------------------
+# Defined here, where pint and numpy are imported anyway, as runtime objects: the annotations
+# that name them resolve (typing.get_type_hints, inspect.signature(eval_str=True)).
+
+#: pint's Quantity, generic in its magnitude: ``Quantity[float]`` (one value),
+#: ``Quantity[npt.NDArray[np.float64]]`` (an array). Every registry's Quantity derives from it.
+#: (Not in ``__all__``: it is pint's own class, documented by pint; ``isinstance(v,
+#: pint.Quantity)`` narrows a :data:`Reading`.)
+Quantity = pint.Quantity
+
+
+class QuantityLike(Protocol):
+    """What the library takes as a Quantity: anything with a magnitude, units and a
+    dimensionality (:func:`is_quantity`'s test), of any registry and any magnitude type
+    (pint's own ``Quantity[int]``, ``Quantity[float]``, a numpy magnitude ...). Whether it
+    is one real value, and of which dimension, is checked at run time."""
+
+    @property
+    def magnitude(self) -> object:
+        """The number (or array) without its unit."""
+        ...
+
+    @property
+    def units(self) -> object:
+        """The unit."""
+        ...
+
+    @property
+    def dimensionality(self) -> object:
+        """The dimension (length, angle, time ...)."""
+        ...
+
+
+#: A plain real number as the library takes it: an int or a float, or a numpy integer or
+#: floating scalar (``np.int64``, ``np.float32``); a bool is refused at run time.
+Real: TypeAlias = float | np.integer | np.floating
+#: One value in, on an axis without a scale or with one: a plain number (counts, or counts
+#: per second ...) or a Quantity (in the axis's units; counts on an axis without a scale).
+Amount: TypeAlias = Real | QuantityLike
+#: Values in, as an array: anything numpy makes an array of, or a Quantity array.
+Amounts: TypeAlias = npt.ArrayLike | QuantityLike
+#: One value out: a float on an axis without a scale (counts, counts/s ...), a Quantity of a
+#: float on one with a scale. A typed caller narrows (``isinstance(v, pint.Quantity)``)
+#: before ``v.to("mm")``: on an axis without a scale that call fails.
+Reading: TypeAlias = float | pint.Quantity[float]
+#: Values out, as an array: floats (counts ...) or a Quantity of them.
+Readings: TypeAlias = npt.NDArray[np.float64] | pint.Quantity[npt.NDArray[np.float64]]
+
+
 @cache
-def get_registry() -> Any:
+def get_registry() -> pint.UnitRegistry[float]:
     """Return the library's default registry (shared with ``pint`` application registry)."""
     reg: Any = pint.get_application_registry()  # type: ignore[no-untyped-call]
-    return reg.get()
+    registry: pint.UnitRegistry[float] = reg.get()
+    return registry
 
 
 class _LazyRegistry:
     """``galil.units.ureg``: the default registry, built on first attribute access."""
 
+    # Any: the registry's attributes are its units (``ureg.mm``), found by name at run time,
+    # and pint types its own registry's __getattr__ as Any.
     def __getattr__(self, name: str) -> Any:
         return getattr(get_registry(), name)
 
-    def __call__(self, *args: Any, **kwargs: Any) -> Any:
-        return get_registry()(*args, **kwargs)
+    def __call__(
+        self, input_string: str, case_sensitive: bool | None = None, **values: object
+    ) -> pint.Quantity[float]:
+        """``ureg("2000 / mm")``: the expression parsed by the default registry (pint's
+        ``UnitRegistry.__call__``; ``values`` are passed on as they are)."""
+        return get_registry()(input_string, case_sensitive, **values)
 
     def __repr__(self) -> str:
         return "<galil default pint registry>"
 
 
-ureg: Any = _LazyRegistry()
+# (Typed as the registry it stands for: ``ureg.Quantity(5, "mm")`` is typed as pint types it.)
+ureg: pint.UnitRegistry[float] = _LazyRegistry()  # type: ignore[assignment]
 
 
-def is_quantity(value: object) -> bool:
+def is_quantity(value: object) -> TypeGuard[QuantityLike]:
     """True for a pint Quantity of any registry."""
     if isinstance(value, pint.Quantity):  # every registry's Quantity class derives from it
         return True
@@ -184,7 +247,7 @@ def _second() -> Any:
 @lru_cache(maxsize=256)
 def _angle_power(units: Any) -> int:
     """The power of angle in ``units`` (pint treats angles as dimensionless: count radians)."""
-    root = get_registry().Quantity(1.0, units).to_root_units()
+    root: Any = get_registry().Quantity(1.0, units).to_root_units()
     return int(dict(root.unit_items()).get("radian", 0))
 
 
@@ -262,7 +325,7 @@ def _one_value(m: object, given: object) -> float:
     return float(m)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)  # (__init__ takes any Quantity; the fields hold checked ones)
 class Scale:
     """How one axis maps user units onto encoder counts.
 
@@ -275,9 +338,19 @@ class Scale:
         sign: +1, or -1 when the user's positive direction is the motor's negative one.
     """
 
-    counts_per: Any
-    offset: Any = None
+    counts_per: pint.Quantity[float]
+    # (None only as __init__'s default, as before: the checked offset replaces it)
+    offset: pint.Quantity[float] = None  # type: ignore[assignment]
     sign: int = 1
+
+    def __init__(
+        self, counts_per: QuantityLike, offset: QuantityLike | None = None, sign: int = 1
+    ) -> None:
+        # What the generated __init__ did: set the fields, then check them (__post_init__).
+        object.__setattr__(self, "counts_per", counts_per)
+        object.__setattr__(self, "offset", offset)
+        object.__setattr__(self, "sign", sign)
+        self.__post_init__()
 
     def __post_init__(self) -> None:
         if not is_quantity(self.counts_per):
@@ -312,15 +385,18 @@ class Scale:
         if isinstance(self.sign, bool) or self.sign not in (1, -1):
             raise InvalidArgument(f"sign must be +1 or -1, got {self.sign!r}")
         unit = self.unit
-        if self.offset is None:
+        offset: object = self.offset  # (as given: None, or any Quantity, until checked here)
+        if offset is None:
             object.__setattr__(self, "offset", get_registry().Quantity(0.0, unit))
         else:
-            object.__setattr__(self, "offset", self._convert(self.offset, unit, "offset"))
+            object.__setattr__(self, "offset", self._convert(offset, unit, "offset"))
 
     @cached_property
-    def unit(self) -> Any:
+    def unit(self) -> pint.Unit:
         """The user's position unit (``mm`` for ``2000 / mm``)."""
-        return (1 / self.counts_per).units
+        cp: Any = self.counts_per  # (a Quantity of the default registry once checked)
+        unit: pint.Unit = (1 / cp).units
+        return unit
 
     @cached_property
     def unit_text(self) -> str:
@@ -329,11 +405,13 @@ class Scale:
 
     @cached_property
     def _k(self) -> float:
-        return float(self.counts_per.magnitude)
+        cp: Any = self.counts_per
+        return float(cp.magnitude)
 
     @cached_property
     def _offset(self) -> float:
-        return float(self.offset.magnitude)
+        offset: Any = self.offset  # (a Quantity in the axis's unit once checked)
+        return float(offset.magnitude)
 
     @cached_property
     def display(self) -> tuple[float, float, str]:
@@ -342,7 +420,7 @@ class Scale:
         return (self.sign * self._k, self._offset, self.unit_text)
 
     @cached_property
-    def _rate_units(self) -> tuple[Any, Any]:
+    def _rate_units(self) -> tuple[pint.Unit, pint.Unit]:
         reg = get_registry()
         return self.unit / reg.second, self.unit / reg.second**2
 
@@ -377,7 +455,7 @@ class Scale:
         _magnitude(out, what)
         return out
 
-    def position_to_counts(self, value: Any, what: str = "position") -> float:
+    def position_to_counts(self, value: QuantityLike, what: str = "position") -> float:
         """A position Quantity to (unrounded) counts."""
         if is_quantity(value):
             q = _ours(value, what, lambda: f"{self.unit:~}-compatible units")
@@ -389,31 +467,57 @@ class Scale:
         # such as degC): subtracting magnitudes is what pint's subtraction does.
         return self.sign * (_magnitude(q, what) - self._offset) * self._k
 
-    def distance_to_counts(self, value: Any, what: str = "distance") -> float:
+    def distance_to_counts(self, value: QuantityLike, what: str = "distance") -> float:
         """A relative distance Quantity to counts (no offset)."""
         q = self._convert(value, self.unit, what)
         return self.sign * float(q.magnitude) * self._k
 
-    def rate_to_counts(self, value: Any, power: int, what: str) -> float:
+    def rate_to_counts(self, value: QuantityLike, power: int, what: str) -> float:
         """A speed (power 1) or acceleration (power 2) Quantity to counts/s**power."""
         unit = self._rate_units[power - 1]
         q = self._convert(value, unit, what)
         return self.sign * float(q.magnitude) * self._k
 
-    def counts_to_position(self, counts: float | npt.NDArray[np.float64]) -> Any:
+    @overload
+    def counts_to_position(self, counts: float) -> pint.Quantity[float]: ...
+    @overload
+    def counts_to_position(
+        self, counts: npt.NDArray[np.float64]
+    ) -> pint.Quantity[npt.NDArray[np.float64]]: ...
+    def counts_to_position(
+        self, counts: float | npt.NDArray[np.float64]
+    ) -> pint.Quantity[float] | pint.Quantity[npt.NDArray[np.float64]]:
         """Counts to a position Quantity."""
-        return (counts * self.sign / self._k) * get_registry().Quantity(
-            1.0, self.unit
-        ) + self.offset
+        q: Any = (counts * self.sign / self._k) * get_registry().Quantity(1.0, self.unit)
+        out: pint.Quantity[float] = q + self.offset  # (pint types its arithmetic as Any)
+        return out
 
-    def counts_to_distance(self, counts: float | npt.NDArray[np.float64]) -> Any:
+    @overload
+    def counts_to_distance(self, counts: float) -> pint.Quantity[float]: ...
+    @overload
+    def counts_to_distance(
+        self, counts: npt.NDArray[np.float64]
+    ) -> pint.Quantity[npt.NDArray[np.float64]]: ...
+    def counts_to_distance(
+        self, counts: float | npt.NDArray[np.float64]
+    ) -> pint.Quantity[float] | pint.Quantity[npt.NDArray[np.float64]]:
         """Counts to a relative distance Quantity."""
-        return get_registry().Quantity(counts * self.sign / self._k, self.unit)
+        out: Any = get_registry().Quantity(counts * self.sign / self._k, self.unit)
+        return out  # type: ignore[no-any-return]
 
-    def counts_to_rate(self, counts: float | npt.NDArray[np.float64], power: int) -> Any:
+    @overload
+    def counts_to_rate(self, counts: float, power: int) -> pint.Quantity[float]: ...
+    @overload
+    def counts_to_rate(
+        self, counts: npt.NDArray[np.float64], power: int
+    ) -> pint.Quantity[npt.NDArray[np.float64]]: ...
+    def counts_to_rate(
+        self, counts: float | npt.NDArray[np.float64], power: int
+    ) -> pint.Quantity[float] | pint.Quantity[npt.NDArray[np.float64]]:
         """Counts/s**power to a speed or acceleration Quantity."""
         unit = self._rate_units[power - 1]
-        return get_registry().Quantity(counts * self.sign / self._k, unit)
+        out: Any = get_registry().Quantity(counts * self.sign / self._k, unit)
+        return out  # type: ignore[no-any-return]
 
 
 def _no_scale(what: str, value: object, letter: str) -> InvalidArgument:
@@ -473,7 +577,7 @@ def signed_rate_counts(
             f"power must be 1 (a speed) or 2 (an acceleration), not {power!r:.60}"
         )
     if scale is not None:
-        return scale.rate_to_counts(value, power, what)
+        return scale.rate_to_counts(cast("QuantityLike", value), power, what)
     return counts_or_plain(value, what, letter, power=power)
 
 
@@ -532,13 +636,15 @@ UNIT_KINDS: dict[str, str] = {
 }
 
 
-def _in_unit(scale: Scale, counts: float, kind: str) -> Any:
+def _in_unit(scale: Scale, counts: float, kind: str) -> pint.Quantity[float]:
     if kind == "position":
         return scale.counts_to_position(counts)
+    q: Any  # (pint types abs() of a Quantity as a PlainQuantity)
     if kind in ("distance", "length"):
         q = scale.counts_to_distance(counts)
         return q if kind == "distance" else abs(q)
-    return abs(scale.counts_to_rate(counts, 1 if kind == "speed" else 2))
+    q = scale.counts_to_rate(counts, 1 if kind == "speed" else 2)
+    return abs(q)
 
 
 def state_in_units(exc: LimitError, scale: Scale | None, kind: str | None = None) -> None:
@@ -566,7 +672,7 @@ def state_in_units(exc: LimitError, scale: Scale | None, kind: str | None = None
     exc.args = (f"{exc.args[0]} (in user units: {text})", *exc.args[1:])
 
 
-PathSamples: TypeAlias = "npt.NDArray[np.float64] | pint.Quantity[npt.NDArray[np.float64]]"
+PathSamples: TypeAlias = Readings
 """Positions sampled along a path: a float array in counts, or a pint Quantity array."""
 
 

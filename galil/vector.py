@@ -20,9 +20,10 @@ goes out as one sequence:
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator, Mapping, Sequence
+import sys
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 
@@ -57,9 +58,45 @@ from galil.segments import (
     show,
     to_counts,
 )
-from galil.units import counts_or_plain, is_quantity, rate_magnitude_counts, state_in_units
+from galil.units import (
+    Amount,
+    counts_or_plain,
+    is_quantity,
+    rate_magnitude_counts,
+    state_in_units,
+)
 
-__all__ = ["VectorHandle", "VectorStream"]
+if sys.version_info >= (3, 11):
+    from typing import Unpack
+else:  # (typing_extensions: a dependency on Python 3.10)
+    from typing_extensions import Unpack
+
+__all__ = ["StreamOptions", "VectorHandle", "VectorOptions", "VectorStream"]
+
+
+class _VectorSpeed(TypedDict):
+    speed: Amount
+
+
+class VectorOptions(_VectorSpeed, total=False):
+    """The keyword arguments of a path (:meth:`Controller.vector_move
+    <galil.controller.CoordinatedMotion.vector_move>`, ``**options`` of ``plan_vector``):
+    ``speed`` (required), and what it documents."""
+
+    accel: Amount | None
+    decel: Amount | None
+    smoothing: float | None
+    mode: str | None
+    stream: bool
+    axis_speed: Mapping[str, Amount] | None
+    axis_accel: Mapping[str, Amount] | None
+
+
+class StreamOptions(VectorOptions, total=False):
+    """:class:`VectorOptions` and what the controller adds: the link's ``byte_rate``."""
+
+    byte_rate: float | None
+
 
 #: The coordinate system the library's sequences use.
 PLANE = "S"
@@ -175,7 +212,9 @@ class VectorHandle(MoveHandle):
         show_in = self._display.get(letter)
         return profile if show_in is None else show_in(profile)
 
-    def add_event(self, letter: str, sample: int | None, make: Any) -> None:
+    def add_event(
+        self, letter: str, sample: int | None, make: Callable[[float], predict.Event] | None
+    ) -> None:
         """A stop (``ST``) or abort (``AB``) sent at controller ``sample`` (other changes,
         SP or AC of an axis, do not touch a sequence)."""
         with self._lock:
@@ -361,7 +400,7 @@ class VectorStream:
         axes: Sequence[PathAxis],
         segments: Sequence[Segment],
         tracker: MotionTracker,
-        **options: Any,
+        **options: Unpack[StreamOptions],
     ) -> VectorStream:
         """A stream for ``axes``, already prepared (:meth:`prepare`), its followers from
         ``tracker``."""
@@ -684,7 +723,7 @@ class VectorStream:
         handle: VectorHandle,
         texts: Sequence[Command],
         sent: int,
-        held: contextlib.AbstractContextManager[Any],
+        held: contextlib.AbstractContextManager[object],
     ) -> None:
         """Stream the rest as room frees up; nothing more once a stop reached the sequence
         (``held``, the tracker's lock, keeps a stop from falling between the check and a

@@ -10,17 +10,24 @@ their setters ``set_`` methods (``await axis.set_speed(v)``); the tuning setting
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Awaitable, Callable
-from typing import Any, Generic, TypeVar, overload
+from typing import Any, Generic, TypeVar, cast, overload
 
 from galil import predict
 from galil.aio._motion import MotionRoom, motion_twin
 from galil.aio._worker import Room, same, twin
-from galil.axis import Axis
+from galil.axis import Axis, MoveOverrides
 from galil.gearing import Gearing
 from galil.homing import Homed, Switches
 from galil.motion import MoveHandle
 from galil.tuning import Setting
+from galil.units import Amount, QuantityLike, Reading, Scale
+
+if sys.version_info >= (3, 11):
+    from typing import Unpack
+else:  # (typing_extensions: a dependency on Python 3.10)
+    from typing_extensions import Unpack
 
 __all__ = ["AsyncAxis", "AsyncGearing", "read_setting", "write_setting"]
 
@@ -29,19 +36,23 @@ T = TypeVar("T")
 
 # Methods that take **overrides cannot bind ``self`` positionally for mypy; these forwarders
 # only make it positional-only (the sync methods do the work and hold the docstrings).
-def _move_to(axis: Axis, /, position: Any, **overrides: Any) -> MoveHandle:
+def _move_to(axis: Axis, /, position: Amount, **overrides: Unpack[MoveOverrides]) -> MoveHandle:
     return axis.move_to(position, **overrides)
 
 
-def _move_by(axis: Axis, /, distance: Any, **overrides: Any) -> MoveHandle:
+def _move_by(axis: Axis, /, distance: Amount, **overrides: Unpack[MoveOverrides]) -> MoveHandle:
     return axis.move_by(distance, **overrides)
 
 
-def _plan_to(axis: Axis, /, position: Any, **overrides: Any) -> predict.Profile:
+def _plan_to(
+    axis: Axis, /, position: Amount, **overrides: Unpack[MoveOverrides]
+) -> predict.Profile:
     return axis.plan_to(position, **overrides)
 
 
-def _plan_by(axis: Axis, /, distance: Any, **overrides: Any) -> predict.Profile:
+def _plan_by(
+    axis: Axis, /, distance: Amount, **overrides: Unpack[MoveOverrides]
+) -> predict.Profile:
     return axis.plan_by(distance, **overrides)
 
 
@@ -177,13 +188,15 @@ class AsyncAxis(MotionRoom[Axis]):
         """The axis letter."""
         return self.sync.letter
 
-    def set_scale(self, counts_per: Any, offset: Any = None, sign: int = 1) -> AsyncAxis:
+    def set_scale(
+        self, counts_per: QuantityLike | None, offset: QuantityLike | None = None, sign: int = 1
+    ) -> AsyncAxis:
         """Give the axis a scale (no I/O; see :meth:`galil.Axis.set_scale`)."""
         self.sync.set_scale(counts_per, offset, sign)
         return self
 
     @property
-    def scale(self) -> Any:
+    def scale(self) -> Scale | None:
         """The axis's :class:`~galil.units.Scale`, if any."""
         return self.sync.scale
 
@@ -196,28 +209,32 @@ class AsyncAxis(MotionRoom[Axis]):
     limit_counts = same(Axis.limit_counts)
     check_parameter = same(Axis.check_parameter)
 
-    async def _get(self, name: str) -> Any:
+    async def _get(self, name: str) -> Any:  # (private: each caller says what it reads)
         return await self._worker.run(getattr, self.sync, name)
 
-    async def _set(self, name: str, value: Any) -> None:
+    async def _reading(self, name: str) -> Reading:
+        """A sync property that reads a :data:`~galil.units.Reading` (on the worker)."""
+        return cast("Reading", await self._get(name))
+
+    async def _set(self, name: str, value: object) -> None:
         await self._worker.run(setattr, self.sync, name, value)
 
     # -- operands (one query each; see the sync properties) ---------------------------------
-    async def position(self) -> Any:
+    async def position(self) -> Reading:
         """Encoder position ``_TP``."""
-        return await self._get("position")
+        return await self._reading("position")
 
-    async def reference_position(self) -> Any:
+    async def reference_position(self) -> Reading:
         """Commanded (reference) position ``_RP``."""
-        return await self._get("reference_position")
+        return await self._reading("reference_position")
 
-    async def velocity(self) -> Any:
+    async def velocity(self) -> Reading:
         """Filtered actual velocity ``_TV`` (signed)."""
-        return await self._get("velocity")
+        return await self._reading("velocity")
 
-    async def error(self) -> Any:
+    async def error(self) -> Reading:
         """Position error ``_TE``."""
-        return await self._get("error")
+        return await self._reading("error")
 
     async def moving(self) -> bool:
         """True while the profiler is running (``_BG``)."""
@@ -233,27 +250,27 @@ class AsyncAxis(MotionRoom[Axis]):
         return int(code), str(text)
 
     # -- parameters ---------------------------------------------------------------------------
-    async def speed(self) -> Any:
+    async def speed(self) -> Reading:
         """Slew speed ``SP``."""
-        return await self._get("speed")
+        return await self._reading("speed")
 
-    async def set_speed(self, value: Any) -> None:
+    async def set_speed(self, value: Amount) -> None:
         """Set ``SP`` (in motion too: the move's prediction follows)."""
         await self._set("speed", value)
 
-    async def accel(self) -> Any:
+    async def accel(self) -> Reading:
         """Acceleration ``AC``."""
-        return await self._get("accel")
+        return await self._reading("accel")
 
-    async def set_accel(self, value: Any) -> None:
+    async def set_accel(self, value: Amount) -> None:
         """Set ``AC`` (in motion too)."""
         await self._set("accel", value)
 
-    async def decel(self) -> Any:
+    async def decel(self) -> Reading:
         """Deceleration ``DC``."""
-        return await self._get("decel")
+        return await self._reading("decel")
 
-    async def set_decel(self, value: Any) -> None:
+    async def set_decel(self, value: Amount) -> None:
         """Set ``DC`` (the controller refuses a change in motion)."""
         await self._set("decel", value)
 
@@ -265,20 +282,20 @@ class AsyncAxis(MotionRoom[Axis]):
         """Set ``IT``."""
         await self._set("smoothing", value)
 
-    async def jog_speed(self) -> Any:
+    async def jog_speed(self) -> Reading:
         """Jog speed ``JG`` (signed)."""
-        return await self._get("jog_speed")
+        return await self._reading("jog_speed")
 
-    async def set_jog_speed(self, value: Any) -> None:
+    async def set_jog_speed(self, value: Amount) -> None:
         """Set ``JG`` (while jogging: the speed changes in motion)."""
         await self._set("jog_speed", value)
 
-    async def soft_limits(self) -> tuple[Any, Any]:
+    async def soft_limits(self) -> tuple[Reading | None, Reading | None]:
         """``(low, high)`` soft limits (``BL``, ``FL``); ``None`` for a side that is off."""
-        low, high = await self._get("soft_limits")
+        low, high = cast("tuple[Reading | None, Reading | None]", await self._get("soft_limits"))
         return low, high
 
-    async def set_soft_limits(self, limits: tuple[Any, Any]) -> None:
+    async def set_soft_limits(self, limits: tuple[Amount | None, Amount | None]) -> None:
         """Set ``(low, high)``; ``None`` on either side removes it."""
         await self._set("soft_limits", limits)
 
@@ -345,11 +362,11 @@ class AsyncAxis(MotionRoom[Axis]):
         found: Switches = await self._get("switches")
         return found
 
-    async def home_speed(self) -> Any:
+    async def home_speed(self) -> Reading:
         """``HV``: the slow speed of HM's last stages and FI's return."""
-        return await self._get("home_speed")
+        return await self._reading("home_speed")
 
-    async def set_home_speed(self, value: Any) -> None:
+    async def set_home_speed(self, value: Amount) -> None:
         """Set ``HV`` (checked as a speed against the model's SP range)."""
         await self._set("home_speed", value)
 

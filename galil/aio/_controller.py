@@ -11,6 +11,7 @@ import concurrent.futures
 import contextlib
 import functools
 import itertools
+import sys
 import warnings
 import weakref
 from collections.abc import AsyncIterator, Callable, Mapping, Sequence
@@ -25,6 +26,7 @@ from galil.aio._motion import AsyncVectorHandle, Starting, motion_twin, settle_a
 from galil.aio._programs import AsyncArrays, AsyncPrograms, AsyncVariables
 from galil.aio._streams import AsyncMessages, LoopQueue
 from galil.aio._worker import Worker, shielded, twin
+from galil.axis import MoveOverrides, MoveTargets
 from galil.capture import Capture
 from galil.contour import ContourResult
 from galil.controller import (
@@ -43,6 +45,13 @@ from galil.predict import MultiProfile
 from galil.protocol.interrupts import Interrupt
 from galil.segments import Segment, VectorPlan
 from galil.transport import Transport
+from galil.units import Amount, Amounts
+from galil.vector import VectorOptions
+
+if sys.version_info >= (3, 11):
+    from typing import Unpack
+else:  # (typing_extensions: a dependency on Python 3.10)
+    from typing_extensions import Unpack
 
 __all__ = ["AsyncController", "connect"]
 
@@ -52,19 +61,29 @@ _names = itertools.count(1)
 # Methods that take **overrides cannot bind ``self`` positionally for mypy; these forwarders
 # only make it positional-only (the sync methods do the work and hold the docstrings).
 def _move(
-    c: Controller, /, targets: Mapping[str, Any], *, relative: bool = False, **overrides: Any
+    c: Controller,
+    /,
+    targets: MoveTargets,
+    *,
+    relative: bool = False,
+    **overrides: Unpack[MoveOverrides],
 ) -> MoveHandle:
     return c.move(targets, relative=relative, **overrides)
 
 
 def _plan(
-    c: Controller, /, targets: Mapping[str, Any], *, relative: bool = False, **overrides: Any
+    c: Controller,
+    /,
+    targets: MoveTargets,
+    *,
+    relative: bool = False,
+    **overrides: Unpack[MoveOverrides],
 ) -> MultiProfile:
     return c.plan(targets, relative=relative, **overrides)
 
 
 def _plan_vector(
-    c: Controller, /, axes: str, segments: Sequence[Segment], **options: Any
+    c: Controller, /, axes: str, segments: Sequence[Segment], **options: Unpack[VectorOptions]
 ) -> VectorPlan:
     return c.plan_vector(axes, segments, **options)
 
@@ -246,13 +265,13 @@ class AsyncController(AsyncLinkFacade):
     async def contour(
         self,
         axes: str,
-        path: object,
+        path: Amounts,
         *,
         dt: int,
         progress: bool = False,
         timeout: float | None = None,
-        speed_limit: object = None,
-        accel_limit: object = None,
+        speed_limit: Amount | Mapping[str, Amount] | None = None,
+        accel_limit: Amount | Mapping[str, Amount] | None = None,
     ) -> ContourResult:
         """Run a contour path on ``axes`` (see ``Controller.contour``) and return when done.
 
@@ -410,7 +429,9 @@ def _close_controller(controller: Controller, worker: Worker) -> None:
         worker.close()
 
 
-async def connect(address: str | Transport, *, threads: int = 4, **options: Any) -> AsyncController:
+async def connect(
+    address: str | Transport, *, threads: int = 4, **options: object
+) -> AsyncController:
     """Connect to a controller from a coroutine: ``c = await galil.aio.connect(address)``.
 
     The address and options are those of :func:`galil.connect`; the connection (and every
@@ -459,7 +480,7 @@ def _close_if_opened(
 
 def _open(
     address: str | Transport,
-    options: dict[str, Any],
+    options: dict[str, object],
     deliver: Callable[[str], None],
     interrupt: Callable[[Interrupt], None],
 ) -> tuple[Controller, Callable[[], None]]:

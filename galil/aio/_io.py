@@ -18,6 +18,8 @@ import operator
 from collections.abc import Awaitable, Iterable, Sequence
 from typing import Any, Generic, TypeVar, overload
 
+import pint
+
 from galil.aio._waits import in_steps
 from galil.aio._worker import Room, Worker
 from galil.io import (
@@ -29,6 +31,7 @@ from galil.io import (
     InputWatch,
 )
 from galil.link import Link
+from galil.units import Amount
 
 __all__ = [
     "AsyncAnalogInputs",
@@ -41,15 +44,18 @@ __all__ = [
 C = TypeVar("C", DigitalInputs, DigitalOutputs, AnalogInputs, AnalogOutputs)
 
 
-def _all(channels: Iterable[Any]) -> tuple[Any, ...]:
+T = TypeVar("T")
+
+
+def _all(channels: Iterable[T]) -> tuple[T, ...]:
     return tuple(channels)
 
 
-def _set_outputs(outputs: DigitalOutputs, key: Any, value: Any) -> None:
-    outputs[key] = value
+def _set_outputs(outputs: DigitalOutputs, key: int | slice, value: object) -> None:
+    outputs[key] = value  # type: ignore[call-overload]  # (DigitalOutputs checks the pair)
 
 
-def _set_analog(outputs: AnalogOutputs, n: int, value: object) -> None:
+def _set_analog(outputs: AnalogOutputs, n: int, value: Amount) -> None:
     outputs[n] = value
 
 
@@ -78,7 +84,7 @@ class _Channels(Room[C], Generic[C]):
         """The channel numbers, in the controller's numbering."""
         return self.sync.numbers()
 
-    def _read(self, key: int | slice) -> Awaitable[Any]:
+    def _read(self, key: int | slice) -> Awaitable[Any]:  # (private: typed by each caller)
         return self._worker.run(operator.getitem, self.sync, key)
 
     def __repr__(self) -> str:
@@ -116,7 +122,7 @@ class AsyncDigitalOutputs(_Channels[DigitalOutputs]):
     async def set(self, key: int, value: bool) -> None: ...
     @overload
     async def set(self, key: slice, value: Sequence[bool]) -> None: ...
-    async def set(self, key: int | slice, value: Any) -> None:
+    async def set(self, key: int | slice, value: object) -> None:
         """Set (True) or clear (False) output ``key``, or the outputs of a slice (sync:
         ``io.outputs[key] = value``).
 
@@ -135,13 +141,15 @@ class AsyncAnalogInputs(_Channels[AnalogInputs]):
     """``await io.analog_in[n]``: the volts on analog input ``n`` (``@AN[n]``)."""
 
     @overload
-    def __getitem__(self, key: int) -> Awaitable[Any]: ...
+    def __getitem__(self, key: int) -> Awaitable[pint.Quantity[float]]: ...
     @overload
-    def __getitem__(self, key: slice) -> Awaitable[tuple[Any, ...]]: ...
-    def __getitem__(self, key: int | slice) -> Awaitable[Any]:
+    def __getitem__(self, key: slice) -> Awaitable[tuple[pint.Quantity[float], ...]]: ...
+    def __getitem__(
+        self, key: int | slice
+    ) -> Awaitable[pint.Quantity[float] | tuple[pint.Quantity[float], ...]]:
         return self._read(key)
 
-    async def all(self) -> tuple[Any, ...]:
+    async def all(self) -> tuple[pint.Quantity[float], ...]:
         """Every analog input, in volts (sync: ``tuple(io.analog_in)``)."""
         return await self._worker.run(_all, self.sync)
 
@@ -149,10 +157,10 @@ class AsyncAnalogInputs(_Channels[AnalogInputs]):
 class AsyncAnalogOutputs(_Channels[AnalogOutputs]):
     """``await io.analog_out[n]`` (``@AO[n]``) and ``await io.analog_out.set(n, volts)``."""
 
-    def __getitem__(self, n: int) -> Awaitable[Any]:
+    def __getitem__(self, n: int) -> Awaitable[pint.Quantity[float]]:
         return self._read(n)
 
-    async def set(self, n: int, value: object) -> None:
+    async def set(self, n: int, value: Amount) -> None:
         """Set analog output ``n`` (``AO n,v``; sync: ``io.analog_out[n] = value``).
 
         Raises:
@@ -161,7 +169,7 @@ class AsyncAnalogOutputs(_Channels[AnalogOutputs]):
         """
         await self._worker.run(_set_analog, self.sync, n, value)
 
-    async def all(self) -> tuple[Any, ...]:
+    async def all(self) -> tuple[pint.Quantity[float], ...]:
         """Every analog output, in volts (sync: ``tuple(io.analog_out)``)."""
         return await self._worker.run(_all, self.sync)
 

@@ -26,7 +26,7 @@ import weakref
 from collections.abc import AsyncGenerator, Awaitable, Callable, Coroutine, Generator
 from dataclasses import dataclass
 from types import TracebackType
-from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
+from typing import Any, Concatenate, Generic, NoReturn, ParamSpec, TypeVar, overload
 
 from galil import predict
 from galil.aio._worker import Room, Worker
@@ -728,11 +728,12 @@ class motion_twin(Generic[S, P, H]):  # noqa: N801 - used like a decorator
 
     def __init__(
         self,
-        method: Callable[Concatenate[S, P], Any],
-        wrap: Callable[[Any, Worker, Link], Any] = AsyncMoveHandle,
+        method: Callable[Concatenate[S, P], object],
+        wrap: Callable[[NoReturn, Worker, Link], object] = AsyncMoveHandle,
     ) -> None:
-        self._method = method
-        self._wrap = wrap
+        # (the overloads pair ``method`` and ``wrap``; here either may be any of them)
+        self._method: Callable[Concatenate[S, P], Any] = method
+        self._wrap: Callable[[Any, Worker, Link], Any] = wrap
         self._at_once: Callable[[Any, Starting], object] | None = None
         self.__doc__ = method.__doc__
         self.__name__ = getattr(method, "__name__", "motion_twin")

@@ -20,9 +20,10 @@ import math
 import threading
 from collections import deque
 from collections.abc import AsyncIterator, Awaitable, Callable
-from typing import Any, Generic, TypeVar
+from typing import Generic, TypeVar
 
 import numpy as np
+import numpy.typing as npt
 
 from galil.aio._worker import Worker, shielded
 from galil.errors import FixedAttributes, GalilConnectionError, InvalidArgument, QueueTimeoutError
@@ -383,7 +384,7 @@ class AsyncRecordStream(FixedAttributes):
         got = await self.batch(1, timeout)
         return got[0]
 
-    async def take(self, n: int, timeout: float | None = None) -> np.ndarray[Any, np.dtype[Any]]:
+    async def take(self, n: int, timeout: float | None = None) -> npt.NDArray[np.void]:
         """The next ``n`` records as one structured array; ``timeout`` bounds each wait.
 
         Cancelled or timed out part-way, the records it had taken wait for the next read

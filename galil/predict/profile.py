@@ -7,7 +7,7 @@ import math
 import numbers
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -222,7 +222,7 @@ class Profile:
         pending = self.__dict__.get("_pending")
         return None if pending is None else pending.source
 
-    def recast(self, cls: type[_P], **changes: Any) -> _P:
+    def recast(self, cls: type[_P], **changes: object) -> _P:
         """This profile as an instance of ``cls`` (a subclass) with some fields changed.
 
         Arrays not computed yet stay so (:meth:`planned`), and once computed they are the
@@ -333,7 +333,11 @@ class Profile:
         """(counts per shown unit, offset, unit name): counts themselves without a display."""
         return self.display if self.display is not None else (1.0, 0.0, "counts")
 
-    def at(self, t: float | npt.ArrayLike) -> Any:
+    @overload
+    def at(self, t: float) -> float: ...
+    @overload
+    def at(self, t: npt.ArrayLike) -> float | npt.NDArray[np.float64]: ...
+    def at(self, t: float | npt.ArrayLike) -> float | npt.NDArray[np.float64]:
         """Reference position at time(s) ``t`` (s), linearly interpolated between samples.
 
         Before 0 it is the start, after the end the final position.

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from galil.codes import stop_text
 from galil.errors import InvalidArgument, ProtocolError
@@ -192,7 +193,7 @@ def record_dtype(
     letters: str | None = None,
     *,
     analog: bool | None = None,
-) -> np.dtype[Any]:
+) -> np.dtype[np.void]:
     """Return the structured dtype of a full data record for ``model`` (or a QZ tuple).
 
     ``axes`` overrides the axis count (a record holding fewer axis blocks) and ``letters``
@@ -220,7 +221,7 @@ def record_dtype(
 @functools.lru_cache(maxsize=256)
 def _record_dtype(
     qz: tuple[int, ...], axes: int | None, letters: str | None, analog: bool = True
-) -> np.dtype[Any]:
+) -> np.dtype[np.void]:
     # Built once per layout and set of axis blocks: a stream decodes thousands a second.
     # ``analog``: the 2103 axis block ends with the analog input (the 18x2's: reserved).
     n, general, coord, per_axis = qz
@@ -290,7 +291,7 @@ def decode_records(
     model: ModelSpec | tuple[int, int, int, int],
     *,
     analog: bool | None = None,
-) -> np.ndarray[Any, np.dtype[Any]]:
+) -> npt.NDArray[np.void]:
     """Decode records laid end to end (a ``DR`` stream's bytes, whole records) in one pass;
     ``analog`` as :func:`record_dtype`.
 
@@ -323,15 +324,15 @@ def decode_records(
     if not good.all():
         i = int(np.argmin(good))
         raise ProtocolError(f"record {i}: header {bytes(heads[i])!r} is not the stream's")
-    records: np.ndarray[Any, np.dtype[Any]] = np.frombuffer(data, dtype=dtype)
+    records: npt.NDArray[np.void] = np.frombuffer(data, dtype=dtype)
     return records
 
 
-def record_to_dict(record: np.void) -> dict[str, Any]:
+def record_to_dict(record: np.void) -> dict[str, object]:
     """Turn a decoded record into plain Python values (nested dicts per axis), raw as the
     record holds them: ``velocity`` is 64 times ``TV`` (:data:`RECORD_VELOCITY_SCALE`;
     :func:`decode_fields` gives counts/s)."""
-    out: dict[str, Any] = {}
+    out: dict[str, object] = {}
     for name in record.dtype.names or ():
         value = record[name]
         if value.dtype.names:
@@ -456,7 +457,7 @@ def extend_sample(low: int, near: int) -> int:
     return base
 
 
-def follow_samples(samples: Any, near: int, period: int) -> np.ndarray[Any, np.dtype[np.int64]]:
+def follow_samples(samples: npt.ArrayLike, near: int, period: int) -> npt.NDArray[np.int64]:
     """Extend the 16-bit sample counters of consecutive records to full samples, at once.
 
     The first is extended against ``near`` (a ``TIME`` close to it), each next one against
@@ -482,9 +483,7 @@ def follow_samples(samples: Any, near: int, period: int) -> np.ndarray[Any, np.d
     return out
 
 
-def with_times(
-    records: np.ndarray[Any, np.dtype[Any]], times: Any
-) -> np.ndarray[Any, np.dtype[Any]]:
+def with_times(records: npt.NDArray[np.void], times: npt.ArrayLike) -> npt.NDArray[np.void]:
     """:func:`with_time` for an array of records: a new array with a ``time`` field last.
 
     Raises:

@@ -393,7 +393,7 @@ def check_baud(value: object) -> float:
     return rate
 
 
-def open_transport(url: str | urllib.parse.SplitResult, **options: Any) -> SimLink:
+def open_transport(url: str | urllib.parse.SplitResult, **options: object) -> SimLink:
     """Open ``sim://MODEL`` as a :class:`SimLink` (the ``sim`` transport scheme).
 
     Options (keywords or URL query): ``controller`` (an existing :class:`SimController`, for

@@ -249,13 +249,13 @@ def split_address(address: str) -> SplitResult:
     )
 
 
-def parse_options(url: SplitResult, options: Mapping[str, Any]) -> dict[str, Any]:
+def parse_options(url: SplitResult, options: Mapping[str, object]) -> dict[str, object]:
     """Merge a URL's query (``?baudrate=19200&rtscts=0``) with keyword options.
 
     Query values are converted to ``int``, ``float`` or ``bool`` where they look like one;
     keyword options win over the query.
     """
-    merged: dict[str, Any] = {}
+    merged: dict[str, object] = {}
     for key, raw in parse_qsl(url.query, keep_blank_values=True):
         merged[key] = _convert(raw)
     merged.update(options)
@@ -276,7 +276,7 @@ def _convert(raw: str) -> Any:
     return raw
 
 
-def open_transport(address: str, **options: Any) -> Transport:
+def open_transport(address: str, **options: object) -> Transport:
     """Open the transport an address names.
 
     Args:

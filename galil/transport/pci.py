@@ -13,7 +13,6 @@ import fcntl
 import os
 import select
 import time
-from typing import Any
 from urllib.parse import SplitResult
 
 from galil.errors import GalilConnectionError, InvalidArgument
@@ -126,7 +125,7 @@ def _lock(fd: int, path: str) -> None:
         raise GalilConnectionError(f"cannot lock PCI node {path}: {exc}") from exc
 
 
-def open_pci(url: SplitResult, **options: Any) -> PciTransport:
+def open_pci(url: SplitResult, **options: object) -> PciTransport:
     """Open ``/dev/galilpciN`` or ``pci:///path/to/node``; options ``write_timeout`` and
     ``exclusive`` (True: a node another process holds is refused).
 

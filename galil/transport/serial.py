@@ -178,7 +178,7 @@ def _checked(opts: dict[str, Any]) -> dict[str, Any]:
     return {key: _CHECKS[key](value, key) for key, value in opts.items()}
 
 
-def open_serial(url: SplitResult, **options: Any) -> SerialTransport:
+def open_serial(url: SplitResult, **options: object) -> SerialTransport:
     """Open a serial port or pyserial URL.
 
     Options (URL query or keywords): ``baudrate`` (115200), ``bytesize``, ``parity``,
@@ -200,7 +200,7 @@ def open_serial(url: SplitResult, **options: Any) -> SerialTransport:
         if url.query:
             target += "?" + url.query
         _check_url_query(url, target)
-        opts = dict(options)
+        opts: dict[str, Any] = dict(options)  # (each checked by _checked, then pyserial)
     else:
         target = url.netloc + url.path
         opts = parse_options(url, options)

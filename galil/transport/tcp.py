@@ -14,7 +14,7 @@ import select
 import selectors
 import socket
 import time
-from typing import Any
+from typing import cast
 from urllib.parse import SplitResult
 
 from galil.errors import GalilConnectionError, InvalidArgument
@@ -311,7 +311,7 @@ def _udp_socket(host: str, port: int) -> socket.socket:
     return sock
 
 
-def open_tcp(url: SplitResult, **options: Any) -> TcpTransport:
+def open_tcp(url: SplitResult, **options: object) -> TcpTransport:
     """Open ``tcp://host[:port]``.
 
     Options: ``port``, ``connect_timeout``, ``write_timeout``, ``message_port``.
@@ -343,5 +343,5 @@ def open_tcp(url: SplitResult, **options: Any) -> TcpTransport:
         port,
         connect_timeout=connect_timeout,
         write_timeout=write_timeout,
-        message_port=message_port,
+        message_port=cast("int | None", message_port),  # (checked above)
     )

@@ -187,7 +187,7 @@ def find_device(
     return candidates[0]
 
 
-def open_usb(url: SplitResult, **options: Any) -> UsbTransport:
+def open_usb(url: SplitResult, **options: object) -> UsbTransport:
     """Open ``usb://[vid:pid][?serial=...&interface=0]``.
 
     Options: ``serial``, ``interface``, ``write_timeout``, ``backend`` (a pyusb backend),

@@ -10,13 +10,16 @@ import asyncio
 
 import numpy as np
 import numpy.typing as npt
+import pint
 from typing_extensions import assert_type
 
 import galil
 import galil.aio as aio
+import galil.units
 from galil.contour import ContourResult
 from galil.predict import MultiProfile, Profile
 from galil.programs import Download
+from galil.units import ureg
 
 
 async def check(c: aio.AsyncController) -> None:
@@ -94,3 +97,23 @@ async def check_motion(c: aio.AsyncController) -> None:
     assert_type(gearing.predict(await c.A.plan_to(10)), Profile)
     assert_type(await gearing.off(), None)
     assert_type(c.A.position_counts(5), float)
+
+
+async def check_units(c: aio.AsyncController) -> None:
+    # decision 0099: the sync axis's types, awaited.
+    assert_type(await c.A.position(), galil.Reading)
+    assert_type(await c.A.position(), float | pint.Quantity[float])
+    assert_type(await c.A.speed(), galil.Reading)
+    assert_type(await c.A.soft_limits(), tuple[galil.Reading | None, galil.Reading | None])
+    assert_type(await c.A.set_speed(5 * ureg.mm / ureg.s), None)
+    assert_type(await c.A.plan_by(ureg.Quantity(10.0, "mm"), speed=None), Profile)
+    assert_type(await c.A.move_to(np.int64(10), accel=1e5), aio.AsyncMoveHandle)
+    assert_type(await c.plan({"A": 1}, relative=True, speed=100), MultiProfile)
+    await c.A.move_to("10")  # type: ignore[arg-type]
+    await c.A.move_to(10, sped=5)  # type: ignore[call-arg]
+    assert_type(c.A.scale, galil.units.Scale | None)
+    assert_type(await c.io.analog_in[1], pint.Quantity[float])
+    assert_type(await c.io.analog_in[1:3], tuple[pint.Quantity[float], ...])
+    assert_type(await c.io.analog_in.all(), tuple[pint.Quantity[float], ...])
+    assert_type(await c.io.analog_out[0], pint.Quantity[float])
+    assert_type(await c.io.analog_out.set(0, ureg.Quantity(2.5, "V")), None)

@@ -7,12 +7,16 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
+import pint
 from typing_extensions import assert_type
 
 import galil
+import galil.units
+from galil.axis import ProfileQuantities
 from galil.contour import ContourResult
 from galil.gearing import Gearing
 from galil.predict import MultiProfile, Profile
+from galil.units import ureg
 
 
 def check(dmc: galil.Controller) -> None:
@@ -65,3 +69,49 @@ def check_coordinated(dmc: galil.Controller) -> None:
     assert_type(dmc.plan_vector("AB", path, speed=20_000), galil.VectorPlan)
     assert_type(dmc.vector_move("AB", path, speed=20_000).wait(), galil.MoveResult)
     assert_type(dmc.B.gear_to(dmc.A, 0.5), Gearing)
+
+
+def check_units(dmc: galil.Controller) -> None:
+    # decision 0099: counts on an axis without a scale, Quantities on one with a scale.
+    x = dmc.A
+    assert_type(x.position, float | pint.Quantity[float])
+    assert_type(x.position, galil.Reading)
+    assert_type(x.speed, galil.Reading)
+    assert_type(x.soft_limits, tuple[galil.Reading | None, galil.Reading | None])
+    x.speed = 5 * ureg.mm / ureg.s
+    x.soft_limits = (None, ureg.Quantity(100, "mm"))
+    assert_type(x.plan_by(10), Profile)
+    assert_type(x.plan_by(ureg.Quantity(10.0, "mm"), speed=np.float32(5), accel=None), Profile)
+    assert_type(x.plan_to(np.int64(10)).at(0.5), float)
+    assert_type(x.move_to(10, speed=20_000), galil.MoveHandle)
+    assert_type(dmc.move({"A": 1, "B": 2.5}, relative=True, decel=1e6), galil.MoveHandle)
+    # What mypy now refuses (each ignore is needed: --strict warns of an unused one).
+    x.move_to("10")  # type: ignore[arg-type]
+    x.move_to(10, sped=5)  # type: ignore[call-arg]
+    x.position.to("mm")  # type: ignore[union-attr]
+    position = x.position
+    if isinstance(position, pint.Quantity):
+        assert_type(position, pint.Quantity[float])
+    else:
+        assert_type(position, float)
+    # Scale conversions.
+    scale = galil.units.Scale(2000 / ureg.mm)
+    assert_type(x.set_scale(ureg.Quantity(2000, "1/mm")), galil.Axis)
+    assert_type(scale.position_to_counts(ureg.Quantity(5, "mm")), float)
+    assert_type(scale.counts_to_position(100.0), pint.Quantity[float])
+    assert_type(scale.counts_to_distance(np.zeros(3)), pint.Quantity[npt.NDArray[np.float64]])
+    assert_type(scale.counts_to_rate(100.0, 1), pint.Quantity[float])
+    assert_type(scale.counts_per, pint.Quantity[float])
+    scale.position_to_counts(5.0)  # type: ignore[arg-type]
+    q = ProfileQuantities(x.plan_by(10), scale)
+    assert_type(q.peak_speed, pint.Quantity[float])
+    assert_type(q.position, pint.Quantity[npt.NDArray[np.float64]])
+    # Analog readings are volts.
+    assert_type(dmc.io.analog_in[1], pint.Quantity[float])
+    assert_type(dmc.io.analog_in[1:3], tuple[pint.Quantity[float], ...])
+    assert_type(dmc.io.analog_out[0], pint.Quantity[float])
+    dmc.io.analog_out[0] = ureg.Quantity(2.5, "V")
+    assert_type(galil.units.get_registry(), pint.UnitRegistry[float])
+    assert_type(dmc.record(), np.void)
+    assert_type(dmc.record(as_dict=True), dict[str, object])
+    assert_type(galil.Line(10 * ureg.mm, 0).dx, galil.Amount)

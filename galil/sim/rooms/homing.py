@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from galil.errors import LimitError
 from galil.predict.checks import quantise_speed
@@ -147,7 +147,7 @@ class Homing(Room):
             bits |= 0x0200 | 0x0002
         return bits
 
-    def fill_record(self, buf: np.ndarray[Any, Any], letters: str) -> None:
+    def fill_record(self, buf: npt.NDArray[np.void], letters: str) -> None:
         """OR the homing bits into the status word of each axis block of ``buf``."""
         if not self.runs:
             return

@@ -22,6 +22,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from galil.models import ModelSpec
 from galil.sim.machine import Room
@@ -244,7 +245,7 @@ class IO(Room):
         return Wait(lambda: self.inputs[k] == want)
 
     # ---- the data record -----------------------------------------------------------------
-    def fill_record(self, buf: np.ndarray[Any, Any], letters: str) -> None:
+    def fill_record(self, buf: npt.NDArray[np.void], letters: str) -> None:
         """Put the inputs, outputs and analog values into the record fields that exist."""
         names = buf.dtype.names or ()
         if "inputs" in names:
