@@ -87,7 +87,7 @@ from galil.motion import held
 from galil.predict import Profile
 from galil.protocol import commands as cmds
 from galil.protocol.records import RecordSplitter, decode_records
-from galil.units import Scale, get_registry, path_to_counts
+from galil.units import Amounts, QuantityLike, Scale, get_registry, path_to_counts
 
 if TYPE_CHECKING:
     from galil.sim import SimController
@@ -294,7 +294,9 @@ class _GalilDevice(Device):
             await _release(c)
 
 
-def _scale_of(counts_per: Any, offset: Any, sign: int) -> Scale | None:
+def _scale_of(
+    counts_per: QuantityLike | None, offset: QuantityLike | None, sign: int
+) -> Scale | None:
     """A motor's scale; ``offset`` and ``sign`` only with ``counts_per`` (they would be
     dropped silently on an axis counted in counts).
 
@@ -578,8 +580,8 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         axis: str,
         name: str = "",
         *,
-        scale: Any = None,
-        offset: Any = None,
+        scale: QuantityLike | None = None,
+        offset: QuantityLike | None = None,
         sign: int = 1,
         in_position: float | None = None,
         settle_timeout: float = 0.5,
@@ -937,7 +939,7 @@ class ContourPath:
         record_period: servo samples between data records (default: one per segment).
     """
 
-    path: Any
+    path: Amounts
     dt: int
     record_period: int | None = None
 
@@ -1165,7 +1167,7 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
         axes: str,
         name: str = "",
         *,
-        scales: Mapping[str, Any] | None = None,
+        scales: Mapping[str, QuantityLike] | None = None,
     ) -> None:
         if not isinstance(address, str):
             raise InvalidArgument(f"GalilContourFlyer takes an address, not {address!r:.60}")

@@ -15,7 +15,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from typing import Any, Generic, TypeVar
+from typing import Generic, TypeVar
 
 from galil.errors import GalilConnectionError, InvalidArgument, QueueTimeoutError
 from galil.link import Link, check_wait_timeout
@@ -183,7 +183,7 @@ class Subscribers(Generic[T]):
 
 def source_ended(
     link: Link,
-    queue: BoundedQueue[Any],
+    queue: BoundedQueue[T],
     stop: threading.Event,
     what: str,
     exc: GalilConnectionError | None,

@@ -21,6 +21,7 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from galil.errors import (
     CommandError,
@@ -557,7 +558,7 @@ class RecordStream(FixedAttributes):
         layout = self._layout if self._layout is not None else self._source.layout()
         return take_room(layout, n)
 
-    def take(self, n: int, timeout: float | None = None) -> np.ndarray[Any, np.dtype[Any]]:
+    def take(self, n: int, timeout: float | None = None) -> npt.NDArray[np.void]:
         """Return the next ``n`` records as one structured array (``a["A"]["position"]``).
 
         ``timeout`` bounds the wait for each record. Timed out (or interrupted) part-way, the
@@ -742,7 +743,7 @@ class Records:
                 self._layout = model.qz
         return self._layout
 
-    def decode(self, whole: bytes, layout: Layout) -> np.ndarray[Any, np.dtype[Any]]:
+    def decode(self, whole: bytes, layout: Layout) -> npt.NDArray[np.void]:
         """Records laid end to end, in ``layout`` (the ``QZ`` reply), their axis blocks as the
         model has them (an 18x2's end in reserved bytes, a 21x3's in the analog input: the
         same QZ)."""
@@ -773,7 +774,7 @@ class Records:
             raise link.error(ProtocolError, f"{command.text!r}: {exc}") from exc
         return with_time(rec, extend_sample(int(rec["sample"]), now))
 
-    def record_dict(self, axes: str = "", *, timeout: float | None = None) -> dict[str, Any]:
+    def record_dict(self, axes: str = "", *, timeout: float | None = None) -> dict[str, object]:
         """:meth:`record` as plain Python values (nested dicts per axis)."""
         return record_to_dict(self.record(axes, timeout=timeout))
 
