@@ -27,7 +27,15 @@ from typing import Any
 import numpy as np
 
 from galil import predict
-from galil.errors import InvalidArgument, LimitError
+from galil.errors import (
+    CommandError,
+    GalilConnectionError,
+    GalilError,
+    GalilTimeoutError,
+    InvalidArgument,
+    LimitError,
+    ProtocolError,
+)
 from galil.link import CommandLink, check_flag
 from galil.models import tm_of
 from galil.motion import (
@@ -38,6 +46,7 @@ from galil.motion import (
     MoveParams,
     Track,
     held,
+    line_timeout,
     refuse_motor_off,
     sample_of,
     stop_on_error,
@@ -626,16 +635,27 @@ class VectorStream:
         """
         lock = held(tracker)
         link = self.link
-        with lock, stop_on_error(link, tracker, PLANE):  # no other thread's motion from the
-            handle, texts, first = self._begin(tracker)  # state read to the handle
+        with lock:  # no other thread's motion from the state read to the handle
+            if tracker is not None:
+                tracker.refuse_cancelled(link.model.name)  # (before the state read: 0100)
+            texts, first = self._load(tracker)  # (nothing moves before BG S)
+            with stop_on_error(link, tracker, PLANE):
+                handle = self._begin(tracker, texts, first)
         if first < len(texts):
             with stop_on_error(link, tracker, PLANE, stop=handle.stop, running=True):
                 self._feed(handle, texts, first, lock)
         return handle
 
-    def _begin(self, tracker: MotionTracker | None) -> tuple[VectorHandle, list[Command], int]:
-        """Read the state, send the setup and the first segments, ``BG S``; the handle, the
-        segments' commands and how many went out."""
+    def _load(self, tracker: MotionTracker | None) -> tuple[list[Command], int]:
+        """Read the state again under the tracker's lock (a stream is prepared without it,
+        the prediction of a long path being too slow to hold up another thread's stop or a
+        cancellation: another thread may have moved the axes since), send the setup and the
+        first segments; the segments' commands and how many went out.
+
+        Raises:
+            GalilTimeoutError, GalilConnectionError, ProtocolError: the setup's line failed
+                (:meth:`_not_started`): ``BG S`` was not sent, nothing moves.
+        """
         if self.profile is None or self._state is None:
             self.prepare()
         elif tracker is not None and self._read_state() != self._state:
@@ -646,8 +666,52 @@ class VectorStream:
         link = self.link
         texts = self._texts(profile)
         first = min(len(texts), link.model.vector_buffer)
+        setup = self._setup(state) + texts[:first] + ([self._end()] if first == len(texts) else [])
+        # Up to 511 segments: kilobytes, seconds on a serial line (as a transfer's bytes).
+        wait = line_timeout(link, setup)
+        try:
+            link.command_line(setup, timeout=wait)
+        except (InvalidArgument, CommandError):
+            raise  # (refused: the controller is as it was, the link in step)
+        except GalilError as exc:
+            error = self._not_started(exc, wait)
+            if error is exc:
+                raise
+            raise error from exc
+        return texts, first
+
+    def _not_started(self, exc: GalilError, wait: float) -> GalilError:
+        """The error of a setup line that failed (``exc``: no reply in time, a dead link, a
+        garbled reply): ``BG S`` was not sent and the axes were read at rest, so nothing
+        moves and nothing is to be stopped. The link resynchronises first (within ``wait``:
+        the rest of a long line may still be on its way on a slow line), so that it is left
+        in step when it can be (``exc`` itself for an error of another kind)."""
+        link = self.link
+        try:
+            link.query_operands([f"_BG{PLANE}"], timeout=wait)
+            after = ""
+        except GalilError:
+            after = "; the link is still out of step (it resynchronises before the next command)"
+        kinds = (GalilTimeoutError, GalilConnectionError, ProtocolError)
+        kind = next((k for k in kinds if isinstance(exc, k)), None)
+        if kind is None:
+            return exc  # (no other error comes of a line: as it is)
+        text = exc.args[0] if exc.args else type(exc).__name__
+        return link.error(
+            kind,
+            f"{text}; the sequence was not started: BG S was not sent and the axes "
+            f"{self.path.letters} were at rest{after}",
+        )
+
+    def _begin(
+        self, tracker: MotionTracker | None, texts: list[Command], first: int
+    ) -> VectorHandle:
+        """``BG S`` (the setup and the first ``first`` of ``texts`` are in); the handle."""
+        profile, state = self.profile, self._state
+        assert profile is not None
+        assert state is not None
+        link = self.link
         ended = first == len(texts)
-        link.command_line(self._setup(state) + texts[:first] + ([self._end()] if ended else []))
         replies = link.command_line([cmds.bg(PLANE, model=link.model), cmds.time_stamp()])
         sequence = _Sequence(
             initial=self.path.segments[:first],
@@ -663,7 +727,7 @@ class VectorStream:
         handle.follow(self.followers)
         if tracker is not None:
             tracker.started(handle)
-        return handle, texts, first
+        return handle
 
     def _groups(self, start: int, stop: int, texts: Sequence[Command]) -> list[tuple[int, int]]:
         """Runs of segments that fit one line with ``MG TIME`` after them."""
