@@ -20,6 +20,7 @@ goes out as one sequence:
 from __future__ import annotations
 
 import contextlib
+import numbers
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -35,6 +36,7 @@ from galil.errors import (
     InvalidArgument,
     LimitError,
     ProtocolError,
+    decimal_hint,
 )
 from galil.link import CommandLink, check_flag
 from galil.models import tm_of
@@ -347,6 +349,10 @@ class VectorStream:
         self.speed = self._rate(speed, 1, "speed")
         self.accel = None if accel is None else self._rate(accel, 2, "accel")
         self.decel = None if decel is None else self._rate(decel, 2, "decel")
+        if smoothing is not None and _not_a_number(smoothing):  # (True is not VT 1: 0026)
+            raise InvalidArgument(
+                f"smoothing (VT) must be a number, not {smoothing!r:.60}" + decimal_hint(smoothing)
+            )
         if smoothing is not None and not model.vt:
             raise InvalidArgument(
                 f"{model.name} has no VT: its sequences are smoothed by the first axis's IT "
@@ -786,6 +792,11 @@ class VectorStream:
                 return
             replies = link.command_line([self._end(), cmds.time_stamp()])
             handle.record(sample_of(replies[-1]), "end", ())
+
+
+def _not_a_number(value: object) -> bool:
+    """Whether ``value`` is no real number (a bool is none either: decision 0092)."""
+    return isinstance(value, bool) or not isinstance(value, numbers.Real)
 
 
 def _stopped(handle: VectorHandle) -> bool:
