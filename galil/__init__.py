@@ -22,6 +22,7 @@ from galil.errors import (
     ProtocolError,
     QueueTimeoutError,
     ScheduleError,
+    UnknownAxisError,
     UnknownVariableError,
 )
 from galil.homing import Homed, Switches, SwitchPolarity
@@ -81,6 +82,7 @@ __all__ = [
     "ScheduleError",
     "SwitchPolarity",
     "Switches",
+    "UnknownAxisError",
     "UnknownVariableError",
     "VectorHandle",
     "VectorPlan",

@@ -28,6 +28,7 @@ from galil.aio._worker import Worker, shielded, twin
 from galil.capture import Capture
 from galil.contour import ContourResult
 from galil.controller import (
+    AxisMap,
     Controller,
     CoordinatedMotion,
     close_after,
@@ -197,10 +198,13 @@ class AsyncController(AsyncLinkFacade):
     def axes(self) -> dict[str, AsyncAxis]:
         """The model's axes by letter (``c.axes["A"]``; also ``c.A``)."""
         if self._axes is None:
-            self._axes = {
-                a: AsyncAxis(ax, self._worker, self._link, self.sync.tracker)
-                for a, ax in self.sync.axes.items()
-            }
+            self._axes = AxisMap(
+                {
+                    a: AsyncAxis(ax, self._worker, self._link, self.sync.tracker)
+                    for a, ax in self.sync.axes.items()
+                },
+                self.model,
+            )
         return self._axes
 
     def axis(self, name: str) -> AsyncAxis:
