@@ -22,6 +22,7 @@ from galil.errors import (
     ProtocolError,
     QueueTimeoutError,
     ScheduleError,
+    UnknownAxisError,
     UnknownVariableError,
 )
 from galil.homing import Homed, Switches, SwitchPolarity
@@ -88,6 +89,7 @@ __all__ = [
     "ScheduleError",
     "SwitchPolarity",
     "Switches",
+    "UnknownAxisError",
     "UnknownVariableError",
     "VectorHandle",
     "VectorOptions",

@@ -39,6 +39,7 @@ from galil.motion import (
     dropped_parts,
     forget_dropped,
     held,
+    line_timeout,
     raise_if_limited,
     refuse_motor_off,
     sample_of,
@@ -323,6 +324,27 @@ def _bad_shape(shape: tuple[int, ...], letters: str) -> InvalidArgument:
     return InvalidArgument(f"{why}: give shape {wanted}")
 
 
+def _not_stopped(
+    link: CommandLink, tracker: MotionTracker | None, letters: str, cause: BaseException | None
+) -> MotionError:
+    """The error of a contour's halt whose ``ST`` could not be sent; the tracker keeps the
+    axes for ``close()`` to stop (decision 0077)."""
+    if tracker is not None:
+        with tracker.lock:
+            tracker.unstopped += "".join(a for a in letters if a not in tracker.unstopped)
+    why = "" if cause is None else f" after {type(cause).__name__}"
+    error = MotionError(
+        f"contour on {letters} could not be stopped{why}: ST did not go through, so its axes "
+        "may still be moving and the segments queued may still run",
+        axis=letters[0],
+        moving=letters,
+        model=link.model.name,
+        recent=link.recent,
+    )
+    error.__cause__ = cause
+    return error
+
+
 class ContourStream:
     """One contour run: :meth:`check` (no I/O), :meth:`prepare` (one state query, the
     predictions, soft limits), :meth:`feed` (CM, DT, segments keeping the buffer fed) and
@@ -386,6 +408,7 @@ class ContourStream:
         # Segments may be held under DT -1, not started: from the pre-load's CM until the
         # line with the start's DT came back (only then does a stop need _drop_held).
         self._holding = False
+        self._line_wait: float | None = None  # (the last batch's reply timeout: _halt)
 
     def commands(self) -> list[Command]:
         """The ``CD`` command of every segment, in order (built and checked at once)."""
@@ -499,8 +522,8 @@ class ContourStream:
             first = cmds.dt(-1 if start is not None else self.dt, model=model)
             self._holding = start is not None
             link.command_line([cmds.cm(self.letters, model=model), first])
-        except BaseException:
-            self._halt(end=True)  # (CM may have gone out: contour mode is left again)
+        except BaseException as exc:
+            self._halt(end=True, cause=exc)  # (CM may have gone out: contour mode is left again)
             raise
         state = _Progress(low_water=model.contour_buffer, texts=texts, start=start)
         state.bar = _bar(len(texts), self.letters) if progress else None
@@ -523,7 +546,7 @@ class ContourStream:
             # 0041) is that stop; anything else stops the axes and leaves contour mode.
             over = self._controller_stop(state) if isinstance(exc, CommandError) else None
             if over is None:
-                self._halt(end=True)
+                self._halt(end=True, cause=exc)
                 raise
             raise over.error from exc
         finally:
@@ -531,14 +554,21 @@ class ContourStream:
                 state.bar.close()
         return state
 
-    def _halt(self, *, end: bool) -> None:
-        """Stop the contour axes (``ST``), then leave contour mode if ``end``: after an
-        exception nothing queued may run on. Errors on the way are dropped (the exception
-        that brought us here is the one to see)."""
+    def _halt(self, *, end: bool, cause: BaseException | None = None) -> None:
+        """Stop the contour axes (``ST``, as long as the last batch could take: one that
+        failed may still be on a slow line, and the link gets in step behind it), then leave
+        contour mode if ``end``: after an exception (``cause``) nothing queued may run on.
+        Errors on the way out of contour mode are dropped (``cause`` is the one to see).
+
+        Raises:
+            MotionError: ``ST`` could not be sent: the axes may still move (from ``cause``).
+        """
         link = self.link
         reopen = None if self._tracker is None else self._tracker.reconnect
         stop = [cmds.st(self.letters, model=link.model)]  # (a dead link reopened once for it)
-        send_reopening(functools.partial(link.command_line, stop), reopen)
+        send = functools.partial(link.command_line, stop, timeout=self._line_wait)
+        if not send_reopening(send, reopen):
+            raise _not_stopped(link, self._tracker, self.letters, cause)
         if end:
             with contextlib.suppress(GalilError):
                 if self._holding:
@@ -595,9 +625,12 @@ class ContourStream:
             state.lines += 1
         elif room >= min(refill, len(texts) - state.sent):
             batch = texts[state.sent : state.sent + room]
+            line = [*_stamped(batch, state), _ERROR_CODE]
+            # (hundreds of segments: seconds on a serial line, as a transfer's bytes)
+            self._line_wait = wait = line_timeout(link, line)
             with held(self._tracker):  # (no stop between the check and the line)
                 self._check_stopped(state)
-                replies = link.command_line([*_stamped(batch, state), _ERROR_CODE])
+                replies = link.command_line(line, timeout=wait)
             self._holding = False  # (the first batch carries the start's DT)
             _note_begin(state, replies[:-1])
             _raise_if_ran_dry(link, state, replies[-1], len(batch))
@@ -747,7 +780,7 @@ class ContourStream:
             stopped = isinstance(exc, CommandError) and not ended
             over = self._controller_stop(state) if stopped else None
             if over is None:
-                self._halt(end=not ended)
+                self._halt(end=not ended, cause=exc)
                 raise
             raise over.error from exc
         return ContourResult(
@@ -801,6 +834,8 @@ class ContourStream:
         self.check()
         try:
             with held(self._tracker):  # no other thread's motion from the state read to CM
+                if self._tracker is not None:  # (a cancelled task's contour: nothing sent)
+                    self._tracker.refuse_cancelled(self.link.model.name)
                 self.prepare()
                 state = self._enter(progress)
             state = self._stream(state)

@@ -24,7 +24,7 @@ import warnings
 import weakref
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from galil import predict
 from galil.arrays import Arrays, Variables
@@ -47,6 +47,7 @@ from galil.errors import (
     InvalidArgument,
     ProtocolError,
     ReadOnly,
+    UnknownAxisError,
 )
 from galil.facade import LinkFacade
 from galil.gearing import read_found
@@ -663,9 +664,10 @@ class Controller(_PublicParts, CoordinatedMotion, Resetting, LinkFacade):
     def axes(self) -> dict[str, Axis]:
         """The model's axes by letter (``controller.axes["A"]``; also ``controller.A``)."""
         if self._axes is None:
-            self._axes = {
-                a: Axis(self.link, a, self.tracker, self.routines) for a in self.model.axes
-            }
+            self._axes = AxisMap(
+                {a: Axis(self.link, a, self.tracker, self.routines) for a in self.model.axes},
+                self.model,
+            )
         return self._axes
 
     def axis(self, name: str) -> Axis:
@@ -1328,6 +1330,32 @@ def _contour_limits(
         )
         for a in chosen
     }
+
+
+_A = TypeVar("_A")
+
+
+class AxisMap(dict[str, _A]):
+    """A controller's axes by letter (``controller.axes``): a ``dict`` whose miss, a letter
+    the model lacks, is an :class:`~galil.errors.UnknownAxisError` (a ``KeyError`` too) that
+    names the model's axes, as ``controller.B`` does."""
+
+    __slots__ = ("_model",)
+
+    def __init__(self, axes: Mapping[str, _A], model: ModelSpec) -> None:
+        super().__init__(axes)
+        self._model = model
+
+    def __missing__(self, key: str) -> _A:
+        model = self._model
+        if not model.axes:
+            text = f"{model.name} is an I/O controller with no axes (controller.io)"
+        else:
+            text = (
+                f"{model.name} has no axis {key!r:.40}: it has axes {', '.join(model.axes)} "
+                "(controller.A, or controller.axes['A'])"
+            )
+        raise UnknownAxisError(text, name=key, model=model.name)
 
 
 def no_axis_attribute(owner: str, name: str, model: ModelSpec | None) -> AttributeError:

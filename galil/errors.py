@@ -15,6 +15,7 @@ mixes in the stdlib type a caller would naturally catch::
     │                         (a misspelt one, a method, a read-only property, any public name
     │                         of an async object); nothing is sent
     ├── InvalidArgument       (also ValueError) refused before anything was sent
+    │   ├── UnknownAxisError  (also KeyError) no axis of that letter (``controller.axes["E"]``)
     │   └── LimitError        a move or value would cross a limit (range, soft limit, CD range,
     │       │                 contour feasibility); says which value, limit, and when
     │       └── ScheduleError a speed-schedule change point the profiler cannot honour
@@ -49,6 +50,7 @@ __all__ = [
     "ProtocolError",
     "QueueTimeoutError",
     "ScheduleError",
+    "UnknownAxisError",
     "UnknownVariableError",
 ]
 
@@ -356,6 +358,25 @@ def _nearest(cls: type[FixedAttributes], name: str) -> list[str]:
 
 class InvalidArgument(GalilError, ValueError):  # noqa: N818 (name fixed by the public API)
     """An argument we refuse to send; raised before any byte reaches the wire."""
+
+
+class UnknownAxisError(InvalidArgument, KeyError):
+    """The model has no axis of that letter: ``controller.axes["B"]`` on a one-axis
+    controller (as ``controller.B`` says it); also a :class:`KeyError`, so ``axes`` is a
+    mapping (``axes.get("B")``, ``"B" in axes``). Nothing is sent.
+
+    Attributes:
+        name: the key asked for.
+    """
+
+    def __init__(self, message: str, *, name: object, model: str | None = None) -> None:
+        super().__init__(message, model=model)
+        self.name = name
+
+    def __str__(self) -> str:
+        # (KeyError's own would print the message quoted)
+        text = Exception.__str__(self)
+        return f"{text} [{self.model}]" if self.model else text
 
 
 class LimitError(InvalidArgument):

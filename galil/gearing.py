@@ -286,13 +286,20 @@ def gear_to(
     Raises:
         InvalidArgument: an axis geared to itself, a master that is a follower or a follower
             that is a master (TC 46), the follower or the master moving, the follower's motor
-            off.
+            off; ``S`` on a controller of one axis (no path it could follow).
         LimitError: a ratio beyond the model's range (``GR``, ±127), or of 0.
     """
     model = link.model
     if master != "S":
         master = model.axis_letter(master)
     follower = model.axis_letter(follower)
+    if master == "S" and not model.axes.replace(follower, ""):
+        # (a path on the follower is refused while it follows: decision 0100)
+        raise InvalidArgument(
+            f"{model.name} has one axis, {follower}: it cannot follow S, whose paths run on "
+            f"other axes (a path on {follower} itself is refused while it follows)",
+            model=model.name,
+        )
     q = _ratio(link, ratio)
     with tracker.lock:  # (both axes at rest until the gearing is sent and known)
         return _gear_to(link, tracker, follower, master, q, (display, scale))

@@ -166,6 +166,7 @@ class AxisHoming:
     def _start(
         self, kind: str, switch: predict.HomeSwitch | None, display: Display | None
     ) -> MoveHandle:
+        self._tracker.refuse_cancelled(self._link.model.name)  # (a cancelled task's: 0100)
         self._refuse_gearing(kind)
         link, a = self._link, self.letter
         model = link.model

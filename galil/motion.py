@@ -67,6 +67,7 @@ __all__ = [
     "dropped_parts",
     "forget_dropped",
     "held",
+    "line_timeout",
     "motion_guard",
     "motors_off",
     "moving_axes",
@@ -333,6 +334,11 @@ def predict_track(
     return profile
 
 
+class _CancelledStartError(InvalidArgument):
+    """A start refused because its task was cancelled (:meth:`MotionTracker.refuse_cancelled`):
+    nothing was sent, so the guards pass it untouched."""
+
+
 class MotionTracker:
     """Which handle drives each axis, so stops and changes reach its prediction.
 
@@ -477,6 +483,20 @@ class MotionTracker:
         """
         with self.lock:
             self._refused.add(thread)
+
+    def refuse_cancelled(self, model: str) -> None:
+        """Refuse a start on a thread whose starts are refused (:meth:`refuse_starts`: its
+        task was cancelled) before anything is sent: call it under :attr:`lock`, before the
+        start's state read, so a start cancelled while it planned never sends its ``BG``
+        (decision 0100).
+
+        Raises:
+            InvalidArgument: the start was cancelled; nothing was sent.
+        """
+        if self._refused and threading.get_ident() in self._refused:
+            raise _CancelledStartError(
+                "this start was cancelled (its task was) before it sent anything", model=model
+            )
 
     def allow_starts(self, thread: int) -> None:
         """Undo :meth:`refuse_starts` (the cancelled start has returned)."""
@@ -1866,6 +1886,29 @@ def send_reopening(send: Callable[[], object], reconnect: Callable[[], None] | N
             if attempt:
                 return False
     return False
+
+
+#: A part's ``:`` (its reply) and, at most, a time stamp's or a read's number on top.
+_REPLY_BYTES = 1
+_NUMBER_BYTES = 16
+
+
+def line_timeout(link: CommandLink, parts: Sequence[Command]) -> float:
+    """The reply timeout of ``parts`` sent at once (``command_line``: as many lines as they
+    fill, pipelined): a bulk transfer's (decision 0064, :meth:`~galil.link.Link.transfer_timeout`),
+    from their bytes both ways at the link's byte rate. A vector sequence's setup and first
+    segments, or a contour's refill, is hundreds of segments long: several kilobytes, seconds
+    on a serial line, where the link's own timeout (1 s) bounds an ordinary line
+    (decision 0100)."""
+    size = 0
+    for c in parts:  # (a ';' or the CR after each, its ':', a number for a read)
+        size += len(c.text) + 1 + _REPLY_BYTES + (_NUMBER_BYTES if c.returns_data else 0)
+    return link.transfer_timeout(_EMPTY_LINE, size)
+
+
+#: What :func:`line_timeout` gives :meth:`~galil.link.Link.transfer_timeout` as the command:
+#: the bytes of the parts all count alike (the command's and the reply's add up there).
+_EMPTY_LINE = Command("")
 
 
 def _wait_stopped(link: CommandLink, busy: str) -> str:

@@ -479,6 +479,8 @@ def _execute_move(
     display: Mapping[str, Display] | None,
 ) -> MoveHandle:
     # (the tracker's lock is held: no gearing changes now)
+    if not dry_run:
+        tracker.refuse_cancelled(link.model.name)  # (a cancelled task's start: 0100)
     geared = bool(tracker.gears) or bool(tracker.found)
     if geared and not dry_run:
         for a in letters:
@@ -582,6 +584,7 @@ def _jog(
     display: Display | None,
 ) -> MoveHandle:
     a = letter
+    tracker.refuse_cancelled(link.model.name)  # (a cancelled task's start: 0100)
     tracker.refuse_geared(a, "jogging it", link.model.name)
     gears = tracker.followers(a)
     rp, bg, sc, ac, dc, it, mo, ts, bl, fl, *ends = link.query_operands(
@@ -705,6 +708,7 @@ def _increment(
     display: Display | None,
 ) -> MoveHandle:
     model = link.model
+    tracker.refuse_cancelled(model.name)  # (a cancelled task's start or change: 0100)
     tracker.refuse_geared(a, "an increment", model.name)
     gears = tracker.followers(a)
     rp, bg, pa, bl, fl, sc, *rest = link.query_operands(
@@ -920,6 +924,7 @@ def speed_schedule(
     # Held from the thread 0 check to the handle: another thread's schedule would install
     # its routine over this one's, or take thread 0 in between.
     with tracker.lock, stop_on_error(link, tracker, letter):
+        tracker.refuse_cancelled(link.model.name)  # (a cancelled task's start: 0100)
         return _speed_schedule(
             link, tracker, routines, letter, distance, changes, speed, label, display
         )

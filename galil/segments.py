@@ -25,6 +25,7 @@ import numpy.typing as npt
 
 from galil import predict
 from galil.errors import InvalidArgument, decimal_hint
+from galil.predict.counts import whole_counts
 from galil.predict.path import PathLayout, quantise_angle
 from galil.units import (
     Amount,
@@ -304,11 +305,22 @@ def to_counts(
     return PathInCounts(kind, letters, tuple(out), per_unit, unit)
 
 
+#: What a Line on an axis without a scale says when given a fraction of a count.
+_WHOLE_HINT = (
+    " (an axis without a scale takes whole counts; with a scale, a length in its unit is"
+    " rounded to the nearest count)"
+)
+
+
 def _line_counts(i: int, line: Line, axes: Sequence[PathAxis]) -> list[float]:
-    return [
-        _distance(a, d, f"segment {i} on {a.letter}")
-        for a, d in zip(axes, line.deltas, strict=True)
-    ]
+    """A Line's moves in counts: whole on an axis without a scale, whose values are counts
+    (a fraction of one refused, decision 0092); in a scale's unit they round along the path."""
+    out: list[float] = []
+    for a, d in zip(axes, line.deltas, strict=True):
+        what = f"segment {i} on {a.letter}"
+        counts = _distance(a, d, what)
+        out.append(counts if a.scale is not None else whole_counts(counts, what, _WHOLE_HINT))
+    return out
 
 
 def _vector_segments(

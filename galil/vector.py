@@ -20,6 +20,7 @@ goes out as one sequence:
 from __future__ import annotations
 
 import contextlib
+import numbers
 import sys
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -28,7 +29,16 @@ from typing import TypedDict
 import numpy as np
 
 from galil import predict
-from galil.errors import InvalidArgument, LimitError
+from galil.errors import (
+    CommandError,
+    GalilConnectionError,
+    GalilError,
+    GalilTimeoutError,
+    InvalidArgument,
+    LimitError,
+    ProtocolError,
+    decimal_hint,
+)
 from galil.link import CommandLink, check_flag
 from galil.models import tm_of
 from galil.motion import (
@@ -39,6 +49,7 @@ from galil.motion import (
     MoveParams,
     Track,
     held,
+    line_timeout,
     refuse_motor_off,
     sample_of,
     stop_on_error,
@@ -377,6 +388,10 @@ class VectorStream:
         self.speed = self._rate(speed, 1, "speed")
         self.accel = None if accel is None else self._rate(accel, 2, "accel")
         self.decel = None if decel is None else self._rate(decel, 2, "decel")
+        if smoothing is not None and _not_a_number(smoothing):  # (True is not VT 1: 0026)
+            raise InvalidArgument(
+                f"smoothing (VT) must be a number, not {smoothing!r:.60}" + decimal_hint(smoothing)
+            )
         if smoothing is not None and not model.vt:
             raise InvalidArgument(
                 f"{model.name} has no VT: its sequences are smoothed by the first axis's IT "
@@ -665,16 +680,27 @@ class VectorStream:
         """
         lock = held(tracker)
         link = self.link
-        with lock, stop_on_error(link, tracker, PLANE):  # no other thread's motion from the
-            handle, texts, first = self._begin(tracker)  # state read to the handle
+        with lock:  # no other thread's motion from the state read to the handle
+            if tracker is not None:
+                tracker.refuse_cancelled(link.model.name)  # (before the state read: 0100)
+            texts, first = self._load(tracker)  # (nothing moves before BG S)
+            with stop_on_error(link, tracker, PLANE):
+                handle = self._begin(tracker, texts, first)
         if first < len(texts):
             with stop_on_error(link, tracker, PLANE, stop=handle.stop, running=True):
                 self._feed(handle, texts, first, lock)
         return handle
 
-    def _begin(self, tracker: MotionTracker | None) -> tuple[VectorHandle, list[Command], int]:
-        """Read the state, send the setup and the first segments, ``BG S``; the handle, the
-        segments' commands and how many went out."""
+    def _load(self, tracker: MotionTracker | None) -> tuple[list[Command], int]:
+        """Read the state again under the tracker's lock (a stream is prepared without it,
+        the prediction of a long path being too slow to hold up another thread's stop or a
+        cancellation: another thread may have moved the axes since), send the setup and the
+        first segments; the segments' commands and how many went out.
+
+        Raises:
+            GalilTimeoutError, GalilConnectionError, ProtocolError: the setup's line failed
+                (:meth:`_not_started`): ``BG S`` was not sent, nothing moves.
+        """
         if self.profile is None or self._state is None:
             self.prepare()
         elif tracker is not None and self._read_state() != self._state:
@@ -685,8 +711,52 @@ class VectorStream:
         link = self.link
         texts = self._texts(profile)
         first = min(len(texts), link.model.vector_buffer)
+        setup = self._setup(state) + texts[:first] + ([self._end()] if first == len(texts) else [])
+        # Up to 511 segments: kilobytes, seconds on a serial line (as a transfer's bytes).
+        wait = line_timeout(link, setup)
+        try:
+            link.command_line(setup, timeout=wait)
+        except (InvalidArgument, CommandError):
+            raise  # (refused: the controller is as it was, the link in step)
+        except GalilError as exc:
+            error = self._not_started(exc, wait)
+            if error is exc:
+                raise
+            raise error from exc
+        return texts, first
+
+    def _not_started(self, exc: GalilError, wait: float) -> GalilError:
+        """The error of a setup line that failed (``exc``: no reply in time, a dead link, a
+        garbled reply): ``BG S`` was not sent and the axes were read at rest, so nothing
+        moves and nothing is to be stopped. The link resynchronises first (within ``wait``:
+        the rest of a long line may still be on its way on a slow line), so that it is left
+        in step when it can be (``exc`` itself for an error of another kind)."""
+        link = self.link
+        try:
+            link.query_operands([f"_BG{PLANE}"], timeout=wait)
+            after = ""
+        except GalilError:
+            after = "; the link is still out of step (it resynchronises before the next command)"
+        kinds = (GalilTimeoutError, GalilConnectionError, ProtocolError)
+        kind = next((k for k in kinds if isinstance(exc, k)), None)
+        if kind is None:
+            return exc  # (no other error comes of a line: as it is)
+        text = exc.args[0] if exc.args else type(exc).__name__
+        return link.error(
+            kind,
+            f"{text}; the sequence was not started: BG S was not sent and the axes "
+            f"{self.path.letters} were at rest{after}",
+        )
+
+    def _begin(
+        self, tracker: MotionTracker | None, texts: list[Command], first: int
+    ) -> VectorHandle:
+        """``BG S`` (the setup and the first ``first`` of ``texts`` are in); the handle."""
+        profile, state = self.profile, self._state
+        assert profile is not None
+        assert state is not None
+        link = self.link
         ended = first == len(texts)
-        link.command_line(self._setup(state) + texts[:first] + ([self._end()] if ended else []))
         replies = link.command_line([cmds.bg(PLANE, model=link.model), cmds.time_stamp()])
         sequence = _Sequence(
             initial=self.path.segments[:first],
@@ -702,7 +772,7 @@ class VectorStream:
         handle.follow(self.followers)
         if tracker is not None:
             tracker.started(handle)
-        return handle, texts, first
+        return handle
 
     def _groups(self, start: int, stop: int, texts: Sequence[Command]) -> list[tuple[int, int]]:
         """Runs of segments that fit one line with ``MG TIME`` after them."""
@@ -761,6 +831,11 @@ class VectorStream:
                 return
             replies = link.command_line([self._end(), cmds.time_stamp()])
             handle.record(sample_of(replies[-1]), "end", ())
+
+
+def _not_a_number(value: object) -> bool:
+    """Whether ``value`` is no real number (a bool is none either: decision 0092)."""
+    return isinstance(value, bool) or not isinstance(value, numbers.Real)
 
 
 def _stopped(handle: VectorHandle) -> bool:

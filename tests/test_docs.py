@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from doc_outputs import missing_outputs, shown_outputs
+from doc_outputs import missing_outputs, shown_outputs, shown_runs
 
 import galil
 
@@ -85,6 +85,15 @@ def test_shown_outputs_are_the_arrow_comments_matched_in_order() -> None:
     assert missing_outputs(["1 2"], "1 2 3\n") == ["1 2"]  # a whole line, not a prefix
 
 
+def test_a_run_of_shown_lines_is_printed_with_none_left_out() -> None:
+    code = 'print("\\n".join(sent))\n# -> MG _BGS\n# -> BG S\nprint(2)  # -> 2\nprint(3)  # -> 3\n'
+    runs = shown_runs(code)
+    assert runs == [("MG _BGS", "BG S"), ("2",), ("3",)]
+    assert missing_outputs(runs, "MG _BGS\nBG S\nnoise\n2\n3\n") == []
+    # a line printed twice where the page shows it once (a query sent twice) is caught
+    assert missing_outputs(runs, "MG _BGS\nMG _BGS\nBG S\n2\n3\n") == ["MG _BGS", "BG S", "2", "3"]
+
+
 @pytest.mark.parametrize("page", PAGES, ids=lambda p: p.name)
 def test_links_resolve(page: Path) -> None:
     for target in _LINK.findall(page.read_text(encoding="utf-8")):
@@ -116,7 +125,7 @@ def test_page_code_runs(
             except Exception as exc:
                 pytest.fail(f"{page.name}, block at line {line}: {type(exc).__name__}: {exc}")
             printed = capsys.readouterr().out
-            missing = missing_outputs(shown_outputs(code), printed)
+            missing = missing_outputs(shown_runs(code), printed)
             if missing:
                 pytest.fail(
                     f"{page.name}, block at line {line} shows {missing[0]!r} but printed:\n"

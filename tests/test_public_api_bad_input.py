@@ -152,6 +152,8 @@ ROOMS: dict[str, str] = {
     "routines": "skip: the library's own routines (watchdog, input wait); fuzzed through them",
     "transport": "skip: the simulator link's own I/O (read, write, let_time_pass)",
     "identity": "skip: a parsed ^R^V reply, no methods",
+    "axes": "skip: the axes by letter, a dict (each axis's entry points are fuzzed on dmc.A;"
+    " a letter the model lacks: tests/axis/test_paths_and_axes_refused_unsent.py)",
 }
 
 

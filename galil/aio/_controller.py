@@ -30,6 +30,7 @@ from galil.axis import MoveOverrides, MoveTargets
 from galil.capture import Capture
 from galil.contour import ContourResult
 from galil.controller import (
+    AxisMap,
     Controller,
     CoordinatedMotion,
     close_after,
@@ -216,10 +217,13 @@ class AsyncController(AsyncLinkFacade):
     def axes(self) -> dict[str, AsyncAxis]:
         """The model's axes by letter (``c.axes["A"]``; also ``c.A``)."""
         if self._axes is None:
-            self._axes = {
-                a: AsyncAxis(ax, self._worker, self._link, self.sync.tracker)
-                for a, ax in self.sync.axes.items()
-            }
+            self._axes = AxisMap(
+                {
+                    a: AsyncAxis(ax, self._worker, self._link, self.sync.tracker)
+                    for a, ax in self.sync.axes.items()
+                },
+                self.model,
+            )
         return self._axes
 
     def axis(self, name: str) -> AsyncAxis:

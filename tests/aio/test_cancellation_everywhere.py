@@ -678,13 +678,14 @@ def test_aclose_leaves_no_callback_watcher_task_on_the_loop() -> None:
     run(body)
 
 
-@pytest.mark.parametrize("kind", ["contour", "long path"])
-def test_a_start_cancelled_before_its_motion_registers_is_stopped_as_it_registers(
+@pytest.mark.parametrize("kind", ["contour", "long path", "move"])
+def test_a_start_cancelled_before_its_motion_registers_is_refused_before_it_begins(
     kind: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The start is held inside its sync call, before its motion registers (the contour in
     its checks, the path at its first query), until the cancellation's own call has run: that
-    stop finds nothing to stop, and the start's motion is refused when it registers."""
+    stop finds nothing to stop, and the start is refused before it sends a segment or its
+    ``BG S`` (decision 0100: it had started the path, then stopped it)."""
     from galil.contour import ContourStream
 
     async def body() -> None:
@@ -707,6 +708,15 @@ def test_a_start_cancelled_before_its_motion_registers_is_stopped_as_it_register
 
                 monkeypatch.setattr(ContourStream, "check", held_check)
                 start: Awaitable[object] = c.contour("A", np.arange(1, 801) * 50.0, dt=4)
+            elif kind == "move":  # (held before the tracker's lock, which its state read takes)
+                move = galil.Axis._move
+
+                def held_move(self: galil.Axis, *args: Any, **kwargs: Any) -> Any:
+                    hold()
+                    return move(self, *args, **kwargs)
+
+                monkeypatch.setattr(galil.Axis, "_move", held_move)
+                start = c.A.move_by(LONG)
             else:
                 c.wire_log.add(lambda way, _: hold() if way == "out" else None)
                 start = c.vector_move("AB", ZIGZAG, speed=3000, accel=512_000, decel=512_000)
@@ -727,11 +737,10 @@ def test_a_start_cancelled_before_its_motion_registers_is_stopped_as_it_register
             assert c.sync.link.clock() - began < 0.5
             log = commands_of(c)[sent:]
             if kind == "contour":
-                assert [t for t in log if t.startswith("CD") and "=" not in t] == []
+                assert [t for t in log if t.startswith(("CM", "CD"))] == []  # (not even CM)
                 assert "ST A" in log
-            else:
-                begin = log.index("BG S")
-                assert log[begin + 2] == "ST S"  # after BG S's MG TIME: refused as it began
+            else:  # (refused under the lock before the state is read (again): 0100)
+                assert not [t for t in log if t.startswith(("CA S", "PR", "BG"))], log
             assert await _moving(c) == [0, 0, 0, 0]
             assert await c.query_number("MG 1") == 1
 
