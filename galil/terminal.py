@@ -3,10 +3,11 @@
 Every line goes to the controller as typed, compound lines included (``PRA=1000;BGA``); the
 reply is printed, a ``?`` is explained with ``TC1`` and the session goes on, and unsolicited
 output (a program's ``MG``) is printed the moment it arrives. ``DL`` alone starts a program
-download: the lines typed (or pasted) after it are collected until a line holding ``\\`` and
-sent as one ``DL``. ``UL`` prints the program and ``LS`` lists it, each with a timeout from the
-most its reply can hold, as every bulk transfer has (a whole program memory over a slow serial
-line takes minutes). ``QR`` says how long the data record was (it is binary: in Python,
+download: the lines typed (or pasted) after it are collected until a line holding ``\\`` alone
+and sent as one ``DL`` (a ``\\`` inside a line is refused, as ``galil dl`` refuses it, and no
+line after it runs). ``UL`` prints the program and ``LS`` lists it, each with a timeout from
+the most its reply can hold, as every bulk transfer has (a whole program memory over a slow
+serial line takes minutes). ``QR`` says how long the data record was (it is binary: in Python,
 :meth:`~galil.Controller.record` reads it). ``RS`` alone resets the controller through
 :meth:`~galil.Controller.reset` (the link is set up again), ``BN`` alone burns through
 :meth:`~galil.Controller.save`; the commands that would change the link's own settings
@@ -202,12 +203,21 @@ class Terminal:
         self.write("saved (BN): the parameters are burned, with the controller's own CW and EO")
 
     def _collect(self, line: str) -> None:
+        """A line of a program being typed: only a line holding ``\\`` alone ends it. A
+        ``\\`` elsewhere (``' data in C:\\scans``) stays in its line, which makes
+        :meth:`download` refuse the program as ``galil dl`` refuses it: cut there, the lines
+        after it would run as commands (a pasted ``BGA`` would move the axis)."""
         assert self._download is not None
         text = line.replace("\t", " ").strip()
-        head, slash, _ = text.partition("\\")
-        if head:
-            self._download.append(head)
-        if not slash:
+        if text != "\\":
+            if "\\" in text:
+                self.write(
+                    f"DL line {len(self._download) + 1}: character '\\\\' cannot be downloaded: "
+                    "this program will not be sent; a line holding only \\ ends it (Ctrl-C "
+                    "cancels)"
+                )
+            if text:
+                self._download.append(text)
             return
         lines, self._download = self._download, None
         if not lines:

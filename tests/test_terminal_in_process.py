@@ -653,3 +653,21 @@ def test_a_download_sent_raw_makes_the_library_forget_the_routines_it_replaced(
     assert dmc.routines.threads == {}
     dog.stop()
     dmc.programs.run("#A", thread=3)
+
+
+def test_a_backslash_inside_a_downloaded_line_refuses_the_download_and_runs_none_of_its_lines(
+    dmc: galil.Controller, term: Terminal, out: list[str]
+) -> None:
+    pasted = "DL\n#SCAN\n' data goes to C:\\scans\nPRA=5000\nBGA\nEN\n\\\n"
+    term.feed("DL")
+    with nothing_sent(dmc):  # (before: the line was cut at the \, the rest ran as commands)
+        term.feed(pasted.removeprefix("DL\n"))
+    assert out[-2].startswith("DL line 2: character '\\\\' cannot be downloaded")
+    assert out[-1] == "not sent: DL line 2: character '\\\\' cannot be downloaded"
+    assert not term.downloading
+    assert term.failures == 1
+    dmc.sleep(0.5)
+    assert dmc.A.reference_position == 0
+    assert not dmc.A.moving
+    term.feed("MG 7")  # the line after the end of the download runs
+    assert out[-1] == " 7.0000"
