@@ -308,8 +308,17 @@ class Terminal:
     def _refused(self, exc: CommandError, command: str, message: str) -> None:
         """A ``?``, explained, among the replies of the rest of its compound line."""
         replies = exc.replies
-        at = replies.index(None) if None in replies else len(replies)
-        self._show(replies[:at])
+        refused = [i for i, reply in enumerate(replies) if reply is None]
+        at = refused[-1] if refused else len(replies)  # (TC1 explains the last one refused)
+        parts = cmds.split_commands(command)
+        for i, reply in enumerate(replies[:at]):
+            if reply is not None:
+                self._show([reply])
+            else:  # (the controller keeps one error code: the last one's)
+                part = parts[i].strip() if len(parts) == len(replies) else "a part"
+                self.write(
+                    f"? (refused: {part!r}; why is not known: TC1 tells only the last error)"
+                )
         code = "?" if exc.code is None else str(exc.code)
         self.write(f"? {code} {exc.text}")
         hint = message.partition("(Galil commands")

@@ -671,3 +671,19 @@ def test_a_backslash_inside_a_downloaded_line_refuses_the_download_and_runs_none
     assert not dmc.A.moving
     term.feed("MG 7")  # the line after the end of the download runs
     assert out[-1] == " 7.0000"
+
+
+def test_a_line_with_two_refused_parts_explains_the_last_and_says_the_first_is_unexplained(
+    dmc: galil.Controller, term: Terminal, out: list[str]
+) -> None:
+    term.feed("JGA=5000;BGA")
+    term.feed("MG 1;PRA=1000;MG 2;BGA;MG 3")  # (before: "? 21 ... (refused: 'PRA=1000')")
+    assert out[-6:] == [
+        " 1.0000",
+        "? (refused: 'PRA=1000'; why is not known: TC1 tells only the last error)",
+        " 2.0000",
+        "? 21 Begin not valid while running",
+        "  (refused: 'BGA')",
+        " 3.0000",
+    ]
+    dmc.stop()
