@@ -196,7 +196,7 @@ def _cmd_terminal(args: argparse.Namespace) -> int:
         ident = dmc.identity
         name = ident.raw_model if ident is not None else dmc.model.name
         print(
-            f"connected to {name} at {args.address}; Ctrl-C sends ST, Ctrl-D leaves",
+            f"connected to {name} at {args.address}; Ctrl-C stops (ST, HX), Ctrl-D leaves",
             file=sys.stderr,
             flush=True,
         )
@@ -281,7 +281,8 @@ def _add_connection_commands(sub: Any) -> None:
         help="type commands, see replies and program output as it arrives",
         description="A Galil terminal: lines go to the controller as typed (PRA=1000;BGA); "
         "a rejected line is explained with TC1; DL alone starts a program download ending "
-        "with a line holding a backslash; Ctrl-C sends ST; Ctrl-D leaves. Piped input "
+        "with a line holding a backslash alone; Ctrl-C stops the motion (ST) and the "
+        "programs (HX); Ctrl-D leaves. Piped input "
         "(galil terminal ADDRESS < setup.txt) runs line by line; the exit status is then 1 "
         "if any line was refused or failed.",
     )

@@ -13,8 +13,10 @@ serial line takes minutes). ``QR`` says how long the data record was (it is bina
 :meth:`~galil.Controller.save`; the commands that would change the link's own settings
 (``CW 1``, ``EO 0``, ``CF``, ``^R^S``, ``RS`` or ``BN`` in a compound line) are not sent, and
 the terminal says why and what to type instead. A compound line with a rejected part prints
-the replies of the other parts, in order around the rejection. Ctrl-C sends ``ST`` (and says
-so), Ctrl-D leaves; a reply that does not come in time is reported and the next command
+the replies of the other parts, in order around the rejection. Ctrl-C sends ``ST`` and halts
+the threads that run a program of the user's (which could start motion again), leaving the
+library's routines running (and says so); Ctrl-D leaves, warning of an axis that still moves
+or a program that still runs; a reply that does not come in time is reported and the next command
 resynchronises the link first. SIGTERM and SIGHUP end the terminal as Ctrl-D does (the tty is
 put back, the controller closed) with status 128 + the signal's number.
 
@@ -34,7 +36,7 @@ import re
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -50,7 +52,7 @@ from galil.link import check_seconds
 from galil.protocol import commands as cmds
 from galil.protocol.programs import ProgramLine, check_program
 from galil.protocol.session import Completed
-from galil.routines import ls_reply_bytes, ul_reply_bytes
+from galil.routines import RESERVED, ls_reply_bytes, routine_at, ul_reply_bytes
 
 if TYPE_CHECKING:
     from prompt_toolkit.history import History
@@ -336,7 +338,10 @@ class Terminal:
                 self.write(text)
 
     def interrupt(self) -> None:
-        """Ctrl-C: cancel a download being typed and stop all motion with ``ST``."""
+        """Ctrl-C: cancel a download being typed, stop all motion with ``ST`` and halt the
+        threads that run a program of the user's (``HX n``: a running program could start
+        motion again); the library's routines (the watchdog, an input wait) are left running,
+        and said."""
         self.cancel()
         try:
             self.controller.stop()
@@ -345,7 +350,77 @@ class Terminal:
                 raise
             self.write(f"Ctrl-C: ST not sent: {exc.args[0] if exc.args else exc}")
             return
-        self.write("Ctrl-C: sent ST, motion stopped on every axis (Ctrl-D leaves)")
+        try:
+            user, library = threads_running(self.controller)
+            if user:
+                self.controller.link.command_line([cmds.hx(t) for t in user])
+                self.controller.stop()  # (a move a program began before its halt)
+        except GalilError as exc:
+            if isinstance(exc, GalilConnectionError) and self.controller.link.dead:
+                raise
+            self.write(
+                "Ctrl-C: sent ST to every axis; the program threads could not be read or "
+                f"halted ({exc.args[0] if exc.args else exc}): a running program may start "
+                "motion again (HX halts every thread)"
+            )
+            return
+        said = "sent ST, motion stopped on every axis"
+        if user:
+            halted = ", ".join(f"HX{t}" for t in user)
+            said = f"sent ST to every axis and halted the program threads ({halted})"
+        self.write(f"Ctrl-C: {said}{_library_threads(library)} (Ctrl-D leaves)")
+
+    def leaving(self) -> None:
+        """Ctrl-D (or the end of piped input): say what still moves or runs, which the end
+        of the terminal leaves as it is (one query)."""
+        model = self.controller.model
+        try:
+            running, moving = self.controller.routines.running_and([f"_BG{a}" for a in model.axes])
+            user, _ = threads_running(self.controller, running)
+        except GalilError:
+            return  # (the link has gone: nothing to tell)
+        axes = [a for a, bg in zip(model.axes, moving, strict=True) if bg]
+        going = [f"axis {a} moves" for a in axes] + [f"thread {t} runs" for t in user]
+        if going:
+            self.write(
+                f"warning: leaving while {', '.join(going)}: the end of the terminal stops "
+                "nothing (ST stops the motion, HX n halts thread n)"
+            )
+
+
+def threads_running(
+    controller: Controller, running: Mapping[int, int] | None = None
+) -> tuple[list[int], dict[int, str]]:
+    """The threads that run a program of the user's, and those that run one of the library's
+    routines, by label: this session's are known, another session's (the watchdog of another
+    link) are told by their line in program memory (one upload, only when a thread this
+    session does not hold runs).
+
+    Args:
+        controller: the controller.
+        running: the running threads and their lines (``_XQn``), if just read.
+    """
+    if running is None:
+        running = controller.routines.running()
+    library = {t: label for t, label in controller.routines.threads.items() if t in running}
+    others = [t for t in running if t not in library]
+    if others:
+        lines = controller.routines.upload()
+        for t in others:
+            label = routine_at(lines, running[t])
+            if label is not None:
+                library[t] = label
+    return sorted(t for t in running if t not in library), library
+
+
+def _library_threads(library: dict[int, str]) -> str:
+    if not library:
+        return ""
+    named = ", ".join(
+        f"thread {t} runs the library's {label} ({RESERVED.get(label, 'a library routine')})"
+        for t, label in sorted(library.items())
+    )
+    return f"; {named}: left running"
 
 
 def _print(text: str) -> None:
@@ -403,6 +478,7 @@ def run_terminal(
         return 128 + ended.signum
     finally:
         unsubscribe()
+    term.leaving()
     return 1 if term.failures and not interactive else 0
 
 

@@ -209,7 +209,12 @@ def test_ctrl_c_while_reading_piped_input_sends_st_and_reading_goes_on(
     assert run_terminal(dmc, interactive=False) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].startswith("Ctrl-C: sent ST")
-    assert lines[-1] == " 6.0000"
+    assert lines[1] == " 6.0000"
+    # (the simulator's clock has not run: A is still decelerating when the input ends)
+    assert lines[2:] == [
+        "warning: leaving while axis A moves: the end of the terminal stops nothing (ST stops "
+        "the motion, HX n halts thread n)"
+    ]
     assert "ST" in [text for _, text in sim_of(dmc).command_log]
 
 
@@ -687,3 +692,65 @@ def test_a_line_with_two_refused_parts_explains_the_last_and_says_the_first_is_u
         " 3.0000",
     ]
     dmc.stop()
+
+
+def test_ctrl_c_halts_a_program_that_would_start_motion_again_and_says_so(
+    dmc: galil.Controller, term: Terminal, out: list[str]
+) -> None:
+    assert term.download(["#L", "PRA=2000", "BGA", "AMA", "JP #L", "EN"])
+    term.feed("XQ #L")
+    dmc.sleep(0.05)
+    assert dmc.A.moving
+    term.interrupt()  # (before: ST only, and "motion stopped on every axis" while #L ran on)
+    assert out[-1] == (
+        "Ctrl-C: sent ST to every axis and halted the program threads (HX0) (Ctrl-D leaves)"
+    )
+    dmc.sleep(0.5)
+    assert not dmc.A.moving
+    assert dmc.programs.threads == {}
+
+
+def test_ctrl_c_leaves_the_librarys_routines_running_and_names_them(
+    dmc: galil.Controller, term: Terminal, out: list[str]
+) -> None:
+    dog = dmc.watchdog(5.0)
+    term.feed("JGA=5000;BGA")
+    term.interrupt()
+    assert out[-1] == (
+        "Ctrl-C: sent ST, motion stopped on every axis; thread 7 runs the library's #GWDOG "
+        "(the watchdog): left running (Ctrl-D leaves)"
+    )
+    assert dog.running
+    assert dmc.routines.running().keys() == {7}
+    dog.stop()
+
+
+def test_ctrl_c_tells_another_sessions_watchdog_by_its_label_and_leaves_it_running() -> None:
+    with (
+        SimTcpServer(model="DMC-4040") as server,
+        galil.connect(server.url) as other,
+        galil.connect(server.url) as dmc,
+    ):
+        dog = other.watchdog(5.0)
+        out: list[str] = []
+        Terminal(dmc, write=out.append).interrupt()
+        assert out == [
+            "Ctrl-C: sent ST, motion stopped on every axis; thread 7 runs the library's #GWDOG "
+            "(the watchdog): left running (Ctrl-D leaves)"
+        ]
+        assert dog.running
+        dog.stop()
+
+
+def test_leaving_the_terminal_while_an_axis_moves_or_a_program_runs_warns(
+    dmc: galil.Controller,
+) -> None:
+    shown = _session(dmc, "JGA=5000;BGA\r\x04", None)  # before: it left without a word
+    assert "warning: leaving while axis A moves: the end of the terminal stops nothing" in shown
+    dmc.stop()
+    dmc.sleep(0.1)
+    dmc.programs.download("#W\nWT 10000\nEN")
+    dmc.programs.run("#W", thread=2)
+    shown = _session(dmc, "MG 1\r\x04", None)
+    assert "warning: leaving while thread 2 runs: the end of the terminal" in shown
+    assert "axis" not in shown.partition("warning:")[2]
