@@ -155,6 +155,10 @@ def _plan_distance(text: str, value: Any, counts: float, scale: Any) -> int:
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
+    if args.png:
+        from galil.predict.profile import check_figure_path
+
+        check_figure_path(args.png)  # (before: a traceback from matplotlib after the plan)
     profile = plan_profile(args)
     print(profile)
     if args.png:

@@ -420,3 +420,25 @@ def test_plan_refuses_a_model_with_no_axes(capsys: pytest.CaptureFixture[str]) -
     out, err = capsys.readouterr()
     assert out == ""
     assert err == "galil: RIO-47100 is an I/O controller with no axes: it has no motion to plan\n"
+
+
+@pytest.mark.parametrize("command", [["plan", "10000"], ["demo"]])
+@pytest.mark.parametrize(
+    ("name", "what"), [("plot.xyz", "an unknown format 'xyz'"), ("plot", "no extension")]
+)
+def test_a_plot_file_of_no_known_format_is_refused_in_one_line_before_anything_runs(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    command: list[str],
+    name: str,
+    what: str,
+) -> None:
+    # Before: the plan was printed (the demo run) and then matplotlib's traceback came.
+    png = tmp_path / name
+    assert cli.main([*command, "--png", str(png)]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err.startswith(f"galil: --png {str(png)!r} has {what}: name the file with one of ")
+    assert ".png, " in err
+    assert err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []

@@ -5,6 +5,7 @@ from __future__ import annotations
 import html
 import math
 import numbers
+import os
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
@@ -17,7 +18,7 @@ from galil.errors import InvalidArgument, decimal_hint
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["MultiProfile", "Profile", "SampleSource", "together"]
+__all__ = ["MultiProfile", "Profile", "SampleSource", "check_figure_path", "together"]
 
 FloatArray = npt.NDArray[np.float64]
 Int64Array = npt.NDArray[np.int64]
@@ -131,6 +132,27 @@ def finite_number(value: object, name: str) -> float:
     if not math.isfinite(x):
         raise InvalidArgument(f"{name} must be a finite number, not {value!r:.60}")
     return x
+
+
+def check_figure_path(path: str, option: str = "png") -> None:
+    """Refuse a file a plot cannot be saved to by its name, before anything runs: its
+    extension must name a format matplotlib writes (``.png``, ``.svg``, ``.pdf``, ...; with
+    none, matplotlib would add ``.png`` to the name).
+
+    Raises:
+        InvalidArgument: saying which formats there are (``option`` names the option).
+        ImportError: matplotlib is missing.
+    """
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    formats = FigureCanvasBase.get_supported_filetypes()
+    suffix = os.path.splitext(path)[1].lower().removeprefix(".")
+    if suffix not in formats:
+        what = "no extension" if not suffix else f"an unknown format {suffix!r}"
+        raise InvalidArgument(
+            f"--{option} {path!r} has {what}: name the file with one of "
+            f"{', '.join('.' + f for f in sorted(formats))}"
+        )
 
 
 @dataclass(frozen=True, eq=False)
