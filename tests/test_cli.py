@@ -442,3 +442,98 @@ def test_a_plot_file_of_no_known_format_is_refused_in_one_line_before_anything_r
     assert ".png, " in err
     assert err.count("\n") == 1
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("argv", "said"),
+    [
+        (
+            ["10000", "--speed", "1"],
+            "galil: SP 1 counts/s is less than one step, the smallest speed above 0 (2 counts/s "
+            "at TM 1000): it would be SP 0, and a move at SP 0 is refused\n",
+        ),
+        (
+            ["1mm", "--scale", "2000/mm", "--speed", "0.0004mm/s"],
+            "galil: SP 0.8 counts/s is less than one step, the smallest speed above 0 (2 "
+            "counts/s at TM 1000): it would be SP 0, and a move at SP 0 is refused (in user "
+            "units: the smallest is 0.001 mm / s, you gave 0.0004 mm / s)\n",
+        ),
+    ],
+)
+def test_plan_refuses_a_speed_under_one_step_as_the_python_api_does(
+    capsys: pytest.CaptureFixture[str], argv: list[str], said: str
+) -> None:
+    # (before: "speed must be a positive number, got 0.0")
+    assert cli.main(["plan", *argv]) == 2
+    assert capsys.readouterr().err == said
+    with (  # (the Python API's refusal, which the CLI's now is)
+        galil.connect("sim://DMC-4040") as dmc,
+        pytest.raises(galil.LimitError, match="less than one step") as info,
+    ):
+        dmc.A.speed = 1
+    assert info.value.floor
+
+
+@pytest.mark.parametrize(
+    ("argv", "note"),
+    [
+        (
+            ["10000", "--accel", "100"],
+            "note: --accel 100 counts/s^2: the controller stores AC and DC 1024 counts/s^2 (in "
+            "its steps, and its range, on DMC-4040); the plan uses that",
+        ),
+        (
+            ["10000", "--speed", "2001"],
+            "note: --speed 2001 counts/s: the controller stores SP 2000 counts/s (in its steps, "
+            "and its range, on DMC-4040); the plan uses that",
+        ),
+        (
+            ["12.5mm", "--scale", "2000/mm", "--speed", "20mm/s", "--accel", "200mm/s^2"],
+            "note: --accel 200mm/s^2 (400000 counts/s^2): the controller stores AC and DC "
+            "399360 counts/s^2 (in its steps, and its range, on DMC-4040); the plan uses that",
+        ),
+    ],
+)
+def test_plan_says_a_value_the_controller_stores_otherwise_and_plans_with_it(
+    capsys: pytest.CaptureFixture[str], argv: list[str], note: str
+) -> None:
+    # (before: --accel 100 became AC 1024 without a word)
+    assert cli.main(["plan", *argv]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == note
+    assert lines[1].startswith("Profile: ")
+
+
+def test_plan_says_nothing_more_when_every_value_is_stored_as_given(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert cli.main(["plan", "10000", "--speed", "25000", "--accel", "256000"]) == 0
+    assert capsys.readouterr().out.startswith("Profile: ")
+
+
+@pytest.mark.parametrize(
+    ("scale", "said"),
+    [
+        ("2000", "galil: --scale 2000: give counts per unit, e.g. --scale 2000/mm or --scale "
+         "4096/deg\n"),
+        ("-2000/mm", "galil: --scale -2000/mm: the counts per unit must be positive and finite, "
+         "e.g. --scale 2000/mm or --scale 4096/deg (for an axis whose positive direction is the "
+         "motor's negative one, give the distance with the opposite sign)\n"),
+        ("2000/s", "galil: --scale 2000/s: give counts per a length or an angle, e.g. --scale "
+         "2000/mm or --scale 4096/deg\n"),
+    ],
+)  # fmt: skip
+def test_plan_says_what_scale_takes_in_the_clis_words(
+    capsys: pytest.CaptureFixture[str], scale: str, said: str
+) -> None:
+    # (before: "counts_per must be a Quantity such as 2000 / ureg.mm", "sign=-1", "<Quantity")
+    assert cli.main(["plan", "1mm", "--scale", scale]) == 2
+    assert capsys.readouterr().err == said
+
+
+def test_plan_shows_the_unit_the_distance_was_given_in(capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["plan", "1in", "--scale", "2000/mm", "--speed", "1in/s", "--accel", "8in/s^2"]
+    assert cli.main(argv) == 0
+    out = capsys.readouterr().out  # (before: "0 → 25.4 mm", "peak speed 25.4 mm/s")
+    assert "start → end 0 → 1 in (0 → 50800 counts)" in out
+    assert "peak speed 1 in/s (50800 counts/s)" in out
