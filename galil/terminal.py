@@ -67,8 +67,9 @@ _PROGRAM_ONLY_HINT = (
     "  (program only: put it in a program (DL) and run that (XQ);"
     " from here, wait for a move by polling MG _BGA until it is 0)"
 )
-# Typed alone, these get a reply bigger than a line: a program (UL, LS) or a binary record (QR).
-_TRANSFER = re.compile(r"(UL|LS|QR)(?=$|[\s#,0-9])")
+# Typed alone, these get a reply bigger than a line: a program (UL, LS) or a binary record (QR,
+# also with its axes written right after it: QRA, QRAB, as QR A).
+_TRANSFER = re.compile(r"(?:UL|LS)(?=$|[\s#,0-9])|QR(?=$|[\s,0-9A-Z])")
 # What the library's refusals advise in Python (decision 0031), said for a person typing here.
 _TYPE_INSTEAD = {
     "RS": "RS in a line with other commands would reset the controller under the link: type "
@@ -280,9 +281,9 @@ class Terminal:
             return self.controller.command(command, timeout=self.timeout, allow_compound=True)
         parsed = cmds.parse_line(command)
         model = self.controller.model
-        if special.group(1) == "UL":
+        if special.group() == "UL":
             return self._transfer(parsed, ul_reply_bytes(model)).text
-        if special.group(1) == "LS":  # each line numbered: "1999 " before the text
+        if special.group() == "LS":  # each line numbered: "1999 " before the text
             return self._transfer(parsed, ls_reply_bytes(model)).text
         record = self.controller.exchange(parsed, timeout=self.timeout).record or b""
         return (

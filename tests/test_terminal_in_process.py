@@ -754,3 +754,13 @@ def test_leaving_the_terminal_while_an_axis_moves_or_a_program_runs_warns(
     shown = _session(dmc, "MG 1\r\x04", None)
     assert "warning: leaving while thread 2 runs: the end of the terminal" in shown
     assert "axis" not in shown.partition("warning:")[2]
+
+
+@pytest.mark.parametrize(("line", "size"), [("QRA", 118), ("QRAB", 154), ("QR A", 118)])
+def test_qr_with_its_axes_written_after_it_says_what_came_back(
+    term: Terminal, out: list[str], line: str, size: int
+) -> None:
+    term.feed(line)  # (before: QRA and QRAB printed nothing)
+    assert len(out) == 1
+    assert out[0].startswith(f"(QR: a {size}-byte binary data record")
+    assert term.failures == 0
