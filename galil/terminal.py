@@ -74,6 +74,13 @@ _TRANSFER = re.compile(r"(?:UL|LS)(?=$|[\s#,0-9])|QR(?=$|[\s,0-9A-Z])")
 _TYPE_INSTEAD = {
     "RS": "RS in a line with other commands would reset the controller under the link: type "
     "RS alone (the terminal then sets the link up again)",
+    # RS with an argument: RS 0 is RS; RS -1 is a soft master reset (factory defaults, the
+    # burned settings kept for the next RS), as the DMC-40x0 command reference has it
+    # (unsourced here: not in the shared references).
+    "RS n": "{cmd!r}: RS with an argument is not sent from here. Type RS alone to restart the "
+    "controller from its burned settings (the terminal then sets the link up again); RS -1 (a "
+    "soft master reset: factory defaults, the burned settings kept) would undo the link's own "
+    "settings under it: use Galil's own tools for it, then start galil terminal again",
     "BN": "BN in a line with other commands would burn the link's own CW 1 and EO 0: type BN "
     "alone (the terminal then burns the controller's own)",
     "^R^S": "^R^S (master reset) returns the controller to its factory settings: use Galil's "
@@ -430,9 +437,12 @@ def _print(text: str) -> None:
 
 def _type_instead(command: str) -> str | None:
     """What to type instead of a line the library refuses to send, or ``None``."""
-    for part in cmds.split_commands(command):
+    parts = cmds.split_commands(command)
+    for part in parts:
         text = part.strip()
         head = "^R^S" if text.startswith("\x12\x13") else text[:2].upper()
+        if head == "RS" and len(parts) == 1 and cmds.link_setting(part):
+            return _TYPE_INSTEAD["RS n"].format(cmd=text)  # (alone, with an argument)
         if head in ("DL", "QD") or (head in _TYPE_INSTEAD and cmds.link_setting(part)):
             return _TYPE_INSTEAD[head].format(cmd=text)
     return None

@@ -452,6 +452,9 @@ def test_a_compound_line_with_a_rejected_part_prints_the_replies_of_the_others(
     ("line", "advice"),
     [
         ("RS;MG 1", "not sent: RS in a line with other commands would reset the controller"),
+        # (before, these two alone got "RS in a line with other commands ...: type RS alone")
+        ("RS 0", "not sent: 'RS 0': RS with an argument is not sent from here. Type RS alone"),
+        ("RS -1", "not sent: 'RS -1': RS with an argument is not sent from here. Type RS alone"),
         ("MG 1;BN", "not sent: BN in a line with other commands would burn"),
         ("DL #A", "not sent: 'DL #A': a program download starts with DL typed alone"),
         ("QD x[]", "not sent: 'QD x[]': QD takes an array's values from the lines after it"),
