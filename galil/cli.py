@@ -307,13 +307,24 @@ def _cmd_dl(args: argparse.Namespace) -> int:
 
 
 def _cmd_ul(args: argparse.Namespace) -> int:
+    """``galil ul``: the user's program, as ``programs.upload()`` gives it: the library's
+    routines after it (a watchdog's, an input wait's) are left out, and said, so that a
+    ``galil dl`` of the file downloads the user's program only."""
     from galil.protocol import commands as cmds
-    from galil.routines import ul_reply_bytes
+    from galil.routines import MARKER, split_program, ul_reply_bytes
 
     command = cmds.ul()
     with _connect(args.address, args.timeout) as dmc:
         text = dmc.link.transfer(command, ul_reply_bytes(dmc.model)).text
-    lines = text.splitlines()
+    everything = text.splitlines()
+    lines, routines = split_program([line for line in everything if line.strip()])
+    if routines:
+        left = len(everything) - len(lines)
+        print(
+            f"(left out: the library's routines {', '.join(routines)}, the {left} lines from "
+            f"its marker line {MARKER!r} on; they are not part of your program)",
+            file=sys.stderr,
+        )
     program = "".join(f"{line}\n" for line in lines)  # (no program: an empty file)
     if args.file:
         Path(args.file).write_text(program, encoding="ascii")

@@ -94,8 +94,7 @@ _TYPE_INSTEAD = {
     "DL": "{cmd!r}: a program download starts with DL typed alone; then type or paste the "
     "program and end it with a line holding \\ (DL #label is not sent from here)",
     "QD": "{cmd!r}: QD takes an array's values from the lines after it, which this terminal "
-    "does not send: set the elements one at a time (x[0]=1), or in Python use "
-    "controller.arrays.download()",
+    "does not send: set the elements one at a time (x[0]=1)",
 }
 
 
@@ -246,6 +245,9 @@ class Terminal:
             command = cmds.dl(program, model=self.controller.model)
             numbered = [ProgramLine(text, n) for n, text in enumerate(program, 1)]
             check_program(numbered, self.controller.model, at_terminal=True)
+            user, library = threads_running(self.controller)  # (said as typed here)
+            if user or library:
+                raise InvalidArgument(_running_refusal(user, library))
             # (refused while a thread runs; the library forgets the routines it replaces)
             self.controller.routines.download_raw(lambda: self._transfer(command))
         except GalilError as exc:
@@ -294,8 +296,8 @@ class Terminal:
             return self._transfer(parsed, ls_reply_bytes(model)).text
         record = self.controller.exchange(parsed, timeout=self.timeout).record or b""
         return (
-            f"(QR: a {len(record)}-byte binary data record; in Python, controller.record() "
-            "reads it)"
+            f"(QR: a {len(record)}-byte binary data record, not shown; MG reads its values "
+            "as text: MG _TPA, _RPA)"
         )
 
     def _report(self, exc: GalilError, command: str) -> None:
@@ -304,7 +306,8 @@ class Terminal:
         if isinstance(exc, CommandError):
             self._refused(exc, command, message)
         elif isinstance(exc, GalilTimeoutError):
-            self.write(f"timeout: {message}; the controller may still be busy (Ctrl-C sends ST)")
+            message = message.replace("(pass timeout=)", "(give a longer --timeout)")
+            self.write(f"timeout: {message}; the controller may still be busy (Ctrl-C stops it)")
         elif isinstance(exc, InvalidArgument):
             self.write(f"not sent: {message.removeprefix('not sent: ')}")
         elif isinstance(exc, GalilConnectionError):
@@ -419,6 +422,41 @@ def threads_running(
             if label is not None:
                 library[t] = label
     return sorted(t for t in running if t not in library), library
+
+
+#: What ends a thread that runs one of the library's routines, said for a person typing.
+_ENDING = {
+    "the watchdog": "stop the watchdog in the program that started it (HX{t} would end it "
+    "unseen, and leave its motion unguarded)",
+    "wait_for_input": "let the wait for an input end (at its input or its timeout)",
+}
+
+
+def _running_refusal(user: list[int], library: dict[int, str]) -> str:
+    """Why a ``DL`` is not sent while threads run, and what to type or do first: ``HX n`` for
+    a program of the user's; the library's routines (``#GWDOG``: a watchdog, perhaps of
+    another session) named, and ended where they were started, never halted behind the
+    library's back."""
+    named = [f"thread {t}" for t in user]
+    named += [
+        f"thread {t} (the library's {label}: {RESERVED.get(label, 'a library routine')})"
+        for t, label in sorted(library.items())
+    ]
+    advice = (
+        [f"halt {'it' if len(user) == 1 else 'them'} first ({', '.join(f'HX{t}' for t in user)})"]
+        if user
+        else []
+    )
+    for t, label in sorted(library.items()):
+        what = RESERVED.get(label, "")
+        advice.append(
+            _ENDING.get(what, "let its run (a speed schedule) end, or stop its motion").format(t=t)
+        )
+    verb = "is" if len(named) == 1 else "are"
+    return (
+        f"{', '.join(named)} {verb} running: the controller refuses DL while a program runs "
+        f"(TC 17) and would then run the program's lines as commands; {'; '.join(advice)}"
+    )
 
 
 def _library_threads(library: dict[int, str]) -> str:

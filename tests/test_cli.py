@@ -18,6 +18,7 @@ import galil
 from galil import cli
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.sim import server as sim_server
+from galil.sim.server import SimTcpServer
 
 GALIL = [sys.executable, "-m", "galil.cli"]
 
@@ -537,3 +538,45 @@ def test_plan_shows_the_unit_the_distance_was_given_in(capsys: pytest.CaptureFix
     out = capsys.readouterr().out  # (before: "0 → 25.4 mm", "peak speed 25.4 mm/s")
     assert "start → end 0 → 1 in (0 → 50800 counts)" in out
     assert "peak speed 1 in/s (50800 counts/s)" in out
+
+
+def test_dl_names_another_sessions_watchdog_and_says_what_a_cli_user_does(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    source = tmp_path / "p.dmc"
+    source.write_text("#B\nMG 2\nEN\n")
+    with SimTcpServer(model="DMC-4040") as server, galil.connect(server.url) as other:
+        other.programs.download("#A\nWT 60000\nEN")
+        dog = other.watchdog(5.0)  # thread 7, in another session than galil dl's
+        other.programs.run("#A", thread=0)
+        assert cli.main(["dl", str(source), server.url]) == 2
+        out = capsys.readouterr().out
+        dog.stop()
+        other.programs.halt(0)
+    # Before: "thread 0, thread 7 are running ...; halt thread(s) [0, 7]
+    # (controller.programs.halt(n), or HX n) first": thread 7 is the other session's watchdog.
+    assert out == (
+        "not sent: thread 0, thread 7 (the library's #GWDOG: the watchdog) are running: the "
+        "controller refuses DL while a program runs (TC 17) and would then run the program's "
+        "lines as commands; halt it first (HX0); stop the watchdog in the program that started "
+        "it (HX7 would end it unseen, and leave its motion unguarded)\n"
+    )
+
+
+def test_ul_leaves_out_the_librarys_routines_and_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    saved = tmp_path / "saved.dmc"
+    with SimTcpServer(model="DMC-4040") as server, galil.connect(server.url) as other:
+        other.programs.download("#A\nMG 1\nEN")
+        dog = other.watchdog(5.0)  # (its routine goes into program memory, after #A)
+        assert cli.main(["ul", server.url, str(saved)]) == 0
+        dog.stop()
+    # Before: the file held the library's block too, which a galil dl would send as yours.
+    assert saved.read_text() == "#A\nMG 1\nEN\n"
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("(left out: the library's routines #GWDOG, the ")
+    assert err[0].endswith(
+        ' lines from its marker line "\'galil library" on; they are not part of your program)'
+    )
+    assert err[1] == f"3 lines saved to {saved}"

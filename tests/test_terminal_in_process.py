@@ -438,7 +438,9 @@ def test_a_typed_ul_or_ls_has_the_timeout_of_a_whole_program_memory() -> None:
 
 def test_qr_says_what_came_back(term: Terminal, out: list[str]) -> None:
     term.feed("QR")  # before, nothing at all was printed
-    assert out == ["(QR: a 226-byte binary data record; in Python, controller.record() reads it)"]
+    assert out == [
+        "(QR: a 226-byte binary data record, not shown; MG reads its values as text: MG _TPA, _RPA)"
+    ]
 
 
 def test_a_compound_line_with_a_rejected_part_prints_the_replies_of_the_others(
@@ -767,3 +769,22 @@ def test_qr_with_its_axes_written_after_it_says_what_came_back(
     assert len(out) == 1
     assert out[0].startswith(f"(QR: a {size}-byte binary data record")
     assert term.failures == 0
+
+
+class CutReply:
+    """A fault hook for ``sim://``: a reply holding ``mark`` comes only in part."""
+
+    def __init__(self, mark: bytes) -> None:
+        self.mark = mark
+
+    def __call__(self, data: bytes) -> list[tuple[float, bytes]]:
+        return [(0.0, data[:4] if self.mark in data else data)]
+
+
+def test_a_reply_cut_part_way_says_which_option_gives_a_longer_timeout() -> None:
+    with galil.connect("sim://DMC-4040", faults=CutReply(b"7777")) as dmc:
+        out: list[str] = []
+        Terminal(dmc, write=out.append, timeout=0.05).feed("MG 7777")
+    assert out[-1].startswith("timeout: the reply to 'MG 7777' was cut part way: 4 bytes")
+    assert "a long reply needs a longer timeout (give a longer --timeout)" in out[-1]
+    assert "pass timeout=" not in out[-1]  # (the Python keyword, before)
