@@ -301,9 +301,36 @@ def _cmd_terminal(args: argparse.Namespace) -> int:
 def _cmd_dl(args: argparse.Namespace) -> int:
     from galil.terminal import Terminal, program_lines
 
-    lines = program_lines(Path(args.file).read_text(encoding="ascii", errors="replace"))
+    lines = program_lines(_program_text(args.file))
     with _connect(args.address, args.timeout) as dmc:  # (checked as programs.download checks)
         return 0 if Terminal(dmc, timeout=args.timeout).download(lines) else 2
+
+
+def _program_text(file: str) -> str:
+    """A program file's text: ASCII, as a controller holds it. A character that is not (an
+    ``é``, read as UTF-8) or a byte that is not text is named, with its line in the file.
+
+    Raises:
+        InvalidArgument: a character or byte a program cannot hold.
+    """
+    from galil.errors import InvalidArgument
+
+    data = Path(file).read_bytes()
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise InvalidArgument(
+            f"{file} line {line}: byte 0x{data[exc.start]:02x} is not text; a program is ASCII"
+        ) from None
+    for n, line in enumerate(text.splitlines(), 1):
+        bad = next((c for c in line if ord(c) > 0x7E), None)
+        if bad is not None:
+            raise InvalidArgument(
+                f"{file} line {n}: character {bad!r} (U+{ord(bad):04X}) cannot be downloaded; "
+                "a program is ASCII"
+            )
+    return text
 
 
 def _cmd_ul(args: argparse.Namespace) -> int:

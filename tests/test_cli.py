@@ -580,3 +580,22 @@ def test_ul_leaves_out_the_librarys_routines_and_says_so(
         ' lines from its marker line "\'galil library" on; they are not part of your program)'
     )
     assert err[1] == f"3 lines saved to {saved}"
+
+
+@pytest.mark.parametrize(
+    ("data", "said"),
+    [
+        (b'#A\nMG "caf\xc3\xa9"\nEN\n', "line 2: character 'é' (U+00E9) cannot be downloaded"),
+        (b'#A\n\nMG "caf\xe9"\nEN\n', "line 3: byte 0xe9 is not text"),  # (latin-1, blank line 2)
+    ],
+)
+def test_dl_names_the_character_or_byte_it_cannot_download_and_its_line_in_the_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], data: bytes, said: str
+) -> None:
+    source = tmp_path / "p.dmc"
+    source.write_bytes(data)
+    assert cli.main(["dl", str(source), "sim://DMC-4040"]) == 2
+    out, err = capsys.readouterr()
+    # (before: "DL line 2: character '\ufffd' cannot be downloaded", the replacement character)
+    assert err == f"galil: {source} {said}; a program is ASCII\n"
+    assert out == ""
