@@ -12,7 +12,7 @@ import math
 import os
 import re
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -91,7 +91,7 @@ def _model_with_axes(name: str) -> Any:
     return model
 
 
-def plan_profile(args: argparse.Namespace, note: Any = None) -> Any:
+def plan_profile(args: argparse.Namespace, note: Callable[[str], None] | None = None) -> Any:
     """The profile ``galil plan`` prints: counts, or the unit the distance was given in (with
     ``--scale``). A value the controller would store otherwise (SP and AC go in steps) is
     said through ``note(text)``, with the value the plan uses; a speed above 0 but under one
@@ -319,9 +319,9 @@ def _program_text(file: str) -> str:
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        line = data.count(b"\n", 0, exc.start) + 1
+        at = data.count(b"\n", 0, exc.start) + 1
         raise InvalidArgument(
-            f"{file} line {line}: byte 0x{data[exc.start]:02x} is not text; a program is ASCII"
+            f"{file} line {at}: byte 0x{data[exc.start]:02x} is not text; a program is ASCII"
         ) from None
     for n, line in enumerate(text.splitlines(), 1):
         bad = next((c for c in line if ord(c) > 0x7E), None)

@@ -486,9 +486,9 @@ class MultiProfile(Mapping[str, Profile]):
             label = name if len(units) == 1 else f"{name} ({unit})"
             ax_p.plot(self.t, offset + p.position / k, label=label, drawstyle="steps-post")
             ax_v.plot(self.t, _moving_average(p.velocity, window) / k, label=label)
-        unit = units.pop() if len(units) == 1 else None
-        ax_p.set_ylabel("position" if unit is None else f"position ({unit})")
-        ax_v.set_ylabel("velocity" if unit is None else f"velocity ({unit}/s)")
+        common = units.pop() if len(units) == 1 else None
+        ax_p.set_ylabel("position" if common is None else f"position ({common})")
+        ax_v.set_ylabel("velocity" if common is None else f"velocity ({common}/s)")
         ax_v.set_xlabel("time (s)")
         for ax in (ax_p, ax_v):
             ax.grid(True, alpha=0.3)
