@@ -27,9 +27,10 @@ def main() -> int:
     """Connect, describe the controller, read the axes; return a process exit code."""
     try:
         dmc = galil.connect(ADDRESS, timeout=2.0)
-    except galil.GalilConnectionError as exc:
-        # Wrong address, cable out, controller off: say so plainly rather than a traceback.
-        print(f"could not connect to {ADDRESS}: {exc}", file=sys.stderr)
+    except (galil.GalilConnectionError, galil.InvalidArgument) as exc:
+        # An address that cannot be read (InvalidArgument), a cable out, a controller off
+        # (GalilConnectionError): say so plainly rather than a traceback.
+        print(f"could not connect to {ADDRESS}: {str(exc).splitlines()[0]}", file=sys.stderr)
         return 1
 
     # `with` closes the link (and restores what connect changed) however the block ends.

@@ -2,6 +2,10 @@
 
     python examples/07_capture.py                       # the simulator
     python examples/07_capture.py tcp://192.168.0.42    # a real controller
+    python examples/07_capture.py sim://DMC-4040 out.png   # the plot saved to out.png
+
+The plot goes to the file given after the address, or else to ``capture_A.png`` in the
+system's temporary folder (``tempfile.gettempdir()``); the example prints where.
 
 The controller records the reference position (what its profiler commanded) and the encoder
 position of axis A every 2 servo samples into arrays of its own (``RA``, ``RD``, ``RC``); the
@@ -16,12 +20,16 @@ COUNTS_PER_MM to your stage's encoder resolution.
 from __future__ import annotations
 
 import sys
+import tempfile
+from pathlib import Path
 
 import galil
 from galil.notebook import compare, compare_plot
 from galil.units import ureg
 
 ADDRESS = sys.argv[1] if len(sys.argv) > 1 else "sim://DMC-4040"
+# Where the plot goes: never into whatever folder the example was started from.
+PLOT = Path(sys.argv[2]) if len(sys.argv) > 2 else Path(tempfile.gettempdir()) / "capture_A.png"
 COUNTS_PER_MM = 2000
 
 mm, s = ureg.mm, ureg.s
@@ -57,8 +65,8 @@ def main() -> int:
         print(f"encoder vs prediction: largest difference {encoder.worst:.0f} counts (lag)")
 
         fig = compare_plot(move, recording, title="A move: predicted vs recorded on the controller")
-        fig.savefig("capture_A.png")
-        print("plot saved to capture_A.png")
+        fig.savefig(PLOT)
+        print(f"plot saved to {PLOT}")
 
         # Data records carry the controller sample too, so they line up the same way.
         with dmc.records(8) as stream:

@@ -8,10 +8,11 @@ from __future__ import annotations
 
 import argparse
 import functools
+import math
 import os
 import re
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -90,12 +91,13 @@ def _model_with_axes(name: str) -> Any:
     return model
 
 
-def plan_profile(args: argparse.Namespace) -> Any:
-    """The profile ``galil plan`` prints: counts, or the units of ``--scale``."""
-    from galil import predict
-    from galil.errors import InvalidArgument, LimitError
-    from galil.moves import check_int32
-    from galil.units import Scale, counts_or_plain, state_in_units
+def plan_profile(args: argparse.Namespace, note: Callable[[str], None] | None = None) -> Any:
+    """The profile ``galil plan`` prints: counts, or the unit the distance was given in (with
+    ``--scale``). A value the controller would store otherwise (SP and AC go in steps) is
+    said through ``note(text)``, with the value the plan uses; a speed above 0 but under one
+    step is refused, as the Python API refuses it."""
+    from galil.errors import InvalidArgument
+    from galil.units import counts_or_plain
 
     model = _model_with_axes(args.model)
     given = {  # what was typed, under the option's name
@@ -105,7 +107,7 @@ def plan_profile(args: argparse.Namespace) -> Any:
         "DC": ("--decel", args.decel if args.decel else args.accel),
     }
     values = {name: _quantity(text, option) for name, (option, text) in given.items()}
-    scale = Scale(counts_per=_quantity(args.scale, "--scale")) if args.scale else None
+    scale = _plan_scale(args.scale) if args.scale else None
     for name, value in values.items():
         if scale is None and not isinstance(value, float):
             option, text = given[name]
@@ -122,23 +124,107 @@ def plan_profile(args: argparse.Namespace) -> Any:
         else:
             counts[name] = abs(scale.rate_to_counts(value, 1 if name == "SP" else 2, name))
     distance = _plan_distance(args.distance, values["distance"], counts["distance"], scale)
+    return _planned(model, distance, counts, args, scale, values["distance"], note)
+
+
+def _planned(
+    model: Any,
+    distance: int,
+    counts: dict[str, float],
+    args: Any,
+    scale: Any,
+    shown: Any,
+    note: Any,
+) -> Any:
+    """The profile of ``distance`` counts at the stored SP, AC, DC and IT, in the unit of
+    ``shown`` (the distance as given) when there is a scale."""
+    from galil import predict
+    from galil.errors import LimitError
+    from galil.models import tm_of
+    from galil.moves import check_int32
+    from galil.units import state_in_units
+
     try:  # (refused as Axis.plan_by refuses it: in counts, and in the scale's unit)
         check_int32("PR", distance, "the axis", model.name)
-        sp, ac, dc = (predict.check_parameter(n, counts[n], model) for n in ("SP", "AC", "DC"))
+        stored = {n: predict.check_parameter(n, counts[n], model) for n in ("SP", "AC", "DC")}
+        if stored["SP"] == 0 and counts["SP"] != 0:
+            from galil.axis import _under_one_step  # (the Python API's refusal, word for word)
+
+            raise _under_one_step("SP", counts["SP"], model, tm_of(model.sample_period), "")
     except LimitError as exc:
         state_in_units(exc, scale)
         raise
+    smoothing = predict.check_parameter("IT", args.smoothing, model)  # stored in 1/256ths
+    _say_stored(note, model, args, counts, {**stored, "IT": smoothing})
     profile = predict.move(
-        distance,
-        sp,
-        ac,
-        dc,
-        sample_period=model.sample_period,
-        smoothing=predict.check_parameter("IT", args.smoothing, model),  # stored in 1/256ths
-    )
-    if scale is not None:
-        profile = profile.with_units(float(scale.counts_per.magnitude), f"{scale.unit:~}")
-    return profile
+        distance, stored["SP"], stored["AC"], stored["DC"],
+        sample_period=model.sample_period, smoothing=smoothing,
+    )  # fmt: skip
+    if scale is None:
+        return profile
+    unit = shown.units if not isinstance(shown, float) else scale.unit
+    per = abs(scale.distance_to_counts(1.0 * unit))  # (counts in one of the distance's units)
+    return profile.with_units(per, f"{unit:~}")
+
+
+def _say_stored(
+    note: Any, model: Any, args: Any, counts: dict[str, float], stored: dict[str, float]
+) -> None:
+    """Say each value the controller stores otherwise than given (SP, AC and DC go in steps,
+    IT in 1/256ths; AC has a smallest value), and that the plan uses what it stores."""
+    if note is None:
+        return
+    given = {"SP": args.speed, "AC": args.accel, "DC": args.decel or args.accel}
+    options = {"SP": "--speed", "AC": "--accel", "DC": "--decel" if args.decel else "--accel"}
+    units = {"SP": " counts/s", "AC": " counts/s^2", "DC": " counts/s^2", "IT": ""}
+    said: dict[tuple[str, float], list[str]] = {}
+    for name, used in stored.items():
+        asked = args.smoothing if name == "IT" else counts[name]
+        if not math.isclose(used, asked, rel_tol=1e-9, abs_tol=1e-9):
+            said.setdefault((options.get(name, "--smoothing"), used), []).append(name)
+    for (option, used), names in said.items():
+        name = names[0]
+        asked = args.smoothing if name == "IT" else counts[name]
+        text = f"{option} {asked:.10g}{units[name]}"
+        if name != "IT" and not _plain(given[name]):  # (a quantity: its counts beside it)
+            text = f"{option} {given[name]} ({asked:.10g}{units[name]})"
+        note(
+            f"note: {text}: the controller stores {' and '.join(names)} {used:.10g}"
+            f"{units[name]} (in its steps, and its range, on {model.name}); the plan uses that"
+        )
+
+
+def _plain(text: object) -> bool:
+    """Whether ``text`` is a plain number (counts) rather than a quantity with units."""
+    try:
+        float(str(text))
+    except ValueError:
+        return False
+    return True
+
+
+def _plan_scale(text: str) -> Any:
+    """``--scale`` as a :class:`~galil.units.Scale`, refused in the CLI's words."""
+    from galil.errors import InvalidArgument
+    from galil.units import Scale
+
+    value = _quantity(text, "--scale")
+    example = "e.g. --scale 2000/mm or --scale 4096/deg"
+    if isinstance(value, float):
+        raise InvalidArgument(f"--scale {text}: give counts per unit, {example}")
+    try:
+        return Scale(counts_per=value)
+    except InvalidArgument:
+        magnitude = float(value.magnitude)
+        if not (math.isfinite(magnitude) and magnitude > 0):
+            raise InvalidArgument(
+                f"--scale {text}: the counts per unit must be positive and finite, {example} "
+                "(for an axis whose positive direction is the motor's negative one, give the "
+                "distance with the opposite sign)"
+            ) from None
+        raise InvalidArgument(
+            f"--scale {text}: give counts per a length or an angle, {example}"
+        ) from None
 
 
 def _plan_distance(text: str, value: Any, counts: float, scale: Any) -> int:
@@ -155,7 +241,11 @@ def _plan_distance(text: str, value: Any, counts: float, scale: Any) -> int:
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
-    profile = plan_profile(args)
+    if args.png:
+        from galil.predict.profile import check_figure_path
+
+        check_figure_path(args.png)  # (before: a traceback from matplotlib after the plan)
+    profile = plan_profile(args, note=print)
     print(profile)
     if args.png:
         fig = profile.plot(title=f"PR {args.distance} on {args.model}")
@@ -196,7 +286,7 @@ def _cmd_terminal(args: argparse.Namespace) -> int:
         ident = dmc.identity
         name = ident.raw_model if ident is not None else dmc.model.name
         print(
-            f"connected to {name} at {args.address}; Ctrl-C sends ST, Ctrl-D leaves",
+            f"connected to {name} at {args.address}; Ctrl-C stops (ST, HX), Ctrl-D leaves",
             file=sys.stderr,
             flush=True,
         )
@@ -211,19 +301,57 @@ def _cmd_terminal(args: argparse.Namespace) -> int:
 def _cmd_dl(args: argparse.Namespace) -> int:
     from galil.terminal import Terminal, program_lines
 
-    lines = program_lines(Path(args.file).read_text(encoding="ascii", errors="replace"))
+    lines = program_lines(_program_text(args.file))
     with _connect(args.address, args.timeout) as dmc:  # (checked as programs.download checks)
         return 0 if Terminal(dmc, timeout=args.timeout).download(lines) else 2
 
 
+def _program_text(file: str) -> str:
+    """A program file's text: ASCII, as a controller holds it. A character that is not (an
+    ``é``, read as UTF-8) or a byte that is not text is named, with its line in the file.
+
+    Raises:
+        InvalidArgument: a character or byte a program cannot hold.
+    """
+    from galil.errors import InvalidArgument
+
+    data = Path(file).read_bytes()
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        at = data.count(b"\n", 0, exc.start) + 1
+        raise InvalidArgument(
+            f"{file} line {at}: byte 0x{data[exc.start]:02x} is not text; a program is ASCII"
+        ) from None
+    for n, line in enumerate(text.splitlines(), 1):
+        bad = next((c for c in line if ord(c) > 0x7E), None)
+        if bad is not None:
+            raise InvalidArgument(
+                f"{file} line {n}: character {bad!r} (U+{ord(bad):04X}) cannot be downloaded; "
+                "a program is ASCII"
+            )
+    return text
+
+
 def _cmd_ul(args: argparse.Namespace) -> int:
+    """``galil ul``: the user's program, as ``programs.upload()`` gives it: the library's
+    routines after it (a watchdog's, an input wait's) are left out, and said, so that a
+    ``galil dl`` of the file downloads the user's program only."""
     from galil.protocol import commands as cmds
-    from galil.routines import ul_reply_bytes
+    from galil.routines import MARKER, split_program, ul_reply_bytes
 
     command = cmds.ul()
     with _connect(args.address, args.timeout) as dmc:
         text = dmc.link.transfer(command, ul_reply_bytes(dmc.model)).text
-    lines = text.splitlines()
+    everything = text.splitlines()
+    lines, routines = split_program([line for line in everything if line.strip()])
+    if routines:
+        left = len(everything) - len(lines)
+        print(
+            f"(left out: the library's routines {', '.join(routines)}, the {left} lines from "
+            f"its marker line {MARKER!r} on; they are not part of your program)",
+            file=sys.stderr,
+        )
     program = "".join(f"{line}\n" for line in lines)  # (no program: an empty file)
     if args.file:
         Path(args.file).write_text(program, encoding="ascii")
@@ -281,7 +409,8 @@ def _add_connection_commands(sub: Any) -> None:
         help="type commands, see replies and program output as it arrives",
         description="A Galil terminal: lines go to the controller as typed (PRA=1000;BGA); "
         "a rejected line is explained with TC1; DL alone starts a program download ending "
-        "with a line holding a backslash; Ctrl-C sends ST; Ctrl-D leaves. Piped input "
+        "with a line holding a backslash alone; Ctrl-C stops the motion (ST) and the "
+        "programs (HX); Ctrl-D leaves. Piped input "
         "(galil terminal ADDRESS < setup.txt) runs line by line; the exit status is then 1 "
         "if any line was refused or failed.",
     )

@@ -24,16 +24,50 @@ import numpy.typing as npt
 from galil.capture import Recording
 from galil.contour import ContourResult, sample_path
 from galil.controller import Controller, connect
+from galil.errors import InvalidArgument
+from galil.models import ModelSpec, get_model
 from galil.motion import MoveHandle
 from galil.notebook import compare, compare_plot
+from galil.predict.profile import check_figure_path
 from galil.records import RecordStream
 from galil.sim.server import SimTcpServer
 from galil.units import ureg
 
 __all__ = ["record_motion", "run_demo"]
 
-#: Samples between recorded values (the smallest ``RC`` allows; records as often).
+#: Samples between recorded values (the smallest ``RC`` allows; records as often), where the
+#: model allows it (:func:`every_for`).
 EVERY = 2
+
+
+def every_for(model: ModelSpec) -> int:
+    """Samples between recorded values on ``model``: the fewest both ``RC`` (a power of two)
+    and ``DR`` (the model's shortest period: 8 on a DMC-21x3 or 41x3, 4 on a DMC-30010)
+    allow, and no fewer than :data:`EVERY`."""
+    every = max(EVERY, 1 << model.record_exponents[0])
+    while every < model.dr_range[0]:
+        every *= 2
+    return every
+
+
+def check_model(name: str) -> ModelSpec:
+    """The model the demo runs on: one with axes, a binary data record and ``RC``.
+
+    Raises:
+        InvalidArgument: an unknown model, or one the demo cannot run on (said in one line).
+    """
+    model = get_model(name)
+    if not model.axes:
+        raise InvalidArgument(
+            f"{model.name} is an I/O controller with no axes: the demo moves axes; pick a "
+            "motion controller (e.g. --model DMC-4040)"
+        )
+    if model.record_size is None:
+        raise InvalidArgument(
+            f"{model.name} has no binary data record, which the demo compares the motion with; "
+            "pick another model (e.g. --model DMC-4040)"
+        )
+    return model
 
 
 @dataclass(frozen=True)
@@ -70,9 +104,10 @@ def record_motion(
     letter: str,
     start: Callable[[], MoveHandle | ContourResult],
     seconds: float,
+    every: int = EVERY,
 ) -> Recorded:
     """Run ``start()`` while the controller records axis ``letter``'s reference, every
-    :data:`EVERY` samples, both in arrays (a capture) and in data records.
+    ``every`` samples (:func:`every_for`), both in arrays (a capture) and in data records.
 
     Args:
         dmc: the controller.
@@ -81,9 +116,10 @@ def record_motion(
         start: starts the motion and returns its handle (or a finished contour's result);
             a handle is waited for here.
         seconds: how long to record at most (the capture stops once the motion is done).
+        every: samples between recorded values.
     """
-    with dmc.records(EVERY) as stream:
-        with dmc.capture([f"_RP{letter}"], every=EVERY, seconds=seconds) as cap:
+    with dmc.records(every) as stream:
+        with dmc.capture([f"_RP{letter}"], every=every, seconds=seconds) as cap:
             handle = start()
             if isinstance(handle, MoveHandle):
                 handle.wait()
@@ -93,7 +129,7 @@ def record_motion(
             dmc.sleep(0.02)  # a few records past the end: the axis holds still
         assert begin is not None
         assert cap.result is not None
-        records = _records_until(stream, begin + samples + EVERY)
+        records = _records_until(stream, begin + samples + every)
     return Recorded(name, letter, handle, cap.result, records)
 
 
@@ -105,25 +141,32 @@ def run_demo(
 ) -> int:
     """Run the demo; return 0 when the controller did exactly what was predicted.
 
+    It adapts to the model: the move and the jog run on its first axis, the contour on its
+    second (the first on a one-axis model), every value recorded as often as the model's
+    ``RC`` and ``DR`` allow (:func:`every_for`); a model whose contour buffer holds one
+    segment skips the contour (streamed over TCP, it would run dry), and says so.
+
     Args:
-        png: where to save the plot (``None``: no plot).
+        png: where to save the plot (``None``: no plot); its extension must be a format
+            matplotlib writes (checked before anything runs).
         model: the simulated model.
         quiet: print nothing.
         quick: a short move and jog (a smoke test of an installation, about a second).
-    """
 
+    Raises:
+        InvalidArgument: a model the demo cannot run on (a RIO, one with no binary data
+            record), or a plot file of an unknown format; nothing has run.
+    """
+    spec = check_model(model)
+    if png:
+        check_figure_path(png, "png")
     say: Callable[[str], None] = (lambda _s: None) if quiet else print
     began = time.monotonic()
-    with SimTcpServer(model=model) as server, connect(server.url) as dmc:
+    with SimTcpServer(model=spec.name) as server, connect(server.url) as dmc:
         ident = dmc.identity
         assert ident is not None
         say(f"simulated {ident.raw_model} (firmware {ident.firmware}) at {server.url}")
-        target = 2.5 if quick else 12.5
-        runs = [
-            _demo_move(dmc, say, target),
-            _demo_jog(dmc, say, 0.1 if quick else 0.4),
-            _demo_contour(dmc, say),
-        ]
+        runs = _runs(dmc, say, quick)
         # Recorded against predicted, sample by sample, both ways.
         worst = {r.name: r.worst() for r in runs}
         for name, ways in worst.items():
@@ -145,16 +188,36 @@ def run_demo(
     return 0 if all(v == 0 for ways in worst.values() for v in ways.values()) else 1
 
 
-def _demo_move(dmc: Controller, say: Callable[[str], None], target: float) -> Recorded:
+def _runs(dmc: Controller, say: Callable[[str], None], quick: bool) -> list[Recorded]:
+    """The move and the jog on the model's first axis, the contour on its second (or first)."""
+    every = every_for(dmc.model)
+    axes = dmc.model.axes
+    runs = [
+        _demo_move(dmc, say, 2.5 if quick else 12.5, axes[0], every),
+        _demo_jog(dmc, say, 0.1 if quick else 0.4, axes[0], every),
+    ]
+    if dmc.model.contour_buffer > 1:
+        runs.append(_demo_contour(dmc, say, axes[1 if len(axes) > 1 else 0], every))
+    else:
+        say(
+            f"contour: skipped: the {dmc.model.name}'s contour buffer holds one segment, which "
+            "a stream over TCP cannot keep fed"
+        )
+    return runs
+
+
+def _demo_move(
+    dmc: Controller, say: Callable[[str], None], target: float, letter: str, every: int
+) -> Recorded:
     """A position move in millimetres, planned before anything is sent."""
     mm, s = ureg.mm, ureg.s
-    x = dmc.A.set_scale(counts_per=2000 / mm)
+    x = dmc.axes[letter].set_scale(counts_per=2000 / mm)
     x.speed = 20 * mm / s
     x.accel = 200 * mm / s**2
     x.decel = 200 * mm / s**2
     plan = x.plan_to(target * mm)
     say(
-        f"plan: A to {target:g} mm ({plan.distance} counts): {plan.shape}, "
+        f"plan: {letter} to {target:g} mm ({plan.distance} counts): {plan.shape}, "
         f"{plan.duration:.3f} s, peak {plan.peak_speed / 2000:.2f} mm/s"
     )
 
@@ -164,15 +227,20 @@ def _demo_move(dmc: Controller, say: Callable[[str], None], target: float) -> Re
         move.wait(progress=sys.stderr.isatty())
         return move
 
-    run = record_motion(dmc, "move", "A", start, plan.duration + 0.5)
-    say(f"moved: A at {x.position:~.4f}, recorded {len(run.capture)} values on the controller")
+    run = record_motion(dmc, "move", letter, start, plan.duration + 0.5, every)
+    say(
+        f"moved: {letter} at {x.position:~.4f}, recorded {len(run.capture)} values on the "
+        "controller"
+    )
     return run
 
 
-def _demo_jog(dmc: Controller, say: Callable[[str], None], hold: float) -> Recorded:
+def _demo_jog(
+    dmc: Controller, say: Callable[[str], None], hold: float, letter: str, every: int
+) -> Recorded:
     """A jog with a speed change in motion, then a stop: the handle follows both."""
     mm, s = ureg.mm, ureg.s
-    x = dmc.A
+    x = dmc.axes[letter]
 
     def start() -> MoveHandle:
         jog = x.jog(10 * mm / s)
@@ -183,15 +251,15 @@ def _demo_jog(dmc: Controller, say: Callable[[str], None], hold: float) -> Recor
         jog.wait()
         return jog
 
-    run = record_motion(dmc, "jog", "A", start, 2 * hold + 1.0)
+    run = record_motion(dmc, "jog", letter, start, 2 * hold + 1.0, every)
     say(f"jogged: +10 mm/s, then -5 mm/s in motion, stopped at {x.position:~.4f}")
     return run
 
 
-def _demo_contour(dmc: Controller, say: Callable[[str], None]) -> Recorded:
+def _demo_contour(dmc: Controller, say: Callable[[str], None], letter: str, every: int) -> Recorded:
     """The manual's contour: 6000 counts (3 mm) in 120 ms along a 1 - cos velocity."""
     ts = dmc.sample_period
-    dmc.B.set_scale(counts_per=2000 / ureg.mm)  # the path stays in counts; the plot shows mm
+    dmc.axes[letter].set_scale(counts_per=2000 / ureg.mm)  # (the path is in counts; plot: mm)
     a, b, dt = 6000.0, 0.120, 2
     path = sample_path(
         lambda t: a * t / b - a / (2 * math.pi) * np.sin(2 * math.pi * np.minimum(t, b) / b),
@@ -199,12 +267,14 @@ def _demo_contour(dmc: Controller, say: Callable[[str], None]) -> Recorded:
         dt=dt,
         sample_period=ts,
     )
-    run = record_motion(dmc, "contour", "B", lambda: dmc.contour("B", path, dt=dt), b + 0.5)
+    run = record_motion(
+        dmc, "contour", letter, lambda: dmc.contour(letter, path, dt=dt), b + 0.5, every
+    )
     contour = run.handle
     assert isinstance(contour, ContourResult)
     incs = contour.increments
     say(
-        f"contour: {incs.size} segments of {(1 << dt) * ts * 1e3:.3f} ms on B, "
+        f"contour: {incs.size} segments of {(1 << dt) * ts * 1e3:.3f} ms on {letter}, "
         f"{int(incs.sum())} counts in {contour.duration * 1e3:.1f} ms, "
         f"{contour.lines} lines, buffer never below {contour.low_water} free"
     )
@@ -212,13 +282,12 @@ def _demo_contour(dmc: Controller, say: Callable[[str], None]) -> Recorded:
 
 
 def _plot(runs: list[Recorded], png: str, title: str) -> None:
-    labels = {"move": "A move", "jog": "A jog", "contour": "B contour"}
     predicted = {}
     recorded = {}
     for r in runs:
-        profiles = r.handle.profiles
-        predicted[labels[r.name]] = profiles[r.letter]
+        label = f"{r.letter} {r.name}"
+        predicted[label] = r.handle.profiles[r.letter]
         pair = compare(r.handle, r.capture)[r.letter]
-        recorded[labels[r.name]] = (pair.t, pair.recorded)
+        recorded[label] = (pair.t, pair.recorded)
     fig = compare_plot(predicted, recorded, title=f"{title}: predicted vs recorded")
     fig.savefig(png, dpi=90)

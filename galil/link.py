@@ -121,11 +121,25 @@ def _parse(text: str) -> Command:
     return cmd
 
 
+def _last_refused(done: Sequence[Completed]) -> Completed:
+    """The part of ``done`` that ``TC1`` explains: the last one refused (the controller keeps
+    only its last error's code, so a line with two refused parts gets the second's)."""
+    return [d for d in done if not d.ok][-1]
+
+
 def _with_replies(error: GalilError, done: Sequence[Completed]) -> GalilError:
     """A refusal in a compound line carries the replies of its parts (``galil terminal``
-    prints them): what the controller answered before the rejected part, and after it."""
+    prints them): what the controller answered before the rejected part, and after it. Parts
+    refused before the one explained are named: ``TC1`` tells only the last error's code."""
     if isinstance(error, CommandError) and len(done) > 1:
         error.replies = tuple(d.text if d.ok else None for d in done)
+        earlier = [repr(d.command.text) for d in done if not d.ok][:-1]
+        if earlier:
+            error.args = (
+                f"{error.args[0]} (also refused: {', '.join(earlier)}, why not known: TC1 "
+                "tells only the last error's code)",
+                *error.args[1:],
+            )
     return error
 
 
@@ -1007,7 +1021,8 @@ class Link(LinkCore):
     def transact(
         self, batch: Sequence[Command], timeout: float | None, stall: float | None = None
     ) -> list[Completed]:
-        """Send ``batch`` (pipelined) under the lock; raise for the first rejected command.
+        """Send ``batch`` (pipelined) under the lock; raise for a rejected command (the last
+        one: ``TC1`` explains only the last error).
 
         While a reconnect is under way it waits for it (up to the timeout) instead of failing.
         ``stall``: see :meth:`exchange`.
@@ -1056,9 +1071,8 @@ class Link(LinkCore):
                 if not self._open or self._dead:
                     raise self._closed_error()
                 done = self._roundtrip(batch, t, stall)
-                for d in done:
-                    if not d.ok:
-                        raise _with_replies(self._explain(d, t), done)
+                if not all(d.ok for d in done):
+                    raise _with_replies(self._explain(_last_refused(done), t), done)
                 return done
         finally:
             if self._inbox:
@@ -1221,9 +1235,8 @@ class Link(LinkCore):
                     done = reply  # type: ignore[assignment]
                 if len(done) == 1 and done[0].ok:
                     return done[0].text
-                for d in done:
-                    if not d.ok:
-                        raise _with_replies(self._explain(d, t), done)
+                if not all(d.ok for d in done):
+                    raise _with_replies(self._explain(_last_refused(done), t), done)
             finally:
                 lock.release()
                 if self._inbox:

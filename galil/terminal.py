@@ -3,17 +3,20 @@
 Every line goes to the controller as typed, compound lines included (``PRA=1000;BGA``); the
 reply is printed, a ``?`` is explained with ``TC1`` and the session goes on, and unsolicited
 output (a program's ``MG``) is printed the moment it arrives. ``DL`` alone starts a program
-download: the lines typed (or pasted) after it are collected until a line holding ``\\`` and
-sent as one ``DL``. ``UL`` prints the program and ``LS`` lists it, each with a timeout from the
-most its reply can hold, as every bulk transfer has (a whole program memory over a slow serial
-line takes minutes). ``QR`` says how long the data record was (it is binary: in Python,
+download: the lines typed (or pasted) after it are collected until a line holding ``\\`` alone
+and sent as one ``DL`` (a ``\\`` inside a line is refused, as ``galil dl`` refuses it, and no
+line after it runs). ``UL`` prints the program and ``LS`` lists it, each with a timeout from
+the most its reply can hold, as every bulk transfer has (a whole program memory over a slow
+serial line takes minutes). ``QR`` says how long the data record was (it is binary: in Python,
 :meth:`~galil.Controller.record` reads it). ``RS`` alone resets the controller through
 :meth:`~galil.Controller.reset` (the link is set up again), ``BN`` alone burns through
 :meth:`~galil.Controller.save`; the commands that would change the link's own settings
 (``CW 1``, ``EO 0``, ``CF``, ``^R^S``, ``RS`` or ``BN`` in a compound line) are not sent, and
 the terminal says why and what to type instead. A compound line with a rejected part prints
-the replies of the other parts, in order around the rejection. Ctrl-C sends ``ST`` (and says
-so), Ctrl-D leaves; a reply that does not come in time is reported and the next command
+the replies of the other parts, in order around the rejection. Ctrl-C sends ``ST`` and halts
+the threads that run a program of the user's (which could start motion again), leaving the
+library's routines running (and says so); Ctrl-D leaves, warning of an axis that still moves
+or a program that still runs; a reply that does not come in time is reported and the next command
 resynchronises the link first. SIGTERM and SIGHUP end the terminal as Ctrl-D does (the tty is
 put back, the controller closed) with status 128 + the signal's number.
 
@@ -33,7 +36,7 @@ import re
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -49,7 +52,7 @@ from galil.link import check_seconds
 from galil.protocol import commands as cmds
 from galil.protocol.programs import ProgramLine, check_program
 from galil.protocol.session import Completed
-from galil.routines import ls_reply_bytes, ul_reply_bytes
+from galil.routines import RESERVED, ls_reply_bytes, routine_at, ul_reply_bytes
 
 if TYPE_CHECKING:
     from prompt_toolkit.history import History
@@ -64,12 +67,20 @@ _PROGRAM_ONLY_HINT = (
     "  (program only: put it in a program (DL) and run that (XQ);"
     " from here, wait for a move by polling MG _BGA until it is 0)"
 )
-# Typed alone, these get a reply bigger than a line: a program (UL, LS) or a binary record (QR).
-_TRANSFER = re.compile(r"(UL|LS|QR)(?=$|[\s#,0-9])")
+# Typed alone, these get a reply bigger than a line: a program (UL, LS) or a binary record (QR,
+# also with its axes written right after it: QRA, QRAB, as QR A).
+_TRANSFER = re.compile(r"(?:UL|LS)(?=$|[\s#,0-9])|QR(?=$|[\s,0-9A-Z])")
 # What the library's refusals advise in Python (decision 0031), said for a person typing here.
 _TYPE_INSTEAD = {
     "RS": "RS in a line with other commands would reset the controller under the link: type "
     "RS alone (the terminal then sets the link up again)",
+    # RS with an argument: RS 0 is RS; RS -1 is a soft master reset (factory defaults, the
+    # burned settings kept for the next RS), as the DMC-40x0 command reference has it
+    # (unsourced here: not in the shared references).
+    "RS n": "{cmd!r}: RS with an argument is not sent from here. Type RS alone to restart the "
+    "controller from its burned settings (the terminal then sets the link up again); RS -1 (a "
+    "soft master reset: factory defaults, the burned settings kept) would undo the link's own "
+    "settings under it: use Galil's own tools for it, then start galil terminal again",
     "BN": "BN in a line with other commands would burn the link's own CW 1 and EO 0: type BN "
     "alone (the terminal then burns the controller's own)",
     "^R^S": "^R^S (master reset) returns the controller to its factory settings: use Galil's "
@@ -83,8 +94,7 @@ _TYPE_INSTEAD = {
     "DL": "{cmd!r}: a program download starts with DL typed alone; then type or paste the "
     "program and end it with a line holding \\ (DL #label is not sent from here)",
     "QD": "{cmd!r}: QD takes an array's values from the lines after it, which this terminal "
-    "does not send: set the elements one at a time (x[0]=1), or in Python use "
-    "controller.arrays.download()",
+    "does not send: set the elements one at a time (x[0]=1)",
 }
 
 
@@ -202,12 +212,21 @@ class Terminal:
         self.write("saved (BN): the parameters are burned, with the controller's own CW and EO")
 
     def _collect(self, line: str) -> None:
+        """A line of a program being typed: only a line holding ``\\`` alone ends it. A
+        ``\\`` elsewhere (``' data in C:\\scans``) stays in its line, which makes
+        :meth:`download` refuse the program as ``galil dl`` refuses it: cut there, the lines
+        after it would run as commands (a pasted ``BGA`` would move the axis)."""
         assert self._download is not None
         text = line.replace("\t", " ").strip()
-        head, slash, _ = text.partition("\\")
-        if head:
-            self._download.append(head)
-        if not slash:
+        if text != "\\":
+            if "\\" in text:
+                self.write(
+                    f"DL line {len(self._download) + 1}: character '\\\\' cannot be downloaded: "
+                    "this program will not be sent; a line holding only \\ ends it (Ctrl-C "
+                    "cancels)"
+                )
+            if text:
+                self._download.append(text)
             return
         lines, self._download = self._download, None
         if not lines:
@@ -226,6 +245,9 @@ class Terminal:
             command = cmds.dl(program, model=self.controller.model)
             numbered = [ProgramLine(text, n) for n, text in enumerate(program, 1)]
             check_program(numbered, self.controller.model, at_terminal=True)
+            user, library = threads_running(self.controller)  # (said as typed here)
+            if user or library:
+                raise InvalidArgument(_running_refusal(user, library))
             # (refused while a thread runs; the library forgets the routines it replaces)
             self.controller.routines.download_raw(lambda: self._transfer(command))
         except GalilError as exc:
@@ -268,14 +290,14 @@ class Terminal:
             return self.controller.command(command, timeout=self.timeout, allow_compound=True)
         parsed = cmds.parse_line(command)
         model = self.controller.model
-        if special.group(1) == "UL":
+        if special.group() == "UL":
             return self._transfer(parsed, ul_reply_bytes(model)).text
-        if special.group(1) == "LS":  # each line numbered: "1999 " before the text
+        if special.group() == "LS":  # each line numbered: "1999 " before the text
             return self._transfer(parsed, ls_reply_bytes(model)).text
         record = self.controller.exchange(parsed, timeout=self.timeout).record or b""
         return (
-            f"(QR: a {len(record)}-byte binary data record; in Python, controller.record() "
-            "reads it)"
+            f"(QR: a {len(record)}-byte binary data record, not shown; MG reads its values "
+            "as text: MG _TPA, _RPA)"
         )
 
     def _report(self, exc: GalilError, command: str) -> None:
@@ -284,7 +306,8 @@ class Terminal:
         if isinstance(exc, CommandError):
             self._refused(exc, command, message)
         elif isinstance(exc, GalilTimeoutError):
-            self.write(f"timeout: {message}; the controller may still be busy (Ctrl-C sends ST)")
+            message = message.replace("(pass timeout=)", "(give a longer --timeout)")
+            self.write(f"timeout: {message}; the controller may still be busy (Ctrl-C stops it)")
         elif isinstance(exc, InvalidArgument):
             self.write(f"not sent: {message.removeprefix('not sent: ')}")
         elif isinstance(exc, GalilConnectionError):
@@ -298,8 +321,17 @@ class Terminal:
     def _refused(self, exc: CommandError, command: str, message: str) -> None:
         """A ``?``, explained, among the replies of the rest of its compound line."""
         replies = exc.replies
-        at = replies.index(None) if None in replies else len(replies)
-        self._show(replies[:at])
+        refused = [i for i, reply in enumerate(replies) if reply is None]
+        at = refused[-1] if refused else len(replies)  # (TC1 explains the last one refused)
+        parts = cmds.split_commands(command)
+        for i, reply in enumerate(replies[:at]):
+            if reply is not None:
+                self._show([reply])
+            else:  # (the controller keeps one error code: the last one's)
+                part = parts[i].strip() if len(parts) == len(replies) else "a part"
+                self.write(
+                    f"? (refused: {part!r}; why is not known: TC1 tells only the last error)"
+                )
         code = "?" if exc.code is None else str(exc.code)
         self.write(f"? {code} {exc.text}")
         hint = message.partition("(Galil commands")
@@ -317,7 +349,10 @@ class Terminal:
                 self.write(text)
 
     def interrupt(self) -> None:
-        """Ctrl-C: cancel a download being typed and stop all motion with ``ST``."""
+        """Ctrl-C: cancel a download being typed, stop all motion with ``ST`` and halt the
+        threads that run a program of the user's (``HX n``: a running program could start
+        motion again); the library's routines (the watchdog, an input wait) are left running,
+        and said."""
         self.cancel()
         try:
             self.controller.stop()
@@ -326,7 +361,112 @@ class Terminal:
                 raise
             self.write(f"Ctrl-C: ST not sent: {exc.args[0] if exc.args else exc}")
             return
-        self.write("Ctrl-C: sent ST, motion stopped on every axis (Ctrl-D leaves)")
+        try:
+            user, library = threads_running(self.controller)
+            if user:
+                self.controller.link.command_line([cmds.hx(t) for t in user])
+                self.controller.stop()  # (a move a program began before its halt)
+        except GalilError as exc:
+            if isinstance(exc, GalilConnectionError) and self.controller.link.dead:
+                raise
+            self.write(
+                "Ctrl-C: sent ST to every axis; the program threads could not be read or "
+                f"halted ({exc.args[0] if exc.args else exc}): a running program may start "
+                "motion again (HX halts every thread)"
+            )
+            return
+        said = "sent ST, motion stopped on every axis"
+        if user:
+            halted = ", ".join(f"HX{t}" for t in user)
+            said = f"sent ST to every axis and halted the program threads ({halted})"
+        self.write(f"Ctrl-C: {said}{_library_threads(library)} (Ctrl-D leaves)")
+
+    def leaving(self) -> None:
+        """Ctrl-D (or the end of piped input): say what still moves or runs, which the end
+        of the terminal leaves as it is (one query)."""
+        model = self.controller.model
+        try:
+            running, moving = self.controller.routines.running_and([f"_BG{a}" for a in model.axes])
+            user, _ = threads_running(self.controller, running)
+        except GalilError:
+            return  # (the link has gone: nothing to tell)
+        axes = [a for a, bg in zip(model.axes, moving, strict=True) if bg]
+        going = [f"axis {a} moves" for a in axes] + [f"thread {t} runs" for t in user]
+        if going:
+            self.write(
+                f"warning: leaving while {', '.join(going)}: the end of the terminal stops "
+                "nothing (ST stops the motion, HX n halts thread n)"
+            )
+
+
+def threads_running(
+    controller: Controller, running: Mapping[int, int] | None = None
+) -> tuple[list[int], dict[int, str]]:
+    """The threads that run a program of the user's, and those that run one of the library's
+    routines, by label: this session's are known, another session's (the watchdog of another
+    link) are told by their line in program memory (one upload, only when a thread this
+    session does not hold runs).
+
+    Args:
+        controller: the controller.
+        running: the running threads and their lines (``_XQn``), if just read.
+    """
+    if running is None:
+        running = controller.routines.running()
+    library = {t: label for t, label in controller.routines.threads.items() if t in running}
+    others = [t for t in running if t not in library]
+    if others:
+        lines = controller.routines.upload()
+        for t in others:
+            label = routine_at(lines, running[t])
+            if label is not None:
+                library[t] = label
+    return sorted(t for t in running if t not in library), library
+
+
+#: What ends a thread that runs one of the library's routines, said for a person typing.
+_ENDING = {
+    "the watchdog": "stop the watchdog in the program that started it (HX{t} would end it "
+    "unseen, and leave its motion unguarded)",
+    "wait_for_input": "let the wait for an input end (at its input or its timeout)",
+}
+
+
+def _running_refusal(user: list[int], library: dict[int, str]) -> str:
+    """Why a ``DL`` is not sent while threads run, and what to type or do first: ``HX n`` for
+    a program of the user's; the library's routines (``#GWDOG``: a watchdog, perhaps of
+    another session) named, and ended where they were started, never halted behind the
+    library's back."""
+    named = [f"thread {t}" for t in user]
+    named += [
+        f"thread {t} (the library's {label}: {RESERVED.get(label, 'a library routine')})"
+        for t, label in sorted(library.items())
+    ]
+    advice = (
+        [f"halt {'it' if len(user) == 1 else 'them'} first ({', '.join(f'HX{t}' for t in user)})"]
+        if user
+        else []
+    )
+    for t, label in sorted(library.items()):
+        what = RESERVED.get(label, "")
+        advice.append(
+            _ENDING.get(what, "let its run (a speed schedule) end, or stop its motion").format(t=t)
+        )
+    verb = "is" if len(named) == 1 else "are"
+    return (
+        f"{', '.join(named)} {verb} running: the controller refuses DL while a program runs "
+        f"(TC 17) and would then run the program's lines as commands; {'; '.join(advice)}"
+    )
+
+
+def _library_threads(library: dict[int, str]) -> str:
+    if not library:
+        return ""
+    named = ", ".join(
+        f"thread {t} runs the library's {label} ({RESERVED.get(label, 'a library routine')})"
+        for t, label in sorted(library.items())
+    )
+    return f"; {named}: left running"
 
 
 def _print(text: str) -> None:
@@ -335,9 +475,12 @@ def _print(text: str) -> None:
 
 def _type_instead(command: str) -> str | None:
     """What to type instead of a line the library refuses to send, or ``None``."""
-    for part in cmds.split_commands(command):
+    parts = cmds.split_commands(command)
+    for part in parts:
         text = part.strip()
         head = "^R^S" if text.startswith("\x12\x13") else text[:2].upper()
+        if head == "RS" and len(parts) == 1 and cmds.link_setting(part):
+            return _TYPE_INSTEAD["RS n"].format(cmd=text)  # (alone, with an argument)
         if head in ("DL", "QD") or (head in _TYPE_INSTEAD and cmds.link_setting(part)):
             return _TYPE_INSTEAD[head].format(cmd=text)
     return None
@@ -384,6 +527,7 @@ def run_terminal(
         return 128 + ended.signum
     finally:
         unsubscribe()
+    term.leaving()
     return 1 if term.failures and not interactive else 0
 
 

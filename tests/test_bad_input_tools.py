@@ -276,3 +276,17 @@ def test_sim_options_are_refused(option: str) -> None:
             continue
         problems.append(f"?{option}={text}: taken")
     assert not problems, "\n".join(problems)
+
+
+def test_sim_takes_negative_limits_as_its_own_message_writes_them(
+    galil_sim: Callable[..., str],
+) -> None:
+    # (before: "argument --limits: expected one argument", for "-50000,50000")
+    address = galil_sim("--tcp", "127.0.0.1:0", "--lag", "0", "--limits", "-50000,50000")
+    with galil.connect(address, timeout=5.0) as dmc:
+        assert dmc.command("MG _LRA, _LFA") == " 1.0000 1.0000"  # (at 0: neither switch hit)
+        dmc.A.speed, dmc.A.accel, dmc.A.decel = 2_000_000, 60_000_000, 60_000_000
+        move = dmc.A.move_by(-60_000)  # (about 0.04 s, on the server's real clock)
+        with pytest.raises(galil.GalilError, match="limit"):
+            move.wait(timeout=5.0)
+        assert dmc.A.stop_code[0] == 3  # stopped by the reverse limit switch at -50000

@@ -18,6 +18,7 @@ import galil
 from galil import cli
 from galil.errors import GalilConnectionError, InvalidArgument
 from galil.sim import server as sim_server
+from galil.sim.server import SimTcpServer
 
 GALIL = [sys.executable, "-m", "galil.cli"]
 
@@ -420,3 +421,181 @@ def test_plan_refuses_a_model_with_no_axes(capsys: pytest.CaptureFixture[str]) -
     out, err = capsys.readouterr()
     assert out == ""
     assert err == "galil: RIO-47100 is an I/O controller with no axes: it has no motion to plan\n"
+
+
+@pytest.mark.parametrize("command", [["plan", "10000"], ["demo"]])
+@pytest.mark.parametrize(
+    ("name", "what"), [("plot.xyz", "an unknown format 'xyz'"), ("plot", "no extension")]
+)
+def test_a_plot_file_of_no_known_format_is_refused_in_one_line_before_anything_runs(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    command: list[str],
+    name: str,
+    what: str,
+) -> None:
+    # Before: the plan was printed (the demo run) and then matplotlib's traceback came.
+    png = tmp_path / name
+    assert cli.main([*command, "--png", str(png)]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err.startswith(f"galil: --png {str(png)!r} has {what}: name the file with one of ")
+    assert ".png, " in err
+    assert err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("argv", "said"),
+    [
+        (
+            ["10000", "--speed", "1"],
+            "galil: SP 1 counts/s is less than one step, the smallest speed above 0 (2 counts/s "
+            "at TM 1000): it would be SP 0, and a move at SP 0 is refused\n",
+        ),
+        (
+            ["1mm", "--scale", "2000/mm", "--speed", "0.0004mm/s"],
+            "galil: SP 0.8 counts/s is less than one step, the smallest speed above 0 (2 "
+            "counts/s at TM 1000): it would be SP 0, and a move at SP 0 is refused (in user "
+            "units: the smallest is 0.001 mm / s, you gave 0.0004 mm / s)\n",
+        ),
+    ],
+)
+def test_plan_refuses_a_speed_under_one_step_as_the_python_api_does(
+    capsys: pytest.CaptureFixture[str], argv: list[str], said: str
+) -> None:
+    # (before: "speed must be a positive number, got 0.0")
+    assert cli.main(["plan", *argv]) == 2
+    assert capsys.readouterr().err == said
+    with (  # (the Python API's refusal, which the CLI's now is)
+        galil.connect("sim://DMC-4040") as dmc,
+        pytest.raises(galil.LimitError, match="less than one step") as info,
+    ):
+        dmc.A.speed = 1
+    assert info.value.floor
+
+
+@pytest.mark.parametrize(
+    ("argv", "note"),
+    [
+        (
+            ["10000", "--accel", "100"],
+            "note: --accel 100 counts/s^2: the controller stores AC and DC 1024 counts/s^2 (in "
+            "its steps, and its range, on DMC-4040); the plan uses that",
+        ),
+        (
+            ["10000", "--speed", "2001"],
+            "note: --speed 2001 counts/s: the controller stores SP 2000 counts/s (in its steps, "
+            "and its range, on DMC-4040); the plan uses that",
+        ),
+        (
+            ["12.5mm", "--scale", "2000/mm", "--speed", "20mm/s", "--accel", "200mm/s^2"],
+            "note: --accel 200mm/s^2 (400000 counts/s^2): the controller stores AC and DC "
+            "399360 counts/s^2 (in its steps, and its range, on DMC-4040); the plan uses that",
+        ),
+    ],
+)
+def test_plan_says_a_value_the_controller_stores_otherwise_and_plans_with_it(
+    capsys: pytest.CaptureFixture[str], argv: list[str], note: str
+) -> None:
+    # (before: --accel 100 became AC 1024 without a word)
+    assert cli.main(["plan", *argv]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == note
+    assert lines[1].startswith("Profile: ")
+
+
+def test_plan_says_nothing_more_when_every_value_is_stored_as_given(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert cli.main(["plan", "10000", "--speed", "25000", "--accel", "256000"]) == 0
+    assert capsys.readouterr().out.startswith("Profile: ")
+
+
+@pytest.mark.parametrize(
+    ("scale", "said"),
+    [
+        ("2000", "galil: --scale 2000: give counts per unit, e.g. --scale 2000/mm or --scale "
+         "4096/deg\n"),
+        ("-2000/mm", "galil: --scale -2000/mm: the counts per unit must be positive and finite, "
+         "e.g. --scale 2000/mm or --scale 4096/deg (for an axis whose positive direction is the "
+         "motor's negative one, give the distance with the opposite sign)\n"),
+        ("2000/s", "galil: --scale 2000/s: give counts per a length or an angle, e.g. --scale "
+         "2000/mm or --scale 4096/deg\n"),
+    ],
+)  # fmt: skip
+def test_plan_says_what_scale_takes_in_the_clis_words(
+    capsys: pytest.CaptureFixture[str], scale: str, said: str
+) -> None:
+    # (before: "counts_per must be a Quantity such as 2000 / ureg.mm", "sign=-1", "<Quantity")
+    assert cli.main(["plan", "1mm", "--scale", scale]) == 2
+    assert capsys.readouterr().err == said
+
+
+def test_plan_shows_the_unit_the_distance_was_given_in(capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["plan", "1in", "--scale", "2000/mm", "--speed", "1in/s", "--accel", "8in/s^2"]
+    assert cli.main(argv) == 0
+    out = capsys.readouterr().out  # (before: "0 → 25.4 mm", "peak speed 25.4 mm/s")
+    assert "start → end 0 → 1 in (0 → 50800 counts)" in out
+    assert "peak speed 1 in/s (50800 counts/s)" in out
+
+
+def test_dl_names_another_sessions_watchdog_and_says_what_a_cli_user_does(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    source = tmp_path / "p.dmc"
+    source.write_text("#B\nMG 2\nEN\n")
+    with SimTcpServer(model="DMC-4040") as server, galil.connect(server.url) as other:
+        other.programs.download("#A\nWT 60000\nEN")
+        dog = other.watchdog(5.0)  # thread 7, in another session than galil dl's
+        other.programs.run("#A", thread=0)
+        assert cli.main(["dl", str(source), server.url]) == 2
+        out = capsys.readouterr().out
+        dog.stop()
+        other.programs.halt(0)
+    # Before: "thread 0, thread 7 are running ...; halt thread(s) [0, 7]
+    # (controller.programs.halt(n), or HX n) first": thread 7 is the other session's watchdog.
+    assert out == (
+        "not sent: thread 0, thread 7 (the library's #GWDOG: the watchdog) are running: the "
+        "controller refuses DL while a program runs (TC 17) and would then run the program's "
+        "lines as commands; halt it first (HX0); stop the watchdog in the program that started "
+        "it (HX7 would end it unseen, and leave its motion unguarded)\n"
+    )
+
+
+def test_ul_leaves_out_the_librarys_routines_and_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    saved = tmp_path / "saved.dmc"
+    with SimTcpServer(model="DMC-4040") as server, galil.connect(server.url) as other:
+        other.programs.download("#A\nMG 1\nEN")
+        dog = other.watchdog(5.0)  # (its routine goes into program memory, after #A)
+        assert cli.main(["ul", server.url, str(saved)]) == 0
+        dog.stop()
+    # Before: the file held the library's block too, which a galil dl would send as yours.
+    assert saved.read_text() == "#A\nMG 1\nEN\n"
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("(left out: the library's routines #GWDOG, the ")
+    assert err[0].endswith(
+        ' lines from its marker line "\'galil library" on; they are not part of your program)'
+    )
+    assert err[1] == f"3 lines saved to {saved}"
+
+
+@pytest.mark.parametrize(
+    ("data", "said"),
+    [
+        (b'#A\nMG "caf\xc3\xa9"\nEN\n', "line 2: character 'é' (U+00E9) cannot be downloaded"),
+        (b'#A\n\nMG "caf\xe9"\nEN\n', "line 3: byte 0xe9 is not text"),  # (latin-1, blank line 2)
+    ],
+)
+def test_dl_names_the_character_or_byte_it_cannot_download_and_its_line_in_the_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], data: bytes, said: str
+) -> None:
+    source = tmp_path / "p.dmc"
+    source.write_bytes(data)
+    assert cli.main(["dl", str(source), "sim://DMC-4040"]) == 2
+    out, err = capsys.readouterr()
+    # (before: "DL line 2: character '\ufffd' cannot be downloaded", the replacement character)
+    assert err == f"galil: {source} {said}; a program is ASCII\n"
+    assert out == ""

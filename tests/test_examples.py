@@ -10,6 +10,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -62,7 +63,7 @@ EXPECTED = {
     "07_capture.py": [
         "plan A -> 10 mm: trapezoid",
         "reference vs prediction: largest difference 0 counts",
-        "plot saved to capture_A.png",
+        f"plot saved to {Path(tempfile.gettempdir()) / 'capture_A.png'}",
         "data records at samples",
     ],
     "08_draw_a_shape.py": [
@@ -144,11 +145,34 @@ def test_script_takes_an_address(tmp_path: Path) -> None:
     assert (tmp_path / "plan_A.png").stat().st_size > 0
 
 
-def test_script_reports_a_bad_address(tmp_path: Path) -> None:
-    proc = _run([str(EXAMPLES / "01_connect.py"), "tcp://127.0.0.1:1"], tmp_path)
+@pytest.mark.parametrize(
+    "address",
+    [
+        "tcp://127.0.0.1:1",
+        "tcp://127.0.0.1:99999",  # (before: an InvalidArgument traceback)
+        "nonsense",
+    ],
+)
+def test_script_reports_a_bad_address(tmp_path: Path, address: str) -> None:
+    proc = _run([str(EXAMPLES / "01_connect.py"), address], tmp_path)
     assert proc.returncode == 1
-    assert "could not connect to tcp://127.0.0.1:1" in proc.stderr
+    assert proc.stderr.startswith(f"could not connect to {address}: ")
+    assert proc.stderr.count("\n") == 1
     assert "Traceback" not in proc.stderr
+
+
+def test_the_capture_example_writes_its_plot_where_it_says_not_into_the_cwd(
+    tmp_path: Path,
+) -> None:
+    plot = tmp_path / "plots" / "out.png"
+    plot.parent.mkdir()
+    here = tmp_path / "cwd"
+    here.mkdir()
+    proc = _run([str(EXAMPLES / "07_capture.py"), "sim://DMC-4040", str(plot)], here)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert f"plot saved to {plot}" in proc.stdout
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert list(here.iterdir()) == []  # (before: capture_A.png in the folder it ran in)
 
 
 def test_notebook_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -209,7 +209,12 @@ def test_ctrl_c_while_reading_piped_input_sends_st_and_reading_goes_on(
     assert run_terminal(dmc, interactive=False) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].startswith("Ctrl-C: sent ST")
-    assert lines[-1] == " 6.0000"
+    assert lines[1] == " 6.0000"
+    # (the simulator's clock has not run: A is still decelerating when the input ends)
+    assert lines[2:] == [
+        "warning: leaving while axis A moves: the end of the terminal stops nothing (ST stops "
+        "the motion, HX n halts thread n)"
+    ]
     assert "ST" in [text for _, text in sim_of(dmc).command_log]
 
 
@@ -433,7 +438,9 @@ def test_a_typed_ul_or_ls_has_the_timeout_of_a_whole_program_memory() -> None:
 
 def test_qr_says_what_came_back(term: Terminal, out: list[str]) -> None:
     term.feed("QR")  # before, nothing at all was printed
-    assert out == ["(QR: a 226-byte binary data record; in Python, controller.record() reads it)"]
+    assert out == [
+        "(QR: a 226-byte binary data record, not shown; MG reads its values as text: MG _TPA, _RPA)"
+    ]
 
 
 def test_a_compound_line_with_a_rejected_part_prints_the_replies_of_the_others(
@@ -447,6 +454,9 @@ def test_a_compound_line_with_a_rejected_part_prints_the_replies_of_the_others(
     ("line", "advice"),
     [
         ("RS;MG 1", "not sent: RS in a line with other commands would reset the controller"),
+        # (before, these two alone got "RS in a line with other commands ...: type RS alone")
+        ("RS 0", "not sent: 'RS 0': RS with an argument is not sent from here. Type RS alone"),
+        ("RS -1", "not sent: 'RS -1': RS with an argument is not sent from here. Type RS alone"),
         ("MG 1;BN", "not sent: BN in a line with other commands would burn"),
         ("DL #A", "not sent: 'DL #A': a program download starts with DL typed alone"),
         ("QD x[]", "not sent: 'QD x[]': QD takes an array's values from the lines after it"),
@@ -653,3 +663,128 @@ def test_a_download_sent_raw_makes_the_library_forget_the_routines_it_replaced(
     assert dmc.routines.threads == {}
     dog.stop()
     dmc.programs.run("#A", thread=3)
+
+
+def test_a_backslash_inside_a_downloaded_line_refuses_the_download_and_runs_none_of_its_lines(
+    dmc: galil.Controller, term: Terminal, out: list[str]
+) -> None:
+    pasted = "DL\n#SCAN\n' data goes to C:\\scans\nPRA=5000\nBGA\nEN\n\\\n"
+    term.feed("DL")
+    with nothing_sent(dmc):  # (before: the line was cut at the \, the rest ran as commands)
+        term.feed(pasted.removeprefix("DL\n"))
+    assert out[-2].startswith("DL line 2: character '\\\\' cannot be downloaded")
+    assert out[-1] == "not sent: DL line 2: character '\\\\' cannot be downloaded"
+    assert not term.downloading
+    assert term.failures == 1
+    dmc.sleep(0.5)
+    assert dmc.A.reference_position == 0
+    assert not dmc.A.moving
+    term.feed("MG 7")  # the line after the end of the download runs
+    assert out[-1] == " 7.0000"
+
+
+def test_a_line_with_two_refused_parts_explains_the_last_and_says_the_first_is_unexplained(
+    dmc: galil.Controller, term: Terminal, out: list[str]
+) -> None:
+    term.feed("JGA=5000;BGA")
+    term.feed("MG 1;PRA=1000;MG 2;BGA;MG 3")  # (before: "? 21 ... (refused: 'PRA=1000')")
+    assert out[-6:] == [
+        " 1.0000",
+        "? (refused: 'PRA=1000'; why is not known: TC1 tells only the last error)",
+        " 2.0000",
+        "? 21 Begin not valid while running",
+        "  (refused: 'BGA')",
+        " 3.0000",
+    ]
+    dmc.stop()
+
+
+def test_ctrl_c_halts_a_program_that_would_start_motion_again_and_says_so(
+    dmc: galil.Controller, term: Terminal, out: list[str]
+) -> None:
+    assert term.download(["#L", "PRA=2000", "BGA", "AMA", "JP #L", "EN"])
+    term.feed("XQ #L")
+    dmc.sleep(0.05)
+    assert dmc.A.moving
+    term.interrupt()  # (before: ST only, and "motion stopped on every axis" while #L ran on)
+    assert out[-1] == (
+        "Ctrl-C: sent ST to every axis and halted the program threads (HX0) (Ctrl-D leaves)"
+    )
+    dmc.sleep(0.5)
+    assert not dmc.A.moving
+    assert dmc.programs.threads == {}
+
+
+def test_ctrl_c_leaves_the_librarys_routines_running_and_names_them(
+    dmc: galil.Controller, term: Terminal, out: list[str]
+) -> None:
+    dog = dmc.watchdog(5.0)
+    term.feed("JGA=5000;BGA")
+    term.interrupt()
+    assert out[-1] == (
+        "Ctrl-C: sent ST, motion stopped on every axis; thread 7 runs the library's #GWDOG "
+        "(the watchdog): left running (Ctrl-D leaves)"
+    )
+    assert dog.running
+    assert dmc.routines.running().keys() == {7}
+    dog.stop()
+
+
+def test_ctrl_c_tells_another_sessions_watchdog_by_its_label_and_leaves_it_running() -> None:
+    with (
+        SimTcpServer(model="DMC-4040") as server,
+        galil.connect(server.url) as other,
+        galil.connect(server.url) as dmc,
+    ):
+        dog = other.watchdog(5.0)
+        out: list[str] = []
+        Terminal(dmc, write=out.append).interrupt()
+        assert out == [
+            "Ctrl-C: sent ST, motion stopped on every axis; thread 7 runs the library's #GWDOG "
+            "(the watchdog): left running (Ctrl-D leaves)"
+        ]
+        assert dog.running
+        dog.stop()
+
+
+def test_leaving_the_terminal_while_an_axis_moves_or_a_program_runs_warns(
+    dmc: galil.Controller,
+) -> None:
+    shown = _session(dmc, "JGA=5000;BGA\r\x04", None)  # before: it left without a word
+    assert "warning: leaving while axis A moves: the end of the terminal stops nothing" in shown
+    dmc.stop()
+    dmc.sleep(0.1)
+    dmc.programs.download("#W\nWT 10000\nEN")
+    dmc.programs.run("#W", thread=2)
+    shown = _session(dmc, "MG 1\r\x04", None)
+    assert "warning: leaving while thread 2 runs: the end of the terminal" in shown
+    assert "axis" not in shown.partition("warning:")[2]
+
+
+@pytest.mark.parametrize(("line", "size"), [("QRA", 118), ("QRAB", 154), ("QR A", 118)])
+def test_qr_with_its_axes_written_after_it_says_what_came_back(
+    term: Terminal, out: list[str], line: str, size: int
+) -> None:
+    term.feed(line)  # (before: QRA and QRAB printed nothing)
+    assert len(out) == 1
+    assert out[0].startswith(f"(QR: a {size}-byte binary data record")
+    assert term.failures == 0
+
+
+class CutReply:
+    """A fault hook for ``sim://``: a reply holding ``mark`` comes only in part."""
+
+    def __init__(self, mark: bytes) -> None:
+        self.mark = mark
+
+    def __call__(self, data: bytes) -> list[tuple[float, bytes]]:
+        return [(0.0, data[:4] if self.mark in data else data)]
+
+
+def test_a_reply_cut_part_way_says_which_option_gives_a_longer_timeout() -> None:
+    with galil.connect("sim://DMC-4040", faults=CutReply(b"7777")) as dmc:
+        out: list[str] = []
+        Terminal(dmc, write=out.append, timeout=0.05).feed("MG 7777")
+    assert out[-1].startswith("timeout: the reply to 'MG 7777' was cut part way: 4 bytes")
+    assert "a long reply needs a longer timeout (give a longer --timeout)" in out[-1]
+    assert "pass timeout=" not in out[-1]  # (the Python keyword, before)

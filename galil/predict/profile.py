@@ -5,6 +5,7 @@ from __future__ import annotations
 import html
 import math
 import numbers
+import os
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar, overload
@@ -17,7 +18,7 @@ from galil.errors import InvalidArgument, decimal_hint
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["MultiProfile", "Profile", "SampleSource", "together"]
+__all__ = ["MultiProfile", "Profile", "SampleSource", "check_figure_path", "together"]
 
 FloatArray = npt.NDArray[np.float64]
 Int64Array = npt.NDArray[np.int64]
@@ -131,6 +132,27 @@ def finite_number(value: object, name: str) -> float:
     if not math.isfinite(x):
         raise InvalidArgument(f"{name} must be a finite number, not {value!r:.60}")
     return x
+
+
+def check_figure_path(path: str, option: str = "png") -> None:
+    """Refuse a file a plot cannot be saved to by its name, before anything runs: its
+    extension must name a format matplotlib writes (``.png``, ``.svg``, ``.pdf``, ...; with
+    none, matplotlib would add ``.png`` to the name).
+
+    Raises:
+        InvalidArgument: saying which formats there are (``option`` names the option).
+        ImportError: matplotlib is missing.
+    """
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    formats = FigureCanvasBase.get_supported_filetypes()
+    suffix = os.path.splitext(path)[1].lower().removeprefix(".")
+    if suffix not in formats:
+        what = "no extension" if not suffix else f"an unknown format {suffix!r}"
+        raise InvalidArgument(
+            f"--{option} {path!r} has {what}: name the file with one of "
+            f"{', '.join('.' + f for f in sorted(formats))}"
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -449,7 +471,9 @@ class MultiProfile(Mapping[str, Profile]):
         return np.vstack([p.position for p in self.profiles.values()])
 
     def plot(self, *, average: float = 0.004) -> Figure:
-        """Plot every axis's position and velocity on the common time base.
+        """Plot every axis's position and velocity on the common time base, each in its
+        display unit (as its own :meth:`Profile.plot`; the legend names the units when they
+        differ).
 
         As in :meth:`Profile.plot`, velocity is drawn as a centred moving average over
         ``average`` seconds: whole-count positions make the per-sample velocity jitter.
@@ -460,11 +484,15 @@ class MultiProfile(Mapping[str, Profile]):
         ax_p, ax_v = fig.subplots(2, 1, sharex=True)
         ts = float(self.t[1] - self.t[0]) if self.t.size > 1 else 1.0
         window = max(1, round(average / ts))
-        for name, p in self.profiles.items():
-            ax_p.plot(self.t, p.position, label=name, drawstyle="steps-post")
-            ax_v.plot(self.t, _moving_average(p.velocity, window), label=name)
-        ax_p.set_ylabel("position (counts)")
-        ax_v.set_ylabel("velocity (counts/s)")
+        units = {p._shown()[2] for p in self.profiles.values()}
+        for name, p in self.profiles.items():  # (each in its axis's unit, as p.plot() is)
+            k, offset, unit = p._shown()
+            label = name if len(units) == 1 else f"{name} ({unit})"
+            ax_p.plot(self.t, offset + p.position / k, label=label, drawstyle="steps-post")
+            ax_v.plot(self.t, _moving_average(p.velocity, window) / k, label=label)
+        common = units.pop() if len(units) == 1 else None
+        ax_p.set_ylabel("position" if common is None else f"position ({common})")
+        ax_v.set_ylabel("velocity" if common is None else f"velocity ({common}/s)")
         ax_v.set_xlabel("time (s)")
         for ax in (ax_p, ax_v):
             ax.grid(True, alpha=0.3)
@@ -478,7 +506,8 @@ class MultiProfile(Mapping[str, Profile]):
         head += "<th>peak speed</th></tr>"
         rows = "".join(
             f"<tr><td>{html.escape(k)}</td><td>{html.escape(p.shape)}</td>"
-            f"<td>{p.duration:.6g}</td><td>{p.distance}</td><td>{p.peak_speed:.6g}</td></tr>"
+            f"<td>{p.duration:.6g}</td><td>{html.escape(_shown_distance(p))}</td>"
+            f"<td>{html.escape(_shown_speed(p))}</td></tr>"
             for k, p in self.profiles.items()
         )
         caption = f"<caption>{len(self)} axes, {self.duration:.6g} s</caption>"
@@ -490,6 +519,18 @@ class MultiProfile(Mapping[str, Profile]):
     def __repr__(self) -> str:
         inner = ", ".join(f"{k}: {v.shape} {v.duration:.4g} s" for k, v in self.profiles.items())
         return f"MultiProfile({inner})"
+
+
+def _shown_distance(p: Profile) -> str:
+    """The distance ``p`` moves, in its display unit (counts without one)."""
+    k, _, unit = p._shown()
+    return f"{p.distance / k:.6g} {unit}"
+
+
+def _shown_speed(p: Profile) -> str:
+    """The peak speed of ``p``, in its display unit per second."""
+    k, _, unit = p._shown()
+    return f"{p.peak_speed / abs(k):.6g} {unit}/s"
 
 
 def _pad(p: Profile, n: int) -> Profile:
@@ -509,6 +550,7 @@ def _pad(p: Profile, n: int) -> Profile:
         sample_period=p.sample_period,
         profiler=raw,
         stop_code=p.stop_code,
+        display=p.display,  # (shown in the axis's unit, as the profile it pads)
     )
 
 

@@ -23,6 +23,7 @@ import contextlib
 import errno
 import math
 import os
+import re
 import selectors
 import signal
 import socket
@@ -657,6 +658,10 @@ def options() -> argparse.ArgumentParser:
         description="Serve a simulated Galil DMC until Ctrl-C. With neither --tcp nor --pty it "
         "serves TCP on 127.0.0.1 on a free port, and prints the address (tcp://HOST:PORT).",
     )
+    # A value that begins with a minus and a digit is a value (--limits -50000,50000, as the
+    # option's own message writes it), as galil plan reads -12.5mm: argparse took it for an
+    # unknown option ("expected one argument").
+    parser._negative_number_matcher = re.compile(r"-\.?\d")
     parser.add_argument("--model", default="DMC-4040", help="controller model (DMC-4040)")
     where = parser.add_mutually_exclusive_group()
     where.add_argument(

@@ -70,3 +70,23 @@ def test_one_missing_name_among_operands_is_the_one_named(dmc: galil.Controller)
     assert "upper case" not in message
     assert "variable 'nosuch' on the controller" in message
     assert "NOSUCH" not in message
+
+
+@pytest.mark.parametrize(
+    ("line", "refused", "code", "earlier"),
+    [
+        ("PRA=1000;BGA", "BGA", 21, "'PRA=1000'"),
+        ("MG 1;BGA;MG 2;XYZ;MG 3", "XYZ", 1, "'BGA'"),
+    ],
+)
+def test_a_line_with_two_refused_parts_gives_the_code_to_the_last_which_tc1_explains(
+    dmc: galil.Controller, line: str, refused: str, code: int, earlier: str
+) -> None:
+    # The controller keeps only its last error's code. Before, the first refused part was
+    # blamed for it ('PRA=1000' "Begin not valid while running", 'BGA' "Unrecognized").
+    dmc.A.jog(5000)
+    with pytest.raises(galil.CommandError) as info:
+        dmc.command(line, allow_compound=True)
+    assert (info.value.command, info.value.code) == (refused, code)
+    assert f"also refused: {earlier}, why not known" in str(info.value)
+    dmc.stop()

@@ -405,3 +405,26 @@ def test_single_value_quantise_forms() -> None:
     p = predict.move(100, 1000, 10_240, 10_240)
     with pytest.raises(InvalidArgument):
         predict.check_soft_limits(p, forward_limit=50)
+
+
+def test_several_axes_are_shown_and_plotted_each_in_its_own_unit() -> None:
+    # Before: the table and the plot were in counts while each mp["A"] showed mm, and the
+    # shorter profile lost its unit when padded to the longer one.
+    a = predict.move(20_000, 40_000, 400_000, 400_000).with_units(2000.0, "mm")
+    b = predict.move(10_000, 40_000, 400_000, 400_000).with_units(2000.0, "mm")
+    multi = predict.together({"A": a, "B": b})
+    table = multi._repr_html_()
+    assert "<td>10 mm</td><td>20 mm/s</td>" in table
+    assert "<td>5 mm</td><td>20 mm/s</td>" in table
+    assert multi["B"].display == (2000.0, 0.0, "mm")
+    fig = multi.plot()
+    assert fig.axes[0].get_ylabel() == "position (mm)"
+    assert fig.axes[1].get_ylabel() == "velocity (mm/s)"
+    assert max(fig.axes[0].lines[0].get_ydata()) == 10.0
+    turns = predict.move(4096, 40_960, 409_600, 409_600).with_units(4096.0, "turn")
+    mixed = predict.together({"A": a, "C": turns, "D": predict.move(100, 1024, 10_240, 10_240)})
+    fig = mixed.plot()
+    assert fig.axes[0].get_ylabel() == "position"
+    assert [line.get_label() for line in fig.axes[0].lines] == ["A (mm)", "C (turn)", "D (counts)"]
+    assert "<td>1 turn</td>" in mixed._repr_html_()
+    assert "<td>100 counts</td><td>" in mixed._repr_html_()
