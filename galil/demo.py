@@ -12,6 +12,7 @@ code records the same things.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import sys
 import time
@@ -78,14 +79,14 @@ class Recorded:
     letter: str
     handle: MoveHandle | ContourResult
     capture: Recording
-    records: npt.NDArray[np.void]
+    records: npt.NDArray[np.void] | None  # None: the model pushes no records (no DR)
 
     def worst(self) -> dict[str, int]:
         """Largest |recorded - predicted| in counts, per way of recording."""
-        return {
-            "capture": round(compare(self.handle, self.capture)[self.letter].worst),
-            "data records": round(compare(self.handle, self.records)[self.letter].worst),
-        }
+        worst = {"capture": round(compare(self.handle, self.capture)[self.letter].worst)}
+        if self.records is not None:
+            worst["data records"] = round(compare(self.handle, self.records)[self.letter].worst)
+        return worst
 
 
 def _records_until(stream: RecordStream, sample: int) -> npt.NDArray[np.void]:
@@ -107,7 +108,9 @@ def record_motion(
     every: int = EVERY,
 ) -> Recorded:
     """Run ``start()`` while the controller records axis ``letter``'s reference, every
-    ``every`` samples (:func:`every_for`), both in arrays (a capture) and in data records.
+    ``every`` samples (:func:`every_for`), both in arrays (a capture) and in data records
+    pushed by ``DR``. A model with no Ethernet has no ``DR``: its records would be polled
+    (``QR``) only as the host asks, after the motion, so it is recorded by the capture alone.
 
     Args:
         dmc: the controller.
@@ -118,7 +121,8 @@ def record_motion(
         seconds: how long to record at most (the capture stops once the motion is done).
         every: samples between recorded values.
     """
-    with dmc.records(every) as stream:
+    with contextlib.ExitStack() as pushed:
+        stream = pushed.enter_context(dmc.records(every)) if dmc.model.has_ethernet else None
         with dmc.capture([f"_RP{letter}"], every=every, seconds=seconds) as cap:
             handle = start()
             if isinstance(handle, MoveHandle):
@@ -129,7 +133,7 @@ def record_motion(
             dmc.sleep(0.02)  # a few records past the end: the axis holds still
         assert begin is not None
         assert cap.result is not None
-        records = _records_until(stream, begin + samples + every)
+        records = None if stream is None else _records_until(stream, begin + samples + every)
     return Recorded(name, letter, handle, cap.result, records)
 
 
@@ -192,6 +196,11 @@ def _runs(dmc: Controller, say: Callable[[str], None], quick: bool) -> list[Reco
     """The move and the jog on the model's first axis, the contour on its second (or first)."""
     every = every_for(dmc.model)
     axes = dmc.model.axes
+    if not dmc.model.has_ethernet:
+        say(
+            f"data records: none: the {dmc.model.name} has no Ethernet, so no DR to push them "
+            "while the axes move; each motion is compared with the capture alone"
+        )
     runs = [
         _demo_move(dmc, say, 2.5 if quick else 12.5, axes[0], every),
         _demo_jog(dmc, say, 0.1 if quick else 0.4, axes[0], every),
