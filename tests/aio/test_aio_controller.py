@@ -154,9 +154,10 @@ def test_cancelling_while_a_move_is_being_sent_stops_it_once_it_started() -> Non
             task = asyncio.ensure_future(c.A.move_to(100_000))
             await writing.wait()
             task.cancel()
-            with pytest.raises(asyncio.CancelledError):
+            await asyncio.sleep(0.01)  # the cancel lands while the write is held...
+            go_on.set()  # ...which then goes on (the task ends once the line is sent: it
+            with pytest.raises(asyncio.CancelledError):  # waited the hook's 10 s before)
                 await task
-            go_on.set()
             await stop_sent.wait()  # the stop follows the move on a worker thread
             remove()
             await c.sleep(2.0)  # through the link's lock: after the stop's whole exchange
