@@ -1205,7 +1205,7 @@ _cached_mg_lines = functools.lru_cache(maxsize=1024)(_build_mg_lines)
 
 
 def tm(period_us: float, *, model: ModelSpec | None = None) -> Command:
-    """TM: servo sample period in µs (the model's range; refused where it is fixed).
+    """TM: servo sample period in µs (the model's range and step; refused where it is fixed).
 
     Without a model the widest range any firmware takes (31.25 .. 20000, "fast firmware").
     """
@@ -1214,7 +1214,10 @@ def tm(period_us: float, *, model: ModelSpec | None = None) -> Command:
             f"{model.name} has a fixed sample period; TM cannot be set", model=model.name
         )
     low, high = (31.25, 20000.0) if model is None else model.tm_range
-    return Command("TM " + _ranged(period_us, low, high, "TM"))
+    text = _ranged(period_us, low, high, "TM")
+    if model is not None:
+        model.tm_setting(float(text))  # (off the model's step: refused)
+    return Command("TM " + text)
 
 
 def cw(mode: int | None = None, drop: int | None = None) -> Command:
