@@ -264,7 +264,10 @@ class AnalogInputs(_Channels):
 
 
 class AnalogOutputs(_Channels):
-    """``io.analog_out[n]``: set (``AO n,v``, range-checked per model) and read (``@AO[n]``)."""
+    """``io.analog_out[n]``: set (``AO n,v``, range-checked per model) and read (``@AO[n]``).
+
+    The range checked is the model's power-on one (``analog_out_range``); a ``DQ`` sent raw
+    (``ModelSpec.dq_ranges``) is not read back: the controller enforces the range it set."""
 
     kind = "analog output"
 

@@ -170,3 +170,102 @@ def test_servo_2pb_is_taken_where_the_model_has_it_and_refused_before_sending_el
             dmc.A.motor_type = galil.MotorType.SERVO_2PB
     assert 4.0 in get_model("DMC-50040").motor_types
     assert 4.0 not in get_model("DMC-18x2").motor_types
+
+
+# ---- 11. DR on the PCI DMC-18xx takes an exponent ----------------------------------------
+
+
+@pytest.mark.parametrize("model", ["DMC-1846", "DMC-1842", "DMC-1806", "DMC-1800"])
+def test_dr_is_not_built_as_a_period_for_a_pci_18xx(model: str) -> None:
+    with pytest.raises(InvalidArgument, match=r"2\*\*n samples"):
+        cmds.dr(2, 0, model=get_model(model))
+    assert cmds.dr(8, 0, model=get_model("DMC-4040")).text == "DR 8,0"
+
+
+# ---- 14. records() with no period says so ----------------------------------------------------
+
+
+def test_records_with_no_period_asks_for_one_and_with_both_says_not_both() -> None:
+    with simulated() as dmc:
+        with nothing_sent(dmc), pytest.raises(InvalidArgument) as neither:
+            dmc.records()
+        assert "not both" not in str(neither.value)
+        assert "records(8)" in str(neither.value)
+        with nothing_sent(dmc), pytest.raises(InvalidArgument, match="not both"):
+            dmc.records(8, seconds=0.01)
+
+
+# ---- 15. TH exists only where Ethernet does --------------------------------------------------
+
+
+@pytest.mark.parametrize("model", ["DMC-1500", "DMC-1846", "DMC-1700"])
+def test_a_model_without_ethernet_does_not_know_th(model: str) -> None:
+    sim = SimController(model)
+    assert ask(sim, "TH") == "?"
+    assert ask(sim, "TC1") == " 1 Unrecognized command\r\n:"
+    assert "CONTROLLER IP ADDRESS" in ask(SimController("DMC-4040"), "TH")
+
+
+# ---- 12, 13. unsourced SP maxima and program memory are listed as assumptions ---------------
+
+
+@pytest.mark.parametrize(
+    ("name", "sp"),
+    [("DMC-18x2", "12,000,000"), ("DMC-1806", "22,000,000"), ("DMC-30010", "22,000,000")],
+)
+def test_an_unsourced_sp_maximum_is_listed_in_the_assumptions(name: str, sp: str) -> None:
+    spec = get_model(name)
+    assert spec.sp_max == int(sp.replace(",", ""))
+    assert any("SP maximum" in a and sp in a for a in spec.assumptions)
+
+
+def test_program_memory_is_the_familys_or_listed_as_assumed() -> None:
+    assert get_model("DMC-2183").variables == 254  # "up to 254 variables" (DMC-2x00 manual)
+    for spec in {s.name: s for s in MODELS.values()}.values():
+        listed = [a for a in spec.assumptions if "program memory" in a]
+        assert listed, f"{spec.name}: program memory neither sourced nor listed as assumed"
+
+
+# ---- 10. DQ: the RIO-47120's analog output ranges ------------------------------------------
+
+
+def test_dq_sets_a_rio_outputs_range_and_ao_follows_it() -> None:
+    assert get_model("RIO-47120").dq_ranges[1] == (0.0, 5.0)
+    with simulated("RIO-47120") as rio:
+        rio.command("DQ 0,1")  # output 0 takes 0-5 V
+        with pytest.raises(galil.CommandError):
+            rio.io.analog_out[0] = -5
+        rio.io.analog_out[0] = 4.5
+        assert rio.io.analog_out[0].magnitude == 4.5
+        rio.io.analog_out[1] = -5  # output 1 keeps ±10 V
+        with nothing_sent(rio), pytest.raises(galil.LimitError):
+            rio.io.analog_out[1] = 12
+    sim = SimController("DMC-30010")
+    assert ask(sim, "DQ 1,1") == "?"
+
+
+# ---- 9. no HV on the Optima-era cards -------------------------------------------------------
+
+
+@pytest.mark.parametrize("model", ["DMC-1500", "DMC-1700", "DMC-1842"])
+def test_a_model_without_hv_refuses_home_speed_and_homes_at_its_own_slow_speed(
+    model: str,
+) -> None:
+    spec = get_model(model)
+    assert not spec.has_hv
+    assert spec.home_slow_speed == 256
+    with simulated(model) as dmc:
+        a = dmc.A
+        with nothing_sent(dmc), pytest.raises(InvalidArgument, match="has no HV"):
+            a.home_speed = 1000
+        with nothing_sent(dmc):
+            assert a.home_speed == 256
+        sim = sim_of(dmc)
+        sim.set_servo_lag(0.0)
+        homed = a.home(switch=sim.home_switch("A")).wait(timeout=600)
+        # predicted at the model's slow speed, as the simulator runs it
+        assert (homed.worst, homed.stop_codes) == (0, {"A": 10})
+        assert not any("HV" in line for _, line in sim.command_log)
+    sim_raw = SimController(model)
+    assert ask(sim_raw, "HVA=500") == "?"
+    assert ask(sim_raw, "MG _HVA") == "?"
