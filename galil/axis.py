@@ -801,14 +801,22 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
     def home_speed(self) -> Reading:
         """``HV``: the slow speed of HM's last stages and FI's return; SP's range and step.
 
+        A model without HV (``model.has_hv`` false: the Optima-era cards) reads its fixed
+        slow speed, ``model.home_slow_speed``, without a query.
+
         Raises (setting it):
+            InvalidArgument: the model has no HV (nothing is sent).
             LimitError: above the model's SP maximum, or a speed above 0 that is less than
                 one step (it would be sent as HV 0, which HM and FI refuse).
         """
+        model = self._link.model
+        if not model.has_hv:
+            return self._out_rate(model.home_slow_speed, 1)
         return self._out_rate(self._operand("HV"), 1)
 
     @home_speed.setter
     def home_speed(self, value: Amount) -> None:
+        cmds.require_hv(self._link.model)  # (no HV on the model: refused first)
         counts = _home_speed_counts(self, value)
         self._link.command_line([cmds.hv(model=self._link.model, **{self._letter: counts})])
 

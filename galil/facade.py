@@ -25,7 +25,7 @@ from galil.protocol.session import Completed
 from galil.records import Records, RecordStream
 from galil.routines import Routines, ls_reply_bytes, ul_reply_bytes
 from galil.transport import Transport
-from galil.tuning import follow_tm
+from galil.tuning import follow_tm, refuse_tm
 
 __all__ = ["LONGEST_SLEEP", "LinkFacade", "check_sleep"]
 
@@ -174,6 +174,8 @@ class LinkFacade:
             GalilConnectionError: the link is closed or dead.
         """
         head = text.lstrip()[:2].upper() if type(text) is str else ""
+        if type(text) is str:
+            refuse_tm(self.link.model, [text])
         if timeout is None and head in _UPLOADS:
             command = cmds.parse_line(text)
             if not command.parts:  # (a compound line: the link says what it takes)
@@ -194,6 +196,8 @@ class LinkFacade:
         self, parts: Sequence[str | Command], *, timeout: float | None = None
     ) -> list[str]:
         """Send several commands as compound line(s) (``PRA=1;BGA``); one reply per part."""
+        if isinstance(parts, (list, tuple)):  # (anything else: the link says what it takes)
+            refuse_tm(self.link.model, [p.text if isinstance(p, Command) else p for p in parts])
         replies = self.link.command_line(parts, timeout=timeout)
         self._follow_tm(parts)
         return replies
@@ -215,6 +219,8 @@ class LinkFacade:
         (:meth:`~galil.link.Link.transfer`, decisions 0064 and 0067).
         """
         prepared = _prepared(command)
+        if isinstance(prepared, Command):
+            refuse_tm(self.link.model, [prepared.text])
         size = None if timeout is not None else _transfer_bytes(self.link, prepared)
         if size is None:
             send = functools.partial(self.link.exchange, prepared, timeout=timeout)
@@ -232,6 +238,7 @@ class LinkFacade:
         batch = check_items(commands, "commands")
         for c in batch:
             _prepared(c)
+        refuse_tm(self.link.model, [c.text for c in batch if isinstance(c, Command)])
         replies = self.link.send_many(batch, timeout=timeout)
         self._follow_tm(batch)
         return replies

@@ -170,7 +170,11 @@ class AxisHoming:
         self._refuse_gearing(kind)
         link, a = self._link, self.letter
         model = link.model
-        values = link.query_operands([f"_{op}{a}" for op in _STATE] + ["_CN1"])
+        # (no HV on the model: its HM's slow stages run at the firmware's home_slow_speed)
+        state = _STATE if model.has_hv else tuple(op for op in _STATE if op != "HV")
+        values = link.query_operands([f"_{op}{a}" for op in state] + ["_CN1"])
+        if not model.has_hv:
+            values.insert(state.index("TS"), model.home_slow_speed)
         rp, bg, mo, sp, ac, dc, jg, hv, ts, mt, sc, bl, fl, cn_home = values
         if not bg:
             self._tracker.ended(a, rp, sc)

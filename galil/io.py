@@ -271,7 +271,10 @@ class AnalogInputs(_Channels[pint.Quantity[float]]):
 
 
 class AnalogOutputs(_Channels[pint.Quantity[float]]):
-    """``io.analog_out[n]``: set (``AO n,v``, range-checked per model) and read (``@AO[n]``)."""
+    """``io.analog_out[n]``: set (``AO n,v``, range-checked per model) and read (``@AO[n]``).
+
+    The range checked is the model's power-on one (``analog_out_range``); a ``DQ`` sent raw
+    (``ModelSpec.dq_ranges``) is not read back: the controller enforces the range it set."""
 
     kind = "analog output"
 

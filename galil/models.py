@@ -7,6 +7,7 @@ a guess; change the table, not the code, when a manual or a hardware log pins a 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 import re
@@ -22,6 +23,7 @@ __all__ = [
     "MODELS",
     "MOTOR_TYPES",
     "ModelSpec",
+    "for_firmware",
     "generic_model",
     "get_model",
     "parse_identity",
@@ -56,6 +58,18 @@ MOTOR_TYPES: dict[float, str] = {
     -11.0: "EtherCAT torque, reversed",
 }
 _MT_STANDARD = frozenset({1.0, -1.0, 1.5, -1.5, 2.0, -2.0, 2.5, -2.5})
+#: MT 4 / -4 "Servo 2PB" (EPICS writeInt32's MT table, which drives every model it knows):
+#: taken on the Accelera-class families (40x0, 41x3, 42x0, 500x0, 18x6, 30010); the Optima-era
+#: cards (1500, 1700/1800, 18x2) and the 21x3 keep the standard set (see their assumptions).
+_MT_2PB = _MT_STANDARD | {4.0, -4.0}
+_MT_2PB_ASSUMPTION = (
+    "MT 4 / -4 ('Servo 2PB', EPICS's MT table) taken: EPICS names no model for it, and no"
+    " command reference page of this family was seen"
+)
+_MT_NO_2PB_ASSUMPTION = (
+    "MT 4 / -4 ('Servo 2PB', EPICS's MT table) refused: EPICS names no model for it and no"
+    " source gives it for this (pre-Accelera) family; refused as the narrower choice"
+)
 #: Interrogation reply formats (``KP ?``, ``TM ?``): the command references' "Default Format",
 #: m.n = digits before and after the point. KP and KD 4.2 (DMC-40x0 command reference KP p.142,
 #: KD p.140; DMC-18x6 manc18x6-127, -125; Optima DMC-1xxx/18x2 optcom-125; DMC-1000/1500 KP
@@ -86,6 +100,20 @@ _OP_ASSUMPTION = (
     " outputs takes outputs 9-16 is not found for this family (the DMC-4103 reference's OP"
     " takes one 16-bit field, 'General Outputs 1-16'; its page lists other families, but"
     " its table is the 4103's), and extended I/O (CO) is not modelled"
+)
+
+#: Program memory taken from the DMC-40x0 defaults (ModelSpec.program_lines ...).
+_MEMORY_ASSUMPTION = (
+    "program memory as the DMC-40x0 as remembered from its user manual (2000 lines, 510"
+    " labels, 510 variables, 30 arrays of 24,000 elements together): no source for this"
+    " family"
+)
+#: SP maxima no page gives (the 18x2, 18x6, 30010 and 500x0 entries).
+_SP_ASSUMPTION = "SP maximum {} counts/s: not sourced for this family"
+
+_NO_HV_ASSUMPTION = (
+    "no HV: the Optima HM page names none (stage 2 runs 'slowly', a stepper's at 256"
+    " counts/s); a servo's slow stages are assumed to run at 256 counts/s too"
 )
 
 #: VS, VA and VD under another TM (docs/decisions/0025, "Predictions at any TM").
@@ -161,7 +189,12 @@ class ModelSpec:
         tm_min_by_axes: smallest TM (µs) of the normal firmware for 1-2, 3-4, 5-6 and 7-8
             axes (M40-CR p246); see :attr:`tm_range`.
         tm_max: largest TM (µs).
+        tm_resolution: TM's step (µs). What the controller does with a TM off the step is
+            not documented: the library refuses one before sending (docs/decisions/0102).
         dr_range: data-record period (``DR``) in samples, smallest and largest.
+        dr_exponent: ``DR n`` takes an exponent, a period of ``2**n`` samples (the PCI
+            18xx cards: GCLIBO, protocol §7); :func:`galil.protocol.commands.dr` is refused
+            there (no exponent form is built).
         label_length: characters of a program label after ``#``.
         variable_length: characters of a variable or array name.
         threads: program threads (``XQ``).
@@ -205,6 +238,9 @@ class ModelSpec:
         analog_inputs: analog inputs (``@AN[n]``).
         analog_outputs: analog outputs (``AO n,v``); 0 where the model has none we know of.
         analog_in_range, analog_out_range: volts at the default AQ/DQ setting.
+        dq_ranges: ``DQ n`` codes and the volts each sets on the analog outputs, where the
+            model has ``DQ`` (the RIO-47120: 1 = 0-5 V, 2 = 0-10 V, 3 = ±5 V, 4 = ±10 V,
+            RIO-UM p44); empty where it has none.
         analog_in_ranges: the inputs (by number) whose range differs from
             ``analog_in_range``, at the default AQ; :meth:`analog_input_range` reads them.
         reply_formats: format (``"4.2"``) of the interrogation replies ``KP ?``, ``KI ?``,
@@ -225,6 +261,12 @@ class ModelSpec:
         er_min, er_max: position-error limit (ER) range in counts (4103 reference: ER 0
             turns the error output on, ER -1 off).
         hv_default: HV (homing speed) at power-on, counts/s.
+        has_hv: the model has ``HV`` (the speed of HM's slow stages). The Optima-era cards'
+            HM page names no HV: their stage 2 runs "slowly" at a speed of the firmware's,
+            :attr:`home_slow_speed`, and ``home_speed`` is refused there.
+        home_slow_speed: the speed (counts/s) of HM's slow stages where the model has no HV
+            (the Optima HM page: a stepper's stage 2 at 256 counts/s; a servo's is assumed
+            the same).
         homing_stages: stages of HM on a servo axis (3: find the index last).
         has_limit_disable: the model has ``LD`` (limit disable, per axis: 0 both switches
             on, 1 the forward one off, 2 the reverse one off, 3 both off). The DMC-4103
@@ -262,17 +304,21 @@ class ModelSpec:
     # adjustable families are assumed to share the 40x0's.
     tm_min_by_axes: tuple[float, float, float, float] = (62.5, 125.0, 156.25, 187.5)
     tm_max: float = 20000.0
+    # The 41x3's TM resolution, 31.25 µs (its entry); the 40x0's TM page: "31.25-20000 in
+    # 31.25 µs steps" (M40-CR p246). Assumed for the other adjustable families.
+    tm_resolution: float = 31.25
     # gclib gclibo.c GRecordRate: "if (period_arg < 2) period_arg = 2; //lowest non-zero DR"
     # for the DMC40, DMC500 and RIO (8 for the DMC41/DMC21, 4 for the DMC3). The 30,000 top
     # is the 4103 reference's; for the others it is assumed.
     dr_range: tuple[int, int] = (2, 30000)
+    dr_exponent: bool = False
     label_length: int = 7  # "#" and up to seven characters (40x0 user manual)
     variable_length: int = 8  # up to eight characters, the first a letter
     threads: int = 8  # EPICS: 8 by default, DMC-1xxx 2, DMC-3xxxx 6, RIO 4
-    # Assumption: 2000 program lines on every family (no per-family figure found yet).
+    # Program memory: the DMC-40x0 figures as remembered from its user manual (2000 lines,
+    # 510 labels, 510 variables, 30 arrays of 24000 elements together), unsourced; every
+    # family that takes them lists _MEMORY_ASSUMPTION, and the 21x3 has its own variables.
     program_lines: int = 2000
-    # Assumption: the DMC-40x0 figures as remembered from its user manual (510 labels, 510
-    # variables, 30 arrays of 24000 elements together) on every family; no source here.
     labels: int = 510
     variables: int = 510
     arrays: int = 30
@@ -308,6 +354,7 @@ class ModelSpec:
     analog_in_range: tuple[float, float] = (-10.0, 10.0)
     analog_out_range: tuple[float, float] = (-10.0, 10.0)
     analog_in_ranges: dict[int, tuple[float, float]] = field(default_factory=dict)
+    dq_ranges: dict[int, tuple[float, float]] = field(default_factory=dict)
     # Motor and loop settings (facts section 4).
     reply_formats: dict[str, str] = field(default_factory=lambda: dict(_REPLY_FORMATS))
     motor_types: frozenset[float] = _MT_STANDARD
@@ -329,6 +376,8 @@ class ModelSpec:
     er_min: int = 1
     er_max: int = INT32_MAX
     hv_default: float = 256.0
+    has_hv: bool = True
+    home_slow_speed: float = 256.0
     homing_stages: int = 3
     has_limit_disable: bool = False
     burn_timeout: float = 3.0
@@ -396,6 +445,47 @@ class ModelSpec:
         if not self.tm_adjustable:
             return self.sample_period
         return tm / 1_024_000.0
+
+    def tm_setting(self, tm: object) -> float:
+        """``tm`` (µs) as a ``TM`` this model may be sent (the range is the controller's to
+        judge, and :func:`galil.protocol.commands.tm`'s).
+
+        Raises:
+            InvalidArgument: ``tm`` is not a finite real number (a bool is not); the model's
+                sample period is fixed (no TM, or a TM that cannot change); ``TM <= 0``,
+                which "turns the servo loop off" (M40-CR p246), a state the library's
+                predictions and guards cannot follow; a value off :attr:`tm_resolution`,
+                whose fate is not documented (docs/decisions/0102).
+        """
+        if isinstance(tm, bool) or not isinstance(tm, numbers.Real):
+            raise InvalidArgument(f"tm must be a number of microseconds, not {tm!r:.60}")
+        try:
+            value = float(tm)
+        except OverflowError:  # 10**400
+            value = math.inf
+        why = None
+        if not math.isfinite(value):
+            why = f"tm must be a finite number of microseconds, not {tm!r:.60}"
+        elif not self.tm_adjustable:
+            why = f"{self.name} has a fixed sample period: TM cannot be set"
+        elif value <= 0:
+            why = (
+                f"TM {value:g} would turn the servo loop off (TM <= 0 does): the motors would"
+                " no longer be controlled, which the library's predictions and guards cannot"
+                " follow; turn the motors off with MO (controller.motor_off) instead"
+            )
+        else:
+            step = self.tm_resolution
+            below = math.floor(value / step + 1e-9) * step
+            if min(value - below, below + step - value) > 1e-9 * step:
+                why = (
+                    f"TM {value:g} is not a multiple of {step:g} µs, TM's step on {self.name}:"
+                    f" what the controller makes of it is not documented; use {below:g} or"
+                    f" {below + step:g}"
+                )
+        if why is not None:
+            raise InvalidArgument(why, model=self.name)
+        return value
 
     def _tm_scale(self, tm: float | None) -> float:
         """1000 / TM for ``tm`` (default: the power-on TM); 1 where TM is fixed."""
@@ -479,7 +569,29 @@ _ETH_USB = frozenset({"serial", "usb", "ethernet"})
 MODELS: dict[str, ModelSpec] = {}
 
 
+#: Families whose general I/O comes in banks of 8 inputs and 8 outputs per four axes: inputs
+#: and outputs 9-16 exist on boards with more than 4 axes (EPICS Init4000/Init2103: ``_TI1``
+#: and outputs 9-16 "only meaningful with >4 axes"). The one place the rule is applied
+#: (:func:`_with_io`), by every entry and by :func:`get_model`'s part numbers.
+_BANKED_IO = frozenset(
+    {"DMC-1700/1800", "DMC-18x2", "DMC-18x6", "DMC-21x3", "DMC-40x0", "DMC-41x3", "DMC-42x0"}
+    | {"DMC-500x0"}
+)
+
+
+def _with_io(spec: ModelSpec) -> ModelSpec:
+    """``spec`` with the general digital I/O of its axis count, where its family's comes in
+    banks (:data:`_BANKED_IO`): 8 in / 8 out up to 4 axes, 16 / 16 above."""
+    if spec.family not in _BANKED_IO:
+        return spec
+    n = 8 if len(spec.axes) <= 4 else 16
+    if (spec.digital_inputs, spec.digital_outputs) == (n, n):
+        return spec
+    return dataclasses.replace(spec, digital_inputs=n, digital_outputs=n)
+
+
 def _add(spec: ModelSpec, *names: str) -> None:
+    spec = _with_io(spec)
     MODELS[spec.name] = spec
     for n in names:
         MODELS[n] = spec
@@ -509,7 +621,11 @@ _add(
         reply_formats=_OPTIMA_REPLY_FORMATS,
         ki_max=_OPTIMA_KI_MAX,  # assumed (see assumptions)
         ki_resolution=_OPTIMA_KI_RESOLUTION,
+        has_hv=False,
         assumptions=(
+            _NO_HV_ASSUMPTION + " (the DMC-1000/1500 HM page was not found: the Optima's taken)",
+            _MT_NO_2PB_ASSUMPTION,
+            _MEMORY_ASSUMPTION,
             "4 axes: the DMC-1500 manual excerpt names X Y Z W; the axis count is not sourced",
             "serial only: the DMC-1500 is a stand-alone RS-232 controller in the sources",
             "contour buffer of 1: pre-Accelera controllers had a 1-deep contour queue",
@@ -544,8 +660,15 @@ _add(
         reply_formats=_OPTIMA_REPLY_FORMATS,
         ki_max=_OPTIMA_KI_MAX,  # optcom-126
         ki_resolution=_OPTIMA_KI_RESOLUTION,
+        has_hv=False,
+        dr_exponent=True,  # the DMC-1800 is a PCI 18xx (protocol §7); the 1700 assumed alike
         assumptions=(
             "ISA/PCI bus card: reached through a Galil driver device node",
+            _NO_HV_ASSUMPTION,
+            _MT_NO_2PB_ASSUMPTION,
+            _MEMORY_ASSUMPTION,
+            "DR n takes an exponent (2**n samples) as on the PCI 18xx: sourced for the PCI"
+            " DMC-1800, assumed for the ISA DMC-1700 this entry also stands for",
             "data record like the 2x00 (QZ 8,24,16,28): the 1700 manual shares that layout",
             "contour buffer of 1: pre-Accelera firmware",
             "SP maximum 12,000,000 c/s: recollection, not a primary page",
@@ -582,8 +705,14 @@ _add(
         reply_formats=_OPTIMA_REPLY_FORMATS,
         ki_max=_OPTIMA_KI_MAX,  # optcom-126
         ki_resolution=_OPTIMA_KI_RESOLUTION,
+        has_hv=False,
+        dr_exponent=True,  # PCI DMC-18xx: DR n is 2**n samples (GCLIBO; protocol §7)
         assumptions=(
             "CD range ±32,000 from the seed manual excerpt",
+            _SP_ASSUMPTION.format("12,000,000"),
+            _NO_HV_ASSUMPTION,
+            _MT_NO_2PB_ASSUMPTION,
+            _MEMORY_ASSUMPTION,
             "contour buffer of 1: the seed shows WC pacing one segment at a time",
             "QZ answers 4, 24, 16, 28: the sizes of gclib's GDataRecord1802 (28-byte axis"
             " blocks, header on the wire); the QZ reply itself not seen from an 18x2",
@@ -609,8 +738,13 @@ _add(
         transports=frozenset({"pci"}),
         qz=(8, 52, 26, 36),
         has_limit_disable=True,  # the LD page lists the DMC1806 (EPICS: no LD on any 1xxx)
+        motor_types=_MT_2PB,
+        dr_exponent=True,  # PCI DMC-18xx: DR n is 2**n samples (GCLIBO; protocol §7)
         assumptions=(
             "CD range ±32,762 as printed on the 18x6 CD page (sic)",
+            _SP_ASSUMPTION.format("22,000,000"),
+            _MT_2PB_ASSUMPTION,
+            _MEMORY_ASSUMPTION,
             "record laid out like the 40x0 one (gclib GDataRecord1806); sizes assumed equal",
             "8 threads as on the 40x0 (the 18x6 is an Accelera card like it): no 18x6 page gives"
             " the count, and EPICS (GalilController.cpp, model_[3] == '1') gives every DMC-1xxx,"
@@ -640,8 +774,14 @@ _add(
         dr_range=(8, 30000),
         vt=True,
         ki_max=2047.992,  # EPICS GalilAxis.h
+        # "up to 254 variables" (DMC-2x00 user manual, manualsdump galil-dmc-2x00), which
+        # this entry also stands for; the 21x3's own figure is not found.
+        variables=254,
         assumptions=(
             "contour buffer 511 as on Accelera-class firmware: not confirmed for 21x3",
+            "254 variables as the DMC-2x00 manual says; other program memory (2000 lines, 510"
+            " labels, 30 arrays of 24,000 elements) as the DMC-40x0: no source for this family",
+            _MT_NO_2PB_ASSUMPTION,
             "DR minimum 8 samples on the Econo 21x3 (EPICS: 8 ms minimum update period)",
             "SP maximum 12,000,000 c/s: recollection, not a primary page",
             "KI ? in format 4.4 as on the 40x0: no 21x3 page found (its KI maximum, 2047.992,"
@@ -672,7 +812,10 @@ _add(
         transports=_ETH_USB,
         qz=(4, 52, 26, 36),
         has_limit_disable=True,  # and so the 41x3, 42x0 and 500x0 built on it
+        motor_types=_MT_2PB,
         assumptions=(
+            _MT_2PB_ASSUMPTION,
+            _MEMORY_ASSUMPTION,
             "CD range ±32,000 from the 40x0 manual summary; the 18x6 page says ±32,762, and the"
             " 4103 reference's CD page (which lists the DMC4000) -32,768 ... 32,767",
             "DR at most 30,000 samples between records: not sourced",
@@ -694,8 +837,6 @@ for _n in (1, 2, 3, 5, 6, 7, 8):
                 "name": f"DMC-40{_n}0",
                 "axes": _ALL_AXES[:_n],
                 "qz": (_n, 52, 26, 36),
-                "digital_inputs": 8 if _n <= 4 else 16,
-                "digital_outputs": 8 if _n <= 4 else 16,
             }
         ),
         f"DMC40{_n}0",
@@ -737,6 +878,10 @@ _add(
                 "one SP/JG/HV maximum for every axis: the 4103 reference's 3,000,000 counts/s"
                 " for stepper axes (MT ±2, ±2.5) is not enforced, because the range checks"
                 " know the model, not the motor type each axis has at that moment",
+                "TM off its 31.25 µs step refused (what the controller does with one is not"
+                " documented)",
+                _MT_2PB_ASSUMPTION,
+                _MEMORY_ASSUMPTION,
                 _VECTOR_TM_ASSUMPTION,
             ),
         }
@@ -759,8 +904,14 @@ _add(
         transports=_ETH_USB,
         qz=(1, 18, 16, 36),
         dr_range=(4, 30000),  # gclib GRecordRate: 4 on the 30010/31010
+        # 6 threads; 4 on firmware before 1.2a ("Firmware prior to 1.2a has only 4 threads",
+        # EPICS Init30010): parse_identity gives the spec of the firmware (for_firmware).
         threads=6,
         has_limit_disable=True,
+        motor_types=_MT_2PB,
+        # EPICS maps 8 inputs (record byte 6) and 4 outputs (byte 8) on the 30000 (wave-2
+        # facts §1.3); gclib's record has two bytes of each, which does not count them.
+        digital_outputs=4,
         # gclib GDataRecord30000: analog input 1 in the axis block, input 2 and outputs 1-2
         # in the general block; EPICS drives AO ±10 V (3276.8 counts/V) on the 30010 and
         # reads @AN[2] as 0-5 V (13107.2 counts/V, unsigned; wave-2 facts, DMC-30010/31010).
@@ -769,6 +920,11 @@ _add(
         analog_in_ranges={2: (0.0, 5.0)},
         assumptions=(
             "contour buffer 511 as on Accelera-class firmware: not confirmed",
+            "8 digital inputs and 4 outputs as EPICS maps them: the 30010 manual's count was"
+            " not seen",
+            _SP_ASSUMPTION.format("22,000,000"),
+            _MT_2PB_ASSUMPTION,
+            _MEMORY_ASSUMPTION,
             "analog input 1 at ±10 V as the other DMC controllers' (input 2's 0-5 V is"
             " EPICS's); a DMC-31010, which takes this table, decodes its inputs per AQ"
             " (EPICS), which is not modelled",
@@ -796,6 +952,7 @@ _LAB_ASSUMPTIONS = (
     " the table is the 4103's",
     "BN/BP/BV finish within 3 s (EPICS's timeout for them); real durations unknown",
     "no analog outputs on DMC motion controllers (the 40x0 command reference has no @AO)",
+    _MT_2PB_ASSUMPTION,
     _VECTOR_TM_ASSUMPTION,
     _OP_ASSUMPTION,
 )
@@ -816,8 +973,6 @@ def _family(base: str, name: str, prefix: str, **changes: object) -> None:
                     "name": sibling.replace("DMC", "DMC-"),
                     "axes": _ALL_AXES[:n],
                     "qz": (n, 52, 26, 36),
-                    "digital_inputs": 8 if n <= 4 else 16,
-                    "digital_outputs": 8 if n <= 4 else 16,
                 }
             ),
             sibling,
@@ -833,6 +988,7 @@ _family(
         "ranges, buffers, TM and record as the DMC-40x0: the 42x0 shares the 4000 record "
         "(gclib GDataRecord4000) and BLISS's MODEL_4000 tables",
         "the 42x0 may not retain its IP address (ISIS): burn it with BN",
+        _MEMORY_ASSUMPTION,
         *_LAB_ASSUMPTIONS,
     ),
 )
@@ -841,10 +997,11 @@ _family(
     "DMC-50040",
     "DMC500",
     family="DMC-500x0",
+    aliases=_XYZW,  # "A-D interchangeable with X,Y,Z,W" (M500)
     # EPICS gives 2,147,483,648 as the 50000 series' maximum acceleration; one past the
     # controller's 32-bit number range, so the largest multiple of AC's 1024 within it.
     ac_max=2_147_482_624,
-    motor_types=_MT_STANDARD | {10.0, 11.0, -11.0},  # EtherCAT types (EPICS MT table)
+    motor_types=_MT_2PB | {10.0, 11.0, -11.0},  # EtherCAT types (EPICS MT table)
     assumptions=(
         "TM range, program memory, contour and vector buffers as the DMC-40x0 (not found "
         "for the 500x0)",
@@ -860,7 +1017,10 @@ _RIO_ASSUMPTIONS = (
     "no motion: a RIO has no axes; motion commands are refused before sending",
     "QZ 0,4,48,0 (general block at 4-7, I/O block at 8-55): inferred from gclib's RIO "
     "layout and EPICS's 'I/O block 48' for the RIO-471xx",
-    "TM 1000 and a servo-loop clock as the DMC-40x0 (TIME counts samples): not sourced",
+    "no TM: a fixed sample of 1/1024 s (gclib: 'RIO doesn't have TM'); TM is refused before"
+    " sending, and the simulator answers TM with TC 1 (unrecognised command): the code a"
+    " RIO gives is not sourced",
+    _MEMORY_ASSUMPTION,
     "BN/BP/BV finish within 3 s (EPICS's timeout for them); real durations unknown",
 )
 _add(
@@ -877,6 +1037,10 @@ _add(
         digital_outputs=16,
         analog_inputs=8,
         analog_outputs=8,
+        # RIO-47120: "1 = 0-5 V, 2 = 0-10 V, 3 = ±5 V, 4 = ±10 V" (RIO-UM p44)
+        dq_ranges={1: (0.0, 5.0), 2: (0.0, 10.0), 3: (-5.0, 5.0), 4: (-10.0, 10.0)},
+        # gclib: "dt = 0.9765625; //RIO doesn't have TM": a fixed 1/1024 s sample
+        tm_adjustable=False,
         motor_types=frozenset(),
         homing_stages=0,
         assumptions=(
@@ -897,6 +1061,7 @@ _add(
             "name": "RIO-47100",
             "analog_in_range": (0.0, 5.0),
             "analog_out_range": (0.0, 5.0),
+            "dq_ranges": {},  # AO fixed at 0-5 V: no DQ
             "assumptions": (
                 "AQ 0 (0-5 V) at power-on and AO fixed at 0-5 V (RIO-47100 user manual p.44)",
                 *_RIO_ASSUMPTIONS,
@@ -950,15 +1115,10 @@ _PART = re.compile(r"DMC-?(\d{4,5})")
 
 
 def _with_axes(base: ModelSpec, name: str, n: int) -> ModelSpec:
-    return ModelSpec(
-        **{
-            **base.__dict__,
-            "name": name,
-            "axes": _ALL_AXES[:n],
-            "qz": None if base.qz is None else (n, *base.qz[1:]),
-            "digital_inputs": base.digital_inputs if n <= 4 else 2 * base.digital_inputs,
-            "digital_outputs": base.digital_outputs if n <= 4 else 2 * base.digital_outputs,
-        }
+    return _with_io(
+        dataclasses.replace(
+            base, name=name, axes=_ALL_AXES[:n], qz=None if base.qz is None else (n, *base.qz[1:])
+        )
     )
 
 
@@ -1059,6 +1219,22 @@ def generic_model(raw_model: str) -> ModelSpec:
     )
 
 
+_REVISION = re.compile(r"(\d+)\.(\d+)([a-z]?)", re.IGNORECASE)
+
+
+def for_firmware(spec: ModelSpec, firmware: str) -> ModelSpec:
+    """``spec`` as a controller running ``firmware`` (the ``^R^V`` revision, ``"1.2a"``) has
+    it: a DMC-30010 (and the 31010 its entry stands for) before 1.2a has 4 threads, not 6
+    ("Firmware prior to 1.2a has only 4 threads", EPICS Init30010). A revision that does not
+    read as ``<major>.<minor><letter>`` gets the fewer threads (assumption: the safe side).
+    Other models are returned unchanged."""
+    if spec.family != "DMC-30010":
+        return spec
+    found = _REVISION.match(firmware.strip()) if isinstance(firmware, str) else None
+    old = found is None or (int(found[1]), int(found[2]), found[3].lower()) < (1, 2, "a")
+    return dataclasses.replace(spec, threads=4) if old and spec.threads > 4 else spec
+
+
 @dataclass(frozen=True)
 class Identity:
     """A parsed ``^R^V`` reply."""
@@ -1085,4 +1261,5 @@ def parse_identity(reply: str) -> Identity:
         model = get_model(raw)
     except InvalidArgument:
         model = generic_model(raw)  # a genuine identity: connect, conservatively (the caller warns)
-    return Identity(model=model, raw_model=raw, firmware=m.group("rev"))
+    firmware = m.group("rev")
+    return Identity(model=for_firmware(model, firmware), raw_model=raw, firmware=firmware)

@@ -824,7 +824,12 @@ class Records:
                 already (the controller has one ``DR``), before a byte is sent.
         """
         if (period is None) == (seconds is None):
-            raise InvalidArgument("give the record period in samples or in seconds=, not both")
+            raise InvalidArgument(
+                "give the record period in samples or in seconds=, not both"
+                if period is not None
+                else "give the record period: in samples (records(8)) or in seconds="
+                " (records(seconds=0.01))"
+            )
         if seconds is not None:
             period = self.samples_of(seconds)
         n = whole(period)

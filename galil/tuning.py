@@ -19,7 +19,7 @@ import contextlib
 import enum
 import logging
 import re
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from typing import Generic, Protocol, TypeVar, overload
 
 from galil.errors import CommandError, GalilError, InvalidArgument, decimal_hint
@@ -443,6 +443,26 @@ def _refuse_while_threads_run(link: Link) -> None:
 
 
 _TM = re.compile(r"^\s*TM\s*([0-9]+(?:\.[0-9]*)?)\s*$", re.IGNORECASE)
+#: ``TM n`` with a number, a sign too (``TM -1``), on one command of a line.
+_TM_SET = re.compile(r"^\s*TM\s*([-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+))\s*$", re.IGNORECASE)
+
+
+def refuse_tm(model: ModelSpec, texts: Iterable[str]) -> None:
+    """Refuse, before a byte is sent, a ``TM n`` among ``texts`` (command lines, compound
+    ones split at ``;``) the library could not follow (:meth:`ModelSpec.tm_setting`: a
+    model without TM, ``TM <= 0``, a value off the model's step; docs/decisions/0102). ``TM
+    ?`` and a TM of an expression pass (the controller judges those; a range error is its).
+
+    Raises:
+        InvalidArgument: naming the TM and why.
+    """
+    for text in texts:
+        if not isinstance(text, str) or "TM" not in text.upper():
+            continue  # every other command, cheaply (this runs before each raw command)
+        for one in text.split(";"):
+            found = _TM_SET.match(one)
+            if found is not None:
+                model.tm_setting(float(found.group(1)))
 
 
 def follow_tm(model: ModelSpec, text: str) -> float | None:

@@ -333,6 +333,7 @@ ENTRIES: list[Entry] = [
     E("model", "accel_resolution", {"tm": 1000}),
     E("model", "speed_resolution", {"tm": 1000}),
     E("model", "sample_period_for", {"tm": 1000}),
+    E("model", "tm_setting", {"tm": 1000}),
     E("model", "axis_letter", {"name": "A"}),
     E("model", "analog_input_range", {"n": 1}),
     E("wire_log", "add", {"hook": _quiet}),

@@ -117,6 +117,7 @@ __all__ = [
     "rc",
     "rd",
     "record_source",
+    "require_hv",
     "require_limit_disable",
     "rp",
     "sb",
@@ -1205,7 +1206,7 @@ _cached_mg_lines = functools.lru_cache(maxsize=1024)(_build_mg_lines)
 
 
 def tm(period_us: float, *, model: ModelSpec | None = None) -> Command:
-    """TM: servo sample period in µs (the model's range; refused where it is fixed).
+    """TM: servo sample period in µs (the model's range and step; refused where it is fixed).
 
     Without a model the widest range any firmware takes (31.25 .. 20000, "fast firmware").
     """
@@ -1214,7 +1215,10 @@ def tm(period_us: float, *, model: ModelSpec | None = None) -> Command:
             f"{model.name} has a fixed sample period; TM cannot be set", model=model.name
         )
     low, high = (31.25, 20000.0) if model is None else model.tm_range
-    return Command("TM " + _ranged(period_us, low, high, "TM"))
+    text = _ranged(period_us, low, high, "TM")
+    if model is not None:
+        model.tm_setting(float(text))  # (off the model's step: refused)
+    return Command("TM " + text)
 
 
 def cw(mode: int | None = None, drop: int | None = None) -> Command:
@@ -1273,7 +1277,19 @@ def dr(period: int, handle: int | None = None, *, model: ModelSpec | None = None
     """DR: push a data record every ``period`` samples to Ethernet handle ``handle`` (0-7).
 
     ``dr(0)`` stops the stream. The period must be 0 or within the model's ``dr_range``.
+
+    Raises:
+        InvalidArgument: ``model`` takes ``DR n`` as an exponent (``2**n`` samples: the PCI
+            DMC-18xx, ``ModelSpec.dr_exponent``): no period form is built for it (its record
+            comes over the bus, not a second Ethernet handle: send ``DR n`` raw if needed).
     """
+    if model is not None and model.dr_exponent:
+        raise InvalidArgument(
+            f"{model.name} takes DR n as an exponent (a record every 2**n samples, the PCI"
+            " DMC-18xx form), which this builder does not make: send it raw"
+            " (controller.command('DR 3'))",
+            model=model.name,
+        )
     low, high = (1, 65535) if model is None else model.dr_range
     n = whole(period)
     if n is None:
@@ -1976,7 +1992,13 @@ def _range_check(
 
 def hv(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
     """HV: homing speed in counts/s (stages 2 and 3 of HM, the return of FI): 0 .. SP max.
-    Stepped as SP (sent at or just beyond its step, :func:`_away`)."""
+    Stepped as SP (sent at or just beyond its step, :func:`_away`).
+
+    Raises:
+        InvalidArgument: the model has no HV (``ModelSpec.has_hv``: the Optima-era cards, whose
+            HM runs its slow stages at ``home_slow_speed``).
+    """
+    require_hv(model)
     spec = model or _DEFAULT_SPEC
     check = _Checker("HV", 0, spec.sp_max, model, integer=False, stepped=True)
     return _setting("HV", by_axis, model, check)
@@ -2055,6 +2077,20 @@ def mt(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
 def oe(*, model: ModelSpec | None = None, **by_axis: object) -> Command:
     """OE: off-on-error, 0 off, 1 position/amplifier error or abort input, 2 limits, 3 all."""
     return _setting("OE", by_axis, model, _one_of("OE", (0, 1, 2, 3), model))
+
+
+def require_hv(model: ModelSpec | None) -> None:
+    """Refuse ``HV`` on a model without it (:attr:`ModelSpec.has_hv`; ``None`` passes).
+
+    Raises:
+        InvalidArgument: naming the model and the speed its HM's slow stages run at.
+    """
+    if model is not None and not model.has_hv:
+        raise InvalidArgument(
+            f"{model.name} has no HV: its HM runs the slow stages at the firmware's own speed"
+            f" (about {model.home_slow_speed:g} counts/s), which cannot be set",
+            model=model.name,
+        )
 
 
 def require_limit_disable(model: ModelSpec | None) -> None:

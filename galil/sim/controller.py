@@ -42,7 +42,7 @@ import numpy as np
 import numpy.typing as npt
 
 from galil.errors import InvalidArgument
-from galil.models import ModelSpec, get_model
+from galil.models import ModelSpec, for_firmware, get_model
 from galil.predict.homing import HomeSwitch
 from galil.sim.clock import Clock, ManualClock
 from galil.sim.machine import Machine, Room
@@ -62,7 +62,9 @@ class SimController:
     Args:
         model: model name (``"DMC-4040"``, ``"DMC-1806"``, ...); see :mod:`galil.models`.
         clock: where time comes from; a new :class:`ManualClock` by default.
-        firmware: the revision reported by ``^R^V``.
+        firmware: the revision reported by ``^R^V``; the model's facts that depend on it
+            follow it (:func:`galil.models.for_firmware`: a DMC-30010 before 1.2a has 4
+            threads).
         servo_lag: time constant (s) of the motor following the reference, for every axis.
         rooms: the rooms that make up the controller (default :data:`galil.sim.rooms.ROOMS`);
             add one to give the simulator new commands, operands or servo-loop behaviour.
@@ -85,7 +87,8 @@ class SimController:
         rooms: Sequence[type[Room]] = ROOMS,
         identity: str | None = None,
     ) -> None:
-        self.spec: ModelSpec = get_model(model)
+        # As parse_identity reads it: a DMC-30010 before 1.2a has 4 threads (models.py).
+        self.spec: ModelSpec = for_firmware(get_model(model), firmware)
         compact = model.strip().upper().replace("-", "")
         self.identity = f"{compact} Rev {firmware}" if identity is None else identity
         self.clock: Clock = clock if clock is not None else ManualClock()

@@ -401,7 +401,8 @@ def open_transport(url: str | urllib.parse.SplitResult, **options: object) -> Si
     ``faults`` (a :class:`FaultPlan` or hook), ``seed`` (random faults: split and interleave
     with this seed), ``auto_advance``, ``messages`` (``"inline"``/``"separate"``), ``baud``
     (a serial line of that rate in simulated time: a :class:`SimSerialLink`; manual clock and
-    inline messages only).
+    inline messages only), ``firmware`` (the revision ``^R^V`` reports, ``sim://DMC-30010?
+    firmware=1.1b``: :class:`SimController`'s).
 
     Raises:
         InvalidArgument: a bad scheme, model or option.
@@ -424,6 +425,9 @@ def open_transport(url: str | urllib.parse.SplitResult, **options: object) -> Si
     auto_advance = _flag(opts.pop("auto_advance", True), "auto_advance")
     messages = str(opts.pop("messages", "inline"))
     baud = opts.pop("baud", None)
+    firmware = opts.pop("firmware", None)
+    if firmware is not None and (not isinstance(firmware, str) or not firmware.strip()):
+        raise InvalidArgument(f"firmware must be a revision such as '1.2a', not {firmware!r:.60}")
     if baud is not None:
         baud = check_baud(baud)
         if messages != "inline":
@@ -443,7 +447,10 @@ def open_transport(url: str | urllib.parse.SplitResult, **options: object) -> Si
             clock = clock_opt
         else:
             raise InvalidArgument(f"clock must be 'manual' or 'real', not {clock_opt!r}")
-        controller = SimController(model, clock, servo_lag=lag)
+        if firmware is None:
+            controller = SimController(model, clock, servo_lag=lag)
+        else:
+            controller = SimController(model, clock, servo_lag=lag, firmware=firmware.strip())
     elif not isinstance(controller, SimController):
         raise InvalidArgument("controller must be a SimController")
     if baud is not None:

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from galil.errors import CommandError, InvalidArgument, LimitError
+from galil.errors import InvalidArgument, LimitError
 from galil.predict.homing import HomeSwitch, HomingParams, homing
 from galil.predict.move import SetAccel, SetDecel, SetSpeed, Stop
 from galil.protocol.numbers import parse_number, parse_numbers
@@ -578,7 +578,8 @@ def test_a_fixed_sample_period_is_what_tm_answers_and_tm_cannot_change_it() -> N
         # The host's model and the simulator say the same: 2048 µs-of-TM, 0.002 s a sample.
         assert parse_number(dmc.command("TM ?")) == dmc.sample_period * 1_024_000
         assert dmc.sample_period == 0.002
-        with pytest.raises(CommandError):
+        # The library refuses it before sending (decision 0102), as the TM builder does.
+        with pytest.raises(InvalidArgument, match="fixed sample period"):
             dmc.command("TM 1000")
         assert dmc.sample_period == 0.002
 

@@ -150,6 +150,7 @@ TAGS: dict[str, Tag] = {
     "DL": _valid("DL\r#T\rEN\r\\", program=False, in_program="DL"),
     "DM": _valid("DM xx[2]"),
     "DP": _still("DPA=0"),
+    "DQ": _valid("DQ 0,4", always=1),  # (analog output ranges: a RIO-47120's, no DMC's)
     "DR": _valid("DR 0"),
     "DT": _still("DT 4", CONTOUR, kept=_DT_KEPT, sim_motion=True),
     "EI": _valid("EI 0"),

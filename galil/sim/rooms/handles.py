@@ -27,6 +27,10 @@ class Handles(Room):
 
     @handler("TH")
     def th(self, args: str) -> str:
+        # A model without Ethernet (DMC-1500 serial, the PCI cards) has no handles to tell:
+        # refused as a command it does not have [unsourced: the code it answers].
+        if not self.machine.spec.has_ethernet:
+            raise Refused(1, "TH on a model without Ethernet")
         return self.machine.ports.describe()
 
     @handler("CF")

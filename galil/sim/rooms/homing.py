@@ -44,7 +44,10 @@ class Homing(Room):
 
     def reset(self) -> None:
         spec = self.machine.spec
-        self.hv = {letter: spec.hv_default for letter in spec.axes}
+        # No HV on the Optima-era cards: the slow stages at the firmware's own speed
+        # (spec.home_slow_speed; the Optima HM page: 256 counts/s for a stepper).
+        speed = spec.hv_default if spec.has_hv else spec.home_slow_speed
+        self.hv = {letter: speed for letter in spec.axes}
         self.runs: dict[str, HomingSequence] = {}
         motion = self.machine.room(Motion)
         for kind, mode in MODES.items():
@@ -179,6 +182,8 @@ class Homing(Room):
 
     @handler("HV", Args.VALUES)
     def hv_command(self, fields: list[tuple[Axis, str]]) -> str:
+        self._refuse_without_hv()
+
         def check(ax: Axis, v: float) -> float:
             if v < 0:
                 raise Refused(6, "negative speed")
@@ -196,4 +201,10 @@ class Homing(Room):
 
     @operand("HV", kind=OperandKind.AXIS)
     def home_speed(self, ax: Axis) -> float:
+        self._refuse_without_hv()
         return self.hv[ax.letter]
+
+    def _refuse_without_hv(self) -> None:
+        """A model without HV (``has_hv``) does not know it [U: TC 1, the code assumed]."""
+        if not self.machine.spec.has_hv:
+            raise Refused(1, "no HV on this model")

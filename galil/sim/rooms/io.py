@@ -1,4 +1,4 @@
-"""Digital and analog I/O: SB CB OB OP AO AQ AI, ``@IN @OUT @AN @AO``, ``_TI _OP _AQ``.
+"""Digital and analog I/O: SB CB OB OP AO AQ DQ AI, ``@IN @OUT @AN @AO``, ``_TI _OP _AQ``.
 
 Channels are numbered from the model's ``io_first`` (1 on DMC controllers, 0 on the RIO).
 Inputs read high when nothing is connected; a test sets them with :meth:`IO.set_input` and
@@ -67,6 +67,10 @@ class IO(Room):
         self.outputs = [False] * spec.digital_outputs
         self.analog_in = [0.0] * spec.analog_inputs  # the volts on the pins
         self.analog_out = [0.0] * spec.analog_outputs
+        # DQ: each output's range code, where the model has DQ (spec.dq_ranges: the
+        # RIO-47120's, RIO-UM p44); at power-on the code of its analog_out_range.
+        out_code = {span: code for code, span in spec.dq_ranges.items()}
+        self.dq = [out_code.get(spec.analog_out_range, 0)] * spec.analog_outputs
         self.aq_ranges = aq_ranges(spec)
         code_of = {span: code for code, span in self.aq_ranges.items()}
         self.aq = [
@@ -80,12 +84,13 @@ class IO(Room):
         )
 
     def burn(self, name: str) -> object | None:
-        # The BN table: SB CB OP (the outputs) and AQ; the inputs are the outside world's.
-        return (list(self.outputs), list(self.aq)) if name == "BN" else None
+        # The BN table: SB CB OP (the outputs), AQ and DQ [U: DQ burned as AQ is]; the
+        # inputs are the outside world's.
+        return (list(self.outputs), list(self.aq), list(self.dq)) if name == "BN" else None
 
     def restore(self, name: str, saved: object) -> None:
         assert isinstance(saved, tuple)
-        self.outputs, self.aq = saved
+        self.outputs, self.aq, self.dq = saved
 
     # ---- channels ------------------------------------------------------------------------
     def channel(self, n: float, count: int) -> int:
@@ -216,10 +221,37 @@ class IO(Room):
         i = self.machine.interp
         k = self.channel(i.evaluate(fields[0]), len(self.analog_out))
         volts = i.evaluate(fields[1])
-        lo, hi = self.machine.spec.analog_out_range
+        lo, hi = self.out_range(k)
         if not lo <= volts <= hi:
             raise Refused(6, "AO out of range")
         self.analog_out[k] = volts
+        return ""
+
+    def out_range(self, k: int) -> tuple[float, float]:
+        """The volts output ``first + k`` takes: its DQ code's range, or the model's fixed
+        ``analog_out_range`` where it has no DQ."""
+        ranges = self.machine.spec.dq_ranges
+        return ranges[self.dq[k]] if ranges else self.machine.spec.analog_out_range
+
+    @handler("DQ")
+    def dq_command(self, args: str) -> str:
+        """``DQ n,code``: analog output n's range (RIO-47120: 1 0-5 V, 2 0-10 V, 3 ±5 V, 4
+        ±10 V; RIO-UM p44). A model without DQ answers TC 1 [U: the code it gives]; an
+        output already beyond the new range is clipped to it [U]."""
+        ranges = self.machine.spec.dq_ranges
+        if not ranges:
+            raise Refused(1, "no DQ on this model")
+        fields = split_fields(args)
+        if len(fields) != 2:
+            raise Refused(50, "DQ n,range")
+        i = self.machine.interp
+        k = self.channel(i.evaluate(fields[0]), len(self.analog_out))
+        code = i.evaluate(fields[1])
+        if code != int(code) or int(code) not in ranges:
+            raise Refused(6, f"DQ code is one of {', '.join(str(c) for c in ranges)}")
+        self.dq[k] = int(code)
+        lo, hi = ranges[self.dq[k]]
+        self.analog_out[k] = min(max(self.analog_out[k], lo), hi)
         return ""
 
     @handler("AQ")

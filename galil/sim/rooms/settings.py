@@ -7,6 +7,8 @@ come from the model: its range, or a fixed period); samples already run keep the
 
 from __future__ import annotations
 
+import math
+
 from galil.errors import InvalidArgument
 from galil.protocol.numbers import parse_format
 from galil.sim.machine import Room
@@ -145,6 +147,8 @@ class Settings(Room):
     def tm(self, args: str) -> str:
         servo = self.machine.servo
         spec = self.machine.spec
+        if not spec.has_axes:  # gclib: "RIO doesn't have TM" [unsourced: the code it answers]
+            raise Refused(1, "no TM on this model")
         a = args.strip()
         if a == "?":
             return self.machine.interp.num(servo.tm, spec.reply_formats["TM"]) + "\r\n"
@@ -153,18 +157,35 @@ class Settings(Room):
         value = self.machine.interp.evaluate(a)
         if not spec.tm_adjustable:  # as the host's TM builder refuses it (models.py)
             raise Refused(6, "this model's sample period is fixed")
+        if any(ax.m.moving for ax in servo.axes.values()):
+            raise Refused(7, "TM while moving")
+        if value <= 0:
+            return self._loop_off(value)
+        # A TM off the step (31.25 µs) is taken down to it, as the gains are to theirs
+        # [unsourced: the references give the step, not what a value off it does].
+        step = spec.tm_resolution
+        value = math.floor(value / step + 1e-9) * step
         low, high = spec.tm_range
         if not low <= value <= high:
             raise Refused(6, "TM out of range")
-        if any(ax.m.moving for ax in servo.axes.values()):
-            raise Refused(7, "TM while moving")
         servo.set_tm(value)
         for ax in servo.axes.values():
             servo.reseat(ax, ax.m.reference)
         return ""
 
+    def _loop_off(self, value: float) -> str:
+        """``TM <= 0``: "turns the servo loop off" (M40-CR p246): the motors are no longer
+        driven (taken here as MO on every axis: [unsourced]); the clock runs on at the last
+        period and ``TM ?`` answers the value given."""
+        servo = self.machine.servo
+        for ax in servo.axes.values():
+            ax.m.motor_on = False
+        servo.tm = value
+        return ""
+
     @operand("TM")
     def sample_time(self) -> float:
+        # A RIO, which has no TM command, answers _TM with its fixed 1000 [unsourced].
         return self.machine.servo.tm
 
     # ---- reset and identity ------------------------------------------------------------
