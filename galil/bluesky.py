@@ -1074,7 +1074,8 @@ async def _recorder(c: AsyncController, period: int) -> _Recorder:
     sim = _simulator(c)
     if sim is None:
         return _StreamRecorder(await c.records(period))
-    cmds.dr(period, 0, model=c.model)  # (the model's range, as its DR stream refuses it)
+    if c.model.has_ethernet:  # (the model's range, as its DR stream would refuse it; one
+        cmds.dr(period, 0, model=c.model)  # with no Ethernet polls, as `records()` does)
     recorder = _SimRecorder(c, sim, await c.run(c.sync.records_room.layout), period)
     await c.run(recorder.start)
     return recorder

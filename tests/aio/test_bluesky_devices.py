@@ -784,6 +784,20 @@ def test_a_mock_fly_scan_records_every_point_the_same_each_time(
         assert pages[0][key] == pages[1][key] == pages[2][key]
 
 
+def test_a_fly_scan_on_a_simulated_pci_card_records_as_its_polled_records_would(
+    engine: RunEngine, docs: Docs
+) -> None:
+    # A PCI DMC-18x6 has no DR of its own (its DR n is an exponent, decision 0102): a real one
+    # polls its records, and the simulator's flight must not be refused by DR's range check.
+    path = ContourPath(np.linspace(0.1, 3.2, 32) * mm, dt=3)
+    flyer = GalilContourFlyer("sim://DMC-1846", "A", name="fly", scales={"A": 2000 / mm})
+    in_loop(flyer.connect())
+    engine(flight(flyer, path, bps.null))
+    data = next(d for name, d in docs if name == "event_page")["data"]
+    assert data["fly-A-reference"] == pytest.approx(data["fly-A-predicted"], abs=1e-12)
+    assert data["fly-A-predicted"][-1] == pytest.approx(3.2)
+
+
 # -- devices on one address share its axes' scales ---------------------------------------
 def test_a_device_asking_another_scale_of_a_shared_axis_is_refused_at_connect(
     engine: RunEngine,
