@@ -738,24 +738,7 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
             LimitError: a speed out of range, a path crossing a soft limit or taking a
                 follower past its soft limits or the model's SP maximum.
         """
-        label = schedule_label(label)  # a bad label is refused before anything else
-        d = count_of(self, self.distance_counts(distance, "distance"), "distance")
-        pairs = _schedule_pairs(self, changes)
-        first = None
-        if speed is not None:
-            first = self.check_parameter("SP", self.rate_counts(speed, 1, "speed"))
-        with user_units({self._letter: self}):
-            return speed_schedule(
-                self._link,
-                self._tracker,
-                self._routines,
-                self._letter,
-                d,
-                pairs,
-                speed=first,
-                label=label,
-                display=self._display,
-            )
+        return _speed_schedule(self, distance, changes, speed, label)
 
     def stop(self) -> None:
         """Decelerate to a stop (``ST``) at DC."""
@@ -1028,6 +1011,30 @@ def in_user_units(exc: LimitError, axes: Mapping[str, Axis]) -> None:
 
 
 _KIND = {1: "speed", 2: "acceleration"}
+
+
+def _speed_schedule(
+    axis: Axis, distance: Amount, changes: SpeedChanges, speed: Amount | None, label: str
+) -> MoveHandle:
+    """:meth:`Axis.speed_schedule`: everything checked (the label first), then started."""
+    label = schedule_label(label)  # a bad label is refused before anything else
+    d = count_of(axis, axis.distance_counts(distance, "distance"), "distance")
+    pairs = _schedule_pairs(axis, changes)
+    first = None
+    if speed is not None:
+        first = axis.check_parameter("SP", axis.rate_counts(speed, 1, "speed"))
+    with user_units({axis.letter: axis}):
+        return speed_schedule(
+            axis._link,
+            axis._tracker,
+            axis._routines,
+            axis.letter,
+            d,
+            pairs,
+            speed=first,
+            label=label,
+            display=axis._display,
+        )
 
 
 def _schedule_pairs(axis: Axis, changes: Any) -> list[tuple[float, float]]:
