@@ -1091,8 +1091,9 @@ def _dr_taken(c: AsyncController, flyer: GalilContourFlyer, exc: InvalidArgument
     )
     if flying is not None:
         return InvalidArgument(
-            f"{head}the flight of {flying} has it: one controller flies one path at a time; wait for "
-            f"that flight's complete() (or stop() it), then kick off {flyer.name or 'this flyer'}"
+            f"{head}the flight of {flying} has it: one controller flies one path at a time; "
+            "wait for that flight's complete() (or stop() it), then kick off "
+            f"{flyer.name or 'this flyer'}"
         )
     return InvalidArgument(
         f"{head}a records() stream of yours has it ({holder!r}): close that stream (await "
