@@ -87,6 +87,7 @@ from galil.motion import held
 from galil.predict import Profile
 from galil.protocol import commands as cmds
 from galil.protocol.records import RecordSplitter, decode_records
+from galil.records import RecordStream
 from galil.units import Amounts, QuantityLike, Scale, get_registry, path_to_counts
 
 if TYPE_CHECKING:
@@ -1065,15 +1066,59 @@ def _simulator(c: AsyncController) -> SimController | None:
     return sim if isinstance(sim, SimController) else None
 
 
-async def _recorder(c: AsyncController, period: int) -> _Recorder:
-    """Start recording a flight: every ``period`` samples.
+#: The record streams flights opened, each with the flyer whose flight it records (a refused
+#: kickoff names it: :func:`_dr_taken`).
+_flight_streams: weakref.WeakKeyDictionary[RecordStream, str] = weakref.WeakKeyDictionary()
+
+
+def _flyer_called(flyer: GalilContourFlyer) -> str:
+    """A flyer as a message names it: ``flyer 'flyA'``."""
+    return f"flyer {flyer.name!r}" if flyer.name else "an unnamed GalilContourFlyer"
+
+
+def _dr_taken(c: AsyncController, flyer: GalilContourFlyer, exc: InvalidArgument) -> GalilError:
+    """The refusal of ``flyer``'s kickoff whose records found the controller's one ``DR``
+    taken (``exc``: the records' refusal, decision 0096), saying what a plan can do: wait
+    for the flight that has it, or close the user's own stream. ``exc`` itself when no
+    ``DR`` stream is open (another refusal)."""
+    holder = c.sync.records_room.dr_stream()
+    if holder is None:
+        return exc
+    flying = _flight_streams.get(holder)
+    head = (
+        f"{_flyer_called(flyer)} cannot kick off: the controller sends its data records to one "
+        "DR stream at a time, and "
+    )
+    if flying is not None:
+        return InvalidArgument(
+            f"{head}the flight of {flying} has it: one controller flies one path at a time; "
+            "wait for that flight's complete() (or stop() it), then kick off "
+            f"{flyer.name or 'this flyer'}"
+        )
+    return InvalidArgument(
+        f"{head}a records() stream of yours has it ({holder!r}): close that stream (await "
+        "stream.close(), or leave its async for loop) before kickoff()"
+    )
+
+
+async def _recorder(c: AsyncController, period: int, flyer: GalilContourFlyer) -> _Recorder:
+    """Start recording ``flyer``'s flight: every ``period`` samples.
 
     Raises:
-        InvalidArgument: the model's ``DR`` refuses the period (nothing started).
+        InvalidArgument: the model's ``DR`` refuses the period, or another flight or a
+            ``records()`` stream has the controller's one ``DR`` (nothing started).
     """
     sim = _simulator(c)
     if sim is None:
-        return _StreamRecorder(await c.records(period))
+        try:
+            stream = await c.records(period)
+        except InvalidArgument as exc:
+            error = _dr_taken(c, flyer, exc)
+            if error is exc:
+                raise
+            raise error from exc
+        _flight_streams[stream.sync] = _flyer_called(flyer)
+        return _StreamRecorder(stream)
     if c.model.has_ethernet:  # (the model's range, as its DR stream would refuse it; one
         cmds.dr(period, 0, model=c.model)  # with no Ethernet polls, as `records()` does)
     recorder = _SimRecorder(c, sim, await c.run(c.sync.records_room.layout), period)
@@ -1153,6 +1198,12 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
     ``stage()``. Its ``complete()`` then fails with a :class:`~galil.errors.MotionError`
     saying so; but for ``unstage()``: the plan is over (an abort, a stop or a failure says
     how), and ``complete()`` returns without data.
+
+    One controller flies one path at a time: it sends its data records to one ``DR`` stream
+    (decision 0096). Over Ethernet, the ``kickoff()`` of a second flyer on the same
+    controller is refused, before anything moves, until the first flight ended (its
+    ``complete()``), and so is a ``kickoff()`` while a ``records()`` stream of the user's is
+    open; the refusal names the flyer or the stream that holds the records.
 
     Args:
         address: the controller's address (shared with the motors on it).
@@ -1252,7 +1303,9 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
         stop it.
 
         Raises:
-            InvalidArgument: no path prepared, or this one kicked off already.
+            InvalidArgument: no path prepared, or this one kicked off already; or the
+            controller's one ``DR`` record stream is taken, by another flyer's flight on the
+            same controller or by a ``records()`` stream of the user's (over Ethernet).
         """
         flight = self._flight
         if flight is None:
@@ -1263,7 +1316,7 @@ class GalilContourFlyer(_GalilDevice, Preparable, Flyable, Stoppable, Pausable, 
                 "once): prepare() it again for another flight"
             )
         c = self.controller
-        records = await _recorder(c, flight.record_period)
+        records = await _recorder(c, flight.record_period, self)
         try:
             flight.start_sample = round((await c.query_operands(["TIME"]))[0])
         except BaseException:

@@ -33,6 +33,7 @@ from galil.motion import (
     SWITCH_BITS,
     Display,
     GearLink,
+    LineSlicer,
     MotionTracker,
     MoveResult,
     StopWatch,
@@ -52,12 +53,16 @@ from galil.predict.checks import check_contour
 from galil.protocol import commands as cmds
 from galil.protocol.commands import Command
 from galil.protocol.numbers import read_one, whole
+from galil.routines import WATCHDOG_FIRED
 from galil.units import PathSamples, sampled_values
 
 __all__ = ["ContourResult", "ContourStream", "ContourUnderrunError", "increments", "sample_path"]
 
 #: ``_SC`` of a contour axis while its contour runs ("Contour running").
 _RUNNING = 50
+#: TC of a ``CD`` refused out of range or out of contour mode ("Contouring record range
+#: error"): the library checks the range, so for it the contour mode has ended.
+_OUT_OF_CONTOUR = 41
 
 
 class _ContourOverError(Exception):
@@ -265,27 +270,36 @@ class _Progress:
     #: this contour (a controller that kept an older code until the contour ran is not
     #: misread; decision 0041).
     live: set[str] = field(default_factory=set)
+    #: Whether the line that starts the contour (and reads ``MG TIME`` there) went out.
+    started: bool = False
 
 
-def _stamped(batch: list[Command], state: _Progress) -> list[Command]:
-    """The first batch gets ``MG TIME`` where the contour starts: right after its first
-    ``CD``, or, pre-loaded under ``DT -1``, after the batch and the ``DT`` that starts it."""
-    if state.sent:
-        return batch
+def _stamped(batch: list[Command], state: _Progress, *, last: bool) -> tuple[list[Command], bool]:
+    """``batch`` with ``MG TIME`` where the contour starts, and whether it starts there:
+    right after the first ``CD``, or, pre-loaded under ``DT -1``, after the first refill's
+    ``last`` line and the ``DT`` that starts it (the pre-load's lines before it are held)."""
+    if state.started or (state.start is not None and not last):
+        return batch, False
     if state.start is not None:
-        return [*batch, state.start, cmds.time_stamp()]
-    return [batch[0], cmds.time_stamp(), *batch[1:]]
+        return [*batch, state.start, cmds.time_stamp()], True
+    return [batch[0], cmds.time_stamp(), *batch[1:]], True
 
 
 def _note_begin(state: _Progress, replies: list[str]) -> None:
-    if state.sent == 0:
-        state.begin = sample_of(replies[-1] if state.start is not None else replies[1])
+    """The line that started the contour came back (``replies``, its parts'): where it began."""
+    state.begin = sample_of(replies[-1] if state.start is not None else replies[1])
+    state.started = True
 
 
 #: Read on the line of every batch, after its last ``CD``: the buffer may run dry after the
 #: ``_TC`` read before a batch and before the batch is in (a host late with its last batch
 #: left nothing after it to read the 42: the path paused and the stream ended as if on time).
 _ERROR_CODE = cmds.mg_operand("_TC")
+
+
+#: Bytes a refill's line carries besides its segments: ``_ERROR_CODE`` and, on the line that
+#: starts the contour, its ``DT`` and ``MG TIME`` (both ways).
+_LINE_EXTRA = 64
 
 
 def _raise_if_ran_dry(link: CommandLink, state: _Progress, reply: str, batch: int) -> None:
@@ -343,6 +357,72 @@ def _not_stopped(
     )
     error.__cause__ = cause
     return error
+
+
+def _check_ends(
+    link: CommandLink,
+    letters: str,
+    ends: Mapping[str, int],
+    stop_codes: Sequence[float],
+    positions: Sequence[float],
+) -> None:
+    """At the end of the contour on ``letters``, no stop code of a halt seen: each axis is
+    where its path ends (``ends``), or something else moved it or cut the contour short (a
+    limit whose stop code a program's move then overwrote): it did not run as asked
+    (decision 0071).
+
+    Raises:
+        MotionError: an axis is not at its path's end.
+    """
+    at = {a: round(p) for a, p in zip(letters, positions, strict=True)}
+    off = [a for a in letters if at[a] != ends[a]]
+    if not off:
+        return
+    stop = {a: round(c) for a, c in zip(letters, stop_codes, strict=True)}
+    raise MotionError(
+        f"contour on {letters} ended with {off[0]} at {at[off[0]]}, not at the end of "
+        f"its path ({ends[off[0]]}), and the stop codes do not say why ("
+        + "; ".join(f"{a}: {codes.stop_text(c)}" for a, c in stop.items())
+        + "): something else stopped or moved it (an ST from a program or another client,"
+        " or a limit whose stop code a program's move then overwrote)",
+        axis=off[0],
+        stop_codes=stop,
+        position=at[off[0]],
+        model=link.model.name,
+        recent=link.recent,
+    )
+
+
+def _ended_elsewhere(link: CommandLink, letters: str, state: _Progress) -> MotionError | None:
+    """The contour on ``letters`` stopped by what the library did not send: the controller
+    refused a ``CD`` whose range the library checked (TC 41), its axes out of contour mode
+    (an ``ST`` from the watchdog, a program or another client; the axes then read 51,
+    "Contour stopped", also a contour's usual end, so only the refusal tells). The
+    watchdog's fired flag is read while one beats on the link. ``moving`` names the axes
+    still moving. ``None`` if the query fails."""
+    n = len(letters)
+    names = [f"_{op}{a}" for op in ("SC", "BG", "RP") for a in letters]
+    dog = [WATCHDOG_FIRED] if link.keepalive is not None else []
+    try:
+        values = link.query_operands(names + dog)
+    except GalilError:
+        return None
+    stop = {a: round(v) for a, v in zip(letters, values[:n], strict=True)}
+    if dog and round(values[-1]) == 1:
+        by = "the watchdog (no heartbeat reached it within its timeout: it sent ST)"
+    else:
+        by = "an ST or AB the library did not send (a program, another client, the watchdog)"
+    return MotionError(
+        f"contour on {letters} stopped by {by} after {state.sent} of {len(state.texts)} "
+        "segments were sent: the controller refused the next segments (TC 41: its axes had "
+        f"left contour mode) ({'; '.join(f'{a}: {codes.stop_text(c)}' for a, c in stop.items())})",
+        axis=letters[0],
+        stop_codes=stop,
+        moving="".join(a for a, v in zip(letters, values[n : 2 * n], strict=True) if round(v)),
+        position=values[2 * n],
+        model=link.model.name,
+        recent=link.recent,
+    )
 
 
 class ContourStream:
@@ -409,6 +489,7 @@ class ContourStream:
         # line with the start's DT came back (only then does a stop need _drop_held).
         self._holding = False
         self._line_wait: float | None = None  # (the last batch's reply timeout: _halt)
+        self._slicer = LineSlicer(link)
 
     def commands(self) -> list[Command]:
         """The ``CD`` command of every segment, in order (built and checked at once)."""
@@ -544,7 +625,7 @@ class ContourStream:
         except BaseException as exc:
             # A CD refused because a limit ended the contour since the last look (decision
             # 0041) is that stop; anything else stops the axes and leaves contour mode.
-            over = self._controller_stop(state) if isinstance(exc, CommandError) else None
+            over = self._stop_seen(state, exc)
             if over is None:
                 self._halt(end=True, cause=exc)
                 raise
@@ -616,32 +697,43 @@ class ContourStream:
         if depth <= 2:
             # A one-deep buffer: WC holds its ':' until the segment before is running.
             self._check_stopped(state)
-            line = _stamped([texts[state.sent]], state)
-            replies = link.command_line([*line, cmds.wc(), _ERROR_CODE], timeout=seg_time * 4 + 1.0)
+            line, starts = _stamped([texts[state.sent]], state, last=True)
+            replies = self._slicer.send([*line, cmds.wc(), _ERROR_CODE], seg_time * 4 + 1.0)
             self._holding = False
-            _note_begin(state, replies[:-1])
+            if starts:
+                _note_begin(state, replies[:-2])
             _raise_if_ran_dry(link, state, replies[-1], 1)
             state.sent += 1
             state.lines += 1
         elif room >= min(refill, len(texts) - state.sent):
-            batch = texts[state.sent : state.sent + room]
-            line = [*_stamped(batch, state), _ERROR_CODE]
-            # (hundreds of segments: seconds on a serial line, as a transfer's bytes)
-            self._line_wait = wait = line_timeout(link, line)
-            with held(self._tracker):  # (no stop between the check and the line)
-                self._check_stopped(state)
-                replies = link.command_line(line, timeout=wait)
-            self._holding = False  # (the first batch carries the start's DT)
-            _note_begin(state, replies[:-1])
-            _raise_if_ran_dry(link, state, replies[-1], len(batch))
-            state.sent += len(batch)
-            state.lines += len(cmds.pack(batch, model.line_length))
+            stop = min(len(texts), state.sent + room)
+            while state.sent < stop:  # (a line at a time, each short: decision 0100)
+                self._send_line(state, stop)
         else:
             # Wait for the room one refill needs, but poll at least every 50 ms and well
             # within what is queued: a late look costs more than an early one.
             queued = (depth - free) * seg_time
             need = (refill - max(room, 0)) * seg_time
             link.pause(max(seg_time, min(need, queued / 4, 0.05)))
+
+    def _send_line(self, state: _Progress, stop: int) -> None:
+        """The next line of a refill ending at segment ``stop``, short (:class:`LineSlicer`: a
+        watchdog's heartbeat rides on the lines), with a transfer's timeout, ``_TC`` after."""
+        link = self.link
+        end = self._slicer.cut(state.texts, state.sent, stop, _LINE_EXTRA)
+        batch = state.texts[state.sent : end]
+        line, starts = _stamped(batch, state, last=end == stop)
+        line = [*line, _ERROR_CODE]
+        self._line_wait = wait = line_timeout(link, line)
+        with held(self._tracker):  # (no stop between the check and the line)
+            self._check_stopped(state)
+            replies = self._slicer.send(line, wait)
+        if starts:
+            self._holding = False  # (the pre-load's DT went out: nothing is held)
+            _note_begin(state, replies[:-1])
+        _raise_if_ran_dry(link, state, replies[-1], len(batch))
+        state.sent = end
+        state.lines += len(cmds.pack(batch, link.model.line_length))
 
     def _check_stopped(self, state: _Progress) -> None:
         """Refuse to send more once a stop or an abort reached a contour axis.
@@ -658,6 +750,19 @@ class ContourStream:
             f"contour on {self.letters} stopped ({watch.stopped_by} sent through the library, "
             f"from another thread) after {state.sent} of {len(state.texts)} segments",
         )
+
+    def _stop_seen(self, state: _Progress, exc: BaseException) -> _ContourOverError | None:
+        """The stop a refused line (``exc``) met: a limit's, or one the library did not send."""
+        if not isinstance(exc, CommandError):
+            return None
+        over = self._controller_stop(state)
+        if over is None and exc.code == _OUT_OF_CONTOUR and exc.command.startswith("CD"):
+            seen = _ended_elsewhere(self.link, self.letters, state)
+            if seen is not None:
+                if seen.moving:  # (an axis still moves: stopped, as after any exception)
+                    self._halt(end=True)
+                over = _ContourOverError(seen)
+        return over
 
     def _controller_stop(self, state: _Progress) -> _ContourOverError | None:
         """The contour the controller stopped itself, once the ``_SC`` of an axis seen
@@ -729,33 +834,6 @@ class ContourStream:
         )
         raise_if_limited(self.link, self._followers, result)
 
-    def _check_ends(self, stop_codes: Sequence[float], positions: Sequence[float]) -> None:
-        """At the contour's end, no stop code of a halt seen: each axis is where its path
-        ends, or something else moved it or cut the contour short (a limit whose stop code a
-        program's move then overwrote): it did not run as asked (decision 0071).
-
-        Raises:
-            MotionError: an axis is not at its path's end.
-        """
-        at = {a: round(p) for a, p in zip(self.letters, positions, strict=True)}
-        off = [a for a in self.letters if at[a] != self._ends[a]]
-        if not off:
-            return
-        stop = {a: round(c) for a, c in zip(self.letters, stop_codes, strict=True)}
-        link = self.link
-        raise MotionError(
-            f"contour on {self.letters} ended with {off[0]} at {at[off[0]]}, not at the end of "
-            f"its path ({self._ends[off[0]]}), and the stop codes do not say why ("
-            + "; ".join(f"{a}: {codes.stop_text(c)}" for a, c in stop.items())
-            + "): something else stopped or moved it (an ST from a program or another client,"
-            " or a limit whose stop code a program's move then overwrote)",
-            axis=off[0],
-            stop_codes=stop,
-            position=at[off[0]],
-            model=link.model.name,
-            recent=link.recent,
-        )
-
     def finish(self, state: _Progress, timeout: float | None = None) -> ContourResult:
         """End contour mode (``CD 0=0``, or ``DT 0`` then ``CD 0``) and wait for the axes to stop.
 
@@ -815,7 +893,9 @@ class ContourStream:
                     if over is not None:
                         raise over
                 self._report_followers(values[n : 2 * n], values[3 * n :])
-                self._check_ends(values[n : 2 * n], values[2 * n : 3 * n])
+                _check_ends(
+                    link, self.letters, self._ends, values[n : 2 * n], values[2 * n : 3 * n]
+                )
                 return
             now = link.clock()
             if now > deadline:

@@ -127,6 +127,10 @@ def _last_refused(done: Sequence[Completed]) -> Completed:
     return [d for d in done if not d.ok][-1]
 
 
+#: The earlier refused parts of a line a :class:`CommandError` names; the rest are counted.
+_REFUSED_NAMED = 5
+
+
 def _with_replies(error: GalilError, done: Sequence[Completed]) -> GalilError:
     """A refusal in a compound line carries the replies of its parts (``galil terminal``
     prints them): what the controller answered before the rejected part, and after it. Parts
@@ -135,8 +139,11 @@ def _with_replies(error: GalilError, done: Sequence[Completed]) -> GalilError:
         error.replies = tuple(d.text if d.ok else None for d in done)
         earlier = [repr(d.command.text) for d in done if not d.ok][:-1]
         if earlier:
+            named = ", ".join(earlier[:_REFUSED_NAMED])
+            if len(earlier) > _REFUSED_NAMED:  # (a line of hundreds refused: decision 0100)
+                named += f" and {len(earlier) - _REFUSED_NAMED} more"
             error.args = (
-                f"{error.args[0]} (also refused: {', '.join(earlier)}, why not known: TC1 "
+                f"{error.args[0]} (also refused: {named}, why not known: TC1 "
                 "tells only the last error's code)",
                 *error.args[1:],
             )
@@ -417,6 +424,16 @@ class CommandLink(Protocol):
 
     def clock(self) -> float:
         """Seconds on the controller's clock."""
+        ...
+
+    @property
+    def byte_rate(self) -> float | None:
+        """Bytes per second the transport carries, when it says (:attr:`Link.byte_rate`)."""
+        ...
+
+    @property
+    def keepalive(self) -> tuple[Command, float] | None:
+        """A running watchdog's heartbeat and its interval (:attr:`Link.keepalive`)."""
         ...
 
     def pause(self, seconds: float) -> None:
@@ -1010,6 +1027,12 @@ class Link(LinkCore):
         caller's thread (see :mod:`galil.watchdog`).
         """
         self._keepalive = None if command is None else (command, every)
+
+    @property
+    def keepalive(self) -> tuple[Command, float] | None:
+        """The heartbeat command and its interval in seconds, while a watchdog beats on the
+        link (``None``: none does); a long transfer puts it on its lines (decision 0100)."""
+        return self._keepalive
 
     @property
     def simulated_time(self) -> bool:

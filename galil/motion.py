@@ -52,9 +52,11 @@ from galil.units import Scale
 
 __all__ = [
     "HOMING_KINDS",
+    "SLICE_SECONDS",
     "SWITCH_BITS",
     "Display",
     "GearLink",
+    "LineSlicer",
     "MotionTracker",
     "MoveHandle",
     "MoveParams",
@@ -1902,8 +1904,89 @@ def line_timeout(link: CommandLink, parts: Sequence[Command]) -> float:
     (decision 0100)."""
     size = 0
     for c in parts:  # (a ';' or the CR after each, its ':', a number for a read)
-        size += len(c.text) + 1 + _REPLY_BYTES + (_NUMBER_BYTES if c.returns_data else 0)
+        size += _part_bytes(c)
     return link.transfer_timeout(_EMPTY_LINE, size)
+
+
+def _part_bytes(c: Command) -> int:
+    """A part's bytes on one line, both ways (:func:`line_timeout`)."""
+    return len(c.text) + 1 + _REPLY_BYTES + (_NUMBER_BYTES if c.returns_data else 0)
+
+
+#: The longest one line of a long run of parts (a contour's refill, a sequence's setup) holds
+#: the link, in seconds of its bytes at the link's byte rate: the link is free again after
+#: each line, and a line's round trip stays a small part of it (decision 0100).
+SLICE_SECONDS = 0.25
+
+
+class LineSlicer:
+    """Cuts a long run of parts into lines that hold the link a short time, and puts a
+    running watchdog's heartbeat on them (decision 0100).
+
+    A line takes at most :data:`SLICE_SECONDS` of bytes at the link's byte rate, and at most
+    half the heartbeat interval of a watchdog that beats on the link (its keepalive); a link
+    that does not say its rate is fast: no cut. A thread that streams line after line takes
+    the link back as soon as it lets it go (a lock is not fair), and on a simulator time
+    passes only with the bytes, so the watchdog's own thread may not get a beat in: the
+    heartbeat rides at the head of a line once half its interval has passed since this
+    slicer last put one on.
+    """
+
+    def __init__(self, link: CommandLink) -> None:
+        self._link = link
+        self._beaten = -math.inf  # (the link's clock when this slicer last sent the beat)
+
+    def _budget(self) -> float:
+        """The bytes one line may carry (infinite on a link that does not say its rate)."""
+        link = self._link
+        rate = link.byte_rate
+        if rate is None or not rate > 0:
+            return math.inf
+        seconds = SLICE_SECONDS
+        keep = link.keepalive
+        if keep is not None:
+            seconds = min(seconds, keep[1] / 2)
+        return seconds * rate
+
+    def cut(self, parts: Sequence[Command], start: int, stop: int, extra: int = 0) -> int:
+        """The end of the run of ``parts`` from ``start`` (to ``stop`` at most) one line
+        carries, with ``extra`` bytes more on it (a time stamp, a read): one part at least."""
+        budget = self._budget() - extra
+        size = 0
+        end = start
+        while end < stop:
+            size += _part_bytes(parts[end])
+            if size > budget and end > start:
+                break
+            end += 1
+        return end
+
+    def beat(self) -> list[Command]:
+        """The heartbeat to put at the head of the next line (empty: no watchdog beats on
+        the link, or this slicer put one on less than half its interval ago)."""
+        link = self._link
+        keep = link.keepalive
+        if keep is None:
+            return []
+        now = link.clock()
+        if now - self._beaten < keep[1] / 2:
+            return []
+        self._beaten = now
+        return [keep[0]]
+
+    def send(self, parts: Sequence[Command], timeout: float | None = None) -> list[str]:
+        """``command_line(parts)`` with the beat at its head when due; the parts' replies."""
+        beat = self.beat()
+        return self._link.command_line([*beat, *parts], timeout=timeout)[len(beat) :]
+
+    def send_all(self, parts: Sequence[Command]) -> None:
+        """All of ``parts`` in order, a short line at a time (:meth:`send`), each line with
+        the reply timeout of its size (:func:`line_timeout`: seconds on a slow line)."""
+        sent = 0
+        while sent < len(parts):
+            end = self.cut(parts, sent, len(parts))
+            self.send(parts[sent:end], line_timeout(self._link, parts[sent:end]))
+            sent = end
 
 
 #: What :func:`line_timeout` gives :meth:`~galil.link.Link.transfer_timeout` as the command:

@@ -878,6 +878,11 @@ class Records:
             )
         return None if method == "QR" else pusher
 
+    def dr_stream(self) -> RecordStream | None:
+        """The open stream that holds the controller's one ``DR`` (decision 0096), if any."""
+        with self._lock:
+            return next((s for s in self._streams if s.method == "DR" and not s.closed), None)
+
     def _reserve_dr(self) -> None:
         """Take the controller's one ``DR`` for a stream being opened (release it by
         clearing ``_opening``).

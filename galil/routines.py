@@ -51,6 +51,7 @@ __all__ = [
     "INPUT_MESSAGE",
     "MARKER",
     "RESERVED",
+    "WATCHDOG_FIRED",
     "ProgramRunning",
     "Routine",
     "Routines",
@@ -62,6 +63,10 @@ __all__ = [
 
 #: The line that separates the user's program (above) from the library's routines (below).
 MARKER = "'galil library"
+
+#: The variable the watchdog's routine sets to 1 once it stopped the axes (:mod:`galil.watchdog`):
+#: a contour the controller stopped reads it to say why (decision 0100).
+WATCHDOG_FIRED = "gwfire"
 
 #: The labels of the library's own routines (first and inner ones), each with the routine it
 #: belongs to. A routine of another kind may not take one (a speed schedule's ``label=``

@@ -44,6 +44,7 @@ from galil.models import tm_of
 from galil.motion import (
     SWITCH_BITS,
     GearLink,
+    LineSlicer,
     MotionTracker,
     MoveHandle,
     MoveParams,
@@ -712,12 +713,13 @@ class VectorStream:
         texts = self._texts(profile)
         first = min(len(texts), link.model.vector_buffer)
         setup = self._setup(state) + texts[:first] + ([self._end()] if first == len(texts) else [])
-        # Up to 511 segments: kilobytes, seconds on a serial line (as a transfer's bytes).
-        wait = line_timeout(link, setup)
+        # Up to 511 segments: kilobytes, seconds on a serial line: short lines (a watchdog's
+        # heartbeat gets through), each with a transfer's timeout (decision 0100).
+        wait = line_timeout(link, setup)  # (the resynchronisation's, after a failure)
         try:
-            link.command_line(setup, timeout=wait)
+            LineSlicer(link).send_all(setup)
         except (InvalidArgument, CommandError):
-            raise  # (refused: the controller is as it was, the link in step)
+            raise  # (refused: BG S not sent, the link in step; the next setup's CS clears S)
         except GalilError as exc:
             error = self._not_started(exc, wait)
             if error is exc:
@@ -807,6 +809,7 @@ class VectorStream:
         deadlines = predict.segment_deadlines(profile)
         begin = handle.begin[self.path.letters[0]] or 0
         ts = link.sample_period
+        slicer = LineSlicer(link)  # (a watchdog's heartbeat on the lines when it is due)
         while sent < len(texts):
             free, now, running = link.query_operands([f"_LM{PLANE}", "TIME", f"_BG{PLANE}"])
             if not round(running):
@@ -820,7 +823,7 @@ class VectorStream:
                     with held:
                         if _stopped(handle):
                             return
-                        replies = link.command_line([*texts[i:j], cmds.time_stamp()])
+                        replies = slicer.send([*texts[i:j], cmds.time_stamp()])
                         handle.record(sample_of(replies[-1]), "add", segs[i:j])
                 sent = stop
             else:

@@ -38,7 +38,7 @@ from galil.link import CommandLink, Link, check_seconds
 from galil.models import INT32_MAX
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import read_one, whole
-from galil.routines import RESERVED, Routine, Routines
+from galil.routines import RESERVED, WATCHDOG_FIRED, Routine, Routines
 from galil.units import plain_seconds
 
 __all__ = ["LABEL", "Watchdog", "watchdog_routine"]
@@ -49,7 +49,7 @@ LABEL = "#GWDOG"
 _LOOP = "#GWDOGL"
 BEAT = "gwbeat"
 LIMIT = "gwlimit"
-FIRED = "gwfire"
+FIRED = WATCHDOG_FIRED
 
 
 def watchdog_routine(axes: str) -> Routine:
