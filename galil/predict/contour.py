@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
+from typing import cast
 
 import numpy as np
 import numpy.typing as npt
@@ -17,6 +18,7 @@ import numpy.typing as npt
 from galil.errors import InvalidArgument
 from galil.predict.counts import whole_counts
 from galil.predict.profile import Profile
+from galil.predict.quantities import no_quantity, seconds
 
 __all__ = ["contour", "interpolate"]
 
@@ -124,6 +126,9 @@ def contour(
     Raises:
         InvalidArgument: non-integer increments, or DT outside 1..8.
     """
+    no_quantity(increments, "contour increments", "counts")
+    no_quantity(dt, "dt", "DT (an exponent: a segment lasts 2**dt samples)", counts=False)
+    sample_period = cast("float", seconds(sample_period, "sample_period"))
     c = np.asarray(increments)
     if c.ndim != 1:
         raise InvalidArgument("increments must be a 1-D sequence")

@@ -15,6 +15,7 @@ import numpy as np
 
 from galil.errors import InvalidArgument, LimitError, decimal_hint
 from galil.models import INT32_MAX, INT32_MIN
+from galil.predict.quantities import no_quantity
 
 __all__ = ["ROUND_IT", "WHOLE_TOLERANCE", "check_position_range", "whole_counts"]
 
@@ -59,6 +60,7 @@ def _real(value: object, what: str) -> float:
         InvalidArgument: a bool, anything not a real number, NaN or infinity.
     """
     refused = f"{what} must be a whole number of counts, not {value!r:.60}"
+    no_quantity(value, what, "counts")  # (a Quantity passes for a numbers.Real)
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
         raise InvalidArgument(refused + decimal_hint(value))
     try:

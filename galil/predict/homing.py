@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import numpy.typing as npt
@@ -41,6 +42,7 @@ from galil.predict.counts import whole_counts
 from galil.predict.engine import AxisProfiler
 from galil.predict.move import Event, SetAccel, sample_of_event
 from galil.predict.profile import Profile
+from galil.predict.quantities import seconds
 from galil.predict.smoothing import smooth
 
 __all__ = [
@@ -375,6 +377,7 @@ def homing(
             in the direction of travel, a speed is 0 ...); an event other than ``AC``, or at a
             time before ``BG``.
     """
+    sample_period = cast("float", seconds(sample_period, "sample_period"))
     start, changes = whole_counts(start, "start"), _accel_changes(events, sample_period)
     prof = AxisProfiler(sample_period=sample_period, position=start)
     seq = HomingSequence(kind, prof, params, switch)

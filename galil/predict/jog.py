@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import cast
 
 from galil.errors import InvalidArgument
 from galil.models import ModelSpec
@@ -14,6 +15,8 @@ from galil.predict.move import (
     Event,
     SetSpeed,
     Stop,
+    _period,
+    _plain_settings,
     _resolve,
     _Run,
     drive,
@@ -21,6 +24,7 @@ from galil.predict.move import (
     sample_of_event,
 )
 from galil.predict.profile import Profile
+from galil.predict.quantities import no_quantity, seconds
 
 __all__ = ["jog"]
 
@@ -67,6 +71,11 @@ def jog(
         CommandError: an event the controller would refuse.
     """
     start = whole_counts(start, "start")
+    _plain_settings(speed, accel, decel, smoothing)
+    no_quantity(initial_speed, "initial_speed", "counts/s")
+    sample_period = _period(sample_period)
+    stop_at = cast("float | None", seconds(stop_at, "stop_at"))
+    duration = cast("float | None", seconds(duration, "duration"))
     _validate_jog(speed, accel, decel)
     speed, accel, decel, smoothing, sample_period = _resolve(
         speed, accel, decel, smoothing, sample_period, model, jog=True

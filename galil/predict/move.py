@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import numpy.typing as npt
@@ -25,6 +26,7 @@ from galil.predict.engine import (
     plan_position,
 )
 from galil.predict.profile import Profile
+from galil.predict.quantities import no_quantity, seconds
 from galil.predict.smoothing import END_LOOKAHEAD
 
 __all__ = [
@@ -55,12 +57,44 @@ MAX_SAMPLES = 50_000_000
 Int64Array = npt.NDArray[np.int64]
 
 
+def _event_time(event: object, kind: str) -> None:
+    """An event's ``time`` given as a time Quantity, in seconds (the dataclass is frozen).
+
+    Raises:
+        InvalidArgument: a Quantity that is not a time.
+    """
+    time = getattr(event, "time")  # noqa: B009 (the events share no base class to type it)
+    if not isinstance(time, (int, float)):
+        object.__setattr__(event, "time", seconds(time, f"{kind} time"))
+
+
+def _plain_settings(speed: object, accel: object, decel: object, smoothing: object) -> None:
+    """Refuse a Quantity for SP (JG), AC, DC or IT: the predictor has no scale.
+
+    Raises:
+        InvalidArgument: naming the argument.
+    """
+    no_quantity(speed, "speed", "counts/s")
+    no_quantity(accel, "accel", "counts/s²")
+    no_quantity(decel, "decel", "counts/s²")
+    no_quantity(smoothing, "smoothing", "IT (a fraction, 1/256 .. 1)", counts=False)
+
+
+def _period(sample_period: float) -> float:
+    """``sample_period``, a time Quantity in seconds (refused if not a time)."""
+    return cast("float", seconds(sample_period, "sample_period"))
+
+
 @dataclass(frozen=True)
 class SetSpeed:
     """SP (position move) or JG (jog) at ``time`` seconds from the start, counts/s."""
 
     time: float
     speed: float
+
+    def __post_init__(self) -> None:
+        _event_time(self, "SetSpeed")
+        no_quantity(self.speed, "SetSpeed speed", "counts/s")
 
 
 @dataclass(frozen=True)
@@ -69,6 +103,10 @@ class SetAccel:
 
     time: float
     accel: float
+
+    def __post_init__(self) -> None:
+        _event_time(self, "SetAccel")
+        no_quantity(self.accel, "SetAccel accel", "counts/s²")
 
 
 @dataclass(frozen=True)
@@ -79,6 +117,10 @@ class SetDecel:
     time: float
     decel: float
 
+    def __post_init__(self) -> None:
+        _event_time(self, "SetDecel")
+        no_quantity(self.decel, "SetDecel decel", "counts/s²")
+
 
 @dataclass(frozen=True)
 class Increment:
@@ -87,12 +129,19 @@ class Increment:
     time: float
     distance: int
 
+    def __post_init__(self) -> None:
+        _event_time(self, "Increment")
+        no_quantity(self.distance, "Increment distance", "counts")
+
 
 @dataclass(frozen=True)
 class Stop:
     """ST at ``time`` seconds."""
 
     time: float
+
+    def __post_init__(self) -> None:
+        _event_time(self, "Stop")
 
 
 @dataclass(frozen=True)
@@ -101,6 +150,9 @@ class Abort:
     that arrives once the motion is over changes nothing; events after it are ignored."""
 
     time: float
+
+    def __post_init__(self) -> None:
+        _event_time(self, "Abort")
 
 
 Event = SetSpeed | SetAccel | SetDecel | Increment | Stop | Abort
@@ -167,6 +219,8 @@ def plan_move(
         LimitError: a distance outside the 32-bit range ``PR`` takes.
     """
     distance = _distance(distance)
+    _plain_settings(speed, accel, decel, None)
+    sample_period = _period(sample_period)
     _validate(speed, accel, decel, sample_period)
     ts = sample_period
     plan = plan_position(0.0, 0.0, float(distance), speed * ts, accel * ts * ts, decel * ts * ts)
@@ -537,6 +591,8 @@ def move(
     """
     start = whole_counts(start, "start")
     distance = _distance(distance, start, _model_name(model))
+    _plain_settings(speed, accel, decel, smoothing)
+    sample_period = _period(sample_period)
     _validate(speed, accel, decel, sample_period)
     if model is not None or smoothing is None:  # (else _resolve returns them as they are)
         speed, accel, decel, smoothing, sample_period = _resolve(
@@ -762,6 +818,8 @@ def speed_schedule(
     """
     start = whole_counts(start, "start")
     distance = _distance(distance, start)
+    _plain_settings(initial_speed, accel, decel, smoothing)
+    sample_period = _period(sample_period)
     _validate(initial_speed, accel, decel, sample_period)
     triggers, speeds, ramp_ends = _schedule_points(distance, initial_speed, changes, accel, decel)
     longest = _schedule_seconds(abs(int(distance)), triggers, speeds, accel, decel)

@@ -14,11 +14,19 @@ import numpy as np
 import numpy.typing as npt
 
 from galil.errors import InvalidArgument, decimal_hint
+from galil.predict.quantities import is_quantity, seconds
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["MultiProfile", "Profile", "SampleSource", "check_figure_path", "together"]
+__all__ = [
+    "MultiProfile",
+    "Profile",
+    "SampleSource",
+    "check_figure_path",
+    "shown_position",
+    "together",
+]
 
 FloatArray = npt.NDArray[np.float64]
 Int64Array = npt.NDArray[np.int64]
@@ -119,8 +127,13 @@ def finite_number(value: object, name: str) -> float:
     (10**400) is refused rather than overflowing.
 
     Raises:
-        InvalidArgument: naming ``name``.
+        InvalidArgument: naming ``name``; a pint Quantity too (it passes for a
+            ``numbers.Real``, but the predictor has no scale to take its unit).
     """
+    if is_quantity(value):
+        raise InvalidArgument(
+            f"{name} must be a plain number in galil.predict (it has no scale), not {value!r:.60}"
+        )
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
         raise InvalidArgument(
             f"{name} must be a finite number, not {value!r:.60}{decimal_hint(value)}"
@@ -132,6 +145,19 @@ def finite_number(value: object, name: str) -> float:
     if not math.isfinite(x):
         raise InvalidArgument(f"{name} must be a finite number, not {value!r:.60}")
     return x
+
+
+def shown_position(
+    display: tuple[float, float, str] | None, counts: float | npt.NDArray[np.float64]
+) -> float | npt.NDArray[np.float64]:
+    """Counts as a position in a profile's display unit (:attr:`Profile.display`; counts
+    themselves without one), rounded once: ``(counts + offset * k) / k``, as
+    ``galil.units.Scale.counts_to_position`` computes it, so both read the same position."""
+    if display is None:
+        return counts
+    k, offset, _ = display
+    out: float | npt.NDArray[np.float64] = (counts + offset * k) / k
+    return out
 
 
 def check_figure_path(path: str, option: str = "png") -> None:
@@ -362,15 +388,18 @@ class Profile:
     def at(self, t: float | npt.ArrayLike) -> float | npt.NDArray[np.float64]:
         """Reference position at time(s) ``t`` (s), linearly interpolated between samples.
 
-        Before 0 it is the start, after the end the final position.
+        Before 0 it is the start, after the end the final position. ``t`` may be a time
+        Quantity (``250 * ureg.ms``, or an array of times), read in seconds.
 
         Raises:
-            InvalidArgument: ``t`` is not a number of seconds (or an array of them), or is NaN.
+            InvalidArgument: ``t`` is not a number of seconds (or an array of them), or is NaN;
+                a Quantity that is not a time (``1 * ureg.mm``).
         """
-        if t is None or isinstance(t, (bool, np.bool_, str, bytes)):
+        value = seconds(t, "t")
+        if value is None or isinstance(value, (bool, np.bool_, str, bytes)):
             raise InvalidArgument(f"t must be seconds, not {t!r:.60}")
         try:
-            times = np.asarray(t, dtype=np.float64)
+            times = np.asarray(value, dtype=np.float64)
         except (TypeError, ValueError, OverflowError):
             raise InvalidArgument(f"t must be seconds, not {t!r:.60}") from None
         if np.isnan(times).any():

@@ -19,7 +19,7 @@ import copy
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -38,6 +38,7 @@ from galil.predict.path import (
     path_kind,
 )
 from galil.predict.profile import Profile
+from galil.predict.quantities import no_quantity, seconds
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -556,6 +557,10 @@ def _resolve(
     tm: float | None,
 ) -> tuple[float, float, float, float, float, float]:
     """(VS, VA, VD, VT, sample period, CR angle step), quantised when a model is given."""
+    for name, value in (("speed", speed), ("accel", accel), ("decel", decel)):
+        no_quantity(value, f"vector {name}", "counts/s" if name == "speed" else "counts/s²")
+    no_quantity(smoothing, "smoothing", "VT (a fraction, 1/256 .. 1)", counts=False)
+    sample_period = cast("float", seconds(sample_period, "sample_period"))
     for name, value in (("speed", speed), ("accel", accel), ("decel", decel)):
         if not (math.isfinite(value) and value > 0):
             raise InvalidArgument(f"vector {name} must be a positive number, got {value!r}")
