@@ -85,6 +85,7 @@ from galil.errors import (
 from galil.link import check_count, check_flag, check_seconds, check_wait_timeout
 from galil.motion import held
 from galil.predict import Profile
+from galil.predict.profile import shown_position
 from galil.protocol import commands as cmds
 from galil.protocol.records import RecordSplitter, decode_records
 from galil.records import RecordStream
@@ -1519,8 +1520,7 @@ def _retrieved(task: asyncio.Task[ContourResult]) -> None:
 
 
 def _in_unit(profile: Profile, counts: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    per, offset, _ = profile.display if profile.display is not None else (1.0, 0.0, "")
-    return counts / per + offset
+    return np.asarray(shown_position(profile.display, counts), dtype=np.float64)
 
 
 def _past(recorded: list[np.void], sample: int) -> bool:

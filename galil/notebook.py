@@ -22,6 +22,7 @@ from galil.contour import ContourResult
 from galil.errors import GalilError, InvalidArgument, decimal_hint
 from galil.motion import MoveHandle
 from galil.predict import Profile
+from galil.predict.profile import shown_position
 from galil.units import Amount, counts_or_plain, get_registry, is_quantity
 
 if TYPE_CHECKING:
@@ -259,11 +260,11 @@ def compare_plot(
     ax_pos, ax_diff = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
     units = {_display(p)[2] for p in profiles.values()}
     for letter, prof in profiles.items():
-        k, offset, unit = _display(prof)
+        unit = _display(prof)[2]
         suffix = "" if len(units) == 1 else f" ({unit})"
         (line,) = ax_pos.plot(
             prof.t,
-            prof.position / k + offset,
+            shown_position(prof.display, prof.position.astype(np.float64)),
             label=f"{letter} predicted{suffix}",
             linewidth=2,
             alpha=0.6,
@@ -273,7 +274,7 @@ def compare_plot(
             # Same colour, dashed: each recording reads as the twin of its prediction.
             ax_pos.plot(
                 pair.t,
-                pair.recorded / k + offset,
+                shown_position(prof.display, pair.recorded.astype(np.float64)),
                 "--",
                 color=line.get_color(),
                 label=f"{letter} recorded",

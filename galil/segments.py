@@ -27,6 +27,7 @@ from galil import predict
 from galil.errors import InvalidArgument, decimal_hint
 from galil.predict.counts import whole_counts
 from galil.predict.path import PathLayout, quantise_angle
+from galil.predict.profile import shown_position
 from galil.units import (
     Amount,
     QuantityLike,
@@ -425,9 +426,8 @@ class VectorPlan:
             KeyError: ``axis`` is not one of the path's axes.
         """
         p = self._profile(axis)
-        k, offset, _ = p.display if p.display is not None else (1.0, 0.0, "counts")
-        out: FloatArray = offset + p.position / k
-        return out
+        out = shown_position(p.display, p.position.astype(np.float64))
+        return np.asarray(out, dtype=np.float64)
 
     def unit_of(self, axis: str) -> str:
         """The unit :meth:`position` gives ``axis`` in (``KeyError`` as :meth:`position`)."""

@@ -487,10 +487,15 @@ class Scale:
     def counts_to_position(
         self, counts: float | npt.NDArray[np.float64]
     ) -> pint.Quantity[float] | pint.Quantity[npt.NDArray[np.float64]]:
-        """Counts to a position Quantity."""
-        q: Any = (counts * self.sign / self._k) * get_registry().Quantity(1.0, self.unit)
-        out: pint.Quantity[float] = q + self.offset  # (pint types its arithmetic as Any)
-        return out
+        """Counts to a position Quantity.
+
+        ``(sign * counts + offset * k) / k`` (``k`` counts per unit): one rounding, so that a
+        position that converted to whole counts reads back as given (``0.1 mm``, not the
+        ``0.09999999999999964 mm`` of ``counts / k`` then ``+ offset``).
+        """
+        k = self._k
+        out: Any = get_registry().Quantity((counts * self.sign + self._offset * k) / k, self.unit)
+        return out  # type: ignore[no-any-return]
 
     @overload
     def counts_to_distance(self, counts: float) -> pint.Quantity[float]: ...

@@ -44,6 +44,7 @@ from galil.motion import (
     not_done_text,
     wait_guard,
 )
+from galil.predict.profile import shown_position
 from galil.segments import VectorPlan
 from galil.vector import VectorHandle
 
@@ -103,8 +104,7 @@ class MoveProgress:
 
 def shown(profile: predict.Profile, counts: float) -> float:
     """A position in counts in the unit a profile is shown in (its axis's user unit)."""
-    per, offset, _ = profile.display if profile.display is not None else (1.0, 0.0, "")
-    return counts / per + offset
+    return float(shown_position(profile.display, counts))
 
 
 def _unit(profile: predict.Profile) -> str:
