@@ -13,7 +13,7 @@ import numbers
 import sys
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, TypeAlias, TypedDict, cast
+from typing import Any, TypeAlias, TypedDict, cast, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -132,8 +132,16 @@ class UnitProfile(predict.Profile):
 
     @property
     def q(self) -> ProfileQuantities:
-        """Times, positions, speeds and accelerations as pint Quantities in the axis's units."""
-        assert self.scale is not None
+        """Times, positions, speeds and accelerations as pint Quantities in the axis's units.
+
+        Raises:
+            InvalidArgument: the profile is of an axis without a scale (it is in counts).
+        """
+        if self.scale is None:
+            raise InvalidArgument(
+                "this profile is of an axis without a scale: it is in counts (set one with "
+                "axis.set_scale(counts_per=...) before planning, to read it in units)"
+            )
         return ProfileQuantities(self, self.scale)
 
 
@@ -190,6 +198,31 @@ class ProfileQuantities:
     def distance(self) -> pint.Quantity[float]:
         """End minus start."""
         return self.scale.counts_to_distance(self.profile.distance)
+
+    @overload
+    def at(self, t: float) -> pint.Quantity[float]: ...
+    @overload
+    def at(
+        self, t: npt.ArrayLike
+    ) -> pint.Quantity[float] | pint.Quantity[npt.NDArray[np.float64]]: ...
+    def at(
+        self, t: float | npt.ArrayLike
+    ) -> pint.Quantity[float] | pint.Quantity[npt.NDArray[np.float64]]:
+        """The reference position at time(s) ``t`` in the axis's unit: seconds, or a time
+        Quantity (``200 * ureg.ms``, or an array of times), as :meth:`Profile.at
+        <galil.predict.Profile.at>` interpolates it.
+
+        Raises:
+            InvalidArgument: ``t`` is not seconds nor a time Quantity, or is NaN.
+        """
+        return self.scale.counts_to_position(self.profile.at(t))
+
+
+def _planned(profile: predict.Profile) -> UnitProfile:
+    """A plan as a :class:`UnitProfile` (an axis without a scale: one whose ``.q`` says so)."""
+    if isinstance(profile, UnitProfile):
+        return profile
+    return profile.recast(UnitProfile, scale=None)
 
 
 def _abs(q: pint.Quantity[float]) -> pint.Quantity[float]:
@@ -660,15 +693,17 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
         check_overrides("move_by", overrides)
         return self._move(distance, True, False, **overrides)
 
-    def plan_to(self, position: Amount, **overrides: Unpack[MoveOverrides]) -> predict.Profile:
-        """Predict and check ``move_to(position)`` without sending anything."""
+    def plan_to(self, position: Amount, **overrides: Unpack[MoveOverrides]) -> UnitProfile:
+        """Predict and check ``move_to(position)`` without sending anything. The profile's
+        ``.q`` reads it in the axis's units (on an axis with a scale)."""
         check_overrides("plan_to", overrides)
-        return self._move(position, False, True, **overrides).profile
+        return _planned(self._move(position, False, True, **overrides).profile)
 
-    def plan_by(self, distance: Amount, **overrides: Unpack[MoveOverrides]) -> predict.Profile:
-        """Predict and check ``move_by(distance)`` without sending anything."""
+    def plan_by(self, distance: Amount, **overrides: Unpack[MoveOverrides]) -> UnitProfile:
+        """Predict and check ``move_by(distance)`` without sending anything. The profile's
+        ``.q`` reads it in the axis's units (on an axis with a scale)."""
         check_overrides("plan_by", overrides)
-        return self._move(distance, True, True, **overrides).profile
+        return _planned(self._move(distance, True, True, **overrides).profile)
 
     def jog(self, speed: Amount) -> MoveHandle:
         """Jog at ``speed`` (signed).

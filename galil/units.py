@@ -287,12 +287,25 @@ def _real(value: numbers.Real | float, what: str) -> float:
         raise InvalidArgument(f"{what} is too large for any controller: {value!r:.40}") from None
 
 
+def string_hint(value: object, *, number: bool = False) -> str:
+    """What a refusal of a string adds: strings are not parsed, and how to make a Quantity
+    (or, where a plain ``number`` is taken too, a number)."""
+    if not isinstance(value, str):
+        return ""
+    text = value.strip()[:40] if any(c.isalpha() for c in value) else "10 mm"
+    return (
+        f" (a string is not parsed: give {'a number, or ' if number else ''}a Quantity such as"
+        f" ureg({text!r}) or 10 * ureg.mm)"
+    )
+
+
 def _plain_number(value: object, what: str) -> float:
     if type(value) is int or type(value) is float:  # (the usual case: no ABC check)
         return _real(value, what)
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise InvalidArgument(
-            f"{what} must be a number or a pint Quantity, got {value!r}{decimal_hint(value)}"
+            f"{what} must be a number or a pint Quantity, got {value!r:.60}"
+            f"{decimal_hint(value) or string_hint(value, number=True)}"
         )
     return _real(value, what)
 
@@ -427,7 +440,8 @@ class Scale:
     def _convert(self, value: Any, unit: Any, what: str) -> Any:
         if not is_quantity(value):
             raise InvalidArgument(
-                f"{what} needs units compatible with {unit:~} (the axis has a scale), got {value!r}"
+                f"{what} needs units compatible with {unit:~} (the axis has a scale), got "
+                f"{value!r:.60}{string_hint(value)}"
             )
         q = _ours(value, what, lambda: f"{unit:~}-compatible units")
         if getattr(q, "_units", None) == getattr(unit, "_units", False):

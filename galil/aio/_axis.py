@@ -14,10 +14,9 @@ import sys
 from collections.abc import Awaitable, Callable
 from typing import Any, Generic, TypeVar, cast, overload
 
-from galil import predict
 from galil.aio._motion import MotionRoom, motion_twin
 from galil.aio._worker import Room, same, twin
-from galil.axis import Axis, MoveOverrides
+from galil.axis import Axis, MoveOverrides, UnitProfile
 from galil.gearing import Gearing
 from galil.homing import Homed, Switches
 from galil.motion import MoveHandle
@@ -44,15 +43,11 @@ def _move_by(axis: Axis, /, distance: Amount, **overrides: Unpack[MoveOverrides]
     return axis.move_by(distance, **overrides)
 
 
-def _plan_to(
-    axis: Axis, /, position: Amount, **overrides: Unpack[MoveOverrides]
-) -> predict.Profile:
+def _plan_to(axis: Axis, /, position: Amount, **overrides: Unpack[MoveOverrides]) -> UnitProfile:
     return axis.plan_to(position, **overrides)
 
 
-def _plan_by(
-    axis: Axis, /, distance: Amount, **overrides: Unpack[MoveOverrides]
-) -> predict.Profile:
+def _plan_by(axis: Axis, /, distance: Amount, **overrides: Unpack[MoveOverrides]) -> UnitProfile:
     return axis.plan_by(distance, **overrides)
 
 

@@ -8,7 +8,7 @@ import numbers
 import os
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol, TypeVar, overload
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar, cast, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -498,6 +498,17 @@ class MultiProfile(Mapping[str, Profile]):
     def position(self) -> Int64Array:
         """Positions as a 2-D array, one row per axis (in mapping order)."""
         return np.vstack([p.position for p in self.profiles.values()])
+
+    def at(self, t: float | npt.ArrayLike) -> dict[str, float | npt.NDArray[np.float64]]:
+        """Each axis's reference position at time(s) ``t`` (seconds, or a time Quantity), in
+        counts, as :meth:`Profile.at` gives it (after its end, an axis holds its end). In an
+        axis's unit: ``plan[axis].q.at(t)`` (a profile of an axis with a scale).
+
+        Raises:
+            InvalidArgument: ``t`` is not seconds nor a time Quantity, or is NaN.
+        """
+        value = seconds(t, "t")  # (once, not once per axis)
+        return {name: p.at(cast("npt.ArrayLike", value)) for name, p in self.profiles.items()}
 
     def plot(self, *, average: float = 0.004) -> Figure:
         """Plot every axis's position and velocity on the common time base, each in its

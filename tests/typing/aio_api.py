@@ -16,6 +16,7 @@ from typing_extensions import assert_type
 import galil
 import galil.aio as aio
 import galil.units
+from galil.axis import UnitProfile
 from galil.contour import ContourResult
 from galil.predict import MultiProfile, Profile
 from galil.programs import Download
@@ -30,7 +31,7 @@ async def check(c: aio.AsyncController) -> None:
     assert_type(await c.A.move_to(10), aio.AsyncMoveHandle)
     assert_type(await c.A.jog(1000), aio.AsyncMoveHandle)
     assert_type(await c.move({"A": 1}), aio.AsyncMoveHandle)
-    assert_type(await c.A.plan_to(10), Profile)
+    assert_type(await c.A.plan_to(10), UnitProfile)
     assert_type(await c.plan({"A": 1}), MultiProfile)
     assert_type(await (await c.A.move_to(10)), galil.MoveResult)
     assert_type(await (await c.A.move_to(10)).wait(), galil.MoveResult)
@@ -106,7 +107,8 @@ async def check_units(c: aio.AsyncController) -> None:
     assert_type(await c.A.speed(), galil.Reading)
     assert_type(await c.A.soft_limits(), tuple[galil.Reading | None, galil.Reading | None])
     assert_type(await c.A.set_speed(5 * ureg.mm / ureg.s), None)
-    assert_type(await c.A.plan_by(ureg.Quantity(10.0, "mm"), speed=None), Profile)
+    assert_type(await c.A.plan_by(ureg.Quantity(10.0, "mm"), speed=None), UnitProfile)
+    assert_type((await c.A.plan_to(10)).q.end, pint.Quantity[float])
     assert_type(await c.A.move_to(np.int64(10), accel=1e5), aio.AsyncMoveHandle)
     assert_type(await c.plan({"A": 1}, relative=True, speed=100), MultiProfile)
     await c.A.move_to("10")  # type: ignore[arg-type]

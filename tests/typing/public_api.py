@@ -12,10 +12,10 @@ from typing_extensions import assert_type
 
 import galil
 import galil.units
-from galil.axis import ProfileQuantities
+from galil.axis import ProfileQuantities, UnitProfile
 from galil.contour import ContourResult
 from galil.gearing import Gearing
-from galil.predict import MultiProfile, Profile
+from galil.predict import MultiProfile
 from galil.units import ureg
 
 
@@ -27,7 +27,7 @@ def check(dmc: galil.Controller) -> None:
     assert_type(dmc.A.move_to(10), galil.MoveHandle)
     assert_type(dmc.A.move_by(10), galil.MoveHandle)
     assert_type(dmc.A.jog(1000), galil.MoveHandle)
-    assert_type(dmc.A.plan_to(10), Profile)
+    assert_type(dmc.A.plan_to(10), UnitProfile)
     assert_type(dmc.move({"A": 1, "B": 2}), galil.MoveHandle)
     assert_type(dmc.plan({"A": 1}), MultiProfile)
     assert_type(dmc.contour("A", [1.0, 2.0], dt=2), ContourResult)
@@ -80,8 +80,8 @@ def check_units(dmc: galil.Controller) -> None:
     assert_type(x.soft_limits, tuple[galil.Reading | None, galil.Reading | None])
     x.speed = 5 * ureg.mm / ureg.s
     x.soft_limits = (None, ureg.Quantity(100, "mm"))
-    assert_type(x.plan_by(10), Profile)
-    assert_type(x.plan_by(ureg.Quantity(10.0, "mm"), speed=np.float32(5), accel=None), Profile)
+    assert_type(x.plan_by(10), UnitProfile)
+    assert_type(x.plan_by(ureg.Quantity(10.0, "mm"), speed=np.float32(5), accel=None), UnitProfile)
     assert_type(x.plan_to(np.int64(10)).at(0.5), float)
     assert_type(x.move_to(10, speed=20_000), galil.MoveHandle)
     assert_type(dmc.move({"A": 1, "B": 2.5}, relative=True, decel=1e6), galil.MoveHandle)
@@ -103,7 +103,15 @@ def check_units(dmc: galil.Controller) -> None:
     assert_type(scale.counts_to_rate(100.0, 1), pint.Quantity[float])
     assert_type(scale.counts_per, pint.Quantity[float])
     scale.position_to_counts(5.0)  # type: ignore[arg-type]
-    q = ProfileQuantities(x.plan_by(10), scale)
+    q = x.plan_by(10).q
+    assert_type(q, ProfileQuantities)
+    assert_type(x.plan_to(25 * ureg.mm).q.end, pint.Quantity[float])
+    print(x.plan_to(25 * ureg.mm).q.end.to("inch"))  # (pint types .to() as Any)
+    assert_type(q.at(0.2), pint.Quantity[float])
+    assert_type(
+        q.at(ureg.Quantity(200.0, "ms")),
+        pint.Quantity[float] | pint.Quantity[npt.NDArray[np.float64]],
+    )
     assert_type(q.peak_speed, pint.Quantity[float])
     assert_type(q.position, pint.Quantity[npt.NDArray[np.float64]])
     # Analog readings are volts.
