@@ -377,6 +377,7 @@ ENTRIES: list[Entry] = [
     E("profile", "at", {"t": 0.01}),
     E("profile", "with_units", {"counts_per_unit": 1000, "unit": "mm", "offset": 0.0}),
     E("multi profile", "__getitem__", {"key": "A"}, kind="getitem", lookup=True),
+    E("multi profile", "at", {"t": 0.01}),
     E("vector plan", "position", {"axis": "A"}, lookup=True),
     E("vector plan", "unit_of", {"axis": "A"}, lookup=True),
 ]
@@ -448,6 +449,7 @@ ACCEPTS: dict[tuple[str, str, str], set[str]] = {
     ("variables", "write", "value"): SIGNED,
     ("variables", "__setitem__", "value"): SIGNED,
     ("profile", "at", "t"): {"-1", "inf", "[]"},  # before the start, after the end; no times
+    ("multi profile", "at", "t"): {"-1", "inf", "[]"},  # (as Profile.at)
     ("profile", "with_units", "counts_per_unit"): SIGNED,  # a reversed axis
     ("profile", "with_units", "offset"): SIGNED,
     ("profile", "with_units", "unit"): {"'x'", "''", "2000 chars"},  # a label for plots

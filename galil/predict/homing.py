@@ -377,9 +377,8 @@ def homing(
             in the direction of travel, a speed is 0 ...); an event other than ``AC``, or at a
             time before ``BG``.
     """
-    sample_period = cast("float", seconds(sample_period, "sample_period"))
-    start, changes = whole_counts(start, "start"), _accel_changes(events, sample_period)
-    prof = AxisProfiler(sample_period=sample_period, position=start)
+    start, (ts, changes) = whole_counts(start, "start"), _accel_changes(events, sample_period)
+    prof = AxisProfiler(sample_period=ts, position=start)
     seq = HomingSequence(kind, prof, params, switch)
     chunks: list[npt.NDArray[np.int64]] = [np.array([start], np.int64)]
     seq.start(start)
@@ -422,7 +421,7 @@ def homing(
         positions = positions - zero
     profile = Profile.from_samples(
         positions,
-        sample_period=sample_period,
+        sample_period=ts,
         shape=kind,
         peak_speed=float(max(params.speed, params.home_speed, abs(params.jog_speed))),
         stop_code=seq.code,
@@ -430,8 +429,12 @@ def homing(
     return HomingPrediction(profile, zero, seq.code)
 
 
-def _accel_changes(events: Sequence[Event], sample_period: float) -> list[tuple[int, float]]:
-    """``(sample, AC)`` of each change, the latest first (the predictor pops from the end)."""
+def _accel_changes(
+    events: Sequence[Event], sample_period: float
+) -> tuple[float, list[tuple[int, float]]]:
+    """The sample period in seconds (a time Quantity too), and ``(sample, AC)`` of each
+    change, the latest first (the predictor pops from the end)."""
+    sample_period = cast("float", seconds(sample_period, "sample_period"))
     changes: list[tuple[int, float]] = []
     for ev in events:
         if not isinstance(ev, SetAccel):
@@ -440,7 +443,7 @@ def _accel_changes(events: Sequence[Event], sample_period: float) -> list[tuple[
             )
         changes.append((sample_of_event(ev.time, sample_period), ev.accel))
     changes.sort(key=lambda c: c[0])  # (stable: of two at one sample, the later wins)
-    return changes[::-1]
+    return sample_period, changes[::-1]
 
 
 def stepper_output(
