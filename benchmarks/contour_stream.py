@@ -10,8 +10,9 @@
    refuse it (it plans on 80 % of the link), so the benchmark prepares and feeds it without
    that check. It is streamed as the library streams it: pre-loaded under ``DT -1`` (the
    buffer filled before the path starts), then kept full. Figures: the bytes a second of the
-   pre-load (a whole buffer sent as fast as the line and the controller take it) as a share
-   of the line (target >= 90 %; once the buffer is full the stream can only send what the
+   pre-load (a whole buffer sent as fast as the line and the controller take it, from its
+   first line's start to its last line's reply: on a serial line a refill goes out in lines
+   of at most 0.25 s each, decision 0100) as a share of the line (target >= 90 %; once the buffer is full the stream can only send what the
    path uses, its need), and the fewest segments queued at any look after the start (target
    >= 1: the buffer never empty; the margin a stall of the host can use). Without the
    pre-load (``preload=False``) the same path started from an empty buffer with 0.2 ms of
@@ -52,7 +53,8 @@ class Watched:
     def __init__(self, link: Any) -> None:
         self._link = link
         self.free: list[int] = []  # _CM at each look
-        self.batches: list[tuple[int, int, float]] = []  # (segments, bytes, seconds)
+        self.batches: list[tuple[int, int, float, float]] = []  # (segments, bytes, t0, t1)
+        self.marks: list[int] = []  # len(batches) at each look at _CM
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._link, name)
@@ -61,15 +63,24 @@ class Watched:
         values: list[float] = self._link.query_operands(names, **kw)
         if names and names[0] == "_CM":
             self.free.append(round(values[0]))
+            self.marks.append(len(self.batches))
         return values
 
     def command_line(self, parts: Sequence[str | Command], **kw: Any) -> list[str]:
         before = self._link.bytes_sent
         t0 = time.perf_counter()
         replies: list[str] = self._link.command_line(parts, **kw)
-        spent = time.perf_counter() - t0
-        self.batches.append((len(parts), self._link.bytes_sent - before, spent))
+        self.batches.append((len(parts), self._link.bytes_sent - before, t0, time.perf_counter()))
         return replies
+
+    def first_refill(self) -> tuple[int, int, float] | None:
+        """The first refill (the lines between the first two looks at ``_CM``: a whole
+        buffer, sent a short line at a time): segments, bytes, seconds from the first line's
+        start to the last one's reply."""
+        if len(self.marks) < 2 or self.marks[1] <= self.marks[0]:
+            return None
+        lines = self.batches[self.marks[0] : self.marks[1]]
+        return sum(b[0] for b in lines), sum(b[1] for b in lines), lines[-1][3] - lines[0][2]
 
 
 def path(seconds: float, sizes: Sequence[float], wobble: Sequence[float] = ()) -> np.ndarray:
@@ -164,7 +175,7 @@ def stream_over(
         "emptiest": max(looks) if looks else None,
         "fullest": min(looks) if looks else None,
         "depth": 511,
-        "first": watched.batches[1] if len(watched.batches) > 1 else None,
+        "first": watched.first_refill(),
         "duration": result.duration,
     }
 
