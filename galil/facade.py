@@ -181,8 +181,7 @@ class LinkFacade:
             if not command.parts:  # (a compound line: the link says what it takes)
                 return self.send(command)  # a bulk transfer: timed by its size
         reply = self.link.command(text, timeout=timeout, allow_compound=allow_compound)
-        if head == "TM":  # the rest, cheaply
-            self._follow_tm([text])
+        self._follow_tm([text])  # (a TM anywhere in the line, as refuse_tm checked it)
         return reply
 
     def _follow_tm(self, parts: Sequence[str | Command]) -> None:

@@ -442,38 +442,50 @@ def _refuse_while_threads_run(link: Link) -> None:
         )
 
 
-_TM = re.compile(r"^\s*TM\s*([0-9]+(?:\.[0-9]*)?)\s*$", re.IGNORECASE)
-#: ``TM n`` with a number, a sign too (``TM -1``), on one command of a line.
+#: ``TM n`` with a number, as a whole command (of a compound line split outside quotes): the
+#: one grammar both the check before sending and the following after it read.
 _TM_SET = re.compile(r"^\s*TM\s*([-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+))\s*$", re.IGNORECASE)
+
+
+def _tm_values(text: str) -> Iterator[float]:
+    """The ``n`` of each ``TM n`` among the commands of ``text`` (split at the ``;`` outside
+    quotes: ``MG "a;TM 0"`` holds none)."""
+    if "TM" not in text.upper():
+        return  # every other command, cheaply (this runs around each raw command)
+    for one in cmds.split_commands(text):
+        found = _TM_SET.match(one)
+        if found is not None:
+            yield float(found.group(1))
 
 
 def refuse_tm(model: ModelSpec, texts: Iterable[str]) -> None:
     """Refuse, before a byte is sent, a ``TM n`` among ``texts`` (command lines, compound
-    ones split at ``;``) the library could not follow (:meth:`ModelSpec.tm_setting`: a
-    model without TM, ``TM <= 0``, a value off the model's step; docs/decisions/0102). ``TM
-    ?`` and a TM of an expression pass (the controller judges those; a range error is its).
+    ones split at ``;`` outside quotes) the library could not follow
+    (:meth:`ModelSpec.tm_setting`: a model without TM, ``TM <= 0``, a value off the model's
+    step; docs/decisions/0102). ``TM ?`` and a TM of an expression pass (the controller
+    judges those; a range error is its).
 
     Raises:
         InvalidArgument: naming the TM and why.
     """
     for text in texts:
-        if not isinstance(text, str) or "TM" not in text.upper():
-            continue  # every other command, cheaply (this runs before each raw command)
-        for one in text.split(";"):
-            found = _TM_SET.match(one)
-            if found is not None:
-                model.tm_setting(float(found.group(1)))
+        if isinstance(text, str):
+            for tm in _tm_values(text):
+                model.tm_setting(tm)
 
 
 def follow_tm(model: ModelSpec, text: str) -> float | None:
-    """The sample period (s) a command line sets, if it is ``TM <µs>``; ``None`` otherwise.
+    """The sample period (s) a command line sets, if it holds ``TM <µs>`` (the last, in a
+    compound line: the controller runs them in turn); ``None`` otherwise. It reads what
+    :func:`refuse_tm` checks (a sign, a part of a compound line), so a TM let through is
+    followed.
 
     The link's ``sample_period`` is set from it after the controller accepted the line, so
-    predictions follow a ``TM`` sent as a raw command too.
+    predictions (and a watchdog's limit in samples) follow a ``TM`` sent as a raw command.
     """
-    if text.lstrip()[:2].upper() != "TM":
-        return None  # every other command, cheaply (this runs after each raw command)
-    found = _TM.match(text)
-    if found is None or not model.tm_adjustable:
+    last = None
+    for tm in _tm_values(text):
+        last = tm
+    if last is None or not model.tm_adjustable:
         return None
-    return model.sample_period_for(float(found.group(1)))
+    return model.sample_period_for(last)

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 import galil
@@ -104,6 +106,35 @@ def test_a_tm_off_its_step_is_refused_before_sending(model: str) -> None:
         dmc.command("TM 312.5")
         assert dmc.sample_period == 312.5 / 1_024_000
         assert parse_number(dmc.command("MG _TM")) == 312.5
+
+
+@pytest.mark.parametrize(
+    "send",
+    [
+        lambda dmc: dmc.command("TM +500"),
+        lambda dmc: dmc.command("TM 500;KP 5", allow_compound=True),
+        lambda dmc: dmc.command("KP 5;TM 250;TM 500", allow_compound=True),
+        lambda dmc: dmc.command_line(["KP 5", "TM +500"]),
+        lambda dmc: dmc.send(cmds.Command("TM +500")),
+    ],
+    ids=["signed", "compound", "the-last-of-two", "command_line", "send"],
+)
+def test_every_tm_the_library_lets_through_is_followed(send: Any) -> None:
+    # Before: a signed TM or one in a compound line was checked and sent but not followed:
+    # the sample period stayed at TM 1000's, and a watchdog then fired at half its timeout.
+    with simulated("DMC-4040") as dmc:
+        send(dmc)
+        assert parse_number(dmc.command("MG _TM")) == 500
+        assert dmc.sample_period == 500 / 1_024_000
+
+
+def test_a_tm_inside_a_quoted_string_is_text_not_a_tm() -> None:
+    # Before: the line was split at every ';', quotes or not, and these were refused unsent.
+    with simulated("DMC-4040") as dmc:
+        before = dmc.sample_period
+        assert dmc.command('MG "x;TM 0;y"').strip() == "x;TM 0;y"
+        assert dmc.command('MG "set;TM 333;now"').strip() == "set;TM 333;now"
+        assert dmc.sample_period == before
 
 
 def test_the_simulator_takes_a_tm_off_the_step_down_to_it() -> None:
