@@ -73,7 +73,7 @@ from galil.aio._motion import Starting
 from galil.aio._worker import shielded
 from galil.axis import Axis, user_units
 from galil.contour import ContourResult, ContourStream
-from galil.controller import Controller
+from galil.controller import Controller, contour_stream
 from galil.errors import (
     GalilError,
     GalilTimeoutError,
@@ -89,7 +89,7 @@ from galil.predict.profile import shown_position
 from galil.protocol import commands as cmds
 from galil.protocol.records import RecordSplitter, decode_records
 from galil.records import RecordStream
-from galil.units import Amounts, QuantityLike, Scale, get_registry, path_to_counts
+from galil.units import Amounts, QuantityLike, Scale, get_registry
 
 if TYPE_CHECKING:
     from galil.sim import SimController
@@ -1146,7 +1146,7 @@ class _Flight:
 
 
 def _build_stream(
-    controller: Controller, letters: str, path: object, dt: int
+    controller: Controller, letters: str, path: Amounts, dt: int
 ) -> tuple[ContourStream, dict[str, Axis]]:
     """Worker side: the stream ``Controller.contour`` would run, checked and predicted, on the
     controller's motion tracker (:func:`_fly` runs it as ``Controller.contour`` does), and
@@ -1154,21 +1154,10 @@ def _build_stream(
     (decision 0063)."""
     chosen = [controller.axis(a) for a in letters]
     axes = {a.letter: a for a in chosen}
-    counts = path_to_counts(path, [a.scale for a in chosen], letters)
-    tracker = controller.tracker
+    stream = contour_stream(controller, chosen, path, dt)
     with user_units(axes):
-        stream = ContourStream(
-            controller.link,
-            letters,
-            counts,
-            dt=dt,
-            display={a.letter: a.display for a in chosen},
-            byte_rate=controller.link.byte_rate,
-            followers=tracker.followers(letters),
-            tracker=tracker,
-        )
         stream.check()
-        with held(tracker):  # (a plan: the flight reads the state again before CM)
+        with held(controller.tracker):  # (a plan: the flight reads the state again before CM)
             stream.prepare()
     return stream, axes
 

@@ -840,20 +840,9 @@ class Controller(_PublicParts, CoordinatedMotion, Resetting, LinkFacade):
         """
         check_flag(progress, "progress")
         chosen = [self.axis(a) for a in _axis_names(axes, self.link)]
-        letters = "".join(a.letter for a in chosen)
-        counts = path_to_counts(path, [a.scale for a in chosen], letters)
+        limits = _contour_limits(self.link.model, chosen, speed_limit, accel_limit)
+        stream = contour_stream(self, chosen, path, dt, limits)
         with user_units({a.letter: a for a in chosen}):
-            stream = ContourStream(
-                self.link,
-                letters,
-                counts,
-                dt=dt,
-                display={a.letter: a.display for a in chosen},
-                byte_rate=self.link.byte_rate,
-                limits=_contour_limits(self.link.model, chosen, speed_limit, accel_limit),
-                followers=self.tracker.followers(letters),
-                tracker=self.tracker,
-            )
             return stream.run(progress=progress, timeout=timeout)
 
     # -- switches and flash (galil.homing, galil.tuning) -------------------------------------
@@ -1312,6 +1301,34 @@ def _policy(reconnect: object, has_address: bool) -> ReconnectPolicy | None:
     if isinstance(reconnect, ReconnectPolicy):
         return reconnect
     raise InvalidArgument(f"reconnect is True, False or a ReconnectPolicy, not {reconnect!r}")
+
+
+def contour_stream(
+    controller: Controller,
+    chosen: Sequence[Axis],
+    path: Amounts,
+    dt: int,
+    limits: dict[str, tuple[float | None, float | None]] | None = None,
+) -> ContourStream:
+    """The stream of a contour of the axes ``chosen`` along ``path`` (in their units), on
+    the controller's link and motion tracker, before any byte: what :meth:`Controller.contour`
+    runs and a bluesky flight checks, prepares and runs. ``limits``: each axis's speed and
+    acceleration limits in counts (``None``: the model's). A refusal in counts says the
+    user's units too (decision 0063)."""
+    letters = "".join(a.letter for a in chosen)
+    counts = path_to_counts(path, [a.scale for a in chosen], letters)
+    with user_units({a.letter: a for a in chosen}):
+        return ContourStream(
+            controller.link,
+            letters,
+            counts,
+            dt=dt,
+            display={a.letter: a.display for a in chosen},
+            byte_rate=controller.link.byte_rate,
+            limits=limits,
+            followers=controller.tracker.followers(letters),
+            tracker=controller.tracker,
+        )
 
 
 def _contour_limits(
