@@ -634,6 +634,9 @@ class Controller(_PublicParts, CoordinatedMotion, Resetting, LinkFacade):
                 self.interrupts.reopen()
                 for dog in self._watchdogs:  # (one stopped while the link was dead)
                     dog.reopened()
+                self._routines.reopened()  # (halted for a DL or a burn, XQ unsent: decision 0094)
+                for dog in self._watchdogs:  # (a beating one says whether it guards)
+                    dog.recheck()
                 _end_captures_left_quietly(self.link, self._captures)
         finally:
             self._life.release()

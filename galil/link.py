@@ -378,6 +378,16 @@ class CommandLink(Protocol):
     """What the rooms above the link (axes, motion, contour, I/O ...) need from it."""
 
     @property
+    def is_open(self) -> bool:
+        """Whether a transport is attached and not closed."""
+        ...
+
+    @property
+    def dead(self) -> str:
+        """Why the link broke (``""`` while it works or after a clean close)."""
+        ...
+
+    @property
     def model(self) -> ModelSpec:
         """The controller's model."""
         ...

@@ -41,8 +41,8 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import TypeVar
 
-from galil.errors import CommandError, GalilError, InvalidArgument
-from galil.link import CommandLink
+from galil.errors import CommandError, GalilConnectionError, GalilError, InvalidArgument
+from galil.link import RECONNECT_ADVICE, CommandLink
 from galil.models import ModelSpec
 from galil.protocol import commands as cmds
 from galil.protocol.numbers import whole
@@ -284,13 +284,15 @@ def _threads_named(running: Mapping[int, int], library: Mapping[int, str]) -> st
     return ", ".join(named) + (" is" if len(named) == 1 else " are")
 
 
-def _say_not_restarted(thread: int, label: str, what: str, why: str, *, held: bool) -> None:
+def _say_not_restarted(
+    thread: int, label: str, what: str, why: str, *, held: bool, fate: str = ""
+) -> None:
     """A WARNING: the library's ``thread`` (running ``label``), halted for ``what``, was not
     started again, ``why``; whether the library still holds it (``held``: the ``XQ`` may have
-    gone out) or forgot it."""
+    gone out, or goes out once the link is reopened: ``fate``) or forgot it."""
     whose = RESERVED.get(label, "a routine of the library's")
     if held:
-        fate = "the library still holds it"
+        fate = fate or "the library still holds it"
     else:
         fate = "it no longer runs, and the library no longer holds it"
         if whose == "the watchdog":
@@ -306,6 +308,100 @@ def _say_not_restarted(thread: int, label: str, what: str, why: str, *, held: bo
     )
 
 
+class _Restarts:
+    """The restarts of the library's threads halted for a download or a burn (decision 0094):
+    :class:`Routines`' threads (the same dict), the commands sent before each routine's
+    ``XQ``, and the threads whose ``XQ`` a dead link kept from going out. Used under
+    :class:`Routines`' lock."""
+
+    def __init__(self, link: CommandLink, threads: dict[int, str]) -> None:
+        self.link = link
+        self.threads = threads  # (Routines' own: library thread -> label it runs)
+        self.preludes: dict[str, tuple[cmds.Command, ...]] = {}  # label -> sent before its XQ
+        self.unsent: dict[int, str] = {}  # halted, XQ not sent (link dead): restart on reopen
+
+    def xq_again(self, label: str, thread: int) -> None:
+        """``XQ label,thread`` after a halt, behind the routine's :meth:`Routines.restart_with`
+        commands on the same line."""
+        self.link.command_line([*self.preludes.get(label, ()), cmds.xq(label, thread)])
+
+    def restart(self, threads: Mapping[int, str], what: str, *, failed: bool) -> None:
+        """``XQ`` each of the library's ``threads``, halted for ``what``, again.
+
+        A thread whose ``XQ`` the controller refused runs nothing: the library forgets it and
+        tries the next. One whose ``XQ``'s fate is unknown (the link died under it, a Ctrl-C)
+        stays the library's, as :meth:`Routines.start` keeps it (decision 0076), and the
+        threads not tried yet are forgotten (halted, never started again). On a link already
+        dead no ``XQ`` goes out: the threads left are :meth:`not_sent`. Each is said in a
+        WARNING on the ``galil.routines`` logger.
+
+        Raises:
+            The first failure, unless ``failed`` (``what`` failed: its error is the one
+            raised), when a ``GalilError`` is suppressed; anything else (a Ctrl-C) is raised.
+        """
+        refused: CommandError | None = None
+        left = dict(threads)
+        for t, label in threads.items():
+            if not self.link.is_open or self.link.dead:  # (known dead: no XQ goes out)
+                self.not_sent(left, what)
+                if failed:
+                    return
+                raise self.link.error(
+                    GalilConnectionError, f"the link died during {what}{RECONNECT_ADVICE}"
+                )
+            del left[t]
+            try:
+                self.xq_again(label, t)
+            except CommandError as exc:  # (refused: the routine does not run)
+                self.threads.pop(t, None)
+                why = f"its XQ was refused ({_first(exc)})"
+                _say_not_restarted(t, label, what, why, held=False)
+                refused = refused or exc
+            except BaseException as exc:  # (the XQ may have gone out: held, as start() holds)
+                why = f"its XQ's fate is unknown ({_first(exc)})"
+                _say_not_restarted(t, label, what, why, held=True)
+                for other, its in left.items():
+                    self.threads.pop(other, None)
+                    why = f"thread {t}'s restart failed first"
+                    _say_not_restarted(other, its, what, why, held=False)
+                if failed and isinstance(exc, GalilError):
+                    return
+                raise
+        if refused is not None and not failed:
+            raise refused
+
+    def not_sent(self, threads: Mapping[int, str], what: str) -> None:
+        """The link is dead: no ``XQ`` of ``threads`` (halted for ``what``) went out. The
+        library still holds them, and :meth:`Routines.reopened` starts them again once the link is
+        reopened (decision 0094's amendment); each is said in a WARNING."""
+        for t, label in threads.items():
+            self.unsent[t] = label
+            why = "its XQ was not sent (the link is dead)"
+            fate = "the library starts it again once the link is reopened (reconnect())"
+            _say_not_restarted(t, label, what, why, held=True, fate=fate)
+
+    def reopened(self, running: Mapping[int, int]) -> tuple[int, ...]:
+        """:meth:`Routines.reopened`, the threads ``running`` read (under its lock)."""
+        pending, self.unsent = dict(self.unsent), {}
+        started = []
+        for t, label in pending.items():
+            if self.threads.get(t) != label or t in running:
+                continue  # (halted or taken since, or something runs there)
+            try:
+                self.xq_again(label, t)
+            except CommandError as exc:
+                self.threads.pop(t, None)
+                why = f"its XQ was refused after the reopening ({_first(exc)})"
+                _say_not_restarted(t, label, "a reopening", why, held=False)
+            except GalilError as exc:
+                self.unsent[t] = label
+                why = f"its XQ failed after the reopening ({_first(exc)})"
+                _say_not_restarted(t, label, "a reopening", why, held=True)
+            else:
+                started.append(t)
+        return tuple(started)
+
+
 class Routines:
     """Installs the library's routines into program memory and runs them on threads."""
 
@@ -313,8 +409,8 @@ class Routines:
         self.link = link
         self._threads: dict[int, str] = {}  # library thread -> label it runs
         self._owners: dict[int, object] = {}  # thread -> the one-shot run that holds it
-        self._preludes: dict[str, tuple[cmds.Command, ...]] = {}  # label -> sent before its XQ
         self._lock = threading.RLock()
+        self._restarts = _Restarts(link, self._threads)
 
     def restart_with(self, label: str, *commands: cmds.Command) -> None:
         """Send ``commands`` on the line of every ``XQ`` that starts the routine ``label``
@@ -322,12 +418,7 @@ class Routines:
         watchdog's fresh heartbeat (``gwbeat=TIME``), without which the routine would measure
         its silence from a beat taken before the halt and fire at once."""
         with self._lock:
-            self._preludes[label] = tuple(commands)
-
-    def _xq_again(self, label: str, thread: int) -> None:
-        """``XQ label,thread`` after a halt, behind the routine's :meth:`restart_with`
-        commands on the same line."""
-        self.link.command_line([*self._preludes.get(label, ()), cmds.xq(label, thread)])
+            self._restarts.preludes[label] = tuple(commands)
 
     def upload(self) -> list[str]:
         """The program in memory, one string per line (``UL``).
@@ -484,46 +575,29 @@ class Routines:
         try:
             yield tuple(sorted(restart))
         except BaseException:
-            self._restart(restart, what, failed=True)
+            self._restarts.restart(restart, what, failed=True)
             raise
-        self._restart(restart, what, failed=False)
+        self._restarts.restart(restart, what, failed=False)
 
-    def _restart(self, threads: Mapping[int, str], what: str, *, failed: bool) -> None:
-        """``XQ`` each of the library's ``threads``, halted for ``what``, again.
+    def reopened(self) -> tuple[int, ...]:
+        """The link was reopened: start again each thread halted for a download or a burn
+        whose ``XQ`` was not sent because the link was dead, if the library still holds it
+        for that routine and it does not run, behind its :meth:`restart_with` commands (the
+        watchdog's fresh heartbeat). A refused ``XQ`` forgets the thread, and another failure
+        leaves it for the next reopening; each is said in a WARNING. Nothing is sent when no
+        thread waits (decision 0094's amendment).
 
-        A thread whose ``XQ`` the controller refused runs nothing: the library forgets it and
-        tries the next. One whose ``XQ``'s fate is unknown (the link died under it, a Ctrl-C)
-        stays the library's, as :meth:`start` keeps it (decision 0076), and the threads not
-        tried yet are forgotten (halted, never started again). Each is said in a WARNING on
-        the ``galil.routines`` logger.
-
-        Raises:
-            The first failure, unless ``failed`` (``what`` failed: its error is the one
-            raised), when a ``GalilError`` is suppressed; anything else (a Ctrl-C) is raised.
+        Returns:
+            The threads started again.
         """
-        refused: CommandError | None = None
-        left = dict(threads)
-        for t, label in threads.items():
-            del left[t]
+        with self._lock:
+            if not self._restarts.unsent:
+                return ()
             try:
-                self._xq_again(label, t)
-            except CommandError as exc:  # (refused: the routine does not run)
-                self._threads.pop(t, None)
-                why = f"its XQ was refused ({_first(exc)})"
-                _say_not_restarted(t, label, what, why, held=False)
-                refused = refused or exc
-            except BaseException as exc:  # (the XQ may have gone out: held, as start() holds)
-                why = f"its XQ's fate is unknown ({_first(exc)})"
-                _say_not_restarted(t, label, what, why, held=True)
-                for other, its in left.items():
-                    self._threads.pop(other, None)
-                    why = f"thread {t}'s restart failed first"
-                    _say_not_restarted(other, its, what, why, held=False)
-                if failed and isinstance(exc, GalilError):
-                    return
-                raise
-        if refused is not None and not failed:
-            raise refused
+                running = self.running()
+            except GalilError:
+                return ()
+            return self._restarts.reopened(running)
 
     def replace_user(self, lines: Sequence[str]) -> tuple[bool, tuple[int, ...]]:
         """Put ``lines`` above the marker as the user's program, keeping the library's block.
@@ -723,6 +797,7 @@ class Routines:
         """``thread`` runs the library's ``label`` (a one-shot run of ``owner``'s)."""
         self._threads[thread] = label
         self._owners.pop(thread, None)
+        self._restarts.unsent.pop(thread, None)
         if owner is not None:
             self._owners[thread] = owner
 
@@ -780,9 +855,11 @@ class Routines:
             if thread is None:
                 self._threads.clear()
                 self._owners.clear()
+                self._restarts.unsent.clear()
             else:
                 self._threads.pop(thread, None)
                 self._owners.pop(thread, None)
+                self._restarts.unsent.pop(thread, None)
 
     def halt(self, thread: int, *, owner: object | None = None) -> bool:
         """Halt a library thread (``HX n``); with ``owner``, only if the run started with
@@ -797,6 +874,7 @@ class Routines:
             self.link.command_line([cmds.hx(thread)])
             self._threads.pop(thread, None)
             self._owners.pop(thread, None)
+            self._restarts.unsent.pop(thread, None)
             return True
 
     @property

@@ -197,6 +197,10 @@ class Watchdog(FixedAttributes):
             running = round(read_one(xq)) >= 0
         except GalilError:
             return
+        self._say_lost(running)
+
+    def _say_lost(self, running: bool) -> None:
+        """:meth:`_check_running`'s WARNING, said once while the routine does not run."""
         if not running and not self._lost and not self._stop.is_set():
             _LOG.warning(
                 "galil watchdog: the routine %s no longer runs on thread %d (a program error "
@@ -241,6 +245,19 @@ class Watchdog(FixedAttributes):
             with contextlib.suppress(GalilError):
                 self._routines.halt(self.thread)
                 self._halt_pending = False
+
+    def recheck(self) -> None:
+        """After a reopening (and the restart of the routines a dead link left halted:
+        :meth:`Routines.reopened`), a watchdog that beats reads whether its routine runs (one
+        query), so that its repr says whether it guards, and says at WARNING once that it
+        does not (decision 0094's amendment)."""
+        if not self.beating:
+            return
+        try:
+            running = self.running
+        except GalilError:
+            return
+        self._say_lost(running)
 
     @property
     def beating(self) -> bool:

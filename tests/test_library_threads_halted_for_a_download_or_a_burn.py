@@ -205,3 +205,44 @@ def test_a_library_thread_whose_restart_may_have_gone_out_stays_held_and_is_halt
         assert dmc.A.moving
         assert not dog.fired
         jog.stop()
+
+
+def _pull_cable_before(dmc: galil.Controller, command: bytes) -> None:
+    """The cable is pulled as ``command``'s line is about to go out: the write fails, the
+    link is dead, and nothing of the line reached the controller."""
+    transport = dmc.link.transport
+    assert transport is not None
+    write = transport.write
+
+    def dying(data: bytes) -> None:
+        if command + b"\r" in data or data.startswith(command):
+            transport.close()
+        write(data)
+
+    transport.write = dying  # type: ignore[method-assign]
+
+
+@pytest.mark.parametrize("call", sorted(_BURNS.keys() | {"programs.download"}))
+def test_a_watchdog_halted_for_a_download_or_a_burn_the_link_died_under_guards_after_reconnect(
+    call: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The link died before the download's or the burn's line went out: the restart's XQ
+    cannot go out either, so it is "not sent" (not "fate unknown"), the library keeps the
+    thread, and reconnect() starts the routine again with a fresh heartbeat: it guards."""
+    with simulated() as dmc:
+        dog = dmc.watchdog(0.5)
+        _pull_cable_before(dmc, {"save": b"BN", "save_program": b"BP"}.get(call, b"DL"))
+        with (
+            caplog.at_level(logging.WARNING, logger="galil.routines"),
+            pytest.raises(galil.GalilConnectionError),
+        ):
+            {**_BURNS, **_DOWNLOADS}[call](dmc)
+        assert dmc.link.dead
+        said = [r.getMessage() for r in caplog.records if r.name == "galil.routines"]
+        assert any("XQ was not sent (the link is dead)" in m and "reconnect()" in m for m in said)
+        assert not any("fate is unknown" in m for m in said)
+        sim_of(dmc).advance(1.0)  # the host silent longer than the timeout, the routine halted
+        dmc.reconnect()
+        assert "beating" in repr(dog)
+        assert "not running" not in repr(dog)
+        _guards_with_a_fresh_heartbeat(dmc, dog)
