@@ -63,6 +63,9 @@ _RUNNING = 50
 #: TC of a ``CD`` refused out of range or out of contour mode ("Contouring record range
 #: error"): the library checks the range, so for it the contour mode has ended.
 _OUT_OF_CONTOUR = 41
+#: TCs of the end of contour mode (``CD 0=0``) refused because the axes had left it: 8 ("not
+#: valid when not running") in the simulator (unsourced for a controller), or 41 as a ``CD``.
+_END_REFUSED = frozenset({8, _OUT_OF_CONTOUR})
 
 
 class _ContourOverError(Exception):
@@ -365,11 +368,15 @@ def _check_ends(
     ends: Mapping[str, int],
     stop_codes: Sequence[float],
     positions: Sequence[float],
+    *,
+    fired_before: bool,
 ) -> None:
     """At the end of the contour on ``letters``, no stop code of a halt seen: each axis is
     where its path ends (``ends``), or something else moved it or cut the contour short (a
     limit whose stop code a program's move then overwrote): it did not run as asked
-    (decision 0071).
+    (decision 0071). An axis short of its end is blamed on the watchdog when one beats on
+    the link and its ``gwfire`` reads 1 now, not at the contour's start (``fired_before``):
+    one query, on this error's path only.
 
     Raises:
         MotionError: an axis is not at its path's end.
@@ -379,12 +386,18 @@ def _check_ends(
     if not off:
         return
     stop = {a: round(c) for a, c in zip(letters, stop_codes, strict=True)}
+    said = "; ".join(f"{a}: {codes.stop_text(c)}" for a, c in stop.items())
+    short = f"{off[0]} at {at[off[0]]}, not at the end of its path ({ends[off[0]]})"
+    if _fired_now(link, fired_before):
+        text = f"contour on {letters} stopped by {_BY_WATCHDOG}: it ended with {short} ({said})"
+    else:
+        text = (
+            f"contour on {letters} ended with {short}, and the stop codes do not say why "
+            f"({said}): something else stopped or moved it (an ST from a program or another "
+            "client, or a limit whose stop code a program's move then overwrote)"
+        )
     raise MotionError(
-        f"contour on {letters} ended with {off[0]} at {at[off[0]]}, not at the end of "
-        f"its path ({ends[off[0]]}), and the stop codes do not say why ("
-        + "; ".join(f"{a}: {codes.stop_text(c)}" for a, c in stop.items())
-        + "): something else stopped or moved it (an ST from a program or another client,"
-        " or a limit whose stop code a program's move then overwrote)",
+        text,
         axis=off[0],
         stop_codes=stop,
         position=at[off[0]],
@@ -393,13 +406,47 @@ def _check_ends(
     )
 
 
-def _ended_elsewhere(link: CommandLink, letters: str, state: _Progress) -> MotionError | None:
+#: Who stopped a contour when the watchdog's ``gwfire`` went from 0 to 1 during it.
+_BY_WATCHDOG = "the watchdog (no heartbeat reached it within its timeout: it sent ST)"
+
+
+def _fired_flag(link: CommandLink) -> bool | None:
+    """The watchdog's ``gwfire`` while one beats on the link (one query); ``None`` when none
+    beats or the query fails."""
+    if link.keepalive is None:
+        return None
+    try:
+        return round(link.query_operands([WATCHDOG_FIRED])[0]) == 1
+    except GalilError:
+        return None
+
+
+def _fired_now(link: CommandLink, fired_before: bool) -> bool:
+    """Whether the watchdog fired during this contour: ``gwfire`` reads 1 now and did not at
+    the contour's start (``fired_before``; the flag stays 1 after a firing until a watchdog
+    starts again, so an earlier firing is not this contour's stop)."""
+    return not fired_before and bool(_fired_flag(link))
+
+
+def _how_far(state: _Progress) -> str:
+    """How far the contour got when it was stopped: ``after 41 of 512 segments were sent``,
+    or, pre-loaded and its ``DT`` not yet gone out, that it never started."""
+    total = len(state.texts)
+    if state.start is not None and not state.started:
+        return f"before it started ({state.sent} of {total} segments pre-loaded, none run)"
+    return f"after {state.sent} of {total} segments were sent"
+
+
+def _ended_elsewhere(
+    link: CommandLink, letters: str, state: _Progress, refused: str, *, fired_before: bool
+) -> MotionError | None:
     """The contour on ``letters`` stopped by what the library did not send: the controller
-    refused a ``CD`` whose range the library checked (TC 41), its axes out of contour mode
-    (an ``ST`` from the watchdog, a program or another client; the axes then read 51,
-    "Contour stopped", also a contour's usual end, so only the refusal tells). The
-    watchdog's fired flag is read while one beats on the link. ``moving`` names the axes
-    still moving. ``None`` if the query fails."""
+    refused ``refused`` (the next ``CD``, whose range the library checked, TC 41; or the end
+    of contour mode), its axes out of contour mode (an ``ST`` from the watchdog, a program
+    or another client; the axes then read 51, "Contour stopped", also a contour's usual end,
+    so only the refusal tells). The watchdog's fired flag is read while one beats on the
+    link: it is named only if the flag was not already set at the contour's start
+    (``fired_before``). ``moving`` names the axes still moving. ``None`` if the query fails."""
     n = len(letters)
     names = [f"_{op}{a}" for op in ("SC", "BG", "RP") for a in letters]
     dog = [WATCHDOG_FIRED] if link.keepalive is not None else []
@@ -408,14 +455,15 @@ def _ended_elsewhere(link: CommandLink, letters: str, state: _Progress) -> Motio
     except GalilError:
         return None
     stop = {a: round(v) for a, v in zip(letters, values[:n], strict=True)}
-    if dog and round(values[-1]) == 1:
-        by = "the watchdog (no heartbeat reached it within its timeout: it sent ST)"
+    if dog and round(values[-1]) == 1 and not fired_before:
+        by = _BY_WATCHDOG
+    elif dog:  # (its flag read: not the watchdog, which had not fired or fired before)
+        by = "an ST or AB the library did not send (a program or another client)"
     else:
         by = "an ST or AB the library did not send (a program, another client, the watchdog)"
     return MotionError(
-        f"contour on {letters} stopped by {by} after {state.sent} of {len(state.texts)} "
-        "segments were sent: the controller refused the next segments (TC 41: its axes had "
-        f"left contour mode) ({'; '.join(f'{a}: {codes.stop_text(c)}' for a, c in stop.items())})",
+        f"contour on {letters} stopped by {by} {_how_far(state)}: the controller refused "
+        f"{refused} ({'; '.join(f'{a}: {codes.stop_text(c)}' for a, c in stop.items())})",
         axis=letters[0],
         stop_codes=stop,
         moving="".join(a for a, v in zip(letters, values[n : 2 * n], strict=True) if round(v)),
@@ -489,6 +537,7 @@ class ContourStream:
         # line with the start's DT came back (only then does a stop need _drop_held).
         self._holding = False
         self._line_wait: float | None = None  # (the last batch's reply timeout: _halt)
+        self._fired_before = False  # the watchdog's gwfire read 1 at the contour's start
         self._slicer = LineSlicer(link)
 
     def commands(self) -> list[Command]:
@@ -597,8 +646,12 @@ class ContourStream:
         # Where DT -1 pre-loads, the buffer is filled before the contour starts: the link's
         # slack then only has to keep it full, not build it up while it runs (decision 0038).
         start = cmds.dt(self.dt, model=model) if self._preload else None
+        dog = [WATCHDOG_FIRED] if link.keepalive is not None else []
         try:
-            if round(link.query_operands(["_TC"])[0]) == 42:
+            # (gwfire stays 1 after a firing: only a change during this contour names it)
+            tc, *fired = link.query_operands(["_TC", *dog])
+            self._fired_before = bool(fired) and round(fired[0]) == 1
+            if round(tc) == 42:
                 link.command_line([cmds.tc(0)])  # a previous stream's code: ours must show
             first = cmds.dt(-1 if start is not None else self.dt, model=model)
             self._holding = start is not None
@@ -757,12 +810,24 @@ class ContourStream:
             return None
         over = self._controller_stop(state)
         if over is None and exc.code == _OUT_OF_CONTOUR and exc.command.startswith("CD"):
-            seen = _ended_elsewhere(self.link, self.letters, state)
-            if seen is not None:
-                if seen.moving:  # (an axis still moves: stopped, as after any exception)
-                    self._halt(end=True)
-                over = _ContourOverError(seen)
+            over = self._elsewhere(state, exc, "the next segments")
         return over
+
+    def _elsewhere(
+        self, state: _Progress, exc: CommandError, refused: str
+    ) -> _ContourOverError | None:
+        """The contour stopped by what the library did not send (:func:`_ended_elsewhere`),
+        the controller having refused ``refused`` with ``exc``: an axis still moving is
+        stopped, and segments held under ``DT -1`` are dropped, as after any exception."""
+        why = f"{refused} (TC {exc.code}: its axes had left contour mode)"
+        seen = _ended_elsewhere(
+            self.link, self.letters, state, why, fired_before=self._fired_before
+        )
+        if seen is None:
+            return None
+        if seen.moving or self._holding:
+            self._halt(end=True)
+        return _ContourOverError(seen)
 
     def _controller_stop(self, state: _Progress) -> _ContourOverError | None:
         """The contour the controller stopped itself, once the ``_SC`` of an axis seen
@@ -782,8 +847,8 @@ class ContourStream:
         halted = _halted(self.letters, values[:n], state.live)
         if not halted:
             return None
-        if any(round(v) for v in values[n : 2 * n]):
-            self._halt(end=True)
+        if any(round(v) for v in values[n : 2 * n]) or self._holding:
+            self._halt(end=True)  # (moving, or segments held under DT -1: dropped)
         first = ([a for a in halted if stop[a] in codes.LIMIT_STOPS] or halted)[0]
         # (a follower a limit stopped on the way is named too, and forgotten: decision 0049)
         ends = self._follower_codes(values[3 * n :])
@@ -791,8 +856,8 @@ class ContourStream:
         parts = [f"{a}: {codes.stop_text(c)}" for a, c in stop.items()]
         parts += dropped_parts(self._followers, dropped)
         error = MotionError(
-            f"contour on {self.letters} stopped by the controller after {state.sent} of "
-            f"{len(state.texts)} segments were sent ({'; '.join(parts)})",
+            f"contour on {self.letters} stopped by the controller {_how_far(state)} "
+            f"({'; '.join(parts)})",
             axis=first,
             stop_codes={**stop, **ends},
             position=values[2 * n + self.letters.index(first)],
@@ -854,9 +919,13 @@ class ContourStream:
         except _ContourOverError as done:
             raise done.error from None
         except BaseException as exc:
-            # (CD 0=0 refused: a limit ended the contour first, decision 0041)
+            # (CD 0=0 refused: a limit ended the contour first, decision 0041; or an ST the
+            # library did not send. The TC of CD 0=0 out of contour mode is the simulator's 8,
+            # unsourced for a controller; 41 as for a CD)
             stopped = isinstance(exc, CommandError) and not ended
             over = self._controller_stop(state) if stopped else None
+            if over is None and isinstance(exc, CommandError) and exc.code in _END_REFUSED:
+                over = None if ended else self._elsewhere(state, exc, "the end of contour mode")
             if over is None:
                 self._halt(end=not ended, cause=exc)
                 raise
@@ -894,7 +963,12 @@ class ContourStream:
                         raise over
                 self._report_followers(values[n : 2 * n], values[3 * n :])
                 _check_ends(
-                    link, self.letters, self._ends, values[n : 2 * n], values[2 * n : 3 * n]
+                    link,
+                    self.letters,
+                    self._ends,
+                    values[n : 2 * n],
+                    values[2 * n : 3 * n],
+                    fired_before=self._fired_before,
                 )
                 return
             now = link.clock()

@@ -117,3 +117,98 @@ def test_a_line_with_many_refused_parts_names_five_and_counts_the_rest() -> None
         assert "also refused: 'CD 1,0', 'CD 2,0', 'CD 3,0', 'CD 4,0', 'CD 5,0' and 34 more" in first
         assert "'CD 6,0'" not in first
         assert caught.value.replies == (None,) * 40
+
+
+def _after_the_start(dmc: galil.Controller, other: bytes, *, then: bytes = b"DT 3") -> None:
+    """Another client sends ``other`` just before the first line after the one holding
+    ``then`` goes out: after the ``DT`` that starts a pre-loaded path (all its segments in),
+    or, with ``then=b"CD 0,0=0"``, while ``finish()`` waits for the contour's end."""
+    sim = sim_of(dmc)
+    port = sim.open_port("other client")
+    state = {"armed": False, "done": False}
+
+    def hook(direction: str, data: bytes) -> None:
+        if direction != "out" or state["done"]:
+            return
+        if state["armed"]:
+            state["done"] = True
+            sim.feed(other, port)
+        elif then in data:
+            state["armed"] = True
+
+    dmc.wire_log.add(hook)
+
+
+def test_a_contour_another_client_stops_after_its_last_segment_raises_a_motion_error() -> None:
+    """A path that fits the pre-load, stopped before its end of contour mode goes out: the
+    controller refuses ``CD 0,0=0``; that refusal is the stop's evidence, as a refused ``CD``
+    is, not a raw ``CommandError``."""
+    with simulated("DMC-4240", baud=19200) as dmc:
+        _after_the_start(dmc, b"ST AB\r")
+        with pytest.raises(MotionError) as caught:
+            dmc.contour("AB", _ramp(300), dt=3)
+        error = caught.value
+        assert not isinstance(error, CommandError)
+        text = str(error).splitlines()[0]
+        assert "stopped by an ST or AB the library did not send" in text
+        assert "after 300 of 300 segments were sent" in text
+        assert "the end of contour mode" in text
+        assert error.stop_codes == {"A": 51, "B": 51}
+        assert list(sim_of(dmc).room(SimContour).axes()) == []
+        assert dmc.query_number("MG 1") == 1
+
+
+def test_a_contour_the_watchdog_stops_after_its_last_segment_names_the_watchdog() -> None:
+    with simulated("DMC-4240", baud=19200) as dmc, dmc.watchdog(1.0) as dog:
+        _after_the_start(dmc, b"gwlimit=2\r")  # (the watchdog fires at once)
+        with pytest.raises(MotionError, match="stopped by the watchdog") as caught:
+            dmc.contour("AB", _ramp(300), dt=3)
+        assert not isinstance(caught.value, CommandError)
+        assert dog.fired
+        assert caught.value.stop_codes == {"A": 51, "B": 51}
+
+
+def test_a_contour_the_watchdog_stops_while_finish_waits_names_the_watchdog() -> None:
+    with simulated("DMC-4240", baud=19200) as dmc, dmc.watchdog(1.0) as dog:
+        _after_the_start(dmc, b"gwlimit=2\r", then=b"CD 0,0=0")
+        with pytest.raises(MotionError) as caught:
+            dmc.contour("AB", _ramp(300), dt=3)
+        text = str(caught.value).splitlines()[0]
+        assert "stopped by the watchdog" in text
+        assert "not at the end of its path (15000)" in text
+        assert dog.fired
+        assert caught.value.stop_codes == {"A": 51, "B": 51}
+
+
+def test_a_contour_another_client_stops_long_after_the_watchdog_fired_does_not_blame_it() -> None:
+    """``gwfire`` stays 1 after a firing: only a firing during the contour names the
+    watchdog."""
+    with simulated("DMC-4240", baud=19200) as dmc, dmc.watchdog(1.0) as dog:
+        dmc.C.jog(2000)
+        sim_of(dmc).advance(2.0)  # the host silent: the watchdog fires, and stops C
+        assert dog.fired
+        assert not dmc.C.moving
+        _on_cd_line(dmc, 20, b"ST AB\r")
+        with pytest.raises(MotionError) as caught:
+            dmc.contour("AB", _ramp(1500), dt=3)
+        text = str(caught.value).splitlines()[0]
+        assert "stopped by an ST or AB the library did not send" in text
+        assert "watchdog" not in text
+
+
+@pytest.mark.parametrize("other", [b"ST AB\r", b"AB\r"])
+def test_a_contour_stopped_during_its_pre_load_says_it_never_started_and_drops_the_held(
+    other: bytes,
+) -> None:
+    with simulated("DMC-4240", baud=19200) as dmc:
+        _on_cd_line(dmc, 2, other)  # (in the pre-load, under DT -1: nothing has run)
+        with pytest.raises(MotionError) as caught:
+            dmc.contour("AB", _ramp(), dt=3)
+        text = str(caught.value).splitlines()[0]
+        assert "before it started" in text
+        assert "segments were sent" not in text
+        assert dmc.query_operands(["_CM"]) == [511]  # (the held segments dropped)
+        assert list(sim_of(dmc).room(SimContour).axes()) == []
+        assert dmc.query_operands(["_RPA", "_RPB"]) == [0, 0]
+        dmc.A.move_by(1000).wait()
+        assert dmc.A.position == 1000
