@@ -851,7 +851,7 @@ class ContourStream:
             self._halt(end=True)  # (moving, or segments held under DT -1: dropped)
         first = ([a for a in halted if stop[a] in codes.LIMIT_STOPS] or halted)[0]
         # (a follower a limit stopped on the way is named too, and forgotten: decision 0049)
-        ends = self._follower_codes(values[3 * n :])
+        ends = _follower_codes(self._followers, values[3 * n :])
         dropped = forget_dropped(self._tracker, self._followers, ends)
         parts = [f"{a}: {codes.stop_text(c)}" for a, c in stop.items()]
         parts += dropped_parts(self._followers, dropped)
@@ -870,34 +870,6 @@ class ContourStream:
         """``_RP`` then ``_SC`` of the followers (none without followers): read with the
         contour axes' state at its end, they tell of a follower a limit stopped."""
         return [f"_{op}{f}" for op in ("RP", "SC") for f in self._followers]
-
-    def _follower_codes(self, values: Sequence[float]) -> dict[str, int]:
-        """Each follower's ``_SC`` from the values of :meth:`_follower_names`."""
-        m = len(self._followers)
-        return {f: round(c) for f, c in zip(self._followers, values[m:], strict=True)}
-
-    def _report_followers(self, stop_codes: Sequence[float], values: Sequence[float]) -> None:
-        """At the contour's usual end (its axes' ``stop_codes``, the followers' ``values``
-        of :meth:`_follower_names`): what :meth:`~galil.motion.MoveHandle.wait` does for a
-        follower a limit stopped, the tracker forgetting its gearing and the same
-        :class:`~galil.errors.MotionError` raised (decision 0049); nothing otherwise.
-
-        Raises:
-            MotionError: a limit stopped a follower, and its gearing is off.
-        """
-        ends = self._follower_codes(values)
-        if not forget_dropped(self._tracker, self._followers, ends):
-            return
-        at = [round(v) for v in values[: len(ends)]]  # (the followers' _RP)
-        result = MoveResult(
-            final={},
-            predicted={},
-            deviation={},
-            stop_codes={a: round(c) for a, c in zip(self.letters, stop_codes, strict=True)},
-            follower_final=dict(zip(self._followers, at, strict=True)),
-            follower_stop_codes=ends,
-        )
-        raise_if_limited(self.link, self._followers, result)
 
     def finish(self, state: _Progress, timeout: float | None = None) -> ContourResult:
         """End contour mode (``CD 0=0``, or ``DT 0`` then ``CD 0``) and wait for the axes to stop.
@@ -961,7 +933,10 @@ class ContourStream:
                     over = self._controller_stop(state)
                     if over is not None:
                         raise over
-                self._report_followers(values[n : 2 * n], values[3 * n :])
+                codes_at_end = dict(zip(self.letters, values[n : 2 * n], strict=True))
+                _report_followers(
+                    link, self._tracker, self._followers, codes_at_end, values[3 * n :]
+                )
                 _check_ends(
                     link,
                     self.letters,
@@ -998,3 +973,40 @@ class ContourStream:
             if self._watch is not None:
                 self._watch.close()
                 self._watch = None
+
+
+def _follower_codes(followers: Mapping[str, GearLink], values: Sequence[float]) -> dict[str, int]:
+    """Each follower's ``_SC`` from the values of :meth:`ContourStream._follower_names`."""
+    m = len(followers)
+    return {f: round(c) for f, c in zip(followers, values[m:], strict=True)}
+
+
+def _report_followers(
+    link: CommandLink,
+    tracker: MotionTracker | None,
+    followers: Mapping[str, GearLink],
+    stop_codes: Mapping[str, float],
+    values: Sequence[float],
+) -> None:
+    """At the usual end of a contour (its axes' ``stop_codes``, the ``followers``' ``values``
+    of :meth:`ContourStream._follower_names`): what
+    :meth:`~galil.motion.MoveHandle.wait` does for a follower a limit stopped, the tracker
+    forgetting its gearing and the same :class:`~galil.errors.MotionError` raised (decision
+    0049); nothing otherwise.
+
+    Raises:
+        MotionError: a limit stopped a follower, and its gearing is off.
+    """
+    ends = _follower_codes(followers, values)
+    if not forget_dropped(tracker, followers, ends):
+        return
+    at = [round(v) for v in values[: len(ends)]]  # (the followers' _RP)
+    result = MoveResult(
+        final={},
+        predicted={},
+        deviation={},
+        stop_codes={a: round(c) for a, c in stop_codes.items()},
+        follower_final=dict(zip(followers, at, strict=True)),
+        follower_stop_codes=ends,
+    )
+    raise_if_limited(link, followers, result)
