@@ -50,7 +50,7 @@ NOT_TWINNED = {
     "on_cancel", "take_cancel",
     "queue", "reopen",  # Interrupts: the sync queue, the reconnect hook
     "start",  # Capture, Watchdog: the async ones come started
-    "reopened", "hand_over",  # Watchdog: the controller's hooks (a reconnect, a new one)
+    "reopened", "recheck", "hand_over",  # Watchdog: the controller's hooks (a reconnect, a new one)
     "reused",  # Capture: the controller's hook (a new capture took its arrays)
     "end_wait",  # IO: the controller's hook (close)
     "operand", "bank_bits", "function",  # the bank layout of the digital I/O rooms
