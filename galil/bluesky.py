@@ -783,11 +783,11 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         """The move of one ``set()``, once its arguments are checked: its progress, then the
         settling and the last update."""
         handle = await self._begin(axis, target)
-        request.handle = handle
-        request.target = value  # (taken: the setpoint is its target until it ends)
-        self._setpoint_backend.show(value)
         begun = self.controller.sync.link.clock()
-        try:
+        try:  # (from the start on: a setpoint subscriber that raises stops the move too)
+            request.handle = handle
+            request.target = value  # (taken: the setpoint is its target until it ends)
+            self._setpoint_backend.show(value)
             if request.stopped is not None:  # stop() came while the move was starting
                 await handle.stop()
             async for update in self._progress(handle, value, initial, wait):
