@@ -1101,12 +1101,13 @@ class MoveHandle(_HandleState):
             timeout = check_wait_timeout(timeout)
         if progress is not False:
             check_flag(progress, "progress")
-        duration = self.duration
-        if timeout is None and math.isfinite(duration):
-            timeout = duration * 1.5 + 2.0
-        bar = WaitBar.open(self.kind, self.axes, duration) if progress else None
+        bar: WaitBar | None = None
         try:
-            with wait_guard(self):
+            with wait_guard(self):  # (a stream's prediction is computed here, lazily: guarded)
+                duration = self.duration
+                if timeout is None and math.isfinite(duration):
+                    timeout = duration * 1.5 + 2.0
+                bar = WaitBar.open(self.kind, self.axes, duration) if progress else None
                 done = self._poll_until_done(timeout, bar)
             if not done:
                 raise self._link.error(GalilTimeoutError, not_done_text(self, timeout))
