@@ -1169,3 +1169,27 @@ def test_a_setpoint_subscriber_that_raises_fails_the_set_once_the_axis_is_at_res
     moving, back = in_loop(body())
     assert not moving
     assert back == pytest.approx(0, abs=0.0006)
+
+
+def test_a_status_watcher_that_raises_fails_the_set_once_the_axis_is_at_rest(
+    engine: RunEngine,
+) -> None:
+    # (ophyd-async left the move's generator suspended: the status failed with the watcher's
+    # error while the axis went on moving, until the generator was collected)
+    x = mock_motor("tcp://127.0.0.1:41")
+
+    def buggy(**update: Any) -> None:
+        raise RuntimeError("bug in my progress bar")
+
+    async def body() -> tuple[bool, float]:
+        status = x.set(50)  # 2.5 s at 20 mm/s
+        status.watch(buggy)
+        with pytest.raises(RuntimeError, match="bug in my progress bar"):
+            await status
+        moving = await x.axis.moving()
+        await x.set(0)  # at once, as a plan's next step would
+        return moving, await x.readback.get_value()
+
+    moving, back = in_loop(body())
+    assert not moving
+    assert back == pytest.approx(0, abs=0.0006)
