@@ -29,7 +29,7 @@ import math
 import numbers
 import time
 import weakref
-from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
+from collections.abc import AsyncGenerator, AsyncIterator, Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -531,6 +531,21 @@ def _watch_timeout(timeout: object) -> float | None:
     return 1e9 if seconds is None else seconds
 
 
+class _MoveStatus(WatchableAsyncStatus[float]):
+    """A ``set()``'s status. A watcher that raises (``status.watch(cb)``) ends the status's
+    loop over the move's updates, and ophyd-async leaves that generator suspended at its
+    ``yield`` (closed only when collected): here it is closed first, so its guard stops the
+    axis, at rest before the status fails with the watcher's error."""
+
+    async def _notify_watchers_from(self, iterator: AsyncIterator[WatcherUpdate[float]]) -> None:
+        try:
+            await super()._notify_watchers_from(iterator)
+        finally:
+            aclose = getattr(iterator, "aclose", None)  # (the move's async generator has one)
+            if aclose is not None:
+                await aclose()
+
+
 @dataclass
 class _Request:
     """One ``set()`` call, from the call to the end of its status."""
@@ -750,7 +765,7 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         request.status = self._move(value, timeout, request)
         return request.status
 
-    @WatchableAsyncStatus.wrap
+    @_MoveStatus.wrap
     async def _move(
         self, value: float, timeout: CalculatableTimeout, request: _Request
     ) -> AsyncIterator[WatcherUpdate[float]]:
@@ -760,8 +775,10 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
             wait = _watch_timeout(timeout)
             initial = await self.readback.get_value()
             if request.stopped is None:  # else stopped before the move began: it never does
-                async for update in self._moved(axis, target, float(value), initial, wait, request):
-                    yield update
+                moved = self._moved(axis, target, float(value), initial, wait, request)
+                async with contextlib.aclosing(moved):  # (closed with this one: _MoveStatus)
+                    async for update in moved:
+                        yield update
             if request.stopped is False:
                 raise MotionError(
                     f"{self.name}: the move to {value:g} {self._unit} was stopped ({request.by})",
@@ -779,15 +796,15 @@ class GalilMotor(_GalilDevice, StandardReadable, Locatable[float], Checkable[flo
         initial: float,
         wait: float | None,
         request: _Request,
-    ) -> AsyncIterator[WatcherUpdate[float]]:
+    ) -> AsyncGenerator[WatcherUpdate[float], None]:
         """The move of one ``set()``, once its arguments are checked: its progress, then the
         settling and the last update."""
         handle = await self._begin(axis, target)
-        request.handle = handle
-        request.target = value  # (taken: the setpoint is its target until it ends)
-        self._setpoint_backend.show(value)
         begun = self.controller.sync.link.clock()
-        try:
+        try:  # (from the start on: a setpoint subscriber that raises stops the move too)
+            request.handle = handle
+            request.target = value  # (taken: the setpoint is its target until it ends)
+            self._setpoint_backend.show(value)
             if request.stopped is not None:  # stop() came while the move was starting
                 await handle.stop()
             async for update in self._progress(handle, value, initial, wait):

@@ -1092,7 +1092,8 @@ class MoveHandle(_HandleState):
                 (off-on-error, an abort input, an amplifier or encoder fault: stop codes 6,
                 8, 11, 12, 15, 16, 70, 71), or a limit stopped an axis geared to one of them
                 (its gearing is then off); raised once the move's own axes are done, so
-                nothing of the move is left moving.
+                nothing of the move is left moving (a speed schedule cut short is undone
+                first: its routine halted, ``SP`` put back; docs/speed-schedule.md).
 
         Anything else that interrupts the wait (Ctrl-C, a dead link, no reply) stops the move
         before it propagates (:func:`stop_on_error`).
@@ -1101,12 +1102,13 @@ class MoveHandle(_HandleState):
             timeout = check_wait_timeout(timeout)
         if progress is not False:
             check_flag(progress, "progress")
-        duration = self.duration
-        if timeout is None and math.isfinite(duration):
-            timeout = duration * 1.5 + 2.0
-        bar = WaitBar.open(self.kind, self.axes, duration) if progress else None
+        bar: WaitBar | None = None
         try:
-            with wait_guard(self):
+            with wait_guard(self):  # (a stream's prediction is computed here, lazily: guarded)
+                duration = self.duration
+                if timeout is None and math.isfinite(duration):
+                    timeout = duration * 1.5 + 2.0
+                bar = WaitBar.open(self.kind, self.axes, duration) if progress else None
                 done = self._poll_until_done(timeout, bar)
             if not done:
                 raise self._link.error(GalilTimeoutError, not_done_text(self, timeout))
@@ -1116,8 +1118,25 @@ class MoveHandle(_HandleState):
         if self._error is not None:
             raise self._error
         assert self._result is not None
+        self._undo_cut_short(self._result)
         raise_if_limited(self._link, self._followers, self._result)
         return self._result
+
+    def _undo_cut_short(self, result: MoveResult) -> None:
+        """A move a limit or a fault stopped before its end undoes what it changed for its
+        course, as one the library stops does (:meth:`on_cancel`: a speed schedule's routine
+        is halted and its ``SP`` put back), once, unless a later move drives the axis now."""
+        if _EARLY_CODES.isdisjoint(result.stop_codes.values()):
+            return
+        tracker = self._tracker
+        with held(tracker):
+            with self._lock:
+                undo, self._cancel = self._cancel, None
+            later = tracker is not None and any(
+                tracker._active.get(a) not in (None, self) for a in self._tracks
+            )
+            if undo is not None and not later:
+                undo(None)
 
     @property
     def _stop_letters(self) -> str:

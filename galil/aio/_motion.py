@@ -137,7 +137,8 @@ class _Poll:
         self.guard: Callable[[], contextlib.AbstractContextManager[None]] = (
             functools.partial(wait_guard, handle) if guarded else contextlib.nullcontext
         )
-        duration = handle.duration
+        with self.guard():  # (a stream's prediction is computed here, lazily: guarded)
+            duration = handle.duration
         if timeout is None and math.isfinite(duration):
             timeout = duration * 1.5 + 2.0  # as MoveHandle.wait
         self.timeout = timeout
@@ -331,7 +332,11 @@ class AsyncMoveHandle(FixedAttributes):
             timeout = check_wait_timeout(timeout)
             check_flag(progress, "progress")
         sync = self.sync
-        bar = WaitBar.open(sync.kind, sync.axes, sync.duration) if progress else None
+        try:  # (a prediction the start could not compute is computed here: if it fails, stop)
+            bar = WaitBar.open(sync.kind, sync.axes, sync.duration) if progress else None
+        except BaseException:
+            await self.stop_unless_done()
+            raise
         try:
             async for step in self.watch(timeout):
                 if bar is not None:

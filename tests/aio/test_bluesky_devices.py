@@ -1141,3 +1141,55 @@ def test_the_flyers_disconnect_during_a_flight_stops_it(engine: RunEngine) -> No
     in_loop(flyer.disconnect())
     assert "ST A" in [text for _, text in sim.command_log]
     assert in_loop(x.axis.moving()) is False
+
+
+def test_a_setpoint_subscriber_that_raises_fails_the_set_once_the_axis_is_at_rest(
+    engine: RunEngine,
+) -> None:
+    # (the status failed with the subscriber's error while the axis went on moving: the
+    # subscribers ran after the move began but before the guard that stops it)
+    x = mock_motor("tcp://127.0.0.1:40")
+    seen: list[Any] = []
+
+    def buggy(reading: Any) -> None:
+        seen.append(reading)
+        if len(seen) > 1:  # (the first value is the subscription's own)
+            raise RuntimeError("bug in my setpoint callback")
+
+    async def body() -> tuple[bool, float]:
+        x.setpoint.subscribe(buggy)
+        await asyncio.sleep(0.05)
+        with pytest.raises(RuntimeError, match="bug in my setpoint callback"):
+            await x.set(50)  # 2.5 s at 20 mm/s
+        moving = await x.axis.moving()
+        x.setpoint.clear_sub(buggy)
+        await x.set(0)  # at once, as a plan's next step would
+        return moving, await x.readback.get_value()
+
+    moving, back = in_loop(body())
+    assert not moving
+    assert back == pytest.approx(0, abs=0.0006)
+
+
+def test_a_status_watcher_that_raises_fails_the_set_once_the_axis_is_at_rest(
+    engine: RunEngine,
+) -> None:
+    # (ophyd-async left the move's generator suspended: the status failed with the watcher's
+    # error while the axis went on moving, until the generator was collected)
+    x = mock_motor("tcp://127.0.0.1:41")
+
+    def buggy(**update: Any) -> None:
+        raise RuntimeError("bug in my progress bar")
+
+    async def body() -> tuple[bool, float]:
+        status = x.set(50)  # 2.5 s at 20 mm/s
+        status.watch(buggy)
+        with pytest.raises(RuntimeError, match="bug in my progress bar"):
+            await status
+        moving = await x.axis.moving()
+        await x.set(0)  # at once, as a plan's next step would
+        return moving, await x.readback.get_value()
+
+    moving, back = in_loop(body())
+    assert not moving
+    assert back == pytest.approx(0, abs=0.0006)

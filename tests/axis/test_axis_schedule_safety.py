@@ -291,3 +291,41 @@ def test_a_negative_change_point_is_refused_not_made_positive(dmc: galil.Control
         x.speed_schedule(10 * mm, [(-4 * mm, 2.5 * mm / s)], speed=10 * mm / s)
     h = x.speed_schedule(10 * mm, [(4 * mm, 2.5 * mm / s)], speed=10 * mm / s)
     assert h.wait().final == {"C": -20_000}
+
+
+def test_a_speed_schedule_a_limit_switch_cut_short_restores_the_speed_when_waited_for(
+    dmc: galil.Controller,
+) -> None:
+    # (SP kept the schedule's speeds: the next move ran at them, not at the user's speed)
+    b = dmc.B
+    b.speed = 20_000
+    h = b.speed_schedule(50_000, [(30_000, 10_000)], speed=40_000)
+    dmc.sleep(0.2)  # at 40 000 counts/s, well before the change point
+    sim_of(dmc).set_limit_switch("B", "forward", True)
+    with pytest.raises(galil.MotionError, match="FWD limit"):
+        h.wait()
+    sim_of(dmc).set_limit_switch("B", "forward", False)
+    assert b.speed == 20_000  # neither the schedule's 40 000 nor its change to 10 000
+    assert dmc.query_operands(["_XQ0"]) == [-1]
+    with pytest.raises(galil.MotionError):
+        h.wait()  # (again: the same error, nothing undone twice)
+    move = b.move_by(-1000)
+    assert move.params["B"].speed == 20_000
+    assert move.wait().worst == 0
+
+
+def test_waiting_late_for_a_cut_short_speed_schedule_leaves_a_later_moves_speed_alone(
+    dmc: galil.Controller,
+) -> None:
+    b = dmc.B
+    b.speed = 20_000
+    h = b.speed_schedule(50_000, [(30_000, 10_000)], speed=40_000)
+    dmc.sleep(0.2)
+    sim_of(dmc).set_limit_switch("B", "forward", True)
+    dmc.sleep(0.5)  # at rest on the switch
+    sim_of(dmc).set_limit_switch("B", "forward", False)
+    later = b.move_by(-20_000, speed=30_000)
+    with pytest.raises(galil.MotionError, match="FWD limit"):
+        h.wait()
+    assert b.speed == 30_000  # the later move's, not put back under it
+    assert later.wait().worst == 0
