@@ -15,7 +15,6 @@ import functools
 import logging
 import math
 import threading
-import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -42,6 +41,7 @@ from galil.link import (
     check_callable,
     check_flag,
     check_wait_timeout,
+    warn_caller,
 )
 from galil.models import tm_of
 from galil.predict.smoothing import stored_it
@@ -98,6 +98,10 @@ _LIMIT_CODES = codes.LIMIT_STOPS
 #: Like a limit's, a fault's end (:data:`galil.codes.FAULT_STOPS`) is not the prediction's,
 #: and ``wait()`` raises (not a stop the host commanded).
 _EARLY_CODES = codes.LIMIT_STOPS | codes.FAULT_STOPS
+#: ``ST`` (4) and ``AB`` (7): the end of a move stopped by the library (quiet: its prediction
+#: follows the stop), or by a stop it did not send (a raw command, another host, a program):
+#: ``wait()`` raises then (decision 0105), but for a jog, which such a stop ends as its own.
+_STOP_CODES = frozenset({4, 7})
 #: Stop codes of an axis still moving that is being stopped: a limit (2, 3) or an ``ST``
 #: (4) the library did not send. The controller takes ``DC`` then (decision 0039).
 _STOPPING_CODES = _LIMIT_CODES | {4}
@@ -165,6 +169,7 @@ class Track:
     events: list[predict.Event] = field(default_factory=list)
     aborted: int | None = None  # sample of an AB
     stopped: bool = False  # an ST went out (host side): the jog has an end
+    stop_sent: bool = False  # an ST or AB reached the axis through the library (decision 0105)
     exact: bool = True  # False once something happened that the predictor cannot follow
     fixed: predict.Profile | None = None  # a prediction made elsewhere (schedule, homing)
     note: str = ""  # what is known of the prediction, in words (homing says it here)
@@ -765,6 +770,8 @@ class MoveHandle(_HandleState):
     _wake: threading.Event | None = None
     _error: BaseException | None = None
     _cancel: Callable[[int | None], None] | None = None
+    # Axes a stop the library did not send ended early, with their stop code (decision 0105).
+    _foreign: dict[str, int] | None = None
 
     # -- predictions -------------------------------------------------------------------------
     @property
@@ -907,6 +914,8 @@ class MoveHandle(_HandleState):
             t = self._tracks.get(letter)
             if t is None or self._done:
                 return
+            if make is None or isinstance(make(0.0), predict.Stop):
+                t.stop_sent = True  # (wherever it lands: this stop is the library's own)
             if sample is None or t.begin is None or t.aborted is not None:
                 t.exact = False
                 return
@@ -1029,9 +1038,10 @@ class MoveHandle(_HandleState):
             predicted: dict[str, int] = {}
             deviation: dict[str, int] = {}
             worst = 0  # (MoveResult.worst, known here)
+            foreign = _stopped_elsewhere(tracks, stop)
             for a, t in tracks.items():
                 open_jog = t.kind != "position" and t.open_jog  # (never a position move's)
-                if t.exact and not open_jog and stop[a] not in _EARLY_CODES:
+                if t.exact and not open_jog and stop[a] not in _EARLY_CODES and a not in foreign:
                     end = predicted[a] = profiles[a].end
                     off = deviation[a] = final[a] - end
                     worst = max(worst, abs(off))
@@ -1045,16 +1055,17 @@ class MoveHandle(_HandleState):
                 follower_stop_codes={f: e[1] for f, e in followers.items()} if followers else {},
             )
             self._result = result
+            self._foreign = foreign
             self._done = True
             callbacks, self._callbacks = self._callbacks, []
         # (outside the handle's lock: the tracker's lock comes first)
         if followers:
             self._release_limited_followers(self._result.follower_stop_codes)
-        if worst > 1:
-            warnings.warn(
-                f"move on {''.join(tracks)} ended {deviation} counts away from the prediction",
-                RuntimeWarning,
-                stacklevel=4,
+        if worst > 1:  # (attributed to the caller's line, not to the library's)
+            warn_caller(
+                f"move on {''.join(tracks)} ended {deviation} counts away from the prediction "
+                "(stop codes " + ", ".join(f"{a}: {c}" for a, c in stop.items()) + "): a "
+                "change the library did not send, or a prediction it could not follow"
             )
         for cb in callbacks:
             self._call(cb)
@@ -1091,8 +1102,10 @@ class MoveHandle(_HandleState):
             MotionError: an axis stopped on a limit switch or soft limit, or on a fault
                 (off-on-error, an abort input, an amplifier or encoder fault: stop codes 6,
                 8, 11, 12, 15, 16, 70, 71), or a limit stopped an axis geared to one of them
-                (its gearing is then off); raised once the move's own axes are done, so
-                nothing of the move is left moving.
+                (its gearing is then off); or an ``ST`` or ``AB`` this library did not send
+                ended the move early (a raw command, another host, a program; not a jog's:
+                decision 0105); raised once the move's own axes are done, so nothing of the
+                move is left moving.
 
         Anything else that interrupts the wait (Ctrl-C, a dead link, no reply) stops the move
         before it propagates (:func:`stop_on_error`).
@@ -1117,6 +1130,7 @@ class MoveHandle(_HandleState):
             raise self._error
         assert self._result is not None
         raise_if_limited(self._link, self._followers, self._result)
+        raise_if_stopped_elsewhere(self)
         return self._result
 
     @property
@@ -1312,6 +1326,46 @@ def dropped_parts(followers: Mapping[str, GearLink], dropped: Mapping[str, int])
         f"{f}, geared to {followers[f].master}: {codes.stop_text(c)}; its gearing is off"
         for f, c in dropped.items()
     ]
+
+
+def _stopped_elsewhere(tracks: Mapping[str, Track], stop: Mapping[str, int]) -> dict[str, int]:
+    """The axes of ``tracks`` whose stop code ``stop`` says ``ST`` or ``AB`` ended them though
+    the library sent neither to them, by letter (decision 0105); a jog's end is its stop,
+    whoever sends it."""
+    return {
+        a: stop[a]
+        for a, t in tracks.items()
+        if stop[a] in _STOP_CODES and not t.stop_sent and t.kind != "jog"
+    }
+
+
+def raise_if_stopped_elsewhere(handle: MoveHandle) -> None:
+    """Raise what :meth:`MoveHandle.wait` raises for a move that a stop the library did not
+    send (``ST`` or ``AB``: a raw command, another host, a program) ended early: its axes are
+    not where it was going (decision 0105); nothing for any other end."""
+    foreign, result = handle._foreign, handle._result
+    if not foreign or result is None:
+        return
+    profiles = handle.profiles
+    parts = []
+    for a, c in foreign.items():
+        name = "ST" if c == 4 else "AB"
+        part = f"{a} by {name} (stop code {c}) at {result.final[a]} counts"
+        if handle._tracks[a].fixed is not None or handle._tracks[a].kind in ("position", "vector"):
+            part += f", going to {profiles[a].end}"
+        parts.append(part)
+    first = next(iter(foreign))
+    link = handle._link
+    raise MotionError(
+        f"{handle.kind} move on {handle.axes} stopped early by a stop this library did not "
+        f"send (a raw command, another host, a program): {'; '.join(parts)}. Its axes are not "
+        "where it was going",
+        axis=first,
+        stop_codes=dict(result.stop_codes),
+        position=result.final[first],
+        model=link.model.name,
+        recent=link.recent,
+    )
 
 
 def raise_if_limited(
