@@ -64,6 +64,16 @@ def decimal_hint(value: object) -> str:
     return ""
 
 
+def missing_extra(exc: ImportError, what: str, extra: str = "jupyter") -> ModuleNotFoundError:
+    """The error for ``what`` (``"Profile.plot()"``), which needs an optional package that
+    ``exc`` says is not installed: a :class:`ModuleNotFoundError` (an ``ImportError``, as the
+    bare one was) naming the package and the extra that installs it; raise it ``from exc``."""
+    name = exc.name or "an optional package"
+    return ModuleNotFoundError(
+        f"{what} needs {name}, which is not installed: pip install 'galil[{extra}]'", name=name
+    )
+
+
 class GalilError(Exception):
     """Root of every error raised by ``galil``.
 

@@ -17,7 +17,7 @@ import math
 import threading
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -1500,16 +1500,24 @@ class WaitBar:
     """
 
     __slots__ = ("_bar",)
+    _said_missing: ClassVar[bool] = False  # (tqdm missing: warned once per process)
 
     def __init__(self, bar: Any) -> None:
         self._bar = bar
 
     @classmethod
     def open(cls, kind: str, axes: str, duration: float) -> WaitBar | None:
-        """A bar named ``"<kind> <axes>"`` over ``duration`` seconds (``None`` without tqdm)."""
+        """A bar named ``"<kind> <axes>"`` over ``duration`` seconds (``None`` without tqdm,
+        said once per process by a ``RuntimeWarning`` at the caller's line)."""
         try:
             from tqdm.auto import tqdm
         except ImportError:  # progress is a nicety; the wait itself does not need it
+            if not WaitBar._said_missing:
+                WaitBar._said_missing = True
+                warn_caller(
+                    "progress=True shows no bar: tqdm is not installed (pip install "
+                    "'galil[jupyter]'); the wait goes on without it"
+                )
             return None
         total = duration if math.isfinite(duration) else None
         fmt = "{l_bar}{bar}| {n:.2f}/{total:.2f} s" if total is not None else "{desc}: {n:.2f} s"
