@@ -1006,7 +1006,7 @@ def _stop_started(link: Link, tracker: MotionTracker, error: BaseException | Non
         tracker.closed = True  # (a reopen for the stops set the link up as for use)
     interrupted = interrupted or stop_interrupted
     if running:
-        _warn_stopped(link, running, error)
+        _warn_stopped(link, running, error, tracker.wait_hint)
     if failed:
         _LOG.warning(
             "galil: closing the link to %s: the stop of axes %s could not be sent; they may "
@@ -1018,8 +1018,9 @@ def _stop_started(link: Link, tracker: MotionTracker, error: BaseException | Non
         raise interrupted
 
 
-def _warn_stopped(link: Link, running: str, error: BaseException | None) -> None:
-    """Closing stopped motion the library started: say why, and what to do about it."""
+def _warn_stopped(link: Link, running: str, error: BaseException | None, hint: str) -> None:
+    """Closing stopped motion the library started: say why, and what to do about it
+    (``hint``: how to wait for a move, :attr:`MotionTracker.wait_hint`)."""
     if error is not None:  # (motion never outlives an exception: stopping was the point)
         _LOG.warning(
             "galil: closing the link to %s stopped axes %s mid-motion: the with block ended "
@@ -1031,10 +1032,10 @@ def _warn_stopped(link: Link, running: str, error: BaseException | None) -> None
         return
     _LOG.warning(  # (a script that left its with block without wait(): "nothing happened")
         "galil: closing the link to %s stopped axes %s mid-motion (started here, not "
-        "waited for: call wait() on a move's handle before closing or leaving the with "
-        "block)",
+        "waited for: %s before closing or leaving the with block)",
         link.model_name,
         ", ".join(running),
+        hint,
     )
 
 

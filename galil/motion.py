@@ -388,6 +388,9 @@ class MotionTracker:
         #: Axes a guard could not stop (its dead link not reopened): close() stops them too
         #: (decision 0077); a start that drives one again takes it back.
         self.unstopped = ""
+        #: What the warning of a close that stopped motion nobody waited for advises (an
+        #: async controller's says ``await``).
+        self.wait_hint = "call wait() on a move's handle"
         self._schedule: MoveHandle | None = None  # the last speed schedule started
         self._sequence: MoveHandle | None = None  # the last vector sequence started
 
