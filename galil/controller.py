@@ -40,6 +40,7 @@ from galil.axis import (
 from galil.capture import Capture
 from galil.contour import ContourResult, ContourStream
 from galil.errors import (
+    CONNECT_OPTIONS,
     FixedAttributes,
     GalilConnectionError,
     GalilError,
@@ -135,19 +136,7 @@ class ReconnectPolicy:
             raise InvalidArgument(f"backoff must be a number in [1, 10], not {self.backoff!r}")
 
 
-CLIENT_OPTIONS = frozenset(
-    {
-        "reconnect",
-        "timeout",
-        "model",
-        "handshake",
-        "unsolicited",
-        "history",
-        "poll_interval",
-        "max_messages",
-        "echo",
-    }
-)
+CLIENT_OPTIONS = frozenset(CONNECT_OPTIONS)
 """Keyword options :func:`connect` keeps for the :class:`Controller`; the rest go to the
 transport opener (``baudrate=``, ``port=``, ``backend=`` ...)."""
 

@@ -33,7 +33,7 @@ import decimal
 import difflib
 import inspect
 import queue
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import ClassVar, Generic, NoReturn, TypeVar, overload
 
 __all__ = [
@@ -62,6 +62,38 @@ def decimal_hint(value: object) -> str:
     if isinstance(value, decimal.Decimal):
         return " (a decimal.Decimal is not taken: pass float() of it)"
     return ""
+
+
+#: The options ``galil.connect()`` takes for the client itself (``galil.CLIENT_OPTIONS``);
+#: every other option goes to the transport. Here, below both, so that a transport's refusal
+#: of an option it does not know can suggest one of these too (:func:`unknown_options`).
+CONNECT_OPTIONS = (
+    "reconnect",
+    "timeout",
+    "model",
+    "handshake",
+    "unsolicited",
+    "history",
+    "poll_interval",
+    "max_messages",
+    "echo",
+)
+
+
+def unknown_options(what: str, unknown: Iterable[str], known: Iterable[str]) -> InvalidArgument:
+    """The refusal of options ``what`` (``"sim://"``, ``"TCP"``) does not know: each named,
+    with the closest spelling among ``known`` (the transport's) and the client options of
+    ``connect()`` (:data:`CONNECT_OPTIONS`) where one is close (``reconect``: "did you mean
+    'reconnect'?")."""
+    pool = sorted({*known, *CONNECT_OPTIONS})
+    names = sorted(unknown)
+    hints = []
+    for name in names:
+        close = difflib.get_close_matches(name, pool, n=1, cutoff=0.75)
+        if close:
+            hints.append(f"{name!r}: did you mean {close[0]!r}?")
+    hint = f" ({'; '.join(hints)})" if hints else ""
+    return InvalidArgument(f"unknown {what} option(s): {', '.join(names)}{hint}")
 
 
 def missing_extra(exc: ImportError, what: str, extra: str = "jupyter") -> ModuleNotFoundError:
