@@ -674,7 +674,10 @@ class Controller(_PublicParts, CoordinatedMotion, Resetting, LinkFacade):
                 model=self.model.name,
             )
         if not isinstance(axes, str):
-            raise InvalidArgument(f"axes must be a string of axis letters, got {axes!r}")
+            raise InvalidArgument(
+                f"axes must be a string of axis letters, got {axes!r}{_letters_hint(axes)}",
+                model=self.model.name,
+            )
         out = ""
         for name in axes.replace(" ", "").replace(",", ""):
             letter = self.model.axis_letter(name)
@@ -1063,6 +1066,16 @@ def _letter_given(link: Link, name: Any) -> Any:
         f"axes are named by their letters here: give {name.letter!r}, not {name!r}",
         model=model.name,
     )
+
+
+def _letters_hint(axes: object) -> str:
+    """What a refusal of ``axes`` that are not a string of letters adds when they are an
+    axis (sync or async) or axes: the string to give instead (``: give 'A'``)."""
+    given = list(axes) if isinstance(axes, (list, tuple, set, frozenset)) else [axes]
+    letters = [getattr(a, "letter", None) for a in given]
+    if not given or not all(isinstance(x, str) for x in letters):
+        return ""
+    return f": axes are named by their letters here, give {''.join(map(str, letters))!r}"
 
 
 def _check_options(echo: object, handshake: object, unsolicited: object, model: object) -> None:

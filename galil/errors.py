@@ -329,6 +329,10 @@ class FixedAttributes:
     __slots__ = ()
     _awaited: ClassVar[bool] = False
     _settable: ClassVar[frozenset[str]] = frozenset()
+    #: What to call instead, by name: said when the name is assigned (a read-only property)
+    #: or read when the class has no such attribute (:func:`missing_attribute`); ``{letter}``
+    #: in it is the object's ``letter`` (an axis's).
+    _elsewhere: ClassVar[dict[str, str]] = {}
 
     def __init_subclass__(cls, **kwargs: object) -> None:
         super().__init_subclass__(**kwargs)
@@ -340,7 +344,7 @@ class FixedAttributes:
 
     def __setattr__(self, name: str, value: object) -> None:
         if name[:1] != "_" and name not in self._settable:
-            raise assignment_refused(type(self), name)
+            raise assignment_refused(type(self), name, self)
         object.__setattr__(self, name, value)
 
 
@@ -352,9 +356,23 @@ def _has_setter(attribute: object) -> bool:
     return hasattr(type(attribute), "__set__")
 
 
-def assignment_refused(cls: type[FixedAttributes], name: str) -> GalilAttributeError:
-    """Why ``name`` cannot be assigned on a ``cls`` (a :class:`FixedAttributes`), with the
-    name meant when there is one."""
+def _elsewhere(cls: type[FixedAttributes], name: str, obj: object) -> str:
+    """What ``cls`` says to call instead of ``name`` (``""``: nothing), with ``obj``'s letter."""
+    said = cls._elsewhere.get(name, "")
+    if not said:
+        return ""
+    try:
+        letter = getattr(obj, "letter", "A")
+    except Exception:  # (an object half made: the example's letter)
+        letter = "A"
+    return said.format(letter=letter if isinstance(letter, str) else "A")
+
+
+def assignment_refused(
+    cls: type[FixedAttributes], name: str, obj: object = None
+) -> GalilAttributeError:
+    """Why ``name`` cannot be assigned on a ``cls`` (a :class:`FixedAttributes`; ``obj``, the
+    object, where known), with the name meant when there is one."""
     what, setter = f"{cls.__name__}.{name}", f"set_{name}"
     if cls._awaited and hasattr(cls, setter):
         return GalilAttributeError(
@@ -367,8 +385,12 @@ def assignment_refused(cls: type[FixedAttributes], name: str) -> GalilAttributeE
         known = inspect.getattr_static(cls, name)
         kind = "read-only" if isinstance(known, (property, ReadOnly)) else "not a setting"
         how = f": use `{'await ' if cls._awaited else ''}x.{setter}(...)`"
+        if not hasattr(cls, setter) and name in cls._elsewhere:
+            how = f": {_elsewhere(cls, name, obj)}"
+        elif not hasattr(cls, setter):
+            how = ""
         return GalilAttributeError(
-            f"{what} is {kind}{how if hasattr(cls, setter) else ''}; nothing was set",
+            f"{what} is {kind}{how}; nothing was set",
             attribute=name,
             suggestions=(setter,) if hasattr(cls, setter) else (),
         )
@@ -378,6 +400,26 @@ def assignment_refused(cls: type[FixedAttributes], name: str) -> GalilAttributeE
         f"{cls.__name__} has no setting {name!r}{hint}; nothing was set",
         attribute=name,
         suggestions=meant,
+    )
+
+
+def missing_attribute(cls: type[FixedAttributes], name: str, obj: object = None) -> AttributeError:
+    """What reading ``name``, which ``cls`` does not have, raises: a
+    :class:`GalilAttributeError` saying what to call instead (``Axis.motor_off`` is the
+    controller's: ``controller.motor_off('A')``) or the closest public names; a plain
+    ``AttributeError`` for a dunder or private name (what ``copy``, ``pickle`` and
+    ``hasattr`` probe)."""
+    if name[:1] == "_":
+        return AttributeError(f"{cls.__name__!r} object has no attribute {name!r}", name=name)
+    if name in cls._elsewhere:
+        hint = f": {_elsewhere(cls, name, obj)}"
+        meant: list[str] = []
+    else:
+        public = [n for n in dir(cls) if n[:1] != "_"]
+        meant = difflib.get_close_matches(name, public, n=3, cutoff=0.7)
+        hint = f" (did you mean {' or '.join(repr(m) for m in meant)}?)" if meant else ""
+    return GalilAttributeError(
+        f"{cls.__name__} has no attribute {name!r}{hint}", attribute=name, suggestions=meant
     )
 
 
