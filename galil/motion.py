@@ -74,7 +74,9 @@ __all__ = [
     "motors_off",
     "moving_axes",
     "raise_if_limited",
+    "raise_if_stopped_elsewhere",
     "refuse_dropped",
+    "refuse_endless_wait",
     "sample_of",
     "send_reopening",
     "stop_axes",
@@ -1100,7 +1102,9 @@ class MoveHandle(_HandleState):
 
         Raises:
             InvalidArgument: a timeout that is not ``None`` or a finite number of seconds
-                >= 0 (:func:`~galil.link.check_wait_timeout`), before anything is sent.
+                >= 0 (:func:`~galil.link.check_wait_timeout`), or no timeout for a jog not
+                stopped on a manual-clock simulator (:func:`refuse_endless_wait`), before
+                anything is sent.
             GalilTimeoutError: the move did not finish in time (it is NOT stopped).
             MotionError: an axis stopped on a limit switch or soft limit, or on a fault
                 (off-on-error, an abort input, an amplifier or encoder fault: stop codes 6,
@@ -1117,6 +1121,7 @@ class MoveHandle(_HandleState):
             timeout = check_wait_timeout(timeout)
         if progress is not False:
             check_flag(progress, "progress")
+        refuse_endless_wait(self, timeout)
         duration = self.duration
         if timeout is None and math.isfinite(duration):
             timeout = duration * 1.5 + 2.0
@@ -1230,6 +1235,46 @@ class MoveHandle(_HandleState):
     def __repr__(self) -> str:
         state = "done" if self._done else "moving"
         return f"<MoveHandle {self.kind} {self.axes} {state}, predicted {self.duration:.4g} s>"
+
+
+def refuse_endless_wait(handle: MoveHandle, timeout: float | None) -> None:
+    """Refuse a synchronous wait with no ``timeout`` for a jog not stopped on a simulator
+    whose manual clock moves only while the host waits, when nothing on the controller can
+    end it: one query (before anything is sent) finds the jog still running, no program
+    thread running (a program, the watchdog's routine, could stop it) and no soft limit in
+    its way (``FL``/``BL`` at the int32 ends). Another Python thread could still stop it:
+    that one gives a timeout. On any other link (and in ``galil.aio``, where another task
+    may stop it) a jog's wait with no timeout waits for ever, as documented.
+
+    Raises:
+        InvalidArgument: stop the jog first, or give a timeout (nothing is sent).
+    """
+    if timeout is not None or not handle._link.simulated_time or handle._done:
+        return
+    link = handle._link
+    if not getattr(getattr(link, "transport", None), "manual_clock", False):
+        return
+    jogs = {a: t for a, t in handle._tracks.items() if t.kind == "jog" and t.open_jog}
+    if not jogs or len(jogs) != len(handle._tracks):
+        return
+    names = [f"_BG{a}" for a in jogs] + [f"_XQ{n}" for n in range(link.model.threads)]
+    names += [f"_{'FL' if t.amount > 0 else 'BL'}{a}" for a, t in jogs.items()]
+    try:
+        values = [round(v) for v in link.query_operands(names)]
+    except GalilError:
+        return  # (the wait's own polls meet it, under the guard that stops the jog)
+    n, m = len(jogs), link.model.threads
+    running = all(values[:n]) and all(v < 0 for v in values[n : n + m])
+    if not running or any(abs(v) < 2**31 - 1 for v in values[n + m :]):
+        return  # (over, or something on the controller may end it: the wait polls)
+    raise InvalidArgument(
+        f"wait() for the jog on {handle.axes} with no timeout would never end: on a "
+        "simulator's manual clock time passes only while this thread waits, and nothing on "
+        "the controller will stop the jog (no program runs, no soft limit in its way). Stop "
+        "it first (handle.stop(), then wait()), or give a timeout (wait(timeout=2.0) lets "
+        "2 s pass, then raises GalilTimeoutError)",
+        model=link.model.name,
+    )
 
 
 def driven_axes(handle: MoveHandle) -> str:

@@ -72,6 +72,13 @@ class SimLink:
     def _manual(self) -> bool:
         return isinstance(self.controller.clock, ManualClock)
 
+    @property
+    def manual_clock(self) -> bool:
+        """Whether simulated time passes only while the host waits (the default clock): a
+        wait that nothing the host does can end never ends
+        (:func:`galil.motion.refuse_endless_wait`)."""
+        return self._manual
+
     def _queue(self, data: bytes) -> None:
         now = time.monotonic()
         for delay, piece in apply_faults(self.faults, data):
