@@ -12,9 +12,10 @@
    buffer filled before the path starts), then kept full. Figures: the bytes a second of the
    pre-load (a whole buffer sent as fast as the line and the controller take it, from its
    first line's start to its last line's reply: on a serial line a refill goes out in lines
-   of at most 0.25 s each, decision 0100) as a share of the line (target >= 90 %; once the buffer is full the stream can only send what the
-   path uses, its need), and the fewest segments queued at any look after the start (target
-   >= 1: the buffer never empty; the margin a stall of the host can use). Without the
+   of at most 0.25 s each, decision 0100) as a share of the line (target >= 90 %; once the
+   buffer is full the stream can only send what the path uses, its need), and the fewest
+   segments queued at any look after the start (target >= 1: the buffer never empty; the
+   margin a stall of the host can use). Without the
    pre-load (``preload=False``) the same path started from an empty buffer with 0.2 ms of
    slack a segment, and a jitter of the pty in its first segments ran it dry (TC 42 after
    510 segments in two of three runs on a quiet machine): decision 0038.
