@@ -13,14 +13,21 @@ import numbers
 import sys
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, TypeAlias, TypedDict, cast, overload
+from typing import TYPE_CHECKING, Any, ClassVar, NoReturn, TypeAlias, TypedDict, cast, overload
 
 import numpy as np
 import numpy.typing as npt
 import pint
 
 from galil import codes, predict
-from galil.errors import FixedAttributes, InvalidArgument, LimitError, ReadOnly, decimal_hint
+from galil.errors import (
+    FixedAttributes,
+    InvalidArgument,
+    LimitError,
+    ReadOnly,
+    decimal_hint,
+    missing_attribute,
+)
 from galil.gearing import Gearing, gear_off, gear_to
 from galil.homing import AxisHoming, Homed, Switches, read_switches
 from galil.link import CommandLink
@@ -385,6 +392,15 @@ class AxisPosition:
             self._homing.define(counts, bool(shift_limits))
 
 
+#: What is the controller's, not an axis's: said when a user reaches for it on an axis.
+_CONTROLLERS = {
+    "motor_off": "turn a motor off through the controller: controller.motor_off('{letter}')",
+    "servo_here": "turn a motor on through the controller: controller.servo_here('{letter}')",
+    "motor_on": "turn the motor off or on through the controller: "
+    "controller.motor_off('{letter}') or controller.servo_here('{letter}')",
+}
+
+
 class Axis(AxisGearing, AxisPosition, FixedAttributes):
     """One axis of a controller.
 
@@ -393,6 +409,12 @@ class Axis(AxisGearing, AxisPosition, FixedAttributes):
     """
 
     letter: ReadOnly[str] = ReadOnly()
+    _elsewhere: ClassVar[dict[str, str]] = _CONTROLLERS
+
+    if not TYPE_CHECKING:  # (a type checker still says an attribute is unknown)
+
+        def __getattr__(self, name: str) -> NoReturn:
+            raise missing_attribute(type(self), name, self)
 
     def __init__(
         self, link: CommandLink, letter: str, tracker: MotionTracker, routines: Routines

@@ -558,7 +558,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if isinstance(exc, GalilError):
             print(f"galil: {exc.args[0] if exc.args else exc}", file=sys.stderr)
             return 2
-        if isinstance(exc, OSError):  # a file or a device that cannot be opened
+        # A file or a device that cannot be opened; an optional package missing (its
+        # message names the extra that installs it: --png without matplotlib).
+        if isinstance(exc, (OSError, ModuleNotFoundError)):
             print(f"galil: {exc}", file=sys.stderr)
             return 2
         raise

@@ -40,6 +40,7 @@ from galil.axis import (
 from galil.capture import Capture
 from galil.contour import ContourResult, ContourStream
 from galil.errors import (
+    CONNECT_OPTIONS,
     FixedAttributes,
     GalilConnectionError,
     GalilError,
@@ -135,19 +136,7 @@ class ReconnectPolicy:
             raise InvalidArgument(f"backoff must be a number in [1, 10], not {self.backoff!r}")
 
 
-CLIENT_OPTIONS = frozenset(
-    {
-        "reconnect",
-        "timeout",
-        "model",
-        "handshake",
-        "unsolicited",
-        "history",
-        "poll_interval",
-        "max_messages",
-        "echo",
-    }
-)
+CLIENT_OPTIONS = frozenset(CONNECT_OPTIONS)
 """Keyword options :func:`connect` keeps for the :class:`Controller`; the rest go to the
 transport opener (``baudrate=``, ``port=``, ``backend=`` ...)."""
 
@@ -688,7 +677,10 @@ class Controller(_PublicParts, CoordinatedMotion, Resetting, LinkFacade):
                 model=self.model.name,
             )
         if not isinstance(axes, str):
-            raise InvalidArgument(f"axes must be a string of axis letters, got {axes!r}")
+            raise InvalidArgument(
+                f"axes must be a string of axis letters, got {axes!r}{_letters_hint(axes)}",
+                model=self.model.name,
+            )
         out = ""
         for name in axes.replace(" ", "").replace(",", ""):
             letter = self.model.axis_letter(name)
@@ -1009,7 +1001,7 @@ def _stop_started(link: Link, tracker: MotionTracker, error: BaseException | Non
         tracker.closed = True  # (a reopen for the stops set the link up as for use)
     interrupted = interrupted or stop_interrupted
     if running:
-        _warn_stopped(link, running, error)
+        _warn_stopped(link, running, error, tracker.wait_hint)
     if failed:
         _LOG.warning(
             "galil: closing the link to %s: the stop of axes %s could not be sent; they may "
@@ -1021,8 +1013,9 @@ def _stop_started(link: Link, tracker: MotionTracker, error: BaseException | Non
         raise interrupted
 
 
-def _warn_stopped(link: Link, running: str, error: BaseException | None) -> None:
-    """Closing stopped motion the library started: say why, and what to do about it."""
+def _warn_stopped(link: Link, running: str, error: BaseException | None, hint: str) -> None:
+    """Closing stopped motion the library started: say why, and what to do about it
+    (``hint``: how to wait for a move, :attr:`MotionTracker.wait_hint`)."""
     if error is not None:  # (motion never outlives an exception: stopping was the point)
         _LOG.warning(
             "galil: closing the link to %s stopped axes %s mid-motion: the with block ended "
@@ -1034,10 +1027,10 @@ def _warn_stopped(link: Link, running: str, error: BaseException | None) -> None
         return
     _LOG.warning(  # (a script that left its with block without wait(): "nothing happened")
         "galil: closing the link to %s stopped axes %s mid-motion (started here, not "
-        "waited for: call wait() on a move's handle before closing or leaving the with "
-        "block)",
+        "waited for: %s before closing or leaving the with block)",
         link.model_name,
         ", ".join(running),
+        hint,
     )
 
 
@@ -1076,6 +1069,16 @@ def _letter_given(link: Link, name: Any) -> Any:
         f"axes are named by their letters here: give {name.letter!r}, not {name!r}",
         model=model.name,
     )
+
+
+def _letters_hint(axes: object) -> str:
+    """What a refusal of ``axes`` that are not a string of letters adds when they are an
+    axis (sync or async) or axes: the string to give instead (``: give 'A'``)."""
+    given = list(axes) if isinstance(axes, (list, tuple, set, frozenset)) else [axes]
+    letters = [getattr(a, "letter", None) for a in given]
+    if not given or not all(isinstance(x, str) for x in letters):
+        return ""
+    return f": axes are named by their letters here, give {''.join(map(str, letters))!r}"
 
 
 def _check_options(echo: object, handshake: object, unsolicited: object, model: object) -> None:

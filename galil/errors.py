@@ -33,7 +33,7 @@ import decimal
 import difflib
 import inspect
 import queue
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import ClassVar, Generic, NoReturn, TypeVar, overload
 
 __all__ = [
@@ -62,6 +62,48 @@ def decimal_hint(value: object) -> str:
     if isinstance(value, decimal.Decimal):
         return " (a decimal.Decimal is not taken: pass float() of it)"
     return ""
+
+
+#: The options ``galil.connect()`` takes for the client itself (``galil.CLIENT_OPTIONS``);
+#: every other option goes to the transport. Here, below both, so that a transport's refusal
+#: of an option it does not know can suggest one of these too (:func:`unknown_options`).
+CONNECT_OPTIONS = (
+    "reconnect",
+    "timeout",
+    "model",
+    "handshake",
+    "unsolicited",
+    "history",
+    "poll_interval",
+    "max_messages",
+    "echo",
+)
+
+
+def unknown_options(what: str, unknown: Iterable[str], known: Iterable[str]) -> InvalidArgument:
+    """The refusal of options ``what`` (``"sim://"``, ``"TCP"``) does not know: each named,
+    with the closest spelling among ``known`` (the transport's) and the client options of
+    ``connect()`` (:data:`CONNECT_OPTIONS`) where one is close (``reconect``: "did you mean
+    'reconnect'?")."""
+    pool = sorted({*known, *CONNECT_OPTIONS})
+    names = sorted(unknown)
+    hints = []
+    for name in names:
+        close = difflib.get_close_matches(name, pool, n=1, cutoff=0.75)
+        if close:
+            hints.append(f"{name!r}: did you mean {close[0]!r}?")
+    hint = f" ({'; '.join(hints)})" if hints else ""
+    return InvalidArgument(f"unknown {what} option(s): {', '.join(names)}{hint}")
+
+
+def missing_extra(exc: ImportError, what: str, extra: str = "jupyter") -> ModuleNotFoundError:
+    """The error for ``what`` (``"Profile.plot()"``), which needs an optional package that
+    ``exc`` says is not installed: a :class:`ModuleNotFoundError` (an ``ImportError``, as the
+    bare one was) naming the package and the extra that installs it; raise it ``from exc``."""
+    name = exc.name or "an optional package"
+    return ModuleNotFoundError(
+        f"{what} needs {name}, which is not installed: pip install 'galil[{extra}]'", name=name
+    )
 
 
 class GalilError(Exception):
@@ -287,6 +329,10 @@ class FixedAttributes:
     __slots__ = ()
     _awaited: ClassVar[bool] = False
     _settable: ClassVar[frozenset[str]] = frozenset()
+    #: What to call instead, by name: said when the name is assigned (a read-only property)
+    #: or read when the class has no such attribute (:func:`missing_attribute`); ``{letter}``
+    #: in it is the object's ``letter`` (an axis's).
+    _elsewhere: ClassVar[dict[str, str]] = {}
 
     def __init_subclass__(cls, **kwargs: object) -> None:
         super().__init_subclass__(**kwargs)
@@ -298,7 +344,7 @@ class FixedAttributes:
 
     def __setattr__(self, name: str, value: object) -> None:
         if name[:1] != "_" and name not in self._settable:
-            raise assignment_refused(type(self), name)
+            raise assignment_refused(type(self), name, self)
         object.__setattr__(self, name, value)
 
 
@@ -310,9 +356,23 @@ def _has_setter(attribute: object) -> bool:
     return hasattr(type(attribute), "__set__")
 
 
-def assignment_refused(cls: type[FixedAttributes], name: str) -> GalilAttributeError:
-    """Why ``name`` cannot be assigned on a ``cls`` (a :class:`FixedAttributes`), with the
-    name meant when there is one."""
+def _elsewhere(cls: type[FixedAttributes], name: str, obj: object) -> str:
+    """What ``cls`` says to call instead of ``name`` (``""``: nothing), with ``obj``'s letter."""
+    said = cls._elsewhere.get(name, "")
+    if not said:
+        return ""
+    try:
+        letter = getattr(obj, "letter", "A")
+    except Exception:  # (an object half made: the example's letter)
+        letter = "A"
+    return said.format(letter=letter if isinstance(letter, str) else "A")
+
+
+def assignment_refused(
+    cls: type[FixedAttributes], name: str, obj: object = None
+) -> GalilAttributeError:
+    """Why ``name`` cannot be assigned on a ``cls`` (a :class:`FixedAttributes`; ``obj``, the
+    object, where known), with the name meant when there is one."""
     what, setter = f"{cls.__name__}.{name}", f"set_{name}"
     if cls._awaited and hasattr(cls, setter):
         return GalilAttributeError(
@@ -325,8 +385,12 @@ def assignment_refused(cls: type[FixedAttributes], name: str) -> GalilAttributeE
         known = inspect.getattr_static(cls, name)
         kind = "read-only" if isinstance(known, (property, ReadOnly)) else "not a setting"
         how = f": use `{'await ' if cls._awaited else ''}x.{setter}(...)`"
+        if not hasattr(cls, setter) and name in cls._elsewhere:
+            how = f": {_elsewhere(cls, name, obj)}"
+        elif not hasattr(cls, setter):
+            how = ""
         return GalilAttributeError(
-            f"{what} is {kind}{how if hasattr(cls, setter) else ''}; nothing was set",
+            f"{what} is {kind}{how}; nothing was set",
             attribute=name,
             suggestions=(setter,) if hasattr(cls, setter) else (),
         )
@@ -336,6 +400,26 @@ def assignment_refused(cls: type[FixedAttributes], name: str) -> GalilAttributeE
         f"{cls.__name__} has no setting {name!r}{hint}; nothing was set",
         attribute=name,
         suggestions=meant,
+    )
+
+
+def missing_attribute(cls: type[FixedAttributes], name: str, obj: object = None) -> AttributeError:
+    """What reading ``name``, which ``cls`` does not have, raises: a
+    :class:`GalilAttributeError` saying what to call instead (``Axis.motor_off`` is the
+    controller's: ``controller.motor_off('A')``) or the closest public names; a plain
+    ``AttributeError`` for a dunder or private name (what ``copy``, ``pickle`` and
+    ``hasattr`` probe)."""
+    if name[:1] == "_":
+        return AttributeError(f"{cls.__name__!r} object has no attribute {name!r}", name=name)
+    if name in cls._elsewhere:
+        hint = f": {_elsewhere(cls, name, obj)}"
+        meant: list[str] = []
+    else:
+        public = [n for n in dir(cls) if n[:1] != "_"]
+        meant = difflib.get_close_matches(name, public, n=3, cutoff=0.7)
+        hint = f" (did you mean {' or '.join(repr(m) for m in meant)}?)" if meant else ""
+    return GalilAttributeError(
+        f"{cls.__name__} has no attribute {name!r}{hint}", attribute=name, suggestions=meant
     )
 
 

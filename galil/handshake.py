@@ -81,12 +81,13 @@ def _ask(link: Link) -> Completed:
         GalilConnectionError: no answer, or none that fits, either time; the link failed.
     """
     before = link.bytes_received
-    try:
-        first: Completed | GalilError = link.roundtrip_locked([_IDENTIFY_ANY], link.timeout)[0]
-    except (GalilTimeoutError, ProtocolError) as exc:
-        first = exc
-    except GalilConnectionError as exc:
-        raise link.error(GalilConnectionError, _dropped(link, exc)) from exc
+    with link.wire_log.capture() as wire:  # (what came, quoted if it is no Galil answer)
+        try:
+            first: Completed | GalilError = link.roundtrip_locked([_IDENTIFY_ANY], link.timeout)[0]
+        except (GalilTimeoutError, ProtocolError) as exc:
+            first = exc
+        except GalilConnectionError as exc:
+            raise link.error(GalilConnectionError, _dropped(link, exc, wire.received)) from exc
     if isinstance(first, Completed) and not _names_nothing(first):
         return first
     heard, before = link.bytes_received - before, link.bytes_received
@@ -96,7 +97,7 @@ def _ask(link: Link) -> Completed:
         return link.roundtrip_locked([_IDENTIFY_ANY], link.timeout)[0]
     except (GalilTimeoutError, ProtocolError, GalilConnectionError) as exc:
         silent = link.bytes_received == before
-        why = _unidentified(link, (first, heard), exc, silent)
+        why = _unidentified(link, (first, heard), exc, silent, bytes(wire.received))
         raise link.error(GalilConnectionError, why) from exc
 
 
@@ -110,11 +111,15 @@ def _names_nothing(reply: Completed) -> bool:
 
 
 def _unidentified(
-    link: Link, first: tuple[Completed | GalilError, int], then: GalilError, silent: bool
+    link: Link,
+    first: tuple[Completed | GalilError, int],
+    then: GalilError,
+    silent: bool,
+    came: bytes = b"",
 ) -> str:
     """The message of a handshake whose ``^R^V`` failed twice (``first``, with the bytes
-    heard, then ``then``, after a resynchronisation; ``silent``: not one byte came to that):
-    what arrived, and what the peer may be."""
+    heard, ``came``, then ``then``, after a resynchronisation; ``silent``: not one byte came
+    to that): what arrived, and what the peer may be."""
     serial = getattr(link.transport, "kind", "") == "serial"
     where = _where(link)
     reply, heard = first
@@ -123,7 +128,8 @@ def _unidentified(
     elif isinstance(reply, GalilTimeoutError):
         what = f"no answer to ^R^V on the {where} within {link.timeout:g} s"
         if heard:
-            what += f" ({heard} byte{'s' if heard > 1 else ''} came, none ending a reply)"
+            what += f" ({heard} byte{'s' if heard > 1 else ''} came, none ending a reply"
+            what += f": {_quoted(came)})" if came else ")"
     else:
         what = f"the answer to ^R^V on the {where} did not fit ({_said(reply)})"
     if silent:
@@ -171,12 +177,30 @@ def _where(link: Link) -> str:
     return label if isinstance(label, str) and label else repr(link.transport)
 
 
-def _dropped(link: Link, exc: GalilConnectionError) -> str:
+#: How many of the bytes a peer sent a message quotes.
+_QUOTED = 60
+
+
+def _quoted(came: bytes) -> str:
+    """The first bytes a peer sent, as a message quotes them (``b'HTTP/1.1 400 ...'``)."""
+    more = f" ... ({len(came)} bytes)" if len(came) > _QUOTED else ""
+    return f"{came[:_QUOTED]!r}{more}"
+
+
+def _dropped(link: Link, exc: GalilConnectionError, came: bytes | bytearray = b"") -> str:
     """The message of a link that failed before the controller answered ``^R^V`` (the
     handshake of a connect or a reopen: no advice to call reconnect() on an object the
-    caller may never get). Over Ethernet, a controller with all its handles taken accepts
-    the connection and drops it at once."""
+    caller may never get), ``came`` the bytes that arrived first. Over Ethernet, a
+    controller with all its handles taken accepts the connection and drops it at once,
+    without a byte; a peer that said something and hung up is not a Galil controller (an
+    HTTP server answers its 400 and closes)."""
     why = str(exc.args[0] if exc.args else exc).removesuffix(RECONNECT_ADVICE)
+    if came:
+        return (
+            f"what answered ^R^V on the {_where(link)} was {_quoted(bytes(came))}, then it "
+            f"closed the connection ({why}): that is not a Galil controller (one answers ^R^V "
+            "with its model and firmware); check the address and port"
+        )
     if getattr(link.transport, "kind", "") == "ethernet":
         return (
             f"the controller dropped the connection before it answered ^R^V ({why}): it may"

@@ -15,10 +15,9 @@ import functools
 import logging
 import math
 import threading
-import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -42,6 +41,7 @@ from galil.link import (
     check_callable,
     check_flag,
     check_wait_timeout,
+    warn_caller,
 )
 from galil.models import tm_of
 from galil.predict.smoothing import stored_it
@@ -74,7 +74,9 @@ __all__ = [
     "motors_off",
     "moving_axes",
     "raise_if_limited",
+    "raise_if_stopped_elsewhere",
     "refuse_dropped",
+    "refuse_endless_wait",
     "sample_of",
     "send_reopening",
     "stop_axes",
@@ -98,6 +100,10 @@ _LIMIT_CODES = codes.LIMIT_STOPS
 #: Like a limit's, a fault's end (:data:`galil.codes.FAULT_STOPS`) is not the prediction's,
 #: and ``wait()`` raises (not a stop the host commanded).
 _EARLY_CODES = codes.LIMIT_STOPS | codes.FAULT_STOPS
+#: ``ST`` (4) and ``AB`` (7): the end of a move stopped by the library (quiet: its prediction
+#: follows the stop), or by a stop it did not send (a raw command, another host, a program):
+#: ``wait()`` raises then (decision 0105), but for a jog, which such a stop ends as its own.
+_STOP_CODES = frozenset({4, 7})
 #: Stop codes of an axis still moving that is being stopped: a limit (2, 3) or an ``ST``
 #: (4) the library did not send. The controller takes ``DC`` then (decision 0039).
 _STOPPING_CODES = _LIMIT_CODES | {4}
@@ -165,6 +171,7 @@ class Track:
     events: list[predict.Event] = field(default_factory=list)
     aborted: int | None = None  # sample of an AB
     stopped: bool = False  # an ST went out (host side): the jog has an end
+    stop_sent: bool = False  # an ST or AB reached the axis through the library (decision 0105)
     exact: bool = True  # False once something happened that the predictor cannot follow
     fixed: predict.Profile | None = None  # a prediction made elsewhere (schedule, homing)
     note: str = ""  # what is known of the prediction, in words (homing says it here)
@@ -383,6 +390,9 @@ class MotionTracker:
         #: Axes a guard could not stop (its dead link not reopened): close() stops them too
         #: (decision 0077); a start that drives one again takes it back.
         self.unstopped = ""
+        #: What the warning of a close that stopped motion nobody waited for advises (an
+        #: async controller's says ``await``).
+        self.wait_hint = "call wait() on a move's handle"
         self._schedule: MoveHandle | None = None  # the last speed schedule started
         self._sequence: MoveHandle | None = None  # the last vector sequence started
 
@@ -765,6 +775,8 @@ class MoveHandle(_HandleState):
     _wake: threading.Event | None = None
     _error: BaseException | None = None
     _cancel: Callable[[int | None], None] | None = None
+    # Axes a stop the library did not send ended early, with their stop code (decision 0105).
+    _foreign: dict[str, int] | None = None
 
     # -- predictions -------------------------------------------------------------------------
     @property
@@ -907,6 +919,8 @@ class MoveHandle(_HandleState):
             t = self._tracks.get(letter)
             if t is None or self._done:
                 return
+            if make is None or isinstance(make(0.0), predict.Stop):
+                t.stop_sent = True  # (wherever it lands: this stop is the library's own)
             if sample is None or t.begin is None or t.aborted is not None:
                 t.exact = False
                 return
@@ -1029,9 +1043,10 @@ class MoveHandle(_HandleState):
             predicted: dict[str, int] = {}
             deviation: dict[str, int] = {}
             worst = 0  # (MoveResult.worst, known here)
+            foreign = _stopped_elsewhere(tracks, stop)
             for a, t in tracks.items():
                 open_jog = t.kind != "position" and t.open_jog  # (never a position move's)
-                if t.exact and not open_jog and stop[a] not in _EARLY_CODES:
+                if t.exact and not open_jog and stop[a] not in _EARLY_CODES and a not in foreign:
                     end = predicted[a] = profiles[a].end
                     off = deviation[a] = final[a] - end
                     worst = max(worst, abs(off))
@@ -1045,16 +1060,17 @@ class MoveHandle(_HandleState):
                 follower_stop_codes={f: e[1] for f, e in followers.items()} if followers else {},
             )
             self._result = result
+            self._foreign = foreign
             self._done = True
             callbacks, self._callbacks = self._callbacks, []
         # (outside the handle's lock: the tracker's lock comes first)
         if followers:
             self._release_limited_followers(self._result.follower_stop_codes)
-        if worst > 1:
-            warnings.warn(
-                f"move on {''.join(tracks)} ended {deviation} counts away from the prediction",
-                RuntimeWarning,
-                stacklevel=4,
+        if worst > 1:  # (attributed to the caller's line, not to the library's)
+            warn_caller(
+                f"move on {''.join(tracks)} ended {deviation} counts away from the prediction "
+                "(stop codes " + ", ".join(f"{a}: {c}" for a, c in stop.items()) + "): a "
+                "change the library did not send, or a prediction it could not follow"
             )
         for cb in callbacks:
             self._call(cb)
@@ -1086,13 +1102,17 @@ class MoveHandle(_HandleState):
 
         Raises:
             InvalidArgument: a timeout that is not ``None`` or a finite number of seconds
-                >= 0 (:func:`~galil.link.check_wait_timeout`), before anything is sent.
+                >= 0 (:func:`~galil.link.check_wait_timeout`), or no timeout for a jog not
+                stopped on a manual-clock simulator (:func:`refuse_endless_wait`), before
+                anything is sent.
             GalilTimeoutError: the move did not finish in time (it is NOT stopped).
             MotionError: an axis stopped on a limit switch or soft limit, or on a fault
                 (off-on-error, an abort input, an amplifier or encoder fault: stop codes 6,
                 8, 11, 12, 15, 16, 70, 71), or a limit stopped an axis geared to one of them
-                (its gearing is then off); raised once the move's own axes are done, so
-                nothing of the move is left moving (a speed schedule cut short is undone
+                (its gearing is then off); or an ``ST`` or ``AB`` this library did not send
+                ended the move early (a raw command, another host, a program; not a jog's:
+                decision 0105); raised once the move's own axes are done, so nothing of the
+                move is left moving (a speed schedule a limit or a fault cut short is undone
                 first: its routine halted, ``SP`` put back; docs/speed-schedule.md).
 
         Anything else that interrupts the wait (Ctrl-C, a dead link, no reply) stops the move
@@ -1102,6 +1122,7 @@ class MoveHandle(_HandleState):
             timeout = check_wait_timeout(timeout)
         if progress is not False:
             check_flag(progress, "progress")
+        refuse_endless_wait(self, timeout)  # (a refusal: nothing stopped, nothing changed)
         bar: WaitBar | None = None
         try:
             with wait_guard(self):  # (a stream's prediction is computed here, lazily: guarded)
@@ -1118,25 +1139,10 @@ class MoveHandle(_HandleState):
         if self._error is not None:
             raise self._error
         assert self._result is not None
-        self._undo_cut_short(self._result)
+        _undo_cut_short(self, self._result)
         raise_if_limited(self._link, self._followers, self._result)
+        raise_if_stopped_elsewhere(self)
         return self._result
-
-    def _undo_cut_short(self, result: MoveResult) -> None:
-        """A move a limit or a fault stopped before its end undoes what it changed for its
-        course, as one the library stops does (:meth:`on_cancel`: a speed schedule's routine
-        is halted and its ``SP`` put back), once, unless a later move drives the axis now."""
-        if _EARLY_CODES.isdisjoint(result.stop_codes.values()):
-            return
-        tracker = self._tracker
-        with held(tracker):
-            with self._lock:
-                undo, self._cancel = self._cancel, None
-            later = tracker is not None and any(
-                tracker._active.get(a) not in (None, self) for a in self._tracks
-            )
-            if undo is not None and not later:
-                undo(None)
 
     @property
     def _stop_letters(self) -> str:
@@ -1234,6 +1240,46 @@ class MoveHandle(_HandleState):
         return f"<MoveHandle {self.kind} {self.axes} {state}, predicted {self.duration:.4g} s>"
 
 
+def refuse_endless_wait(handle: MoveHandle, timeout: float | None) -> None:
+    """Refuse a synchronous wait with no ``timeout`` for a jog not stopped on a simulator
+    whose manual clock moves only while the host waits, when nothing on the controller can
+    end it: one query (before anything is sent) finds the jog still running, no program
+    thread running (a program, the watchdog's routine, could stop it) and no soft limit in
+    its way (``FL``/``BL`` at the int32 ends). Another Python thread could still stop it:
+    that one gives a timeout. On any other link (and in ``galil.aio``, where another task
+    may stop it) a jog's wait with no timeout waits for ever, as documented.
+
+    Raises:
+        InvalidArgument: stop the jog first, or give a timeout (nothing is sent).
+    """
+    if timeout is not None or not handle._link.simulated_time or handle._done:
+        return
+    link = handle._link
+    if not getattr(getattr(link, "transport", None), "manual_clock", False):
+        return
+    jogs = {a: t for a, t in handle._tracks.items() if t.kind == "jog" and t.open_jog}
+    if not jogs or len(jogs) != len(handle._tracks):
+        return
+    names = [f"_BG{a}" for a in jogs] + [f"_XQ{n}" for n in range(link.model.threads)]
+    names += [f"_{'FL' if t.amount > 0 else 'BL'}{a}" for a, t in jogs.items()]
+    try:
+        values = [round(v) for v in link.query_operands(names)]
+    except GalilError:
+        return  # (the wait's own polls meet it, under the guard that stops the jog)
+    n, m = len(jogs), link.model.threads
+    running = all(values[:n]) and all(v < 0 for v in values[n : n + m])
+    if not running or any(abs(v) < 2**31 - 1 for v in values[n + m :]):
+        return  # (over, or something on the controller may end it: the wait polls)
+    raise InvalidArgument(
+        f"wait() for the jog on {handle.axes} with no timeout would never end: on a "
+        "simulator's manual clock time passes only while this thread waits, and nothing on "
+        "the controller will stop the jog (no program runs, no soft limit in its way). Stop "
+        "it first (handle.stop(), then wait()), or give a timeout (wait(timeout=2.0) lets "
+        "2 s pass, then raises GalilTimeoutError)",
+        model=link.model.name,
+    )
+
+
 def driven_axes(handle: MoveHandle) -> str:
     """The axes ``handle`` may still drive, those its ``stop()`` stops: none once it was seen
     done; else its axes but those a later start read at rest (decision 0030) or a newer
@@ -1268,6 +1314,24 @@ def not_done_text(handle: MoveHandle, timeout: float | None) -> str:
         f"{handle.duration:.3g} s); it goes on: wait again, or stop it (a controller.motion() "
         "block guarding its axes stops it when this error leaves the block)"
     )
+
+
+def _undo_cut_short(handle: MoveHandle, result: MoveResult) -> None:
+    """A move a limit or a fault stopped before its end undoes what it changed for its
+    course, as one the library stops does (:meth:`MoveHandle.on_cancel`: a speed schedule's
+    routine is halted and its ``SP`` put back), once, unless a later move drives the axis
+    now."""
+    if _EARLY_CODES.isdisjoint(result.stop_codes.values()):
+        return
+    tracker = handle._tracker
+    with held(tracker):
+        with handle._lock:
+            undo, handle._cancel = handle._cancel, None
+        later = tracker is not None and any(
+            tracker._active.get(a) not in (None, handle) for a in handle._tracks
+        )
+        if undo is not None and not later:
+            undo(None)
 
 
 def wait_guard(handle: MoveHandle) -> contextlib.AbstractContextManager[None]:
@@ -1331,6 +1395,46 @@ def dropped_parts(followers: Mapping[str, GearLink], dropped: Mapping[str, int])
         f"{f}, geared to {followers[f].master}: {codes.stop_text(c)}; its gearing is off"
         for f, c in dropped.items()
     ]
+
+
+def _stopped_elsewhere(tracks: Mapping[str, Track], stop: Mapping[str, int]) -> dict[str, int]:
+    """The axes of ``tracks`` whose stop code ``stop`` says ``ST`` or ``AB`` ended them though
+    the library sent neither to them, by letter (decision 0105); a jog's end is its stop,
+    whoever sends it."""
+    return {
+        a: stop[a]
+        for a, t in tracks.items()
+        if stop[a] in _STOP_CODES and not t.stop_sent and t.kind != "jog"
+    }
+
+
+def raise_if_stopped_elsewhere(handle: MoveHandle) -> None:
+    """Raise what :meth:`MoveHandle.wait` raises for a move that a stop the library did not
+    send (``ST`` or ``AB``: a raw command, another host, a program) ended early: its axes are
+    not where it was going (decision 0105); nothing for any other end."""
+    foreign, result = handle._foreign, handle._result
+    if not foreign or result is None:
+        return
+    profiles = handle.profiles
+    parts = []
+    for a, c in foreign.items():
+        name = "ST" if c == 4 else "AB"
+        part = f"{a} by {name} (stop code {c}) at {result.final[a]} counts"
+        if handle._tracks[a].fixed is not None or handle._tracks[a].kind in ("position", "vector"):
+            part += f", going to {profiles[a].end}"
+        parts.append(part)
+    first = next(iter(foreign))
+    link = handle._link
+    raise MotionError(
+        f"{handle.kind} move on {handle.axes} stopped early by a stop this library did not "
+        f"send (a raw command, another host, a program): {'; '.join(parts)}. Its axes are not "
+        "where it was going",
+        axis=first,
+        stop_codes=dict(result.stop_codes),
+        position=result.final[first],
+        model=link.model.name,
+        recent=link.recent,
+    )
 
 
 def raise_if_limited(
@@ -1465,16 +1569,24 @@ class WaitBar:
     """
 
     __slots__ = ("_bar",)
+    _said_missing: ClassVar[bool] = False  # (tqdm missing: warned once per process)
 
     def __init__(self, bar: Any) -> None:
         self._bar = bar
 
     @classmethod
     def open(cls, kind: str, axes: str, duration: float) -> WaitBar | None:
-        """A bar named ``"<kind> <axes>"`` over ``duration`` seconds (``None`` without tqdm)."""
+        """A bar named ``"<kind> <axes>"`` over ``duration`` seconds (``None`` without tqdm,
+        said once per process by a ``RuntimeWarning`` at the caller's line)."""
         try:
             from tqdm.auto import tqdm
         except ImportError:  # progress is a nicety; the wait itself does not need it
+            if not WaitBar._said_missing:
+                WaitBar._said_missing = True
+                warn_caller(
+                    "progress=True shows no bar: tqdm is not installed (pip install "
+                    "'galil[jupyter]'); the wait goes on without it"
+                )
             return None
         total = duration if math.isfinite(duration) else None
         fmt = "{l_bar}{bar}| {n:.2f}/{total:.2f} s" if total is not None else "{desc}: {n:.2f} s"

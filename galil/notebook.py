@@ -19,7 +19,7 @@ import numpy.typing as npt
 from galil.axis import Axis
 from galil.capture import Recording
 from galil.contour import ContourResult
-from galil.errors import GalilError, InvalidArgument, decimal_hint
+from galil.errors import GalilError, InvalidArgument, decimal_hint, missing_extra
 from galil.motion import MoveHandle
 from galil.predict import Profile
 from galil.predict.profile import shown_position
@@ -252,7 +252,10 @@ def compare_plot(
     """
     # A plain Figure (not pyplot): nothing global is touched, no backend is chosen, and the
     # figure shows in Jupyter the same way Profile.plot()'s does.
-    from matplotlib.figure import Figure
+    try:
+        from matplotlib.figure import Figure
+    except ImportError as exc:
+        raise missing_extra(exc, "compare_plot()") from exc
 
     profiles, _ = _predictions(predicted)
     pairs = compare(predicted, recorded, field=field)
@@ -419,7 +422,10 @@ def jog_widget(axis: Axis, *, max_speed: Amount | None = None) -> VBox:
     Returns:
         The widget box (``.children``: slider, stop button, status label).
     """
-    import ipywidgets as widgets
+    try:
+        import ipywidgets as widgets
+    except ImportError as exc:
+        raise missing_extra(exc, "jog_widget()") from exc
 
     limit = _slider_limit(axis, max_speed)
     unit = "counts/s" if axis.scale is None else f"{axis.scale.unit:~}/s"

@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from galil import predict
-from galil.errors import InvalidArgument, decimal_hint
+from galil.errors import InvalidArgument, decimal_hint, missing_extra
 from galil.predict.counts import whole_counts
 from galil.predict.path import PathLayout, quantise_angle
 from galil.predict.profile import shown_position
@@ -439,7 +439,10 @@ class VectorPlan:
 
         matplotlib is imported here, not at import time.
         """
-        from matplotlib.figure import Figure
+        try:
+            from matplotlib.figure import Figure
+        except ImportError as exc:
+            raise missing_extra(exc, "VectorPlan.plot()") from exc
 
         fig = Figure(figsize=(10, 4.5), layout="constrained")
         ax_xy, ax_v = fig.subplots(1, 2)

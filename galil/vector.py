@@ -244,6 +244,8 @@ class VectorHandle(MoveHandle):
             else:
                 return
             self._stopped = True  # whoever sent it: nothing more is streamed
+            for t in self._tracks.values():  # (the library's own stop: decision 0105)
+                t.stop_sent = True
             if not self._sequence.event(sample, kind):
                 for t in self._tracks.values():
                     t.exact = False

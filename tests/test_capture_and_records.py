@@ -66,7 +66,7 @@ def test_compare_measures_how_far_a_recording_strays_from_its_prediction(
     move = dmc.A.move_by(5000)
     dmc.sleep(plan.duration / 2)
     dmc.link.command_line(["ST A"])  # the library does not know: the recording strays
-    with pytest.warns(RuntimeWarning):
+    with pytest.raises(galil.MotionError, match="did not send"):  # (decision 0105)
         move.wait()
     rec = cap.wait()
     got = compare(move, rec)["A"]

@@ -12,11 +12,12 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Awaitable, Callable
-from typing import Any, Generic, TypeVar, cast, overload
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, NoReturn, TypeVar, cast, overload
 
 from galil.aio._motion import MotionRoom, motion_twin
 from galil.aio._worker import Room, same, twin
 from galil.axis import Axis, MoveOverrides, UnitProfile
+from galil.errors import missing_attribute
 from galil.gearing import Gearing
 from galil.homing import Homed, Switches
 from galil.motion import MoveHandle
@@ -177,6 +178,18 @@ class AsyncAxis(MotionRoom[Axis]):
     Values go in and come out in the axis's user units, exactly as on the sync
     :class:`~galil.axis.Axis` (:attr:`sync`), which does the work.
     """
+
+    _elsewhere: ClassVar[dict[str, str]] = {
+        "motor_off": "turn a motor off through the controller: "
+        "await controller.motor_off('{letter}')",
+        "servo_here": "turn a motor on through the controller: "
+        "await controller.servo_here('{letter}')",
+    }
+
+    if not TYPE_CHECKING:  # (a type checker still says an attribute is unknown)
+
+        def __getattr__(self, name: str) -> NoReturn:
+            raise missing_attribute(type(self), name, self)
 
     @property
     def letter(self) -> str:

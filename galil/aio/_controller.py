@@ -489,6 +489,7 @@ def _open(
     interrupt: Callable[[Interrupt], None],
 ) -> tuple[Controller, Callable[[], None]]:
     controller = connect_sync(address, **options)
+    controller.tracker.wait_hint = "await a move's handle (await handle.wait(), or await handle)"
     try:
         quiet = controller.subscribe(deliver)
         deaf = controller.interrupts.subscribe(interrupt)

@@ -788,4 +788,7 @@ class motion_twin(Generic[S, P, H]):  # noqa: N801 - used like a decorator
 
         call.__doc__ = method.__doc__
         call.__name__ = self.__name__
+        # (what "coroutine ... was never awaited" and tracebacks name: AsyncAxis.stop, not
+        # motion_twin.__get__.<locals>.call)
+        call.__qualname__ = f"{type(room).__name__}.{self.__name__}"
         return call

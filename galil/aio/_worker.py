@@ -301,6 +301,9 @@ class twin(Generic[S, P, R]):  # noqa: N801 - used like a decorator
 
         call.__doc__ = method.__doc__
         call.__name__ = self.__name__
+        # (what "coroutine ... was never awaited" and tracebacks name: AsyncAxis.stop, not
+        # twin.__get__.<locals>.call)
+        call.__qualname__ = f"{type(room).__name__}.{self.__name__}"
         return call
 
 
@@ -334,4 +337,7 @@ class same(Generic[S, P, R]):  # noqa: N801 - used like a decorator
 
         call.__doc__ = method.__doc__
         call.__name__ = self.__name__
+        # (what "coroutine ... was never awaited" and tracebacks name: AsyncAxis.stop, not
+        # twin.__get__.<locals>.call)
+        call.__qualname__ = f"{type(room).__name__}.{self.__name__}"
         return call

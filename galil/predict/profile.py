@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, Protocol, TypeVar, cast, overload
 import numpy as np
 import numpy.typing as npt
 
-from galil.errors import InvalidArgument, decimal_hint
+from galil.errors import InvalidArgument, decimal_hint, missing_extra
 from galil.predict.quantities import is_quantity, seconds
 
 if TYPE_CHECKING:
@@ -167,9 +167,12 @@ def check_figure_path(path: str, option: str = "png") -> None:
 
     Raises:
         InvalidArgument: saying which formats there are (``option`` names the option).
-        ImportError: matplotlib is missing.
+        ModuleNotFoundError: matplotlib is missing (naming the extra that installs it).
     """
-    from matplotlib.backend_bases import FigureCanvasBase
+    try:
+        from matplotlib.backend_bases import FigureCanvasBase
+    except ImportError as exc:
+        raise missing_extra(exc, f"--{option}") from exc
 
     formats = FigureCanvasBase.get_supported_filetypes()
     suffix = os.path.splitext(path)[1].lower().removeprefix(".")
@@ -413,9 +416,13 @@ class Profile:
         Positions are whole counts, so per-sample velocity jitters by a count per sample and its
         difference is noise; velocity and acceleration are therefore drawn as centred moving
         averages over ``average`` seconds (the raw velocity is shown faintly behind).
-        matplotlib is imported here, not at import time.
+        matplotlib is imported here, not at import time (missing: a ModuleNotFoundError
+        naming ``galil[jupyter]``).
         """
-        from matplotlib.figure import Figure
+        try:
+            from matplotlib.figure import Figure
+        except ImportError as exc:
+            raise missing_extra(exc, "Profile.plot()") from exc
 
         window = max(1, round(average / self.sample_period))
         vel = _moving_average(self.velocity, window)
@@ -518,7 +525,10 @@ class MultiProfile(Mapping[str, Profile]):
         As in :meth:`Profile.plot`, velocity is drawn as a centred moving average over
         ``average`` seconds: whole-count positions make the per-sample velocity jitter.
         """
-        from matplotlib.figure import Figure
+        try:
+            from matplotlib.figure import Figure
+        except ImportError as exc:
+            raise missing_extra(exc, "MultiProfile.plot()") from exc
 
         fig = Figure(figsize=(7, 5), layout="constrained")
         ax_p, ax_v = fig.subplots(2, 1, sharex=True)

@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from galil.codes import tc_text
-from galil.errors import CommandError, InvalidArgument, LimitError
+from galil.errors import CommandError, InvalidArgument, LimitError, missing_extra
 from galil.models import ModelSpec
 from galil.predict.engine import AxisProfiler, final_decel, ramping, slewing
 from galil.predict.path import (
@@ -493,7 +493,10 @@ class VectorProfile:
 
         matplotlib is imported here, not at import time.
         """
-        from matplotlib.figure import Figure
+        try:
+            from matplotlib.figure import Figure
+        except ImportError as exc:
+            raise missing_extra(exc, "VectorProfile.plot()") from exc
 
         fig = Figure(figsize=(10, 4.5), layout="constrained")
         ax_xy, ax_v = fig.subplots(1, 2)

@@ -24,7 +24,7 @@ import urllib.parse
 from collections import deque
 from typing import Any
 
-from galil.errors import GalilConnectionError, InvalidArgument
+from galil.errors import GalilConnectionError, InvalidArgument, unknown_options
 from galil.sim.clock import ManualClock, RealTimeClock
 from galil.sim.controller import SimController
 from galil.sim.faults import FaultHook, FaultPlan, apply_faults
@@ -71,6 +71,13 @@ class SimLink:
     @property
     def _manual(self) -> bool:
         return isinstance(self.controller.clock, ManualClock)
+
+    @property
+    def manual_clock(self) -> bool:
+        """Whether simulated time passes only while the host waits (the default clock): a
+        wait that nothing the host does can end never ends
+        (:func:`galil.motion.refuse_endless_wait`)."""
+        return self._manual
 
     def _queue(self, data: bytes) -> None:
         now = time.monotonic()
@@ -393,6 +400,13 @@ def check_baud(value: object) -> float:
     return rate
 
 
+#: What ``open_transport`` takes (an unknown option's refusal suggests the closest).
+_SIM_OPTIONS = (
+    "controller", "clock", "lag", "faults", "seed", "auto_advance", "messages", "baud",
+    "firmware", "timeout",
+)  # fmt: skip
+
+
 def open_transport(url: str | urllib.parse.SplitResult, **options: object) -> SimLink:
     """Open ``sim://MODEL`` as a :class:`SimLink` (the ``sim`` transport scheme).
 
@@ -437,7 +451,7 @@ def open_transport(url: str | urllib.parse.SplitResult, **options: object) -> Si
             )
     opts.pop("timeout", None)  # accepted for symmetry with other transports
     if opts:
-        raise InvalidArgument(f"unknown sim:// options: {', '.join(sorted(opts))}")
+        raise unknown_options("sim://", opts, _SIM_OPTIONS)
     if controller is None:
         if clock_opt == "manual":
             clock: Any = ManualClock()

@@ -15,7 +15,7 @@ import select
 import time
 from urllib.parse import SplitResult
 
-from galil.errors import GalilConnectionError, InvalidArgument
+from galil.errors import GalilConnectionError, InvalidArgument, unknown_options
 from galil.transport import parse_options
 from galil.transport.base import TransportBase
 from galil.transport.options import flag, seconds
@@ -141,5 +141,5 @@ def open_pci(url: SplitResult, **options: object) -> PciTransport:
     write_timeout = seconds(opts.pop("write_timeout", 1.0), "write_timeout")
     exclusive = flag(opts.pop("exclusive", True), "exclusive")
     if opts:
-        raise InvalidArgument(f"unknown PCI option(s): {', '.join(sorted(opts))}")
+        raise unknown_options("PCI", opts, ("write_timeout", "exclusive"))
     return PciTransport(path, write_timeout=write_timeout, exclusive=exclusive)

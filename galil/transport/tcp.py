@@ -17,7 +17,7 @@ import time
 from typing import cast
 from urllib.parse import SplitResult
 
-from galil.errors import GalilConnectionError, InvalidArgument
+from galil.errors import GalilConnectionError, InvalidArgument, unknown_options
 from galil.models import ETHERNET_BYTES_PER_S
 from galil.portnumber import check_port
 from galil.transport import parse_options
@@ -337,7 +337,9 @@ def open_tcp(url: SplitResult, **options: object) -> TcpTransport:
     if message_port is not None:
         check_port(message_port, "message port")
     if opts:
-        raise InvalidArgument(f"unknown TCP option(s): {', '.join(sorted(opts))}")
+        raise unknown_options(
+            "TCP", opts, ("port", "connect_timeout", "write_timeout", "message_port")
+        )
     return TcpTransport(
         host,
         port,

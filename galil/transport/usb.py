@@ -15,7 +15,7 @@ from urllib.parse import SplitResult
 import usb.core
 import usb.util
 
-from galil.errors import GalilConnectionError, InvalidArgument
+from galil.errors import GalilConnectionError, InvalidArgument, unknown_options
 from galil.transport import parse_options
 from galil.transport.base import TransportBase
 from galil.transport.options import seconds, whole_number
@@ -205,7 +205,9 @@ def open_usb(url: SplitResult, **options: object) -> UsbTransport:
     backend = opts.pop("backend", None)
     device = opts.pop("device", None)
     if opts:
-        raise InvalidArgument(f"unknown USB option(s): {', '.join(sorted(opts))}")
+        raise unknown_options(
+            "USB", opts, ("serial", "interface", "write_timeout", "backend", "device")
+        )
     if device is not None:
         _check_device(device)
     if device is None:

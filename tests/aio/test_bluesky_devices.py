@@ -1193,3 +1193,24 @@ def test_a_status_watcher_that_raises_fails_the_set_once_the_axis_is_at_rest(
     moving, back = in_loop(body())
     assert not moving
     assert back == pytest.approx(0, abs=0.0006)
+
+
+def test_a_set_whose_move_another_client_stopped_fails_its_status(engine: RunEngine) -> None:
+    # (decision 0105: the scan must not go on measuring where the axis was stopped)
+    x = mock_motor("tcp://127.0.0.1:48")
+
+    async def body() -> BaseException | None:
+        status = x.set(50)
+        while not await x.axis.moving():
+            await x.controller.sleep(0.01)
+        await x.controller.command("STA")  # as another client would
+        try:
+            await status
+        except Exception as exc:
+            return exc
+        return None
+
+    error = in_loop(body())
+    assert error is not None
+    assert "A by ST (stop code 4)" in str(error)
+    assert in_loop(_settled(x)) < 50

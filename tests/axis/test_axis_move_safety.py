@@ -14,7 +14,7 @@ import pytest
 
 import galil
 import galil.aio as aio
-from galil.errors import InvalidArgument, LimitError
+from galil.errors import InvalidArgument, LimitError, MotionError
 from galil.testing import nothing_sent, sim_of, simulated, transcript
 from galil.units import ureg
 
@@ -213,8 +213,8 @@ def test_increment_while_a_stopped_schedule_ramps_down_is_refused(
         dmc.B.increment(5)
     if how == "stop":
         schedule.wait()
-    else:  # (an ST behind the library's back: the end is not the prediction)
-        with pytest.warns(RuntimeWarning, match="away from the prediction"):
+    else:  # (an ST behind the library's back: the schedule did not end, decision 0105)
+        with pytest.raises(MotionError, match=r"B by ST \(stop code 4\)"):
             schedule.wait()
 
 

@@ -13,7 +13,7 @@ import pytest
 from axis_helpers import assert_follows
 
 import galil
-from galil.errors import GalilTimeoutError, InvalidArgument
+from galil.errors import GalilTimeoutError, InvalidArgument, MotionError
 from galil.testing import nothing_sent, sim_of, simulated, transcript
 from galil.units import ureg
 
@@ -277,18 +277,18 @@ def test_motor_off_on_a_moving_axis_is_refused_before_mo_goes_out(
     assert not dmc.B.motor_on
 
 
-def test_a_stop_the_library_did_not_send_shows_as_a_deviation_and_a_warning() -> None:
+def test_a_stop_the_library_did_not_send_is_a_motion_error_with_the_result_kept() -> None:
     with simulated("DMC-4040") as dmc:
         handle = dmc.A.move_by(20_000)
         dmc.sleep(0.1)
-        dmc.link.command_line(["ST A"])  # behind the library's back: the prediction is wrong
-        with pytest.warns(RuntimeWarning, match=r"counts away from the prediction"):
-            result = handle.wait()
+        dmc.link.command_line(["ST A"])  # behind the library's back (decision 0105)
+        with pytest.raises(MotionError, match=r"A by ST \(stop code 4\) at \d+ counts"):
+            handle.wait()
         final = dmc.A.reference_position
+        result = handle.result
+        assert result is not None
         assert result.final == {"A": final}
-        assert result.predicted == {"A": 20_000}
-        assert result.deviation == {"A": final - 20_000}
-        assert result.worst == 20_000 - final > 10_000
+        assert result.predicted == {}  # (not where the prediction ends: no deviation)
         assert result.stop_codes == {"A": 4}
 
 

@@ -207,3 +207,59 @@ def test_a_warning_at_connect_points_at_the_callers_line() -> None:
         c = connect("sim://DMC-4040", model="DMC-4020")  # (the controller says DMC4040)
     c.close()
     assert [w.filename for w in caught if w.category is RuntimeWarning] == [__file__]
+
+
+_HELD: list[socket.socket] = []  # (connections a silent peer keeps open until the test ends)
+
+
+def _peer(answer: bytes, then_close: bool) -> tuple[socket.socket, threading.Thread]:
+    """A TCP peer that is no Galil controller: it reads what comes, sends ``answer`` and
+    closes at once (``then_close``) or keeps the connection open and says nothing more."""
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+    held = _HELD
+
+    def serve() -> None:
+        conn, _ = srv.accept()
+        conn.recv(100)
+        conn.sendall(answer)
+        if then_close:
+            conn.close()
+        else:
+            held.append(conn)
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    return srv, thread
+
+
+def test_a_peer_that_answers_and_hangs_up_is_named_not_a_galil_controller() -> None:
+    srv, thread = _peer(b"HTTP/1.1 400 Bad Request\r\nconnection: close\r\n\r\n", True)
+    port = srv.getsockname()[1]
+    try:
+        with pytest.raises(GalilConnectionError) as info:
+            connect(f"tcp://127.0.0.1:{port}", timeout=1.0)
+        text = str(info.value).splitlines()[0]
+        assert f"what answered ^R^V on the TCP link to 127.0.0.1:{port} was " in text
+        assert "b'HTTP/1.1 400 Bad Request\\r\\n" in text
+        assert "that is not a Galil controller" in text
+        assert "Ethernet handle" not in text
+    finally:
+        thread.join(2)
+        srv.close()
+
+
+def test_a_peer_that_says_something_else_is_quoted() -> None:
+    srv, thread = _peer(b"SSH-2.0-OpenSSH_8.9\r\n", False)
+    port = srv.getsockname()[1]
+    try:
+        with pytest.raises(GalilConnectionError) as info:
+            connect(f"tcp://127.0.0.1:{port}", timeout=0.2)
+        text = str(info.value).splitlines()[0]
+        assert "(21 bytes came, none ending a reply: b'SSH-2.0-OpenSSH_8.9\\r\\n')" in text
+    finally:
+        thread.join(2)
+        for s in (*_HELD, srv):
+            s.close()
+        _HELD.clear()
