@@ -894,10 +894,11 @@ class ContourStream:
             # (CD 0=0 refused: a limit ended the contour first, decision 0041; or an ST the
             # library did not send. The TC of CD 0=0 out of contour mode is the simulator's 8,
             # unsourced for a controller; 41 as for a CD)
-            stopped = isinstance(exc, CommandError) and not ended
-            over = self._controller_stop(state) if stopped else None
-            if over is None and isinstance(exc, CommandError) and exc.code in _END_REFUSED:
-                over = None if ended else self._elsewhere(state, exc, "the end of contour mode")
+            over = None
+            if isinstance(exc, CommandError) and not ended:
+                over = self._controller_stop(state)
+                if over is None and exc.code in _END_REFUSED:
+                    over = self._elsewhere(state, exc, "the end of contour mode")
             if over is None:
                 self._halt(end=not ended, cause=exc)
                 raise
