@@ -407,6 +407,18 @@ _SIM_OPTIONS = (
 )  # fmt: skip
 
 
+def _clock_of(clock: object) -> Any:
+    """The clock of a simulator ``sim://`` builds: ``"manual"`` (the default), ``"real"``, or
+    a clock object (one with ``now()``)."""
+    if clock == "manual":
+        return ManualClock()
+    if clock == "real":
+        return RealTimeClock()
+    if hasattr(clock, "now"):
+        return clock
+    raise InvalidArgument(f"clock must be 'manual' or 'real', not {clock!r}")
+
+
 def open_transport(url: str | urllib.parse.SplitResult, **options: object) -> SimLink:
     """Open ``sim://MODEL`` as a :class:`SimLink` (the ``sim`` transport scheme).
 
@@ -453,15 +465,8 @@ def open_transport(url: str | urllib.parse.SplitResult, **options: object) -> Si
     if opts:
         raise unknown_options("sim://", opts, _SIM_OPTIONS)
     if controller is None:
-        if clock_opt == "manual":
-            clock: Any = ManualClock()
-        elif clock_opt == "real":
-            clock = RealTimeClock()
-        elif hasattr(clock_opt, "now"):
-            clock = clock_opt
-        else:
-            raise InvalidArgument(f"clock must be 'manual' or 'real', not {clock_opt!r}")
-        if firmware is None:
+        clock = _clock_of(clock_opt)
+        if firmware is None:  # (the SimController's own revision)
             controller = SimController(model, clock, servo_lag=lag)
         else:
             controller = SimController(model, clock, servo_lag=lag, firmware=firmware.strip())
