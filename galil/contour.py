@@ -892,8 +892,7 @@ class ContourStream:
             raise done.error from None
         except BaseException as exc:
             # (CD 0=0 refused: a limit ended the contour first, decision 0041; or an ST the
-            # library did not send. The TC of CD 0=0 out of contour mode is the simulator's 8,
-            # unsourced for a controller; 41 as for a CD)
+            # library did not send, its TC one of _END_REFUSED)
             over = None
             if isinstance(exc, CommandError) and not ended:
                 over = self._controller_stop(state)

@@ -263,27 +263,8 @@ def compare_plot(
     ax_pos, ax_diff = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
     units = {_display(p)[2] for p in profiles.values()}
     for letter, prof in profiles.items():
-        unit = _display(prof)[2]
-        suffix = "" if len(units) == 1 else f" ({unit})"
-        (line,) = ax_pos.plot(
-            prof.t,
-            shown_position(prof.display, prof.position.astype(np.float64)),
-            label=f"{letter} predicted{suffix}",
-            linewidth=2,
-            alpha=0.6,
-        )
-        pair = pairs.get(letter)
-        if pair is not None:
-            # Same colour, dashed: each recording reads as the twin of its prediction.
-            ax_pos.plot(
-                pair.t,
-                shown_position(prof.display, pair.recorded.astype(np.float64)),
-                "--",
-                color=line.get_color(),
-                label=f"{letter} recorded",
-            )
-            # The difference stays in counts: an exact prediction is 0 counts off.
-            ax_diff.plot(pair.t, pair.difference, color=line.get_color(), label=letter)
+        suffix = "" if len(units) == 1 else f" ({_display(prof)[2]})"
+        _plot_axis(ax_pos, ax_diff, letter, prof, pairs.get(letter), suffix)
     shown = next(iter(units)) if len(units) == 1 else "each axis's unit"
     ax_pos.set_ylabel(f"position ({shown})")
     ax_pos.legend(loc="best", fontsize="small")
@@ -295,6 +276,31 @@ def compare_plot(
     if len(ax_diff.lines) > 1:
         ax_diff.legend(loc="best", fontsize="small")
     return fig
+
+
+def _plot_axis(
+    ax_pos: Any, ax_diff: Any, letter: str, prof: Profile, pair: Comparison | None, suffix: str
+) -> None:
+    """One axis of :func:`compare_plot`: its prediction, its recording (same colour, dashed:
+    each reads as the twin of the other) and their difference (in counts: an exact prediction
+    is 0 counts off)."""
+    (line,) = ax_pos.plot(
+        prof.t,
+        shown_position(prof.display, prof.position.astype(np.float64)),
+        label=f"{letter} predicted{suffix}",
+        linewidth=2,
+        alpha=0.6,
+    )
+    if pair is None:
+        return
+    ax_pos.plot(
+        pair.t,
+        shown_position(prof.display, pair.recorded.astype(np.float64)),
+        "--",
+        color=line.get_color(),
+        label=f"{letter} recorded",
+    )
+    ax_diff.plot(pair.t, pair.difference, color=line.get_color(), label=letter)
 
 
 def _display(profile: Profile) -> tuple[float, float, str]:
