@@ -4,6 +4,8 @@ waiting for motion from the host."""
 from __future__ import annotations
 
 import queue
+import threading
+import time
 
 import galil
 from galil.motion import MIN_POLL
@@ -45,3 +47,26 @@ def wait_for_motion(dmc: galil.Controller, axes: str = "A", timeout: float = 30.
     while any(dmc.query_numbers(query)):
         assert link.clock() < deadline, f"{axes} still moving after {timeout} s"
         link.pause(MIN_POLL)
+
+
+def input_wait_started(
+    dmc: galil.Controller, timeout: float
+) -> tuple[threading.Thread, list[BaseException | None]]:
+    """``dmc.io.wait_for_input(1, high=False, timeout=timeout)`` on a thread of its own,
+    returned once its routine runs on thread 7; the list gets ``None`` when the wait returns,
+    or what it raised."""
+    ended: list[BaseException | None] = []
+
+    def wait() -> None:
+        try:
+            dmc.io.wait_for_input(1, high=False, timeout=timeout)
+            ended.append(None)
+        except BaseException as exc:
+            ended.append(exc)
+
+    waiting = threading.Thread(target=wait)
+    waiting.start()
+    deadline = time.monotonic() + 10.0
+    while dmc.routines.threads.get(7) != "#GINWAIT" and time.monotonic() < deadline:
+        time.sleep(0.001)  # (the wait's routine starts: not a wait for motion)
+    return waiting, ended

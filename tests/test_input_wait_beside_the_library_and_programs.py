@@ -12,6 +12,7 @@ import time
 from collections.abc import Iterator
 
 import pytest
+from program_helpers import input_wait_started
 
 import galil
 from galil.sim.server import SimTcpServer
@@ -64,20 +65,7 @@ def test_an_input_wait_beside_the_watchdog_takes_another_thread_by_default() -> 
 
 def test_a_watchdog_started_while_an_input_wait_runs_takes_another_thread_by_default() -> None:
     with simulated() as dmc:
-        ended: list[BaseException | None] = []
-
-        def wait() -> None:
-            try:
-                dmc.io.wait_for_input(1, high=False, timeout=30)
-                ended.append(None)
-            except BaseException as exc:
-                ended.append(exc)
-
-        waiting = threading.Thread(target=wait)
-        waiting.start()
-        deadline = time.monotonic() + 10.0
-        while dmc.routines.threads.get(7) != "#GINWAIT" and time.monotonic() < deadline:
-            time.sleep(0.001)  # (the wait's routine starts: not a wait for motion)
+        waiting, ended = input_wait_started(dmc, timeout=30)
         dog = dmc.watchdog(0.5)  # (before: "left running by an earlier session; ... HX7")
         assert dog.thread == 6
         assert dog.running

@@ -5,12 +5,11 @@ controller refused is forgotten and said; one whose ``XQ`` may have gone out sta
 from __future__ import annotations
 
 import logging
-import threading
-import time
 from collections.abc import Callable
 
 import pytest
 from client_fakes import Interrupt, pull_cable_after
+from program_helpers import input_wait_started
 
 import galil
 from galil.testing import sim_of, simulated
@@ -155,20 +154,7 @@ def test_the_library_threads_after_one_whose_restart_is_refused_are_started_agai
     """Two of the library's routines halted for a burn (an input wait's on thread 7, the
     watchdog's on 6): the wait's XQ refused, the watchdog still starts again."""
     with simulated() as dmc:
-        ended: list[BaseException | None] = []
-
-        def wait() -> None:
-            try:
-                dmc.io.wait_for_input(1, high=False, timeout=2)
-                ended.append(None)
-            except BaseException as exc:
-                ended.append(exc)
-
-        waiting = threading.Thread(target=wait)
-        waiting.start()
-        deadline = time.monotonic() + 10.0
-        while dmc.routines.threads.get(7) != "#GINWAIT" and time.monotonic() < deadline:
-            time.sleep(0.001)  # (the wait's routine starts: not a wait for motion)
+        waiting, ended = input_wait_started(dmc, timeout=2)
         dog = dmc.watchdog(0.5)
         assert dog.thread == 6
         undo = _on_write(dmc, lambda data: data.replace(b"XQ #GINWAIT,7", b"XQ #GWNOT,7"))
