@@ -360,13 +360,19 @@ def test_a_set_that_times_out_fails_once_the_axis_is_at_rest(engine: RunEngine) 
     async def body() -> tuple[bool, float]:
         with pytest.raises(galil.GalilTimeoutError, match="the axis was stopped"):
             await x.set(50, timeout=0.5)
-        moving = await x.axis.moving()
-        await x.set(0)  # at once, as a plan's next step would
-        return moving, await x.readback.get_value()
+        return await _moving_then_set_back(x)
 
     moving, back = in_loop(body())
     assert not moving
     assert back == pytest.approx(0, abs=0.0006)
+
+
+async def _moving_then_set_back(x: GalilMotor) -> tuple[bool, float]:
+    """Whether the axis still moves once a failed ``set()`` has returned; then the plan's next
+    ``set(0)``, at once, and where the axis reads after it."""
+    moving = await x.axis.moving()
+    await x.set(0)  # at once, as a plan's next step would
+    return moving, await x.readback.get_value()
 
 
 def test_a_set_refused_while_the_axis_moves_says_what_a_set_caller_can_do(
@@ -1161,10 +1167,8 @@ def test_a_setpoint_subscriber_that_raises_fails_the_set_once_the_axis_is_at_res
         await asyncio.sleep(0.05)
         with pytest.raises(RuntimeError, match="bug in my setpoint callback"):
             await x.set(50)  # 2.5 s at 20 mm/s
-        moving = await x.axis.moving()
         x.setpoint.clear_sub(buggy)
-        await x.set(0)  # at once, as a plan's next step would
-        return moving, await x.readback.get_value()
+        return await _moving_then_set_back(x)
 
     moving, back = in_loop(body())
     assert not moving
@@ -1186,9 +1190,7 @@ def test_a_status_watcher_that_raises_fails_the_set_once_the_axis_is_at_rest(
         status.watch(buggy)
         with pytest.raises(RuntimeError, match="bug in my progress bar"):
             await status
-        moving = await x.axis.moving()
-        await x.set(0)  # at once, as a plan's next step would
-        return moving, await x.readback.get_value()
+        return await _moving_then_set_back(x)
 
     moving, back = in_loop(body())
     assert not moving
