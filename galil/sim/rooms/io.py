@@ -19,6 +19,7 @@ RIO-47100's 0-5 V outputs too).
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from typing import Any
 
 import numpy as np
@@ -241,32 +242,36 @@ class IO(Room):
         ranges = self.machine.spec.dq_ranges
         if not ranges:
             raise Refused(1, "no DQ on this model")
-        fields = split_fields(args)
-        if len(fields) != 2:
-            raise Refused(50, "DQ n,range")
-        i = self.machine.interp
-        k = self.channel(i.evaluate(fields[0]), len(self.analog_out))
-        code = i.evaluate(fields[1])
-        if code != int(code) or int(code) not in ranges:
-            raise Refused(6, f"DQ code is one of {', '.join(str(c) for c in ranges)}")
-        self.dq[k] = int(code)
+        k, code = self._range_code("DQ", args, len(self.analog_out), ranges)
+        self.dq[k] = code
         lo, hi = ranges[self.dq[k]]
         self.analog_out[k] = min(max(self.analog_out[k], lo), hi)
         return ""
 
     @handler("AQ")
     def aq_command(self, args: str) -> str:
+        k, code = self._range_code("AQ", args, len(self.analog_in), self.aq_ranges, signed=True)
+        self.aq[k] = code
+        return ""
+
+    def _range_code(
+        self, name: str, args: str, channels: int, codes: Collection[int], *, signed: bool = False
+    ) -> tuple[int, int]:
+        """``AQ``/``DQ n,code``: the channel ``n`` (of ``channels``) and its range code, one of
+        ``codes`` (``signed``: a negative code too, AQ's differential input [U])."""
         fields = split_fields(args)
         if len(fields) != 2:
-            raise Refused(50, "AQ n,range")
+            raise Refused(50, f"{name} n,range")
         i = self.machine.interp
-        k = self.channel(i.evaluate(fields[0]), len(self.analog_in))
+        k = self.channel(i.evaluate(fields[0]), channels)
         code = i.evaluate(fields[1])
-        if code != int(code) or abs(int(code)) not in self.aq_ranges:
-            taken = ", ".join(str(c) for c in self.aq_ranges)
-            raise Refused(6, f"AQ code is one of {taken} (negative: differential)")
-        self.aq[k] = int(code)
-        return ""
+        if code != int(code) or (abs(int(code)) if signed else int(code)) not in codes:
+            taken = ", ".join(str(c) for c in codes)
+            raise Refused(
+                6,
+                f"{name} code is one of {taken}" + (" (negative: differential)" if signed else ""),
+            )
+        return k, int(code)
 
     @handler("AI")
     def ai(self, args: str) -> Wait:
