@@ -395,9 +395,8 @@ def assignment_refused(
             suggestions=(setter,) if hasattr(cls, setter) else (),
         )
     meant = _nearest(cls, name)
-    hint = f" (did you mean {' or '.join(repr(m) for m in meant)}?)" if meant else ""
     return GalilAttributeError(
-        f"{cls.__name__} has no setting {name!r}{hint}; nothing was set",
+        f"{cls.__name__} has no setting {name!r}{_did_you_mean(meant)}; nothing was set",
         attribute=name,
         suggestions=meant,
     )
@@ -417,10 +416,16 @@ def missing_attribute(cls: type[FixedAttributes], name: str, obj: object = None)
     else:
         public = [n for n in dir(cls) if n[:1] != "_"]
         meant = difflib.get_close_matches(name, public, n=3, cutoff=0.7)
-        hint = f" (did you mean {' or '.join(repr(m) for m in meant)}?)" if meant else ""
+        hint = _did_you_mean(meant)
     return GalilAttributeError(
         f"{cls.__name__} has no attribute {name!r}{hint}", attribute=name, suggestions=meant
     )
+
+
+def _did_you_mean(meant: Sequence[str]) -> str:
+    """`` (did you mean 'a' or 'b'?)`` for the names a misspelt one may have meant; ``""``
+    for none."""
+    return f" (did you mean {' or '.join(repr(m) for m in meant)}?)" if meant else ""
 
 
 def _nearest(cls: type[FixedAttributes], name: str) -> list[str]:
