@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
-from typing import cast
 
 import numpy as np
 import numpy.typing as npt
@@ -18,7 +17,7 @@ import numpy.typing as npt
 from galil.errors import InvalidArgument
 from galil.predict.counts import whole_counts
 from galil.predict.profile import Profile
-from galil.predict.quantities import no_quantity, seconds
+from galil.predict.quantities import no_quantity, period_seconds
 
 __all__ = ["contour", "interpolate"]
 
@@ -128,7 +127,7 @@ def contour(
     """
     no_quantity(increments, "contour increments", "counts")
     no_quantity(dt, "dt", "DT (an exponent: a segment lasts 2**dt samples)", counts=False)
-    sample_period = cast("float", seconds(sample_period, "sample_period"))
+    sample_period = period_seconds(sample_period)
     c = np.asarray(increments)
     if c.ndim != 1:
         raise InvalidArgument("increments must be a 1-D sequence")

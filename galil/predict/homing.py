@@ -32,7 +32,6 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import cast
 
 import numpy as np
 import numpy.typing as npt
@@ -42,7 +41,7 @@ from galil.predict.counts import whole_counts
 from galil.predict.engine import AxisProfiler
 from galil.predict.move import Event, SetAccel, sample_of_event
 from galil.predict.profile import Profile
-from galil.predict.quantities import seconds
+from galil.predict.quantities import period_seconds
 from galil.predict.smoothing import smooth
 
 __all__ = [
@@ -434,7 +433,7 @@ def _accel_changes(
 ) -> tuple[float, list[tuple[int, float]]]:
     """The sample period in seconds (a time Quantity too), and ``(sample, AC)`` of each
     change, the latest first (the predictor pops from the end)."""
-    sample_period = cast("float", seconds(sample_period, "sample_period"))
+    sample_period = period_seconds(sample_period)
     changes: list[tuple[int, float]] = []
     for ev in events:
         if not isinstance(ev, SetAccel):

@@ -15,7 +15,6 @@ from galil.predict.move import (
     Event,
     SetSpeed,
     Stop,
-    _period,
     _plain_settings,
     _resolve,
     _Run,
@@ -24,7 +23,7 @@ from galil.predict.move import (
     sample_of_event,
 )
 from galil.predict.profile import Profile
-from galil.predict.quantities import no_quantity, seconds
+from galil.predict.quantities import no_quantity, period_seconds, seconds
 
 __all__ = ["jog"]
 
@@ -73,7 +72,7 @@ def jog(
     start = whole_counts(start, "start")
     _plain_settings(speed, accel, decel, smoothing)
     no_quantity(initial_speed, "initial_speed", "counts/s")
-    sample_period = _period(sample_period)
+    sample_period = period_seconds(sample_period)
     stop_at = cast("float | None", seconds(stop_at, "stop_at"))
     duration = cast("float | None", seconds(duration, "duration"))
     _validate_jog(speed, accel, decel)

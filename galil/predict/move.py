@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import cast
 
 import numpy as np
 import numpy.typing as npt
@@ -26,7 +25,7 @@ from galil.predict.engine import (
     plan_position,
 )
 from galil.predict.profile import Profile
-from galil.predict.quantities import no_quantity, seconds
+from galil.predict.quantities import no_quantity, period_seconds, seconds
 from galil.predict.smoothing import END_LOOKAHEAD
 
 __all__ = [
@@ -78,11 +77,6 @@ def _plain_settings(speed: object, accel: object, decel: object, smoothing: obje
     no_quantity(accel, "accel", "counts/s²")
     no_quantity(decel, "decel", "counts/s²")
     no_quantity(smoothing, "smoothing", "IT (a fraction, 1/256 .. 1)", counts=False)
-
-
-def _period(sample_period: float) -> float:
-    """``sample_period``, a time Quantity in seconds (refused if not a time)."""
-    return cast("float", seconds(sample_period, "sample_period"))
 
 
 @dataclass(frozen=True)
@@ -220,7 +214,7 @@ def plan_move(
     """
     distance = _distance(distance)
     _plain_settings(speed, accel, decel, None)
-    sample_period = _period(sample_period)
+    sample_period = period_seconds(sample_period)
     _validate(speed, accel, decel, sample_period)
     ts = sample_period
     plan = plan_position(0.0, 0.0, float(distance), speed * ts, accel * ts * ts, decel * ts * ts)
@@ -592,7 +586,7 @@ def move(
     start = whole_counts(start, "start")
     distance = _distance(distance, start, _model_name(model))
     _plain_settings(speed, accel, decel, smoothing)
-    sample_period = _period(sample_period)
+    sample_period = period_seconds(sample_period)
     _validate(speed, accel, decel, sample_period)
     if model is not None or smoothing is None:  # (else _resolve returns them as they are)
         speed, accel, decel, smoothing, sample_period = _resolve(
@@ -819,7 +813,7 @@ def speed_schedule(
     start = whole_counts(start, "start")
     distance = _distance(distance, start)
     _plain_settings(initial_speed, accel, decel, smoothing)
-    sample_period = _period(sample_period)
+    sample_period = period_seconds(sample_period)
     _validate(initial_speed, accel, decel, sample_period)
     triggers, speeds, ramp_ends = _schedule_points(distance, initial_speed, changes, accel, decel)
     longest = _schedule_seconds(abs(int(distance)), triggers, speeds, accel, decel)

@@ -9,13 +9,13 @@ there is refused naming the argument (an axis with a scale converts its units fi
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from galil.errors import InvalidArgument
 
-__all__ = ["is_quantity", "no_quantity", "seconds"]
+__all__ = ["is_quantity", "no_quantity", "period_seconds", "seconds"]
 
 #: What an argument in seconds takes, as a refusal says it.
 A_TIME = "a time such as 0.5 * ureg.s or 100 * ureg.ms (a plain number is seconds)"
@@ -59,6 +59,12 @@ def seconds(value: object, name: str) -> object:
     if np.ndim(magnitude) == 0:  # (the caller checks the number: finite, real, >= 0 ...)
         return magnitude.item() if hasattr(magnitude, "item") else magnitude
     return np.asarray(magnitude)
+
+
+def period_seconds(sample_period: object) -> float:
+    """``sample_period`` as seconds: a time Quantity converted (refused if not a time), a
+    plain number as it is (each predictor checks it)."""
+    return cast("float", seconds(sample_period, "sample_period"))
 
 
 #: What a refused Quantity in counts (or counts/s, counts/s²) is pointed to.

@@ -19,7 +19,7 @@ import copy
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -38,7 +38,7 @@ from galil.predict.path import (
     path_kind,
 )
 from galil.predict.profile import Profile
-from galil.predict.quantities import no_quantity, seconds
+from galil.predict.quantities import no_quantity, period_seconds
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -563,7 +563,7 @@ def _resolve(
     for name, value in (("speed", speed), ("accel", accel), ("decel", decel)):
         no_quantity(value, f"vector {name}", "counts/s" if name == "speed" else "counts/s²")
     no_quantity(smoothing, "smoothing", "VT (a fraction, 1/256 .. 1)", counts=False)
-    sample_period = cast("float", seconds(sample_period, "sample_period"))
+    sample_period = period_seconds(sample_period)
     for name, value in (("speed", speed), ("accel", accel), ("decel", decel)):
         if not (math.isfinite(value) and value > 0):
             raise InvalidArgument(f"vector {name} must be a positive number, got {value!r}")
